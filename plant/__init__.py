@@ -1,0 +1,21 @@
+"""The physics and the sensor: eq. (1), the calibration matrix, logs, scenarios."""
+
+from .dynamics import (A_1, A_2, B_1, B_2, C_1, C_2, STATE_NAMES, acceleration, input_matrix,
+                       phi_1, phi_2, S_from_phi, state_derivative)
+from .excitation import Excitation, Multisine, PaperWrench, SampledWrench
+from .log import COLUMNS, Log, LogError, Truth, read_log, read_truth
+from .payload import PAPER_PAYLOAD, Payload
+from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenario
+from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
+from .simulate import integrate, rk4_step
+
+__all__ = [
+    "A_1", "A_2", "B_1", "B_2", "C_1", "C_2", "STATE_NAMES", "acceleration", "input_matrix",
+    "phi_1", "phi_2", "S_from_phi", "state_derivative",
+    "Excitation", "Multisine", "PaperWrench", "SampledWrench",
+    "COLUMNS", "Log", "LogError", "Truth", "read_log", "read_truth",
+    "PAPER_PAYLOAD", "Payload",
+    "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
+    "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
+    "integrate", "rk4_step",
+]

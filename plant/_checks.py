@@ -1,0 +1,46 @@
+"""Input checks used at the public boundary of every package."""
+
+import numpy as np
+
+__all__ = ["as_finite_array", "as_positive_scalar"]
+
+
+def as_finite_array(value, shape, name):
+    """Return ``value`` as a float ndarray of ``shape``, or raise ValueError.
+
+    Parameters
+    ----------
+    value : array_like
+        The value to check.
+    shape : tuple of int
+        Expected shape; ``-1`` in a position accepts any length there.
+    name : str
+        Name used in the error message.
+
+    Returns
+    -------
+    ndarray
+        A float copy of ``value``.
+    """
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numeric; got {value!r}") from None
+    if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape)):
+        expected = "x".join("N" if s == -1 else str(s) for s in shape) or "scalar"
+        actual = "x".join(str(a) for a in arr.shape) or "scalar"
+        raise ValueError(f"{name} has the wrong shape; expected {expected} instead of {actual}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite; got {value!r}")
+    return arr
+
+
+def as_positive_scalar(value, name):
+    """Return ``value`` as a positive finite float, or raise ValueError."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number; got {value!r}") from None
+    if not np.isfinite(x) or x <= 0:
+        raise ValueError(f"{name} must be positive and finite; got {value!r}")
+    return x

@@ -1,0 +1,258 @@
+"""The log: a CSV of measured pose and raw sensor reading, and its sidecar.
+
+Format (a public one: a user records it on a real rig)::
+
+    t,theta,x,y,M,fx,fy
+
+in SI units (s, rad, m, N m, N). ``theta, x, y`` is the measured pose in the
+inertial frame, ``theta`` continuous (not wrapped); ``M, fx, fy`` is the raw
+sensor reading ``w_hat`` in the body frame at the sensor interface. Empty
+``theta,x,y`` cells on a row mean no pose measurement at that sample; every
+other cell is a finite number. Time is strictly increasing and evenly sampled.
+
+Every log, from a file or from the simulator, is validated in one place:
+:meth:`Log.__init__`.
+"""
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .payload import Payload
+from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
+
+__all__ = ["Log", "LogError", "Truth", "read_log", "read_truth", "COLUMNS"]
+
+#: Column names of the log, in order.
+COLUMNS = ("t", "theta", "x", "y", "M", "fx", "fy")
+_POSE, _WRENCH = ("theta", "x", "y"), ("M", "fx", "fy")
+_SAMPLING_TOLERANCE = 0.01        # relative spread of the time step accepted as even
+MIN_SAMPLES = 10
+
+
+class LogError(ValueError):
+    """A log that cannot be used: the message names the problem."""
+
+
+class Log:
+    """Measured pose and raw sensor reading on one time grid.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Time in s, strictly increasing, evenly sampled.
+    pose : array_like, shape (N, 3)
+        Measured ``[theta, X, Y]`` in rad and m; a row of NaN where there
+        was no measurement.
+    w_hat : array_like, shape (N, 3)
+        Raw reading ``[M, f_x, f_y]``, finite.
+    name : str, optional
+        Where the log came from (a file name).
+
+    Attributes
+    ----------
+    dt : float
+        The time step, s.
+    has_pose : ndarray of bool, shape (N,)
+        True where the pose was measured.
+
+    Raises
+    ------
+    LogError
+        With a one-line message naming the problem.
+    """
+
+    def __init__(self, t, pose, w_hat, name="log"):
+        self.name = str(name)
+        self.t = np.asarray(t, dtype=float)
+        self.pose = np.asarray(pose, dtype=float)
+        self.w_hat = np.asarray(w_hat, dtype=float)
+        n = len(self.t)
+        if self.t.ndim != 1 or self.pose.shape != (n, 3) or self.w_hat.shape != (n, 3):
+            raise LogError(f"{self.name}: expected t (N,), pose (N, 3), w_hat (N, 3); "
+                           f"got {self.t.shape}, {self.pose.shape}, {self.w_hat.shape}")
+        if n < MIN_SAMPLES:
+            raise LogError(f"{self.name}: too few rows to calibrate; need at least {MIN_SAMPLES}, got {n}")
+        if not np.all(np.isfinite(self.t)):
+            raise LogError(f"{self.name}: column t has a missing, NaN or infinite value at row {_first_bad(self.t)}")
+        for j, col in enumerate(_WRENCH):
+            if not np.all(np.isfinite(self.w_hat[:, j])):
+                raise LogError(f"{self.name}: column {col} has a missing, NaN or infinite value "
+                               f"at row {_first_bad(self.w_hat[:, j])}")
+        partial = np.isnan(self.pose).any(axis=1) & ~np.isnan(self.pose).all(axis=1)
+        if partial.any():
+            raise LogError(f"{self.name}: row {np.argmax(partial) + 1} has some but not all of theta,x,y; "
+                           "leave all three empty where there is no pose measurement")
+        if np.isinf(self.pose).any():
+            raise LogError(f"{self.name}: pose has an infinite value at row {_first_bad(self.pose.sum(1))}")
+        steps = np.diff(self.t)
+        if np.any(steps <= 0):
+            raise LogError(f"{self.name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")
+        self.dt = float(np.median(steps))
+        spread = np.max(np.abs(steps - self.dt)) / self.dt
+        if spread > _SAMPLING_TOLERANCE:
+            raise LogError(f"{self.name}: time is not evenly sampled; steps range from "
+                           f"{steps.min():.6g} to {steps.max():.6g} s (resample to one step)")
+        self.has_pose = ~np.isnan(self.pose[:, 0])
+        if self.has_pose.sum() < MIN_SAMPLES:
+            raise LogError(f"{self.name}: too few pose measurements to calibrate; "
+                           f"need at least {MIN_SAMPLES}, got {int(self.has_pose.sum())}")
+        if not self.has_pose[0]:
+            first = int(np.argmax(self.has_pose))
+            raise LogError(f"{self.name}: the first row has no pose; the log must start with a pose "
+                           f"measurement (the first one is at row {first + 1}); drop the rows before it")
+
+    def __len__(self):
+        return len(self.t)
+
+    @property
+    def duration(self):
+        """Time covered, s."""
+        return float(self.t[-1] - self.t[0])
+
+    def pose_rate(self):
+        """Mean rate of pose measurements, Hz."""
+        return float((self.has_pose.sum() - 1) / max(self.duration, 1e-12))
+
+    def write(self, path):
+        """Write the log as CSV with the header ``t,theta,x,y,M,fx,fy``."""
+        data = np.column_stack([self.t, self.pose, self.w_hat])
+        lines = [",".join(COLUMNS)]
+        for row, ok in zip(data, self.has_pose):
+            cells = [repr(float(v)) for v in row]
+            if not ok:
+                cells[1:4] = ["", "", ""]
+            lines.append(",".join(cells))
+        Path(path).write_text("\n".join(lines) + "\n")
+
+    def head(self, n):
+        """The first ``n`` samples as a new Log."""
+        return Log(self.t[:n], self.pose[:n], self.w_hat[:n], self.name)
+
+
+def _first_bad(values):
+    return int(np.argmax(~np.isfinite(values))) + 1
+
+
+_NONFINITE = re.compile(r"(?i)(^|,)\s*[+-]?(nan|inf|infinity)\s*(?=,|$)", re.M)
+
+
+def read_log(path):
+    """Read a log CSV (see the module docstring for the format).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    plant.Log
+
+    Raises
+    ------
+    LogError
+        Missing file, missing or misnamed columns, a cell that is not a
+        number, NaN or infinite values, time not strictly increasing or not
+        evenly sampled, too few rows or pose measurements.
+    """
+    import pandas as pd
+
+    path = Path(path)
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    text = path.read_text()
+    header = text.split("\n", 1)[0].strip().split(",")
+    header = [h.strip() for h in header]
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        raise LogError(f"{path.name}: missing column(s) {', '.join(missing)}; expected the header "
+                       f"{','.join(COLUMNS)} (got {','.join(header)})")
+    match = _NONFINITE.search(text)
+    if match:
+        line = text.count("\n", 0, match.start()) + 1
+        raise LogError(f"{path.name}: line {line} holds a NaN or infinite value; "
+                       "only pose cells may be empty (no measurement)")
+    try:
+        frame = pd.read_csv(path, skipinitialspace=True, dtype=float)
+    except ValueError as err:
+        raise LogError(f"{path.name}: a cell is not a number ({str(err).splitlines()[0]})") from None
+    return Log(frame["t"].to_numpy(), frame[list(_POSE)].to_numpy(),
+               frame[list(_WRENCH)].to_numpy(), name=path.name)
+
+
+@dataclass
+class Truth:
+    """What produced a simulated log: the sidecar ``NAME.truth.json``.
+
+    Attributes
+    ----------
+    scenario : str
+    seed : int
+    schedule : plant.CalibrationSchedule
+        The true ``S`` (constant) or its schedule.
+    S0 : ndarray, shape (3, 3)
+        The initial estimate the scenario prescribes to every observer.
+    payload : plant.Payload
+    noise : plant.NoiseSpec
+        Standard deviations of the noise added to the log.
+    extra : dict
+        Other settings of the scenario (pose rate, dropped frames, ...).
+    """
+
+    scenario: str
+    seed: int
+    schedule: CalibrationSchedule
+    S0: np.ndarray
+    payload: Payload
+    noise: NoiseSpec
+    extra: dict = field(default_factory=dict)
+
+    def S_at(self, t):
+        """The true ``S`` at time ``t``."""
+        return self.schedule.at(t)
+
+    def to_json(self):
+        data = {"scenario": self.scenario, "seed": self.seed}
+        data.update(self.schedule.to_json())
+        data["S0"] = np.asarray(self.S0).tolist()
+        data.update(self.payload.to_dict())
+        data["noise"] = self.noise.to_dict()
+        data.update(self.extra)
+        return data
+
+    def write(self, path):
+        Path(path).write_text(json.dumps(self.to_json(), indent=2) + "\n")
+
+
+def read_truth(path):
+    """Read a ``NAME.truth.json`` sidecar into a :class:`Truth`.
+
+    Raises
+    ------
+    LogError
+        Missing file, not JSON, or a missing key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    try:
+        data = json.loads(path.read_text())
+        if "S" in data:
+            schedule = CalibrationSchedule(data["S"])
+        else:
+            schedule = CalibrationSchedule([(t0, S) for t0, S in data["S_schedule"]])
+        known = {"scenario", "seed", "S", "S_schedule", "S0", "mass", "inertia", "rho", "noise"}
+        return Truth(
+            scenario=data.get("scenario", "unknown"), seed=data.get("seed"),
+            schedule=schedule, S0=check_calibration(data["S0"], "S0"),
+            payload=Payload.from_dict(data), noise=NoiseSpec.from_dict(data["noise"]),
+            extra={k: v for k, v in data.items() if k not in known})
+    except json.JSONDecodeError as err:
+        raise LogError(f"{path.name}: not valid JSON ({err})") from None
+    except KeyError as err:
+        raise LogError(f"{path.name}: missing key {err} in the truth file") from None
+    except (TypeError, ValueError) as err:
+        raise LogError(f"{path.name}: {str(err).splitlines()[0]}") from None

@@ -1,0 +1,137 @@
+"""The force-moment sensor: calibration matrix ``S`` (eq. 3) and noise."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._checks import as_finite_array
+
+__all__ = ["CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration"]
+
+
+class SingularCalibrationError(ValueError):
+    """A calibration matrix that cannot be inverted."""
+
+
+def check_calibration(S, name="S", max_cond=1e8):
+    """Return ``S`` as a finite, invertible 3x3 float array, or raise.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape or non-finite entries.
+    SingularCalibrationError
+        Condition number above ``max_cond``.
+    """
+    S = as_finite_array(S, (3, 3), name)
+    cond = np.linalg.cond(S)
+    if not np.isfinite(cond) or cond > max_cond:
+        raise SingularCalibrationError(
+            f"{name} is singular (condition number {cond:.3g}); a calibration matrix must be invertible")
+    return S
+
+
+class CalibrationSchedule:
+    """The true calibration matrix ``S(t)``: constant or piecewise constant.
+
+    Eq. (3): ``w = S w_hat``, so the raw reading is ``w_hat = S^-1 w``.
+
+    Parameters
+    ----------
+    steps : list of (t_start, S)
+        Times in s, strictly increasing, the first 0; each ``S`` 3x3 and
+        invertible. A single matrix may be given instead of a list.
+
+    Examples
+    --------
+    >>> sched = CalibrationSchedule(np.eye(3))
+    >>> sched.at(5.0).shape
+    (3, 3)
+    """
+
+    def __init__(self, steps):
+        arr = np.asarray(steps, dtype=object)
+        if not isinstance(steps, list) or (arr.ndim == 2 and arr.shape == (3, 3)):
+            steps = [(0.0, steps)]
+        if not steps:
+            raise ValueError("a calibration schedule needs at least one matrix")
+        self.starts = np.array([float(t0) for t0, _ in steps])
+        self.matrices = np.array([check_calibration(S, f"S at t={t0}") for t0, S in steps])
+        if self.starts[0] != 0.0 or np.any(np.diff(self.starts) <= 0):
+            raise ValueError(f"schedule start times must begin at 0 and increase; got {list(self.starts)}")
+
+    @property
+    def is_constant(self):
+        return len(self.starts) == 1
+
+    def at(self, t):
+        """``S(t)``, shape (3, 3) for a scalar ``t`` or (N, 3, 3) for an array."""
+        idx = np.searchsorted(self.starts, np.asarray(t, dtype=float), side="right") - 1
+        return self.matrices[np.clip(idx, 0, None)]
+
+    def to_json(self):
+        """``{"S": ...}`` for a constant matrix, else ``{"S_schedule": [[t, S], ...]}``."""
+        if self.is_constant:
+            return {"S": self.matrices[0].tolist()}
+        return {"S_schedule": [[float(t0), S.tolist()] for t0, S in zip(self.starts, self.matrices)]}
+
+    def raw_reading(self, t, w):
+        """Noise-free raw reading ``w_hat = S(t)^-1 w``, eq. (3).
+
+        Parameters
+        ----------
+        t : ndarray, shape (N,)
+        w : ndarray, shape (N, 3)
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+        """
+        S_inv = np.linalg.inv(self.matrices)[np.clip(
+            np.searchsorted(self.starts, t, side="right") - 1, 0, None)]
+        return np.einsum("nij,nj->ni", S_inv, w)
+
+
+@dataclass(frozen=True)
+class NoiseSpec:
+    """Measurement noise standard deviations, in the units of the log.
+
+    Parameters
+    ----------
+    wrench_sd : tuple of 3 float
+        Standard deviation of the raw reading ``[M, f_x, f_y]`` in N m, N, N.
+    angle_sd : float
+        Standard deviation of the measured angle, in rad.
+    position_sd : float
+        Standard deviation of the measured ``X`` and ``Y``, in m.
+    """
+
+    wrench_sd: tuple = (0.0, 0.0, 0.0)
+    angle_sd: float = 0.0
+    position_sd: float = 0.0
+
+    def __post_init__(self):
+        sd = as_finite_array(self.wrench_sd, (3,), "wrench_sd")
+        if np.any(sd < 0) or self.angle_sd < 0 or self.position_sd < 0:
+            raise ValueError("noise standard deviations must be >= 0")
+        object.__setattr__(self, "wrench_sd", tuple(float(v) for v in sd))
+        object.__setattr__(self, "angle_sd", float(self.angle_sd))
+        object.__setattr__(self, "position_sd", float(self.position_sd))
+
+    @property
+    def pose_sd(self):
+        """``[angle_sd, position_sd, position_sd]``, shape (3,)."""
+        return np.array([self.angle_sd, self.position_sd, self.position_sd])
+
+    def to_dict(self):
+        return {"wrench_sd": list(self.wrench_sd), "angle_sd": self.angle_sd,
+                "position_sd": self.position_sd}
+
+    @classmethod
+    def from_dict(cls, d):
+        return cls(tuple(d["wrench_sd"]), d["angle_sd"], d["position_sd"])
+
+    def scaled(self, factor):
+        """The same noise with every standard deviation times ``factor``."""
+        return NoiseSpec(tuple(factor * v for v in self.wrench_sd),
+                         factor * self.angle_sd, factor * self.position_sd)
