@@ -89,6 +89,25 @@ def cmd_check_gains(args):
         print(report)
 
 
+def _add_reproduce(sub):
+    p = sub.add_parser("reproduce", help="the paper's section 4: Figs. 2-4 and claimed vs measured E",
+                       description="Run the paper, noisy and time-varying scenarios for every observer; "
+                                   "write PNG figures and summary.md to --out.")
+    p.add_argument("--out", default="reproduce", metavar="DIR")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quick", type=float, default=1.0, metavar="FRACTION",
+                   help="run this fraction of each scenario's length (default 1: the paper's)")
+    p.set_defaults(func=cmd_reproduce)
+
+
+def cmd_reproduce(args):
+    from .reproduce import reproduce
+    if not 0 < args.quick <= 1:
+        raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
+    reproduce(args.out, seed=args.seed, duration_scale=args.quick)
+    print((Path(args.out) / "summary.md").read_text())
+
+
 def _positive(value, name):
     if not np.isfinite(value) or value <= 0:
         raise CliError(f"{name} must be positive; got {value}")
@@ -105,7 +124,7 @@ def build_parser():
     return parser
 
 
-_COMMANDS = [_add_simulate, _add_check_gains]
+_COMMANDS = [_add_simulate, _add_reproduce, _add_check_gains]
 
 
 def main(argv=None):

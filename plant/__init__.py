@@ -8,6 +8,7 @@ from .payload import PAPER_PAYLOAD, Payload
 from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenario
 from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
 from .simulate import integrate, rk4_step
+from .noise import estimate_noise
 
 __all__ = [
     "A_1", "A_2", "B_1", "B_2", "C_1", "C_2", "STATE_NAMES", "acceleration", "input_matrix",
@@ -17,5 +18,5 @@ __all__ = [
     "PAPER_PAYLOAD", "Payload",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
-    "integrate", "rk4_step",
+    "integrate", "rk4_step", "estimate_noise",
 ]

@@ -1,0 +1,231 @@
+"""Augmented-state extended Kalman filter in the manner of Aghili (ICRA 2000)."""
+
+import casadi as ca
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from plant import Log, NoiseSpec, rk4_step
+from plant.noise import estimate_noise
+
+from .base import DIVERGENCE_BOUND, ObserverResult, settled
+
+__all__ = ["AugmentedEKF"]
+
+_POSE_ROWS = [0, 2, 4]
+
+
+class _CalibrationEKF(ExtendedKalmanFilter):
+    """filterpy's EKF with the state transition of eq. (1) compiled by casadi.
+
+    ``predict_x`` is overridden; ``F`` and ``Q`` are set before every
+    predict, from the same compiled call.
+    """
+
+    def __init__(self, step_buffer):
+        super().__init__(dim_x=15, dim_z=3)
+        self._call, self._in, self._out = step_buffer
+
+    def predict_x(self, u=0):
+        self.x = self._out["x_next"].reshape(15, 1).copy()
+
+
+class AugmentedEKF:
+    """Extended Kalman filter on ``[theta, theta', X, X', Y, Y', s_11 .. s_33]``.
+
+    A reconstruction of [3] for the planar case: the calibration entries are
+    states (random walks), the motion follows eq. (1) with ``w = S w_hat``
+    (:func:`plant.rk4_step`, the raw reading linear over the step), and the
+    measurement is ``[theta, X, Y]``. casadi derives the transition Jacobian
+    ``F``, the noise Jacobians and ``H`` from the plant's single definition;
+    the compiled function is called through ``casadi.Function.buffer()``.
+    filterpy's ``ExtendedKalmanFilter`` does the predict and the update
+    (Joseph form, so ``P`` stays symmetric positive definite).
+
+    Tuning rule: ``R = diag(angle_sd^2, position_sd^2, position_sd^2)`` from
+    the pose noise; ``Q`` is the wrench noise carried through the dynamics,
+    ``Q = J_0 diag(wrench_sd^2) J_0^T + J_1 diag(wrench_sd^2) J_1^T`` with
+    ``J_0, J_1`` the Jacobians of the step with respect to the two raw
+    readings it uses, plus ``q_S dt`` on each calibration entry (a random
+    walk, so that a slowly changing sensor is tracked); ``P_0`` is the pose
+    noise on the positions, ``v0_sd^2`` on the velocities and ``S0_sd^2``
+    on the calibration entries.
+
+    Parameters
+    ----------
+    payload : plant.Payload
+    noise : plant.NoiseSpec, optional
+        Noise standard deviations in the units of the log. None: estimated
+        from the log (:func:`plant.noise.estimate_noise`) and reported in
+        ``result.info["noise"]``.
+    q_S : float
+        Random-walk intensity of each calibration entry, 1/s.
+    S0_sd : float
+        Initial standard deviation of each calibration entry.
+    v0_sd : float
+        Initial standard deviation of the velocities (rad/s, m/s).
+
+    Attributes
+    ----------
+    name : str
+        ``"ekf"``.
+    """
+
+    name = "ekf"
+
+    def __init__(self, payload, noise=None, q_S=1e-5, S0_sd=3.0, v0_sd=1.0):
+        from plant import Payload
+        if not isinstance(payload, Payload):
+            raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
+        if noise is not None and not isinstance(noise, NoiseSpec):
+            raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
+        self.payload = payload
+        self.noise = noise
+        self.q_S, self.S0_sd, self.v0_sd = float(q_S), float(S0_sd), float(v0_sd)
+        self._step = self._compile()
+        self.reset()
+
+    # --- the model, from the plant ------------------------------------------
+    def _compile(self):
+        xs = ca.SX.sym("xs", 15)
+        w0 = ca.SX.sym("w0", 3)
+        w1 = ca.SX.sym("w1", 3)
+        dt = ca.SX.sym("dt")
+        S = ca.reshape(xs[6:15], 3, 3).T                    # row order
+        x_next = rk4_step(xs[0:6], S @ w0, S @ (w0 + w1) / 2, S @ w1, dt, self.payload)
+        f = ca.vertcat(x_next, xs[6:15])
+        # dense outputs: the buffer is read as full column-major matrices
+        F = ca.densify(ca.jacobian(f, xs))
+        J0 = ca.densify(ca.jacobian(f, w0))
+        J1 = ca.densify(ca.jacobian(f, w1))
+        fun = ca.Function("ekf_step", [xs, w0, w1, dt], [f, F, J0, J1])
+        buf, call = fun.buffer()
+        ins = {"xs": np.zeros(15), "w0": np.zeros(3), "w1": np.zeros(3), "dt": np.zeros(1)}
+        outs = {"x_next": np.zeros(15), "F": np.zeros(15 * 15), "J0": np.zeros(15 * 3),
+                "J1": np.zeros(15 * 3)}
+        for i, key in enumerate(ins):
+            buf.set_arg(i, memoryview(ins[key]))
+        for i, key in enumerate(outs):
+            buf.set_res(i, memoryview(outs[key]))
+        self._buffer = buf            # keep alive
+        self._fun = fun
+        return call, ins, outs
+
+    def transition(self, xs, w0, w1, dt):
+        """The discrete step and its Jacobians (the compiled casadi call).
+
+        Returns
+        -------
+        x_next : ndarray, shape (15,)
+        F : ndarray, shape (15, 15)
+        J0, J1 : ndarray, shape (15, 3)
+            Jacobians with respect to the raw readings at the step's start
+            and end.
+        """
+        call, ins, outs = self._step
+        ins["xs"][:] = xs
+        ins["w0"][:] = w0
+        ins["w1"][:] = w1
+        ins["dt"][0] = dt
+        call()
+        # casadi stores column-major
+        return (outs["x_next"].copy(), outs["F"].reshape(15, 15, order="F").copy(),
+                outs["J0"].reshape(15, 3, order="F").copy(), outs["J1"].reshape(15, 3, order="F").copy())
+
+    @staticmethod
+    def H(xs=None):
+        """Measurement Jacobian: ``[theta, X, Y]`` are states 0, 2, 4."""
+        H = np.zeros((3, 15))
+        H[0, 0] = H[1, 2] = H[2, 4] = 1.0
+        return H
+
+    @staticmethod
+    def hx(xs):
+        return np.asarray(xs).reshape(-1)[_POSE_ROWS].reshape(3, 1)
+
+    # --- step-by-step --------------------------------------------------------
+    def reset(self, S0=None, noise=None):
+        """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
+        self._S0 = np.eye(3) if S0 is None else np.asarray(S0, dtype=float)
+        self._noise = noise or self.noise or NoiseSpec((0.05, 0.05, 0.05), np.deg2rad(0.1), 1e-4)
+        self._kf = None
+        self._w_prev = None
+
+    def _start(self, pose, w_hat):
+        noise = self._noise
+        kf = _CalibrationEKF(self._step)
+        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], self._S0.ravel()]).reshape(15, 1)
+        pose_var = np.maximum(noise.pose_sd, 1e-6) ** 2
+        kf.P = np.diag(np.concatenate([[pose_var[0], self.v0_sd ** 2, pose_var[1], self.v0_sd ** 2,
+                                        pose_var[2], self.v0_sd ** 2], np.full(9, self.S0_sd ** 2)]))
+        kf.R = np.diag(pose_var)
+        self._Sigma_w = np.diag(np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2)
+        self._kf = kf
+        self._w_prev = np.asarray(w_hat, dtype=float)
+
+    def step(self, dt, pose, w_hat):
+        """One sample: predict over ``dt`` with the raw readings, update with the pose.
+
+        Parameters and returns as :meth:`observers.Observer.step`.
+        """
+        if self._kf is None:
+            if pose is None:
+                raise ValueError("the first sample after reset() needs a pose measurement")
+            self._start(pose, w_hat)
+        else:
+            kf = self._kf
+            x_next, F, J0, J1 = self.transition(kf.x[:, 0], self._w_prev, w_hat, dt)
+            kf._out["x_next"][:] = x_next
+            kf.F = F
+            Q = J0 @ self._Sigma_w @ J0.T + J1 @ self._Sigma_w @ J1.T
+            Q[6:, 6:] += np.eye(9) * self.q_S * dt
+            kf.Q = Q
+            kf.predict()
+            if pose is not None:
+                kf.update(np.asarray(pose, dtype=float).reshape(3, 1), self.H, self.hx)
+            self._w_prev = np.asarray(w_hat, dtype=float)
+        x = self._kf.x[:, 0]
+        return x[0:6].copy(), x[6:15].reshape(3, 3).copy()
+
+    def run(self, log, S0=None):
+        """Run over a whole log; the same result as :meth:`observers.Observer.run`."""
+        import time
+        if not isinstance(log, Log):
+            raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
+        start = time.perf_counter()
+        info = {}
+        noise = self.noise
+        if noise is None:
+            noise = estimate_noise(log)
+            info["noise"] = noise.to_dict()
+            info["noise_estimated"] = True
+        self.reset(S0, noise)
+        n = len(log)
+        X = np.empty((n, 15))
+        diverged = False
+        for k in range(n):
+            pose = log.pose[k] if log.has_pose[k] else None
+            self.step(log.dt, pose, log.w_hat[k])
+            X[k] = self._kf.x[:, 0]
+            if not self._healthy():
+                diverged = True
+                break
+        X = X[:k + (0 if diverged else 1)] if diverged else X
+        if len(X) == 0:
+            X = np.concatenate([[log.pose[0][0], 0, log.pose[0][1], 0, log.pose[0][2], 0],
+                                self._S0.ravel()])[None, :]
+        S_hist = X[:, 6:15].reshape(-1, 3, 3)
+        P_s = np.diag(self._kf.P)[6:15]
+        S_std = None if diverged else np.sqrt(np.maximum(P_s, 0)).reshape(3, 3)
+        return ObserverResult(
+            observer=self.name, t=log.t[:len(X)].copy(), S_hat=S_hist[-1].copy(),
+            S_hat_history=S_hist, x_hat_history=X[:, 0:6].copy(), S_std=S_std,
+            diverged=diverged, converged=bool(not diverged and settled(S_hist)),
+            wall_time=time.perf_counter() - start, info=info)
+
+    def _healthy(self):
+        kf = self._kf
+        if not (np.all(np.isfinite(kf.x)) and np.all(np.isfinite(kf.P))):
+            return False
+        if np.max(np.abs(kf.x[6:15])) >= DIVERGENCE_BOUND:
+            return False
+        return bool(np.all(np.diag(kf.P) > 0))
