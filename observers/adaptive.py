@@ -63,8 +63,8 @@ class AdaptiveObserver(Observer):
          ``[s_2, s_3]' = gain m R^-1 w_hat (R(theta)^T [e_X', e_Y'])``, with
          ``R`` a running mean of ``w_hat w_hat^T``. The printed law's rate
          scales with ``|w_hat|^2 / I_G^2`` (unstable for light payloads) and
-         its slowest direction with ``1 / cond(S)^2`` (measured: E stuck at
-         0.2-0.5 after 60 s for cond(S) of 5-7); this one is free of both;
+         its slowest direction with ``1 / cond(S)^2`` (the regressor
+         ``w_hat = S^-1 w``); this one is free of both;
       3. the gain decays as ``gamma / (1 + t / t_decay)`` down to a floor
          ``gamma * floor``, trading tracking speed for less noise late in
          the run;
