@@ -8,7 +8,7 @@ from tqdm import tqdm
 from observers import AdaptiveObserver, AugmentedEKF
 from plant import get_scenario
 
-from .metrics import calibration_error, convergence_time, error_history
+from .metrics import convergence_time, error_history
 from .plots import plot_S_entries
 
 __all__ = ["reproduce", "PAPER_CLAIMS"]
@@ -45,14 +45,14 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
     -------
     list of dict
         One row per scenario and observer: ``scenario``, ``observer``,
-        ``E`` (at the end, or at 100 s for the time-varying case's first
-        window), ``E_end``, ``convergence_time``, ``diverged``, ``wall_time``.
+        ``E_100`` (E just before 100 s, or at the end of a shorter run),
+        ``E_end``, ``convergence_time``, ``diverged``, ``converged``,
+        ``wall_time``, ``S_hat_100``; E is None for a diverged run.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    jobs = [(name, fig, k) for name, fig in _FIGURES for k in range(3)]
-    bar = tqdm(total=len(jobs), desc="reproduce", disable=not progress)
+    bar = tqdm(total=3 * len(_FIGURES), desc="reproduce", disable=not progress)   # 3 observers each
     for name, fig in _FIGURES:
         sc = get_scenario(name)
         sc = sc.with_(duration=sc.duration * duration_scale)

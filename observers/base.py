@@ -17,7 +17,7 @@ import numpy as np
 from plant import Log, Payload
 from plant.sensor import check_calibration
 
-__all__ = ["Observer", "ObserverResult", "settled", "DIVERGENCE_BOUND", "SETTLE_FRACTION",
+__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "DIVERGENCE_BOUND", "SETTLE_FRACTION",
            "SETTLE_TOLERANCE"]
 
 #: A run whose calibration estimate has an entry beyond this is declared diverged.
@@ -162,20 +162,10 @@ class Observer:
         x_hat : ndarray, shape (6,)
         S_hat : ndarray, shape (3, 3)
         """
-        w_hat = np.asarray(w_hat, dtype=float)
-        if w_hat.shape != (3,) or not np.all(np.isfinite(w_hat)):
-            raise ValueError(f"w_hat must be 3 finite numbers; got {w_hat!r}")
-        if pose is not None:
-            pose = np.asarray(pose, dtype=float)
-            if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-                raise ValueError(f"pose must be 3 finite numbers or None; got {pose!r}")
+        pose, w_hat = check_sample(dt, pose, w_hat, first=self._z is None)
         if self._z is None:
-            if pose is None:
-                raise ValueError("the first sample after reset() needs a pose measurement")
             self._z = self._initial_state(self._S0, pose, w_hat)
         else:
-            if not (np.isfinite(dt) and dt > 0):
-                raise ValueError(f"dt must be positive; got {dt!r}")
             self._z = self._transition(self._z, _pack_input(pose, w_hat), float(dt))
         return self._z[self._X].copy(), self._z[self._S].reshape(3, 3).copy()
 
@@ -264,6 +254,30 @@ class Observer:
 
     def _info(self):
         return {}
+
+
+def check_sample(dt, pose, w_hat, first):
+    """Validate one live sample for :meth:`Observer.step`; return ``(pose, w_hat)`` as arrays.
+
+    Raises
+    ------
+    ValueError
+        ``w_hat`` not 3 finite numbers, ``pose`` neither None nor 3 finite
+        numbers, no pose on the first sample, or ``dt`` not positive after it.
+    """
+    w_hat = np.asarray(w_hat, dtype=float)
+    if w_hat.shape != (3,) or not np.all(np.isfinite(w_hat)):
+        raise ValueError(f"w_hat must be 3 finite numbers; got {w_hat!r}")
+    if pose is not None:
+        pose = np.asarray(pose, dtype=float)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise ValueError(f"pose must be 3 finite numbers or None; got {pose!r}")
+    if first:
+        if pose is None:
+            raise ValueError("the first sample after reset() needs a pose measurement")
+    elif not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be positive; got {dt!r}")
+    return pose, w_hat
 
 
 def _pack_input(pose, w_hat):

@@ -4,10 +4,11 @@ import casadi as ca
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from plant import Log, NoiseSpec, rk4_step
+from plant import Log, NoiseSpec, Payload, rk4_step
 from plant.noise import estimate_noise
+from plant.sensor import check_calibration
 
-from .base import DIVERGENCE_BOUND, ObserverResult, settled
+from .base import DIVERGENCE_BOUND, ObserverResult, check_sample, settled
 
 __all__ = ["AugmentedEKF"]
 
@@ -17,16 +18,16 @@ _POSE_ROWS = [0, 2, 4]
 class _CalibrationEKF(ExtendedKalmanFilter):
     """filterpy's EKF with the state transition of eq. (1) compiled by casadi.
 
-    ``predict_x`` is overridden; ``F`` and ``Q`` are set before every
-    predict, from the same compiled call.
+    ``predict_x`` is overridden to take ``x_next``; ``x_next``, ``F`` and
+    ``Q`` are set before every predict, from the same compiled call.
     """
 
-    def __init__(self, step_buffer):
+    def __init__(self):
         super().__init__(dim_x=15, dim_z=3)
-        self._call, self._in, self._out = step_buffer
+        self.x_next = np.zeros(15)
 
     def predict_x(self, u=0):
-        self.x = self._out["x_next"].reshape(15, 1).copy()
+        self.x = self.x_next.reshape(15, 1)
 
 
 class AugmentedEKF:
@@ -73,7 +74,6 @@ class AugmentedEKF:
     name = "ekf"
 
     def __init__(self, payload, noise=None, q_S=1e-5, S0_sd=3.0, v0_sd=1.0):
-        from plant import Payload
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         if noise is not None and not isinstance(noise, NoiseSpec):
@@ -145,14 +145,14 @@ class AugmentedEKF:
     # --- step-by-step --------------------------------------------------------
     def reset(self, S0=None, noise=None):
         """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
-        self._S0 = np.eye(3) if S0 is None else np.asarray(S0, dtype=float)
+        self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
         self._noise = noise or self.noise or NoiseSpec((0.05, 0.05, 0.05), np.deg2rad(0.1), 1e-4)
         self._kf = None
         self._w_prev = None
 
     def _start(self, pose, w_hat):
         noise = self._noise
-        kf = _CalibrationEKF(self._step)
+        kf = _CalibrationEKF()
         kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], self._S0.ravel()]).reshape(15, 1)
         pose_var = np.maximum(noise.pose_sd, 1e-6) ** 2
         kf.P = np.diag(np.concatenate([[pose_var[0], self.v0_sd ** 2, pose_var[1], self.v0_sd ** 2,
@@ -160,29 +160,26 @@ class AugmentedEKF:
         kf.R = np.diag(pose_var)
         self._Sigma_w = np.diag(np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2)
         self._kf = kf
-        self._w_prev = np.asarray(w_hat, dtype=float)
+        self._w_prev = w_hat
 
     def step(self, dt, pose, w_hat):
         """One sample: predict over ``dt`` with the raw readings, update with the pose.
 
         Parameters and returns as :meth:`observers.Observer.step`.
         """
+        pose, w_hat = check_sample(dt, pose, w_hat, first=self._kf is None)
         if self._kf is None:
-            if pose is None:
-                raise ValueError("the first sample after reset() needs a pose measurement")
             self._start(pose, w_hat)
         else:
             kf = self._kf
-            x_next, F, J0, J1 = self.transition(kf.x[:, 0], self._w_prev, w_hat, dt)
-            kf._out["x_next"][:] = x_next
-            kf.F = F
+            kf.x_next, kf.F, J0, J1 = self.transition(kf.x[:, 0], self._w_prev, w_hat, dt)
             Q = J0 @ self._Sigma_w @ J0.T + J1 @ self._Sigma_w @ J1.T
             Q[6:, 6:] += np.eye(9) * self.q_S * dt
             kf.Q = Q
             kf.predict()
             if pose is not None:
-                kf.update(np.asarray(pose, dtype=float).reshape(3, 1), self.H, self.hx)
-            self._w_prev = np.asarray(w_hat, dtype=float)
+                kf.update(pose.reshape(3, 1), self.H, self.hx)
+            self._w_prev = w_hat
         x = self._kf.x[:, 0]
         return x[0:6].copy(), x[6:15].reshape(3, 3).copy()
 
@@ -209,7 +206,8 @@ class AugmentedEKF:
             if not self._healthy():
                 diverged = True
                 break
-        X = X[:k + (0 if diverged else 1)] if diverged else X
+        if diverged:
+            X = X[:k]          # the last finite estimate; row k is the unhealthy one
         if len(X) == 0:
             X = np.concatenate([[log.pose[0][0], 0, log.pose[0][1], 0, log.pose[0][2], 0],
                                 self._S0.ravel()])[None, :]

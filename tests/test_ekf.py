@@ -82,3 +82,15 @@ def test_ekf_on_another_payload_and_S():
     result = AugmentedEKF(payload, noise=truth.noise).run(log, truth.S0)
     assert not result.diverged
     assert calibration_error(result.S_hat, truth.S_at(0.0)) < 0.05
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda e: e.step(0.001, [0, 0, 0], [1, np.nan, 3]), "w_hat must be 3 finite"),
+    (lambda e: e.step(0.001, [0, 0], [1, 2, 3]), "pose must be 3 finite numbers"),
+    (lambda e: e.step(0.001, None, [1, 2, 3]), "first sample after reset"),
+    (lambda e: (e.step(0.001, [0, 0, 0], [1, 2, 3]), e.step(0.0, [0, 0, 0], [1, 2, 3])), "dt must be positive"),
+    (lambda e: e.reset(np.full((3, 3), np.nan)), "S0 must be finite"),
+])
+def test_ekf_refuses_bad_samples_like_every_observer(call, match):
+    with pytest.raises(ValueError, match=match):
+        call(AugmentedEKF(plant.PAPER_PAYLOAD))
