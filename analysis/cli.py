@@ -67,16 +67,28 @@ def _add_check_gains(sub):
                        description="Check observer gains with python-control: poles of A - K C, "
                                    "observability of (A, C), the Lyapunov P, and whether assumption 2 "
                                    "of Theorem 1 holds with P = I.")
-    p.add_argument("--config", choices=["paper", "adaptive"], default="paper",
-                   help="paper: eq. (14) as printed; adaptive: the default configuration's gains")
+    p.add_argument("--config", choices=["paper", "adaptive", "high-gain", "high-gain-ref4"], default="paper",
+                   help="paper: eq. (14) as printed; adaptive: the default configuration's gains; "
+                        "high-gain, high-gain-ref4: the reconstruction of [4] (poles at -LAM)")
+    p.add_argument("--lam", type=float, default=None,
+                   help="high-gain parameter in rad/s for the high-gain configurations")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_check_gains)
 
 
 def cmd_check_gains(args):
-    from observers import AdaptiveObserver, check_gains
+    from observers import AdaptiveObserver, HighGainObserver, check_gains
     from plant import PAPER_PAYLOAD
-    obs = AdaptiveObserver.paper(PAPER_PAYLOAD) if args.config == "paper" else AdaptiveObserver(PAPER_PAYLOAD)
+    if args.lam is not None and not args.config.startswith("high-gain"):
+        raise CliError(f"--lam applies to the high-gain configurations; got --config {args.config}")
+    if args.lam is not None:
+        _positive(args.lam, "--lam")
+    obs = {"paper": lambda: AdaptiveObserver.paper(PAPER_PAYLOAD),
+           "adaptive": lambda: AdaptiveObserver(PAPER_PAYLOAD),
+           "high-gain": lambda: HighGainObserver(PAPER_PAYLOAD),
+           "high-gain-ref4": lambda: HighGainObserver.ref4(PAPER_PAYLOAD)}[args.config]()
+    if args.lam is not None:
+        obs = HighGainObserver(PAPER_PAYLOAD, lam=args.lam)
     report = check_gains(obs.K1, obs.K2)
     if args.json:
         print(json.dumps({k: {"poles": [[complex(p).real, complex(p).imag] for p in v["poles"]],
@@ -108,6 +120,73 @@ def cmd_reproduce(args):
     print((Path(args.out) / "summary.md").read_text())
 
 
+def _add_compare(sub):
+    from plant import SCENARIOS
+    from .comparison import OBSERVER_NAMES
+    p = sub.add_parser("compare", help="run the observers side by side on identical data",
+                       description="Run every observer on the same simulated logs (same data, same "
+                                   "initial S_hat) over scenarios and seeds; print the table of E, "
+                                   "convergence time and cost. Scenarios: " + ", ".join(SCENARIOS))
+    p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
+                   help="one or more of: " + ", ".join(SCENARIOS))
+    p.add_argument("--observer", nargs="+", default=list(OBSERVER_NAMES), metavar="NAME",
+                   help="one or more of: " + ", ".join(OBSERVER_NAMES))
+    p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0 .. N-1 (default 1)")
+    p.add_argument("--duration", type=float, metavar="S", help="run length in s (default: each scenario's)")
+    p.add_argument("--json", action="store_true", help="print a JSON list of rows (strict JSON) instead")
+    p.add_argument("--out", metavar="DIR", help="write E-against-time plots and summary.md here")
+    p.set_defaults(func=cmd_compare)
+
+
+def cmd_compare(args):
+    from plant import get_scenario
+    from .comparison import OBSERVER_NAMES, compare, summarise, summary_markdown
+    from .plots import plot_error_histories
+    for name in args.scenario:
+        get_scenario(name)                      # ValueError naming the choices
+    for name in args.observer:
+        if name not in OBSERVER_NAMES:
+            raise CliError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+    if args.seeds < 1:
+        raise CliError(f"--seeds must be at least 1; got {args.seeds}")
+    if args.duration is not None:
+        _positive(args.duration, "--duration")
+    table, curves = compare(args.scenario, args.seeds, args.observer, args.duration,
+                            progress=not args.json, histories=True)
+    summary = summarise(table)
+    text = summary_markdown(summary, f"Observer comparison ({args.seeds} seed(s), "
+                                     f"{'each scenario' if args.duration is None else f'{args.duration:g} s'})")
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        for scenario in dict.fromkeys(table["scenario"]):
+            plot_error_histories({obs: v for (sc, obs), v in curves.items() if sc == scenario},
+                                 out / f"E_{scenario}.png", f"E against time, scenario '{scenario}' (seed 0)")
+        (out / "summary.md").write_text(text)
+        table.to_csv(out / "runs.csv", index=False)
+    if args.json:
+        print(json.dumps(_strict_rows(table), indent=1, allow_nan=False))
+    else:
+        print(text)
+
+
+def _strict_rows(table):
+    """Rows of a DataFrame as JSON-ready dicts: NaN becomes None, numpy scalars plain."""
+    rows = []
+    for record in table.to_dict(orient="records"):
+        row = {}
+        for key, value in record.items():
+            if isinstance(value, (np.bool_, bool)):
+                value = bool(value)
+            elif isinstance(value, (np.integer,)):
+                value = int(value)
+            elif isinstance(value, (float, np.floating)):
+                value = None if not np.isfinite(value) else float(value)
+            row[key] = value
+        rows.append(row)
+    return rows
+
+
 def _positive(value, name):
     if not np.isfinite(value) or value <= 0:
         raise CliError(f"{name} must be positive; got {value}")
@@ -124,7 +203,7 @@ def build_parser():
     return parser
 
 
-_COMMANDS = [_add_simulate, _add_reproduce, _add_check_gains]
+_COMMANDS = [_add_simulate, _add_reproduce, _add_compare, _add_check_gains]
 
 
 def main(argv=None):

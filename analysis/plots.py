@@ -6,7 +6,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["plot_S_entries"]
+from .metrics import display_name  # noqa: E402
+
+__all__ = ["plot_S_entries", "plot_error_histories"]
 
 
 def plot_S_entries(results, truth, path, title):
@@ -29,7 +31,7 @@ def plot_S_entries(results, truth, path, title):
         for j in range(3):
             ax = axes[i, j]
             for r in results:
-                ax.plot(r.t[::step], r.S_hat_history[::step, i, j], lw=1, label=r.observer)
+                ax.plot(r.t[::step], r.S_hat_history[::step, i, j], lw=1, label=display_name(r.observer))
             ax.plot(t_all[::step], S_true[:, i, j], "k--", lw=1, label="true")
             ax.set_title(f"s_{i + 1}{j + 1}", fontsize=9)
             lo, hi = np.min(S_true[:, i, j]), np.max(S_true[:, i, j])
@@ -40,4 +42,28 @@ def plot_S_entries(results, truth, path, title):
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_error_histories(curves, path, title):
+    """E against time, log scale, one line per observer.
+
+    Parameters
+    ----------
+    curves : dict
+        ``{observer name: (t, E)}`` with ``t`` in s.
+    path : str or Path
+        PNG file to write.
+    title : str
+    """
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for name, (t, E) in curves.items():
+        ax.semilogy(t, np.maximum(E, 1e-12), lw=1, label=display_name(name))
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("E = ||I - S_hat S^-1||_2")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     plt.close(fig)

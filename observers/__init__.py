@@ -1,8 +1,9 @@
 """Observers that estimate the motion and the calibration matrix ``S``."""
 
 from .adaptive import AdaptiveObserver
+from .highgain import HighGainObserver
 from .ekf import AugmentedEKF
 from .base import Observer, ObserverResult, settled
 from .gains import check_gains, double_pole_gains
 
-__all__ = ["Observer", "ObserverResult", "settled", "AdaptiveObserver", "AugmentedEKF", "check_gains", "double_pole_gains"]
+__all__ = ["Observer", "ObserverResult", "settled", "AdaptiveObserver", "HighGainObserver", "AugmentedEKF", "check_gains", "double_pole_gains"]

@@ -21,6 +21,7 @@ from plant import input_matrix
 from plant._backend import ops
 from plant._checks import as_finite_array, as_positive_scalar
 
+from . import _matrix as mx
 from .base import Observer
 from .gains import double_pole_gains
 
@@ -150,18 +151,18 @@ class AdaptiveObserver(Observer):
         e = has * o.vcat([pose[0] - x[0], pose[1] - x[2], pose[2] - x[4]])
         theta = has * pose[0] + (1 - has) * x[0]            # eq. (5) uses the measured angle
         G = input_matrix(theta, self.payload)
-        S_mat = _as_matrix(o, S)
+        S_mat = mx.as_matrix(o, S)
         # eq. (15): velocity errors by backward difference, step absorbed in delta
         e_v = has * (e - e_prev)
         # eq. (8) as printed: S_hat += delta G^T diag(1, m, m) e_v w_hat^T
         W_e_v = o.vcat([e_v[0], self.payload.mass * e_v[1], self.payload.mass * e_v[2]])
-        S_next = S_mat + self.delta * o.dot(_col(o, o.dot(G.T, W_e_v)), _row(o, w))
+        S_next = S_mat + self.delta * o.dot(mx.col(o.dot(G.T, W_e_v)), mx.row(w))
         # eqs. (6), (7), (14): x_hat' = A x_hat + G S_hat w_hat + K C e, forward Euler
         a = o.dot(G, o.dot(S_mat, w))
         x_dot = o.vcat([x[1], a[0], x[3], a[1], x[5], a[2]]) + o.dot(self.K, e)
         x_next = x + dt * x_dot
         e_keep = has * e + (1 - has) * e_prev
-        return o.vcat([x_next, _flat(o, S_next), e_keep, u[1:4], u[0], u[4:7], z[25] + dt, z[26:38]])
+        return o.vcat([x_next, mx.flat(o, S_next), e_keep, u[1:4], u[0], u[4:7], z[25] + dt, z[26:38]])
 
     def _default_step(self, z, u, dt):
         """The default configuration (class docstring, points 1-4)."""
@@ -173,7 +174,7 @@ class AdaptiveObserver(Observer):
         e = has * o.vcat([pose[0] - x[0], pose[1] - x[2], pose[2] - x[4]])
         theta = has * pose[0] + (1 - has) * x[0]
         G = input_matrix(theta, p)
-        S_mat = _as_matrix(o, S)
+        S_mat = mx.as_matrix(o, S)
         # 1. velocity error e_v = e' + K_pos e, e' from the filter xi' = (e - xi)/tau
         e_dot = (e - xi) / self.tau
         K_pos = self.K[[0, 2, 4], :]
@@ -185,11 +186,10 @@ class AdaptiveObserver(Observer):
         #    R a running mean of w_hat w_hat^T (time constant 2 s): the rate is free of I_G, m
         #    and of how well S is conditioned.
         gain = self.gamma * o.fmax(1.0 / (1.0 + t / self.t_decay), self.floor)   # 3. decaying gain
-        R_mat = _as_matrix(o, R_flat)
-        w_col = _col(o, w)
-        R_next = R_mat + (1 - o.exp(-dt / _R_TIME)) * (o.dot(w_col, _row(o, w)) - R_mat)
-        reg = R_mat + _R_REG * (R_mat[0, 0] + R_mat[1, 1] + R_mat[2, 2]) / 3 * _eye(o)
-        g_w = _flatvec(o, o.solve(reg, w_col))          # R^-1 w_hat
+        R_mat = mx.as_matrix(o, R_flat)
+        w_col = mx.col(w)
+        R_next = R_mat + (1 - o.exp(-dt / _R_TIME)) * (o.dot(w_col, mx.row(w)) - R_mat)
+        g_w = mx.vec(mx.regularised_solve(o, R_mat, w_col, 3, rel=_R_REG, floor=0.0))   # R^-1 w_hat
         d_phi1 = gain * dt * p.inertia * g_w * e_v[0]
         c, s = o.cos(theta), o.sin(theta)
         e_b = o.vcat([c * e_v[1] + s * e_v[2], -s * e_v[1] + c * e_v[2]])   # R(theta)^T e_v
@@ -207,38 +207,5 @@ class AdaptiveObserver(Observer):
             x[2 * i + j] + (dt * x[2 * i + 1] + dt * dt * (2 * a0[i] + a1[i]) / 6 if j == 0
                             else dt * (a0[i] + a1[i]) / 2)
             for i in range(3) for j in range(2)]) + dt * inj
-        return o.vcat([x_next, S_next, z[15:18], pose_next, has_next, w_next, t + dt, xi_next, _flat(o, R_next)])
+        return o.vcat([x_next, S_next, z[15:18], pose_next, has_next, w_next, t + dt, xi_next, mx.flat(o, R_next)])
 
-
-def _as_matrix(o, flat):
-    if hasattr(flat, "reshape") and not hasattr(flat, "sparsity"):
-        return flat.reshape(3, 3)
-    return o.matrix([[flat[3 * i + j] for j in range(3)] for i in range(3)])
-
-
-def _flat(o, mat):
-    if hasattr(mat, "sparsity"):
-        return o.vcat([mat[i, j] for i in range(3) for j in range(3)])
-    return mat.ravel()
-
-
-def _col(o, v):
-    if hasattr(v, "sparsity"):
-        return v
-    return v[:, None]
-
-
-def _flatvec(o, v):
-    if hasattr(v, "sparsity"):
-        return v
-    return v.ravel()
-
-
-def _eye(o):
-    return o.matrix([[1.0 if i == j else 0.0 for j in range(3)] for i in range(3)])
-
-
-def _row(o, v):
-    if hasattr(v, "sparsity"):
-        return v.T
-    return v[None, :] if v.ndim == 1 else v

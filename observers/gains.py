@@ -6,7 +6,7 @@ import numpy as np
 from plant import A_1, A_2, C_1, C_2
 from plant._checks import as_finite_array, as_positive_scalar
 
-__all__ = ["double_pole_gains", "check_gains", "GainReport"]
+__all__ = ["double_pole_gains", "check_gains", "GainReport", "sampled_poles"]
 
 
 def double_pole_gains(lam):
@@ -101,3 +101,26 @@ def check_gains(K1, K2):
     K1 = as_finite_array(K1, (2, 1), "K1")
     K2 = as_finite_array(K2, (4, 2), "K2")
     return GainReport(angular=_check(A_1, C_1, K1), translational=_check(A_2, C_2, K2))
+
+
+def sampled_poles(K1, dt):
+    """Poles of one channel ``A_1 - K_1 C_1`` sampled at ``dt``, by python-control.
+
+    The sampled images ``exp(p dt)`` of the continuous poles: where the
+    high-gain observer (:class:`observers.HighGainObserver`) places the
+    eigenvalues of its discrete error recursion.
+
+    Parameters
+    ----------
+    K1 : array_like, shape (2, 1)
+    dt : float
+        Sample time, s.
+
+    Returns
+    -------
+    ndarray, shape (2,)
+    """
+    K1 = as_finite_array(K1, (2, 1), "K1")
+    dt = as_positive_scalar(dt, "dt")
+    closed = control.ss(A_1 - K1 @ C_1, np.zeros((2, 1)), C_1, 0)
+    return np.sort_complex(control.sample_system(closed, dt).poles())

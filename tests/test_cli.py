@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 import plant
 from analysis.cli import main
@@ -45,4 +46,40 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
     for name in ("fig2_paper.png", "fig3_noisy.png", "fig4_time-varying.png", "summary.md"):
         assert (tmp_path / name).stat().st_size > 0
     summary = (tmp_path / "summary.md").read_text()
-    assert "0.0009111" in summary and "adaptive-paper" in summary and "| ekf |" in summary
+    assert "0.0009111" in summary and "0.0367" in summary and "| adaptive-paper |" in summary
+    for name in ("| ekf (after [3]) |", "| high-gain (reconstruction of [4]) |", "| high-gain-ref4 (reconstruction"):
+        assert name in summary
+
+
+def test_compare_json_is_strict_and_has_a_row_per_observer_and_seed(capsys):
+    assert main(["compare", "--scenario", "paper", "--seeds", "2", "--duration", "3", "--json",
+                 "--observer", "adaptive", "adaptive-paper", "high-gain", "ekf"]) == 0
+    rows = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
+    assert sorted((r["observer"], r["seed"]) for r in rows) == sorted(
+        (o, s) for o in ("adaptive", "adaptive-paper", "high-gain", "ekf") for s in (0, 1))
+    for r in rows:
+        assert r["scenario"] == "paper" and isinstance(r["E"], float)
+        assert r["convergence_time"] is None or r["convergence_time"] >= 0
+    assert any(r["convergence_time"] is None for r in rows)      # adaptive-paper: not within 3 s
+
+
+def test_compare_writes_plots_and_summary(tmp_path, capsys):
+    assert main(["compare", "--scenario", "paper", "drift", "--duration", "2", "--out", str(tmp_path),
+                 "--observer", "adaptive", "high-gain"]) == 0
+    assert (tmp_path / "E_paper.png").stat().st_size > 0 and (tmp_path / "E_drift.png").stat().st_size > 0
+    text = (tmp_path / "summary.md").read_text()
+    assert text == capsys.readouterr().out.strip() + "\n"
+    assert "| drift | high-gain (reconstruction of [4]) |" in text
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["compare", "--scenario", "nowhere"], "unknown scenario 'nowhere'"),
+    (["compare", "--observer", "kalman"], "unknown observer 'kalman'"),
+    (["compare", "--seeds", "0"], "--seeds must be at least 1"),
+    (["compare", "--duration", "nan"], "--duration must be positive"),
+    (["check-gains", "--config", "adaptive", "--lam", "10"], "--lam applies to the high-gain"),
+])
+def test_compare_and_check_gains_refuse_bad_arguments(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]

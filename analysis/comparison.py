@@ -1,0 +1,222 @@
+"""Run observers side by side on identical data and tabulate E, convergence and cost."""
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from observers import AdaptiveObserver, AugmentedEKF, HighGainObserver
+from plant import get_scenario
+from plant._checks import as_positive_scalar
+
+from .metrics import convergence_time, display_name, error_history
+
+__all__ = ["OBSERVER_NAMES", "make_observer", "run_case", "compare", "summarise", "summary_markdown",
+           "CHECKPOINTS"]
+
+#: Every observer the toolkit compares, by the name tables use.
+OBSERVER_NAMES = ("adaptive", "adaptive-paper", "high-gain", "high-gain-ref4", "ekf")
+#: Times (s) at which E is reported, where the run is that long.
+CHECKPOINTS = (10.0, 30.0, 100.0)
+
+
+def make_observer(name, payload, told_noise=None, settings=None):
+    """An observer by name, with its documented default tuning.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`OBSERVER_NAMES`.
+    payload : plant.Payload
+    told_noise : plant.NoiseSpec, optional
+        What an observer with a noise model (the EKF) is told; None: it
+        estimates the noise from the log.
+    settings : dict, optional
+        Keyword arguments passed to the observer's constructor (gains, ...).
+
+    Returns
+    -------
+    observers.Observer or observers.AugmentedEKF
+    """
+    settings = dict(settings or {})
+    if name == "adaptive":
+        return AdaptiveObserver(payload, **settings)
+    if name == "adaptive-paper":
+        return AdaptiveObserver(payload, literal=True, **settings)
+    if name == "high-gain":
+        return HighGainObserver(payload, **settings)
+    if name == "high-gain-ref4":
+        ref4 = HighGainObserver.ref4(payload)
+        base = {"lam": ref4.lam, "gamma": ref4.gamma, "normalisation": ref4.normalisation,
+                "t_decay": ref4.t_decay, "name": ref4.name}
+        return HighGainObserver(payload, **{**base, **settings})
+    if name == "ekf":
+        return AugmentedEKF(payload, noise=told_noise, **settings)
+    raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+
+
+def _checkpoint_column(t_check):
+    return f"E_{t_check:g}s"
+
+
+def run_case(scenario, seed, observers=OBSERVER_NAMES, duration=None, settings=None, histories=False):
+    """Run several observers on one simulated log: same data, same ``S0``.
+
+    Parameters
+    ----------
+    scenario : str or plant.Scenario
+    seed : int
+        Seeds the log (noise, ``S``, ``S0``).
+    observers : sequence of str
+        Names from :data:`OBSERVER_NAMES`.
+    duration : float, optional
+        Run length in s; default the scenario's.
+    settings : dict, optional
+        ``{observer name: constructor keyword arguments}``.
+    histories : bool
+        Also return E against time for each observer.
+
+    Returns
+    -------
+    rows : list of dict
+        One per observer; the columns of :func:`compare`.
+    histories : dict, only with ``histories=True``
+        ``{observer: (t, E)}``, decimated to at most 2000 points.
+    """
+    sc = get_scenario(scenario) if isinstance(scenario, str) else scenario
+    if duration is not None:
+        sc = sc.with_(duration=as_positive_scalar(duration, "duration"))
+    log, truth, _ = sc.generate(int(seed))
+    told = truth.noise.scaled(truth.extra.get("told_noise", 1.0))
+    rows, curves = [], {}
+    for name in observers:
+        obs = make_observer(name, sc.payload, told, (settings or {}).get(name))
+        result = obs.run(log, truth.S0)
+        E = error_history(result.S_hat_history, truth.S_at(result.t))
+        row = {"observer": name, "scenario": sc.name, "seed": int(seed), "duration": float(log.duration),
+               "E": np.nan if result.diverged else float(E[-1]),
+               "E_median_last_10pct": np.nan if result.diverged else float(np.median(E[int(0.9 * len(E)):])),
+               "convergence_time": np.nan, "diverged": bool(result.diverged),
+               "converged": bool(result.converged), "wall_time": result.wall_time,
+               "wall_per_sim_s": result.wall_time / log.duration,
+               "us_per_step": 1e6 * result.wall_time / len(log)}
+        if not result.diverged:
+            ct = convergence_time(result.t, E)
+            row["convergence_time"] = np.nan if ct is None else float(ct)
+        for t_check in CHECKPOINTS:
+            if t_check <= log.duration + 1e-9:
+                k = min(len(E) - 1, int(round(t_check / log.dt)) - 1)      # just before t_check
+                row[_checkpoint_column(t_check)] = np.nan if result.diverged else float(E[k])
+        rows.append(row)
+        if histories:
+            step = max(1, len(E) // 2000)
+            curves[name] = (result.t[::step], E[::step])
+    return (rows, curves) if histories else rows
+
+
+def compare(scenarios=("paper",), seeds=1, observers=OBSERVER_NAMES, duration=None, settings=None,
+            progress=True, histories=False):
+    """Run observers over scenarios and seeds on identical data.
+
+    For each scenario and seed one log is simulated, and every observer runs
+    on it from the same initial ``S_hat`` (drawn from the seed).
+
+    Parameters
+    ----------
+    scenarios : sequence of str
+        Names from :data:`plant.SCENARIOS`.
+    seeds : int or sequence of int
+        ``N`` means seeds ``0 .. N-1``.
+    observers : sequence of str
+        Names from :data:`OBSERVER_NAMES`.
+    duration : float, optional
+        Run length in s; default each scenario's.
+    settings : dict, optional
+        ``{observer name: constructor keyword arguments}``.
+    progress : bool
+        Show a progress bar.
+    histories : bool
+        Also return E against time for seed ``seeds[0]``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per observer, scenario and seed: ``observer``, ``scenario``,
+        ``seed``, ``duration``, ``E`` (at the end), ``E_10s``, ``E_30s``,
+        ``E_100s`` (just before each checkpoint, where the run is that long),
+        ``E_median_last_10pct``, ``convergence_time`` (s; NaN where E never
+        stays below the threshold), ``diverged``, ``converged``,
+        ``wall_time`` (s), ``wall_per_sim_s`` (wall seconds per simulated
+        second) and ``us_per_step``. E is NaN for a diverged run.
+    dict, only with ``histories=True``
+        ``{(scenario, observer): (t, E)}``.
+    """
+    seeds = list(range(int(seeds))) if np.isscalar(seeds) else [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must be at least 1; got 0")
+    for name in observers:
+        if name not in OBSERVER_NAMES:
+            raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+    scenarios = [get_scenario(s).name for s in scenarios]
+    rows, curves = [], {}
+    cases = [(s, seed) for s in scenarios for seed in seeds]
+    for scenario, seed in tqdm(cases, desc="compare", disable=not progress):
+        keep = histories and seed == seeds[0]
+        out = run_case(scenario, seed, observers, duration, settings, histories=keep)
+        if keep:
+            out, h = out
+            curves.update({(scenario, name): v for name, v in h.items()})
+        rows += out
+    table = pd.DataFrame(rows)
+    return (table, curves) if histories else table
+
+
+def summarise(table):
+    """Medians and spread over seeds, one row per scenario and observer.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        From :func:`compare`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``scenario``, ``observer``, ``seeds``, ``E_median``, ``E_q25``,
+        ``E_q75`` (quartiles over seeds), the medians of each checkpoint
+        column and of ``convergence_time`` (over the runs that converged),
+        ``converged_runs``, ``diverged_runs`` and ``us_per_step_median``.
+    """
+    checkpoints = [c for c in table.columns if c.startswith("E_") and c.endswith("s") and c[2].isdigit()]
+    out = []
+    for (scenario, observer), g in table.groupby(["scenario", "observer"], sort=False):
+        row = {"scenario": scenario, "observer": observer, "seeds": len(g),
+               "E_median": g["E"].median(), "E_q25": g["E"].quantile(0.25), "E_q75": g["E"].quantile(0.75)}
+        for c in checkpoints:
+            row[c + "_median"] = g[c].median()
+        row["convergence_time_median"] = g["convergence_time"].median()
+        row["converged_runs"] = int(g["converged"].sum())
+        row["diverged_runs"] = int(g["diverged"].sum())
+        row["us_per_step_median"] = g["us_per_step"].median()
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def _fmt(v, spec=".3g"):
+    return "-" if v is None or (isinstance(v, float) and np.isnan(v)) else format(v, spec)
+
+
+def summary_markdown(summary, title="Observer comparison"):
+    """The summary of :func:`summarise` as a Markdown table."""
+    checkpoints = [c for c in summary.columns if c.startswith("E_") and c.endswith("s_median")]
+    head = ["scenario", "observer", "seeds", "median E at end [IQR]"]
+    head += [f"median {c[:-len('_median')].replace('E_', 'E at ')}" for c in checkpoints]
+    head += ["median convergence time [s]", "converged", "diverged", "cost [us/step]"]
+    lines = [f"# {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for _, r in summary.iterrows():
+        cells = [r["scenario"], display_name(r["observer"]), str(r["seeds"]),
+                 f"{_fmt(r['E_median'])} [{_fmt(r['E_q25'])}, {_fmt(r['E_q75'])}]"]
+        cells += [_fmt(r[c]) for c in checkpoints]
+        cells += [_fmt(r["convergence_time_median"], ".1f"), f"{r['converged_runs']}/{r['seeds']}",
+                  f"{r['diverged_runs']}/{r['seeds']}", _fmt(r["us_per_step_median"], ".1f")]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
