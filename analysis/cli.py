@@ -32,6 +32,9 @@ def _add_simulate(sub):
     p.add_argument("--noise-free", action="store_true", help="no measurement noise")
     p.add_argument("--pose-rate", type=float, metavar="HZ", help="pose measurements per second")
     p.add_argument("--drop-rate", type=float, metavar="FRAC", help="fraction of pose frames dropped")
+    p.add_argument("--mass", type=float, metavar="KG", help="payload mass (default: the scenario's)")
+    p.add_argument("--inertia", type=float, metavar="KGM2", help="payload I_G (default: the scenario's)")
+    p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"), help="offset, m (default: the scenario's)")
     p.add_argument("--out", required=True, metavar="LOG.csv")
     p.set_defaults(func=cmd_simulate)
 
@@ -50,6 +53,12 @@ def cmd_simulate(args):
         if not 0 <= args.drop_rate < 1:
             raise CliError(f"--drop-rate must be in [0, 1); got {args.drop_rate}")
         changes["drop_rate"] = args.drop_rate
+    if args.mass is not None or args.inertia is not None or args.rho is not None:
+        from plant import Payload
+        p = sc.payload
+        changes["payload"] = Payload(_positive(args.mass, "--mass") if args.mass is not None else p.mass,
+                                     _positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
+                                     tuple(args.rho) if args.rho is not None else p.rho)
     sc = sc.with_(**changes)
     log, truth, _ = sc.generate(args.seed, noise_free=args.noise_free)
     out = Path(args.out)
@@ -165,26 +174,89 @@ def cmd_compare(args):
         (out / "summary.md").write_text(text)
         table.to_csv(out / "runs.csv", index=False)
     if args.json:
-        print(json.dumps(_strict_rows(table), indent=1, allow_nan=False))
+        print(json.dumps(_strict(table.to_dict(orient="records")), indent=1, allow_nan=False))
     else:
         print(text)
 
 
-def _strict_rows(table):
-    """Rows of a DataFrame as JSON-ready dicts: NaN becomes None, numpy scalars plain."""
-    rows = []
-    for record in table.to_dict(orient="records"):
-        row = {}
-        for key, value in record.items():
-            if isinstance(value, (np.bool_, bool)):
-                value = bool(value)
-            elif isinstance(value, (np.integer,)):
-                value = int(value)
-            elif isinstance(value, (float, np.floating)):
-                value = None if not np.isfinite(value) else float(value)
-            row[key] = value
-        rows.append(row)
-    return rows
+def _add_calibrate(sub):
+    from .calibrate import CALIBRATION_METHODS, DEFAULT_METHOD
+    p = sub.add_parser("calibrate", help="estimate S from a recorded log",
+                       description="Estimate the calibration matrix S from a log (t,theta,x,y,M,fx,fy; "
+                                   "rad, m, N m, N) and the payload's mass properties. Prints S_hat with "
+                                   "its one-sigma uncertainty, whether the run converged, warnings about "
+                                   "excitation and model consistency, and E with --truth.")
+    p.add_argument("log", metavar="LOG.csv")
+    p.add_argument("--mass", type=float, required=True, metavar="KG")
+    p.add_argument("--inertia", type=float, required=True, metavar="KGM2", help="I_G about the centre of mass")
+    p.add_argument("--rho", type=float, nargs=2, required=True, metavar=("RX", "RY"),
+                   help="offset of the centre of mass from the sensor, body frame, m (negative values as written)")
+    p.add_argument("--observer", choices=CALIBRATION_METHODS, default=DEFAULT_METHOD,
+                   help=f"method (default {DEFAULT_METHOD}: the most accurate one that is robust)")
+    p.add_argument("--pose-noise", type=float, nargs=2, metavar=("SD_RAD", "SD_M"),
+                   help="pose noise standard deviations (default: estimated from the log)")
+    p.add_argument("--wrench-noise", type=float, nargs=3, metavar=("SD_M", "SD_FX", "SD_FY"),
+                   help="raw-reading noise standard deviations, N m and N (default: estimated from the log)")
+    p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
+    p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the entries of S_hat against time")
+    p.set_defaults(func=cmd_calibrate)
+
+
+def cmd_calibrate(args):
+    from plant import Payload, read_log, read_truth
+    from .calibrate import calibrate
+    from .plots import plot_S_entries
+    for name, value in (("--mass", args.mass), ("--inertia", args.inertia)):
+        _positive(value, name)
+    for value in args.rho:
+        if not np.isfinite(value):
+            raise CliError(f"--rho must be two finite numbers in m; got {args.rho}")
+    for option, values in (("--pose-noise", args.pose_noise), ("--wrench-noise", args.wrench_noise)):
+        if values is not None and not all(np.isfinite(v) and v >= 0 for v in values):
+            raise CliError(f"{option} must be non-negative standard deviations; got {values}")
+    payload = Payload(args.mass, args.inertia, tuple(args.rho))
+    log = read_log(args.log)
+    truth = read_truth(args.truth) if args.truth else None
+    out = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth)
+    for warning in out["warnings"]:
+        print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
+    if args.plot:
+        plot_S_entries([out["result"]], truth, args.plot, f"{Path(args.log).name}: entries of S_hat")
+    result = out.pop("result")
+    if args.json:
+        print(json.dumps(_strict(out), allow_nan=False))
+        return
+    print(f"{Path(args.log).name}: {len(log)} samples, {log.duration:g} s, "
+          f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
+    if out["noise_estimated"]:
+        n = out["noise"]
+        print(f"noise estimated from the log ({' and '.join(out['noise_estimated'])}): wrench sd "
+              f"{', '.join(f'{v:.3g}' for v in n['wrench_sd'])}; angle sd {n['angle_sd']:.3g} rad; "
+              f"position sd {n['position_sd']:.3g} m")
+    S, S_std = np.array(out["S"]), out["S_std"]
+    print("S_hat" + (" +- one sigma:" if S_std is not None else " (this method gives no uncertainty):"))
+    for i in range(3):
+        cells = [f"{S[i, j]:+.5f}" + (f" +- {S_std[i][j]:.1e}" if S_std is not None else "") for j in range(3)]
+        print("  " + "   ".join(cells))
+    print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {result.t[-1]:g} s)")
+    if "E" in out:
+        print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")
+
+
+def _strict(value):
+    """A JSON-ready copy: NaN and infinity become None, numpy scalars plain."""
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 def _positive(value, name):
@@ -193,8 +265,15 @@ def _positive(value, name):
     return value
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with usage errors on one line (exit 2) instead of usage plus error."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fmscal",
         description="Calibrate a force-moment sensor from motion, and compare the observers that do it.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -203,17 +282,21 @@ def build_parser():
     return parser
 
 
-_COMMANDS = [_add_simulate, _add_reproduce, _add_compare, _add_check_gains]
+_COMMANDS = [_add_simulate, _add_calibrate, _add_reproduce, _add_compare, _add_check_gains]
 
 
 def main(argv=None):
     """Entry point of ``fmscal``; returns the exit status."""
     from plant import LogError, SingularCalibrationError
+    from .calibrate import DivergedError
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:            # --help, or a usage error already printed on one line
+        return stop.code
     try:
         args.func(args)
-    except (CliError, LogError, SingularCalibrationError, ValueError, OSError) as err:
+    except (CliError, LogError, SingularCalibrationError, DivergedError, ValueError, OSError) as err:
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
         print(f"fmscal {args.command}: error: {message}", file=sys.stderr)
         return 2

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from observers import AdaptiveObserver, AugmentedEKF, HighGainObserver
+from observers import AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares
 from plant import get_scenario
 from plant._checks import as_positive_scalar
 
@@ -14,7 +14,7 @@ __all__ = ["OBSERVER_NAMES", "make_observer", "run_case", "compare", "summarise"
            "CHECKPOINTS"]
 
 #: Every observer the toolkit compares, by the name tables use.
-OBSERVER_NAMES = ("adaptive", "adaptive-paper", "high-gain", "high-gain-ref4", "ekf")
+OBSERVER_NAMES = ("adaptive", "adaptive-paper", "high-gain", "high-gain-ref4", "ekf", "least-squares")
 #: Times (s) at which E is reported, where the run is that long.
 CHECKPOINTS = (10.0, 30.0, 100.0)
 
@@ -35,7 +35,7 @@ def make_observer(name, payload, told_noise=None, settings=None):
 
     Returns
     -------
-    observers.Observer or observers.AugmentedEKF
+    observers.Observer, observers.AugmentedEKF or observers.LeastSquares
     """
     settings = dict(settings or {})
     if name == "adaptive":
@@ -51,6 +51,8 @@ def make_observer(name, payload, told_noise=None, settings=None):
         return HighGainObserver(payload, **{**base, **settings})
     if name == "ekf":
         return AugmentedEKF(payload, noise=told_noise, **settings)
+    if name == "least-squares":
+        return LeastSquares(payload, **settings)
     raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
 
 

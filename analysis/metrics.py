@@ -76,7 +76,8 @@ def convergence_time(t, E, threshold=CONVERGENCE_THRESHOLD):
 
 _DISPLAY = {"high-gain": "high-gain (reconstruction of [4])",
             "high-gain-ref4": "high-gain-ref4 (reconstruction of [4], as the seed paper describes it)",
-            "ekf": "ekf (after [3])"}
+            "ekf": "ekf (after [3])",
+            "least-squares": "least-squares (offline reference)"}
 
 
 def display_name(observer):

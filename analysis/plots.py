@@ -17,8 +17,8 @@ def plot_S_entries(results, truth, path, title):
     Parameters
     ----------
     results : list of observers.ObserverResult
-    truth : plant.Truth
-        Its true ``S(t)`` is drawn dashed.
+    truth : plant.Truth or None
+        Its true ``S(t)`` is drawn dashed, where given.
     path : str or Path
         PNG file to write.
     title : str
@@ -26,16 +26,17 @@ def plot_S_entries(results, truth, path, title):
     fig, axes = plt.subplots(3, 3, figsize=(11, 7.5), sharex=True)
     t_all = max((r.t for r in results), key=len)
     step = max(1, len(t_all) // 2000)
-    S_true = truth.S_at(t_all[::step])
+    S_true = None if truth is None else truth.S_at(t_all[::step])
     for i in range(3):
         for j in range(3):
             ax = axes[i, j]
             for r in results:
                 ax.plot(r.t[::step], r.S_hat_history[::step, i, j], lw=1, label=display_name(r.observer))
-            ax.plot(t_all[::step], S_true[:, i, j], "k--", lw=1, label="true")
             ax.set_title(f"s_{i + 1}{j + 1}", fontsize=9)
-            lo, hi = np.min(S_true[:, i, j]), np.max(S_true[:, i, j])
-            ax.set_ylim(lo - 1.0, hi + 1.0)
+            if S_true is not None:
+                ax.plot(t_all[::step], S_true[:, i, j], "k--", lw=1, label="true")
+                lo, hi = np.min(S_true[:, i, j]), np.max(S_true[:, i, j])
+                ax.set_ylim(lo - 1.0, hi + 1.0)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     axes[0, 0].legend(fontsize=7)

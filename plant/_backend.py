@@ -32,8 +32,15 @@ class _NumpyOps:
 
     @staticmethod
     def matrix(rows):
-        """Build a 2D array from a list of rows of scalars."""
-        return np.array(rows, dtype=float)
+        """Build an array from a list of rows of scalars.
+
+        Entries may be arrays of one common shape (a batch, for example one
+        angle per sample): the result is then ``(rows, cols, *batch)``.
+        """
+        shape = np.broadcast_shapes(*[np.shape(v) for row in rows for v in row])
+        if not shape:
+            return np.array(rows, dtype=float)
+        return np.array([[np.broadcast_to(np.asarray(v, dtype=float), shape) for v in row] for row in rows])
 
     @staticmethod
     def dot(a, b):

@@ -1,0 +1,275 @@
+"""Offline least-squares calibration: the accuracy floor the observers are measured against.
+
+Eq. (1) with ``w = S w_hat`` is linear in the parameters ``phi_1``, ``phi_2`` of
+eqs. (4), (5)::
+
+    theta'' = psi_theta(t) . phi_1,   X'' = psi_X(t) . phi_2,   Y'' = psi_Y(t) . phi_2
+
+with the regressors of :func:`observers.highgain.regressors` (built from
+:func:`plant.input_matrix`). Integrated twice over a window starting at
+``t_0``, each measured position is ``p(t) = p_0 + v_0 (t - t_0) + Z(t) . phi``
+with ``Z`` the double integral of the regressor. The fit eliminates ``p_0``
+and ``v_0`` in each window (it projects out a line) and solves the normal
+equations of all windows for ``phi``; windows are kept short so that the
+twice-integrated wrench noise stays near the pose noise.
+"""
+
+import time
+
+import numpy as np
+
+from plant import Log, Payload, S_from_phi
+from plant._checks import as_positive_scalar
+from plant.noise import estimate_noise
+
+from .base import ObserverResult
+from .highgain import regressors
+
+__all__ = ["LeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
+
+#: Above this condition number of the (scaled) information matrix, the log is said not to
+#: excite all nine entries of S.
+EXCITATION_COND_LIMIT = 1e4
+#: Above this ratio of fit residual to the pose noise estimated from the log, the log is
+#: said not to match the model.
+CONSISTENCY_RATIO_LIMIT = 10.0
+
+
+class FitReport(dict):
+    """Diagnostics of a least-squares fit (a dict).
+
+    Keys: ``information_cond`` (condition number of the information matrix,
+    columns scaled to unit diagonal), ``weakest_direction`` (the entries of
+    ``S``, 3x3, along which the data say least), ``residual_rms``
+    (``[theta, X, Y]`` after the fit), ``pose_noise_estimate`` (from the
+    log's high-frequency content), ``consistency_ratio`` (largest
+    residual over noise ratio), and ``warnings`` (list of one-line str).
+    """
+
+
+class LeastSquares:
+    """Offline weighted least squares for ``S`` over double-integrated windows.
+
+    Module docstring for the model. Angular and translational parameters are
+    fitted separately (they share no unknown); ``S_hat`` follows from
+    :func:`plant.S_from_phi`, and its covariance from the residual variance of
+    each channel, mapped linearly. The covariance is the cluster-robust
+    (sandwich) estimate with the windows as clusters: the twice-integrated
+    wrench noise makes residuals within a window correlated, and the textbook
+    ``sigma^2 (Z^T Z)^-1`` would claim two to three times too little.
+
+    Parameters
+    ----------
+    payload : plant.Payload
+    window : float
+        Window length in s over which the raw reading is integrated twice.
+
+    Attributes
+    ----------
+    name : str
+        ``"least-squares"``.
+    report : FitReport
+        Diagnostics of the last :meth:`run`.
+    """
+
+    name = "least-squares"
+
+    def __init__(self, payload, window=0.5):
+        if not isinstance(payload, Payload):
+            raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
+        self.payload = payload
+        self.window = as_positive_scalar(window, "window")
+        self.report = FitReport()
+
+    def _double_integrals(self, log):
+        """Double integrals of each channel's regressor from the log's start.
+
+        The regressor is taken linear between samples (as the observers do),
+        the angle interpolated between pose measurements.
+
+        Returns
+        -------
+        list of three ndarrays, shapes (N, 3), (N, 6), (N, 6)
+        """
+        t = log.t
+        theta = np.interp(t, t[log.has_pose], log.pose[log.has_pose, 0])
+        psi = [np.array(v).T for v in regressors(theta, log.w_hat.T, self.payload)]
+        h = np.diff(t)[:, None]
+        out = []
+        for P in psi:
+            dv = h * (P[:-1] + P[1:]) / 2
+            V = np.vstack([np.zeros(P.shape[1]), np.cumsum(dv, axis=0)])
+            dp = V[:-1] * h + h * h * (2 * P[:-1] + P[1:]) / 6
+            out.append(np.vstack([np.zeros(P.shape[1]), np.cumsum(dp, axis=0)]))
+        return out
+
+    def _windows(self, log):
+        idx = np.floor((log.t - log.t[0]) / self.window).astype(int)
+        return [np.flatnonzero((idx == k) & log.has_pose) for k in np.unique(idx)]
+
+    def _normal_equations(self, log, Z, channels, windows):
+        """Information matrix and right side for the channels sharing one parameter set.
+
+        Each window's positions and regressors have a line in time projected out.
+        """
+        n_par = Z[channels[0]].shape[1]
+        info, rhs, per_window = np.zeros((n_par, n_par)), np.zeros(n_par), []
+        for rows in windows:
+            if len(rows) < 3:
+                continue
+            tau = log.t[rows] - log.t[rows[0]]
+            Q, _ = np.linalg.qr(np.column_stack([np.ones_like(tau), tau]))
+            Iw, bw = np.zeros((n_par, n_par)), np.zeros(n_par)
+            for c in channels:
+                Zc = Z[c][rows] - Q @ (Q.T @ Z[c][rows])
+                yc = log.pose[rows, c] - Q @ (Q.T @ log.pose[rows, c])
+                Iw += Zc.T @ Zc
+                bw += Zc.T @ yc
+            info += Iw
+            rhs += bw
+            per_window.append((rows, Iw, bw))
+        return info, rhs, per_window
+
+    def run(self, log, S0=None):
+        """Fit ``S`` to a whole log.
+
+        Parameters
+        ----------
+        log : plant.Log
+        S0 : ignored
+            Accepted for the common interface; the fit needs no start.
+
+        Returns
+        -------
+        ObserverResult
+            ``S_hat_history`` holds the fit on the data up to the end of each
+            window (held within it); ``x_hat_history`` the fitted motion;
+            ``S_std`` the one-sigma uncertainty from the residuals;
+            ``converged`` is True when the excitation and consistency checks
+            pass (``result.info`` holds the :class:`FitReport`).
+        """
+        if not isinstance(log, Log):
+            raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
+        start = time.perf_counter()
+        Z = self._double_integrals(log)
+        windows = [rows for rows in self._windows(log) if len(rows) >= 3]
+        if len(windows) < 2:
+            raise ValueError(f"{log.name}: too short for least squares with {self.window:g} s windows: "
+                             f"need at least 2 windows of 3 pose measurements, got {len(windows)}")
+        groups = [(0, [0]), (1, [1, 2])]       # (parameter set, channels): phi_1 <- theta; phi_2 <- X, Y
+        phis, covs, residuals, histories = [], [], {}, []
+        for k, channels in groups:
+            info, rhs, per_window = self._normal_equations(log, Z, channels, windows)
+            phi = np.linalg.lstsq(info, rhs, rcond=None)[0]
+            # residuals per channel, and a covariance robust to their correlation within a
+            # window (the twice-integrated wrench noise): the cluster sandwich I^-1 (sum g g^T) I^-1
+            sq, dof = {c: 0.0 for c in channels}, {c: 0 for c in channels}
+            meat = np.zeros((len(phi), len(phi)))
+            for rows, _, _ in per_window:
+                tau = log.t[rows] - log.t[rows[0]]
+                Q, _ = np.linalg.qr(np.column_stack([np.ones_like(tau), tau]))
+                g = np.zeros(len(phi))
+                for c in channels:
+                    Zc = Z[c][rows] - Q @ (Q.T @ Z[c][rows])
+                    r = log.pose[rows, c] - Z[c][rows] @ phi
+                    r -= Q @ (Q.T @ r)
+                    sq[c] += float(r @ r)
+                    dof[c] += len(rows) - 2
+                    g += Zc.T @ r
+                meat += np.outer(g, g)
+            for c in channels:
+                residuals[c] = np.sqrt(sq[c] / max(dof[c] - len(phi) / len(channels), 1))
+            info_inv = np.linalg.pinv(info)
+            covs.append(info_inv @ meat @ info_inv * len(per_window) / max(len(per_window) - len(phi), 1))
+            phis.append(phi)
+            histories.append(_running_fits(per_window, len(log)))
+        S_hat = S_from_phi(phis[0], phis[1], self.payload)
+        T = _phi_to_S_map(self.payload)
+        cov_phi = np.zeros((9, 9))
+        cov_phi[:3, :3], cov_phi[3:, 3:] = covs
+        cov_S = T @ cov_phi @ T.T
+        S_std = np.sqrt(np.maximum(np.diag(cov_S), 0)).reshape(3, 3)
+        self.report = self._diagnose(log, covs, residuals, T)
+        S_hist = np.array([S_from_phi(a, b, self.payload) for a, b in zip(*histories)])
+        x_hat = self._fitted_motion(log, Z, phis, windows)
+        ok = not self.report["warnings"]
+        return ObserverResult(observer=self.name, t=log.t.copy(), S_hat=S_hat, S_hat_history=S_hist,
+                              x_hat_history=x_hat, S_std=S_std, diverged=False, converged=ok,
+                              wall_time=time.perf_counter() - start, info={"fit": self.report})
+
+    def _diagnose(self, log, covs, residuals, T):
+        cov_phi = np.zeros((9, 9))
+        cov_phi[:3, :3], cov_phi[3:, 3:] = covs
+        # information about S, columns scaled to unit diagonal: unit-free conditioning
+        info_S = np.linalg.pinv(T @ cov_phi @ T.T)
+        d = np.sqrt(np.maximum(np.diag(info_S), 1e-300))
+        scaled = info_S / np.outer(d, d)
+        eigval, eigvec = np.linalg.eigh(scaled)
+        cond = float(eigval[-1] / max(eigval[0], 1e-300))
+        noise = estimate_noise(log)
+        pose_sd = np.array(noise.pose_sd)
+        rms = np.array([residuals[0], residuals[1], residuals[2]])
+        ratio = float(np.max(rms / np.maximum(pose_sd, 1e-12))) if np.all(pose_sd > 0) else float("nan")
+        warnings = []
+        if cond > EXCITATION_COND_LIMIT:
+            weakest = eigvec[:, 0].reshape(3, 3)
+            i, j = np.unravel_index(np.argmax(np.abs(weakest)), (3, 3))
+            warnings.append(f"the log does not excite all nine entries of S (information matrix condition "
+                            f"number {cond:.3g} > {EXCITATION_COND_LIMIT:.0e}; weakest along s_{i + 1}{j + 1}): "
+                            "drive every wrench component, or no method can recover S")
+        if np.isfinite(ratio) and ratio > CONSISTENCY_RATIO_LIMIT:
+            names = ["theta", "X", "Y"]
+            worst = int(np.argmax(rms / np.maximum(pose_sd, 1e-12)))
+            warnings.append(f"the log does not match the model: the fit residual of {names[worst]} is "
+                            f"{ratio:.3g}x the pose noise estimated from the log (> {CONSISTENCY_RATIO_LIMIT:g}); "
+                            "check units (angles in rad, positions in m), the mass properties and the offset rho")
+        return FitReport(information_cond=cond, weakest_direction=eigvec[:, 0].reshape(3, 3).tolist(),
+                         residual_rms=rms.tolist(), pose_noise_estimate=pose_sd.tolist(),
+                         consistency_ratio=ratio, warnings=warnings)
+
+    def _fitted_motion(self, log, Z, phis, windows):
+        """``[theta, theta', X, X', Y, Y']`` of the fit: per window a line plus ``Z phi``."""
+        x = np.full((len(log), 6), np.nan)
+        t = log.t
+        for c, phi in ((0, phis[0]), (1, phis[1]), (2, phis[1])):
+            forced = Z[c] @ phi
+            dforced = np.gradient(forced, t)
+            for rows in windows:
+                if len(rows) < 2:
+                    continue
+                A = np.column_stack([np.ones(len(rows)), t[rows] - t[rows[0]]])
+                p0, v0 = np.linalg.lstsq(A, log.pose[rows, c] - forced[rows], rcond=None)[0]
+                span = slice(rows[0], rows[-1] + 1)
+                x[span, 2 * c] = p0 + v0 * (t[span] - t[rows[0]]) + forced[span]
+                x[span, 2 * c + 1] = v0 + dforced[span]
+        # samples between windows without a fit (rare): hold the last value
+        for col in range(6):
+            good = np.isfinite(x[:, col])
+            x[:, col] = np.interp(t, t[good], x[good, col]) if good.any() else 0.0
+        return x
+
+
+def _running_fits(per_window, n):
+    """The fit on the windows so far, held over each window: shape (n, n_par)."""
+    n_par = len(per_window[0][2])
+    out = np.zeros((n, n_par))
+    info, rhs = np.zeros((n_par, n_par)), np.zeros(n_par)
+    last_end, phi = 0, np.zeros(n_par)
+    for rows, Iw, bw in per_window:
+        info += Iw
+        rhs += bw
+        phi = np.linalg.lstsq(info, rhs, rcond=None)[0]
+        out[last_end:rows[-1] + 1] = phi
+        last_end = rows[-1] + 1
+    out[last_end:] = phi
+    return out
+
+
+def _phi_to_S_map(payload):
+    """The 9x9 matrix ``T`` with ``vec(S) = T [phi_1, phi_2]`` (row order), from eqs. (4), (5)."""
+    T = np.zeros((9, 9))
+    for k in range(9):
+        e = np.zeros(9)
+        e[k] = 1.0
+        T[:, k] = np.ravel(S_from_phi(e[:3], e[3:], payload))
+    return T

@@ -1,0 +1,169 @@
+"""fmscal calibrate and the least-squares reference: recovery, warnings, and bad input."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import plant
+from analysis import calibrate as calibrate_module
+from analysis.cli import main
+from analysis.metrics import calibration_error
+from observers import LeastSquares
+from observers.base import ObserverResult
+
+OTHER = plant.Payload(6.0, 0.3, (-0.15, 0.4))
+PAYLOAD_ARGS = ["--mass", "6", "--inertia", "0.3", "--rho", "-0.15", "0.4"]
+
+
+@pytest.fixture(scope="module")
+def other_log(tmp_path_factory):
+    """A log of another payload and a random S, made by fmscal simulate."""
+    out = tmp_path_factory.mktemp("logs") / "other.csv"
+    assert main(["simulate", "--scenario", "random-S", "--seed", "4", "--duration", "40", *PAYLOAD_ARGS,
+                 "--out", str(out)]) == 0
+    truth = plant.read_truth(out.with_suffix(".truth.json"))
+    assert truth.payload == OTHER
+    return out, truth
+
+
+def _calibrate_json(path, *extra):
+    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", str(path), *PAYLOAD_ARGS,
+                           "--truth", str(path.with_suffix(".truth.json")), "--json", *extra],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout, parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
+
+
+@pytest.mark.parametrize("method, tolerance", [("least-squares", 0.01), ("ekf", 0.02), ("high-gain", 0.02),
+                                               ("adaptive", 0.05)])
+def test_every_method_recovers_S_of_another_payload(other_log, method, tolerance):
+    path, truth = other_log
+    out = _calibrate_json(path, "--observer", method)
+    assert out["observer"] == method and out["converged"] in (True, False)
+    assert calibration_error(truth.S0, truth.S_at(0)) > 1.0
+    assert out["E"] < tolerance
+    assert (out["S_std"] is None) == (method in ("high-gain", "adaptive"))
+
+
+def test_least_squares_and_ekf_agree(other_log):
+    path, truth = other_log
+    ls, ekf = _calibrate_json(path), _calibrate_json(path, "--observer", "ekf")
+    assert ls["observer"] == "least-squares"                    # the default
+    diff = np.abs(np.array(ls["S"]) - np.array(ekf["S"]))
+    assert np.all(diff < 3 * np.hypot(np.array(ls["S_std"]), np.array(ekf["S_std"])) + 1e-3)
+
+
+def test_least_squares_uncertainty_is_honest():
+    """Errors over the reported one-sigma: standard deviation near 1 over 4 logs x 9 entries."""
+    z = []
+    for seed in range(4):
+        log, truth, _ = plant.get_scenario("random-S").with_(payload=OTHER, duration=30).generate(seed)
+        result = LeastSquares(OTHER).run(log)
+        z.append(((result.S_hat - truth.S_at(0)) / result.S_std).ravel())
+    assert 0.6 < np.std(np.concatenate(z)) < 1.6
+
+
+def test_noise_is_estimated_and_said(other_log, capsys):
+    path, truth = other_log
+    assert main(["calibrate", str(path), *PAYLOAD_ARGS]) == 0
+    text = capsys.readouterr().out
+    assert "noise estimated from the log (wrench and pose)" in text and "S_hat +- one sigma" in text
+    assert main(["calibrate", str(path), *PAYLOAD_ARGS, "--pose-noise", "0.0017", "1e-4", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["noise_estimated"] == ["wrench"] and out["noise"]["position_sd"] == 1e-4
+
+
+def test_plot_draws_S_hat(other_log, tmp_path):
+    path, _ = other_log
+    assert main(["calibrate", str(path), *PAYLOAD_ARGS, "--observer", "high-gain",
+                 "--plot", str(tmp_path / "s.png")]) == 0
+    assert (tmp_path / "s.png").stat().st_size > 0
+
+
+def test_excitation_warning_when_one_wrench_component_is_driven(tmp_path, capsys):
+    only_moment = plant.Multisine([[(1.0, 2.0, 0.0), (0.5, 5.0, 0.3)], [(0.0, 1.0, 0.0)], [(0.0, 1.0, 0.0)]])
+    log, truth, _ = plant.get_scenario("paper").with_(excitation=only_moment, duration=20).generate(0)
+    log.write(tmp_path / "moment.csv")
+    assert main(["calibrate", str(tmp_path / "moment.csv"), "--mass", "2.5", "--inertia", "0.75",
+                 "--rho", "0.2", "0.25"]) == 0
+    err = capsys.readouterr().err
+    assert "does not excite all nine entries of S" in err
+
+
+def test_consistency_warning_when_angles_are_in_degrees(tmp_path, capsys):
+    log, _, _ = plant.get_scenario("paper").with_(duration=20).generate(0)
+    pose = log.pose.copy()
+    pose[:, 0] = np.rad2deg(pose[:, 0])
+    plant.Log(log.t, pose, log.w_hat).write(tmp_path / "degrees.csv")
+    assert main(["calibrate", str(tmp_path / "degrees.csv"), "--mass", "2.5", "--inertia", "0.75",
+                 "--rho", "0.2", "0.25"]) == 0
+    err = capsys.readouterr().err
+    assert "does not match the model" in err and "angles in rad" in err
+    # the same log in radians draws no warning
+    log.write(tmp_path / "radians.csv")
+    assert main(["calibrate", str(tmp_path / "radians.csv"), "--mass", "2.5", "--inertia", "0.75",
+                 "--rho", "0.2", "0.25"]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_a_diverged_run_is_an_error_not_an_answer(other_log, monkeypatch, capsys):
+    path, _ = other_log
+
+    class Diverging:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def run(self, log, S0=None):
+            return ObserverResult("ekf", log.t[:5], np.eye(3), np.tile(np.eye(3), (5, 1, 1)), np.zeros((5, 6)),
+                                  diverged=True)
+
+    monkeypatch.setattr(calibrate_module, "make_observer", lambda *a, **k: Diverging())
+    assert main(["calibrate", str(path), *PAYLOAD_ARGS, "--observer", "ekf"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "diverged" in err[0]
+
+
+def _write(path, text):
+    path.write_text(text)
+    return str(path)
+
+
+GOOD_ROWS = "".join(f"{0.001 * k},{0.0},{0.0},{0.0},1,1,1\n" for k in range(20))
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: str(d / "absent.csv"), "no such file"),
+    (lambda d: _write(d / "cols.csv", "t,theta,x,y,M,fx,fz\n" + GOOD_ROWS), "missing column(s) fy"),
+    (lambda d: _write(d / "nan.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS.replace("1,1,1\n", "nan,1,1\n", 1)),
+     "NaN or infinite"),
+    (lambda d: _write(d / "order.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS.replace("0.002,", "0.0005,", 1)),
+     "not strictly increasing"),
+    (lambda d: _write(d / "uneven.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS.replace("0.002,", "0.0021,", 1)),
+     "not evenly sampled"),
+    (lambda d: _write(d / "short.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS[:60]), "too few rows"),
+    (lambda d: _write(d / "nopose.csv", "t,theta,x,y,M,fx,fy\n" + "".join(
+        f"{0.001 * k},{'0,0,0' if k < 3 else ',,'},1,1,1\n" for k in range(20))), "too few pose measurements"),
+])
+def test_bad_logs_are_refused_with_one_line(tmp_path, make, message):
+    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", make(tmp_path), *PAYLOAD_ARGS],
+                          capture_output=True, text=True)
+    assert proc.returncode != 0
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], proc.stderr
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--mass", "0", "--inertia", "0.3", "--rho", "0", "0"], "--mass must be positive"),
+    (["--mass", "6", "--inertia", "-1", "--rho", "0", "0"], "--inertia must be positive"),
+    (["--mass", "6", "--inertia", "0.3", "--rho", "0.1"], "--rho: expected 2 arguments"),
+    (["--mass", "6", "--inertia", "0.3", "--rho", "0.1", "x"], "invalid float value: 'x'"),
+    (["--mass", "6", "--inertia", "0.3", "--rho", "0", "0", "--pose-noise", "-1", "0"], "--pose-noise must be"),
+])
+def test_bad_payload_arguments_are_refused_with_one_line(other_log, args, message, capsys):
+    path, _ = other_log
+    assert main(["calibrate", str(path), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
