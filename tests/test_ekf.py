@@ -94,3 +94,13 @@ def test_ekf_on_another_payload_and_S():
 def test_ekf_refuses_bad_samples_like_every_observer(call, match):
     with pytest.raises(ValueError, match=match):
         call(AugmentedEKF(plant.PAPER_PAYLOAD))
+
+
+def test_ekf_without_random_walk_is_near_least_squares_on_the_same_data():
+    """Issue 4: the EKF near the accuracy of a least-squares fit (q_S = 0: constant S, as LS assumes)."""
+    from observers import LeastSquares
+    log, truth, _ = plant.get_scenario("paper").with_(duration=60).generate(0)
+    E_ls = calibration_error(LeastSquares(plant.PAPER_PAYLOAD).run(log).S_hat, plant.PAPER_S)
+    E_ekf = calibration_error(AugmentedEKF(plant.PAPER_PAYLOAD, noise=truth.noise, q_S=0.0)
+                              .run(log, truth.S0).S_hat, plant.PAPER_S)
+    assert E_ekf < 1.5 * E_ls
