@@ -45,10 +45,7 @@ def make_observer(name, payload, told_noise=None, settings=None):
     if name == "high-gain":
         return HighGainObserver(payload, **settings)
     if name == "high-gain-ref4":
-        ref4 = HighGainObserver.ref4(payload)
-        base = {"lam": ref4.lam, "gamma": ref4.gamma, "normalisation": ref4.normalisation,
-                "t_decay": ref4.t_decay, "name": ref4.name}
-        return HighGainObserver(payload, **{**base, **settings})
+        return HighGainObserver.ref4(payload, **settings)
     if name == "ekf":
         return AugmentedEKF(payload, noise=told_noise, **settings)
     if name == "least-squares":

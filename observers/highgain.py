@@ -37,7 +37,7 @@ continuous double pole at ``-lam``.
 
 import numpy as np
 
-from plant import S_from_phi, input_matrix
+from plant import S_from_phi, input_matrix, phi_1
 from plant._backend import ops
 from plant._checks import as_positive_scalar
 
@@ -177,10 +177,14 @@ class HighGainObserver(Observer):
         super().__init__(payload)
 
     @classmethod
-    def ref4(cls, payload):
-        """The configuration closest to the seed paper's account of [4] (``high-gain-ref4``)."""
-        return cls(payload, lam=REF4_HIGH_GAIN, gamma=1.0, normalisation="scalar", t_decay=None,
-                   name="high-gain-ref4")
+    def ref4(cls, payload, **overrides):
+        """The configuration closest to the seed paper's account of [4] (``high-gain-ref4``).
+
+        ``overrides`` change single settings (keywords of the constructor).
+        """
+        settings = {"lam": REF4_HIGH_GAIN, "gamma": 1.0, "normalisation": "scalar", "t_decay": None,
+                    "name": "high-gain-ref4"}
+        return cls(payload, **{**settings, **overrides})
 
     def _initial_state(self, S0, pose, w_hat):
         x = np.array([pose[0], 0.0, pose[1], 0.0, pose[2], 0.0])
@@ -213,9 +217,7 @@ class HighGainObserver(Observer):
                mx.as_matrix(o, z[_UPS_Y], 2, 6)]
         R1, R2 = mx.as_matrix(o, z[_R1], 3), mx.as_matrix(o, z[_R2], 6)
         # the parameters of eqs. (4), (5): phi_1 = [1, -rho_y, rho_x] S, phi_2 = rows 2, 3 of S
-        # (plant.phi_1, plant.phi_2, written here for symbols too)
-        rho_x, rho_y = p.rho
-        phi1 = o.vcat([S[j] - rho_y * S[3 + j] + rho_x * S[6 + j] for j in range(3)])
+        phi1 = phi_1(S, p)
         phi2 = S[3:9]
         phis = [phi1, phi2, phi2]
         # regressors of eqs. (4), (5) at both ends of the step; the angle at n is the

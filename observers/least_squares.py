@@ -111,23 +111,29 @@ class LeastSquares:
         """Information matrix and right side for the channels sharing one parameter set.
 
         Each window's positions and regressors have a line in time projected out.
+
+        Returns
+        -------
+        info, rhs : ndarray
+        per_window : list of (rows, Iw, bw, projected)
+            ``projected`` maps each channel to its window's projected
+            ``(Z, y)``, kept for the residuals.
         """
         n_par = Z[channels[0]].shape[1]
         info, rhs, per_window = np.zeros((n_par, n_par)), np.zeros(n_par), []
         for rows in windows:
-            if len(rows) < 3:
-                continue
             tau = log.t[rows] - log.t[rows[0]]
             Q, _ = np.linalg.qr(np.column_stack([np.ones_like(tau), tau]))
-            Iw, bw = np.zeros((n_par, n_par)), np.zeros(n_par)
+            Iw, bw, projected = np.zeros((n_par, n_par)), np.zeros(n_par), {}
             for c in channels:
                 Zc = Z[c][rows] - Q @ (Q.T @ Z[c][rows])
                 yc = log.pose[rows, c] - Q @ (Q.T @ log.pose[rows, c])
                 Iw += Zc.T @ Zc
                 bw += Zc.T @ yc
+                projected[c] = (Zc, yc)
             info += Iw
             rhs += bw
-            per_window.append((rows, Iw, bw))
+            per_window.append((rows, Iw, bw, projected))
         return info, rhs, per_window
 
     def run(self, log, S0=None):
@@ -156,23 +162,20 @@ class LeastSquares:
         if len(windows) < 2:
             raise ValueError(f"{log.name}: too short for least squares with {self.window:g} s windows: "
                              f"need at least 2 windows of 3 pose measurements, got {len(windows)}")
-        groups = [(0, [0]), (1, [1, 2])]       # (parameter set, channels): phi_1 <- theta; phi_2 <- X, Y
+        groups = [[0], [1, 2]]           # channels of each parameter set: phi_1 <- theta; phi_2 <- X, Y
         phis, covs, residuals, histories = [], [], {}, []
-        for k, channels in groups:
+        for channels in groups:
             info, rhs, per_window = self._normal_equations(log, Z, channels, windows)
             phi = np.linalg.lstsq(info, rhs, rcond=None)[0]
             # residuals per channel, and a covariance robust to their correlation within a
             # window (the twice-integrated wrench noise): the cluster sandwich I^-1 (sum g g^T) I^-1
             sq, dof = {c: 0.0 for c in channels}, {c: 0 for c in channels}
             meat = np.zeros((len(phi), len(phi)))
-            for rows, _, _ in per_window:
-                tau = log.t[rows] - log.t[rows[0]]
-                Q, _ = np.linalg.qr(np.column_stack([np.ones_like(tau), tau]))
+            for rows, _, _, projected in per_window:
                 g = np.zeros(len(phi))
                 for c in channels:
-                    Zc = Z[c][rows] - Q @ (Q.T @ Z[c][rows])
-                    r = log.pose[rows, c] - Z[c][rows] @ phi
-                    r -= Q @ (Q.T @ r)
+                    Zc, yc = projected[c]
+                    r = yc - Zc @ phi               # the projection is linear: P (y - Z phi)
                     sq[c] += float(r @ r)
                     dof[c] += len(rows) - 2
                     g += Zc.T @ r
@@ -189,7 +192,7 @@ class LeastSquares:
         cov_phi[:3, :3], cov_phi[3:, 3:] = covs
         cov_S = T @ cov_phi @ T.T
         S_std = np.sqrt(np.maximum(np.diag(cov_S), 0)).reshape(3, 3)
-        self.report = self._diagnose(log, covs, residuals, T)
+        self.report = self._diagnose(log, cov_S, residuals)
         S_hist = np.array([S_from_phi(a, b, self.payload) for a, b in zip(*histories)])
         x_hat = self._fitted_motion(log, Z, phis, windows)
         ok = not self.report["warnings"]
@@ -197,11 +200,9 @@ class LeastSquares:
                               x_hat_history=x_hat, S_std=S_std, diverged=False, converged=ok,
                               wall_time=time.perf_counter() - start, info={"fit": self.report})
 
-    def _diagnose(self, log, covs, residuals, T):
-        cov_phi = np.zeros((9, 9))
-        cov_phi[:3, :3], cov_phi[3:, 3:] = covs
+    def _diagnose(self, log, cov_S, residuals):
         # information about S, columns scaled to unit diagonal: unit-free conditioning
-        info_S = np.linalg.pinv(T @ cov_phi @ T.T)
+        info_S = np.linalg.pinv(cov_S)
         d = np.sqrt(np.maximum(np.diag(info_S), 1e-300))
         scaled = info_S / np.outer(d, d)
         eigval, eigvec = np.linalg.eigh(scaled)
@@ -251,11 +252,11 @@ class LeastSquares:
 
 def _running_fits(per_window, n):
     """The fit on the windows so far, held over each window: shape (n, n_par)."""
-    n_par = len(per_window[0][2])
+    n_par = len(per_window[0][2])          # entries (rows, Iw, bw, projected)
     out = np.zeros((n, n_par))
     info, rhs = np.zeros((n_par, n_par)), np.zeros(n_par)
     last_end, phi = 0, np.zeros(n_par)
-    for rows, Iw, bw in per_window:
+    for rows, Iw, bw, _ in per_window:
         info += Iw
         rhs += bw
         phi = np.linalg.lstsq(info, rhs, rcond=None)[0]

@@ -145,8 +145,15 @@ def phi_1(S, payload):
     """Eq. (4): ``phi_1_j = s_1j - rho_y s_2j + rho_x s_3j``, shape (3,).
 
     It is the first row of eq. (1) times ``I_G``, applied to ``S``.
+
+    Parameters
+    ----------
+    S : array_like, shape (3, 3), or a flat (9,) vector in row order (numbers or casadi.SX)
+    payload : plant.Payload
     """
     row = input_matrix(0.0, payload)[0] * payload.inertia   # [1, -rho_y, rho_x]
+    if is_symbolic(S) or np.ndim(S) == 1:
+        return ops(S).vcat([sum(row[i] * S[3 * i + j] for i in range(3)) for j in range(3)])
     return row @ np.asarray(S, dtype=float)
 
 
