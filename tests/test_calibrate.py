@@ -42,7 +42,9 @@ def _calibrate_json(path, *extra):
 def test_every_method_recovers_S_of_another_payload(other_log, method, tolerance):
     path, truth = other_log
     out = _calibrate_json(path, "--observer", method)
-    assert out["observer"] == method and out["converged"] in (True, False)
+    assert out["observer"] == method
+    # the adaptive default's estimate still moves by more than 5 % over the last 8 s of 40 s: not settled
+    assert out["converged"] is (method != "adaptive")
     assert calibration_error(truth.S0, truth.S_at(0)) > 1.0
     assert out["E"] < tolerance
     assert (out["S_std"] is None) == (method in ("high-gain", "adaptive"))
