@@ -10,11 +10,13 @@ from plant._checks import as_positive_scalar
 
 from .metrics import convergence_time, display_name, error_history
 
-__all__ = ["OBSERVER_NAMES", "make_observer", "run_case", "compare", "summarise", "summary_markdown",
+__all__ = ["OBSERVER_NAMES", "make_observer", "simulate_case", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
            "CHECKPOINTS"]
 
 #: Every observer the toolkit compares, by the name tables use.
 OBSERVER_NAMES = ("adaptive", "adaptive-paper", "high-gain", "high-gain-ref4", "ekf", "least-squares")
+#: Columns of a sweep's table that tell its rows apart besides scenario and observer.
+_SWEEP_KEYS = ("noise_scale", "settings")
 #: Times (s) at which E is reported, where the run is that long.
 CHECKPOINTS = (10.0, 30.0, 100.0)
 
@@ -57,6 +59,88 @@ def _checkpoint_column(t_check):
     return f"E_{t_check:g}s"
 
 
+def simulate_case(scenario, seed, duration=None, noise_scale=1.0):
+    """The log a case runs on: one scenario, one seed, its noise scaled.
+
+    Parameters
+    ----------
+    scenario : str or plant.Scenario
+    seed : int
+        Seeds the log (noise, ``S``, ``S0``).
+    duration : float, optional
+        Run length in s; default the scenario's.
+    noise_scale : float
+        Multiplies every noise standard deviation of the scenario (wrench,
+        angle, position); 1 is the scenario as defined.
+
+    Returns
+    -------
+    scenario : plant.Scenario
+        As run (duration and noise applied).
+    log : plant.Log
+    truth : plant.Truth
+    told_noise : plant.NoiseSpec
+        What an observer with a noise model is told (the scenario may tell
+        it a wrong figure on purpose).
+    """
+    sc = get_scenario(scenario) if isinstance(scenario, str) else scenario
+    if duration is not None:
+        sc = sc.with_(duration=as_positive_scalar(duration, "duration"))
+    noise_scale = float(noise_scale)
+    if not (np.isfinite(noise_scale) and noise_scale >= 0):
+        raise ValueError(f"noise_scale must be a non-negative number; got {noise_scale}")
+    if noise_scale != 1.0:
+        sc = sc.with_(wrench_noise=sc.wrench_noise * noise_scale, angle_sd=sc.angle_sd * noise_scale,
+                      position_sd=sc.position_sd * noise_scale)
+    log, truth, _ = sc.generate(int(seed))
+    return sc, log, truth, truth.noise.scaled(truth.extra.get("told_noise", 1.0))
+
+
+def run_observer(name, log, truth, payload, told_noise=None, settings=None, history=False):
+    """Run one observer on a simulated log and measure it against the truth.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`OBSERVER_NAMES`.
+    log : plant.Log
+    truth : plant.Truth
+        ``S`` against time, and ``S0`` (every observer starts from it).
+    payload : plant.Payload
+    told_noise : plant.NoiseSpec, optional
+    settings : dict, optional
+        Constructor keyword arguments.
+    history : bool
+        Also return ``(t, E)``, decimated to at most 2000 points.
+
+    Returns
+    -------
+    row : dict
+        The columns of :func:`compare` other than ``scenario`` and ``seed``.
+    (t, E) : tuple of ndarray, only with ``history=True``
+    """
+    result = make_observer(name, payload, told_noise, settings).run(log, truth.S0)
+    E = error_history(result.S_hat_history, truth.S_at(result.t))
+    row = {"observer": name, "duration": float(log.duration),
+           "E": np.nan if result.diverged else float(E[-1]),
+           "E_median_last_10pct": np.nan if result.diverged else float(np.median(E[int(0.9 * len(E)):])),
+           "convergence_time": np.nan, "diverged": bool(result.diverged),
+           "converged": bool(result.converged)}
+    if not result.diverged:
+        ct = convergence_time(result.t, E)
+        row["convergence_time"] = np.nan if ct is None else float(ct)
+    for t_check in CHECKPOINTS:
+        if t_check <= log.duration + 1e-9:
+            k = min(len(E) - 1, int(round(t_check / log.dt)) - 1)      # just before t_check
+            row[_checkpoint_column(t_check)] = np.nan if result.diverged else float(E[k])
+    row.update({"wall_time": result.wall_time, "wall_per_sim_s": result.wall_time / log.duration,
+                "us_per_step": 1e6 * result.wall_time / len(log)})
+    if not history:
+        return row
+    step = max(1, len(E) // 2000)
+    return row, (result.t[::step], E[::step])
+
+
 def run_case(scenario, seed, observers=OBSERVER_NAMES, duration=None, settings=None, histories=False):
     """Run several observers on one simulated log: same data, same ``S0``.
 
@@ -81,35 +165,21 @@ def run_case(scenario, seed, observers=OBSERVER_NAMES, duration=None, settings=N
     histories : dict, only with ``histories=True``
         ``{observer: (t, E)}``, decimated to at most 2000 points.
     """
-    sc = get_scenario(scenario) if isinstance(scenario, str) else scenario
-    if duration is not None:
-        sc = sc.with_(duration=as_positive_scalar(duration, "duration"))
-    log, truth, _ = sc.generate(int(seed))
-    told = truth.noise.scaled(truth.extra.get("told_noise", 1.0))
+    sc, log, truth, told = simulate_case(scenario, seed, duration)
     rows, curves = [], {}
     for name in observers:
-        obs = make_observer(name, sc.payload, told, (settings or {}).get(name))
-        result = obs.run(log, truth.S0)
-        E = error_history(result.S_hat_history, truth.S_at(result.t))
-        row = {"observer": name, "scenario": sc.name, "seed": int(seed), "duration": float(log.duration),
-               "E": np.nan if result.diverged else float(E[-1]),
-               "E_median_last_10pct": np.nan if result.diverged else float(np.median(E[int(0.9 * len(E)):])),
-               "convergence_time": np.nan, "diverged": bool(result.diverged),
-               "converged": bool(result.converged), "wall_time": result.wall_time,
-               "wall_per_sim_s": result.wall_time / log.duration,
-               "us_per_step": 1e6 * result.wall_time / len(log)}
-        if not result.diverged:
-            ct = convergence_time(result.t, E)
-            row["convergence_time"] = np.nan if ct is None else float(ct)
-        for t_check in CHECKPOINTS:
-            if t_check <= log.duration + 1e-9:
-                k = min(len(E) - 1, int(round(t_check / log.dt)) - 1)      # just before t_check
-                row[_checkpoint_column(t_check)] = np.nan if result.diverged else float(E[k])
-        rows.append(row)
-        if histories:
-            step = max(1, len(E) // 2000)
-            curves[name] = (result.t[::step], E[::step])
+        out = run_observer(name, log, truth, sc.payload, told, (settings or {}).get(name), histories)
+        row, curves[name] = out if histories else (out, None)
+        rows.append({"scenario": sc.name, "seed": int(seed), **row})
     return (rows, curves) if histories else rows
+
+
+def seed_list(seeds):
+    """``N`` as seeds ``[0 .. N-1]``; a sequence as a list of ints. At least one seed."""
+    seeds = list(range(int(seeds))) if np.isscalar(seeds) else [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("seeds must be at least 1; got 0")
+    return seeds
 
 
 def compare(scenarios=("paper",), seeds=1, observers=OBSERVER_NAMES, duration=None, settings=None,
@@ -149,9 +219,7 @@ def compare(scenarios=("paper",), seeds=1, observers=OBSERVER_NAMES, duration=No
     dict, only with ``histories=True``
         ``{(scenario, observer): (t, E)}``.
     """
-    seeds = list(range(int(seeds))) if np.isscalar(seeds) else [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("seeds must be at least 1; got 0")
+    seeds = seed_list(seeds)
     for name in observers:
         if name not in OBSERVER_NAMES:
             raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
@@ -175,20 +243,22 @@ def summarise(table):
     Parameters
     ----------
     table : pandas.DataFrame
-        From :func:`compare`.
+        From :func:`compare` or :func:`analysis.sweep.sweep`.
 
     Returns
     -------
     pandas.DataFrame
-        ``scenario``, ``observer``, ``seeds``, ``E_median``, ``E_q25``,
+        ``scenario``, (``noise_scale``, ``settings``: from a sweep),
+        ``observer``, ``seeds``, ``E_median``, ``E_q25``,
         ``E_q75`` (quartiles over seeds), the medians of each checkpoint
         column and of ``convergence_time`` (over the runs that converged),
         ``converged_runs``, ``diverged_runs`` and ``us_per_step_median``.
     """
     checkpoints = [c for c in table.columns if c.startswith("E_") and c.endswith("s") and c[2].isdigit()]
+    keys = ["scenario"] + [k for k in _SWEEP_KEYS if k in table.columns] + ["observer"]
     out = []
-    for (scenario, observer), g in table.groupby(["scenario", "observer"], sort=False):
-        row = {"scenario": scenario, "observer": observer, "seeds": len(g),
+    for values, g in table.groupby(keys, sort=False):
+        row = {**dict(zip(keys, values)), "seeds": len(g),
                "E_median": g["E"].median(), "E_q25": g["E"].quantile(0.25), "E_q75": g["E"].quantile(0.75)}
         for c in checkpoints:
             row[c + "_median"] = g[c].median()
@@ -201,18 +271,21 @@ def summarise(table):
 
 
 def _fmt(v, spec=".3g"):
+    if isinstance(v, str):
+        return v
     return "-" if v is None or (isinstance(v, float) and np.isnan(v)) else format(v, spec)
 
 
 def summary_markdown(summary, title="Observer comparison"):
     """The summary of :func:`summarise` as a Markdown table."""
     checkpoints = [c for c in summary.columns if c.startswith("E_") and c.endswith("s_median")]
-    head = ["scenario", "observer", "seeds", "median E at end [IQR]"]
+    keys = [k for k in _SWEEP_KEYS if k in summary.columns]
+    head = ["scenario", *keys, "observer", "seeds", "median E at end [IQR]"]
     head += [f"median {c[:-len('_median')].replace('E_', 'E at ')}" for c in checkpoints]
     head += ["median convergence time [s]", "converged", "diverged", "cost [us/step]"]
     lines = [f"# {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in summary.iterrows():
-        cells = [r["scenario"], display_name(r["observer"]), str(r["seeds"]),
+        cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], display_name(r["observer"]), str(r["seeds"]),
                  f"{_fmt(r['E_median'])} [{_fmt(r['E_q25'])}, {_fmt(r['E_q75'])}]"]
         cells += [_fmt(r[c]) for c in checkpoints]
         cells += [_fmt(r["convergence_time_median"], ".1f"), f"{r['converged_runs']}/{r['seeds']}",

@@ -11,19 +11,22 @@ from .comparison import make_observer
 from .metrics import convergence_time, display_name, error_history
 from .plots import plot_S_entries
 
-__all__ = ["reproduce", "PAPER_CLAIMS"]
+__all__ = ["reproduce", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
 #: Section 4's claims: E at 100 s for this observer and for the high-gain observer of [4].
 PAPER_CLAIMS = {"adaptive-paper": 9.1106e-4, "high-gain-ref4": 3.6700e-2, "transient_s": 70.0}
 
 _FIGURES = [("paper", "Fig. 2"), ("noisy", "Fig. 3"), ("time-varying", "Fig. 4")]
-_REPRODUCED = ("adaptive-paper", "adaptive", "high-gain-ref4", "high-gain", "ekf")
+#: The scenarios of section 4, in figure order.
+REPRODUCED_SCENARIOS = tuple(name for name, _ in _FIGURES)
+#: The observers ``fmscal reproduce`` runs.
+REPRODUCED_OBSERVERS = ("adaptive-paper", "adaptive", "high-gain-ref4", "high-gain", "ekf")
 
 
 def _observers(payload, truth):
     """The observers compared, each with its documented default tuning."""
     told = truth.noise.scaled(truth.extra.get("told_noise", 1.0))
-    return [make_observer(name, payload, told) for name in _REPRODUCED]
+    return [make_observer(name, payload, told) for name in REPRODUCED_OBSERVERS]
 
 
 def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
@@ -54,7 +57,7 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    bar = tqdm(total=len(_REPRODUCED) * len(_FIGURES), desc="reproduce", disable=not progress)
+    bar = tqdm(total=len(REPRODUCED_OBSERVERS) * len(_FIGURES), desc="reproduce", disable=not progress)
     for name, fig in _FIGURES:
         sc = get_scenario(name)
         sc = sc.with_(duration=sc.duration * duration_scale)
@@ -95,7 +98,7 @@ def summary_markdown(rows, seed, duration_scale):
              "| observer | claimed E | measured E | median E, 90-100 s | measured convergence time [s] | claimed transient [s] |",
              "|---|---|---|---|---|---|"]
     paper_rows = {r["observer"]: r for r in rows if r["scenario"] == "paper"}
-    for name in _REPRODUCED:
+    for name in REPRODUCED_OBSERVERS:
         r = paper_rows.get(name)
         if r is None:
             continue

@@ -15,6 +15,7 @@ import casadi as ca
 import numpy as np
 
 from plant import Log, Payload
+from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
 __all__ = ["Observer", "ObserverResult", "settled", "check_sample", "DIVERGENCE_BOUND", "SETTLE_FRACTION",
@@ -215,29 +216,35 @@ class Observer:
         return Z
 
     def _compiled_chunk(self, nz):
+        """The transition accumulated over ``_CHUNK`` steps, compiled to C once, bound to buffers."""
         if self._compiled is None:
             z = ca.SX.sym("z", nz)
             u = ca.SX.sym("u", 7)
             dt = ca.SX.sym("dt")
             ident = self.name.replace("-", "_")
-            step = ca.Function(f"{ident}_step", [z, u, dt], [self._transition(z, u, dt)])
-            self._compiled = step.mapaccum(f"{ident}_chunk", _CHUNK)
+            step = ca.Function(f"{ident}_step", [z, u, dt], [ca.densify(self._transition(z, u, dt))])
+            chunk = step.mapaccum(f"{ident}_chunk", _CHUNK)
+            self._compiled = BufferedCall(compile_function(chunk))
         return self._compiled
 
     def _run_compiled(self, z0, U, dt):
-        chunk = self._compiled_chunk(len(z0))
+        call = self._compiled_chunk(len(z0))
+        z_in, U_in, dt_in = call.inputs
+        Z_out = call.outputs[0].reshape(_CHUNK, len(z0))      # column-major (nz, CHUNK)
+        U_in = U_in.reshape(_CHUNK, 7)
         n = len(U)
         Z = np.empty((n, len(z0)))
-        Z[0] = z = z0
+        Z[0] = z0
+        z_in[:] = z0
+        dt_in[:] = dt                                  # mapped: one per step
         for k0 in range(1, n, _CHUNK):
             k1 = min(k0 + _CHUNK, n)
-            Uc = U[k0:k1]
-            if len(Uc) < _CHUNK:
-                Uc = np.vstack([Uc, np.repeat(Uc[-1:], _CHUNK - len(Uc), axis=0)])
-            out = np.asarray(chunk(z, Uc.T, dt)).T[:k1 - k0]
-            Z[k0:k1] = out
-            z = out[-1]
-            if not _healthy(z, self._S) or not np.all(np.isfinite(out)):
+            U_in[:k1 - k0] = U[k0:k1]
+            U_in[k1 - k0:] = U[k1 - 1]                  # padding past the end, discarded
+            call()
+            Z[k0:k1] = Z_out[:k1 - k0]
+            z_in[:] = Z_out[k1 - k0 - 1]
+            if not _healthy(z_in, self._S) or not np.all(np.isfinite(Z[k0:k1])):
                 return Z[:k1]
         return Z
 

@@ -1,11 +1,14 @@
 """Augmented-state extended Kalman filter in the manner of Aghili (ICRA 2000)."""
 
+import time
+
 import casadi as ca
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from plant import Log, NoiseSpec, Payload, rk4_step
 from plant.noise import estimate_noise
+from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
 from .base import DIVERGENCE_BOUND, ObserverResult, check_sample, settled
@@ -84,11 +87,12 @@ class AugmentedEKF:
         self.payload = payload
         self.noise = noise
         self.q_S, self.S0_sd, self.v0_sd = float(q_S), float(S0_sd), float(v0_sd)
-        self._step = self._compile()
+        self._jacobians, self._predict = self._compile()
         self.reset()
 
     # --- the model, from the plant ------------------------------------------
     def _compile(self):
+        """casadi: the step of eq. (1) with ``w = S w_hat``, its Jacobians and ``Q``, compiled once."""
         xs = ca.SX.sym("xs", 15)
         w0 = ca.SX.sym("w0", 3)
         w1 = ca.SX.sym("w1", 3)
@@ -96,22 +100,17 @@ class AugmentedEKF:
         S = ca.reshape(xs[6:15], 3, 3).T                    # row order
         x_next = rk4_step(xs[0:6], S @ w0, S @ (w0 + w1) / 2, S @ w1, dt, self.payload)
         f = ca.vertcat(x_next, xs[6:15])
-        # dense outputs: the buffer is read as full column-major matrices
+        # dense outputs: the buffers are read as full column-major matrices
         F = ca.densify(ca.jacobian(f, xs))
         J0 = ca.densify(ca.jacobian(f, w0))
         J1 = ca.densify(ca.jacobian(f, w1))
-        fun = ca.Function("ekf_step", [xs, w0, w1, dt], [f, F, J0, J1])
-        buf, call = fun.buffer()
-        ins = {"xs": np.zeros(15), "w0": np.zeros(3), "w1": np.zeros(3), "dt": np.zeros(1)}
-        outs = {"x_next": np.zeros(15), "F": np.zeros(15 * 15), "J0": np.zeros(15 * 3),
-                "J1": np.zeros(15 * 3)}
-        for i, key in enumerate(ins):
-            buf.set_arg(i, memoryview(ins[key]))
-        for i, key in enumerate(outs):
-            buf.set_res(i, memoryview(outs[key]))
-        self._buffer = buf            # keep alive
-        self._fun = fun
-        return call, ins, outs
+        var_w = ca.SX.sym("var_w", 3)                       # wrench noise variances
+        q_dt = ca.SX.sym("q_dt")                            # q_S dt
+        Q = (J0 @ ca.diag(var_w) @ J0.T + J1 @ ca.diag(var_w) @ J1.T
+             + ca.diag(ca.vertcat(ca.DM.zeros(6), q_dt * ca.DM.ones(9))))
+        jacobians = ca.Function("ekf_jacobians", [xs, w0, w1, dt], [f, F, J0, J1])
+        predict = ca.Function("ekf_predict", [xs, w0, w1, dt, var_w, q_dt], [f, F, ca.densify(Q)])
+        return BufferedCall(compile_function(jacobians)), BufferedCall(compile_function(predict))
 
     def transition(self, xs, w0, w1, dt):
         """The discrete step and its Jacobians (the compiled casadi call).
@@ -124,15 +123,30 @@ class AugmentedEKF:
             Jacobians with respect to the raw readings at the step's start
             and end.
         """
-        call, ins, outs = self._step
-        ins["xs"][:] = xs
-        ins["w0"][:] = w0
-        ins["w1"][:] = w1
-        ins["dt"][0] = dt
+        call = self._jacobians
+        for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
+            buffer[:] = value
         call()
-        # casadi stores column-major
-        return (outs["x_next"].copy(), outs["F"].reshape(15, 15, order="F").copy(),
-                outs["J0"].reshape(15, 3, order="F").copy(), outs["J1"].reshape(15, 3, order="F").copy())
+        f, F, J0, J1 = call.outputs                           # casadi stores column-major
+        return f.copy(), F.reshape(15, 15).T.copy(), J0.reshape(3, 15).T.copy(), J1.reshape(3, 15).T.copy()
+
+    def predict_matrices(self, xs, w0, w1, dt):
+        """``x_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
+
+        Returns
+        -------
+        x_next : ndarray, shape (15,)
+        F, Q : ndarray, shape (15, 15)
+            Views of the call's buffers, overwritten by the next call.
+        """
+        call = self._predict
+        xs_in, w0_in, w1_in, dt_in, var_in, q_in = call.inputs
+        xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
+        var_in[:] = self._var_w
+        q_in[0] = self.q_S * dt
+        call()
+        f, F, Q = call.outputs
+        return f.copy(), F.reshape(15, 15).T, Q.reshape(15, 15).T
 
     @staticmethod
     def H(xs=None):
@@ -161,7 +175,7 @@ class AugmentedEKF:
         kf.P = np.diag(np.concatenate([[pose_var[0], self.v0_sd ** 2, pose_var[1], self.v0_sd ** 2,
                                         pose_var[2], self.v0_sd ** 2], np.full(9, self.S0_sd ** 2)]))
         kf.R = np.diag(pose_var)
-        self._Sigma_w = np.diag(np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2)
+        self._var_w = np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
         self._kf = kf
         self._w_prev = w_hat
 
@@ -171,24 +185,24 @@ class AugmentedEKF:
         Parameters and returns as :meth:`observers.Observer.step`.
         """
         pose, w_hat = check_sample(dt, pose, w_hat, first=self._kf is None)
-        if self._kf is None:
-            self._start(pose, w_hat)
-        else:
-            kf = self._kf
-            kf.x_next, kf.F, J0, J1 = self.transition(kf.x[:, 0], self._w_prev, w_hat, dt)
-            Q = J0 @ self._Sigma_w @ J0.T + J1 @ self._Sigma_w @ J1.T
-            Q[6:, 6:] += np.eye(9) * self.q_S * dt
-            kf.Q = Q
-            kf.predict()
-            if pose is not None:
-                kf.update(pose.reshape(3, 1), self.H, self.hx)
-            self._w_prev = w_hat
+        self._advance(dt, pose, w_hat)
         x = self._kf.x[:, 0]
         return x[0:6].copy(), x[6:15].reshape(3, 3).copy()
 
+    def _advance(self, dt, pose, w_hat):
+        """One checked sample: predict with the raw readings, update with the pose."""
+        if self._kf is None:
+            self._start(pose, w_hat)
+            return
+        kf = self._kf
+        kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], self._w_prev, w_hat, dt)
+        kf.predict()
+        if pose is not None:
+            kf.update(pose.reshape(3, 1), self.H, self.hx)
+        self._w_prev = w_hat
+
     def run(self, log, S0=None):
         """Run over a whole log; the same result as :meth:`observers.Observer.run`."""
-        import time
         if not isinstance(log, Log):
             raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
         start = time.perf_counter()
@@ -202,9 +216,8 @@ class AugmentedEKF:
         n = len(log)
         X = np.empty((n, 15))
         diverged = False
-        for k in range(n):
-            pose = log.pose[k] if log.has_pose[k] else None
-            self.step(log.dt, pose, log.w_hat[k])
+        for k in range(n):                      # the log is validated: no per-sample checks
+            self._advance(log.dt, log.pose[k] if log.has_pose[k] else None, log.w_hat[k])
             X[k] = self._kf.x[:, 0]
             if not self._healthy():
                 diverged = True
@@ -225,8 +238,6 @@ class AugmentedEKF:
 
     def _healthy(self):
         kf = self._kf
-        if not (np.all(np.isfinite(kf.x)) and np.all(np.isfinite(kf.P))):
-            return False
-        if np.max(np.abs(kf.x[6:15])) >= DIVERGENCE_BOUND:
-            return False
-        return bool(np.all(np.diag(kf.P) > 0))
+        # a NaN or inf anywhere makes a sum non-finite: one reduction per array
+        return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum()) and np.abs(kf.x[6:15]).max() < DIVERGENCE_BOUND
+                    and kf.P.diagonal().min() > 0)

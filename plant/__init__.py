@@ -9,6 +9,7 @@ from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenar
 from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
 from .simulate import integrate, rk4_step
 from .noise import estimate_noise
+from ._compile import compiler
 
 __all__ = [
     "A_1", "A_2", "B_1", "B_2", "C_1", "C_2", "STATE_NAMES", "acceleration", "input_matrix",
@@ -18,5 +19,5 @@ __all__ = [
     "PAPER_PAYLOAD", "Payload",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
-    "integrate", "rk4_step", "estimate_noise",
+    "integrate", "rk4_step", "estimate_noise", "compiler",
 ]

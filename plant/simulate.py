@@ -6,6 +6,7 @@ import casadi as ca
 import numpy as np
 
 from ._checks import as_finite_array
+from ._compile import BufferedCall, compile_function
 from .dynamics import state_derivative
 
 __all__ = ["integrate", "rk4_step"]
@@ -44,13 +45,13 @@ def rk4_step(x, w0, w_mid, w1, dt, payload):
 
 @lru_cache(maxsize=16)
 def _compiled_chunk(payload):
-    """RK4 step from :func:`rk4_step`, compiled by casadi and accumulated over a chunk."""
+    """RK4 step from :func:`rk4_step`, accumulated over a chunk and compiled once."""
     x = ca.SX.sym("x", 6)
     w = ca.SX.sym("w", 9)
     dt = ca.SX.sym("dt")
     x_next = rk4_step(x, w[0:3], w[3:6], w[6:9], dt, payload)
-    step = ca.Function("rk4", [x, w, dt], [x_next])
-    return step.mapaccum("rk4_chunk", _CHUNK)
+    step = ca.Function("rk4", [x, w, dt], [ca.densify(x_next)])
+    return compile_function(step.mapaccum("rk4_chunk", _CHUNK))
 
 
 def integrate(payload, excitation, t, x0=None, compiled=True):
@@ -89,15 +90,17 @@ def integrate(payload, excitation, t, x0=None, compiled=True):
             x = rk4_step(x, w_start[k], w_mid[k], w_end[k], dt, payload)
             out[k + 1] = x
         return out
-    chunk = _compiled_chunk(payload)
+    call = BufferedCall(_compiled_chunk(payload))       # own buffers: safe across threads
+    x_in, W_in, dt_in = call.inputs
+    W_in, X_out = W_in.reshape(_CHUNK, 9), call.outputs[0].reshape(_CHUNK, 6)   # column-major
     W = np.hstack([w_start, w_mid, w_end])
     n = len(dts)
     for k0 in range(0, n, _CHUNK):
         k1 = min(k0 + _CHUNK, n)
-        pad = _CHUNK - (k1 - k0)
-        Wc = np.vstack([W[k0:k1], np.zeros((pad, 9))]) if pad else W[k0:k1]
-        dtc = np.concatenate([dts[k0:k1], np.zeros(pad)]) if pad else dts[k0:k1]
-        X = np.asarray(chunk(x, Wc.T, dtc[None, :]))
-        out[k0 + 1:k1 + 1] = X[:, :k1 - k0].T
+        x_in[:] = x
+        W_in[:k1 - k0], W_in[k1 - k0:] = W[k0:k1], 0.0
+        dt_in[:k1 - k0], dt_in[k1 - k0:] = dts[k0:k1], 0.0       # padding: zero steps, discarded
+        call()
+        out[k0 + 1:k1 + 1] = X_out[:k1 - k0]
         x = out[k1]
     return out

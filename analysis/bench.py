@@ -1,0 +1,266 @@
+"""The benchmark behind ``fmscal bench``: speed, measured against plain numpy in the same run.
+
+Every figure is a ratio of two timings taken in the same process, minutes
+apart, so that a shared, noisy machine moves both alike:
+
+- each observer's compiled path (:meth:`observers.Observer.run`, a casadi
+  step generated as C and called through buffers) against its readable path
+  (``run(compiled=False)``: the same transition evaluated in numpy, one step
+  at a time), on the paper's scenario;
+- the EKF's step against filterpy's bare ``predict`` + ``update`` with
+  matrices of the same sizes, and the casadi call through ``Function.buffer()``
+  against the same function called the ordinary way;
+- the simulator's compiled RK4 against its numpy loop;
+- the wall time of ``fmscal reproduce`` and of a Monte Carlo sweep, beside
+  the time the readable paths would take for the same steps, estimated from
+  the per-step costs measured above (running them would take hours).
+"""
+
+import os
+import platform
+import tempfile
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from observers import AugmentedEKF
+from plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
+from plant.excitation import PaperWrench
+
+from .comparison import make_observer
+from .reproduce import REPRODUCED_OBSERVERS, REPRODUCED_SCENARIOS, reproduce
+from .sweep import SWEEP_OBSERVERS, sweep
+
+__all__ = ["BenchSettings", "run_bench", "bench_markdown", "machine_description", "TARGETS"]
+
+#: The targets of issue 7, checked by :func:`bench_markdown`.
+TARGETS = {"compiled_over_numpy": 10.0, "steps_per_s_stretch": 1e6, "ekf_over_bare_filterpy": 2.0,
+           "reproduce_s": 60.0, "sweep_s": 600.0}
+#: Observers whose compiled path is benchmarked; the ``-paper``/``-ref4`` variants share their code.
+_COMPILED = ("adaptive", "high-gain")
+_SAME_CODE = {"adaptive-paper": "adaptive", "high-gain-ref4": "high-gain"}
+
+
+@dataclass(frozen=True)
+class BenchSettings:
+    """How long each measurement runs.
+
+    Parameters
+    ----------
+    fast_s : float
+        Log length for the compiled paths, s of simulated time.
+    numpy_s : float
+        Log length for the readable (numpy) paths.
+    ekf_s : float
+        Log length for the EKF and bare filterpy.
+    reproduce_scale : float
+        Fraction of ``fmscal reproduce``'s scenario lengths (1: the real job).
+    sweep_seeds : int
+    sweep_s : float
+        Length of each sweep run, s.
+    """
+
+    fast_s: float = 100.0
+    numpy_s: float = 5.0
+    ekf_s: float = 10.0
+    reproduce_scale: float = 1.0
+    sweep_seeds: int = 100
+    sweep_s: float = 100.0
+
+    @classmethod
+    def quick(cls):
+        """A short mode (a few seconds) that exercises every measurement; not for the README."""
+        return cls(fast_s=5.0, numpy_s=0.5, ekf_s=1.0, reproduce_scale=0.02, sweep_seeds=4, sweep_s=2.0)
+
+
+def machine_description():
+    """CPU model, cores, Python and library versions, and the C compiler used."""
+    import casadi
+    import filterpy
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "numpy": np.__version__, "casadi": casadi.__version__, "filterpy": filterpy.__version__,
+            "compiler": compiler() or "none (casadi virtual machine)", "platform": platform.platform()}
+
+
+def _log(seconds, seed=0):
+    log, truth, _ = get_scenario("paper").with_(duration=seconds).generate(seed)
+    return log, truth
+
+
+def _timed(fn):
+    start = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - start, out
+
+
+def _observer_speeds(s):
+    """us per step: compiled (first run, with its build; then steady) and readable, per observer."""
+    fast_log, truth = _log(s.fast_s)
+    numpy_log, _ = _log(s.numpy_s)
+    rows = {}
+    for name in _COMPILED:
+        obs = make_observer(name, PAPER_PAYLOAD, truth.noise)
+        first, _ = _timed(lambda: obs.run(fast_log, truth.S0))
+        steady, _ = _timed(lambda: obs.run(fast_log, truth.S0))
+        readable, _ = _timed(lambda: obs.run(numpy_log, truth.S0, compiled=False))
+        rows[name] = {"first_run_us": 1e6 * first / len(fast_log), "compiled_us": 1e6 * steady / len(fast_log),
+                      "numpy_us": 1e6 * readable / len(numpy_log)}
+    return rows
+
+
+def _bare_filterpy_us(n):
+    """filterpy's ExtendedKalmanFilter predict + update, 15 states, 3 measurements, nothing else."""
+    from filterpy.kalman import ExtendedKalmanFilter
+    rng = np.random.default_rng(0)
+    kf = ExtendedKalmanFilter(dim_x=15, dim_z=3)
+    kf.F = np.eye(15) + 1e-3 * rng.standard_normal((15, 15))
+    kf.Q = 1e-8 * np.eye(15)
+    kf.R = 1e-6 * np.eye(3)
+    H = AugmentedEKF.H()
+    z = np.zeros((3, 1))
+    elapsed, _ = _timed(lambda: [(kf.predict(), kf.update(z, lambda x: H, AugmentedEKF.hx)) for _ in range(n)])
+    return 1e6 * elapsed / n
+
+
+def _ekf_speeds(s):
+    log, truth = _log(s.ekf_s)
+    ekf = AugmentedEKF(PAPER_PAYLOAD, noise=truth.noise)
+    elapsed, _ = _timed(lambda: ekf.run(log, truth.S0))
+    xs = np.concatenate([np.zeros(6), truth.S0.ravel()])
+    w0, w1 = log.w_hat[0], log.w_hat[1]
+    calls = 20000 if s.ekf_s >= 10 else 2000
+    buffered, _ = _timed(lambda: [ekf.predict_matrices(xs, w0, w1, log.dt) for _ in range(calls)])
+    trigger, _ = _timed(lambda: [ekf._predict() for _ in range(calls)])     # the compiled call alone
+    fun = ekf._predict.fun
+    var_w, q_dt = np.ones(3), 1e-8
+
+    def ordinary():
+        out = fun(xs, w0, w1, log.dt, var_w, q_dt)
+        return [np.asarray(o) for o in out]
+
+    plain, _ = _timed(lambda: [ordinary() for _ in range(calls // 10)])
+    return {"ekf_us": 1e6 * elapsed / len(log), "bare_filterpy_us": _bare_filterpy_us(len(log)),
+            "buffer_call_us": 1e6 * buffered / calls, "trigger_us": 1e6 * trigger / calls,
+            "ordinary_call_us": 1e6 * plain / (calls // 10)}
+
+
+def _simulator_speeds(s):
+    excitation = PaperWrench()
+    t_fast = np.arange(0.0, s.fast_s + 1e-9, 1e-3)
+    t_numpy = np.arange(0.0, s.numpy_s + 1e-9, 1e-3)
+    integrate(PAPER_PAYLOAD, excitation, t_fast[:10])            # build once
+    fast, _ = _timed(lambda: integrate(PAPER_PAYLOAD, excitation, t_fast))
+    slow, _ = _timed(lambda: integrate(PAPER_PAYLOAD, excitation, t_numpy, compiled=False))
+    return {"compiled_us": 1e6 * fast / len(t_fast), "numpy_us": 1e6 * slow / len(t_numpy)}
+
+
+def _numpy_us(name, observers, ekf):
+    """Per-step cost of an observer's readable path (the EKF has one path)."""
+    if name == "ekf":
+        return ekf["ekf_us"]
+    return observers[_SAME_CODE.get(name, name)]["numpy_us"]
+
+
+def run_bench(settings=None, progress=True):
+    """Run every measurement.
+
+    Parameters
+    ----------
+    settings : BenchSettings, optional
+        Default: the full benchmark (about 5 minutes on 2 cores).
+    progress : bool
+        Progress bars for the reproduction and the sweep.
+
+    Returns
+    -------
+    dict
+        ``machine``, ``settings``, ``observers`` (``{name: {first_run_us,
+        compiled_us, numpy_us}}``), ``ekf`` (``ekf_us``,
+        ``bare_filterpy_us``, ``buffer_call_us``, ``trigger_us``, ``ordinary_call_us``),
+        ``simulator`` (``compiled_us``, ``numpy_us``), ``reproduce``
+        and ``sweep`` (``wall_s``, ``numpy_estimate_s``, ``steps``).
+    """
+    s = settings or BenchSettings()
+    observers = _observer_speeds(s)
+    ekf = _ekf_speeds(s)
+    simulator = _simulator_speeds(s)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        wall, _ = _timed(lambda: reproduce(tmp, seed=0, duration_scale=s.reproduce_scale, progress=progress))
+    steps_est = 0.0
+    for scenario in REPRODUCED_SCENARIOS:
+        sc = get_scenario(scenario)
+        n = sc.duration * s.reproduce_scale / sc.dt
+        steps_est += n * simulator["numpy_us"]
+        steps_est += sum(n * _numpy_us(name, observers, ekf) for name in REPRODUCED_OBSERVERS)
+    repro = {"wall_s": wall, "numpy_estimate_s": steps_est * 1e-6}
+
+    cores = os.cpu_count() or 1
+    wall, table = _timed(lambda: sweep(["paper"], s.sweep_seeds, observers=SWEEP_OBSERVERS, duration=s.sweep_s,
+                                       n_jobs=-1, progress=progress))
+    n = s.sweep_s / get_scenario("paper").dt
+    per_case = n * (simulator["numpy_us"] + sum(_numpy_us(name, observers, ekf) for name in SWEEP_OBSERVERS))
+    sweep_out = {"wall_s": wall, "numpy_estimate_s": s.sweep_seeds * per_case * 1e-6 / cores,
+                 "runs": len(table), "diverged": int(table["diverged"].sum())}
+    return {"machine": machine_description(), "settings": s.__dict__, "observers": observers, "ekf": ekf,
+            "simulator": simulator, "reproduce": repro, "sweep": sweep_out}
+
+
+def _verdict(ok):
+    return "met" if ok else "**missed**"
+
+
+def bench_markdown(report):
+    """The report of :func:`run_bench` as Markdown, each figure beside its target."""
+    m, s = report["machine"], report["settings"]
+    lines = ["# fmscal bench", "",
+             f"Machine: {m['cpu']}, {m['cores']} cores; {m['platform']}; Python {m['python']}, "
+             f"numpy {m['numpy']}, casadi {m['casadi']}, filterpy {m['filterpy']}; C compiler: {m['compiler']}.",
+             "",
+             "| measurement | fast path | plain numpy | ratio | target |", "|---|---|---|---|---|"]
+    for name, r in report["observers"].items():
+        ratio = r["numpy_us"] / r["compiled_us"]
+        steps = 1e6 / r["compiled_us"]
+        lines.append(f"| `{name}` step, one log ({s['fast_s']:g} s; numpy on {s['numpy_s']:g} s) | "
+                     f"{r['compiled_us']:.3g} us ({steps:.3g} steps/s; first run with its build "
+                     f"{r['first_run_us']:.3g} us) | {r['numpy_us']:.3g} us | {ratio:.0f}x | "
+                     f">= {TARGETS['compiled_over_numpy']:g}x: {_verdict(ratio >= TARGETS['compiled_over_numpy'])}; "
+                     f"1e6 steps/s: {_verdict(steps >= TARGETS['steps_per_s_stretch'])} |")
+    e = report["ekf"]
+    ratio = e["ekf_us"] / e["bare_filterpy_us"]
+    lines.append(f"| `ekf` step ({s['ekf_s']:g} s) against filterpy's bare predict + update | {e['ekf_us']:.3g} us | "
+                 f"{e['bare_filterpy_us']:.3g} us (bare filterpy) | {ratio:.2f}x | "
+                 f"<= {TARGETS['ekf_over_bare_filterpy']:g}x: {_verdict(ratio <= TARGETS['ekf_over_bare_filterpy'])} |")
+    lines.append(f"| casadi `x_next, F, Q` of the EKF: `Function.buffer()` against an ordinary call | "
+                 f"{e['buffer_call_us']:.3g} us with the copies in and out ({e['trigger_us']:.3g} us the call alone) | {e['ordinary_call_us']:.3g} us (ordinary call) | "
+                 f"{e['ordinary_call_us'] / e['buffer_call_us']:.0f}x | - |")
+    sim = report["simulator"]
+    lines.append(f"| simulator RK4 step | {sim['compiled_us']:.3g} us | {sim['numpy_us']:.3g} us | "
+                 f"{sim['numpy_us'] / sim['compiled_us']:.0f}x | - |")
+    r = report["reproduce"]
+    full = s["reproduce_scale"] == 1.0
+    label = "" if full else f" (x{s['reproduce_scale']:g} length)"
+    lines.append(f"| `fmscal reproduce`{label} | "
+                 f"{r['wall_s']:.1f} s | {r['numpy_estimate_s']:.0f} s (estimated) | "
+                 f"{r['numpy_estimate_s'] / r['wall_s']:.0f}x | < {TARGETS['reproduce_s']:g} s: "
+                 f"{_verdict(r['wall_s'] < TARGETS['reproduce_s']) if full else 'not the full job'} |")
+    w = report["sweep"]
+    full = s["sweep_seeds"] >= 100 and s["sweep_s"] >= 100
+    lines.append(f"| sweep: {s['sweep_seeds']} seeds x {s['sweep_s']:g} s x {', '.join(SWEEP_OBSERVERS)} "
+                 f"({w['runs']} runs, {w['diverged']} diverged), every core | {w['wall_s']:.1f} s | "
+                 f"{w['numpy_estimate_s']:.0f} s (estimated) | {w['numpy_estimate_s'] / w['wall_s']:.0f}x | "
+                 f"< {TARGETS['sweep_s']:g} s: {_verdict(w['wall_s'] < TARGETS['sweep_s']) if full else 'not the full job'} |")
+    lines += ["", "Plain numpy: the same transition evaluated in numpy one step at a time "
+              "(`run(compiled=False)`, `integrate(compiled=False)`). The EKF is measured against filterpy "
+              "alone, with matrices of the same sizes. Estimated: the steps of the job times the per-step "
+              "costs of the plain paths measured above (the EKF at its own cost: it has one path), "
+              "the sweep divided by the cores. The first-run figure includes building the observer "
+              "(symbolic step, C generation, loading the cached library)."]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,177 @@
+"""Monte Carlo sweeps: seeds x scenarios x noise levels x observer settings, in parallel.
+
+The unit of work is a *case*: one scenario, one seed and one noise level,
+simulated once, on which every observer variant runs (same data, same
+``S0``). Cases run on local cores through joblib, or on a Dask cluster; the
+table is the same either way, timing columns aside (:data:`TIMING_COLUMNS`).
+"""
+
+import itertools
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from plant import get_scenario
+
+from .comparison import OBSERVER_NAMES, make_observer, run_observer, seed_list, simulate_case
+
+__all__ = ["sweep", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS"]
+
+#: Columns that depend on the machine and the moment, not on the data.
+TIMING_COLUMNS = ("wall_time", "wall_per_sim_s", "us_per_step")
+#: The three observers the toolkit compares, swept by default.
+SWEEP_OBSERVERS = ("adaptive", "high-gain", "ekf")
+
+
+def settings_label(settings):
+    """``{"lam": 10, "gamma": 2}`` as ``"gamma=2, lam=10"``; ``{}`` as ``"default"``."""
+    if not settings:
+        return "default"
+    return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in sorted(settings.items()))
+
+
+def expand_settings(observers, grid=None):
+    """Every observer variant of a settings grid.
+
+    Parameters
+    ----------
+    observers : sequence of str
+        Names from :data:`analysis.comparison.OBSERVER_NAMES`.
+    grid : dict, optional
+        ``{observer: {parameter: [values]}}``; the product of each
+        observer's value lists gives its variants. Observers absent from
+        the grid run once with their defaults.
+
+    Returns
+    -------
+    list of (str, dict)
+        ``(observer, constructor keyword arguments)``.
+    """
+    grid = dict(grid or {})
+    for name in grid:
+        if name not in observers:
+            raise ValueError(f"settings given for {name!r}, which is not swept; observers: {', '.join(observers)}")
+    variants = []
+    for name in observers:
+        if name not in OBSERVER_NAMES:
+            raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+        params = grid.get(name) or {}
+        keys = sorted(params)
+        values = [list(params[k]) if np.ndim(params[k]) else [params[k]] for k in keys]
+        for k, v in zip(keys, values):
+            if not v:
+                raise ValueError(f"settings for {name}: {k} needs at least one value; got none")
+        for combo in itertools.product(*values):
+            variants.append((name, dict(zip(keys, combo))))
+    return variants
+
+
+def _check_variants(variants, payload):
+    """Build each variant once here, so that a misspelt setting fails before any work is sent."""
+    for name, settings in variants:
+        try:
+            make_observer(name, payload, None, settings)
+        except TypeError as err:
+            raise ValueError(f"{name}: {err}") from err
+
+
+def _run_case(case):
+    """One case: simulate once, run every variant. Module-level so that it pickles."""
+    index, scenario, seed, noise_scale, duration, variants = case
+    sc, log, truth, told = simulate_case(scenario, seed, duration, noise_scale)
+    rows = []
+    for name, settings in variants:
+        row = run_observer(name, log, truth, sc.payload, told, settings)
+        rows.append({"case": index, "scenario": sc.name, "seed": int(seed), "noise_scale": float(noise_scale),
+                     "settings": settings_label(settings), **row})
+    return index, rows
+
+
+def _run_local(cases, n_jobs, bar):
+    from joblib import Parallel, delayed
+    if n_jobs == 1:                     # no worker processes: simplest to debug
+        for case in cases:
+            yield _run_case(case)
+            bar.update()
+        return
+    for out in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(delayed(_run_case)(c) for c in cases):
+        bar.update()
+        yield out
+
+
+def _run_dask(cases, client, bar):
+    from dask.distributed import as_completed
+    futures = client.map(_run_case, cases, pure=False)
+    for future in as_completed(futures):
+        bar.update()
+        yield future.result()
+
+
+def _client(scheduler):
+    if isinstance(scheduler, str):
+        try:
+            from dask.distributed import Client
+        except ImportError as err:
+            raise ImportError('a Dask scheduler needs the distributed extra: pip install "fmscal[distributed]"') \
+                from err
+        return Client(scheduler), True
+    return scheduler, False
+
+
+def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OBSERVERS, settings=None,
+          duration=None, n_jobs=-1, scheduler=None, progress=True):
+    """Run observers over the product of scenarios, seeds, noise levels and settings.
+
+    Parameters
+    ----------
+    scenarios : sequence of str
+        Names from :data:`plant.SCENARIOS`.
+    seeds : int or sequence of int
+        ``N`` means seeds ``0 .. N-1``.
+    noise_scales : sequence of float
+        Each multiplies every noise standard deviation of the scenario.
+    observers : sequence of str
+        Names from :data:`analysis.comparison.OBSERVER_NAMES`.
+    settings : dict, optional
+        ``{observer: {parameter: [values]}}``: a grid of constructor
+        arguments (:func:`expand_settings`).
+    duration : float, optional
+        Run length in s; default each scenario's.
+    n_jobs : int
+        Local worker processes (joblib; -1: every core, 1: this process).
+    scheduler : str or dask.distributed.Client, optional
+        Run on a Dask cluster instead: a scheduler address
+        (``"tcp://HOST:PORT"``) or a connected client.
+    progress : bool
+        Show a progress bar (one tick per case).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per case and observer variant, in case order whatever ran
+        it: ``case``, ``scenario``, ``seed``, ``noise_scale``, ``settings``
+        (a label, ``"default"`` or ``"lam=10"``) and the columns of
+        :func:`analysis.comparison.compare`.
+    """
+    seeds = seed_list(seeds)
+    scenarios = [get_scenario(s).name for s in scenarios]
+    noise_scales = [float(f) for f in np.atleast_1d(noise_scales)]
+    for f in noise_scales:
+        if not (np.isfinite(f) and f >= 0):
+            raise ValueError(f"noise scales must be non-negative numbers; got {f}")
+    variants = expand_settings(observers, settings)
+    _check_variants(variants, get_scenario(scenarios[0]).payload)
+    cases = [(i, sc, seed, f, duration, variants)
+             for i, (sc, f, seed) in enumerate(itertools.product(scenarios, noise_scales, seeds))]
+    client, owned = _client(scheduler) if scheduler is not None else (None, False)
+    results = {}
+    try:
+        with tqdm(total=len(cases), desc="sweep", unit="case", disable=not progress) as bar:
+            runs = _run_local(cases, n_jobs, bar) if client is None else _run_dask(cases, client, bar)
+            for index, rows in runs:
+                results[index] = rows
+    finally:
+        if owned:
+            client.close()
+    return pd.DataFrame([row for i in sorted(results) for row in results[i]])

@@ -1,0 +1,82 @@
+"""The compiled paths (C through buffers, or casadi's virtual machine) against the readable ones."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import plant
+from observers import AdaptiveObserver, HighGainObserver
+from plant import _compile
+from plant._compile import BufferedCall, compile_function
+from plant.excitation import PaperWrench
+
+LOGS = [("paper", 0), ("vision-50hz", 4), ("other-payload", 2)]
+
+
+def _square():
+    x = ca.SX.sym("x", 2)
+    return ca.Function("square_plus", [x], [ca.vertcat(x[0] ** 2, x[1] + 1)])
+
+
+def test_without_a_compiler_the_virtual_machine_runs(monkeypatch):
+    monkeypatch.setenv("FMSCAL_COMPILER", "none")
+    assert _compile.compiler() is None
+    fun = _square()
+    assert compile_function(fun) is fun
+
+
+@pytest.mark.skipif(_compile.compiler() is None, reason="no C compiler on this machine")
+def test_the_c_library_gives_the_same_numbers_and_is_cached(tmp_path, monkeypatch):
+    monkeypatch.setenv("FMSCAL_CACHE", str(tmp_path))
+    fun = _square()
+    compiled = compile_function(fun)
+    assert compiled.class_name() == "External"
+    assert len(list(tmp_path.glob("square_plus_*.so"))) == 1
+    call = BufferedCall(compiled)
+    call.inputs[0][:] = [3.0, 4.0]
+    call()
+    np.testing.assert_array_equal(call.outputs[0], [9.0, 5.0])
+
+
+def test_a_failing_compiler_falls_back_with_one_warning(tmp_path, monkeypatch):
+    monkeypatch.setenv("FMSCAL_COMPILER", "false")          # exits 1: a broken toolchain
+    monkeypatch.setenv("FMSCAL_CACHE", str(tmp_path))
+    monkeypatch.setattr(_compile, "_warned", [])
+    fun = _square()
+    with pytest.warns(RuntimeWarning, match="virtual machine"):
+        assert compile_function(fun) is fun
+
+
+def test_buffers_refuse_sparse_outputs():
+    x = ca.SX.sym("x", 2)
+    fun = ca.Function("sparse", [x], [ca.jacobian(ca.vertcat(x[0], x[1]), x)])   # a sparse identity
+    with pytest.raises(ValueError, match="must be dense"):
+        BufferedCall(fun)
+
+
+@pytest.mark.parametrize("backend", ["c", "vm"])
+@pytest.mark.parametrize("scenario, seed", LOGS)
+def test_fast_and_readable_observers_agree(backend, scenario, seed, monkeypatch):
+    if backend == "vm":
+        monkeypatch.setenv("FMSCAL_COMPILER", "none")
+    elif _compile.compiler() is None:
+        pytest.skip("no C compiler on this machine")
+    sc = plant.get_scenario(scenario).with_(duration=2.0)
+    log, truth, _ = sc.generate(seed)
+    for obs in (AdaptiveObserver(sc.payload), HighGainObserver(sc.payload)):
+        fast, slow = obs.run(log, truth.S0), obs.run(log, truth.S0, compiled=False)
+        np.testing.assert_allclose(fast.S_hat_history, slow.S_hat_history, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(fast.x_hat_history, slow.x_hat_history, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", ["c", "vm"])
+def test_fast_and_readable_simulators_agree(backend, monkeypatch):
+    if backend == "vm":
+        monkeypatch.setenv("FMSCAL_COMPILER", "none")
+        plant.simulate._compiled_chunk.cache_clear()
+    t = np.arange(0, 1.2, 1e-3)                       # not a whole number of chunks
+    payload = plant.Payload(6.0, 0.3, (-0.15, 0.4))
+    fast = plant.integrate(payload, PaperWrench(), t)
+    slow = plant.integrate(payload, PaperWrench(), t, compiled=False)
+    plant.simulate._compiled_chunk.cache_clear()
+    np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-12)

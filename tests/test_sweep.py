@@ -1,0 +1,90 @@
+"""Sweeps: the same table on one process, on local cores and on a Dask cluster; the bench's short mode."""
+
+import json
+
+import pandas as pd
+import pytest
+
+from analysis.cli import main
+from analysis.sweep import TIMING_COLUMNS, expand_settings, settings_label, sweep
+
+GRID = {"high-gain": {"lam": [10.0, 20.0]}}
+
+
+def _without_timing(table):
+    return table.drop(columns=list(TIMING_COLUMNS)).reset_index(drop=True)
+
+
+@pytest.fixture(scope="module")
+def serial_table():
+    return sweep(["paper", "drift"], seeds=[0, 3], noise_scales=[0.5, 1.0], observers=["adaptive", "high-gain"],
+                 settings=GRID, duration=1.5, n_jobs=1, progress=False)
+
+
+def test_the_table_covers_the_product(serial_table):
+    # 2 scenarios x 2 noise levels x 2 seeds, each with adaptive and two high-gain variants
+    assert len(serial_table) == 2 * 2 * 2 * 3
+    assert set(serial_table["settings"]) == {"default", "lam=10", "lam=20"}
+    assert set(serial_table["noise_scale"]) == {0.5, 1.0}
+    assert list(serial_table["case"]) == sorted(serial_table["case"])
+    # the noise scale reaches the data: the same seed at two noise levels gives different E
+    e = serial_table.set_index(["scenario", "seed", "noise_scale", "observer", "settings"])["E"]
+    assert e[("paper", 0, 0.5, "adaptive", "default")] != e[("paper", 0, 1.0, "adaptive", "default")]
+
+
+def test_local_cores_give_the_serial_table(serial_table):
+    parallel = sweep(["paper", "drift"], seeds=[0, 3], noise_scales=[0.5, 1.0], observers=["adaptive", "high-gain"],
+                     settings=GRID, duration=1.5, n_jobs=2, progress=False)
+    pd.testing.assert_frame_equal(_without_timing(parallel), _without_timing(serial_table))
+
+
+def test_a_dask_cluster_gives_the_serial_table(serial_table):
+    distributed = pytest.importorskip("dask.distributed")       # the [distributed] extra; README installs it
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+                                  processes=True) as cluster, distributed.Client(cluster) as client:
+        table = sweep(["paper", "drift"], seeds=[0, 3], noise_scales=[0.5, 1.0],
+                      observers=["adaptive", "high-gain"], settings=GRID, duration=1.5, scheduler=client,
+                      progress=False)
+    pd.testing.assert_frame_equal(_without_timing(table), _without_timing(serial_table))
+
+
+def test_settings_expand_to_their_product():
+    variants = expand_settings(["adaptive", "high-gain"], {"high-gain": {"lam": [10, 20], "gamma": [1, 2]}})
+    assert variants[0] == ("adaptive", {})
+    assert sorted(settings_label(v) for n, v in variants[1:]) == [
+        "gamma=1, lam=10", "gamma=1, lam=20", "gamma=2, lam=10", "gamma=2, lam=20"]
+    with pytest.raises(ValueError, match="not swept"):
+        expand_settings(["adaptive"], {"ekf": {"q_S": [0.0]}})
+    with pytest.raises(ValueError, match="unknown observer"):
+        expand_settings(["kalman"])
+
+
+def test_a_misspelt_setting_fails_before_any_work():
+    with pytest.raises(ValueError, match="high-gain: .*lamda"):
+        sweep(["paper"], 1, observers=["high-gain"], settings={"high-gain": {"lamda": [10]}}, duration=1,
+              progress=False)
+
+
+def test_the_sweep_command(tmp_path, capsys):
+    out = tmp_path / "runs.csv"
+    code = main(["sweep", "--seeds", "2", "--duration", "1", "--observer", "adaptive", "high-gain",
+                 "--set", "high-gain:lam=10,20", "--noise-scale", "1", "2", "--jobs", "1", "--out", str(out),
+                 "--json"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert len(summary) == 2 * 3 and all(row["seeds"] == 2 for row in summary)
+    assert len(pd.read_csv(out)) == 2 * 2 * 3
+    assert main(["sweep", "--set", "high-gain-lam=10"]) == 2
+    assert "OBSERVER:PARAM" in capsys.readouterr().err
+    assert main(["sweep", "--seeds", "0"]) == 2
+
+
+def test_the_bench_runs_in_its_short_mode(tmp_path, capsys):
+    code = main(["bench", "--quick", "--out", str(tmp_path / "bench.md")])
+    assert code == 0
+    text = capsys.readouterr().out
+    for row in ("`adaptive` step", "`high-gain` step", "`ekf` step", "Function.buffer()", "simulator",
+                "`fmscal reproduce`", "sweep:"):
+        assert row in text
+    assert "not the full job" in text                # the short mode does not claim the targets
+    assert (tmp_path / "bench.md").read_text() == text.rstrip("\n") + "\n"
