@@ -95,14 +95,19 @@ def regressors(theta, w_hat, payload):
     ``Y'' = psi_Y . phi_2`` with ``psi_X = [cos w_hat, -sin w_hat] / m``,
     ``psi_Y = [sin w_hat, cos w_hat] / m``.
 
+    ``w_hat`` may carry a fourth component, a constant 1: the regressors
+    then also drive the offset column ``c`` of ``w = S w_hat + c``.
+
     Returns
     -------
-    psi_theta : list of 3, psi_X, psi_Y : lists of 6
+    psi_theta : list of n, psi_X, psi_Y : lists of 2n
+        ``n = len(w_hat)``, 3 (or 4 with the offset).
     """
     G = input_matrix(theta, payload)
-    psi_theta = [G[0, 0] * w_hat[j] for j in range(3)]
-    psi_X = [G[1, 1 + a] * w_hat[j] for a in range(2) for j in range(3)]
-    psi_Y = [G[2, 1 + a] * w_hat[j] for a in range(2) for j in range(3)]
+    n = w_hat.shape[0] if hasattr(w_hat, "shape") else len(w_hat)
+    psi_theta = [G[0, 0] * w_hat[j] for j in range(n)]
+    psi_X = [G[1, 1 + a] * w_hat[j] for a in range(2) for j in range(n)]
+    psi_Y = [G[2, 1 + a] * w_hat[j] for a in range(2) for j in range(n)]
     return psi_theta, psi_X, psi_Y
 
 

@@ -63,6 +63,11 @@ class LeastSquares:
     payload : plant.Payload
     window : float
         Window length in s over which the raw reading is integrated twice.
+    offset : bool
+        Also estimate the sensor's offset ``b`` in ``w = S (w_hat - b)``:
+        the model ``w = S w_hat + c`` stays linear (``c = -S b``, the
+        reading augmented by a constant 1). ``b`` and its one-sigma
+        uncertainty are in ``result.info["b"]``, ``["b_std"]``.
 
     Attributes
     ----------
@@ -74,11 +79,12 @@ class LeastSquares:
 
     name = "least-squares"
 
-    def __init__(self, payload, window=0.5):
+    def __init__(self, payload, window=0.5, offset=False):
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         self.payload = payload
         self.window = as_positive_scalar(window, "window")
+        self.offset = bool(offset)
         self.report = FitReport()
 
     def _double_integrals(self, log):
@@ -89,11 +95,13 @@ class LeastSquares:
 
         Returns
         -------
-        list of three ndarrays, shapes (N, 3), (N, 6), (N, 6)
+        list of three ndarrays, shapes (N, n), (N, 2n), (N, 2n)
+            ``n`` = 3, or 4 with the offset.
         """
         t = log.t
         theta = np.interp(t, t[log.has_pose], log.pose[log.has_pose, 0])
-        psi = [np.array(v).T for v in regressors(theta, log.w_hat.T, self.payload)]
+        reading = log.w_hat.T if not self.offset else np.vstack([log.w_hat.T, np.ones(len(t))])
+        psi = [np.array(v).T for v in regressors(theta, reading, self.payload)]
         h = np.diff(t)[:, None]
         out = []
         for P in psi:
@@ -186,21 +194,26 @@ class LeastSquares:
             covs.append(info_inv @ meat @ info_inv * len(per_window) / max(len(per_window) - len(phi), 1))
             phis.append(phi)
             histories.append(_running_fits(per_window, len(log)))
-        S_hat = S_from_phi(phis[0], phis[1], self.payload)
-        T = _phi_to_S_map(self.payload)
-        cov_phi = np.zeros((9, 9))
-        cov_phi[:3, :3], cov_phi[3:, 3:] = covs
-        cov_S = T @ cov_phi @ T.T
-        S_std = np.sqrt(np.maximum(np.diag(cov_S), 0)).reshape(3, 3)
-        self.report = self._diagnose(log, cov_S, residuals)
-        S_hist = np.array([S_from_phi(a, b, self.payload) for a, b in zip(*histories)])
+        n = len(phis[0])                              # 3, or 4 with the offset column c
+        S_aug = S_from_phi(phis[0], phis[1], self.payload)
+        T = _phi_to_S_map(self.payload, n)
+        cov_phi = np.zeros((3 * n, 3 * n))
+        cov_phi[:n, :n], cov_phi[n:, n:] = covs
+        cov_S = T @ cov_phi @ T.T                     # of [S | c], row order
+        S_hat = S_aug[:, :3]
+        S_std = np.sqrt(np.maximum(np.diag(cov_S), 0)).reshape(3, n)[:, :3]
+        self.report = self._diagnose(log, cov_S, residuals, n)
+        info = {"fit": self.report}
+        if self.offset:
+            info["b"], info["b_std"] = _offset_from_c(S_hat, S_aug[:, 3], cov_S)
+        S_hist = np.array([S_from_phi(a, b, self.payload)[:, :3] for a, b in zip(*histories)])
         x_hat = self._fitted_motion(log, Z, phis, windows)
         ok = not self.report["warnings"]
         return ObserverResult(observer=self.name, t=log.t.copy(), S_hat=S_hat, S_hat_history=S_hist,
                               x_hat_history=x_hat, S_std=S_std, diverged=False, converged=ok,
-                              wall_time=time.perf_counter() - start, info={"fit": self.report})
+                              wall_time=time.perf_counter() - start, info=info)
 
-    def _diagnose(self, log, cov_S, residuals):
+    def _diagnose(self, log, cov_S, residuals, n):
         # information about S, columns scaled to unit diagonal: unit-free conditioning
         info_S = np.linalg.pinv(cov_S)
         d = np.sqrt(np.maximum(np.diag(info_S), 1e-300))
@@ -213,10 +226,12 @@ class LeastSquares:
         ratio = float(np.max(rms / np.maximum(pose_sd, 1e-12))) if np.all(pose_sd > 0) else float("nan")
         warnings = []
         if cond > EXCITATION_COND_LIMIT:
-            weakest = eigvec[:, 0].reshape(3, 3)
-            i, j = np.unravel_index(np.argmax(np.abs(weakest)), (3, 3))
-            warnings.append(f"the log does not excite all nine entries of S (information matrix condition "
-                            f"number {cond:.3g} > {EXCITATION_COND_LIMIT:.0e}; weakest along s_{i + 1}{j + 1}): "
+            weakest = eigvec[:, 0].reshape(3, n)
+            i, j = np.unravel_index(np.argmax(np.abs(weakest)), (3, n))
+            entry = f"s_{i + 1}{j + 1}" if j < 3 else f"the offset c_{i + 1}"
+            what = "all nine entries of S" if n == 3 else "all nine entries of S and the offset"
+            warnings.append(f"the log does not excite {what} (information matrix condition "
+                            f"number {cond:.3g} > {EXCITATION_COND_LIMIT:.0e}; weakest along {entry}): "
                             "drive every wrench component, or no method can recover S")
         if np.isfinite(ratio) and ratio > CONSISTENCY_RATIO_LIMIT:
             names = ["theta", "X", "Y"]
@@ -224,7 +239,7 @@ class LeastSquares:
             warnings.append(f"the log does not match the model: the fit residual of {names[worst]} is "
                             f"{ratio:.3g}x the pose noise estimated from the log (> {CONSISTENCY_RATIO_LIMIT:g}); "
                             "check units (angles in rad, positions in m), the mass properties and the offset rho")
-        return FitReport(information_cond=cond, weakest_direction=eigvec[:, 0].reshape(3, 3).tolist(),
+        return FitReport(information_cond=cond, weakest_direction=eigvec[:, 0].reshape(3, n)[:, :3].tolist(),
                          residual_rms=rms.tolist(), pose_noise_estimate=pose_sd.tolist(),
                          consistency_ratio=ratio, warnings=warnings)
 
@@ -266,11 +281,29 @@ def _running_fits(per_window, n):
     return out
 
 
-def _phi_to_S_map(payload):
-    """The 9x9 matrix ``T`` with ``vec(S) = T [phi_1, phi_2]`` (row order), from eqs. (4), (5)."""
-    T = np.zeros((9, 9))
-    for k in range(9):
-        e = np.zeros(9)
+def _phi_to_S_map(payload, n=3):
+    """The matrix ``T`` with ``vec([S | c]) = T [phi_1, phi_2]`` (row order), from eqs. (4), (5).
+
+    ``n`` columns: 3, or 4 with the offset ``c``; ``T`` is ``3n x 3n``.
+    """
+    T = np.zeros((3 * n, 3 * n))
+    for k in range(3 * n):
+        e = np.zeros(3 * n)
         e[k] = 1.0
-        T[:, k] = np.ravel(S_from_phi(e[:3], e[3:], payload))
+        T[:, k] = np.ravel(S_from_phi(e[:n], e[n:], payload))
     return T
+
+
+def _offset_from_c(S, c, cov_aug):
+    """``b = -S^-1 c`` and its one-sigma uncertainty, linearised.
+
+    ``db = -S^-1 (dc + dS b)``: the column of entry ``(i, j)`` of ``[S | c]``
+    is ``-S^-1 e_i`` times ``b_j`` (``j < 3``) or 1 (the offset column).
+    """
+    S_inv = np.linalg.inv(S)
+    b = -S_inv @ c
+    J = np.zeros((3, 12))
+    for i in range(3):
+        for j in range(4):
+            J[:, 4 * i + j] = -S_inv[:, i] * (b[j] if j < 3 else 1.0)
+    return b, np.sqrt(np.maximum(np.diag(J @ cov_aug @ J.T), 0))

@@ -165,21 +165,26 @@ def phi_2(S):
 def S_from_phi(phi1, phi2, payload):
     """Invert eqs. (4), (5): ``s_1j = phi_1j + rho_y s_2j - rho_x s_3j``.
 
+    With an offset (``w = S w_hat + c``, the reading augmented by a constant
+    1), ``phi_1`` has 4 entries, ``phi_2`` 8, and the result is ``[S | c]``.
+
     Parameters
     ----------
-    phi1 : array_like or casadi.SX, shape (3,)
-    phi2 : array_like or casadi.SX, shape (6,)
+    phi1 : array_like or casadi.SX, shape (n,)
+    phi2 : array_like or casadi.SX, shape (2n,)
+        ``n`` = 3, or 4 with the offset.
     payload : plant.Payload
 
     Returns
     -------
     ndarray or casadi.SX
-        ``S`` as a (3, 3) array, or for symbols a flat (9,) vector in row order.
+        ``S`` as a (3, n) array, or for symbols a flat (3n,) vector in row order.
     """
     o = ops(phi1, phi2)
     rho_x, rho_y = payload.rho
-    s2 = [phi2[j] for j in range(3)]
-    s3 = [phi2[3 + j] for j in range(3)]
-    s1 = [phi1[j] + rho_y * s2[j] - rho_x * s3[j] for j in range(3)]
+    n = phi1.shape[0] if hasattr(phi1, "shape") else len(phi1)
+    s2 = [phi2[j] for j in range(n)]
+    s3 = [phi2[n + j] for j in range(n)]
+    s1 = [phi1[j] + rho_y * s2[j] - rho_x * s3[j] for j in range(n)]
     flat = o.vcat(s1 + s2 + s3)
-    return flat if is_symbolic(flat) else flat.reshape(3, 3)
+    return flat if is_symbolic(flat) else flat.reshape(3, n)

@@ -128,6 +128,35 @@ class Log:
             lines.append(",".join(cells))
         Path(path).write_text("\n".join(lines) + "\n")
 
+    def shift_poses(self, latency):
+        """The log with the pose stream moved back by ``latency`` to line up with the sensor.
+
+        A vision system that delivers each pose ``latency`` s late logs the
+        pose of ``t - latency`` at ``t``; this returns the log in which each
+        pose sits at the time it was taken. The shift is rounded to whole
+        samples (resolution ``dt``); rows before the first pose after the
+        shift are dropped.
+
+        Parameters
+        ----------
+        latency : float
+            s, at least 0.
+
+        Returns
+        -------
+        Log
+        """
+        latency = float(latency)
+        if not (np.isfinite(latency) and 0 <= latency < self.duration / 2):
+            raise ValueError(f"latency must be in [0, {self.duration / 2:g}) s for this log; got {latency}")
+        k = int(round(latency / self.dt))
+        if k == 0:
+            return self
+        pose = np.full_like(self.pose, np.nan)
+        pose[:-k] = self.pose[k:]
+        first = int(np.argmax(~np.isnan(pose[:, 0])))
+        return Log(self.t[first:], pose[first:], self.w_hat[first:], self.name)
+
     def head(self, n):
         """The first ``n`` samples as a new Log."""
         return Log(self.t[:n], self.pose[:n], self.w_hat[:n], self.name)

@@ -1,0 +1,197 @@
+"""A calibration as a file: what ``fmscal calibrate --save`` writes and ``fmscal apply`` uses.
+
+The calibrated wrench is ``w = S (w_hat - b)`` (eq. 3 with the sensor's
+offset ``b``; ``b = 0`` where it was not estimated). The file is JSON::
+
+    {"format": "fmscal-calibration/1", "S": [[...] x3], "S_std": [[...] x3] or null,
+     "b": [M, fx, fy] or null, "b_std": [...] or null, "payload": {"mass", "inertia", "rho"},
+     "method": "least-squares", "log": {"name": "run.csv", "sha256": "..."},
+     "latency": s or null, "date": "2026-11-22T10:00:00+00:00"}
+"""
+
+import datetime
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .payload import Payload
+from .sensor import check_calibration
+
+__all__ = ["Calibration", "CalibrationFileError", "file_sha256", "FORMAT"]
+
+#: The format tag every calibration file carries.
+FORMAT = "fmscal-calibration/1"
+
+
+class CalibrationFileError(ValueError):
+    """A calibration file that cannot be used: the message names the problem."""
+
+
+def file_sha256(path):
+    """SHA-256 of a file's bytes, hex."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _matrix(value, shape, name, source):
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}; got {value!r}") from None
+    if arr.shape != shape or not np.all(np.isfinite(arr)):
+        raise CalibrationFileError(f"{source}: {name} must be finite numbers of shape {shape}; "
+                                   f"got shape {arr.shape}")
+    return arr
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A sensor calibration: ``w = S (w_hat - b)``.
+
+    Parameters
+    ----------
+    S : array_like, shape (3, 3)
+        Calibration matrix, non-singular.
+    payload : plant.Payload
+        The mass properties the calibration was estimated with.
+    method : str
+        The estimator (``least-squares``, ``ekf``, ...).
+    S_std : array_like, shape (3, 3), optional
+        One-sigma uncertainty of each entry.
+    b, b_std : array_like, shape (3,), optional
+        Offset ``[M, f_x, f_y]`` in the raw reading's units (N m, N) and its
+        uncertainty; None: not estimated (taken as zero).
+    log_name, log_sha256 : str
+        The log it came from, and a hash of the log file's contents.
+    latency : float, optional
+        Delay of the pose stream behind the sensor stream that was used, s.
+    date : str, optional
+        ISO 8601; default now (UTC).
+    """
+
+    S: np.ndarray
+    payload: Payload
+    method: str
+    S_std: np.ndarray = None
+    b: np.ndarray = None
+    b_std: np.ndarray = None
+    log_name: str = ""
+    log_sha256: str = ""
+    latency: float = None
+    date: str = None
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "S", check_calibration(self.S, "S"))
+        if not isinstance(self.payload, Payload):
+            raise TypeError(f"payload must be a plant.Payload; got {type(self.payload).__name__}")
+        for name, shape in (("S_std", (3, 3)), ("b", (3,)), ("b_std", (3,))):
+            value = getattr(self, name)
+            if value is not None:
+                set_(self, name, _matrix(value, shape, name, "calibration"))
+        if self.date is None:
+            set_(self, "date", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+
+    @property
+    def offset(self):
+        """``b``, zeros where it was not estimated; shape (3,)."""
+        return np.zeros(3) if self.b is None else self.b
+
+    def apply(self, w_hat):
+        """Calibrated wrench ``w = S (w_hat - b)``.
+
+        Parameters
+        ----------
+        w_hat : array_like, shape (3,) or (N, 3)
+            Raw readings ``[M, f_x, f_y]``, N m and N.
+
+        Returns
+        -------
+        ndarray, same shape as ``w_hat``
+        """
+        w_hat = np.asarray(w_hat, dtype=float)
+        if w_hat.ndim not in (1, 2) or w_hat.shape[-1] != 3:
+            raise ValueError(f"w_hat must have shape (3,) or (N, 3); got {w_hat.shape}")
+        if not np.all(np.isfinite(w_hat)):
+            raise ValueError("w_hat holds NaN or infinite values")
+        return (w_hat - self.offset) @ self.S.T
+
+    def to_dict(self):
+        """The JSON document (module docstring)."""
+        def listed(a):
+            return None if a is None else np.asarray(a).tolist()
+        return {"format": FORMAT, "S": listed(self.S), "S_std": listed(self.S_std), "b": listed(self.b),
+                "b_std": listed(self.b_std), "payload": self.payload.to_dict(), "method": self.method,
+                "log": {"name": self.log_name, "sha256": self.log_sha256}, "latency": self.latency,
+                "date": self.date}
+
+    def save(self, path):
+        """Write the calibration as JSON."""
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
+
+    @classmethod
+    def load(cls, path, payload=None):
+        """Read a calibration file, refusing one that is malformed or made for another payload.
+
+        Parameters
+        ----------
+        path : str or Path
+        payload : plant.Payload, optional
+            If given, the file must have been made for these mass properties.
+
+        Returns
+        -------
+        Calibration
+
+        Raises
+        ------
+        CalibrationFileError
+            Missing file, not JSON, wrong format tag, missing keys, entries
+            of the wrong shape or not finite, a singular ``S``, or another
+            payload.
+        """
+        path = Path(path)
+        source = path.name
+        if not path.is_file():
+            raise CalibrationFileError(f"{path}: no such file")
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise CalibrationFileError(f"{source}: not a JSON calibration file ({err})") from None
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            got = data.get("format") if isinstance(data, dict) else type(data).__name__
+            raise CalibrationFileError(f"{source}: not an fmscal calibration (format {got!r}; expected {FORMAT!r})")
+        missing = [k for k in ("S", "payload", "method") if k not in data]
+        if missing:
+            raise CalibrationFileError(f"{source}: missing key(s) {', '.join(missing)}")
+        try:
+            file_payload = Payload.from_dict(data["payload"])
+        except (KeyError, TypeError, ValueError) as err:
+            raise CalibrationFileError(f"{source}: payload must hold mass, inertia and rho ({err})") from None
+        if payload is not None and not file_payload.isclose(payload):
+            raise CalibrationFileError(f"{source}: made for another payload ({_describe(file_payload)}), "
+                                       f"not {_describe(payload)}")
+        S = _matrix(data["S"], (3, 3), "S", source)
+        optional = {}
+        for name, shape in (("S_std", (3, 3)), ("b", (3,)), ("b_std", (3,))):
+            if data.get(name) is not None:
+                optional[name] = _matrix(data[name], shape, name, source)
+        latency = data.get("latency")
+        if latency is not None and not (isinstance(latency, (int, float)) and np.isfinite(latency)):
+            raise CalibrationFileError(f"{source}: latency must be a number of seconds or null; got {latency!r}")
+        log = data.get("log") or {}
+        try:
+            return cls(S=S, payload=file_payload, method=str(data["method"]), log_name=str(log.get("name", "")),
+                       log_sha256=str(log.get("sha256", "")), latency=latency, date=data.get("date"), **optional)
+        except ValueError as err:
+            raise CalibrationFileError(f"{source}: {err}") from None
+
+
+def _describe(payload):
+    return f"m = {payload.mass:g} kg, I_G = {payload.inertia:g} kg m^2, rho = ({payload.rho[0]:g}, {payload.rho[1]:g}) m"
