@@ -129,7 +129,8 @@ def _bare_filterpy_us(n):
     kf.F = np.eye(15) + 1e-3 * rng.standard_normal((15, 15))
     kf.Q = 1e-8 * np.eye(15)
     kf.R = 1e-6 * np.eye(3)
-    H = AugmentedEKF.H()
+    H = np.zeros((3, 15))
+    H[0, 0] = H[1, 2] = H[2, 4] = 1.0
     z = np.zeros((3, 1))
     elapsed = _best(lambda: [(kf.predict(), kf.update(z, lambda x: H, AugmentedEKF.hx)) for _ in range(n)], 2)
     return 1e6 * elapsed / n

@@ -98,6 +98,10 @@ class AdaptiveObserver(Observer):
         Default configuration: time over which the gain halves, s.
     floor : float
         Default configuration: the gain never falls below ``floor * gamma``.
+    offset : bool
+        Also estimate the sensor's offset ``b`` (``result.b``): the laws run
+        on ``[S | c]`` and the reading ``[w_hat, 1]``
+        (:class:`observers.Observer`). Off by default, as in the paper.
 
     Examples
     --------
@@ -109,7 +113,7 @@ class AdaptiveObserver(Observer):
     """
 
     def __init__(self, payload, K1=None, K2=None, delta=PAPER_DELTA, literal=False,
-                 gamma=30.0, tau=0.01, t_decay=20.0, floor=0.1):
+                 gamma=30.0, tau=0.01, t_decay=20.0, floor=0.1, offset=False):
         default_K1, default_K2 = (PAPER_K1, PAPER_K2) if literal else double_pole_gains(DEFAULT_POLE)
         self.K1 = as_finite_array(default_K1 if K1 is None else K1, (2, 1), "K1")
         self.K2 = as_finite_array(default_K2 if K2 is None else K2, (4, 2), "K2")
@@ -124,18 +128,27 @@ class AdaptiveObserver(Observer):
         self.K = np.zeros((6, 3))
         self.K[0:2, 0] = self.K1[:, 0]
         self.K[2:6, 1:3] = self.K2
-        super().__init__(payload)
+        super().__init__(payload, offset=offset)
 
     @classmethod
-    def paper(cls, payload):
+    def paper(cls, payload, offset=False):
         """The paper's configuration exactly (``adaptive-paper``)."""
-        return cls(payload, literal=True)
+        return cls(payload, literal=True, offset=offset)
 
-    # packed state: x_hat(6) S_hat(9) e_prev(3) pose_n(3) has_n(1) w_n(3) t(1) xi(3) R(9)
+    # packed state: x_hat(6) [S_hat | c_hat](3n) e_prev(3) pose_n(3) has_n(1) w_n(3) t(1) xi(3) R(n x n),
+    # n = n_cols (3, or 4 with the offset)
+    def _split(self, z):
+        """The packed state's parts, in the order above."""
+        k = self._S.stop
+        n = self.n_cols
+        return (z[0:6], z[self._S], z[k:k + 3], z[k + 3:k + 6], z[k + 6], z[k + 7:k + 10], z[k + 10],
+                z[k + 11:k + 14], z[k + 14:k + 14 + n * n])
+
     def _initial_state(self, S0, pose, w_hat):
         x = np.array([pose[0], 0.0, pose[1], 0.0, pose[2], 0.0])
-        R = np.eye(3) * max(float(w_hat @ w_hat), _R_MIN) / 3     # isotropic until excited
-        return np.concatenate([x, np.ravel(S0), np.zeros(3), pose, [1.0], w_hat, [0.0], np.zeros(3),
+        w = np.append(w_hat, 1.0) if self.offset else w_hat
+        R = np.eye(self.n_cols) * max(float(w @ w), _R_MIN) / self.n_cols     # isotropic until excited
+        return np.concatenate([x, self._initial_S(S0), np.zeros(3), pose, [1.0], w_hat, [0.0], np.zeros(3),
                                R.ravel()])
 
     def _transition(self, z, u, dt):
@@ -146,12 +159,13 @@ class AdaptiveObserver(Observer):
     def _paper_step(self, z, u, dt):
         """Eqs. (6), (7), (14) by forward Euler; eq. (8) with eq. (15)."""
         o = ops(z, u)
-        x, S, e_prev, pose, has, w = z[0:6], z[6:15], z[15:18], z[18:21], z[21], z[22:25]
+        x, S, e_prev, pose, has, w_raw, t, xi, R_flat = self._split(z)
+        w = self._augmented(o, w_raw)
         # output errors, true minus estimate (the proof's sign, READING.md)
         e = has * o.vcat([pose[0] - x[0], pose[1] - x[2], pose[2] - x[4]])
         theta = has * pose[0] + (1 - has) * x[0]            # eq. (5) uses the measured angle
         G = input_matrix(theta, self.payload)
-        S_mat = mx.as_matrix(o, S)
+        S_mat = mx.as_matrix(o, S, 3, self.n_cols)
         # eq. (15): velocity errors by backward difference, step absorbed in delta
         e_v = has * (e - e_prev)
         # eq. (8) as printed: S_hat += delta G^T diag(1, m, m) e_v w_hat^T
@@ -162,19 +176,20 @@ class AdaptiveObserver(Observer):
         x_dot = o.vcat([x[1], a[0], x[3], a[1], x[5], a[2]]) + o.dot(self.K, e)
         x_next = x + dt * x_dot
         e_keep = has * e + (1 - has) * e_prev
-        return o.vcat([x_next, mx.flat(o, S_next), e_keep, u[1:4], u[0], u[4:7], z[25] + dt, z[26:38]])
+        return o.vcat([x_next, mx.flat(o, S_next), e_keep, u[1:4], u[0], u[4:7], t + dt, xi, R_flat])
 
     def _default_step(self, z, u, dt):
         """The default configuration (class docstring, points 1-4)."""
         o = ops(z, u)
         p = self.payload
-        x, S, pose, has, w, t, xi, R_flat = (z[0:6], z[6:15], z[18:21], z[21], z[22:25], z[25],
-                                             z[26:29], z[29:38])
-        w_next, has_next, pose_next = u[4:7], u[0], u[1:4]
+        x, S, e_prev, pose, has, w_raw, t, xi, R_flat = self._split(z)
+        n = self.n_cols
+        w, w_next = self._augmented(o, w_raw), self._augmented(o, u[4:7])
+        has_next, pose_next = u[0], u[1:4]
         e = has * o.vcat([pose[0] - x[0], pose[1] - x[2], pose[2] - x[4]])
         theta = has * pose[0] + (1 - has) * x[0]
         G = input_matrix(theta, p)
-        S_mat = mx.as_matrix(o, S)
+        S_mat = mx.as_matrix(o, S, 3, n)
         # 1. velocity error e_v = e' + K_pos e, e' from the filter xi' = (e - xi)/tau
         e_dot = (e - xi) / self.tau
         K_pos = self.K[[0, 2, 4], :]
@@ -186,10 +201,10 @@ class AdaptiveObserver(Observer):
         #    R a running mean of w_hat w_hat^T (time constant 2 s): the rate is free of I_G, m
         #    and of how well S is conditioned.
         gain = self.gamma * o.fmax(1.0 / (1.0 + t / self.t_decay), self.floor)   # 3. decaying gain
-        R_mat = mx.as_matrix(o, R_flat)
+        R_mat = mx.as_matrix(o, R_flat, n)
         w_col = mx.col(w)
         R_next = R_mat + (1 - o.exp(-dt / _R_TIME)) * (o.dot(w_col, mx.row(w)) - R_mat)
-        g_w = mx.vec(mx.regularised_solve(o, R_mat, w_col, 3, rel=_R_REG, floor=0.0))   # R^-1 w_hat
+        g_w = mx.vec(mx.regularised_solve(o, R_mat, w_col, n, rel=_R_REG, floor=0.0))   # R^-1 w_hat
         d_phi1 = gain * dt * p.inertia * g_w * e_v[0]
         c, s = o.cos(theta), o.sin(theta)
         e_b = o.vcat([c * e_v[1] + s * e_v[2], -s * e_v[1] + c * e_v[2]])   # R(theta)^T e_v
@@ -207,5 +222,5 @@ class AdaptiveObserver(Observer):
             x[2 * i + j] + (dt * x[2 * i + 1] + dt * dt * (2 * a0[i] + a1[i]) / 6 if j == 0
                             else dt * (a0[i] + a1[i]) / 2)
             for i in range(3) for j in range(2)]) + dt * inj
-        return o.vcat([x_next, S_next, z[15:18], pose_next, has_next, w_next, t + dt, xi_next, mx.flat(o, R_next)])
+        return o.vcat([x_next, S_next, e_prev, pose_next, has_next, u[4:7], t + dt, xi_next, mx.flat(o, R_next)])
 

@@ -18,7 +18,7 @@ from plant import Log, Payload
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
-__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "DIVERGENCE_BOUND", "SETTLE_FRACTION",
+__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "offset_from_c", "offset_std", "DIVERGENCE_BOUND", "SETTLE_FRACTION",
            "SETTLE_TOLERANCE"]
 
 #: A run whose calibration estimate has an entry beyond this is declared diverged.
@@ -81,7 +81,12 @@ class ObserverResult:
     wall_time : float
         Seconds of computation.
     info : dict
-        Method-specific extras (noise estimates, offset ``b``, ...).
+        Method-specific extras (noise estimates, fit diagnostics, ...).
+    b : ndarray, shape (3,), or None
+        The sensor's offset in ``w = S (w_hat - b)`` (N m, N), where the
+        method was asked to estimate it; None otherwise.
+    b_std : ndarray, shape (3,), or None
+        Its one-sigma uncertainty, where the method has one.
     """
 
     observer: str
@@ -94,19 +99,27 @@ class ObserverResult:
     converged: bool = False
     wall_time: float = 0.0
     info: dict = field(default_factory=dict)
+    b: np.ndarray = None
+    b_std: np.ndarray = None
 
 
 class Observer:
     """Base class: estimates the motion and ``S`` from pose and raw reading.
 
-    Subclasses set :attr:`name`, the slices :attr:`_X` (6 motion states) and
-    :attr:`_S` (9 entries of ``S_hat``, row order) of the packed state, and
-    implement :meth:`_initial_state` and :meth:`_transition`.
+    Subclasses set :attr:`name`, the slice :attr:`_X` (6 motion states) of
+    the packed state, keep ``[S_hat | c_hat]`` (``3 x n`` row order, ``n`` =
+    :attr:`n_cols`) right after it, and implement :meth:`_initial_state` and
+    :meth:`_transition`.
 
     Parameters
     ----------
     payload : plant.Payload
         The payload's known mass properties.
+    offset : bool
+        Also estimate the sensor's offset ``b`` in ``w = S (w_hat - b)``:
+        the observer runs on ``w = S w_hat + c`` (the reading augmented by a
+        constant 1, ``[S | c]`` in place of ``S``) and reports
+        ``b = -S^-1 c`` in ``result.b``. Off by default, as in the paper.
 
     Notes
     -----
@@ -122,12 +135,15 @@ class Observer:
 
     name = "observer"
     _X = slice(0, 6)
-    _S = slice(6, 15)
 
-    def __init__(self, payload):
+    def __init__(self, payload, offset=False):
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         self.payload = payload
+        self.offset = bool(offset)
+        #: Columns of the estimated ``[S | c]``: 3, or 4 with the offset.
+        self.n_cols = 4 if self.offset else 3
+        self._S = slice(6, 6 + 3 * self.n_cols)
         self._compiled = None
         self.reset()
 
@@ -171,7 +187,7 @@ class Observer:
             self._z = self._initial_state(self._S0, pose, w_hat)
         else:
             self._z = self._transition(self._z, _pack_input(pose, w_hat), float(dt))
-        return self._z[self._X].copy(), self._z[self._S].reshape(3, 3).copy()
+        return self._z[self._X].copy(), self._z[self._S].reshape(3, self.n_cols)[:, :3].copy()
 
     # --- whole log ----------------------------------------------------------
     def run(self, log, S0=None, compiled=True):
@@ -251,19 +267,67 @@ class Observer:
                 return Z[:k1]
         return Z
 
+    def _augmented(self, o, w_hat):
+        """The reading the model multiplies: ``w_hat``, or ``[w_hat, 1]`` with the offset."""
+        return o.vcat([w_hat, 1.0]) if self.offset else w_hat
+
+    def _initial_S(self, S0):
+        """``[S0 | 0]`` flat in row order: the offset starts at zero."""
+        return np.column_stack([S0, np.zeros(3)]).ravel() if self.offset else np.ravel(S0)
+
     def _result(self, log, Z, diverged):
-        S_hist = Z[:, self._S].reshape(-1, 3, 3)
+        aug = Z[:, self._S].reshape(-1, 3, self.n_cols)
+        S_hist = aug[:, :, :3]
+        b = None
+        if self.offset and not diverged:
+            b = offset_from_c(S_hist[-1], aug[-1, :, 3])
         return ObserverResult(
             observer=self.name, t=log.t[:len(Z)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=Z[:, self._X].copy(),
             S_std=self._S_std(Z[-1]), diverged=bool(diverged),
-            converged=bool(not diverged and settled(S_hist)), info=self._info())
+            converged=bool(not diverged and settled(S_hist)), info=self._info(), b=b)
 
     def _S_std(self, z):
         return None
 
     def _info(self):
         return {}
+
+
+def offset_from_c(S, c):
+    """The sensor's offset ``b = -S^-1 c`` from ``w = S w_hat + c = S (w_hat - b)``; shape (3,).
+
+    NaN where ``S`` is singular (the offset is then undefined).
+    """
+    try:
+        return -np.linalg.solve(S, c)
+    except np.linalg.LinAlgError:
+        return np.full(3, np.nan)
+
+
+def offset_std(S, b, cov_aug):
+    """One-sigma uncertainty of ``b = -S^-1 c``, linearised.
+
+    ``db = -S^-1 (dc + dS b)``: the column of entry ``(i, j)`` of ``[S | c]``
+    is ``-S^-1 e_i`` times ``b_j`` (``j < 3``) or 1 (the offset column).
+
+    Parameters
+    ----------
+    S : ndarray, shape (3, 3)
+    b : ndarray, shape (3,)
+    cov_aug : ndarray, shape (12, 12)
+        Covariance of ``[S | c]`` in row order.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+    """
+    S_inv = np.linalg.inv(S)
+    J = np.zeros((3, 12))
+    for i in range(3):
+        for j in range(4):
+            J[:, 4 * i + j] = -S_inv[:, i] * (b[j] if j < 3 else 1.0)
+    return np.sqrt(np.maximum(np.diag(J @ cov_aug @ J.T), 0))
 
 
 def check_sample(dt, pose, w_hat, first):

@@ -11,7 +11,7 @@ from plant.noise import estimate_noise
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
-from .base import DIVERGENCE_BOUND, ObserverResult, check_sample, settled
+from .base import DIVERGENCE_BOUND, ObserverResult, check_sample, offset_from_c, offset_std, settled
 
 __all__ = ["AugmentedEKF"]
 
@@ -25,12 +25,12 @@ class _CalibrationEKF(ExtendedKalmanFilter):
     ``Q`` are set before every predict, from the same compiled call.
     """
 
-    def __init__(self):
-        super().__init__(dim_x=15, dim_z=3)
-        self.x_next = np.zeros(15)
+    def __init__(self, dim_x):
+        super().__init__(dim_x=dim_x, dim_z=3)
+        self.x_next = np.zeros(dim_x)
 
     def predict_x(self, u=0):
-        self.x = self.x_next.reshape(15, 1)
+        self.x = self.x_next.reshape(-1, 1)
 
 
 class AugmentedEKF:
@@ -70,6 +70,14 @@ class AugmentedEKF:
         Initial standard deviation of each calibration entry.
     v0_sd : float
         Initial standard deviation of the velocities (rad/s, m/s).
+    offset : bool
+        Also estimate the sensor's offset ``b`` (``result.b``, with
+        ``result.b_std`` from ``P``): three more states ``c_1..c_3`` in
+        ``w = S w_hat + c``, ``c = -S b``, with the same random walk. Off by
+        default, as in the paper.
+    c0_sd : float, optional
+        Initial standard deviation of each ``c_i`` (N m, N); default
+        ``S0_sd`` times the size of the first reading (at least 1).
 
     Attributes
     ----------
@@ -79,7 +87,7 @@ class AugmentedEKF:
 
     name = "ekf"
 
-    def __init__(self, payload, noise=None, q_S=1e-5, S0_sd=3.0, v0_sd=1.0):
+    def __init__(self, payload, noise=None, q_S=1e-5, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None):
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         if noise is not None and not isinstance(noise, NoiseSpec):
@@ -87,19 +95,28 @@ class AugmentedEKF:
         self.payload = payload
         self.noise = noise
         self.q_S, self.S0_sd, self.v0_sd = float(q_S), float(S0_sd), float(v0_sd)
+        self.offset = bool(offset)
+        self.c0_sd = None if c0_sd is None else float(c0_sd)
+        #: Columns of the estimated ``[S | c]``, and the filter's state size.
+        self.n_cols = 4 if self.offset else 3
+        self.dim_x = 6 + 3 * self.n_cols
+        self._H = np.zeros((3, self.dim_x))
+        self._H[0, 0] = self._H[1, 2] = self._H[2, 4] = 1.0
         self._jacobians, self._predict = self._compile()
         self.reset()
 
     # --- the model, from the plant ------------------------------------------
     def _compile(self):
         """casadi: the step of eq. (1) with ``w = S w_hat``, its Jacobians and ``Q``, compiled once."""
-        xs = ca.SX.sym("xs", 15)
+        n, dim = self.n_cols, self.dim_x
+        xs = ca.SX.sym("xs", dim)
         w0 = ca.SX.sym("w0", 3)
         w1 = ca.SX.sym("w1", 3)
         dt = ca.SX.sym("dt")
-        S = ca.reshape(xs[6:15], 3, 3).T                    # row order
-        x_next = rk4_step(xs[0:6], S @ w0, S @ (w0 + w1) / 2, S @ w1, dt, self.payload)
-        f = ca.vertcat(x_next, xs[6:15])
+        S = ca.reshape(xs[6:dim], n, 3).T                   # [S | c], row order
+        a0, a1 = (ca.vertcat(w, 1) if self.offset else w for w in (w0, w1))
+        x_next = rk4_step(xs[0:6], S @ a0, S @ (a0 + a1) / 2, S @ a1, dt, self.payload)
+        f = ca.vertcat(x_next, xs[6:dim])
         # dense outputs: the buffers are read as full column-major matrices
         F = ca.densify(ca.jacobian(f, xs))
         J0 = ca.densify(ca.jacobian(f, w0))
@@ -107,7 +124,7 @@ class AugmentedEKF:
         var_w = ca.SX.sym("var_w", 3)                       # wrench noise variances
         q_dt = ca.SX.sym("q_dt")                            # q_S dt
         Q = (J0 @ ca.diag(var_w) @ J0.T + J1 @ ca.diag(var_w) @ J1.T
-             + ca.diag(ca.vertcat(ca.DM.zeros(6), q_dt * ca.DM.ones(9))))
+             + ca.diag(ca.vertcat(ca.DM.zeros(6), q_dt * ca.DM.ones(3 * n))))
         jacobians = ca.Function("ekf_jacobians", [xs, w0, w1, dt], [f, F, J0, J1])
         predict = ca.Function("ekf_predict", [xs, w0, w1, dt, var_w, q_dt], [f, F, ca.densify(Q)])
         return BufferedCall(compile_function(jacobians)), BufferedCall(compile_function(predict))
@@ -117,28 +134,29 @@ class AugmentedEKF:
 
         Returns
         -------
-        x_next : ndarray, shape (15,)
-        F : ndarray, shape (15, 15)
-        J0, J1 : ndarray, shape (15, 3)
+        x_next : ndarray, shape (d,)
+        F : ndarray, shape (d, d)
+        J0, J1 : ndarray, shape (d, 3)
             Jacobians with respect to the raw readings at the step's start
-            and end.
+            and end. ``d`` = :attr:`dim_x` (15, or 18 with the offset).
         """
-        call = self._jacobians
+        call, d = self._jacobians, self.dim_x
         for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
             buffer[:] = value
         call()
         f, F, J0, J1 = call.outputs                           # casadi stores column-major
-        return f.copy(), F.reshape(15, 15).T.copy(), J0.reshape(3, 15).T.copy(), J1.reshape(3, 15).T.copy()
+        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(3, d).T.copy(), J1.reshape(3, d).T.copy()
 
     def predict_matrices(self, xs, w0, w1, dt):
         """``x_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
 
         Returns
         -------
-        x_next : ndarray, shape (15,)
-        F, Q : ndarray, shape (15, 15)
+        x_next : ndarray, shape (d,)
+        F, Q : ndarray, shape (d, d)
             Views of the call's buffers, overwritten by the next call.
         """
+        d = self.dim_x
         call = self._predict
         xs_in, w0_in, w1_in, dt_in, var_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
@@ -146,14 +164,11 @@ class AugmentedEKF:
         q_in[0] = self.q_S * dt
         call()
         f, F, Q = call.outputs
-        return f.copy(), F.reshape(15, 15).T, Q.reshape(15, 15).T
+        return f.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
 
-    @staticmethod
-    def H(xs=None):
-        """Measurement Jacobian: ``[theta, X, Y]`` are states 0, 2, 4."""
-        H = np.zeros((3, 15))
-        H[0, 0] = H[1, 2] = H[2, 4] = 1.0
-        return H
+    def H(self, xs=None):
+        """Measurement Jacobian: ``[theta, X, Y]`` are states 0, 2, 4; shape (3, d)."""
+        return self._H
 
     @staticmethod
     def hx(xs):
@@ -169,11 +184,15 @@ class AugmentedEKF:
 
     def _start(self, pose, w_hat):
         noise = self._noise
-        kf = _CalibrationEKF()
-        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], self._S0.ravel()]).reshape(15, 1)
+        kf = _CalibrationEKF(self.dim_x)
+        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], self._initial_S()]).reshape(-1, 1)
         pose_var = np.maximum(noise.pose_sd, 1e-6) ** 2
+        S_var = np.full((3, self.n_cols), self.S0_sd ** 2)
+        if self.offset:
+            c0_sd = self.c0_sd if self.c0_sd is not None else self.S0_sd * max(float(np.linalg.norm(w_hat)), 1.0)
+            S_var[:, 3] = c0_sd ** 2
         kf.P = np.diag(np.concatenate([[pose_var[0], self.v0_sd ** 2, pose_var[1], self.v0_sd ** 2,
-                                        pose_var[2], self.v0_sd ** 2], np.full(9, self.S0_sd ** 2)]))
+                                        pose_var[2], self.v0_sd ** 2], S_var.ravel()]))
         kf.R = np.diag(pose_var)
         self._var_w = np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
         self._kf = kf
@@ -187,7 +206,11 @@ class AugmentedEKF:
         pose, w_hat = check_sample(dt, pose, w_hat, first=self._kf is None)
         self._advance(dt, pose, w_hat)
         x = self._kf.x[:, 0]
-        return x[0:6].copy(), x[6:15].reshape(3, 3).copy()
+        return x[0:6].copy(), x[6:].reshape(3, self.n_cols)[:, :3].copy()
+
+    def _initial_S(self):
+        """``[S0 | 0]`` flat in row order: the offset starts at zero."""
+        return np.column_stack([self._S0, np.zeros(3)]).ravel() if self.offset else self._S0.ravel()
 
     def _advance(self, dt, pose, w_hat):
         """One checked sample: predict with the raw readings, update with the pose."""
@@ -214,7 +237,7 @@ class AugmentedEKF:
             info["noise_estimated"] = True
         self.reset(S0, noise)
         n = len(log)
-        X = np.empty((n, 15))
+        X = np.empty((n, self.dim_x))
         diverged = False
         for k in range(n):                      # the log is validated: no per-sample checks
             self._advance(log.dt, log.pose[k] if log.has_pose[k] else None, log.w_hat[k])
@@ -226,18 +249,23 @@ class AugmentedEKF:
             X = X[:k]          # the last finite estimate; row k is the unhealthy one
         if len(X) == 0:
             X = np.concatenate([[log.pose[0][0], 0, log.pose[0][1], 0, log.pose[0][2], 0],
-                                self._S0.ravel()])[None, :]
-        S_hist = X[:, 6:15].reshape(-1, 3, 3)
-        P_s = np.diag(self._kf.P)[6:15]
-        S_std = None if diverged else np.sqrt(np.maximum(P_s, 0)).reshape(3, 3)
+                                self._initial_S()])[None, :]
+        aug = X[:, 6:].reshape(-1, 3, self.n_cols)
+        S_hist = aug[:, :, :3]
+        cov_aug = self._kf.P[6:, 6:]
+        S_std = None if diverged else np.sqrt(np.maximum(np.diag(cov_aug), 0)).reshape(3, self.n_cols)[:, :3]
+        b = b_std = None
+        if self.offset and not diverged:
+            b = offset_from_c(S_hist[-1], aug[-1, :, 3])
+            b_std = offset_std(S_hist[-1], b, cov_aug) if np.all(np.isfinite(b)) else None
         return ObserverResult(
             observer=self.name, t=log.t[:len(X)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=X[:, 0:6].copy(), S_std=S_std,
             diverged=diverged, converged=bool(not diverged and settled(S_hist)),
-            wall_time=time.perf_counter() - start, info=info)
+            wall_time=time.perf_counter() - start, info=info, b=b, b_std=b_std)
 
     def _healthy(self):
         kf = self._kf
         # a NaN or inf anywhere makes a sum non-finite: one reduction per array
-        return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum()) and np.abs(kf.x[6:15]).max() < DIVERGENCE_BOUND
+        return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum()) and np.abs(kf.x[6:]).max() < DIVERGENCE_BOUND
                     and kf.P.diagonal().min() > 0)

@@ -55,11 +55,22 @@ _R_TIME = 2.0        # s, averaging time of the regressor's outer product
 _R_REG = 1e-3        # regularisation of the normalisation, relative to its mean eigenvalue
 _R_FLOOR = 1e-12
 
-# packed state: x_hat(6) S_hat(9) pose_n(3) has_n(1) w_n(3) t(1)
-#               Ups_theta(2x3) Ups_X(2x6) Ups_Y(2x6) R_1(3x3) R_2(6x6)
-_UPS_T, _UPS_X, _UPS_Y = slice(23, 29), slice(29, 41), slice(41, 53)
-_R1, _R2 = slice(53, 62), slice(62, 98)
-_N_STATE = 98
+
+
+def _layout(n):
+    """Slices of the packed state for ``n`` columns of ``[S | c]`` (3, or 4 with the offset).
+
+    x_hat(6) [S_hat | c_hat](3n) pose_n(3) has_n(1) w_n(3) t(1)
+    Ups_theta(2 x n) Ups_X(2 x 2n) Ups_Y(2 x 2n) R_1(n x n) R_2(2n x 2n)
+    """
+    sizes = [("x", 6), ("S", 3 * n), ("pose", 3), ("has", 1), ("w", 3), ("t", 1), ("ups_t", 2 * n),
+             ("ups_x", 4 * n), ("ups_y", 4 * n), ("R1", n * n), ("R2", 4 * n * n)]
+    out, k = {}, 0
+    for name, size in sizes:
+        out[name] = slice(k, k + size)
+        k += size
+    out["size"] = k
+    return out
 
 
 def discrete_gain(o, lam, dt):
@@ -159,6 +170,10 @@ class HighGainObserver(Observer):
         Time over which the gain halves, s; None keeps it constant.
     floor : float
         The gain never falls below ``floor * gamma``.
+    offset : bool
+        Also estimate the sensor's offset ``b`` (``result.b``): ``phi_1``,
+        ``phi_2`` gain the offset column (the reading augmented by a
+        constant 1, :class:`observers.Observer`). Off by default.
 
     Examples
     --------
@@ -169,7 +184,7 @@ class HighGainObserver(Observer):
     """
 
     def __init__(self, payload, lam=DEFAULT_HIGH_GAIN, gamma=1.0, normalisation="matrix",
-                 t_decay=20.0, floor=0.1, name="high-gain"):
+                 t_decay=20.0, floor=0.1, name="high-gain", offset=False):
         self.lam = as_positive_scalar(lam, "lam")
         self.gamma = as_positive_scalar(gamma, "gamma")
         if normalisation not in ("matrix", "scalar"):
@@ -179,7 +194,8 @@ class HighGainObserver(Observer):
         self.floor = as_positive_scalar(floor, "floor")
         self.name = str(name)
         self.K1, self.K2 = double_pole_gains(self.lam)
-        super().__init__(payload)
+        super().__init__(payload, offset=offset)
+        self._L = _layout(self.n_cols)
 
     @classmethod
     def ref4(cls, payload, **overrides):
@@ -192,13 +208,16 @@ class HighGainObserver(Observer):
         return cls(payload, **{**settings, **overrides})
 
     def _initial_state(self, S0, pose, w_hat):
+        L, n = self._L, self.n_cols
         x = np.array([pose[0], 0.0, pose[1], 0.0, pose[2], 0.0])
-        z = np.zeros(_N_STATE)
-        z[0:6], z[6:15], z[15:18], z[18], z[19:22] = x, np.ravel(S0), pose, 1.0, w_hat
+        z = np.zeros(L["size"])
+        z[L["x"]], z[L["S"]], z[L["pose"]], z[L["has"]], z[L["w"]] = x, self._initial_S(S0), pose, 1.0, w_hat
         # R starts isotropic at the size C Upsilon will have, |psi| / lam^2 (the filter's DC gain)
-        psi_t, psi_x, psi_y = (np.array(v) for v in regressors(pose[0], w_hat, self.payload))
-        z[_R1] = (np.eye(3) * max(psi_t @ psi_t / 3, _R_FLOOR) / self.lam ** 4).ravel()
-        z[_R2] = (np.eye(6) * max((psi_x @ psi_x + psi_y @ psi_y) / 6, _R_FLOOR) / self.lam ** 4).ravel()
+        w = np.append(w_hat, 1.0) if self.offset else w_hat
+        psi_t, psi_x, psi_y = (np.array(v) for v in regressors(pose[0], w, self.payload))
+        z[L["R1"]] = (np.eye(n) * max(psi_t @ psi_t / n, _R_FLOOR) / self.lam ** 4).ravel()
+        z[L["R2"]] = (np.eye(2 * n) * max((psi_x @ psi_x + psi_y @ psi_y) / (2 * n), _R_FLOOR)
+                      / self.lam ** 4).ravel()
         return z
 
     def _gain(self, o, t):
@@ -215,15 +234,17 @@ class HighGainObserver(Observer):
 
     def _transition(self, z, u, dt):
         o = ops(z, u)
-        p = self.payload
-        x, S, pose, has, w, t = z[0:6], z[6:15], z[15:18], z[18], z[19:22], z[22]
-        has_next, pose_next, w_next = u[0], u[1:4], u[4:7]
-        ups = [mx.as_matrix(o, z[_UPS_T], 2, 3), mx.as_matrix(o, z[_UPS_X], 2, 6),
-               mx.as_matrix(o, z[_UPS_Y], 2, 6)]
-        R1, R2 = mx.as_matrix(o, z[_R1], 3), mx.as_matrix(o, z[_R2], 6)
+        p, L, n = self.payload, self._L, self.n_cols
+        x, S, pose, has, t = z[L["x"]], z[L["S"]], z[L["pose"]], z[L["has"].start], z[L["t"].start]
+        w = self._augmented(o, z[L["w"]])
+        has_next, pose_next, w_next = u[0], u[1:4], self._augmented(o, u[4:7])
+        ups = [mx.as_matrix(o, z[L["ups_t"]], 2, n), mx.as_matrix(o, z[L["ups_x"]], 2, 2 * n),
+               mx.as_matrix(o, z[L["ups_y"]], 2, 2 * n)]
+        R1, R2 = mx.as_matrix(o, z[L["R1"]], n), mx.as_matrix(o, z[L["R2"]], 2 * n)
         # the parameters of eqs. (4), (5): phi_1 = [1, -rho_y, rho_x] S, phi_2 = rows 2, 3 of S
+        # (each row with its offset entry when the offset is estimated)
         phi1 = phi_1(S, p)
-        phi2 = S[3:9]
+        phi2 = S[n:3 * n]
         phis = [phi1, phi2, phi2]
         # regressors of eqs. (4), (5) at both ends of the step; the angle at n is the
         # measured one where there is one, at n+1 the prediction
@@ -253,8 +274,8 @@ class HighGainObserver(Observer):
         R1_next = R1 + alpha * (o.dot(H1.T, H1) - R1)
         R2_next = R2 + alpha * (o.dot(H2.T, H2) - R2)
         gain = self._gain(o, t)
-        d_phi1 = gain * dt * self._normalised(o, R1_next, o.dot(H1.T, mx.col(o.vcat(e[0:1]))), 3)
-        d_phi2 = gain * dt * self._normalised(o, R2_next, o.dot(H2.T, mx.col(o.vcat(e[1:3]))), 6)
+        d_phi1 = gain * dt * self._normalised(o, R1_next, o.dot(H1.T, mx.col(o.vcat(e[0:1]))), n)
+        d_phi2 = gain * dt * self._normalised(o, R2_next, o.dot(H2.T, mx.col(o.vcat(e[1:3]))), 2 * n)
         d_phis = [d_phi1, d_phi2, d_phi2]
         # correction: Upsilon_n+1 = (I - L C) Upsilon^-, x_n+1 = x^- + L e + Upsilon_n+1 d_phi
         l1, l2 = discrete_gain(o, self.lam, dt)
@@ -269,5 +290,5 @@ class HighGainObserver(Observer):
             x_next += [x_pred[c][0] + l1 * e[c] + shift[0], x_pred[c][1] + l2 * e[c] + shift[1]]
             ups_next += new[0] + new[1]
         S_next = mx.flat(o, S_from_phi(phi1 + d_phi1, phi2 + d_phi2, p))
-        return o.vcat([o.vcat(x_next), S_next, pose_next, has_next, w_next, t + dt, o.vcat(ups_next),
+        return o.vcat([o.vcat(x_next), S_next, pose_next, has_next, u[4:7], t + dt, o.vcat(ups_next),
                        mx.flat(o, R1_next), mx.flat(o, R2_next)])

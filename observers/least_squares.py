@@ -22,7 +22,7 @@ from plant import Log, Payload, S_from_phi
 from plant._checks import as_positive_scalar
 from plant.noise import estimate_noise
 
-from .base import ObserverResult
+from .base import ObserverResult, offset_from_c, offset_std
 from .highgain import regressors
 
 __all__ = ["LeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
@@ -67,7 +67,7 @@ class LeastSquares:
         Also estimate the sensor's offset ``b`` in ``w = S (w_hat - b)``:
         the model ``w = S w_hat + c`` stays linear (``c = -S b``, the
         reading augmented by a constant 1). ``b`` and its one-sigma
-        uncertainty are in ``result.info["b"]``, ``["b_std"]``.
+        uncertainty are in ``result.b``, ``result.b_std``.
 
     Attributes
     ----------
@@ -204,14 +204,16 @@ class LeastSquares:
         S_std = np.sqrt(np.maximum(np.diag(cov_S), 0)).reshape(3, n)[:, :3]
         self.report = self._diagnose(log, cov_S, residuals, n)
         info = {"fit": self.report}
+        b = b_std = None
         if self.offset:
-            info["b"], info["b_std"] = _offset_from_c(S_hat, S_aug[:, 3], cov_S)
+            b = offset_from_c(S_hat, S_aug[:, 3])
+            b_std = offset_std(S_hat, b, cov_S)
         S_hist = np.array([S_from_phi(a, b, self.payload)[:, :3] for a, b in zip(*histories)])
         x_hat = self._fitted_motion(log, Z, phis, windows)
         ok = not self.report["warnings"]
         return ObserverResult(observer=self.name, t=log.t.copy(), S_hat=S_hat, S_hat_history=S_hist,
                               x_hat_history=x_hat, S_std=S_std, diverged=False, converged=ok,
-                              wall_time=time.perf_counter() - start, info=info)
+                              wall_time=time.perf_counter() - start, info=info, b=b, b_std=b_std)
 
     def _diagnose(self, log, cov_S, residuals, n):
         # information about S, columns scaled to unit diagonal: unit-free conditioning
@@ -292,18 +294,3 @@ def _phi_to_S_map(payload, n=3):
         e[k] = 1.0
         T[:, k] = np.ravel(S_from_phi(e[:n], e[n:], payload))
     return T
-
-
-def _offset_from_c(S, c, cov_aug):
-    """``b = -S^-1 c`` and its one-sigma uncertainty, linearised.
-
-    ``db = -S^-1 (dc + dS b)``: the column of entry ``(i, j)`` of ``[S | c]``
-    is ``-S^-1 e_i`` times ``b_j`` (``j < 3``) or 1 (the offset column).
-    """
-    S_inv = np.linalg.inv(S)
-    b = -S_inv @ c
-    J = np.zeros((3, 12))
-    for i in range(3):
-        for j in range(4):
-            J[:, 4 * i + j] = -S_inv[:, i] * (b[j] if j < 3 else 1.0)
-    return b, np.sqrt(np.maximum(np.diag(J @ cov_aug @ J.T), 0))

@@ -146,14 +146,18 @@ def phi_1(S, payload):
 
     It is the first row of eq. (1) times ``I_G``, applied to ``S``.
 
+    With an offset column (``[S | c]``, 3x4) it has 4 entries.
+
     Parameters
     ----------
-    S : array_like, shape (3, 3), or a flat (9,) vector in row order (numbers or casadi.SX)
+    S : array_like, shape (3, n), or a flat (3n,) vector in row order (numbers or casadi.SX)
+        ``n`` = 3, or 4 with the offset column.
     payload : plant.Payload
     """
     row = input_matrix(0.0, payload)[0] * payload.inertia   # [1, -rho_y, rho_x]
     if is_symbolic(S) or np.ndim(S) == 1:
-        return ops(S).vcat([sum(row[i] * S[3 * i + j] for i in range(3)) for j in range(3)])
+        n = (S.shape[0] if hasattr(S, "shape") else len(S)) // 3
+        return ops(S).vcat([sum(row[i] * S[n * i + j] for i in range(3)) for j in range(n)])
     return row @ np.asarray(S, dtype=float)
 
 
