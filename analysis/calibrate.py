@@ -3,26 +3,34 @@
 import numpy as np
 
 from observers import LeastSquares
+from observers.latency import estimate_latency
 from plant import NoiseSpec, estimate_noise
 
 from .comparison import make_observer
 from .metrics import calibration_error
 
-__all__ = ["CALIBRATION_METHODS", "DEFAULT_METHOD", "calibrate", "DivergedError"]
+__all__ = ["CALIBRATION_METHODS", "DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "calibrate", "DivergedError"]
 
 #: Methods ``fmscal calibrate`` offers.
 CALIBRATION_METHODS = ("least-squares", "ekf", "high-gain", "adaptive")
 #: The default: the most accurate method that is robust on logs unlike the paper's
 #: (README, "Which observer to trust").
 DEFAULT_METHOD = "least-squares"
+#: Largest pose-stream delay searched when the latency is estimated, s.
+DEFAULT_MAX_LATENCY = 0.1
 
 
 class DivergedError(RuntimeError):
     """The estimate diverged: there is no calibration to report."""
 
 
-def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise=None, truth=None):
-    """Estimate ``S`` from a log, with diagnostics.
+def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise=None, truth=None,
+              offset=True, latency=None, max_latency=DEFAULT_MAX_LATENCY):
+    """Estimate ``S`` (and the sensor's offset) from a log, with diagnostics.
+
+    Every method runs on the log with its pose stream moved back by the
+    latency (given, or estimated by least squares over candidate delays,
+    :func:`observers.latency.estimate_latency`).
 
     Parameters
     ----------
@@ -37,12 +45,22 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
         Noise not given is estimated from the log and reported.
     truth : plant.Truth, optional
         For E of eq. (16).
+    offset : bool
+        Estimate the sensor's offset ``b`` in ``w = S (w_hat - b)`` with
+        ``S`` (the default: a real sensor reads non-zero under no load, and
+        an offset left out biases ``S_hat`` far more than estimating three
+        more numbers costs).
+    latency : float, optional
+        Delay of the pose stream behind the sensor stream, s. None: estimated.
+    max_latency : float
+        Largest delay searched when it is estimated, s.
 
     Returns
     -------
     dict
         ``observer``, ``S`` (3x3 list), ``S_std`` (3x3 list or None),
-        ``converged``, ``E`` (with ``truth``, else absent), ``noise`` (what
+        ``b``, ``b_std`` (3 lists, or None without the offset),
+        ``latency`` (s), ``latency_estimated`` (bool), ``converged``, ``E`` (with ``truth``, else absent), ``noise`` (what
         was used), ``noise_estimated`` (which parts came from the log),
         ``warnings`` (excitation and model consistency, from a
         least-squares fit of the same log), ``fit`` (its diagnostics) and
@@ -60,17 +78,25 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
                       pose_noise[0] if pose_noise is not None else estimated.angle_sd,
                       pose_noise[1] if pose_noise is not None else estimated.position_sd)
     noise_estimated = [name for name, given in (("wrench", wrench_noise), ("pose", pose_noise)) if given is None]
-    reference = LeastSquares(payload)
-    ls_result = reference.run(log)
+    latency_estimated = latency is None
+    if latency_estimated:
+        latency, _ = estimate_latency(log, payload, max_latency, offset=offset)
+    aligned = log.shift_poses(latency)
+    reference = LeastSquares(payload, offset=offset)
+    ls_result = reference.run(aligned)
     if method == "least-squares":
         result = ls_result
     else:
-        result = make_observer(method, payload, told_noise=noise).run(log)
+        result = make_observer(method, payload, told_noise=noise, settings={"offset": offset}).run(aligned)
     if result.diverged:
         raise DivergedError(f"the {method} estimate diverged at t = {result.t[-1]:.3f} s; "
                             "no calibration (check the mass properties, units and excitation)")
-    out = {"observer": result.observer, "S": result.S_hat.tolist(),
-           "S_std": None if result.S_std is None else result.S_std.tolist(),
+    def listed(a):
+        return None if a is None else np.asarray(a).tolist()
+
+    out = {"observer": result.observer, "S": result.S_hat.tolist(), "S_std": listed(result.S_std),
+           "b": listed(result.b), "b_std": listed(result.b_std), "latency": float(latency),
+           "latency_estimated": latency_estimated,
            "converged": bool(result.converged), "noise": noise.to_dict(),
            "noise_estimated": noise_estimated, "warnings": list(reference.report["warnings"]),
            "fit": {k: v for k, v in reference.report.items() if k != "warnings"}, "result": result}

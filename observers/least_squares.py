@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from plant import Log, Payload, S_from_phi
+from plant import Log, Payload, S_from_phi, phi_1
 from plant._checks import as_positive_scalar
 from plant.noise import estimate_noise
 
@@ -115,10 +115,11 @@ class LeastSquares:
         idx = np.floor((log.t - log.t[0]) / self.window).astype(int)
         return [np.flatnonzero((idx == k) & log.has_pose) for k in np.unique(idx)]
 
-    def _normal_equations(self, log, Z, channels, windows):
+    def _normal_equations(self, log, Z, channels, windows, y=None):
         """Information matrix and right side for the channels sharing one parameter set.
 
         Each window's positions and regressors have a line in time projected out.
+        ``y`` (``{channel: (N,) array}``) replaces the logged positions.
 
         Returns
         -------
@@ -135,7 +136,8 @@ class LeastSquares:
             Iw, bw, projected = np.zeros((n_par, n_par)), np.zeros(n_par), {}
             for c in channels:
                 Zc = Z[c][rows] - Q @ (Q.T @ Z[c][rows])
-                yc = log.pose[rows, c] - Q @ (Q.T @ log.pose[rows, c])
+                yr = log.pose[rows, c] if y is None else y[c][rows]
+                yc = yr - Q @ (Q.T @ yr)
                 Iw += Zc.T @ Zc
                 bw += Zc.T @ yc
                 projected[c] = (Zc, yc)
@@ -214,6 +216,43 @@ class LeastSquares:
         return ObserverResult(observer=self.name, t=log.t.copy(), S_hat=S_hat, S_hat_history=S_hist,
                               x_hat_history=x_hat, S_std=S_std, diverged=False, converged=ok,
                               wall_time=time.perf_counter() - start, info=info, b=b, b_std=b_std)
+
+    def offset_bias(self, log, S, b):
+        """What an offset left out does to the fit: the predicted ``S_hat - S``.
+
+        An offset ``b`` adds ``G(theta) c`` (``c = -S b``) to the
+        accelerations; a fit without it projects that motion onto the
+        regressors of ``S`` (the omitted-variable bias of least squares):
+        ``delta phi = (Z^T Z)^-1 Z^T Z_c c`` per parameter set, window by window.
+
+        Parameters
+        ----------
+        log : plant.Log
+            Supplies the angle, the readings and the windows.
+        S : array_like, shape (3, 3)
+        b : array_like, shape (3,)
+            The sensor's offset, N m and N.
+
+        Returns
+        -------
+        ndarray, shape (3, 3)
+            ``S_hat - S`` of :meth:`run` with ``offset=False`` on noise-free data.
+        """
+        S = np.asarray(S, dtype=float)
+        c = -S @ np.asarray(b, dtype=float)
+        with_c = LeastSquares(self.payload, self.window, offset=True)
+        Z_all = with_c._double_integrals(log)                    # (N, 4), (N, 8), (N, 8)
+        S_c = np.column_stack([np.zeros((3, 3)), c])             # the offset alone, as [0 | c]
+        phi_c = [phi_1(S_c, self.payload), S_c[1:].ravel()]
+        keep = [[0, 1, 2], [0, 1, 2, 4, 5, 6], [0, 1, 2, 4, 5, 6]]     # the columns of S
+        y = {ch: Z_all[ch] @ phi_c[min(ch, 1)] for ch in range(3)}        # the motion c alone causes
+        Z = [Z_all[ch][:, keep[ch]] for ch in range(3)]
+        windows = [rows for rows in self._windows(log) if len(rows) >= 3]
+        d_phi = []
+        for channels in ([0], [1, 2]):
+            info, rhs, _ = self._normal_equations(log, Z, channels, windows, y)
+            d_phi.append(np.linalg.lstsq(info, rhs, rcond=None)[0])
+        return S_from_phi(d_phi[0], d_phi[1], self.payload)
 
     def _diagnose(self, log, cov_S, residuals, n):
         # information about S, columns scaled to unit diagonal: unit-free conditioning

@@ -3,7 +3,8 @@
 from .dynamics import (A_1, A_2, B_1, B_2, C_1, C_2, STATE_NAMES, acceleration, input_matrix,
                        phi_1, phi_2, S_from_phi, state_derivative)
 from .excitation import Excitation, Multisine, PaperWrench, SampledWrench
-from .log import COLUMNS, Log, LogError, Truth, read_log, read_truth
+from .calibration import Calibration, CalibrationFileError, file_sha256
+from .log import COLUMNS, READING_COLUMNS, Log, LogError, Truth, read_log, read_readings, read_truth
 from .payload import PAPER_PAYLOAD, Payload
 from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenario
 from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
@@ -15,7 +16,8 @@ __all__ = [
     "A_1", "A_2", "B_1", "B_2", "C_1", "C_2", "STATE_NAMES", "acceleration", "input_matrix",
     "phi_1", "phi_2", "S_from_phi", "state_derivative",
     "Excitation", "Multisine", "PaperWrench", "SampledWrench",
-    "COLUMNS", "Log", "LogError", "Truth", "read_log", "read_truth",
+    "Calibration", "CalibrationFileError", "file_sha256",
+    "COLUMNS", "READING_COLUMNS", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",
     "PAPER_PAYLOAD", "Payload",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",

@@ -24,7 +24,7 @@ import numpy as np
 from .payload import Payload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
-__all__ = ["Log", "LogError", "Truth", "read_log", "read_truth", "COLUMNS"]
+__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "COLUMNS", "READING_COLUMNS"]
 
 #: Column names of the log, in order.
 COLUMNS = ("t", "theta", "x", "y", "M", "fx", "fy")
@@ -187,29 +187,71 @@ def read_log(path):
         number, NaN or infinite values, time not strictly increasing or not
         evenly sampled, too few rows or pose measurements.
     """
+    path = Path(path)
+    frame = _read_csv(path, COLUMNS, "only pose cells may be empty (no measurement)")
+    return Log(frame["t"].to_numpy(), frame[list(_POSE)].to_numpy(),
+               frame[list(_WRENCH)].to_numpy(), name=path.name)
+
+
+#: Columns of a file of raw readings (``fmscal apply``); a full log has them too.
+READING_COLUMNS = ("t", "M", "fx", "fy")
+
+
+def read_readings(path):
+    """Read raw sensor readings: a CSV with columns ``t,M,fx,fy`` (a full log will do).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    t : ndarray, shape (N,)
+        s, strictly increasing (even sampling is not required).
+    w_hat : ndarray, shape (N, 3)
+        ``[M, f_x, f_y]``, N m and N.
+
+    Raises
+    ------
+    LogError
+        Missing file or columns, a cell that is empty, not a number, NaN or
+        infinite, time not strictly increasing, no rows.
+    """
+    path = Path(path)
+    frame = _read_csv(path, READING_COLUMNS, "every t, M, fx, fy cell must be a number")
+    t = frame["t"].to_numpy()
+    w_hat = frame[list(_WRENCH)].to_numpy()
+    if len(t) == 0:
+        raise LogError(f"{path.name}: no readings")
+    for name, values in (("t", t), *((c, w_hat[:, j]) for j, c in enumerate(_WRENCH))):
+        if not np.all(np.isfinite(values)):
+            raise LogError(f"{path.name}: column {name} has a missing, NaN or infinite value at row {_first_bad(values)}")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        raise LogError(f"{path.name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")
+    return t, w_hat
+
+
+def _read_csv(path, required, empty_rule):
+    """A CSV with the ``required`` columns, every cell a number or empty; one-line errors."""
     import pandas as pd
 
-    path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
     text = path.read_text()
-    header = text.split("\n", 1)[0].strip().split(",")
-    header = [h.strip() for h in header]
-    missing = [c for c in COLUMNS if c not in header]
+    header = [h.strip() for h in text.split("\n", 1)[0].strip().split(",")]
+    missing = [c for c in required if c not in header]
     if missing:
         raise LogError(f"{path.name}: missing column(s) {', '.join(missing)}; expected the header "
-                       f"{','.join(COLUMNS)} (got {','.join(header)})")
+                       f"{','.join(required)} (got {','.join(header)})")
     match = _NONFINITE.search(text)
     if match:
         line = text.count("\n", 0, match.start()) + 1
-        raise LogError(f"{path.name}: line {line} holds a NaN or infinite value; "
-                       "only pose cells may be empty (no measurement)")
+        raise LogError(f"{path.name}: line {line} holds a NaN or infinite value; {empty_rule}")
     try:
-        frame = pd.read_csv(path, skipinitialspace=True, dtype=float)
+        return pd.read_csv(path, skipinitialspace=True, dtype=float)
     except ValueError as err:
         raise LogError(f"{path.name}: a cell is not a number ({str(err).splitlines()[0]})") from None
-    return Log(frame["t"].to_numpy(), frame[list(_POSE)].to_numpy(),
-               frame[list(_WRENCH)].to_numpy(), name=path.name)
 
 
 @dataclass

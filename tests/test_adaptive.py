@@ -128,8 +128,19 @@ def test_bad_input_is_refused(call, match):
         call(AdaptiveObserver(plant.PAPER_PAYLOAD))
 
 
-@pytest.mark.xfail(strict=True, reason="known limitation, README: the default adaptive observer diverges "
-                                       "when poses arrive at 50 Hz beside a 1 kHz sensor")
-def test_default_survives_a_50_hz_vision_system():
-    log, truth, _ = plant.get_scenario("vision-50hz").with_(duration=30).generate(0)
-    assert not AdaptiveObserver(plant.PAPER_PAYLOAD).run(log, truth.S0).diverged
+@pytest.mark.parametrize("pose_rate, drop_rate", [(50.0, 0.10), (30.0, 0.0)])
+def test_default_handles_a_slow_vision_system(pose_rate, drop_rate):
+    """Poses at 30-50 Hz beside a 1 kHz sensor: converges noise-free; with noise, no divergence and
+    E well below its start (it is slow: 20-30x fewer poses than at full rate).
+
+    Before the correction was scaled by the time since the last pose (point 6 of the
+    class docstring), this diverged within 3 s.
+    """
+    sc = plant.get_scenario("vision-50hz").with_(duration=30, pose_rate=pose_rate, drop_rate=drop_rate)
+    log, truth, _ = sc.generate(0, noise_free=True)
+    result = AdaptiveObserver(plant.PAPER_PAYLOAD).run(log, truth.S0)
+    assert not result.diverged and calibration_error(result.S_hat, plant.PAPER_S) < 1e-3
+    log, truth, _ = sc.generate(0)
+    result = AdaptiveObserver(plant.PAPER_PAYLOAD).run(log, truth.S0)
+    start = calibration_error(truth.S0, plant.PAPER_S)
+    assert not result.diverged and calibration_error(result.S_hat, plant.PAPER_S) < start / 3
