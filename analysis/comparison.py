@@ -109,7 +109,10 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     payload : plant.Payload
     told_noise : plant.NoiseSpec, optional
     settings : dict, optional
-        Constructor keyword arguments.
+        Constructor keyword arguments. Where the scenario has a sensor
+        offset, ``offset=True`` unless given; where it has a latency, the
+        observer runs on the log with its poses moved back by it (the
+        latency is known here; ``fmscal calibrate`` estimates it).
     history : bool
         Also return ``(t, E)``, decimated to at most 2000 points.
 
@@ -119,6 +122,10 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
         The columns of :func:`compare` other than ``scenario`` and ``seed``.
     (t, E) : tuple of ndarray, only with ``history=True``
     """
+    settings = dict(settings or {})
+    if truth.extra.get("offset") is not None:     # a rig with an offset: every method estimates it
+        settings.setdefault("offset", True)
+    log = log.shift_poses(truth.extra.get("latency") or 0.0)     # and sees the streams lined up
     result = make_observer(name, payload, told_noise, settings).run(log, truth.S0)
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     row = {"observer": name, "duration": float(log.duration),
