@@ -132,9 +132,9 @@ class HighGainObserver(Observer):
     module docstring for the equations. ``S_hat`` is recovered from
     ``phi_1, phi_2`` by :func:`plant.S_from_phi`.
 
-    Tuning rule, in one sentence: put the poles at ``-lam`` a few times
-    faster than the excitation (``lam = 20`` rad/s for the paper's wrench,
-    whose fastest component is 3 rad/s), and set the adaptation gain to
+    Tuning rule, in one sentence: put the poles at ``-lam``, about twice the
+    fastest frequency in the regressor (``lam = 20`` rad/s for the paper's
+    wrench, whose fastest component is 10 rad/s), and set the adaptation gain to
     ``gamma`` times the inverse of the running mean of
     ``(C Upsilon)^T (C Upsilon)``, so that every direction of ``phi``
     converges at about ``gamma`` 1/s whatever the payload and the

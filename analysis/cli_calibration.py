@@ -1,0 +1,134 @@
+"""``fmscal calibrate`` and ``fmscal apply``: a calibration from a log, and applied to readings."""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .cli_common import CliError, positive, strict
+
+
+def add_calibrate(sub):
+    from .calibrate import CALIBRATION_METHODS, DEFAULT_MAX_LATENCY, DEFAULT_METHOD
+    p = sub.add_parser("calibrate", help="estimate S from a recorded log",
+                       description="Estimate the calibration matrix S from a log (t,theta,x,y,M,fx,fy; "
+                                   "rad, m, N m, N) and the payload's mass properties. Prints S_hat with "
+                                   "its one-sigma uncertainty, whether the run converged, warnings about "
+                                   "excitation and model consistency, and E with --truth.")
+    p.add_argument("log", metavar="LOG.csv")
+    p.add_argument("--mass", type=float, required=True, metavar="KG")
+    p.add_argument("--inertia", type=float, required=True, metavar="KGM2", help="I_G about the centre of mass")
+    p.add_argument("--rho", type=float, nargs=2, required=True, metavar=("RX", "RY"),
+                   help="offset of the centre of mass from the sensor, body frame, m (negative values as written)")
+    p.add_argument("--observer", choices=CALIBRATION_METHODS, default=DEFAULT_METHOD,
+                   help=f"method (default {DEFAULT_METHOD}: the most accurate one that is robust)")
+    p.add_argument("--pose-noise", type=float, nargs=2, metavar=("SD_RAD", "SD_M"),
+                   help="pose noise standard deviations (default: estimated from the log)")
+    p.add_argument("--wrench-noise", type=float, nargs=3, metavar=("SD_M", "SD_FX", "SD_FY"),
+                   help="raw-reading noise standard deviations, N m and N (default: estimated from the log)")
+    p.add_argument("--offset", action=argparse.BooleanOptionalAction, default=True,
+                   help="estimate the sensor's offset b in w = S (w_hat - b) with S (default: yes; "
+                        "--no-offset for an offset-free sensor, as in the paper)")
+    p.add_argument("--latency", type=float, metavar="S",
+                   help="delay of the pose stream behind the sensor stream, s (default: estimated)")
+    p.add_argument("--max-latency", type=float, default=DEFAULT_MAX_LATENCY, metavar="S",
+                   help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
+    p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
+    p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the entries of S_hat against time")
+    p.add_argument("--save", metavar="CAL.json", help="write the calibration here (for fmscal apply)")
+    p.set_defaults(func=cmd_calibrate)
+
+
+def cmd_calibrate(args):
+    from plant import Calibration, Payload, file_sha256, read_log, read_truth
+    from .calibrate import calibrate
+    from .plots import plot_S_entries
+    for name, value in (("--mass", args.mass), ("--inertia", args.inertia)):
+        positive(value, name)
+    for value in args.rho:
+        if not np.isfinite(value):
+            raise CliError(f"--rho must be two finite numbers in m; got {args.rho}")
+    for option, values in (("--pose-noise", args.pose_noise), ("--wrench-noise", args.wrench_noise)):
+        if values is not None and not all(np.isfinite(v) and v >= 0 for v in values):
+            raise CliError(f"{option} must be non-negative standard deviations; got {values}")
+    if args.latency is not None and not (np.isfinite(args.latency) and args.latency >= 0):
+        raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
+    positive(args.max_latency, "--max-latency")
+    if args.save and not args.save.endswith(".json"):
+        raise CliError(f"--save must end in .json; got {args.save}")
+    payload = Payload(args.mass, args.inertia, tuple(args.rho))
+    log = read_log(args.log)
+    truth = read_truth(args.truth) if args.truth else None
+    out = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
+                    offset=args.offset, latency=args.latency, max_latency=args.max_latency)
+    if args.save:
+        Calibration(S=out["S"], payload=payload, method=out["observer"], S_std=out["S_std"], b=out["b"],
+                    b_std=out["b_std"], log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
+                    latency=out["latency"]).save(args.save)
+    for warning in out["warnings"]:
+        print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
+    if args.plot:
+        plot_S_entries([out["result"]], truth, args.plot, f"{Path(args.log).name}: entries of S_hat")
+    result = out.pop("result")
+    if args.json:
+        print(json.dumps(strict(out), allow_nan=False))
+        return
+    print(f"{Path(args.log).name}: {len(log)} samples, {log.duration:g} s, "
+          f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
+    if out["noise_estimated"]:
+        n = out["noise"]
+        print(f"noise estimated from the log ({' and '.join(out['noise_estimated'])}): wrench sd "
+              f"{', '.join(f'{v:.3g}' for v in n['wrench_sd'])}; angle sd {n['angle_sd']:.3g} rad; "
+              f"position sd {n['position_sd']:.3g} m")
+    S, S_std = np.array(out["S"]), out["S_std"]
+    print("S_hat" + (" +- one sigma:" if S_std is not None else " (this method gives no uncertainty):"))
+    for i in range(3):
+        cells = [f"{S[i, j]:+.5f}" + (f" +- {S_std[i][j]:.1e}" if S_std is not None else "") for j in range(3)]
+        print("  " + "   ".join(cells))
+    if out["b"] is not None:
+        b, b_std = out["b"], out["b_std"]
+        cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(3)]
+        print("offset b [N m, N, N]: " + "   ".join(cells))
+    print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
+    print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {result.t[-1]:g} s)")
+    if "E" in out:
+        print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")
+    if args.save:
+        print(f"saved the calibration to {args.save}")
+
+
+def add_apply(sub):
+    p = sub.add_parser("apply", help="turn raw readings into calibrated wrenches with a saved calibration",
+                       description="Apply a calibration saved by fmscal calibrate --save: w = S (w_hat - b) "
+                                   "for every row of READINGS.csv (columns t,M,fx,fy, or a full log); "
+                                   "writes t,M,fx,fy.")
+    p.add_argument("calibration", metavar="CAL.json")
+    p.add_argument("readings", metavar="READINGS.csv")
+    p.add_argument("--out", required=True, metavar="WRENCH.csv")
+    p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
+    p.add_argument("--inertia", type=float, metavar="KGM2")
+    p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"))
+    p.set_defaults(func=cmd_apply)
+
+
+def cmd_apply(args):
+    from plant import Calibration, Payload, read_readings
+    given = [v is not None for v in (args.mass, args.inertia, args.rho)]
+    if any(given) and not all(given):
+        raise CliError("give all of --mass, --inertia and --rho to check the payload, or none")
+    payload = None
+    if all(given):
+        payload = Payload(positive(args.mass, "--mass"), positive(args.inertia, "--inertia"), tuple(args.rho))
+    if not args.out.endswith(".csv"):
+        raise CliError(f"--out must end in .csv; got {args.out}")
+    calibration = Calibration.load(args.calibration, payload)
+    t, w_hat = read_readings(args.readings)
+    w = calibration.apply(w_hat)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    lines = ["t,M,fx,fy"] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "
+          f"{calibration.method}, {calibration.date})")

@@ -1,0 +1,41 @@
+"""What every ``fmscal`` command shares: the user-error type and small input helpers."""
+
+import numpy as np
+
+__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers"]
+
+
+class CliError(Exception):
+    """A user error: printed as one line, exit status 2."""
+
+
+def strict(value):
+    """A JSON-ready copy: NaN and infinity become None, numpy scalars plain."""
+    if isinstance(value, dict):
+        return {k: strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def positive(value, name):
+    """``value`` if it is a positive finite number, else a :class:`CliError` naming ``name``."""
+    if not np.isfinite(value) or value <= 0:
+        raise CliError(f"{name} must be positive; got {value}")
+    return value
+
+
+def add_scenarios_and_observers(p, default_observers):
+    """``--scenario`` and ``--observer`` (several names each), as compare and sweep take them."""
+    from plant import SCENARIOS
+    from .comparison import OBSERVER_NAMES
+    p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
+                   help="one or more of: " + ", ".join(SCENARIOS))
+    p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
+                   help="one or more of: " + ", ".join(OBSERVER_NAMES) + f" (default: {' '.join(default_observers)})")
