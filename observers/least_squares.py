@@ -279,7 +279,8 @@ class LeastSquares:
             worst = int(np.argmax(rms / np.maximum(pose_sd, 1e-12)))
             warnings.append(f"the log does not match the model: the fit residual of {names[worst]} is "
                             f"{ratio:.3g}x the pose noise estimated from the log (> {CONSISTENCY_RATIO_LIMIT:g}); "
-                            "check units (angles in rad, positions in m), the mass properties and the offset rho")
+                            "check units (angles in rad, positions in m), the mass properties (m, I_G, rho), "
+                            "a sensor offset left out and the pose latency")
         return FitReport(information_cond=cond, weakest_direction=eigvec[:, 0].reshape(3, n)[:, :3].tolist(),
                          residual_rms=rms.tolist(), pose_noise_estimate=pose_sd.tolist(),
                          consistency_ratio=ratio, warnings=warnings)
