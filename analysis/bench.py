@@ -246,7 +246,8 @@ def bench_markdown(report):
                  f"{e['bare_filterpy_us']:.3g} us (bare filterpy) | {ratio:.2f}x | "
                  f"<= {TARGETS['ekf_over_bare_filterpy']:g}x: {_verdict(ratio <= TARGETS['ekf_over_bare_filterpy'])} |")
     lines.append(f"| casadi `x_next, F, Q` of the EKF: `Function.buffer()` against an ordinary call | "
-                 f"{e['buffer_call_us']:.3g} us with the copies in and out ({e['trigger_us']:.3g} us the call alone) | {e['ordinary_call_us']:.3g} us (ordinary call) | "
+                 f"{e['buffer_call_us']:.3g} us with the copies in and out ({e['trigger_us']:.3g} us the call "
+                 f"alone) | {e['ordinary_call_us']:.3g} us (ordinary call) | "
                  f"{e['ordinary_call_us'] / e['buffer_call_us']:.0f}x | - |")
     sim = report["simulator"]
     lines.append(f"| simulator RK4 step | {sim['compiled_us']:.3g} us | {sim['numpy_us']:.3g} us | "
@@ -260,10 +261,11 @@ def bench_markdown(report):
                  f"{_verdict(r['wall_s'] < TARGETS['reproduce_s']) if full else 'not the full job'} |")
     w = report["sweep"]
     full = s["sweep_seeds"] >= 100 and s["sweep_s"] >= 100
+    verdict = _verdict(w["wall_s"] < TARGETS["sweep_s"]) if full else "not the full job"
     lines.append(f"| sweep: {s['sweep_seeds']} seeds x {s['sweep_s']:g} s x {', '.join(SWEEP_OBSERVERS)} "
                  f"({w['runs']} runs, {w['diverged']} diverged), every core | {w['wall_s']:.1f} s | "
                  f"{w['numpy_estimate_s']:.0f} s (estimated) | {w['numpy_estimate_s'] / w['wall_s']:.0f}x | "
-                 f"< {TARGETS['sweep_s']:g} s: {_verdict(w['wall_s'] < TARGETS['sweep_s']) if full else 'not the full job'} |")
+                 f"< {TARGETS['sweep_s']:g} s: {verdict} |")
     lines += ["", "Plain numpy: the same transition evaluated in numpy one step at a time "
               "(`run(compiled=False)`, `integrate(compiled=False)`). The EKF is measured against filterpy "
               "alone, with matrices of the same sizes. Estimated: the steps of the job times the per-step "

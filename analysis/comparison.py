@@ -10,7 +10,8 @@ from plant._checks import as_positive_scalar
 
 from .metrics import convergence_time, display_name, error_history
 
-__all__ = ["OBSERVER_NAMES", "make_observer", "simulate_case", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
+__all__ = ["OBSERVER_NAMES", "make_observer", "simulate_case", "run_observer", "run_case", "seed_list", "compare",
+           "summarise", "summary_markdown",
            "CHECKPOINTS"]
 
 #: Every observer the toolkit compares, by the name tables use.

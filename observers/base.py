@@ -18,8 +18,8 @@ from plant import Log, Payload
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
-__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "offset_from_c", "offset_std", "DIVERGENCE_BOUND", "SETTLE_FRACTION",
-           "SETTLE_TOLERANCE"]
+__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "offset_from_c", "offset_std",
+           "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
 
 #: A run whose calibration estimate has an entry beyond this is declared diverged.
 DIVERGENCE_BOUND = 1e3

@@ -267,5 +267,5 @@ class AugmentedEKF:
     def _healthy(self):
         kf = self._kf
         # a NaN or inf anywhere makes a sum non-finite: one reduction per array
-        return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum()) and np.abs(kf.x[6:]).max() < DIVERGENCE_BOUND
-                    and kf.P.diagonal().min() > 0)
+        return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum())
+                    and np.abs(kf.x[6:]).max() < DIVERGENCE_BOUND and kf.P.diagonal().min() > 0)
