@@ -151,7 +151,7 @@ class AdaptiveObserver(Observer):
 
     def _initial_state(self, S0, pose, w_hat):
         x = np.array([pose[0], 0.0, pose[1], 0.0, pose[2], 0.0])
-        w = np.append(w_hat, 1.0) if self.offset else w_hat
+        w = self._augmented(ops(w_hat), w_hat)
         R = np.eye(self.n_cols) * max(float(w @ w), _R_MIN) / self.n_cols     # isotropic until excited
         return np.concatenate([x, self._initial_S(S0), np.zeros(3), pose, [1.0], w_hat, [0.0], np.zeros(3),
                                R.ravel(), [0.0]])

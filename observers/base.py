@@ -18,8 +18,8 @@ from plant import Log, Payload
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
-__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "offset_from_c", "offset_std",
-           "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
+__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "initial_calibration", "offset_from_c",
+           "offset_std", "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
 
 #: A run whose calibration estimate has an entry beyond this is declared diverged.
 DIVERGENCE_BOUND = 1e3
@@ -272,8 +272,8 @@ class Observer:
         return o.vcat([w_hat, 1.0]) if self.offset else w_hat
 
     def _initial_S(self, S0):
-        """``[S0 | 0]`` flat in row order: the offset starts at zero."""
-        return np.column_stack([S0, np.zeros(3)]).ravel() if self.offset else np.ravel(S0)
+        """``[S0 | 0]`` flat in row order (:func:`initial_calibration`)."""
+        return initial_calibration(S0, self.offset)
 
     def _result(self, log, Z, diverged):
         aug = Z[:, self._S].reshape(-1, 3, self.n_cols)
@@ -292,6 +292,17 @@ class Observer:
 
     def _info(self):
         return {}
+
+
+def initial_calibration(S0, offset):
+    """The calibration entries an estimator starts from: ``S0``, or ``[S0 | 0]`` with the offset.
+
+    Returns
+    -------
+    ndarray, shape (9,) or (12,)
+        Row order.
+    """
+    return np.column_stack([S0, np.zeros(3)]).ravel() if offset else np.ravel(S0)
 
 
 def offset_from_c(S, c):

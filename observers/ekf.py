@@ -11,7 +11,8 @@ from plant.noise import estimate_noise
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
-from .base import DIVERGENCE_BOUND, ObserverResult, check_sample, offset_from_c, offset_std, settled
+from .base import (DIVERGENCE_BOUND, ObserverResult, check_sample, initial_calibration, offset_from_c,
+                   offset_std, settled)
 
 __all__ = ["AugmentedEKF"]
 
@@ -185,7 +186,7 @@ class AugmentedEKF:
     def _start(self, pose, w_hat):
         noise = self._noise
         kf = _CalibrationEKF(self.dim_x)
-        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], self._initial_S()]).reshape(-1, 1)
+        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], initial_calibration(self._S0, self.offset)]).reshape(-1, 1)
         pose_var = np.maximum(noise.pose_sd, 1e-6) ** 2
         S_var = np.full((3, self.n_cols), self.S0_sd ** 2)
         if self.offset:
@@ -207,10 +208,6 @@ class AugmentedEKF:
         self._advance(dt, pose, w_hat)
         x = self._kf.x[:, 0]
         return x[0:6].copy(), x[6:].reshape(3, self.n_cols)[:, :3].copy()
-
-    def _initial_S(self):
-        """``[S0 | 0]`` flat in row order: the offset starts at zero."""
-        return np.column_stack([self._S0, np.zeros(3)]).ravel() if self.offset else self._S0.ravel()
 
     def _advance(self, dt, pose, w_hat):
         """One checked sample: predict with the raw readings, update with the pose."""
@@ -249,7 +246,7 @@ class AugmentedEKF:
             X = X[:k]          # the last finite estimate; row k is the unhealthy one
         if len(X) == 0:
             X = np.concatenate([[log.pose[0][0], 0, log.pose[0][1], 0, log.pose[0][2], 0],
-                                self._initial_S()])[None, :]
+                                initial_calibration(self._S0, self.offset)])[None, :]
         aug = X[:, 6:].reshape(-1, 3, self.n_cols)
         S_hist = aug[:, :, :3]
         cov_aug = self._kf.P[6:, 6:]

@@ -213,7 +213,7 @@ class HighGainObserver(Observer):
         z = np.zeros(L["size"])
         z[L["x"]], z[L["S"]], z[L["pose"]], z[L["has"]], z[L["w"]] = x, self._initial_S(S0), pose, 1.0, w_hat
         # R starts isotropic at the size C Upsilon will have, |psi| / lam^2 (the filter's DC gain)
-        w = np.append(w_hat, 1.0) if self.offset else w_hat
+        w = self._augmented(ops(w_hat), w_hat)
         psi_t, psi_x, psi_y = (np.array(v) for v in regressors(pose[0], w, self.payload))
         z[L["R1"]] = (np.eye(n) * max(psi_t @ psi_t / n, _R_FLOOR) / self.lam ** 4).ravel()
         z[L["R2"]] = (np.eye(2 * n) * max((psi_x @ psi_x + psi_y @ psi_y) / (2 * n), _R_FLOOR)
