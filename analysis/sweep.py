@@ -116,6 +116,9 @@ def _client(scheduler):
             raise ImportError('a Dask scheduler needs the distributed extra: pip install "fmscal[distributed]"') \
                 from err
         return Client(scheduler), True
+    if not (hasattr(scheduler, "map") and hasattr(scheduler, "gather")):
+        raise TypeError(f"scheduler must be an address like 'tcp://HOST:PORT' or a dask.distributed.Client; "
+                        f"got {type(scheduler).__name__}")
     return scheduler, False
 
 

@@ -88,3 +88,8 @@ def test_the_bench_runs_in_its_short_mode(tmp_path, capsys):
         assert row in text
     assert "not the full job" in text                # the short mode does not claim the targets
     assert (tmp_path / "bench.md").read_text() == text.rstrip("\n") + "\n"
+
+
+def test_a_scheduler_that_is_neither_an_address_nor_a_client_is_refused():
+    with pytest.raises(TypeError, match="tcp://HOST:PORT"):
+        sweep(["paper"], 1, observers=["adaptive"], duration=1, scheduler=8786, progress=False)
