@@ -210,7 +210,8 @@ class LeastSquares:
         if self.offset:
             b = offset_from_c(S_hat, S_aug[:, 3])
             b_std = offset_std(S_hat, b, cov_S)
-        S_hist = np.array([S_from_phi(a, b, self.payload)[:, :3] for a, b in zip(*histories)])
+        # the running fits mapped to [S | c] in one product (S_from_phi is the linear map T)
+        S_hist = (np.hstack(histories) @ T.T).reshape(-1, 3, n)[:, :, :3]
         x_hat = self._fitted_motion(log, Z, phis, windows)
         ok = not self.report["warnings"]
         return ObserverResult(observer=self.name, t=log.t.copy(), S_hat=S_hat, S_hat_history=S_hist,
