@@ -18,8 +18,8 @@ from plant import Log, Payload
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
-__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "initial_calibration", "offset_from_c",
-           "offset_std", "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
+__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "initial_calibration", "split_calibration",
+           "offset_from_c", "offset_std", "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
 
 #: A run whose calibration estimate has an entry beyond this is declared diverged.
 DIVERGENCE_BOUND = 1e3
@@ -276,11 +276,9 @@ class Observer:
         return initial_calibration(S0, self.offset)
 
     def _result(self, log, Z, diverged):
-        aug = Z[:, self._S].reshape(-1, 3, self.n_cols)
-        S_hist = aug[:, :, :3]
-        b = None
-        if self.offset and not diverged:
-            b = offset_from_c(S_hist[-1], aug[-1, :, 3])
+        S_hist, b = split_calibration(Z[:, self._S], self.n_cols)
+        if diverged:
+            b = None
         return ObserverResult(
             observer=self.name, t=log.t[:len(Z)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=Z[:, self._X].copy(),
@@ -303,6 +301,27 @@ def initial_calibration(S0, offset):
         Row order.
     """
     return np.column_stack([S0, np.zeros(3)]).ravel() if offset else np.ravel(S0)
+
+
+def split_calibration(history, n_cols):
+    """``S_hat`` history and the final offset from a history of ``[S_hat | c_hat]``.
+
+    Parameters
+    ----------
+    history : ndarray, shape (N, 3 n_cols)
+        Calibration entries in row order, per sample.
+    n_cols : int
+        3, or 4 with the offset column.
+
+    Returns
+    -------
+    S_history : ndarray, shape (N, 3, 3)
+    b : ndarray, shape (3,), or None
+        :func:`offset_from_c` of the last sample; None without the offset.
+    """
+    aug = history.reshape(-1, 3, n_cols)
+    S_hist = aug[:, :, :3]
+    return S_hist, (offset_from_c(S_hist[-1], aug[-1, :, 3]) if n_cols == 4 else None)
 
 
 def offset_from_c(S, c):
@@ -332,8 +351,12 @@ def offset_std(S, b, cov_aug):
     Returns
     -------
     ndarray, shape (3,)
+        NaN where ``S`` is singular (as :func:`offset_from_c`).
     """
-    S_inv = np.linalg.inv(S)
+    try:
+        S_inv = np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        return np.full(3, np.nan)
     J = np.zeros((3, 12))
     for i in range(3):
         for j in range(4):

@@ -11,8 +11,8 @@ from plant.noise import estimate_noise
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
-from .base import (DIVERGENCE_BOUND, ObserverResult, check_sample, initial_calibration, offset_from_c,
-                   offset_std, settled)
+from .base import (DIVERGENCE_BOUND, ObserverResult, check_sample, initial_calibration, offset_std, settled,
+                   split_calibration)
 
 __all__ = ["AugmentedEKF"]
 
@@ -247,14 +247,14 @@ class AugmentedEKF:
         if len(X) == 0:
             X = np.concatenate([[log.pose[0][0], 0, log.pose[0][1], 0, log.pose[0][2], 0],
                                 initial_calibration(self._S0, self.offset)])[None, :]
-        aug = X[:, 6:].reshape(-1, 3, self.n_cols)
-        S_hist = aug[:, :, :3]
+        S_hist, b = split_calibration(X[:, 6:], self.n_cols)
         cov_aug = self._kf.P[6:, 6:]
         S_std = None if diverged else np.sqrt(np.maximum(np.diag(cov_aug), 0)).reshape(3, self.n_cols)[:, :3]
-        b = b_std = None
-        if self.offset and not diverged:
-            b = offset_from_c(S_hist[-1], aug[-1, :, 3])
-            b_std = offset_std(S_hist[-1], b, cov_aug) if np.all(np.isfinite(b)) else None
+        b_std = None
+        if diverged:
+            b = None
+        elif b is not None:
+            b_std = offset_std(S_hist[-1], b, cov_aug)
         return ObserverResult(
             observer=self.name, t=log.t[:len(X)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=X[:, 0:6].copy(), S_std=S_std,

@@ -221,3 +221,10 @@ def test_simulate_calibrate_save_apply_on_a_multi_rate_log_with_an_offset(tmp_pa
     w_true = (log.w_hat - B_TRUE) @ truth.S_at(0.0).T
     w = np.loadtxt(tmp_path / "w.csv", delimiter=",", skiprows=1)[:, 1:]
     assert np.max(np.abs(w - w_true)) < 0.05 * np.max(np.abs(w_true))
+
+
+def test_the_offset_of_a_singular_estimate_is_nan_not_an_exception():
+    from observers.base import offset_from_c, offset_std
+    S = np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]])
+    b = offset_from_c(S, np.ones(3))
+    assert np.all(np.isnan(b)) and np.all(np.isnan(offset_std(S, b, np.eye(12))))
