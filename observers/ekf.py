@@ -8,11 +8,13 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from plant import Log, NoiseSpec, Payload, rk4_step
 from plant.noise import estimate_noise
+from plant._checks import as_positive_scalar
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
 
 from .base import (DIVERGENCE_BOUND, ObserverResult, check_sample, initial_calibration, offset_std, settled,
                    split_calibration)
+from .noise_level import NoiseLevel
 
 __all__ = ["AugmentedEKF"]
 
@@ -50,10 +52,23 @@ class AugmentedEKF:
     the pose noise; ``Q`` is the wrench noise carried through the dynamics,
     ``Q = J_0 diag(wrench_sd^2) J_0^T + J_1 diag(wrench_sd^2) J_1^T`` with
     ``J_0, J_1`` the Jacobians of the step with respect to the two raw
-    readings it uses, plus ``q_S dt`` on each calibration entry (a random
-    walk, so that a slowly changing sensor is tracked); ``P_0`` is the pose
-    noise on the positions, ``v0_sd^2`` on the velocities and ``S0_sd^2``
-    on the calibration entries.
+    readings it uses, plus ``q dt`` on each calibration entry: a random walk
+    of intensity ``q_S`` (about 0.6 % an hour), so that a slowly changing
+    sensor is tracked, raised towards ``q_S_max`` while the normalized
+    innovation squared of the poses says that ``S`` has moved
+    (:class:`observers.noise_level.NoiseLevel`, ``adapt_q``); ``P_0`` is the
+    pose noise on the positions, ``v0_sd^2`` on the velocities and
+    ``S0_sd^2`` on the calibration entries.
+
+    With a fixed random walk the filter must choose between averaging (a
+    constant ``S``, near the least-squares accuracy) and forgetting (a
+    moving ``S``); the adjustable level does both: on a constant ``S`` it
+    stays at the base intensity and reaches the least-squares accuracy
+    (``tests/test_ekf.py``), and after a step in ``S`` (Table 1) it raises
+    the intensity until the innovations are consistent again. A sensor that
+    drifts fast and steadily (the ``drift`` scenario, 0.2 per 100 s) keeps
+    the innovations only a little above their bound; it is followed better
+    with a fixed random walk of its rate (``q_S=1e-5, adapt_q=False``).
 
     Parameters
     ----------
@@ -61,12 +76,13 @@ class AugmentedEKF:
     noise : plant.NoiseSpec, optional
         Noise standard deviations in the units of the log. None: estimated
         from the log (:func:`plant.noise.estimate_noise`) and reported in
-        ``result.info["noise"]``.
+        ``result.info["noise"]``. ``result.info["q_S_history"]`` (N,) holds
+        the random-walk intensity after each sample, 1/s.
     q_S : float
-        Random-walk intensity of each calibration entry, 1/s. The default
-        1e-5 assumes the entries wander by about 0.03 per 100 s; it makes the
-        filter forget, so on a constant ``S`` it stays above the least-squares
-        accuracy, which ``q_S = 0`` reaches (``tests/test_ekf.py``).
+        Base random-walk intensity of each calibration entry, 1/s: the
+        entries are assumed to wander by ``sqrt(q_S t)`` over ``t`` seconds
+        (1e-8: about 0.006 an hour). ``0`` (with ``adapt_q=False``): a
+        constant ``S``.
     S0_sd : float
         Initial standard deviation of each calibration entry.
     v0_sd : float
@@ -79,25 +95,46 @@ class AugmentedEKF:
     c0_sd : float, optional
         Initial standard deviation of each ``c_i`` (N m, N); default
         ``S0_sd`` times the size of the first reading (at least 1).
+    adapt_q : bool
+        Raise the intensity while the innovations say ``S`` moved (default).
+        False: a fixed random walk of ``q_S``.
+    q_S_max : float
+        Largest intensity the adaptation reaches, 1/s.
+    nis_tolerance : float
+        Relative error of the noise standard deviations that the adaptation
+        tolerates without raising the intensity (0.25: 25 %); a larger value
+        reacts to larger changes only.
 
     Attributes
     ----------
     name : str
         ``"ekf"``.
+    level : observers.noise_level.NoiseLevel or None
+        The adjustable random-walk intensity (None with ``adapt_q=False``).
     """
 
     name = "ekf"
 
-    def __init__(self, payload, noise=None, q_S=1e-5, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None):
+    def __init__(self, payload, noise=None, q_S=1e-8, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
+                 adapt_q=True, q_S_max=1e-4, nis_tolerance=0.25):
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         if noise is not None and not isinstance(noise, NoiseSpec):
             raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
         self.payload = payload
         self.noise = noise
-        self.q_S, self.S0_sd, self.v0_sd = float(q_S), float(S0_sd), float(v0_sd)
+        self.adapt_q = bool(adapt_q)
+        self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=not self.adapt_q)
+        self.S0_sd, self.v0_sd = as_positive_scalar(S0_sd, "S0_sd"), as_positive_scalar(v0_sd, "v0_sd")
+        self.level = None
+        if self.adapt_q:
+            q_S_max = as_positive_scalar(q_S_max, "q_S_max")
+            if q_S_max < self.q_S:
+                raise ValueError(f"q_S_max must be at least q_S ({self.q_S:g}); got {q_S_max:g}")
+            self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
+                                                                          allow_zero=True))
         self.offset = bool(offset)
-        self.c0_sd = None if c0_sd is None else float(c0_sd)
+        self.c0_sd = None if c0_sd is None else as_positive_scalar(c0_sd, "c0_sd")
         #: Columns of the estimated ``[S | c]``, and the filter's state size.
         self.n_cols = 4 if self.offset else 3
         self.dim_x = 6 + 3 * self.n_cols
@@ -162,7 +199,7 @@ class AugmentedEKF:
         xs_in, w0_in, w1_in, dt_in, var_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
         var_in[:] = self._var_w
-        q_in[0] = self.q_S * dt
+        q_in[0] = (self.level.q if self.level is not None else self.q_S) * dt
         call()
         f, F, Q = call.outputs
         return f.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
@@ -182,6 +219,9 @@ class AugmentedEKF:
         self._noise = noise or self.noise or NoiseSpec((0.05, 0.05, 0.05), np.deg2rad(0.1), 1e-4)
         self._kf = None
         self._w_prev = None
+        self._since_pose = 0.0
+        if self.level is not None:
+            self.level.reset()
 
     def _start(self, pose, w_hat):
         noise = self._noise
@@ -217,9 +257,15 @@ class AugmentedEKF:
         kf = self._kf
         kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], self._w_prev, w_hat, dt)
         kf.predict()
-        if pose is not None:
-            kf.update(pose.reshape(3, 1), self.H, self.hx)
         self._w_prev = w_hat
+        self._since_pose += dt
+        if pose is None:
+            return
+        kf.update(pose.reshape(3, 1), self.H, self.hx)
+        if self.level is not None:
+            y = kf.y[:, 0]
+            self.level.update(float(y @ kf.SI @ y), self._since_pose)      # NIS of this pose
+        self._since_pose = 0.0
 
     def run(self, log, S0=None):
         """Run over a whole log; the same result as :meth:`observers.Observer.run`."""
@@ -235,15 +281,19 @@ class AugmentedEKF:
         self.reset(S0, noise)
         n = len(log)
         X = np.empty((n, self.dim_x))
+        q_history = np.full(n, self.q_S)
         diverged = False
         for k in range(n):                      # the log is validated: no per-sample checks
             self._advance(log.dt, log.pose[k] if log.has_pose[k] else None, log.w_hat[k])
             X[k] = self._kf.x[:, 0]
+            if self.level is not None:
+                q_history[k] = self.level.q
             if not self._healthy():
                 diverged = True
                 break
         if diverged:
             X = X[:k]          # the last finite estimate; row k is the unhealthy one
+        info["q_S_history"] = q_history[:max(len(X), 1)]
         if len(X) == 0:
             X = np.concatenate([[log.pose[0][0], 0, log.pose[0][1], 0, log.pose[0][2], 0],
                                 initial_calibration(self._S0, self.offset)])[None, :]

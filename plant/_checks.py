@@ -35,12 +35,15 @@ def as_finite_array(value, shape, name):
     return arr
 
 
-def as_positive_scalar(value, name):
-    """Return ``value`` as a positive finite float, or raise ValueError."""
+def as_positive_scalar(value, name, allow_zero=False):
+    """Return ``value`` as a positive (or, with ``allow_zero``, non-negative) finite float, or raise ValueError."""
     try:
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number; got {value!r}") from None
-    if not np.isfinite(x) or x <= 0:
+    if allow_zero:
+        if not np.isfinite(x) or x < 0:
+            raise ValueError(f"{name} must be non-negative and finite; got {value!r}")
+    elif not np.isfinite(x) or x <= 0:
         raise ValueError(f"{name} must be positive and finite; got {value!r}")
     return x

@@ -1,0 +1,108 @@
+"""Adjustable-level process noise for the EKF's random walk on ``S``.
+
+A change in the sensor's calibration shows in the pose innovations before
+it shows anywhere else: their normalized innovation squared (NIS)
+``eps = nu^T S_nu^-1 nu`` is chi-square with 3 degrees of freedom while the
+filter's model holds, and grows while its ``S_hat`` lags the true ``S``.
+:class:`NoiseLevel` watches a fading-memory average of the NIS and raises
+the random-walk intensity while that average is above its bound, lowering
+it back to the base level otherwise: the adjustable-level process noise of
+maneuvering-target tracking (Bar-Shalom, Li and Kirubarajan, *Estimation
+with Applications to Tracking and Navigation*, 2001, ch. 11), applied to
+the calibration states. The filter then averages like a constant-``S``
+fit while nothing changes, and re-opens its calibration states when the
+innovations say that something did.
+"""
+
+import math
+
+from scipy.stats import chi2, norm
+
+__all__ = ["NoiseLevel", "NIS_DOF"]
+
+#: Degrees of freedom of the pose innovation ``[theta, X, Y]``.
+NIS_DOF = 3
+#: One NIS sample counts at most this much (the 99.9 % point of chi-square(3)),
+#: so that a single outlier in the poses cannot raise the level.
+NIS_CLIP = float(chi2.ppf(0.999, NIS_DOF))
+#: The bound is the 99.9 % point of the average under a consistent filter.
+_Z = float(norm.ppf(0.999))
+
+
+class NoiseLevel:
+    """The random-walk intensity of ``S``, raised while the innovations say ``S`` moved.
+
+    With ``eps_k`` the NIS of pose ``k`` (clipped at :data:`NIS_CLIP`) and
+    ``h`` the time since the previous pose,
+
+    - ``a = exp(-h / window)``, ``eps_bar_k = a eps_bar_{k-1} + (1 - a) eps_k``
+      (starting at 3, its mean under a consistent filter);
+    - ``bound = (1 + tolerance)^2 (3 + z sqrt(6 (1 - a) / (1 + a)))``, with
+      ``z`` the 99.9 % normal point: the 99.9 % bound of ``eps_bar`` for a
+      consistent filter, widened for a noise model whose standard deviations
+      are off by up to ``tolerance``;
+    - the intensity ``q`` is multiplied by ``exp(rise h)`` while
+      ``eps_bar > bound`` and by ``exp(-fall h)`` otherwise, within
+      ``[q_base, q_max]``.
+
+    Parameters
+    ----------
+    q_base : float
+        Intensity while nothing changes, 1/s (> 0).
+    q_max : float
+        Largest intensity, 1/s (>= ``q_base``).
+    tolerance : float
+        Relative error of the noise model's standard deviations that does not
+        raise the level (0.25: a model 25 % too small is still tolerated).
+    window : float
+        Time constant of the NIS average, s.
+    rise, fall : float
+        Rates at which the intensity grows and decays, 1/s (a factor of 10
+        in 0.23 s and in 2.3 s by default).
+
+    Attributes
+    ----------
+    q : float
+        The current intensity, 1/s.
+    eps_bar : float
+        The current NIS average.
+    """
+
+    def __init__(self, q_base, q_max, tolerance=0.25, window=1.0, rise=10.0, fall=1.0):
+        self.q_base, self.q_max = float(q_base), float(q_max)
+        self.inflation = (1.0 + float(tolerance)) ** 2
+        self.window, self.rise, self.fall = float(window), float(rise), float(fall)
+        self.reset()
+
+    def reset(self):
+        """Back to the base intensity and a NIS average of 3."""
+        self.q = self.q_base
+        self.eps_bar = float(NIS_DOF)
+
+    def bound(self, a):
+        """The alarm bound of the NIS average for a forgetting factor ``a``."""
+        spread = _Z * math.sqrt(2 * NIS_DOF * (1 - a) / (1 + a))
+        return self.inflation * (NIS_DOF + spread)
+
+    def update(self, nis, h):
+        """Take the NIS of one pose, ``h`` seconds after the previous one; return the new intensity.
+
+        Parameters
+        ----------
+        nis : float
+            ``nu^T S_nu^-1 nu`` of this pose's innovation.
+        h : float
+            Time since the previous pose, s (> 0).
+
+        Returns
+        -------
+        float
+            The random-walk intensity for the following predictions, 1/s.
+        """
+        a = math.exp(-h / self.window)
+        self.eps_bar = a * self.eps_bar + (1 - a) * min(nis, NIS_CLIP)
+        if self.eps_bar > self.bound(a):
+            self.q = min(self.q * math.exp(self.rise * h), self.q_max)
+        else:
+            self.q = max(self.q * math.exp(-self.fall * h), self.q_base)
+        return self.q
