@@ -13,7 +13,8 @@ __all__ = ["CALIBRATION_METHODS", "DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "cali
 
 #: Methods ``fmscal calibrate`` offers.
 CALIBRATION_METHODS = ("least-squares", "ekf", "high-gain", "adaptive")
-#: The default: the most accurate method that is robust on logs unlike the paper's
+#: The default: it never diverges, needs no noise model, and is within 1.5x of the most
+#: accurate method on full-rate logs; with poses at 50 Hz the EKF is more accurate
 #: (README, "Which observer to trust").
 DEFAULT_METHOD = "least-squares"
 #: Largest pose-stream delay searched when the latency is estimated, s.
@@ -91,6 +92,10 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     if result.diverged:
         raise DivergedError(f"the {method} estimate diverged at t = {result.t[-1]:.3f} s; "
                             "no calibration (check the mass properties, units and excitation)")
+    warnings = list(reference.report["warnings"])
+    if "q_S_history" in result.info:
+        warnings += _random_walk_warning(result.t, result.info["q_S_history"])
+
     def listed(a):
         return None if a is None else np.asarray(a).tolist()
 
@@ -98,8 +103,19 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
            "b": listed(result.b), "b_std": listed(result.b_std), "latency": float(latency),
            "latency_estimated": latency_estimated,
            "converged": bool(result.converged), "noise": noise.to_dict(),
-           "noise_estimated": noise_estimated, "warnings": list(reference.report["warnings"]),
+           "noise_estimated": noise_estimated, "warnings": warnings,
            "fit": {k: v for k, v in reference.report.items() if k != "warnings"}, "result": result}
     if truth is not None:
         out["E"] = calibration_error(result.S_hat, truth.S_at(log.t[-1]))
     return out
+
+
+def _random_walk_warning(t, q_history):
+    """A warning if the EKF raised its random walk on S (its innovations said S moved)."""
+    raised = q_history > 1.01 * q_history.min()
+    if not raised.any():
+        return []
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    return [f"the EKF raised its random walk on S for {raised.sum() * dt:.1f} s (first at t = "
+            f"{t[np.argmax(raised)]:.1f} s): S may have changed during the log, or the noise model is "
+            "more than 25 % off"]

@@ -56,6 +56,17 @@ def test_least_squares_and_ekf_agree(other_log):
     assert ls["observer"] == "least-squares"                    # the default
     diff = np.abs(np.array(ls["S"]) - np.array(ekf["S"]))
     assert np.all(diff < 3 * np.hypot(np.array(ls["S_std"]), np.array(ekf["S_std"])) + 1e-3)
+    assert not any("random walk" in w for w in ekf["warnings"])        # a constant S: nothing moved
+
+
+def test_ekf_warns_when_the_calibration_steps_during_the_log(tmp_path, capsys):
+    """A Table 1 step at 100 s: the EKF raises its random walk there, and calibrate says so."""
+    path = tmp_path / "step.csv"
+    assert main(["simulate", "--scenario", "time-varying", "--duration", "110", "--out", str(path)]) == 0
+    assert main(["calibrate", str(path), "--mass", "2.5", "--inertia", "0.75", "--rho", "0.2", "0.25",
+                 "--observer", "ekf", "--latency", "0"]) == 0
+    err = capsys.readouterr().err
+    assert "the EKF raised its random walk on S" in err and "first at t = 100." in err
 
 
 def test_least_squares_uncertainty_is_honest():
