@@ -41,9 +41,6 @@ def as_positive_scalar(value, name, allow_zero=False):
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number; got {value!r}") from None
-    if allow_zero:
-        if not np.isfinite(x) or x < 0:
-            raise ValueError(f"{name} must be non-negative and finite; got {value!r}")
-    elif not np.isfinite(x) or x <= 0:
-        raise ValueError(f"{name} must be positive and finite; got {value!r}")
+    if not np.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
+        raise ValueError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite; got {value!r}")
     return x
