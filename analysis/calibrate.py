@@ -4,6 +4,7 @@ import numpy as np
 
 from observers import LeastSquares
 from observers.latency import estimate_latency
+from observers.noise_level import DEFAULT_TOLERANCE
 from plant import NoiseSpec, estimate_noise
 
 from .comparison import make_observer
@@ -118,4 +119,4 @@ def _random_walk_warning(t, q_history):
     dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
     return [f"the EKF raised its random walk on S for {raised.sum() * dt:.1f} s (first at t = "
             f"{t[np.argmax(raised)]:.1f} s): S may have changed during the log, or the noise model is "
-            "more than 25 % off"]
+            f"more than {DEFAULT_TOLERANCE * 100:g} % off"]

@@ -14,7 +14,7 @@ from plant.sensor import check_calibration
 
 from .base import (DIVERGENCE_BOUND, ObserverResult, check_sample, initial_calibration, offset_std, settled,
                    split_calibration)
-from .noise_level import NoiseLevel
+from .noise_level import DEFAULT_TOLERANCE, NoiseLevel
 
 __all__ = ["AugmentedEKF"]
 
@@ -116,7 +116,7 @@ class AugmentedEKF:
     name = "ekf"
 
     def __init__(self, payload, noise=None, q_S=1e-8, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
-                 adapt_q=True, q_S_max=1e-4, nis_tolerance=0.25):
+                 adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE):
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         if noise is not None and not isinstance(noise, NoiseSpec):

@@ -18,13 +18,15 @@ import math
 
 from scipy.stats import chi2, norm
 
-__all__ = ["NoiseLevel", "NIS_DOF"]
+__all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE"]
 
 #: Degrees of freedom of the pose innovation ``[theta, X, Y]``.
 NIS_DOF = 3
 #: One NIS sample counts at most this much (the 99.9 % point of chi-square(3)),
 #: so that a single outlier in the poses cannot raise the level.
 NIS_CLIP = float(chi2.ppf(0.999, NIS_DOF))
+#: Relative error of the noise standard deviations tolerated by default (25 %).
+DEFAULT_TOLERANCE = 0.25
 #: The bound is the 99.9 % point of the average under a consistent filter.
 _Z = float(norm.ppf(0.999))
 
@@ -68,7 +70,7 @@ class NoiseLevel:
         The current NIS average.
     """
 
-    def __init__(self, q_base, q_max, tolerance=0.25, window=1.0, rise=10.0, fall=1.0):
+    def __init__(self, q_base, q_max, tolerance=DEFAULT_TOLERANCE, window=1.0, rise=10.0, fall=1.0):
         self.q_base, self.q_max = float(q_base), float(q_max)
         self.inflation = (1.0 + float(tolerance)) ** 2
         self.window, self.rise, self.fall = float(window), float(rise), float(fall)
