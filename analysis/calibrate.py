@@ -9,6 +9,7 @@ from plant import NoiseSpec, estimate_noise
 
 from .comparison import make_observer
 from .metrics import calibration_error
+from plant.errors import FmscalError
 
 __all__ = ["CALIBRATION_METHODS", "DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "calibrate", "DivergedError"]
 
@@ -22,7 +23,7 @@ DEFAULT_METHOD = "least-squares"
 DEFAULT_MAX_LATENCY = 0.1
 
 
-class DivergedError(RuntimeError):
+class DivergedError(FmscalError):
     """The estimate diverged: there is no calibration to report."""
 
 
@@ -74,7 +75,7 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
         The method's estimate diverged.
     """
     if method not in CALIBRATION_METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {', '.join(CALIBRATION_METHODS)}")
+        raise FmscalError(f"unknown method {method!r}; expected one of {', '.join(CALIBRATION_METHODS)}")
     estimated = estimate_noise(log)
     noise = NoiseSpec(tuple(wrench_noise) if wrench_noise is not None else estimated.wrench_sd,
                       pose_noise[0] if pose_noise is not None else estimated.angle_sd,

@@ -1,7 +1,8 @@
 """The ``fmscal`` command line.
 
-Every command answers bad input with one line on stderr and exit status 2,
-never a traceback.
+Every command answers bad input (a :class:`plant.FmscalError`, or a file that
+cannot be read or written) with one line on stderr and exit status 2. Any other
+exception is a bug in the toolkit and shows its traceback.
 """
 
 import argparse
@@ -211,8 +212,7 @@ _COMMANDS = [_add_simulate, add_calibrate, add_apply, _add_reproduce, _add_compa
 
 def main(argv=None):
     """Entry point of ``fmscal``; returns the exit status."""
-    from plant import LogError, SingularCalibrationError
-    from .calibrate import DivergedError
+    from plant import FmscalError
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -220,7 +220,7 @@ def main(argv=None):
         return stop.code
     try:
         args.func(args)
-    except (CliError, LogError, SingularCalibrationError, DivergedError, ValueError, OSError) as err:
+    except (FmscalError, OSError) as err:      # the user's input or files; any other error is a bug
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
         print(f"fmscal {args.command}: error: {message}", file=sys.stderr)
         return 2

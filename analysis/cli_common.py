@@ -2,10 +2,12 @@
 
 import numpy as np
 
+from plant.errors import FmscalError
+
 __all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers"]
 
 
-class CliError(Exception):
+class CliError(FmscalError):
     """A user error: printed as one line, exit status 2."""
 
 

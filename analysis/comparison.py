@@ -9,6 +9,7 @@ from plant import get_scenario
 from plant._checks import as_positive_scalar
 
 from .metrics import convergence_time, display_name, error_history
+from plant.errors import FmscalError
 
 __all__ = ["OBSERVER_NAMES", "make_observer", "simulate_case", "run_observer", "run_case", "seed_list", "compare",
            "summarise", "summary_markdown",
@@ -53,7 +54,7 @@ def make_observer(name, payload, told_noise=None, settings=None):
         return AugmentedEKF(payload, noise=told_noise, **settings)
     if name == "least-squares":
         return LeastSquares(payload, **settings)
-    raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+    raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
 
 
 def _checkpoint_column(t_check):
@@ -89,7 +90,7 @@ def simulate_case(scenario, seed, duration=None, noise_scale=1.0):
         sc = sc.with_(duration=as_positive_scalar(duration, "duration"))
     noise_scale = float(noise_scale)
     if not (np.isfinite(noise_scale) and noise_scale >= 0):
-        raise ValueError(f"noise_scale must be a non-negative number; got {noise_scale}")
+        raise FmscalError(f"noise_scale must be a non-negative number; got {noise_scale}")
     if noise_scale != 1.0:
         sc = sc.with_(wrench_noise=sc.wrench_noise * noise_scale, angle_sd=sc.angle_sd * noise_scale,
                       position_sd=sc.position_sd * noise_scale)
@@ -186,7 +187,7 @@ def seed_list(seeds):
     """``N`` as seeds ``[0 .. N-1]``; a sequence as a list of ints. At least one seed."""
     seeds = list(range(int(seeds))) if np.isscalar(seeds) else [int(s) for s in seeds]
     if not seeds:
-        raise ValueError("seeds must be at least 1; got 0")
+        raise FmscalError("seeds must be at least 1; got 0")
     return seeds
 
 
@@ -230,7 +231,7 @@ def compare(scenarios=("paper",), seeds=1, observers=OBSERVER_NAMES, duration=No
     seeds = seed_list(seeds)
     for name in observers:
         if name not in OBSERVER_NAMES:
-            raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+            raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
     scenarios = [get_scenario(s).name for s in scenarios]
     rows, curves = [], {}
     cases = [(s, seed) for s in scenarios for seed in seeds]

@@ -28,6 +28,7 @@ from plant import Payload, get_scenario
 
 from .comparison import make_observer
 from .metrics import calibration_error
+from plant.errors import FmscalError
 
 __all__ = ["PARAMETERS", "perturbed", "distortion", "derived_error", "sensitivity", "tolerable_error"]
 
@@ -47,7 +48,7 @@ def perturbed(payload, parameter, relative_error):
         return Payload(payload.mass, payload.inertia * (1 + e), payload.rho)
     if parameter == "rho":
         return Payload(payload.mass, payload.inertia, tuple(r * (1 + e) for r in payload.rho))
-    raise ValueError(f"unknown parameter {parameter!r}; expected one of {', '.join(PARAMETERS)}")
+    raise FmscalError(f"unknown parameter {parameter!r}; expected one of {', '.join(PARAMETERS)}")
 
 
 def distortion(parameter, relative_error, payload):
@@ -75,7 +76,7 @@ def distortion(parameter, relative_error, payload):
     if parameter == "rho":
         d_x, d_y = e * rho_x, e * rho_y
         return np.array([[1.0, d_y, -d_x], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    raise ValueError(f"unknown parameter {parameter!r}; expected one of {', '.join(PARAMETERS)}")
+    raise FmscalError(f"unknown parameter {parameter!r}; expected one of {', '.join(PARAMETERS)}")
 
 
 def derived_error(parameter, relative_error, payload):

@@ -15,6 +15,7 @@ from tqdm import tqdm
 from plant import get_scenario
 
 from .comparison import OBSERVER_NAMES, make_observer, run_observer, seed_list, simulate_case
+from plant.errors import FmscalError
 
 __all__ = ["sweep", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS"]
 
@@ -51,17 +52,17 @@ def expand_settings(observers, grid=None):
     grid = dict(grid or {})
     for name in grid:
         if name not in observers:
-            raise ValueError(f"settings given for {name!r}, which is not swept; observers: {', '.join(observers)}")
+            raise FmscalError(f"settings given for {name!r}, which is not swept; observers: {', '.join(observers)}")
     variants = []
     for name in observers:
         if name not in OBSERVER_NAMES:
-            raise ValueError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+            raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
         params = grid.get(name) or {}
         keys = sorted(params)
         values = [list(params[k]) if np.ndim(params[k]) else [params[k]] for k in keys]
         for k, v in zip(keys, values):
             if not v:
-                raise ValueError(f"settings for {name}: {k} needs at least one value; got none")
+                raise FmscalError(f"settings for {name}: {k} needs at least one value; got none")
         for combo in itertools.product(*values):
             variants.append((name, dict(zip(keys, combo))))
     return variants
@@ -73,7 +74,7 @@ def _check_variants(variants, payload):
         try:
             make_observer(name, payload, None, settings)
         except TypeError as err:
-            raise ValueError(f"{name}: {err}") from err
+            raise FmscalError(f"{name}: {err}") from err
 
 
 def _run_case(case):
@@ -162,7 +163,7 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
     noise_scales = [float(f) for f in np.atleast_1d(noise_scales)]
     for f in noise_scales:
         if not (np.isfinite(f) and f >= 0):
-            raise ValueError(f"noise scales must be non-negative numbers; got {f}")
+            raise FmscalError(f"noise scales must be non-negative numbers; got {f}")
     variants = expand_settings(observers, settings)
     _check_variants(variants, get_scenario(scenarios[0]).payload)
     cases = [(i, sc, seed, f, duration, variants)

@@ -17,6 +17,7 @@ import numpy as np
 from plant import Log, Payload
 from plant._compile import BufferedCall, compile_function
 from plant.sensor import check_calibration
+from plant.errors import FmscalError
 
 __all__ = ["Observer", "ObserverResult", "settled", "check_sample", "initial_calibration", "split_calibration",
            "offset_from_c", "offset_std", "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
@@ -375,16 +376,16 @@ def check_sample(dt, pose, w_hat, first):
     """
     w_hat = np.asarray(w_hat, dtype=float)
     if w_hat.shape != (3,) or not np.all(np.isfinite(w_hat)):
-        raise ValueError(f"w_hat must be 3 finite numbers; got {w_hat!r}")
+        raise FmscalError(f"w_hat must be 3 finite numbers; got {w_hat!r}")
     if pose is not None:
         pose = np.asarray(pose, dtype=float)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise ValueError(f"pose must be 3 finite numbers or None; got {pose!r}")
+            raise FmscalError(f"pose must be 3 finite numbers or None; got {pose!r}")
     if first:
         if pose is None:
-            raise ValueError("the first sample after reset() needs a pose measurement")
+            raise FmscalError("the first sample after reset() needs a pose measurement")
     elif not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be positive; got {dt!r}")
+        raise FmscalError(f"dt must be positive; got {dt!r}")
     return pose, w_hat
 
 

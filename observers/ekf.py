@@ -15,6 +15,7 @@ from plant.sensor import check_calibration
 from .base import (DIVERGENCE_BOUND, ObserverResult, check_sample, initial_calibration, offset_std, settled,
                    split_calibration)
 from .noise_level import DEFAULT_TOLERANCE, NoiseLevel
+from plant.errors import FmscalError
 
 __all__ = ["AugmentedEKF"]
 
@@ -130,7 +131,7 @@ class AugmentedEKF:
         if self.adapt_q:
             q_S_max = as_positive_scalar(q_S_max, "q_S_max")
             if q_S_max < self.q_S:
-                raise ValueError(f"q_S_max must be at least q_S ({self.q_S:g}); got {q_S_max:g}")
+                raise FmscalError(f"q_S_max must be at least q_S ({self.q_S:g}); got {q_S_max:g}")
             self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
                                                                           allow_zero=True))
         self.offset = bool(offset)

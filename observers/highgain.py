@@ -44,6 +44,7 @@ from plant._checks import as_positive_scalar
 from . import _matrix as mx
 from .base import Observer
 from .gains import double_pole_gains
+from plant.errors import FmscalError
 
 __all__ = ["HighGainObserver", "DEFAULT_HIGH_GAIN", "REF4_HIGH_GAIN"]
 
@@ -188,7 +189,7 @@ class HighGainObserver(Observer):
         self.lam = as_positive_scalar(lam, "lam")
         self.gamma = as_positive_scalar(gamma, "gamma")
         if normalisation not in ("matrix", "scalar"):
-            raise ValueError(f"normalisation must be 'matrix' or 'scalar'; got {normalisation!r}")
+            raise FmscalError(f"normalisation must be 'matrix' or 'scalar'; got {normalisation!r}")
         self.normalisation = normalisation
         self.t_decay = None if t_decay is None else as_positive_scalar(t_decay, "t_decay")
         self.floor = as_positive_scalar(floor, "floor")

@@ -13,6 +13,7 @@ from plant import Log
 from plant._checks import as_positive_scalar
 
 from .least_squares import LeastSquares
+from plant.errors import FmscalError
 
 __all__ = ["estimate_latency"]
 
@@ -59,7 +60,7 @@ def estimate_latency(log, payload, max_latency=0.1, offset=False, window=0.5):
     part = log.head(n_search)
     k_max = int(round(max_latency / log.dt))
     if k_max * log.dt >= part.duration / 4:
-        raise ValueError(f"max_latency {max_latency:g} s is too long for a {part.duration:g} s log")
+        raise FmscalError(f"max_latency {max_latency:g} s is too long for a {part.duration:g} s log")
     seen = {}
 
     def cost(k):

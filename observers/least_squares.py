@@ -24,6 +24,7 @@ from plant.noise import estimate_noise
 
 from .base import ObserverResult, offset_from_c, offset_std
 from .highgain import regressors
+from plant.errors import FmscalError
 
 __all__ = ["LeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
 
@@ -170,7 +171,7 @@ class LeastSquares:
         Z = self._double_integrals(log)
         windows = [rows for rows in self._windows(log) if len(rows) >= 3]
         if len(windows) < 2:
-            raise ValueError(f"{log.name}: too short for least squares with {self.window:g} s windows: "
+            raise FmscalError(f"{log.name}: too short for least squares with {self.window:g} s windows: "
                              f"need at least 2 windows of 3 pose measurements, got {len(windows)}")
         groups = [[0], [1, 2]]           # channels of each parameter set: phi_1 <- theta; phi_2 <- X, Y
         phis, covs, residuals, histories = [], [], {}, []

@@ -10,6 +10,7 @@ from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenar
 from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
 from .simulate import integrate, rk4_step
 from .noise import estimate_noise
+from .errors import FmscalError
 from ._compile import compiler
 
 __all__ = [
@@ -21,5 +22,5 @@ __all__ = [
     "PAPER_PAYLOAD", "Payload",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
-    "integrate", "rk4_step", "estimate_noise", "compiler",
+    "integrate", "rk4_step", "estimate_noise", "compiler", "FmscalError",
 ]

@@ -2,11 +2,13 @@
 
 import numpy as np
 
+from .errors import FmscalError
+
 __all__ = ["as_finite_array", "as_positive_scalar"]
 
 
 def as_finite_array(value, shape, name):
-    """Return ``value`` as a float ndarray of ``shape``, or raise ValueError.
+    """Return ``value`` as a float ndarray of ``shape``, or raise FmscalError.
 
     Parameters
     ----------
@@ -25,22 +27,22 @@ def as_finite_array(value, shape, name):
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be numeric; got {value!r}") from None
+        raise FmscalError(f"{name} must be numeric; got {value!r}") from None
     if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape)):
         expected = "x".join("N" if s == -1 else str(s) for s in shape) or "scalar"
         actual = "x".join(str(a) for a in arr.shape) or "scalar"
-        raise ValueError(f"{name} has the wrong shape; expected {expected} instead of {actual}")
+        raise FmscalError(f"{name} has the wrong shape; expected {expected} instead of {actual}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite; got {value!r}")
+        raise FmscalError(f"{name} must be finite; got {value!r}")
     return arr
 
 
 def as_positive_scalar(value, name, allow_zero=False):
-    """Return ``value`` as a positive (or, with ``allow_zero``, non-negative) finite float, or raise ValueError."""
+    """Return ``value`` as a positive (or, with ``allow_zero``, non-negative) finite float, or raise FmscalError."""
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number; got {value!r}") from None
+        raise FmscalError(f"{name} must be a number; got {value!r}") from None
     if not np.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
-        raise ValueError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite; got {value!r}")
+        raise FmscalError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite; got {value!r}")
     return x

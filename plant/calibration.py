@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import FmscalError
 from .payload import Payload
 from .sensor import check_calibration
 
@@ -26,7 +27,7 @@ __all__ = ["Calibration", "CalibrationFileError", "file_sha256", "FORMAT"]
 FORMAT = "fmscal-calibration/1"
 
 
-class CalibrationFileError(ValueError):
+class CalibrationFileError(FmscalError):
     """A calibration file that cannot be used: the message names the problem."""
 
 
@@ -117,9 +118,9 @@ class Calibration:
         """
         w_hat = np.asarray(w_hat, dtype=float)
         if w_hat.ndim not in (1, 2) or w_hat.shape[-1] != 3:
-            raise ValueError(f"w_hat must have shape (3,) or (N, 3); got {w_hat.shape}")
+            raise FmscalError(f"w_hat must have shape (3,) or (N, 3); got {w_hat.shape}")
         if not np.all(np.isfinite(w_hat)):
-            raise ValueError("w_hat holds NaN or infinite values")
+            raise FmscalError("w_hat holds NaN or infinite values")
         return (w_hat - self.offset) @ self.S.T
 
     def to_dict(self):

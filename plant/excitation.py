@@ -3,6 +3,7 @@
 import numpy as np
 
 from ._checks import as_finite_array
+from .errors import FmscalError
 
 __all__ = ["Excitation", "PaperWrench", "Multisine", "SampledWrench"]
 
@@ -48,7 +49,7 @@ class Multisine(Excitation):
 
     def __init__(self, components):
         if len(components) != 3:
-            raise ValueError(f"Multisine needs 3 components (M, fx, fy); got {len(components)}")
+            raise FmscalError(f"Multisine needs 3 components (M, fx, fy); got {len(components)}")
         self.components = []
         for i, comp in enumerate(components):
             arr = as_finite_array(comp, (-1, 3), f"component {i} (amplitude, omega, phase)")
@@ -97,7 +98,7 @@ class SampledWrench(Excitation):
         self.t = as_finite_array(t, (-1,), "t")
         self.w = as_finite_array(w, (len(self.t), 3), "w")
         if len(self.t) < 2 or np.any(np.diff(self.t) <= 0):
-            raise ValueError("t must hold at least 2 strictly increasing times")
+            raise FmscalError("t must hold at least 2 strictly increasing times")
 
     def __call__(self, t):
         t = np.asarray(t, dtype=float)

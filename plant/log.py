@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import FmscalError
 from .payload import Payload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
@@ -33,7 +34,7 @@ _SAMPLING_TOLERANCE = 0.01        # relative spread of the time step accepted as
 MIN_SAMPLES = 10
 
 
-class LogError(ValueError):
+class LogError(FmscalError):
     """A log that cannot be used: the message names the problem."""
 
 
@@ -148,7 +149,7 @@ class Log:
         """
         latency = float(latency)
         if not (np.isfinite(latency) and 0 <= latency < self.duration / 2):
-            raise ValueError(f"latency must be in [0, {self.duration / 2:g}) s for this log; got {latency}")
+            raise FmscalError(f"latency must be in [0, {self.duration / 2:g}) s for this log; got {latency}")
         k = int(round(latency / self.dt))
         if k == 0:
             return self

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._checks import as_finite_array, as_positive_scalar
+from .errors import FmscalError
 
 __all__ = ["Payload", "PAPER_PAYLOAD"]
 
@@ -40,7 +41,7 @@ class Payload:
         try:
             rho = as_finite_array(self.rho, (2,), "rho")
         except ValueError as err:
-            raise ValueError(f"{err} (rho is the offset [rho_x, rho_y] in m)") from None
+            raise FmscalError(f"{err} (rho is the offset [rho_x, rho_y] in m)") from None
         object.__setattr__(self, "rho", tuple(float(r) for r in rho))
 
     def to_dict(self):

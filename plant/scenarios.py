@@ -15,6 +15,7 @@ from .log import Log, Truth
 from .payload import PAPER_PAYLOAD, Payload
 from .sensor import CalibrationSchedule, NoiseSpec
 from .simulate import integrate
+from .errors import FmscalError
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "PAPER_S", "TABLE_1", "draw_S"]
 
@@ -131,7 +132,7 @@ class Scenario:
                 n = int(np.ceil(self.duration))
                 return CalibrationSchedule(
                     [(float(k), PAPER_S + direction * self.drift * k / n) for k in range(n)])
-            raise ValueError(f"unknown S setting {self.S!r}")
+            raise FmscalError(f"unknown S setting {self.S!r}")
         return CalibrationSchedule(np.asarray(self.S, dtype=float))
 
     def generate(self, seed=0, noise_free=False):
@@ -228,4 +229,4 @@ def get_scenario(name):
     try:
         return SCENARIOS[name]
     except KeyError:
-        raise ValueError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}") from None
+        raise FmscalError(f"unknown scenario {name!r}; expected one of {', '.join(SCENARIOS)}") from None

@@ -4,12 +4,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import FmscalError
 from ._checks import as_finite_array
 
 __all__ = ["CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration"]
 
 
-class SingularCalibrationError(ValueError):
+class SingularCalibrationError(FmscalError):
     """A calibration matrix that cannot be inverted."""
 
 
@@ -54,11 +55,11 @@ class CalibrationSchedule:
         if not isinstance(steps, list) or (arr.ndim == 2 and arr.shape == (3, 3)):
             steps = [(0.0, steps)]
         if not steps:
-            raise ValueError("a calibration schedule needs at least one matrix")
+            raise FmscalError("a calibration schedule needs at least one matrix")
         self.starts = np.array([float(t0) for t0, _ in steps])
         self.matrices = np.array([check_calibration(S, f"S at t={t0}") for t0, S in steps])
         if self.starts[0] != 0.0 or np.any(np.diff(self.starts) <= 0):
-            raise ValueError(f"schedule start times must begin at 0 and increase; got {list(self.starts)}")
+            raise FmscalError(f"schedule start times must begin at 0 and increase; got {list(self.starts)}")
 
     @property
     def is_constant(self):
@@ -113,7 +114,7 @@ class NoiseSpec:
     def __post_init__(self):
         sd = as_finite_array(self.wrench_sd, (3,), "wrench_sd")
         if np.any(sd < 0) or self.angle_sd < 0 or self.position_sd < 0:
-            raise ValueError("noise standard deviations must be >= 0")
+            raise FmscalError("noise standard deviations must be >= 0")
         object.__setattr__(self, "wrench_sd", tuple(float(v) for v in sd))
         object.__setattr__(self, "angle_sd", float(self.angle_sd))
         object.__setattr__(self, "position_sd", float(self.position_sd))

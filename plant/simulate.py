@@ -8,6 +8,7 @@ import numpy as np
 from ._checks import as_finite_array
 from ._compile import BufferedCall, compile_function
 from .dynamics import state_derivative
+from .errors import FmscalError
 
 __all__ = ["integrate", "rk4_step"]
 
@@ -79,7 +80,7 @@ def integrate(payload, excitation, t, x0=None, compiled=True):
     """
     t = as_finite_array(t, (-1,), "t")
     if len(t) < 2 or np.any(np.diff(t) <= 0):
-        raise ValueError("t must hold at least 2 strictly increasing times")
+        raise FmscalError("t must hold at least 2 strictly increasing times")
     x = np.zeros(6) if x0 is None else as_finite_array(x0, (6,), "x0")
     dts = np.diff(t)
     w_start, w_mid, w_end = excitation(t[:-1]), excitation(t[:-1] + dts / 2), excitation(t[1:])
