@@ -25,11 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from observers import AugmentedEKF
+from observers import METHODS, AugmentedEKF, RecursiveObserver, make_observer
 from plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
 from plant.excitation import PaperWrench
 
-from .comparison import make_observer
 from .reproduce import REPRODUCED_OBSERVERS, REPRODUCED_SCENARIOS, reproduce
 from .sweep import SWEEP_OBSERVERS, sweep
 
@@ -38,9 +37,8 @@ __all__ = ["BenchSettings", "run_bench", "bench_markdown", "machine_description"
 #: The targets of issue 7, checked by :func:`bench_markdown`.
 TARGETS = {"compiled_over_numpy": 10.0, "steps_per_s_stretch": 1e6, "ekf_over_bare_filterpy": 2.0,
            "reproduce_s": 60.0, "sweep_s": 600.0}
-#: Observers whose compiled path is benchmarked; the ``-paper``/``-ref4`` variants share their code.
-_COMPILED = ("adaptive", "high-gain")
-_SAME_CODE = {"adaptive-paper": "adaptive", "high-gain-ref4": "high-gain"}
+#: Observers whose compiled path is benchmarked: every registered recursive observer.
+_COMPILED = tuple(m.name for m in METHODS.values() if issubclass(m.cls, RecursiveObserver))
 
 
 @dataclass(frozen=True)
@@ -170,9 +168,9 @@ def _simulator_speeds(s):
 
 def _numpy_us(name, observers, ekf):
     """Per-step cost of an observer's readable path (the EKF has one path)."""
-    if name == "ekf":
+    if name not in observers:
         return ekf["ekf_us"]
-    return observers[_SAME_CODE.get(name, name)]["numpy_us"]
+    return observers[name]["numpy_us"]
 
 
 def run_bench(settings=None, progress=True):

@@ -1,20 +1,19 @@
 """Calibrate a recorded log: one method, the fit diagnostics, and how far to trust the answer."""
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
-from observers import LeastSquares
+from observers import LeastSquares, ObserverResult, get_method, method_names
 from observers.latency import estimate_latency
-from observers.noise_level import DEFAULT_TOLERANCE
-from plant import NoiseSpec, estimate_noise
-
-from .comparison import make_observer
-from .metrics import calibration_error
+from plant import Calibration, NoiseSpec, estimate_noise
 from plant.errors import FmscalError
 
-__all__ = ["CALIBRATION_METHODS", "DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "calibrate", "DivergedError"]
+from .metrics import calibration_error
 
-#: Methods ``fmscal calibrate`` offers.
-CALIBRATION_METHODS = ("least-squares", "ekf", "high-gain", "adaptive")
+__all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "CalibrationReport", "calibrate",
+           "DivergedError"]
+
 #: The default: it never diverges, needs no noise model, and is within 1.5x of the most
 #: accurate method on full-rate logs; with poses at 50 Hz the EKF is more accurate
 #: (README, "Which observer to trust").
@@ -25,6 +24,67 @@ DEFAULT_MAX_LATENCY = 0.1
 
 class DivergedError(FmscalError):
     """The estimate diverged: there is no calibration to report."""
+
+
+@dataclass
+class CalibrationReport:
+    """What :func:`calibrate` returns: the calibration, and how far to trust it.
+
+    Attributes
+    ----------
+    calibration : plant.Calibration
+        ``S``, its one-sigma ``S_std`` (None where the method gives none),
+        the offset ``b`` and ``b_std`` (None without the offset), the
+        method, the payload and the latency; ready to ``save``.
+    result : observers.ObserverResult
+        The method's full run (histories, info).
+    converged : bool
+        The method's ``converged`` flag (:class:`observers.ObserverResult`).
+    noise : plant.NoiseSpec
+        The noise model used.
+    noise_estimated : list of str
+        Which parts of it came from the log (``"wrench"``, ``"pose"``).
+    latency_estimated : bool
+        The latency was estimated (True) or given.
+    warnings : list of str
+        Excitation and model consistency (from a least-squares fit of the
+        same log) and the method's own warnings, one line each.
+    fit : dict
+        The least-squares fit's diagnostics (:class:`observers.least_squares.FitReport`
+        without its warnings).
+    E : float or None
+        E of eq. (16) against a known truth, where one was given.
+    """
+
+    calibration: Calibration
+    result: ObserverResult
+    converged: bool
+    noise: NoiseSpec
+    noise_estimated: list
+    latency_estimated: bool
+    warnings: list = field(default_factory=list)
+    fit: dict = field(default_factory=dict)
+    E: float = None
+
+    def to_dict(self):
+        """The report as plain JSON-ready values (``fmscal calibrate --json``).
+
+        Returns
+        -------
+        dict
+            ``observer``, ``S``, ``S_std``, ``b``, ``b_std``, ``latency``,
+            ``latency_estimated``, ``converged``, ``noise``,
+            ``noise_estimated``, ``warnings``, ``fit`` and, with a truth, ``E``.
+        """
+        cal = self.calibration.to_dict()
+        out = {"observer": self.calibration.method, "S": cal["S"], "S_std": cal["S_std"], "b": cal["b"],
+               "b_std": cal["b_std"], "latency": float(self.calibration.latency),
+               "latency_estimated": self.latency_estimated, "converged": bool(self.converged),
+               "noise": self.noise.to_dict(), "noise_estimated": list(self.noise_estimated),
+               "warnings": list(self.warnings), "fit": self.fit}
+        if self.E is not None:
+            out["E"] = float(self.E)
+        return out
 
 
 def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise=None, truth=None,
@@ -40,7 +100,8 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     log : plant.Log
     payload : plant.Payload
     method : str
-        One of :data:`CALIBRATION_METHODS`.
+        A method the registry offers for calibration
+        (``observers.method_names(calibrates=True)``).
     pose_noise : (float, float), optional
         Standard deviations of the angle (rad) and of the positions (m).
     wrench_noise : (float, float, float), optional
@@ -60,22 +121,16 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
 
     Returns
     -------
-    dict
-        ``observer``, ``S`` (3x3 list), ``S_std`` (3x3 list or None),
-        ``b``, ``b_std`` (3 lists, or None without the offset),
-        ``latency`` (s), ``latency_estimated`` (bool), ``converged``, ``E`` (with ``truth``, else absent), ``noise`` (what
-        was used), ``noise_estimated`` (which parts came from the log),
-        ``warnings`` (excitation and model consistency, from a
-        least-squares fit of the same log), ``fit`` (its diagnostics) and
-        ``result`` (the :class:`observers.ObserverResult`).
+    CalibrationReport
 
     Raises
     ------
     DivergedError
         The method's estimate diverged.
     """
-    if method not in CALIBRATION_METHODS:
-        raise FmscalError(f"unknown method {method!r}; expected one of {', '.join(CALIBRATION_METHODS)}")
+    offered = method_names(calibrates=True)
+    if method not in offered:
+        raise FmscalError(f"unknown method {method!r}; expected one of {', '.join(offered)}")
     estimated = estimate_noise(log)
     noise = NoiseSpec(tuple(wrench_noise) if wrench_noise is not None else estimated.wrench_sd,
                       pose_noise[0] if pose_noise is not None else estimated.angle_sd,
@@ -87,37 +142,19 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     aligned = log.shift_poses(latency)
     reference = LeastSquares(payload, offset=offset)
     ls_result = reference.run(aligned)
-    if method == "least-squares":
+    if method == reference.name:
         result = ls_result
     else:
-        result = make_observer(method, payload, told_noise=noise, settings={"offset": offset}).run(aligned)
+        result = get_method(method).build(payload, noise, {"offset": offset}).run(aligned)
     if result.diverged:
         raise DivergedError(f"the {method} estimate diverged at t = {result.t[-1]:.3f} s; "
                             "no calibration (check the mass properties, units and excitation)")
-    warnings = list(reference.report["warnings"])
-    if "q_S_history" in result.info:
-        warnings += _random_walk_warning(result.t, result.info["q_S_history"])
-
-    def listed(a):
-        return None if a is None else np.asarray(a).tolist()
-
-    out = {"observer": result.observer, "S": result.S_hat.tolist(), "S_std": listed(result.S_std),
-           "b": listed(result.b), "b_std": listed(result.b_std), "latency": float(latency),
-           "latency_estimated": latency_estimated,
-           "converged": bool(result.converged), "noise": noise.to_dict(),
-           "noise_estimated": noise_estimated, "warnings": warnings,
-           "fit": {k: v for k, v in reference.report.items() if k != "warnings"}, "result": result}
-    if truth is not None:
-        out["E"] = calibration_error(result.S_hat, truth.S_at(log.t[-1]))
-    return out
-
-
-def _random_walk_warning(t, q_history):
-    """A warning if the EKF raised its random walk on S (its innovations said S moved)."""
-    raised = q_history > 1.01 * q_history.min()
-    if not raised.any():
-        return []
-    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
-    return [f"the EKF raised its random walk on S for {raised.sum() * dt:.1f} s (first at t = "
-            f"{t[np.argmax(raised)]:.1f} s): S may have changed during the log, or the noise model is "
-            f"more than {DEFAULT_TOLERANCE * 100:g} % off"]
+    warnings = list(ls_result.warnings)
+    warnings += [w for w in result.warnings if w not in warnings]
+    calibration = Calibration(S=result.S_hat, payload=payload, method=result.observer, S_std=result.S_std,
+                              b=result.b, b_std=result.b_std, latency=float(latency))
+    E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
+    return CalibrationReport(calibration=calibration, result=result, converged=bool(result.converged),
+                             noise=noise, noise_estimated=noise_estimated, latency_estimated=latency_estimated,
+                             warnings=warnings, fit={k: v for k, v in reference.report.items() if k != "warnings"},
+                             E=E)

@@ -89,9 +89,11 @@ def _add_check_gains(sub):
                        description="Check observer gains with python-control: poles of A - K C, "
                                    "observability of (A, C), the Lyapunov P, and whether assumption 2 "
                                    "of Theorem 1 holds with P = I.")
-    p.add_argument("--config", choices=["paper", "adaptive", "high-gain", "high-gain-ref4"], default="paper",
-                   help="paper: eq. (14) as printed; adaptive: the default configuration's gains; "
-                        "high-gain, high-gain-ref4: the reconstruction of [4] (poles at -LAM)")
+    from observers import METHODS, RecursiveObserver
+    configs = [name for name, m in METHODS.items() if issubclass(m.cls, RecursiveObserver)]
+    p.add_argument("--config", choices=["paper", *configs], default="paper",
+                   help="the gains of one observer: " + ", ".join(configs) + "; paper is adaptive-paper, "
+                        "eq. (14) as printed; with --lam, the high-gain observer with poles at -LAM")
     p.add_argument("--lam", type=float, default=None,
                    help="high-gain parameter in rad/s for the high-gain configurations")
     p.add_argument("--json", action="store_true")
@@ -99,18 +101,16 @@ def _add_check_gains(sub):
 
 
 def cmd_check_gains(args):
-    from observers import AdaptiveObserver, HighGainObserver, check_gains
+    from observers import HighGainObserver, PaperAdaptiveObserver, check_gains, make_observer
     from plant import PAPER_PAYLOAD
-    if args.lam is not None and not args.config.startswith("high-gain"):
+    if args.config == "paper":
+        obs = PaperAdaptiveObserver(PAPER_PAYLOAD)
+    else:
+        obs = make_observer(args.config, PAPER_PAYLOAD)
+    if args.lam is not None and not isinstance(obs, HighGainObserver):
         raise CliError(f"--lam applies to the high-gain configurations; got --config {args.config}")
     if args.lam is not None:
-        positive(args.lam, "--lam")
-    obs = {"paper": lambda: AdaptiveObserver.paper(PAPER_PAYLOAD),
-           "adaptive": lambda: AdaptiveObserver(PAPER_PAYLOAD),
-           "high-gain": lambda: HighGainObserver(PAPER_PAYLOAD),
-           "high-gain-ref4": lambda: HighGainObserver.ref4(PAPER_PAYLOAD)}[args.config]()
-    if args.lam is not None:
-        obs = HighGainObserver(PAPER_PAYLOAD, lam=args.lam)
+        obs = HighGainObserver(PAPER_PAYLOAD, lam=positive(args.lam, "--lam"))
     report = check_gains(obs.K1, obs.K2)
     if args.json:
         print(json.dumps({k: {"poles": [[complex(p).real, complex(p).imag] for p in v["poles"]],
@@ -143,13 +143,13 @@ def cmd_reproduce(args):
 
 
 def _add_compare(sub):
+    from observers import METHODS
     from plant import SCENARIOS
-    from .comparison import OBSERVER_NAMES
     p = sub.add_parser("compare", help="run the observers side by side on identical data",
                        description="Run every observer on the same simulated logs (same data, same "
                                    "initial S_hat) over scenarios and seeds; print the table of E, "
                                    "convergence time and cost. Scenarios: " + ", ".join(SCENARIOS))
-    add_scenarios_and_observers(p, OBSERVER_NAMES)
+    add_scenarios_and_observers(p, METHODS)
     p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0 .. N-1 (default 1)")
     p.add_argument("--duration", type=float, metavar="S", help="run length in s (default: each scenario's)")
     p.add_argument("--json", action="store_true", help="print a JSON list of rows (strict JSON) instead")
@@ -158,14 +158,14 @@ def _add_compare(sub):
 
 
 def cmd_compare(args):
+    from observers import get_method
     from plant import get_scenario
-    from .comparison import OBSERVER_NAMES, compare, summarise, summary_markdown
+    from .comparison import compare, summarise, summary_markdown
     from .plots import plot_error_histories
     for name in args.scenario:
-        get_scenario(name)                      # ValueError naming the choices
+        get_scenario(name)                      # FmscalError naming the choices
     for name in args.observer:
-        if name not in OBSERVER_NAMES:
-            raise CliError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+        get_method(name)                        # FmscalError naming the methods
     if args.seeds < 1:
         raise CliError(f"--seeds must be at least 1; got {args.seeds}")
     if args.duration is not None:

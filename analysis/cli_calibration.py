@@ -11,7 +11,8 @@ from .cli_common import CliError, positive, strict
 
 
 def add_calibrate(sub):
-    from .calibrate import CALIBRATION_METHODS, DEFAULT_MAX_LATENCY, DEFAULT_METHOD
+    from observers import method_names
+    from .calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD
     p = sub.add_parser("calibrate", help="estimate S from a recorded log",
                        description="Estimate the calibration matrix S from a log (t,theta,x,y,M,fx,fy; "
                                    "rad, m, N m, N) and the payload's mass properties. Prints S_hat with "
@@ -22,7 +23,7 @@ def add_calibrate(sub):
     p.add_argument("--inertia", type=float, required=True, metavar="KGM2", help="I_G about the centre of mass")
     p.add_argument("--rho", type=float, nargs=2, required=True, metavar=("RX", "RY"),
                    help="offset of the centre of mass from the sensor, body frame, m (negative values as written)")
-    p.add_argument("--observer", choices=CALIBRATION_METHODS, default=DEFAULT_METHOD,
+    p.add_argument("--observer", choices=method_names(calibrates=True), default=DEFAULT_METHOD,
                    help=f"method (default {DEFAULT_METHOD}: never diverges, needs no noise model; "
                         "ekf is more accurate with poses slower than the sensor)")
     p.add_argument("--pose-noise", type=float, nargs=2, metavar=("SD_RAD", "SD_M"),
@@ -44,7 +45,9 @@ def add_calibrate(sub):
 
 
 def cmd_calibrate(args):
-    from plant import Calibration, Payload, file_sha256, read_log, read_truth
+    from dataclasses import replace
+
+    from plant import Payload, file_sha256, read_log, read_truth
     from .calibrate import calibrate
     from .plots import plot_S_entries
     for name, value in (("--mass", args.mass), ("--inertia", args.inertia)):
@@ -63,17 +66,15 @@ def cmd_calibrate(args):
     payload = Payload(args.mass, args.inertia, tuple(args.rho))
     log = read_log(args.log)
     truth = read_truth(args.truth) if args.truth else None
-    out = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
-                    offset=args.offset, latency=args.latency, max_latency=args.max_latency)
+    report = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
+                       offset=args.offset, latency=args.latency, max_latency=args.max_latency)
     if args.save:
-        Calibration(S=out["S"], payload=payload, method=out["observer"], S_std=out["S_std"], b=out["b"],
-                    b_std=out["b_std"], log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
-                    latency=out["latency"]).save(args.save)
-    for warning in out["warnings"]:
+        replace(report.calibration, log_name=Path(args.log).name, log_sha256=file_sha256(args.log)).save(args.save)
+    for warning in report.warnings:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
     if args.plot:
-        plot_S_entries([out["result"]], truth, args.plot, f"{Path(args.log).name}: entries of S_hat")
-    result = out.pop("result")
+        plot_S_entries([report.result], truth, args.plot, f"{Path(args.log).name}: entries of S_hat")
+    result, out = report.result, report.to_dict()
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
         return

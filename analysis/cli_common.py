@@ -35,9 +35,9 @@ def positive(value, name):
 
 def add_scenarios_and_observers(p, default_observers):
     """``--scenario`` and ``--observer`` (several names each), as compare and sweep take them."""
+    from observers import METHODS
     from plant import SCENARIOS
-    from .comparison import OBSERVER_NAMES
     p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
                    help="one or more of: " + ", ".join(SCENARIOS))
     p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
-                   help="one or more of: " + ", ".join(OBSERVER_NAMES) + f" (default: {' '.join(default_observers)})")
+                   help="one or more of: " + ", ".join(METHODS) + f" (default: {' '.join(default_observers)})")

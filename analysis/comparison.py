@@ -4,57 +4,20 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from observers import AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares
+from observers import METHODS, get_method, method_label
 from plant import get_scenario
 from plant._checks import as_positive_scalar
-
-from .metrics import convergence_time, display_name, error_history
 from plant.errors import FmscalError
 
-__all__ = ["OBSERVER_NAMES", "make_observer", "simulate_case", "run_observer", "run_case", "seed_list", "compare",
-           "summarise", "summary_markdown",
+from .metrics import convergence_time, error_history
+
+__all__ = ["simulate_case", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
            "CHECKPOINTS"]
 
-#: Every observer the toolkit compares, by the name tables use.
-OBSERVER_NAMES = ("adaptive", "adaptive-paper", "high-gain", "high-gain-ref4", "ekf", "least-squares")
 #: Columns of a sweep's table that tell its rows apart besides scenario and observer.
 _SWEEP_KEYS = ("noise_scale", "settings")
 #: Times (s) at which E is reported, where the run is that long.
 CHECKPOINTS = (10.0, 30.0, 100.0)
-
-
-def make_observer(name, payload, told_noise=None, settings=None):
-    """An observer by name, with its documented default tuning.
-
-    Parameters
-    ----------
-    name : str
-        One of :data:`OBSERVER_NAMES`.
-    payload : plant.Payload
-    told_noise : plant.NoiseSpec, optional
-        What an observer with a noise model (the EKF) is told; None: it
-        estimates the noise from the log.
-    settings : dict, optional
-        Keyword arguments passed to the observer's constructor (gains, ...).
-
-    Returns
-    -------
-    observers.Observer, observers.AugmentedEKF or observers.LeastSquares
-    """
-    settings = dict(settings or {})
-    if name == "adaptive":
-        return AdaptiveObserver(payload, **settings)
-    if name == "adaptive-paper":
-        return AdaptiveObserver(payload, literal=True, **settings)
-    if name == "high-gain":
-        return HighGainObserver(payload, **settings)
-    if name == "high-gain-ref4":
-        return HighGainObserver.ref4(payload, **settings)
-    if name == "ekf":
-        return AugmentedEKF(payload, noise=told_noise, **settings)
-    if name == "least-squares":
-        return LeastSquares(payload, **settings)
-    raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
 
 
 def _checkpoint_column(t_check):
@@ -95,7 +58,7 @@ def simulate_case(scenario, seed, duration=None, noise_scale=1.0):
         sc = sc.with_(wrench_noise=sc.wrench_noise * noise_scale, angle_sd=sc.angle_sd * noise_scale,
                       position_sd=sc.position_sd * noise_scale)
     log, truth, _ = sc.generate(int(seed))
-    return sc, log, truth, truth.noise.scaled(truth.extra.get("told_noise", 1.0))
+    return sc, log, truth, truth.told_noise_spec()
 
 
 def run_observer(name, log, truth, payload, told_noise=None, settings=None, history=False):
@@ -104,10 +67,10 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     Parameters
     ----------
     name : str
-        One of :data:`OBSERVER_NAMES`.
+        A method of :data:`observers.METHODS`.
     log : plant.Log
     truth : plant.Truth
-        ``S`` against time, and ``S0`` (every observer starts from it).
+        ``S`` against time, and ``S0`` (every online method starts from it).
     payload : plant.Payload
     told_noise : plant.NoiseSpec, optional
     settings : dict, optional
@@ -125,10 +88,11 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     (t, E) : tuple of ndarray, only with ``history=True``
     """
     settings = dict(settings or {})
-    if truth.extra.get("offset") is not None:     # a rig with an offset: every method estimates it
+    if truth.offset is not None:                  # a rig with an offset: every method estimates it
         settings.setdefault("offset", True)
-    log = log.shift_poses(truth.extra.get("latency") or 0.0)     # and sees the streams lined up
-    result = make_observer(name, payload, told_noise, settings).run(log, truth.S0)
+    log = log.shift_poses(truth.latency)          # and sees the streams lined up
+    method = get_method(name)
+    result = method.build(payload, told_noise, settings).run(log, truth.S0 if method.online else None)
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     row = {"observer": name, "duration": float(log.duration),
            "E": np.nan if result.diverged else float(E[-1]),
@@ -150,7 +114,7 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     return row, (result.t[::step], E[::step])
 
 
-def run_case(scenario, seed, observers=OBSERVER_NAMES, duration=None, settings=None, histories=False):
+def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=None, histories=False):
     """Run several observers on one simulated log: same data, same ``S0``.
 
     Parameters
@@ -159,7 +123,7 @@ def run_case(scenario, seed, observers=OBSERVER_NAMES, duration=None, settings=N
     seed : int
         Seeds the log (noise, ``S``, ``S0``).
     observers : sequence of str
-        Names from :data:`OBSERVER_NAMES`.
+        Names from :data:`observers.METHODS`.
     duration : float, optional
         Run length in s; default the scenario's.
     settings : dict, optional
@@ -191,7 +155,7 @@ def seed_list(seeds):
     return seeds
 
 
-def compare(scenarios=("paper",), seeds=1, observers=OBSERVER_NAMES, duration=None, settings=None,
+def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=None, settings=None,
             progress=True, histories=False):
     """Run observers over scenarios and seeds on identical data.
 
@@ -205,7 +169,7 @@ def compare(scenarios=("paper",), seeds=1, observers=OBSERVER_NAMES, duration=No
     seeds : int or sequence of int
         ``N`` means seeds ``0 .. N-1``.
     observers : sequence of str
-        Names from :data:`OBSERVER_NAMES`.
+        Names from :data:`observers.METHODS`.
     duration : float, optional
         Run length in s; default each scenario's.
     settings : dict, optional
@@ -230,8 +194,7 @@ def compare(scenarios=("paper",), seeds=1, observers=OBSERVER_NAMES, duration=No
     """
     seeds = seed_list(seeds)
     for name in observers:
-        if name not in OBSERVER_NAMES:
-            raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+        get_method(name)                        # FmscalError naming the methods
     scenarios = [get_scenario(s).name for s in scenarios]
     rows, curves = [], {}
     cases = [(s, seed) for s in scenarios for seed in seeds]
@@ -294,7 +257,7 @@ def summary_markdown(summary, title="Observer comparison"):
     head += ["median convergence time [s]", "converged", "diverged", "cost [us/step]"]
     lines = [f"# {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in summary.iterrows():
-        cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], display_name(r["observer"]), str(r["seeds"]),
+        cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], method_label(r["observer"]), str(r["seeds"]),
                  f"{_fmt(r['E_median'])} [{_fmt(r['E_q25'])}, {_fmt(r['E_q75'])}]"]
         cells += [_fmt(r[c]) for c in checkpoints]
         cells += [_fmt(r["convergence_time_median"], ".1f"), f"{r['converged_runs']}/{r['seeds']}",

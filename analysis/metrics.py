@@ -4,8 +4,7 @@ import numpy as np
 
 from plant._checks import as_finite_array
 
-__all__ = ["calibration_error", "error_history", "convergence_time", "CONVERGENCE_THRESHOLD",
-           "display_name"]
+__all__ = ["calibration_error", "error_history", "convergence_time", "CONVERGENCE_THRESHOLD"]
 
 #: Default threshold on E for :func:`convergence_time`.
 CONVERGENCE_THRESHOLD = 0.05
@@ -72,14 +71,3 @@ def convergence_time(t, E, threshold=CONVERGENCE_THRESHOLD):
     if above[-1] == len(E) - 1:
         return None
     return float(t[above[-1] + 1])
-
-
-_DISPLAY = {"high-gain": "high-gain (reconstruction of [4])",
-            "high-gain-ref4": "high-gain-ref4 (reconstruction of [4], as the seed paper describes it)",
-            "ekf": "ekf (after [3])",
-            "least-squares": "least-squares (offline reference)"}
-
-
-def display_name(observer):
-    """How tables show an observer: the high-gain observer is always called a reconstruction."""
-    return _DISPLAY.get(observer, observer)

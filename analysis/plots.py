@@ -6,7 +6,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .metrics import display_name  # noqa: E402
+from observers import method_label  # noqa: E402
 
 __all__ = ["plot_S_entries", "plot_error_histories"]
 
@@ -31,7 +31,7 @@ def plot_S_entries(results, truth, path, title):
         for j in range(3):
             ax = axes[i, j]
             for r in results:
-                ax.plot(r.t[::step], r.S_hat_history[::step, i, j], lw=1, label=display_name(r.observer))
+                ax.plot(r.t[::step], r.S_hat_history[::step, i, j], lw=1, label=method_label(r.observer))
             ax.set_title(f"s_{i + 1}{j + 1}", fontsize=9)
             if S_true is not None:
                 ax.plot(t_all[::step], S_true[:, i, j], "k--", lw=1, label="true")
@@ -59,7 +59,7 @@ def plot_error_histories(curves, path, title):
     """
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for name, (t, E) in curves.items():
-        ax.semilogy(t, np.maximum(E, 1e-12), lw=1, label=display_name(name))
+        ax.semilogy(t, np.maximum(E, 1e-12), lw=1, label=method_label(name))
     ax.set_xlabel("t [s]")
     ax.set_ylabel("E = ||I - S_hat S^-1||_2")
     ax.set_title(title)

@@ -5,28 +5,31 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from observers import METHODS, make_observer, method_label, method_names
 from plant import get_scenario
 
-from .comparison import make_observer
-from .metrics import convergence_time, display_name, error_history
+from .metrics import convergence_time, error_history
 from .plots import plot_S_entries
 
 __all__ = ["reproduce", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
-#: Section 4's claims: E at 100 s for this observer and for the high-gain observer of [4].
-PAPER_CLAIMS = {"adaptive-paper": 9.1106e-4, "high-gain-ref4": 3.6700e-2, "transient_s": 70.0}
+#: Section 4's claims: E at 100 s for the paper's observer and for the high-gain observer of [4]
+#: (:attr:`observers.Method.paper_claim`), and the paper observer's transient, s.
+PAPER_CLAIMS = {**{m.name: m.paper_claim for m in METHODS.values() if m.paper_claim is not None},
+                "transient_s": 70.0}
+#: The method whose transient the paper claims: its own observer as printed.
+_PAPER_OBSERVER = "adaptive-paper"
 
 _FIGURES = [("paper", "Fig. 2"), ("noisy", "Fig. 3"), ("time-varying", "Fig. 4")]
 #: The scenarios of section 4, in figure order.
 REPRODUCED_SCENARIOS = tuple(name for name, _ in _FIGURES)
-#: The observers ``fmscal reproduce`` runs.
-REPRODUCED_OBSERVERS = ("adaptive-paper", "adaptive", "high-gain-ref4", "high-gain", "ekf")
+#: The observers ``fmscal reproduce`` runs: every online method of the registry.
+REPRODUCED_OBSERVERS = method_names(online=True)
 
 
 def _observers(payload, truth):
     """The observers compared, each with its documented default tuning."""
-    told = truth.noise.scaled(truth.extra.get("told_noise", 1.0))
-    return [make_observer(name, payload, told) for name in REPRODUCED_OBSERVERS]
+    return [make_observer(name, payload, truth.told_noise_spec()) for name in REPRODUCED_OBSERVERS]
 
 
 def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
@@ -103,20 +106,20 @@ def summary_markdown(rows, seed, duration_scale):
         if r is None:
             continue
         claim = PAPER_CLAIMS.get(name)
-        transient = f"{PAPER_CLAIMS['transient_s']:g}" if name == "adaptive-paper" else "-"
-        lines.append(f"| {display_name(name)} | {_fmt(claim, '.4g') if claim else '-'} | {_fmt(r['E_100'])} | "
+        transient = f"{PAPER_CLAIMS['transient_s']:g}" if name == _PAPER_OBSERVER else "-"
+        lines.append(f"| {method_label(name)} | {_fmt(claim, '.4g') if claim else '-'} | {_fmt(r['E_100'])} | "
                      f"{_fmt(r['E_median_last_10s'])} | "
                      f"{_fmt(r['convergence_time'], '.1f')} | {transient} |")
     lines += ["", "## Every scenario", "",
               "| scenario | observer | E at 100 s | E at end | convergence time [s] | diverged | converged | wall time [s] |",
               "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['scenario']} | {display_name(r['observer'])} | {_fmt(r['E_100'])} | {_fmt(r['E_end'])} | "
+        lines.append(f"| {r['scenario']} | {method_label(r['observer'])} | {_fmt(r['E_100'])} | {_fmt(r['E_end'])} | "
                      f"{_fmt(r['convergence_time'], '.1f')} | {r['diverged']} | {r['converged']} | "
                      f"{r['wall_time']:.1f} |")
     lines += ["", "## S_hat at 100 s, paper scenario", ""]
     for name, r in paper_rows.items():
-        lines.append(f"{display_name(name)}:")
+        lines.append(f"{method_label(name)}:")
         lines.append("```")
         lines += ["  " + "  ".join(f"{v:+.4f}" for v in row) for row in np.asarray(r["S_hat_100"])]
         lines.append("```")

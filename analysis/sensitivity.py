@@ -26,7 +26,7 @@ import pandas as pd
 
 from plant import Payload, get_scenario
 
-from .comparison import make_observer
+from observers import make_observer
 from .metrics import calibration_error
 from plant.errors import FmscalError
 
@@ -108,7 +108,7 @@ def sensitivity(scenario="paper", errors=(-0.1, -0.05, -0.01, 0.01, 0.05, 0.1), 
         From :data:`PARAMETERS`.
     method : str
         The estimator run with the wrong payload
-        (:data:`analysis.comparison.OBSERVER_NAMES`).
+        (:data:`observers.METHODS`).
     seed : int
     duration : float
         Length of the log, s.
@@ -128,7 +128,8 @@ def sensitivity(scenario="paper", errors=(-0.1, -0.05, -0.01, 0.01, 0.05, 0.1), 
     S_true = truth.S_at(log.t[-1])
 
     def measured(payload):
-        result = make_observer(method, payload, truth.noise).run(log, truth.S0)
+        obs = make_observer(method, payload, truth.noise)
+        result = obs.run(log, truth.S0 if obs.online else None)     # an offline fit takes no start
         return np.nan if result.diverged else calibration_error(result.S_hat, S_true)
 
     floor = measured(sc.payload)

@@ -12,17 +12,18 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from observers import get_method, make_observer, method_names
 from plant import get_scenario
-
-from .comparison import OBSERVER_NAMES, make_observer, run_observer, seed_list, simulate_case
 from plant.errors import FmscalError
+
+from .comparison import run_observer, seed_list, simulate_case
 
 __all__ = ["sweep", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS"]
 
 #: Columns that depend on the machine and the moment, not on the data.
 TIMING_COLUMNS = ("wall_time", "wall_per_sim_s", "us_per_step")
-#: The three observers the toolkit compares, swept by default.
-SWEEP_OBSERVERS = ("adaptive", "high-gain", "ekf")
+#: The three observers the toolkit compares, swept by default (the registry's ``design`` role).
+SWEEP_OBSERVERS = method_names(role="design")
 
 
 def settings_label(settings):
@@ -38,7 +39,7 @@ def expand_settings(observers, grid=None):
     Parameters
     ----------
     observers : sequence of str
-        Names from :data:`analysis.comparison.OBSERVER_NAMES`.
+        Names from :data:`observers.METHODS`.
     grid : dict, optional
         ``{observer: {parameter: [values]}}``; the product of each
         observer's value lists gives its variants. Observers absent from
@@ -55,8 +56,7 @@ def expand_settings(observers, grid=None):
             raise FmscalError(f"settings given for {name!r}, which is not swept; observers: {', '.join(observers)}")
     variants = []
     for name in observers:
-        if name not in OBSERVER_NAMES:
-            raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
+        get_method(name)                  # FmscalError naming the methods
         params = grid.get(name) or {}
         keys = sorted(params)
         values = [list(params[k]) if np.ndim(params[k]) else [params[k]] for k in keys]
@@ -136,7 +136,7 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
     noise_scales : sequence of float
         Each multiplies every noise standard deviation of the scenario.
     observers : sequence of str
-        Names from :data:`analysis.comparison.OBSERVER_NAMES`.
+        Names from :data:`observers.METHODS`.
     settings : dict, optional
         ``{observer: {parameter: [values]}}``: a grid of constructor
         arguments (:func:`expand_settings`).

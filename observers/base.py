@@ -1,11 +1,20 @@
-"""The interface every observer shares, and the machinery that runs them.
+"""The one contract every method of the toolkit follows: :class:`Observer`.
 
-An observer is a discrete-time system with a packed state vector ``z``. Each
-implementation writes its update once, in :meth:`Observer._transition`, with
-operations that work on numpy arrays and on casadi symbols. :meth:`Observer.run`
-then either loops over the log in numpy (the readable path) or compiles the
-same transition with casadi and runs it in chunks (the fast path): both give the
-same numbers.
+Every method (the observers, the EKF, the offline references) is an
+:class:`Observer`: built as ``Method(payload, ..., offset=False)``, run on a
+whole log with ``run(log, S0=None) -> ObserverResult``. The base class does
+what they share, once: input validation, timing, the offset ``b`` from
+``[S | c]``, the uncertainties from a covariance, the ``converged`` and
+``diverged`` flags. A method writes only what is its own:
+
+* an online method implements :meth:`Observer._start` (the first sample),
+  :meth:`Observer._advance` (one step) and :meth:`Observer._current` (its
+  estimate now); :meth:`Observer.reset` / :meth:`Observer.step` then work
+  sample by sample for a live sensor, and :meth:`Observer.run` loops the same
+  three over a log. :class:`RecursiveObserver` goes further: its step is one
+  function of numbers or casadi symbols, compiled and run in chunks;
+* an offline method (``online = False``) implements
+  :meth:`Observer._estimate` over the whole log, and has no ``step``.
 """
 
 import time
@@ -15,102 +24,61 @@ import casadi as ca
 import numpy as np
 
 from plant import Log, Payload
-from plant._compile import BufferedCall, compile_function
-from plant.sensor import check_calibration
+from plant._compile import ChunkedSteps
 from plant.errors import FmscalError
+from plant.sensor import check_calibration
 
-__all__ = ["Observer", "ObserverResult", "settled", "check_sample", "initial_calibration", "split_calibration",
-           "offset_from_c", "offset_std", "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
+from .convergence import DIVERGENCE_BOUND, settled
+from .result import ObserverResult, initial_calibration, offset_std, split_calibration
+from .samples import check_sample, pack_input
+from .state import INPUT
 
-#: A run whose calibration estimate has an entry beyond this is declared diverged.
-DIVERGENCE_BOUND = 1e3
-#: ``converged`` looks at this final fraction of the run ...
-SETTLE_FRACTION = 0.2
-#: ... and asks that ``S_hat`` stay within this relative 2-norm distance of its final value.
-SETTLE_TOLERANCE = 0.05
+__all__ = ["Observer", "RecursiveObserver", "Estimate", "log_inputs"]
+
 _CHUNK = 1000          # steps per compiled call
 
 
-def settled(S_history, fraction=SETTLE_FRACTION, tolerance=SETTLE_TOLERANCE):
-    """Whether an estimate settled: no truth needed.
-
-    True when, over the last ``fraction`` of the run, every ``S_hat(t)`` is
-    within ``tolerance`` of the final ``S_hat`` in relative induced 2-norm.
-
-    Parameters
-    ----------
-    S_history : ndarray, shape (N, 3, 3)
-
-    Returns
-    -------
-    bool
-    """
-    n = len(S_history)
-    tail = S_history[int(n * (1 - fraction)):]
-    final = S_history[-1]
-    bound = tolerance * max(np.linalg.norm(final, 2), 1e-12)
-    gap = tail - final
-    # the 2-norm never exceeds the Frobenius norm: take SVDs only where the cheap bound fails
-    unsure = np.sqrt(np.einsum("nij,nij->n", gap, gap)) > bound
-    return bool(not unsure.any() or np.max(np.linalg.norm(gap[unsure], ord=2, axis=(1, 2))) <= bound)
-
-
 @dataclass
-class ObserverResult:
-    """What an observer's :meth:`Observer.run` returns.
+class Estimate:
+    """What a method's whole-log pass produces, before the base turns it into a result.
 
     Attributes
     ----------
-    observer : str
-        Name used in tables: ``adaptive``, ``adaptive-paper``, ``high-gain``,
-        ``ekf``, ``least-squares``.
-    t : ndarray, shape (N,)
-        Times, s. Shorter than the log's if the run diverged and stopped.
-    S_hat : ndarray, shape (3, 3)
-        The final estimate of ``S``.
-    S_hat_history : ndarray, shape (N, 3, 3)
-    x_hat_history : ndarray, shape (N, 6)
-        ``[theta, theta', X, X', Y, Y']``.
-    S_std : ndarray, shape (3, 3), or None
-        One-sigma uncertainty of each entry, where the method has one.
+    calibration : ndarray, shape (N, 3 n)
+        ``[S_hat | c_hat]`` after each sample, row order (``n`` = 3, or 4
+        with the offset). Shorter than the log where the run diverged.
+    x : ndarray, shape (N, 6)
+        The motion estimate ``[theta, theta', X, X', Y, Y']``.
+    cov : ndarray, shape (3 n, 3 n), or None
+        Covariance of the final ``[S_hat | c_hat]`` (row order), where the
+        method has one: gives ``S_std`` and ``b_std``.
     diverged : bool
-        The estimate left ``|s_ij| < DIVERGENCE_BOUND`` or became non-finite;
-        the run stopped at the last finite step.
-    converged : bool
-        Not diverged, and the estimate settled (:func:`settled`) over the
-        last 20 % of the run.
-    wall_time : float
-        Seconds of computation.
+    checks_passed : bool
+        The method's own diagnostics of the log (excitation, consistency)
+        found nothing wrong.
     info : dict
-        Method-specific extras (noise estimates, fit diagnostics, ...).
-    b : ndarray, shape (3,), or None
-        The sensor's offset in ``w = S (w_hat - b)`` (N m, N), where the
-        method was asked to estimate it; None otherwise.
-    b_std : ndarray, shape (3,), or None
-        Its one-sigma uncertainty, where the method has one.
+    warnings : list of str
     """
 
-    observer: str
-    t: np.ndarray
-    S_hat: np.ndarray
-    S_hat_history: np.ndarray
-    x_hat_history: np.ndarray
-    S_std: np.ndarray = None
+    calibration: np.ndarray
+    x: np.ndarray
+    cov: np.ndarray = None
     diverged: bool = False
-    converged: bool = False
-    wall_time: float = 0.0
+    checks_passed: bool = True
     info: dict = field(default_factory=dict)
-    b: np.ndarray = None
-    b_std: np.ndarray = None
+    warnings: list = field(default_factory=list)
+
+
+def log_inputs(log):
+    """Every sample's step input ``[has_pose, theta, X, Y, M, f_x, f_y]``, shape (N, 7).
+
+    Pose entries are zero where the log has no pose (:data:`observers.state.INPUT`).
+    """
+    return np.column_stack([log.has_pose, np.nan_to_num(log.pose), log.w_hat])
 
 
 class Observer:
-    """Base class: estimates the motion and ``S`` from pose and raw reading.
-
-    Subclasses set :attr:`name`, the slice :attr:`_X` (6 motion states) of
-    the packed state, keep ``[S_hat | c_hat]`` (``3 x n`` row order, ``n`` =
-    :attr:`n_cols`) right after it, and implement :meth:`_initial_state` and
-    :meth:`_transition`.
+    """Base class of every method: estimates ``S`` (and the motion) from poses and raw readings.
 
     Parameters
     ----------
@@ -118,52 +86,106 @@ class Observer:
         The payload's known mass properties.
     offset : bool
         Also estimate the sensor's offset ``b`` in ``w = S (w_hat - b)``:
-        the observer runs on ``w = S w_hat + c`` (the reading augmented by a
+        the method runs on ``w = S w_hat + c`` (the reading augmented by a
         constant 1, ``[S | c]`` in place of ``S``) and reports
         ``b = -S^-1 c`` in ``result.b``. Off by default, as in the paper.
 
+    Attributes
+    ----------
+    name : str
+        The method's name in the registry (:data:`observers.METHODS`).
+    online : bool
+        True: works sample by sample (:meth:`reset`, :meth:`step`); False:
+        fits a whole log (:meth:`run` only).
+    n_cols : int
+        Columns of the estimated ``[S | c]``: 3, or 4 with the offset.
+
     Notes
     -----
-    Step-by-step use for a live sensor::
+    Step-by-step use of an online method for a live sensor::
 
         obs.reset(S0)                # S0=None: identity, a sensor's nominal calibration
         for dt, pose, w_hat in stream:
             x_hat, S_hat = obs.step(dt, pose, w_hat)   # pose=None: no measurement
 
     The first :meth:`step` after :meth:`reset` only takes the first sample
-    (it needs a pose) and ignores ``dt``.
+    (it needs a pose) and ignores ``dt``. After :meth:`run`, :meth:`step`
+    continues from the end of the log.
     """
 
     name = "observer"
-    _X = slice(0, 6)
+    online = True
 
     def __init__(self, payload, offset=False):
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         self.payload = payload
         self.offset = bool(offset)
-        #: Columns of the estimated ``[S | c]``: 3, or 4 with the offset.
         self.n_cols = 4 if self.offset else 3
-        self._S = slice(6, 6 + 3 * self.n_cols)
-        self._compiled = None
-        self.reset()
+        self._S0 = np.eye(3)
+        self._u_prev = None
 
-    # --- to implement -------------------------------------------------------
-    def _initial_state(self, S0, pose, w_hat):
-        """Packed state ``z`` at the first sample (numpy)."""
-        raise NotImplementedError
+    # --- the whole log --------------------------------------------------------
+    def run(self, log, S0=None):
+        """Run over a whole log.
 
-    def _transition(self, z, u, dt):
-        """One step: ``z`` at sample n, ``u = [has_pose, theta, X, Y, M, fx, fy]``
-        at sample n+1 (pose zeros where ``has_pose`` is 0), ``dt`` in s.
-        Returns ``z`` at n+1. Must work on numpy arrays and casadi SX."""
-        raise NotImplementedError
+        Parameters
+        ----------
+        log : plant.Log
+        S0 : array_like, shape (3, 3), optional
+            Initial estimate of ``S`` for an online method (default the
+            identity). An offline method needs none and refuses one.
 
-    # --- step-by-step -------------------------------------------------------
+        Returns
+        -------
+        ObserverResult
+        """
+        if not isinstance(log, Log):
+            raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
+        if S0 is not None and not self.online:
+            raise FmscalError(f"{self.name} fits the whole log and takes no starting estimate; got S0, "
+                              "pass S0=None")
+        start = time.perf_counter()
+        if self.online:
+            self.reset(S0)
+        estimate = self._estimate(log, self._S0)
+        result = self._result(log, estimate)
+        result.wall_time = time.perf_counter() - start
+        return result
+
+    def _estimate(self, log, S0):
+        """The pass over the whole log. Online default: :meth:`_start`, then :meth:`_advance` per sample."""
+        U = log_inputs(log)
+        n, d = len(U), 3 * self.n_cols
+        calibration, x = np.empty((n, d)), np.empty((n, 6))
+        diverged = False
+        for k in range(n):
+            if k == 0:
+                self._start(U[0])
+            else:
+                self._advance(U[k - 1], U[k], log.dt)
+            x[k], calibration[k] = self._current()
+            if not self._healthy(x[k], calibration[k]):
+                diverged = True
+                break
+        if diverged:                        # keep the last healthy estimate; row k is the bad one
+            k = max(k, 1)
+            calibration, x = calibration[:k], x[:k]
+        self._u_prev = U[len(calibration) - 1]
+        return Estimate(calibration, x, cov=self._covariance(), diverged=diverged)
+
+    # --- sample by sample -------------------------------------------------------
     def reset(self, S0=None):
-        """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
+        """Forget the run; the next :meth:`step` starts from ``S0`` (default identity).
+
+        Parameters
+        ----------
+        S0 : array_like, shape (3, 3), optional
+            A non-singular initial estimate of ``S``.
+        """
+        self._require_online("reset")
         self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
-        self._z = None
+        self._u_prev = None
 
     def step(self, dt, pose, w_hat):
         """Take one sample.
@@ -174,7 +196,7 @@ class Observer:
             Time since the previous sample, s (ignored on the first call).
         pose : array_like, shape (3,), or None
             Measured ``[theta, X, Y]`` (rad, m), or None when the vision
-            system gave none: the observer predicts without correcting.
+            system gave none: the method predicts without correcting.
         w_hat : array_like, shape (3,)
             Raw sensor reading ``[M, f_x, f_y]``.
 
@@ -183,16 +205,108 @@ class Observer:
         x_hat : ndarray, shape (6,)
         S_hat : ndarray, shape (3, 3)
         """
-        pose, w_hat = check_sample(dt, pose, w_hat, first=self._z is None)
-        if self._z is None:
-            self._z = self._initial_state(self._S0, pose, w_hat)
+        self._require_online("step")
+        pose, w_hat = check_sample(dt, pose, w_hat, first=self._u_prev is None)
+        u = pack_input(pose, w_hat)
+        if self._u_prev is None:
+            self._start(u)
         else:
-            self._z = self._transition(self._z, _pack_input(pose, w_hat), float(dt))
-        return self._z[self._X].copy(), self._z[self._S].reshape(3, self.n_cols)[:, :3].copy()
+            self._advance(self._u_prev, u, float(dt))
+        self._u_prev = u
+        x, calibration = self._current()
+        return np.array(x, dtype=float), np.reshape(calibration, (3, self.n_cols))[:, :3].copy()
 
-    # --- whole log ----------------------------------------------------------
+    def _require_online(self, what):
+        if not self.online:
+            raise TypeError(f"{self.name} is an offline method: it fits a whole log with run(log) "
+                            f"and has no {what}()")
+
+    # --- to implement (online) ------------------------------------------------------
+    def _start(self, u):
+        """Take the first sample ``u`` (:data:`observers.state.INPUT`, with a pose), from ``self._S0``."""
+        raise NotImplementedError
+
+    def _advance(self, u_prev, u, dt):
+        """One step from sample ``u_prev`` to sample ``u``, ``dt`` s apart."""
+        raise NotImplementedError
+
+    def _current(self):
+        """The estimate now: ``x_hat`` (6,) and ``[S_hat | c_hat]`` (3 n,), row order."""
+        raise NotImplementedError
+
+    def _covariance(self):
+        """Covariance of the current ``[S_hat | c_hat]``, where the method has one."""
+        return None
+
+    def _healthy(self, x, calibration):
+        """Finite, and every calibration entry within the divergence bound."""
+        return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(calibration))
+                    and np.max(np.abs(calibration)) < DIVERGENCE_BOUND)
+
+    # --- shared ---------------------------------------------------------------------
+    def _augmented(self, o, w_hat):
+        """The reading the model multiplies: ``w_hat``, or ``[w_hat, 1]`` with the offset."""
+        return o.vcat([w_hat, 1.0]) if self.offset else w_hat
+
+    def _initial_S(self, S0):
+        """``[S0 | 0]`` flat in row order (:func:`observers.result.initial_calibration`)."""
+        return initial_calibration(S0, self.offset)
+
+    def _result(self, log, est):
+        """The :class:`ObserverResult` of an estimate: offset, uncertainties and flags, for every method."""
+        S_hist, b = split_calibration(est.calibration, self.n_cols)
+        S_std = b_std = None
+        if not est.diverged and est.cov is not None:
+            S_std = np.sqrt(np.maximum(np.diag(est.cov), 0)).reshape(3, self.n_cols)[:, :3]
+            if b is not None:
+                b_std = offset_std(S_hist[-1], b, est.cov)
+        if est.diverged:
+            b = None
+        converged = bool(not est.diverged and est.checks_passed and settled(S_hist))
+        return ObserverResult(
+            observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
+            S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,
+            diverged=bool(est.diverged), converged=converged, info=est.info, b=b, b_std=b_std,
+            warnings=list(est.warnings))
+
+
+class RecursiveObserver(Observer):
+    """An online method whose step is one function of numbers or casadi symbols.
+
+    A subclass names the parts of its packed state in :attr:`state` (a
+    :class:`observers.state.StateLayout` with at least ``x``, 6 motion
+    states, and ``S``, the ``3 n`` calibration entries) and implements
+    :meth:`_initial_state` and :meth:`_transition`. The transition is
+    written once with :func:`plant._backend.ops`: :meth:`run` either loops it
+    in numpy (``compiled=False``, the readable path) or compiles it with
+    casadi and runs it in chunks (:class:`plant._compile.ChunkedSteps`); both
+    give the same numbers to 1e-9.
+    """
+
+    def __init__(self, payload, offset=False):
+        super().__init__(payload, offset)
+        self.state = self._layout()
+        self._z = None
+        self._chunks = None
+
+    # --- to implement ----------------------------------------------------------------
+    def _layout(self):
+        """The :class:`observers.state.StateLayout` of the packed state."""
+        raise NotImplementedError
+
+    def _initial_state(self, S0, u):
+        """Packed state at the first sample ``u`` (numpy)."""
+        raise NotImplementedError
+
+    def _transition(self, z, u_prev, u, dt):
+        """One step: ``z`` at sample n, the inputs at samples n (``u_prev``) and n+1 (``u``),
+        ``[has_pose, theta, X, Y, M, f_x, f_y]`` (:data:`observers.state.INPUT`), ``dt`` in s.
+        Returns ``z`` at n+1. Must work on numpy arrays and casadi SX."""
+        raise NotImplementedError
+
+    # --- Observer --------------------------------------------------------------------
     def run(self, log, S0=None, compiled=True):
-        """Run over a whole log.
+        """Run over a whole log (:meth:`Observer.run`).
 
         Parameters
         ----------
@@ -207,200 +321,51 @@ class Observer:
         -------
         ObserverResult
         """
-        if not isinstance(log, Log):
-            raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
-        start = time.perf_counter()
-        self.reset(S0)
-        self._prepare(log)
-        z0 = self._initial_state(self._S0, log.pose[0], log.w_hat[0])
-        U = np.column_stack([log.has_pose, np.nan_to_num(log.pose), log.w_hat])
-        Z = self._run_compiled(z0, U, log.dt) if compiled else self._run_numpy(z0, U, log.dt)
-        n_ok = _finite_prefix(Z, self._S)
-        Z = Z[:n_ok]
+        self._use_compiled = bool(compiled)
+        return super().run(log, S0)
+
+    def _estimate(self, log, S0):
+        if not getattr(self, "_use_compiled", True):
+            return super()._estimate(log, S0)
+        U = log_inputs(log)
+        self._start(U[0])
+        z0 = self._z
+        Z = self._compiled_steps().run(z0, [U[:-1], U[1:], np.full((len(U) - 1, 1), log.dt)],
+                                       healthy=self._healthy_prefix)
+        Z = np.vstack([z0, Z])
+        diverged = len(Z) < len(U)
         self._z = Z[-1].copy()
-        result = self._result(log, Z, diverged=n_ok < len(log))
-        result.wall_time = time.perf_counter() - start
-        return result
+        self._u_prev = U[len(Z) - 1]
+        return Estimate(self.state.part(Z, "S"), self.state.part(Z, "x"), cov=self._covariance(),
+                        diverged=diverged)
 
-    def _prepare(self, log):
-        """Hook: look at the whole log before the run (noise estimates, ...)."""
+    def _start(self, u):
+        u = INPUT.unpack(np.asarray(u, dtype=float))
+        self._z = self._initial_state(self._S0, u)
 
-    def _run_numpy(self, z0, U, dt):
-        Z = np.empty((len(U), len(z0)))
-        Z[0] = z = z0
-        for k in range(1, len(U)):
-            z = self._transition(z, U[k], dt)
-            Z[k] = z
-            if not _healthy(z, self._S):
-                return Z[:k + 1]
-        return Z
+    def _advance(self, u_prev, u, dt):
+        self._z = self._transition(self._z, u_prev, u, dt)
 
-    def _compiled_chunk(self, nz):
-        """The transition accumulated over ``_CHUNK`` steps, compiled to C once, bound to buffers."""
-        if self._compiled is None:
-            z = ca.SX.sym("z", nz)
-            u = ca.SX.sym("u", 7)
+    def _current(self):
+        s = self.state.unpack(self._z)
+        return s.x, s.S
+
+    def _healthy_prefix(self, Z):
+        """Leading rows of ``Z`` that are finite with every calibration entry within the bound."""
+        with np.errstate(invalid="ignore"):
+            bad = (~np.all(np.isfinite(Z), axis=1)
+                   | (np.max(np.abs(self.state.part(Z, "S")), axis=1) >= DIVERGENCE_BOUND))
+        return int(np.argmax(bad)) if bad.any() else len(Z)
+
+    def _compiled_steps(self):
+        """The transition compiled once per observer (:class:`plant._compile.ChunkedSteps`)."""
+        if self._chunks is None:
+            z = ca.SX.sym("z", self.state.size)
+            u_prev = ca.SX.sym("u_prev", INPUT.size)
+            u = ca.SX.sym("u", INPUT.size)
             dt = ca.SX.sym("dt")
             ident = self.name.replace("-", "_")
-            step = ca.Function(f"{ident}_step", [z, u, dt], [ca.densify(self._transition(z, u, dt))])
-            chunk = step.mapaccum(f"{ident}_chunk", _CHUNK)
-            self._compiled = BufferedCall(compile_function(chunk))
-        return self._compiled
-
-    def _run_compiled(self, z0, U, dt):
-        call = self._compiled_chunk(len(z0))
-        z_in, U_in, dt_in = call.inputs
-        Z_out = call.outputs[0].reshape(_CHUNK, len(z0))      # column-major (nz, CHUNK)
-        U_in = U_in.reshape(_CHUNK, 7)
-        n = len(U)
-        Z = np.empty((n, len(z0)))
-        Z[0] = z0
-        z_in[:] = z0
-        dt_in[:] = dt                                  # mapped: one per step
-        for k0 in range(1, n, _CHUNK):
-            k1 = min(k0 + _CHUNK, n)
-            U_in[:k1 - k0] = U[k0:k1]
-            U_in[k1 - k0:] = U[k1 - 1]                  # padding past the end, discarded
-            call()
-            Z[k0:k1] = Z_out[:k1 - k0]
-            z_in[:] = Z_out[k1 - k0 - 1]
-            if not _healthy(z_in, self._S) or not np.all(np.isfinite(Z[k0:k1])):
-                return Z[:k1]
-        return Z
-
-    def _augmented(self, o, w_hat):
-        """The reading the model multiplies: ``w_hat``, or ``[w_hat, 1]`` with the offset."""
-        return o.vcat([w_hat, 1.0]) if self.offset else w_hat
-
-    def _initial_S(self, S0):
-        """``[S0 | 0]`` flat in row order (:func:`initial_calibration`)."""
-        return initial_calibration(S0, self.offset)
-
-    def _result(self, log, Z, diverged):
-        S_hist, b = split_calibration(Z[:, self._S], self.n_cols)
-        if diverged:
-            b = None
-        return ObserverResult(
-            observer=self.name, t=log.t[:len(Z)].copy(), S_hat=S_hist[-1].copy(),
-            S_hat_history=S_hist, x_hat_history=Z[:, self._X].copy(),
-            S_std=self._S_std(Z[-1]), diverged=bool(diverged),
-            converged=bool(not diverged and settled(S_hist)), info=self._info(), b=b)
-
-    def _S_std(self, z):
-        return None
-
-    def _info(self):
-        return {}
-
-
-def initial_calibration(S0, offset):
-    """The calibration entries an estimator starts from: ``S0``, or ``[S0 | 0]`` with the offset.
-
-    Returns
-    -------
-    ndarray, shape (9,) or (12,)
-        Row order.
-    """
-    return np.column_stack([S0, np.zeros(3)]).ravel() if offset else np.ravel(S0)
-
-
-def split_calibration(history, n_cols):
-    """``S_hat`` history and the final offset from a history of ``[S_hat | c_hat]``.
-
-    Parameters
-    ----------
-    history : ndarray, shape (N, 3 n_cols)
-        Calibration entries in row order, per sample.
-    n_cols : int
-        3, or 4 with the offset column.
-
-    Returns
-    -------
-    S_history : ndarray, shape (N, 3, 3)
-    b : ndarray, shape (3,), or None
-        :func:`offset_from_c` of the last sample; None without the offset.
-    """
-    aug = history.reshape(-1, 3, n_cols)
-    S_hist = aug[:, :, :3]
-    return S_hist, (offset_from_c(S_hist[-1], aug[-1, :, 3]) if n_cols == 4 else None)
-
-
-def offset_from_c(S, c):
-    """The sensor's offset ``b = -S^-1 c`` from ``w = S w_hat + c = S (w_hat - b)``; shape (3,).
-
-    NaN where ``S`` is singular (the offset is then undefined).
-    """
-    try:
-        return -np.linalg.solve(S, c)
-    except np.linalg.LinAlgError:
-        return np.full(3, np.nan)
-
-
-def offset_std(S, b, cov_aug):
-    """One-sigma uncertainty of ``b = -S^-1 c``, linearised.
-
-    ``db = -S^-1 (dc + dS b)``: the column of entry ``(i, j)`` of ``[S | c]``
-    is ``-S^-1 e_i`` times ``b_j`` (``j < 3``) or 1 (the offset column).
-
-    Parameters
-    ----------
-    S : ndarray, shape (3, 3)
-    b : ndarray, shape (3,)
-    cov_aug : ndarray, shape (12, 12)
-        Covariance of ``[S | c]`` in row order.
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        NaN where ``S`` is singular (as :func:`offset_from_c`).
-    """
-    try:
-        S_inv = np.linalg.inv(S)
-    except np.linalg.LinAlgError:
-        return np.full(3, np.nan)
-    J = np.zeros((3, 12))
-    for i in range(3):
-        for j in range(4):
-            J[:, 4 * i + j] = -S_inv[:, i] * (b[j] if j < 3 else 1.0)
-    return np.sqrt(np.maximum(np.diag(J @ cov_aug @ J.T), 0))
-
-
-def check_sample(dt, pose, w_hat, first):
-    """Validate one live sample for :meth:`Observer.step`; return ``(pose, w_hat)`` as arrays.
-
-    Raises
-    ------
-    ValueError
-        ``w_hat`` not 3 finite numbers, ``pose`` neither None nor 3 finite
-        numbers, no pose on the first sample, or ``dt`` not positive after it.
-    """
-    w_hat = np.asarray(w_hat, dtype=float)
-    if w_hat.shape != (3,) or not np.all(np.isfinite(w_hat)):
-        raise FmscalError(f"w_hat must be 3 finite numbers; got {w_hat!r}")
-    if pose is not None:
-        pose = np.asarray(pose, dtype=float)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise FmscalError(f"pose must be 3 finite numbers or None; got {pose!r}")
-    if first:
-        if pose is None:
-            raise FmscalError("the first sample after reset() needs a pose measurement")
-    elif not (np.isfinite(dt) and dt > 0):
-        raise FmscalError(f"dt must be positive; got {dt!r}")
-    return pose, w_hat
-
-
-def _pack_input(pose, w_hat):
-    if pose is None:
-        return np.concatenate([[0.0], np.zeros(3), w_hat])
-    return np.concatenate([[1.0], pose, w_hat])
-
-
-def _healthy(z, S_slice):
-    return bool(np.all(np.isfinite(z)) and np.max(np.abs(z[S_slice])) < DIVERGENCE_BOUND)
-
-
-def _finite_prefix(Z, S_slice):
-    """Number of leading rows that are finite and within the divergence bound."""
-    with np.errstate(invalid="ignore"):
-        bad = ~np.all(np.isfinite(Z), axis=1) | (np.max(np.abs(Z[:, S_slice]), axis=1) >= DIVERGENCE_BOUND)
-    return int(np.argmax(bad)) if bad.any() else len(Z)
+            step = ca.Function(f"{ident}_step", [z, u_prev, u, dt],
+                               [ca.densify(self._transition(z, u_prev, u, dt))])
+            self._chunks = ChunkedSteps(step, _CHUNK)
+        return self._chunks

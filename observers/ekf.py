@@ -1,20 +1,18 @@
 """Augmented-state extended Kalman filter in the manner of Aghili (ICRA 2000)."""
 
-import time
-
 import casadi as ca
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from plant import Log, NoiseSpec, Payload, rk4_step
+from plant import NoiseSpec, rk4_step
 from plant.noise import estimate_noise
 from plant._checks import as_positive_scalar
 from plant._compile import BufferedCall, compile_function
-from plant.sensor import check_calibration
 
-from .base import (DIVERGENCE_BOUND, ObserverResult, check_sample, initial_calibration, offset_std, settled,
-                   split_calibration)
+from .base import Observer
+from .convergence import DIVERGENCE_BOUND
 from .noise_level import DEFAULT_TOLERANCE, NoiseLevel
+from .state import INPUT
 from plant.errors import FmscalError
 
 __all__ = ["AugmentedEKF"]
@@ -37,7 +35,7 @@ class _CalibrationEKF(ExtendedKalmanFilter):
         self.x = self.x_next.reshape(-1, 1)
 
 
-class AugmentedEKF:
+class AugmentedEKF(Observer):
     """Extended Kalman filter on ``[theta, theta', X, X', Y, Y', s_11 .. s_33]``.
 
     A reconstruction of [3] for the planar case: the calibration entries are
@@ -108,8 +106,6 @@ class AugmentedEKF:
 
     Attributes
     ----------
-    name : str
-        ``"ekf"``.
     level : observers.noise_level.NoiseLevel or None
         The adjustable random-walk intensity (None with ``adapt_q=False``).
     """
@@ -118,11 +114,9 @@ class AugmentedEKF:
 
     def __init__(self, payload, noise=None, q_S=1e-8, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
                  adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE):
-        if not isinstance(payload, Payload):
-            raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
+        super().__init__(payload, offset=offset)
         if noise is not None and not isinstance(noise, NoiseSpec):
             raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
-        self.payload = payload
         self.noise = noise
         self.adapt_q = bool(adapt_q)
         self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=not self.adapt_q)
@@ -134,10 +128,8 @@ class AugmentedEKF:
                 raise FmscalError(f"q_S_max must be at least q_S ({self.q_S:g}); got {q_S_max:g}")
             self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
                                                                           allow_zero=True))
-        self.offset = bool(offset)
         self.c0_sd = None if c0_sd is None else as_positive_scalar(c0_sd, "c0_sd")
-        #: Columns of the estimated ``[S | c]``, and the filter's state size.
-        self.n_cols = 4 if self.offset else 3
+        #: The filter's state size: 6 motion states and the entries of ``[S | c]``.
         self.dim_x = 6 + 3 * self.n_cols
         self._H = np.zeros((3, self.dim_x))
         self._H[0, 0] = self._H[1, 2] = self._H[2, 4] = 1.0
@@ -213,21 +205,38 @@ class AugmentedEKF:
     def hx(xs):
         return np.asarray(xs).reshape(-1)[_POSE_ROWS].reshape(3, 1)
 
-    # --- step-by-step --------------------------------------------------------
-    def reset(self, S0=None, noise=None):
+    # --- Observer ---------------------------------------------------------------
+    def reset(self, S0=None):
         """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
-        self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
-        self._noise = noise or self.noise or NoiseSpec((0.05, 0.05, 0.05), np.deg2rad(0.1), 1e-4)
+        super().reset(S0)
         self._kf = None
-        self._w_prev = None
         self._since_pose = 0.0
+        self._q_history = []
         if self.level is not None:
             self.level.reset()
 
-    def _start(self, pose, w_hat):
-        noise = self._noise
+    def _estimate(self, log, S0):
+        """The filter over the log, with the noise model told or estimated from the log."""
+        self._run_noise = self.noise
+        info = {}
+        if self._run_noise is None:
+            self._run_noise = estimate_noise(log)
+            info["noise"] = self._run_noise.to_dict()
+            info["noise_estimated"] = True
+        estimate = super()._estimate(log, S0)
+        self._run_noise = None
+        q = np.array(self._q_history[:len(estimate.calibration)]) if self._q_history else np.full(1, self.q_S)
+        info["q_S_history"] = q
+        estimate.info = info
+        estimate.warnings = _random_walk_warnings(log.t[:len(q)], q)
+        return estimate
+
+    def _start(self, u):
+        u = INPUT.unpack(np.asarray(u, dtype=float))
+        pose, w_hat = u.pose, u.w_hat
+        noise = getattr(self, "_run_noise", None) or self.noise or _NOMINAL_NOISE
         kf = _CalibrationEKF(self.dim_x)
-        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], initial_calibration(self._S0, self.offset)]).reshape(-1, 1)
+        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], self._initial_S(self._S0)]).reshape(-1, 1)
         pose_var = np.maximum(noise.pose_sd, 1e-6) ** 2
         S_var = np.full((3, self.n_cols), self.S0_sd ** 2)
         if self.offset:
@@ -238,82 +247,48 @@ class AugmentedEKF:
         kf.R = np.diag(pose_var)
         self._var_w = np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
         self._kf = kf
-        self._w_prev = w_hat
-
-    def step(self, dt, pose, w_hat):
-        """One sample: predict over ``dt`` with the raw readings, update with the pose.
-
-        Parameters and returns as :meth:`observers.Observer.step`.
-        """
-        pose, w_hat = check_sample(dt, pose, w_hat, first=self._kf is None)
-        self._advance(dt, pose, w_hat)
-        x = self._kf.x[:, 0]
-        return x[0:6].copy(), x[6:].reshape(3, self.n_cols)[:, :3].copy()
-
-    def _advance(self, dt, pose, w_hat):
-        """One checked sample: predict with the raw readings, update with the pose."""
-        if self._kf is None:
-            self._start(pose, w_hat)
-            return
-        kf = self._kf
-        kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], self._w_prev, w_hat, dt)
-        kf.predict()
-        self._w_prev = w_hat
-        self._since_pose += dt
-        if pose is None:
-            return
-        kf.update(pose.reshape(3, 1), self.H, self.hx)
-        if self.level is not None:
-            y = kf.y[:, 0]
-            self.level.update(float(y @ kf.SI @ y), self._since_pose)      # NIS of this pose
         self._since_pose = 0.0
+        self._q_history = [self.level.q if self.level is not None else self.q_S]
 
-    def run(self, log, S0=None):
-        """Run over a whole log; the same result as :meth:`observers.Observer.run`."""
-        if not isinstance(log, Log):
-            raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
-        start = time.perf_counter()
-        info = {}
-        noise = self.noise
-        if noise is None:
-            noise = estimate_noise(log)
-            info["noise"] = noise.to_dict()
-            info["noise_estimated"] = True
-        self.reset(S0, noise)
-        n = len(log)
-        X = np.empty((n, self.dim_x))
-        q_history = np.full(n, self.q_S)
-        diverged = False
-        for k in range(n):                      # the log is validated: no per-sample checks
-            self._advance(log.dt, log.pose[k] if log.has_pose[k] else None, log.w_hat[k])
-            X[k] = self._kf.x[:, 0]
+    def _advance(self, u_prev, u, dt):
+        """Predict over ``dt`` with the raw readings at both ends, update with the pose."""
+        kf = self._kf
+        has_pose, pose, w_hat = u[0], u[1:4], u[4:7]
+        kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], u_prev[4:7], w_hat, dt)
+        kf.predict()
+        self._since_pose += dt
+        if has_pose:
+            kf.update(np.reshape(pose, (3, 1)), self.H, self.hx)
             if self.level is not None:
-                q_history[k] = self.level.q
-            if not self._healthy():
-                diverged = True
-                break
-        if diverged:
-            X = X[:k]          # the last finite estimate; row k is the unhealthy one
-        info["q_S_history"] = q_history[:max(len(X), 1)]
-        if len(X) == 0:
-            X = np.concatenate([[log.pose[0][0], 0, log.pose[0][1], 0, log.pose[0][2], 0],
-                                initial_calibration(self._S0, self.offset)])[None, :]
-        S_hist, b = split_calibration(X[:, 6:], self.n_cols)
-        cov_aug = self._kf.P[6:, 6:]
-        S_std = None if diverged else np.sqrt(np.maximum(np.diag(cov_aug), 0)).reshape(3, self.n_cols)[:, :3]
-        b_std = None
-        if diverged:
-            b = None
-        elif b is not None:
-            b_std = offset_std(S_hist[-1], b, cov_aug)
-        return ObserverResult(
-            observer=self.name, t=log.t[:len(X)].copy(), S_hat=S_hist[-1].copy(),
-            S_hat_history=S_hist, x_hat_history=X[:, 0:6].copy(), S_std=S_std,
-            diverged=diverged, converged=bool(not diverged and settled(S_hist)),
-            wall_time=time.perf_counter() - start, info=info, b=b, b_std=b_std)
+                y = kf.y[:, 0]
+                self.level.update(float(y @ kf.SI @ y), self._since_pose)      # NIS of this pose
+            self._since_pose = 0.0
+        self._q_history.append(self.level.q if self.level is not None else self.q_S)
 
-    def _healthy(self):
+    def _current(self):
+        x = self._kf.x[:, 0]
+        return x[0:6], x[6:]
+
+    def _covariance(self):
+        return self._kf.P[6:, 6:].copy()
+
+    def _healthy(self, x, calibration):
         kf = self._kf
         # a NaN or inf anywhere makes a sum non-finite: one reduction per array
         return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum())
                     and np.abs(kf.x[6:]).max() < DIVERGENCE_BOUND and kf.P.diagonal().min() > 0)
+
+
+#: The noise model of a live filter that was told none (``step`` without a log to estimate it from).
+_NOMINAL_NOISE = NoiseSpec((0.05, 0.05, 0.05), np.deg2rad(0.1), 1e-4)
+
+
+def _random_walk_warnings(t, q_history):
+    """A warning if the EKF raised its random walk on S (its innovations said S moved)."""
+    raised = q_history > 1.01 * q_history.min()
+    if not raised.any():
+        return []
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    return [f"the EKF raised its random walk on S for {raised.sum() * dt:.1f} s (first at t = "
+            f"{t[np.argmax(raised)]:.1f} s): S may have changed during the log, or the noise model is "
+            f"more than {DEFAULT_TOLERANCE * 100:g} % off"]

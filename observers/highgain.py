@@ -1,6 +1,6 @@
 """High-gain adaptive observer after Parsa and Aghili (ICRA 2006): a reconstruction.
 
-The full text of [4] is not at hand (READING.md). What is known of it: two
+The full text of [4] is not at hand (``docs/reading-the-paper.md``). What is known of it: two
 observers, angular and translational, on the state-affine form of eqs. (4),
 (5); a high gain; an adaptation gain that must be tuned; slow convergence.
 This module reconstructs it as the standard adaptive observer for state-affine
@@ -15,7 +15,7 @@ Q. Zhang, IEEE TAC 47(3), 2002. For each subsystem ``i = 1, 2`` with
 ``epsilon = x_tilde - Upsilon phi_tilde`` then obeys ``epsilon' = (A - K C)
 epsilon``, so the output error is ``C Upsilon phi_tilde`` plus a decaying
 term: the law needs only the position error, no velocity error (which is what
-makes it rigorous where eq. (8) is not, READING.md).
+makes it rigorous where eq. (8) is not, ``docs/reading-the-paper.md``).
 
 Discrete form. A sampled high-gain observer that integrates ``K y`` turns the
 integration error of each step into an estimation bias that grows as
@@ -37,13 +37,14 @@ continuous double pole at ``-lam``.
 
 import numpy as np
 
-from plant import S_from_phi, input_matrix, phi_1
+from plant import S_from_phi, phi_1, phi_2, regressors
 from plant._backend import ops
 from plant._checks import as_positive_scalar
 
 from . import _matrix as mx
-from .base import Observer
+from .base import RecursiveObserver
 from .gains import double_pole_gains
+from .state import INPUT, StateLayout
 from plant.errors import FmscalError
 
 __all__ = ["HighGainObserver", "DEFAULT_HIGH_GAIN", "REF4_HIGH_GAIN"]
@@ -56,22 +57,6 @@ _R_TIME = 2.0        # s, averaging time of the regressor's outer product
 _R_REG = 1e-3        # regularisation of the normalisation, relative to its mean eigenvalue
 _R_FLOOR = 1e-12
 
-
-
-def _layout(n):
-    """Slices of the packed state for ``n`` columns of ``[S | c]`` (3, or 4 with the offset).
-
-    x_hat(6) [S_hat | c_hat](3n) pose_n(3) has_n(1) w_n(3) t(1)
-    Ups_theta(2 x n) Ups_X(2 x 2n) Ups_Y(2 x 2n) R_1(n x n) R_2(2n x 2n)
-    """
-    sizes = [("x", 6), ("S", 3 * n), ("pose", 3), ("has", 1), ("w", 3), ("t", 1), ("ups_t", 2 * n),
-             ("ups_x", 4 * n), ("ups_y", 4 * n), ("R1", n * n), ("R2", 4 * n * n)]
-    out, k = {}, 0
-    for name, size in sizes:
-        out[name] = slice(k, k + size)
-        k += size
-    out["size"] = k
-    return out
 
 
 def discrete_gain(o, lam, dt):
@@ -99,31 +84,7 @@ def discrete_gain(o, lam, dt):
     return 1 - r * r, (1 - r) ** 2 / dt
 
 
-def regressors(theta, w_hat, payload):
-    """Rows of ``B_1`` and ``B_2`` (eqs. 4, 5) that drive the velocities.
-
-    From eq. (1) (:func:`plant.input_matrix`): ``theta'' = psi_theta . phi_1``
-    with ``psi_theta = w_hat / I_G``, and ``X'' = psi_X . phi_2``,
-    ``Y'' = psi_Y . phi_2`` with ``psi_X = [cos w_hat, -sin w_hat] / m``,
-    ``psi_Y = [sin w_hat, cos w_hat] / m``.
-
-    ``w_hat`` may carry a fourth component, a constant 1: the regressors
-    then also drive the offset column ``c`` of ``w = S w_hat + c``.
-
-    Returns
-    -------
-    psi_theta : list of n, psi_X, psi_Y : lists of 2n
-        ``n = len(w_hat)``, 3 (or 4 with the offset).
-    """
-    G = input_matrix(theta, payload)
-    n = w_hat.shape[0] if hasattr(w_hat, "shape") else len(w_hat)
-    psi_theta = [G[0, 0] * w_hat[j] for j in range(n)]
-    psi_X = [G[1, 1 + a] * w_hat[j] for a in range(2) for j in range(n)]
-    psi_Y = [G[2, 1 + a] * w_hat[j] for a in range(2) for j in range(n)]
-    return psi_theta, psi_X, psi_Y
-
-
-class HighGainObserver(Observer):
+class HighGainObserver(RecursiveObserver):
     """The high-gain adaptive observer of Parsa and Aghili [4]: a reconstruction.
 
     Two observers, angular (``phi_1`` of eq. 4, 3 parameters) and
@@ -196,7 +157,10 @@ class HighGainObserver(Observer):
         self.name = str(name)
         self.K1, self.K2 = double_pole_gains(self.lam)
         super().__init__(payload, offset=offset)
-        self._L = _layout(self.n_cols)
+
+    #: The configuration closest to the seed paper's account of [4] (``high-gain-ref4``).
+    REF4_SETTINGS = {"lam": REF4_HIGH_GAIN, "gamma": 1.0, "normalisation": "scalar", "t_decay": None,
+                     "name": "high-gain-ref4"}
 
     @classmethod
     def ref4(cls, payload, **overrides):
@@ -204,22 +168,26 @@ class HighGainObserver(Observer):
 
         ``overrides`` change single settings (keywords of the constructor).
         """
-        settings = {"lam": REF4_HIGH_GAIN, "gamma": 1.0, "normalisation": "scalar", "t_decay": None,
-                    "name": "high-gain-ref4"}
-        return cls(payload, **{**settings, **overrides})
+        return cls(payload, **{**cls.REF4_SETTINGS, **overrides})
 
-    def _initial_state(self, S0, pose, w_hat):
-        L, n = self._L, self.n_cols
-        x = np.array([pose[0], 0.0, pose[1], 0.0, pose[2], 0.0])
-        z = np.zeros(L["size"])
-        z[L["x"]], z[L["S"]], z[L["pose"]], z[L["has"]], z[L["w"]] = x, self._initial_S(S0), pose, 1.0, w_hat
+    def _layout(self):
+        # t: time since the start (gain decay); ups_*: the sensitivity filters Upsilon of the
+        # theta, X and Y channels (2 x n, 2 x 2n, 2 x 2n, row order); R1, R2: running means
+        # of H^T H of the angular and translational laws
+        n = self.n_cols
+        return StateLayout(("x", 6), ("S", 3 * n), ("t", 1), ("ups_t", 2 * n), ("ups_x", 4 * n),
+                           ("ups_y", 4 * n), ("R1", n * n), ("R2", 4 * n * n))
+
+    def _initial_state(self, S0, u):
+        n = self.n_cols
+        x = np.array([u.pose[0], 0.0, u.pose[1], 0.0, u.pose[2], 0.0])
         # R starts isotropic at the size C Upsilon will have, |psi| / lam^2 (the filter's DC gain)
-        w = self._augmented(ops(w_hat), w_hat)
-        psi_t, psi_x, psi_y = (np.array(v) for v in regressors(pose[0], w, self.payload))
-        z[L["R1"]] = (np.eye(n) * max(psi_t @ psi_t / n, _R_FLOOR) / self.lam ** 4).ravel()
-        z[L["R2"]] = (np.eye(2 * n) * max((psi_x @ psi_x + psi_y @ psi_y) / (2 * n), _R_FLOOR)
-                      / self.lam ** 4).ravel()
-        return z
+        w = self._augmented(ops(u.w_hat), u.w_hat)
+        psi_t, psi_x, psi_y = (np.array(v) for v in regressors(u.pose[0], w, self.payload))
+        R1 = np.eye(n) * max(psi_t @ psi_t / n, _R_FLOOR) / self.lam ** 4
+        R2 = np.eye(2 * n) * max((psi_x @ psi_x + psi_y @ psi_y) / (2 * n), _R_FLOOR) / self.lam ** 4
+        return self.state.pack(None, x=x, S=self._initial_S(S0), t=0.0, ups_t=np.zeros(2 * n),
+                               ups_x=np.zeros(4 * n), ups_y=np.zeros(4 * n), R1=R1.ravel(), R2=R2.ravel())
 
     def _gain(self, o, t):
         if self.t_decay is None:
@@ -233,19 +201,21 @@ class HighGainObserver(Observer):
         trace = sum(R_mean[i, i] for i in range(n))
         return mx.vec(H_T_e) * (n / (trace + _R_FLOOR))
 
-    def _transition(self, z, u, dt):
+    def _transition(self, z, u_prev, u, dt):
+        """One step of the sampled observer (module docstring)."""
         o = ops(z, u)
-        p, L, n = self.payload, self._L, self.n_cols
-        x, S, pose, has, t = z[L["x"]], z[L["S"]], z[L["pose"]], z[L["has"].start], z[L["t"].start]
-        w = self._augmented(o, z[L["w"]])
-        has_next, pose_next, w_next = u[0], u[1:4], self._augmented(o, u[4:7])
-        ups = [mx.as_matrix(o, z[L["ups_t"]], 2, n), mx.as_matrix(o, z[L["ups_x"]], 2, 2 * n),
-               mx.as_matrix(o, z[L["ups_y"]], 2, 2 * n)]
-        R1, R2 = mx.as_matrix(o, z[L["R1"]], n), mx.as_matrix(o, z[L["R2"]], 2 * n)
+        p, n = self.payload, self.n_cols
+        s, now, nxt = self.state.unpack(z), INPUT.unpack(u_prev), INPUT.unpack(u)
+        x, S, pose, has, t = s.x, s.S, now.pose, now.has_pose, s.t
+        w = self._augmented(o, now.w_hat)
+        has_next, pose_next, w_next = nxt.has_pose, nxt.pose, self._augmented(o, nxt.w_hat)
+        ups = [mx.as_matrix(o, s.ups_t, 2, n), mx.as_matrix(o, s.ups_x, 2, 2 * n),
+               mx.as_matrix(o, s.ups_y, 2, 2 * n)]
+        R1, R2 = mx.as_matrix(o, s.R1, n), mx.as_matrix(o, s.R2, 2 * n)
         # the parameters of eqs. (4), (5): phi_1 = [1, -rho_y, rho_x] S, phi_2 = rows 2, 3 of S
         # (each row with its offset entry when the offset is estimated)
         phi1 = phi_1(S, p)
-        phi2 = S[n:3 * n]
+        phi2 = phi_2(S)
         phis = [phi1, phi2, phi2]
         # regressors of eqs. (4), (5) at both ends of the step; the angle at n is the
         # measured one where there is one, at n+1 the prediction
@@ -291,5 +261,6 @@ class HighGainObserver(Observer):
             x_next += [x_pred[c][0] + l1 * e[c] + shift[0], x_pred[c][1] + l2 * e[c] + shift[1]]
             ups_next += new[0] + new[1]
         S_next = mx.flat(o, S_from_phi(phi1 + d_phi1, phi2 + d_phi2, p))
-        return o.vcat([o.vcat(x_next), S_next, pose_next, has_next, u[4:7], t + dt, o.vcat(ups_next),
-                       mx.flat(o, R1_next), mx.flat(o, R2_next)])
+        return self.state.pack(o, x=o.vcat(x_next), S=S_next, t=t + dt, ups_t=o.vcat(ups_next[:2 * n]),
+                               ups_x=o.vcat(ups_next[2 * n:6 * n]), ups_y=o.vcat(ups_next[6 * n:]),
+                               R1=mx.flat(o, R1_next), R2=mx.flat(o, R2_next))

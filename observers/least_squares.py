@@ -5,7 +5,7 @@ eqs. (4), (5)::
 
     theta'' = psi_theta(t) . phi_1,   X'' = psi_X(t) . phi_2,   Y'' = psi_Y(t) . phi_2
 
-with the regressors of :func:`observers.highgain.regressors` (built from
+with the regressors of :func:`plant.regressors` (built from
 :func:`plant.input_matrix`). Integrated twice over a window starting at
 ``t_0``, each measured position is ``p(t) = p_0 + v_0 (t - t_0) + Z(t) . phi``
 with ``Z`` the double integral of the regressor. The fit eliminates ``p_0``
@@ -14,17 +14,14 @@ equations of all windows for ``phi``; windows are kept short so that the
 twice-integrated wrench noise stays near the pose noise.
 """
 
-import time
-
 import numpy as np
 
-from plant import Log, Payload, S_from_phi, phi_1
+from plant import S_from_phi, phi_1, regressors
 from plant._checks import as_positive_scalar
+from plant.errors import FmscalError
 from plant.noise import estimate_noise
 
-from .base import ObserverResult, offset_from_c, offset_std
-from .highgain import regressors
-from plant.errors import FmscalError
+from .base import Estimate, Observer
 
 __all__ = ["LeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
 
@@ -48,7 +45,7 @@ class FitReport(dict):
     """
 
 
-class LeastSquares:
+class LeastSquares(Observer):
     """Offline weighted least squares for ``S`` over double-integrated windows.
 
     Module docstring for the model. Angular and translational parameters are
@@ -72,20 +69,16 @@ class LeastSquares:
 
     Attributes
     ----------
-    name : str
-        ``"least-squares"``.
     report : FitReport
         Diagnostics of the last :meth:`run`.
     """
 
     name = "least-squares"
+    online = False
 
     def __init__(self, payload, window=0.5, offset=False):
-        if not isinstance(payload, Payload):
-            raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
-        self.payload = payload
+        super().__init__(payload, offset=offset)
         self.window = as_positive_scalar(window, "window")
-        self.offset = bool(offset)
         self.report = FitReport()
 
     def _double_integrals(self, log):
@@ -147,27 +140,16 @@ class LeastSquares:
             per_window.append((rows, Iw, bw, projected))
         return info, rhs, per_window
 
-    def run(self, log, S0=None):
-        """Fit ``S`` to a whole log.
+    def _estimate(self, log, S0):
+        """Fit ``S`` to the whole log (:meth:`observers.Observer.run`).
 
-        Parameters
-        ----------
-        log : plant.Log
-        S0 : ignored
-            Accepted for the common interface; the fit needs no start.
-
-        Returns
-        -------
-        ObserverResult
-            ``S_hat_history`` holds the fit on the data up to the end of each
-            window (held within it); ``x_hat_history`` the fitted motion;
-            ``S_std`` the one-sigma uncertainty from the residuals;
-            ``converged`` is True when the excitation and consistency checks
-            pass (``result.info`` holds the :class:`FitReport`).
+        ``S_hat_history`` of the result holds the fit on the data up to the
+        end of each window (held within it); ``x_hat_history`` the fitted
+        motion; ``S_std`` the one-sigma uncertainty from the residuals; the
+        method's checks pass when the excitation and consistency checks find
+        nothing (``result.info["fit"]`` holds the :class:`FitReport`, and
+        ``result.warnings`` its warnings).
         """
-        if not isinstance(log, Log):
-            raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
-        start = time.perf_counter()
         Z = self._double_integrals(log)
         windows = [rows for rows in self._windows(log) if len(rows) >= 3]
         if len(windows) < 2:
@@ -203,21 +185,14 @@ class LeastSquares:
         cov_phi = np.zeros((3 * n, 3 * n))
         cov_phi[:n, :n], cov_phi[n:, n:] = covs
         cov_S = T @ cov_phi @ T.T                     # of [S | c], row order
-        S_hat = S_aug[:, :3]
-        S_std = np.sqrt(np.maximum(np.diag(cov_S), 0)).reshape(3, n)[:, :3]
         self.report = self._diagnose(log, cov_S, residuals, n)
-        info = {"fit": self.report}
-        b = b_std = None
-        if self.offset:
-            b = offset_from_c(S_hat, S_aug[:, 3])
-            b_std = offset_std(S_hat, b, cov_S)
-        # the running fits mapped to [S | c] in one product (S_from_phi is the linear map T)
-        S_hist = (np.hstack(histories) @ T.T).reshape(-1, 3, n)[:, :, :3]
-        x_hat = self._fitted_motion(log, Z, phis, windows)
-        ok = not self.report["warnings"]
-        return ObserverResult(observer=self.name, t=log.t.copy(), S_hat=S_hat, S_hat_history=S_hist,
-                              x_hat_history=x_hat, S_std=S_std, diverged=False, converged=ok,
-                              wall_time=time.perf_counter() - start, info=info, b=b, b_std=b_std)
+        # the running fits mapped to [S | c] in one product (S_from_phi is the linear map T);
+        # the last window's fit is the fit of the whole log
+        calibration = np.hstack(histories) @ T.T
+        calibration[-1] = S_aug.ravel()
+        return Estimate(calibration, self._fitted_motion(log, Z, phis, windows), cov=cov_S,
+                        checks_passed=not self.report["warnings"], info={"fit": self.report},
+                        warnings=list(self.report["warnings"]))
 
     def offset_bias(self, log, S, b):
         """What an offset left out does to the fit: the predicted ``S_hat - S``.

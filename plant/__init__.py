@@ -1,7 +1,7 @@
 """The physics and the sensor: eq. (1), the calibration matrix, logs, scenarios."""
 
 from .dynamics import (A_1, A_2, B_1, B_2, C_1, C_2, STATE_NAMES, acceleration, input_matrix,
-                       phi_1, phi_2, S_from_phi, state_derivative)
+                       phi_1, phi_2, regressors, S_from_phi, state_derivative)
 from .excitation import Excitation, Multisine, PaperWrench, SampledWrench
 from .calibration import Calibration, CalibrationFileError, file_sha256
 from .log import COLUMNS, READING_COLUMNS, Log, LogError, Truth, read_log, read_readings, read_truth
@@ -15,7 +15,7 @@ from ._compile import compiler
 
 __all__ = [
     "A_1", "A_2", "B_1", "B_2", "C_1", "C_2", "STATE_NAMES", "acceleration", "input_matrix",
-    "phi_1", "phi_2", "S_from_phi", "state_derivative",
+    "phi_1", "phi_2", "regressors", "S_from_phi", "state_derivative",
     "Excitation", "Multisine", "PaperWrench", "SampledWrench",
     "Calibration", "CalibrationFileError", "file_sha256",
     "COLUMNS", "READING_COLUMNS", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",

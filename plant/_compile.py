@@ -23,7 +23,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["compile_function", "compiler", "BufferedCall"]
+__all__ = ["compile_function", "compiler", "BufferedCall", "ChunkedSteps"]
 
 _FLAGS = ("-O2", "-fPIC", "-shared")       # no -ffast-math: results must match numpy to 1e-9
 _loaded = {}                               # source hash -> casadi.Function, this process
@@ -138,3 +138,65 @@ class BufferedCall:
 
     def __call__(self):
         self._trigger()
+
+
+class ChunkedSteps:
+    """A one-step recursion ``z_{k+1} = f(z_k, a_k, b_k, ...)`` run over many steps in compiled chunks.
+
+    ``f`` is accumulated over ``chunk`` steps (casadi ``mapaccum``), compiled
+    once (:func:`compile_function`) and called through buffers
+    (:class:`BufferedCall`). The simulator and every recursive observer run
+    through this one loop.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        ``z_next = step(z, a, b, ...)``: first input and only output the
+        state (dense column), the others the per-step inputs.
+    chunk : int
+        Steps per compiled call.
+    """
+
+    def __init__(self, step, chunk):
+        self.chunk = int(chunk)
+        self.nz = step.nnz_in(0)
+        self.sizes = [step.nnz_in(i) for i in range(1, step.n_in())]
+        self.fun = compile_function(step.mapaccum(f"{step.name()}_chunk", self.chunk))
+
+    def run(self, z0, inputs, healthy=None):
+        """Run the recursion from ``z0`` over the rows of ``inputs``.
+
+        Parameters
+        ----------
+        z0 : ndarray, shape (nz,)
+        inputs : list of ndarray, each shape (N, size_i)
+            Row ``k`` of each is the step's input from state ``k`` to ``k + 1``.
+        healthy : callable, optional
+            ``healthy(Z_chunk) -> int``: the number of leading rows of a
+            finished chunk to keep; the run stops after a chunk that keeps
+            fewer than it computed.
+
+        Returns
+        -------
+        ndarray, shape (M, nz)
+            The states after each step (``M = N``, fewer if ``healthy`` stopped it).
+        """
+        n = len(inputs[0]) if inputs else 0
+        call = BufferedCall(self.fun)              # buffers of this run: safe across threads
+        z_in, *u_in = call.inputs
+        u_in = [buf.reshape(self.chunk, size) for buf, size in zip(u_in, self.sizes)]    # column-major
+        Z_out = call.outputs[0].reshape(self.chunk, self.nz)
+        Z = np.empty((n, self.nz))
+        z_in[:] = z0
+        for k0 in range(0, n, self.chunk):
+            k1 = min(k0 + self.chunk, n)
+            for buf, values in zip(u_in, inputs):
+                buf[:k1 - k0] = values[k0:k1]
+                buf[k1 - k0:] = values[k1 - 1]            # padding past the end, discarded
+            call()
+            Z[k0:k1] = Z_out[:k1 - k0]
+            keep = k1 - k0 if healthy is None else healthy(Z[k0:k1])
+            if keep < k1 - k0:
+                return Z[:k0 + keep]
+            z_in[:] = Z_out[k1 - k0 - 1]
+        return Z

@@ -18,7 +18,7 @@ __all__ = [
     "acceleration",
     "state_derivative",
     "A_1", "C_1", "B_1", "A_2", "C_2", "B_2",
-    "phi_1", "phi_2", "S_from_phi",
+    "regressors", "phi_1", "phi_2", "S_from_phi",
     "STATE_NAMES",
 ]
 
@@ -111,33 +111,64 @@ A_2 = np.block([[A_1, np.zeros((2, 2))], [np.zeros((2, 2)), A_1]])
 C_2 = np.block([[C_1, np.zeros((1, 2))], [np.zeros((1, 2)), C_1]])
 
 
+def regressors(theta, w_hat, payload):
+    """The rows of ``B_1``, ``B_2`` (eqs. 4, 5) that drive the accelerations.
+
+    From eq. (1) (:func:`input_matrix` ``G``): ``theta'' = psi_theta . phi_1``
+    with ``psi_theta = w_hat / I_G``, and ``X'' = psi_X . phi_2``,
+    ``Y'' = psi_Y . phi_2`` with ``psi_X = [cos w_hat, -sin w_hat] / m``,
+    ``psi_Y = [sin w_hat, cos w_hat] / m``.
+
+    ``w_hat`` may carry a fourth component, a constant 1: the regressors then
+    also drive the offset column ``c`` of ``w = S w_hat + c``.
+
+    Parameters
+    ----------
+    theta : float, ndarray of shape (N,), or casadi.SX
+        Body angle, rad (an array gives one regressor per sample).
+    w_hat : array_like or casadi.SX, shape (n,) or (n, N)
+        The raw reading, ``n`` = 3 (or 4 with the constant 1).
+    payload : plant.Payload
+
+    Returns
+    -------
+    psi_theta : list of n, psi_X, psi_Y : lists of 2n
+        Entries are scalars, arrays of shape (N,), or casadi expressions.
+    """
+    G = input_matrix(theta, payload)
+    n = w_hat.shape[0] if hasattr(w_hat, "shape") else len(w_hat)
+    psi_theta = [G[0, 0] * w_hat[j] for j in range(n)]
+    psi_X = [G[1, 1 + a] * w_hat[j] for a in range(2) for j in range(n)]
+    psi_Y = [G[2, 1 + a] * w_hat[j] for a in range(2) for j in range(n)]
+    return psi_theta, psi_X, psi_Y
+
+
 def B_1(w_hat, payload):
     """Eq. (4): ``B_1(w_hat) = [0_3, w_hat]^T / I_G``, shape (2, 3).
 
     With it, ``x_1' = A_1 x_1 + B_1(w_hat) phi_1`` where ``phi_1`` is
-    :func:`phi_1` of the calibration matrix.
+    :func:`phi_1` of the calibration matrix. Its velocity row is
+    ``psi_theta`` of :func:`regressors`.
     """
-    g00 = input_matrix(0.0, payload)[0, 0]          # 1/I_G, first row of eq. (1)
-    w_hat = np.asarray(w_hat, dtype=float)
-    return np.vstack([np.zeros(3), g00 * w_hat])
+    psi_theta, _, _ = regressors(0.0, np.asarray(w_hat, dtype=float), payload)
+    return np.vstack([np.zeros(len(psi_theta)), psi_theta])
 
 
 def B_2(w_hat, theta, payload):
     """Eq. (5): ``B_2(w_hat, theta)``, shape (4, 6), for ``phi_2 = [s_2., s_3.]``.
 
     Rows ``X, X', Y, Y'``; the velocity rows are ``R(theta)/m`` (the lower
-    right block of eq. (1)) times ``w_hat^T`` for each row of ``S``::
+    right block of eq. (1)) times ``w_hat^T`` for each row of ``S``, that is
+    ``psi_X`` and ``psi_Y`` of :func:`regressors`::
 
         B_2 = 1/m [[0_3,             0_3            ],
                    [w_hat cos(theta), -w_hat sin(theta)],
                    [0_3,             0_3            ],
                    [w_hat sin(theta),  w_hat cos(theta)]]
     """
-    R_over_m = input_matrix(theta, payload)[1:, 1:]
-    w_hat = np.asarray(w_hat, dtype=float)
-    rows = np.kron(R_over_m, w_hat[None, :])          # (2, 6)
-    out = np.zeros((4, 6))
-    out[1], out[3] = rows[0], rows[1]
+    _, psi_X, psi_Y = regressors(theta, np.asarray(w_hat, dtype=float), payload)
+    out = np.zeros((4, len(psi_X)))
+    out[1], out[3] = psi_X, psi_Y
     return out
 
 
@@ -162,7 +193,20 @@ def phi_1(S, payload):
 
 
 def phi_2(S):
-    """Eq. (5): ``phi_2 = [s_21, s_22, s_23, s_31, s_32, s_33]``, shape (6,)."""
+    """Eq. (5): ``phi_2 = [s_21, s_22, s_23, s_31, s_32, s_33]``, rows 2 and 3 of ``S``.
+
+    Parameters
+    ----------
+    S : array_like, shape (3, n), or a flat (3n,) vector in row order (numbers or casadi.SX)
+        ``n`` = 3, or 4 with the offset column (``phi_2`` then has 8 entries).
+
+    Returns
+    -------
+    ndarray or casadi.SX, shape (2n,)
+    """
+    if is_symbolic(S) or np.ndim(S) == 1:
+        n = (S.shape[0] if hasattr(S, "shape") else len(S)) // 3
+        return S[n:3 * n]
     return np.asarray(S, dtype=float)[1:].ravel()
 
 

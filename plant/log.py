@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._checks import as_finite_array, as_positive_scalar
 from .errors import FmscalError
 from .payload import Payload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
@@ -270,8 +271,16 @@ class Truth:
     payload : plant.Payload
     noise : plant.NoiseSpec
         Standard deviations of the noise added to the log.
-    extra : dict
-        Other settings of the scenario (pose rate, dropped frames, ...).
+    told_noise : float
+        What a method with a noise model is told, as a multiple of ``noise``
+        (1: the truth; a scenario may tell a wrong figure on purpose).
+    offset : ndarray, shape (3,), or None
+        The sensor's offset ``b`` in ``w = S (w_hat - b)``, N m and N.
+    latency : float
+        Delay of the pose stream behind the sensor stream, s.
+    settings : dict
+        The rest of the scenario, for the record (duration, dt, pose rate,
+        dropped frames, outliers, description).
     """
 
     scenario: str
@@ -280,11 +289,18 @@ class Truth:
     S0: np.ndarray
     payload: Payload
     noise: NoiseSpec
-    extra: dict = field(default_factory=dict)
+    told_noise: float = 1.0
+    offset: np.ndarray = None
+    latency: float = 0.0
+    settings: dict = field(default_factory=dict)
 
     def S_at(self, t):
         """The true ``S`` at time ``t``."""
         return self.schedule.at(t)
+
+    def told_noise_spec(self):
+        """The :class:`plant.NoiseSpec` a method with a noise model is told (``noise`` times ``told_noise``)."""
+        return self.noise.scaled(self.told_noise)
 
     def to_json(self):
         data = {"scenario": self.scenario, "seed": self.seed}
@@ -292,7 +308,9 @@ class Truth:
         data["S0"] = np.asarray(self.S0).tolist()
         data.update(self.payload.to_dict())
         data["noise"] = self.noise.to_dict()
-        data.update(self.extra)
+        data.update(self.settings)
+        data.update({"told_noise": float(self.told_noise), "latency": float(self.latency),
+                     "offset": None if self.offset is None else [float(v) for v in self.offset]})
         return data
 
     def write(self, path):
@@ -316,12 +334,17 @@ def read_truth(path):
             schedule = CalibrationSchedule(data["S"])
         else:
             schedule = CalibrationSchedule([(t0, S) for t0, S in data["S_schedule"]])
-        known = {"scenario", "seed", "S", "S_schedule", "S0", "mass", "inertia", "rho", "noise"}
+        known = {"scenario", "seed", "S", "S_schedule", "S0", "mass", "inertia", "rho", "noise", "told_noise",
+                 "offset", "latency"}
+        offset = data.get("offset")
         return Truth(
             scenario=data.get("scenario", "unknown"), seed=data.get("seed"),
             schedule=schedule, S0=check_calibration(data["S0"], "S0"),
             payload=Payload.from_dict(data), noise=NoiseSpec.from_dict(data["noise"]),
-            extra={k: v for k, v in data.items() if k not in known})
+            told_noise=as_positive_scalar(data.get("told_noise", 1.0), "told_noise"),
+            offset=None if offset is None else as_finite_array(offset, (3,), "offset"),
+            latency=as_positive_scalar(data.get("latency") or 0.0, "latency", allow_zero=True),
+            settings={k: v for k, v in data.items() if k not in known})
     except json.JSONDecodeError as err:
         raise LogError(f"{path.name}: not valid JSON ({err})") from None
     except KeyError as err:

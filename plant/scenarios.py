@@ -150,8 +150,8 @@ class Scenario:
         -------
         log : plant.Log
         truth : plant.Truth
-            ``truth.noise`` is the noise actually added; ``truth.extra``
-            holds ``told_noise`` and the true states ``x`` are not stored.
+            ``truth.noise`` is the noise actually added; the true states
+            ``x`` are not stored.
         x_true : ndarray, shape (N, 6)
             True ``[theta, theta', X, X', Y, Y']``.
         """
@@ -185,12 +185,12 @@ class Scenario:
             dropped[0] = False
             keep &= ~dropped
         pose[~keep] = np.nan
-        extra = {"duration": self.duration, "dt": self.dt, "told_noise": self.told_noise,
-                 "pose_rate": self.pose_rate, "drop_rate": self.drop_rate,
-                 "outlier_rate": 0.0 if noise_free else self.outlier_rate,
-                 "description": self.description, "latency": self.latency,
-                 "offset": None if self.offset is None else [float(v) for v in self.offset]}
-        truth = Truth(self.name, int(seed), schedule, S0, self.payload, noise, extra)
+        settings = {"duration": self.duration, "dt": self.dt, "pose_rate": self.pose_rate,
+                    "drop_rate": self.drop_rate, "outlier_rate": 0.0 if noise_free else self.outlier_rate,
+                    "description": self.description}
+        truth = Truth(self.name, int(seed), schedule, S0, self.payload, noise, told_noise=self.told_noise,
+                      offset=None if self.offset is None else np.array(self.offset, dtype=float),
+                      latency=float(self.latency or 0.0), settings=settings)
         log = Log(t, pose, w_hat, name=f"{self.name}-seed{seed}")
         return log, truth, x_true
 

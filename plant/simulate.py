@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 
 from ._checks import as_finite_array
-from ._compile import BufferedCall, compile_function
+from ._compile import ChunkedSteps
 from .dynamics import state_derivative
 from .errors import FmscalError
 
@@ -45,14 +45,13 @@ def rk4_step(x, w0, w_mid, w1, dt, payload):
 
 
 @lru_cache(maxsize=16)
-def _compiled_chunk(payload):
-    """RK4 step from :func:`rk4_step`, accumulated over a chunk and compiled once."""
+def _compiled_steps(payload):
+    """RK4 step from :func:`rk4_step`, run in compiled chunks (:class:`plant._compile.ChunkedSteps`)."""
     x = ca.SX.sym("x", 6)
     w = ca.SX.sym("w", 9)
     dt = ca.SX.sym("dt")
     x_next = rk4_step(x, w[0:3], w[3:6], w[6:9], dt, payload)
-    step = ca.Function("rk4", [x, w, dt], [ca.densify(x_next)])
-    return compile_function(step.mapaccum("rk4_chunk", _CHUNK))
+    return ChunkedSteps(ca.Function("rk4", [x, w, dt], [ca.densify(x_next)]), _CHUNK)
 
 
 def integrate(payload, excitation, t, x0=None, compiled=True):
@@ -91,17 +90,5 @@ def integrate(payload, excitation, t, x0=None, compiled=True):
             x = rk4_step(x, w_start[k], w_mid[k], w_end[k], dt, payload)
             out[k + 1] = x
         return out
-    call = BufferedCall(_compiled_chunk(payload))       # own buffers: safe across threads
-    x_in, W_in, dt_in = call.inputs
-    W_in, X_out = W_in.reshape(_CHUNK, 9), call.outputs[0].reshape(_CHUNK, 6)   # column-major
-    W = np.hstack([w_start, w_mid, w_end])
-    n = len(dts)
-    for k0 in range(0, n, _CHUNK):
-        k1 = min(k0 + _CHUNK, n)
-        x_in[:] = x
-        W_in[:k1 - k0], W_in[k1 - k0:] = W[k0:k1], 0.0
-        dt_in[:k1 - k0], dt_in[k1 - k0:] = dts[k0:k1], 0.0       # padding: zero steps, discarded
-        call()
-        out[k0 + 1:k1 + 1] = X_out[:k1 - k0]
-        x = out[k1]
+    out[1:] = _compiled_steps(payload).run(x, [np.hstack([w_start, w_mid, w_end]), dts[:, None]])
     return out

@@ -5,8 +5,8 @@ import pytest
 
 import plant
 from analysis import calibration_error, error_history
-from observers import AdaptiveObserver, check_gains
-from observers.adaptive import PAPER_K1, PAPER_K2
+from observers import AdaptiveObserver, PaperAdaptiveObserver, check_gains
+from observers.adaptive_paper import PAPER_K1, PAPER_K2
 
 
 @pytest.fixture(scope="module")
@@ -16,7 +16,7 @@ def paper_noise_free():
 
 def test_paper_configuration_converges_on_noise_free_data(paper_noise_free):
     log, truth, _ = paper_noise_free
-    result = AdaptiveObserver.paper(plant.PAPER_PAYLOAD).run(log, truth.S0)
+    result = PaperAdaptiveObserver(plant.PAPER_PAYLOAD).run(log, truth.S0)
     assert result.observer == "adaptive-paper"
     assert not result.diverged
     assert calibration_error(result.S_hat, plant.PAPER_S) < 1e-2
@@ -25,7 +25,7 @@ def test_paper_configuration_converges_on_noise_free_data(paper_noise_free):
 def test_a_wrong_sign_in_law_8_is_caught(paper_noise_free):
     """The text's e = estimate - truth, taken literally, runs away (READING.md)."""
     log, truth, _ = paper_noise_free
-    obs = AdaptiveObserver.paper(plant.PAPER_PAYLOAD)
+    obs = PaperAdaptiveObserver(plant.PAPER_PAYLOAD)
     obs.delta = -obs.delta
     result = obs.run(log.head(30000), truth.S0)
     assert result.diverged or calibration_error(result.S_hat, plant.PAPER_S) > 1.0
@@ -35,7 +35,7 @@ def test_a_wrong_sign_in_law_8_is_caught(paper_noise_free):
 def test_default_configuration_beats_paper_configuration_under_paper_noise():
     log, truth, _ = plant.get_scenario("paper").generate(1)
     E = {obs.name: calibration_error(obs.run(log, truth.S0).S_hat, plant.PAPER_S)
-         for obs in (AdaptiveObserver(plant.PAPER_PAYLOAD), AdaptiveObserver.paper(plant.PAPER_PAYLOAD))}
+         for obs in (AdaptiveObserver(plant.PAPER_PAYLOAD), PaperAdaptiveObserver(plant.PAPER_PAYLOAD))}
     assert E["adaptive"] < 0.05
     assert E["adaptive"] < E["adaptive-paper"] / 3
 
@@ -81,7 +81,7 @@ def test_gain_checks_give_the_poles_of_reading_md():
 
 def test_compiled_and_readable_paths_agree():
     log, truth, _ = plant.get_scenario("vision-50hz").with_(duration=3.0).generate(4)
-    for obs in (AdaptiveObserver(plant.PAPER_PAYLOAD), AdaptiveObserver.paper(plant.PAPER_PAYLOAD)):
+    for obs in (AdaptiveObserver(plant.PAPER_PAYLOAD), PaperAdaptiveObserver(plant.PAPER_PAYLOAD)):
         fast = obs.run(log, truth.S0, compiled=True)
         slow = obs.run(log, truth.S0, compiled=False)
         np.testing.assert_allclose(fast.S_hat_history, slow.S_hat_history, rtol=1e-9, atol=1e-12)

@@ -9,7 +9,7 @@ import plant
 from analysis import calibration_error
 from analysis.calibrate import calibrate
 from analysis.cli import main
-from analysis.comparison import make_observer
+from observers import make_observer
 from analysis.sensitivity import derived_error, distortion, perturbed, sensitivity, tolerable_error
 from observers import LeastSquares
 from observers.latency import estimate_latency
@@ -30,7 +30,8 @@ def offset_log():
 @pytest.mark.parametrize("method", sorted(OFFSET_E_BOUND))
 def test_every_method_recovers_the_offset_with_S(offset_log, method):
     sc, log, truth = offset_log
-    result = make_observer(method, sc.payload, truth.noise, {"offset": True}).run(log, truth.S0)
+    obs = make_observer(method, sc.payload, truth.noise, {"offset": True})
+    result = obs.run(log, truth.S0 if obs.online else None)
     assert not result.diverged
     assert calibration_error(result.S_hat, truth.S_at(60)) < OFFSET_E_BOUND[method]
     assert np.max(np.abs(result.b - B_TRUE)) < 0.05
@@ -82,8 +83,8 @@ def test_a_50_hz_log_with_dropped_frames_calibrates_close_to_full_rate():
     full, truth, _ = plant.get_scenario("paper").with_(duration=60).generate(3)
     slow, _, _ = plant.get_scenario("vision-50hz").with_(duration=60).generate(3)
     assert slow.pose_rate() < 50
-    S_full = calibrate(full, PAPER_PAYLOAD, latency=0.0)["S"]
-    S_slow = calibrate(slow, PAPER_PAYLOAD, latency=0.0)["S"]
+    S_full = calibrate(full, PAPER_PAYLOAD, latency=0.0).calibration.S
+    S_slow = calibrate(slow, PAPER_PAYLOAD, latency=0.0).calibration.S
     assert calibration_error(np.array(S_slow), truth.S_at(60)) < 0.02
     assert calibration_error(np.array(S_slow), np.array(S_full)) < 0.02
 
@@ -224,7 +225,7 @@ def test_simulate_calibrate_save_apply_on_a_multi_rate_log_with_an_offset(tmp_pa
 
 
 def test_the_offset_of_a_singular_estimate_is_nan_not_an_exception():
-    from observers.base import offset_from_c, offset_std
+    from observers.result import offset_from_c, offset_std
     S = np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]])
     b = offset_from_c(S, np.ones(3))
     assert np.all(np.isnan(b)) and np.all(np.isnan(offset_std(S, b, np.eye(12))))

@@ -1,0 +1,167 @@
+"""The registry of methods: the one list of names the toolkit knows.
+
+Every command, table and notebook finds a method here: its name, how tables
+show it, how to build it with its documented defaults, whether it needs a
+noise model, whether it runs online, and what it is for. No other module
+keeps a list of method names.
+"""
+
+from dataclasses import dataclass
+
+from plant import NoiseSpec
+from plant.errors import FmscalError
+
+from .adaptive import AdaptiveObserver
+from .adaptive_paper import PaperAdaptiveObserver
+from .ekf import AugmentedEKF
+from .highgain import HighGainObserver
+from .least_squares import LeastSquares
+
+__all__ = ["Method", "METHODS", "get_method", "make_observer", "method_names", "method_label"]
+
+
+@dataclass(frozen=True)
+class Method:
+    """One method of the toolkit, as the registry knows it.
+
+    Attributes
+    ----------
+    name : str
+        The name commands take (``--observer NAME``) and tables print.
+    label : str
+        How tables and figures show it.
+    cls : type
+        The :class:`observers.Observer` subclass that implements it.
+    defaults : dict
+        Constructor settings that make this method out of ``cls`` (on top of
+        the class's own documented defaults).
+    needs_noise_model : bool
+        It is told the noise standard deviations (or estimates them from the log).
+    online : bool
+        Sample by sample (``step``); False: it fits a whole log.
+    role : str
+        ``"design"``: an observer of the toolkit's comparison; ``"paper"``:
+        a configuration kept to reproduce the paper's claims; ``"reference"``:
+        an offline reference.
+    calibrates : bool
+        Offered by ``fmscal calibrate`` for a recorded log.
+    summary : str
+        One line on what it is.
+    paper_claim : float or None
+        E at 100 s that the paper claims for this method (section 4), where it claims one.
+    """
+
+    name: str
+    label: str
+    cls: type
+    defaults: dict
+    needs_noise_model: bool
+    online: bool
+    role: str
+    calibrates: bool
+    summary: str
+    paper_claim: float = None
+
+    def build(self, payload, noise=None, settings=None):
+        """The method for ``payload``, with its documented defaults and ``settings`` on top.
+
+        Parameters
+        ----------
+        payload : plant.Payload
+        noise : plant.NoiseSpec, optional
+            What a method with a noise model is told; None: it estimates the
+            noise from the log. Ignored by methods without one.
+        settings : dict, optional
+            Constructor keyword arguments (gains, ``offset``, ...).
+
+        Returns
+        -------
+        observers.Observer
+        """
+        kwargs = {**self.defaults, **dict(settings or {})}
+        if self.needs_noise_model:
+            if noise is not None and not isinstance(noise, NoiseSpec):
+                raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
+            kwargs.setdefault("noise", noise)
+        return self.cls(payload, **kwargs)
+
+
+METHODS = {m.name: m for m in (
+    Method("adaptive", "adaptive", AdaptiveObserver, {}, needs_noise_model=False, online=True, role="design",
+           calibrates=True, summary="the paper's adaptive observer with the toolkit's documented changes"),
+    Method("adaptive-paper", "adaptive-paper", PaperAdaptiveObserver, {},
+           needs_noise_model=False, online=True, role="paper", calibrates=False,
+           summary="eqs. (6)-(8), (14), (15) exactly as printed", paper_claim=9.1106e-4),
+    Method("high-gain", "high-gain (reconstruction of [4])", HighGainObserver, {}, needs_noise_model=False,
+           online=True, role="design", calibrates=True,
+           summary="high-gain adaptive observer after Parsa and Aghili, tuned by its rule"),
+    Method("high-gain-ref4", "high-gain-ref4 (reconstruction of [4], as the seed paper describes it)",
+           HighGainObserver, HighGainObserver.REF4_SETTINGS, needs_noise_model=False, online=True,
+           role="paper", calibrates=False, summary="the high-gain observer configured as the paper describes [4]",
+           paper_claim=3.6700e-2),
+    Method("ekf", "ekf (after [3])", AugmentedEKF, {}, needs_noise_model=True, online=True, role="design",
+           calibrates=True, summary="augmented-state extended Kalman filter after Aghili"),
+    Method("least-squares", "least-squares (offline reference)", LeastSquares, {}, needs_noise_model=False,
+           online=False, role="reference", calibrates=True,
+           summary="offline least squares over double-integrated windows"),
+)}
+
+
+def get_method(name):
+    """The :class:`Method` called ``name``.
+
+    Raises
+    ------
+    FmscalError
+        No such method; the message lists the names.
+    """
+    try:
+        return METHODS[name]
+    except (KeyError, TypeError):
+        raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(METHODS)}") from None
+
+
+def make_observer(name, payload, noise=None, settings=None):
+    """A method by name, with its documented defaults (:meth:`Method.build`).
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`METHODS`.
+    payload : plant.Payload
+    noise : plant.NoiseSpec, optional
+        What a method with a noise model is told; None: estimated from the log.
+    settings : dict, optional
+        Constructor keyword arguments.
+
+    Returns
+    -------
+    observers.Observer
+    """
+    return get_method(name).build(payload, noise, settings)
+
+
+def method_names(role=None, online=None, calibrates=None):
+    """Names of the registered methods, in registry order, optionally filtered.
+
+    Parameters
+    ----------
+    role : str or tuple of str, optional
+        Keep these roles (``"design"``, ``"paper"``, ``"reference"``).
+    online : bool, optional
+    calibrates : bool, optional
+
+    Returns
+    -------
+    tuple of str
+    """
+    roles = (role,) if isinstance(role, str) else role
+    return tuple(m.name for m in METHODS.values()
+                 if (roles is None or m.role in roles) and (online is None or m.online == online)
+                 and (calibrates is None or m.calibrates == calibrates))
+
+
+def method_label(name):
+    """How tables and figures show a method: its :attr:`Method.label` (``name`` itself if unregistered)."""
+    method = METHODS.get(name)
+    return name if method is None else method.label
