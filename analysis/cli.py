@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_calibration import add_apply, add_calibrate
+from .cli_import import add_import
 from .cli_common import CliError, add_scenarios_and_observers, positive, strict
 from .cli_scale import add_bench, add_sweep
 
@@ -207,7 +208,7 @@ def build_parser():
 
 
 _COMMANDS = [_add_simulate, add_calibrate, add_apply, _add_reproduce, _add_compare, add_sweep, add_bench,
-             _add_check_gains]
+             _add_check_gains, add_import]
 
 
 def main(argv=None):

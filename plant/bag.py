@@ -145,7 +145,7 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
                        f"share ({max(tw[0], tp[0]):.3f} to {min(tw[-1], tp[-1]):.3f} s)")
     dt = float(np.median(np.diff(tw)))
     keep_w = (tw >= lo - dt / 2) & (tw <= hi + dt / 2)
-    keep_p = (tp >= lo) & (tp <= hi)
+    keep_p = (tp >= lo - dt / 2) & (tp <= hi + dt / 2)
     tw, w, w_ignored = tw[keep_w], w[keep_w], w_ignored[keep_w]
     tp, p = tp[keep_p], p[keep_p]
     if len(tw) < 2 or len(tp) < 2:
@@ -222,6 +222,12 @@ def _open_reader(path):
     if kind not in ("folder", ".bag", ".mcap", ".db3"):
         raise BagError(f"{path.name}: not a ROS bag; expected a ROS 2 bag folder, a .mcap or .db3 file, "
                        f"or a ROS 1 .bag (got a {path.suffix or 'file without suffix'})")
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        files = sorted(path.glob("*.mcap")) + sorted(path.glob("*.db3"))
+        if len(files) != 1:
+            raise BagError(f"{path.name}: not a ROS 2 bag folder (no metadata.yaml"
+                           + (f", and {len(files)} .mcap/.db3 files)" if files else ", no .mcap or .db3 file)"))
+        path = files[0]
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
         reader.open()
@@ -402,7 +408,7 @@ def format_report(report):
 
 def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_topic="/mocap/payload/pose",
               pose_type="PoseStamped", start_time_ns=1_700_000_000_000_000_000, receive_jitter=0.0,
-              pose_offset=(0.0, 0.0), seed=0):
+              pose_offset=(0.0, 0.0), pose_stamp_jitter=0.0, seed=0):
     """Write a log as a ROS bag, as a rig's recorder would.
 
     The reading goes out as ``WrenchStamped`` at every sample, the pose as
@@ -411,7 +417,9 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     from the centre of mass). Header stamps are ``start_time_ns`` plus the
     log's ``t``; the bag's receive times are later by 1 ms plus a uniform
     jitter of up to ``receive_jitter`` s, and messages are written in
-    receive order.
+    receive order. ``pose_stamp_jitter`` moves each pose's header stamp by
+    up to that much either way (a motion-capture clock off the sensor's
+    sample grid), the pose itself unchanged.
 
     Parameters
     ----------
@@ -429,8 +437,10 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         s, at least 0.
     pose_offset : (float, float)
         The marker's origin relative to the centre of mass, body frame, m.
+    pose_stamp_jitter : float
+        s, at least 0, less than half a sample.
     seed : int
-        Seeds the jitter.
+        Seeds the jitters.
 
     Returns
     -------
@@ -450,6 +460,8 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         raise BagError(f"pose_type must be one of {', '.join(full)}; got {pose_type!r}")
     if not (np.isfinite(receive_jitter) and receive_jitter >= 0):
         raise BagError(f"receive_jitter must be a non-negative number of seconds; got {receive_jitter}")
+    if not (np.isfinite(pose_stamp_jitter) and 0 <= pose_stamp_jitter < log.dt / 2):
+        raise BagError(f"pose_stamp_jitter must be in [0, {log.dt / 2:g}) s; got {pose_stamp_jitter}")
     dx, dy = _pair(pose_offset, "pose_offset")
     ts = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE)
     T = ts.types
@@ -490,7 +502,9 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
                                       covariance=cov))
 
     messages = [(0, ns, wrench_msg(ns, row)) for ns, row in zip(stamps, log.w_hat)]
-    messages += [(1, stamps[k], pose_msg(stamps[k], *log.pose[k])) for k in np.flatnonzero(log.has_pose)]
+    rows = np.flatnonzero(log.has_pose)
+    shift = np.round(rng.uniform(-pose_stamp_jitter, pose_stamp_jitter, len(rows)) * 1e9).astype(np.int64)
+    messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, *log.pose[k])) for k, d in zip(rows, shift)]
     received = [int(ns) + 1_000_000 + int(rng.uniform(0, receive_jitter) * 1e9) for _, ns, _ in messages]
     order = np.argsort(received, kind="stable")
     if storage == "ros1":
