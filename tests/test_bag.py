@@ -8,7 +8,8 @@ import pytest
 from analysis.calibrate import calibrate
 from analysis.cli import main
 from plant import FmscalError, get_scenario, read_log, read_truth
-from plant.bag import BagError, import_bag, read_bag, write_bag
+from plant.bag import BagError, import_bag, read_bag
+from plant.bag_write import write_bag
 
 WRENCH, POSE = "/ft_sensor/wrench", "/mocap/payload/pose"
 OFFSET = (0.05, -0.02)          # marker origin from the centre of mass, body frame, m
