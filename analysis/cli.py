@@ -161,7 +161,7 @@ def _add_compare(sub):
 def cmd_compare(args):
     from plant import get_scenario
     from .comparison import OBSERVER_NAMES, compare, summarise, summary_markdown
-    from .plots import plot_error_histories
+    from .plots import plot_comparison
     for name in args.scenario:
         get_scenario(name)                      # ValueError naming the choices
     for name in args.observer:
@@ -180,8 +180,11 @@ def cmd_compare(args):
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         for scenario in dict.fromkeys(table["scenario"]):
-            plot_error_histories({obs: v for (sc, obs), v in curves.items() if sc == scenario},
-                                 out / f"E_{scenario}.png", f"E against time, scenario '{scenario}' (seed 0)")
+            sc = get_scenario(scenario)
+            truth = sc.with_(duration=args.duration or sc.duration).generate(0)[1]     # seed 0's S(t)
+            plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
+                            out / f"E_{scenario}.png",
+                            f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
         (out / "summary.md").write_text(text)
         table.to_csv(out / "runs.csv", index=False)
     if args.json:
