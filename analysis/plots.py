@@ -67,12 +67,21 @@ def _clip_note(clipped):
     return f"\n({names} wanders far: clipped at the frame, the scale set by the others)"
 
 
+def _style(name, clipped):
+    """A clipped method drawn thin and faded, under the others."""
+    return {"lw": 0.6, "alpha": 0.45, "zorder": 1} if name in clipped else {"lw": 1.0, "zorder": 2}
+
+
+def _label(name, clipped):
+    return display_name(name) + (" (clipped)" if name in clipped else "")
+
+
 def _E_panel(ax, curves, clipped):
     """E against time on a log scale, one line per method; limits from the unclipped ones."""
     kept = []
     for name, (t, E) in curves.items():
         E = np.maximum(np.asarray(E, dtype=float), 1e-12)
-        ax.semilogy(t, E, lw=1, label=display_name(name))
+        ax.semilogy(t, E, label=_label(name, clipped), **_style(name, clipped))
         if name not in clipped:
             kept.append(E)
     if kept:
@@ -115,7 +124,7 @@ def _S_panels(fig, spec, times, histories, S_true, t_true, clipped, bands=None):
         for j in range(3):
             ax = axes[i, j]
             for name, h in histories.items():
-                line, = ax.plot(times[name], h[:, i, j], lw=1, label=display_name(name))
+                line, = ax.plot(times[name], h[:, i, j], label=_label(name, clipped), **_style(name, clipped))
                 if bands is not None and bands.get(name) is not None:
                     centre, sd = h[-1, i, j], bands[name][i][j]
                     ax.axhspan(centre - sd, centre + sd, color=line.get_color(), alpha=0.25, lw=0,

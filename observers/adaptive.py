@@ -1,6 +1,6 @@
 """The paper's Lyapunov adaptive observer, eqs. (6)-(8), (14), (15).
 
-Reading of the paper: ``../shared/reference/READING.md``. In matrix form, with
+Reading of the paper: ``docs/reading-the-paper.md``. In matrix form, with
 ``G(theta)`` the matrix of eq. (1) (:func:`plant.input_matrix`), the observer
 is
 
@@ -56,7 +56,7 @@ class AdaptiveObserver(Observer):
       each measured in ``tests/test_adaptive.py`` and the README:
 
       1. the velocity error is ``e_v = e' + K_pos e`` (the reading the
-         observer equations imply, READING.md), with ``e'`` a first-order
+         observer equations imply, docs/reading-the-paper.md), with ``e'`` a first-order
          filtered derivative (time constant ``tau``), not a raw difference
          that turns pose noise into large steps;
       2. the law adapts ``phi_1`` and ``phi_2`` of eqs. (4), (5) with a
@@ -166,7 +166,7 @@ class AdaptiveObserver(Observer):
         o = ops(z, u)
         x, S, e_prev, pose, has, w_raw, t, xi, R_flat, since = self._split(z)
         w = self._augmented(o, w_raw)
-        # output errors, true minus estimate (the proof's sign, READING.md)
+        # output errors, true minus estimate (the proof's sign, docs/reading-the-paper.md)
         e = has * o.vcat([pose[0] - x[0], pose[1] - x[2], pose[2] - x[4]])
         theta = has * pose[0] + (1 - has) * x[0]            # eq. (5) uses the measured angle
         G = input_matrix(theta, self.payload)
