@@ -64,7 +64,7 @@ def _clip_note(clipped):
     if not clipped:
         return ""
     names = ", ".join(display_name(n) for n in sorted(clipped))
-    return f"\n({names} wanders far: clipped at the frame, the scale set by the others)"
+    return f"\n({names} wanders far: drawn faded and clipped at the frame; the others set the scale)"
 
 
 def _style(name, clipped):

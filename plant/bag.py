@@ -106,7 +106,8 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         ``t = 0``), ``span_s`` (the shared span used, relative to the
         first wrench stamp), ``wrench`` and ``pose`` (per stream: messages
         read, messages used, nominal rate in Hz (one over the median step;
-        the pose's mean rate too), frames dropped, duplicate stamps),
+        the pose's mean rate too), frames dropped within the span used
+        (gaps of 1.5 steps and more), duplicate stamps),
         ``resampled`` (None, or the spread of the wrench steps that made it
         necessary), ``snap_error_max_s``, ``poses_merged`` (poses that fell on
         the same sample as a nearer one), ``tilt_max_deg``,
@@ -181,7 +182,7 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         "start_time_utc": _utc(origin + round(t0 * 1e9)),
         "span_s": [float(t0), float(grid[last])],
         "window": [start, end],
-        "wrench": {**w_info, "used": int(used_w.sum()), "rate_hz": 1.0 / dt},
+        "wrench": {**w_info, "used": int(used_w.sum()), "rate_hz": 1.0 / dt, "dropped": 0},
         "pose": {**p_info, "used": int(len(rows)), "rate_hz": 1.0 / float(np.median(np.diff(tp))),
                  "mean_rate_hz": _rate(tp)},
         "resampled": resampled,
@@ -194,6 +195,7 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         "rms_ignored": dict(zip(("torque.x", "torque.y", "force.z"), rms(w_ignored[used_w]))),
         "pose_offset": list(offset),
     }
+    report["wrench"]["dropped"] = _dropped(tw)             # frames missing within the span used
     report["pose"]["dropped"] = _dropped(tp)
     report["warnings"] = _warnings(report)
     return log, report
@@ -296,7 +298,6 @@ def _stream(messages, role, name):
         raise BagError(f"{name}: a {role} message holds a NaN or infinite value "
                        f"(message {int(np.argmax(~np.isfinite(values).all(axis=1))) + 1} by stamp)")
     if role == "wrench":
-        info["dropped"] = _dropped((stamps - stamps[0]) * 1e-9)
         return stamps, values[:, :3], values[:, 3:], info
     return stamps, values, info
 
@@ -396,7 +397,7 @@ def format_report(report):
         f"({report['start_time_ns']} ns)",
         f"  poses snapped to the nearest wrench sample: largest error {report['snap_error_max_s'] * 1e3:.3g} ms",
         f"  planarity: tilt up to {report['tilt_max_deg']:.3g} deg, {report['out_of_plane_m'] * 1e3:.3g} mm out of "
-        f"the plane against {report['in_plane_m'] * 1e3:.4g} mm in it",
+        f"the plane (the motion spans {report['in_plane_m']:.3g} m in it)",
         "  rms used:    " + ", ".join(f"{k} {v:.4g}" for k, v in used.items()) + " (N m, N)",
         "  rms ignored: " + ", ".join(f"{k} {v:.4g}" for k, v in ignored.items()) + " (N m, N)",
     ]

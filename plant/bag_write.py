@@ -11,7 +11,7 @@ __all__ = ["write_bag"]
 
 def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_topic="/mocap/payload/pose",
               pose_type="PoseStamped", start_time_ns=1_700_000_000_000_000_000, receive_jitter=0.0,
-              pose_offset=(0.0, 0.0), pose_stamp_jitter=0.0, seed=0):
+              pose_offset=(0.0, 0.0), pose_stamp_jitter=0.0, wrench_drop_rate=0.0, seed=0):
     """Write a log as a ROS bag, as a rig's recorder would.
 
     The reading goes out as ``WrenchStamped`` at every sample, the pose as
@@ -42,6 +42,9 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         The marker's origin relative to the centre of mass, body frame, m.
     pose_stamp_jitter : float
         s, at least 0, less than half a sample.
+    wrench_drop_rate : float
+        Fraction of wrench messages left out at random (never the first or
+        the last), in [0, 0.5).
     seed : int
         Seeds the jitters.
 
@@ -65,6 +68,8 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         raise BagError(f"receive_jitter must be a non-negative number of seconds; got {receive_jitter}")
     if not (np.isfinite(pose_stamp_jitter) and 0 <= pose_stamp_jitter < log.dt / 2):
         raise BagError(f"pose_stamp_jitter must be in [0, {log.dt / 2:g}) s; got {pose_stamp_jitter}")
+    if not (np.isfinite(wrench_drop_rate) and 0 <= wrench_drop_rate < 0.5):
+        raise BagError(f"wrench_drop_rate must be in [0, 0.5); got {wrench_drop_rate}")
     dx, dy = _pair(pose_offset, "pose_offset")
     ts = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE)
     T = ts.types
@@ -104,7 +109,9 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
                                                                           angular=Vector3(x=0.0, y=0.0, z=0.0)),
                                       covariance=cov))
 
-    messages = [(0, ns, wrench_msg(ns, row)) for ns, row in zip(stamps, log.w_hat)]
+    sent = rng.random(len(stamps)) >= wrench_drop_rate
+    sent[0] = sent[-1] = True
+    messages = [(0, ns, wrench_msg(ns, row)) for ns, row, ok in zip(stamps, log.w_hat, sent) if ok]
     rows = np.flatnonzero(log.has_pose)
     shift = np.round(rng.uniform(-pose_stamp_jitter, pose_stamp_jitter, len(rows)) * 1e9).astype(np.int64)
     messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, *log.pose[k])) for k, d in zip(rows, shift)]

@@ -84,6 +84,19 @@ def test_pose_stamps_off_the_grid_are_snapped_and_reported(rig, tmp_path):
     assert imported.has_pose.sum() == log.head(5000).has_pose.sum()
 
 
+def test_dropped_wrench_messages_resampled_with_a_warning(rig, tmp_path):
+    folder, log, truth, _ = rig
+    bag = write_bag(log, tmp_path / "drops", "sqlite3", WRENCH, POSE, wrench_drop_rate=0.01, seed=4)
+    imported, report = import_bag(bag, WRENCH, POSE)
+    missing = len(log) - report["wrench"]["messages"]
+    assert 100 < missing < 300 and report["wrench"]["dropped"] == missing
+    assert report["resampled"] is not None and any("resampled" in w for w in report["warnings"])
+    assert len(imported) == len(log)
+    E_csv = calibrate(read_log(folder / "rig.csv"), truth.payload, truth=truth)["E"]
+    E_bag = calibrate(imported, truth.payload, truth=truth)["E"]
+    assert 0.8 * E_csv < E_bag < 1.25 * E_csv
+
+
 def test_window_cuts_the_log_and_moves_t0(rig):
     folder, log, _, _ = rig
     imported, report = import_bag(_bag(folder, "mcap", "PoseStamped", log), WRENCH, POSE, OFFSET, start=5.0, end=12.0)
