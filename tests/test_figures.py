@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from analysis.cli import main
 from analysis.plots import plot_comparison, wandering_methods
@@ -29,17 +30,18 @@ def test_importing_the_plots_leaves_the_backend_alone():
 
 def test_calibrate_plot(tmp_path, capsys):
     log = tmp_path / "rig.csv"
-    assert main(["simulate", "--scenario", "real-rig", "--duration", "8", "--out", str(log)]) == 0
+    assert main(["simulate", "--scenario", "real-rig", "--duration", "6", "--out", str(log)]) == 0
     p = PAPER_PAYLOAD
     for method in ("least-squares", "high-gain"):          # with and without S_std
         png = tmp_path / f"{method}.png"
         assert main(["calibrate", str(log), "--mass", str(p.mass), "--inertia", str(p.inertia), "--rho",
                      *map(str, p.rho), "--observer", method, "--truth", str(log.with_suffix(".truth.json")),
-                     "--plot", str(png)]) == 0
+                     "--latency", "0.02", "--plot", str(png)]) == 0
         assert _is_png(png)
     capsys.readouterr()
 
 
+@pytest.mark.slow
 def test_compare_and_reproduce_write_their_figures(tmp_path, capsys):
     assert main(["compare", "--scenario", "paper", "--observer", "ekf", "adaptive-paper", "--duration", "3",
                  "--out", str(tmp_path / "cmp")]) == 0
