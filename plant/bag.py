@@ -233,10 +233,22 @@ def _open_reader(path):
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
         reader.open()
-    except Exception as err:        # rosbags raises many types on a damaged file; all mean "not a bag"
-        message = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise BagError(f"{path.name}: not a readable ROS bag ({message})") from None
+    except Exception as err:
+        _refuse_foreign(err, f"{path.name}: not a readable ROS bag")
     return reader
+
+
+#: Where the errors of a damaged or foreign file come from (rosbags and the storage it reads).
+_FOREIGN = ("rosbags", "sqlite3", "struct", "zstandard", "lz4", "ruamel", "yaml")
+
+
+def _refuse_foreign(err, what):
+    """A BagError for an error raised by rosbags or its storage on a bad file; anything else re-raised."""
+    module = type(err).__module__ or ""
+    if not (module.split(".")[0] in _FOREIGN or isinstance(err, (EOFError, UnicodeDecodeError))):
+        raise err
+    message = str(err).splitlines()[0] if str(err) else type(err).__name__
+    raise BagError(f"{what} ({message})") from None
 
 
 def _read_messages(path, wrench_topic, pose_topic):
@@ -256,10 +268,13 @@ def _read_messages(path, wrench_topic, pose_topic):
         if wrench_topic == pose_topic:
             raise BagError(f"the wrench and pose topics must differ; got {wrench_topic!r} for both")
         connections = [c for c in reader.connections if c.topic in out]
-        for connection, _, raw in reader.messages(connections=connections):
-            msg = reader.deserialize(raw, connection.msgtype)
-            stamp = msg.header.stamp
-            out[connection.topic].append((int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg))
+        try:
+            for connection, _, raw in reader.messages(connections=connections):
+                msg = reader.deserialize(raw, connection.msgtype)
+                stamp = msg.header.stamp
+                out[connection.topic].append((int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg))
+        except Exception as err:
+            _refuse_foreign(err, f"{path.name}: a message could not be read; the bag is damaged")
         pose_type = topics[pose_topic]
     finally:
         reader.close()

@@ -184,12 +184,13 @@ def test_missing_topic_wrong_type_and_not_a_bag_refused(rig, tmp_path, capsys):
     assert "nav_msgs/msg/Odometry" in line and "expected geometry_msgs/msg/WrenchStamped" in line
     line = _refused(["import", bag, "--wrench-topic", WRENCH, "--pose-topic", WRENCH, "--out", out], capsys)
     assert "WrenchStamped" in line and "PoseStamped" in line
+    whole = next(_bag(folder, "mcap", "PoseStamped", log).glob("*.mcap")).read_bytes()
     for name, content in (("fake.bag", b"not a bag\n"), ("fake.mcap", b"\x00" * 64), ("fake.db3", b"hello"),
-                          ("fake.txt", b"t,theta\n")):
+                          ("fake.txt", b"t,theta\n"), ("cut.mcap", whole[:len(whole) // 2])):
         (tmp_path / name).write_bytes(content)
         line = _refused(["import", str(tmp_path / name), "--wrench-topic", WRENCH, "--pose-topic", POSE,
                          "--out", out], capsys)
-        assert "not a" in line and "ROS" in line
+        assert "not a" in line and "ROS" in line and name in line
     (tmp_path / "folder").mkdir()
     assert "not a ROS 2 bag folder" in _refused(["import", str(tmp_path / "folder"), "--wrench-topic", WRENCH,
                                                  "--pose-topic", POSE, "--out", out], capsys)
