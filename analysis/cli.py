@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_calibration import add_apply, add_calibrate
+from .cli_import import add_import
 from .cli_common import CliError, add_scenarios_and_observers, positive, strict
 from .cli_scale import add_bench, add_sweep
 
@@ -161,7 +162,7 @@ def cmd_compare(args):
     from observers import get_method
     from plant import get_scenario
     from .comparison import compare, summarise, summary_markdown
-    from .plots import plot_error_histories
+    from .plots import plot_comparison
     for name in args.scenario:
         get_scenario(name)                      # FmscalError naming the choices
     for name in args.observer:
@@ -179,8 +180,11 @@ def cmd_compare(args):
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         for scenario in dict.fromkeys(table["scenario"]):
-            plot_error_histories({obs: v for (sc, obs), v in curves.items() if sc == scenario},
-                                 out / f"E_{scenario}.png", f"E against time, scenario '{scenario}' (seed 0)")
+            sc = get_scenario(scenario)
+            truth = sc.with_(duration=args.duration or sc.duration).generate(0)[1]     # seed 0's S(t)
+            plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
+                            out / f"E_{scenario}.png",
+                            f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
         (out / "summary.md").write_text(text)
         table.to_csv(out / "runs.csv", index=False)
     if args.json:
@@ -207,7 +211,7 @@ def build_parser():
 
 
 _COMMANDS = [_add_simulate, add_calibrate, add_apply, _add_reproduce, _add_compare, add_sweep, add_bench,
-             _add_check_gains]
+             _add_check_gains, add_import]
 
 
 def main(argv=None):

@@ -39,7 +39,8 @@ def add_calibrate(sub):
                    help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
-    p.add_argument("--plot", metavar="FILE.png", help="draw the entries of S_hat against time")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="draw each entry of S_hat against time with its one-sigma band, and the pose residual")
     p.add_argument("--save", metavar="CAL.json", help="write the calibration here (for fmscal apply)")
     p.set_defaults(func=cmd_calibrate)
 
@@ -49,7 +50,7 @@ def cmd_calibrate(args):
 
     from plant import Payload, file_sha256, read_log, read_truth
     from .calibrate import calibrate
-    from .plots import plot_S_entries
+    from .plots import plot_calibration
     for name, value in (("--mass", args.mass), ("--inertia", args.inertia)):
         positive(value, name)
     for value in args.rho:
@@ -73,7 +74,9 @@ def cmd_calibrate(args):
     for warning in report.warnings:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
     if args.plot:
-        plot_S_entries([report.result], truth, args.plot, f"{Path(args.log).name}: entries of S_hat")
+        plot_calibration(report.result, log.shift_poses(report.calibration.latency), args.plot,
+                         f"{Path(args.log).name}: entries of S_hat ({report.calibration.method}) and the pose residual",
+                         truth)
     result, out = report.result, report.to_dict()
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))

@@ -79,13 +79,14 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
         observer runs on the log with its poses moved back by it (the
         latency is known here; ``fmscal calibrate`` estimates it).
     history : bool
-        Also return ``(t, E)``, decimated to at most 2000 points.
+        Also return ``(t, E, S_hat_history)``, decimated to at most 2000 points.
 
     Returns
     -------
     row : dict
         The columns of :func:`compare` other than ``scenario`` and ``seed``.
-    (t, E) : tuple of ndarray, only with ``history=True``
+    (t, E, S_hat_history) : tuple of ndarray, only with ``history=True``
+        Shapes (M,), (M,), (M, 3, 3).
     """
     settings = dict(settings or {})
     if truth.offset is not None:                  # a rig with an offset: every method estimates it
@@ -111,7 +112,7 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     if not history:
         return row
     step = max(1, len(E) // 2000)
-    return row, (result.t[::step], E[::step])
+    return row, (result.t[::step], E[::step], result.S_hat_history[::step])
 
 
 def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=None, histories=False):
@@ -136,7 +137,7 @@ def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=N
     rows : list of dict
         One per observer; the columns of :func:`compare`.
     histories : dict, only with ``histories=True``
-        ``{observer: (t, E)}``, decimated to at most 2000 points.
+        ``{observer: (t, E, S_hat_history)}``, decimated to at most 2000 points.
     """
     sc, log, truth, told = simulate_case(scenario, seed, duration)
     rows, curves = [], {}
@@ -190,7 +191,7 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
         ``wall_time`` (s), ``wall_per_sim_s`` (wall seconds per simulated
         second) and ``us_per_step``. E is NaN for a diverged run.
     dict, only with ``histories=True``
-        ``{(scenario, observer): (t, E)}``.
+        ``{(scenario, observer): (t, E, S_hat_history)}``.
     """
     seeds = seed_list(seeds)
     for name in observers:

@@ -1,4 +1,4 @@
-"""Reproduce the paper's section 4: Figs. 2-4 and E at 100 s, claimed vs measured."""
+"""Reproduce the paper's section 4: Figs. 2-4 (with E against time beside them) and E at 100 s, claimed vs measured."""
 
 from pathlib import Path
 
@@ -9,7 +9,7 @@ from observers import METHODS, make_observer, method_label, method_names
 from plant import get_scenario
 
 from .metrics import convergence_time, error_history
-from .plots import plot_S_entries
+from .plots import plot_comparison
 
 __all__ = ["reproduce", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
@@ -39,7 +39,9 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
     ----------
     out_dir : str or Path
         Gets ``fig2_paper.png``, ``fig3_noisy.png``, ``fig4_time-varying.png``
-        and ``summary.md``.
+        (each: E against time for every observer, log scale, beside the
+        entries of ``S_hat``; :func:`analysis.plots.plot_comparison`) and
+        ``summary.md``.
     seed : int
         Seed of every scenario (noise, ``S0``, the noisy case's ``S``).
     duration_scale : float
@@ -65,12 +67,12 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
         sc = get_scenario(name)
         sc = sc.with_(duration=sc.duration * duration_scale)
         log, truth, _ = sc.generate(seed)
-        results = []
+        runs = {}
         for obs in _observers(sc.payload, truth):
             bar.set_postfix_str(f"{name}: {obs.name}")
             r = obs.run(log, truth.S0)
-            results.append(r)
             E = error_history(r.S_hat_history, truth.S_at(r.t))
+            runs[r.observer] = (r.t, E, r.S_hat_history)
             k100 = min(len(E) - 1, int(round(min(100.0, sc.duration) / log.dt)) - 1)   # just before 100 s
             rows.append({"scenario": name, "observer": r.observer,
                          "E_100": float(E[k100]) if not r.diverged else None,
@@ -81,8 +83,8 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
                          "diverged": r.diverged, "converged": r.converged,
                          "wall_time": r.wall_time, "S_hat_100": r.S_hat_history[k100].tolist()})
             bar.update(1)
-        plot_S_entries(results, truth, out / f"{fig.replace('. ', '').lower()}_{name}.png",
-                       f"{fig}: entries of S_hat, scenario '{name}' (seed {seed})")
+        plot_comparison(runs, truth, out / f"{fig.replace('. ', '').lower()}_{name}.png",
+                        f"{fig}: E against time and the entries of S_hat, scenario '{name}' (seed {seed})")
     bar.close()
     (out / "summary.md").write_text(summary_markdown(rows, seed, duration_scale))
     return rows

@@ -4,6 +4,7 @@ from .dynamics import (A_1, A_2, B_1, B_2, C_1, C_2, STATE_NAMES, acceleration, 
                        phi_1, phi_2, regressors, S_from_phi, state_derivative)
 from .excitation import Excitation, Multisine, PaperWrench, SampledWrench
 from .calibration import Calibration, CalibrationFileError, file_sha256
+from .bag import BagError, import_bag, read_bag
 from .log import COLUMNS, READING_COLUMNS, Log, LogError, Truth, read_log, read_readings, read_truth
 from .payload import PAPER_PAYLOAD, Payload
 from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenario
@@ -18,6 +19,7 @@ __all__ = [
     "phi_1", "phi_2", "regressors", "S_from_phi", "state_derivative",
     "Excitation", "Multisine", "PaperWrench", "SampledWrench",
     "Calibration", "CalibrationFileError", "file_sha256",
+    "BagError", "import_bag", "read_bag",
     "COLUMNS", "READING_COLUMNS", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",
     "PAPER_PAYLOAD", "Payload",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",

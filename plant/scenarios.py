@@ -1,6 +1,6 @@
 """Named simulation scenarios: the paper's section 4 and the cases users meet.
 
-Noise follows READING.md: the wrench noise is added to the raw reading
+Noise follows docs/reading-the-paper.md: the wrench noise is added to the raw reading
 ``w_hat``, with a standard deviation that is a fraction of the peak amplitude of
 each component of the noise-free reading; angle and position noise are
 standard deviations in rad and m.

@@ -23,7 +23,7 @@ def test_paper_configuration_converges_on_noise_free_data(paper_noise_free):
 
 
 def test_a_wrong_sign_in_law_8_is_caught(paper_noise_free):
-    """The text's e = estimate - truth, taken literally, runs away (READING.md)."""
+    """The text's e = estimate - truth, taken literally, runs away (docs/reading-the-paper.md)."""
     log, truth, _ = paper_noise_free
     obs = PaperAdaptiveObserver(plant.PAPER_PAYLOAD)
     obs.delta = -obs.delta

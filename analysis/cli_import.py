@@ -1,0 +1,78 @@
+"""``fmscal import``: a ROS bag (ROS 1, or ROS 2 MCAP / sqlite3) into the log format."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .cli_common import CliError, strict
+
+
+def add_import(sub):
+    p = sub.add_parser("import", help="read a ROS bag into a log (LOG.csv and LOG.import.json)",
+                       description="Read a ROS 2 bag (its folder, or its .mcap or .db3 file) or a ROS 1 .bag "
+                                   "with rosbags (pip install 'fmscal[ros]'): the sensor as "
+                                   "geometry_msgs/WrenchStamped (M = torque.z, fx = force.x, fy = force.y), the "
+                                   "pose as PoseStamped, TransformStamped or nav_msgs/Odometry (theta the yaw, "
+                                   "unwrapped). Times are the header stamps, t = 0 at the first wrench sample; "
+                                   "each pose goes to the nearest wrench sample. Writes the log, the sidecar "
+                                   "LOG.import.json of what was imported, and prints the import report.")
+    p.add_argument("bag", metavar="BAG")
+    p.add_argument("--wrench-topic", required=True, metavar="TOPIC", help="the sensor's WrenchStamped topic")
+    p.add_argument("--pose-topic", required=True, metavar="TOPIC",
+                   help="the payload's PoseStamped, TransformStamped or Odometry topic")
+    p.add_argument("--out", required=True, metavar="LOG.csv")
+    p.add_argument("--pose-offset", type=float, nargs=2, default=(0.0, 0.0), metavar=("DX", "DY"),
+                   help="the tracked marker frame's origin relative to the payload's centre of mass, "
+                        "body frame, m (default 0 0)")
+    p.add_argument("--start", type=float, metavar="S", help="keep stamps from S s after the first wrench stamp")
+    p.add_argument("--end", type=float, metavar="S", help="keep stamps up to S s after the first wrench stamp")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out and its sidecar")
+    p.add_argument("--json", action="store_true", help="print the import report as one JSON object")
+    p.set_defaults(func=cmd_import)
+
+
+def cmd_import(args):
+    from plant.bag import format_report, import_bag
+    out = Path(args.out)
+    if out.suffix != ".csv":
+        raise CliError(f"--out must end in .csv; got {out}")
+    sidecar = out.with_suffix(".import.json")
+    bag = Path(args.bag)
+    if bag.exists() and any(_same(bag, f) or _inside(f, bag) for f in (out, sidecar)):
+        raise CliError(f"--out {out} would write onto the bag {bag}; choose another path")
+    if not args.overwrite:
+        for f in (out, sidecar):
+            if f.exists():
+                raise CliError(f"{f} exists; give --overwrite to replace it")
+    if not all(np.isfinite(v) for v in args.pose_offset):
+        raise CliError(f"--pose-offset must be two finite numbers in m; got {list(args.pose_offset)}")
+    log, report = import_bag(bag, args.wrench_topic, args.pose_topic, tuple(args.pose_offset),
+                             args.start, args.end)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    log.write(out)
+    sidecar.write_text(json.dumps(strict({"log": out.name, "samples": len(log), "duration_s": log.duration,
+                                          "pose_measurements": int(log.has_pose.sum()), **report}),
+                                  indent=2, allow_nan=False) + "\n")
+    for warning in report["warnings"]:
+        print(f"fmscal import: warning: {warning}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(strict(report), allow_nan=False))
+        return
+    print(format_report(report))
+    print(f"wrote {out} ({len(log)} samples, {log.duration:g} s, {int(log.has_pose.sum())} poses) and {sidecar}")
+
+
+def _same(a, b):
+    try:
+        return b.exists() and a.resolve() == b.resolve()
+    except OSError:
+        return False
+
+
+def _inside(f, folder):
+    """True if ``f`` would be written inside the bag's folder."""
+    if not folder.is_dir():
+        return False
+    return folder.resolve() in f.resolve().parents

@@ -1,0 +1,133 @@
+"""A log written as a ROS bag, as a rig's recorder would write it (tests, trying ``fmscal import``)."""
+
+from pathlib import Path
+
+import numpy as np
+
+from .bag import WRENCH_TYPE, BagError, _pair
+
+__all__ = ["write_bag"]
+
+
+def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_topic="/mocap/payload/pose",
+              pose_type="PoseStamped", start_time_ns=1_700_000_000_000_000_000, receive_jitter=0.0,
+              pose_offset=(0.0, 0.0), pose_stamp_jitter=0.0, wrench_drop_rate=0.0, seed=0):
+    """Write a log as a ROS bag, as a rig's recorder would.
+
+    The reading goes out as ``WrenchStamped`` at every sample, the pose as
+    ``pose_type`` where the log has one (the yaw as a quaternion about z,
+    so it wraps into (-pi, pi]; the position of a marker at ``pose_offset``
+    from the centre of mass). Header stamps are ``start_time_ns`` plus the
+    log's ``t``; the bag's receive times are later by 1 ms plus a uniform
+    jitter of up to ``receive_jitter`` s, and messages are written in
+    receive order. ``pose_stamp_jitter`` moves each pose's header stamp by
+    up to that much either way (a motion-capture clock off the sensor's
+    sample grid), the pose itself unchanged.
+
+    Parameters
+    ----------
+    log : plant.Log
+    path : str or Path
+        A new folder (ROS 2) or ``.bag`` file (ROS 1); never overwritten.
+    storage : str
+        ``"mcap"`` or ``"sqlite3"`` (ROS 2), ``"ros1"``.
+    wrench_topic, pose_topic : str
+    pose_type : str
+        ``"PoseStamped"``, ``"TransformStamped"`` or ``"Odometry"``.
+    start_time_ns : int
+        Absolute time of the log's first sample, ns.
+    receive_jitter : float
+        s, at least 0.
+    pose_offset : (float, float)
+        The marker's origin relative to the centre of mass, body frame, m.
+    pose_stamp_jitter : float
+        s, at least 0, less than half a sample.
+    wrench_drop_rate : float
+        Fraction of wrench messages left out at random (never the first or
+        the last), in [0, 0.5).
+    seed : int
+        Seeds the jitters.
+
+    Returns
+    -------
+    pathlib.Path
+        The bag written.
+    """
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    if path.exists():
+        raise BagError(f"{path}: exists already; a bag is never overwritten")
+    if storage not in ("mcap", "sqlite3", "ros1"):
+        raise BagError(f"storage must be mcap, sqlite3 or ros1; got {storage!r}")
+    full = {"PoseStamped": "geometry_msgs/msg/PoseStamped", "TransformStamped": "geometry_msgs/msg/TransformStamped",
+            "Odometry": "nav_msgs/msg/Odometry"}
+    if pose_type not in full:
+        raise BagError(f"pose_type must be one of {', '.join(full)}; got {pose_type!r}")
+    if not (np.isfinite(receive_jitter) and receive_jitter >= 0):
+        raise BagError(f"receive_jitter must be a non-negative number of seconds; got {receive_jitter}")
+    if not (np.isfinite(pose_stamp_jitter) and 0 <= pose_stamp_jitter < log.dt / 2):
+        raise BagError(f"pose_stamp_jitter must be in [0, {log.dt / 2:g}) s; got {pose_stamp_jitter}")
+    if not (np.isfinite(wrench_drop_rate) and 0 <= wrench_drop_rate < 0.5):
+        raise BagError(f"wrench_drop_rate must be in [0, 0.5); got {wrench_drop_rate}")
+    dx, dy = _pair(pose_offset, "pose_offset")
+    ts = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE)
+    T = ts.types
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    Vector3, Point, Quaternion = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Quaternion"]
+    rng = np.random.default_rng(seed)
+    stamps = start_time_ns + np.round(log.t * 1e9).astype(np.int64)
+
+    def header(ns):
+        kw = {"stamp": Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000)), "frame_id": "world"}
+        if storage == "ros1":
+            kw["seq"] = 0
+        return Header(**kw)
+
+    def wrench_msg(ns, row):
+        M, fx, fy = row
+        return T["geometry_msgs/msg/WrenchStamped"](
+            header=header(ns), wrench=T["geometry_msgs/msg/Wrench"](
+                force=Vector3(x=float(fx), y=float(fy), z=0.0), torque=Vector3(x=0.0, y=0.0, z=float(M))))
+
+    def pose_msg(ns, theta, X, Y):
+        c, s = np.cos(theta), np.sin(theta)
+        px, py = X + c * dx - s * dy, Y + s * dx + c * dy
+        q = Quaternion(x=0.0, y=0.0, z=float(np.sin(theta / 2)), w=float(np.cos(theta / 2)))
+        if pose_type == "TransformStamped":
+            return T[full[pose_type]](header=header(ns), child_frame_id="payload",
+                                      transform=T["geometry_msgs/msg/Transform"](
+                                          translation=Vector3(x=float(px), y=float(py), z=0.0), rotation=q))
+        pose = T["geometry_msgs/msg/Pose"](position=Point(x=float(px), y=float(py), z=0.0), orientation=q)
+        if pose_type == "PoseStamped":
+            return T[full[pose_type]](header=header(ns), pose=pose)
+        cov = np.zeros(36)
+        return T[full[pose_type]](header=header(ns), child_frame_id="payload",
+                                  pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
+                                  twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                                      twist=T["geometry_msgs/msg/Twist"](linear=Vector3(x=0.0, y=0.0, z=0.0),
+                                                                          angular=Vector3(x=0.0, y=0.0, z=0.0)),
+                                      covariance=cov))
+
+    sent = rng.random(len(stamps)) >= wrench_drop_rate
+    sent[0] = sent[-1] = True
+    messages = [(0, ns, wrench_msg(ns, row)) for ns, row, ok in zip(stamps, log.w_hat, sent) if ok]
+    rows = np.flatnonzero(log.has_pose)
+    shift = np.round(rng.uniform(-pose_stamp_jitter, pose_stamp_jitter, len(rows)) * 1e9).astype(np.int64)
+    messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, *log.pose[k])) for k, d in zip(rows, shift)]
+    received = [int(ns) + 1_000_000 + int(rng.uniform(0, receive_jitter) * 1e9) for _, ns, _ in messages]
+    order = np.argsort(received, kind="stable")
+    if storage == "ros1":
+        from rosbags.rosbag1 import Writer
+        writer, serialize = Writer(path), ts.serialize_ros1
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        writer, serialize = Writer(path, version=9, storage_plugin=plugin), ts.serialize_cdr
+    with writer:
+        conns = [writer.add_connection(wrench_topic, WRENCH_TYPE, typestore=ts),
+                 writer.add_connection(pose_topic, full[pose_type], typestore=ts)]
+        for i in order:
+            which, _, msg = messages[i]
+            writer.write(conns[which], int(received[i]), serialize(msg, msg.__msgtype__))
+    return path
