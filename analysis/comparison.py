@@ -4,14 +4,14 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from observers import METHODS, get_method, method_label
+from observers import FLOOR_METHOD, METHODS, get_method, method_label
 from plant import get_scenario
 from plant._checks import as_positive_scalar
 from plant.errors import FmscalError
 
-from .metrics import convergence_time, error_history
+from .metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
 
-__all__ = ["simulate_case", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
+__all__ = ["simulate_case", "floor_error", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
            "CHECKPOINTS"]
 
 #: Columns of a sweep's table that tell its rows apart besides scenario and observer.
@@ -61,7 +61,34 @@ def simulate_case(scenario, seed, duration=None, noise_scale=1.0):
     return sc, log, truth, truth.told_noise_spec()
 
 
-def run_observer(name, log, truth, payload, told_noise=None, settings=None, history=False):
+def _aligned(log, truth, settings):
+    """The log as every method sees it, and its settings: poses lined up, offset estimated where there is one."""
+    settings = dict(settings or {})
+    if truth.offset is not None:                  # a rig with an offset: every method estimates it
+        settings.setdefault("offset", True)
+    return log.shift_poses(truth.latency), settings
+
+
+def floor_error(log, truth, payload, told_noise=None):
+    """The information floor of a log: E of the maximum-likelihood estimate on it.
+
+    The registry's floor method (:data:`observers.FLOOR_METHOD`) runs on the
+    log as every method sees it (:func:`run_observer`), told the same noise;
+    its E is taken as every method's is (:func:`analysis.metrics.tail_median`).
+
+    Returns
+    -------
+    float
+        NaN where the floor diverged (it should not).
+    """
+    log, settings = _aligned(log, truth, None)
+    result = get_method(FLOOR_METHOD).build(payload, told_noise, settings).run(log)
+    if result.diverged:
+        return float("nan")
+    return tail_median(error_history(result.S_hat_history, truth.S_at(result.t)))
+
+
+def run_observer(name, log, truth, payload, told_noise=None, settings=None, history=False, floor=None):
     """Run one observer on a simulated log and measure it against the truth.
 
     Parameters
@@ -80,6 +107,8 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
         latency is known here; ``fmscal calibrate`` estimates it).
     history : bool
         Also return ``(t, E, S_hat_history)``, decimated to at most 2000 points.
+    floor : float, optional
+        The floor's E on this log (:func:`floor_error`), for ``E_over_floor``.
 
     Returns
     -------
@@ -88,25 +117,25 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     (t, E, S_hat_history) : tuple of ndarray, only with ``history=True``
         Shapes (M,), (M,), (M, 3, 3).
     """
-    settings = dict(settings or {})
-    if truth.offset is not None:                  # a rig with an offset: every method estimates it
-        settings.setdefault("offset", True)
-    log = log.shift_poses(truth.latency)          # and sees the streams lined up
+    log, settings = _aligned(log, truth, settings)
     method = get_method(name)
     result = method.build(payload, told_noise, settings).run(log, truth.S0 if method.online else None)
     E = error_history(result.S_hat_history, truth.S_at(result.t))
+    bad = result.diverged
     row = {"observer": name, "duration": float(log.duration),
-           "E": np.nan if result.diverged else float(E[-1]),
-           "E_median_last_10pct": np.nan if result.diverged else float(np.median(E[int(0.9 * len(E)):])),
-           "convergence_time": np.nan, "diverged": bool(result.diverged),
-           "converged": bool(result.converged)}
-    if not result.diverged:
+           "E": np.nan if bad else tail_median(E), "E_end": np.nan if bad else float(E[-1]),
+           "E_over_floor": np.nan, "floor_E": np.nan if floor is None else float(floor),
+           "convergence_time": np.nan, "diverged": bool(bad), "converged": bool(result.converged)}
+    if floor is not None and not bad:
+        row["E_over_floor"] = row["E"] / floor if floor > 0 else np.nan
+    if not bad:
         ct = convergence_time(result.t, E)
         row["convergence_time"] = np.nan if ct is None else float(ct)
     for t_check in CHECKPOINTS:
         if t_check <= log.duration + 1e-9:
-            k = min(len(E) - 1, int(round(t_check / log.dt)) - 1)      # just before t_check
-            row[_checkpoint_column(t_check)] = np.nan if result.diverged else float(E[k])
+            k = min(len(E), int(round(t_check / log.dt)))          # samples before t_check
+            window = E[int((1 - TAIL_FRACTION) * k):k]               # the last 10 % before it
+            row[_checkpoint_column(t_check)] = np.nan if bad or len(window) == 0 else float(np.median(window))
     row.update({"wall_time": result.wall_time, "wall_per_sim_s": result.wall_time / log.duration,
                 "us_per_step": 1e6 * result.wall_time / len(log)})
     if not history:
@@ -135,14 +164,16 @@ def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=N
     Returns
     -------
     rows : list of dict
-        One per observer; the columns of :func:`compare`.
+        One per observer; the columns of :func:`compare`, ``E_over_floor``
+        against the floor of this log (:func:`floor_error`).
     histories : dict, only with ``histories=True``
         ``{observer: (t, E, S_hat_history)}``, decimated to at most 2000 points.
     """
     sc, log, truth, told = simulate_case(scenario, seed, duration)
+    floor = floor_error(log, truth, sc.payload, told)
     rows, curves = [], {}
     for name in observers:
-        out = run_observer(name, log, truth, sc.payload, told, (settings or {}).get(name), histories)
+        out = run_observer(name, log, truth, sc.payload, told, (settings or {}).get(name), histories, floor)
         row, curves[name] = out if histories else (out, None)
         rows.append({"scenario": sc.name, "seed": int(seed), **row})
     return (rows, curves) if histories else rows
@@ -184,12 +215,17 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
     -------
     pandas.DataFrame
         One row per observer, scenario and seed: ``observer``, ``scenario``,
-        ``seed``, ``duration``, ``E`` (at the end), ``E_10s``, ``E_30s``,
-        ``E_100s`` (just before each checkpoint, where the run is that long),
-        ``E_median_last_10pct``, ``convergence_time`` (s; NaN where E never
-        stays below the threshold), ``diverged``, ``converged``,
-        ``wall_time`` (s), ``wall_per_sim_s`` (wall seconds per simulated
-        second) and ``us_per_step``. E is NaN for a diverged run.
+        ``seed``, ``duration``, ``E`` (the median over the last 10 % of
+        the run, :func:`analysis.metrics.tail_median`), ``E_end`` (the last
+        sample), ``floor_E`` (the floor's E on the same log,
+        :func:`floor_error`), ``E_over_floor`` (``E / floor_E``: how much
+        accuracy the method leaves on the table), ``E_10s``, ``E_30s``,
+        ``E_100s`` (the median over the 10 % of the run before each
+        checkpoint, where the run is that long), ``convergence_time`` (s,
+        :func:`analysis.metrics.convergence_time`; NaN where E never holds
+        below the threshold), ``diverged``, ``converged``, ``wall_time``
+        (s), ``wall_per_sim_s`` (wall seconds per simulated second) and
+        ``us_per_step``. E is NaN for a diverged run.
     dict, only with ``histories=True``
         ``{(scenario, observer): (t, E, S_hat_history)}``.
     """
@@ -223,7 +259,8 @@ def summarise(table):
     pandas.DataFrame
         ``scenario``, (``noise_scale``, ``settings``: from a sweep),
         ``observer``, ``seeds``, ``E_median``, ``E_q25``,
-        ``E_q75`` (quartiles over seeds), the medians of each checkpoint
+        ``E_q75`` (quartiles over seeds), ``floor_E_median``,
+        ``E_over_floor_median`` and ``E_over_floor_max`` (over seeds), the medians of each checkpoint
         column and of ``convergence_time`` (over the runs that converged),
         ``converged_runs``, ``diverged_runs`` and ``us_per_step_median``.
     """
@@ -232,7 +269,9 @@ def summarise(table):
     out = []
     for values, g in table.groupby(keys, sort=False):
         row = {**dict(zip(keys, values)), "seeds": len(g),
-               "E_median": g["E"].median(), "E_q25": g["E"].quantile(0.25), "E_q75": g["E"].quantile(0.75)}
+               "E_median": g["E"].median(), "E_q25": g["E"].quantile(0.25), "E_q75": g["E"].quantile(0.75),
+               "floor_E_median": g["floor_E"].median(), "E_over_floor_median": g["E_over_floor"].median(),
+               "E_over_floor_max": g["E_over_floor"].max()}
         for c in checkpoints:
             row[c + "_median"] = g[c].median()
         row["convergence_time_median"] = g["convergence_time"].median()
@@ -253,13 +292,14 @@ def summary_markdown(summary, title="Observer comparison"):
     """The summary of :func:`summarise` as a Markdown table."""
     checkpoints = [c for c in summary.columns if c.startswith("E_") and c.endswith("s_median")]
     keys = [k for k in _SWEEP_KEYS if k in summary.columns]
-    head = ["scenario", *keys, "observer", "seeds", "median E at end [IQR]"]
+    head = ["scenario", *keys, "observer", "seeds", "median E, last 10 % [IQR]", "E / floor, median [max]"]
     head += [f"median {c[:-len('_median')].replace('E_', 'E at ')}" for c in checkpoints]
     head += ["median convergence time [s]", "converged", "diverged", "cost [us/step]"]
     lines = [f"# {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in summary.iterrows():
         cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], method_label(r["observer"]), str(r["seeds"]),
-                 f"{_fmt(r['E_median'])} [{_fmt(r['E_q25'])}, {_fmt(r['E_q75'])}]"]
+                 f"{_fmt(r['E_median'])} [{_fmt(r['E_q25'])}, {_fmt(r['E_q75'])}]",
+                 f"{_fmt(r['E_over_floor_median'], '.2f')} [{_fmt(r['E_over_floor_max'], '.2f')}]"]
         cells += [_fmt(r[c]) for c in checkpoints]
         cells += [_fmt(r["convergence_time_median"], ".1f"), f"{r['converged_runs']}/{r['seeds']}",
                   f"{r['diverged_runs']}/{r['seeds']}", _fmt(r["us_per_step_median"], ".1f")]

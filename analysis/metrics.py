@@ -1,13 +1,18 @@
-"""The paper's error metric, eq. (16), and a convergence time."""
+"""The paper's error metric, eq. (16), its robust end-of-run value, and a convergence time."""
 
 import numpy as np
 
 from plant._checks import as_finite_array
 
-__all__ = ["calibration_error", "error_history", "convergence_time", "CONVERGENCE_THRESHOLD"]
+__all__ = ["calibration_error", "error_history", "tail_median", "convergence_time", "CONVERGENCE_THRESHOLD",
+           "CONVERGENCE_HOLD", "TAIL_FRACTION"]
 
 #: Default threshold on E for :func:`convergence_time`.
 CONVERGENCE_THRESHOLD = 0.05
+#: ... and the stretch, s, for which E must hold below it.
+CONVERGENCE_HOLD = 10.0
+#: Share of a run at its end over which :func:`tail_median` takes E.
+TAIL_FRACTION = 0.1
 
 
 def calibration_error(S_hat, S):
@@ -51,23 +56,59 @@ def error_history(S_hat_history, S_true):
     return np.linalg.norm(D, ord=2, axis=(1, 2))
 
 
-def convergence_time(t, E, threshold=CONVERGENCE_THRESHOLD):
-    """First time after which E stays below ``threshold`` for the rest of the run.
+def tail_median(E, fraction=TAIL_FRACTION):
+    """The median of E over the last ``fraction`` of a run: the run's E, robust to one sample.
+
+    E moves from sample to sample (a tenfold swing within seconds is common
+    for an online observer); tables rank methods on this statistic, never
+    on one sample.
+
+    Parameters
+    ----------
+    E : array_like, shape (N,)
+    fraction : float
+        Share of the run at its end, in (0, 1].
+
+    Returns
+    -------
+    float
+        NaN for an empty history.
+    """
+    E = np.asarray(E, dtype=float)
+    if len(E) == 0:
+        return float("nan")
+    return float(np.median(E[min(int((1 - fraction) * len(E)), len(E) - 1):]))
+
+
+def convergence_time(t, E, threshold=CONVERGENCE_THRESHOLD, hold=CONVERGENCE_HOLD):
+    """First time after which E stays below ``threshold`` for at least ``hold`` seconds.
+
+    The stretch must fit in the run: a run that ends less than ``hold``
+    after E last fell below the threshold has not shown that it converged.
 
     Parameters
     ----------
     t : ndarray, shape (N,)
+        Times, s, increasing.
     E : ndarray, shape (N,)
     threshold : float
+    hold : float
+        Minimum stretch below the threshold, s.
 
     Returns
     -------
     float or None
-        None where E never settles below the threshold (or ends above it).
+        None where E never holds below the threshold that long.
     """
-    above = np.nonzero(np.asarray(E) >= threshold)[0]
-    if len(above) == 0:
-        return float(t[0])
-    if above[-1] == len(E) - 1:
-        return None
-    return float(t[above[-1] + 1])
+    t, E = np.asarray(t, dtype=float), np.asarray(E, dtype=float)
+    below = E < threshold
+    start = None
+    for k in range(len(E)):
+        if not below[k]:
+            start = None
+            continue
+        if start is None:
+            start = k
+        if t[k] - t[start] >= hold:
+            return float(t[start])
+    return None

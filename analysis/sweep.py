@@ -16,7 +16,7 @@ from observers import get_method, make_observer, method_names
 from plant import get_scenario
 from plant.errors import FmscalError
 
-from .comparison import run_observer, seed_list, simulate_case
+from .comparison import floor_error, run_observer, seed_list, simulate_case
 
 __all__ = ["sweep", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS"]
 
@@ -81,9 +81,10 @@ def _run_case(case):
     """One case: simulate once, run every variant. Module-level so that it pickles."""
     index, scenario, seed, noise_scale, duration, variants = case
     sc, log, truth, told = simulate_case(scenario, seed, duration, noise_scale)
+    floor = floor_error(log, truth, sc.payload, told)
     rows = []
     for name, settings in variants:
-        row = run_observer(name, log, truth, sc.payload, told, settings)
+        row = run_observer(name, log, truth, sc.payload, told, settings, floor=floor)
         rows.append({"case": index, "scenario": sc.name, "seed": int(seed), "noise_scale": float(noise_scale),
                      "settings": settings_label(settings), **row})
     return index, rows
