@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_common import CliError, positive, strict
+from .files import atomic_write_text, check_outputs
 
 
 def add_calibrate(sub):
@@ -39,12 +40,18 @@ def add_calibrate(sub):
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the entries of S_hat against time")
-    p.add_argument("--save", metavar="CAL.json", help="write the calibration here (for fmscal apply)")
+    p.add_argument("--save", metavar="CAL.json",
+                   help="write the calibration here (for fmscal apply), only if the run converged and the "
+                        "log's units look right; written atomically, never onto the log or --truth")
+    p.add_argument("--force", action="store_true",
+                   help="save even a calibration that did not converge; the file records \"forced\": true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --save or --plot file")
     p.set_defaults(func=cmd_calibrate)
 
 
 def cmd_calibrate(args):
     from plant import Calibration, Payload, file_sha256, read_log, read_truth
+    from plant.units import diagnose_units
     from .calibrate import calibrate
     from .plots import plot_S_entries
     for name, value in (("--mass", args.mass), ("--inertia", args.inertia)):
@@ -60,23 +67,53 @@ def cmd_calibrate(args):
     positive(args.max_latency, "--max-latency")
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
+    if args.plot and not args.plot.endswith(".png"):
+        raise CliError(f"--plot must end in .png; got {args.plot}")
+    if args.force and not args.save:
+        raise CliError("--force applies to --save; give --save CAL.json too")
+    check_outputs([(args.save, "--save"), (args.plot, "--plot")],
+                  [(args.log, "the log"), (args.truth, "the --truth file")], overwrite=args.overwrite)
     payload = Payload(args.mass, args.inertia, tuple(args.rho))
     log = read_log(args.log)
+    for note in log.notes:
+        print(f"fmscal calibrate: note: {note}", file=sys.stderr)
+    log_sha256 = file_sha256(args.log) if args.save else ""
     truth = read_truth(args.truth) if args.truth else None
+    units = diagnose_units(log, payload)
     out = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
                     offset=args.offset, latency=args.latency, max_latency=args.max_latency)
-    if args.save:
-        Calibration(S=out["S"], payload=payload, method=out["observer"], S_std=out["S_std"], b=out["b"],
-                    b_std=out["b_std"], log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
-                    latency=out["latency"]).save(args.save)
+    out["warnings"] = units + out["warnings"]
     for warning in out["warnings"]:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
-    if args.plot:
+    if args.plot:                 # before saving: a failing plot leaves no calibration behind
         plot_S_entries([out["result"]], truth, args.plot, f"{Path(args.log).name}: entries of S_hat")
+    refusal = _not_savable(out, units, args.observer)
+    if args.save and (refusal is None or args.force):
+        Calibration(S=out["S"], payload=payload, method=out["observer"], S_std=out["S_std"], b=out["b"],
+                    b_std=out["b_std"], log_name=Path(args.log).name, log_sha256=log_sha256,
+                    latency=out["latency"], forced=refusal is not None).save(args.save)
+    out["saved"] = bool(args.save) and (refusal is None or args.force)
     result = out.pop("result")
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
-        return
+    else:
+        _print_calibration(args, log, out, result)
+    if args.save and refusal is not None and not args.force:
+        raise CliError(f"did not save {args.save}: {refusal}; add --force to save it anyway (marked as forced)")
+
+
+def _not_savable(out, units, method):
+    """Why the calibration in ``out`` should not be saved, or None."""
+    if not out["converged"]:
+        return "the run did not converge"
+    blocking = [u for u in units if method != "least-squares" or "sensor counts" not in u]
+    if blocking:
+        return "the log's units look wrong (" + blocking[0].split(":")[0] + ")"
+    return None
+
+
+def _print_calibration(args, log, out, result):
+    """The human-readable report of ``fmscal calibrate``."""
     print(f"{Path(args.log).name}: {len(log)} samples, {log.duration:g} s, "
           f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
     if out["noise_estimated"]:
@@ -97,7 +134,7 @@ def cmd_calibrate(args):
     print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {result.t[-1]:g} s)")
     if "E" in out:
         print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")
-    if args.save:
+    if out["saved"]:
         print(f"saved the calibration to {args.save}")
 
 
@@ -109,6 +146,7 @@ def add_apply(sub):
     p.add_argument("calibration", metavar="CAL.json")
     p.add_argument("readings", metavar="READINGS.csv")
     p.add_argument("--out", required=True, metavar="WRENCH.csv")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
     p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
     p.add_argument("--inertia", type=float, metavar="KGM2")
     p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"))
@@ -125,11 +163,15 @@ def cmd_apply(args):
         payload = Payload(positive(args.mass, "--mass"), positive(args.inertia, "--inertia"), tuple(args.rho))
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
+    check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],
+                  overwrite=args.overwrite)
     calibration = Calibration.load(args.calibration, payload)
+    if calibration.forced:
+        print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
+              file=sys.stderr)
     t, w_hat = read_readings(args.readings)
     w = calibration.apply(w_hat)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     lines = ["t,M,fx,fy"] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
-    Path(args.out).write_text("\n".join(lines) + "\n")
+    atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "
           f"{calibration.method}, {calibration.date})")

@@ -4,7 +4,7 @@ import numpy as np
 
 from plant.errors import FmscalError
 
-__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers"]
+__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes"]
 
 
 class CliError(FmscalError):
@@ -41,3 +41,11 @@ def add_scenarios_and_observers(p, default_observers):
                    help="one or more of: " + ", ".join(SCENARIOS))
     p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
                    help="one or more of: " + ", ".join(OBSERVER_NAMES) + f" (default: {' '.join(default_observers)})")
+
+
+def check_sizes(scenarios, duration=None):
+    """Refuse, before any work, a run whose simulated logs would exceed :data:`plant.scenarios.MAX_SAMPLES`."""
+    from plant import get_scenario
+    for name in scenarios:
+        sc = get_scenario(name)
+        (sc.with_(duration=duration) if duration is not None else sc).check_size()

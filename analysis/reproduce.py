@@ -6,12 +6,13 @@ import numpy as np
 from tqdm import tqdm
 
 from plant import get_scenario
+from plant.files import atomic_write_text
 
 from .comparison import make_observer
 from .metrics import convergence_time, display_name, error_history
 from .plots import plot_S_entries
 
-__all__ = ["reproduce", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
+__all__ = ["reproduce", "output_names", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
 #: Section 4's claims: E at 100 s for this observer and for the high-gain observer of [4].
 PAPER_CLAIMS = {"adaptive-paper": 9.1106e-4, "high-gain-ref4": 3.6700e-2, "transient_s": 70.0}
@@ -21,6 +22,15 @@ _FIGURES = [("paper", "Fig. 2"), ("noisy", "Fig. 3"), ("time-varying", "Fig. 4")
 REPRODUCED_SCENARIOS = tuple(name for name, _ in _FIGURES)
 #: The observers ``fmscal reproduce`` runs.
 REPRODUCED_OBSERVERS = ("adaptive-paper", "adaptive", "high-gain-ref4", "high-gain", "ekf")
+
+
+def _figure_name(name, fig):
+    return f"{fig.replace('. ', '').lower()}_{name}.png"
+
+
+def output_names():
+    """The files :func:`reproduce` writes into its folder."""
+    return [_figure_name(name, fig) for name, fig in _FIGURES] + ["summary.md"]
 
 
 def _observers(payload, truth):
@@ -78,10 +88,10 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
                          "diverged": r.diverged, "converged": r.converged,
                          "wall_time": r.wall_time, "S_hat_100": r.S_hat_history[k100].tolist()})
             bar.update(1)
-        plot_S_entries(results, truth, out / f"{fig.replace('. ', '').lower()}_{name}.png",
+        plot_S_entries(results, truth, out / _figure_name(name, fig),
                        f"{fig}: entries of S_hat, scenario '{name}' (seed {seed})")
     bar.close()
-    (out / "summary.md").write_text(summary_markdown(rows, seed, duration_scale))
+    atomic_write_text(out / "summary.md", summary_markdown(rows, seed, duration_scale))
     return rows
 
 
