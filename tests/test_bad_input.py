@@ -292,9 +292,16 @@ def test_a_wrapped_theta_is_unwrapped_with_a_note(folder, capsys):
     wrapped = plant.read_log(folder / "wrapped.csv")
     np.testing.assert_allclose(wrapped.pose[:, 0], plain.pose[:, 0] + 3.0 - 2 * np.pi * np.round(
         (wrapped.pose[0, 0] - plain.pose[0, 0] - 3.0) / (2 * np.pi)), atol=1e-9)
-    assert main(["calibrate", str(folder / "wrapped.csv"), *PAYLOAD, "--json"]) == 0
-    err = capsys.readouterr().err
+    np.savetxt(folder / "continuous.csv", np.column_stack([log.t, log.pose + [3.0, 0, 0], log.w_hat]),
+               delimiter=",", fmt="%.17g", header=",".join(plant.COLUMNS), comments="")
+    capsys.readouterr()
+    assert main(["calibrate", str(folder / "wrapped.csv"), *PAYLOAD, "--json", "--latency", "0"]) == 0
+    out, err = capsys.readouterr()
     assert "fmscal calibrate: note: wrapped.csv: theta is wrapped into (-pi, pi]" in err
+    assert main(["calibrate", str(folder / "continuous.csv"), *PAYLOAD, "--json", "--latency", "0"]) == 0
+    same = capsys.readouterr()
+    assert "note" not in same.err
+    np.testing.assert_allclose(json.loads(out)["S"], json.loads(same.out)["S"], atol=1e-9)
 
 
 def test_python_api_raises_the_toolkits_errors(folder):
