@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_calibration import add_apply, add_calibrate
-from .cli_common import CliError, add_scenarios_and_observers, check_sizes, positive, strict
+from .cli_common import CliError, add_scenarios_and_observers, check_seeds, check_sizes, positive, strict
 from .files import atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs
 from .cli_scale import add_bench, add_sweep
 
@@ -54,6 +54,7 @@ def _add_simulate(sub):
 
 def cmd_simulate(args):
     from plant import get_scenario
+    check_seeds(seed=args.seed)
     sc = get_scenario(args.scenario)
     changes = {}
     if args.duration is not None:
@@ -150,6 +151,7 @@ def cmd_reproduce(args):
     from .reproduce import output_names, reproduce
     if not 0 < args.quick <= 1:
         raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
+    check_seeds(seed=args.seed)
     check_output_dir(args.out, output_names(), overwrite=args.overwrite)
     reproduce(args.out, seed=args.seed, duration_scale=args.quick)
     print((Path(args.out) / "summary.md").read_text())
@@ -180,8 +182,7 @@ def cmd_compare(args):
     for name in args.observer:
         if name not in OBSERVER_NAMES:
             raise CliError(f"unknown observer {name!r}; expected one of {', '.join(OBSERVER_NAMES)}")
-    if args.seeds < 1:
-        raise CliError(f"--seeds must be at least 1; got {args.seeds}")
+    check_seeds(seeds=args.seeds)
     if args.duration is not None:
         positive(args.duration, "--duration")
     check_sizes(args.scenario, args.duration)

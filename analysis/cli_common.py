@@ -4,7 +4,11 @@ import numpy as np
 
 from plant.errors import FmscalError
 
-__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes"]
+__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes", "check_seeds",
+           "MAX_SEEDS"]
+
+#: Most seeds a compare or sweep runs (each seed simulates every scenario).
+MAX_SEEDS = 100_000
 
 
 class CliError(FmscalError):
@@ -49,3 +53,11 @@ def check_sizes(scenarios, duration=None):
     for name in scenarios:
         sc = get_scenario(name)
         (sc.with_(duration=duration) if duration is not None else sc).check_size()
+
+
+def check_seeds(seed=None, seeds=None):
+    """Refuse a negative ``--seed``, and a ``--seeds`` count outside 1 .. :data:`MAX_SEEDS`."""
+    if seed is not None and seed < 0:
+        raise CliError(f"--seed must be a non-negative integer; got {seed}")
+    if seeds is not None and not 1 <= seeds <= MAX_SEEDS:
+        raise CliError(f"--seeds must be at least 1 and at most {MAX_SEEDS}; got {seeds}")

@@ -2,7 +2,7 @@
 
 import json
 
-from .cli_common import CliError, add_scenarios_and_observers, check_sizes, positive, strict
+from .cli_common import CliError, add_scenarios_and_observers, check_seeds, check_sizes, positive, strict
 from .files import atomic_write, atomic_write_text, check_outputs
 
 
@@ -93,8 +93,7 @@ def parse_settings(items):
 def cmd_sweep(args):
     from .comparison import summarise, summary_markdown
     from .sweep import sweep
-    if args.seeds < 1:
-        raise CliError(f"--seeds must be at least 1; got {args.seeds}")
+    check_seeds(seeds=args.seeds)
     if args.jobs == 0:
         raise CliError("--jobs must be a positive number of processes or -1 (every core); got 0")
     if args.duration is not None:

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .excitation import Multisine, PaperWrench
-from .log import Log, Truth
+from .log import MIN_SAMPLES, Log, Truth
 from .payload import PAPER_PAYLOAD, Payload
 from .sensor import CalibrationSchedule, NoiseSpec
 from .simulate import integrate
@@ -118,10 +118,13 @@ class Scenario:
     latency: float = 0.0
 
     def check_size(self):
-        """Raise :class:`FmscalError` if the log would have more than :data:`MAX_SAMPLES` samples."""
+        """Raise :class:`FmscalError` if the log would have fewer than ``plant.log.MIN_SAMPLES`` or more than :data:`MAX_SAMPLES` samples."""
         if not (np.isfinite(self.duration) and self.duration > 0 and np.isfinite(self.dt) and self.dt > 0):
             raise FmscalError(f"duration and dt must be positive and finite; got {self.duration} s and {self.dt} s")
         n = self.duration / self.dt
+        if n + 1 < MIN_SAMPLES:
+            raise FmscalError(f"{self.name}: {self.duration:g} s at dt = {self.dt:g} s is {int(round(n)) + 1} "
+                              f"sample(s); a log needs at least {MIN_SAMPLES}")
         if n + 1 > MAX_SAMPLES:
             raise FmscalError(f"{self.name}: {self.duration:g} s at dt = {self.dt:g} s is {n + 1:.3g} samples; "
                               f"at most {MAX_SAMPLES:.0e} fit in memory (shorten the duration or raise dt)")

@@ -171,6 +171,10 @@ CASES = [
     (["compare", "--duration", "1e9"], "samples"),
     (["sweep", "--duration", "1e9", "--seeds", "1"], "samples"),
     (["check-gains", "--config", "high-gain", "--lam", "1e308"], "--lam must be at most"),
+    (["simulate", "--seed", "-1", "--duration", "1", "--out", "{d}/m.csv"], "--seed must be a non-negative"),
+    (["compare", "--seeds", "1000000000000", "--duration", "1"], "--seeds must be at least 1 and at most"),
+    (["sweep", "--seeds", "1000000000000", "--duration", "1"], "--seeds must be at least 1 and at most"),
+    (["compare", "--seeds", "2", "--duration", "1e-9"], "a log needs at least"),
     (["simulate", "--mass", "inf", "--duration", "1", "--out", "{d}/m.csv"], "--mass"),
     (["simulate", "--drop-rate", "1", "--duration", "1", "--out", "{d}/m.csv"], "--drop-rate"),
 ]
