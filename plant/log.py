@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FmscalError
+from .files import atomic_write_text
 from .payload import Payload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
@@ -158,7 +159,7 @@ class Log:
             if not ok:
                 cells[1:4] = ["", "", ""]
             lines.append(",".join(cells))
-        Path(path).write_text("\n".join(lines) + "\n")
+        atomic_write_text(path, "\n".join(lines) + "\n")
 
     def shift_poses(self, latency):
         """The log with the pose stream moved back by ``latency`` to line up with the sensor.
@@ -387,7 +388,8 @@ class Truth:
         return data
 
     def write(self, path):
-        Path(path).write_text(json.dumps(self.to_json(), indent=2) + "\n")
+        """Write the sidecar as JSON (atomically)."""
+        atomic_write_text(path, json.dumps(self.to_json(), indent=2) + "\n")
 
 
 def read_truth(path):
@@ -396,13 +398,13 @@ def read_truth(path):
     Raises
     ------
     LogError
-        Missing file, not JSON, or a missing key.
+        Missing file, a folder, not UTF-8, not JSON (or nested too deeply), or a missing key.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise LogError(f"{path}: no such file")
+    path = _as_path(path, "truth")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            raise LogError(f"{path.name}: not a truth sidecar (a JSON {type(data).__name__}, not an object)")
         if "S" in data:
             schedule = CalibrationSchedule(data["S"])
         else:
@@ -415,6 +417,12 @@ def read_truth(path):
             extra={k: v for k, v in data.items() if k not in known})
     except json.JSONDecodeError as err:
         raise LogError(f"{path.name}: not valid JSON ({err})") from None
+    except RecursionError:
+        raise LogError(f"{path.name}: not a truth sidecar (JSON nested too deeply)") from None
+    except UnicodeDecodeError as err:
+        raise LogError(f"{path.name}: not UTF-8 text (offset {err.start})") from None
+    except LogError:
+        raise
     except KeyError as err:
         raise LogError(f"{path.name}: missing key {err} in the truth file") from None
     except (TypeError, ValueError) as err:
