@@ -8,6 +8,7 @@ from observers import LeastSquares, ObserverResult, get_method, method_names
 from observers.latency import estimate_latency
 from plant import Calibration, NoiseSpec, estimate_noise
 from plant.errors import FmscalError
+from plant.units import diagnose_units
 
 from .metrics import calibration_error
 
@@ -39,7 +40,8 @@ class CalibrationReport:
     result : observers.ObserverResult
         The method's full run (histories, info).
     converged : bool
-        The method's ``converged`` flag (:class:`observers.ObserverResult`).
+        The method's ``converged`` flag (:class:`observers.ObserverResult`),
+        and the log's units look right.
     noise : plant.NoiseSpec
         The noise model used.
     noise_estimated : list of str
@@ -47,8 +49,14 @@ class CalibrationReport:
     latency_estimated : bool
         The latency was estimated (True) or given.
     warnings : list of str
-        Excitation and model consistency (from a least-squares fit of the
-        same log) and the method's own warnings, one line each.
+        The units diagnosis, excitation and model consistency (from a
+        least-squares fit of the same log) and the method's own warnings,
+        one line each.
+    units : list of str
+        What :func:`plant.units.diagnose_units` found wrong with the log's
+        units (degrees, millimetres, counts) that this method cannot absorb
+        (an offline fit is linear in ``S`` and takes readings in counts);
+        empty when they look right. Any of them makes ``converged`` false.
     fit : dict
         The least-squares fit's diagnostics (:class:`observers.least_squares.FitReport`
         without its warnings).
@@ -63,6 +71,7 @@ class CalibrationReport:
     noise_estimated: list
     latency_estimated: bool
     warnings: list = field(default_factory=list)
+    units: list = field(default_factory=list)
     fit: dict = field(default_factory=dict)
     E: float = None
 
@@ -149,12 +158,14 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     if result.diverged:
         raise DivergedError(f"the {method} estimate diverged at t = {result.t[-1]:.3f} s; "
                             "no calibration (check the mass properties, units and excitation)")
-    warnings = list(ls_result.warnings)
+    diagnosed = diagnose_units(log, payload)
+    units = [u for u in diagnosed if "sensor counts" not in u or get_method(method).online]
+    warnings = diagnosed + list(ls_result.warnings)
     warnings += [w for w in result.warnings if w not in warnings]
     calibration = Calibration(S=result.S_hat, payload=payload, method=result.observer, S_std=result.S_std,
                               b=result.b, b_std=result.b_std, latency=float(latency))
     E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
-    return CalibrationReport(calibration=calibration, result=result, converged=bool(result.converged),
+    return CalibrationReport(calibration=calibration, result=result, converged=bool(result.converged) and not units,
                              noise=noise, noise_estimated=noise_estimated, latency_estimated=latency_estimated,
-                             warnings=warnings, fit={k: v for k, v in reference.report.items() if k != "warnings"},
+                             warnings=warnings, units=units, fit={k: v for k, v in reference.report.items() if k != "warnings"},
                              E=E)

@@ -8,16 +8,23 @@ exception is a bug in the toolkit and shows its traceback.
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from .cli_calibration import add_apply, add_calibrate
 from .cli_import import add_import
-from .cli_common import CliError, add_scenarios_and_observers, positive, strict
+from .cli_common import CliError, add_scenarios_and_observers, check_seeds, check_sizes, positive, strict
+from .files import atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs
 from .cli_scale import add_bench, add_sweep
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "MAX_LAM"]
+
+#: Longest error message printed, characters (a message echoing a huge input is cut).
+MAX_MESSAGE = 400
+#: Largest high-gain parameter check-gains accepts, rad/s (a million times the default's 20).
+MAX_LAM = 1e7
 
 
 def _add_simulate(sub):
@@ -42,11 +49,13 @@ def _add_simulate(sub):
     p.add_argument("--latency", type=float, metavar="S",
                    help="delay of the pose stream behind the sensor stream, s (default: the scenario's)")
     p.add_argument("--out", required=True, metavar="LOG.csv")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing LOG.csv and LOG.truth.json")
     p.set_defaults(func=cmd_simulate)
 
 
 def cmd_simulate(args):
     from plant import get_scenario
+    check_seeds(seed=args.seed)
     sc = get_scenario(args.scenario)
     changes = {}
     if args.duration is not None:
@@ -74,14 +83,15 @@ def cmd_simulate(args):
                                      positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
                                      tuple(args.rho) if args.rho is not None else p.rho)
     sc = sc.with_(**changes)
-    log, truth, _ = sc.generate(args.seed, noise_free=args.noise_free)
     out = Path(args.out)
     if out.suffix != ".csv":
         raise CliError(f"--out must end in .csv; got {out}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    log.write(out)
     truth_path = out.with_suffix(".truth.json")
-    truth.write(truth_path)
+    check_outputs([(out, "--out"), (truth_path, "--out's sidecar")], overwrite=args.overwrite)
+    sc.check_size()
+    log, truth, _ = sc.generate(args.seed, noise_free=args.noise_free)
+    # the sidecar first, the log last: never a log without its sidecar
+    atomic_write_many([(truth_path, truth.write), (out, log.write)])
     print(f"wrote {out} ({len(log)} samples, {log.duration:g} s) and {truth_path}")
 
 
@@ -111,6 +121,8 @@ def cmd_check_gains(args):
     if args.lam is not None and not isinstance(obs, HighGainObserver):
         raise CliError(f"--lam applies to the high-gain configurations; got --config {args.config}")
     if args.lam is not None:
+        if args.lam > MAX_LAM:
+            raise CliError(f"--lam must be at most {MAX_LAM:g} rad/s (the gains grow as lam^2); got {args.lam:g}")
         obs = HighGainObserver(PAPER_PAYLOAD, lam=positive(args.lam, "--lam"))
     report = check_gains(obs.K1, obs.K2)
     if args.json:
@@ -132,13 +144,16 @@ def _add_reproduce(sub):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quick", type=float, default=1.0, metavar="FRACTION",
                    help="run this fraction of each scenario's length (default 1: the paper's)")
+    p.add_argument("--overwrite", action="store_true", help="replace figures and summary.md already in DIR")
     p.set_defaults(func=cmd_reproduce)
 
 
 def cmd_reproduce(args):
-    from .reproduce import reproduce
+    from .reproduce import output_names, reproduce
     if not 0 < args.quick <= 1:
         raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
+    check_seeds(seed=args.seed)
+    check_output_dir(args.out, output_names(), overwrite=args.overwrite)
     reproduce(args.out, seed=args.seed, duration_scale=args.quick)
     print((Path(args.out) / "summary.md").read_text())
 
@@ -154,7 +169,8 @@ def _add_compare(sub):
     p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0 .. N-1 (default 1)")
     p.add_argument("--duration", type=float, metavar="S", help="run length in s (default: each scenario's)")
     p.add_argument("--json", action="store_true", help="print a JSON list of rows (strict JSON) instead")
-    p.add_argument("--out", metavar="DIR", help="write E-against-time plots and summary.md here")
+    p.add_argument("--out", metavar="DIR", help="write E-against-time plots, summary.md and runs.csv here")
+    p.add_argument("--overwrite", action="store_true", help="replace those files if DIR already holds them")
     p.set_defaults(func=cmd_compare)
 
 
@@ -167,10 +183,14 @@ def cmd_compare(args):
         get_scenario(name)                      # FmscalError naming the choices
     for name in args.observer:
         get_method(name)                        # FmscalError naming the methods
-    if args.seeds < 1:
-        raise CliError(f"--seeds must be at least 1; got {args.seeds}")
+    check_seeds(seeds=args.seeds)
     if args.duration is not None:
         positive(args.duration, "--duration")
+    check_sizes(args.scenario, args.duration)
+    if args.out:
+        scenarios = dict.fromkeys(get_scenario(name).name for name in args.scenario)
+        check_output_dir(args.out, [f"E_{sc}.png" for sc in scenarios] + ["summary.md", "runs.csv"],
+                         overwrite=args.overwrite)
     table, curves = compare(args.scenario, args.seeds, args.observer, args.duration,
                             progress=not args.json, histories=True)
     summary = summarise(table)
@@ -185,8 +205,8 @@ def cmd_compare(args):
             plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
                             out / f"E_{scenario}.png",
                             f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
-        (out / "summary.md").write_text(text)
-        table.to_csv(out / "runs.csv", index=False)
+        atomic_write_text(out / "summary.md", text)
+        atomic_write(out / "runs.csv", lambda tmp: table.to_csv(tmp, index=False))
     if args.json:
         print(json.dumps(strict(table.to_dict(orient="records")), indent=1, allow_nan=False))
     else:
@@ -223,9 +243,17 @@ def main(argv=None):
     except SystemExit as stop:            # --help, or a usage error already printed on one line
         return stop.code
     try:
-        args.func(args)
+        # numpy's RuntimeWarnings on degenerate input would break the one-line promise: the
+        # commands report such input themselves (warnings, converged flags, refusals)
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            args.func(args)
     except (FmscalError, OSError) as err:      # the user's input or files; any other error is a bug
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
+        if not message.isprintable():
+            message = message.encode("unicode_escape").decode("ascii")
+        if len(message) > MAX_MESSAGE:
+            message = message[:MAX_MESSAGE] + "..."
         print(f"fmscal {args.command}: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_common import CliError, positive, strict
+from .files import atomic_write_text, check_outputs
 
 
 def add_calibrate(sub):
@@ -39,9 +40,13 @@ def add_calibrate(sub):
                    help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
-    p.add_argument("--plot", metavar="FILE.png",
-                   help="draw each entry of S_hat against time with its one-sigma band, and the pose residual")
-    p.add_argument("--save", metavar="CAL.json", help="write the calibration here (for fmscal apply)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw each entry of S_hat against time with its one-sigma band, and the pose residual")
+    p.add_argument("--save", metavar="CAL.json",
+                   help="write the calibration here (for fmscal apply), only if the run converged and the "
+                        "log's units look right; written atomically, never onto the log or --truth")
+    p.add_argument("--force", action="store_true",
+                   help="save even a calibration that did not converge; the file records \"forced\": true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --save or --plot file")
     p.set_defaults(func=cmd_calibrate)
 
 
@@ -64,23 +69,52 @@ def cmd_calibrate(args):
     positive(args.max_latency, "--max-latency")
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
+    if args.plot and not args.plot.endswith(".png"):
+        raise CliError(f"--plot must end in .png; got {args.plot}")
+    if args.force and not args.save:
+        raise CliError("--force applies to --save; give --save CAL.json too")
+    check_outputs([(args.save, "--save"), (args.plot, "--plot")],
+                  [(args.log, "the log"), (args.truth, "the --truth file")], overwrite=args.overwrite)
     payload = Payload(args.mass, args.inertia, tuple(args.rho))
     log = read_log(args.log)
+    for note in log.notes:
+        print(f"fmscal calibrate: note: {note}", file=sys.stderr)
+    log_sha256 = file_sha256(args.log) if args.save else ""
     truth = read_truth(args.truth) if args.truth else None
     report = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
                        offset=args.offset, latency=args.latency, max_latency=args.max_latency)
-    if args.save:
-        replace(report.calibration, log_name=Path(args.log).name, log_sha256=file_sha256(args.log)).save(args.save)
     for warning in report.warnings:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
-    if args.plot:
+    if args.plot:                 # before saving: a failing plot leaves no calibration behind
         plot_calibration(report.result, log.shift_poses(report.calibration.latency), args.plot,
                          f"{Path(args.log).name}: entries of S_hat ({report.calibration.method}) and the pose residual",
                          truth)
+    refusal = _not_savable(report)
+    saved = bool(args.save) and (refusal is None or args.force)
+    if saved:
+        replace(report.calibration, log_name=Path(args.log).name, log_sha256=log_sha256,
+                forced=refusal is not None).save(args.save)
     result, out = report.result, report.to_dict()
+    out["saved"] = saved
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
-        return
+    else:
+        _print_calibration(args, log, out, result)
+    if args.save and refusal is not None and not args.force:
+        raise CliError(f"did not save {args.save}: {refusal}; add --force to save it anyway (marked as forced)")
+
+
+def _not_savable(report):
+    """Why the calibration of ``report`` (:class:`analysis.calibrate.CalibrationReport`) should not be saved, or None."""
+    if report.units:
+        return "the log's units look wrong (" + report.units[0].split(":")[0] + ")"
+    if not report.converged:
+        return "the run did not converge"
+    return None
+
+
+def _print_calibration(args, log, out, result):
+    """The human-readable report of ``fmscal calibrate``."""
     print(f"{Path(args.log).name}: {len(log)} samples, {log.duration:g} s, "
           f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
     if out["noise_estimated"]:
@@ -101,7 +135,7 @@ def cmd_calibrate(args):
     print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {result.t[-1]:g} s)")
     if "E" in out:
         print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")
-    if args.save:
+    if out["saved"]:
         print(f"saved the calibration to {args.save}")
 
 
@@ -113,6 +147,7 @@ def add_apply(sub):
     p.add_argument("calibration", metavar="CAL.json")
     p.add_argument("readings", metavar="READINGS.csv")
     p.add_argument("--out", required=True, metavar="WRENCH.csv")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
     p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
     p.add_argument("--inertia", type=float, metavar="KGM2")
     p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"))
@@ -129,11 +164,15 @@ def cmd_apply(args):
         payload = Payload(positive(args.mass, "--mass"), positive(args.inertia, "--inertia"), tuple(args.rho))
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
+    check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],
+                  overwrite=args.overwrite)
     calibration = Calibration.load(args.calibration, payload)
+    if calibration.forced:
+        print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
+              file=sys.stderr)
     t, w_hat = read_readings(args.readings)
     w = calibration.apply(w_hat)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     lines = ["t,M,fx,fy"] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
-    Path(args.out).write_text("\n".join(lines) + "\n")
+    atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "
           f"{calibration.method}, {calibration.date})")

@@ -4,7 +4,11 @@ import numpy as np
 
 from plant.errors import FmscalError
 
-__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers"]
+__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes", "check_seeds",
+           "MAX_SEEDS"]
+
+#: Most seeds a compare or sweep runs (each seed simulates every scenario).
+MAX_SEEDS = 100_000
 
 
 class CliError(FmscalError):
@@ -41,3 +45,19 @@ def add_scenarios_and_observers(p, default_observers):
                    help="one or more of: " + ", ".join(SCENARIOS))
     p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
                    help="one or more of: " + ", ".join(METHODS) + f" (default: {' '.join(default_observers)})")
+
+
+def check_sizes(scenarios, duration=None):
+    """Refuse, before any work, a run whose simulated logs would exceed :data:`plant.scenarios.MAX_SAMPLES`."""
+    from plant import get_scenario
+    for name in scenarios:
+        sc = get_scenario(name)
+        (sc.with_(duration=duration) if duration is not None else sc).check_size()
+
+
+def check_seeds(seed=None, seeds=None):
+    """Refuse a negative ``--seed``, and a ``--seeds`` count outside 1 .. :data:`MAX_SEEDS`."""
+    if seed is not None and seed < 0:
+        raise CliError(f"--seed must be a non-negative integer; got {seed}")
+    if seeds is not None and not 1 <= seeds <= MAX_SEEDS:
+        raise CliError(f"--seeds must be at least 1 and at most {MAX_SEEDS}; got {seeds}")

@@ -14,6 +14,7 @@ clipped.
 import numpy as np
 
 from observers import method_label
+from plant.files import atomic_write
 
 __all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "wandering_methods"]
 
@@ -29,9 +30,10 @@ def _figure(figsize):
 
 
 def _save(fig, path, dpi=100):
+    """Write the figure as PNG, atomically (a failed write leaves no half file)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png"))
 
 
 def _thin(n):

@@ -7,11 +7,12 @@ from tqdm import tqdm
 
 from observers import FLOOR_METHOD, METHODS, make_observer, method_label, method_names
 from plant import get_scenario
+from plant.files import atomic_write_text
 
 from .metrics import convergence_time, error_history
 from .plots import plot_comparison
 
-__all__ = ["reproduce", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
+__all__ = ["reproduce", "output_names", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
 #: Section 4's claims: E at 100 s for the paper's observer and for the high-gain observer of [4]
 #: (:attr:`observers.Method.paper_claim`), and the paper observer's transient, s.
@@ -25,6 +26,15 @@ _FIGURES = [("paper", "Fig. 2"), ("noisy", "Fig. 3"), ("time-varying", "Fig. 4")
 REPRODUCED_SCENARIOS = tuple(name for name, _ in _FIGURES)
 #: The methods ``fmscal reproduce`` runs: every online method of the registry, and the floor.
 REPRODUCED_OBSERVERS = (*method_names(online=True), FLOOR_METHOD)
+
+
+def _figure_name(name, fig):
+    return f"{fig.replace('. ', '').lower()}_{name}.png"
+
+
+def output_names():
+    """The files :func:`reproduce` writes into its folder."""
+    return [_figure_name(name, fig) for name, fig in _FIGURES] + ["summary.md"]
 
 
 def _observers(payload, truth):
@@ -89,10 +99,10 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
         for r in rows:
             if r["scenario"] == name and r["E_median_last_10s"] is not None and floor["E_median_last_10s"]:
                 r["E_over_floor"] = r["E_median_last_10s"] / floor["E_median_last_10s"]
-        plot_comparison(runs, truth, out / f"{fig.replace('. ', '').lower()}_{name}.png",
+        plot_comparison(runs, truth, out / _figure_name(name, fig),
                         f"{fig}: E against time and the entries of S_hat, scenario '{name}' (seed {seed})")
     bar.close()
-    (out / "summary.md").write_text(summary_markdown(rows, seed, duration_scale))
+    atomic_write_text(out / "summary.md", summary_markdown(rows, seed, duration_scale))
     return rows
 
 

@@ -18,10 +18,13 @@ from plant.errors import FmscalError
 
 from .comparison import floor_error, run_observer, seed_list, simulate_case
 
-__all__ = ["sweep", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS"]
+__all__ = ["sweep", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS",
+           "DEFAULT_SCHEDULER_TIMEOUT"]
 
 #: Columns that depend on the machine and the moment, not on the data.
 TIMING_COLUMNS = ("wall_time", "wall_per_sim_s", "us_per_step")
+#: Seconds to wait for a Dask scheduler to answer.
+DEFAULT_SCHEDULER_TIMEOUT = 10.0
 #: The three observers the toolkit compares, swept by default (the registry's ``design`` role).
 SWEEP_OBSERVERS = method_names(role="design")
 
@@ -110,14 +113,54 @@ def _run_dask(cases, client, bar):
         yield future.result()
 
 
-def _client(scheduler):
+def _probe(address, timeout):
+    """Refuse a ``tcp://`` address where nothing listens, or where the listener says nothing.
+
+    A Dask scheduler sends its handshake as soon as it accepts a connection;
+    a listener that accepts and stays silent would make the Dask client wait
+    for ever, so this waits at most ``timeout`` s for the first byte.
+    Addresses of other schemes are left to Dask.
+    """
+    import socket
+    from urllib.parse import urlsplit
+    parts = urlsplit(address)
+    if parts.scheme != "tcp":
+        return
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host = port = None
+    if not host or port is None:
+        raise FmscalError(f"a scheduler address reads tcp://HOST:PORT; got {address!r}")
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as sock:
+            sock.settimeout(timeout)
+            first = sock.recv(1)
+    except socket.timeout:
+        raise FmscalError(f"no answer from the Dask scheduler at {address} within {timeout:g} s "
+                          "(something accepts connections there but says nothing)") from None
+    except OSError as err:
+        raise FmscalError(f"cannot reach the Dask scheduler at {address} ({err.strerror or err})") from None
+    if not first:
+        raise FmscalError(f"the listener at {address} closed the connection without a Dask handshake")
+
+
+def _client(scheduler, timeout=DEFAULT_SCHEDULER_TIMEOUT):
     if isinstance(scheduler, str):
         try:
             from dask.distributed import Client
-        except ImportError as err:
-            raise ImportError('a Dask scheduler needs the distributed extra: pip install "fmscal[distributed]"') \
-                from err
-        return Client(scheduler), True
+        except ImportError:
+            raise FmscalError('a Dask scheduler needs the distributed extra: pip install "fmscal[distributed]"') \
+                from None
+        _probe(scheduler, timeout)
+        try:
+            return Client(scheduler, timeout=timeout), True
+        except (OSError, TimeoutError) as err:
+            raise FmscalError(f"no answer from the Dask scheduler at {scheduler} within {timeout:g} s "
+                              f"({type(err).__name__}); is it running, and is the address right?") from None
+        except ValueError as err:
+            raise FmscalError(f"cannot use the Dask scheduler address {scheduler!r} ({str(err).splitlines()[0]})") \
+                from None
     if not (hasattr(scheduler, "map") and hasattr(scheduler, "gather")):
         raise TypeError(f"scheduler must be an address like 'tcp://HOST:PORT' or a dask.distributed.Client; "
                         f"got {type(scheduler).__name__}")
@@ -125,7 +168,7 @@ def _client(scheduler):
 
 
 def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OBSERVERS, settings=None,
-          duration=None, n_jobs=-1, scheduler=None, progress=True):
+          duration=None, n_jobs=-1, scheduler=None, progress=True, scheduler_timeout=DEFAULT_SCHEDULER_TIMEOUT):
     """Run observers over the product of scenarios, seeds, noise levels and settings.
 
     Parameters
@@ -150,6 +193,9 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
         (``"tcp://HOST:PORT"``) or a connected client.
     progress : bool
         Show a progress bar (one tick per case).
+    scheduler_timeout : float
+        Seconds to wait for a scheduler given by address to answer before
+        giving up with :class:`plant.FmscalError`.
 
     Returns
     -------
@@ -169,7 +215,7 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
     _check_variants(variants, get_scenario(scenarios[0]).payload)
     cases = [(i, sc, seed, f, duration, variants)
              for i, (sc, f, seed) in enumerate(itertools.product(scenarios, noise_scales, seeds))]
-    client, owned = _client(scheduler) if scheduler is not None else (None, False)
+    client, owned = _client(scheduler, scheduler_timeout) if scheduler is not None else (None, False)
     results = {}
     try:
         with tqdm(total=len(cases), desc="sweep", unit="case", disable=not progress) as bar:

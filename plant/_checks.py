@@ -4,7 +4,11 @@ import numpy as np
 
 from .errors import FmscalError
 
-__all__ = ["as_finite_array", "as_positive_scalar"]
+__all__ = ["as_finite_array", "as_positive_scalar", "MAX_SCALAR"]
+
+#: Largest setting (a gain, a standard deviation, ...) accepted: beyond it squares and products of
+#: settings overflow double precision, and no physical quantity in SI units comes near it.
+MAX_SCALAR = 1e50
 
 
 def as_finite_array(value, shape, name):
@@ -38,11 +42,16 @@ def as_finite_array(value, shape, name):
 
 
 def as_positive_scalar(value, name, allow_zero=False):
-    """Return ``value`` as a positive (or, with ``allow_zero``, non-negative) finite float, or raise FmscalError."""
+    """Return ``value`` as a positive (or, with ``allow_zero``, non-negative) finite float, or raise FmscalError.
+
+    Values above :data:`MAX_SCALAR` are refused too: their squares overflow.
+    """
     try:
         x = float(value)
     except (TypeError, ValueError):
         raise FmscalError(f"{name} must be a number; got {value!r}") from None
     if not np.isfinite(x) or x < 0 or (x == 0 and not allow_zero):
         raise FmscalError(f"{name} must be {'non-negative' if allow_zero else 'positive'} and finite; got {value!r}")
+    if x > MAX_SCALAR:
+        raise FmscalError(f"{name} must be at most {MAX_SCALAR:g} (larger values overflow); got {value!r}")
     return x

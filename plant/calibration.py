@@ -6,18 +6,24 @@ offset ``b``; ``b = 0`` where it was not estimated). The file is JSON::
     {"format": "fmscal-calibration/1", "S": [[...] x3], "S_std": [[...] x3] or null,
      "b": [M, fx, fy] or null, "b_std": [...] or null, "payload": {"mass", "inertia", "rho"},
      "method": "least-squares", "log": {"name": "run.csv", "sha256": "..."},
-     "latency": s or null, "date": "2026-11-22T10:00:00+00:00"}
+     "latency": s or null, "date": "2026-11-22T10:00:00+00:00", "forced": false}
+
+``forced`` is true when the calibration was saved although its run had not
+converged (``fmscal calibrate --save --force``); files without it are read as
+not forced.
 """
 
 import datetime
 import hashlib
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .errors import FmscalError
+from .files import atomic_write_text
 from .payload import Payload
 from .sensor import check_calibration
 
@@ -25,6 +31,8 @@ __all__ = ["Calibration", "CalibrationFileError", "file_sha256", "FORMAT"]
 
 #: The format tag every calibration file carries.
 FORMAT = "fmscal-calibration/1"
+#: A calibration file is a few kB; anything above this is refused unread.
+_MAX_FILE_BYTES = 1 << 20
 
 
 class CalibrationFileError(FmscalError):
@@ -44,7 +52,7 @@ def _matrix(value, shape, name, source):
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}; got {value!r}") from None
+        raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}; got {_short(value)}") from None
     if arr.shape != shape or not np.all(np.isfinite(arr)):
         raise CalibrationFileError(f"{source}: {name} must be finite numbers of shape {shape}; "
                                    f"got shape {arr.shape}")
@@ -74,6 +82,9 @@ class Calibration:
         Delay of the pose stream behind the sensor stream that was used, s.
     date : str, optional
         ISO 8601; default now (UTC).
+    forced : bool
+        True if it was saved although the run had not converged
+        (``--force``): use it knowing that.
     """
 
     S: np.ndarray
@@ -86,6 +97,7 @@ class Calibration:
     log_sha256: str = ""
     latency: float = None
     date: str = None
+    forced: bool = False
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -96,6 +108,9 @@ class Calibration:
             value = getattr(self, name)
             if value is not None:
                 set_(self, name, _matrix(value, shape, name, "calibration"))
+        if not isinstance(self.forced, (bool, np.bool_)):
+            raise TypeError(f"forced must be True or False; got {self.forced!r}")
+        set_(self, "forced", bool(self.forced))
         if self.date is None:
             set_(self, "date", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
 
@@ -130,11 +145,15 @@ class Calibration:
         return {"format": FORMAT, "S": listed(self.S), "S_std": listed(self.S_std), "b": listed(self.b),
                 "b_std": listed(self.b_std), "payload": self.payload.to_dict(), "method": self.method,
                 "log": {"name": self.log_name, "sha256": self.log_sha256}, "latency": self.latency,
-                "date": self.date}
+                "date": self.date, "forced": self.forced}
 
     def save(self, path):
-        """Write the calibration as JSON."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
+        """Write the calibration as JSON, atomically (a temporary file, then a rename).
+
+        A failure (a full disk, a crash) leaves any previous file at ``path``
+        intact: never a truncated calibration.
+        """
+        atomic_write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
 
     @classmethod
     def load(cls, path, payload=None):
@@ -157,14 +176,25 @@ class Calibration:
             of the wrong shape or not finite, a singular ``S``, or another
             payload.
         """
+        if payload is not None and not isinstance(payload, Payload):
+            raise TypeError(f"payload must be a plant.Payload or None; got {type(payload).__name__}")
+        if not isinstance(path, (str, os.PathLike)):
+            raise CalibrationFileError(f"a calibration path must be a file name; got {type(path).__name__}")
         path = Path(path)
         source = path.name
+        if path.is_dir():
+            raise CalibrationFileError(f"{path}: is a folder, not a calibration file")
         if not path.is_file():
             raise CalibrationFileError(f"{path}: no such file")
+        if path.stat().st_size > _MAX_FILE_BYTES:
+            raise CalibrationFileError(f"{source}: {path.stat().st_size} bytes is too large for a calibration "
+                                       f"file (at most {_MAX_FILE_BYTES}); not an fmscal calibration")
         try:
-            data = json.loads(path.read_text())
+            data = json.loads(path.read_text(encoding="utf-8"))
         except (json.JSONDecodeError, UnicodeDecodeError) as err:
             raise CalibrationFileError(f"{source}: not a JSON calibration file ({err})") from None
+        except RecursionError:
+            raise CalibrationFileError(f"{source}: not a calibration file (JSON nested too deeply)") from None
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             got = data.get("format") if isinstance(data, dict) else type(data).__name__
             raise CalibrationFileError(f"{source}: not an fmscal calibration (format {got!r}; expected {FORMAT!r})")
@@ -187,11 +217,27 @@ class Calibration:
         if latency is not None and not (isinstance(latency, (int, float)) and np.isfinite(latency)):
             raise CalibrationFileError(f"{source}: latency must be a number of seconds or null; got {latency!r}")
         log = data.get("log") or {}
+        if not isinstance(log, dict) or not all(isinstance(log.get(k, ""), str) for k in ("name", "sha256")):
+            raise CalibrationFileError(f"{source}: log must be an object with a name and a sha256 (strings); "
+                                       f"got {_short(log)}")
+        forced = data.get("forced", False)
+        if not isinstance(forced, bool):
+            raise CalibrationFileError(f"{source}: forced must be true or false; got {_short(forced)}")
+        for key in ("method", "date"):
+            if data.get(key) is not None and not isinstance(data[key], str):
+                raise CalibrationFileError(f"{source}: {key} must be a string; got {_short(data[key])}")
         try:
-            return cls(S=S, payload=file_payload, method=str(data["method"]), log_name=str(log.get("name", "")),
-                       log_sha256=str(log.get("sha256", "")), latency=latency, date=data.get("date"), **optional)
+            return cls(S=S, payload=file_payload, method=data["method"], log_name=log.get("name", ""),
+                       log_sha256=log.get("sha256", ""), latency=latency, date=data.get("date"),
+                       forced=forced, **optional)
         except ValueError as err:
             raise CalibrationFileError(f"{source}: {err}") from None
+
+
+def _short(value, limit=60):
+    """``repr(value)`` cut to ``limit`` characters, for messages."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def _describe(payload):

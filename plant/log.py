@@ -5,7 +5,8 @@ Format (a public one: a user records it on a real rig)::
     t,theta,x,y,M,fx,fy
 
 in SI units (s, rad, m, N m, N). ``theta, x, y`` is the measured pose in the
-inertial frame, ``theta`` continuous (not wrapped); ``M, fx, fy`` is the raw
+inertial frame, ``theta`` continuous (one wrapped into (-pi, pi] is unwrapped,
+with a note in :attr:`Log.notes`); ``M, fx, fy`` is the raw
 sensor reading ``w_hat`` in the body frame at the sensor interface. Empty
 ``theta,x,y`` cells on a row mean no pose measurement at that sample; every
 other cell is a finite number. Time is strictly increasing and evenly sampled.
@@ -14,7 +15,9 @@ Every log, from a file or from the simulator, is validated in one place:
 :meth:`Log.__init__`.
 """
 
+import io
 import json
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +26,7 @@ import numpy as np
 
 from ._checks import as_finite_array, as_positive_scalar
 from .errors import FmscalError
+from .files import atomic_write_text
 from .payload import Payload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
@@ -33,6 +37,8 @@ COLUMNS = ("t", "theta", "x", "y", "M", "fx", "fy")
 _POSE, _WRENCH = ("theta", "x", "y"), ("M", "fx", "fy")
 _SAMPLING_TOLERANCE = 0.01        # relative spread of the time step accepted as even
 MIN_SAMPLES = 10
+#: Largest magnitude accepted in any column (s, rad, m, N m, N; or sensor counts).
+MAX_MAGNITUDE = 1e9
 
 
 class LogError(FmscalError):
@@ -60,6 +66,10 @@ class Log:
         The time step, s.
     has_pose : ndarray of bool, shape (N,)
         True where the pose was measured.
+    notes : list of str
+        What was done to the data on reading it: a ``theta`` wrapped into
+        (-pi, pi] (as vision systems and quaternion-to-yaw conversions give
+        it) is unwrapped, and said so here.
 
     Raises
     ------
@@ -90,6 +100,13 @@ class Log:
                            "leave all three empty where there is no pose measurement")
         if np.isinf(self.pose).any():
             raise LogError(f"{self.name}: pose has an infinite value at row {_first_bad(self.pose.sum(1))}")
+        for col, values in (("t", self.t), *((c, self.pose[:, j]) for j, c in enumerate(_POSE)),
+                            *((c, self.w_hat[:, j]) for j, c in enumerate(_WRENCH))):
+            big = np.abs(np.nan_to_num(values)) > MAX_MAGNITUDE
+            if big.any():
+                row = int(np.argmax(big))
+                raise LogError(f"{self.name}: column {col} holds {values[row]:.3g} at row {row + 1}; values beyond "
+                               f"{MAX_MAGNITUDE:.0e} are not measurements in s, rad, m, N m or N")
         steps = np.diff(self.t)
         if np.any(steps <= 0):
             raise LogError(f"{self.name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")
@@ -106,6 +123,21 @@ class Log:
             first = int(np.argmax(self.has_pose))
             raise LogError(f"{self.name}: the first row has no pose; the log must start with a pose "
                            f"measurement (the first one is at row {first + 1}); drop the rows before it")
+        self.notes = []
+        self._unwrap_theta()
+
+    def _unwrap_theta(self):
+        """Unwrap a ``theta`` wrapped into (-pi, pi] (its ~2 pi jumps between poses), with a note."""
+        rows = np.flatnonzero(self.has_pose)
+        theta = self.pose[rows, 0]
+        jumps = np.abs(np.diff(theta)) > np.pi
+        if not jumps.any() or np.max(np.abs(theta)) > np.pi + 1e-6:
+            return
+        self.pose = self.pose.copy()
+        self.pose[rows, 0] = np.unwrap(theta)
+        first = self.t[rows[1:][jumps][0]]
+        self.notes.append(f"{self.name}: theta is wrapped into (-pi, pi] ({int(jumps.sum())} jump(s) of about "
+                          f"2 pi between poses, the first at t = {first:g} s); unwrapped it")
 
     def __len__(self):
         return len(self.t)
@@ -128,7 +160,7 @@ class Log:
             if not ok:
                 cells[1:4] = ["", "", ""]
             lines.append(",".join(cells))
-        Path(path).write_text("\n".join(lines) + "\n")
+        atomic_write_text(path, "\n".join(lines) + "\n")
 
     def shift_poses(self, latency):
         """The log with the pose stream moved back by ``latency`` to line up with the sensor.
@@ -163,6 +195,30 @@ class Log:
         """The first ``n`` samples as a new Log."""
         return Log(self.t[:n], self.pose[:n], self.w_hat[:n], self.name)
 
+    def between(self, t_start, t_end):
+        """The samples with ``t_start <= t < t_end`` as a new Log (from its first pose on).
+
+        Parameters
+        ----------
+        t_start, t_end : float
+            s, on the log's clock.
+
+        Returns
+        -------
+        Log
+
+        Raises
+        ------
+        LogError
+            Too few samples or poses in the window.
+        """
+        keep = np.flatnonzero((self.t >= t_start) & (self.t < t_end))
+        poses = keep[self.has_pose[keep]]
+        if len(poses) == 0:
+            raise LogError(f"{self.name}: no pose measurement between t = {t_start:g} and {t_end:g} s")
+        keep = keep[keep >= poses[0]]
+        return Log(self.t[keep], self.pose[keep], self.w_hat[keep], self.name)
+
 
 def _first_bad(values):
     return int(np.argmax(~np.isfinite(values))) + 1
@@ -189,7 +245,7 @@ def read_log(path):
         number, NaN or infinite values, time not strictly increasing or not
         evenly sampled, too few rows or pose measurements.
     """
-    path = Path(path)
+    path = _as_path(path, "log")
     frame = _read_csv(path, COLUMNS, "only pose cells may be empty (no measurement)")
     return Log(frame["t"].to_numpy(), frame[list(_POSE)].to_numpy(),
                frame[list(_WRENCH)].to_numpy(), name=path.name)
@@ -219,7 +275,7 @@ def read_readings(path):
         Missing file or columns, a cell that is empty, not a number, NaN or
         infinite, time not strictly increasing, no rows.
     """
-    path = Path(path)
+    path = _as_path(path, "readings")
     frame = _read_csv(path, READING_COLUMNS, "every t, M, fx, fy cell must be a number")
     t = frame["t"].to_numpy()
     w_hat = frame[list(_WRENCH)].to_numpy()
@@ -234,26 +290,62 @@ def read_readings(path):
     return t, w_hat
 
 
+def _as_path(path, what="log"):
+    """``path`` as a Path to an existing regular file, or a one-line :class:`LogError`."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise LogError(f"a {what} must be given as a file name; got {type(path).__name__}")
+    path = Path(path)
+    if path.is_dir():
+        raise LogError(f"{_echo(str(path))}: is a folder, not a {what} file")
+    if not path.is_file():
+        raise LogError(f"{_echo(str(path))}: no such file")
+    return path
+
+
+def _echo(text, limit=80):
+    """``text`` fit for a one-line message: control characters escaped, at most ``limit`` characters."""
+    text = text.encode("unicode_escape").decode("ascii") if not text.isprintable() else text
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
 def _read_csv(path, required, empty_rule):
     """A CSV with the ``required`` columns, every cell a number or empty; one-line errors."""
     import pandas as pd
 
-    if not path.is_file():
-        raise LogError(f"{path}: no such file")
-    text = path.read_text()
-    header = [h.strip() for h in text.split("\n", 1)[0].strip().split(",")]
+    data = path.read_bytes()
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise LogError(f"{path.name}: holds a NUL byte at offset {nul}; not a text CSV")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise LogError(f"{path.name}: not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}); "
+                       "save the CSV as UTF-8 (the columns are plain ASCII)") from None
+    del data
+    text = text.removeprefix("\ufeff")       # a byte-order mark some spreadsheets write
+    first = text.split("\n", 1)[0].strip()
+    header = [h.strip() for h in first.split(",")]
+    if len(header) > 2 * len(COLUMNS) + 10 or len(first) > 1000:
+        raise LogError(f"{path.name}: the first line is not a CSV header ({len(header)} cells, {len(first)} "
+                       f"characters: {_echo(first)}); expected {','.join(required)}")
+    duplicated = sorted({h for h in header if header.count(h) > 1})
+    if duplicated:
+        raise LogError(f"{path.name}: column(s) {_echo(', '.join(duplicated))} appear more than once in the header "
+                       f"{_echo(','.join(header))}; keep one of each")
     missing = [c for c in required if c not in header]
     if missing:
         raise LogError(f"{path.name}: missing column(s) {', '.join(missing)}; expected the header "
-                       f"{','.join(required)} (got {','.join(header)})")
+                       f"{','.join(required)} (got {_echo(','.join(header))})")
     match = _NONFINITE.search(text)
     if match:
         line = text.count("\n", 0, match.start()) + 1
         raise LogError(f"{path.name}: line {line} holds a NaN or infinite value; {empty_rule}")
     try:
-        return pd.read_csv(path, skipinitialspace=True, dtype=float)
+        return pd.read_csv(io.StringIO(text), skipinitialspace=True, dtype=float)
+    except pd.errors.ParserError as err:
+        raise LogError(f"{path.name}: not a well-formed CSV ({_echo(str(err).splitlines()[0])})") from None
     except ValueError as err:
-        raise LogError(f"{path.name}: a cell is not a number ({str(err).splitlines()[0]})") from None
+        raise LogError(f"{path.name}: a cell is not a number ({_echo(str(err).splitlines()[0])})") from None
 
 
 @dataclass
@@ -314,7 +406,8 @@ class Truth:
         return data
 
     def write(self, path):
-        Path(path).write_text(json.dumps(self.to_json(), indent=2) + "\n")
+        """Write the sidecar as JSON (atomically)."""
+        atomic_write_text(path, json.dumps(self.to_json(), indent=2) + "\n")
 
 
 def read_truth(path):
@@ -323,13 +416,13 @@ def read_truth(path):
     Raises
     ------
     LogError
-        Missing file, not JSON, or a missing key.
+        Missing file, a folder, not UTF-8, not JSON (or nested too deeply), or a missing key.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise LogError(f"{path}: no such file")
+    path = _as_path(path, "truth")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            raise LogError(f"{path.name}: not a truth sidecar (a JSON {type(data).__name__}, not an object)")
         if "S" in data:
             schedule = CalibrationSchedule(data["S"])
         else:
@@ -347,6 +440,12 @@ def read_truth(path):
             settings={k: v for k, v in data.items() if k not in known})
     except json.JSONDecodeError as err:
         raise LogError(f"{path.name}: not valid JSON ({err})") from None
+    except RecursionError:
+        raise LogError(f"{path.name}: not a truth sidecar (JSON nested too deeply)") from None
+    except UnicodeDecodeError as err:
+        raise LogError(f"{path.name}: not UTF-8 text (offset {err.start})") from None
+    except LogError:
+        raise
     except KeyError as err:
         raise LogError(f"{path.name}: missing key {err} in the truth file") from None
     except (TypeError, ValueError) as err:

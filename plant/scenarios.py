@@ -11,13 +11,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .excitation import Multisine, PaperWrench
-from .log import Log, Truth
+from .log import MIN_SAMPLES, Log, Truth
 from .payload import PAPER_PAYLOAD, Payload
 from .sensor import CalibrationSchedule, NoiseSpec
 from .simulate import integrate
 from .errors import FmscalError
 
-__all__ = ["Scenario", "SCENARIOS", "get_scenario", "PAPER_S", "TABLE_1", "draw_S"]
+__all__ = ["Scenario", "SCENARIOS", "get_scenario", "PAPER_S", "TABLE_1", "draw_S", "MAX_SAMPLES"]
+
+#: Most samples a simulated log may have (2e7: 5.6 h at 1 kHz, about 2.5 GB of arrays while simulating).
+MAX_SAMPLES = 20_000_000
 
 #: The true calibration matrix printed in section 4.
 PAPER_S = np.array([[0.6110, -0.0372, -0.1445],
@@ -114,6 +117,18 @@ class Scenario:
     offset: tuple = None
     latency: float = 0.0
 
+    def check_size(self):
+        """Raise :class:`FmscalError` if the log would have fewer than ``plant.log.MIN_SAMPLES`` or more than :data:`MAX_SAMPLES` samples."""
+        if not (np.isfinite(self.duration) and self.duration > 0 and np.isfinite(self.dt) and self.dt > 0):
+            raise FmscalError(f"duration and dt must be positive and finite; got {self.duration} s and {self.dt} s")
+        n = self.duration / self.dt
+        if n + 1 < MIN_SAMPLES:
+            raise FmscalError(f"{self.name}: {self.duration:g} s at dt = {self.dt:g} s is {int(round(n)) + 1} "
+                              f"sample(s); a log needs at least {MIN_SAMPLES}")
+        if n + 1 > MAX_SAMPLES:
+            raise FmscalError(f"{self.name}: {self.duration:g} s at dt = {self.dt:g} s is {n + 1:.3g} samples; "
+                              f"at most {MAX_SAMPLES:.0e} fit in memory (shorten the duration or raise dt)")
+
     def with_(self, **changes):
         """A copy with some settings changed (duration, dt, ...)."""
         return replace(self, **changes)
@@ -155,6 +170,7 @@ class Scenario:
         x_true : ndarray, shape (N, 6)
             True ``[theta, theta', X, X', Y, Y']``.
         """
+        self.check_size()
         rng = np.random.default_rng(seed)
         schedule = self.schedule(rng)
         S0 = rng.uniform(*self.S0_range, (3, 3))

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import FmscalError
-from ._checks import as_finite_array
+from ._checks import as_finite_array, as_positive_scalar
 
 __all__ = ["CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration"]
 
@@ -113,11 +113,11 @@ class NoiseSpec:
 
     def __post_init__(self):
         sd = as_finite_array(self.wrench_sd, (3,), "wrench_sd")
-        if np.any(sd < 0) or self.angle_sd < 0 or self.position_sd < 0:
-            raise FmscalError("noise standard deviations must be >= 0")
+        if np.any(sd < 0):
+            raise FmscalError(f"noise standard deviations must be >= 0; got wrench_sd {tuple(sd.tolist())}")
         object.__setattr__(self, "wrench_sd", tuple(float(v) for v in sd))
-        object.__setattr__(self, "angle_sd", float(self.angle_sd))
-        object.__setattr__(self, "position_sd", float(self.position_sd))
+        object.__setattr__(self, "angle_sd", as_positive_scalar(self.angle_sd, "angle_sd", allow_zero=True))
+        object.__setattr__(self, "position_sd", as_positive_scalar(self.position_sd, "position_sd", allow_zero=True))
 
     @property
     def pose_sd(self):

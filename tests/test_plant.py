@@ -73,7 +73,7 @@ def test_agrees_with_an_independent_physics_engine():
     velocity step (Stormer-Verlet, second order): the engine's velocity lives
     at half steps and starts at ``v(dt/2)``.
     """
-    pymunk = pytest.importorskip("pymunk")
+    import pymunk                                # the [test] extra: a missing package fails here, never skips
     log, truth, x = get_scenario("paper").with_(duration=20.0).generate(0, noise_free=True)
     w = log.w_hat @ truth.S_at(0.0).T            # what the body feels: S w_hat
     p, dt = PAPER_PAYLOAD, log.dt

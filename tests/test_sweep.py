@@ -39,7 +39,7 @@ def test_local_cores_give_the_serial_table(serial_table):
 
 
 def test_a_dask_cluster_gives_the_serial_table(serial_table):
-    distributed = pytest.importorskip("dask.distributed")       # the [distributed] extra; README installs it
+    import dask.distributed as distributed      # the [distributed] extra; README installs it (a failure if missing)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
                                   processes=True) as cluster, distributed.Client(cluster) as client:
         table = sweep(["paper", "drift"], seeds=[0, 3], noise_scales=[0.5, 1.0],

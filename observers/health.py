@@ -1,0 +1,178 @@
+"""Is an estimate of ``S`` one to trust? Pure checks an observer's result can call.
+
+* :func:`consistency_check`: is the log consistent with one constant ``S``?
+  Least squares fitted to the first and the second half of the log must agree
+  within their uncertainty; where they do not, fits over shorter windows say
+  roughly when ``S`` changed.
+* :func:`divergence_bound`: the size of entries of ``S_hat`` that means the
+  estimate diverged, relative to the scale of the data and of ``S0`` (not an
+  absolute number: a sensor read in counts has entries near 1e-4, one read in
+  small units entries near 1e4).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from plant.errors import FmscalError
+from plant.units import implied_scale
+
+from .least_squares import LeastSquares
+
+__all__ = ["Consistency", "consistency_check", "divergence_bound", "DEFAULT_SIGNIFICANCE",
+           "DEFAULT_WINDOWS", "DIVERGENCE_FACTOR"]
+
+#: Probability, for a log with one constant S, of wrongly calling it inconsistent.
+DEFAULT_SIGNIFICANCE = 1e-3
+#: Windows of the fits that locate a change.
+DEFAULT_WINDOWS = 6
+#: An entry beyond this many times the scale (of S0 and of the data) counts as diverged.
+DIVERGENCE_FACTOR = 20.0
+
+
+@dataclass
+class Consistency:
+    """The outcome of :func:`consistency_check`.
+
+    Attributes
+    ----------
+    consistent : bool
+        The two halves agree within their uncertainty.
+    statistic : float
+        ``sum((S_a - S_b)^2 / (sd_a^2 + sd_b^2))`` over the 9 entries; about
+        chi-square with 9 degrees of freedom for a constant ``S``.
+    p_value : float
+        Probability of a statistic at least this large for a constant ``S``.
+    S_halves : (ndarray, ndarray)
+        The two fits, each shape (3, 3).
+    change_time : float or None
+        Where the windowed fits place the largest change, s (None when
+        consistent).
+    warning : str or None
+        One line for the user when inconsistent: S changed, and roughly when.
+    """
+
+    consistent: bool
+    statistic: float
+    p_value: float
+    S_halves: tuple
+    change_time: float = None
+    warning: str = None
+
+
+def _difference_statistic(a, b):
+    """Chi-square-like distance of two least-squares fits (``ObserverResult``), and its p-value (9 dof)."""
+    var = np.asarray(a.S_std) ** 2 + np.asarray(b.S_std) ** 2
+    d2 = (a.S_hat - b.S_hat) ** 2
+    if not np.all(var > 0):
+        # an exactly known entry: any difference at all is a disagreement
+        return (np.inf, 0.0) if np.any(d2[var <= 0] > 0) else (0.0, 1.0)
+    stat = float(np.sum(d2 / var))
+    return stat, float(chi2.sf(stat, d2.size))
+
+
+def consistency_check(log, payload, offset=True, significance=DEFAULT_SIGNIFICANCE, windows=DEFAULT_WINDOWS):
+    """Whether a log is consistent with one constant ``S``: fits of its two halves agree.
+
+    Each half is fitted by least squares (:class:`observers.LeastSquares`);
+    the difference of the two ``S`` estimates, entry by entry over their
+    combined variance (``S_std`` of each; correlations between entries are
+    ignored), is compared with chi-square with 9 degrees of freedom. When it
+    is too large, the log is cut into ``windows`` equal parts and fitted part
+    by part; the largest difference between neighbouring parts places the
+    change.
+
+    Parameters
+    ----------
+    log : plant.Log
+    payload : plant.Payload
+    offset : bool
+        Fit the sensor's offset too (as ``fmscal calibrate`` does by default).
+    significance : float
+        Probability of calling a constant-``S`` log inconsistent.
+    windows : int
+        Number of parts for locating a change (each must hold enough data for
+        least squares: at least two of its 0.5 s windows).
+
+    Returns
+    -------
+    Consistency
+
+    Raises
+    ------
+    FmscalError
+        A log too short to be halved for least squares.
+    """
+    if not 0 < significance < 1:
+        raise FmscalError(f"significance must be in (0, 1); got {significance}")
+    t0, t1 = float(log.t[0]), float(log.t[-1]) + log.dt
+    middle = 0.5 * (t0 + t1)
+    fit = LeastSquares(payload, offset=offset)
+    first, second = fit.run(log.between(t0, middle)), fit.run(log.between(middle, t1))
+    stat, p = _difference_statistic(first, second)
+    out = Consistency(consistent=p >= significance, statistic=stat, p_value=p,
+                      S_halves=(first.S_hat, second.S_hat))
+    if out.consistent:
+        return out
+    edges = np.linspace(t0, t1, int(windows) + 1)
+    parts = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        try:
+            parts.append(fit.run(log.between(a, b)))
+        except FmscalError:           # a part too short or without poses: locate with the others
+            parts.append(None)
+    jumps = [(_difference_statistic(x, y)[0] if x is not None and y is not None else -1.0, edge)
+             for x, y, edge in zip(parts[:-1], parts[1:], edges[1:-1])]
+    best, when = max(jumps)
+    threshold = chi2.isf(significance, 9)
+    changed = [edge for stat_, edge in jumps if stat_ > threshold]
+    if len(changed) > 1:
+        out.change_time = float(when)
+        where = (f"gradually (neighbouring {(t1 - t0) / windows:.3g} s parts differ at {len(changed)} of "
+                 f"{len(jumps)} boundaries, most around t = {when:.3g} s)")
+    elif best > 0:
+        out.change_time = float(when)
+        where = f"around t = {when:.3g} s (between t = {when - (t1 - t0) / windows:.3g} and " \
+                f"{when + (t1 - t0) / windows:.3g} s)"
+    else:
+        where = f"somewhere in t = {t0:.3g} .. {t1:.3g} s"
+    worst = np.unravel_index(np.argmax(np.abs(first.S_hat - second.S_hat)), (3, 3))
+    out.warning = (f"S changed during the log {where}: fits of its two halves differ by "
+                   f"{np.sqrt(stat / 9):.3g} sigma per entry (s_{worst[0] + 1}{worst[1] + 1}: "
+                   f"{first.S_hat[worst]:.4g} then {second.S_hat[worst]:.4g}); one constant S does not "
+                   f"describe it")
+    return out
+
+
+def divergence_bound(S0, log, payload, factor=DIVERGENCE_FACTOR):
+    """The size of an entry of ``S_hat`` beyond which an estimate has diverged.
+
+    ``factor`` times the larger of the largest entry of ``S0`` and the scale
+    of ``S`` the data implies (:func:`plant.units.implied_scale`: the wrench
+    the poses imply over the reading, the larger of the moment's and the
+    force's ratio). A sensor read in counts (``S`` near 1e-4) and one read in
+    small units (``S`` near 1e4) each get a bound of their own size.
+
+    Parameters
+    ----------
+    S0 : array_like, shape (3, 3)
+        The initial estimate.
+    log : plant.Log
+    payload : plant.Payload
+    factor : float
+
+    Returns
+    -------
+    float
+        Bound on ``max |S_hat_ij|``.
+    """
+    S0 = np.asarray(S0, dtype=float)
+    if S0.shape != (3, 3) or not np.all(np.isfinite(S0)):
+        raise FmscalError(f"S0 must be a finite 3x3 matrix; got shape {S0.shape}")
+    scale = implied_scale(log, payload)
+    data = max(scale) if scale is not None else 0.0
+    size = max(float(np.max(np.abs(S0))), data)
+    if size == 0:
+        size = 1.0             # nothing to go by: S of order one, as for N m and N
+    return float(factor * size)
