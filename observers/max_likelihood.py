@@ -1,0 +1,466 @@
+"""Maximum-likelihood estimate of ``S`` from a whole log: the information floor.
+
+The model is the log's own (eq. 1, :func:`plant.input_matrix`), with ``S``
+constant and every noise white:
+
+* the pose ``y_k = [theta, X, Y]`` is measured with white noise of variance
+  ``R = diag(angle_sd^2, position_sd^2, position_sd^2)``;
+* the raw reading is ``w_hat_k = w_hat_true(t_k) + n_k``, ``n_k`` white per
+  sample with variance ``Sigma = diag(wrench_sd^2)``, the true reading linear
+  between samples;
+* the accelerations are ``a = G(theta) [S | c] [w_hat_true; 1]`` (eq. 1; the
+  offset column ``c`` only with ``offset=True``), ``theta`` in ``G`` taken
+  from the measured poses (interpolated between them on a multi-rate log, as
+  least squares does), so that the model is linear in the state and in ``S``.
+
+Exact discretisation. With the acceleration linear over a step ``h`` (the
+reading at both ends of the step, as the observers take it), each channel
+``[p, v]`` moves by::
+
+    p_{k+1} = p_k + h v_k + h^2 (2 a_k + a_{k+1}) / 6,    v_{k+1} = v_k + h (a_k + a_{k+1}) / 2
+
+so the reading noise ``eps_k = G(theta_k) S n_k`` enters two consecutive steps,
+and a filter that took ``J_0 Sigma J_0^T + J_1 Sigma J_1^T`` per step would
+see half the velocity random walk the noise actually drives (the velocity
+error after ``N`` steps is ``h sum eps_k``, variance ``N h^2``, not
+``N h^2 / 2``). The state ``x~_k = x_k + [h^2 / 6, h / 2] eps_k`` (the part of
+the last step that ``n_k`` already moved) removes the correlation exactly::
+
+    x~_{k+1} = Phi x~_k + U_k s - [h^2, h] eps_k                       (white)
+    y_k      = C x~_k - (h^2 / 6) eps_k + v_k
+
+``U_k`` is the regressor of ``s = vec([S | c])`` (row order) at both ends of
+the step, from ``G(theta_k) [w_hat_k; 1]`` and ``G(theta_k+1)
+[w_hat_k+1; 1]``. The process noise of the three channels is joint, ``[h^2,
+h] [h^2, h]^T (x) G S Sigma S^T G^T``: the angular and translational
+accelerations are driven by the same ``n``, and their cross-covariance is
+kept. The one term left out is ``(h^2 / 6) eps_k`` in the measurement, about
+``1e-7`` of the pose noise variance in every scenario (``h^2 |eps| / 6 ~
+3e-8 m`` against ``1e-4 m``).
+
+The filter. ``S`` is constant and enters linearly, with a flat (diffuse)
+prior: the Kalman filter on ``[x, s]`` then splits exactly into a filter on
+``x`` alone, run as if ``s = 0``, and a sensitivity ``M_k = d x_k / d s``
+(Friedland's separate-bias filter; the same sensitivity as the Kreisselmeier
+filter of :mod:`observers.highgain`, with the Kalman gain)::
+
+    x-  = Phi x,   P- = Phi P Phi^T + Q_k,   M- = Phi M + U_k
+    H   = C M-,    e = y - C x-,   V = C P- C^T + R,   K = P- C^T V^-1
+    x   = x- + K e,    P = P- - K V K^T,    M = M- - K H
+    J  += H^T V^-1 H,  r += H^T V^-1 e
+
+The estimate is ``s_hat = J^-1 r``, its covariance ``J^-1`` (the information
+the log held), the motion ``x + M s_hat``. This is the maximum-likelihood
+estimate of ``s`` under the model for a given noise model ``Q``; ``Q``
+depends on ``S`` itself, so the filter runs again with ``Q`` at the first
+pass's estimate (``passes=2``).
+
+Two paths run the same step (:func:`_step`, written once for numpy and
+casadi): a numpy loop (the readable path) and the step compiled with casadi
+over chunks of 1000 samples (the fast path); they agree to 1e-9.
+"""
+
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from plant import Log, NoiseSpec, Payload, input_matrix
+from plant._backend import ops
+from plant._compile import BufferedCall, compile_function
+from plant.errors import FmscalError
+from plant.noise import estimate_noise
+from plant.sensor import check_calibration
+
+from . import _matrix as mx
+from .base import initial_calibration, offset_from_c, offset_std
+
+__all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "V0_SD", "POSE_SD_FLOOR"]
+
+#: Prior standard deviation of the initial velocities (rad/s, m/s); the first pose is the
+#: prior of the initial position. A few samples of poses outweigh it.
+V0_SD = 1.0
+#: Floor on the pose noise standard deviations (rad, m), so that a noise-free log keeps a
+#: well-conditioned filter.
+POSE_SD_FLOOR = 1e-6
+_CHUNK = 1000            # samples per compiled call
+_REG_REL = 1e-10         # history only: S_hat_k = S0 + (J + lam I)^-1 (r - J S0), lam relative to trace(J)
+_REG_ABS = 1e-12
+_N_IN = 12               # per-step input: has_next, theta_k, theta_k+1, pose_k+1 (3), w_k (3), w_k+1 (3)
+
+
+@dataclass
+class MaximumLikelihoodFit:
+    """The maximum-likelihood estimate of ``[S | c]`` from a whole log.
+
+    Attributes
+    ----------
+    S_aug : ndarray, shape (3, n)
+        The estimate of ``[S | c]`` in ``w = S w_hat + c``; ``n`` = 3, or 4
+        with the offset.
+    cov_aug : ndarray, shape (3n, 3n)
+        Its covariance, entries in row order: the inverse of the information
+        the log held about them.
+    S_history : ndarray, shape (N, 3, n)
+        The filtered estimate after each sample (the data up to it), for E
+        against time. Defined from the first sample by a negligible pull
+        towards ``S0`` (relative weight ``1e-10`` of the information), so its
+        last row differs from ``S_aug`` by rounding only.
+    x_history : ndarray, shape (N, 6)
+        The filtered motion ``[theta, theta', X, X', Y, Y']`` (rad, rad/s, m,
+        m/s) after each sample, with the estimate of that sample: filtered,
+        not smoothed.
+    noise : plant.NoiseSpec
+        The noise model used.
+    noise_estimated : bool
+        True when ``noise`` was estimated from the log.
+    passes : int
+        Filter passes run; each after the first takes the process noise at
+        the previous pass's ``S``.
+    payload : plant.Payload
+    wall_time : float
+        Seconds of computation, all passes.
+    """
+
+    S_aug: np.ndarray
+    cov_aug: np.ndarray
+    S_history: np.ndarray
+    x_history: np.ndarray
+    noise: NoiseSpec
+    noise_estimated: bool
+    passes: int
+    payload: Payload = None
+    wall_time: float = 0.0
+
+    @property
+    def offset(self):
+        """True when the fit estimated the offset column ``c``."""
+        return self.S_aug.shape[1] == 4
+
+    @property
+    def S_hat(self):
+        """The estimate of ``S``, shape (3, 3)."""
+        return self.S_aug[:, :3].copy()
+
+    @property
+    def S_std(self):
+        """One-sigma uncertainty of each entry of ``S``, shape (3, 3)."""
+        n = self.S_aug.shape[1]
+        return np.sqrt(np.maximum(np.diag(self.cov_aug), 0)).reshape(3, n)[:, :3]
+
+    @property
+    def b(self):
+        """The sensor's offset ``b = -S^-1 c`` (N m, N), shape (3,); None without the offset."""
+        return offset_from_c(self.S_hat, self.S_aug[:, 3]) if self.offset else None
+
+    @property
+    def b_std(self):
+        """One-sigma uncertainty of :attr:`b`, shape (3,); None without the offset."""
+        return offset_std(self.S_hat, self.b, self.cov_aug) if self.offset else None
+
+
+def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None, compiled=True):
+    """The maximum-likelihood estimate of ``S`` (and the offset) from a whole log.
+
+    Module docstring for the model and the filter: a Kalman filter on the
+    motion with the exact discretisation of eq. (1), the reading's noise as
+    process noise, and the information about ``[S | c]`` accumulated with a
+    flat prior.
+
+    Parameters
+    ----------
+    log : plant.Log
+        Full-rate or multi-rate (samples without a pose only predict). For a
+        pose stream that lags the sensor, pass ``log.shift_poses(latency)``.
+    payload : plant.Payload
+        The payload's known mass properties.
+    noise : plant.NoiseSpec, optional
+        Noise standard deviations of the log. None: estimated from the log
+        (:func:`plant.estimate_noise`). Pose standard deviations are floored
+        at :data:`POSE_SD_FLOOR`.
+    offset : bool
+        Also estimate the offset column ``c`` of ``w = S w_hat + c`` (the
+        reading augmented by a constant 1); the fit reports ``b = -S^-1 c``.
+    passes : int
+        Filter passes, at least 1. The first takes the process noise at
+        ``S0``, each further one at the previous estimate; two are enough
+        (the second changes ``E`` by a few per cent, a third by far less).
+    S0 : array_like, shape (3, 3), optional
+        Where the first pass evaluates the process noise, and where the
+        history starts; default the identity (a sensor's nominal calibration).
+    compiled : bool
+        True (default): the step compiled by casadi; False: the same step in
+        numpy, sample by sample (slow; for checks). Results agree to 1e-9.
+
+    Returns
+    -------
+    MaximumLikelihoodFit
+
+    Raises
+    ------
+    TypeError
+        ``log`` not a :class:`plant.Log`, ``payload`` not a
+        :class:`plant.Payload`, ``noise`` neither None nor a
+        :class:`plant.NoiseSpec`.
+    FmscalError
+        ``passes`` not a positive integer, ``S0`` not a finite 3x3 matrix, or
+        a log that does not excite every entry of ``[S | c]`` (singular
+        information).
+    """
+    if not isinstance(log, Log):
+        raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
+    if not isinstance(payload, Payload):
+        raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
+    if noise is not None and not isinstance(noise, NoiseSpec):
+        raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
+    if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
+        raise FmscalError(f"passes must be a positive integer; got {passes!r}")
+    start = time.perf_counter()
+    S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
+    noise_estimated = noise is None
+    if noise_estimated:
+        noise = estimate_noise(log)
+    n = 4 if offset else 3
+    s0 = initial_calibration(S0, offset)
+    theta = np.interp(log.t, log.t[log.has_pose], log.pose[log.has_pose, 0])
+    U = np.column_stack([log.has_pose[1:], theta[:-1], theta[1:], np.nan_to_num(log.pose[1:]),
+                         log.w_hat[:-1], log.w_hat[1:]])
+    pose_var = np.maximum(noise.pose_sd, POSE_SD_FLOOR) ** 2
+    z0 = _initial_state(log.pose[0], pose_var, n)
+    S_noise = S0
+    for _ in range(int(passes)):
+        # the process noise at the current S: G(theta) S Sigma S^T G(theta)^T, eq. (1)
+        W = S_noise @ np.diag(np.square(noise.wrench_sd)) @ S_noise.T
+        p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), s0])
+        z_end, Y = (_run_compiled if compiled else _run_numpy)(z0, U, p, payload, n)
+        S_aug, cov_aug = _solve_information(z_end, n, log.name)
+        S_noise = S_aug[:, :3]
+    Y = np.vstack([np.concatenate([z0[:6], s0]), Y])
+    return MaximumLikelihoodFit(
+        S_aug=S_aug, cov_aug=cov_aug, S_history=Y[:, 6:].reshape(-1, 3, n), x_history=Y[:, :6].copy(),
+        noise=noise, noise_estimated=noise_estimated, passes=int(passes), payload=payload,
+        wall_time=time.perf_counter() - start)
+
+
+# --- the packed state -------------------------------------------------------------------------
+
+def _layout(n):
+    """Slices of the packed state for ``n`` columns of ``[S | c]`` (``m = 3 n`` unknowns).
+
+    x (6), P (6x6 packed lower, 21), M (6 x m), J (m x m packed lower), r (m)
+    """
+    m = 3 * n
+    sizes = [("x", 6), ("P", 21), ("M", 6 * m), ("J", m * (m + 1) // 2), ("r", m)]
+    out, k = {}, 0
+    for name, size in sizes:
+        out[name] = slice(k, k + size)
+        k += size
+    out["size"] = k
+    return out
+
+
+def _initial_state(pose, pose_var, n):
+    """The filter at the first sample: the first pose, velocities with prior :data:`V0_SD`, no information."""
+    L = _layout(n)
+    z = np.zeros(L["size"])
+    z[L["x"]] = [pose[0], 0.0, pose[1], 0.0, pose[2], 0.0]
+    P = np.diag([pose_var[0], V0_SD ** 2, pose_var[1], V0_SD ** 2, pose_var[1], V0_SD ** 2])
+    z[L["P"]] = _pack(P, 6)
+    return z
+
+
+def _pack(A, k):
+    """Lower triangle of a symmetric ``k x k`` matrix, row by row (numpy or casadi)."""
+    o = ops(A)
+    return o.vcat([A[i, j] for i in range(k) for j in range(i + 1)])
+
+
+def _unpack(o, v, k):
+    """The symmetric ``k x k`` matrix from its packed lower triangle."""
+    idx = lambda i, j: i * (i + 1) // 2 + j if j <= i else j * (j + 1) // 2 + i     # noqa: E731
+    return o.matrix([[v[idx(i, j)] for j in range(k)] for i in range(k)])
+
+
+def _cholesky_solve(o, A, B, k, floor=0.0):
+    """``A^-1 B`` for a symmetric positive definite ``k x k`` ``A`` (Cholesky, in scalars).
+
+    Written in scalar operations so that numpy and casadi run the same
+    arithmetic; pivots are floored at ``floor`` (a guard, never reached on
+    a positive definite ``A``).
+    """
+    cols = B.shape[1]
+    Lc = [[None] * k for _ in range(k)]
+    for j in range(k):
+        d = A[j, j] - sum(Lc[j][q] * Lc[j][q] for q in range(j))
+        Lc[j][j] = o.sqrt(o.fmax(d, floor)) if floor > 0 else o.sqrt(d)
+        for i in range(j + 1, k):
+            Lc[i][j] = (A[i, j] - sum(Lc[i][q] * Lc[j][q] for q in range(j))) / Lc[j][j]
+    out = [[None] * cols for _ in range(k)]
+    for c in range(cols):
+        yv = [None] * k
+        for i in range(k):
+            yv[i] = (B[i, c] - sum(Lc[i][q] * yv[q] for q in range(i))) / Lc[i][i]
+        for i in reversed(range(k)):
+            out[i][c] = (yv[i] - sum(Lc[q][i] * out[q][c] for q in range(i + 1, k))) / Lc[i][i]
+    return o.matrix(out)
+
+
+# --- one step ---------------------------------------------------------------------------------
+
+def _regressor_rows(o, theta, w_hat, payload, n):
+    """``d a / d s`` at one sample: row ``c`` of ``G(theta) kron [w_hat; 1]^T``, shape (3, 3n).
+
+    ``a = G(theta) [S | c] w_aug`` (eq. 1, :func:`plant.input_matrix`), so
+    ``d a_c / d s_ij = G_ci w_aug_j`` with ``s`` in row order.
+    """
+    G = input_matrix(theta, payload)
+    w = [w_hat[j] for j in range(3)] + ([1.0] if n == 4 else [])
+    return o.matrix([[G[c, i] * w[j] for i in range(3) for j in range(n)] for c in range(3)])
+
+
+def _step(z, u, p, payload, n):
+    """One sample of the separate-bias Kalman filter (module docstring).
+
+    Parameters
+    ----------
+    z : ndarray or casadi.SX, shape (size,)
+        Packed state at sample ``k`` (:func:`_layout`).
+    u : ndarray or casadi.SX, shape (12,)
+        ``[has_pose_k+1, theta_k, theta_k+1, pose_k+1 (3), w_hat_k (3), w_hat_k+1 (3)]``:
+        ``theta`` the measured angle (interpolated between poses), the pose
+        zeros where there is none.
+    p : ndarray or casadi.SX, shape (12 + 3n,)
+        ``[h, angle variance, position variance, W (3x3, row order), s0 (3n)]``
+        with ``W = S Sigma S^T`` the reading's noise in true-wrench units.
+    payload : plant.Payload
+    n : int
+        Columns of ``[S | c]``: 3, or 4 with the offset.
+
+    Returns
+    -------
+    z_next : shape (size,)
+    out : shape (6 + 3n,)
+        The motion ``x + M s_hat`` and ``s_hat`` after the sample.
+    """
+    o = ops(z, u, p)
+    m, L = 3 * n, _layout(n)
+    x = z[L["x"]]
+    P = _unpack(o, z[L["P"]], 6)
+    M = mx.as_matrix(o, z[L["M"]], 6, m)
+    J = _unpack(o, z[L["J"]], m)
+    r = z[L["r"]]
+    has, h = u[0], p[0]
+    W = mx.as_matrix(o, p[3:12], 3)
+    s0 = p[12:12 + m]
+    # prediction over the step: Phi = diag of [[1, h], [0, 1]] per channel theta, X, Y
+    Phi = o.matrix([[1.0 if i == j else (h if (j == i + 1 and i % 2 == 0) else 0.0) for j in range(6)]
+                    for i in range(6)])
+    x_pred = o.dot(Phi, mx.col(x))
+    # process noise: [h^2, h] [h^2, h]^T (x) G W G^T at the step's start (white, module docstring)
+    G0 = input_matrix(u[1], payload)
+    A = o.dot(o.dot(G0, W), G0.T)
+    g = [h * h, h]
+    Q = o.matrix([[g[i % 2] * g[j % 2] * A[i // 2, j // 2] for j in range(6)] for i in range(6)])
+    P_pred = o.dot(o.dot(Phi, P), Phi.T) + Q
+    # the regressor linear over the step: U = [h^2 (2 u_k + u_k+1) / 6; h (u_k + u_k+1) / 2] per channel
+    R0 = _regressor_rows(o, u[1], u[6:9], payload, n)
+    R1 = _regressor_rows(o, u[2], u[9:12], payload, n)
+    U = o.matrix([[(h * h * (2 * R0[i // 2, j] + R1[i // 2, j]) / 6 if i % 2 == 0
+                    else h * (R0[i // 2, j] + R1[i // 2, j]) / 2) for j in range(m)] for i in range(6)])
+    M_pred = o.dot(Phi, M) + U
+    # correction with the pose (none without one: has = 0)
+    pos = [0, 2, 4]
+    CP = P_pred[pos, :]                                   # C P-, 3 x 6
+    H = M_pred[pos, :]                                    # C M-, 3 x m
+    e = mx.col(u[3:6]) - x_pred[pos, :]                   # innovation of the filter run with s = 0
+    V = P_pred[pos, :][:, pos] + o.matrix([[p[1], 0.0, 0.0], [0.0, p[2], 0.0], [0.0, 0.0, p[2]]])
+    rhs = o.matrix([[CP[i, j] for j in range(6)] + [H[i, j] for j in range(m)] + [e[i, 0]] for i in range(3)])
+    X = _cholesky_solve(o, V, rhs, 3)                     # V^-1 [C P-, H, e]
+    Vi_CP, Vi_H, Vi_e = X[:, 0:6], X[:, 6:6 + m], X[:, 6 + m:7 + m]
+    x_next = x_pred + has * o.dot(CP.T, Vi_e)
+    P_next = P_pred - has * o.dot(CP.T, Vi_CP)
+    M_next = M_pred - has * o.dot(CP.T, Vi_H)
+    J_next = J + has * o.dot(H.T, Vi_H)
+    r_next = mx.col(r) + has * o.dot(H.T, Vi_e)
+    # the estimate so far (history only; the final one is solved exactly)
+    trace = sum(J_next[i, i] for i in range(m))
+    lam = _REG_REL * trace / m + _REG_ABS
+    J_reg = J_next + lam * mx.eye(o, m)
+    d_s = _cholesky_solve(o, J_reg, r_next - o.dot(J_next, mx.col(s0)), m, floor=_REG_ABS)
+    s_hat = mx.col(s0) + d_s
+    x_hat = x_next + o.dot(M_next, s_hat)
+    z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next)])
+    return z_next, o.vcat([mx.vec(x_hat), mx.vec(s_hat)])
+
+
+def _solve_information(z, n, name):
+    """``s_hat = J^-1 r`` and ``cov = J^-1`` from the final state (numpy, exact, no prior).
+
+    Raises
+    ------
+    FmscalError
+        The information is singular: the log does not excite every entry.
+    """
+    m, L = 3 * n, _layout(n)
+    J = _unpack(ops(z), z[L["J"]], m)
+    r = z[L["r"]]
+    d = np.sqrt(np.maximum(np.diag(J), 1e-300))
+    scaled = J / np.outer(d, d)                         # unit diagonal: a unit-free condition number
+    try:
+        chol = np.linalg.cholesky(scaled)
+    except np.linalg.LinAlgError:
+        chol = None
+    if chol is None or not np.all(np.isfinite(J)) or np.linalg.cond(scaled) > 1e12:
+        what = "all nine entries of S" if n == 3 else "all nine entries of S and the offset"
+        raise FmscalError(f"{name}: the log does not excite {what}; the information matrix is singular")
+    inv_scaled = np.linalg.inv(scaled)
+    cov = inv_scaled / np.outer(d, d)
+    cov = (cov + cov.T) / 2
+    s = cov @ r
+    return s.reshape(3, n), cov
+
+
+# --- the two paths ----------------------------------------------------------------------------
+
+def _run_numpy(z0, U, p, payload, n):
+    """The step in numpy, sample by sample (the readable path)."""
+    Y = np.empty((len(U), 6 + 3 * n))
+    z = z0
+    for k in range(len(U)):
+        z, Y[k] = _step(z, U[k], p, payload, n)
+    return z, Y
+
+
+@lru_cache(maxsize=8)
+def _chunk_function(payload, n):
+    """:func:`_step` accumulated over :data:`_CHUNK` samples and compiled to C once per payload."""
+    size = _layout(n)["size"]
+    z = ca.SX.sym("z", size)
+    u = ca.SX.sym("u", _N_IN)
+    p = ca.SX.sym("p", 12 + 3 * n)
+    z_next, out = _step(z, u, p, payload, n)
+    step = ca.Function(f"max_likelihood{n}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
+    return compile_function(step.mapaccum(f"max_likelihood{n}_chunk", _CHUNK))
+
+
+def _run_compiled(z0, U, p, payload, n):
+    """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`."""
+    call = BufferedCall(_chunk_function(payload, n))
+    z_in, U_in, p_in = call.inputs
+    size, n_out = len(z0), 6 + 3 * n
+    Z_out = call.outputs[0].reshape(_CHUNK, size)          # column-major (size, CHUNK)
+    Y_out = call.outputs[1].reshape(_CHUNK, n_out)
+    U_in = U_in.reshape(_CHUNK, _N_IN)
+    p_in.reshape(_CHUNK, -1)[:] = p                        # mapped: one copy per sample
+    Y = np.empty((len(U), n_out))
+    z_in[:] = z0
+    for k0 in range(0, len(U), _CHUNK):
+        k1 = min(k0 + _CHUNK, len(U))
+        U_in[:k1 - k0] = U[k0:k1]
+        U_in[k1 - k0:] = U[k1 - 1]                         # padding past the end, discarded
+        call()
+        Y[k0:k1] = Y_out[:k1 - k0]
+        z_in[:] = Z_out[k1 - k0 - 1]
+    return z_in.copy(), Y
