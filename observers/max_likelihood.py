@@ -88,6 +88,7 @@ POSE_SD_FLOOR = 1e-6
 _CHUNK = 1000            # samples per compiled call
 _REG_REL = 1e-10         # history only: S_hat_k = S0 + (J + lam I)^-1 (r - J S0), lam relative to trace(J)
 _REG_ABS = 1e-12
+_CORRECTION_LIMIT = 0.1  # history only: the bias correction at most this fraction of |s_hat|
 _N_IN = 12               # per-step input: has_next, theta_k, theta_k+1, pose_k+1 (3), w_k (3), w_k+1 (3)
 
 
@@ -106,8 +107,10 @@ class MaximumLikelihoodFit:
     S_history : ndarray, shape (N, 3, n)
         The filtered estimate after each sample (the data up to it), for E
         against time. Defined from the first sample by a negligible pull
-        towards ``S0`` (relative weight ``1e-10`` of the information), so its
-        last row differs from ``S_aug`` by rounding only.
+        towards ``S0`` (relative weight ``1e-10`` of the information), and
+        corrected for the errors in variables to first order, so that its
+        last row differs from ``S_aug`` by the square of that correction
+        (about 1e-6 relative).
     x_history : ndarray, shape (N, 6)
         The filtered motion ``[theta, theta', X, X', Y, Y']`` (rad, rad/s, m,
         m/s) after each sample, with the estimate of that sample: filtered,
@@ -120,6 +123,12 @@ class MaximumLikelihoodFit:
         Filter passes run; each after the first takes the process noise at
         the previous pass's ``S``.
     payload : plant.Payload
+    information : ndarray, shape (3n, 3n)
+        ``J``, the information the last pass accumulated about ``[S | c]``
+        (row order), as if the readings were exact.
+    eiv_bias : ndarray, shape (3n, 3n)
+        ``B``, its part that the reading's own noise contributes (the
+        errors in variables): the estimate solves ``(J - B) s = r``.
     wall_time : float
         Seconds of computation, all passes.
     """
@@ -132,6 +141,8 @@ class MaximumLikelihoodFit:
     noise_estimated: bool
     passes: int
     payload: Payload = None
+    information: np.ndarray = None
+    eiv_bias: np.ndarray = None
     wall_time: float = 0.0
 
     @property
@@ -197,6 +208,7 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
     Returns
     -------
     MaximumLikelihoodFit
+        ``S_history`` and ``x_history`` are those of the last pass.
 
     Raises
     ------
@@ -233,15 +245,16 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
     for _ in range(int(passes)):
         # the process noise at the current S: G(theta) S Sigma S^T G(theta)^T, eq. (1)
         W = S_noise @ np.diag(np.square(noise.wrench_sd)) @ S_noise.T
-        p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), s0])
+        var_w = np.square(noise.wrench_sd)
+        p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), var_w, s0])
         z_end, Y = (_run_compiled if compiled else _run_numpy)(z0, U, p, payload, n)
-        S_aug, cov_aug = _solve_information(z_end, n, log.name)
+        S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
         S_noise = S_aug[:, :3]
     Y = np.vstack([np.concatenate([z0[:6], s0]), Y])
     return MaximumLikelihoodFit(
         S_aug=S_aug, cov_aug=cov_aug, S_history=Y[:, 6:].reshape(-1, 3, n), x_history=Y[:, :6].copy(),
         noise=noise, noise_estimated=noise_estimated, passes=int(passes), payload=payload,
-        wall_time=time.perf_counter() - start)
+        information=J, eiv_bias=B, wall_time=time.perf_counter() - start)
 
 
 # --- the packed state -------------------------------------------------------------------------
@@ -249,10 +262,13 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
 def _layout(n):
     """Slices of the packed state for ``n`` columns of ``[S | c]`` (``m = 3 n`` unknowns).
 
-    x (6), P (6x6 packed lower, 21), M (6 x m), J (m x m packed lower), r (m)
+    x (6), P (6x6 packed lower, 21), M (6 x m), J (m x m packed lower), r (m),
+    N (6 x 3), K (the last gain, 6 x 3), Gamma (6 matrices 6 x 6, row order, for (a, i) with i <= a), beta (3 x 3
+    symmetric, packed lower, 6): the moments of the errors-in-variables correction (:func:`_step`)
     """
     m = 3 * n
-    sizes = [("x", 6), ("P", 21), ("M", 6 * m), ("J", m * (m + 1) // 2), ("r", m)]
+    sizes = [("x", 6), ("P", 21), ("M", 6 * m), ("J", m * (m + 1) // 2), ("r", m),
+             ("N", 18), ("K", 18), ("Gam", 6 * 36), ("beta", 6)]
     out, k = {}, 0
     for name, size in sizes:
         out[name] = slice(k, k + size)
@@ -283,20 +299,23 @@ def _unpack(o, v, k):
     return o.matrix([[v[idx(i, j)] for j in range(k)] for i in range(k)])
 
 
-def _cholesky_solve(o, A, B, k, floor=0.0):
-    """``A^-1 B`` for a symmetric positive definite ``k x k`` ``A`` (Cholesky, in scalars).
+def _cholesky(o, A, k):
+    """Lower Cholesky factor of a symmetric positive definite ``k x k`` ``A``, as lists of scalars.
 
     Written in scalar operations so that numpy and casadi run the same
-    arithmetic; pivots are floored at ``floor`` (a guard, never reached on
-    a positive definite ``A``).
+    arithmetic; only the lower triangle of ``A`` is read.
     """
-    cols = B.shape[1]
     Lc = [[None] * k for _ in range(k)]
     for j in range(k):
-        d = A[j, j] - sum(Lc[j][q] * Lc[j][q] for q in range(j))
-        Lc[j][j] = o.sqrt(o.fmax(d, floor)) if floor > 0 else o.sqrt(d)
+        Lc[j][j] = o.sqrt(A[j, j] - sum(Lc[j][q] * Lc[j][q] for q in range(j)))
         for i in range(j + 1, k):
             Lc[i][j] = (A[i, j] - sum(Lc[i][q] * Lc[j][q] for q in range(j))) / Lc[j][j]
+    return Lc
+
+
+def _cholesky_apply(o, Lc, B, k):
+    """``A^-1 B`` from the factor of :func:`_cholesky`; ``B`` is ``k x cols``."""
+    cols = B.shape[1]
     out = [[None] * cols for _ in range(k)]
     for c in range(cols):
         yv = [None] * k
@@ -305,6 +324,11 @@ def _cholesky_solve(o, A, B, k, floor=0.0):
         for i in reversed(range(k)):
             out[i][c] = (yv[i] - sum(Lc[q][i] * out[q][c] for q in range(i + 1, k))) / Lc[i][i]
     return o.matrix(out)
+
+
+def _cholesky_solve(o, A, B, k):
+    """``A^-1 B`` for a symmetric positive definite ``k x k`` ``A``."""
+    return _cholesky_apply(o, _cholesky(o, A, k), B, k)
 
 
 # --- one step ---------------------------------------------------------------------------------
@@ -321,7 +345,7 @@ def _regressor_rows(o, theta, w_hat, payload, n):
 
 
 def _step(z, u, p, payload, n):
-    """One sample of the separate-bias Kalman filter (module docstring).
+    """One sample of the separate-bias Kalman filter and its bias moments (module docstring).
 
     Parameters
     ----------
@@ -331,9 +355,10 @@ def _step(z, u, p, payload, n):
         ``[has_pose_k+1, theta_k, theta_k+1, pose_k+1 (3), w_hat_k (3), w_hat_k+1 (3)]``:
         ``theta`` the measured angle (interpolated between poses), the pose
         zeros where there is none.
-    p : ndarray or casadi.SX, shape (12 + 3n,)
-        ``[h, angle variance, position variance, W (3x3, row order), s0 (3n)]``
-        with ``W = S Sigma S^T`` the reading's noise in true-wrench units.
+    p : ndarray or casadi.SX, shape (15 + 3n,)
+        ``[h, angle variance, position variance, W (3x3, row order), Sigma (3), s0 (3n)]``
+        with ``W = S Sigma S^T`` the reading's noise in true-wrench units and
+        ``Sigma`` the reading's noise variances.
     payload : plant.Payload
     n : int
         Columns of ``[S | c]``: 3, or 4 with the offset.
@@ -351,15 +376,21 @@ def _step(z, u, p, payload, n):
     M = mx.as_matrix(o, z[L["M"]], 6, m)
     J = _unpack(o, z[L["J"]], m)
     r = z[L["r"]]
+    Nz = mx.as_matrix(o, z[L["N"]], 6, 3)
+    K_last = mx.as_matrix(o, z[L["K"]], 6, 3)
+    gam = z[L["Gam"]]
+    beta = z[L["beta"]]
     has, h = u[0], p[0]
     W = mx.as_matrix(o, p[3:12], 3)
-    s0 = p[12:12 + m]
+    var_w = p[12:15]
+    s0 = p[15:15 + m]
     # prediction over the step: Phi = diag of [[1, h], [0, 1]] per channel theta, X, Y
     Phi = o.matrix([[1.0 if i == j else (h if (j == i + 1 and i % 2 == 0) else 0.0) for j in range(6)]
                     for i in range(6)])
     x_pred = o.dot(Phi, mx.col(x))
     # process noise: [h^2, h] [h^2, h]^T (x) G W G^T at the step's start (white, module docstring)
     G0 = input_matrix(u[1], payload)
+    G1 = input_matrix(u[2], payload)
     A = o.dot(o.dot(G0, W), G0.T)
     g = [h * h, h]
     Q = o.matrix([[g[i % 2] * g[j % 2] * A[i // 2, j // 2] for j in range(6)] for i in range(6)])
@@ -370,33 +401,97 @@ def _step(z, u, p, payload, n):
     U = o.matrix([[(h * h * (2 * R0[i // 2, j] + R1[i // 2, j]) / 6 if i % 2 == 0
                     else h * (R0[i // 2, j] + R1[i // 2, j]) / 2) for j in range(m)] for i in range(6)])
     M_pred = o.dot(Phi, M) + U
+    # errors in variables: Gamma_(a, i) = E[filter error x (part of M's column i driven by the
+    # reading's noise)], per unit S_a. and variance; its source is the noise n_k, which drives both
+    # the step's process noise ([h^2, h] (x) G_k e_a) and the regressor (A (x) G_k e_i, plus
+    # N e_i = (I - K C) (D (x) G_k e_i) already in M from the last step)
+    w_p = [h * h, h]
+    w_a = [h * h / 3, h / 2]
+    # (the pose at k carried -(h^2 / 6) eps_k: the last update put K (h^2 / 6) eps_k in the error)
+    PhiKG = o.dot(o.dot(Phi, K_last), G0)
+    src_left = [[w_p[i % 2] * G0[i // 2, a] - h * h / 6 * PhiKG[i, a] for i in range(6)] for a in range(3)]
+    PhiN = o.dot(Phi, Nz)
+    src_right = [[PhiN[i, b] + w_a[i % 2] * G0[i // 2, b] for i in range(6)] for b in range(3)]
+    # beta is symmetric (it is E[D_n^T V^-1 D_n] of the batch form, D_n the design's part
+    # driven by the noise): the pairs i <= a are enough
+    gam_pred = []
+    for a in range(3):
+        for b in range(a + 1):
+            q = a * (a + 1) // 2 + b
+            Gm = mx.as_matrix(o, gam[36 * q:36 * (q + 1)], 6)
+            Gm = o.dot(o.dot(Phi, Gm), Phi.T)
+            gam_pred.append(Gm + o.matrix([[src_left[a][i] * src_right[b][j] for j in range(6)]
+                                           for i in range(6)]))
     # correction with the pose (none without one: has = 0)
     pos = [0, 2, 4]
     CP = P_pred[pos, :]                                   # C P-, 3 x 6
     H = M_pred[pos, :]                                    # C M-, 3 x m
     e = mx.col(u[3:6]) - x_pred[pos, :]                   # innovation of the filter run with s = 0
     V = P_pred[pos, :][:, pos] + o.matrix([[p[1], 0.0, 0.0], [0.0, p[2], 0.0], [0.0, 0.0, p[2]]])
-    rhs = o.matrix([[CP[i, j] for j in range(6)] + [H[i, j] for j in range(m)] + [e[i, 0]] for i in range(3)])
-    X = _cholesky_solve(o, V, rhs, 3)                     # V^-1 [C P-, H, e]
-    Vi_CP, Vi_H, Vi_e = X[:, 0:6], X[:, 6:6 + m], X[:, 6 + m:7 + m]
-    x_next = x_pred + has * o.dot(CP.T, Vi_e)
-    P_next = P_pred - has * o.dot(CP.T, Vi_CP)
-    M_next = M_pred - has * o.dot(CP.T, Vi_H)
+    rhs = o.matrix([[CP[i, j] for j in range(6)] + [H[i, j] for j in range(m)] + [e[i, 0]]
+                    + [1.0 if i == j else 0.0 for j in range(3)] for i in range(3)])
+    X = _cholesky_solve(o, V, rhs, 3)                     # V^-1 [C P-, H, e, I]
+    Vi_CP, Vi_H, Vi_e, Vi = X[:, 0:6], X[:, 6:6 + m], X[:, 6 + m:7 + m], X[:, 7 + m:10 + m]
+    K = has * Vi_CP.T                                     # Kalman gain, 6 x 3 (zero without a pose)
+    x_next = x_pred + o.dot(K, e)
+    P_next = P_pred - o.dot(K, CP)
+    M_next = M_pred - o.dot(K, H)
     J_next = J + has * o.dot(H.T, Vi_H)
     r_next = mx.col(r) + has * o.dot(H.T, Vi_e)
-    # the estimate so far (history only; the final one is solved exactly)
+    # the bias moments: beta_ab += trace(V^-1 C Gamma_ab C^T); Gamma <- (I - K C) Gamma (I - K C)^T
+    beta_next, gam_next = [], []
+    # and the pose at k+1 itself: -(h^2 / 6) eps_k+1 against H's (h^2 / 6) G_k+1 n_k+1
+    GViG = o.dot(o.dot(G1.T, Vi), G1)
+    for q, Gm in enumerate(gam_pred):
+        a = int((np.sqrt(8 * q + 1) - 1) // 2)
+        b = q - a * (a + 1) // 2
+        CGC = Gm[pos, :][:, pos]
+        beta_next.append(beta[q] + has * (sum(Vi[i, j] * CGC[j, i] for i in range(3) for j in range(3))
+                                          + (h * h / 6) ** 2 * GViG[a, b]))
+        Gk = Gm - o.dot(K, Gm[pos, :])
+        gam_next.append(mx.flat(o, Gk - o.dot(Gk[:, pos], K.T)))
+    d_end = o.matrix([[(h * h / 6 if i % 2 == 0 else h / 2) * G1[i // 2, b] for b in range(3)] for i in range(6)])
+    N_next = d_end - o.dot(K, d_end[pos, :])
+    # the estimate so far, for the history (the final one is solved exactly, in numpy): the
+    # uncorrected s_u = S0 + (J + lam I)^-1 (r - J S0), then s_u + (J + lam I)^-1 B s_u, the
+    # first-order solution of (J - B) s = r, the correction limited to a tenth of |s_u| while
+    # the information is still rank-deficient (the first samples)
     trace = sum(J_next[i, i] for i in range(m))
     lam = _REG_REL * trace / m + _REG_ABS
-    J_reg = J_next + lam * mx.eye(o, m)
-    d_s = _cholesky_solve(o, J_reg, r_next - o.dot(J_next, mx.col(s0)), m, floor=_REG_ABS)
-    s_hat = mx.col(s0) + d_s
+    chol = _cholesky(o, J_next + lam * mx.eye(o, m), m)
+    s_u = mx.col(s0) + _cholesky_apply(o, chol, r_next - o.dot(J_next, mx.col(s0)), m)
+    corr = _cholesky_apply(o, chol, o.dot(_bias_matrix(o, beta_next, var_w, n), s_u), m)
+    size_u = o.sqrt(sum(s_u[i, 0] * s_u[i, 0] for i in range(m)))
+    size_c = o.sqrt(sum(corr[i, 0] * corr[i, 0] for i in range(m)))
+    s_hat = s_u + corr / o.fmax(1.0, size_c / (_CORRECTION_LIMIT * size_u + _REG_ABS))
     x_hat = x_next + o.dot(M_next, s_hat)
-    z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next)])
+    z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next),
+                     mx.flat(o, N_next), mx.flat(o, K), o.vcat(gam_next), o.vcat(beta_next)])
     return z_next, o.vcat([mx.vec(x_hat), mx.vec(s_hat)])
 
 
-def _solve_information(z, n, name):
-    """``s_hat = J^-1 r`` and ``cov = J^-1`` from the final state (numpy, exact, no prior).
+def _bias_matrix(o, beta, var_w, n):
+    """The errors-in-variables bias of the information, ``B`` with ``E[r - J s] = -B s``; shape (3n, 3n).
+
+    ``B_(i l),(a l') = delta_l l' Sigma_l beta_(a i)`` for entries ``s_il`` in row
+    order, ``beta`` (3 x 3, symmetric) packed lower; the offset column
+    (``l = 3``, a constant 1 without noise) has none.
+    """
+    idx = lambda a, i: a * (a + 1) // 2 + i if i <= a else i * (i + 1) // 2 + a     # noqa: E731
+    rows = []
+    for i in range(3):
+        for l in range(n):
+            rows.append([beta[idx(a, i)] * var_w[l] if (l2 == l and l < 3) else 0.0
+                         for a in range(3) for l2 in range(n)])
+    return o.matrix(rows)
+
+
+def _solve_information(z, n, var_w, name):
+    """``s_hat = (J - B)^-1 r`` and its covariance from the final state (numpy, no prior).
+
+    ``J`` is the information, ``B`` the errors-in-variables bias
+    (:func:`_bias_matrix`); the covariance is the sandwich
+    ``(J - B)^-1 J (J - B)^-1``.
 
     Raises
     ------
@@ -404,22 +499,21 @@ def _solve_information(z, n, name):
         The information is singular: the log does not excite every entry.
     """
     m, L = 3 * n, _layout(n)
-    J = _unpack(ops(z), z[L["J"]], m)
+    o = ops(z)
+    J = _unpack(o, z[L["J"]], m)
     r = z[L["r"]]
+    B = _bias_matrix(o, z[L["beta"]], var_w, n)
     d = np.sqrt(np.maximum(np.diag(J), 1e-300))
     scaled = J / np.outer(d, d)                         # unit diagonal: a unit-free condition number
-    try:
-        chol = np.linalg.cholesky(scaled)
-    except np.linalg.LinAlgError:
-        chol = None
-    if chol is None or not np.all(np.isfinite(J)) or np.linalg.cond(scaled) > 1e12:
+    Jc = (J - B) / np.outer(d, d)
+    if not np.all(np.isfinite(J)) or np.linalg.cond(scaled) > 1e12 or np.linalg.cond(Jc) > 1e12:
         what = "all nine entries of S" if n == 3 else "all nine entries of S and the offset"
         raise FmscalError(f"{name}: the log does not excite {what}; the information matrix is singular")
-    inv_scaled = np.linalg.inv(scaled)
-    cov = inv_scaled / np.outer(d, d)
+    Jc_inv = np.linalg.inv(Jc)
+    s = (Jc_inv @ (r / d)) / d
+    cov = (Jc_inv @ scaled @ Jc_inv.T) / np.outer(d, d)
     cov = (cov + cov.T) / 2
-    s = cov @ r
-    return s.reshape(3, n), cov
+    return s.reshape(3, n), cov, J, B
 
 
 # --- the two paths ----------------------------------------------------------------------------
@@ -439,7 +533,7 @@ def _chunk_function(payload, n):
     size = _layout(n)["size"]
     z = ca.SX.sym("z", size)
     u = ca.SX.sym("u", _N_IN)
-    p = ca.SX.sym("p", 12 + 3 * n)
+    p = ca.SX.sym("p", 15 + 3 * n)
     z_next, out = _step(z, u, p, payload, n)
     step = ca.Function(f"max_likelihood{n}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
     return compile_function(step.mapaccum(f"max_likelihood{n}_chunk", _CHUNK))
