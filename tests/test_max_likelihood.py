@@ -119,7 +119,8 @@ def _agree(fits, late, tol_std):
     d = np.sqrt(np.diag(fits[0].information))
     np.testing.assert_allclose(fits[0].information / np.outer(d, d), fits[1].information / np.outer(d, d),
                                atol=1e-9)
-    np.testing.assert_allclose(fits[0].eiv_bias / np.outer(d, d), fits[1].eiv_bias / np.outer(d, d), atol=1e-12)
+    np.testing.assert_allclose(fits[0].eiv_bias / np.outer(d, d), fits[1].eiv_bias / np.outer(d, d),
+                               atol=1e-12)
     std = np.sqrt(np.diag(fits[0].cov_aug)).reshape(fits[0].S_aug.shape)
     assert np.max(np.abs(fits[0].S_aug - fits[1].S_aug) / std) < tol_std
     np.testing.assert_allclose(np.sqrt(np.diag(fits[1].cov_aug)).reshape(std.shape), std, rtol=1e-9)
