@@ -12,9 +12,10 @@ from .highgain import HighGainObserver
 from .least_squares import LeastSquares
 from .ekf import AugmentedEKF
 from .gains import check_gains, double_pole_gains
-from .registry import METHODS, Method, get_method, make_observer, method_label, method_names
+from .floor import MaximumLikelihood
+from .registry import FLOOR_METHOD, METHODS, Method, get_method, make_observer, method_label, method_names
 
 __all__ = ["Observer", "RecursiveObserver", "Estimate", "ObserverResult", "settled",
-           "AdaptiveObserver", "PaperAdaptiveObserver", "HighGainObserver", "AugmentedEKF", "LeastSquares",
+           "AdaptiveObserver", "PaperAdaptiveObserver", "HighGainObserver", "AugmentedEKF", "LeastSquares", "MaximumLikelihood", "FLOOR_METHOD",
            "check_gains", "double_pole_gains", "METHODS", "Method", "get_method", "make_observer", "method_names",
            "method_label"]

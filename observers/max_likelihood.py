@@ -92,7 +92,7 @@ from plant.noise import estimate_noise
 from plant.sensor import check_calibration
 
 from . import _matrix as mx
-from .base import initial_calibration, offset_from_c, offset_std
+from .result import initial_calibration, offset_from_c, offset_std
 
 __all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "V0_SD", "POSE_SD_FLOOR"]
 

@@ -14,10 +14,11 @@ from plant.errors import FmscalError
 from .adaptive import AdaptiveObserver
 from .adaptive_paper import PaperAdaptiveObserver
 from .ekf import AugmentedEKF
+from .floor import MaximumLikelihood
 from .highgain import HighGainObserver
 from .least_squares import LeastSquares
 
-__all__ = ["Method", "METHODS", "get_method", "make_observer", "method_names", "method_label"]
+__all__ = ["Method", "METHODS", "FLOOR_METHOD", "get_method", "make_observer", "method_names", "method_label"]
 
 
 @dataclass(frozen=True)
@@ -104,7 +105,13 @@ METHODS = {m.name: m for m in (
     Method("least-squares", "least-squares (offline reference)", LeastSquares, {}, needs_noise_model=False,
            online=False, role="reference", calibrates=True,
            summary="offline least squares over double-integrated windows"),
+    Method("max-likelihood", "max-likelihood (the floor)", MaximumLikelihood, {}, needs_noise_model=True,
+           online=False, role="reference", calibrates=True,
+           summary="maximum-likelihood estimate from the whole log: what the data allow"),
 )}
+
+#: The method whose E on a log is the floor every table divides by (``E / floor``).
+FLOOR_METHOD = "max-likelihood"
 
 
 def get_method(name):

@@ -1,0 +1,57 @@
+"""The information floor as a method: the maximum-likelihood estimate behind the Observer contract."""
+
+from plant import NoiseSpec
+
+from .base import Estimate, Observer
+from .max_likelihood import fit_max_likelihood
+
+__all__ = ["MaximumLikelihood"]
+
+
+class MaximumLikelihood(Observer):
+    """Maximum-likelihood estimate of ``S`` from a whole log: what the data allow.
+
+    An offline method (``max-likelihood`` in the registry): it fits the
+    whole log with :func:`observers.max_likelihood.fit_max_likelihood`
+    (a Kalman filter on the motion of eq. (1) with the exact discretisation,
+    the reading's noise as process noise, a flat prior on ``[S | c]``, two
+    passes; module docstring there) and reports ``S_std`` (and ``b_std``)
+    from the information the log held. Every table divides a method's E by
+    this one's on the same log (``E / floor``).
+
+    Parameters
+    ----------
+    payload : plant.Payload
+    noise : plant.NoiseSpec, optional
+        The log's noise standard deviations; None: estimated from the log
+        (reported in ``result.info["noise"]``).
+    passes : int
+        Filter passes (the process noise of each after the first at the
+        previous estimate).
+    offset : bool
+        Also estimate the sensor's offset ``b`` (``result.b``, ``result.b_std``).
+
+    Examples
+    --------
+    >>> from plant import PAPER_PAYLOAD, get_scenario
+    >>> log, truth, _ = get_scenario("paper").with_(duration=5.0).generate(0)
+    >>> MaximumLikelihood(PAPER_PAYLOAD).run(log).S_std.shape
+    (3, 3)
+    """
+
+    name = "max-likelihood"
+    online = False
+
+    def __init__(self, payload, noise=None, passes=2, offset=False):
+        super().__init__(payload, offset=offset)
+        if noise is not None and not isinstance(noise, NoiseSpec):
+            raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
+        self.noise = noise
+        self.passes = passes
+
+    def _estimate(self, log, S0):
+        fit = fit_max_likelihood(log, self.payload, self.noise, self.offset, self.passes)
+        calibration = fit.S_history.reshape(len(fit.S_history), -1).copy()
+        calibration[-1] = fit.S_aug.ravel()          # the whole log's estimate
+        info = {"noise": fit.noise.to_dict(), "noise_estimated": fit.noise_estimated, "passes": fit.passes}
+        return Estimate(calibration, fit.x_history, cov=fit.cov_aug, info=info)
