@@ -4,7 +4,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from observers import LeastSquares, ObserverResult, get_method, method_names
+from observers import FLOOR_METHOD, LeastSquares, ObserverResult, get_method, method_names
+from observers.health import consistency_check
 from observers.latency import estimate_latency
 from plant import Calibration, NoiseSpec, estimate_noise
 from plant.errors import FmscalError
@@ -15,12 +16,17 @@ from .metrics import calibration_error
 __all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "CalibrationReport", "calibrate",
            "DivergedError"]
 
-#: The default: it never diverges, needs no noise model, and is within 1.5x of the most
-#: accurate method on full-rate logs; with poses at 50 Hz the EKF is more accurate
-#: (README, "Which observer to trust").
-DEFAULT_METHOD = "least-squares"
+#: The default: the maximum-likelihood estimate, at the information floor by construction, on
+#: full-rate and multi-rate logs, with offset and latency; its noise model is estimated from the
+#: log when not given (README, "Which observer to trust").
+DEFAULT_METHOD = FLOOR_METHOD
 #: Largest pose-stream delay searched when the latency is estimated, s.
 DEFAULT_MAX_LATENCY = 0.1
+#: A method's estimate disagrees with the least-squares fit of the same log when an entry differs by more
+#: than this many (combined) standard deviations ...
+AGREEMENT_SIGMAS = 6.0
+#: ... and the two calibrations differ by more than this E (eq. 16, one against the other).
+AGREEMENT_E = 0.01
 
 
 class DivergedError(FmscalError):
@@ -41,7 +47,12 @@ class CalibrationReport:
         The method's full run (histories, info).
     converged : bool
         The method's ``converged`` flag (:class:`observers.ObserverResult`),
-        and the log's units look right.
+        and: the log's units look right, a least-squares fit of it finds it
+        exciting every entry and matching the model, the log is consistent with one
+        constant ``S`` (:func:`observers.health.consistency_check`), and the
+        method's estimate agrees with a least-squares fit of the same log
+        (within :data:`AGREEMENT_SIGMAS` standard deviations or an E of
+        :data:`AGREEMENT_E`). Each failure adds a warning that names it.
     noise : plant.NoiseSpec
         The noise model used.
     noise_estimated : list of str
@@ -162,10 +173,36 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     units = [u for u in diagnosed if "sensor counts" not in u or get_method(method).online]
     warnings = diagnosed + list(ls_result.warnings)
     warnings += [w for w in result.warnings if w not in warnings]
+    consistency = consistency_check(aligned, payload, offset=offset)
+    if not consistency.consistent:
+        warnings.append(consistency.warning)
+    disagreement = _disagreement(result, ls_result)
+    if disagreement:
+        warnings.append(disagreement)
     calibration = Calibration(S=result.S_hat, payload=payload, method=result.observer, S_std=result.S_std,
                               b=result.b, b_std=result.b_std, latency=float(latency))
     E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
-    return CalibrationReport(calibration=calibration, result=result, converged=bool(result.converged) and not units,
+    converged = (bool(result.converged) and not units and not ls_result.warnings and consistency.consistent
+                 and not disagreement)
+    return CalibrationReport(calibration=calibration, result=result, converged=converged,
                              noise=noise, noise_estimated=noise_estimated, latency_estimated=latency_estimated,
                              warnings=warnings, units=units, fit={k: v for k, v in reference.report.items() if k != "warnings"},
                              E=E)
+
+
+def _disagreement(result, reference):
+    """A warning when ``result``'s estimate is far from the least-squares fit ``reference``; else None."""
+    if result is reference:
+        return None
+    var = np.square(reference.S_std) + (0.0 if result.S_std is None else np.square(result.S_std))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = float(np.nanmax(np.abs(result.S_hat - reference.S_hat) / np.sqrt(var)))
+    try:
+        E = calibration_error(result.S_hat, reference.S_hat)
+    except (np.linalg.LinAlgError, FmscalError):
+        E = float("inf")
+    if z > AGREEMENT_SIGMAS and E > AGREEMENT_E:
+        return (f"the {result.observer} estimate is far from a least-squares fit of the same log (E between "
+                f"them {E:.3g}, an entry {z:.3g} sigma off): it has not converged to what the data say "
+                "(a gain too small, or a run too short)")
+    return None

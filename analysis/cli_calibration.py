@@ -25,8 +25,8 @@ def add_calibrate(sub):
     p.add_argument("--rho", type=float, nargs=2, required=True, metavar=("RX", "RY"),
                    help="offset of the centre of mass from the sensor, body frame, m (negative values as written)")
     p.add_argument("--observer", choices=method_names(calibrates=True), default=DEFAULT_METHOD,
-                   help=f"method (default {DEFAULT_METHOD}: never diverges, needs no noise model; "
-                        "ekf is more accurate with poses slower than the sensor)")
+                   help=f"method (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at the "
+                        "information floor; its noise model is estimated from the log unless given)")
     p.add_argument("--pose-noise", type=float, nargs=2, metavar=("SD_RAD", "SD_M"),
                    help="pose noise standard deviations (default: estimated from the log)")
     p.add_argument("--wrench-noise", type=float, nargs=3, metavar=("SD_M", "SD_FX", "SD_FY"),

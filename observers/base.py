@@ -28,7 +28,7 @@ from plant._compile import ChunkedSteps
 from plant.errors import FmscalError
 from plant.sensor import check_calibration
 
-from .convergence import DIVERGENCE_BOUND, settled
+from .convergence import divergence_bound, settled
 from .result import ObserverResult, initial_calibration, offset_std, split_calibration
 from .samples import check_sample, pack_input
 from .state import INPUT
@@ -123,6 +123,7 @@ class Observer:
         self.offset = bool(offset)
         self.n_cols = 4 if self.offset else 3
         self._S0 = np.eye(3)
+        self._bound = divergence_bound(self._S0)
         self._u_prev = None
 
     # --- the whole log --------------------------------------------------------
@@ -148,6 +149,7 @@ class Observer:
         start = time.perf_counter()
         if self.online:
             self.reset(S0)
+            self._bound = divergence_bound(self._S0, log, self.payload)     # relative to the data's scale
         estimate = self._estimate(log, self._S0)
         result = self._result(log, estimate)
         result.wall_time = time.perf_counter() - start
@@ -185,6 +187,7 @@ class Observer:
         """
         self._require_online("reset")
         self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
+        self._bound = divergence_bound(self._S0)
         self._u_prev = None
 
     def step(self, dt, pose, w_hat):
@@ -239,9 +242,10 @@ class Observer:
         return None
 
     def _healthy(self, x, calibration):
-        """Finite, and every calibration entry within the divergence bound."""
-        return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(calibration))
-                    and np.max(np.abs(calibration)) < DIVERGENCE_BOUND)
+        """Finite, and every entry of ``S_hat`` within the divergence bound
+        (:func:`observers.convergence.divergence_bound`)."""
+        S = np.reshape(calibration, (3, self.n_cols))[:, :3]
+        return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(calibration)) and np.max(np.abs(S)) < self._bound)
 
     # --- shared ---------------------------------------------------------------------
     def _augmented(self, o, w_hat):
@@ -262,7 +266,8 @@ class Observer:
                 b_std = offset_std(S_hist[-1], b, est.cov)
         if est.diverged:
             b = None
-        converged = bool(not est.diverged and est.checks_passed and settled(S_hist))
+        honest = S_std is None or bool(np.all(np.isfinite(S_std)) and np.all(S_std > 0))
+        converged = bool(not est.diverged and est.checks_passed and honest and settled(S_hist))
         return ObserverResult(
             observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,
@@ -352,9 +357,9 @@ class RecursiveObserver(Observer):
 
     def _healthy_prefix(self, Z):
         """Leading rows of ``Z`` that are finite with every calibration entry within the bound."""
+        S = self.state.part(Z, "S").reshape(len(Z), 3, self.n_cols)[:, :, :3].reshape(len(Z), 9)
         with np.errstate(invalid="ignore"):
-            bad = (~np.all(np.isfinite(Z), axis=1)
-                   | (np.max(np.abs(self.state.part(Z, "S")), axis=1) >= DIVERGENCE_BOUND))
+            bad = ~np.all(np.isfinite(Z), axis=1) | (np.max(np.abs(S), axis=1) >= self._bound)
         return int(np.argmax(bad)) if bad.any() else len(Z)
 
     def _compiled_steps(self):

@@ -2,10 +2,13 @@
 
 import numpy as np
 
-__all__ = ["settled", "DIVERGENCE_BOUND", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
+from plant.errors import FmscalError
+from plant.units import implied_scale
 
-#: A run whose calibration estimate has an entry beyond this is declared diverged.
-DIVERGENCE_BOUND = 1e3
+__all__ = ["settled", "divergence_bound", "DIVERGENCE_FACTOR", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
+
+#: An entry of S_hat beyond this many times the scale (of S0 and of the data) counts as diverged.
+DIVERGENCE_FACTOR = 20.0
 #: ``converged`` looks at this final fraction of the run ...
 SETTLE_FRACTION = 0.2
 #: ... and asks that ``S_hat`` stay within this relative 2-norm distance of its final value.
@@ -34,3 +37,41 @@ def settled(S_history, fraction=SETTLE_FRACTION, tolerance=SETTLE_TOLERANCE):
     # the 2-norm never exceeds the Frobenius norm: take SVDs only where the cheap bound fails
     unsure = np.sqrt(np.einsum("nij,nij->n", gap, gap)) > bound
     return bool(not unsure.any() or np.max(np.linalg.norm(gap[unsure], ord=2, axis=(1, 2))) <= bound)
+
+
+def divergence_bound(S0, log=None, payload=None, factor=DIVERGENCE_FACTOR):
+    """The size of an entry of ``S_hat`` beyond which an estimate has diverged.
+
+    ``factor`` times the larger of the largest entry of ``S0`` and the scale
+    of ``S`` the data imply (:func:`plant.units.implied_scale`: the wrench
+    the poses imply over the reading, the larger of the moment's and the
+    force's ratio). A sensor read in counts (``S`` near 1e-4) and one read in
+    small units (``S`` near 1e4) each get a bound of their own size; the
+    paper's observer under noise, whose entries reach 80 where the true ones
+    are at most 2.7, counts as diverged.
+
+    Parameters
+    ----------
+    S0 : array_like, shape (3, 3)
+        The initial estimate.
+    log : plant.Log, optional
+        Without a log (a live sensor, :meth:`observers.Observer.step`), the
+        scale is that of ``S0`` and at least 1.
+    payload : plant.Payload, optional
+        Needed with ``log``.
+    factor : float
+
+    Returns
+    -------
+    float
+        Bound on ``max |s_ij|`` of ``S_hat``.
+    """
+    S0 = np.asarray(S0, dtype=float)
+    if S0.shape != (3, 3) or not np.all(np.isfinite(S0)):
+        raise FmscalError(f"S0 must be a finite 3x3 matrix; got shape {S0.shape}")
+    scale = implied_scale(log, payload) if log is not None else None
+    data = max(scale) if scale is not None else (1.0 if log is None else 0.0)
+    size = max(float(np.max(np.abs(S0))), data)
+    if size == 0:
+        size = 1.0             # nothing to go by: S of order one, as for N m and N
+    return float(factor * size)

@@ -10,7 +10,6 @@ from plant._checks import as_positive_scalar
 from plant._compile import BufferedCall, compile_function
 
 from .base import Observer
-from .convergence import DIVERGENCE_BOUND
 from .noise_level import DEFAULT_TOLERANCE, NoiseLevel
 from .state import INPUT
 from plant.errors import FmscalError
@@ -276,7 +275,8 @@ class AugmentedEKF(Observer):
         kf = self._kf
         # a NaN or inf anywhere makes a sum non-finite: one reduction per array
         return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum())
-                    and np.abs(kf.x[6:]).max() < DIVERGENCE_BOUND and kf.P.diagonal().min() > 0)
+                    and np.abs(calibration.reshape(3, self.n_cols)[:, :3]).max() < self._bound
+                    and kf.P.diagonal().min() > 0)
 
 
 #: The noise model of a live filter that was told none (``step`` without a log to estimate it from).

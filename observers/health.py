@@ -1,13 +1,9 @@
-"""Is an estimate of ``S`` one to trust? Pure checks an observer's result can call.
+"""Is a log consistent with one constant ``S``? A check ``fmscal calibrate`` runs on every log.
 
-* :func:`consistency_check`: is the log consistent with one constant ``S``?
-  Least squares fitted to the first and the second half of the log must agree
-  within their uncertainty; where they do not, fits over shorter windows say
-  roughly when ``S`` changed.
-* :func:`divergence_bound`: the size of entries of ``S_hat`` that means the
-  estimate diverged, relative to the scale of the data and of ``S0`` (not an
-  absolute number: a sensor read in counts has entries near 1e-4, one read in
-  small units entries near 1e4).
+:func:`consistency_check`: least squares fitted to the first and the second
+half of the log must agree within their uncertainty; where they do not, fits
+over shorter windows say roughly when ``S`` changed. (When an estimate counts
+as diverged: :func:`observers.convergence.divergence_bound`.)
 """
 
 from dataclasses import dataclass
@@ -16,19 +12,15 @@ import numpy as np
 from scipy.stats import chi2
 
 from plant.errors import FmscalError
-from plant.units import implied_scale
 
 from .least_squares import LeastSquares
 
-__all__ = ["Consistency", "consistency_check", "divergence_bound", "DEFAULT_SIGNIFICANCE",
-           "DEFAULT_WINDOWS", "DIVERGENCE_FACTOR"]
+__all__ = ["Consistency", "consistency_check", "DEFAULT_SIGNIFICANCE", "DEFAULT_WINDOWS"]
 
 #: Probability, for a log with one constant S, of wrongly calling it inconsistent.
 DEFAULT_SIGNIFICANCE = 1e-3
 #: Windows of the fits that locate a change.
 DEFAULT_WINDOWS = 6
-#: An entry beyond this many times the scale (of S0 and of the data) counts as diverged.
-DIVERGENCE_FACTOR = 20.0
 
 
 @dataclass
@@ -143,36 +135,3 @@ def consistency_check(log, payload, offset=True, significance=DEFAULT_SIGNIFICAN
                    f"{first.S_hat[worst]:.4g} then {second.S_hat[worst]:.4g}); one constant S does not "
                    f"describe it")
     return out
-
-
-def divergence_bound(S0, log, payload, factor=DIVERGENCE_FACTOR):
-    """The size of an entry of ``S_hat`` beyond which an estimate has diverged.
-
-    ``factor`` times the larger of the largest entry of ``S0`` and the scale
-    of ``S`` the data implies (:func:`plant.units.implied_scale`: the wrench
-    the poses imply over the reading, the larger of the moment's and the
-    force's ratio). A sensor read in counts (``S`` near 1e-4) and one read in
-    small units (``S`` near 1e4) each get a bound of their own size.
-
-    Parameters
-    ----------
-    S0 : array_like, shape (3, 3)
-        The initial estimate.
-    log : plant.Log
-    payload : plant.Payload
-    factor : float
-
-    Returns
-    -------
-    float
-        Bound on ``max |S_hat_ij|``.
-    """
-    S0 = np.asarray(S0, dtype=float)
-    if S0.shape != (3, 3) or not np.all(np.isfinite(S0)):
-        raise FmscalError(f"S0 must be a finite 3x3 matrix; got shape {S0.shape}")
-    scale = implied_scale(log, payload)
-    data = max(scale) if scale is not None else 0.0
-    size = max(float(np.max(np.abs(S0))), data)
-    if size == 0:
-        size = 1.0             # nothing to go by: S of order one, as for N m and N
-    return float(factor * size)

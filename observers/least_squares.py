@@ -233,11 +233,15 @@ class LeastSquares(Observer):
 
     def _diagnose(self, log, cov_S, residuals, n):
         # information about S, columns scaled to unit diagonal: unit-free conditioning
-        info_S = np.linalg.pinv(cov_S)
-        d = np.sqrt(np.maximum(np.diag(info_S), 1e-300))
-        scaled = info_S / np.outer(d, d)
-        eigval, eigvec = np.linalg.eigh(scaled)
-        cond = float(eigval[-1] / max(eigval[0], 1e-300))
+        with np.errstate(all="ignore"):
+            info_S = np.linalg.pinv(cov_S) if np.all(np.isfinite(cov_S)) else np.zeros_like(cov_S)
+            d = np.sqrt(np.maximum(np.diag(info_S), 1e-300))
+            scaled = info_S / np.outer(d, d)
+        if np.all(np.isfinite(scaled)):
+            eigval, eigvec = np.linalg.eigh(scaled)
+        else:                               # a covariance that overflowed: nothing is known
+            eigval, eigvec = np.zeros(len(scaled)), np.eye(len(scaled))
+        cond = float(eigval[-1] / eigval[0]) if eigval[0] > 0 else float("inf")
         noise = estimate_noise(log)
         pose_sd = np.array(noise.pose_sd)
         rms = np.array([residuals[0], residuals[1], residuals[2]])

@@ -30,11 +30,15 @@ class ObserverResult:
     S_std : ndarray, shape (3, 3), or None
         One-sigma uncertainty of each entry, where the method has one.
     diverged : bool
-        The estimate left ``|s_ij| < DIVERGENCE_BOUND`` or became non-finite;
-        the run stopped at the last finite step.
+        An entry of ``S_hat`` left the divergence bound (20 times the scale
+        of ``S0`` and of the data, :func:`observers.convergence.divergence_bound`)
+        or the estimate became non-finite; the run stopped at the last
+        healthy step.
     converged : bool
-        Not diverged, and the estimate settled (:func:`settled`) over the
-        last 20 % of the run.
+        Not diverged, the estimate settled over the last 20 % of the run
+        (:func:`observers.convergence.settled`), its uncertainty (where it
+        has one) finite and non-zero, and the method's own checks of the log
+        passed (least squares: excitation and consistency).
     wall_time : float
         Seconds of computation.
     info : dict

@@ -210,9 +210,16 @@ def test_no_runtime_warning_reaches_stderr(folder, capsys):
     import subprocess                 # a subprocess: pytest would catch the warnings before stderr
     proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", str(folder / "zero.csv"), *PAYLOAD,
                            "--json"], capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "default"})
+    assert proc.returncode == 2, proc.stderr
+    assert "RuntimeWarning" not in proc.stderr and "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "does not excite" in lines[0]        # the default (the floor) refuses it
+    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", str(folder / "zero.csv"), *PAYLOAD,
+                           "--observer", "ekf", "--json"], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONWARNINGS": "default"})
     assert proc.returncode == 0, proc.stderr
     assert "RuntimeWarning" not in proc.stderr and "Traceback" not in proc.stderr
-    assert json.loads(proc.stdout)["converged"] is False
+    assert json.loads(proc.stdout)["converged"] is False             # the EKF's prior is not an answer
 
 
 def test_set_reads_booleans_strictly_and_numbers_as_numbers():
@@ -271,7 +278,7 @@ def test_a_failing_plot_leaves_no_saved_calibration(folder, monkeypatch, capsys)
 
     def broken(*args, **kwargs):
         raise OSError(5, "Input/output error")
-    monkeypatch.setattr(analysis.plots, "plot_S_entries", broken)
+    monkeypatch.setattr(analysis.plots, "plot_calibration", broken)
     assert main([*[a.format(d=folder) for a in CAL], "--plot", str(folder / "p.png"),
                  "--save", str(folder / "new.json")]) == 2
     assert not (folder / "new.json").exists()

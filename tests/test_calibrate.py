@@ -52,8 +52,8 @@ def test_every_method_recovers_S_of_another_payload(other_log, method, tolerance
 
 def test_least_squares_and_ekf_agree(other_log):
     path, truth = other_log
-    ls, ekf = _calibrate_json(path), _calibrate_json(path, "--observer", "ekf")
-    assert ls["observer"] == "least-squares"                    # the default
+    ls, ekf = _calibrate_json(path, "--observer", "least-squares"), _calibrate_json(path, "--observer", "ekf")
+    assert _calibrate_json(path)["observer"] == "max-likelihood"            # the default: the floor
     diff = np.abs(np.array(ls["S"]) - np.array(ekf["S"]))
     assert np.all(diff < 3 * np.hypot(np.array(ls["S_std"]), np.array(ekf["S_std"])) + 1e-3)
     assert not any("random walk" in w for w in ekf["warnings"])        # a constant S: nothing moved

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import plant
-from observers.health import consistency_check, divergence_bound
+from observers.convergence import divergence_bound
+from observers.health import consistency_check
 
 
 @pytest.fixture(scope="module")

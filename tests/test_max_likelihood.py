@@ -13,7 +13,7 @@ from plant.errors import FmscalError
 def _case(name="paper", seed=0, duration=10.0, **changes):
     sc = plant.get_scenario(name).with_(duration=duration, **changes)
     log, truth, _ = sc.generate(seed)
-    return sc, log.shift_poses(truth.extra.get("latency") or 0.0), truth
+    return sc, log.shift_poses(truth.latency), truth
 
 
 def _batch_gls(log, payload, noise, S_noise, offset):
@@ -152,7 +152,7 @@ def _z_scores(name, seeds, duration, offset=False):
         fit = fit_max_likelihood(log, sc.payload, offset=offset, S0=truth.S0)
         z.append(((fit.S_hat - truth.S_at(0.0)) / fit.S_std).ravel())
         if offset:
-            zb.append((fit.b - np.array(truth.extra["offset"])) / fit.b_std)
+            zb.append((fit.b - truth.offset) / fit.b_std)
     return np.concatenate(z), (np.concatenate(zb) if offset else None)
 
 
@@ -193,7 +193,7 @@ def test_multi_rate_log_with_dropped_frames_and_latency():
     assert isinstance(fit, MaximumLikelihoodFit) and fit.noise_estimated and fit.passes == 2
     assert fit.S_history.shape == (len(log), 3, 4) and fit.x_history.shape == (len(log), 6)
     assert calibration_error(fit.S_hat, truth.S_at(0.0)) < 0.02
-    assert np.all(np.abs(fit.b - np.array(truth.extra["offset"])) < 5 * fit.b_std)
+    assert np.all(np.abs(fit.b - truth.offset) < 5 * fit.b_std)
     assert np.all(np.isfinite(fit.S_history)) and np.all(np.isfinite(fit.x_history))
 
 
