@@ -106,6 +106,7 @@ _CHUNK = 1000            # samples per compiled call
 _REG_REL = 1e-10         # history only: S_hat_k = S0 + (J + lam I)^-1 (r - J S0), lam relative to trace(J)
 _REG_ABS = 1e-12
 _CORRECTION_LIMIT = 0.1  # history only: the bias correction at most this fraction of |s_hat|
+_HISTORY_RADIUS = 10.0   # history only: |S_hat - S0| <= this times (|S0| + 1), Frobenius norms
 _PAIRS = [(a, b) for a in range(3) for b in range(a + 1)]     # (a, i), i <= a: Gamma and beta, packed
 _N_IN = 12               # per-step input: has_next, theta_k, theta_k+1, pose_k+1 (3), w_k (3), w_k+1 (3)
 
@@ -124,11 +125,13 @@ class MaximumLikelihoodFit:
         held about them: ``(J - B)^-1 J (J - B)^-1`` (module docstring).
     S_history : ndarray, shape (N, 3, n)
         The filtered estimate after each sample (the data up to it), for E
-        against time. Defined from the first sample by a negligible pull
-        towards ``S0`` (relative weight ``1e-10`` of the information), and
-        corrected for the errors in variables to first order, so that its
-        last row differs from ``S_aug`` by the square of that correction
-        (about 1e-6 relative).
+        against time; its last row is ``S_aug``. Defined from the first
+        sample by a negligible pull towards ``S0`` (relative weight ``1e-10``
+        of the information), corrected for the errors in variables to first
+        order (the square of that correction, about 1e-6 relative, left
+        out), and held within ``10 (|S0| + 1)`` of ``S0`` (Frobenius norm of
+        the ``S`` entries) over the first samples, where the information
+        does not yet pin every entry and the estimate is ill-determined.
     x_history : ndarray, shape (N, 6)
         The filtered motion ``[theta, theta', X, X', Y, Y']`` (rad, rad/s, m,
         m/s) after each sample, with the estimate of that sample: filtered,
@@ -271,6 +274,7 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
         S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
         S_noise = S_aug[:, :3]
     Y = np.vstack([np.concatenate([z0[:6], s0]), Y])
+    Y[-1, 6:] = S_aug.ravel()                          # the history ends at the estimate
     return MaximumLikelihoodFit(
         S_aug=S_aug, cov_aug=cov_aug, S_history=Y[:, 6:].reshape(-1, 3, n), x_history=Y[:, :6].copy(),
         noise=noise, noise_estimated=noise_estimated, passes=int(passes), payload=payload,
@@ -481,6 +485,11 @@ def _step(z, u, p, payload, n):
     size_u = o.sqrt(sum(s_u[i, 0] * s_u[i, 0] for i in range(m)))
     size_c = o.sqrt(sum(corr[i, 0] * corr[i, 0] for i in range(m)))
     s_hat = s_u + corr / o.fmax(1.0, size_c / (_CORRECTION_LIMIT * size_u + _REG_ABS))
+    # and held within a radius of S0 while the information cannot place every entry yet
+    s_entries = [n * i + j for i in range(3) for j in range(3)]
+    step_size = o.sqrt(sum((s_hat[k, 0] - s0[k]) ** 2 for k in s_entries))
+    radius = _HISTORY_RADIUS * (o.sqrt(sum(s0[k] * s0[k] for k in s_entries)) + 1.0)
+    s_hat = mx.col(s0) + (s_hat - mx.col(s0)) / o.fmax(1.0, step_size / radius)
     x_hat = x_next + o.dot(M_next, s_hat)
     z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next),
                      mx.flat(o, N_next), mx.flat(o, K), o.vcat(gam_next), o.vcat(beta_next)])
