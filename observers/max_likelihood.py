@@ -220,6 +220,9 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
         Filter passes, at least 1. The first takes the process noise at
         ``S0``, each further one at the previous estimate; two are enough
         (the second changes ``E`` by a few per cent, a third by far less).
+        Only the last pass carries the errors-in-variables moments (the
+        others only set the next pass's noise model), at about twice the
+        cost of each of the others.
     S0 : array_like, shape (3, 3), optional
         Where the first pass evaluates the process noise, and where the
         history starts; default the identity (a sensor's nominal calibration).
@@ -265,12 +268,13 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
     pose_var = np.maximum(noise.pose_sd, POSE_SD_FLOOR) ** 2
     z0 = _initial_state(log.pose[0], pose_var, n)
     S_noise = S0
-    for _ in range(int(passes)):
+    for k in range(int(passes)):
         # the process noise at the current S: G(theta) S Sigma S^T G(theta)^T, eq. (1)
         W = S_noise @ np.diag(np.square(noise.wrench_sd)) @ S_noise.T
         var_w = np.square(noise.wrench_sd)
         p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), var_w, s0])
-        z_end, Y = (_run_compiled if compiled else _run_numpy)(z0, U, p, payload, n)
+        # the bias moments only where the estimate is the result (the last pass)
+        z_end, Y = (_run_compiled if compiled else _run_numpy)(z0, U, p, payload, n, k == passes - 1)
         S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
         S_noise = S_aug[:, :3]
     Y = np.vstack([np.concatenate([z0[:6], s0]), Y])
@@ -369,7 +373,7 @@ def _regressor_rows(o, theta, w_hat, payload, n):
     return o.matrix([[G[c, i] * w[j] for i in range(3) for j in range(n)] for c in range(3)])
 
 
-def _step(z, u, p, payload, n):
+def _step(z, u, p, payload, n, eiv=True):
     """One sample of the separate-bias Kalman filter and its bias moments (module docstring).
 
     Parameters
@@ -387,6 +391,10 @@ def _step(z, u, p, payload, n):
     payload : plant.Payload
     n : int
         Columns of ``[S | c]``: 3, or 4 with the offset.
+    eiv : bool
+        Propagate the moments of the errors-in-variables correction (False:
+        they are carried unchanged, and the history is uncorrected; for a
+        pass whose estimate only sets the next pass's noise model).
 
     Returns
     -------
@@ -432,18 +440,20 @@ def _step(z, u, p, payload, n):
     # N e_i = (I - K C) (D (x) G_k e_i) already in M from the last step)
     w_p = [h * h, h]
     w_a = [h * h / 3, h / 2]
+    gam_pred = []
     # (the pose at k carried -(h^2 / 6) eps_k: the last update put K (h^2 / 6) eps_k in the error)
-    PhiKG = o.dot(o.dot(Phi, K_last), G0)
-    src_left = [[w_p[i % 2] * G0[i // 2, a] - h * h / 6 * PhiKG[i, a] for i in range(6)] for a in range(3)]
-    PhiN = o.dot(Phi, Nz)
-    src_right = [[PhiN[i, b] + w_a[i % 2] * G0[i // 2, b] for i in range(6)] for b in range(3)]
     # beta is symmetric (it is E[D_n^T V^-1 D_n] of the batch form, D_n the design's part
     # driven by the noise): the pairs i <= a are enough
-    gam_pred = []
-    for q, (a, b) in enumerate(_PAIRS):
-        Gm = mx.as_matrix(o, gam[36 * q:36 * (q + 1)], 6)
-        source = o.matrix([[src_left[a][i] * src_right[b][j] for j in range(6)] for i in range(6)])
-        gam_pred.append(o.dot(o.dot(Phi, Gm), Phi.T) + source)
+    if eiv:
+        PhiKG = o.dot(o.dot(Phi, K_last), G0)
+        src_left = [[w_p[i % 2] * G0[i // 2, a] - h * h / 6 * PhiKG[i, a] for i in range(6)]
+                    for a in range(3)]
+        PhiN = o.dot(Phi, Nz)
+        src_right = [[PhiN[i, b] + w_a[i % 2] * G0[i // 2, b] for i in range(6)] for b in range(3)]
+        for q, (a, b) in enumerate(_PAIRS):
+            Gm = mx.as_matrix(o, gam[36 * q:36 * (q + 1)], 6)
+            source = o.matrix([[src_left[a][i] * src_right[b][j] for j in range(6)] for i in range(6)])
+            gam_pred.append(o.dot(o.dot(Phi, Gm), Phi.T) + source)
     # correction with the pose (none without one: has = 0)
     pos = [0, 2, 4]
     CP = P_pred[pos, :]                                   # C P-, 3 x 6
@@ -464,6 +474,8 @@ def _step(z, u, p, payload, n):
     # (its -(h^2 / 6) eps_k+1 against H's (h^2 / 6) G_k+1 n_k+1); Gamma <- (I - K C) Gamma (I - K C)^T
     GViG = o.dot(o.dot(G1.T, Vi), G1)
     beta_next, gam_next = [], []
+    if not eiv:
+        beta_next, gam_next = [beta[q] for q in range(len(_PAIRS))], [gam]
     for q, ((a, b), Gm) in enumerate(zip(_PAIRS, gam_pred)):
         CGC = Gm[pos, :][:, pos]
         beta_next.append(beta[q] + has * (sum(Vi[i, j] * CGC[j, i] for i in range(3) for j in range(3))
@@ -472,7 +484,7 @@ def _step(z, u, p, payload, n):
         gam_next.append(mx.flat(o, Gk - o.dot(Gk[:, pos], K.T)))
     d_end = o.matrix([[(h * h / 6 if i % 2 == 0 else h / 2) * G1[i // 2, b] for b in range(3)]
                       for i in range(6)])
-    N_next = d_end - o.dot(K, d_end[pos, :])
+    N_next = d_end - o.dot(K, d_end[pos, :]) if eiv else Nz
     # the estimate so far, for the history (the final one is solved exactly, in numpy): the
     # uncorrected s_u = S0 + (J + lam I)^-1 (r - J S0), then s_u + (J + lam I)^-1 B s_u, the
     # first-order solution of (J - B) s = r, the correction limited to a tenth of |s_u| while
@@ -481,7 +493,8 @@ def _step(z, u, p, payload, n):
     lam = _REG_REL * trace / m + _REG_ABS
     chol = _cholesky(o, J_next + lam * mx.eye(o, m), m)
     s_u = mx.col(s0) + _cholesky_apply(o, chol, r_next - o.dot(J_next, mx.col(s0)), m)
-    corr = _cholesky_apply(o, chol, o.dot(_bias_matrix(o, beta_next, var_w, n), s_u), m)
+    corr = (_cholesky_apply(o, chol, o.dot(_bias_matrix(o, beta_next, var_w, n), s_u), m) if eiv
+            else 0.0 * s_u)
     size_u = o.sqrt(sum(s_u[i, 0] * s_u[i, 0] for i in range(m)))
     size_c = o.sqrt(sum(corr[i, 0] * corr[i, 0] for i in range(m)))
     s_hat = s_u + corr / o.fmax(1.0, size_c / (_CORRECTION_LIMIT * size_u + _REG_ABS))
@@ -492,7 +505,8 @@ def _step(z, u, p, payload, n):
     s_hat = mx.col(s0) + (s_hat - mx.col(s0)) / o.fmax(1.0, step_size / radius)
     x_hat = x_next + o.dot(M_next, s_hat)
     z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next),
-                     mx.flat(o, N_next), mx.flat(o, K), o.vcat(gam_next), o.vcat(beta_next)])
+                     mx.flat(o, N_next), mx.flat(o, K if eiv else K_last), o.vcat(gam_next),
+                     o.vcat(beta_next)])
     return z_next, o.vcat([mx.vec(x_hat), mx.vec(s_hat)])
 
 
@@ -544,30 +558,31 @@ def _solve_information(z, n, var_w, name):
 
 # --- the two paths ----------------------------------------------------------------------------
 
-def _run_numpy(z0, U, p, payload, n):
+def _run_numpy(z0, U, p, payload, n, eiv):
     """The step in numpy, sample by sample (the readable path)."""
     Y = np.empty((len(U), 6 + 3 * n))
     z = z0
     for k in range(len(U)):
-        z, Y[k] = _step(z, U[k], p, payload, n)
+        z, Y[k] = _step(z, U[k], p, payload, n, eiv)
     return z, Y
 
 
 @lru_cache(maxsize=8)
-def _chunk_function(payload, n):
+def _chunk_function(payload, n, eiv):
     """:func:`_step` accumulated over :data:`_CHUNK` samples and compiled to C once per payload."""
     size = _layout(n)["size"]
     z = ca.SX.sym("z", size)
     u = ca.SX.sym("u", _N_IN)
     p = ca.SX.sym("p", 15 + 3 * n)
-    z_next, out = _step(z, u, p, payload, n)
-    step = ca.Function(f"max_likelihood{n}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
-    return compile_function(step.mapaccum(f"max_likelihood{n}_chunk", _CHUNK))
+    z_next, out = _step(z, u, p, payload, n, eiv)
+    name = f"max_likelihood{n}{'' if eiv else '_plain'}"
+    step = ca.Function(f"{name}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
+    return compile_function(step.mapaccum(f"{name}_chunk", _CHUNK))
 
 
-def _run_compiled(z0, U, p, payload, n):
+def _run_compiled(z0, U, p, payload, n, eiv):
     """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`."""
-    call = BufferedCall(_chunk_function(payload, n))
+    call = BufferedCall(_chunk_function(payload, n, eiv))
     z_in, U_in, p_in = call.inputs
     size, n_out = len(z0), 6 + 3 * n
     Z_out = call.outputs[0].reshape(_CHUNK, size)          # column-major (size, CHUNK)
