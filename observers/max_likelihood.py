@@ -34,9 +34,10 @@ the step, from ``G(theta_k) [w_hat_k; 1]`` and ``G(theta_k+1)
 [w_hat_k+1; 1]``. The process noise of the three channels is joint, ``[h^2,
 h] [h^2, h]^T (x) G S Sigma S^T G^T``: the angular and translational
 accelerations are driven by the same ``n``, and their cross-covariance is
-kept. The one term left out is ``(h^2 / 6) eps_k`` in the measurement, about
-``1e-7`` of the pose noise variance in every scenario (``h^2 |eps| / 6 ~
-3e-8 m`` against ``1e-4 m``).
+kept. The one term the filter's noise model leaves out is ``(h^2 / 6) eps_k``
+in the measurement, about ``1e-7`` of the pose noise variance in the
+scenarios (``h^2 |eps| / 6 ~ 3e-8 m`` against ``1e-4 m``); the
+errors-in-variables moments below do take it.
 
 The filter. ``S`` is constant and enters linearly, with a flat (diffuse)
 prior: the Kalman filter on ``[x, s]`` then splits exactly into a filter on
@@ -53,9 +54,10 @@ filter of :mod:`observers.highgain`, with the Kalman gain)::
 regressor ``U_k`` were exact. It is not: it is built from the noisy reading,
 whose noise also drives the motion's process noise, and that correlation
 (errors in variables) biases ``J^-1 r`` towards zero, by a fraction that
-grows with the reading's noise and with the filter's bandwidth (measured on
-``random-S``, 100 s: about 2 standard deviations, E 7.3e-3 where least
-squares gives 4.4e-3). The estimate solves instead the bias-compensated
+grows with the reading's noise and with the filter's bandwidth (on
+``random-S`` and ``noisy`` it doubled E, to more than least squares gives;
+an EKF that takes the reading as its input shares the bias). The estimate
+solves instead the bias-compensated
 equations (the first-order equivalent of the errors-in-variables maximum
 likelihood, Deming's regression for a known noise ratio)::
 
