@@ -55,8 +55,9 @@ regressor ``U_k`` were exact. It is not: it is built from the noisy reading,
 whose noise also drives the motion's process noise, and that correlation
 (errors in variables) biases ``J^-1 r`` towards zero, by a fraction that
 grows with the reading's noise and with the filter's bandwidth (on
-``random-S`` and ``noisy`` it doubled E, to more than least squares gives;
-an EKF that takes the reading as its input shares the bias). The estimate
+some seeds of ``random-S`` and ``noisy`` it doubled E or more, above what
+least squares gives; an EKF that takes the reading as its input shares the
+bias). The estimate
 solves instead the bias-compensated
 equations (the first-order equivalent of the errors-in-variables maximum
 likelihood, Deming's regression for a known noise ratio)::
