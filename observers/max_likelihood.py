@@ -34,9 +34,10 @@ the step, from ``G(theta_k) [w_hat_k; 1]`` and ``G(theta_k+1)
 [w_hat_k+1; 1]``. The process noise of the three channels is joint, ``[h^2,
 h] [h^2, h]^T (x) G S Sigma S^T G^T``: the angular and translational
 accelerations are driven by the same ``n``, and their cross-covariance is
-kept. The one term left out is ``(h^2 / 6) eps_k`` in the measurement, about
-``1e-7`` of the pose noise variance in every scenario (``h^2 |eps| / 6 ~
-3e-8 m`` against ``1e-4 m``).
+kept. The one term the filter's noise model leaves out is ``(h^2 / 6) eps_k``
+in the measurement, about ``1e-7`` of the pose noise variance in the
+scenarios (``h^2 |eps| / 6 ~ 3e-8 m`` against ``1e-4 m``); the
+errors-in-variables moments below do take it.
 
 The filter. ``S`` is constant and enters linearly, with a flat (diffuse)
 prior: the Kalman filter on ``[x, s]`` then splits exactly into a filter on
@@ -53,9 +54,11 @@ filter of :mod:`observers.highgain`, with the Kalman gain)::
 regressor ``U_k`` were exact. It is not: it is built from the noisy reading,
 whose noise also drives the motion's process noise, and that correlation
 (errors in variables) biases ``J^-1 r`` towards zero, by a fraction that
-grows with the reading's noise and with the filter's bandwidth (measured on
-``random-S``, 100 s: about 2 standard deviations, E 7.3e-3 where least
-squares gives 4.4e-3). The estimate solves instead the bias-compensated
+grows with the reading's noise and with the filter's bandwidth (on
+some seeds of ``random-S`` and ``noisy`` it doubled E or more, above what
+least squares gives; an EKF that takes the reading as its input shares the
+bias). The estimate
+solves instead the bias-compensated
 equations (the first-order equivalent of the errors-in-variables maximum
 likelihood, Deming's regression for a known noise ratio)::
 
@@ -106,6 +109,7 @@ _CHUNK = 1000            # samples per compiled call
 _REG_REL = 1e-10         # history only: S_hat_k = S0 + (J + lam I)^-1 (r - J S0), lam relative to trace(J)
 _REG_ABS = 1e-12
 _CORRECTION_LIMIT = 0.1  # history only: the bias correction at most this fraction of |s_hat|
+_HISTORY_RADIUS = 10.0   # history only: |S_hat - S0| <= this times (|S0| + 1), Frobenius norms
 _PAIRS = [(a, b) for a in range(3) for b in range(a + 1)]     # (a, i), i <= a: Gamma and beta, packed
 _N_IN = 12               # per-step input: has_next, theta_k, theta_k+1, pose_k+1 (3), w_k (3), w_k+1 (3)
 
@@ -124,11 +128,13 @@ class MaximumLikelihoodFit:
         held about them: ``(J - B)^-1 J (J - B)^-1`` (module docstring).
     S_history : ndarray, shape (N, 3, n)
         The filtered estimate after each sample (the data up to it), for E
-        against time. Defined from the first sample by a negligible pull
-        towards ``S0`` (relative weight ``1e-10`` of the information), and
-        corrected for the errors in variables to first order, so that its
-        last row differs from ``S_aug`` by the square of that correction
-        (about 1e-6 relative).
+        against time; its last row is ``S_aug``. Defined from the first
+        sample by a negligible pull towards ``S0`` (relative weight ``1e-10``
+        of the information), corrected for the errors in variables to first
+        order (the square of that correction, about 1e-6 relative, left
+        out), and held within ``10 (|S0| + 1)`` of ``S0`` (Frobenius norm of
+        the ``S`` entries) over the first samples, where the information
+        does not yet pin every entry and the estimate is ill-determined.
     x_history : ndarray, shape (N, 6)
         The filtered motion ``[theta, theta', X, X', Y, Y']`` (rad, rad/s, m,
         m/s) after each sample, with the estimate of that sample: filtered,
@@ -217,6 +223,9 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
         Filter passes, at least 1. The first takes the process noise at
         ``S0``, each further one at the previous estimate; two are enough
         (the second changes ``E`` by a few per cent, a third by far less).
+        Only the last pass carries the errors-in-variables moments (the
+        others only set the next pass's noise model), at about twice the
+        cost of each of the others.
     S0 : array_like, shape (3, 3), optional
         Where the first pass evaluates the process noise, and where the
         history starts; default the identity (a sensor's nominal calibration).
@@ -262,15 +271,17 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
     pose_var = np.maximum(noise.pose_sd, POSE_SD_FLOOR) ** 2
     z0 = _initial_state(log.pose[0], pose_var, n)
     S_noise = S0
-    for _ in range(int(passes)):
+    for k in range(int(passes)):
         # the process noise at the current S: G(theta) S Sigma S^T G(theta)^T, eq. (1)
         W = S_noise @ np.diag(np.square(noise.wrench_sd)) @ S_noise.T
         var_w = np.square(noise.wrench_sd)
         p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), var_w, s0])
-        z_end, Y = (_run_compiled if compiled else _run_numpy)(z0, U, p, payload, n)
+        # the bias moments only where the estimate is the result (the last pass)
+        z_end, Y = (_run_compiled if compiled else _run_numpy)(z0, U, p, payload, n, k == passes - 1)
         S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
         S_noise = S_aug[:, :3]
     Y = np.vstack([np.concatenate([z0[:6], s0]), Y])
+    Y[-1, 6:] = S_aug.ravel()                          # the history ends at the estimate
     return MaximumLikelihoodFit(
         S_aug=S_aug, cov_aug=cov_aug, S_history=Y[:, 6:].reshape(-1, 3, n), x_history=Y[:, :6].copy(),
         noise=noise, noise_estimated=noise_estimated, passes=int(passes), payload=payload,
@@ -365,7 +376,7 @@ def _regressor_rows(o, theta, w_hat, payload, n):
     return o.matrix([[G[c, i] * w[j] for i in range(3) for j in range(n)] for c in range(3)])
 
 
-def _step(z, u, p, payload, n):
+def _step(z, u, p, payload, n, eiv=True):
     """One sample of the separate-bias Kalman filter and its bias moments (module docstring).
 
     Parameters
@@ -383,6 +394,10 @@ def _step(z, u, p, payload, n):
     payload : plant.Payload
     n : int
         Columns of ``[S | c]``: 3, or 4 with the offset.
+    eiv : bool
+        Propagate the moments of the errors-in-variables correction (False:
+        they are carried unchanged, and the history is uncorrected; for a
+        pass whose estimate only sets the next pass's noise model).
 
     Returns
     -------
@@ -428,18 +443,20 @@ def _step(z, u, p, payload, n):
     # N e_i = (I - K C) (D (x) G_k e_i) already in M from the last step)
     w_p = [h * h, h]
     w_a = [h * h / 3, h / 2]
+    gam_pred = []
     # (the pose at k carried -(h^2 / 6) eps_k: the last update put K (h^2 / 6) eps_k in the error)
-    PhiKG = o.dot(o.dot(Phi, K_last), G0)
-    src_left = [[w_p[i % 2] * G0[i // 2, a] - h * h / 6 * PhiKG[i, a] for i in range(6)] for a in range(3)]
-    PhiN = o.dot(Phi, Nz)
-    src_right = [[PhiN[i, b] + w_a[i % 2] * G0[i // 2, b] for i in range(6)] for b in range(3)]
     # beta is symmetric (it is E[D_n^T V^-1 D_n] of the batch form, D_n the design's part
     # driven by the noise): the pairs i <= a are enough
-    gam_pred = []
-    for q, (a, b) in enumerate(_PAIRS):
-        Gm = mx.as_matrix(o, gam[36 * q:36 * (q + 1)], 6)
-        source = o.matrix([[src_left[a][i] * src_right[b][j] for j in range(6)] for i in range(6)])
-        gam_pred.append(o.dot(o.dot(Phi, Gm), Phi.T) + source)
+    if eiv:
+        PhiKG = o.dot(o.dot(Phi, K_last), G0)
+        src_left = [[w_p[i % 2] * G0[i // 2, a] - h * h / 6 * PhiKG[i, a] for i in range(6)]
+                    for a in range(3)]
+        PhiN = o.dot(Phi, Nz)
+        src_right = [[PhiN[i, b] + w_a[i % 2] * G0[i // 2, b] for i in range(6)] for b in range(3)]
+        for q, (a, b) in enumerate(_PAIRS):
+            Gm = mx.as_matrix(o, gam[36 * q:36 * (q + 1)], 6)
+            source = o.matrix([[src_left[a][i] * src_right[b][j] for j in range(6)] for i in range(6)])
+            gam_pred.append(o.dot(o.dot(Phi, Gm), Phi.T) + source)
     # correction with the pose (none without one: has = 0)
     pos = [0, 2, 4]
     CP = P_pred[pos, :]                                   # C P-, 3 x 6
@@ -460,6 +477,8 @@ def _step(z, u, p, payload, n):
     # (its -(h^2 / 6) eps_k+1 against H's (h^2 / 6) G_k+1 n_k+1); Gamma <- (I - K C) Gamma (I - K C)^T
     GViG = o.dot(o.dot(G1.T, Vi), G1)
     beta_next, gam_next = [], []
+    if not eiv:
+        beta_next, gam_next = [beta[q] for q in range(len(_PAIRS))], [gam]
     for q, ((a, b), Gm) in enumerate(zip(_PAIRS, gam_pred)):
         CGC = Gm[pos, :][:, pos]
         beta_next.append(beta[q] + has * (sum(Vi[i, j] * CGC[j, i] for i in range(3) for j in range(3))
@@ -468,7 +487,7 @@ def _step(z, u, p, payload, n):
         gam_next.append(mx.flat(o, Gk - o.dot(Gk[:, pos], K.T)))
     d_end = o.matrix([[(h * h / 6 if i % 2 == 0 else h / 2) * G1[i // 2, b] for b in range(3)]
                       for i in range(6)])
-    N_next = d_end - o.dot(K, d_end[pos, :])
+    N_next = d_end - o.dot(K, d_end[pos, :]) if eiv else Nz
     # the estimate so far, for the history (the final one is solved exactly, in numpy): the
     # uncorrected s_u = S0 + (J + lam I)^-1 (r - J S0), then s_u + (J + lam I)^-1 B s_u, the
     # first-order solution of (J - B) s = r, the correction limited to a tenth of |s_u| while
@@ -477,13 +496,20 @@ def _step(z, u, p, payload, n):
     lam = _REG_REL * trace / m + _REG_ABS
     chol = _cholesky(o, J_next + lam * mx.eye(o, m), m)
     s_u = mx.col(s0) + _cholesky_apply(o, chol, r_next - o.dot(J_next, mx.col(s0)), m)
-    corr = _cholesky_apply(o, chol, o.dot(_bias_matrix(o, beta_next, var_w, n), s_u), m)
+    corr = (_cholesky_apply(o, chol, o.dot(_bias_matrix(o, beta_next, var_w, n), s_u), m) if eiv
+            else 0.0 * s_u)
     size_u = o.sqrt(sum(s_u[i, 0] * s_u[i, 0] for i in range(m)))
     size_c = o.sqrt(sum(corr[i, 0] * corr[i, 0] for i in range(m)))
     s_hat = s_u + corr / o.fmax(1.0, size_c / (_CORRECTION_LIMIT * size_u + _REG_ABS))
+    # and held within a radius of S0 while the information cannot place every entry yet
+    s_entries = [n * i + j for i in range(3) for j in range(3)]
+    step_size = o.sqrt(sum((s_hat[k, 0] - s0[k]) ** 2 for k in s_entries))
+    radius = _HISTORY_RADIUS * (o.sqrt(sum(s0[k] * s0[k] for k in s_entries)) + 1.0)
+    s_hat = mx.col(s0) + (s_hat - mx.col(s0)) / o.fmax(1.0, step_size / radius)
     x_hat = x_next + o.dot(M_next, s_hat)
     z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next),
-                     mx.flat(o, N_next), mx.flat(o, K), o.vcat(gam_next), o.vcat(beta_next)])
+                     mx.flat(o, N_next), mx.flat(o, K if eiv else K_last), o.vcat(gam_next),
+                     o.vcat(beta_next)])
     return z_next, o.vcat([mx.vec(x_hat), mx.vec(s_hat)])
 
 
@@ -535,30 +561,31 @@ def _solve_information(z, n, var_w, name):
 
 # --- the two paths ----------------------------------------------------------------------------
 
-def _run_numpy(z0, U, p, payload, n):
+def _run_numpy(z0, U, p, payload, n, eiv):
     """The step in numpy, sample by sample (the readable path)."""
     Y = np.empty((len(U), 6 + 3 * n))
     z = z0
     for k in range(len(U)):
-        z, Y[k] = _step(z, U[k], p, payload, n)
+        z, Y[k] = _step(z, U[k], p, payload, n, eiv)
     return z, Y
 
 
 @lru_cache(maxsize=8)
-def _chunk_function(payload, n):
+def _chunk_function(payload, n, eiv):
     """:func:`_step` accumulated over :data:`_CHUNK` samples and compiled to C once per payload."""
     size = _layout(n)["size"]
     z = ca.SX.sym("z", size)
     u = ca.SX.sym("u", _N_IN)
     p = ca.SX.sym("p", 15 + 3 * n)
-    z_next, out = _step(z, u, p, payload, n)
-    step = ca.Function(f"max_likelihood{n}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
-    return compile_function(step.mapaccum(f"max_likelihood{n}_chunk", _CHUNK))
+    z_next, out = _step(z, u, p, payload, n, eiv)
+    name = f"max_likelihood{n}{'' if eiv else '_plain'}"
+    step = ca.Function(f"{name}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
+    return compile_function(step.mapaccum(f"{name}_chunk", _CHUNK))
 
 
-def _run_compiled(z0, U, p, payload, n):
+def _run_compiled(z0, U, p, payload, n, eiv):
     """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`."""
-    call = BufferedCall(_chunk_function(payload, n))
+    call = BufferedCall(_chunk_function(payload, n, eiv))
     z_in, U_in, p_in = call.inputs
     size, n_out = len(z0), 6 + 3 * n
     Z_out = call.outputs[0].reshape(_CHUNK, size)          # column-major (size, CHUNK)
