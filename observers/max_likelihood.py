@@ -89,7 +89,7 @@ import numpy as np
 
 from plant import Log, NoiseSpec, Payload, input_matrix
 from plant._backend import ops
-from plant._compile import BufferedCall, compile_function
+from plant._compile import ChunkedSteps
 from plant.errors import FmscalError
 from plant.noise import estimate_noise
 from plant.sensor import check_calibration
@@ -571,8 +571,8 @@ def _run_numpy(z0, U, p, payload, n, eiv):
 
 
 @lru_cache(maxsize=8)
-def _chunk_function(payload, n, eiv):
-    """:func:`_step` accumulated over :data:`_CHUNK` samples and compiled to C once per payload."""
+def _chunked_steps(payload, n, eiv):
+    """:func:`_step` run in compiled chunks of :data:`_CHUNK` samples (:class:`plant._compile.ChunkedSteps`)."""
     size = _layout(n)["size"]
     z = ca.SX.sym("z", size)
     u = ca.SX.sym("u", _N_IN)
@@ -580,25 +580,11 @@ def _chunk_function(payload, n, eiv):
     z_next, out = _step(z, u, p, payload, n, eiv)
     name = f"max_likelihood{n}{'' if eiv else '_plain'}"
     step = ca.Function(f"{name}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
-    return compile_function(step.mapaccum(f"{name}_chunk", _CHUNK))
+    return ChunkedSteps(step, _CHUNK)
 
 
 def _run_compiled(z0, U, p, payload, n, eiv):
     """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`."""
-    call = BufferedCall(_chunk_function(payload, n, eiv))
-    z_in, U_in, p_in = call.inputs
-    size, n_out = len(z0), 6 + 3 * n
-    Z_out = call.outputs[0].reshape(_CHUNK, size)          # column-major (size, CHUNK)
-    Y_out = call.outputs[1].reshape(_CHUNK, n_out)
-    U_in = U_in.reshape(_CHUNK, _N_IN)
-    p_in.reshape(_CHUNK, -1)[:] = p                        # mapped: one copy per sample
-    Y = np.empty((len(U), n_out))
-    z_in[:] = z0
-    for k0 in range(0, len(U), _CHUNK):
-        k1 = min(k0 + _CHUNK, len(U))
-        U_in[:k1 - k0] = U[k0:k1]
-        U_in[k1 - k0:] = U[k1 - 1]                         # padding past the end, discarded
-        call()
-        Y[k0:k1] = Y_out[:k1 - k0]
-        z_in[:] = Z_out[k1 - k0 - 1]
-    return z_in.copy(), Y
+    z_end, (Y,) = _chunked_steps(payload, n, eiv).run(z0, [U, np.broadcast_to(p, (len(U), len(p)))],
+                                                       outputs=True, states=False)
+    return z_end, Y

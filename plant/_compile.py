@@ -145,14 +145,15 @@ class ChunkedSteps:
 
     ``f`` is accumulated over ``chunk`` steps (casadi ``mapaccum``), compiled
     once (:func:`compile_function`) and called through buffers
-    (:class:`BufferedCall`). The simulator and every recursive observer run
-    through this one loop.
+    (:class:`BufferedCall`). The simulator, every recursive observer and the
+    maximum-likelihood filter run through this one loop.
 
     Parameters
     ----------
     step : casadi.Function
-        ``z_next = step(z, a, b, ...)``: first input and only output the
-        state (dense column), the others the per-step inputs.
+        ``z_next, *y = step(z, a, b, ...)``: first input and first output
+        the state (dense column), the other inputs those of each step, the
+        other outputs (optional) per-step values that are not carried on.
     chunk : int
         Steps per compiled call.
     """
@@ -161,9 +162,10 @@ class ChunkedSteps:
         self.chunk = int(chunk)
         self.nz = step.nnz_in(0)
         self.sizes = [step.nnz_in(i) for i in range(1, step.n_in())]
+        self.out_sizes = [step.nnz_out(i) for i in range(1, step.n_out())]
         self.fun = compile_function(step.mapaccum(f"{step.name()}_chunk", self.chunk))
 
-    def run(self, z0, inputs, healthy=None):
+    def run(self, z0, inputs, healthy=None, outputs=False, states=True):
         """Run the recursion from ``z0`` over the rows of ``inputs``.
 
         Parameters
@@ -175,28 +177,48 @@ class ChunkedSteps:
             ``healthy(Z_chunk) -> int``: the number of leading rows of a
             finished chunk to keep; the run stops after a chunk that keeps
             fewer than it computed.
+        outputs : bool
+            Also return the step's other outputs.
+        states : bool
+            Keep every state (default); False keeps only the last, for a large
+            state whose history is not wanted (``healthy`` is then not called).
 
         Returns
         -------
-        ndarray, shape (M, nz)
-            The states after each step (``M = N``, fewer if ``healthy`` stopped it).
+        Z : ndarray, shape (M, nz), or shape (nz,) with ``states=False``
+            The states after each step (``M = N``, fewer if ``healthy`` stopped
+            it), or the last one.
+        Y : list of ndarray, each shape (M, size), only with ``outputs=True``
+            The step's other outputs, row ``k`` from step ``k``.
         """
         n = len(inputs[0]) if inputs else 0
         call = BufferedCall(self.fun)              # buffers of this run: safe across threads
         z_in, *u_in = call.inputs
         u_in = [buf.reshape(self.chunk, size) for buf, size in zip(u_in, self.sizes)]    # column-major
-        Z_out = call.outputs[0].reshape(self.chunk, self.nz)
-        Z = np.empty((n, self.nz))
+        Z_out, *Y_out = [buf.reshape(self.chunk, size) for buf, size in zip(call.outputs, [self.nz, *self.out_sizes])]
+        Z = np.empty((n if states else 1, self.nz))
+        Y = [np.empty((n, size)) for size in self.out_sizes]
         z_in[:] = z0
+        m = n
         for k0 in range(0, n, self.chunk):
             k1 = min(k0 + self.chunk, n)
             for buf, values in zip(u_in, inputs):
                 buf[:k1 - k0] = values[k0:k1]
                 buf[k1 - k0:] = values[k1 - 1]            # padding past the end, discarded
             call()
+            for y, y_out in zip(Y, Y_out):
+                y[k0:k1] = y_out[:k1 - k0]
+            if not states:
+                z_in[:] = Z_out[k1 - k0 - 1]
+                continue
             Z[k0:k1] = Z_out[:k1 - k0]
             keep = k1 - k0 if healthy is None else healthy(Z[k0:k1])
             if keep < k1 - k0:
-                return Z[:k0 + keep]
+                m = k0 + keep
+                break
             z_in[:] = Z_out[k1 - k0 - 1]
-        return Z
+        if not states:
+            Z = z_in.copy() if n else np.array(z0, dtype=float)
+        else:
+            Z = Z[:m]
+        return (Z, [y[:m] for y in Y]) if outputs else Z
