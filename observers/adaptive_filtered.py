@@ -1,0 +1,338 @@
+"""An adaptive observer at the information floor: eqs. (6)-(8) with filtered regressors and a least-squares gain.
+
+The observer keeps the paper's structure: ``x_hat`` follows eqs. (6), (7),
+propagated with ``G(theta) S_hat w_hat`` and corrected by an output injection
+``K C e``; the adaptation acts on ``phi_1``, ``phi_2`` of eqs. (4), (5) with the
+regressor of eq. (8), ``G(theta)^T . w_hat^T`` (the rows of ``B_1``, ``B_2``,
+:func:`observers.highgain.regressors`). What changes is how the error and the
+gain are formed (class docstring, numbered).
+
+Why it reaches the floor. With both poles of each channel's observer at
+``-lam``, the output error is the regressor passed through one stable
+second-order filter, ``e = psi_f . phi_tilde + noise`` with
+``psi_f = 1/(s + lam)^2 psi`` (Kreisselmeier's sensitivity filter
+``Upsilon`` keeps this exact while ``phi_hat`` moves). Equivalently
+``s^2/(s + lam)^2 y = psi_f . phi + noise``: the double integrator's signals
+through one filter, no differentiated poses. A recursive least-squares fit
+of that linear regression, without forgetting while ``S`` is constant,
+averages the whole log as an offline fit would; the noise in the regressor
+(the raw reading's) is filtered to a negligible bias.
+
+Discrete form (as :mod:`observers.highgain`): the exact double-integrator
+step with the regressor linear over the step; per pose, with ``h`` the time
+since the previous pose,
+
+    x^-           = Phi x_n + G_n phi_n          Upsilon^- = Phi Upsilon_n + G_n
+    e             = y_{n+1} - C x^-               H = C Upsilon^-
+    phi_{n+1}     = phi_n + P_{n+1} H^T e         (recursive least squares)
+    Upsilon_{n+1} = (I - L_h C) Upsilon^-
+    x_{n+1}       = x^- + L_h e + Upsilon_{n+1} (phi_{n+1} - phi_n)
+
+with ``L_h`` placing the eigenvalues of ``(I - L_h C) Phi(h)`` at
+``exp(-lam h)``.
+"""
+
+import numpy as np
+
+from plant import S_from_phi, phi_1
+from plant._backend import ops
+from plant._checks import as_positive_scalar
+from plant.errors import FmscalError
+
+from . import _matrix as mx
+from .base import Observer
+from .highgain import discrete_gain, regressors
+
+__all__ = ["FilteredAdaptiveObserver", "DEFAULT_LAM", "GAINS"]
+
+#: Default pole of each channel's observer (double), rad/s: the filter ``1/(s + lam)^2``.
+DEFAULT_LAM = 5.0
+#: Adaptation gains :class:`FilteredAdaptiveObserver` offers.
+GAINS = ("least-squares", "gradient")
+_PRIOR = 1e-3          # weight of the start S0, in samples' worth of information
+_FLOOR = 1e-300
+_T_STEP = 0.05         # s, time constant of the forgetting while the step test fires
+
+
+def _layout(n):
+    """Slices of the packed state for ``n`` columns of ``[S | c]``.
+
+    x_hat(6) [S_hat | c_hat](3n) pose_n(3) has_n(1) w_n(3) since(1) scale(2)
+    Ups_theta(2 x n) Ups_X(2 x 2n) Ups_Y(2 x 2n) P_1(n x n) P_2(2n x 2n)
+    test_1(4n + 2) test_2(8n + 2)
+
+    ``since``: time from the last pose to sample n; ``scale``: each channel's
+    prior information; ``test_i``: the averages of the change test of each
+    parameter set (:meth:`FilteredAdaptiveObserver._change_test`).
+    """
+    sizes = [("x", 6), ("S", 3 * n), ("pose", 3), ("has", 1), ("w", 3), ("since", 1), ("scale", 2),
+             ("ups_t", 2 * n), ("ups_x", 4 * n), ("ups_y", 4 * n), ("P1", n * n), ("P2", 4 * n * n),
+             ("test1", 4 * n + 2), ("test2", 8 * n + 2)]
+    out, k = {}, 0
+    for name, size in sizes:
+        out[name] = slice(k, k + size)
+        k += size
+    out["size"] = k
+    return out
+
+
+class FilteredAdaptiveObserver(Observer):
+    """Adaptive observer of eqs. (6)-(8) with filtered regressors and a least-squares gain.
+
+    Module docstring for the equations. The changes from the paper's
+    observer (:meth:`observers.AdaptiveObserver.paper`), each switched by a
+    setting so that :func:`analysis.ablation.ablation` measures them one by
+    one:
+
+    1. **Discrete observer, poles at -lam** (eqs. 6, 7, 14): the exact
+       double-integrator step with the wrench linear over the step, and the
+       injection gain ``L_h`` placing each channel's sampled poles at
+       ``exp(-lam h)`` (both at ``-lam``), in place of forward Euler and the
+       printed ``K_1``, ``K_2``.
+    2. **Filtered regressor, position error** (eqs. 8, 15): the law is driven
+       by the position error ``e`` and the regressor of eq. (8) passed through
+       the observer's own error filter (Kreisselmeier's sensitivity filter
+       ``Upsilon``, ``H = C Upsilon``), in place of velocity errors from
+       differenced poses (eq. 15) and the raw regressor. The correction
+       ``Upsilon dphi`` keeps ``e = H phi_tilde`` exact while ``phi_hat``
+       moves. Without the least-squares gain (``gain="gradient"``) the step
+       is the normalised gradient ``dphi = gamma h H^T e / |H|^2``
+       (eq. 8's ``delta`` made scale-free).
+    3. **Least-squares gain** (eq. 8's ``delta``): ``delta`` becomes the
+       recursive least-squares covariance ``P`` of each parameter set
+       (``phi_1``; ``phi_2``, X and Y taken in turn), so the estimate is the
+       least-squares fit of all poses so far (``gain="least-squares"``).
+       ``P`` starts from a prior worth a thousandth of a sample; no noise
+       model is needed (the innovations are weighted alike).
+    4. **Forgetting on evidence of change** (``track=True``): a
+       windowed score test per parameter set (the mean of ``H^T e`` over
+       ``window`` s, each entry normalised by its information and the
+       innovation power) stays near its null level while ``S`` is constant;
+       while it exceeds ``threshold`` times that level, ``P`` grows at a rate
+       up to ``1/t_forget`` (capped at its prior): the fit forgets until the
+       innovations are consistent again. This tracks the steps of Table 1
+       and a drifting ``S``, and on a constant ``S`` stays off.
+    5. **Multi-rate poses**: where no pose arrives the observer and the
+       filter only predict and nothing adapts; at a pose the gain ``L_h``
+       and the test's window use ``h``, the time since the previous pose.
+
+    With ``offset=True`` each parameter set gains the offset column (the
+    reading augmented by 1, :class:`observers.Observer`).
+
+    Parameters
+    ----------
+    payload : plant.Payload
+    lam : float
+        Pole of each channel (double), rad/s: the bandwidth of the filter
+        ``1/(s + lam)^2`` on the regressor (change 1, 2).
+    gain : {"least-squares", "gradient"}
+        Change 3 on or off.
+    gamma : float
+        Rate of the normalised gradient, 1/s (``gain="gradient"`` only).
+    track : bool
+        Change 4: forget on evidence of a change in ``S``.
+    window : float
+        Time constant of the change test's averages, s.
+    threshold : float
+        The test fires above this multiple of its null level.
+    t_forget : float
+        Shortest time constant of the forgetting, s.
+    offset : bool
+        Also estimate the sensor's offset ``b`` (``result.b``).
+    name : str
+        Name in tables.
+
+    Examples
+    --------
+    >>> from plant import PAPER_PAYLOAD, get_scenario
+    >>> log, truth, _ = get_scenario("paper").with_(duration=2.0).generate(0)
+    >>> FilteredAdaptiveObserver(PAPER_PAYLOAD).run(log, truth.S0).S_hat.shape
+    (3, 3)
+    """
+
+    def __init__(self, payload, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
+                 threshold=5.0, step_ratio=5.0, t_forget=0.5, memory=0.2, offset=False, name="adaptive-filtered"):
+        self.lam = as_positive_scalar(lam, "lam")
+        if gain not in GAINS:
+            raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")
+        self.gain = gain
+        self.gamma = as_positive_scalar(gamma, "gamma")
+        self.track = bool(track)
+        self.window = as_positive_scalar(window, "window")
+        self.threshold = as_positive_scalar(threshold, "threshold")
+        self.step_ratio = as_positive_scalar(step_ratio, "step_ratio")
+        self.t_forget = as_positive_scalar(t_forget, "t_forget")
+        self.memory = as_positive_scalar(memory, "memory")
+        self.name = str(name)
+        super().__init__(payload, offset=offset)
+        self._L = _layout(self.n_cols)
+
+    def _initial_state(self, S0, pose, w_hat):
+        L, n = self._L, self.n_cols
+        z = np.zeros(L["size"])
+        z[L["x"]] = [pose[0], 0.0, pose[1], 0.0, pose[2], 0.0]
+        z[L["S"]], z[L["pose"]], z[L["has"]], z[L["w"]] = self._initial_S(S0), pose, 1.0, w_hat
+        # the size H = C Upsilon will have, |psi| / lam^2 (the filter's DC gain), sets the prior
+        w = self._augmented(ops(w_hat), w_hat)
+        psi_t, psi_x, psi_y = (np.array(v) for v in regressors(pose[0], w, self.payload))
+        info = [max(psi_t @ psi_t / n, 1e-12) / self.lam ** 4,
+                max((psi_x @ psi_x + psi_y @ psi_y) / (2 * n), 1e-12) / self.lam ** 4]
+        z[L["scale"]] = info
+        z[L["P1"]] = (np.eye(n) / (_PRIOR * info[0])).ravel()
+        z[L["P2"]] = (np.eye(2 * n) / (_PRIOR * info[1])).ravel()
+        z[L["test1"].start + 3 * n:L["test1"].start + 4 * n] = info[0]
+        z[L["test2"].start + 6 * n:L["test2"].start + 8 * n] = info[1]
+        return z
+
+    # --- the adaptation -------------------------------------------------------
+    def _rls(self, o, P, phi, rows, errors, k):
+        """Recursive least squares, measurements in turn (change 3).
+
+        Returns ``(d_phi, P_next)``; ``rows`` the regressors ``H`` (lists of
+        ``k``), ``errors`` the a priori errors.
+        """
+        d_phi = [0.0] * k
+        for h, e in zip(rows, errors):
+            Ph = [sum(P[i][j] * h[j] for j in range(k)) for i in range(k)]
+            denom = 1.0 + sum(h[i] * Ph[i] for i in range(k))
+            innov = e - sum(h[i] * d_phi[i] for i in range(k))        # after the previous rows
+            K = [Ph[i] / denom for i in range(k)]
+            d_phi = [d_phi[i] + K[i] * innov for i in range(k)]
+            P = [[P[i][j] - Ph[i] * Ph[j] / denom for j in range(k)] for i in range(k)]
+        return d_phi, P
+
+    def _gradient(self, o, rows, errors, k, step, scale):
+        """Normalised gradient ``gamma h H^T e / |H|^2`` (change 2 without 3)."""
+        num = [sum(h[i] * e for h, e in zip(rows, errors)) for i in range(k)]
+        norm = sum(h[i] * h[i] for h in rows for i in range(k)) + 1e-6 * scale
+        return [self.gamma * step * v / norm for v in num]
+
+    def _change_test(self, o, rows, errors, state, h, k):
+        """The change test of one parameter set (change 4): its averages and how far it fires.
+
+        Two statistics, both free of the noise's level and colour:
+
+        * drift: ``g``, the mean of ``H^T e`` per pose over ``window`` s (the
+          score), is zero-mean while ``S_hat`` fits; its mean ``m`` and
+          spread ``v`` over ``10 window`` s give a t-statistic per entry,
+          ``m_j^2 / v_j`` times the number of windows averaged, about 1
+          while ``S`` is constant and growing with a persistent lag;
+        * step: the innovation power over ``window / 4`` s against its
+          mean over ``10 window`` s.
+
+        Parameters
+        ----------
+        rows, errors : lists
+            Regressor rows ``H`` (zero without a pose) and a priori errors.
+        state : vector, shape (4 k + 2,)
+            ``[g, m, v, d, power_fast, power_slow]``; ``d`` the mean of
+            ``diag(H^T H)`` per pose over ``window``.
+        h : float or casadi.SX
+            Time since the previous pose, 0 without a pose.
+
+        Returns
+        -------
+        state : list of 4 k + 2
+        rate : float or casadi.SX
+            Forgetting rate, 1/s: up to ``1/t_forget`` as the drift
+            statistic fires, plus up to ``1/0.05 s`` as the step statistic does.
+        """
+        n_rows = len(rows)
+        g, m, v, d = ([state[i * k + j] for j in range(k)] for i in range(4))
+        fast, slow = state[4 * k], state[4 * k + 1]
+        a_w, a_long, a_fast = (1 - o.exp(-h / tau) for tau in (self.window, 10 * self.window, self.window / 4))
+        score = [sum(r[j] * e for r, e in zip(rows, errors)) / n_rows for j in range(k)]
+        diag = [sum(r[j] * r[j] for r in rows) / n_rows for j in range(k)]
+        power = sum(e * e for e in errors) / n_rows
+        g = [g[j] + a_w * (score[j] - g[j]) for j in range(k)]
+        m = [m[j] + a_long * (g[j] - m[j]) for j in range(k)]
+        v = [v[j] + a_long * ((g[j] - m[j]) ** 2 - v[j]) for j in range(k)]
+        d = [d[j] + a_w * (diag[j] - d[j]) for j in range(k)]
+        fast = fast + a_fast * (power - fast)
+        slow = slow + a_long * (power - slow)
+        t2 = sum(m[j] * m[j] / (v[j] + _FLOOR) for j in range(k)) * 10 / k
+        drift = o.fmin(o.fmax(t2 / self.threshold - 1, 0), 1)
+        step = o.fmin(o.fmax(fast / (self.step_ratio * slow + _FLOOR) - 1, 0), 1)
+        return g + m + v + d + [fast, slow], drift / self.t_forget + step / _T_STEP
+
+    def _forget(self, o, P, k, d, rate, h):
+        """``P`` grown while the change test fires (change 4), at most to one window's covariance.
+
+        ``d`` the mean information per pose of each entry, ``h`` the time
+        since the previous pose (0 without a pose).
+        """
+        trace = sum(P[i][i] for i in range(k))
+        # the covariance of a fit of one window's poses (window / h poses of information d)
+        cap = sum(1.0 / (d[i] * self.memory + _FLOOR) for i in range(k)) * h
+        factor = o.fmin(o.exp(h * rate), o.fmax(cap / (trace + _FLOOR), 1.0))
+        return [[factor * P[i][j] for j in range(k)] for i in range(k)]
+
+    def _transition(self, z, u, dt):
+        o = ops(z, u)
+        p, L, n = self.payload, self._L, self.n_cols
+        x, S, pose, has = z[L["x"]], z[L["S"]], z[L["pose"]], z[L["has"].start]
+        since, scale = z[L["since"].start], z[L["scale"]]
+        w = self._augmented(o, z[L["w"]])
+        has_next, pose_next, w_next = u[0], u[1:4], self._augmented(o, u[4:7])
+        ups = [mx.as_matrix(o, z[L["ups_t"]], 2, n), mx.as_matrix(o, z[L["ups_x"]], 2, 2 * n),
+               mx.as_matrix(o, z[L["ups_y"]], 2, 2 * n)]
+        phi1 = phi_1(S, p)                      # eq. (4)
+        phi2 = S[n:3 * n]                       # eq. (5): rows 2, 3 of [S | c]
+        phis = [phi1, phi2, phi2]
+        # 1. regressors of eq. (8) at both ends of the step (rows of B_1, B_2), linear over it;
+        #    the angle at n is the measured one where there is one
+        theta = has * pose[0] + (1 - has) * x[0]
+        psi0 = regressors(theta, w, p)
+        psi1 = regressors(x[0] + dt * x[1], w_next, p)
+        x_pred, ups_pred, H = [], [], []
+        for c in range(3):
+            k = len(psi0[c])
+            g_p = [dt * dt * (2 * psi0[c][j] + psi1[c][j]) / 6 for j in range(k)]
+            g_v = [dt * (psi0[c][j] + psi1[c][j]) / 2 for j in range(k)]
+            pos, vel = x[2 * c], x[2 * c + 1]
+            # eqs. (6), (7): x_hat propagated with G(theta) S_hat w_hat (= B phi_hat)
+            x_pred.append([pos + dt * vel + sum(g_p[j] * phis[c][j] for j in range(k)),
+                           vel + sum(g_v[j] * phis[c][j] for j in range(k))])
+            ups_pred.append([[ups[c][0, j] + dt * ups[c][1, j] + g_p[j] for j in range(k)],
+                             [ups[c][1, j] + g_v[j] for j in range(k)]])
+            H.append(ups_pred[c][0])              # 2. the filtered regressor C Upsilon^-
+        # a priori position errors at n+1 (true minus estimate), zero without a pose
+        e = [has_next * (pose_next[c] - x_pred[c][0]) for c in range(3)]
+        h = since + dt                            # 5. time since the previous pose
+        P1 = [[z[L["P1"].start + n * i + j] for j in range(n)] for i in range(n)]
+        P2 = [[z[L["P2"].start + 2 * n * i + j] for j in range(2 * n)] for i in range(2 * n)]
+        H1 = [[has_next * v for v in H[0]]]
+        H2 = [[has_next * v for v in H[1]], [has_next * v for v in H[2]]]
+        if self.gain == "least-squares":          # 3. recursive least squares
+            d_phi1, P1 = self._rls(o, P1, phi1, H1, e[0:1], n)
+            d_phi2, P2 = self._rls(o, P2, phi2, H2, e[1:3], 2 * n)
+        else:
+            d_phi1 = self._gradient(o, H1, e[0:1], n, has_next * h, scale[0])
+            d_phi2 = self._gradient(o, H2, e[1:3], 2 * n, has_next * h, scale[1])
+        # 4. the change test (its averages are kept either way), and forgetting while it fires
+        tests = [self._change_test(o, H1, e[0:1], z[L["test1"]], has_next * h, n),
+                 self._change_test(o, H2, e[1:3], z[L["test2"]], has_next * h, 2 * n)]
+        if self.track:
+            P1 = self._forget(o, P1, n, tests[0][0][3 * n:4 * n], tests[0][1], has_next * h)
+            P2 = self._forget(o, P2, 2 * n, tests[1][0][6 * n:8 * n], tests[1][1], has_next * h)
+        test_state = [o.vcat(tests[0][0]), o.vcat(tests[1][0])]
+        d_phis = [d_phi1, d_phi2, d_phi2]
+        # 1. correction: Upsilon_n+1 = (I - L_h C) Upsilon^-, x_n+1 = x^- + L_h e + Upsilon_n+1 d_phi
+        l1, l2 = discrete_gain(o, self.lam, h)
+        l1, l2 = has_next * l1, has_next * l2
+        x_next, ups_next = [], []
+        for c in range(3):
+            k = len(psi0[c])
+            up = ups_pred[c]
+            new = [[(1 - l1) * up[0][j] for j in range(k)], [up[1][j] - l2 * up[0][j] for j in range(k)]]
+            shift = [sum(new[i][j] * d_phis[c][j] for j in range(k)) for i in range(2)]
+            x_next += [x_pred[c][0] + l1 * e[c] + shift[0], x_pred[c][1] + l2 * e[c] + shift[1]]
+            ups_next += new[0] + new[1]
+        S_next = mx.flat(o, S_from_phi(phi1 + o.vcat(d_phi1), phi2 + o.vcat(d_phi2), p))
+        since_next = (1 - has_next) * h
+        return o.vcat([o.vcat(x_next), S_next, pose_next, has_next, u[4:7], since_next, scale,
+                       o.vcat(ups_next), o.vcat([v for r in P1 for v in r]), o.vcat([v for r in P2 for v in r]),
+                       *test_state])
+
+    def _S_std(self, z):
+        return None
