@@ -13,6 +13,11 @@ the log with its poses moved back by it.
 Usage::
 
     PYTHONPATH=. python benchmarks/adaptive_vs_floor.py [--seeds 5] [--duration 100] [scenario ...]
+    PYTHONPATH=. python benchmarks/adaptive_vs_floor.py --tracking [--seeds 5]
+
+``--tracking``: for each seed, the time after each step of Table 1
+(``time-varying``, 300 s) from which E stays below 0.02 until the next step,
+and the ``drift`` scenario's E for the old and the new adaptive observer.
 """
 
 import argparse
@@ -64,12 +69,46 @@ def run(scenarios=SCENARIOS, seeds=5, duration=100.0):
     return pd.DataFrame(rows)
 
 
+def recovery_time(t, E, t_step, t_end, threshold=0.02):
+    """Seconds after ``t_step`` from which E stays below ``threshold`` until ``t_end`` (inf if never)."""
+    seg = (t >= t_step) & (t < t_end)
+    above = np.flatnonzero(E[seg] >= threshold)
+    if len(above) == 0:
+        return 0.0
+    if above[-1] == seg.sum() - 1:
+        return float("inf")
+    return float(t[seg][above[-1] + 1] - t_step)
+
+
+def tracking(seeds=5):
+    """Table 1 steps (``time-varying``, 300 s) and the ``drift`` scenario, old and new adaptive."""
+    rows = []
+    for seed in range(seeds):
+        sc, log, truth, _ = simulate_case("time-varying", seed)
+        result = FilteredAdaptiveObserver(sc.payload).run(log, truth.S0)
+        E = error_history(result.S_hat_history, truth.S_at(result.t))
+        row = {"seed": seed, "recovery after 100 s step [s]": recovery_time(result.t, E, 100.0, 200.0),
+               "recovery after 200 s step [s]": recovery_time(result.t, E, 200.0, 300.0 + 1e-9)}
+        sc, log, truth, _ = simulate_case("drift", seed, duration=100)
+        row["drift E, old adaptive"] = tail_median(AdaptiveObserver(sc.payload).run(log, truth.S0), truth)
+        row["drift E, new adaptive"] = tail_median(FilteredAdaptiveObserver(sc.payload).run(log, truth.S0), truth)
+        rows.append(row)
+        print(pd.DataFrame([row]).to_string(index=False, float_format="%.3g"), flush=True)
+    table = pd.DataFrame(rows)
+    print("medians:", table.drop(columns="seed").median().to_dict())
+    return table
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenarios", nargs="*", default=list(SCENARIOS))
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--duration", type=float, default=100.0)
+    ap.add_argument("--tracking", action="store_true", help="the Table 1 steps and the drift scenario instead")
     args = ap.parse_args()
+    if args.tracking:
+        tracking(args.seeds)
+        return
     table = run(args.scenarios, args.seeds, args.duration)
     print()
     print(table.to_markdown(index=False, floatfmt=".3g") if hasattr(table, "to_markdown") else table)

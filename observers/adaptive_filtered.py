@@ -58,15 +58,19 @@ def _layout(n):
     """Slices of the packed state for ``n`` columns of ``[S | c]``.
 
     x_hat(6) [S_hat | c_hat](3n) pose_n(3) has_n(1) w_n(3) since(1) scale(2)
-    Ups_theta(2 x n) Ups_X(2 x 2n) Ups_Y(2 x 2n) P_1(n x n) P_2(2n x 2n)
+    Ups_theta(2 x n) Ups_c(2 x n) Ups_s(2 x n) P_1(n x n) P_re(n x n) P_im(n x n)
     test_1(4n + 2) test_2(8n + 2)
 
-    ``since``: time from the last pose to sample n; ``scale``: each channel's
-    prior information; ``test_i``: the averages of the change test of each
-    parameter set (:meth:`FilteredAdaptiveObserver._change_test`).
+    ``since``: time from the last pose to sample n; ``scale``: each parameter
+    set's prior information; ``Ups_c``, ``Ups_s``: the filtered
+    ``cos(theta) w_hat / m`` and ``sin(theta) w_hat / m``, from which both
+    translational regressors are made; ``P_re + i P_im``: the translational
+    covariance in complex form (class docstring, change 3); ``test_i``: the
+    averages of each parameter set's change test
+    (:meth:`FilteredAdaptiveObserver._change_test`).
     """
     sizes = [("x", 6), ("S", 3 * n), ("pose", 3), ("has", 1), ("w", 3), ("since", 1), ("scale", 2),
-             ("ups_t", 2 * n), ("ups_x", 4 * n), ("ups_y", 4 * n), ("P1", n * n), ("P2", 4 * n * n),
+             ("ups_t", 2 * n), ("ups_c", 2 * n), ("ups_s", 2 * n), ("P1", n * n), ("Pre", n * n), ("Pim", n * n),
              ("test1", 4 * n + 2), ("test2", 8 * n + 2)]
     out, k = {}, 0
     for name, size in sizes:
@@ -179,56 +183,77 @@ class FilteredAdaptiveObserver(Observer):
                 max((psi_x @ psi_x + psi_y @ psi_y) / (2 * n), 1e-12) / self.lam ** 4]
         z[L["scale"]] = info
         z[L["P1"]] = (np.eye(n) / (_PRIOR * info[0])).ravel()
-        z[L["P2"]] = (np.eye(2 * n) / (_PRIOR * info[1])).ravel()
+        z[L["Pre"]] = (np.eye(n) / (_PRIOR * info[1])).ravel()
         z[L["test1"].start + 3 * n:L["test1"].start + 4 * n] = info[0]
         z[L["test2"].start + 6 * n:L["test2"].start + 8 * n] = info[1]
         return z
 
     # --- the adaptation -------------------------------------------------------
-    def _rls(self, o, P, phi, rows, errors, k):
-        """Recursive least squares, measurements in turn (change 3).
+    @staticmethod
+    def _rls(P, h, e, k):
+        """Recursive least squares, one measurement ``e = h . phi_tilde`` (change 3).
 
-        Returns ``(d_phi, P_next)``; ``rows`` the regressors ``H`` (lists of
-        ``k``), ``errors`` the a priori errors.
+        Returns ``(d_phi, P_next)``; ``P`` a list of ``k`` rows.
         """
-        d_phi = [0.0] * k
-        for h, e in zip(rows, errors):
-            Ph = [sum(P[i][j] * h[j] for j in range(k)) for i in range(k)]
-            denom = 1.0 + sum(h[i] * Ph[i] for i in range(k))
-            innov = e - sum(h[i] * d_phi[i] for i in range(k))        # after the previous rows
-            K = [Ph[i] / denom for i in range(k)]
-            d_phi = [d_phi[i] + K[i] * innov for i in range(k)]
-            P = [[P[i][j] - Ph[i] * Ph[j] / denom for j in range(k)] for i in range(k)]
-        return d_phi, P
+        Ph = [sum(P[i][j] * h[j] for j in range(k)) for i in range(k)]
+        denom = 1.0 + sum(h[i] * Ph[i] for i in range(k))
+        d_phi = [Ph[i] * e / denom for i in range(k)]
+        return d_phi, [[P[i][j] - Ph[i] * Ph[j] / denom for j in range(k)] for i in range(k)]
 
-    def _gradient(self, o, rows, errors, k, step, scale):
+    @staticmethod
+    def _complex_rls(A, B, hc, hs, e_x, e_y, k):
+        """Recursive least squares of ``phi_2`` from the X and Y errors together, in complex form.
+
+        ``X + iY = zeta . (s_2 + i s_3)`` with ``zeta = hc + i hs`` (the
+        filtered ``exp(i theta) w_hat / m``); ``P = A + iB`` Hermitian, ``A``
+        symmetric and ``B`` antisymmetric (lists of ``k`` rows). With
+        ``h = conj(zeta)``: ``g = P h / (1 + h^H P h)``, ``phi += g e``,
+        ``P -= g (P h)^H``, the same as the real update on both rows.
+
+        Returns
+        -------
+        d_s2, d_s3 : lists of k
+        A_next, B_next : lists of k rows
+        """
+        hr, hi = hc, [-v for v in hs]
+        pr = [sum(A[i][j] * hr[j] - B[i][j] * hi[j] for j in range(k)) for i in range(k)]
+        pi = [sum(A[i][j] * hi[j] + B[i][j] * hr[j] for j in range(k)) for i in range(k)]
+        denom = 1.0 + sum(hr[i] * pr[i] + hi[i] * pi[i] for i in range(k))
+        d_s2 = [(pr[i] * e_x - pi[i] * e_y) / denom for i in range(k)]
+        d_s3 = [(pr[i] * e_y + pi[i] * e_x) / denom for i in range(k)]
+        A = [[A[i][j] - (pr[i] * pr[j] + pi[i] * pi[j]) / denom for j in range(k)] for i in range(k)]
+        B = [[B[i][j] - (pi[i] * pr[j] - pr[i] * pi[j]) / denom for j in range(k)] for i in range(k)]
+        return d_s2, d_s3, A, B
+
+    def _gradient(self, rows, errors, k, step, scale):
         """Normalised gradient ``gamma h H^T e / |H|^2`` (change 2 without 3)."""
         num = [sum(h[i] * e for h, e in zip(rows, errors)) for i in range(k)]
         norm = sum(h[i] * h[i] for h in rows for i in range(k)) + 1e-6 * scale
         return [self.gamma * step * v / norm for v in num]
 
-    def _change_test(self, o, rows, errors, state, h, k):
-        """The change test of one parameter set (change 4): its averages and how far it fires.
+    def _change_test(self, o, rows, errors, state, alphas, k):
+        """The change test of one parameter set (change 4): its averages and the forgetting rate.
 
         Two statistics, both free of the noise's level and colour:
 
         * drift: ``g``, the mean of ``H^T e`` per pose over ``window`` s (the
           score), is zero-mean while ``S_hat`` fits; its mean ``m`` and
           spread ``v`` over ``10 window`` s give a t-statistic per entry,
-          ``m_j^2 / v_j`` times the number of windows averaged, about 1
-          while ``S`` is constant and growing with a persistent lag;
+          ``10 m_j^2 / v_j`` (averaged over the entries), about 1 while ``S``
+          is constant and growing with a persistent lag;
         * step: the innovation power over ``window / 4`` s against its
           mean over ``10 window`` s.
 
         Parameters
         ----------
         rows, errors : lists
-            Regressor rows ``H`` (zero without a pose) and a priori errors.
+            Regressor rows ``H`` and a priori errors (zero without a pose).
         state : vector, shape (4 k + 2,)
             ``[g, m, v, d, power_fast, power_slow]``; ``d`` the mean of
             ``diag(H^T H)`` per pose over ``window``.
-        h : float or casadi.SX
-            Time since the previous pose, 0 without a pose.
+        alphas : tuple of 3
+            Weights of the new sample in the averages over ``window``,
+            ``10 window`` and ``window / 4`` (0 without a pose).
 
         Returns
         -------
@@ -238,9 +263,9 @@ class FilteredAdaptiveObserver(Observer):
             statistic fires, plus up to ``1/0.05 s`` as the step statistic does.
         """
         n_rows = len(rows)
+        a_w, a_long, a_fast = alphas
         g, m, v, d = ([state[i * k + j] for j in range(k)] for i in range(4))
         fast, slow = state[4 * k], state[4 * k + 1]
-        a_w, a_long, a_fast = (1 - o.exp(-h / tau) for tau in (self.window, 10 * self.window, self.window / 4))
         score = [sum(r[j] * e for r, e in zip(rows, errors)) / n_rows for j in range(k)]
         diag = [sum(r[j] * r[j] for r in rows) / n_rows for j in range(k)]
         power = sum(e * e for e in errors) / n_rows
@@ -255,17 +280,14 @@ class FilteredAdaptiveObserver(Observer):
         step = o.fmin(o.fmax(fast / (self.step_ratio * slow + _FLOOR) - 1, 0), 1)
         return g + m + v + d + [fast, slow], drift / self.t_forget + step / _T_STEP
 
-    def _forget(self, o, P, k, d, rate, h):
-        """``P`` grown while the change test fires (change 4), at most to one window's covariance.
+    def _growth(self, o, trace, d, rate, h):
+        """Factor on ``P`` while the change test fires (change 4), at most to ``memory``'s covariance.
 
-        ``d`` the mean information per pose of each entry, ``h`` the time
-        since the previous pose (0 without a pose).
+        ``trace`` of ``P``; ``d`` the mean information per pose of each
+        entry; ``h`` the time since the previous pose (0 without a pose).
         """
-        trace = sum(P[i][i] for i in range(k))
-        # the covariance of a fit of one window's poses (window / h poses of information d)
-        cap = sum(1.0 / (d[i] * self.memory + _FLOOR) for i in range(k)) * h
-        factor = o.fmin(o.exp(h * rate), o.fmax(cap / (trace + _FLOOR), 1.0))
-        return [[factor * P[i][j] for j in range(k)] for i in range(k)]
+        cap = sum(1.0 / (d_i * self.memory + _FLOOR) for d_i in d) * h
+        return o.fmin(o.exp(h * rate), o.fmax(cap / (trace + _FLOOR), 1.0))
 
     def _transition(self, z, u, dt):
         o = ops(z, u)
@@ -274,65 +296,72 @@ class FilteredAdaptiveObserver(Observer):
         since, scale = z[L["since"].start], z[L["scale"]]
         w = self._augmented(o, z[L["w"]])
         has_next, pose_next, w_next = u[0], u[1:4], self._augmented(o, u[4:7])
-        ups = [mx.as_matrix(o, z[L["ups_t"]], 2, n), mx.as_matrix(o, z[L["ups_x"]], 2, 2 * n),
-               mx.as_matrix(o, z[L["ups_y"]], 2, 2 * n)]
         phi1 = phi_1(S, p)                      # eq. (4)
-        phi2 = S[n:3 * n]                       # eq. (5): rows 2, 3 of [S | c]
-        phis = [phi1, phi2, phi2]
+        s2, s3 = S[n:2 * n], S[2 * n:3 * n]     # eq. (5): phi_2, rows 2, 3 of [S | c]
         # 1. regressors of eq. (8) at both ends of the step (rows of B_1, B_2), linear over it;
-        #    the angle at n is the measured one where there is one
+        #    the angle at n is the measured one where there is one. Eq. (1) rotates the force:
+        #    psi_X = [c, -s] and psi_Y = [s, c] with c = cos(theta) w_hat / m, s = sin(theta) w_hat / m,
+        #    so three filtered vectors carry all three regressors.
         theta = has * pose[0] + (1 - has) * x[0]
         psi0 = regressors(theta, w, p)
         psi1 = regressors(x[0] + dt * x[1], w_next, p)
-        x_pred, ups_pred, H = [], [], []
-        for c in range(3):
-            k = len(psi0[c])
-            g_p = [dt * dt * (2 * psi0[c][j] + psi1[c][j]) / 6 for j in range(k)]
-            g_v = [dt * (psi0[c][j] + psi1[c][j]) / 2 for j in range(k)]
-            pos, vel = x[2 * c], x[2 * c + 1]
-            # eqs. (6), (7): x_hat propagated with G(theta) S_hat w_hat (= B phi_hat)
-            x_pred.append([pos + dt * vel + sum(g_p[j] * phis[c][j] for j in range(k)),
-                           vel + sum(g_v[j] * phis[c][j] for j in range(k))])
-            ups_pred.append([[ups[c][0, j] + dt * ups[c][1, j] + g_p[j] for j in range(k)],
-                             [ups[c][1, j] + g_v[j] for j in range(k)]])
-            H.append(ups_pred[c][0])              # 2. the filtered regressor C Upsilon^-
+        bases = [(psi0[0], psi1[0]), (psi0[1][:n], psi1[1][:n]), (psi0[2][:n], psi1[2][:n])]   # theta, c, s
+        ups = [z[L[key]] for key in ("ups_t", "ups_c", "ups_s")]
+        g_p, g_v, ups_pred = [], [], []
+        for (b0, b1), up in zip(bases, ups):
+            g_p.append([dt * dt * (2 * b0[j] + b1[j]) / 6 for j in range(n)])
+            g_v.append([dt * (b0[j] + b1[j]) / 2 for j in range(n)])
+            ups_pred.append([[up[j] + dt * up[n + j] + g_p[-1][j] for j in range(n)],
+                             [up[n + j] + g_v[-1][j] for j in range(n)]])
+        dot = lambda a, b: sum(a[j] * b[j] for j in range(n))
+        # eqs. (6), (7): x_hat propagated with G(theta) S_hat w_hat (= B_1 phi_1, B_2 phi_2)
+        push = [(dot(g_p[0], phi1), dot(g_v[0], phi1)),
+                (dot(g_p[1], s2) - dot(g_p[2], s3), dot(g_v[1], s2) - dot(g_v[2], s3)),
+                (dot(g_p[2], s2) + dot(g_p[1], s3), dot(g_v[2], s2) + dot(g_v[1], s3))]
+        x_pred = [[x[2 * c] + dt * x[2 * c + 1] + push[c][0], x[2 * c + 1] + push[c][1]] for c in range(3)]
         # a priori position errors at n+1 (true minus estimate), zero without a pose
         e = [has_next * (pose_next[c] - x_pred[c][0]) for c in range(3)]
-        h = since + dt                            # 5. time since the previous pose
+        # 2. the filtered regressors C Upsilon^- (zero without a pose)
+        h_t, h_c, h_s = ([has_next * v for v in up[0]] for up in ups_pred)
+        rows_t, rows_xy = [h_t], [h_c + [-v for v in h_s], h_s + h_c]
         P1 = [[z[L["P1"].start + n * i + j] for j in range(n)] for i in range(n)]
-        P2 = [[z[L["P2"].start + 2 * n * i + j] for j in range(2 * n)] for i in range(2 * n)]
-        H1 = [[has_next * v for v in H[0]]]
-        H2 = [[has_next * v for v in H[1]], [has_next * v for v in H[2]]]
+        A = [[z[L["Pre"].start + n * i + j] for j in range(n)] for i in range(n)]
+        B = [[z[L["Pim"].start + n * i + j] for j in range(n)] for i in range(n)]
+        h = since + dt                            # 5. time since the previous pose
         if self.gain == "least-squares":          # 3. recursive least squares
-            d_phi1, P1 = self._rls(o, P1, phi1, H1, e[0:1], n)
-            d_phi2, P2 = self._rls(o, P2, phi2, H2, e[1:3], 2 * n)
+            d_phi1, P1 = self._rls(P1, h_t, e[0], n)
+            d_s2, d_s3, A, B = self._complex_rls(A, B, h_c, h_s, e[1], e[2], n)
+            d_phi2 = d_s2 + d_s3
         else:
-            d_phi1 = self._gradient(o, H1, e[0:1], n, has_next * h, scale[0])
-            d_phi2 = self._gradient(o, H2, e[1:3], 2 * n, has_next * h, scale[1])
-        # 4. the change test (its averages are kept either way), and forgetting while it fires
-        tests = [self._change_test(o, H1, e[0:1], z[L["test1"]], has_next * h, n),
-                 self._change_test(o, H2, e[1:3], z[L["test2"]], has_next * h, 2 * n)]
+            d_phi1 = self._gradient(rows_t, e[0:1], n, has_next * h, scale[0])
+            d_phi2 = self._gradient(rows_xy, e[1:3], 2 * n, has_next * h, scale[1])
+            d_s2, d_s3 = d_phi2[:n], d_phi2[n:]
+        # 4. the change test, and forgetting while it fires (off: the test's averages stay put)
+        test1, test2 = z[L["test1"]], z[L["test2"]]
         if self.track:
-            P1 = self._forget(o, P1, n, tests[0][0][3 * n:4 * n], tests[0][1], has_next * h)
-            P2 = self._forget(o, P2, 2 * n, tests[1][0][6 * n:8 * n], tests[1][1], has_next * h)
-        test_state = [o.vcat(tests[0][0]), o.vcat(tests[1][0])]
-        d_phis = [d_phi1, d_phi2, d_phi2]
+            hp = has_next * h
+            alphas = [1 - o.exp(-hp / tau) for tau in (self.window, 10 * self.window, self.window / 4)]
+            test1, rate1 = self._change_test(o, rows_t, e[0:1], test1, alphas, n)
+            test2, rate2 = self._change_test(o, rows_xy, e[1:3], test2, alphas, 2 * n)
+            f1 = self._growth(o, sum(P1[i][i] for i in range(n)), test1[3 * n:4 * n], rate1, hp)
+            f2 = self._growth(o, 2 * sum(A[i][i] for i in range(n)), test2[6 * n:8 * n], rate2, hp)
+            P1 = [[f1 * v for v in r] for r in P1]
+            A = [[f2 * v for v in r] for r in A]
+            B = [[f2 * v for v in r] for r in B]
+            test1, test2 = o.vcat(test1), o.vcat(test2)
         # 1. correction: Upsilon_n+1 = (I - L_h C) Upsilon^-, x_n+1 = x^- + L_h e + Upsilon_n+1 d_phi
         l1, l2 = discrete_gain(o, self.lam, h)
         l1, l2 = has_next * l1, has_next * l2
-        x_next, ups_next = [], []
+        new = [[[(1 - l1) * up[0][j] for j in range(n)], [up[1][j] - l2 * up[0][j] for j in range(n)]]
+               for up in ups_pred]
+        shift = [[dot(new[0][r], d_phi1) for r in range(2)],
+                 [dot(new[1][r], d_s2) - dot(new[2][r], d_s3) for r in range(2)],
+                 [dot(new[2][r], d_s2) + dot(new[1][r], d_s3) for r in range(2)]]
+        x_next = []
         for c in range(3):
-            k = len(psi0[c])
-            up = ups_pred[c]
-            new = [[(1 - l1) * up[0][j] for j in range(k)], [up[1][j] - l2 * up[0][j] for j in range(k)]]
-            shift = [sum(new[i][j] * d_phis[c][j] for j in range(k)) for i in range(2)]
-            x_next += [x_pred[c][0] + l1 * e[c] + shift[0], x_pred[c][1] + l2 * e[c] + shift[1]]
-            ups_next += new[0] + new[1]
-        S_next = mx.flat(o, S_from_phi(phi1 + o.vcat(d_phi1), phi2 + o.vcat(d_phi2), p))
-        since_next = (1 - has_next) * h
-        return o.vcat([o.vcat(x_next), S_next, pose_next, has_next, u[4:7], since_next, scale,
-                       o.vcat(ups_next), o.vcat([v for r in P1 for v in r]), o.vcat([v for r in P2 for v in r]),
-                       *test_state])
-
-    def _S_std(self, z):
-        return None
+            x_next += [x_pred[c][0] + l1 * e[c] + shift[c][0], x_pred[c][1] + l2 * e[c] + shift[c][1]]
+        S_next = mx.flat(o, S_from_phi(phi1 + o.vcat(d_phi1), o.vcat([s2, s3]) + o.vcat(d_phi2), p))
+        flat = lambda M: o.vcat([v for r in M for v in r])
+        return o.vcat([o.vcat(x_next), S_next, pose_next, has_next, u[4:7], (1 - has_next) * h, scale,
+                       o.vcat(new[0][0] + new[0][1]), o.vcat(new[1][0] + new[1][1]), o.vcat(new[2][0] + new[2][1]),
+                       flat(P1), flat(A), flat(B), test1, test2])
