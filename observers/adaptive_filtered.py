@@ -103,22 +103,35 @@ class FilteredAdaptiveObserver(Observer):
        is the normalised gradient ``dphi = gamma h H^T e / |H|^2``
        (eq. 8's ``delta`` made scale-free).
     3. **Least-squares gain** (eq. 8's ``delta``): ``delta`` becomes the
-       recursive least-squares covariance ``P`` of each parameter set
-       (``phi_1``; ``phi_2``, X and Y taken in turn), so the estimate is the
-       least-squares fit of all poses so far (``gain="least-squares"``).
-       ``P`` starts from a prior worth a thousandth of a sample; no noise
-       model is needed (the innovations are weighted alike).
-    4. **Forgetting on evidence of change** (``track=True``): a
-       windowed score test per parameter set (the mean of ``H^T e`` over
-       ``window`` s, each entry normalised by its information and the
-       innovation power) stays near its null level while ``S`` is constant;
-       while it exceeds ``threshold`` times that level, ``P`` grows at a rate
-       up to ``1/t_forget`` (capped at its prior): the fit forgets until the
-       innovations are consistent again. This tracks the steps of Table 1
-       and a drifting ``S``, and on a constant ``S`` stays off.
+       recursive least-squares covariance ``P`` of each parameter set, so
+       the estimate is the least-squares fit of all poses so far
+       (``gain="least-squares"``). ``P`` starts from a prior worth a
+       thousandth of a sample; no noise model is needed (the innovations
+       are weighted alike). ``phi_2`` is fitted from the X and Y errors
+       together in complex form: eq. (1) rotates the force, so
+       ``X + iY = zeta . (s_2 + i s_3)`` with ``zeta`` the filtered
+       ``exp(i theta) w_hat / m``, and ``P`` is a 3x3 Hermitian matrix (the
+       same fit as a 6x6 real one, for a quarter of the work).
+    4. **Forgetting on evidence of change** (``track=True``; the paper's
+       law has a constant gain and so never stops adapting): a change test
+       per parameter set on the a priori errors, free of the noise's level
+       and colour (:meth:`_change_test`): a t-statistic of the windowed
+       score ``H^T e`` (a persistent lag: drift) and the ratio of the
+       innovation power over ``window / 4`` s to its mean over
+       ``10 window`` s (a step). While the first exceeds ``threshold``
+       (about 1 while ``S`` is constant), ``P`` grows at up to
+       ``1/t_forget``; while the second exceeds ``step_ratio``, at up to
+       1/(0.05 s); never beyond the covariance of ``memory`` s of poses.
+       The fit forgets until the errors are consistent again: it follows
+       the steps of Table 1 and a drifting ``S``, and on a constant ``S``
+       stays (nearly) off.
     5. **Multi-rate poses**: where no pose arrives the observer and the
        filter only predict and nothing adapts; at a pose the gain ``L_h``
-       and the test's window use ``h``, the time since the previous pose.
+       and the test's averages use ``h``, the time since the previous pose.
+
+    The discrete observer with the sensitivity filter is the one
+    :class:`observers.HighGainObserver` reconstructs for [4]; what differs
+    is the gain (least squares, change 3) and when it forgets (change 4).
 
     With ``offset=True`` each parameter set gains the offset column (the
     reading augmented by 1, :class:`observers.Observer`).
@@ -136,11 +149,18 @@ class FilteredAdaptiveObserver(Observer):
     track : bool
         Change 4: forget on evidence of a change in ``S``.
     window : float
-        Time constant of the change test's averages, s.
+        Time constant of the change test's score average, s.
     threshold : float
-        The test fires above this multiple of its null level.
+        The drift statistic fires above this value (about 1 while ``S`` is
+        constant).
+    step_ratio : float
+        The step statistic fires above this ratio of fast to slow
+        innovation power.
     t_forget : float
-        Shortest time constant of the forgetting, s.
+        Shortest time constant of the forgetting on a drift, s.
+    memory : float
+        The forgetting never leaves less information than ``memory`` s of
+        poses, s.
     offset : bool
         Also estimate the sensor's offset ``b`` (``result.b``).
     name : str
