@@ -69,6 +69,14 @@ def run(scenarios=SCENARIOS, seeds=5, duration=100.0):
     return pd.DataFrame(rows)
 
 
+def markdown(table):
+    """A DataFrame as a Markdown table, numbers to 3 significant digits."""
+    cells = lambda r: [v if isinstance(v, str) else f"{v:.3g}" for v in r]
+    lines = ["| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
+    lines += ["| " + " | ".join(cells(r)) + " |" for r in table.itertuples(index=False)]
+    return "\n".join(lines)
+
+
 def recovery_time(t, E, t_step, t_end, threshold=0.02):
     """Seconds after ``t_step`` from which E stays below ``threshold`` until ``t_end`` (inf if never)."""
     seg = (t >= t_step) & (t < t_end)
@@ -111,7 +119,7 @@ def main():
         return
     table = run(args.scenarios, args.seeds, args.duration)
     print()
-    print(table.to_markdown(index=False, floatfmt=".3g") if hasattr(table, "to_markdown") else table)
+    print(markdown(table))
 
 
 if __name__ == "__main__":

@@ -51,6 +51,7 @@ DEFAULT_LAM = 5.0
 GAINS = ("least-squares", "gradient")
 _PRIOR = 1e-3          # weight of the start S0, in samples' worth of information
 _FLOOR = 1e-300
+_DRIFT_WINDOWS = 20   # the drift statistic averages the windowed score over this many windows
 _T_STEP = 0.05         # s, time constant of the forgetting while the step test fires
 
 
@@ -116,7 +117,7 @@ class FilteredAdaptiveObserver(Observer):
        law has a constant gain and so never stops adapting): a change test
        per parameter set on the a priori errors, free of the noise's level
        and colour (:meth:`_change_test`): a t-statistic of the windowed
-       score ``H^T e`` (a persistent lag: drift) and the ratio of the
+       score ``H^T e`` over ``20 window`` s (a persistent lag: drift) and the ratio of the
        innovation power over ``window / 4`` s to its mean over
        ``10 window`` s (a step). While the first exceeds ``threshold``
        (about 1 while ``S`` is constant), ``P`` grows at up to
@@ -175,7 +176,7 @@ class FilteredAdaptiveObserver(Observer):
     """
 
     def __init__(self, payload, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
-                 threshold=5.0, step_ratio=5.0, t_forget=0.5, memory=0.2, offset=False, name="adaptive-filtered"):
+                 threshold=8.0, step_ratio=5.0, t_forget=0.5, memory=0.2, offset=False, name="adaptive-filtered"):
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")
@@ -258,8 +259,8 @@ class FilteredAdaptiveObserver(Observer):
 
         * drift: ``g``, the mean of ``H^T e`` per pose over ``window`` s (the
           score), is zero-mean while ``S_hat`` fits; its mean ``m`` and
-          spread ``v`` over ``10 window`` s give a t-statistic per entry,
-          ``10 m_j^2 / v_j`` (averaged over the entries), about 1 while ``S``
+          spread ``v`` over ``20 window`` s give a t-statistic per entry,
+          ``20 m_j^2 / v_j`` (averaged over the entries), about 1 while ``S``
           is constant and growing with a persistent lag;
         * step: the innovation power over ``window / 4`` s against its
           mean over ``10 window`` s.
@@ -271,9 +272,9 @@ class FilteredAdaptiveObserver(Observer):
         state : vector, shape (4 k + 2,)
             ``[g, m, v, d, power_fast, power_slow]``; ``d`` the mean of
             ``diag(H^T H)`` per pose over ``window``.
-        alphas : tuple of 3
+        alphas : tuple of 4
             Weights of the new sample in the averages over ``window``,
-            ``10 window`` and ``window / 4`` (0 without a pose).
+            ``20 window``, ``10 window`` and ``window / 4`` (0 without a pose).
 
         Returns
         -------
@@ -283,19 +284,19 @@ class FilteredAdaptiveObserver(Observer):
             statistic fires, plus up to ``1/0.05 s`` as the step statistic does.
         """
         n_rows = len(rows)
-        a_w, a_long, a_fast = alphas
+        a_w, a_drift, a_long, a_fast = alphas
         g, m, v, d = ([state[i * k + j] for j in range(k)] for i in range(4))
         fast, slow = state[4 * k], state[4 * k + 1]
         score = [sum(r[j] * e for r, e in zip(rows, errors)) / n_rows for j in range(k)]
         diag = [sum(r[j] * r[j] for r in rows) / n_rows for j in range(k)]
         power = sum(e * e for e in errors) / n_rows
         g = [g[j] + a_w * (score[j] - g[j]) for j in range(k)]
-        m = [m[j] + a_long * (g[j] - m[j]) for j in range(k)]
-        v = [v[j] + a_long * ((g[j] - m[j]) ** 2 - v[j]) for j in range(k)]
+        m = [m[j] + a_drift * (g[j] - m[j]) for j in range(k)]
+        v = [v[j] + a_drift * ((g[j] - m[j]) ** 2 - v[j]) for j in range(k)]
         d = [d[j] + a_w * (diag[j] - d[j]) for j in range(k)]
         fast = fast + a_fast * (power - fast)
         slow = slow + a_long * (power - slow)
-        t2 = sum(m[j] * m[j] / (v[j] + _FLOOR) for j in range(k)) * 10 / k
+        t2 = sum(m[j] * m[j] / (v[j] + _FLOOR) for j in range(k)) * _DRIFT_WINDOWS / k
         drift = o.fmin(o.fmax(t2 / self.threshold - 1, 0), 1)
         step = o.fmin(o.fmax(fast / (self.step_ratio * slow + _FLOOR) - 1, 0), 1)
         return g + m + v + d + [fast, slow], drift / self.t_forget + step / _T_STEP
@@ -360,7 +361,8 @@ class FilteredAdaptiveObserver(Observer):
         test1, test2 = z[L["test1"]], z[L["test2"]]
         if self.track:
             hp = has_next * h
-            alphas = [1 - o.exp(-hp / tau) for tau in (self.window, 10 * self.window, self.window / 4)]
+            alphas = [1 - o.exp(-hp / tau) for tau in (self.window, _DRIFT_WINDOWS * self.window, 10 * self.window,
+                                                         self.window / 4)]
             test1, rate1 = self._change_test(o, rows_t, e[0:1], test1, alphas, n)
             test2, rate2 = self._change_test(o, rows_xy, e[1:3], test2, alphas, 2 * n)
             f1 = self._growth(o, sum(P1[i][i] for i in range(n)), test1[3 * n:4 * n], rate1, hp)
