@@ -20,7 +20,7 @@ from plant.errors import FmscalError
 from .comparison import seed_list, simulate_case
 from .metrics import error_history
 
-__all__ = ["ABLATION_STEPS", "ablation", "ablation_markdown", "ekf_floor", "tail_error"]
+__all__ = ["ABLATION_STEPS", "QUICK_SETTINGS", "ablation", "ablation_markdown", "ekf_floor", "tail_error"]
 
 #: ``(label, factory(payload, offset))``, in the order the changes are added.
 ABLATION_STEPS = (
@@ -33,6 +33,10 @@ ABLATION_STEPS = (
     ("+ 4: forgetting on evidence of change (the default)",
      lambda p, offset: FilteredAdaptiveObserver(p, offset=offset)),
 )
+
+
+#: Settings of a quick run (``fmscal ablation --quick``): the same rows, one short seed.
+QUICK_SETTINGS = {"seeds": 1, "duration": 20.0}
 
 
 def tail_error(result, truth):
@@ -72,7 +76,7 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=ekf_fl
     seeds : int or sequence of int
         ``N`` means seeds ``0 .. N-1``.
     duration : float
-        Run length, s (``--quick``: 20 s and 1 seed give the same rows).
+        Run length, s (:data:`QUICK_SETTINGS`: 20 s and 1 seed give the same rows).
     floor : callable
         ``floor(payload, log, truth, told_noise, offset) -> ObserverResult``,
         the reference E is measured against (default :func:`ekf_floor`).
