@@ -155,3 +155,24 @@ def test_ablation_short_mode():
     assert text.count("\n| paper |") == 4 and "E / floor" in text
     with pytest.raises(FmscalError, match="floor"):
         ablation(floor=3.0)
+
+
+def test_complex_least_squares_is_the_real_fit_of_both_rows():
+    """The 3x3 Hermitian update equals the 6x6 real one on the X and Y rows taken in turn."""
+    rng = np.random.default_rng(4)
+    n = 3
+    M = rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n))
+    P = M @ M.conj().T + np.eye(n)                        # Hermitian positive definite
+    A, B = P.real, P.imag
+    P_real = np.block([[A, -B], [B, A]])                  # the same covariance on [s_2, s_3]
+    hc, hs = rng.standard_normal(n), rng.standard_normal(n)
+    e_x, e_y = 0.3, -0.7
+    d_s2, d_s3, A1, B1 = FilteredAdaptiveObserver._complex_rls(A.tolist(), B.tolist(), list(hc), list(hs),
+                                                               e_x, e_y, n)
+    row_x, row_y = np.concatenate([hc, -hs]), np.concatenate([hs, hc])
+    d1, P1 = FilteredAdaptiveObserver._rls(P_real.tolist(), list(row_x), e_x, 2 * n)
+    d2, P2 = FilteredAdaptiveObserver._rls(P1, list(row_y), e_y - row_y @ np.array(d1), 2 * n)
+    assert np.allclose(np.concatenate([d_s2, d_s3]), np.array(d1) + np.array(d2), atol=1e-12)
+    assert np.allclose(np.block([[np.array(A1), -np.array(B1)], [np.array(B1), np.array(A1)]]), np.array(P2),
+                       atol=1e-12)
+    assert not np.allclose(d_s3, 0)
