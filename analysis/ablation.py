@@ -1,37 +1,37 @@
-"""Ablation of the filtered adaptive observer: from the paper's law, each documented change in turn.
+"""Ablation of the adaptive observer: from the paper's law, each documented change in turn (``fmscal ablation``).
 
 Each row is a configuration of a real class: the paper's observer
-(:meth:`observers.AdaptiveObserver.paper`), then
-:class:`observers.adaptive_filtered.FilteredAdaptiveObserver` with its
-settings switched on one at a time (the numbered changes of its docstring).
-Each is measured by E (eq. 16, the median over the last 10 % of the run),
-against a floor on the same logs, and by its cost per step (compiled, the
-second run so that compilation is not counted).
+(:class:`observers.PaperAdaptiveObserver`), then
+:class:`observers.AdaptiveObserver` with its settings switched on one at a
+time (the numbered changes of its docstring). Each is measured by E (eq. 16,
+the median over the last 10 % of the run), against the floor on the same
+logs (the maximum-likelihood estimate, :func:`analysis.comparison.floor_error`),
+and by its cost per step (compiled, the second run so that compilation is not
+counted).
 """
 
 import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from observers import AdaptiveObserver, AugmentedEKF
-from observers.adaptive_filtered import FilteredAdaptiveObserver
+from observers import AdaptiveObserver, PaperAdaptiveObserver
 from plant.errors import FmscalError
 
-from .comparison import seed_list, simulate_case
-from .metrics import error_history
+from .comparison import floor_error, seed_list, simulate_case
+from .metrics import error_history, tail_median
 
-__all__ = ["ABLATION_STEPS", "QUICK_SETTINGS", "ablation", "ablation_markdown", "ekf_floor", "tail_error"]
+__all__ = ["ABLATION_STEPS", "QUICK_SETTINGS", "ablation", "ablation_markdown", "tail_error"]
 
 #: ``(label, factory(payload, offset))``, in the order the changes are added.
 ABLATION_STEPS = (
     ("adaptive-paper: eqs. (6)-(8), (14), (15) as printed",
-     lambda p, offset: AdaptiveObserver.paper(p, offset=offset)),
+     lambda p, offset: PaperAdaptiveObserver(p, offset=offset)),
     ("+ 1, 2: discrete observer, poles at -lam; filtered regressor and position error (gradient gain)",
-     lambda p, offset: FilteredAdaptiveObserver(p, gain="gradient", track=False, offset=offset)),
+     lambda p, offset: AdaptiveObserver(p, gain="gradient", track=False, offset=offset)),
     ("+ 3: least-squares gain",
-     lambda p, offset: FilteredAdaptiveObserver(p, gain="least-squares", track=False, offset=offset)),
+     lambda p, offset: AdaptiveObserver(p, gain="least-squares", track=False, offset=offset)),
     ("+ 4: forgetting on evidence of change (the default)",
-     lambda p, offset: FilteredAdaptiveObserver(p, offset=offset)),
+     lambda p, offset: AdaptiveObserver(p, offset=offset)),
 )
 
 
@@ -43,30 +43,10 @@ def tail_error(result, truth):
     """E of eq. (16), its median over the last 10 % of the run (NaN if the run diverged)."""
     if result.diverged:
         return float("nan")
-    E = error_history(result.S_hat_history, truth.S_at(result.t))
-    return float(np.median(E[int(0.9 * len(E)):]))
+    return tail_median(error_history(result.S_hat_history, truth.S_at(result.t)))
 
 
-def ekf_floor(payload, log, truth, told_noise, offset):
-    """The floor proxy: the EKF told the noise, with no random walk on ``S``.
-
-    Parameters
-    ----------
-    payload : plant.Payload
-    log : plant.Log
-        Poses already lined up with the sensor.
-    truth : plant.Truth
-    told_noise : plant.NoiseSpec
-    offset : bool
-
-    Returns
-    -------
-    observers.ObserverResult
-    """
-    return AugmentedEKF(payload, noise=told_noise, q_S=0.0, adapt_q=False, offset=offset).run(log, truth.S0)
-
-
-def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=ekf_floor, progress=False):
+def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_error, progress=False):
     """Each documented change of the filtered adaptive observer, added in turn.
 
     Parameters
@@ -78,8 +58,9 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=ekf_fl
     duration : float
         Run length, s (:data:`QUICK_SETTINGS`: 20 s and 1 seed give the same rows).
     floor : callable
-        ``floor(payload, log, truth, told_noise, offset) -> ObserverResult``,
-        the reference E is measured against (default :func:`ekf_floor`).
+        ``floor(log, truth, payload, told_noise) -> float``: the E each
+        configuration is divided by (default the maximum-likelihood floor,
+        :func:`analysis.comparison.floor_error`).
     progress : bool
         Show a progress bar.
 
@@ -98,9 +79,9 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=ekf_fl
     cases = [(s, seed) for s in scenarios for seed in seeds]
     for name, seed in tqdm(cases, desc="ablation", disable=not progress):
         sc, log, truth, told = simulate_case(name, seed, duration=duration)
-        offset = truth.extra.get("offset") is not None
-        log = log.shift_poses(truth.extra.get("latency") or 0.0)
-        E_floor = tail_error(floor(sc.payload, log, truth, told, offset), truth)
+        E_floor = floor(log, truth, sc.payload, told)
+        offset = truth.offset is not None
+        log = log.shift_poses(truth.latency)
         for step, (label, factory) in enumerate(ABLATION_STEPS):
             obs = factory(sc.payload, offset)
             obs.run(log, truth.S0)                            # compiles; the second run is timed
@@ -119,7 +100,7 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=ekf_fl
     return pd.DataFrame(rows)
 
 
-def ablation_markdown(table, title="Ablation: from the paper's observer to the filtered adaptive observer"):
+def ablation_markdown(table, title="Ablation: from the paper's observer to the adaptive default"):
     """The table of :func:`ablation` as Markdown."""
     head = ["scenario", "configuration", "seeds", "median E", "floor median E", "E / floor", "diverged",
             "cost [us/step]"]

@@ -89,7 +89,7 @@ class Method:
 
 METHODS = {m.name: m for m in (
     Method("adaptive", "adaptive", AdaptiveObserver, {}, needs_noise_model=False, online=True, role="design",
-           calibrates=True, summary="the paper's adaptive observer with the toolkit's documented changes"),
+           calibrates=True, summary="eqs. (6)-(8) with filtered regressors and a least-squares gain: at the floor"),
     Method("adaptive-paper", "adaptive-paper", PaperAdaptiveObserver, {},
            needs_noise_model=False, online=True, role="paper", calibrates=False,
            summary="eqs. (6)-(8), (14), (15) exactly as printed", paper_claim=9.1106e-4),

@@ -1,14 +1,13 @@
-"""The filtered adaptive observer: both run paths agree, it sits at the floor, tracks changes; the ablation."""
+"""The adaptive default: both run paths agree, it sits at the floor, tracks changes; the ablation."""
 
 import numpy as np
 import pytest
 
 import plant
-from analysis.ablation import ABLATION_STEPS, ablation, ablation_markdown, ekf_floor, tail_error
-from analysis.comparison import simulate_case
+from analysis.ablation import ABLATION_STEPS, ablation, ablation_markdown, tail_error
+from analysis.comparison import floor_error, simulate_case
 from analysis.metrics import error_history
-from observers import AdaptiveObserver, LeastSquares
-from observers.adaptive_filtered import FilteredAdaptiveObserver
+from observers import AdaptiveObserver, LeastSquares, PaperAdaptiveObserver
 from plant.errors import FmscalError
 
 FLOOR_MARGIN = 1.3        # issue 15: within 1.3x of the floor on the constant-S scenarios
@@ -16,8 +15,8 @@ FLOOR_MARGIN = 1.3        # issue 15: within 1.3x of the floor on the constant-S
 
 def _case(name, seed, duration):
     sc, log, truth, told = simulate_case(name, seed, duration=duration)
-    offset = truth.extra.get("offset") is not None
-    return sc, log.shift_poses(truth.extra.get("latency") or 0.0), truth, told, offset
+    offset = truth.offset is not None
+    return sc, log.shift_poses(truth.latency), truth, told, offset
 
 
 @pytest.mark.parametrize("name, settings", [
@@ -28,7 +27,7 @@ def _case(name, seed, duration):
 ])
 def test_compiled_and_numpy_paths_agree(name, settings):
     sc, log, truth, _, offset = _case(name, 0, 1.5)
-    obs = FilteredAdaptiveObserver(sc.payload, offset=offset, **settings)
+    obs = AdaptiveObserver(sc.payload, offset=offset, **settings)
     slow, fast = obs.run(log, truth.S0, compiled=False), obs.run(log, truth.S0, compiled=True)
     assert np.max(np.abs(slow.S_hat_history - fast.S_hat_history)) < 1e-9
     assert np.max(np.abs(slow.x_hat_history - fast.x_hat_history)) < 1e-9
@@ -37,7 +36,7 @@ def test_compiled_and_numpy_paths_agree(name, settings):
 
 def test_step_by_step_matches_the_run():
     sc, log, truth, _, _ = _case("vision-50hz", 1, 0.5)
-    obs = FilteredAdaptiveObserver(sc.payload)
+    obs = AdaptiveObserver(sc.payload)
     result = obs.run(log, truth.S0, compiled=False)
     obs.reset(truth.S0)
     for k in range(len(log)):
@@ -46,32 +45,35 @@ def test_step_by_step_matches_the_run():
     assert np.allclose(x_hat, result.x_hat_history[-1], atol=1e-12)
 
 
+def _floor(name, seed, duration):
+    sc, log, truth, told = simulate_case(name, seed, duration=duration)
+    return floor_error(log, truth, sc.payload, told)
+
+
 def test_at_the_floor_on_paper_30s():
-    """30 s, one seed: the ratio is 1.08-1.14 on seeds 0-2 (1.06 median at 60 s, 1.07 at 100 s)."""
+    """30 s, one seed, against the maximum-likelihood floor on the same log."""
     sc, log, truth, told, _ = _case("paper", 0, 30.0)
-    E = tail_error(FilteredAdaptiveObserver(sc.payload).run(log, truth.S0), truth)
-    E_floor = tail_error(ekf_floor(sc.payload, log, truth, told, False), truth)
+    E = tail_error(AdaptiveObserver(sc.payload).run(log, truth.S0), truth)
+    E_floor = _floor("paper", 0, 30.0)
     assert 0.5 * E_floor < E < FLOOR_MARGIN * E_floor
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["paper", "noisy"])
+@pytest.mark.parametrize("name", ["paper", "other-payload", "weak-excitation"])
 def test_at_the_floor_over_seeds(name):
-    ratios, E_old = [], []
+    ratios = []
     for seed in range(3):
         sc, log, truth, told, _ = _case(name, seed, 60.0)
-        E = tail_error(FilteredAdaptiveObserver(sc.payload).run(log, truth.S0), truth)
-        ratios.append(E / tail_error(ekf_floor(sc.payload, log, truth, told, False), truth))
-        E_old.append(E / tail_error(AdaptiveObserver(sc.payload).run(log, truth.S0), truth))
+        E = tail_error(AdaptiveObserver(sc.payload).run(log, truth.S0), truth)
+        ratios.append(E / _floor(name, seed, 60.0))
     assert 0.5 < np.median(ratios) < FLOOR_MARGIN
     assert max(ratios) < 1.6
-    assert max(E_old) < 0.5            # well below today's default on every seed
 
 
 @pytest.mark.slow
 def test_tracks_the_table_1_steps():
     sc, log, truth, _, _ = _case("time-varying", 0, None)
-    result = FilteredAdaptiveObserver(sc.payload).run(log, truth.S0)
+    result = AdaptiveObserver(sc.payload).run(log, truth.S0)
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     t = result.t
     for t_step in (100.0, 200.0):
@@ -83,14 +85,14 @@ def test_tracks_the_table_1_steps():
 
 
 @pytest.mark.slow
-def test_follows_a_drift_better_than_the_old_default():
-    new, old = [], []
+def test_follows_a_drift_far_better_than_without_tracking():
+    tracked, fixed = [], []
     for seed in range(3):
         sc, log, truth, _, _ = _case("drift", seed, 100.0)
-        new.append(tail_error(FilteredAdaptiveObserver(sc.payload).run(log, truth.S0), truth))
-        old.append(tail_error(AdaptiveObserver(sc.payload).run(log, truth.S0), truth))
-    assert np.median(new) <= np.median(old)
-    assert 0.005 < np.median(new) < 0.03        # a drift of 0.2 per 100 s cannot be followed exactly
+        tracked.append(tail_error(AdaptiveObserver(sc.payload).run(log, truth.S0), truth))
+        fixed.append(tail_error(AdaptiveObserver(sc.payload, track=False).run(log, truth.S0), truth))
+    assert np.median(tracked) < np.median(fixed) / 2
+    assert 0.005 < np.median(tracked) < 0.03        # a drift of 0.2 per 100 s cannot be followed exactly
 
 
 def test_without_tracking_a_step_is_not_followed():
@@ -98,7 +100,7 @@ def test_without_tracking_a_step_is_not_followed():
     sc, log, truth, _, _ = _case("time-varying", 0, 115.0)
     E = {}
     for track in (True, False):
-        result = FilteredAdaptiveObserver(sc.payload, track=track).run(log, truth.S0)
+        result = AdaptiveObserver(sc.payload, track=track).run(log, truth.S0)
         E[track] = error_history(result.S_hat[None], truth.S_at(115.0))[0]
     assert E[True] < 0.02 < E[False]
 
@@ -106,40 +108,40 @@ def test_without_tracking_a_step_is_not_followed():
 def test_recovers_the_offset_on_the_real_rig():
     sc, log, truth, _, offset = _case("real-rig", 0, 40.0)
     assert offset
-    result = FilteredAdaptiveObserver(sc.payload, offset=True).run(log, truth.S0)
-    b_true = np.array(truth.extra["offset"])
+    result = AdaptiveObserver(sc.payload, offset=True).run(log, truth.S0)
+    b_true = truth.offset
     assert np.max(np.abs(result.b - b_true)) < 0.01
     assert tail_error(result, truth) < 0.005
     # left out, the offset biases the fit
-    plain = FilteredAdaptiveObserver(sc.payload).run(log, truth.S0)
+    plain = AdaptiveObserver(sc.payload).run(log, truth.S0)
     assert tail_error(plain, truth) > 5 * tail_error(result, truth)
 
 
 def test_poses_at_50_hz():
     sc, log, truth, told, _ = _case("vision-50hz", 0, 30.0)
     assert 40 < log.pose_rate() < 50
-    result = FilteredAdaptiveObserver(sc.payload).run(log, truth.S0)
+    result = AdaptiveObserver(sc.payload).run(log, truth.S0)
     assert not result.diverged
     E = tail_error(result, truth)
-    assert E < 2 * tail_error(ekf_floor(sc.payload, log, truth, told, False), truth)
+    assert E < 2 * _floor("vision-50hz", 0, 30.0)
     assert E < 0.01
 
 
 def test_rejects_bad_settings():
     with pytest.raises(FmscalError, match="gain"):
-        FilteredAdaptiveObserver(plant.PAPER_PAYLOAD, gain="newton")
+        AdaptiveObserver(plant.PAPER_PAYLOAD, gain="newton")
     with pytest.raises(FmscalError, match="lam"):
-        FilteredAdaptiveObserver(plant.PAPER_PAYLOAD, lam=-1.0)
+        AdaptiveObserver(plant.PAPER_PAYLOAD, lam=-1.0)
     with pytest.raises(FmscalError, match="window"):
-        FilteredAdaptiveObserver(plant.PAPER_PAYLOAD, window=0.0)
+        AdaptiveObserver(plant.PAPER_PAYLOAD, window=0.0)
 
 
 def test_ablation_short_mode():
     calls = []
 
-    def least_squares_floor(payload, log, truth, told_noise, offset):
+    def least_squares_floor(log, truth, payload, told_noise):
         calls.append(log.name)
-        return LeastSquares(payload, offset=offset).run(log)
+        return tail_error(LeastSquares(payload).run(log), truth)
 
     table = ablation(scenarios=("paper", "noisy"), seeds=1, duration=4.0, floor=least_squares_floor)
     assert len(calls) == 2                                     # the floor it was given, once per log
@@ -167,11 +169,11 @@ def test_complex_least_squares_is_the_real_fit_of_both_rows():
     P_real = np.block([[A, -B], [B, A]])                  # the same covariance on [s_2, s_3]
     hc, hs = rng.standard_normal(n), rng.standard_normal(n)
     e_x, e_y = 0.3, -0.7
-    d_s2, d_s3, A1, B1 = FilteredAdaptiveObserver._complex_rls(A.tolist(), B.tolist(), list(hc), list(hs),
+    d_s2, d_s3, A1, B1 = AdaptiveObserver._complex_rls(A.tolist(), B.tolist(), list(hc), list(hs),
                                                                e_x, e_y, n)
     row_x, row_y = np.concatenate([hc, -hs]), np.concatenate([hs, hc])
-    d1, P1 = FilteredAdaptiveObserver._rls(P_real.tolist(), list(row_x), e_x, 2 * n)
-    d2, P2 = FilteredAdaptiveObserver._rls(P1, list(row_y), e_y - row_y @ np.array(d1), 2 * n)
+    d1, P1 = AdaptiveObserver._rls(P_real.tolist(), list(row_x), e_x, 2 * n)
+    d2, P2 = AdaptiveObserver._rls(P1, list(row_y), e_y - row_y @ np.array(d1), 2 * n)
     assert np.allclose(np.concatenate([d_s2, d_s3]), np.array(d1) + np.array(d2), atol=1e-12)
     assert np.allclose(np.block([[np.array(A1), -np.array(B1)], [np.array(B1), np.array(A1)]]), np.array(P2),
                        atol=1e-12)
