@@ -158,6 +158,36 @@ def cmd_reproduce(args):
     print((Path(args.out) / "summary.md").read_text())
 
 
+def _add_ablation(sub):
+    p = sub.add_parser("ablation", help="the adaptive observer's changes from the paper, added one at a time",
+                       description="From the paper's observer as printed, each documented change of the adaptive "
+                                   "default added in turn: median E over seeds (E the median over the last 10 %% "
+                                   "of each run) against the maximum-likelihood floor on the same logs, and the "
+                                   "cost per step.")
+    p.add_argument("--scenario", nargs="+", default=["paper", "noisy"], metavar="NAME")
+    p.add_argument("--seeds", type=int, default=3, metavar="N", help="seeds 0 .. N-1 (default 3)")
+    p.add_argument("--duration", type=float, default=100.0, metavar="S", help="run length in s (default 100)")
+    p.add_argument("--quick", action="store_true", help="one seed of 20 s: the same rows, for a check")
+    p.add_argument("--json", action="store_true", help="print the table as JSON (strict) instead")
+    p.set_defaults(func=cmd_ablation)
+
+
+def cmd_ablation(args):
+    from plant import get_scenario
+    from .ablation import QUICK_SETTINGS, ablation, ablation_markdown
+    for name in args.scenario:
+        get_scenario(name)                      # FmscalError naming the choices
+    seeds, duration = (QUICK_SETTINGS["seeds"], QUICK_SETTINGS["duration"]) if args.quick else \
+        (args.seeds, positive(args.duration, "--duration"))
+    check_seeds(seeds=seeds)
+    check_sizes(args.scenario, duration)
+    table = ablation(args.scenario, seeds, duration, progress=not args.json)
+    if args.json:
+        print(json.dumps(strict(table.to_dict(orient="records")), indent=1, allow_nan=False))
+    else:
+        print(ablation_markdown(table))
+
+
 def _add_compare(sub):
     from observers import METHODS
     from plant import SCENARIOS
@@ -230,8 +260,8 @@ def build_parser():
     return parser
 
 
-_COMMANDS = [_add_simulate, add_calibrate, add_apply, _add_reproduce, _add_compare, add_sweep, add_bench,
-             _add_check_gains, add_import]
+_COMMANDS = [_add_simulate, add_calibrate, add_apply, _add_reproduce, _add_compare, _add_ablation, add_sweep,
+             add_bench, _add_check_gains, add_import]
 
 
 def main(argv=None):

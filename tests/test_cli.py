@@ -83,3 +83,11 @@ def test_compare_and_check_gains_refuse_bad_arguments(argv, message, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+
+
+def test_ablation_quick_gives_one_row_per_change(capsys):
+    assert main(["ablation", "--quick", "--scenario", "paper", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["step"] for r in rows] == [0, 1, 2, 3]
+    assert all(r["ratio"] > 0.5 for r in rows)                    # nothing beats the floor by far
+    assert rows[0]["ratio"] > 10 * rows[-1]["ratio"]              # the paper's law is far from it
