@@ -8,11 +8,11 @@ from plant import NoiseSpec, rk4_step
 from plant.noise import estimate_noise
 from plant._checks import as_positive_scalar
 from plant._compile import BufferedCall, compile_function
+from plant.errors import FmscalError
 
 from .base import Observer
-from .noise_level import DEFAULT_TOLERANCE, NoiseLevel
+from .noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
 from .state import INPUT
-from plant.errors import FmscalError
 
 __all__ = ["AugmentedEKF"]
 
@@ -47,21 +47,28 @@ class AugmentedEKF(Observer):
     (Joseph form, so ``P`` stays symmetric positive definite).
 
     Tuning rule: ``R = diag(angle_sd^2, position_sd^2, position_sd^2)`` from
-    the pose noise; ``Q`` is the wrench noise carried through the dynamics,
-    ``Q = J_0 diag(wrench_sd^2) J_0^T + J_1 diag(wrench_sd^2) J_1^T`` with
-    ``J_0, J_1`` the Jacobians of the step with respect to the two raw
-    readings it uses, plus ``q dt`` on each calibration entry: a random walk
-    of intensity ``q_S`` (about 0.6 % an hour), so that a slowly changing
-    sensor is tracked, raised towards ``q_S_max`` while the normalized
-    innovation squared of the poses says that ``S`` has moved
-    (:class:`observers.noise_level.NoiseLevel`, ``adapt_q``); ``P_0`` is the
-    pose noise on the positions, ``v0_sd^2`` on the velocities and
+    the pose noise; ``Q`` is the raw reading's noise carried through the
+    dynamics, ``Q = J diag(wrench_sd^2) J^T`` with ``J = J_0 + J_1`` the
+    sum of the step's Jacobians with respect to the raw readings at its two
+    ends. Each reading's noise enters two consecutive steps (through ``J_1``
+    of one and ``J_0`` of the next), so the process noise of eq. (1) is
+    correlated from step to step; the filter's white ``Q`` must carry each
+    reading once, with its whole effect: ``J_0 Sigma J_0^T + J_1 Sigma
+    J_1^T`` (each end as an independent draw) would give the motion half
+    the wrench noise's low-frequency power and make ``S_std`` about
+    ``sqrt(2)`` too small. On top, ``q dt`` on each calibration entry: a
+    random walk whose intensity ``q`` is 0 (``q_S``, a constant ``S``)
+    until the normalized innovation squared of the poses says that ``S``
+    moved; then it starts at ``q_S_start`` and rises towards ``q_S_max``,
+    and falls back to 0 once the innovations are consistent again
+    (:class:`observers.noise_level.NoiseLevel`, ``adapt_q``). ``P_0`` is
+    the pose noise on the positions, ``v0_sd^2`` on the velocities and
     ``S0_sd^2`` on the calibration entries.
 
     With a fixed random walk the filter must choose between averaging (a
-    constant ``S``, near the least-squares accuracy) and forgetting (a
-    moving ``S``); the adjustable level does both: on a constant ``S`` it
-    stays at the base intensity and reaches the least-squares accuracy
+    constant ``S``) and forgetting (a moving ``S``); the adjustable level
+    does both: on a constant ``S`` it stays at zero and the filter is the
+    constant-``S`` filter, whose ``S_std`` the z-scores over seeds bear out
     (``tests/test_ekf.py``), and after a step in ``S`` (Table 1) it raises
     the intensity until the innovations are consistent again. A sensor that
     drifts fast and steadily (the ``drift`` scenario, 0.2 per 100 s) keeps
@@ -79,8 +86,8 @@ class AugmentedEKF(Observer):
     q_S : float
         Base random-walk intensity of each calibration entry, 1/s: the
         entries are assumed to wander by ``sqrt(q_S t)`` over ``t`` seconds
-        (1e-8: about 0.006 an hour). ``0`` (with ``adapt_q=False``): a
-        constant ``S``.
+        (1e-8: about 0.006 an hour). Default 0: a constant ``S`` while the
+        innovations are consistent (with ``adapt_q=False``: throughout).
     S0_sd : float
         Initial standard deviation of each calibration entry.
     v0_sd : float
@@ -98,6 +105,9 @@ class AugmentedEKF(Observer):
         False: a fixed random walk of ``q_S``.
     q_S_max : float
         Largest intensity the adaptation reaches, 1/s.
+    q_S_start : float
+        Intensity the adaptation starts from when the innovations first say
+        that ``S`` moved, 1/s (at least ``q_S``).
     nis_tolerance : float
         Relative error of the noise standard deviations that the adaptation
         tolerates without raising the intensity (0.25: 25 %); a larger value
@@ -111,22 +121,23 @@ class AugmentedEKF(Observer):
 
     name = "ekf"
 
-    def __init__(self, payload, noise=None, q_S=1e-8, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
-                 adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE):
+    def __init__(self, payload, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
+                 adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START):
         super().__init__(payload, offset=offset)
         if noise is not None and not isinstance(noise, NoiseSpec):
             raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
         self.noise = noise
         self.adapt_q = bool(adapt_q)
-        self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=not self.adapt_q)
+        self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=True)
         self.S0_sd, self.v0_sd = as_positive_scalar(S0_sd, "S0_sd"), as_positive_scalar(v0_sd, "v0_sd")
         self.level = None
         if self.adapt_q:
             q_S_max = as_positive_scalar(q_S_max, "q_S_max")
-            if q_S_max < self.q_S:
-                raise FmscalError(f"q_S_max must be at least q_S ({self.q_S:g}); got {q_S_max:g}")
+            q_S_start = max(as_positive_scalar(q_S_start, "q_S_start"), self.q_S)
+            if q_S_max < q_S_start:
+                raise FmscalError(f"q_S_max must be at least q_S and q_S_start ({q_S_start:g}); got {q_S_max:g}")
             self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
-                                                                          allow_zero=True))
+                                                                          allow_zero=True), q_start=q_S_start)
         self.c0_sd = None if c0_sd is None else as_positive_scalar(c0_sd, "c0_sd")
         #: The filter's state size: 6 motion states and the entries of ``[S | c]``.
         self.dim_x = 6 + 3 * self.n_cols
@@ -153,7 +164,8 @@ class AugmentedEKF(Observer):
         J1 = ca.densify(ca.jacobian(f, w1))
         var_w = ca.SX.sym("var_w", 3)                       # wrench noise variances
         q_dt = ca.SX.sym("q_dt")                            # q_S dt
-        Q = (J0 @ ca.diag(var_w) @ J0.T + J1 @ ca.diag(var_w) @ J1.T
+        J = J0 + J1                                         # one reading's whole effect, once a step
+        Q = (J @ ca.diag(var_w) @ J.T
              + ca.diag(ca.vertcat(ca.DM.zeros(6), q_dt * ca.DM.ones(3 * n))))
         jacobians = ca.Function("ekf_jacobians", [xs, w0, w1, dt], [f, F, J0, J1])
         predict = ca.Function("ekf_predict", [xs, w0, w1, dt, var_w, q_dt], [f, F, ca.densify(Q)])

@@ -18,7 +18,9 @@ import math
 
 from scipy.stats import chi2, norm
 
-__all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE"]
+from plant.errors import FmscalError
+
+__all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE", "DEFAULT_Q_START"]
 
 #: Degrees of freedom of the pose innovation ``[theta, X, Y]``.
 NIS_DOF = 3
@@ -27,6 +29,8 @@ NIS_DOF = 3
 NIS_CLIP = float(chi2.ppf(0.999, NIS_DOF))
 #: Relative error of the noise standard deviations tolerated by default (25 %).
 DEFAULT_TOLERANCE = 0.25
+#: Intensity the first alarm starts a zero base level at, 1/s (about 0.006 of wander an hour).
+DEFAULT_Q_START = 1e-8
 #: The bound is the 99.9 % point of the average under a consistent filter.
 _Z = float(norm.ppf(0.999))
 
@@ -43,16 +47,24 @@ class NoiseLevel:
       ``z`` the 99.9 % normal point: the 99.9 % bound of ``eps_bar`` for a
       consistent filter, widened for a noise model whose standard deviations
       are off by up to ``tolerance``;
-    - the intensity ``q`` is multiplied by ``exp(rise h)`` while
-      ``eps_bar > bound`` and by ``exp(-fall h)`` otherwise, within
-      ``[q_base, q_max]``.
+    - while ``eps_bar > bound`` the intensity is raised: ``q`` becomes
+      ``max(q, q_start) exp(rise h)``, at most ``q_max`` (a base level of
+      zero cannot be multiplied up, so the first alarm starts it at
+      ``q_start``);
+    - otherwise it decays: ``q exp(-fall h)``, and once below ``q_start``
+      it drops back to ``q_base`` (never below ``q_base``).
+
+    The level is thus ``q_base`` while nothing changes (0 by default in the
+    EKF: a constant ``S``, the constant-``S`` accuracy) and somewhere in
+    ``[q_start, q_max]`` while, and shortly after, the innovations say that
+    ``S`` moved.
 
     Parameters
     ----------
     q_base : float
-        Intensity while nothing changes, 1/s (> 0).
+        Intensity while nothing changes, 1/s (>= 0).
     q_max : float
-        Largest intensity, 1/s (>= ``q_base``).
+        Largest intensity, 1/s (>= ``q_start`` and ``q_base``).
     tolerance : float
         Relative error of the noise model's standard deviations that does not
         raise the level (0.25: a model 25 % too small is still tolerated).
@@ -61,6 +73,9 @@ class NoiseLevel:
     rise, fall : float
         Rates at which the intensity grows and decays, 1/s (a factor of 10
         in 0.23 s and in 2.3 s by default).
+    q_start : float, optional
+        Intensity an alarm starts from, 1/s (> 0); default ``q_base`` if
+        that is positive, else :data:`DEFAULT_Q_START`.
 
     Attributes
     ----------
@@ -70,8 +85,15 @@ class NoiseLevel:
         The current NIS average.
     """
 
-    def __init__(self, q_base, q_max, tolerance=DEFAULT_TOLERANCE, window=1.0, rise=10.0, fall=1.0):
+    def __init__(self, q_base, q_max, tolerance=DEFAULT_TOLERANCE, window=1.0, rise=10.0, fall=1.0,
+                 q_start=None):
         self.q_base, self.q_max = float(q_base), float(q_max)
+        if q_start is None:
+            q_start = self.q_base if self.q_base > 0 else DEFAULT_Q_START
+        self.q_start = float(q_start)
+        if not (self.q_base >= 0 and self.q_start > 0 and self.q_max >= max(self.q_start, self.q_base)):
+            raise FmscalError(f"NoiseLevel needs 0 <= q_base, 0 < q_start <= q_max; got q_base={self.q_base:g}, "
+                              f"q_start={self.q_start:g}, q_max={self.q_max:g}")
         self.inflation = (1.0 + float(tolerance)) ** 2
         self.window, self.rise, self.fall = float(window), float(rise), float(fall)
         self.reset()
@@ -104,7 +126,13 @@ class NoiseLevel:
         a = math.exp(-h / self.window)
         self.eps_bar = a * self.eps_bar + (1 - a) * min(nis, NIS_CLIP)
         if self.eps_bar > self.bound(a):
-            self.q = min(self.q * math.exp(self.rise * h), self.q_max)
-        else:
-            self.q = max(self.q * math.exp(-self.fall * h), self.q_base)
+            self.q = min(max(self.q, self.q_start) * math.exp(self.rise * h), self.q_max)
+        elif self.q > self.q_base:
+            q = self.q * math.exp(-self.fall * h)
+            self.q = q if q >= max(self.q_start, self.q_base) else self.q_base
         return self.q
+
+    @property
+    def raised(self):
+        """True while the intensity is above its base level."""
+        return self.q > self.q_base

@@ -1,6 +1,7 @@
 """The EKF's adjustable random-walk level, fed NIS samples directly."""
 
 import numpy as np
+import pytest
 
 from observers.noise_level import NIS_CLIP, NoiseLevel
 
@@ -52,3 +53,31 @@ def test_the_average_accounts_for_the_time_between_poses():
     q = np.array([level.update(e, 0.02) for e in rng.chisquare(3, 5_000)])
     assert np.mean(q > 1e-8) < 0.01
     assert level.bound(np.exp(-0.02)) > level.bound(np.exp(-0.001))
+
+
+def test_a_zero_base_level_stays_zero_on_a_consistent_filter():
+    rng = np.random.default_rng(5)
+    level = NoiseLevel(0.0, 1e-4)
+    q = _feed(level, rng.chisquare(3, 100_000))
+    assert np.mean(q > 0) < 0.01 and q[-1] == 0.0 and not level.raised
+
+
+def test_a_zero_base_level_starts_at_q_start_and_drops_back_to_zero():
+    """From a zero base the first alarm starts the level at q_start; once it decays below q_start it is 0 again."""
+    rng = np.random.default_rng(6)
+    level = NoiseLevel(0.0, 1e-4, q_start=1e-8)
+    q_up = _feed(level, 5 * rng.chisquare(3, 5_000))
+    first = np.argmax(q_up > 0)
+    assert 1e-8 <= q_up[first] < 1.1e-8                            # started at q_start
+    assert q_up[-1] == 1e-4 and level.raised
+    q_down = _feed(level, rng.chisquare(3, 20_000))
+    assert q_down[-1] == 0.0 and not level.raised
+    assert np.all((q_down == 0.0) | (q_down >= 1e-8))              # never between 0 and q_start
+
+
+@pytest.mark.parametrize("args, kwargs", [
+    ((-1e-8, 1e-4), {}), ((0.0, 1e-4), {"q_start": 0.0}), ((0.0, 1e-9), {}), ((1e-6, 1e-7), {}),
+])
+def test_noise_level_refuses_bad_levels(args, kwargs):
+    with pytest.raises(ValueError, match="NoiseLevel needs"):
+        NoiseLevel(*args, **kwargs)
