@@ -129,7 +129,7 @@ def summary_markdown(rows, seed, duration_scale):
         claim = PAPER_CLAIMS.get(name)
         transient = f"{PAPER_CLAIMS['transient_s']:g}" if name == _PAPER_OBSERVER else "-"
         lines.append(f"| {method_label(name)} | {_fmt(claim, '.4g') if claim else '-'} | "
-                     f"{_fmt(r['E_median_last_10s'])} | {_fmt(r.get('E_over_floor'), '.2f')} | {_fmt(r['E_100'])} | "
+                     f"{_fmt(r['E_median_last_10s'])} | {_fmt(r.get('E_over_floor'), '.3g')} | {_fmt(r['E_100'])} | "
                      f"{_fmt(r['convergence_time'], '.1f')} | {transient} |")
     lines += ["", "## Every scenario", "",
               "| scenario | observer | median E, last 10 s before 100 s | E / floor | E at end | convergence time [s] "
@@ -137,7 +137,7 @@ def summary_markdown(rows, seed, duration_scale):
               "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['scenario']} | {method_label(r['observer'])} | {_fmt(r['E_median_last_10s'])} | "
-                     f"{_fmt(r.get('E_over_floor'), '.2f')} | {_fmt(r['E_end'])} | "
+                     f"{_fmt(r.get('E_over_floor'), '.3g')} | {_fmt(r['E_end'])} | "
                      f"{_fmt(r['convergence_time'], '.1f')} | {r['diverged']} | {r['converged']} | "
                      f"{r['wall_time']:.1f} |")
     lines += ["", "## S_hat at 100 s, paper scenario", ""]

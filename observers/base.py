@@ -29,6 +29,7 @@ from plant.errors import FmscalError
 from plant.sensor import check_calibration
 
 from .convergence import divergence_bound, settled
+from .progress import EVERY, progress_bar
 from .result import ObserverResult, initial_calibration, offset_std, split_calibration
 from .samples import check_sample, pack_input
 from .state import INPUT
@@ -161,15 +162,18 @@ class Observer:
         n, d = len(U), 3 * self.n_cols
         calibration, x = np.empty((n, d)), np.empty((n, 6))
         diverged = False
-        for k in range(n):
-            if k == 0:
-                self._start(U[0])
-            else:
-                self._advance(U[k - 1], U[k], log.dt)
-            x[k], calibration[k] = self._current()
-            if not self._healthy(x[k], calibration[k]):
-                diverged = True
-                break
+        with progress_bar(n, self.name) as bar:           # shown on a long log in a terminal only
+            for k in range(n):
+                if k == 0:
+                    self._start(U[0])
+                else:
+                    self._advance(U[k - 1], U[k], log.dt)
+                x[k], calibration[k] = self._current()
+                if not self._healthy(x[k], calibration[k]):
+                    diverged = True
+                    break
+                if k % EVERY == EVERY - 1:
+                    bar.update(EVERY)
         if diverged:                        # keep the last healthy estimate; row k is the bad one
             k = max(k, 1)
             calibration, x = calibration[:k], x[:k]
@@ -335,8 +339,9 @@ class RecursiveObserver(Observer):
         U = log_inputs(log)
         self._start(U[0])
         z0 = self._z
-        Z = self._compiled_steps().run(z0, [U[:-1], U[1:], np.full((len(U) - 1, 1), log.dt)],
-                                       healthy=self._healthy_prefix)
+        with progress_bar(len(U), self.name) as bar:
+            Z = self._compiled_steps().run(z0, [U[:-1], U[1:], np.full((len(U) - 1, 1), log.dt)],
+                                           healthy=self._healthy_prefix, progress=bar.update)
         Z = np.vstack([z0, Z])
         diverged = len(Z) < len(U)
         self._z = Z[-1].copy()

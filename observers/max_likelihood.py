@@ -95,6 +95,7 @@ from plant.noise import estimate_noise
 from plant.sensor import check_calibration
 
 from . import _matrix as mx
+from .progress import progress_bar
 from .result import initial_calibration, offset_from_c, offset_std
 
 __all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "V0_SD", "POSE_SD_FLOOR"]
@@ -271,15 +272,19 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
     pose_var = np.maximum(noise.pose_sd, POSE_SD_FLOOR) ** 2
     z0 = _initial_state(log.pose[0], pose_var, n)
     S_noise = S0
-    for k in range(int(passes)):
-        # the process noise at the current S: G(theta) S Sigma S^T G(theta)^T, eq. (1)
-        W = S_noise @ np.diag(np.square(noise.wrench_sd)) @ S_noise.T
-        var_w = np.square(noise.wrench_sd)
-        p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), var_w, s0])
-        # the bias moments only where the estimate is the result (the last pass)
-        z_end, Y = (_run_compiled if compiled else _run_numpy)(z0, U, p, payload, n, k == passes - 1)
-        S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
-        S_noise = S_aug[:, :3]
+    with progress_bar(int(passes) * len(U), "max-likelihood") as bar:     # a long log in a terminal only
+        for k in range(int(passes)):
+            # the process noise at the current S: G(theta) S Sigma S^T G(theta)^T, eq. (1)
+            W = S_noise @ np.diag(np.square(noise.wrench_sd)) @ S_noise.T
+            var_w = np.square(noise.wrench_sd)
+            p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), var_w, s0])
+            # the bias moments only where the estimate is the result (the last pass)
+            if compiled:
+                z_end, Y = _run_compiled(z0, U, p, payload, n, k == passes - 1, bar.update)
+            else:
+                z_end, Y = _run_numpy(z0, U, p, payload, n, k == passes - 1)
+            S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
+            S_noise = S_aug[:, :3]
     Y = np.vstack([np.concatenate([z0[:6], s0]), Y])
     Y[-1, 6:] = S_aug.ravel()                          # the history ends at the estimate
     return MaximumLikelihoodFit(
@@ -583,8 +588,8 @@ def _chunked_steps(payload, n, eiv):
     return ChunkedSteps(step, _CHUNK)
 
 
-def _run_compiled(z0, U, p, payload, n, eiv):
+def _run_compiled(z0, U, p, payload, n, eiv, progress=None):
     """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`."""
     z_end, (Y,) = _chunked_steps(payload, n, eiv).run(z0, [U, np.broadcast_to(p, (len(U), len(p)))],
-                                                       outputs=True, states=False)
+                                                       outputs=True, states=False, progress=progress)
     return z_end, Y

@@ -165,7 +165,7 @@ class ChunkedSteps:
         self.out_sizes = [step.nnz_out(i) for i in range(1, step.n_out())]
         self.fun = compile_function(step.mapaccum(f"{step.name()}_chunk", self.chunk))
 
-    def run(self, z0, inputs, healthy=None, outputs=False, states=True):
+    def run(self, z0, inputs, healthy=None, outputs=False, states=True, progress=None):
         """Run the recursion from ``z0`` over the rows of ``inputs``.
 
         Parameters
@@ -182,6 +182,8 @@ class ChunkedSteps:
         states : bool
             Keep every state (default); False keeps only the last, for a large
             state whose history is not wanted (``healthy`` is then not called).
+        progress : callable, optional
+            ``progress(steps)`` after each chunk, with the steps it ran (a progress bar's ``update``).
 
         Returns
         -------
@@ -206,6 +208,8 @@ class ChunkedSteps:
                 buf[:k1 - k0] = values[k0:k1]
                 buf[k1 - k0:] = values[k1 - 1]            # padding past the end, discarded
             call()
+            if progress is not None:
+                progress(k1 - k0)
             for y, y_out in zip(Y, Y_out):
                 y[k0:k1] = y_out[:k1 - k0]
             if not states:

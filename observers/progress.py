@@ -1,4 +1,4 @@
-"""A progress bar for long runs: the EKF or least squares over a long log.
+"""A progress bar for long runs: a method over a long log (the EKF, the compiled observers, the floor).
 
 :func:`progress_bar` is a :class:`tqdm.tqdm` on stderr that shows itself only
 where it helps: when the run is long (at least :data:`MIN_SAMPLES` samples),
