@@ -58,7 +58,7 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_
     duration : float
         Run length, s (:data:`QUICK_SETTINGS`: 20 s and 1 seed give the same rows).
     floor : callable
-        ``floor(log, truth, payload, told_noise) -> float``: the E each
+        ``floor(log, truth, payload) -> float``: the E each
         configuration is divided by (default the maximum-likelihood floor,
         :func:`analysis.comparison.floor_error`).
     progress : bool
@@ -79,7 +79,7 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_
     cases = [(s, seed) for s in scenarios for seed in seeds]
     for name, seed in tqdm(cases, desc="ablation", disable=not progress):
         sc, log, truth, told = simulate_case(name, seed, duration=duration)
-        E_floor = floor(log, truth, sc.payload, told)
+        E_floor = floor(log, truth, sc.payload)
         offset = truth.offset is not None
         log = log.shift_poses(truth.latency)
         for step, (label, factory) in enumerate(ABLATION_STEPS):

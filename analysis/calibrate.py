@@ -173,16 +173,21 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     units = [u for u in diagnosed if "sensor counts" not in u or get_method(method).online]
     warnings = diagnosed + list(ls_result.warnings)
     warnings += [w for w in result.warnings if w not in warnings]
-    consistency = consistency_check(aligned, payload, offset=offset)
-    if not consistency.consistent:
-        warnings.append(consistency.warning)
+    try:
+        consistency = consistency_check(aligned, payload, offset=offset)
+        consistent = consistency.consistent
+        if not consistent:
+            warnings.append(consistency.warning)
+    except FmscalError as err:            # a half too short to fit: nothing says S stayed constant
+        consistent = False
+        warnings.append(f"the log is too short to check that one constant S explains it ({err})")
     disagreement = _disagreement(result, ls_result)
     if disagreement:
         warnings.append(disagreement)
     calibration = Calibration(S=result.S_hat, payload=payload, method=result.observer, S_std=result.S_std,
                               b=result.b, b_std=result.b_std, latency=float(latency))
     E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
-    converged = (bool(result.converged) and not units and not ls_result.warnings and consistency.consistent
+    converged = (bool(result.converged) and not units and not ls_result.warnings and consistent
                  and not disagreement)
     return CalibrationReport(calibration=calibration, result=result, converged=converged,
                              noise=noise, noise_estimated=noise_estimated, latency_estimated=latency_estimated,

@@ -53,10 +53,11 @@ def _defaults(observer):
     """The constructor's default of each parameter of ``observer`` (empty for an unknown name)."""
     import inspect
     from plant import PAPER_PAYLOAD
+    from plant.errors import FmscalError
     from observers import make_observer
     try:
         obs = make_observer(observer, PAPER_PAYLOAD)
-    except Exception:         # an unknown observer: sweep names it
+    except FmscalError:       # an unknown observer: sweep names it
         return {}
     return {k: v.default for k, v in inspect.signature(type(obs).__init__).parameters.items()}
 

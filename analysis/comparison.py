@@ -69,12 +69,20 @@ def _aligned(log, truth, settings):
     return log.shift_poses(truth.latency), settings
 
 
-def floor_error(log, truth, payload, told_noise=None):
+def floor_error(log, truth, payload):
     """The information floor of a log: E of the maximum-likelihood estimate on it.
 
     The registry's floor method (:data:`observers.FLOOR_METHOD`) runs on the
-    log as every method sees it (:func:`run_observer`), told the same noise;
-    its E is taken as every method's is (:func:`analysis.metrics.tail_median`).
+    log as every method sees it (:func:`run_observer`), with the log's own
+    noise (``truth.noise``; not what a scenario tells a method on purpose,
+    ``ekf-noise-low``); its E is taken as every method's is
+    (:func:`analysis.metrics.tail_median`).
+
+    Parameters
+    ----------
+    log : plant.Log
+    truth : plant.Truth
+    payload : plant.Payload
 
     Returns
     -------
@@ -82,7 +90,7 @@ def floor_error(log, truth, payload, told_noise=None):
         NaN where the floor diverged (it should not).
     """
     log, settings = _aligned(log, truth, None)
-    result = get_method(FLOOR_METHOD).build(payload, told_noise, settings).run(log)
+    result = get_method(FLOOR_METHOD).build(payload, truth.noise, settings).run(log)
     if result.diverged:
         return float("nan")
     return tail_median(error_history(result.S_hat_history, truth.S_at(result.t)))
@@ -170,7 +178,7 @@ def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=N
         ``{observer: (t, E, S_hat_history)}``, decimated to at most 2000 points.
     """
     sc, log, truth, told = simulate_case(scenario, seed, duration)
-    floor = floor_error(log, truth, sc.payload, told)
+    floor = floor_error(log, truth, sc.payload)
     rows, curves = [], {}
     for name in observers:
         out = run_observer(name, log, truth, sc.payload, told, (settings or {}).get(name), histories, floor)

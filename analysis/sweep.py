@@ -84,7 +84,7 @@ def _run_case(case):
     """One case: simulate once, run every variant. Module-level so that it pickles."""
     index, scenario, seed, noise_scale, duration, variants = case
     sc, log, truth, told = simulate_case(scenario, seed, duration, noise_scale)
-    floor = floor_error(log, truth, sc.payload, told)
+    floor = floor_error(log, truth, sc.payload)
     rows = []
     for name, settings in variants:
         row = run_observer(name, log, truth, sc.payload, told, settings, floor=floor)

@@ -41,6 +41,7 @@ from plant.errors import FmscalError
 
 from . import _matrix as mx
 from .base import RecursiveObserver
+from .gains import double_pole_gains
 from .highgain import discrete_gain
 from .state import INPUT, StateLayout
 
@@ -161,6 +162,9 @@ class AdaptiveObserver(RecursiveObserver):
         self.step_ratio = as_positive_scalar(step_ratio, "step_ratio")
         self.t_forget = as_positive_scalar(t_forget, "t_forget")
         self.memory = as_positive_scalar(memory, "memory")
+        #: The continuous-time injection gains whose double poles at ``-lam`` the sampled gain
+        #: ``L_h`` images (eqs. 6, 7, 14; ``fmscal check-gains --config adaptive``).
+        self.K1, self.K2 = double_pole_gains(self.lam)
         super().__init__(payload, offset=offset)
 
     name = "adaptive"

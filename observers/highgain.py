@@ -101,7 +101,7 @@ class HighGainObserver(RecursiveObserver):
     ``(C Upsilon)^T (C Upsilon)``, so that every direction of ``phi``
     converges at about ``gamma`` 1/s whatever the payload and the
     conditioning of ``S``; ``gamma`` decays as ``1/(1 + t/t_decay)`` to a
-    floor to average the noise out, as in the adaptive observer's default.
+    floor to average the noise out.
 
     Two configurations:
 

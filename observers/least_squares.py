@@ -1,4 +1,4 @@
-"""Offline least-squares calibration: the accuracy floor the observers are measured against.
+"""Offline least-squares calibration: a reference that needs no noise model.
 
 Eq. (1) with ``w = S w_hat`` is linear in the parameters ``phi_1``, ``phi_2`` of
 eqs. (4), (5)::

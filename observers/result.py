@@ -40,7 +40,8 @@ class ObserverResult:
         has one) finite and non-zero, and the method's own checks of the log
         passed (least squares: excitation and consistency).
     wall_time : float
-        Seconds of computation.
+        Seconds of computation, without the one-off build of a compiled step
+        (its symbolic graph, C generation and loading; ``info["build_time"]``).
     info : dict
         Method-specific extras (noise estimates, fit diagnostics, ...).
     b : ndarray, shape (3,), or None

@@ -18,6 +18,9 @@ def _temporary(path):
     path = Path(path)
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix or ".tmp", dir=path.parent)
     os.close(fd)
+    umask = os.umask(0)                  # mkstemp makes 0600: give the file the mode open() would
+    os.umask(umask)
+    os.chmod(name, 0o666 & ~umask)
     return Path(name)
 
 

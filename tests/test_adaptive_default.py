@@ -47,7 +47,7 @@ def test_step_by_step_matches_the_run():
 
 def _floor(name, seed, duration):
     sc, log, truth, told = simulate_case(name, seed, duration=duration)
-    return floor_error(log, truth, sc.payload, told)
+    return floor_error(log, truth, sc.payload)
 
 
 def test_at_the_floor_on_paper_30s():
@@ -139,7 +139,7 @@ def test_rejects_bad_settings():
 def test_ablation_short_mode():
     calls = []
 
-    def least_squares_floor(log, truth, payload, told_noise):
+    def least_squares_floor(log, truth, payload):
         calls.append(log.name)
         return tail_error(LeastSquares(payload).run(log), truth)
 
