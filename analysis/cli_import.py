@@ -6,7 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
+from plant.files import atomic_write_many
+
 from .cli_common import CliError, strict
+from .files import check_outputs
 
 
 def add_import(sub):
@@ -40,21 +43,17 @@ def cmd_import(args):
         raise CliError(f"--out must end in .csv; got {out}")
     sidecar = out.with_suffix(".import.json")
     bag = Path(args.bag)
-    if bag.exists() and any(_same(bag, f) or _inside(f, bag) for f in (out, sidecar)):
-        raise CliError(f"--out {out} would write onto the bag {bag}; choose another path")
-    if not args.overwrite:
-        for f in (out, sidecar):
-            if f.exists():
-                raise CliError(f"{f} exists; give --overwrite to replace it")
+    if bag.is_dir() and any(_inside(f, bag) for f in (out, sidecar)):
+        raise CliError(f"--out {out} would write into the bag {bag}; choose another path")
+    check_outputs([(out, "--out"), (sidecar, "--out's sidecar")], [(bag, "the bag")], overwrite=args.overwrite)
     if not all(np.isfinite(v) for v in args.pose_offset):
         raise CliError(f"--pose-offset must be two finite numbers in m; got {list(args.pose_offset)}")
     log, report = import_bag(bag, args.wrench_topic, args.pose_topic, tuple(args.pose_offset),
                              args.start, args.end)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    log.write(out)
-    sidecar.write_text(json.dumps(strict({"log": out.name, "samples": len(log), "duration_s": log.duration,
-                                          "pose_measurements": int(log.has_pose.sum()), **report}),
-                                  indent=2, allow_nan=False) + "\n")
+    text = json.dumps(strict({"log": out.name, "samples": len(log), "duration_s": log.duration,
+                              "pose_measurements": int(log.has_pose.sum()), **report}), indent=2, allow_nan=False)
+    # both or neither: the sidecar first, the log last (plant.files.atomic_write_many)
+    atomic_write_many([(sidecar, lambda tmp: Path(tmp).write_text(text + "\n")), (out, log.write)])
     for warning in report["warnings"]:
         print(f"fmscal import: warning: {warning}", file=sys.stderr)
     if args.json:
@@ -62,13 +61,6 @@ def cmd_import(args):
         return
     print(format_report(report))
     print(f"wrote {out} ({len(log)} samples, {log.duration:g} s, {int(log.has_pose.sum())} poses) and {sidecar}")
-
-
-def _same(a, b):
-    try:
-        return b.exists() and a.resolve() == b.resolve()
-    except OSError:
-        return False
 
 
 def _inside(f, folder):

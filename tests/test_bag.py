@@ -98,7 +98,7 @@ def test_dropped_wrench_messages_resampled_with_a_warning(rig, E_csv, tmp_path):
     assert 75 < missing < 225 and report["wrench"]["dropped"] == missing
     assert report["resampled"] is not None and any("resampled" in w for w in report["warnings"])
     assert len(imported) == len(log)
-    E_bag = calibrate(imported, truth.payload, truth=truth, latency=0.02).E
+    E_bag = calibrate(imported, truth.payload, "least-squares", truth=truth, latency=0.02).E
     assert 0.5 * E_csv < E_bag < 1.25 * E_csv                # resampling over 1 % of samples costs little
 
 
