@@ -96,6 +96,7 @@ from plant.sensor import check_calibration
 
 from . import _matrix as mx
 from .progress import progress_bar
+from .state import StateLayout
 from .result import initial_calibration, offset_from_c, offset_std
 
 __all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "V0_SD", "POSE_SD_FLOOR"]
@@ -296,7 +297,7 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
 # --- the packed state -------------------------------------------------------------------------
 
 def _layout(n):
-    """Slices of the packed state for ``n`` columns of ``[S | c]`` (``m = 3 n`` unknowns).
+    """The packed state for ``n`` columns of ``[S | c]`` (``m = 3 n`` unknowns), a :class:`observers.state.StateLayout`.
 
     x (6), P (6x6 packed lower, 21), M (6 x m), J (m x m packed lower), r (m), and the
     moments of the errors-in-variables correction (:func:`_step`): N (6 x 3), K (the last
@@ -304,23 +305,17 @@ def _layout(n):
     symmetric, packed lower, 6)
     """
     m = 3 * n
-    sizes = [("x", 6), ("P", 21), ("M", 6 * m), ("J", m * (m + 1) // 2), ("r", m),
-             ("N", 18), ("K", 18), ("Gam", 6 * 36), ("beta", 6)]
-    out, k = {}, 0
-    for name, size in sizes:
-        out[name] = slice(k, k + size)
-        k += size
-    out["size"] = k
-    return out
+    return StateLayout(("x", 6), ("P", 21), ("M", 6 * m), ("J", m * (m + 1) // 2), ("r", m),
+                       ("N", 18), ("K", 18), ("Gam", 6 * 36), ("beta", 6))
 
 
 def _initial_state(pose, pose_var, n):
     """The filter at the first sample: the first pose, velocities with prior :data:`V0_SD`, no information."""
     L = _layout(n)
-    z = np.zeros(L["size"])
-    z[L["x"]] = [pose[0], 0.0, pose[1], 0.0, pose[2], 0.0]
+    z = np.zeros(L.size)
+    z[L.slices["x"]] = [pose[0], 0.0, pose[1], 0.0, pose[2], 0.0]
     P = np.diag([pose_var[0], V0_SD ** 2, pose_var[1], V0_SD ** 2, pose_var[1], V0_SD ** 2])
-    z[L["P"]] = _pack(P, 6)
+    z[L.slices["P"]] = _pack(P, 6)
     return z
 
 
@@ -411,16 +406,16 @@ def _step(z, u, p, payload, n, eiv=True):
         The motion ``x + M s_hat`` and ``s_hat`` after the sample.
     """
     o = ops(z, u, p)
-    m, L = 3 * n, _layout(n)
-    x = z[L["x"]]
-    P = _unpack(o, z[L["P"]], 6)
-    M = mx.as_matrix(o, z[L["M"]], 6, m)
-    J = _unpack(o, z[L["J"]], m)
-    r = z[L["r"]]
-    Nz = mx.as_matrix(o, z[L["N"]], 6, 3)
-    K_last = mx.as_matrix(o, z[L["K"]], 6, 3)
-    gam = z[L["Gam"]]
-    beta = z[L["beta"]]
+    m, st = 3 * n, _layout(n).unpack(z)
+    x = st.x
+    P = _unpack(o, st.P, 6)
+    M = mx.as_matrix(o, st.M, 6, m)
+    J = _unpack(o, st.J, m)
+    r = st.r
+    Nz = mx.as_matrix(o, st.N, 6, 3)
+    K_last = mx.as_matrix(o, st.K, 6, 3)
+    gam = st.Gam
+    beta = st.beta
     has, h = u[0], p[0]
     W = mx.as_matrix(o, p[3:12], 3)
     var_w = p[12:15]
@@ -548,9 +543,9 @@ def _solve_information(z, n, var_w, name):
     """
     m, L = 3 * n, _layout(n)
     o = ops(z)
-    J = _unpack(o, z[L["J"]], m)
-    r = z[L["r"]]
-    B = _bias_matrix(o, z[L["beta"]], var_w, n)
+    J = _unpack(o, z[L.slices["J"]], m)
+    r = z[L.slices["r"]]
+    B = _bias_matrix(o, z[L.slices["beta"]], var_w, n)
     d = np.sqrt(np.maximum(np.diag(J), 1e-300))
     scaled = J / np.outer(d, d)                         # unit diagonal: a unit-free condition number
     Jc = (J - B) / np.outer(d, d)
@@ -578,7 +573,7 @@ def _run_numpy(z0, U, p, payload, n, eiv):
 @lru_cache(maxsize=8)
 def _chunked_steps(payload, n, eiv):
     """:func:`_step` run in compiled chunks of :data:`_CHUNK` samples (:class:`plant._compile.ChunkedSteps`)."""
-    size = _layout(n)["size"]
+    size = _layout(n).size
     z = ca.SX.sym("z", size)
     u = ca.SX.sym("u", _N_IN)
     p = ca.SX.sym("p", 15 + 3 * n)
