@@ -69,19 +69,21 @@ class AugmentedEKF(Observer):
     constant ``S``) and forgetting (a moving ``S``); the adjustable level
     does both: on a constant ``S`` it stays at zero and the filter is the
     constant-``S`` filter, and after a step in ``S`` (Table 1) it raises
-    the intensity until the innovations are consistent again.
+    the intensity until the innovations are consistent again. A sensor that
+    drifts fast and steadily (the ``drift`` scenario, 0.2 per 100 s) keeps
+    the innovations only a little above their bound; it is followed better
+    with a fixed random walk of its rate (``q_S=1e-5, adapt_q=False``).
 
     ``S_std`` (and ``b_std``) come from ``P``. Over seeds, the z-scores
     ``(S_hat - S) / S_std`` have a spread near 1 on the ``paper`` and
     ``real-rig`` scenarios, told the noise or estimating it
     (``tests/test_ekf.py``). Where ``S`` amplifies the reading noise (the
     ``random-S`` scenario: entries up to 3, condition number up to 20) the
-    filter is still overconfident (spread about 1.45 on 25 s logs): there
-    its error holds a part that grows with the square of the wrench noise,
-    which the first-order filter does not carry in ``P``. A sensor that
-    drifts fast and steadily (the ``drift`` scenario, 0.2 per 100 s) keeps
-    the innovations only a little above their bound; it is followed better
-    with a fixed random walk of its rate (``q_S=1e-5, adapt_q=False``).
+    filter is still overconfident (spread about 1.45 on 25 s logs): the
+    step's Jacobian with respect to ``S`` holds the noisy reading, whose
+    noise is also in the process noise of the same step; the correlation
+    biases ``S_hat`` by a term that grows with the square of the wrench
+    noise and that ``P`` does not carry.
 
     Parameters
     ----------

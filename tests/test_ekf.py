@@ -206,8 +206,9 @@ def test_ekf_uncertainties_are_honest_over_seeds(scenario, duration, told):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known gap (issue 15): on random-S (S up to 3, cond up to 20) the error "
-                                       "grows faster than S_std, z spread about 1.45 over 20 seeds")
+@pytest.mark.xfail(strict=True, reason="known gap (issue 15): on random-S (S up to 3, cond up to 20) the z spread "
+                                       "is about 1.45 over 20 seeds: the noisy reading in the Jacobian of the step "
+                                       "with respect to S is correlated with the process noise")
 def test_ekf_uncertainties_are_honest_on_random_S():
     """The same two-sided spread on random S: the EKF is still overconfident there (see the xfail reason)."""
     z = np.array([_z_scores("random-S", seed, 25.0, True)[0] for seed in range(20)])
