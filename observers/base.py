@@ -28,7 +28,7 @@ from plant._compile import ChunkedSteps
 from plant.errors import FmscalError
 from plant.sensor import check_calibration
 
-from .convergence import divergence_bound, settled
+from .convergence import DIVERGENCE_GRACE, divergence_bound, settled
 from .progress import EVERY, progress_bar
 from .result import ObserverResult, initial_calibration, offset_std, split_calibration
 from .samples import check_sample, pack_input
@@ -125,6 +125,7 @@ class Observer:
         self.n_cols = 4 if self.offset else 3
         self._S0 = np.eye(3)
         self._bound = divergence_bound(self._S0)
+        self._grace = 0
         self._u_prev = None
 
     # --- the whole log --------------------------------------------------------
@@ -151,6 +152,7 @@ class Observer:
         if self.online:
             self.reset(S0)
             self._bound = divergence_bound(self._S0, log, self.payload)     # relative to the data's scale
+            self._grace = int(round(DIVERGENCE_GRACE / log.dt))             # steps judged on finiteness only
         self._build_time = 0.0
         estimate = self._estimate(log, self._S0)
         result = self._result(log, estimate)
@@ -172,7 +174,7 @@ class Observer:
                 else:
                     self._advance(U[k - 1], U[k], log.dt)
                 x[k], calibration[k] = self._current()
-                if not self._healthy(x[k], calibration[k]):
+                if not self._healthy(x[k], calibration[k], k):
                     diverged = True
                     break
                 if k % EVERY == EVERY - 1:
@@ -195,6 +197,7 @@ class Observer:
         self._require_online("reset")
         self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
         self._bound = divergence_bound(self._S0)
+        self._grace = 0
         self._u_prev = None
 
     def step(self, dt, pose, w_hat):
@@ -248,11 +251,12 @@ class Observer:
         """Covariance of the current ``[S_hat | c_hat]``, where the method has one."""
         return None
 
-    def _healthy(self, x, calibration):
-        """Finite, and every entry of ``S_hat`` within the divergence bound
-        (:func:`observers.convergence.divergence_bound`)."""
+    def _healthy(self, x, calibration, k=None):
+        """Finite, and (from step ``k`` = the grace on) every entry of ``S_hat`` within the divergence
+        bound (:func:`observers.convergence.divergence_bound`, :data:`observers.convergence.DIVERGENCE_GRACE`)."""
         S = np.reshape(calibration, (3, self.n_cols))[:, :3]
-        return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(calibration)) and np.max(np.abs(S)) < self._bound)
+        bounded = (k is not None and k < self._grace) or np.max(np.abs(S)) < self._bound
+        return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(calibration)) and bounded)
 
     # --- shared ---------------------------------------------------------------------
     def _augmented(self, o, w_hat):
@@ -344,8 +348,7 @@ class RecursiveObserver(Observer):
         z0 = self._z
         with progress_bar(len(U), self.name) as bar:
             Z = self._compiled_steps().run(z0, [U[:-1], U[1:], np.full((len(U) - 1, 1), log.dt)],
-                                           healthy=self._healthy_prefix, progress=bar.update)
-        Z = np.vstack([z0, Z])
+                                           healthy=self._healthy_prefix, progress=bar.update, with_start=True)
         diverged = len(Z) < len(U)
         self._z = Z[-1].copy()
         self._u_prev = U[len(Z) - 1]
@@ -363,11 +366,13 @@ class RecursiveObserver(Observer):
         s = self.state.unpack(self._z)
         return s.x, s.S
 
-    def _healthy_prefix(self, Z):
-        """Leading rows of ``Z`` that are finite with every calibration entry within the bound."""
+    def _healthy_prefix(self, Z, k0):
+        """Leading rows of ``Z`` (steps ``k0 + 1`` on) that :meth:`Observer._healthy` would pass."""
         S = self.state.part(Z, "S").reshape(len(Z), 3, self.n_cols)[:, :, :3].reshape(len(Z), 9)
+        steps = k0 + 1 + np.arange(len(Z))
         with np.errstate(invalid="ignore"):
-            bad = ~np.all(np.isfinite(Z), axis=1) | (np.max(np.abs(S), axis=1) >= self._bound)
+            bad = ~np.all(np.isfinite(Z), axis=1) | ((np.max(np.abs(S), axis=1) >= self._bound)
+                                                      & (steps >= self._grace))
         return int(np.argmax(bad)) if bad.any() else len(Z)
 
     def _compiled_steps(self):

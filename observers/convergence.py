@@ -5,10 +5,14 @@ import numpy as np
 from plant.errors import FmscalError
 from plant.units import implied_scale
 
-__all__ = ["settled", "divergence_bound", "DIVERGENCE_FACTOR", "SETTLE_FRACTION", "SETTLE_TOLERANCE"]
+__all__ = ["settled", "divergence_bound", "DIVERGENCE_FACTOR", "DIVERGENCE_GRACE", "SETTLE_FRACTION",
+           "SETTLE_TOLERANCE"]
 
-#: An entry of S_hat beyond this many times the scale (of S0 and of the data) counts as diverged.
+#: An entry of S_hat beyond this many times the scale (of S0 and of the data) counts as diverged ...
 DIVERGENCE_FACTOR = 20.0
+#: ... after this first stretch of a run, s, where only a non-finite estimate does (a recursive
+#: least-squares fit swings wide on its first few poses, before they excite every entry).
+DIVERGENCE_GRACE = 1.0
 #: ``converged`` looks at this final fraction of the run ...
 SETTLE_FRACTION = 0.2
 #: ... and asks that ``S_hat`` stay within this relative 2-norm distance of its final value.

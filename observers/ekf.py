@@ -293,12 +293,11 @@ class AugmentedEKF(Observer):
     def _covariance(self):
         return self._kf.P[6:, 6:].copy()
 
-    def _healthy(self, x, calibration):
+    def _healthy(self, x, calibration, k=None):
         kf = self._kf
         # a NaN or inf anywhere makes a sum non-finite: one reduction per array
-        return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum())
-                    and np.abs(calibration.reshape(3, self.n_cols)[:, :3]).max() < self._bound
-                    and kf.P.diagonal().min() > 0)
+        bounded = (k is not None and k < self._grace) or np.abs(calibration.reshape(3, self.n_cols)[:, :3]).max() < self._bound
+        return bool(np.isfinite(kf.x.sum()) and np.isfinite(kf.P.sum()) and bounded and kf.P.diagonal().min() > 0)
 
 
 #: The noise model of a live filter that was told none (``step`` without a log to estimate it from).

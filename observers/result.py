@@ -30,10 +30,10 @@ class ObserverResult:
     S_std : ndarray, shape (3, 3), or None
         One-sigma uncertainty of each entry, where the method has one.
     diverged : bool
-        An entry of ``S_hat`` left the divergence bound (20 times the scale
-        of ``S0`` and of the data, :func:`observers.convergence.divergence_bound`)
-        or the estimate became non-finite; the run stopped at the last
-        healthy step.
+        After the first second, an entry of ``S_hat`` left the divergence
+        bound (20 times the scale of ``S0`` and of the data,
+        :func:`observers.convergence.divergence_bound`), or at any time the
+        estimate became non-finite; the run stopped at the last healthy step.
     converged : bool
         Not diverged, the estimate settled over the last 20 % of the run
         (:func:`observers.convergence.settled`), its uncertainty (where it

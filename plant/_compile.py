@@ -165,7 +165,7 @@ class ChunkedSteps:
         self.out_sizes = [step.nnz_out(i) for i in range(1, step.n_out())]
         self.fun = compile_function(step.mapaccum(f"{step.name()}_chunk", self.chunk))
 
-    def run(self, z0, inputs, healthy=None, outputs=False, states=True, progress=None):
+    def run(self, z0, inputs, healthy=None, outputs=False, states=True, progress=None, with_start=False):
         """Run the recursion from ``z0`` over the rows of ``inputs``.
 
         Parameters
@@ -174,7 +174,8 @@ class ChunkedSteps:
         inputs : list of ndarray, each shape (N, size_i)
             Row ``k`` of each is the step's input from state ``k`` to ``k + 1``.
         healthy : callable, optional
-            ``healthy(Z_chunk) -> int``: the number of leading rows of a
+            ``healthy(Z_chunk, k0) -> int`` (``k0`` the step of the chunk's first
+            row): the number of leading rows of a
             finished chunk to keep; the run stops after a chunk that keeps
             fewer than it computed.
         outputs : bool
@@ -184,6 +185,8 @@ class ChunkedSteps:
             state whose history is not wanted (``healthy`` is then not called).
         progress : callable, optional
             ``progress(steps)`` after each chunk, with the steps it ran (a progress bar's ``update``).
+        with_start : bool
+            Put ``z0`` in the first row of the states (``M + 1`` rows), saving a copy.
 
         Returns
         -------
@@ -198,7 +201,10 @@ class ChunkedSteps:
         z_in, *u_in = call.inputs
         u_in = [buf.reshape(self.chunk, size) for buf, size in zip(u_in, self.sizes)]    # column-major
         Z_out, *Y_out = [buf.reshape(self.chunk, size) for buf, size in zip(call.outputs, [self.nz, *self.out_sizes])]
-        Z = np.empty((n if states else 1, self.nz))
+        first = 1 if (states and with_start) else 0
+        Z_all = np.empty((n + first if states else 1, self.nz))
+        Z_all[0] = z0
+        Z = Z_all[first:]
         Y = [np.empty((n, size)) for size in self.out_sizes]
         z_in[:] = z0
         m = n
@@ -216,7 +222,7 @@ class ChunkedSteps:
                 z_in[:] = Z_out[k1 - k0 - 1]
                 continue
             Z[k0:k1] = Z_out[:k1 - k0]
-            keep = k1 - k0 if healthy is None else healthy(Z[k0:k1])
+            keep = k1 - k0 if healthy is None else healthy(Z[k0:k1], k0)
             if keep < k1 - k0:
                 m = k0 + keep
                 break
@@ -224,5 +230,5 @@ class ChunkedSteps:
         if not states:
             Z = z_in.copy() if n else np.array(z0, dtype=float)
         else:
-            Z = Z[:m]
+            Z = Z_all[:first + m]
         return (Z, [y[:m] for y in Y]) if outputs else Z

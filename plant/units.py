@@ -59,7 +59,8 @@ def implied_scale(log, payload, window=_WINDOW):
     _, pose, w_hat, h = coarse
     acc = np.diff(pose, n=2, axis=0) / h ** 2                # [theta'', X'', Y''] at the inner points
     with np.errstate(all="ignore"):
-        w = np.array([np.linalg.solve(input_matrix(th, payload), a) for th, a in zip(pose[1:-1, 0], acc)])
+        G = np.moveaxis(input_matrix(pose[1:-1, 0], payload), -1, 0)      # (N, 3, 3): eq. (1) per sample
+        w = np.linalg.solve(G, acc[:, :, None])[:, :, 0]
         w_hat = w_hat[1:-1]
         moment = np.std(w[:, 0]) / np.std(w_hat[:, 0])
         force = np.sqrt(np.var(w[:, 1]) + np.var(w[:, 2])) / np.sqrt(np.var(w_hat[:, 1]) + np.var(w_hat[:, 2]))
