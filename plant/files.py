@@ -31,8 +31,9 @@ def atomic_write_many(writers):
     written are the destinations replaced, in the order given (put the file
     that must never be alone last: ``simulate`` replaces the sidecar, then
     the log). If a replacement fails, the destinations already replaced by
-    this call are removed again, so that no file is left without its
-    companion.
+    this call get their old content back (kept as a hard link beside them
+    until every replacement is done), or are removed where there was none,
+    so that no file is left without its companion and none is lost.
 
     Parameters
     ----------
@@ -44,7 +45,7 @@ def atomic_write_many(writers):
     OSError
         From the writers or the file system; the temporary files are removed.
     """
-    temps, done = [], []
+    temps, done, backups = [], [], {}
     try:
         for path, write in writers:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -54,15 +55,27 @@ def atomic_write_many(writers):
             with open(tmp, "rb+") as f:       # on disk before the rename
                 os.fsync(f.fileno())
         for (path, _), tmp in zip(writers, temps):
+            path = Path(path)
+            if path.is_file():                # the old content, until every file is in place
+                backup = _temporary(path)
+                backup.unlink()
+                os.link(path, backup)
+                backups[path] = backup
             os.replace(tmp, path)
-            done.append(Path(path))
+            done.append(path)
     except BaseException:
         for tmp in temps:
             tmp.unlink(missing_ok=True)
         if len(done) < len(writers):
-            for path in done:                 # no file without its companion
-                path.unlink(missing_ok=True)
+            for path in done:                 # no file without its companion, and none lost
+                if path in backups:
+                    os.replace(backups.pop(path), path)
+                else:
+                    path.unlink(missing_ok=True)
         raise
+    finally:
+        for backup in backups.values():
+            backup.unlink(missing_ok=True)
 
 
 def atomic_write(path, write):

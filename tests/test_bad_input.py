@@ -12,6 +12,7 @@ import os
 import shutil
 import socket
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -271,6 +272,22 @@ def test_simulate_never_leaves_a_log_without_its_sidecar(folder, monkeypatch, ca
     assert main(["simulate", "--duration", "1", "--out", str(folder / "new.csv")]) == 2
     assert not (folder / "new.csv").exists() and not (folder / "new.truth.json").exists()
     assert _snapshot(folder) == before
+
+
+def test_a_failed_overwrite_keeps_the_old_log_and_its_sidecar(folder, monkeypatch, capsys):
+    assert main(["simulate", "--duration", "1", "--seed", "1", "--out", str(folder / "old.csv")]) == 0
+    real, calls = os.replace, []
+
+    def log_fails(src, dst):                    # the sidecar is replaced first, then the log fails
+        calls.append(dst)
+        if Path(dst) == folder / "old.csv":
+            raise OSError(28, "No space left on device")
+        real(src, dst)
+    monkeypatch.setattr(os, "replace", log_fails)
+    before = _snapshot(folder)
+    assert main(["simulate", "--duration", "2", "--out", str(folder / "old.csv"), "--overwrite"]) == 2
+    assert folder / "old.truth.json" in [Path(d) for d in calls]          # it had been replaced
+    assert _snapshot(folder) == before          # the sidecar already replaced got its old content back
 
 
 def test_a_failing_plot_leaves_no_saved_calibration(folder, monkeypatch, capsys):
