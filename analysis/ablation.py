@@ -47,7 +47,7 @@ def tail_error(result, truth):
 
 
 def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_error, progress=False):
-    """Each documented change of the filtered adaptive observer, added in turn.
+    """Each documented change of the adaptive default, added in turn (``fmscal ablation``).
 
     Parameters
     ----------
