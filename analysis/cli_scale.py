@@ -37,10 +37,12 @@ BOOLEANS = {"true": True, "yes": True, "1": True, "false": False, "no": False, "
 
 
 def _parse_value(text):
-    """A number if ``text`` reads as one, a boolean for true/false/yes/no, else the stripped text."""
+    """A number if ``text`` reads as one, a boolean for true/false/yes/no, None for none, else the stripped text."""
     low = text.strip().lower()
     if low in ("true", "false", "yes", "no"):
         return BOOLEANS[low]
+    if low == "none":                    # e.g. high-gain:t_decay=none, a constant gain
+        return None
     for kind in (int, float):
         try:
             return kind(text)

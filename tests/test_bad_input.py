@@ -229,6 +229,7 @@ def test_set_reads_booleans_strictly_and_numbers_as_numbers():
     assert grid == {"adaptive": {"offset": [False, True, False, True, False, True]},
                     "high-gain": {"lam": [1, 2.5]}}
     assert isinstance(grid["high-gain"]["lam"][0], int) and isinstance(grid["adaptive"]["offset"][1], bool)
+    assert parse_settings(["high-gain:t_decay=none,20"]) == {"high-gain": {"t_decay": [None, 20]}}    # a constant gain
 
 
 # --- atomic writes --------------------------------------------------------------------------------------------
