@@ -10,15 +10,13 @@ and by its cost per step (compiled, the second run so that compilation is not
 counted).
 """
 
-import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
 from observers import AdaptiveObserver, PaperAdaptiveObserver
 from plant.errors import FmscalError
 
-from .comparison import floor_error, seed_list, simulate_case
-from .metrics import error_history, tail_median
+from .comparison import floor_error, seed_list, simulate_case, tail_error
 
 __all__ = ["ABLATION_STEPS", "QUICK_SETTINGS", "ablation", "ablation_markdown", "tail_error"]
 
@@ -37,13 +35,6 @@ ABLATION_STEPS = (
 
 #: Settings of a quick run (``fmscal ablation --quick``): the same rows, one short seed.
 QUICK_SETTINGS = {"seeds": 1, "duration": 20.0}
-
-
-def tail_error(result, truth):
-    """E of eq. (16), its median over the last 10 % of the run (NaN if the run diverged)."""
-    if result.diverged:
-        return float("nan")
-    return tail_median(error_history(result.S_hat_history, truth.S_at(result.t)))
 
 
 def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_error, progress=False):

@@ -11,7 +11,7 @@ from plant.errors import FmscalError
 
 from .metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
 
-__all__ = ["simulate_case", "floor_error", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
+__all__ = ["simulate_case", "tail_error", "floor_error", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
            "CHECKPOINTS"]
 
 #: Columns of a sweep's table that tell its rows apart besides scenario and observer.
@@ -69,6 +69,23 @@ def _aligned(log, truth, settings):
     return log.shift_poses(truth.latency), settings
 
 
+def tail_error(result, truth):
+    """E of eq. (16) of a result, its median over the last 10 % of the run (NaN if the run diverged).
+
+    Parameters
+    ----------
+    result : observers.ObserverResult
+    truth : plant.Truth
+
+    Returns
+    -------
+    float
+    """
+    if result.diverged:
+        return float("nan")
+    return tail_median(error_history(result.S_hat_history, truth.S_at(result.t)))
+
+
 def floor_error(log, truth, payload):
     """The information floor of a log: E of the maximum-likelihood estimate on it.
 
@@ -90,10 +107,7 @@ def floor_error(log, truth, payload):
         NaN where the floor diverged (it should not).
     """
     log, settings = _aligned(log, truth, None)
-    result = get_method(FLOOR_METHOD).build(payload, truth.noise, settings).run(log)
-    if result.diverged:
-        return float("nan")
-    return tail_median(error_history(result.S_hat_history, truth.S_at(result.t)))
+    return tail_error(get_method(FLOOR_METHOD).build(payload, truth.noise, settings).run(log), truth)
 
 
 def run_observer(name, log, truth, payload, told_noise=None, settings=None, history=False, floor=None):
