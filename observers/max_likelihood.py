@@ -377,6 +377,65 @@ def _regressor_rows(o, theta, w_hat, payload, n):
 
 
 def _step(z, u, p, payload, n, eiv=True):
+    """One sample of the filter (:func:`_filter_step`) and the estimate so far, for the history.
+
+    Parameters are those of :func:`_filter_step`.
+
+    Returns
+    -------
+    z_next : shape (size,)
+    out : shape (6 + 3n,)
+        The motion ``x + M s_hat`` and ``s_hat`` after the sample.
+    """
+    o = ops(z, u, p)
+    m, L = 3 * n, _layout(n)
+    z_next = _filter_step(z, u, p, payload, n, eiv)
+    st = L.unpack(z_next)
+    J = _unpack(o, st.J, m)
+    M = mx.as_matrix(o, st.M, 6, m)
+    var_w, s0 = p[12:15], p[15:15 + m]
+    # the estimate so far (the final one is solved exactly, in numpy): the uncorrected
+    # s_u = S0 + (J + lam I)^-1 (r - J S0), then s_u + (J + lam I)^-1 B s_u, the first-order
+    # solution of (J - B) s = r, the correction limited (:func:`_correction_limit`) while the
+    # information is still rank-deficient (the first samples)
+    chol = _information_factor(o, J, m)
+    s_u = mx.col(s0) + _cholesky_apply(o, chol, mx.col(st.r) - o.dot(J, mx.col(s0)), m)
+    corr = (_cholesky_apply(o, chol, o.dot(_bias_matrix(o, st.beta, var_w, n), s_u), m) if eiv
+            else 0.0 * s_u)
+    s_hat = s_u + corr * _correction_limit(o, s_u, corr, m)
+    # and held within a radius of S0 while the information cannot place every entry yet
+    s_entries = [n * i + j for i in range(3) for j in range(3)]
+    step_size = o.sqrt(sum((s_hat[k, 0] - s0[k]) ** 2 for k in s_entries))
+    radius = _HISTORY_RADIUS * (o.sqrt(sum(s0[k] * s0[k] for k in s_entries)) + 1.0)
+    s_hat = mx.col(s0) + (s_hat - mx.col(s0)) / o.fmax(1.0, step_size / radius)
+    x_hat = mx.col(st.x) + o.dot(M, s_hat)
+    return z_next, o.vcat([mx.vec(x_hat), mx.vec(s_hat)])
+
+
+def _information_factor(o, J, m):
+    """Cholesky factor (:func:`_cholesky`) of ``J + lam I``, ``lam`` a ``1e-10`` of ``J``'s mean diagonal.
+
+    The information is rank-deficient over the first samples; the small
+    ``lam`` (a pull towards the start, negligible once every entry is
+    excited) keeps the estimate defined from the first sample.
+    """
+    trace = sum(J[i, i] for i in range(m))
+    return _cholesky(o, J + (_REG_REL * trace / m + _REG_ABS) * mx.eye(o, m), m)
+
+
+def _correction_limit(o, s, corr, m):
+    """The factor (<= 1) that keeps a bias correction ``corr`` within a tenth of ``|s|``.
+
+    The correction is a first-order term, about 1e-3 of ``|s|`` once the
+    log has excited every entry; the limit only acts over the first samples,
+    where the information is still rank-deficient.
+    """
+    size_s = o.sqrt(sum(s[i, 0] * s[i, 0] for i in range(m)))
+    size_c = o.sqrt(sum(corr[i, 0] * corr[i, 0] for i in range(m)))
+    return 1.0 / o.fmax(1.0, size_c / (_CORRECTION_LIMIT * size_s + _REG_ABS))
+
+
+def _filter_step(z, u, p, payload, n, eiv=True):
     """One sample of the separate-bias Kalman filter and its bias moments (module docstring).
 
     Parameters
@@ -402,8 +461,7 @@ def _step(z, u, p, payload, n, eiv=True):
     Returns
     -------
     z_next : shape (size,)
-    out : shape (6 + 3n,)
-        The motion ``x + M s_hat`` and ``s_hat`` after the sample.
+        Packed state after the sample.
     """
     o = ops(z, u, p)
     m, st = 3 * n, _layout(n).unpack(z)
@@ -418,8 +476,6 @@ def _step(z, u, p, payload, n, eiv=True):
     beta = st.beta
     has, h = u[0], p[0]
     W = mx.as_matrix(o, p[3:12], 3)
-    var_w = p[12:15]
-    s0 = p[15:15 + m]
     # prediction over the step: Phi = diag of [[1, h], [0, 1]] per channel theta, X, Y
     Phi = o.matrix([[1.0 if i == j else (h if (j == i + 1 and i % 2 == 0) else 0.0) for j in range(6)]
                     for i in range(6)])
@@ -488,29 +544,10 @@ def _step(z, u, p, payload, n, eiv=True):
     d_end = o.matrix([[(h * h / 6 if i % 2 == 0 else h / 2) * G1[i // 2, b] for b in range(3)]
                       for i in range(6)])
     N_next = d_end - o.dot(K, d_end[pos, :]) if eiv else Nz
-    # the estimate so far, for the history (the final one is solved exactly, in numpy): the
-    # uncorrected s_u = S0 + (J + lam I)^-1 (r - J S0), then s_u + (J + lam I)^-1 B s_u, the
-    # first-order solution of (J - B) s = r, the correction limited to a tenth of |s_u| while
-    # the information is still rank-deficient (the first samples)
-    trace = sum(J_next[i, i] for i in range(m))
-    lam = _REG_REL * trace / m + _REG_ABS
-    chol = _cholesky(o, J_next + lam * mx.eye(o, m), m)
-    s_u = mx.col(s0) + _cholesky_apply(o, chol, r_next - o.dot(J_next, mx.col(s0)), m)
-    corr = (_cholesky_apply(o, chol, o.dot(_bias_matrix(o, beta_next, var_w, n), s_u), m) if eiv
-            else 0.0 * s_u)
-    size_u = o.sqrt(sum(s_u[i, 0] * s_u[i, 0] for i in range(m)))
-    size_c = o.sqrt(sum(corr[i, 0] * corr[i, 0] for i in range(m)))
-    s_hat = s_u + corr / o.fmax(1.0, size_c / (_CORRECTION_LIMIT * size_u + _REG_ABS))
-    # and held within a radius of S0 while the information cannot place every entry yet
-    s_entries = [n * i + j for i in range(3) for j in range(3)]
-    step_size = o.sqrt(sum((s_hat[k, 0] - s0[k]) ** 2 for k in s_entries))
-    radius = _HISTORY_RADIUS * (o.sqrt(sum(s0[k] * s0[k] for k in s_entries)) + 1.0)
-    s_hat = mx.col(s0) + (s_hat - mx.col(s0)) / o.fmax(1.0, step_size / radius)
-    x_hat = x_next + o.dot(M_next, s_hat)
     z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next),
                      mx.flat(o, N_next), mx.flat(o, K if eiv else K_last), o.vcat(gam_next),
                      o.vcat(beta_next)])
-    return z_next, o.vcat([mx.vec(x_hat), mx.vec(s_hat)])
+    return z_next
 
 
 def _bias_matrix(o, beta, var_w, n):

@@ -1,0 +1,72 @@
+"""The errors-in-variables compensation the EKF reports through (observers.eiv)."""
+
+import numpy as np
+import pytest
+
+import plant
+from observers import AugmentedEKF
+from observers.eiv import EivCompensation, _compensation, _compiled
+from observers.max_likelihood import _initial_state, _layout, fit_max_likelihood
+
+
+def test_compiled_compensation_matches_the_readable_step():
+    """The compiled call and the same step in numpy agree to rounding, state and output."""
+    payload, n = plant.PAPER_PAYLOAD, 3
+    rng = np.random.default_rng(3)
+    z = _initial_state(np.array([0.1, 0.2, -0.3]), np.array([1e-6, 1e-8, 1e-8]), n)
+    q = np.concatenate([[1e-3, 1e-6, 1e-8], [4e-4, 2.5e-3, 2.5e-3], np.eye(3).ravel()])
+    s = (np.eye(3) + 0.1 * rng.normal(size=(3, 3))).ravel()
+    fun = _compiled(payload, n)
+    for k in range(200):
+        u = np.concatenate([[k % 2, 0.1 + 1e-3 * k, 0.1 + 1e-3 * (k + 1)], rng.normal(scale=0.1, size=3),
+                            rng.normal(size=6)])
+        z_np, s_np, T_np = _compensation(z, u, q, s, payload, n)
+        z_c, s_c, T_c = (np.asarray(v) for v in fun(z, u, q, s))
+        np.testing.assert_allclose(z_c.ravel(), np.ravel(z_np), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(s_c.ravel(), np.ravel(s_np), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(T_c, T_np, rtol=1e-9, atol=1e-12)
+        z = np.ravel(z_np)
+    assert z.size == _layout(n).size
+
+
+@pytest.fixture(scope="module")
+def noisy_20s():
+    sc = plant.get_scenario("noisy").with_(duration=20.0)
+    log, truth, _ = sc.generate(1)
+    return sc, log, truth
+
+
+def test_the_ekf_compensation_is_the_floors_bias(noisy_20s):
+    """At the end of a log the EKF's correction ``(T - I) s`` is the floor's ``J^-1 B s`` (the same moments, with
+    the EKF's angles and its S in the noise): within 10 %, and not negligible on this scenario (1.4 % of ``|s|``,
+    so that a compensation left off fails the test)."""
+    sc, log, truth = noisy_20s
+    ekf = AugmentedEKF(sc.payload, noise=truth.noise)
+    ekf.run(log, truth.S0)
+    fit = fit_max_likelihood(log, sc.payload, truth.noise)
+    S = truth.S_at(0.0).ravel()
+    floor_correction = np.linalg.solve(fit.information, fit.eiv_bias @ S)
+    assert np.linalg.norm(floor_correction) > 5e-3 * np.linalg.norm(S)
+    ekf_correction = (ekf.eiv.T - np.eye(9)) @ S
+    assert np.linalg.norm(ekf_correction - floor_correction) < 0.1 * np.linalg.norm(floor_correction)
+
+
+def test_the_ekf_reports_the_compensated_filter(noisy_20s):
+    """``S_hat = T s`` and ``P_S = T P T^T`` from the filter's own ``s`` and ``P``; ``eiv=False`` reports them as is."""
+    sc, log, truth = noisy_20s
+    log = log.head(5000)
+    ekf = AugmentedEKF(sc.payload, noise=truth.noise)
+    result = ekf.run(log, truth.S0)
+    s, P, T = ekf._kf.x[6:, 0], ekf._kf.P[6:, 6:], ekf.eiv.T
+    np.testing.assert_allclose(result.S_hat.ravel(), T @ s, rtol=1e-12)
+    np.testing.assert_allclose(result.S_std.ravel(), np.sqrt(np.diag(T @ P @ T.T)), rtol=1e-12)
+    plain = AugmentedEKF(sc.payload, noise=truth.noise, eiv=False)
+    result_plain = plain.run(log, truth.S0)
+    np.testing.assert_allclose(result_plain.S_hat.ravel(), s, rtol=1e-12)      # the same filter underneath
+    assert plain.eiv is None
+
+
+def test_compensation_starts_at_the_identity():
+    comp = EivCompensation(plant.PAPER_PAYLOAD, 4)
+    comp.reset(np.zeros(3), np.array([1e-3, 1e-4, 1e-4]), np.full(3, 0.05), np.zeros(12))
+    np.testing.assert_array_equal(comp.T, np.eye(12))
