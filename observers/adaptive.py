@@ -150,7 +150,7 @@ class AdaptiveObserver(RecursiveObserver):
     """
 
     def __init__(self, payload, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
-                 threshold=8.0, step_ratio=5.0, t_forget=0.5, memory=0.2, offset=False):
+                 threshold=8.0, step_ratio=5.0, t_forget=0.05, memory=0.2, offset=False):
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")

@@ -86,13 +86,15 @@ def test_tracks_the_table_1_steps():
 
 @pytest.mark.slow
 def test_follows_a_drift_far_better_than_without_tracking():
+    """Issue 15: on ``drift`` (0.2 per 100 s) the median over 5 seeds of E over the last 10 s stays below 0.022,
+    the figure of the adaptive default before it (a drift cannot be followed exactly: above 0.005)."""
     tracked, fixed = [], []
-    for seed in range(3):
+    for seed in range(5):
         sc, log, truth, _, _ = _case("drift", seed, 100.0)
         tracked.append(tail_error(AdaptiveObserver(sc.payload).run(log, truth.S0), truth))
         fixed.append(tail_error(AdaptiveObserver(sc.payload, track=False).run(log, truth.S0), truth))
     assert np.median(tracked) < np.median(fixed) / 2
-    assert 0.005 < np.median(tracked) < 0.03        # a drift of 0.2 per 100 s cannot be followed exactly
+    assert 0.005 < np.median(tracked) < 0.022
 
 
 def test_without_tracking_a_step_is_not_followed():
