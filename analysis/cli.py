@@ -15,7 +15,8 @@ import numpy as np
 
 from .cli_calibration import add_apply, add_calibrate
 from .cli_import import add_import
-from .cli_common import CliError, add_scenarios_and_observers, check_seeds, check_sizes, positive, strict
+from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
+                         strict)
 from .files import atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs
 from .cli_scale import add_bench, add_sweep
 
@@ -145,6 +146,7 @@ def _add_reproduce(sub):
     p.add_argument("--quick", type=float, default=1.0, metavar="FRACTION",
                    help="run this fraction of each scenario's length (default 1: the paper's)")
     p.add_argument("--overwrite", action="store_true", help="replace figures and summary.md already in DIR")
+    add_jobs(p)
     p.set_defaults(func=cmd_reproduce)
 
 
@@ -153,8 +155,9 @@ def cmd_reproduce(args):
     if not 0 < args.quick <= 1:
         raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
     check_seeds(seed=args.seed)
+    check_jobs(args.jobs)
     check_output_dir(args.out, output_names(), overwrite=args.overwrite)
-    reproduce(args.out, seed=args.seed, duration_scale=args.quick)
+    reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
     print((Path(args.out) / "summary.md").read_text())
 
 

@@ -61,3 +61,14 @@ def check_seeds(seed=None, seeds=None):
         raise CliError(f"--seed must be a non-negative integer; got {seed}")
     if seeds is not None and not 1 <= seeds <= MAX_SEEDS:
         raise CliError(f"--seeds must be at least 1 and at most {MAX_SEEDS}; got {seeds}")
+
+
+def add_jobs(p):
+    """The ``--jobs`` option of a command that runs on local worker processes."""
+    p.add_argument("--jobs", type=int, default=-1, metavar="N", help="local worker processes (default -1: every core)")
+
+
+def check_jobs(jobs):
+    """Refuse ``--jobs 0`` (joblib: a positive count, or -1 for every core, -2 all but one, ...)."""
+    if jobs == 0:
+        raise CliError("--jobs must be a positive number of processes or -1 (every core); got 0")

@@ -2,7 +2,8 @@
 
 import json
 
-from .cli_common import CliError, add_scenarios_and_observers, check_seeds, check_sizes, positive, strict
+from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
+                         strict)
 from .files import atomic_write, atomic_write_text, check_outputs
 
 
@@ -21,7 +22,7 @@ def add_sweep(sub):
                    help="a grid of constructor settings, e.g. high-gain:lam=10,20,40 (repeatable, once per "
                         "parameter; booleans: true/false/yes/no/1/0)")
     p.add_argument("--duration", type=float, metavar="S", help="run length in s (default: each scenario's)")
-    p.add_argument("--jobs", type=int, default=-1, metavar="N", help="local worker processes (default -1: every core)")
+    add_jobs(p)
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler instead")
     p.add_argument("--scheduler-timeout", type=float, default=DEFAULT_SCHEDULER_TIMEOUT, metavar="S",
                    help=f"give up on a scheduler that does not answer within this many seconds "
@@ -97,8 +98,7 @@ def cmd_sweep(args):
     from .comparison import summarise, summary_markdown
     from .sweep import sweep
     check_seeds(seeds=args.seeds)
-    if args.jobs == 0:
-        raise CliError("--jobs must be a positive number of processes or -1 (every core); got 0")
+    check_jobs(args.jobs)
     if args.duration is not None:
         positive(args.duration, "--duration")
     if args.out and not args.out.endswith(".csv"):

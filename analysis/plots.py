@@ -16,7 +16,8 @@ import numpy as np
 from observers import method_label
 from plant.files import atomic_write
 
-__all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "wandering_methods"]
+__all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "thinned",
+           "wandering_methods"]
 
 _MAX_POINTS = 2000        # points drawn per curve
 #: A method whose median E over the second half of the run exceeds this factor times the
@@ -38,6 +39,23 @@ def _save(fig, path, dpi=100):
 
 def _thin(n):
     return max(1, n // _MAX_POINTS)
+
+
+def thinned(t, E, S_hat_history):
+    """A run's curves decimated as :func:`plot_comparison` draws them (about 2000 points).
+
+    Parameters
+    ----------
+    t, E : ndarray, shape (N,)
+    S_hat_history : ndarray, shape (N, 3, 3)
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(t, E, S_hat_history)``, every ``k``-th sample; drawn again they are not thinned further.
+    """
+    k = _thin(len(t))
+    return np.asarray(t)[::k], np.asarray(E)[::k], np.asarray(S_hat_history)[::k]
 
 
 def wandering_methods(E_curves):

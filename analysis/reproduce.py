@@ -10,7 +10,7 @@ from plant import get_scenario
 from plant.files import atomic_write_text
 
 from .metrics import convergence_time, error_history
-from .plots import plot_comparison
+from .plots import plot_comparison, thinned
 
 __all__ = ["reproduce", "output_names", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
@@ -37,12 +37,36 @@ def output_names():
     return [_figure_name(name, fig) for name, fig in _FIGURES] + ["summary.md"]
 
 
-def _observers(payload, truth):
-    """The methods compared, each with its documented default tuning."""
-    return [make_observer(name, payload, truth.told_noise_spec()) for name in REPRODUCED_OBSERVERS]
+def _scenario(name, duration_scale):
+    sc = get_scenario(name)
+    return sc.with_(duration=sc.duration * duration_scale)
 
 
-def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
+def _run_one(name, method, seed, duration_scale):
+    """One method on one scenario's log, with its documented default tuning: a row and its curves, thinned.
+
+    Runs in a worker process: the log is made there (it is cheap and
+    seeded), and only the row and the curves as the figure draws them
+    (:func:`analysis.plots.thinned`) come back.
+    """
+    sc = _scenario(name, duration_scale)
+    log, truth, _ = sc.generate(seed)
+    obs = make_observer(method, sc.payload, truth.told_noise_spec())
+    r = obs.run(log, truth.S0 if obs.online else None)
+    E = error_history(r.S_hat_history, truth.S_at(r.t))
+    k100 = min(len(E) - 1, int(round(min(100.0, sc.duration) / log.dt)) - 1)   # just before 100 s
+    ok = not r.diverged
+    row = {"scenario": name, "observer": r.observer,
+           "E_100": float(E[k100]) if ok else None,
+           "E_end": float(E[-1]) if ok else None,
+           "E_median_last_10s": float(np.median(E[max(0, k100 - int(10 / log.dt)):k100 + 1])) if ok else None,
+           "convergence_time": convergence_time(r.t, E) if ok else None,
+           "diverged": r.diverged, "converged": r.converged,
+           "wall_time": r.wall_time, "S_hat_100": r.S_hat_history[k100].tolist()}
+    return row, thinned(r.t, E, r.S_hat_history)
+
+
+def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True, n_jobs=-1):
     """Run section 4 for every observer and write figures and a summary.
 
     Parameters
@@ -59,6 +83,9 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
         300 s); for quick checks.
     progress : bool
         Show a progress bar.
+    n_jobs : int
+        Local worker processes (joblib) over the scenario and method pairs;
+        -1: every core, 1: this process. The results do not depend on it.
 
     Returns
     -------
@@ -71,39 +98,46 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True):
         same log), ``convergence_time``, ``diverged``, ``converged``,
         ``wall_time``, ``S_hat_100``; E is None for a diverged run.
     """
+    from joblib import Parallel, delayed
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    bar = tqdm(total=len(REPRODUCED_OBSERVERS) * len(_FIGURES), desc="reproduce", disable=not progress)
+    pairs = [(name, method) for name, _ in _FIGURES for method in REPRODUCED_OBSERVERS]
+    # the longest runs first, so that the workers finish together
+    order = sorted(range(len(pairs)), key=lambda i: -_scenario(pairs[i][0], 1.0).duration
+                   * _COST_RANK.get(pairs[i][1], 1))
+    results = [None] * len(pairs)
+    bar = tqdm(total=len(pairs), desc="reproduce", disable=not progress)
+    if n_jobs == 1:
+        done = ((i, _run_one(*pairs[i], seed, duration_scale)) for i in order)
+    else:
+        done = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+            delayed(_indexed)(i, *pairs[i], seed, duration_scale) for i in order)
+    for i, result in done:
+        results[i] = result
+        bar.set_postfix_str(" ".join(pairs[i]))
+        bar.update(1)
+    bar.close()
+    rows = [row for row, _ in results]
     for name, fig in _FIGURES:
-        sc = get_scenario(name)
-        sc = sc.with_(duration=sc.duration * duration_scale)
-        log, truth, _ = sc.generate(seed)
-        runs = {}
-        for obs in _observers(sc.payload, truth):
-            bar.set_postfix_str(f"{name}: {obs.name}")
-            r = obs.run(log, truth.S0 if obs.online else None)
-            E = error_history(r.S_hat_history, truth.S_at(r.t))
-            runs[r.observer] = (r.t, E, r.S_hat_history)
-            k100 = min(len(E) - 1, int(round(min(100.0, sc.duration) / log.dt)) - 1)   # just before 100 s
-            rows.append({"scenario": name, "observer": r.observer,
-                         "E_100": float(E[k100]) if not r.diverged else None,
-                         "E_end": float(E[-1]) if not r.diverged else None,
-                         "E_median_last_10s": float(np.median(E[max(0, k100 - int(10 / log.dt)):k100 + 1]))
-                         if not r.diverged else None,
-                         "convergence_time": convergence_time(r.t, E) if not r.diverged else None,
-                         "diverged": r.diverged, "converged": r.converged,
-                         "wall_time": r.wall_time, "S_hat_100": r.S_hat_history[k100].tolist()})
-            bar.update(1)
-        floor = next(r for r in rows[::-1] if r["scenario"] == name and r["observer"] == FLOOR_METHOD)
+        floor = next(r for r in rows if r["scenario"] == name and r["observer"] == FLOOR_METHOD)
         for r in rows:
             if r["scenario"] == name and r["E_median_last_10s"] is not None and floor["E_median_last_10s"]:
                 r["E_over_floor"] = r["E_median_last_10s"] / floor["E_median_last_10s"]
+        truth = _scenario(name, duration_scale).generate(seed)[1]
+        runs = {row["observer"]: curves for row, curves in results if row["scenario"] == name}
         plot_comparison(runs, truth, out / _figure_name(name, fig),
                         f"{fig}: E against time and the entries of S_hat, scenario '{name}' (seed {seed})")
-    bar.close()
     atomic_write_text(out / "summary.md", summary_markdown(rows, seed, duration_scale))
     return rows
+
+
+#: Relative cost per step of the methods that dominate the wall time (the EKF's filterpy steps, the
+#: floor's two passes), for scheduling only.
+_COST_RANK = {"ekf": 20, FLOOR_METHOD: 3}
+
+
+def _indexed(i, name, method, seed, duration_scale):
+    return i, _run_one(name, method, seed, duration_scale)
 
 
 def _fmt(v, spec=".3g"):

@@ -158,6 +158,8 @@ CASES = [
       "0", "0"], "another payload"),
     # sweep --set read strictly
     (["sweep", "--set", "adaptive:offset=maybe", "--duration", "1", "--seeds", "1"], "true or false"),
+    (["sweep", "--jobs", "0", "--duration", "1", "--seeds", "1"], "--jobs must be a positive number"),
+    (["reproduce", "--jobs", "0", "--out", "{d}/rep0", "--quick", "0.01"], "--jobs must be a positive number"),
     (["sweep", "--set", "adaptive:offset=true", "--set", "adaptive:offset=false", "--duration", "1"], "twice"),
     (["sweep", "--set", "adaptive-offset", "--duration", "1"], "OBSERVER:PARAM"),
     (["sweep", "--scheduler", "{silent}", "--scheduler-timeout", "1", "--duration", "1", "--seeds", "1"],

@@ -51,6 +51,15 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
         assert name in summary
 
 
+def test_reproduce_gives_the_same_rows_on_one_process_and_on_two(tmp_path):
+    """The scenario and method pairs run on worker processes; the table does not depend on how many."""
+    from analysis.reproduce import reproduce
+    rows = [reproduce(tmp_path / str(n), duration_scale=0.02, progress=False, n_jobs=n) for n in (1, 2)]
+    strip = lambda table: [{k: v for k, v in r.items() if k != "wall_time"} for r in table]     # noqa: E731
+    assert strip(rows[0]) == strip(rows[1])
+    assert (tmp_path / "2" / "fig4_time-varying.png").stat().st_size > 0
+
+
 def test_compare_json_is_strict_and_has_a_row_per_observer_and_seed(capsys):
     assert main(["compare", "--scenario", "paper", "--seeds", "2", "--duration", "3", "--json",
                  "--observer", "adaptive", "adaptive-paper", "high-gain", "ekf"]) == 0
