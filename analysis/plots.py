@@ -52,7 +52,9 @@ def thinned(t, E, S_hat_history):
     Returns
     -------
     tuple of ndarray
-        ``(t, E, S_hat_history)``, every ``k``-th sample; drawn again they are not thinned further.
+        ``(t, E, S_hat_history)``, every ``k``-th sample; drawn again they are not thinned further
+        (:func:`wandering_methods` then judges the thinned ``E``: a median over the same curve's
+        points, equal to the full one's to within the curve's sample-to-sample spread).
     """
     k = _thin(len(t))
     return np.asarray(t)[::k], np.asarray(E)[::k], np.asarray(S_hat_history)[::k]

@@ -55,10 +55,9 @@ def _compensation(z, u, q, s, payload, n):
         Packed state of the separate-bias filter (:func:`observers.max_likelihood._layout`).
     u : shape (12,)
         ``[has_pose_k+1, theta_k, theta_k+1, pose_k+1 (3), w_hat_k (3), w_hat_k+1 (3)]``.
-    q : shape (6 + 3n,)
-        ``[h, angle variance, position variance, Sigma (3), s0 (3n)]``: the
-        step (s), the pose noise, the raw reading's noise variances and the
-        start of the filter.
+    q : shape (6,)
+        ``[h, angle variance, position variance, Sigma (3)]``: the step (s),
+        the pose noise and the raw reading's noise variances.
     s : shape (3n,)
         The filter's estimate of ``vec([S | c])`` after the sample, row order;
         the separate-bias filter takes its process noise
@@ -80,7 +79,7 @@ def _compensation(z, u, q, s, payload, n):
     var_w = q[3:6]
     S = o.matrix([[s[n * i + j] for j in range(3)] for i in range(3)])
     W = o.dot(o.dot(S, o.matrix([[var_w[i] if i == j else 0.0 for j in range(3)] for i in range(3)])), S.T)
-    p = o.vcat([q[0:3], mx.flat(o, W), q[3:]])           # the parameters of _filter_step
+    p = o.vcat([q[0:3], mx.flat(o, W), q[3:6]])          # the parameters of _filter_step (it reads no s0)
     z_next = _filter_step(z, u, p, payload, n, eiv=True)
     st = _layout(n).unpack(z_next)
     J = _unpack(o, st.J, m)
@@ -96,7 +95,7 @@ def _compiled(payload, n):
     size = _layout(n).size
     z = ca.SX.sym("z", size)
     u = ca.SX.sym("u", 12)
-    q = ca.SX.sym("q", 6 + 3 * n)
+    q = ca.SX.sym("q", 6)
     s = ca.SX.sym("s", 3 * n)
     z_next, s_c, T = _compensation(z, u, q, s, payload, n)
     fun = ca.Function(f"eiv_compensation{n}", [z, u, q, s], [ca.densify(z_next), ca.densify(s_c), ca.densify(T)])
@@ -119,7 +118,7 @@ class EivCompensation:
         self._call = BufferedCall(_compiled(payload, self.n))
         self.T = np.eye(3 * self.n)
 
-    def reset(self, pose, pose_sd, wrench_sd, s0):
+    def reset(self, pose, pose_sd, wrench_sd):
         """Start at the first sample.
 
         Parameters
@@ -131,15 +130,12 @@ class EivCompensation:
             ``X`` and ``Y`` share the position's.
         wrench_sd : array_like, shape (3,)
             The raw reading's noise standard deviations.
-        s0 : array_like, shape (3n,)
-            The filter's start ``vec([S | c])``, row order.
         """
         pose_var = np.maximum(np.asarray(pose_sd, dtype=float), POSE_SD_FLOOR) ** 2
         z_in, _, q_in, _ = self._call.inputs
         z_in[:] = _initial_state(np.asarray(pose, dtype=float), pose_var, self.n)
         q_in[1:3] = pose_var[:2]
         q_in[3:6] = np.square(np.asarray(wrench_sd, dtype=float))
-        q_in[6:] = s0
         self.T = np.eye(3 * self.n)
 
     def step(self, has_pose, theta, pose, w_hat, dt, s):

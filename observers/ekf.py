@@ -81,7 +81,9 @@ class AugmentedEKF(Observer):
     towards zero by a fraction that grows with the square of the wrench
     noise (2x the floor's E on the ``noisy`` scenario). The reported
     estimate is compensated to first order, ``S_c = T S_hat`` and
-    ``P_c = T P T^T`` with ``T = I + (J + lam I)^-1 B``, from the information
+    ``P_c = T P T^T`` with ``T = I + (J + lam I)^-1 B`` (the correction
+    limited to a tenth of ``|S_hat|`` over the first samples, while ``J``
+    is still rank-deficient), from the information
     ``J`` and its noise-made part ``B`` that a separate-bias filter run
     beside the EKF accumulates (:class:`observers.eiv.EivCompensation`, the
     same step as the floor's); the filter itself runs on its own estimate.
@@ -196,7 +198,7 @@ class AugmentedEKF(Observer):
         J1 = ca.densify(ca.jacobian(f, w1))
         var_w = ca.SX.sym("var_w", 3)                       # wrench noise variances
         P_S_flat = ca.SX.sym("P_S", (3 * n) ** 2)
-        P_S = ca.reshape(P_S_flat, 3 * n, 3 * n)              # covariance of [S | c], row order
+        P_S = ca.reshape(P_S_flat, 3 * n, 3 * n)              # covariance of [S | c] (symmetric: either order)
         q_dt = ca.SX.sym("q_dt")                            # q_S dt
         J = J0 + J1                                         # one reading's whole effect, once a step
         # the true wrench's noise S n, with S uncertain: E[S Sigma S^T] = S_hat Sigma S_hat^T + Delta,
@@ -319,7 +321,7 @@ class AugmentedEKF(Observer):
         self._kf = kf
         self._s_out = kf.x[6:, 0].copy()
         if self.eiv is not None:
-            self.eiv.reset(pose, noise.pose_sd, np.sqrt(self._var_w), self._s_out)
+            self.eiv.reset(pose, noise.pose_sd, np.sqrt(self._var_w))
         self._since_pose = 0.0
         self._q_history = [self.level.q if self.level is not None else self.q_S]
 

@@ -68,7 +68,7 @@ with ``D_n`` the part of the batch design that the reading's noise makes;
 ``B_(i l),(a l) = Sigma_l beta_ai`` (entries ``s_il``; none for the offset
 column), and ``beta`` (3x3) follows from the cross-moments ``Gamma_ai`` of
 the filter's error with the noise-driven part of ``M``, propagated forward
-with the filter (six 6x6 matrices, :func:`_step`). Its covariance is the
+with the filter (six 6x6 matrices, :func:`_filter_step`). Its covariance is the
 sandwich ``(J - B)^-1 J (J - B)^-1``, the motion ``x + M s_hat``. ``Q``
 depends on ``S`` itself, so the filter runs again with ``Q`` at the first
 pass's estimate (``passes=2``).
@@ -300,7 +300,7 @@ def _layout(n):
     """The packed state for ``n`` columns of ``[S | c]`` (``m = 3 n`` unknowns), a :class:`observers.state.StateLayout`.
 
     x (6), P (6x6 packed lower, 21), M (6 x m), J (m x m packed lower), r (m), and the
-    moments of the errors-in-variables correction (:func:`_step`): N (6 x 3), K (the last
+    moments of the errors-in-variables correction (:func:`_filter_step`): N (6 x 3), K (the last
     gain, 6 x 3), Gamma (6 matrices 6 x 6, row order, for (a, i) with i <= a), beta (3 x 3
     symmetric, packed lower, 6)
     """
