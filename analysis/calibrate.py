@@ -9,7 +9,7 @@ from observers.health import consistency_check
 from observers.latency import estimate_latency
 from plant import Calibration, NoiseSpec, estimate_noise
 from plant.errors import FmscalError
-from plant.units import diagnose_units
+from plant.units import COUNTS, diagnose_units
 
 from .metrics import calibration_error
 
@@ -169,8 +169,9 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     if result.diverged:
         raise DivergedError(f"the {method} estimate diverged at t = {result.t[-1]:.3f} s; "
                             "no calibration (check the mass properties, units and excitation)")
-    diagnosed = diagnose_units(log, payload)
-    units = [u for u in diagnosed if "sensor counts" not in u or get_method(method).online]
+    findings = diagnose_units(log, payload)
+    diagnosed = [f.message for f in findings]
+    units = [f.message for f in findings if f.kind != COUNTS or get_method(method).online]
     warnings = diagnosed + list(ls_result.warnings)
     warnings += [w for w in result.warnings if w not in warnings]
     try:

@@ -9,11 +9,17 @@ are in millimetres; near 57 on the moment alone, that theta is in degrees;
 both far below one, that the readings are in other units (sensor counts).
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .dynamics import input_matrix
 
-__all__ = ["implied_scale", "diagnose_units"]
+__all__ = ["implied_scale", "diagnose_units", "UnitFinding", "COUNTS"]
+
+#: The kind of :class:`UnitFinding` for readings in sensor counts: only the online methods,
+#: which start from an ``S0`` of order one, are hurt by it.
+COUNTS = "counts"
 
 #: Window over which poses are smoothed before differentiating twice, s.
 _WINDOW = 0.05
@@ -69,8 +75,16 @@ def implied_scale(log, payload, window=_WINDOW):
     return float(moment), float(force)
 
 
+class UnitFinding(NamedTuple):
+    """A unit the data says is not rad, m, N m, N: what it is, and the one-line message."""
+
+    #: ``"degrees"`` (theta), ``"millimetres"`` (x, y) or :data:`COUNTS` (the readings).
+    kind: str
+    message: str
+
+
 def diagnose_units(log, payload):
-    """One-line messages naming units the data says are not rad, m, N m, N.
+    """Findings naming units the data says are not rad, m, N m, N.
 
     Parameters
     ----------
@@ -79,7 +93,7 @@ def diagnose_units(log, payload):
 
     Returns
     -------
-    list of str
+    list of UnitFinding
         Empty when the log looks like SI units (or when it cannot tell).
     """
     scale = implied_scale(log, payload)
@@ -87,15 +101,15 @@ def diagnose_units(log, payload):
         return []
     moment, force = scale
     if 20 < moment / force < 160 and 1 / _FAR < force < _FAR:
-        return [f"theta looks like degrees, not radians: the moment the poses imply is {moment / force:.0f} "
-                f"times the force's share (57 for degrees); convert theta to rad"]
+        return [UnitFinding("degrees", f"theta looks like degrees, not radians: the moment the poses imply is {moment / force:.0f} "
+                f"times the force's share (57 for degrees); convert theta to rad")]
     if force > _FAR:
-        return [f"x and y look like millimetres, not metres: the forces the poses imply are {force:.3g} times "
-                f"the readings (1000 for mm; else the readings are not in N); convert x and y to m"]
+        return [UnitFinding("millimetres", f"x and y look like millimetres, not metres: the forces the poses imply are {force:.3g} times "
+                f"the readings (1000 for mm; else the readings are not in N); convert x and y to m")]
     if force < 1 / _FAR and moment < 1 / _FAR:
         size = np.sqrt(force * moment)
-        return [f"the readings are about {1 / size:.3g} times the wrench the poses imply: S's entries will be "
+        return [UnitFinding(COUNTS, f"the readings are about {1 / size:.3g} times the wrench the poses imply: S's entries will be "
                 f"near {size:.3g} (readings in sensor counts?); methods that start from S0 of order one "
                 f"(adaptive, high-gain, ekf) may not reach it: use least-squares, or give the readings in "
-                f"N m and N"]
+                f"N m and N")]
     return []

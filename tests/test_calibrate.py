@@ -186,3 +186,17 @@ def test_bad_payload_arguments_are_refused_with_one_line(other_log, args, messag
     assert main(["calibrate", str(path), *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+
+
+def test_readings_in_counts_are_named_and_fail_only_the_methods_that_start_from_S0():
+    """A reading in sensor counts makes S's entries tiny: every method warns, the offline fit absorbs it (its units
+    check passes), an online method starting from S0 of order one does not (its units check fails)."""
+    from analysis.calibrate import calibrate
+    sc = plant.get_scenario("paper").with_(duration=20.0)
+    log, truth, _ = sc.generate(0)
+    counts = plant.Log(log.t, log.pose, log.w_hat * 1e4)
+    offline = calibrate(counts, sc.payload, method="least-squares", offset=False, latency=0.0)
+    online = calibrate(counts, sc.payload, method="adaptive", offset=False, latency=0.0)
+    for report in (offline, online):
+        assert any("sensor counts" in w for w in report.warnings)
+    assert offline.units == [] and len(online.units) == 1 and "sensor counts" in online.units[0]
