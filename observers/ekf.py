@@ -17,7 +17,6 @@ from .state import INPUT
 
 __all__ = ["AugmentedEKF"]
 
-_POSE_ROWS = [0, 2, 4]
 
 
 class _CalibrationEKF(ExtendedKalmanFilter):
@@ -263,7 +262,8 @@ class AugmentedEKF(Observer):
         xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
         var_in[:] = self._var_w
-        P_in[:] = self._kf.P[6:, 6:].ravel() if P_S is None else np.ravel(P_S)
+        m = 3 * self.n_cols
+        P_in.reshape(m, m)[:] = self._kf.P[6:, 6:] if P_S is None else np.reshape(P_S, (m, m))   # symmetric
         q_in[0] = (self.level.q if self.level is not None else self.q_S) * dt
         call()
         f, F, Q = call.outputs
@@ -275,7 +275,8 @@ class AugmentedEKF(Observer):
 
     @staticmethod
     def hx(xs):
-        return np.asarray(xs).reshape(-1)[_POSE_ROWS].reshape(3, 1)
+        """The measured pose ``[theta, X, Y]`` of a state column, shape (3, 1) (states 0, 2, 4)."""
+        return np.asarray(xs).reshape(-1, 1)[0:5:2]
 
     # --- Observer ---------------------------------------------------------------
     def reset(self, S0=None):
@@ -340,11 +341,11 @@ class AugmentedEKF(Observer):
                 self.level.update(float(y @ kf.SI @ y), self._since_pose)      # NIS of this pose
             self._since_pose = 0.0
         self._q_history.append(self.level.q if self.level is not None else self.q_S)
-        self._s_out = kf.x[6:, 0].copy()
-        if self.eiv is not None:
-            # the errors-in-variables compensation (observers.eiv), with the filter's angles
-            self._s_out = self.eiv.step(has_pose, (theta_prev, kf.x[0, 0]), pose, (u_prev[4:7], w_hat), dt,
-                                        self._s_out)
+        s = kf.x[6:, 0]
+        if self.eiv is None:
+            self._s_out = s.copy()
+        else:      # the errors-in-variables compensation (observers.eiv), with the filter's angles
+            self._s_out = self.eiv.step(has_pose, (theta_prev, kf.x[0, 0]), pose, (u_prev[4:7], w_hat), dt, s)
 
     def _current(self):
         return self._kf.x[0:6, 0], self._s_out

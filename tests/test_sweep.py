@@ -83,7 +83,7 @@ def test_the_bench_runs_in_its_short_mode(tmp_path, capsys):
     code = main(["bench", "--quick", "--out", str(tmp_path / "bench.md")])
     assert code == 0
     text = capsys.readouterr().out
-    for row in ("`adaptive` step", "`high-gain` step", "`ekf` step", "Function.buffer()", "simulator",
+    for row in ("`adaptive` step", "`high-gain` step", "`ekf` step", "(`eiv=False`)", "Function.buffer()", "simulator",
                 "`fmscal reproduce`", "sweep:"):
         assert row in text
     assert "not the full job" in text                # the short mode does not claim the targets
