@@ -8,13 +8,14 @@ from .files import atomic_write, atomic_write_text, check_outputs
 
 
 def add_sweep(sub):
-    from .sweep import DEFAULT_SCHEDULER_TIMEOUT, SWEEP_OBSERVERS
+    from observers import method_names
+    from .sweep import DEFAULT_SCHEDULER_TIMEOUT
     p = sub.add_parser("sweep", help="Monte Carlo: seeds x scenarios x noise levels x observer settings",
                        description="Run observers over the product of scenarios, seeds, noise levels and "
                                    "settings, on local cores (joblib) or a Dask cluster (--scheduler); "
                                    "print medians over seeds. The table is the same whichever runs it, "
                                    "timing columns aside.")
-    add_scenarios_and_observers(p, SWEEP_OBSERVERS)
+    add_scenarios_and_observers(p, method_names(role="design"))     # the registry as it is now (SWEEP_OBSERVERS)
     p.add_argument("--seeds", type=int, default=10, metavar="N", help="seeds 0 .. N-1 (default 10)")
     p.add_argument("--noise-scale", type=float, nargs="+", default=[1.0], metavar="F",
                    help="multiply every noise standard deviation by each F (default 1)")

@@ -1,5 +1,7 @@
 """Augmented-state extended Kalman filter in the manner of Aghili (ICRA 2000)."""
 
+import math
+
 import casadi as ca
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -358,10 +360,11 @@ class AugmentedEKF(Observer):
         return T @ P @ T.T
 
     def _healthy(self, x, calibration, k=None):
-        """The base class's test of the estimate, and a finite, positive definite-looking ``P``."""
+        """The base class's test (finite, within the bound), and a finite, positive definite-looking ``P``."""
         P = self._kf.P
-        # a NaN or inf anywhere makes a sum non-finite: one reduction
-        return super()._healthy(x, calibration, k) and bool(np.isfinite(P.sum()) and P.diagonal().min() > 0)
+        # a NaN or inf anywhere makes the sum non-finite: one reduction per array
+        finite = math.isfinite(float(x.sum()) + float(calibration.sum()) + float(P.sum()))
+        return bool(finite and P.diagonal().min() > 0 and self._bounded(calibration, k))
 
 
 #: The noise model of a live filter that was told none (``step`` without a log to estimate it from).
