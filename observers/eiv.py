@@ -110,7 +110,6 @@ class EivCompensation:
     payload : plant.Payload
     n : int
         Columns of ``[S | c]``: 3, or 4 with the offset.
-
     """
 
     def __init__(self, payload, n):
