@@ -90,6 +90,7 @@ def test_drifting_sensor_the_trackers_follow_and_least_squares_cannot(runs):
     E, _ = runs
     assert _beats(E, "drift", "adaptive", "high-gain")
     assert _beats(E, "drift", "adaptive", "least-squares")
-    # told the rate, the EKF tracks best, though by less than the 1.3x margin at 60 s (1.2-1.8x here)
-    assert all(told * 1.1 < a for told, a in zip(E["drift", "ekf told the drift rate"], E["drift", "adaptive"]))
+    # told the rate, the EKF tracks best, though by less than the 1.3x margin: the adaptive default, told
+    # nothing, is 1.08-1.32x behind it at 60 s (forgetting on evidence of a drift, t_forget = 0.05 s)
+    assert all(told < a < 1.5 * told for told, a in zip(E["drift", "ekf told the drift rate"], E["drift", "adaptive"]))
     assert min(E["drift", "least-squares"]) > 0.1                          # it assumes a constant S
