@@ -182,9 +182,9 @@ def plot_comparison(runs, truth, path, title):
     set of str
         The methods clipped (:func:`wandering_methods`).
     """
-    thin = {name: _thin(len(t)) for name, (t, _, _) in runs.items()}
-    curves = {name: (np.asarray(t)[::thin[name]], np.asarray(E)[::thin[name]]) for name, (t, E, _) in runs.items()}
-    histories = {name: np.asarray(S)[::thin[name]] for name, (_, _, S) in runs.items()}
+    drawn = {name: thinned(*run) for name, run in runs.items()}
+    curves = {name: (t, E) for name, (t, E, _) in drawn.items()}
+    histories = {name: S for name, (_, _, S) in drawn.items()}
     clipped = wandering_methods({name: np.asarray(E) for name, (_, E, _) in runs.items()})
     fig = _figure((15, 6.2))
     outer = fig.add_gridspec(1, 2, width_ratios=[1.0, 1.55], wspace=0.18)

@@ -11,6 +11,7 @@ from plant.files import atomic_write_text
 
 from .metrics import convergence_time, error_history
 from .plots import plot_comparison, thinned
+from .sweep import run_local
 
 __all__ = ["reproduce", "output_names", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
@@ -98,7 +99,6 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True, n_jobs=-1):
         same log), ``convergence_time``, ``diverged``, ``converged``,
         ``wall_time``, ``S_hat_100``; E is None for a diverged run.
     """
-    from joblib import Parallel, delayed
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     pairs = [(name, method) for name, _ in _FIGURES for method in REPRODUCED_OBSERVERS]
@@ -106,17 +106,11 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True, n_jobs=-1):
     order = sorted(range(len(pairs)), key=lambda i: -_scenario(pairs[i][0], 1.0).duration
                    * _COST_RANK.get(pairs[i][1], 1))
     results = [None] * len(pairs)
-    bar = tqdm(total=len(pairs), desc="reproduce", disable=not progress)
-    if n_jobs == 1:
-        done = ((i, _run_one(*pairs[i], seed, duration_scale)) for i in order)
-    else:
-        done = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
-            delayed(_indexed)(i, *pairs[i], seed, duration_scale) for i in order)
-    for i, result in done:
-        results[i] = result
-        bar.set_postfix_str(" ".join(pairs[i]))
-        bar.update(1)
-    bar.close()
+    with tqdm(total=len(pairs), desc="reproduce", disable=not progress) as bar:
+        tasks = [(i, *pairs[i], seed, duration_scale) for i in order]
+        for i, result in run_local(_run_task, tasks, n_jobs, bar):
+            results[i] = result
+            bar.set_postfix_str(" ".join(pairs[i]))
     rows = [row for row, _ in results]
     for name, fig in _FIGURES:
         floor = next(r for r in rows if r["scenario"] == name and r["observer"] == FLOOR_METHOD)
@@ -136,8 +130,10 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True, n_jobs=-1):
 _COST_RANK = {"ekf": 20, FLOOR_METHOD: 3}
 
 
-def _indexed(i, name, method, seed, duration_scale):
-    return i, _run_one(name, method, seed, duration_scale)
+def _run_task(task):
+    """``(i, scenario, method, seed, duration_scale)`` -> ``(i, _run_one(...))``; module-level, so that it pickles."""
+    i, *args = task
+    return i, _run_one(*args)
 
 
 def _fmt(v, spec=".3g"):

@@ -18,7 +18,7 @@ from plant.errors import FmscalError
 
 from .comparison import floor_error, run_observer, seed_list, simulate_case
 
-__all__ = ["sweep", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS",
+__all__ = ["sweep", "run_local", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS",
            "DEFAULT_SCHEDULER_TIMEOUT"]
 
 #: Columns that depend on the machine and the moment, not on the data.
@@ -93,14 +93,20 @@ def _run_case(case):
     return index, rows
 
 
-def _run_local(cases, n_jobs, bar):
+def run_local(func, items, n_jobs, bar):
+    """``func(item)`` for every item on local worker processes (joblib), yielded as each finishes.
+
+    ``n_jobs=1`` runs them in this process, in order (simplest to debug);
+    ``-1`` on every core. ``bar`` (a tqdm bar) advances by one per item.
+    ``func`` must be a module-level function, so that it pickles.
+    """
     from joblib import Parallel, delayed
     if n_jobs == 1:                     # no worker processes: simplest to debug
-        for case in cases:
-            yield _run_case(case)
+        for item in items:
+            yield func(item)
             bar.update()
         return
-    for out in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(delayed(_run_case)(c) for c in cases):
+    for out in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(delayed(func)(item) for item in items):
         bar.update()
         yield out
 
@@ -219,7 +225,7 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
     results = {}
     try:
         with tqdm(total=len(cases), desc="sweep", unit="case", disable=not progress) as bar:
-            runs = _run_local(cases, n_jobs, bar) if client is None else _run_dask(cases, client, bar)
+            runs = run_local(_run_case, cases, n_jobs, bar) if client is None else _run_dask(cases, client, bar)
             for index, rows in runs:
                 results[index] = rows
     finally:

@@ -256,10 +256,8 @@ class Observer:
         """Finite, and (from step ``k`` = the grace on) every entry of ``S_hat`` within the divergence
         bound (:func:`observers.convergence.divergence_bound`, :data:`observers.convergence.DIVERGENCE_GRACE`)."""
         # a NaN or inf anywhere makes the sum non-finite: one reduction per array
-        return math.isfinite(float(x.sum()) + float(calibration.sum())) and self._bounded(calibration, k)
-
-    def _bounded(self, calibration, k=None):
-        """Every entry of ``S_hat`` below the divergence bound, or step ``k`` still within the grace."""
+        if not math.isfinite(float(x.sum()) + float(calibration.sum())):
+            return False
         if k is not None and k < self._grace:
             return True
         return float(np.abs(calibration.reshape(3, self.n_cols)[:, :3]).max()) < self._bound

@@ -115,7 +115,7 @@ class EivCompensation:
     def __init__(self, payload, n):
         self.payload, self.n = payload, int(n)
         self._call = BufferedCall(_compiled(payload, self.n))
-        self.T = np.eye(3 * self.n)
+        self._T_flat = None                      # the last step's T, column-major (None: no step yet)
 
     def reset(self, pose, pose_sd, wrench_sd):
         """Start at the first sample.
@@ -135,7 +135,7 @@ class EivCompensation:
         z_in[:] = _initial_state(np.asarray(pose, dtype=float), pose_var, self.n)
         q_in[1:3] = pose_var[:2]
         q_in[3:6] = np.square(np.asarray(wrench_sd, dtype=float))
-        self.T = np.eye(3 * self.n)
+        self._T_flat = None
 
     def step(self, has_pose, theta, pose, w_hat, dt, s):
         """One sample: advance the separate-bias filter and compensate ``s``.
@@ -179,8 +179,6 @@ class EivCompensation:
     def T(self):
         """The compensation after the last :meth:`step`, shape (3n, 3n) (identity before any)."""
         m = 3 * self.n
+        if self._T_flat is None:
+            return np.eye(m)
         return self._T_flat.reshape(m, m).T.copy()             # casadi stores column-major
-
-    @T.setter
-    def T(self, value):
-        self._T_flat = np.asarray(value, dtype=float).T.ravel().copy()

@@ -192,7 +192,10 @@ class AugmentedEKF(Observer):
         dt = ca.SX.sym("dt")
         S = ca.reshape(xs[6:dim], n, 3).T                   # [S | c], row order
         a0, a1 = (ca.vertcat(w, 1) if self.offset else w for w in (w0, w1))
-        x_next = rk4_step(xs[0:6], S @ a0, S @ (a0 + a1) / 2, S @ a1, dt, self.payload)
+        d0, d1 = ca.SX.sym("d0", 3), ca.SX.sym("d1", 3)     # a perturbation of the true wrench, at 0
+        d = ca.vertcat(d0, d1)
+        x_d = rk4_step(xs[0:6], S @ a0 + d0, S @ (a0 + a1) / 2 + (d0 + d1) / 2, S @ a1 + d1, dt, self.payload)
+        x_next = ca.substitute(x_d, d, ca.DM.zeros(6))
         f = ca.vertcat(x_next, xs[6:dim])
         # dense outputs: the buffers are read as full column-major matrices
         F = ca.densify(ca.jacobian(f, xs))
@@ -202,19 +205,16 @@ class AugmentedEKF(Observer):
         P_S_flat = ca.SX.sym("P_S", (3 * n) ** 2)
         P_S = ca.reshape(P_S_flat, 3 * n, 3 * n)              # covariance of [S | c] (symmetric: either order)
         q_dt = ca.SX.sym("q_dt")                            # q_S dt
-        J = J0 + J1                                         # one reading's whole effect, once a step
         # the true wrench's noise S n, with S uncertain: E[S Sigma S^T] = S_hat Sigma S_hat^T + Delta,
-        # Delta_ij = sum_l Sigma_l cov(s_il, s_jl); it enters the step as the wrench itself does
-        Delta = ca.SX(3, 3)
+        # Delta_ij = sum_l Sigma_l cov(s_il, s_jl), carried through the step as the wrench itself is:
+        # J_d, the step's Jacobian with respect to the true wrench at both ends (one reading's whole
+        # effect, once a step), so that J_d S_hat = J_0 + J_1 of the motion
+        W = S[:, 0:3] @ ca.diag(var_w) @ S[:, 0:3].T
         for i in range(3):
             for j in range(3):
-                Delta[i, j] = sum(var_w[l] * P_S[n * i + l, n * j + l] for l in range(3))
-        d0, d1 = ca.SX.sym("d0", 3), ca.SX.sym("d1", 3)     # a perturbation of the true wrench
-        x_d = rk4_step(xs[0:6], S @ a0 + d0, S @ (a0 + a1) / 2 + (d0 + d1) / 2, S @ a1 + d1, dt, self.payload)
-        J_d = ca.substitute(ca.jacobian(x_d, d0) + ca.jacobian(x_d, d1),
-                            ca.vertcat(d0, d1), ca.DM.zeros(6))
-        Q = (J @ ca.diag(var_w) @ J.T
-             + ca.diagcat(J_d @ Delta @ J_d.T, ca.SX(3 * n, 3 * n))
+                W[i, j] += sum(var_w[l] * P_S[n * i + l, n * j + l] for l in range(3))
+        J_d = ca.substitute(ca.jacobian(x_d, d0) + ca.jacobian(x_d, d1), d, ca.DM.zeros(6))
+        Q = (ca.diagcat(J_d @ W @ J_d.T, ca.SX(3 * n, 3 * n))
              + ca.diag(ca.vertcat(ca.DM.zeros(6), q_dt * ca.DM.ones(3 * n))))
         jacobians = ca.Function("ekf_jacobians", [xs, w0, w1, dt], [f, F, J0, J1])
         predict = ca.Function("ekf_predict", [xs, w0, w1, dt, var_w, P_S_flat, q_dt],
@@ -363,9 +363,8 @@ class AugmentedEKF(Observer):
     def _healthy(self, x, calibration, k=None):
         """The base class's test (finite, within the bound), and a finite, positive definite-looking ``P``."""
         P = self._kf.P
-        # a NaN or inf anywhere makes the sum non-finite: one reduction per array
-        finite = math.isfinite(float(x.sum()) + float(calibration.sum()) + float(P.sum()))
-        return bool(finite and P.diagonal().min() > 0 and self._bounded(calibration, k))
+        # a NaN or inf anywhere makes the sum non-finite: one reduction
+        return super()._healthy(x, calibration, k) and math.isfinite(float(P.sum())) and bool(P.diagonal().min() > 0)
 
 
 #: The noise model of a live filter that was told none (``step`` without a log to estimate it from).
