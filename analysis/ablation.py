@@ -13,8 +13,8 @@ counted).
 import pandas as pd
 from tqdm import tqdm
 
-from observers import AdaptiveObserver, PaperAdaptiveObserver
-from plant.errors import FmscalError
+from fmscal.observers import AdaptiveObserver, PaperAdaptiveObserver
+from fmscal.plant.errors import FmscalError
 
 from .comparison import floor_error, seed_list, simulate_case, tail_error
 

@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from observers import METHODS, AugmentedEKF, RecursiveObserver, make_observer
-from plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
-from plant.excitation import PaperWrench
+from fmscal.observers import METHODS, AugmentedEKF, RecursiveObserver, make_observer
+from fmscal.plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
+from fmscal.plant.excitation import PaperWrench
 
 from .reproduce import REPRODUCED_OBSERVERS, REPRODUCED_SCENARIOS, reproduce
 from .sweep import SWEEP_OBSERVERS, sweep

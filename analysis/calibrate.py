@@ -4,12 +4,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from observers import FLOOR_METHOD, LeastSquares, ObserverResult, get_method, method_names
-from observers.health import consistency_check
-from observers.latency import estimate_latency
-from plant import Calibration, NoiseSpec, estimate_noise
-from plant.errors import FmscalError
-from plant.units import COUNTS, diagnose_units
+from fmscal.observers import FLOOR_METHOD, LeastSquares, ObserverResult, get_method, method_names
+from fmscal.observers.health import consistency_check
+from fmscal.observers.latency import estimate_latency
+from fmscal.plant import Calibration, NoiseSpec, estimate_noise
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.units import COUNTS, diagnose_units
 
 from .metrics import calibration_error
 

@@ -29,7 +29,7 @@ MAX_LAM = 1e7
 
 
 def _add_simulate(sub):
-    from plant import SCENARIOS
+    from fmscal.plant import SCENARIOS
     p = sub.add_parser("simulate", help="simulate a scenario and write LOG.csv and LOG.truth.json",
                        description="Simulate a named scenario. Writes the log (t,theta,x,y,M,fx,fy) "
                                    "and the sidecar LOG.truth.json. Scenarios: " +
@@ -55,7 +55,7 @@ def _add_simulate(sub):
 
 
 def cmd_simulate(args):
-    from plant import get_scenario
+    from fmscal.plant import get_scenario
     check_seeds(seed=args.seed)
     sc = get_scenario(args.scenario)
     changes = {}
@@ -78,7 +78,7 @@ def cmd_simulate(args):
             raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
         changes["latency"] = args.latency
     if args.mass is not None or args.inertia is not None or args.rho is not None:
-        from plant import Payload
+        from fmscal.plant import Payload
         p = sc.payload
         changes["payload"] = Payload(positive(args.mass, "--mass") if args.mass is not None else p.mass,
                                      positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
@@ -101,7 +101,7 @@ def _add_check_gains(sub):
                        description="Check observer gains with python-control: poles of A - K C, "
                                    "observability of (A, C), the Lyapunov P, and whether assumption 2 "
                                    "of Theorem 1 holds with P = I.")
-    from observers import METHODS, RecursiveObserver
+    from fmscal.observers import METHODS, RecursiveObserver
     configs = [name for name, m in METHODS.items() if issubclass(m.cls, RecursiveObserver)]
     p.add_argument("--config", choices=["paper", *configs], default="paper",
                    help="the gains of one observer: " + ", ".join(configs) + "; paper is adaptive-paper, "
@@ -113,8 +113,8 @@ def _add_check_gains(sub):
 
 
 def cmd_check_gains(args):
-    from observers import HighGainObserver, PaperAdaptiveObserver, check_gains, make_observer
-    from plant import PAPER_PAYLOAD
+    from fmscal.observers import HighGainObserver, PaperAdaptiveObserver, check_gains, make_observer
+    from fmscal.plant import PAPER_PAYLOAD
     if args.config == "paper":
         obs = PaperAdaptiveObserver(PAPER_PAYLOAD)
     else:
@@ -176,7 +176,7 @@ def _add_ablation(sub):
 
 
 def cmd_ablation(args):
-    from plant import get_scenario
+    from fmscal.plant import get_scenario
     from .ablation import QUICK_SETTINGS, ablation, ablation_markdown
     for name in args.scenario:
         get_scenario(name)                      # FmscalError naming the choices
@@ -192,8 +192,8 @@ def cmd_ablation(args):
 
 
 def _add_compare(sub):
-    from observers import METHODS
-    from plant import SCENARIOS
+    from fmscal.observers import METHODS
+    from fmscal.plant import SCENARIOS
     p = sub.add_parser("compare", help="run the observers side by side on identical data",
                        description="Run every observer on the same simulated logs (same data, same "
                                    "initial S_hat) over scenarios and seeds; print the table of E, "
@@ -208,8 +208,8 @@ def _add_compare(sub):
 
 
 def cmd_compare(args):
-    from observers import get_method
-    from plant import get_scenario
+    from fmscal.observers import get_method
+    from fmscal.plant import get_scenario
     from .comparison import compare, summarise, summary_markdown
     from .plots import plot_comparison
     for name in args.scenario:
@@ -269,7 +269,7 @@ _COMMANDS = [_add_simulate, add_calibrate, add_apply, _add_reproduce, _add_compa
 
 def main(argv=None):
     """Entry point of ``fmscal``; returns the exit status."""
-    from plant import FmscalError
+    from fmscal.plant import FmscalError
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -12,7 +12,7 @@ from .files import atomic_write_text, check_outputs
 
 
 def add_calibrate(sub):
-    from observers import method_names
+    from fmscal.observers import method_names
     from .calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD
     p = sub.add_parser("calibrate", help="estimate S from a recorded log",
                        description="Estimate the calibration matrix S from a log (t,theta,x,y,M,fx,fy; "
@@ -53,7 +53,7 @@ def add_calibrate(sub):
 def cmd_calibrate(args):
     from dataclasses import replace
 
-    from plant import Payload, file_sha256, read_log, read_truth
+    from fmscal.plant import Payload, file_sha256, read_log, read_truth
     from .calibrate import calibrate
     from .plots import plot_calibration
     for name, value in (("--mass", args.mass), ("--inertia", args.inertia)):
@@ -155,7 +155,7 @@ def add_apply(sub):
 
 
 def cmd_apply(args):
-    from plant import Calibration, Payload, read_readings
+    from fmscal.plant import Calibration, Payload, read_readings
     given = [v is not None for v in (args.mass, args.inertia, args.rho)]
     if any(given) and not all(given):
         raise CliError("give all of --mass, --inertia and --rho to check the payload, or none")

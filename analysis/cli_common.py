@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from plant.errors import FmscalError
+from fmscal.plant.errors import FmscalError
 
 __all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes", "check_seeds",
            "MAX_SEEDS"]
@@ -39,8 +39,8 @@ def positive(value, name):
 
 def add_scenarios_and_observers(p, default_observers):
     """``--scenario`` and ``--observer`` (several names each), as compare and sweep take them."""
-    from observers import METHODS
-    from plant import SCENARIOS
+    from fmscal.observers import METHODS
+    from fmscal.plant import SCENARIOS
     p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
                    help="one or more of: " + ", ".join(SCENARIOS))
     p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
@@ -49,7 +49,7 @@ def add_scenarios_and_observers(p, default_observers):
 
 def check_sizes(scenarios, duration=None):
     """Refuse, before any work, a run whose simulated logs would exceed :data:`plant.scenarios.MAX_SAMPLES`."""
-    from plant import get_scenario
+    from fmscal.plant import get_scenario
     for name in scenarios:
         sc = get_scenario(name)
         (sc.with_(duration=duration) if duration is not None else sc).check_size()

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plant.files import atomic_write_many
+from fmscal.plant.files import atomic_write_many
 
 from .cli_common import CliError, strict
 from .files import check_outputs
@@ -37,7 +37,7 @@ def add_import(sub):
 
 
 def cmd_import(args):
-    from plant.bag import format_report, import_bag
+    from fmscal.plant.bag import format_report, import_bag
     out = Path(args.out)
     if out.suffix != ".csv":
         raise CliError(f"--out must end in .csv; got {out}")

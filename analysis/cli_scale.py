@@ -8,7 +8,7 @@ from .files import atomic_write, atomic_write_text, check_outputs
 
 
 def add_sweep(sub):
-    from observers import method_names
+    from fmscal.observers import method_names
     from .sweep import DEFAULT_SCHEDULER_TIMEOUT
     p = sub.add_parser("sweep", help="Monte Carlo: seeds x scenarios x noise levels x observer settings",
                        description="Run observers over the product of scenarios, seeds, noise levels and "
@@ -56,9 +56,9 @@ def _parse_value(text):
 def _defaults(observer):
     """The constructor's default of each parameter of ``observer`` (empty for an unknown name)."""
     import inspect
-    from plant import PAPER_PAYLOAD
-    from plant.errors import FmscalError
-    from observers import make_observer
+    from fmscal.plant import PAPER_PAYLOAD
+    from fmscal.plant.errors import FmscalError
+    from fmscal.observers import make_observer
     try:
         obs = make_observer(observer, PAPER_PAYLOAD)
     except FmscalError:       # an unknown observer: sweep names it

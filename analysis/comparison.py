@@ -4,10 +4,10 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from observers import FLOOR_METHOD, METHODS, get_method, method_label
-from plant import get_scenario
-from plant._checks import as_positive_scalar
-from plant.errors import FmscalError
+from fmscal.observers import FLOOR_METHOD, METHODS, get_method, method_label
+from fmscal.plant import get_scenario
+from fmscal.plant._checks import as_positive_scalar
+from fmscal.plant.errors import FmscalError
 
 from .metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
 

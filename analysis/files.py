@@ -11,7 +11,7 @@ atomic (:mod:`plant.files`).
 import os
 from pathlib import Path
 
-from plant.files import atomic_write, atomic_write_many, atomic_write_text
+from fmscal.plant.files import atomic_write, atomic_write_many, atomic_write_text
 
 from .cli_common import CliError
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from plant._checks import as_finite_array
+from fmscal.plant._checks import as_finite_array
 
 __all__ = ["calibration_error", "error_history", "tail_median", "convergence_time", "CONVERGENCE_THRESHOLD",
            "CONVERGENCE_HOLD", "TAIL_FRACTION"]

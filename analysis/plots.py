@@ -13,8 +13,8 @@ clipped.
 
 import numpy as np
 
-from observers import method_label
-from plant.files import atomic_write
+from fmscal.observers import method_label
+from fmscal.plant.files import atomic_write
 
 __all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "thinned",
            "wandering_methods"]

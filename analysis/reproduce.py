@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from observers import FLOOR_METHOD, METHODS, make_observer, method_label, method_names
-from plant import get_scenario
-from plant.files import atomic_write_text
+from fmscal.observers import FLOOR_METHOD, METHODS, make_observer, method_label, method_names
+from fmscal.plant import get_scenario
+from fmscal.plant.files import atomic_write_text
 
 from .metrics import convergence_time, error_history
 from .plots import plot_comparison, thinned

@@ -24,11 +24,11 @@ method on a log with the payload's property perturbed.
 import numpy as np
 import pandas as pd
 
-from plant import Payload, get_scenario
+from fmscal.plant import Payload, get_scenario
 
-from observers import make_observer
+from fmscal.observers import make_observer
 from .metrics import calibration_error
-from plant.errors import FmscalError
+from fmscal.plant.errors import FmscalError
 
 __all__ = ["PARAMETERS", "perturbed", "distortion", "derived_error", "sensitivity", "tolerable_error"]
 

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from observers import get_method, make_observer, method_names
-from plant import get_scenario
-from plant.errors import FmscalError
+from fmscal.observers import get_method, make_observer, method_names
+from fmscal.plant import get_scenario
+from fmscal.plant.errors import FmscalError
 
 from .comparison import floor_error, run_observer, seed_list, simulate_case
 

@@ -7,7 +7,7 @@ these helpers hide the one difference that matters there: numpy vectors are
 
 import numpy as np
 
-from plant._backend import is_symbolic
+from fmscal.plant._backend import is_symbolic
 
 
 def as_matrix(o, flat, n=3, cols=None):

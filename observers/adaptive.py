@@ -34,10 +34,10 @@ with ``L_h`` placing the eigenvalues of ``(I - L_h C) Phi(h)`` at
 
 import numpy as np
 
-from plant import S_from_phi, phi_1, phi_2, regressors
-from plant._backend import ops
-from plant._checks import as_positive_scalar
-from plant.errors import FmscalError
+from fmscal.plant import S_from_phi, phi_1, phi_2, regressors
+from fmscal.plant._backend import ops
+from fmscal.plant._checks import as_positive_scalar
+from fmscal.plant.errors import FmscalError
 
 from . import _matrix as mx
 from .base import RecursiveObserver
@@ -143,7 +143,7 @@ class AdaptiveObserver(RecursiveObserver):
 
     Examples
     --------
-    >>> from plant import PAPER_PAYLOAD, get_scenario
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
     >>> log, truth, _ = get_scenario("paper").with_(duration=2.0).generate(0)
     >>> AdaptiveObserver(PAPER_PAYLOAD).run(log, truth.S0).S_hat.shape
     (3, 3)

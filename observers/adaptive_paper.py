@@ -17,9 +17,9 @@ matrix form, with ``G(theta)`` the matrix of eq. (1) (:func:`plant.input_matrix`
 
 import numpy as np
 
-from plant import input_matrix
-from plant._backend import ops
-from plant._checks import as_finite_array, as_positive_scalar
+from fmscal.plant import input_matrix
+from fmscal.plant._backend import ops
+from fmscal.plant._checks import as_finite_array, as_positive_scalar
 
 from . import _matrix as mx
 from .base import RecursiveObserver
@@ -101,7 +101,7 @@ class PaperAdaptiveObserver(RecursiveObserver):
 
     Examples
     --------
-    >>> from plant import PAPER_PAYLOAD, get_scenario
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
     >>> log, truth, _ = get_scenario("paper").with_(duration=2.0).generate(0)
     >>> PaperAdaptiveObserver(PAPER_PAYLOAD).run(log, truth.S0).S_hat.shape
     (3, 3)

@@ -24,10 +24,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from plant import Log, Payload
-from plant._compile import ChunkedSteps
-from plant.errors import FmscalError
-from plant.sensor import check_calibration
+from fmscal.plant import Log, Payload
+from fmscal.plant._compile import ChunkedSteps
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.sensor import check_calibration
 
 from .convergence import DIVERGENCE_GRACE, divergence_bound, settled
 from .progress import EVERY, progress_bar

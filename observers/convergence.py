@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from plant.errors import FmscalError
-from plant.units import implied_scale
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.units import implied_scale
 
 __all__ = ["settled", "divergence_bound", "DIVERGENCE_FACTOR", "DIVERGENCE_GRACE", "SETTLE_FRACTION",
            "SETTLE_TOLERANCE"]

@@ -36,8 +36,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from plant._backend import ops
-from plant._compile import BufferedCall, compile_function
+from fmscal.plant._backend import ops
+from fmscal.plant._compile import BufferedCall, compile_function
 
 from . import _matrix as mx
 from .max_likelihood import (POSE_SD_FLOOR, _bias_matrix, _cholesky_apply, _correction_limit, _filter_step,

@@ -6,11 +6,11 @@ import casadi as ca
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from plant import NoiseSpec, rk4_step
-from plant.noise import estimate_noise
-from plant._checks import as_positive_scalar
-from plant._compile import BufferedCall, compile_function
-from plant.errors import FmscalError
+from fmscal.plant import NoiseSpec, rk4_step
+from fmscal.plant.noise import estimate_noise
+from fmscal.plant._checks import as_positive_scalar
+from fmscal.plant._compile import BufferedCall, compile_function
+from fmscal.plant.errors import FmscalError
 
 from .base import Observer
 from .eiv import EivCompensation

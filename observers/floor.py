@@ -1,6 +1,6 @@
 """The information floor as a method: the maximum-likelihood estimate behind the Observer contract."""
 
-from plant import NoiseSpec
+from fmscal.plant import NoiseSpec
 
 from .base import Estimate, Observer
 from .max_likelihood import fit_max_likelihood
@@ -33,7 +33,7 @@ class MaximumLikelihood(Observer):
 
     Examples
     --------
-    >>> from plant import PAPER_PAYLOAD, get_scenario
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
     >>> log, truth, _ = get_scenario("paper").with_(duration=5.0).generate(0)
     >>> MaximumLikelihood(PAPER_PAYLOAD).run(log).S_std.shape
     (3, 3)

@@ -3,8 +3,8 @@
 import control
 import numpy as np
 
-from plant import A_1, A_2, C_1, C_2
-from plant._checks import as_finite_array, as_positive_scalar
+from fmscal.plant import A_1, A_2, C_1, C_2
+from fmscal.plant._checks import as_finite_array, as_positive_scalar
 
 __all__ = ["double_pole_gains", "check_gains", "GainReport", "sampled_poles"]
 
@@ -93,7 +93,7 @@ def check_gains(K1, K2):
 
     Examples
     --------
-    >>> from observers.adaptive import PAPER_K1, PAPER_K2
+    >>> from fmscal.observers.adaptive import PAPER_K1, PAPER_K2
     >>> report = check_gains(PAPER_K1, PAPER_K2)
     >>> bool(report["angular"]["assumption_2_holds"])
     False

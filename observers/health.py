@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from plant.errors import FmscalError
+from fmscal.plant.errors import FmscalError
 
 from .least_squares import LeastSquares
 

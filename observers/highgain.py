@@ -37,15 +37,15 @@ continuous double pole at ``-lam``.
 
 import numpy as np
 
-from plant import S_from_phi, phi_1, phi_2, regressors
-from plant._backend import ops
-from plant._checks import as_positive_scalar
+from fmscal.plant import S_from_phi, phi_1, phi_2, regressors
+from fmscal.plant._backend import ops
+from fmscal.plant._checks import as_positive_scalar
 
 from . import _matrix as mx
 from .base import RecursiveObserver
 from .gains import double_pole_gains
 from .state import INPUT, StateLayout
-from plant.errors import FmscalError
+from fmscal.plant.errors import FmscalError
 
 __all__ = ["HighGainObserver", "DEFAULT_HIGH_GAIN", "REF4_HIGH_GAIN"]
 
@@ -139,7 +139,7 @@ class HighGainObserver(RecursiveObserver):
 
     Examples
     --------
-    >>> from plant import PAPER_PAYLOAD, get_scenario
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
     >>> log, truth, _ = get_scenario("paper").with_(duration=2.0).generate(0)
     >>> HighGainObserver(PAPER_PAYLOAD).run(log, truth.S0).S_hat.shape
     (3, 3)

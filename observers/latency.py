@@ -9,11 +9,11 @@ search on whole samples around the best grid point.
 
 import numpy as np
 
-from plant import Log
-from plant._checks import as_positive_scalar
+from fmscal.plant import Log
+from fmscal.plant._checks import as_positive_scalar
 
 from .least_squares import LeastSquares
-from plant.errors import FmscalError
+from fmscal.plant.errors import FmscalError
 
 __all__ = ["estimate_latency"]
 

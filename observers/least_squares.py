@@ -16,10 +16,10 @@ twice-integrated wrench noise stays near the pose noise.
 
 import numpy as np
 
-from plant import S_from_phi, phi_1, regressors
-from plant._checks import as_positive_scalar
-from plant.errors import FmscalError
-from plant.noise import estimate_noise
+from fmscal.plant import S_from_phi, phi_1, regressors
+from fmscal.plant._checks import as_positive_scalar
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.noise import estimate_noise
 
 from .base import Estimate, Observer
 

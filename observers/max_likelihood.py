@@ -87,12 +87,12 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from plant import Log, NoiseSpec, Payload, input_matrix
-from plant._backend import ops
-from plant._compile import ChunkedSteps
-from plant.errors import FmscalError
-from plant.noise import estimate_noise
-from plant.sensor import check_calibration
+from fmscal.plant import Log, NoiseSpec, Payload, input_matrix
+from fmscal.plant._backend import ops
+from fmscal.plant._compile import ChunkedSteps
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.noise import estimate_noise
+from fmscal.plant.sensor import check_calibration
 
 from . import _matrix as mx
 from .progress import progress_bar

@@ -18,7 +18,7 @@ import math
 
 from scipy.stats import chi2, norm
 
-from plant.errors import FmscalError
+from fmscal.plant.errors import FmscalError
 
 __all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE", "DEFAULT_Q_START"]
 

@@ -8,8 +8,8 @@ keeps a list of method names.
 
 from dataclasses import dataclass
 
-from plant import NoiseSpec
-from plant.errors import FmscalError
+from fmscal.plant import NoiseSpec
+from fmscal.plant.errors import FmscalError
 
 from .adaptive import AdaptiveObserver
 from .adaptive_paper import PaperAdaptiveObserver

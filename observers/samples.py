@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from plant.errors import FmscalError
+from fmscal.plant.errors import FmscalError
 
 from .state import INPUT
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-import plant
-from analysis import calibration_error, error_history
-from observers import AdaptiveObserver, PaperAdaptiveObserver, check_gains
-from observers.adaptive_paper import PAPER_K1, PAPER_K2
+from fmscal import plant
+from fmscal.analysis import calibration_error, error_history
+from fmscal.observers import AdaptiveObserver, PaperAdaptiveObserver, check_gains
+from fmscal.observers.adaptive_paper import PAPER_K1, PAPER_K2
 
 
 @pytest.fixture(scope="module")

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import plant
-from analysis.cli import main
-from plant import Calibration
+from fmscal import plant
+from fmscal.analysis.cli import main
+from fmscal.plant import Calibration
 
 PAYLOAD = ["--mass", "2.5", "--inertia", "0.75", "--rho", "0.2", "0.25"]
 
@@ -211,13 +211,13 @@ def test_no_runtime_warning_reaches_stderr(folder, capsys):
     log = plant.read_log(folder / "log.csv")
     plant.Log(log.t, log.pose, np.zeros_like(log.w_hat)).write(folder / "zero.csv")
     import subprocess                 # a subprocess: pytest would catch the warnings before stderr
-    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", str(folder / "zero.csv"), *PAYLOAD,
+    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", str(folder / "zero.csv"), *PAYLOAD,
                            "--json"], capture_output=True, text=True, env={**os.environ, "PYTHONWARNINGS": "default"})
     assert proc.returncode == 2, proc.stderr
     assert "RuntimeWarning" not in proc.stderr and "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "does not excite" in lines[0]        # the default (the floor) refuses it
-    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", str(folder / "zero.csv"), *PAYLOAD,
+    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", str(folder / "zero.csv"), *PAYLOAD,
                            "--observer", "ekf", "--json"], capture_output=True, text=True,
                           env={**os.environ, "PYTHONWARNINGS": "default"})
     assert proc.returncode == 0, proc.stderr
@@ -226,7 +226,7 @@ def test_no_runtime_warning_reaches_stderr(folder, capsys):
 
 
 def test_set_reads_booleans_strictly_and_numbers_as_numbers():
-    from analysis.cli_scale import parse_settings
+    from fmscal.analysis.cli_scale import parse_settings
     grid = parse_settings(["adaptive:offset=no,YES,0,1,false,True", "high-gain:lam=1,2.5"])
     assert grid == {"adaptive": {"offset": [False, True, False, True, False, True]},
                     "high-gain": {"lam": [1, 2.5]}}
@@ -294,11 +294,10 @@ def test_a_failed_overwrite_keeps_the_old_log_and_its_sidecar(folder, monkeypatc
 
 
 def test_a_failing_plot_leaves_no_saved_calibration(folder, monkeypatch, capsys):
-    import analysis.plots
-
+    from fmscal.analysis import plots
     def broken(*args, **kwargs):
         raise OSError(5, "Input/output error")
-    monkeypatch.setattr(analysis.plots, "plot_calibration", broken)
+    monkeypatch.setattr(plots, "plot_calibration", broken)
     assert main([*[a.format(d=folder) for a in CAL], "--plot", str(folder / "p.png"),
                  "--save", str(folder / "new.json")]) == 2
     assert not (folder / "new.json").exists()
@@ -355,6 +354,6 @@ def test_python_api_raises_the_toolkits_errors(folder):
         plant.NoiseSpec((0.1, 0.1, 0.1), angle_sd=float("inf"))
     with pytest.raises(TypeError, match="plant.Payload"):
         Calibration.load(folder / "cal.json", payload="x")
-    from observers import AugmentedEKF
+    from fmscal.observers import AugmentedEKF
     with pytest.raises(plant.FmscalError, match="S0_sd must be at most"):
         AugmentedEKF(plant.PAPER_PAYLOAD, S0_sd=1e200)

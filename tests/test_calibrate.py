@@ -7,12 +7,11 @@ import sys
 import numpy as np
 import pytest
 
-import plant
-
-from analysis.cli import main
-from analysis.metrics import calibration_error
-from observers import AugmentedEKF, LeastSquares
-from observers.base import ObserverResult
+from fmscal import plant
+from fmscal.analysis.cli import main
+from fmscal.analysis.metrics import calibration_error
+from fmscal.observers import AugmentedEKF, LeastSquares
+from fmscal.observers.base import ObserverResult
 
 OTHER = plant.Payload(6.0, 0.3, (-0.15, 0.4))
 PAYLOAD_ARGS = ["--mass", "6", "--inertia", "0.3", "--rho", "-0.15", "0.4"]
@@ -30,7 +29,7 @@ def other_log(tmp_path_factory):
 
 
 def _calibrate_json(path, *extra):
-    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", str(path), *PAYLOAD_ARGS,
+    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", str(path), *PAYLOAD_ARGS,
                            "--truth", str(path.with_suffix(".truth.json")), "--json", *extra],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
@@ -73,7 +72,7 @@ def test_least_squares_uncertainty_is_honest(scenario):
     """Issue 15: over 20 seeds the z-scores ``(S_hat - S) / S_std`` (and of ``b`` on the rig, with its offset,
     50 Hz poses and latency) have a spread between 0.8 and 1.25 and a mean near 0: neither overconfident
     nor needlessly cautious."""
-    from analysis.comparison import simulate_case
+    from fmscal.analysis.comparison import simulate_case
     z_S, z_b = [], []
     for seed in range(20):
         sc, log, truth, _ = simulate_case(scenario, seed, 30.0)
@@ -167,7 +166,7 @@ GOOD_ROWS = "".join(f"{0.001 * k},{0.0},{0.0},{0.0},1,1,1\n" for k in range(20))
         f"{0.001 * k},{'0,0,0' if k < 3 else ',,'},1,1,1\n" for k in range(20))), "too few pose measurements"),
 ])
 def test_bad_logs_are_refused_with_one_line(tmp_path, make, message):
-    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "calibrate", make(tmp_path), *PAYLOAD_ARGS],
+    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", make(tmp_path), *PAYLOAD_ARGS],
                           capture_output=True, text=True)
     assert proc.returncode != 0
     lines = proc.stderr.strip().splitlines()
@@ -191,7 +190,7 @@ def test_bad_payload_arguments_are_refused_with_one_line(other_log, args, messag
 def test_readings_in_counts_are_named_and_fail_only_the_methods_that_start_from_S0():
     """A reading in sensor counts makes S's entries tiny: every method warns, the offline fit absorbs it (its units
     check passes), an online method starting from S0 of order one does not (its units check fails)."""
-    from analysis.calibrate import calibrate
+    from fmscal.analysis.calibrate import calibrate
     sc = plant.get_scenario("paper").with_(duration=20.0)
     log, truth, _ = sc.generate(0)
     counts = plant.Log(log.t, log.pose, log.w_hat * 1e4)

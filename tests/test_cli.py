@@ -7,8 +7,8 @@ import sys
 import numpy as np
 import pytest
 
-import plant
-from analysis.cli import main
+from fmscal import plant
+from fmscal.analysis.cli import main
 
 
 def test_simulate_writes_a_log_that_matches_the_plant(tmp_path):
@@ -35,7 +35,7 @@ def test_check_gains_says_assumption_2_fails_for_the_paper(capsys):
 
 
 def test_console_script_runs_and_reports_errors_without_traceback(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "analysis.cli", "simulate", "--out", str(tmp_path / "x.txt"),
+    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "simulate", "--out", str(tmp_path / "x.txt"),
                            "--duration", "0.1"], capture_output=True, text=True)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and "--out must end in .csv" in proc.stderr
@@ -53,7 +53,7 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
 
 def test_reproduce_gives_the_same_rows_on_one_process_and_on_two(tmp_path):
     """The scenario and method pairs run on worker processes; the table does not depend on how many."""
-    from analysis.reproduce import reproduce
+    from fmscal.analysis.reproduce import reproduce
     rows = [reproduce(tmp_path / str(n), duration_scale=0.02, progress=False, n_jobs=n) for n in (1, 2)]
     strip = lambda table: [{k: v for k, v in r.items() if k != "wall_time"} for r in table]     # noqa: E731
     assert strip(rows[0]) == strip(rows[1])

@@ -4,11 +4,11 @@ import casadi as ca
 import numpy as np
 import pytest
 
-import plant
-from observers import AdaptiveObserver, HighGainObserver
-from plant import _compile
-from plant._compile import BufferedCall, compile_function
-from plant.excitation import PaperWrench
+from fmscal import plant
+from fmscal.observers import AdaptiveObserver, HighGainObserver
+from fmscal.plant import _compile
+from fmscal.plant._compile import BufferedCall, compile_function
+from fmscal.plant.excitation import PaperWrench
 
 LOGS = [("paper", 0), ("vision-50hz", 4), ("other-payload", 2)]
 

@@ -7,11 +7,11 @@ import casadi as ca
 import numpy as np
 import pytest
 
-import plant
-from analysis.cli import build_parser, main
-from observers import METHODS, Method, Observer, ObserverResult, RecursiveObserver, make_observer, method_names
-from observers.state import INPUT, StateLayout
-from plant.errors import FmscalError
+from fmscal import plant
+from fmscal.analysis.cli import build_parser, main
+from fmscal.observers import METHODS, Method, Observer, ObserverResult, RecursiveObserver, make_observer, method_names
+from fmscal.observers.state import INPUT, StateLayout
+from fmscal.plant.errors import FmscalError
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +126,7 @@ def test_no_module_keeps_its_own_list_of_method_names():
 
 def test_importing_every_module_leaves_the_matplotlib_backend_alone():
     code = ("import importlib, pkgutil, matplotlib\n"
-            "import analysis, observers, plant\n"
+            "from fmscal import analysis, observers, plant\n"
             "for pkg in (plant, observers, analysis):\n"
             "    for m in pkgutil.iter_modules(pkg.__path__):\n"
             "        importlib.import_module(pkg.__name__ + '.' + m.name)\n"
@@ -138,7 +138,7 @@ def test_importing_every_module_leaves_the_matplotlib_backend_alone():
 
 def test_a_genuine_bug_keeps_its_traceback(monkeypatch):
     """The CLI turns the toolkit's input errors into one line; anything else is a bug and is raised."""
-    import analysis.cli as cli
+    import fmscal.analysis.cli as cli
 
     def broken(args):
         raise ZeroDivisionError("a bug")
@@ -157,7 +157,7 @@ def test_state_layout_packs_and_unpacks_numbers_and_symbols_alike():
     np.testing.assert_array_equal(s.S, np.eye(3).ravel())
     zs = ca.SX.sym("z", layout.size)
     parts = layout.unpack(zs)
-    packed = layout.pack(__import__("plant._backend", fromlist=["ops"]).ops(zs), x=parts.x, S=parts.S, t=parts.t)
+    packed = layout.pack(__import__("fmscal.plant._backend", fromlist=["ops"]).ops(zs), x=parts.x, S=parts.S, t=parts.t)
     f = ca.Function("f", [zs], [packed])
     np.testing.assert_array_equal(np.array(f(z)).ravel(), z)
     with pytest.raises(ValueError, match="missing"):

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-import plant
-from observers import AugmentedEKF
-from observers.eiv import _compensation, _compiled
-from observers.max_likelihood import _initial_state, _layout, fit_max_likelihood
+from fmscal import plant
+from fmscal.observers import AugmentedEKF
+from fmscal.observers.eiv import _compensation, _compiled
+from fmscal.observers.max_likelihood import _initial_state, _layout, fit_max_likelihood
 
 
 @pytest.mark.parametrize("n", [3, 4])

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-import plant
-from analysis import calibration_error, error_history
-from observers import AugmentedEKF
+from fmscal import plant
+from fmscal.analysis import calibration_error, error_history
+from fmscal.observers import AugmentedEKF
 
 
 def test_casadi_jacobians_match_finite_differences_of_the_plant():
@@ -122,7 +122,7 @@ def test_ekf_refuses_bad_samples_like_every_observer(call, match):
 ])
 def test_ekf_with_its_defaults_is_near_least_squares_on_the_same_data(scenario, seed, noise_factor):
     """Issue 4: with its defaults, the EKF within 1.5x of a least-squares fit of the same log."""
-    from observers import LeastSquares
+    from fmscal.observers import LeastSquares
     sc = plant.get_scenario(scenario).with_(duration=60)
     log, truth, _ = sc.generate(seed)
     S = truth.S_at(0.0)
@@ -173,7 +173,7 @@ def _median_E_last_10pct(result, truth):
 def test_ekf_defaults_reach_the_constant_S_filter_on_a_constant_S(scenario, seed):
     """Issue 15: with its defaults (no random walk until the innovations raise one) the EKF is within 1.3x
     of the same filter with no random walk at all, told the true noise, on a sensor that does not change."""
-    from analysis.comparison import simulate_case
+    from fmscal.analysis.comparison import simulate_case
     sc, log, truth, noise = simulate_case(scenario, seed, 40.0)
     E = {name: _median_E_last_10pct(AugmentedEKF(sc.payload, noise=noise, **kw).run(log, truth.S0), truth)
          for name, kw in (("default", {}), ("floor", {"q_S": 0.0, "adapt_q": False}))}
@@ -182,7 +182,7 @@ def test_ekf_defaults_reach_the_constant_S_filter_on_a_constant_S(scenario, seed
 
 def _z_scores(scenario, seed, duration, told):
     """``(S_hat - S) / S_std`` (9,) and, with an offset, ``(b_hat - b) / b_std`` (3,) of one seeded run."""
-    from analysis.comparison import simulate_case
+    from fmscal.analysis.comparison import simulate_case
     sc, log, truth, noise = simulate_case(scenario, seed, duration)
     offset = truth.offset is not None
     result = AugmentedEKF(sc.payload, noise=noise if told else None, offset=offset).run(
@@ -219,7 +219,7 @@ def test_ekf_defaults_are_at_the_floor_where_the_reading_is_noisy():
     """Issue 15: on ``noisy`` and ``random-S`` (where the noisy reading in the regressor cost the uncompensated
     EKF 1.4-1.8x) the EKF with its defaults is within 1.3x of the floor on the median over seeds, and no seed is
     below 0.7x (the floor is what the data allow) or above 1.6x."""
-    from analysis.comparison import compare
+    from fmscal.analysis.comparison import compare
     table = compare(["noisy", "random-S"], 3, ["ekf"], duration=60, progress=False)
     for scenario, g in table[table["observer"] == "ekf"].groupby("scenario"):
         ratio = g["E_over_floor"].to_numpy()

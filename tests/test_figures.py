@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.cli import main
-from analysis.plots import plot_comparison, wandering_methods
-from plant import PAPER_PAYLOAD
+from fmscal.analysis.cli import main
+from fmscal.analysis.plots import plot_comparison, wandering_methods
+from fmscal.plant import PAPER_PAYLOAD
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -21,9 +21,9 @@ def _is_png(path):
 
 
 def test_importing_the_plots_leaves_the_backend_alone():
-    code = ("import matplotlib; matplotlib.use('svg'); import analysis.plots, analysis.cli, analysis.reproduce; "
+    code = ("import matplotlib; matplotlib.use('svg'); import fmscal.analysis.plots, fmscal.analysis.cli, fmscal.analysis.reproduce; "
             "print(matplotlib.get_backend())")          # (python-control imports pyplot; that alone switches nothing)
-    env = {**os.environ, "MPLBACKEND": "svg", "PYTHONPATH": str(Path(__file__).parents[1])}
+    env = {**os.environ, "MPLBACKEND": "svg"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "svg"
 

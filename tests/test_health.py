@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-import plant
-from observers.convergence import divergence_bound
-from observers.health import consistency_check
+from fmscal import plant
+from fmscal.observers.convergence import divergence_bound
+from fmscal.observers.health import consistency_check
 
 
 @pytest.fixture(scope="module")

@@ -4,11 +4,11 @@ import control
 import numpy as np
 import pytest
 
-import plant
-from analysis import calibration_error
-from observers import HighGainObserver, check_gains, double_pole_gains
-from observers.gains import sampled_poles
-from observers.highgain import discrete_gain
+from fmscal import plant
+from fmscal.analysis import calibration_error
+from fmscal.observers import HighGainObserver, check_gains, double_pole_gains
+from fmscal.observers.gains import sampled_poles
+from fmscal.observers.highgain import discrete_gain
 
 
 @pytest.mark.parametrize("lam", [5.0, 20.0, 80.0])

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-import plant
-from analysis import calibration_error
-from observers import LeastSquares
-from observers.max_likelihood import POSE_SD_FLOOR, V0_SD, MaximumLikelihoodFit, fit_max_likelihood
-from plant.errors import FmscalError
+from fmscal import plant
+from fmscal.analysis import calibration_error
+from fmscal.observers import LeastSquares
+from fmscal.observers.max_likelihood import POSE_SD_FLOOR, V0_SD, MaximumLikelihoodFit, fit_max_likelihood
+from fmscal.plant.errors import FmscalError
 
 
 def _case(name="paper", seed=0, duration=10.0, **changes):

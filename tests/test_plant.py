@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-import plant
-from plant import (PAPER_PAYLOAD, PAPER_S, CalibrationSchedule, Log, LogError, Payload,
+from fmscal import plant
+from fmscal.plant import (PAPER_PAYLOAD, PAPER_S, CalibrationSchedule, Log, LogError, Payload,
                    PaperWrench, SampledWrench, acceleration, get_scenario, integrate)
 
 

@@ -5,8 +5,8 @@ import json
 import pandas as pd
 import pytest
 
-from analysis.cli import main
-from analysis.sweep import TIMING_COLUMNS, expand_settings, settings_label, sweep
+from fmscal.analysis.cli import main
+from fmscal.analysis.sweep import TIMING_COLUMNS, expand_settings, settings_label, sweep
 
 GRID = {"high-gain": {"lam": [10.0, 20.0]}}
 
