@@ -1,4 +1,4 @@
-"""The physics and the sensor: eq. (1), the calibration matrix, logs, scenarios."""
+"""The physics and the sensor: eq. (1) and Newton-Euler in 3D, the models, the calibration matrix, logs, scenarios."""
 
 from .dynamics import (A_1, A_2, B_1, B_2, C_1, C_2, STATE_NAMES, acceleration, input_matrix,
                        phi_1, phi_2, regressors, S_from_phi, state_derivative)
@@ -7,6 +7,8 @@ from .calibration import Calibration, CalibrationFileError, file_sha256
 from .bag import BagError, import_bag, read_bag
 from .log import COLUMNS, READING_COLUMNS, Log, LogError, Truth, read_log, read_readings, read_truth
 from .payload import PAPER_PAYLOAD, Payload
+from .rigid_body import SpatialPayload
+from .model import Model, PlanarModel, SpatialModel
 from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenario
 from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
 from .simulate import integrate, rk4_step
@@ -21,7 +23,7 @@ __all__ = [
     "Calibration", "CalibrationFileError", "file_sha256",
     "BagError", "import_bag", "read_bag",
     "COLUMNS", "READING_COLUMNS", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",
-    "PAPER_PAYLOAD", "Payload",
+    "PAPER_PAYLOAD", "Payload", "SpatialPayload", "Model", "PlanarModel", "SpatialModel",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
     "integrate", "rk4_step", "estimate_noise", "compiler", "FmscalError",

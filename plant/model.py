@@ -1,0 +1,349 @@
+"""The problem's shape in one object: sizes, layouts, columns, measurement, dynamics.
+
+A calibration problem is a rigid payload on a force-moment sensor whose raw
+reading ``w_hat`` (``n_w`` components) gives the true wrench through
+``w = S w_hat + c`` (``S`` n_w x n_w; ``c = -S b`` with ``b`` the sensor's
+offset), while a tracker measures the payload's pose. A :class:`Model` says
+what the problem is, as pinocchio's ``Model`` says what a robot is:
+
+- the sizes: the wrench ``n_w``, the configuration ``nq`` and velocity
+  ``nv`` (they differ when the configuration holds a unit quaternion), the
+  motion state ``nx = nq + nv``, the parameters ``[S | c]``;
+- named layouts of the motion state and of the pose, and the log's columns;
+- the measurement map (the pose a state shows) and the state at rest at a
+  measured pose;
+- ``integrate`` and ``difference`` on the configuration (an angle and a
+  position in the plane; a position and a unit quaternion in space);
+- the dynamics, affine in the wrench: ``a = A(x) w + d(x)`` for the
+  accelerations ``a`` (``nv``), and from it the regressor of ``[S | c]``.
+  They are written once per case (:mod:`fmscal.plant.dynamics`, eq. (1);
+  :mod:`fmscal.plant.rigid_body`, Newton-Euler) for numbers and casadi
+  symbols alike.
+
+Two models: :class:`PlanarModel` (the paper's problem: ``[M, f_x, f_y]``,
+pose ``theta, X, Y``) and :class:`SpatialModel` (a 6-axis sensor: ``[tau,
+f]``, pose ``q, p``, under gravity).
+"""
+
+import casadi as ca
+import numpy as np
+
+from . import dynamics, rigid_body
+from ._backend import is_symbolic, ops
+from ._checks import as_finite_array
+from .errors import FmscalError
+from .layout import StateLayout
+from .payload import Payload
+from .rigid_body import SpatialPayload
+
+__all__ = ["Model", "PlanarModel", "SpatialModel", "model_for_columns"]
+
+
+class Model:
+    """What every case shares; a case sets the class attributes and the dynamics.
+
+    Attributes
+    ----------
+    name : str
+        ``"planar"`` or ``"spatial"``.
+    wrench_names, pose_names : tuple of str
+        The reading's and the pose's columns in a log, in order.
+    nq, nv : int
+        Configuration and velocity sizes.
+    state : StateLayout
+        The motion state ``x`` (``nx = nq + nv`` entries) by name.
+    payload
+        The payload's mass properties.
+    """
+
+    name = ""
+    wrench_names = ()
+    pose_names = ()
+    nq = nv = 0
+    state = None
+
+    def __init__(self, payload):
+        self.payload = payload
+
+    def __repr__(self):
+        return f"{type(self).__name__}({self.payload!r})"
+
+    # --- sizes ------------------------------------------------------------------------------------
+    @property
+    def n_w(self):
+        """Components of the wrench and of the reading."""
+        return len(self.wrench_names)
+
+    @property
+    def n_pose(self):
+        """Numbers in one pose measurement (its columns in a log)."""
+        return len(self.pose_names)
+
+    @property
+    def nx(self):
+        """Size of the motion state."""
+        return self.nq + self.nv
+
+    @property
+    def columns(self):
+        """The log's header: ``t``, the pose, the reading."""
+        return ("t", *self.pose_names, *self.wrench_names)
+
+    def n_params(self, offset=False):
+        """Entries of ``[S | c]``: ``n_w^2``, plus ``n_w`` with the offset column."""
+        return self.n_w * (self.n_w + int(bool(offset)))
+
+    def params(self, offset=False):
+        """The layout of ``vec([S | c])``, row by row (the order every method packs ``S`` in).
+
+        Returns
+        -------
+        StateLayout
+            One part a row of ``[S | c]``: ``row0``, ``row1``, ... each of
+            ``n_w`` entries, or ``n_w + 1`` with the offset column.
+        """
+        width = self.n_w + int(bool(offset))
+        return StateLayout(*((f"row{i}", width) for i in range(self.n_w)))
+
+    # --- the state's parts ---------------------------------------------------------------------------
+    #: Indices of the configuration and of the velocity in the motion state.
+    q_index = v_index = ()
+
+    def configuration(self, x):
+        """The configuration part of the state, ``nq`` entries."""
+        return ops(x).vcat([x[k] for k in self.q_index])
+
+    def velocity(self, x):
+        """The velocity part of the state, ``nv`` entries."""
+        return ops(x).vcat([x[k] for k in self.v_index])
+
+    # --- checks -----------------------------------------------------------------------------------
+    def check_matrix(self, S, name="S"):
+        """``S`` as a finite ``n_w x n_w`` float array, or a one-line :class:`FmscalError`."""
+        return as_finite_array(S, (self.n_w, self.n_w), name)
+
+    def check_pose(self, pose, name="pose"):
+        """One pose as ``n_pose`` finite numbers, or a one-line :class:`FmscalError`."""
+        return as_finite_array(pose, (self.n_pose,), name)
+
+    # --- the dynamics, affine in the wrench --------------------------------------------------------
+    def acceleration(self, x, w):
+        """Accelerations ``a`` (``nv``) the wrench ``w`` makes in state ``x``: ``A(x) w + d(x)``."""
+        o = ops(x, w)
+        A, d = self.input_matrix(x), self.drift(x)
+        return o.dot(A, w) + d
+
+    def regressor(self, x, w_hat):
+        """The regressor ``U`` of ``s = vec([S | c])`` (row order): ``a = U s + d(x)``.
+
+        Since ``S w_hat = (I (x) w_hat^T) s``, ``U = A(x) (I_nw (x) w_hat^T)``.
+
+        Parameters
+        ----------
+        x : ndarray or casadi.SX, shape (nx,)
+        w_hat : ndarray or casadi.SX, shape (n_w,) or (n_w + 1,)
+            The reading; with a trailing constant 1 the offset column ``c``
+            is in ``s`` too.
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (nv, n_w * len(w_hat))
+        """
+        A = self.input_matrix(x)
+        m = w_hat.shape[0] if hasattr(w_hat, "shape") else len(w_hat)
+        if is_symbolic(x, w_hat):
+            return ca.horzcat(*[A[:, i] * w_hat[j] for i in range(self.n_w) for j in range(m)])
+        w_hat = np.asarray(w_hat, dtype=float)
+        return np.hstack([np.outer(A[:, i], w_hat) for i in range(self.n_w)])
+
+
+class PlanarModel(Model):
+    """The paper's planar problem: reading ``[M, f_x, f_y]``, pose ``theta, X, Y`` (eq. 1).
+
+    The motion state is ``[theta, theta', X, X', Y, Y']`` (the toolkit's
+    order since the first release); the configuration is ``[theta, X, Y]``
+    and it moves additively.
+
+    Parameters
+    ----------
+    payload : Payload
+
+    Examples
+    --------
+    >>> from fmscal.plant import PAPER_PAYLOAD
+    >>> model = PlanarModel(PAPER_PAYLOAD)
+    >>> model.n_w, model.nq, model.nv, model.columns
+    (3, 3, 3, ('t', 'theta', 'x', 'y', 'M', 'fx', 'fy'))
+    """
+
+    name = "planar"
+    wrench_names = ("M", "fx", "fy")
+    pose_names = ("theta", "x", "y")
+    nq = nv = 3
+    state = StateLayout(("theta", 1), ("theta_dot", 1), ("X", 1), ("X_dot", 1), ("Y", 1), ("Y_dot", 1))
+    q_index, v_index = (0, 2, 4), (1, 3, 5)
+
+    def __init__(self, payload):
+        if not isinstance(payload, Payload):
+            raise FmscalError(f"PlanarModel takes a plant.Payload; got {type(payload).__name__}")
+        super().__init__(payload)
+
+    def measure(self, x):
+        """The pose ``[theta, X, Y]`` the state shows (the measurement map, ``C_1``, ``C_2`` of eqs. 4, 5)."""
+        return self.configuration(x)
+
+    def rest_state(self, pose):
+        """The state at rest at a measured pose: ``[theta, 0, X, 0, Y, 0]``."""
+        theta, X, Y = self.check_pose(pose)
+        return np.array([theta, 0.0, X, 0.0, Y, 0.0])
+
+    def integrate(self, q, dq):
+        """The configuration ``q`` moved by ``dq`` (additive in the plane)."""
+        return q + dq
+
+    def difference(self, q0, q1):
+        """The move ``dq`` taking ``q0`` to ``q1``: ``q1 - q0``."""
+        return q1 - q0
+
+    def input_matrix(self, x):
+        """``A(x) = G(theta)`` of eq. (1), shape (3, 3): ``[theta'', X'', Y''] = G w``."""
+        return dynamics.input_matrix(x[0], self.payload)
+
+    def drift(self, x):
+        """``d(x) = 0``: in the plane the accelerations are linear in the wrench."""
+        return ops(x).vcat([0.0, 0.0, 0.0])
+
+    def state_derivative(self, x, w):
+        """``x'`` under eq. (1) (:func:`fmscal.plant.dynamics.state_derivative`)."""
+        return dynamics.state_derivative(x, w, self.payload)
+
+
+class SpatialModel(Model):
+    """A 6-axis sensor on a payload moving in 3D under gravity (Newton-Euler).
+
+    Reading ``[tx, ty, tz, fx, fy, fz]`` (torque about the sensor point first,
+    sensor axes); pose ``[qw, qx, qy, qz, x, y, z]`` of the sensor frame in
+    the world (unit quaternion, scalar first; position in m). The motion
+    state is ``[p, q, v, omega]`` (:mod:`fmscal.plant.rigid_body`):
+    ``nq = 7``, ``nv = 6``, velocities ``[v (world), omega (sensor axes)]``.
+
+    Parameters
+    ----------
+    payload : SpatialPayload
+    gravity : array_like, shape (3,)
+        Gravity in the world frame, m/s^2.
+    """
+
+    name = "spatial"
+    wrench_names = ("tx", "ty", "tz", "fx", "fy", "fz")
+    pose_names = ("qw", "qx", "qy", "qz", "x", "y", "z")
+    nq, nv = rigid_body.NQ, rigid_body.NV
+    state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))
+    q_index, v_index = tuple(range(7)), tuple(range(7, 13))
+
+    def __init__(self, payload, gravity=rigid_body.GRAVITY):
+        if not isinstance(payload, SpatialPayload):
+            raise FmscalError(f"SpatialModel takes a plant.rigid_body.SpatialPayload; got {type(payload).__name__}")
+        super().__init__(payload)
+        self.gravity = tuple(float(g) for g in as_finite_array(gravity, (3,), "gravity"))
+
+    def measure(self, x):
+        """The pose ``[q, p]`` (log order) the state shows."""
+        o = ops(x)
+        return o.vcat([x[3:7], x[0:3]])
+
+    def rest_state(self, pose):
+        """The state at rest at a measured pose ``[q, p]``: ``[p, q, 0, 0]``."""
+        pose = self.check_pose(pose)
+        q = pose[:4] / np.linalg.norm(pose[:4])
+        return np.r_[pose[4:], q, np.zeros(6)]
+
+    def integrate(self, q, dq):
+        """The configuration ``[p, q]`` moved by ``dq = [dp (world), dphi (sensor axes)]``.
+
+        ``p + dp`` and ``q (x) exp(dphi / 2)``: the rotation vector ``dphi``
+        turns the body about its own axes, as ``omega dt`` does.
+        """
+        o = ops(q, dq)
+        dphi = dq[3:6]
+        angle = o.sqrt(dphi[0] * dphi[0] + dphi[1] * dphi[1] + dphi[2] * dphi[2])
+        half = 0.5 * angle
+        # sin(angle/2)/angle, its series below 1e-8 rad (exact to rounding there)
+        k = o.if_else(angle > 1e-8, o.sin(half) / o.fmax(angle, 1e-300), 0.5 - angle * angle / 48.0)
+        step = o.vcat([o.cos(half), k * dphi[0], k * dphi[1], k * dphi[2]])
+        return o.vcat([q[0:3] + dq[0:3], rigid_body.quaternion_multiply(q[3:7], step)])
+
+    def difference(self, q0, q1):
+        """The move ``dq = [dp, dphi]`` taking ``q0`` to ``q1`` (inverse of :meth:`integrate`).
+
+        ``dphi = 2 log(q0* (x) q1)``, taken on the short way round (``q`` and
+        ``-q`` are one attitude).
+        """
+        q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+        rel = rigid_body.quaternion_multiply(rigid_body.quaternion_conjugate(q0[3:7]), q1[3:7])
+        if rel[0] < 0:
+            rel = -rel
+        s = np.linalg.norm(rel[1:])
+        angle = 2.0 * np.arctan2(s, rel[0])
+        dphi = rel[1:] * (angle / s if s > 1e-300 else 2.0)
+        return np.r_[q1[0:3] - q0[0:3], dphi]
+
+    def input_matrix(self, x):
+        """``A(x)``, shape (6, 6): ``[p_ddot; alpha] = A(x) [tau_O; f] + d(x)``.
+
+        From :func:`fmscal.plant.rigid_body.body_acceleration`, with
+        ``K = I_c^-1``::
+
+            alpha  = K tau_O - K [rho]x f + alpha_0
+            p_ddot = R ([rho]x K tau_O + (I/m - [rho]x K [rho]x) f) + ...
+        """
+        K = np.linalg.inv(self.payload.I_c)
+        r = _skew(self.payload.rho)
+        R = rigid_body.rotation_matrix(x[3:7])
+        top = np.hstack([r @ K, np.eye(3) / self.payload.mass - r @ K @ r])
+        bottom = np.hstack([K, -K @ r])
+        if is_symbolic(x):
+            return ca.vertcat(ca.mtimes(R, ca.DM(top)), ca.DM(bottom))
+        return np.vstack([R @ top, bottom])
+
+    def drift(self, x):
+        """``d(x)``: gravity and the gyroscopic and centripetal terms, shape (6,)."""
+        o = ops(x)
+        zero = o.vcat([0.0] * 6)
+        alpha_0, p_ddot_0 = rigid_body.body_acceleration(x[3:7], x[10:13], zero, self.payload, self.gravity)
+        return o.vcat([p_ddot_0, alpha_0])
+
+    def state_derivative(self, x, w):
+        """``x'`` under Newton-Euler (:func:`fmscal.plant.rigid_body.state_derivative`)."""
+        return rigid_body.state_derivative(x, w, self.payload, self.gravity)
+
+
+def _skew(v):
+    """``[v]x``, the cross-product matrix: ``[v]x u = v x u``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def model_for_columns(header):
+    """Which case a log's header belongs to: ``"planar"`` or ``"spatial"``.
+
+    Parameters
+    ----------
+    header : sequence of str
+        The column names of a log.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    FmscalError
+        The header holds neither case's columns.
+    """
+    names = set(header)
+    for model in (SpatialModel, PlanarModel):
+        if set(("t", *model.pose_names, *model.wrench_names)) <= names:
+            return model.name
+    expected = " or ".join(f"{','.join(('t', *m.pose_names, *m.wrench_names))} ({m.name})"
+                           for m in (PlanarModel, SpatialModel))
+    raise FmscalError(f"a log's header is {expected}; got {','.join(header)[:200]}")

@@ -1,0 +1,113 @@
+"""The model object: one place for the problem's sizes, layouts, measurement and dynamics (issue 27)."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from fmscal.plant import PAPER_PAYLOAD, FmscalError
+from fmscal.plant.layout import StateLayout
+from fmscal.plant.model import Model, PlanarModel, SpatialModel, model_for_columns
+from fmscal.plant.rigid_body import SpatialPayload
+
+TOOL = SpatialPayload(1.7, [0.02, -0.03, 0.08], [0.012, 0.015, 0.009, 0.001, -0.0005, 0.0008])
+
+
+class RailModel(Model):
+    """A payload on a rail: one position, a 1x1 S (the minimal case; proof that sizes flow from the model)."""
+
+    name = "rail"
+    wrench_names = ("f",)
+    pose_names = ("x",)
+    nq = nv = 1
+    state = StateLayout(("x", 1), ("x_dot", 1))
+    q_index, v_index = (0,), (1,)
+
+    def measure(self, x):
+        return self.configuration(x)
+
+    def input_matrix(self, x):
+        return ca.DM([[1.0 / self.payload]]) if isinstance(x, ca.SX) else np.array([[1.0 / self.payload]])
+
+    def drift(self, x):
+        return np.zeros(1) if not isinstance(x, ca.SX) else ca.DM.zeros(1)
+
+
+MODELS = [PlanarModel(PAPER_PAYLOAD), SpatialModel(TOOL), RailModel(2.0)]
+
+
+def _state(model, rng):
+    x = rng.normal(size=model.nx)
+    if model.name == "spatial":
+        x[3:7] /= np.linalg.norm(x[3:7])
+    return x
+
+
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: m.name)
+def test_sizes_and_layouts_agree(model):
+    assert model.state.size == model.nx == len(model.q_index) + len(model.v_index)
+    assert model.columns == ("t", *model.pose_names, *model.wrench_names)
+    assert model.params(offset=True).size == model.n_params(offset=True) == model.n_w * (model.n_w + 1)
+    assert model.n_params() == model.n_w ** 2
+
+
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: m.name)
+def test_the_regressor_is_the_dynamics_written_for_S(model):
+    """``A(x) (S w_hat + c) + d(x) = U s + d(x)``, and casadi gives the same numbers."""
+    rng = np.random.default_rng(0)
+    x, S, c, w_hat = _state(model, rng), rng.normal(size=(model.n_w, model.n_w)), rng.normal(size=model.n_w), \
+        rng.normal(size=model.n_w)
+    a = model.acceleration(x, S @ w_hat + c)
+    U = model.regressor(x, np.r_[w_hat, 1.0])
+    np.testing.assert_allclose(U @ np.c_[S, c].ravel() + model.drift(x), a, rtol=1e-12, atol=1e-12)
+    xs, ws = ca.SX.sym("x", model.nx), ca.SX.sym("w", model.n_w + 1)
+    f = ca.Function("f", [xs, ws], [model.regressor(xs, ws), model.drift(xs), model.measure(xs)])
+    U_ca, d_ca, y_ca = f(x, np.r_[w_hat, 1.0])
+    np.testing.assert_allclose(np.array(U_ca), U, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.array(d_ca).ravel(), model.drift(x), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.array(y_ca).ravel(), model.measure(x), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("model", MODELS[:2], ids=lambda m: m.name)
+def test_the_acceleration_is_the_state_derivative(model):
+    rng = np.random.default_rng(1)
+    x, w = _state(model, rng), rng.normal(size=model.n_w)
+    np.testing.assert_allclose(np.asarray(model.state_derivative(x, w))[list(model.v_index)],
+                               model.acceleration(x, w), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("model", MODELS[:2], ids=lambda m: m.name)
+def test_integrate_and_difference_are_inverse_and_rest_shows_its_pose(model):
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        q0 = model.configuration(_state(model, rng))
+        dq = rng.normal(size=model.nv) * 0.8
+        np.testing.assert_allclose(model.difference(q0, model.integrate(q0, dq)), dq, rtol=0, atol=1e-12)
+        pose = model.measure(np.r_[q0, np.zeros(model.nv)] if model.name == "spatial" else
+                             np.r_[q0[0], 0, q0[1], 0, q0[2], 0])
+        x = model.rest_state(pose)
+        np.testing.assert_allclose(model.measure(x), pose, atol=1e-15)
+        np.testing.assert_array_equal(model.velocity(x), np.zeros(model.nv))
+
+
+def test_a_quaternion_and_its_negative_are_one_attitude():
+    model = SpatialModel(TOOL)
+    q0 = np.r_[0.1, 0.2, 0.3, 0.5, 0.5, 0.5, 0.5]
+    q1 = model.integrate(q0, np.r_[0, 0, 0, 0.3, -0.2, 0.1])
+    flipped = np.r_[q1[:3], -q1[3:]]
+    np.testing.assert_allclose(model.difference(q0, flipped), model.difference(q0, q1), atol=1e-14)
+
+
+def test_the_header_picks_the_case():
+    assert model_for_columns(["t", "theta", "x", "y", "M", "fx", "fy"]) == "planar"
+    assert model_for_columns(["t", *SpatialModel.pose_names, *SpatialModel.wrench_names]) == "spatial"
+    with pytest.raises(FmscalError, match="planar.*spatial"):
+        model_for_columns(["t", "a", "b"])
+
+
+def test_a_model_refuses_the_other_case_payload():
+    with pytest.raises(FmscalError, match="SpatialPayload"):
+        SpatialModel(PAPER_PAYLOAD)
+    with pytest.raises(FmscalError, match="Payload"):
+        PlanarModel(TOOL)
+    with pytest.raises(FmscalError, match="gravity"):
+        SpatialModel(TOOL, gravity=[0, 0])
