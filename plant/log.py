@@ -1,15 +1,33 @@
 """The log: a CSV of measured pose and raw sensor reading, and its sidecar.
 
-Format (a public one: a user records it on a real rig)::
+Two formats (public ones: a user records them on a real rig); the header
+says which case a log is (:func:`fmscal.plant.model.model_for_columns`).
+
+Planar (the paper's problem)::
 
     t,theta,x,y,M,fx,fy
 
 in SI units (s, rad, m, N m, N). ``theta, x, y`` is the measured pose in the
 inertial frame, ``theta`` continuous (one wrapped into (-pi, pi] is unwrapped,
 with a note in :attr:`Log.notes`); ``M, fx, fy`` is the raw
-sensor reading ``w_hat`` in the body frame at the sensor interface. Empty
-``theta,x,y`` cells on a row mean no pose measurement at that sample; every
-other cell is a finite number. Time is strictly increasing and evenly sampled.
+sensor reading ``w_hat`` in the body frame at the sensor interface.
+
+Spatial (a 6-axis sensor moving in 3D)::
+
+    t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz
+
+``qw, qx, qy, qz`` is the attitude of the sensor frame (origin at the
+sensor's measuring point, the sensor's axes) in an inertial frame with z
+up: a unit quaternion, scalar first, rotating sensor-frame vectors into the
+world; ``x, y, z`` the position of the sensor point, m. ``tx, ty, tz, fx, fy,
+fz`` is the raw reading, torque first. A quaternion off unit norm by more
+than :data:`QUATERNION_TOLERANCE` is refused; within it, it is normalised;
+``q`` and ``-q`` are one attitude, and a sequence that flips sign is made
+continuous (with a note).
+
+In both, empty pose cells on a row (all of them) mean no pose measurement at
+that sample; every other cell is a finite number. Time is strictly
+increasing and evenly sampled.
 
 Every log, from a file or from the simulator, is validated in one place:
 :meth:`Log.__init__`.
@@ -27,14 +45,21 @@ import numpy as np
 from ._checks import as_finite_array, as_positive_scalar
 from .errors import FmscalError
 from .files import atomic_write_text
+from .model import PlanarModel, SpatialModel, model_for_columns
 from .payload import Payload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
-__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "COLUMNS", "READING_COLUMNS"]
+__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "COLUMNS", "SPATIAL_COLUMNS",
+           "READING_COLUMNS", "QUATERNION_TOLERANCE"]
 
-#: Column names of the log, in order.
-COLUMNS = ("t", "theta", "x", "y", "M", "fx", "fy")
-_POSE, _WRENCH = ("theta", "x", "y"), ("M", "fx", "fy")
+#: Column names of a planar log, in order.
+COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
+#: Column names of a spatial log, in order.
+SPATIAL_COLUMNS = ("t", *SpatialModel.pose_names, *SpatialModel.wrench_names)
+_POSE, _WRENCH = PlanarModel.pose_names, PlanarModel.wrench_names
+#: Largest departure of a logged quaternion's norm from 1 that is taken for rounding (and normalised).
+QUATERNION_TOLERANCE = 1e-3
+_CASES = {(len(m.pose_names), len(m.wrench_names)): m for m in (PlanarModel, SpatialModel)}
 _SAMPLING_TOLERANCE = 0.01        # relative spread of the time step accepted as even
 MIN_SAMPLES = 10
 #: Largest magnitude accepted in any column (s, rad, m, N m, N; or sensor counts).
@@ -52,16 +77,22 @@ class Log:
     ----------
     t : array_like, shape (N,)
         Time in s, strictly increasing, evenly sampled.
-    pose : array_like, shape (N, 3)
-        Measured ``[theta, X, Y]`` in rad and m; a row of NaN where there
-        was no measurement.
-    w_hat : array_like, shape (N, 3)
-        Raw reading ``[M, f_x, f_y]``, finite.
+    pose : array_like, shape (N, 3) or (N, 7)
+        Measured pose, a row of NaN where there was no measurement: planar
+        ``[theta, X, Y]`` in rad and m, or spatial ``[qw, qx, qy, qz, x, y,
+        z]`` (unit quaternion, scalar first; m).
+    w_hat : array_like, shape (N, 3) or (N, 6)
+        Raw reading, finite: planar ``[M, f_x, f_y]``, or spatial ``[tx, ty,
+        tz, fx, fy, fz]``.
     name : str, optional
         Where the log came from (a file name).
 
     Attributes
     ----------
+    kind : str
+        ``"planar"`` or ``"spatial"``, from the shapes.
+    columns : tuple of str
+        The log's CSV header.
     dt : float
         The time step, s.
     has_pose : ndarray of bool, shape (N,)
@@ -69,7 +100,8 @@ class Log:
     notes : list of str
         What was done to the data on reading it: a ``theta`` wrapped into
         (-pi, pi] (as vision systems and quaternion-to-yaw conversions give
-        it) is unwrapped, and said so here.
+        it) is unwrapped, a quaternion sequence that flips sign is made
+        continuous, and said so here.
 
     Raises
     ------
@@ -83,25 +115,30 @@ class Log:
         self.pose = np.asarray(pose, dtype=float)
         self.w_hat = np.asarray(w_hat, dtype=float)
         n = len(self.t)
-        if self.t.ndim != 1 or self.pose.shape != (n, 3) or self.w_hat.shape != (n, 3):
-            raise LogError(f"{self.name}: expected t (N,), pose (N, 3), w_hat (N, 3); "
-                           f"got {self.t.shape}, {self.pose.shape}, {self.w_hat.shape}")
+        case = _CASES.get((self.pose.shape[-1], self.w_hat.shape[-1])) if self.pose.ndim == self.w_hat.ndim == 2 \
+            else None
+        if self.t.ndim != 1 or case is None or self.pose.shape[0] != n or self.w_hat.shape[0] != n:
+            raise LogError(f"{self.name}: expected t (N,), pose (N, 3), w_hat (N, 3) (planar) or pose (N, 7), "
+                           f"w_hat (N, 6) (spatial); got {self.t.shape}, {self.pose.shape}, {self.w_hat.shape}")
+        self.kind = case.name
+        self.columns = ("t", *case.pose_names, *case.wrench_names)
+        pose_names, wrench_names = case.pose_names, case.wrench_names
         if n < MIN_SAMPLES:
             raise LogError(f"{self.name}: too few rows to calibrate; need at least {MIN_SAMPLES}, got {n}")
         if not np.all(np.isfinite(self.t)):
             raise LogError(f"{self.name}: column t has a missing, NaN or infinite value at row {_first_bad(self.t)}")
-        for j, col in enumerate(_WRENCH):
+        for j, col in enumerate(wrench_names):
             if not np.all(np.isfinite(self.w_hat[:, j])):
                 raise LogError(f"{self.name}: column {col} has a missing, NaN or infinite value "
                                f"at row {_first_bad(self.w_hat[:, j])}")
         partial = np.isnan(self.pose).any(axis=1) & ~np.isnan(self.pose).all(axis=1)
         if partial.any():
-            raise LogError(f"{self.name}: row {np.argmax(partial) + 1} has some but not all of theta,x,y; "
-                           "leave all three empty where there is no pose measurement")
+            raise LogError(f"{self.name}: row {np.argmax(partial) + 1} has some but not all of {','.join(pose_names)}; "
+                           f"leave all {len(pose_names)} empty where there is no pose measurement")
         if np.isinf(self.pose).any():
             raise LogError(f"{self.name}: pose has an infinite value at row {_first_bad(self.pose.sum(1))}")
-        for col, values in (("t", self.t), *((c, self.pose[:, j]) for j, c in enumerate(_POSE)),
-                            *((c, self.w_hat[:, j]) for j, c in enumerate(_WRENCH))):
+        for col, values in (("t", self.t), *((c, self.pose[:, j]) for j, c in enumerate(pose_names)),
+                            *((c, self.w_hat[:, j]) for j, c in enumerate(wrench_names))):
             big = np.abs(np.nan_to_num(values)) > MAX_MAGNITUDE
             if big.any():
                 row = int(np.argmax(big))
@@ -124,7 +161,30 @@ class Log:
             raise LogError(f"{self.name}: the first row has no pose; the log must start with a pose "
                            f"measurement (the first one is at row {first + 1}); drop the rows before it")
         self.notes = []
-        self._unwrap_theta()
+        if self.kind == "planar":
+            self._unwrap_theta()
+        else:
+            self._normalise_quaternions()
+
+    def _normalise_quaternions(self):
+        """Unit quaternions within :data:`QUATERNION_TOLERANCE`, normalised and made sign-continuous (with a note)."""
+        rows = np.flatnonzero(self.has_pose)
+        q = self.pose[rows, :4]
+        norm = np.linalg.norm(q, axis=1)
+        off = np.abs(norm - 1) > QUATERNION_TOLERANCE
+        if off.any():
+            k = int(np.argmax(off))
+            raise LogError(f"{self.name}: the quaternion qw,qx,qy,qz at row {rows[k] + 1} has norm {norm[k]:.6g}; "
+                           f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g})")
+        q = q / norm[:, None]
+        flips = np.sum(q[1:] * q[:-1], axis=1) < 0
+        sign = np.cumprod(np.r_[1.0, np.where(flips, -1.0, 1.0)])
+        self.pose = self.pose.copy()
+        self.pose[rows, :4] = q * sign[:, None]
+        if flips.any():
+            first = self.t[rows[1:][flips][0]]
+            self.notes.append(f"{self.name}: the quaternion changes sign {int(flips.sum())} time(s) between poses "
+                              f"(q and -q are one attitude; the first at t = {first:g} s); made it continuous")
 
     def _unwrap_theta(self):
         """Unwrap a ``theta`` wrapped into (-pi, pi] (its ~2 pi jumps between poses), with a note."""
@@ -152,13 +212,14 @@ class Log:
         return float((self.has_pose.sum() - 1) / max(self.duration, 1e-12))
 
     def write(self, path):
-        """Write the log as CSV with the header ``t,theta,x,y,M,fx,fy``."""
+        """Write the log as CSV with its header (:attr:`columns`)."""
         data = np.column_stack([self.t, self.pose, self.w_hat])
-        lines = [",".join(COLUMNS)]
+        lines = [",".join(self.columns)]
+        width = self.pose.shape[1]
         for row, ok in zip(data, self.has_pose):
             cells = [repr(float(v)) for v in row]
             if not ok:
-                cells[1:4] = ["", "", ""]
+                cells[1:1 + width] = [""] * width
             lines.append(",".join(cells))
         atomic_write_text(path, "\n".join(lines) + "\n")
 
@@ -243,12 +304,26 @@ def read_log(path):
     LogError
         Missing file, missing or misnamed columns, a cell that is not a
         number, NaN or infinite values, time not strictly increasing or not
-        evenly sampled, too few rows or pose measurements.
+        evenly sampled, too few rows or pose measurements, a quaternion not
+        of unit norm.
     """
     path = _as_path(path, "log")
-    frame = _read_csv(path, COLUMNS, "only pose cells may be empty (no measurement)")
-    return Log(frame["t"].to_numpy(), frame[list(_POSE)].to_numpy(),
-               frame[list(_WRENCH)].to_numpy(), name=path.name)
+    case = SpatialModel if _looks_spatial(path) else PlanarModel
+    frame = _read_csv(path, ("t", *case.pose_names, *case.wrench_names),
+                      "only pose cells may be empty (no measurement)")
+    return Log(frame["t"].to_numpy(), frame[list(case.pose_names)].to_numpy(),
+               frame[list(case.wrench_names)].to_numpy(), name=path.name)
+
+
+def _looks_spatial(path):
+    """True when the file's header names the spatial columns (the planar format otherwise, and its errors)."""
+    with open(path, "rb") as f:
+        first = f.readline(4096).decode("utf-8", errors="replace").removeprefix("\ufeff")
+    header = [h.strip() for h in first.split(",")]
+    try:
+        return model_for_columns(header) == "spatial"
+    except FmscalError:
+        return False
 
 
 #: Columns of a file of raw readings (``fmscal apply``); a full log has them too.
