@@ -9,6 +9,7 @@ from .log import COLUMNS, READING_COLUMNS, Log, LogError, Truth, read_log, read_
 from .payload import PAPER_PAYLOAD, Payload
 from .rigid_body import SpatialPayload
 from .model import Model, PlanarModel, SpatialModel
+from .spatial_scenarios import SPATIAL_SCENARIOS, SpatialScenario
 from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenario
 from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
 from .simulate import integrate, rk4_step
@@ -24,6 +25,7 @@ __all__ = [
     "BagError", "import_bag", "read_bag",
     "COLUMNS", "READING_COLUMNS", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",
     "PAPER_PAYLOAD", "Payload", "SpatialPayload", "Model", "PlanarModel", "SpatialModel",
+    "SPATIAL_SCENARIOS", "SpatialScenario",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
     "integrate", "rk4_step", "estimate_noise", "compiler", "FmscalError",

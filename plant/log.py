@@ -47,6 +47,7 @@ from .errors import FmscalError
 from .files import atomic_write_text
 from .model import PlanarModel, SpatialModel, model_for_columns
 from .payload import Payload
+from .rigid_body import SpatialPayload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
 __all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "COLUMNS", "SPATIAL_COLUMNS",
@@ -433,15 +434,15 @@ class Truth:
     seed : int
     schedule : plant.CalibrationSchedule
         The true ``S`` (constant) or its schedule.
-    S0 : ndarray, shape (3, 3)
+    S0 : ndarray, shape (n_w, n_w)
         The initial estimate the scenario prescribes to every observer.
-    payload : plant.Payload
+    payload : plant.Payload or plant.SpatialPayload
     noise : plant.NoiseSpec
         Standard deviations of the noise added to the log.
     told_noise : float
         What a method with a noise model is told, as a multiple of ``noise``
         (1: the truth; a scenario may tell a wrong figure on purpose).
-    offset : ndarray, shape (3,), or None
+    offset : ndarray, shape (n_w,), or None
         The sensor's offset ``b`` in ``w = S (w_hat - b)``, N m and N.
     latency : float
         Delay of the pose stream behind the sensor stream, s.
@@ -505,12 +506,13 @@ def read_truth(path):
         known = {"scenario", "seed", "S", "S_schedule", "S0", "mass", "inertia", "rho", "noise", "told_noise",
                  "offset", "latency"}
         offset = data.get("offset")
+        spatial = schedule.size == 6
         return Truth(
             scenario=data.get("scenario", "unknown"), seed=data.get("seed"),
-            schedule=schedule, S0=check_calibration(data["S0"], "S0"),
-            payload=Payload.from_dict(data), noise=NoiseSpec.from_dict(data["noise"]),
+            schedule=schedule, S0=check_calibration(data["S0"], "S0", size=schedule.size),
+            payload=(SpatialPayload if spatial else Payload).from_dict(data), noise=NoiseSpec.from_dict(data["noise"]),
             told_noise=as_positive_scalar(data.get("told_noise", 1.0), "told_noise"),
-            offset=None if offset is None else as_finite_array(offset, (3,), "offset"),
+            offset=None if offset is None else as_finite_array(offset, (schedule.size,), "offset"),
             latency=as_positive_scalar(data.get("latency") or 0.0, "latency", allow_zero=True),
             settings={k: v for k, v in data.items() if k not in known})
     except json.JSONDecodeError as err:

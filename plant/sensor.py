@@ -14,8 +14,18 @@ class SingularCalibrationError(FmscalError):
     """A calibration matrix that cannot be inverted."""
 
 
-def check_calibration(S, name="S", max_cond=1e8):
-    """Return ``S`` as a finite, invertible 3x3 float array, or raise.
+def check_calibration(S, name="S", max_cond=1e8, size=3):
+    """Return ``S`` as a finite, invertible ``size x size`` float array, or raise.
+
+    Parameters
+    ----------
+    S : array_like
+    name : str
+        Named in the message.
+    max_cond : float
+        Largest condition number taken for invertible.
+    size : int
+        ``n_w`` of the model: 3 (planar) or 6 (spatial).
 
     Raises
     ------
@@ -24,7 +34,7 @@ def check_calibration(S, name="S", max_cond=1e8):
     SingularCalibrationError
         Condition number above ``max_cond``.
     """
-    S = as_finite_array(S, (3, 3), name)
+    S = as_finite_array(S, (size, size), name)
     cond = np.linalg.cond(S)
     if not np.isfinite(cond) or cond > max_cond:
         raise SingularCalibrationError(
@@ -40,8 +50,9 @@ class CalibrationSchedule:
     Parameters
     ----------
     steps : list of (t_start, S)
-        Times in s, strictly increasing, the first 0; each ``S`` 3x3 and
-        invertible. A single matrix may be given instead of a list.
+        Times in s, strictly increasing, the first 0; each ``S`` square
+        (3x3 planar, 6x6 spatial; all of one size) and invertible. A single
+        matrix may be given instead of a list.
 
     Examples
     --------
@@ -52,12 +63,13 @@ class CalibrationSchedule:
 
     def __init__(self, steps):
         arr = np.asarray(steps, dtype=object)
-        if not isinstance(steps, list) or (arr.ndim == 2 and arr.shape == (3, 3)):
+        if not isinstance(steps, list) or (arr.ndim == 2 and arr.shape[0] == arr.shape[1] and arr.shape[0] in (3, 6)):
             steps = [(0.0, steps)]
         if not steps:
             raise FmscalError("a calibration schedule needs at least one matrix")
         self.starts = np.array([float(t0) for t0, _ in steps])
-        self.matrices = np.array([check_calibration(S, f"S at t={t0}") for t0, S in steps])
+        size = 6 if np.shape(steps[0][1]) == (6, 6) else 3
+        self.matrices = np.array([check_calibration(S, f"S at t={t0}", size=size) for t0, S in steps])
         if self.starts[0] != 0.0 or np.any(np.diff(self.starts) <= 0):
             raise FmscalError(f"schedule start times must begin at 0 and increase; got {list(self.starts)}")
 
@@ -65,8 +77,13 @@ class CalibrationSchedule:
     def is_constant(self):
         return len(self.starts) == 1
 
+    @property
+    def size(self):
+        """``n_w``: 3 (planar) or 6 (spatial)."""
+        return self.matrices.shape[1]
+
     def at(self, t):
-        """``S(t)``, shape (3, 3) for a scalar ``t`` or (N, 3, 3) for an array."""
+        """``S(t)``, shape (n_w, n_w) for a scalar ``t`` or (N, n_w, n_w) for an array."""
         idx = np.searchsorted(self.starts, np.asarray(t, dtype=float), side="right") - 1
         return self.matrices[np.clip(idx, 0, None)]
 
@@ -82,11 +99,11 @@ class CalibrationSchedule:
         Parameters
         ----------
         t : ndarray, shape (N,)
-        w : ndarray, shape (N, 3)
+        w : ndarray, shape (N, n_w)
 
         Returns
         -------
-        ndarray, shape (N, 3)
+        ndarray, shape (N, n_w)
         """
         S_inv = np.linalg.inv(self.matrices)[np.clip(
             np.searchsorted(self.starts, t, side="right") - 1, 0, None)]
@@ -99,12 +116,14 @@ class NoiseSpec:
 
     Parameters
     ----------
-    wrench_sd : tuple of 3 float
-        Standard deviation of the raw reading ``[M, f_x, f_y]`` in N m, N, N.
+    wrench_sd : tuple of 3 or 6 float
+        Standard deviation of each component of the raw reading, planar
+        ``[M, f_x, f_y]`` or spatial ``[tx, ty, tz, fx, fy, fz]``, in N m and N.
     angle_sd : float
-        Standard deviation of the measured angle, in rad.
+        Standard deviation of the measured angle, in rad (spatial: of the
+        attitude about each axis).
     position_sd : float
-        Standard deviation of the measured ``X`` and ``Y``, in m.
+        Standard deviation of each measured position coordinate, in m.
     """
 
     wrench_sd: tuple = (0.0, 0.0, 0.0)
@@ -112,7 +131,9 @@ class NoiseSpec:
     position_sd: float = 0.0
 
     def __post_init__(self):
-        sd = as_finite_array(self.wrench_sd, (3,), "wrench_sd")
+        sd = as_finite_array(self.wrench_sd, (-1,), "wrench_sd")
+        if len(sd) not in (3, 6):
+            raise FmscalError(f"wrench_sd has the wrong shape; expected 3 (planar) or 6 (spatial) instead of {len(sd)}")
         if np.any(sd < 0):
             raise FmscalError(f"noise standard deviations must be >= 0; got wrench_sd {tuple(sd.tolist())}")
         object.__setattr__(self, "wrench_sd", tuple(float(v) for v in sd))

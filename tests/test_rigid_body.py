@@ -3,8 +3,8 @@
 pinocchio's RNEA on a free-floating body checks the inverse dynamics; MuJoCo,
 driven through six motors on a site at the sensor point (so that the wrench
 is held in sensor axes over each step, as in our simulator), checks the
-forward dynamics and the integration over 20 s of a motion that turns the
-payload through large angles.
+forward dynamics and the integration over 20 s of the spatial-arm
+scenario's motion, which turns the payload through large angles.
 """
 
 import casadi as ca
@@ -13,8 +13,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fmscal.plant import FmscalError
-from fmscal.plant.rigid_body import (GRAVITY, SpatialPayload, body_acceleration, prescribed_motion,
-                                     quaternion_multiply, rk4_step, rotation_matrix, sensor_wrench)
+from fmscal.plant.rigid_body import (GRAVITY, SpatialPayload, body_acceleration, quaternion_multiply, rk4_step,
+                                     rotation_matrix, sensor_wrench)
+from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
 
 pin = pytest.importorskip("pinocchio")          # the [test] extra installs it; on CI a skip fails
 mujoco = pytest.importorskip("mujoco")
@@ -75,20 +76,6 @@ def test_numpy_and_casadi_give_the_same_step():
         np.testing.assert_allclose(np.array(step(x0, w0)).ravel(), rk4_step(x0, w0, 1e-3, TOOL), rtol=1e-13, atol=1e-15)
 
 
-def _turning_motion():
-    """A multisine in position (+-0.3 m) and in ZYX angles (up to about 70 degrees), as a casadi function."""
-    t = ca.SX.sym("t")
-
-    def about(angle, axis):
-        return ca.vertcat(ca.cos(angle / 2), *[ca.sin(angle / 2) * (i == axis) for i in range(3)])
-
-    yaw, pitch, roll = (0.9 * ca.sin(0.5 * t) + 0.3 * ca.sin(1.3 * t + 1), 0.6 * ca.sin(0.7 * t + 0.5),
-                        0.8 * ca.sin(0.9 * t + 2))
-    attitude = quaternion_multiply(quaternion_multiply(about(yaw, 2), about(pitch, 1)), about(roll, 0))
-    position = ca.vertcat(0.3 * ca.sin(0.7 * t), 0.2 * ca.sin(1.1 * t + 1), 0.25 * ca.sin(0.9 * t + 2))
-    return prescribed_motion(t, position, attitude, TOOL)
-
-
 def _mujoco_model(dt):
     inertial = (f'<inertial pos="{" ".join(map(str, TOOL.rho))}" mass="{TOOL.mass}" '
                 f'fullinertia="{" ".join(map(str, TOOL.inertia))}"/>')
@@ -101,9 +88,10 @@ def _mujoco_model(dt):
         f'<actuator>{motors}</actuator></mujoco>')
 
 
-def test_simulator_matches_mujoco_over_20_s_of_large_rotations():
+def test_simulator_matches_mujoco_over_20_s_of_spatial_arm():
+    """20 s of the spatial-arm scenario's motion (tens of degrees about every axis), its true wrench as logged."""
     dt, n = 1e-3, 20_000
-    motion = _turning_motion()
+    motion = SPATIAL_SCENARIOS["spatial-arm"].with_(payload=TOOL).motion_function(np.random.default_rng(0))
     x0 = np.array(motion(0.0)[0]).ravel()
     wrench = np.array(motion.map(n)(np.arange(n) * dt)[1]).T            # the logged wrench, one row a sample
     xs, ws = ca.SX.sym("x", 13), ca.SX.sym("w", 6)
@@ -123,6 +111,7 @@ def test_simulator_matches_mujoco_over_20_s_of_large_rotations():
     assert attitude_error.max() < 1e-4                                   # rad
     angles = Rotation.from_quat(np.roll(x[:, 3:7], -1, axis=1)).magnitude()
     assert angles.max() > 1.0                                            # it did turn through large angles
+    assert np.abs(x[:, 10:13]).max() > 1.0                                # rad/s
 
 
 @pytest.mark.parametrize("inertia, message", [
