@@ -42,6 +42,35 @@ def draw_S(rng, low=-3.0, high=3.0, max_cond=20.0):
             return S
 
 
+def pose_frames(n, dt, pose_rate, drop_rate, rng):
+    """Which of ``n`` samples carry a pose: one every ``1 / (pose_rate dt)`` samples, less random drops.
+
+    Parameters
+    ----------
+    n : int
+    dt : float
+        Sample time, s.
+    pose_rate : float or None
+        Poses per second (None: every sample).
+    drop_rate : float
+        Fraction of frames dropped at random (never the first).
+    rng : numpy.random.Generator
+        Drawn from only when ``drop_rate > 0``.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    keep = np.ones(n, dtype=bool)
+    if pose_rate is not None:
+        keep = np.arange(n) % max(1, int(round(1.0 / (pose_rate * dt)))) == 0
+    if drop_rate > 0:
+        dropped = rng.random(n) < drop_rate
+        dropped[0] = False
+        keep &= ~dropped
+    return keep
+
+
 def _table_1_schedule():
     steps = []
     for k, t0 in enumerate(TABLE_1["starts"]):
@@ -192,15 +221,7 @@ class Scenario:
         if not noise_free and self.outlier_rate > 0:
             hit = rng.random(n) < self.outlier_rate
             pose[hit] += self.outlier_sd * noise.pose_sd * rng.choice([-1.0, 1.0], (hit.sum(), 3))
-        keep = np.ones(n, dtype=bool)
-        if self.pose_rate is not None:
-            every = max(1, int(round(1.0 / (self.pose_rate * self.dt))))
-            keep = np.arange(n) % every == 0
-        if self.drop_rate > 0:
-            dropped = rng.random(n) < self.drop_rate
-            dropped[0] = False
-            keep &= ~dropped
-        pose[~keep] = np.nan
+        pose[~pose_frames(n, self.dt, self.pose_rate, self.drop_rate, rng)] = np.nan
         settings = {"duration": self.duration, "dt": self.dt, "pose_rate": self.pose_rate,
                     "drop_rate": self.drop_rate, "outlier_rate": 0.0 if noise_free else self.outlier_rate,
                     "description": self.description}

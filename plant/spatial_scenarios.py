@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 from .errors import FmscalError
 from .log import MIN_SAMPLES, Log, Truth
 from .rigid_body import GRAVITY, SpatialPayload, prescribed_motion, quaternion_multiply
+from .scenarios import pose_frames
 from .sensor import CalibrationSchedule, NoiseSpec
 
 __all__ = ["SpatialScenario", "SPATIAL_SCENARIOS", "TOOL", "draw_spatial_S"]
@@ -216,14 +217,7 @@ class SpatialScenario:
         measured = Rotation.from_quat(np.roll(pose[:, :4], -1, axis=1)) * turn       # scipy: scalar last
         pose[:, :4] = np.roll(measured.as_quat(), 1, axis=1)
         pose[:, 4:] += rng.standard_normal((n, 3)) * noise.position_sd
-        keep = np.ones(n, dtype=bool)
-        if self.pose_rate is not None:
-            keep = np.arange(n) % max(1, int(round(1.0 / (self.pose_rate * self.dt)))) == 0
-        if self.drop_rate > 0:
-            dropped = rng.random(n) < self.drop_rate
-            dropped[0] = False
-            keep &= ~dropped
-        pose[~keep] = np.nan
+        pose[~pose_frames(n, self.dt, self.pose_rate, self.drop_rate, rng)] = np.nan
         settings = {"duration": self.duration, "dt": self.dt, "pose_rate": self.pose_rate,
                     "drop_rate": self.drop_rate, "gravity": list(self.gravity), "description": self.description}
         truth = Truth(self.name, int(seed), schedule, np.eye(6), self.payload, noise, offset=b,
