@@ -1,0 +1,238 @@
+"""What practitioners estimate with ``S`` known: the payload's mass properties and the offset.
+
+With the calibration ``S`` known (the identity, or a calibration file such
+as the factory matrix), the corrected reading ``S w_hat`` of a spatial log
+is linear in the ten inertial parameters ``pi = (m, h = m rho, I_O)`` and in
+the offset ``c = S b`` (Newton-Euler at the sensor point, in sensor axes;
+``I_O`` the inertia about the sensor point)::
+
+    f     = m a_g + alpha x h + omega x (omega x h)
+    tau_O = I_O alpha + omega x (I_O omega) + h x a_g
+    S w_hat = [tau_O; f] + c
+
+with ``a_g = R^T (p_ddot - g)``. Static poses (``omega = alpha = 0``)
+determine ``m``, ``h`` and ``c`` when gravity covers enough directions in
+the sensor frame; the inertia needs angular acceleration. The motion comes
+from the poses by smoothing differentiation (:func:`fmscal.plant.
+differentiate.spatial_motion`); the fit is weighted least squares (the
+channel's noise estimated from a first pass), and its covariance is the
+cluster-robust sandwich over blocks of time, so that correlated residuals
+(drift, smoothing) do not make it claim too much. Then ``rho = h / m`` and
+``I_c = I_O + m [rho]x^2`` (the parallel-axis theorem), their uncertainties
+by the delta method.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fmscal.plant.differentiate import spatial_motion
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.rigid_body import GRAVITY
+from fmscal.plant.sensor import check_calibration
+
+__all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED"]
+
+#: The six entries of an inertia tensor, as URDF and MuJoCo's ``fullinertia`` write them.
+INERTIA_NAMES = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+#: A group (mass, centre of mass, inertia) counts as determined when its one-sigma uncertainty is below
+#: this fraction of its size: above it, the noise of the differentiated poses biases the fit by as much
+#: (errors in variables: on spatial-weak and spatial-static the inertia comes out low by several sigma).
+DETERMINED = 0.02
+
+
+@dataclass
+class PayloadFit:
+    """The payload's mass properties and the sensor's offset, with one-sigma uncertainties.
+
+    Attributes
+    ----------
+    mass, mass_std : float
+        kg.
+    rho, rho_std : ndarray, shape (3,)
+        Centre of mass in the sensor frame, m.
+    inertia, inertia_std : ndarray, shape (6,), or None
+        Inertia about the centre of mass, sensor axes (:data:`INERTIA_NAMES`),
+        kg m^2; None where the log does not determine it.
+    b, b_std : ndarray, shape (6,)
+        The sensor's offset in ``w = S (w_hat - b)``, reading order, N m and N.
+    residual_rms : ndarray, shape (6,)
+        Of the fit, per channel of the corrected reading, N m and N.
+    warnings : list of str
+        What the log did not determine, in words a user acts on.
+    converged : bool
+        Every group (mass, centre of mass, inertia, offset) determined.
+    """
+
+    mass: float
+    mass_std: float
+    rho: np.ndarray
+    rho_std: np.ndarray
+    inertia: np.ndarray
+    inertia_std: np.ndarray
+    b: np.ndarray
+    b_std: np.ndarray
+    residual_rms: np.ndarray
+    warnings: list = field(default_factory=list)
+    converged: bool = False
+
+    def to_dict(self):
+        """The fields as JSON-ready numbers and lists (None where undetermined)."""
+        def listed(v):
+            return None if v is None else [float(x) for x in np.ravel(v)]
+        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
+                "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
+                "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
+                "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
+                "converged": bool(self.converged)}
+
+
+def _skew(v):
+    """``[v]x`` for every row of ``v`` (N, 3): shape (N, 3, 3)."""
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
+                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+def _inertia_map(v):
+    """``L(v)`` with ``I v = L(v) [Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` for every row of ``v``: (N, 3, 6)."""
+    z = np.zeros(len(v))
+    x, y, w = v[:, 0], v[:, 1], v[:, 2]
+    return np.stack([np.stack([x, z, z, y, w, z], 1), np.stack([z, y, z, x, z, w], 1),
+                     np.stack([z, z, w, z, x, y], 1)], 1)
+
+
+def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY):
+    """The Newton-Euler regressor ``W`` with ``[tau_O; f] = W pi``, for every sample.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 4)
+    omega, alpha, p_ddot : ndarray, shape (N, 3)
+    gravity : array_like, shape (3,)
+
+    Returns
+    -------
+    ndarray, shape (N, 6, 10)
+        Columns ``m, h (3), I_O (6, :data:`INERTIA_NAMES` order)``.
+    """
+    w, x, y, z = q.T
+    R = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1),
+                  np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1),
+                  np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1)], 1)
+    a_g = np.einsum("nji,nj->ni", R, p_ddot - np.asarray(gravity, dtype=float))
+    A, Om = _skew(alpha), _skew(omega)
+    W = np.zeros((len(q), 6, 10))
+    W[:, :3, 1:4] = -_skew(a_g)                                         # h x a_g
+    W[:, :3, 4:] = _inertia_map(alpha) + Om @ _inertia_map(omega)       # I_O alpha + omega x (I_O omega)
+    W[:, 3:, 0] = a_g                                                   # m a_g
+    W[:, 3:, 1:4] = A + Om @ Om                                         # alpha x h + omega x (omega x h)
+    return W
+
+
+def _fit(X, y, weights, blocks):
+    """Weighted least squares ``y ~ X theta`` with the cluster-robust covariance over ``blocks``."""
+    Xw = X * weights[:, None]
+    information = Xw.T @ Xw
+    scale = np.sqrt(np.maximum(np.diag(information), 1e-300))
+    u, s, vt = np.linalg.svd(information / np.outer(scale, scale))
+    keep = s > 1e-12 * s[0]
+    inverse = (vt[keep].T / s[keep]) @ u[:, keep].T / np.outer(scale, scale)
+    theta = inverse @ (Xw.T @ (y * weights))
+    e = (y - X @ theta) * weights
+    scores = np.zeros((blocks.max() + 1, X.shape[1]))
+    np.add.at(scores, blocks, Xw * e[:, None])
+    cov = inverse @ (scores.T @ scores) @ inverse
+    cov[:, ~_columns(keep, vt)] = np.inf
+    cov[~_columns(keep, vt), :] = np.inf
+    return theta, cov, y - X @ theta
+
+
+def _columns(keep, vt):
+    """Parameters that touch only the kept directions of the information."""
+    return np.abs(vt[~keep]).max(axis=0) < 1e-6 if (~keep).any() else np.ones(vt.shape[1], dtype=bool)
+
+
+def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0):
+    """Estimate the payload's mass, centre of mass, inertia and the sensor's offset, with ``S`` known.
+
+    Parameters
+    ----------
+    log : plant.Log
+        A spatial log.
+    S : array_like, shape (6, 6), optional
+        The calibration (default: the identity).
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+    window : float
+        Smoothing window of the pose differentiation, s.
+    block : float
+        Length of the blocks of the robust covariance, s.
+
+    Returns
+    -------
+    PayloadFit
+    """
+    S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
+    q, omega, alpha, p_ddot = spatial_motion(log, window)
+    trim = slice(len(log.t) // 200 + 5, len(log.t) - len(log.t) // 200 - 5)       # the filter's edges
+    W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
+    y = (log.w_hat @ S.T)[trim]
+    n = len(y)
+    X = np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
+    blocks = np.repeat(((log.t[trim] - log.t[trim][0]) // block).astype(int), 6)
+    theta, _, residual = _fit(X, y.ravel(), np.ones(6 * n), blocks)
+    sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
+    theta, cov, residual = _fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
+    return _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
+
+
+def _physical(theta):
+    """``(m, rho, I_c entries)`` from ``pi = (m, h, I_O)``: ``rho = h / m``, ``I_c = I_O + m [rho]x^2``."""
+    m, h, io = theta[0], theta[1:4], theta[4:10]
+    rho = h / m
+    I_O = np.array([[io[0], io[3], io[4]], [io[3], io[1], io[5]], [io[4], io[5], io[2]]])
+    r = _skew(rho[None])[0]
+    I_c = I_O + m * r @ r
+    return np.r_[m, rho, I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]]
+
+
+def _report(theta, cov, S, residual_rms):
+    if not np.isfinite(cov[0, 0]) or theta[0] <= 0:
+        raise FmscalError("the log does not determine the payload's mass: it holds no force that gravity or "
+                          "motion explains (is the reading in N and the pose in m and unit quaternions?)")
+    values = _physical(theta[:10])
+    finite = np.isfinite(np.diag(cov)[:10])
+    J = np.zeros((10, 10))
+    step = 1e-7 * np.maximum(np.abs(theta[:10]), 1e-6)
+    for i in range(10):
+        d = np.zeros(10)
+        d[i] = step[i]
+        J[:, i] = (_physical(theta[:10] + d) - _physical(theta[:10] - d)) / (2 * step[i])
+    sub = np.where(np.outer(finite, finite), cov[:10, :10], 0.0)
+    std = np.sqrt(np.maximum(np.diag(J @ sub @ J.T), 0))
+    std[np.abs(J[:, ~finite]).max(axis=1) > 0 if (~finite).any() else np.zeros(10, dtype=bool)] = np.inf
+    S_inv = np.linalg.inv(S)
+    cov_c = cov[10:, 10:]
+    b = S_inv @ theta[10:]
+    b_std = np.sqrt(np.maximum(np.diag(S_inv @ np.where(np.isfinite(cov_c), cov_c, 0) @ S_inv.T), 0))
+    b_std[~np.isfinite(np.diag(cov_c))] = np.inf
+    warnings = []
+    mass_ok = std[0] < DETERMINED * values[0]
+    rho_ok = np.all(std[1:4] < np.maximum(DETERMINED * np.linalg.norm(values[1:4]), 1e-3))
+    inertia_scale = max(np.mean(values[4:7]), 1e-9)
+    inertia_ok = bool(np.all(std[4:] < DETERMINED * inertia_scale)) and np.all(values[4:7] > 0)
+    offset_ok = bool(np.all(np.isfinite(b_std)))
+    if not mass_ok or not rho_ok:
+        warnings.append("the mass and centre of mass are not determined: hold the payload at attitudes that turn "
+                        "gravity through several directions in the sensor frame")
+    if not inertia_ok:
+        warnings.append("the inertia is not determined: the log holds too little angular acceleration "
+                        "(rotate faster, or about more axes)")
+    if not offset_ok:
+        warnings.append("the offset is not separated from the weight: turn gravity through more directions "
+                        "in the sensor frame")
+    return PayloadFit(mass=values[0], mass_std=std[0], rho=values[1:4], rho_std=std[1:4],
+                      inertia=values[4:] if inertia_ok else None, inertia_std=std[4:] if inertia_ok else None,
+                      b=b, b_std=b_std, residual_rms=residual_rms, warnings=warnings,
+                      converged=bool(mass_ok and rho_ok and inertia_ok and offset_ok))

@@ -1,0 +1,75 @@
+"""The motion of a spatial log by smoothing differentiation of its poses.
+
+The plain reference's way to the motion (and the practitioners'): poses
+resampled on the log's grid, smoothed and differentiated by a
+Savitzky-Golay filter (a local quintic fitted over a window), and the angular
+velocity and acceleration read from the quaternion's derivatives::
+
+    omega = 2 vec(q* (x) q_dot),    alpha = 2 vec(q* (x) q_ddot)
+
+(:mod:`fmscal.plant.rigid_body`). Smoothing cuts the motion's high
+frequencies and, with a noisy pose, differentiating still amplifies its
+noise: the floor uses the motion model instead. The window should be short
+against the motion's period and long against the pose interval.
+"""
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from .errors import FmscalError
+
+__all__ = ["spatial_motion", "ORDER"]
+#: Degree of the local polynomial (a quintic keeps the smoothing bias of a 0.2 s window below 0.1 % at 0.5 Hz).
+ORDER = 5
+
+
+def _batch_product(p, q):
+    """Hamilton products ``p (x) q`` of two (N, 4) arrays, row by row (as :func:`rigid_body.quaternion_multiply`)."""
+    return np.stack([
+        p[:, 0] * q[:, 0] - p[:, 1] * q[:, 1] - p[:, 2] * q[:, 2] - p[:, 3] * q[:, 3],
+        p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0] + p[:, 2] * q[:, 3] - p[:, 3] * q[:, 2],
+        p[:, 0] * q[:, 2] - p[:, 1] * q[:, 3] + p[:, 2] * q[:, 0] + p[:, 3] * q[:, 1],
+        p[:, 0] * q[:, 3] + p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1] + p[:, 3] * q[:, 0]], axis=1)
+
+
+def spatial_motion(log, window=0.2):
+    """Attitude, angular velocity and acceleration, and the acceleration of ``O``, at every sample.
+
+    Parameters
+    ----------
+    log : plant.Log
+        A spatial log.
+    window : float
+        Savitzky-Golay window, s (a quintic, :data:`ORDER`; at least 7 samples).
+
+    Returns
+    -------
+    q : ndarray, shape (N, 4)
+        Smoothed unit quaternions, scalar first.
+    omega, alpha : ndarray, shape (N, 3)
+        In sensor axes, rad/s and rad/s^2.
+    p_ddot : ndarray, shape (N, 3)
+        Acceleration of the sensor point in the world, m/s^2.
+
+    Raises
+    ------
+    FmscalError
+        Not a spatial log, or a window shorter than 7 samples or longer than the log.
+    """
+    if getattr(log, "kind", None) != "spatial":
+        raise FmscalError(f"spatial_motion takes a spatial log; got a {getattr(log, 'kind', type(log).__name__)} one")
+    k = int(round(window / log.dt)) // 2 * 2 + 1
+    if not 7 <= k <= len(log):
+        raise FmscalError(f"window must span 7 to {len(log)} samples; {window:g} s is {k}")
+    rows = np.flatnonzero(log.has_pose)
+    pose = np.column_stack([np.interp(log.t, log.t[rows], log.pose[rows, j]) for j in range(7)])
+
+    def smooth(values, derivative):
+        return savgol_filter(values, k, ORDER, deriv=derivative, delta=log.dt, axis=0, mode="interp")
+
+    q = smooth(pose[:, :4], 0)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    conj = q * np.array([1.0, -1.0, -1.0, -1.0])                 # q*, row by row
+    omega = 2 * _batch_product(conj, smooth(pose[:, :4], 1))[:, 1:]
+    alpha = 2 * _batch_product(conj, smooth(pose[:, :4], 2))[:, 1:]
+    return q, omega, alpha, smooth(pose[:, 4:], 2)

@@ -1,0 +1,48 @@
+"""identify_payload: the practitioners' job (mass, centre of mass, inertia, offset) with S known (issue 22)."""
+
+import numpy as np
+import pytest
+
+from fmscal.observers.payload_fit import identify_payload
+from fmscal.plant import FmscalError
+from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_arm_gives_mass_within_1_percent_and_centre_of_mass_within_2_mm(seed):
+    log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=30.0).generate(seed)
+    fit = identify_payload(log, S=truth.S_at(0.0))
+    p = truth.payload
+    assert abs(fit.mass - p.mass) < 0.01 * p.mass
+    assert np.abs(fit.rho - np.array(p.rho)).max() < 2e-3
+    assert np.abs(fit.inertia[:3] - np.array(p.inertia)[:3]).max() < 0.02 * np.mean(p.inertia[:3])
+    assert np.abs(fit.b - truth.offset).max() < 0.02 * np.abs(truth.offset).max()
+    # the uncertainties are of the error's size (not a thousand times too small or too large)
+    z = np.abs(np.r_[fit.mass - p.mass, fit.rho - p.rho] / np.r_[fit.mass_std, fit.rho_std])
+    assert z.max() < 5 and 1e-5 < fit.mass_std / p.mass < 1e-2
+    assert fit.converged and not fit.warnings
+
+
+def test_static_poses_give_mass_and_centre_of_mass_but_not_the_inertia():
+    log, truth, _ = SPATIAL_SCENARIOS["spatial-static"].generate(0)
+    fit = identify_payload(log, S=truth.S_at(0.0))
+    assert abs(fit.mass - truth.payload.mass) < 0.01 * truth.payload.mass
+    assert np.abs(fit.rho - np.array(truth.payload.rho)).max() < 2e-3
+    assert fit.inertia is None and fit.inertia_std is None and not fit.converged
+    assert any("inertia is not determined" in w and "angular acceleration" in w for w in fit.warnings)
+    assert fit.to_dict()["inertia"] is None
+
+
+def test_an_unknown_S_biases_the_mass_and_the_known_one_removes_it():
+    """With S = I on a sensor with cross-talk the mass is off by the gains' error; told S, it is not."""
+    log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=20.0, crosstalk=0.1).generate(4)
+    told, naive = identify_payload(log, S=truth.S_at(0.0)), identify_payload(log)
+    error = lambda fit: abs(fit.mass - truth.payload.mass) / truth.payload.mass
+    assert error(told) < 0.002 < error(naive)
+
+
+def test_a_planar_log_is_refused():
+    from fmscal.plant import get_scenario
+    log, _, _ = get_scenario("paper").with_(duration=1.0).generate(0)
+    with pytest.raises(FmscalError, match="spatial log"):
+        identify_payload(log)
