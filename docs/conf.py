@@ -85,3 +85,21 @@ html_theme_options = {
     "show_toc_level": 2,
 }
 html_static_path = []
+
+
+def _resolve_short_names(app, env, node, contnode):
+    """Docstrings name objects by their repository path (``plant.Log``): resolve them as ``fmscal.plant.Log``."""
+    target = node.get("reftarget", "")
+    if node.get("refdomain") != "py" or not target.startswith(("plant.", "observers.", "analysis.")):
+        return None
+    domain = env.get_domain("py")
+    node["reftarget"] = f"fmscal.{target}"
+    try:
+        return domain.resolve_xref(env, node["refdoc"], app.builder, node["reftype"], node["reftarget"],
+                                   node, contnode)
+    finally:
+        node["reftarget"] = target
+
+
+def setup(app):
+    app.connect("missing-reference", _resolve_short_names)
