@@ -69,7 +69,7 @@ class BenchSettings:
 
     @classmethod
     def quick(cls):
-        """A short mode (a few seconds) that exercises every measurement; not for the README."""
+        """A short mode (a few seconds) that exercises every measurement; not for docs/speed.md."""
         return cls(fast_s=5.0, numpy_s=0.5, ekf_s=1.0, reproduce_scale=0.02, sweep_seeds=4, sweep_s=2.0)
 
 

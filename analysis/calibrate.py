@@ -18,7 +18,7 @@ __all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "CalibrationReport", "calibr
 
 #: The default: the maximum-likelihood estimate, at the information floor by construction, on
 #: full-rate and multi-rate logs, with offset and latency; its noise model is estimated from the
-#: log when not given (README, "Which observer to trust").
+#: log when not given (docs/comparison.md, "Which observer to trust").
 DEFAULT_METHOD = FLOOR_METHOD
 #: Largest pose-stream delay searched when the latency is estimated, s.
 DEFAULT_MAX_LATENCY = 0.1

@@ -254,6 +254,13 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser():
+    """The ``fmscal`` argument parser: every subcommand with its options.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser :func:`main` uses; ``fmscal --help`` prints it.
+    """
     parser = _Parser(
         prog="fmscal",
         description="Calibrate a force-moment sensor from motion, and compare the observers that do it.")

@@ -202,7 +202,7 @@ def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=N
 
 
 def seed_list(seeds):
-    """``N`` as seeds ``[0 .. N-1]``; a sequence as a list of ints. At least one seed."""
+    """``N`` as seeds ``[0, 1, ..., N-1]``; a sequence as a list of ints. At least one seed."""
     seeds = list(range(int(seeds))) if np.isscalar(seeds) else [int(s) for s in seeds]
     if not seeds:
         raise FmscalError("seeds must be at least 1; got 0")

@@ -1,6 +1,6 @@
 """The paper's Lyapunov adaptive observer exactly as printed: eqs. (6)-(8), (14), (15).
 
-How the paper's garbled equations are read: ``docs/reading-the-paper.md``. In
+How the paper's garbled equations are read: ``docs/paper/reading-the-paper.md``. In
 matrix form, with ``G(theta)`` the matrix of eq. (1) (:func:`plant.input_matrix`):
 
 * eqs. (6), (7): ``x_hat' = A x_hat + G(theta) S_hat w_hat + K C e``, since
@@ -84,7 +84,7 @@ class PaperAdaptiveObserver(RecursiveObserver):
     ``K_2`` as printed (eq. 14), velocity errors by the backward difference of
     the position errors (eq. 15, ``e_v = e(n) - e(n-1)`` per step), and the law
     as printed (``W = diag(1, m, m)``, module docstring). Under the paper's
-    noise it does not converge (README, "What the paper claims").
+    noise it does not converge (docs/paper/index.md).
 
     Parameters
     ----------

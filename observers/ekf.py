@@ -37,7 +37,7 @@ class _CalibrationEKF(ExtendedKalmanFilter):
 
 
 class AugmentedEKF(Observer):
-    """Extended Kalman filter on ``[theta, theta', X, X', Y, Y', s_11 .. s_33]``.
+    """Extended Kalman filter on ``[theta, theta', X, X', Y, Y', s_11, ..., s_33]``.
 
     A reconstruction of [3] for the planar case: the calibration entries are
     states (random walks), the motion follows eq. (1) with ``w = S w_hat``

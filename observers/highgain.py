@@ -1,6 +1,6 @@
 """High-gain adaptive observer after Parsa and Aghili (ICRA 2006): a reconstruction.
 
-The full text of [4] is not at hand (``docs/reading-the-paper.md``). What is known of it: two
+The full text of [4] is not at hand (``docs/paper/reading-the-paper.md``). What is known of it: two
 observers, angular and translational, on the state-affine form of eqs. (4),
 (5); a high gain; an adaptation gain that must be tuned; slow convergence.
 This module reconstructs it as the standard adaptive observer for state-affine
@@ -15,7 +15,7 @@ Q. Zhang, IEEE TAC 47(3), 2002. For each subsystem ``i = 1, 2`` with
 ``epsilon = x_tilde - Upsilon phi_tilde`` then obeys ``epsilon' = (A - K C)
 epsilon``, so the output error is ``C Upsilon phi_tilde`` plus a decaying
 term: the law needs only the position error, no velocity error (which is what
-makes it rigorous where eq. (8) is not, ``docs/reading-the-paper.md``).
+makes it rigorous where eq. (8) is not, ``docs/paper/reading-the-paper.md``).
 
 Discrete form. A sampled high-gain observer that integrates ``K y`` turns the
 integration error of each step into an estimation bias that grows as

@@ -87,6 +87,7 @@ class Method:
         return self.cls(payload, **kwargs)
 
 
+#: Every method the toolkit knows, by name: ``{name: Method}``, in the order tables show them.
 METHODS = {m.name: m for m in (
     Method("adaptive", "adaptive", AdaptiveObserver, {}, needs_noise_model=False, online=True, role="design",
            calibrates=True, summary="eqs. (6)-(8) with filtered regressors and a least-squares gain: at the floor"),

@@ -1,6 +1,6 @@
 """Named simulation scenarios: the paper's section 4 and the cases users meet.
 
-Noise follows docs/reading-the-paper.md: the wrench noise is added to the raw reading
+Noise follows docs/paper/reading-the-paper.md: the wrench noise is added to the raw reading
 ``w_hat``, with a standard deviation that is a fraction of the peak amplitude of
 each component of the noise-free reading; angle and position noise are
 standard deviations in rad and m.
@@ -235,6 +235,7 @@ class Scenario:
 _OTHER_PAYLOAD = Payload(6.0, 0.3, (-0.15, 0.4))
 _WEAK = Multisine([[(1.0, 2.0, 0.0)], [(1.0, 1.0, 0.0)], [(2.0, 3.0, 0.0)]])
 
+#: The named scenarios, ``{name: Scenario}`` (``fmscal simulate --help`` lists them).
 SCENARIOS = {s.name: s for s in [
     Scenario("paper", "Section 4: printed S, 5 % wrench noise, 0.1 deg, 0.1 mm, 100 s at 1 ms."),
     Scenario("noisy", "Fig. 3: 10 % wrench noise, 1 deg, 0.2 mm (the printed '0.2 m' read as mm), "

@@ -23,7 +23,7 @@ def test_paper_configuration_converges_on_noise_free_data(paper_noise_free):
 
 
 def test_a_wrong_sign_in_law_8_is_caught(paper_noise_free):
-    """The text's e = estimate - truth, taken literally, runs away (docs/reading-the-paper.md)."""
+    """The text's e = estimate - truth, taken literally, runs away (docs/paper/reading-the-paper.md)."""
     log, truth, _ = paper_noise_free
     obs = PaperAdaptiveObserver(plant.PAPER_PAYLOAD)
     obs.delta = -obs.delta
@@ -43,7 +43,7 @@ def test_default_configuration_beats_paper_configuration_under_paper_noise():
 @pytest.mark.parametrize("payload, seed, settings", [
     (plant.Payload(1.0, 0.2, [-0.3, 0.2]), 0, {}),
     # lightest, largest offset: it spins at tens of rad/s, and the default filter (lam = 5 rad/s)
-    # leaves it at E = 0.12 where the floor is 0.006; lam = 20 gives 0.014 (README, limitations)
+    # leaves it at E = 0.12 where the floor is 0.006; lam = 20 gives 0.014 (docs/observers.md, limitation)
     (plant.Payload(0.5, 0.05, [0.35, -0.35]), 1, {"lam": 20.0}),
     (plant.Payload(10.0, 2.0, [0.0, 0.5]), 3, {}),        # heaviest
     (plant.Payload(6.0, 0.3, [-0.15, 0.4]), 2, {}),

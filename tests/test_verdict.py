@@ -1,4 +1,4 @@
-"""The verdict: which method wins on E, as the toolkit measures it (README, "Which observer to trust").
+"""The verdict: which method wins on E, as the toolkit measures it (docs/comparison.md, the verdict).
 
 E is the median over the last 10 % of each run (never one sample), compared on
 every one of three seeds with a 1.3x margin, so that each assertion is a
@@ -21,7 +21,7 @@ from fmscal.analysis.comparison import compare
 SEEDS = 3
 MARGIN = 1.3
 OBSERVERS = ["adaptive", "adaptive-paper", "high-gain", "high-gain-ref4", "ekf", "least-squares"]
-#: The EKF's documented setting for a sensor drifting at the drift scenario's rate (README).
+#: The EKF's documented setting for a sensor drifting at the drift scenario's rate (docs/comparison.md).
 DRIFT_RATE_EKF = {"q_S": 1e-5, "adapt_q": False}
 
 pytestmark = pytest.mark.slow
