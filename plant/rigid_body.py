@@ -49,8 +49,11 @@ __all__ = [
 
 #: Gravity in the world frame (z up), m/s^2.
 GRAVITY = (0.0, 0.0, -9.81)
-#: Configuration size (position 3, unit quaternion 4), velocity size, state size.
-NQ, NV = 7, 6
+#: Configuration size: the position (3) and the unit quaternion (4).
+NQ = 7
+#: Velocity size: the velocity of the sensor point (3, world) and the angular velocity (3, sensor axes).
+NV = 6
+#: Motion state size, ``NQ + NV``.
 NX = NQ + NV
 
 

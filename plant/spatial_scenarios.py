@@ -225,6 +225,7 @@ class SpatialScenario:
         return Log(t, pose, w_hat, name=f"{self.name}-seed{seed}"), truth, x_true
 
 
+#: The spatial scenarios by name (module docstring).
 SPATIAL_SCENARIOS = {s.name: s for s in [
     SpatialScenario("spatial-arm", "A tool on a robot's wrist: poses from joint encoders at 1 kHz (0.02 mm, "
                                    "0.006 deg), a multisine turning the tool through tens of degrees, 60 s."),
