@@ -4,7 +4,7 @@ import numpy as np
 
 from fmscal.plant._checks import as_finite_array
 
-__all__ = ["calibration_error", "error_history", "tail_median", "convergence_time", "CONVERGENCE_THRESHOLD",
+__all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "convergence_time", "CONVERGENCE_THRESHOLD",
            "CONVERGENCE_HOLD", "TAIL_FRACTION"]
 
 #: Default threshold on E for :func:`convergence_time`.
@@ -20,8 +20,9 @@ def calibration_error(S_hat, S):
 
     Parameters
     ----------
-    S_hat, S : array_like, shape (3, 3)
-        Estimate and true calibration matrix.
+    S_hat, S : array_like, shape (n, n)
+        Estimate and true calibration matrix, in SI units: 3x3 (planar) or
+        6x6 (spatial, where N and N m mix: :func:`block_errors`).
 
     Returns
     -------
@@ -33,9 +34,34 @@ def calibration_error(S_hat, S):
     >>> calibration_error(np.eye(3), np.eye(3))
     0.0
     """
-    S_hat = as_finite_array(S_hat, (3, 3), "S_hat")
-    S = as_finite_array(S, (3, 3), "S")
-    return float(np.linalg.norm(np.eye(3) - S_hat @ np.linalg.inv(S), 2))
+    n = np.shape(S)[0] if np.ndim(S) == 2 and np.shape(S)[0] in (3, 6) else 3
+    S_hat = as_finite_array(S_hat, (n, n), "S_hat")
+    S = as_finite_array(S, (n, n), "S")
+    return float(np.linalg.norm(np.eye(n) - S_hat @ np.linalg.inv(S), 2))
+
+
+def block_errors(S_hat, S):
+    """E of eq. (16) on a 6x6 ``S``, whole and by its torque and force blocks.
+
+    ``I - S_hat S^-1`` mixes N and N m in its off-diagonal blocks (a force
+    reading's share of a torque, in m; a torque's share of a force, in 1/m),
+    so the whole E changes with the units: in mm and N mm the torque-force
+    blocks scale by 1000 and its inverse. The diagonal blocks (torque rows
+    and columns, force rows and columns) are unit-free.
+
+    Parameters
+    ----------
+    S_hat, S : array_like, shape (6, 6)
+
+    Returns
+    -------
+    E, E_torque, E_force : float
+        The 2-norm of ``I - S_hat S^-1`` and of its two diagonal 3x3 blocks.
+    """
+    S_hat = as_finite_array(S_hat, (6, 6), "S_hat")
+    S = as_finite_array(S, (6, 6), "S")
+    D = np.eye(6) - S_hat @ np.linalg.inv(S)
+    return (float(np.linalg.norm(D, 2)), float(np.linalg.norm(D[:3, :3], 2)), float(np.linalg.norm(D[3:, 3:], 2)))
 
 
 def error_history(S_hat_history, S_true):

@@ -28,9 +28,10 @@ def estimate_noise(log):
     Returns
     -------
     plant.NoiseSpec
-        ``wrench_sd`` from the raw reading; ``angle_sd`` and ``position_sd``
-        from the measured poses (the position standard deviation is the mean
-        of X and Y).
+        ``wrench_sd`` from the raw reading (3 or 6 channels); ``angle_sd``
+        and ``position_sd`` from the measured poses (the position standard
+        deviation is the mean over the axes; in a spatial log the angle's
+        from the quaternion's four components).
     """
     def sd(runs):
         estimates = []
@@ -41,8 +42,14 @@ def estimate_noise(log):
                 estimates.append(1.4826 * mad / np.sqrt(comb(2 * k, k)))
         return float(min(estimates)) if estimates else 0.0
 
-    wrench = tuple(sd([log.w_hat[:, j]]) for j in range(3))
+    wrench = tuple(sd([log.w_hat[:, j]]) for j in range(log.w_hat.shape[1]))
     runs = _even_runs(np.flatnonzero(log.has_pose))
+    if getattr(log, "kind", "planar") == "spatial":
+        # a turn n about the sensor's axes moves the unit quaternion by |n| / 2 over its four
+        # components: sum_j var(q_j) = E|n|^2 / 4 = 3 angle_sd^2 / 4
+        angle = np.sqrt(4.0 / 3.0 * sum(sd([log.pose[r, j] for r in runs]) ** 2 for j in range(4)))
+        position = float(np.mean([sd([log.pose[r, j] for r in runs]) for j in range(4, 7)]))
+        return NoiseSpec(wrench, float(angle), position)
     angle = sd([log.pose[r, 0] for r in runs])
     position = 0.5 * (sd([log.pose[r, 1] for r in runs]) + sd([log.pose[r, 2] for r in runs]))
     return NoiseSpec(wrench, angle, position)

@@ -1,0 +1,182 @@
+"""The plain reference in 3D: smoothed inverse dynamics, then least squares for ``[S | c]``.
+
+What a practitioner would write first. The poses are smoothed and
+differentiated (:func:`fmscal.plant.differentiate.spatial_motion`); with the
+payload known, Newton-Euler gives the wrench each sample needed
+(``w_k = W_k pi``, :func:`fmscal.observers.payload_fit.regressor`); and
+``w_k = S w_hat_k + c`` is fitted row by row by least squares on the
+augmented reading ``[w_hat_k; 1]``, the covariance cluster-robust over
+blocks of time. The smoothing biases the accelerations and the
+differentiated noise enters ``w_k``: the floor (the motion model, not a
+differentiated pose) is what this is measured against.
+
+What the log determines. Every row of ``[S | c]`` is read off the same
+regressor, the augmented reading, so the information about ``S`` lies in
+the second-moment matrix of ``[w_hat; 1]``: a direction of the reading
+along which the log does not vary leaves ``S`` undetermined on it, for every
+row at once. Static poses make every wrench ``[rho x f; f]`` (3 dimensions
+of 6), so three directions of the reading stay undetermined: mostly torque
+directions, which only angular acceleration (``I alpha + omega x I omega``)
+can excite. :attr:`InverseDynamicsFit.undetermined` lists them, and the
+warnings say what to record.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fmscal.plant.differentiate import spatial_motion
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.noise import estimate_noise
+from fmscal.plant.rigid_body import GRAVITY, SpatialPayload
+
+from .payload_fit import regressor
+
+__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "UNDETERMINED_STD", "READING_NAMES"]
+
+#: The augmented reading's components, the directions in which the information is reported.
+READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
+#: A direction of the reading counts as undetermined when ``S`` along it (a unit direction of the
+#: readings scaled to their spread) has a one-sigma uncertainty above this: 5 % of a unit gain.
+UNDETERMINED_STD = 0.05
+
+
+@dataclass
+class InverseDynamicsFit:
+    """``[S | c]`` of a spatial log by smoothed inverse dynamics and least squares.
+
+    Attributes
+    ----------
+    S_hat, S_std : ndarray, shape (6, 6)
+        The estimate of ``S`` in ``w = S (w_hat - b)`` and its one-sigma uncertainty.
+    b, b_std : ndarray, shape (6,)
+        The offset (reading order, N m and N) and its uncertainty.
+    cov : ndarray, shape (42, 42)
+        Covariance of ``vec([S | c])``, row order.
+    undetermined : list of ndarray, shape (7,)
+        Unit directions of the augmented reading ``[tx .. fz, 1]`` (each
+        component scaled by its spread in the log) along which ``S`` is not
+        determined.
+    warnings : list of str
+    converged : bool
+        No direction undetermined.
+    """
+
+    S_hat: np.ndarray
+    S_std: np.ndarray
+    b: np.ndarray
+    b_std: np.ndarray
+    cov: np.ndarray
+    undetermined: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    converged: bool = False
+
+
+def _describe(direction):
+    """A user's words for an undetermined direction of the reading (its components scaled to their spread).
+
+    A direction with a torque share (a quarter of its square or more) is torque
+    the force does not already explain, which only angular acceleration makes.
+    """
+    torque = float(np.sum(direction[:3] ** 2))
+    parts = " ".join(f"{'+' if c >= 0 else '-'}{abs(c):.2f} {name}" for c, name in zip(direction, READING_NAMES)
+                     if abs(c) >= 0.2).lstrip("+")
+    if torque >= 0.25:
+        return (f"S is not determined along the reading {parts}: the torque there is only what the force makes "
+                "about the centre of mass; the log holds too little angular acceleration (rotate the payload "
+                "faster, about more axes)")
+    return (f"S is not determined along the reading {parts}: the force hardly changes there; turn gravity "
+            "through more directions in the sensor frame, or accelerate the payload")
+
+
+def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, eiv=True):
+    """Estimate ``S`` and the offset of a spatial log by smoothed inverse dynamics and least squares.
+
+    Parameters
+    ----------
+    log : plant.Log
+        A spatial log.
+    payload : plant.SpatialPayload
+        The payload's mass properties (known).
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+    window : float
+        Smoothing window of the pose differentiation, s.
+    block : float
+        Length of the blocks of the robust covariance, s.
+    eiv : bool
+        Compensate the errors in variables: the reading is the regressor and
+        its noise shrinks ``S`` along the directions the log barely excites
+        (the torque not explained by the force, above all). With ``eiv``
+        the normal equations lose the noise's share, ``(X^T X - N Sigma)
+        theta = X^T w`` (Deming's regression), ``Sigma`` the reading's noise
+        covariance estimated from the log (:func:`fmscal.plant.estimate_noise`).
+        False gives the plain least squares, the reference in its simplest form.
+
+    Returns
+    -------
+    InverseDynamicsFit
+    """
+    if not isinstance(payload, SpatialPayload):
+        raise FmscalError(f"fit_inverse_dynamics takes a SpatialPayload; got {type(payload).__name__}")
+    q, omega, alpha, p_ddot = spatial_motion(log, window)
+    trim = slice(len(log.t) // 200 + 5, len(log.t) - len(log.t) // 200 - 5)     # the filter's edges
+    I_c, rho, m = payload.I_c, np.asarray(payload.rho), payload.mass
+    r = np.array([[0, -rho[2], rho[1]], [rho[2], 0, -rho[0]], [-rho[1], rho[0], 0]])
+    I_O = I_c - m * r @ r                                                         # parallel axis
+    pi = np.r_[m, m * rho, I_O[0, 0], I_O[1, 1], I_O[2, 2], I_O[0, 1], I_O[0, 2], I_O[1, 2]]
+    w = regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], gravity) @ pi          # (N, 6)
+    X = np.c_[log.w_hat[trim], np.ones(len(w))]                                        # (N, 7)
+    spread = np.r_[np.std(X[:, :6], axis=0), 1.0]
+    Xs = X / np.maximum(spread, 1e-300)
+    # the reading's noise covariance in scaled units (the constant 1 has none)
+    noise = np.r_[estimate_noise(log).wrench_sd, 0.0] / np.maximum(spread, 1e-300) if eiv else np.zeros(7)
+    sigma = np.diag(noise ** 2)
+    information = Xs.T @ Xs - len(Xs) * sigma
+    u, s, _ = np.linalg.svd(information)
+    inverse = (u / s) @ u.T if s[-1] > 1e-14 * s[0] else np.linalg.pinv(information, rcond=1e-14)
+    theta = inverse @ Xs.T @ w                                                           # (7, 6): rows of [S|c]^T
+    e = w - Xs @ theta
+    blocks = ((log.t[trim] - log.t[trim][0]) // block).astype(int)
+    scores = np.zeros((blocks.max() + 1, 7, 6))
+    # each sample's share of the estimating equation X^T e + Sigma theta = 0
+    np.add.at(scores, blocks, Xs[:, :, None] * e[:, None, :] + (sigma @ theta)[None])
+    scores = scores.transpose(0, 2, 1).reshape(len(scores), 42)                          # row order of [S|c]
+    bread = np.kron(np.eye(6), inverse)
+    cov_scaled = bread @ (scores.T @ scores) @ bread
+    unscale = np.tile(1.0 / np.maximum(spread, 1e-300), 6)
+    cov = cov_scaled * np.outer(unscale, unscale)
+    S_aug = (theta / np.maximum(spread, 1e-300)[:, None]).T                              # (6, 7)
+    undetermined = [u[:, k] for k in range(7) if _relative_std(u[:, k], s[k], e, spread) > UNDETERMINED_STD]
+    warnings = [_describe(d) for d in undetermined]
+    S_hat, c = S_aug[:, :6], S_aug[:, 6]
+    S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(6, 7)[:, :6]
+    b, b_std = _offset(S_hat, c, cov)
+    return InverseDynamicsFit(S_hat=S_hat, S_std=S_std, b=b, b_std=b_std, cov=cov, undetermined=undetermined,
+                              warnings=warnings, converged=not undetermined)
+
+
+def _relative_std(direction, information, e, spread):
+    """The uncertainty of ``S`` along a direction of the scaled reading, relative to a unit gain.
+
+    Along the unit direction ``d`` of the scaled reading the fit's uncertainty
+    is ``sigma / sqrt(lambda)`` (wrench units per scaled unit, ``lambda`` the
+    information along ``d``, ``sigma`` the largest residual spread of a row);
+    a unit gain maps the same move of the reading to ``|d * spread|`` of
+    wrench, the force channels' spread standing in for the constant's.
+    """
+    sigma = np.sqrt(np.mean(e ** 2, axis=0).max())
+    scale = np.r_[spread[:6], spread[3:6].mean()]
+    return sigma / np.sqrt(max(information, 1e-300)) / max(np.linalg.norm(direction * scale), 1e-300)
+
+
+def _offset(S_hat, c, cov):
+    """``b = -S^-1 c`` and its uncertainty by the delta method (``S`` and ``c`` both uncertain)."""
+    S_inv = np.linalg.inv(S_hat)
+    b = -S_inv @ c
+    # d b = -S^-1 (dS b + dc): Jacobian with respect to vec([S | c]) in row order
+    J = np.zeros((6, 42))
+    for i in range(6):
+        J[:, 7 * i:7 * i + 6] = -np.outer(S_inv[:, i], b)
+        J[:, 7 * i + 6] = -S_inv[:, i]
+    return b, np.sqrt(np.maximum(np.diag(J @ cov @ J.T), 0))

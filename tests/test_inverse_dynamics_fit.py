@@ -1,0 +1,51 @@
+"""The plain spatial reference: smoothed inverse dynamics and least squares for [S | c] (issue 22)."""
+
+import numpy as np
+import pytest
+
+from fmscal.analysis.metrics import block_errors
+from fmscal.observers.inverse_dynamics_fit import fit_inverse_dynamics
+from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+
+
+@pytest.fixture(scope="module")
+def arm_logs():
+    return [SPATIAL_SCENARIOS["spatial-arm"].with_(duration=30.0).generate(seed) for seed in range(3)]
+
+
+def test_with_the_noise_compensated_the_arm_is_calibrated_with_honest_uncertainties(arm_logs):
+    for log, truth, _ in arm_logs:
+        S = truth.S_at(0.0)
+        fit = fit_inverse_dynamics(log, truth.payload)
+        E, E_torque, E_force = block_errors(fit.S_hat, S)
+        assert E_torque < 0.02 and E_force < 0.02 and E < 0.3
+        z = (fit.S_hat - S) / fit.S_std
+        assert 0.5 < np.sqrt(np.mean(z ** 2)) < 1.6
+        assert np.abs((fit.b - truth.offset) / fit.b_std).max() < 4
+        assert fit.converged and not fit.undetermined
+
+
+def test_plain_least_squares_is_biased_where_the_torque_carries_little_of_its_own(arm_logs):
+    """Errors in variables: the reading's noise shrinks S along the weakly excited directions."""
+    for log, truth, _ in arm_logs:
+        S = truth.S_at(0.0)
+        plain, compensated = fit_inverse_dynamics(log, truth.payload, eiv=False), fit_inverse_dynamics(log, truth.payload)
+        assert block_errors(plain.S_hat, S)[1] > 5 * block_errors(compensated.S_hat, S)[1]
+        assert np.sqrt(np.mean(((plain.S_hat - S) / plain.S_std) ** 2)) > 3        # and overconfident
+
+
+def test_static_poses_leave_directions_undetermined_and_say_what_to_record():
+    log, truth, _ = SPATIAL_SCENARIOS["spatial-static"].generate(0)
+    fit = fit_inverse_dynamics(log, truth.payload)
+    assert 2 <= len(fit.undetermined) <= 3 and not fit.converged
+    assert any("angular acceleration" in w for w in fit.warnings)
+    for d in fit.undetermined:
+        assert np.linalg.norm(d) == pytest.approx(1.0)
+
+
+def test_block_errors_split_units():
+    S = np.eye(6)
+    S_hat = np.eye(6)
+    S_hat[0, 3] = 0.01                                  # a force reading's share of a torque, m
+    E, E_torque, E_force = block_errors(S_hat, S)
+    assert E == pytest.approx(0.01) and E_torque == 0 and E_force == 0
