@@ -29,7 +29,7 @@ from fmscal.plant._compile import ChunkedSteps
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.sensor import check_calibration
 
-from .convergence import DIVERGENCE_GRACE, divergence_bound, settled
+from .convergence import DIVERGENCE_GRACE, EVIDENCE_TOLERANCE, divergence_bound, informed, moved, settled
 from .progress import EVERY, progress_bar
 from .result import ObserverResult, initial_calibration, offset_std, split_calibration
 from .samples import check_sample, pack_input
@@ -271,6 +271,14 @@ class Observer:
         """``[S0 | 0]`` flat in row order (:func:`observers.result.initial_calibration`)."""
         return initial_calibration(S0, self.offset)
 
+    def _evidence(self, log, S_hat, S_std):
+        """The log pinned ``S`` down: the method's own ``S_std``, or else a least-squares fit's of
+        the log, at most :data:`observers.convergence.EVIDENCE_TOLERANCE` of ``S_hat`` (2-norms)."""
+        if S_std is not None:
+            return informed(S_hat, S_std)
+        from .evidence import log_uncertainty        # here: least squares is itself an Observer
+        return log_uncertainty(log, self.payload, self.offset, enough=EVIDENCE_TOLERANCE) <= EVIDENCE_TOLERANCE
+
     def _result(self, log, est):
         """The :class:`ObserverResult` of an estimate: offset, uncertainties and flags, for every method."""
         S_hist, b = split_calibration(est.calibration, self.n_cols)
@@ -282,7 +290,8 @@ class Observer:
         if est.diverged:
             b = None
         honest = S_std is None or bool(np.all(np.isfinite(S_std)) and np.all(S_std > 0))
-        converged = bool(not est.diverged and est.checks_passed and honest and settled(S_hist))
+        converged = bool(not est.diverged and est.checks_passed and honest and settled(S_hist)
+                         and (not self.online or moved(S_hist)) and self._evidence(log, S_hist[-1], S_std))
         return ObserverResult(
             observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,

@@ -36,7 +36,12 @@ class ObserverResult:
         estimate became non-finite; the run stopped at the last healthy step.
     converged : bool
         Not diverged, the estimate settled over the last 20 % of the run
-        (:func:`observers.convergence.settled`), its uncertainty (where it
+        (:func:`observers.convergence.settled`) after moving (an online
+        method's left ``S0``, :func:`observers.convergence.moved`), the log
+        pinned ``S`` down (its uncertainty, the method's own or else a
+        least-squares fit's, within
+        :data:`observers.convergence.EVIDENCE_TOLERANCE`;
+        :meth:`observers.Observer._evidence`), its uncertainty (where it
         has one) finite and non-zero, and the method's own checks of the log
         passed (least squares: excitation and consistency).
     wall_time : float
