@@ -9,18 +9,19 @@ Two checks ``fmscal calibrate`` runs on every log, beside
 * :func:`offset_drift`: the offset ``b`` changes during the log (a step, a
   ramp). A least-squares fit of the whole log leaves, in each of its 0.5 s
   windows, a residual that a change of ``b`` explains; those per-window
-  offsets must not change level over the log.
+  offsets must not change level over the log, and must be white.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
 from .least_squares import LeastSquares, _phi_to_S_map
 
 __all__ = ["saturation", "offset_drift", "OffsetDrift", "SATURATION_SHARE", "SATURATION_RATIO",
-           "DRIFT_SIGNIFICANCE", "DRIFT_PARTS"]
+           "DRIFT_SIGNIFICANCE", "DRIFT_PARTS", "DRIFT_LAGS"]
 
 #: A channel is saturated where at least this share of its samples sits exactly at one extreme ...
 SATURATION_SHARE = 0.005
@@ -29,11 +30,13 @@ SATURATION_SHARE = 0.005
 #: reading's top level holds about as many as its neighbours (a sine's at most 2.4x), a clipped
 #: one far more; an unquantised reading repeats no value.
 SATURATION_RATIO = 5.0
-#: Probability, for a log with a constant offset, of calling it moving (the F test of
+#: Probability, for a log with a constant offset, of calling it moving (the two tests of
 #: :func:`offset_drift`, nominal).
 DRIFT_SIGNIFICANCE = 1e-3
 #: Equal parts of the log whose mean offsets are compared.
 DRIFT_PARTS = 6
+#: Lags of the whiteness test (Ljung-Box) of the per-window offsets.
+DRIFT_LAGS = 5
 
 _CHANNELS = ("M", "fx", "fy")
 _UNITS = ("N m", "N", "N")
@@ -87,12 +90,16 @@ class OffsetDrift:
     statistic : float
         The F statistic of the part means (about 1 for a constant offset).
     p_value : float
+        Of the F test (a change of level).
     offsets : ndarray, shape (K, 3)
         The offset change ``delta b`` each window's residual asks for (N m, N, N).
     t : ndarray, shape (K,)
         The middle of each window, s.
     warning : str or None
         One line when the offset moves: which channel, a step or a ramp, and when.
+    white_p : float
+        The smallest over channels of the Ljung-Box p-value of the
+        standardised per-window offsets (white for a constant offset).
     """
 
     constant: bool
@@ -101,6 +108,7 @@ class OffsetDrift:
     offsets: np.ndarray
     t: np.ndarray
     warning: str = None
+    white_p: float = np.nan
 
 
 def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, significance=DRIFT_SIGNIFICANCE):
@@ -117,7 +125,10 @@ def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, sig
     offset (the within-part scatter sets the noise level: no noise model).
     Where it is too large, a level that steps or ramps between two window
     boundaries is fitted to the channel that moved most, and the warning
-    says which.
+    says which. The offsets must also be white: each channel's, standardised,
+    passes a Ljung-Box test over :data:`DRIFT_LAGS` lags (an offset that
+    wanders faster than a part of the log). Each test takes half of
+    ``significance``.
 
     Parameters
     ----------
@@ -132,6 +143,7 @@ def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, sig
         Window length, s (least squares', :class:`observers.LeastSquares`).
     parts : int
     significance : float
+        Probability, for a constant offset, of calling it moving (both tests).
 
     Returns
     -------
@@ -194,10 +206,31 @@ def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, sig
     dof_b, dof_w = 3 * (len(np.unique(part)) - 1), 3 * (K - len(np.unique(part)))
     stat = (between / dof_b) / max(within / dof_w, 1e-300)
     p_value = float(f_dist.sf(stat, dof_b, dof_w))
-    out = OffsetDrift(p_value >= significance, float(stat), p_value, est, t)
-    if not out.constant:
+    # white: each channel's standardised offsets, uncorrelated from window to window
+    z = (est - overall) / np.sqrt(np.array([np.diag(np.linalg.inv(I)) for I in info]) * within / dof_w)
+    white = [_ljung_box(z[:, j], DRIFT_LAGS) for j in range(3)]
+    worst = int(np.argmin(white))
+    # half the significance to each test, a third of the whiteness half to each channel
+    out = OffsetDrift(p_value >= significance / 2 and white[worst] >= significance / 6, float(stat), p_value,
+                      est, t, white_p=float(white[worst]))
+    if p_value < significance / 2:
         out.warning = _describe(t, est, info, within / dof_w, p_value)
+    elif not out.constant:
+        out.warning = (f"the sensor's offset moves during the log: the offset of {_CHANNELS[worst]} wanders (the "
+                       f"residuals of a least-squares fit, window by window, are not white: Ljung-Box p = "
+                       f"{white[worst]:.2g} over {DRIFT_LAGS} lags); one constant offset does not describe it")
     return out
+
+
+def _ljung_box(z, lags):
+    """p-value of the Ljung-Box statistic of the series ``z`` (white: chi-square with ``lags`` dof)."""
+    z = z - np.mean(z)
+    n, denom = len(z), float(z @ z)
+    if denom <= 0:
+        return 1.0
+    rho = np.array([float(z[k:] @ z[:-k]) / denom for k in range(1, lags + 1)])
+    Q = n * (n + 2) * float(np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
+    return float(chi2.sf(Q, lags))
 
 
 def _describe(t, est, info, scale, p_value):

@@ -79,6 +79,19 @@ def test_the_step_and_the_ramp_are_measured_and_placed(kind, pattern, start, end
         assert end[0] <= float(found.group(3)) <= end[1]
 
 
+def test_an_offset_that_wanders_is_not_white():
+    """fy's offset swinging by +-0.3 N every 3 s: every 5 s part has the same mean (the F test passes),
+    but the offsets of neighbouring windows are correlated."""
+    sc, log, _ = _faulty("none")
+    w = log.w_hat.copy()
+    w[:, 2] += 0.3 * np.sin(2 * np.pi * log.t / 3.0)
+    wobbly = plant.Log(log.t, log.pose, w)
+    fit = LeastSquares(sc.payload, offset=True).run(wobbly)
+    drift = offset_drift(wobbly, sc.payload, fit.S_hat, fit.b)
+    assert drift.p_value > 0.01 and drift.white_p < 1e-10 and not drift.constant
+    assert "offset of fy wanders" in drift.warning and "not white" in drift.warning
+
+
 @pytest.mark.parametrize("scenario", ["paper", "noisy", "real-rig", "vision-50hz", "other-payload"])
 @pytest.mark.parametrize("seed", [0, 4])
 def test_no_false_alarm_on_clean_logs(scenario, seed):
