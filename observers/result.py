@@ -46,7 +46,9 @@ class ObserverResult:
         passed (least squares: excitation and consistency).
     wall_time : float
         Seconds of computation, without the one-off build of a compiled step
-        (its symbolic graph, C generation and loading; ``info["build_time"]``).
+        (its symbolic graph, C generation and loading; ``info["build_time"]``)
+        and without the least-squares fit that gives a method without an
+        uncertainty its evidence (:mod:`observers.evidence`).
     info : dict
         Method-specific extras (noise estimates, fit diagnostics, ...).
     b : ndarray, shape (3,), or None
