@@ -219,6 +219,8 @@ def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, sig
         out.warning = (f"the sensor's offset moves during the log: the offset of {_CHANNELS[worst]} wanders (the "
                        f"residuals of a least-squares fit, window by window, are not white: Ljung-Box p = "
                        f"{white[worst]:.2g} over {DRIFT_LAGS} lags); one constant offset does not describe it")
+    if out.warning and b is None:
+        out.warning += " (or an offset left out: the fit estimated none)"
     return out
 
 

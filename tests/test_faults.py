@@ -114,3 +114,15 @@ def test_a_quantised_reading_is_not_saturation():
     clipped = plant.Log(log.t, log.pose, np.clip(coarse.w_hat, -1.5, 1.5))      # 6-23 % pinned
     found = saturation(clipped)
     assert [f.split(" is pinned")[0] for f in found] == ["the reading M", "the reading fx", "the reading fy"]
+
+
+def test_an_offset_left_out_is_named_as_a_possible_cause():
+    """real-rig has an offset; fitted without one, the residuals are not white, and the warning says why."""
+    sc = plant.get_scenario("real-rig").with_(duration=30.0)
+    log, truth, _ = sc.generate(0)
+    log = log.shift_poses(truth.latency)
+    without = LeastSquares(sc.payload).run(log)
+    drift = offset_drift(log, sc.payload, without.S_hat)
+    assert not drift.constant and drift.warning.endswith("(or an offset left out: the fit estimated none)")
+    fit = LeastSquares(sc.payload, offset=True).run(log)
+    assert offset_drift(log, sc.payload, fit.S_hat, fit.b).constant
