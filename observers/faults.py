@@ -216,9 +216,9 @@ def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, sig
     if p_value < significance / 2:
         out.warning = _describe(t, est, info, within / dof_w, p_value)
     elif not out.constant:
-        out.warning = (f"the sensor's offset moves during the log: the offset of {_CHANNELS[worst]} wanders (the "
-                       f"residuals of a least-squares fit, window by window, are not white: Ljung-Box p = "
-                       f"{white[worst]:.2g} over {DRIFT_LAGS} lags); one constant offset does not describe it")
+        out.warning = (f"the residuals of a least-squares fit are not white from window to window (as an offset "
+                       f"of {_CHANNELS[worst]}: Ljung-Box p = {white[worst]:.2g} over {DRIFT_LAGS} lags): the "
+                       f"sensor's offset wanders, or S changes, during the log")
     if out.warning and b is None:
         out.warning += " (or an offset left out: the fit estimated none)"
     return out
