@@ -10,6 +10,7 @@ and by its cost per step (compiled, the second run so that compilation is not
 counted).
 """
 
+import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
@@ -60,7 +61,9 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_
     pandas.DataFrame
         One row per scenario and step: ``scenario``, ``step`` (0 the paper),
         ``configuration``, ``seeds``, ``E_median`` (median over seeds of the
-        tail E), ``floor_E_median``, ``ratio`` (their quotient),
+        tail E), ``floor_E_median`` (over the seeds where the floor
+        converged), ``ratio`` (their quotient; NaN, printed "n/a", where the
+        floor converged on no seed),
         ``diverged_runs`` and ``us_per_step`` (median over seeds).
     """
     if not callable(floor):
@@ -84,7 +87,7 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_
     raw = pd.DataFrame(records)
     rows = []
     for (scenario, step), g in raw.groupby(["scenario", "step"], sort=False):
-        E_med, F_med = float(g["E"].median()), float(g["E_floor"].median())
+        E_med, F_med = float(g["E"].median()), float(g["E_floor"].median())      # NaN: no floor converged
         rows.append({"scenario": scenario, "step": int(step), "configuration": g["configuration"].iloc[0],
                      "seeds": len(g), "E_median": E_med, "floor_E_median": F_med, "ratio": E_med / F_med,
                      "diverged_runs": int(g["diverged"].sum()), "us_per_step": float(g["us_per_step"].median())})
@@ -99,6 +102,11 @@ def ablation_markdown(table, title="Ablation: from the paper's observer to the a
     for _, r in table.iterrows():
         lines.append("| " + " | ".join([
             r["scenario"], r["configuration"], str(r["seeds"]), f"{r['E_median']:.3g}",
-            f"{r['floor_E_median']:.3g}", f"{r['ratio']:.3g}", f"{r['diverged_runs']}/{r['seeds']}",
+            _or_na(r["floor_E_median"]), _or_na(r["ratio"]), f"{r['diverged_runs']}/{r['seeds']}",
             f"{r['us_per_step']:.2g}"]) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _or_na(value):
+    """A number for the table; "n/a" where there is none (the floor did not converge)."""
+    return "n/a" if np.isnan(value) else f"{value:.3g}"

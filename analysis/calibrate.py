@@ -5,6 +5,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, ObserverResult, get_method, method_names
+from fmscal.observers.faults import offset_drift, saturation
 from fmscal.observers.health import consistency_check
 from fmscal.observers.latency import estimate_latency
 from fmscal.plant import Calibration, NoiseSpec, estimate_noise
@@ -49,7 +50,9 @@ class CalibrationReport:
         The method's ``converged`` flag (:class:`observers.ObserverResult`),
         and: the log's units look right, a least-squares fit of it finds it
         exciting every entry and matching the model, the log is consistent with one
-        constant ``S`` (:func:`observers.health.consistency_check`), and the
+        constant ``S`` (:func:`observers.health.consistency_check`), no channel of the
+        reading saturates (:func:`observers.faults.saturation`), the offset keeps one
+        level (:func:`observers.faults.offset_drift`), and the
         method's estimate agrees with a least-squares fit of the same log
         (within :data:`AGREEMENT_SIGMAS` standard deviations or an E of
         :data:`AGREEMENT_E`). Each failure adds a warning that names it.
@@ -61,8 +64,8 @@ class CalibrationReport:
         The latency was estimated (True) or given.
     warnings : list of str
         The units diagnosis, excitation and model consistency (from a
-        least-squares fit of the same log) and the method's own warnings,
-        one line each.
+        least-squares fit of the same log), saturation and a moving offset,
+        and the method's own warnings, one line each.
     units : list of str
         What :func:`plant.units.diagnose_units` found wrong with the log's
         units (degrees, millimetres, counts) that this method cannot absorb
@@ -182,6 +185,11 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     except FmscalError as err:            # a half too short to fit: nothing says S stayed constant
         consistent = False
         warnings.append(f"the log is too short to check that one constant S explains it ({err})")
+    faults = saturation(log)
+    drift = offset_drift(aligned, payload, ls_result.S_hat, ls_result.b)
+    if drift.warning:
+        faults.append(drift.warning)
+    warnings += faults
     disagreement = _disagreement(result, ls_result)
     if disagreement:
         warnings.append(disagreement)
@@ -189,7 +197,7 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
                               b=result.b, b_std=result.b_std, latency=float(latency))
     E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
     converged = (bool(result.converged) and not units and not ls_result.warnings and consistent
-                 and not disagreement)
+                 and not faults and not disagreement)
     return CalibrationReport(calibration=calibration, result=result, converged=converged,
                              noise=noise, noise_estimated=noise_estimated, latency_estimated=latency_estimated,
                              warnings=warnings, units=units, fit={k: v for k, v in reference.report.items() if k != "warnings"},

@@ -104,10 +104,14 @@ def floor_error(log, truth, payload):
     Returns
     -------
     float
-        NaN where the floor diverged (it should not).
+        NaN where the floor did not converge (:class:`observers.ObserverResult`:
+        a log too short to pin ``S`` down, or an ``S`` that is not constant):
+        there is then no floor, and every table leaves ``E / floor`` out
+        ("-").
     """
     log, settings = _aligned(log, truth, None)
-    return tail_error(get_method(FLOOR_METHOD).build(payload, truth.noise, settings).run(log), truth)
+    result = get_method(FLOOR_METHOD).build(payload, truth.noise, settings).run(log)
+    return tail_error(result, truth) if result.converged else float("nan")
 
 
 def run_observer(name, log, truth, payload, told_noise=None, settings=None, history=False, floor=None):
@@ -149,7 +153,7 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
            "E_over_floor": np.nan, "floor_E": np.nan if floor is None else float(floor),
            "convergence_time": np.nan, "diverged": bool(bad), "converged": bool(result.converged)}
     if floor is not None and not bad:
-        row["E_over_floor"] = row["E"] / floor if floor > 0 else np.nan
+        row["E_over_floor"] = row["E"] / floor if floor > 0 else np.nan        # NaN > 0 is False
     if not bad:
         ct = convergence_time(result.t, E)
         row["convergence_time"] = np.nan if ct is None else float(ct)
@@ -240,7 +244,7 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
         ``seed``, ``duration``, ``E`` (the median over the last 10 % of
         the run, :func:`analysis.metrics.tail_median`), ``E_end`` (the last
         sample), ``floor_E`` (the floor's E on the same log,
-        :func:`floor_error`), ``E_over_floor`` (``E / floor_E``: how much
+        :func:`floor_error`; NaN where the floor did not converge), ``E_over_floor`` (``E / floor_E``: how much
         accuracy the method leaves on the table), ``E_10s``, ``E_30s``,
         ``E_100s`` (the median over the 10 % of the run before each
         checkpoint, where the run is that long), ``convergence_time`` (s,

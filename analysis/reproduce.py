@@ -96,7 +96,7 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True, n_jobs=-1):
         ``E_end``, ``E_median_last_10s`` (the median of E over the 10 s
         before ``E_100``: E moves from sample to sample, so tables use this
         one), ``E_over_floor`` (``E_median_last_10s`` over the floor's on the
-        same log), ``convergence_time``, ``diverged``, ``converged``,
+        same log; only where the floor converged), ``convergence_time``, ``diverged``, ``converged``,
         ``wall_time``, ``S_hat_100``; E is None for a diverged run.
     """
     out = Path(out_dir)
@@ -115,7 +115,8 @@ def reproduce(out_dir, seed=0, duration_scale=1.0, progress=True, n_jobs=-1):
     for name, fig in _FIGURES:
         floor = next(r for r in rows if r["scenario"] == name and r["observer"] == FLOOR_METHOD)
         for r in rows:
-            if r["scenario"] == name and r["E_median_last_10s"] is not None and floor["E_median_last_10s"]:
+            if (r["scenario"] == name and r["E_median_last_10s"] is not None and floor["converged"]
+                    and floor["E_median_last_10s"]):
                 r["E_over_floor"] = r["E_median_last_10s"] / floor["E_median_last_10s"]
         truth = _scenario(name, duration_scale).generate(seed)[1]
         runs = {row["observer"]: curves for row, curves in results if row["scenario"] == name}

@@ -29,7 +29,7 @@ from fmscal.plant._compile import ChunkedSteps
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.sensor import check_calibration
 
-from .convergence import DIVERGENCE_GRACE, divergence_bound, settled
+from .convergence import DIVERGENCE_GRACE, EVIDENCE_TOLERANCE, divergence_bound, informed, moved, settled
 from .progress import EVERY, progress_bar
 from .result import ObserverResult, initial_calibration, offset_std, split_calibration
 from .samples import check_sample, pack_input
@@ -154,10 +154,10 @@ class Observer:
             self.reset(S0)
             self._bound = divergence_bound(self._S0, log, self.payload)     # relative to the data's scale
             self._grace = int(round(DIVERGENCE_GRACE / log.dt))             # steps judged on finiteness only
-        self._build_time = 0.0
+        self._build_time = self._evidence_time = 0.0
         estimate = self._estimate(log, self._S0)
         result = self._result(log, estimate)
-        result.wall_time = time.perf_counter() - start - self._build_time
+        result.wall_time = time.perf_counter() - start - self._build_time - self._evidence_time
         if self._build_time:
             result.info["build_time"] = self._build_time
         return result
@@ -271,6 +271,17 @@ class Observer:
         """``[S0 | 0]`` flat in row order (:func:`observers.result.initial_calibration`)."""
         return initial_calibration(S0, self.offset)
 
+    def _evidence(self, log, S_hat, S_std):
+        """The log pinned ``S`` down: the method's own ``S_std``, or else a least-squares fit's of
+        the log, at most :data:`observers.convergence.EVIDENCE_TOLERANCE` of ``S_hat`` (2-norms)."""
+        if S_std is not None:
+            return informed(S_hat, S_std)
+        from .evidence import log_uncertainty        # here: least squares is itself an Observer
+        start = time.perf_counter()
+        value = log_uncertainty(log, self.payload, self.offset, enough=EVIDENCE_TOLERANCE)
+        self._evidence_time = time.perf_counter() - start      # a check of the log: not the method's cost
+        return value <= EVIDENCE_TOLERANCE
+
     def _result(self, log, est):
         """The :class:`ObserverResult` of an estimate: offset, uncertainties and flags, for every method."""
         S_hist, b = split_calibration(est.calibration, self.n_cols)
@@ -282,7 +293,8 @@ class Observer:
         if est.diverged:
             b = None
         honest = S_std is None or bool(np.all(np.isfinite(S_std)) and np.all(S_std > 0))
-        converged = bool(not est.diverged and est.checks_passed and honest and settled(S_hist))
+        converged = bool(not est.diverged and est.checks_passed and honest and settled(S_hist)
+                         and (not self.online or moved(S_hist)) and self._evidence(log, S_hist[-1], S_std))
         return ObserverResult(
             observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,

@@ -5,8 +5,8 @@ import numpy as np
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.units import implied_scale
 
-__all__ = ["settled", "divergence_bound", "DIVERGENCE_FACTOR", "DIVERGENCE_GRACE", "SETTLE_FRACTION",
-           "SETTLE_TOLERANCE"]
+__all__ = ["settled", "moved", "informed", "divergence_bound", "DIVERGENCE_FACTOR", "DIVERGENCE_GRACE",
+           "SETTLE_FRACTION", "SETTLE_TOLERANCE", "EVIDENCE_TOLERANCE"]
 
 #: An entry of S_hat beyond this many times the scale (of S0 and of the data) counts as diverged ...
 DIVERGENCE_FACTOR = 20.0
@@ -17,6 +17,10 @@ DIVERGENCE_GRACE = 1.0
 SETTLE_FRACTION = 0.2
 #: ... and asks that ``S_hat`` stay within this relative 2-norm distance of its final value.
 SETTLE_TOLERANCE = 0.05
+#: ``converged`` needs the one-sigma uncertainty of ``S`` (``||S_std||_2 / ||S_hat||_2``: the
+#: method's own, or a least-squares fit's of the log, :func:`observers.evidence.log_uncertainty`)
+#: at most this: the log held information in every direction of ``S``.
+EVIDENCE_TOLERANCE = 0.05
 
 
 def settled(S_history, fraction=SETTLE_FRACTION, tolerance=SETTLE_TOLERANCE):
@@ -41,6 +45,54 @@ def settled(S_history, fraction=SETTLE_FRACTION, tolerance=SETTLE_TOLERANCE):
     # the 2-norm never exceeds the Frobenius norm: take SVDs only where the cheap bound fails
     unsure = np.sqrt(np.einsum("nij,nij->n", gap, gap)) > bound
     return bool(not unsure.any() or np.max(np.linalg.norm(gap[unsure], ord=2, axis=(1, 2))) <= bound)
+
+
+def moved(S_history, tolerance=SETTLE_TOLERANCE):
+    """Whether an estimate left its start: settling means nothing until it has.
+
+    True when some ``S_hat(t)`` is farther than ``tolerance`` from
+    ``S_hat(0)`` in relative induced 2-norm (relative to the final
+    ``S_hat``). An online method that never leaves ``S0`` has learned
+    nothing the run can show, however still it stands.
+
+    Parameters
+    ----------
+    S_history : ndarray, shape (N, 3, 3)
+    tolerance : float
+
+    Returns
+    -------
+    bool
+    """
+    gap = S_history - S_history[0]
+    bound = tolerance * max(np.linalg.norm(S_history[-1], 2), 1e-12)
+    # the 2-norm is at least the Frobenius norm over sqrt(3): the cheap test first
+    frob = np.sqrt(np.einsum("nij,nij->n", gap, gap))
+    if np.any(frob > np.sqrt(3) * bound):
+        return True
+    near = frob > bound
+    return bool(near.any() and np.max(np.linalg.norm(gap[near], ord=2, axis=(1, 2))) > bound)
+
+
+def informed(S_hat, S_std, tolerance=EVIDENCE_TOLERANCE):
+    """Whether an uncertainty says the data pinned ``S`` down: ``||S_std||_2 <= tolerance ||S_hat||_2``.
+
+    Parameters
+    ----------
+    S_hat : array_like, shape (3, 3)
+    S_std : array_like, shape (3, 3)
+        One-sigma uncertainty of each entry.
+    tolerance : float
+
+    Returns
+    -------
+    bool
+        False where either is not finite.
+    """
+    S_hat, S_std = np.asarray(S_hat, dtype=float), np.asarray(S_std, dtype=float)
+    if not (np.all(np.isfinite(S_hat)) and np.all(np.isfinite(S_std))):
+        return False
+    return bool(np.linalg.norm(S_std, 2) <= tolerance * np.linalg.norm(S_hat, 2))
 
 
 def divergence_bound(S0, log=None, payload=None, factor=DIVERGENCE_FACTOR):

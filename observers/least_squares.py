@@ -106,8 +106,10 @@ class LeastSquares(Observer):
         return out
 
     def _windows(self, log):
+        """The pose rows of each window that holds at least 3 poses (a line and a curvature)."""
         idx = np.floor((log.t - log.t[0]) / self.window).astype(int)
-        return [np.flatnonzero((idx == k) & log.has_pose) for k in np.unique(idx)]
+        rows = (np.flatnonzero((idx == k) & log.has_pose) for k in np.unique(idx))
+        return [r for r in rows if len(r) >= 3]
 
     def _normal_equations(self, log, Z, channels, windows, y=None):
         """Information matrix and right side for the channels sharing one parameter set.
@@ -151,7 +153,7 @@ class LeastSquares(Observer):
         ``result.warnings`` its warnings).
         """
         Z = self._double_integrals(log)
-        windows = [rows for rows in self._windows(log) if len(rows) >= 3]
+        windows = self._windows(log)
         if len(windows) < 2:
             raise FmscalError(f"{log.name}: too short for least squares with {self.window:g} s windows: "
                              f"need at least 2 windows of 3 pose measurements, got {len(windows)}")
@@ -224,7 +226,7 @@ class LeastSquares(Observer):
         keep = [[0, 1, 2], [0, 1, 2, 4, 5, 6], [0, 1, 2, 4, 5, 6]]     # the columns of S
         y = {ch: Z_all[ch] @ phi_c[min(ch, 1)] for ch in range(3)}        # the motion c alone causes
         Z = [Z_all[ch][:, keep[ch]] for ch in range(3)]
-        windows = [rows for rows in self._windows(log) if len(rows) >= 3]
+        windows = self._windows(log)
         d_phi = []
         for channels in ([0], [1, 2]):
             info, rhs, _ = self._normal_equations(log, Z, channels, windows, y)

@@ -36,12 +36,19 @@ class ObserverResult:
         estimate became non-finite; the run stopped at the last healthy step.
     converged : bool
         Not diverged, the estimate settled over the last 20 % of the run
-        (:func:`observers.convergence.settled`), its uncertainty (where it
+        (:func:`observers.convergence.settled`) after moving (an online
+        method's left ``S0``, :func:`observers.convergence.moved`), the log
+        pinned ``S`` down (its uncertainty, the method's own or else a
+        least-squares fit's, within
+        :data:`observers.convergence.EVIDENCE_TOLERANCE`;
+        :meth:`observers.Observer._evidence`), its uncertainty (where it
         has one) finite and non-zero, and the method's own checks of the log
         passed (least squares: excitation and consistency).
     wall_time : float
         Seconds of computation, without the one-off build of a compiled step
-        (its symbolic graph, C generation and loading; ``info["build_time"]``).
+        (its symbolic graph, C generation and loading; ``info["build_time"]``)
+        and without the least-squares fit that gives a method without an
+        uncertainty its evidence (:mod:`observers.evidence`).
     info : dict
         Method-specific extras (noise estimates, fit diagnostics, ...).
     b : ndarray, shape (3,), or None
