@@ -6,6 +6,7 @@ exception is a bug in the toolkit and shows its traceback.
 """
 
 import argparse
+import contextlib
 import json
 import sys
 import warnings
@@ -17,7 +18,8 @@ from .cli_calibration import add_apply, add_calibrate
 from .cli_import import add_import
 from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
                          strict)
-from .files import atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs
+from .files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs, claim_folder,
+                    exclusive)
 from .cli_scale import add_bench, add_sweep
 
 __all__ = ["main", "build_parser", "MAX_LAM"]
@@ -157,7 +159,8 @@ def cmd_reproduce(args):
     check_seeds(seed=args.seed)
     check_jobs(args.jobs)
     check_output_dir(args.out, output_names(), overwrite=args.overwrite)
-    reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
+    with claim_folder(args.out):                # one run's alone: a second one at once is refused
+        reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
     print((Path(args.out) / "summary.md").read_text())
 
 
@@ -211,7 +214,6 @@ def cmd_compare(args):
     from fmscal.observers import get_method
     from fmscal.plant import get_scenario
     from .comparison import compare, summarise, summary_markdown
-    from .plots import plot_comparison
     for name in args.scenario:
         get_scenario(name)                      # FmscalError naming the choices
     for name in args.observer:
@@ -224,26 +226,32 @@ def cmd_compare(args):
         scenarios = dict.fromkeys(get_scenario(name).name for name in args.scenario)
         check_output_dir(args.out, [f"E_{sc}.png" for sc in scenarios] + ["summary.md", "runs.csv"],
                          overwrite=args.overwrite)
-    table, curves = compare(args.scenario, args.seeds, args.observer, args.duration,
-                            progress=not args.json, histories=True)
-    summary = summarise(table)
-    text = summary_markdown(summary, f"Observer comparison ({args.seeds} seed(s), "
-                                     f"{'each scenario' if args.duration is None else f'{args.duration:g} s'})")
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        for scenario in dict.fromkeys(table["scenario"]):
-            sc = get_scenario(scenario)
-            truth = sc.with_(duration=args.duration or sc.duration).generate(0)[1]     # seed 0's S(t)
-            plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
-                            out / f"E_{scenario}.png",
-                            f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
-        atomic_write_text(out / "summary.md", text)
-        atomic_write(out / "runs.csv", lambda tmp: table.to_csv(tmp, index=False))
+    with claim_folder(args.out) if args.out else contextlib.nullcontext():
+        table, curves = compare(args.scenario, args.seeds, args.observer, args.duration,
+                                progress=not args.json, histories=True)
+        summary = summarise(table)
+        text = summary_markdown(summary, f"Observer comparison ({args.seeds} seed(s), "
+                                         f"{'each scenario' if args.duration is None else f'{args.duration:g} s'})")
+        if args.out:
+            _write_comparison(Path(args.out), args.duration, table, curves, text)
     if args.json:
         print(json.dumps(strict(table.to_dict(orient="records")), indent=1, allow_nan=False))
     else:
         print(text)
+
+
+def _write_comparison(out, duration, table, curves, text):
+    """compare --out: a figure per scenario, summary.md and runs.csv in ``out``."""
+    from fmscal.plant import get_scenario
+    from .plots import plot_comparison
+    for scenario in dict.fromkeys(table["scenario"]):
+        sc = get_scenario(scenario)
+        truth = sc.with_(duration=duration or sc.duration).generate(0)[1]     # seed 0's S(t)
+        plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
+                        out / f"E_{scenario}.png",
+                        f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
+    atomic_write_text(out / "summary.md", text)
+    atomic_write(out / "runs.csv", lambda tmp: table.to_csv(tmp, index=False))
 
 
 class _Parser(argparse.ArgumentParser):
@@ -278,7 +286,9 @@ def main(argv=None):
     try:
         # numpy's RuntimeWarnings on degenerate input would break the one-line promise: the
         # commands report such input themselves (warnings, converged flags, refusals)
-        with np.errstate(all="ignore"), warnings.catch_warnings():
+        # without --overwrite, no output replaces a file, even one that appears while the command works
+        with exclusive(not getattr(args, "overwrite", False)), np.errstate(all="ignore"), \
+                warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             args.func(args)
     except (FmscalError, OSError) as err:      # the user's input or files; any other error is a bug

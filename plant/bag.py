@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FmscalError
+from .files import not_a_file
 from .log import Log, LogError
 
 __all__ = ["BagError", "import_bag", "read_bag", "format_report",
@@ -218,8 +219,11 @@ def _open_reader(path):
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
         raise BagError("reading ROS bags needs rosbags: pip install 'fmscal[ros]'") from None
-    if not path.exists():
+    problem = not_a_file(path, folder_ok=True)
+    if problem == "no such file":
         raise BagError(f"{path}: no such file or folder")
+    if problem is not None:
+        raise BagError(f"{path}: is {problem}, not a ROS bag")
     kind = "folder" if path.is_dir() else path.suffix
     if kind not in ("folder", ".bag", ".mcap", ".db3"):
         raise BagError(f"{path.name}: not a ROS bag; expected a ROS 2 bag folder, a .mcap or .db3 file, "
