@@ -8,6 +8,7 @@ exception is a bug in the toolkit and shows its traceback.
 import argparse
 import contextlib
 import json
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -26,6 +27,18 @@ __all__ = ["main", "build_parser", "MAX_LAM"]
 
 #: Longest error message printed, characters (a message echoing a huge input is cut).
 MAX_MESSAGE = 400
+#: Most characters of one echoed word (a file name, a value the user gave) an error message prints.
+MAX_ECHO = 80
+
+
+def one_line(message):
+    """``message`` fit for one line of stderr: control characters escaped, each echoed word (a run
+    without spaces, as a path or a value is) cut to :data:`MAX_ECHO` characters, the whole to
+    :data:`MAX_MESSAGE`."""
+    if not message.isprintable():
+        message = message.encode("unicode_escape").decode("ascii")
+    message = re.sub(r"\S{%d,}" % (MAX_ECHO + 1), lambda m: m.group()[:MAX_ECHO] + "...", message)
+    return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
 #: Largest high-gain parameter check-gains accepts, rad/s (a million times the default's 20).
 MAX_LAM = 1e7
 
@@ -86,6 +99,9 @@ def cmd_simulate(args):
                                      positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
                                      tuple(args.rho) if args.rho is not None else p.rho)
     sc = sc.with_(**changes)
+    if not sc.latency < sc.duration / 2:
+        raise CliError(f"--latency must be less than half the run ({sc.duration / 2:g} s): the poses are shifted "
+                       f"by it; got {sc.latency:g} s")
     out = Path(args.out)
     if out.suffix != ".csv":
         raise CliError(f"--out must end in .csv; got {out}")
@@ -167,7 +183,7 @@ def cmd_reproduce(args):
 def _add_ablation(sub):
     p = sub.add_parser("ablation", help="the adaptive observer's changes from the paper, added one at a time",
                        description="From the paper's observer as printed, each documented change of the adaptive "
-                                   "default added in turn: median E over seeds (E the median over the last 10 %% "
+                                   "default added in turn: median E over seeds (E the median over the last 10 % "
                                    "of each run) against the maximum-likelihood floor on the same logs, and the "
                                    "cost per step.")
     p.add_argument("--scenario", nargs="+", default=["paper", "noisy"], metavar="NAME")
@@ -183,6 +199,7 @@ def cmd_ablation(args):
     from .ablation import QUICK_SETTINGS, ablation, ablation_markdown
     for name in args.scenario:
         get_scenario(name)                      # FmscalError naming the choices
+    check_seeds(seeds=args.seeds)               # --quick or not: a bad --seeds is not ignored
     seeds, duration = (QUICK_SETTINGS["seeds"], QUICK_SETTINGS["duration"]) if args.quick else \
         (args.seeds, positive(args.duration, "--duration"))
     check_seeds(seeds=seeds)
@@ -258,7 +275,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse, with usage errors on one line (exit 2) instead of usage plus error."""
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
 
 
 def build_parser():
@@ -293,11 +310,7 @@ def main(argv=None):
             args.func(args)
     except (FmscalError, OSError) as err:      # the user's input or files; any other error is a bug
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
-        if not message.isprintable():
-            message = message.encode("unicode_escape").decode("ascii")
-        if len(message) > MAX_MESSAGE:
-            message = message[:MAX_MESSAGE] + "..."
-        print(f"fmscal {args.command}: error: {message}", file=sys.stderr)
+        print(f"fmscal {args.command}: error: {one_line(message)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("fmscal: interrupted", file=sys.stderr)

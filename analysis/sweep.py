@@ -169,7 +169,14 @@ def _probe(address, timeout):
     if not host or port is None:
         raise FmscalError(f"a scheduler address reads tcp://HOST:PORT; got {address!r}")
     try:
-        with socket.create_connection((host, port), timeout=timeout) as sock:
+        sock = socket.create_connection((host, port), timeout=timeout)
+    except socket.timeout:
+        raise FmscalError(f"no answer from {address} within {timeout:g} s (nothing accepted the connection: "
+                          "is the address right, and is the scheduler running?)") from None
+    except OSError as err:
+        raise FmscalError(f"cannot reach the Dask scheduler at {address} ({err.strerror or err})") from None
+    try:
+        with sock:
             sock.settimeout(timeout)
             first = sock.recv(1)
     except socket.timeout:

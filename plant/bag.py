@@ -298,6 +298,11 @@ def _read_messages(path, wrench_topic, pose_topic):
             [(s, pose_values(m)) for s, m in out[pose_topic]])
 
 
+#: A stamp earlier than the one recorded before it by more than this many of the stream's steps is a
+#: clock that jumped back (a few steps: messages reordered in transport, sorted by stamp).
+_MAX_BACK_STEPS = 10
+
+
 def _stream(messages, role, name):
     """Stamps (int ns, sorted, duplicates dropped) and values of one stream, with counts."""
     if len(messages) < 2:
@@ -307,6 +312,18 @@ def _stream(messages, role, name):
     if np.all(stamps == stamps[0]):
         raise BagError(f"{name}: every {role} message has the header stamp {stamps[0]} ns; "
                        "the publisher did not stamp its messages")
+    zero = np.flatnonzero(stamps == 0)
+    if len(zero):
+        raise BagError(f"{name}: {len(zero)} {role} message(s) have the header stamp 0 (unstamped), the first "
+                       f"message {zero[0] + 1} as recorded; the publisher did not stamp them")
+    steps = np.diff(stamps)
+    nominal = np.median(steps[steps > 0]) if np.any(steps > 0) else 0
+    back = np.flatnonzero(steps < -_MAX_BACK_STEPS * nominal)
+    if len(back):
+        k = int(back[0])
+        raise BagError(f"{name}: the {role} clock jumps back by {-steps[k] / 1e9:.6g} s at message {k + 2} "
+                       f"as recorded ({_utc(int(stamps[k]))} then {_utc(int(stamps[k + 1]))}); a restarted clock or "
+                       "publisher; split the bag there and import each part")
     order = np.argsort(stamps, kind="stable")
     stamps, values = stamps[order], values[order]
     unique = np.concatenate([[True], np.diff(stamps) > 0])

@@ -5,7 +5,7 @@ Format (a public one: a user records it on a real rig)::
     t,theta,x,y,M,fx,fy
 
 in SI units (s, rad, m, N m, N). ``theta, x, y`` is the measured pose in the
-inertial frame, ``theta`` continuous (one wrapped into (-pi, pi] is unwrapped,
+inertial frame, ``theta`` continuous (one wrapped into (-pi, pi] or [0, 2 pi) is unwrapped,
 with a note in :attr:`Log.notes`); ``M, fx, fy`` is the raw
 sensor reading ``w_hat`` in the body frame at the sensor interface. Empty
 ``theta,x,y`` cells on a row mean no pose measurement at that sample; every
@@ -68,7 +68,7 @@ class Log:
         True where the pose was measured.
     notes : list of str
         What was done to the data on reading it: a ``theta`` wrapped into
-        (-pi, pi] (as vision systems and quaternion-to-yaw conversions give
+        (-pi, pi] or [0, 2 pi) (as vision systems and quaternion-to-yaw conversions give
         it) is unwrapped, and said so here.
 
     Raises
@@ -127,16 +127,22 @@ class Log:
         self._unwrap_theta()
 
     def _unwrap_theta(self):
-        """Unwrap a ``theta`` wrapped into (-pi, pi] (its ~2 pi jumps between poses), with a note."""
+        """Unwrap a ``theta`` wrapped into (-pi, pi] or [0, 2 pi) (its ~2 pi jumps between poses), with a note."""
         rows = np.flatnonzero(self.has_pose)
         theta = self.pose[rows, 0]
         jumps = np.abs(np.diff(theta)) > np.pi
-        if not jumps.any() or np.max(np.abs(theta)) > np.pi + 1e-6:
+        if not jumps.any():
+            return
+        if np.max(np.abs(theta)) <= np.pi + 1e-6:
+            interval = "(-pi, pi]"
+        elif np.min(theta) >= -1e-6 and np.max(theta) <= 2 * np.pi + 1e-6:
+            interval = "[0, 2 pi)"
+        else:
             return
         self.pose = self.pose.copy()
         self.pose[rows, 0] = np.unwrap(theta)
         first = self.t[rows[1:][jumps][0]]
-        self.notes.append(f"{self.name}: theta is wrapped into (-pi, pi] ({int(jumps.sum())} jump(s) of about "
+        self.notes.append(f"{self.name}: theta is wrapped into {interval} ({int(jumps.sum())} jump(s) of about "
                           f"2 pi between poses, the first at t = {first:g} s); unwrapped it")
 
     def __len__(self):
