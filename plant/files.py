@@ -85,7 +85,7 @@ def not_a_file(path, folder_ok=False):
             return "a link to a missing file"
         if err.errno in (errno.ENOENT, errno.ENOTDIR):
             return "no such file"
-        return err.strerror or str(err)
+        return f"unreadable ({err.strerror or err})"
     if stat.S_ISDIR(st.st_mode):
         return None if folder_ok else "a folder"
     return _kind(st.st_mode)

@@ -321,3 +321,127 @@ def test_reset_and_step_raise_the_toolkits_errors(name):
     with pytest.raises(FmscalError, match="w_hat must be 3 finite numbers"):
         obs.step(0.001, [0.0, 0.0, 0.0], "123")
     obs.step(np.float32(0.001), [0.0, 0.0, 0.0], [1.0, 2.0, 3.0])     # a numpy number is a number
+
+
+# --- item 7: smaller ------------------------------------------------------------------------------------------
+
+def _write(path, log, pose=None, w_hat=None, t=None):
+    """A log CSV written as given (no unwrapping on the way), with numpy."""
+    data = np.column_stack([log.t if t is None else t, log.pose if pose is None else pose,
+                            log.w_hat if w_hat is None else w_hat])
+    np.savetxt(path, data, delimiter=",", fmt="%.17g", header=",".join(plant.COLUMNS), comments="")
+
+
+@pytest.fixture
+def logs(folder):
+    """Misleading logs: a still pose, theta in [0, 2 pi), readings x 1e-8, x and y in mm, t in ms."""
+    log = plant.read_log(folder / "log.csv")
+    still = np.tile(log.pose[0], (len(log), 1))
+    _write(folder / "still.csv", log, pose=still)
+    pose = log.pose.copy()
+    pose[:, 0] = np.mod(pose[:, 0] - 1.0, 2 * np.pi)           # crosses 0: wrapped into [0, 2 pi)
+    _write(folder / "twopi.csv", log, pose=pose)
+    pose = log.pose.copy()
+    pose[:, 0] -= 1.0
+    _write(folder / "minus1.csv", log, pose=pose)               # the same angle, continuous
+    _write(folder / "tiny.csv", log, w_hat=log.w_hat * 1e-8)
+    pose = log.pose.copy()
+    pose[:, 1:] *= 1000
+    _write(folder / "mm.csv", log, pose=pose)
+    _write(folder / "ms.csv", log, t=log.t * 1000)
+    return folder
+
+
+CASES_7 = [
+    (["simulate", "--latency", "100", "--duration", "5", "--out", "{d}/q.csv"], "--latency must be less than half"),
+    (["simulate", "--latency", "2.5", "--duration", "5", "--out", "{d}/q.csv"], "--latency must be less than half"),
+    (["ablation", "--seeds", "0", "--duration", "1"], "--seeds must be at least 1"),
+    (["ablation", "--quick", "--seeds", "0"], "--seeds must be at least 1"),
+    (["calibrate", "{d}/still.csv", *PAYLOAD], "the pose does not move"),
+    (["calibrate", "{d}/still.csv", *PAYLOAD, "--observer", "least-squares"], "the pose does not move"),
+    (["calibrate", "{d}/ms.csv", *PAYLOAD], "is t in milliseconds?"),
+    (["calibrate", "{d}/" + "x" * 300 + ".csv", *PAYLOAD], "(File name too long)"),
+    (["compare", "--scenario", "y" * 300], "unknown scenario"),
+    (["calibrate", "{d}/log.csv", "--mass", "z" * 300, "--inertia", "1", "--rho", "0", "0"], "invalid float value"),
+]
+
+
+@pytest.mark.parametrize("argv, words", CASES_7, ids=[" ".join(a[:1] + a[-2:])[:40] for a, _ in CASES_7])
+def test_smaller_cases_give_one_right_line(argv, words, logs, capsys):
+    argv = [a.format(d=logs) for a in argv]
+    before = _snapshot(logs)
+    assert main(argv) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0], lines
+    assert "S is singular" not in lines[0] and "too short" not in lines[0]
+    assert max((len(w) for w in lines[0].split()), default=0) <= 83 + len("'")         # 80 echoed, "...", a quote
+    assert _snapshot(logs) == before
+
+
+def test_apply_refuses_a_wrench_that_is_not_finite(folder, capsys):
+    import json
+    cal = json.loads((folder / "cal.json").read_text())
+    (folder / "huge.json").write_text(json.dumps({**cal, "S": [[2, 0, 0], [0, 2, 0], [0, 0, 2]], "b": [1e308] * 3}))
+    assert main(["apply", str(folder / "huge.json"), str(folder / "log.csv"), "--out", str(folder / "w.csv")]) == 2
+    assert "not finite" in capsys.readouterr().err
+    assert not (folder / "w.csv").exists()
+    assert main(["apply", str(folder / "cal.json"), str(folder / "log.csv"), "--out", str(folder / "w.csv")]) == 0
+
+
+def test_theta_in_zero_to_two_pi_is_unwrapped_not_taken_for_degrees(logs, capsys):
+    wrapped = plant.read_log(logs / "twopi.csv")
+    assert wrapped.notes and "[0, 2 pi)" in wrapped.notes[0]
+    np.testing.assert_allclose(wrapped.pose[:, 0], plant.read_log(logs / "minus1.csv").pose[:, 0] + 2 * np.pi,
+                               atol=1e-9)
+    assert main(["calibrate", str(logs / "twopi.csv"), *PAYLOAD, "--latency", "0"]) == 0
+    assert "degrees" not in capsys.readouterr().err
+
+
+def test_readings_far_from_si_are_not_taken_for_millimetres(logs):
+    from fmscal.plant.units import COUNTS, diagnose_units
+    payload = plant.read_truth(logs / "log.truth.json").payload
+    tiny = diagnose_units(plant.read_log(logs / "tiny.csv"), payload)
+    assert [f.kind for f in tiny] == [COUNTS] and "millimetres" not in tiny[0].message
+    assert 0.5e8 < float(tiny[0].message.split("near ")[1].split()[0]) < 2e8         # S's entries near 1e8
+    mm = diagnose_units(plant.read_log(logs / "mm.csv"), payload)
+    assert [f.kind for f in mm] == ["millimetres"]
+    assert diagnose_units(plant.read_log(logs / "log.csv"), payload) == []
+
+
+def test_an_unroutable_scheduler_is_not_said_to_accept_connections(monkeypatch):
+    import socket
+    from fmscal.analysis.sweep import _probe
+
+    def unroutable(address, timeout):
+        raise socket.timeout("timed out")
+    monkeypatch.setattr(socket, "create_connection", unroutable)
+    with pytest.raises(FmscalError, match="nothing accepted the connection") as err:
+        _probe("tcp://10.255.255.1:8786", 1.0)
+    assert "accepts connections" not in str(err.value)
+
+
+def test_ablation_help_prints_no_doubled_percent(capsys):
+    assert main(["ablation", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert "%%" not in out and "10 %" in " ".join(out.split())
+
+
+_BASE_NS = 1_700_000_000_000_000_000
+
+
+def _wrench_messages(n=200, step_ns=1_000_000):
+    return [(_BASE_NS + k * step_ns, (1.0, 2.0, 3.0, 0.0, 0.0, 0.0)) for k in range(n)]
+
+
+def test_import_refuses_a_clock_jumping_back_and_zero_stamps():
+    from fmscal.plant.bag import BagError, _stream
+    messages = _wrench_messages()
+    assert _stream(messages, "wrench", "b.mcap")[3]["duplicate_stamps"] == 0
+    jumped = messages[:120] + [(s - 5_000_000_000, v) for s, v in messages[120:]]
+    with pytest.raises(BagError, match=r"the wrench clock jumps back by 4\.99\d* s at message 121 as recorded"):
+        _stream(jumped, "wrench", "b.mcap")
+    unstamped = [(0, v) for _, v in messages[:5]] + messages[5:]
+    with pytest.raises(BagError, match=r"5 pose message\(s\) have the header stamp 0 \(unstamped\), the first message 1"):
+        _stream(unstamped, "pose", "b.mcap")
+    swapped = messages[:50] + [messages[51], messages[50]] + messages[52:]      # reordered in transport: sorted
+    assert _stream(swapped, "wrench", "b.mcap")[3]["out_of_order"] == 1
