@@ -33,11 +33,12 @@ MAX_ECHO = 80
 
 def one_line(message):
     """``message`` fit for one line of stderr: control characters escaped, each echoed word (a run
-    without spaces, as a path or a value is) cut to :data:`MAX_ECHO` characters, the whole to
-    :data:`MAX_MESSAGE`."""
+    without spaces, as a path or a value is) cut to its first and last :data:`MAX_ECHO` / 2
+    characters, the whole to :data:`MAX_MESSAGE`."""
     if not message.isprintable():
         message = message.encode("unicode_escape").decode("ascii")
-    message = re.sub(r"\S{%d,}" % (MAX_ECHO + 1), lambda m: m.group()[:MAX_ECHO] + "...", message)
+    half = MAX_ECHO // 2                 # a path keeps its start and its end, where the file's name is
+    message = re.sub(r"\S{%d,}" % (MAX_ECHO + 1), lambda m: m.group()[:half] + "..." + m.group()[-half:], message)
     return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
 #: Largest high-gain parameter check-gains accepts, rad/s (a million times the default's 20).
 MAX_LAM = 1e7

@@ -127,7 +127,7 @@ class Method:
                   if k not in ("self", "payload") and v.kind == v.POSITIONAL_OR_KEYWORD}
         for key, value in settings.items():
             if key not in params:
-                raise FmscalError(f"{self.name} has no setting {key!r}; its settings: {', '.join(params)}")
+                raise FmscalError(f"{self.name}: no setting {key!r}; its settings: {', '.join(params)}")
             default = params[key]
             if isinstance(default, bool):
                 as_bool(value, f"{self.name} setting {key}")

@@ -120,20 +120,17 @@ def _place(tmp, path):
         os.replace(tmp, path)
         return
     try:
-        os.link(tmp, path)                    # fails if the name exists, whatever made it meanwhile
+        try:
+            os.link(tmp, path)                # fails if the name exists, whatever made it meanwhile
+        except OSError as err:                # no hard links here (some network or FAT file systems)
+            if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+                raise
+            os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY))     # claim the name, then fill it
+            os.replace(tmp, path)
+            return
     except FileExistsError:
         raise OutputExistsError(f"{path} appeared while this run worked; not replaced (add --overwrite to "
                                 "replace it)") from None
-    except OSError as err:                    # no hard links here (some network or FAT file systems)
-        if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
-            raise
-        try:
-            os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY))     # claim the name, then fill it
-        except FileExistsError:
-            raise OutputExistsError(f"{path} appeared while this run worked; not replaced (add --overwrite to "
-                                    "replace it)") from None
-        os.replace(tmp, path)
-        return
     os.unlink(tmp)
 
 
@@ -177,7 +174,7 @@ def atomic_write_many(writers):
                 os.fsync(f.fileno())
         for (path, _), tmp in zip(writers, temps):
             path = Path(path)
-            if path.is_file():                # the old content, until every file is in place
+            if path.is_file() and not _EXCLUSIVE.get():     # the old content, until every file is in place
                 backup = _temporary(path)
                 backup.unlink()
                 os.link(path, backup)

@@ -189,6 +189,21 @@ def test_an_output_that_appears_meanwhile_is_not_replaced(tmp_path):
     assert target.read_text() == "replaced\n"
 
 
+def test_without_hard_links_the_name_is_still_claimed_exclusively(tmp_path, monkeypatch):
+    import errno
+    from fmscal.plant.files import OutputExistsError, atomic_write_text, exclusive
+
+    def no_links(src, dst):
+        raise OSError(errno.EPERM, "Operation not permitted")
+    monkeypatch.setattr(os, "link", no_links)
+    with exclusive():
+        atomic_write_text(tmp_path / "a.txt", "first\n")
+        with pytest.raises(OutputExistsError):
+            atomic_write_text(tmp_path / "a.txt", "second\n")
+    assert (tmp_path / "a.txt").read_text() == "first\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
+
+
 def test_a_folder_is_claimed_by_one_run(tmp_path):
     from fmscal.plant.files import LOCK_NAME, claim_folder
     out = tmp_path / "new" / "d"
@@ -286,7 +301,7 @@ def test_two_compares_into_one_folder_at_once_one_succeeds(folder):
     ("high-gain", {"lam": "20"}, "lam must be a number; got '20'"),
     ("high-gain", {"gamma": True}, "gamma must be a number"),
     ("adaptive", {"gain": 1}, "gain must be text"),
-    ("ekf", {"adapt": True}, "ekf has no setting 'adapt'"),
+    ("ekf", {"adapt": True}, "ekf: no setting 'adapt'"),
 ])
 def test_settings_are_checked_for_type(name, settings, words):
     from fmscal.observers import make_observer
@@ -374,7 +389,7 @@ def test_smaller_cases_give_one_right_line(argv, words, logs, capsys):
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and words in lines[0], lines
     assert "S is singular" not in lines[0] and "too short" not in lines[0]
-    assert max((len(w) for w in lines[0].split()), default=0) <= 83 + len("'")         # 80 echoed, "...", a quote
+    assert max((len(w) for w in lines[0].split()), default=0) <= 80 + len("...")        # 80 echoed, "..."
     assert _snapshot(logs) == before
 
 
