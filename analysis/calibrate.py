@@ -194,7 +194,8 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
                                   b=result.b, b_std=result.b_std, latency=float(latency))
     except SingularCalibrationError as err:
         raise FmscalError(f"the {method} estimate of S is singular ({str(err).split('(')[-1].split(')')[0]}): the "
-                          "log does not excite every entry of S, or holds an outlier (a reading far from the rest)") from None
+                          "log does not excite every entry of S, or holds an outlier (a reading far from the "
+                          "rest)") from None
     E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
     converged = (bool(result.converged) and not units and not ls_result.warnings and consistent
                  and not disagreement)

@@ -18,7 +18,8 @@ from fmscal.plant.errors import FmscalError
 
 from .comparison import floor_error, run_observer, seed_list, simulate_case
 
-__all__ = ["sweep", "run_local", "worker_count", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS",
+__all__ = ["sweep", "run_local", "worker_count", "expand_settings", "settings_label", "TIMING_COLUMNS",
+           "SWEEP_OBSERVERS",
            "DEFAULT_SCHEDULER_TIMEOUT"]
 
 #: Columns that depend on the machine and the moment, not on the data.

@@ -209,8 +209,8 @@ class Observer:
         self._require_online("reset")
         self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
         if np.max(np.abs(self._S0)) > MAX_S0:
-            raise FmscalError(f"S0 entries must be at most {MAX_S0:g} in magnitude (N and N m per unit of the "
-                              f"reading; beyond it the observers' products overflow); got {np.max(np.abs(self._S0)):.3g}")
+            raise FmscalError(f"S0 entries must be at most {MAX_S0:g} in magnitude (N and N m per unit of the reading; "
+                              f"beyond it the observers' products overflow); got {np.max(np.abs(self._S0)):.3g}")
         self._bound = divergence_bound(self._S0)
         self._grace = 0
         self._u_prev = None

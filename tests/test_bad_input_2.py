@@ -456,7 +456,28 @@ def test_import_refuses_a_clock_jumping_back_and_zero_stamps():
     with pytest.raises(BagError, match=r"the wrench clock jumps back by 4\.99\d* s at message 121 as recorded"):
         _stream(jumped, "wrench", "b.mcap")
     unstamped = [(0, v) for _, v in messages[:5]] + messages[5:]
-    with pytest.raises(BagError, match=r"5 pose message\(s\) have the header stamp 0 \(unstamped\), the first message 1"):
+    with pytest.raises(BagError, match=r"5 pose message\(s\) have the header stamp 0 \(unstamped\), "
+                                       r"the first message 1 "):
         _stream(unstamped, "pose", "b.mcap")
     swapped = messages[:50] + [messages[51], messages[50]] + messages[52:]      # reordered in transport: sorted
     assert _stream(swapped, "wrench", "b.mcap")[3]["out_of_order"] == 1
+
+
+def test_a_singular_estimate_is_named_for_its_cause_not_as_a_bad_matrix(folder, monkeypatch):
+    """An estimate with a zero row (a spike that swamps the fit): not 'S is singular' as if the user gave S."""
+    from dataclasses import replace
+    from fmscal.analysis.calibrate import calibrate
+    from fmscal.observers import LeastSquares
+    real = LeastSquares.run
+
+    def zero_row(self, log, S0=None):
+        result = real(self, log, S0)
+        S = result.S_hat.copy()
+        S[1] = 0.0
+        return replace(result, S_hat=S)
+    monkeypatch.setattr(LeastSquares, "run", zero_row)
+    log = plant.read_log(folder / "log.csv")
+    with pytest.raises(FmscalError, match=r"the least-squares estimate of S is singular \(condition number inf\): "
+                                          r"the log does not excite every entry of S, or holds an outlier") as err:
+        calibrate(log, plant.read_truth(folder / "log.truth.json").payload, "least-squares", latency=0.0)
+    assert not isinstance(err.value, plant.SingularCalibrationError)
