@@ -8,7 +8,7 @@ from fmscal.observers import FLOOR_METHOD, LeastSquares, ObserverResult, get_met
 from fmscal.observers.faults import offset_drift, saturation
 from fmscal.observers.health import consistency_check
 from fmscal.observers.latency import estimate_latency
-from fmscal.plant import Calibration, NoiseSpec, estimate_noise
+from fmscal.plant import Calibration, NoiseSpec, SingularCalibrationError, estimate_noise
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.units import COUNTS, diagnose_units
 
@@ -159,6 +159,10 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
                       pose_noise[0] if pose_noise is not None else estimated.angle_sd,
                       pose_noise[1] if pose_noise is not None else estimated.position_sd)
     noise_estimated = [name for name, given in (("wrench", wrench_noise), ("pose", pose_noise)) if given is None]
+    spread = np.ptp(log.pose[log.has_pose], axis=0)
+    if np.all(spread <= 10 * np.array([noise.angle_sd, noise.position_sd, noise.position_sd])):
+        raise FmscalError(f"{log.name}: the pose does not move (theta, x and y each stay within 10 noise standard "
+                          "deviations): a payload at rest does not excite S; record it moving")
     latency_estimated = latency is None
     if latency_estimated:
         latency, _ = estimate_latency(log, payload, max_latency, offset=offset)
@@ -193,8 +197,13 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     disagreement = _disagreement(result, ls_result)
     if disagreement:
         warnings.append(disagreement)
-    calibration = Calibration(S=result.S_hat, payload=payload, method=result.observer, S_std=result.S_std,
-                              b=result.b, b_std=result.b_std, latency=float(latency))
+    try:
+        calibration = Calibration(S=result.S_hat, payload=payload, method=result.observer, S_std=result.S_std,
+                                  b=result.b, b_std=result.b_std, latency=float(latency))
+    except SingularCalibrationError as err:
+        raise FmscalError(f"the {method} estimate of S is singular ({str(err).split('(')[-1].split(')')[0]}): the "
+                          "log does not excite every entry of S, or holds an outlier (a reading far from the "
+                          "rest)") from None
     E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
     converged = (bool(result.converged) and not units and not ls_result.warnings and consistent
                  and not faults and not disagreement)

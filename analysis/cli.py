@@ -6,7 +6,9 @@ exception is a bug in the toolkit and shows its traceback.
 """
 
 import argparse
+import contextlib
 import json
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -17,13 +19,27 @@ from .cli_calibration import add_apply, add_calibrate
 from .cli_import import add_import
 from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
                          strict)
-from .files import atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs
+from .files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs, claim_folder,
+                    exclusive)
 from .cli_scale import add_bench, add_sweep
 
 __all__ = ["main", "build_parser", "MAX_LAM"]
 
 #: Longest error message printed, characters (a message echoing a huge input is cut).
 MAX_MESSAGE = 400
+#: Most characters of one echoed word (a file name, a value the user gave) an error message prints.
+MAX_ECHO = 80
+
+
+def one_line(message):
+    """``message`` fit for one line of stderr: control characters escaped, each echoed word (a run
+    without spaces, as a path or a value is) cut to its first and last :data:`MAX_ECHO` / 2
+    characters, the whole to :data:`MAX_MESSAGE`."""
+    if not message.isprintable():
+        message = message.encode("unicode_escape").decode("ascii")
+    half = MAX_ECHO // 2                 # a path keeps its start and its end, where the file's name is
+    message = re.sub(r"\S{%d,}" % (MAX_ECHO + 1), lambda m: m.group()[:half] + "..." + m.group()[-half:], message)
+    return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
 #: Largest high-gain parameter check-gains accepts, rad/s (a million times the default's 20).
 MAX_LAM = 1e7
 
@@ -84,6 +100,9 @@ def cmd_simulate(args):
                                      positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
                                      tuple(args.rho) if args.rho is not None else p.rho)
     sc = sc.with_(**changes)
+    if not sc.latency < sc.duration / 2:
+        raise CliError(f"--latency must be less than half the run ({sc.duration / 2:g} s): the poses are shifted "
+                       f"by it; got {sc.latency:g} s")
     out = Path(args.out)
     if out.suffix != ".csv":
         raise CliError(f"--out must end in .csv; got {out}")
@@ -157,14 +176,15 @@ def cmd_reproduce(args):
     check_seeds(seed=args.seed)
     check_jobs(args.jobs)
     check_output_dir(args.out, output_names(), overwrite=args.overwrite)
-    reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
+    with claim_folder(args.out):                # one run's alone: a second one at once is refused
+        reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
     print((Path(args.out) / "summary.md").read_text())
 
 
 def _add_ablation(sub):
     p = sub.add_parser("ablation", help="the adaptive observer's changes from the paper, added one at a time",
                        description="From the paper's observer as printed, each documented change of the adaptive "
-                                   "default added in turn: median E over seeds (E the median over the last 10 %% "
+                                   "default added in turn: median E over seeds (E the median over the last 10 % "
                                    "of each run) against the maximum-likelihood floor on the same logs, and the "
                                    "cost per step.")
     p.add_argument("--scenario", nargs="+", default=["paper", "noisy"], metavar="NAME")
@@ -180,6 +200,7 @@ def cmd_ablation(args):
     from .ablation import QUICK_SETTINGS, ablation, ablation_markdown
     for name in args.scenario:
         get_scenario(name)                      # FmscalError naming the choices
+    check_seeds(seeds=args.seeds)               # --quick or not: a bad --seeds is not ignored
     seeds, duration = (QUICK_SETTINGS["seeds"], QUICK_SETTINGS["duration"]) if args.quick else \
         (args.seeds, positive(args.duration, "--duration"))
     check_seeds(seeds=seeds)
@@ -211,7 +232,6 @@ def cmd_compare(args):
     from fmscal.observers import get_method
     from fmscal.plant import get_scenario
     from .comparison import compare, summarise, summary_markdown
-    from .plots import plot_comparison
     for name in args.scenario:
         get_scenario(name)                      # FmscalError naming the choices
     for name in args.observer:
@@ -224,33 +244,39 @@ def cmd_compare(args):
         scenarios = dict.fromkeys(get_scenario(name).name for name in args.scenario)
         check_output_dir(args.out, [f"E_{sc}.png" for sc in scenarios] + ["summary.md", "runs.csv"],
                          overwrite=args.overwrite)
-    table, curves = compare(args.scenario, args.seeds, args.observer, args.duration,
-                            progress=not args.json, histories=True)
-    summary = summarise(table)
-    text = summary_markdown(summary, f"Observer comparison ({args.seeds} seed(s), "
-                                     f"{'each scenario' if args.duration is None else f'{args.duration:g} s'})")
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        for scenario in dict.fromkeys(table["scenario"]):
-            sc = get_scenario(scenario)
-            truth = sc.with_(duration=args.duration or sc.duration).generate(0)[1]     # seed 0's S(t)
-            plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
-                            out / f"E_{scenario}.png",
-                            f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
-        atomic_write_text(out / "summary.md", text)
-        atomic_write(out / "runs.csv", lambda tmp: table.to_csv(tmp, index=False))
+    with claim_folder(args.out) if args.out else contextlib.nullcontext():
+        table, curves = compare(args.scenario, args.seeds, args.observer, args.duration,
+                                progress=not args.json, histories=True)
+        summary = summarise(table)
+        text = summary_markdown(summary, f"Observer comparison ({args.seeds} seed(s), "
+                                         f"{'each scenario' if args.duration is None else f'{args.duration:g} s'})")
+        if args.out:
+            _write_comparison(Path(args.out), args.duration, table, curves, text)
     if args.json:
         print(json.dumps(strict(table.to_dict(orient="records")), indent=1, allow_nan=False))
     else:
         print(text)
 
 
+def _write_comparison(out, duration, table, curves, text):
+    """compare --out: a figure per scenario, summary.md and runs.csv in ``out``."""
+    from fmscal.plant import get_scenario
+    from .plots import plot_comparison
+    for scenario in dict.fromkeys(table["scenario"]):
+        sc = get_scenario(scenario)
+        truth = sc.with_(duration=duration or sc.duration).generate(0)[1]     # seed 0's S(t)
+        plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
+                        out / f"E_{scenario}.png",
+                        f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
+    atomic_write_text(out / "summary.md", text)
+    atomic_write(out / "runs.csv", lambda tmp: table.to_csv(tmp, index=False))
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse, with usage errors on one line (exit 2) instead of usage plus error."""
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
 
 
 def build_parser():
@@ -285,16 +311,14 @@ def main(argv=None):
     try:
         # numpy's RuntimeWarnings on degenerate input would break the one-line promise: the
         # commands report such input themselves (warnings, converged flags, refusals)
-        with np.errstate(all="ignore"), warnings.catch_warnings():
+        # without --overwrite, no output replaces a file, even one that appears while the command works
+        with exclusive(not getattr(args, "overwrite", False)), np.errstate(all="ignore"), \
+                warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             args.func(args)
     except (FmscalError, OSError) as err:      # the user's input or files; any other error is a bug
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
-        if not message.isprintable():
-            message = message.encode("unicode_escape").decode("ascii")
-        if len(message) > MAX_MESSAGE:
-            message = message[:MAX_MESSAGE] + "..."
-        print(f"fmscal {args.command}: error: {message}", file=sys.stderr)
+        print(f"fmscal {args.command}: error: {one_line(message)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("fmscal: interrupted", file=sys.stderr)

@@ -172,6 +172,10 @@ def cmd_apply(args):
               file=sys.stderr)
     t, w_hat = read_readings(args.readings)
     w = calibration.apply(w_hat)
+    bad = ~np.isfinite(w).all(axis=1)
+    if bad.any():
+        raise CliError(f"the calibration gives a wrench that is not finite (overflow) at row {np.argmax(bad) + 1} of "
+                       f"{Path(args.readings).name}; its S or b is far outside any sensor's range: nothing written")
     lines = ["t,M,fx,fy"] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
     atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "

@@ -69,6 +69,6 @@ def add_jobs(p):
 
 
 def check_jobs(jobs):
-    """Refuse ``--jobs 0`` (joblib: a positive count, or -1 for every core, -2 all but one, ...)."""
-    if jobs == 0:
-        raise CliError("--jobs must be a positive number of processes or -1 (every core); got 0")
+    """Refuse a ``--jobs`` that is neither a positive count nor -1 (every core)."""
+    if jobs == 0 or jobs < -1:
+        raise CliError(f"--jobs must be a positive number of processes or -1 (every core); got {jobs}")

@@ -1,6 +1,7 @@
 """``fmscal import``: a ROS bag (ROS 1, or ROS 2 MCAP / sqlite3) into the log format."""
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -67,4 +68,4 @@ def _inside(f, folder):
     """True if ``f`` would be written inside the bag's folder."""
     if not folder.is_dir():
         return False
-    return folder.resolve() in f.resolve().parents
+    return Path(os.path.realpath(folder)) in Path(os.path.realpath(f)).parents

@@ -18,7 +18,8 @@ from fmscal.plant.errors import FmscalError
 
 from .comparison import floor_error, run_observer, seed_list, simulate_case
 
-__all__ = ["sweep", "run_local", "expand_settings", "settings_label", "TIMING_COLUMNS", "SWEEP_OBSERVERS",
+__all__ = ["sweep", "run_local", "worker_count", "expand_settings", "settings_label", "TIMING_COLUMNS",
+           "SWEEP_OBSERVERS",
            "DEFAULT_SCHEDULER_TIMEOUT"]
 
 #: Columns that depend on the machine and the moment, not on the data.
@@ -93,14 +94,44 @@ def _run_case(case):
     return index, rows
 
 
+def worker_count(n_jobs, n_items):
+    """How many worker processes serve ``n_items`` items: ``n_jobs``, at most one per item and per core.
+
+    Parameters
+    ----------
+    n_jobs : int
+        A positive count, or -1 for every core.
+    n_items : int
+
+    Returns
+    -------
+    int
+        At least 1.
+
+    Raises
+    ------
+    FmscalError
+        ``n_jobs`` neither a positive integer nor -1.
+    """
+    import numbers
+    import os
+    if not isinstance(n_jobs, numbers.Integral) or isinstance(n_jobs, bool) or not (n_jobs >= 1 or n_jobs == -1):
+        raise FmscalError(f"n_jobs must be a positive number of processes or -1 (every core); got {n_jobs!r}")
+    cores = os.cpu_count() or 1
+    return max(1, min(cores, n_items, cores if n_jobs == -1 else int(n_jobs)))
+
+
 def run_local(func, items, n_jobs, bar):
     """``func(item)`` for every item on local worker processes (joblib), yielded as each finishes.
 
     ``n_jobs=1`` runs them in this process, in order (simplest to debug);
-    ``-1`` on every core. ``bar`` (a tqdm bar) advances by one per item.
+    ``-1`` on every core; never more workers than items or cores
+    (:func:`worker_count`). ``bar`` (a tqdm bar) advances by one per item.
     ``func`` must be a module-level function, so that it pickles.
     """
     from joblib import Parallel, delayed
+    items = list(items)
+    n_jobs = worker_count(n_jobs, len(items))
     if n_jobs == 1:                     # no worker processes: simplest to debug
         for item in items:
             yield func(item)
@@ -139,7 +170,14 @@ def _probe(address, timeout):
     if not host or port is None:
         raise FmscalError(f"a scheduler address reads tcp://HOST:PORT; got {address!r}")
     try:
-        with socket.create_connection((host, port), timeout=timeout) as sock:
+        sock = socket.create_connection((host, port), timeout=timeout)
+    except socket.timeout:
+        raise FmscalError(f"no answer from {address} within {timeout:g} s (nothing accepted the connection: "
+                          "is the address right, and is the scheduler running?)") from None
+    except OSError as err:
+        raise FmscalError(f"cannot reach the Dask scheduler at {address} ({err.strerror or err})") from None
+    try:
+        with sock:
             sock.settimeout(timeout)
             first = sock.recv(1)
     except socket.timeout:

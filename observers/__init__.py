@@ -3,7 +3,7 @@
 :data:`METHODS` is the registry: every method by name, with how to build it.
 """
 
-from .base import Estimate, Observer, RecursiveObserver
+from .base import MAX_S0, Estimate, Observer, RecursiveObserver
 from .result import ObserverResult
 from .convergence import settled
 from .adaptive import AdaptiveObserver
@@ -18,4 +18,4 @@ from .registry import FLOOR_METHOD, METHODS, Method, get_method, make_observer, 
 __all__ = ["Observer", "RecursiveObserver", "Estimate", "ObserverResult", "settled",
            "AdaptiveObserver", "PaperAdaptiveObserver", "HighGainObserver", "AugmentedEKF", "LeastSquares", "MaximumLikelihood", "FLOOR_METHOD",
            "check_gains", "double_pole_gains", "METHODS", "Method", "get_method", "make_observer", "method_names",
-           "method_label"]
+           "method_label", "MAX_S0"]

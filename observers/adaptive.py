@@ -36,7 +36,7 @@ import numpy as np
 
 from fmscal.plant import S_from_phi, phi_1, phi_2, regressors
 from fmscal.plant._backend import ops
-from fmscal.plant._checks import as_positive_scalar
+from fmscal.plant._checks import as_bool, as_positive_scalar
 from fmscal.plant.errors import FmscalError
 
 from . import _matrix as mx
@@ -156,7 +156,7 @@ class AdaptiveObserver(RecursiveObserver):
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")
         self.gain = gain
         self.gamma = as_positive_scalar(gamma, "gamma")
-        self.track = bool(track)
+        self.track = as_bool(track, "track")
         self.window = as_positive_scalar(window, "window")
         self.threshold = as_positive_scalar(threshold, "threshold")
         self.step_ratio = as_positive_scalar(step_ratio, "step_ratio")

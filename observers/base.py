@@ -25,6 +25,7 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant import Log, Payload
+from fmscal.plant._checks import as_bool
 from fmscal.plant._compile import ChunkedSteps
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.sensor import check_calibration
@@ -35,7 +36,11 @@ from .result import ObserverResult, initial_calibration, offset_std, split_calib
 from .samples import check_sample, pack_input
 from .state import INPUT
 
-__all__ = ["Observer", "RecursiveObserver", "Estimate", "log_inputs"]
+__all__ = ["Observer", "RecursiveObserver", "Estimate", "log_inputs", "MAX_S0"]
+
+#: Largest magnitude of an entry of an initial estimate ``S0``: the readings' scale (log values up to
+#: 1e9, :data:`plant.log.MAX_MAGNITUDE`) times it stays far from overflow in every observer.
+MAX_S0 = 1e9
 
 _CHUNK = 1000          # steps per compiled call
 
@@ -122,7 +127,7 @@ class Observer:
         if not isinstance(payload, Payload):
             raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
         self.payload = payload
-        self.offset = bool(offset)
+        self.offset = as_bool(offset, "offset")
         self.n_cols = 4 if self.offset else 3
         self._S0 = np.eye(3)
         self._bound = divergence_bound(self._S0)
@@ -193,10 +198,19 @@ class Observer:
         Parameters
         ----------
         S0 : array_like, shape (3, 3), optional
-            A non-singular initial estimate of ``S``.
+            A non-singular initial estimate of ``S``, entries at most
+            :data:`MAX_S0` in magnitude.
+
+        Raises
+        ------
+        FmscalError
+            ``S0`` not a finite 3x3 matrix of numbers, or an entry beyond :data:`MAX_S0`.
         """
         self._require_online("reset")
         self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
+        if np.max(np.abs(self._S0)) > MAX_S0:
+            raise FmscalError(f"S0 entries must be at most {MAX_S0:g} in magnitude (N and N m per unit of the reading; "
+                              f"beyond it the observers' products overflow); got {np.max(np.abs(self._S0)):.3g}")
         self._bound = divergence_bound(self._S0)
         self._grace = 0
         self._u_prev = None

@@ -8,7 +8,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from fmscal.plant import NoiseSpec, rk4_step
 from fmscal.plant.noise import estimate_noise
-from fmscal.plant._checks import as_positive_scalar
+from fmscal.plant._checks import as_bool, as_positive_scalar
 from fmscal.plant._compile import BufferedCall, compile_function
 from fmscal.plant.errors import FmscalError
 
@@ -162,7 +162,7 @@ class AugmentedEKF(Observer):
         if noise is not None and not isinstance(noise, NoiseSpec):
             raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
         self.noise = noise
-        self.adapt_q = bool(adapt_q)
+        self.adapt_q = as_bool(adapt_q, "adapt_q")
         self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=True)
         self.S0_sd, self.v0_sd = as_positive_scalar(S0_sd, "S0_sd"), as_positive_scalar(v0_sd, "v0_sd")
         self.level = None
@@ -179,7 +179,7 @@ class AugmentedEKF(Observer):
         self._H = np.zeros((3, self.dim_x))
         self._H[0, 0] = self._H[1, 2] = self._H[2, 4] = 1.0
         self._jacobians, self._predict = self._compile()
-        self.eiv = EivCompensation(payload, self.n_cols) if eiv else None
+        self.eiv = EivCompensation(payload, self.n_cols) if as_bool(eiv, "eiv") else None
         self.reset()
 
     # --- the model, from the plant ------------------------------------------

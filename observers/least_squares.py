@@ -154,6 +154,10 @@ class LeastSquares(Observer):
         """
         Z = self._double_integrals(log)
         windows = self._windows(log)
+        if len(windows) < 2 and log.duration >= 2 * self.window:      # long enough: the poses too sparse
+            unit = f"; the time step is {log.dt:g} s: is t in milliseconds? t must be in s" if log.dt >= 0.1 else ""
+            raise FmscalError(f"{log.name}: too few pose measurements for least squares with {self.window:g} s "
+                              f"windows: need at least 2 windows of 3 pose measurements, got {len(windows)}{unit}")
         if len(windows) < 2:
             raise FmscalError(f"{log.name}: too short for least squares with {self.window:g} s windows: "
                              f"need at least 2 windows of 3 pose measurements, got {len(windows)}")

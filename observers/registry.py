@@ -6,9 +6,12 @@ noise model, whether it runs online, and what it is for. No other module
 keeps a list of method names.
 """
 
+import inspect
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from fmscal.plant import NoiseSpec
+from fmscal.plant._checks import as_bool, as_number
 from fmscal.plant.errors import FmscalError
 
 from .adaptive import AdaptiveObserver
@@ -78,13 +81,61 @@ class Method:
         Returns
         -------
         observers.Observer
+
+        Raises
+        ------
+        FmscalError
+            A setting the method does not have, or of the wrong type
+            (:meth:`check_settings`).
         """
-        kwargs = {**self.defaults, **dict(settings or {})}
+        kwargs = {**self.defaults, **self.check_settings(settings)}
         if self.needs_noise_model:
             if noise is not None and not isinstance(noise, NoiseSpec):
                 raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
             kwargs.setdefault("noise", noise)
         return self.cls(payload, **kwargs)
+
+
+    def check_settings(self, settings):
+        """``settings`` as a dict, each checked against the type of its default in the constructor.
+
+        A setting whose default is a boolean takes only ``True`` or ``False``
+        (the text ``"false"`` is true to Python); one whose default is a
+        number takes only a number (not text, not a boolean) or None (which
+        the constructor accepts or refuses: ``t_decay=None``); one whose
+        default is text takes only text. Settings whose default is None are
+        checked by the constructor.
+
+        Parameters
+        ----------
+        settings : mapping or None
+
+        Returns
+        -------
+        dict
+
+        Raises
+        ------
+        FmscalError
+            Not a mapping, a name the constructor does not take, or a value of the wrong type.
+        """
+        if settings is None:
+            return {}
+        if not isinstance(settings, Mapping):
+            raise FmscalError(f"settings must be a dict of constructor arguments; got {type(settings).__name__}")
+        params = {k: v.default for k, v in inspect.signature(self.cls.__init__).parameters.items()
+                  if k not in ("self", "payload") and v.kind == v.POSITIONAL_OR_KEYWORD}
+        for key, value in settings.items():
+            if key not in params:
+                raise FmscalError(f"{self.name}: no setting {key!r}; its settings: {', '.join(params)}")
+            default = params[key]
+            if isinstance(default, bool):
+                as_bool(value, f"{self.name} setting {key}")
+            elif isinstance(default, (int, float)) and value is not None:      # None: the constructor decides
+                as_number(value, f"{self.name} setting {key}")
+            elif isinstance(default, str) and not isinstance(value, str):
+                raise FmscalError(f"{self.name} setting {key} must be text; got {value!r}")
+        return dict(settings)
 
 
 #: Every method the toolkit knows, by name: ``{name: Method}``, in the order tables show them.

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from fmscal.plant._checks import as_finite_array, as_number
 from fmscal.plant.errors import FmscalError
 
 from .state import INPUT
@@ -18,19 +19,25 @@ def check_sample(dt, pose, w_hat, first):
         ``w_hat`` not 3 finite numbers, ``pose`` neither None nor 3 finite
         numbers, no pose on the first sample, or ``dt`` not positive after it.
     """
-    w_hat = np.asarray(w_hat, dtype=float)
-    if w_hat.shape != (3,) or not np.all(np.isfinite(w_hat)):
-        raise FmscalError(f"w_hat must be 3 finite numbers; got {w_hat!r}")
+    if not first or dt is not None:
+        dt = as_number(dt, "dt")
+    w_hat = _three(w_hat, "w_hat must be 3 finite numbers")
     if pose is not None:
-        pose = np.asarray(pose, dtype=float)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise FmscalError(f"pose must be 3 finite numbers or None; got {pose!r}")
+        pose = _three(pose, "pose must be 3 finite numbers or None")
     if first:
         if pose is None:
             raise FmscalError("the first sample after reset() needs a pose measurement")
     elif not (np.isfinite(dt) and dt > 0):
         raise FmscalError(f"dt must be positive; got {dt!r}")
     return pose, w_hat
+
+
+def _three(value, rule):
+    """``value`` as 3 finite floats (text refused), or FmscalError stating ``rule``."""
+    try:
+        return as_finite_array(value, (3,), "")
+    except FmscalError:
+        raise FmscalError(f"{rule}; got {value!r}"[:200]) from None
 
 
 def pack_input(pose, w_hat):

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FmscalError
+from .files import not_a_file
 from .log import Log, LogError
 
 __all__ = ["BagError", "import_bag", "read_bag", "format_report",
@@ -218,8 +219,11 @@ def _open_reader(path):
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
         raise BagError("reading ROS bags needs rosbags: pip install 'fmscal[ros]'") from None
-    if not path.exists():
+    problem = not_a_file(path, folder_ok=True)
+    if problem == "no such file":
         raise BagError(f"{path}: no such file or folder")
+    if problem is not None:
+        raise BagError(f"{path}: is {problem}, not a ROS bag")
     kind = "folder" if path.is_dir() else path.suffix
     if kind not in ("folder", ".bag", ".mcap", ".db3"):
         raise BagError(f"{path.name}: not a ROS bag; expected a ROS 2 bag folder, a .mcap or .db3 file, "
@@ -294,6 +298,11 @@ def _read_messages(path, wrench_topic, pose_topic):
             [(s, pose_values(m)) for s, m in out[pose_topic]])
 
 
+#: A stamp earlier than the one recorded before it by more than this many of the stream's steps is a
+#: clock that jumped back (a few steps: messages reordered in transport, sorted by stamp).
+_MAX_BACK_STEPS = 10
+
+
 def _stream(messages, role, name):
     """Stamps (int ns, sorted, duplicates dropped) and values of one stream, with counts."""
     if len(messages) < 2:
@@ -303,6 +312,18 @@ def _stream(messages, role, name):
     if np.all(stamps == stamps[0]):
         raise BagError(f"{name}: every {role} message has the header stamp {stamps[0]} ns; "
                        "the publisher did not stamp its messages")
+    zero = np.flatnonzero(stamps == 0)
+    if len(zero):
+        raise BagError(f"{name}: {len(zero)} {role} message(s) have the header stamp 0 (unstamped), the first "
+                       f"message {zero[0] + 1} as recorded; the publisher did not stamp them")
+    steps = np.diff(stamps)
+    nominal = np.median(steps[steps > 0]) if np.any(steps > 0) else 0
+    back = np.flatnonzero(steps < -_MAX_BACK_STEPS * nominal)
+    if len(back):
+        k = int(back[0])
+        raise BagError(f"{name}: the {role} clock jumps back by {-steps[k] / 1e9:.6g} s at message {k + 2} "
+                       f"as recorded ({_utc(int(stamps[k]))} then {_utc(int(stamps[k + 1]))}); a restarted clock or "
+                       "publisher; split the bag there and import each part")
     order = np.argsort(stamps, kind="stable")
     stamps, values = stamps[order], values[order]
     unique = np.concatenate([[True], np.diff(stamps) > 0])

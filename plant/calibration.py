@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FmscalError
-from .files import atomic_write_text
+from .files import atomic_write_text, not_a_file
 from .payload import Payload
 from .sensor import check_calibration
 
@@ -182,10 +182,11 @@ class Calibration:
             raise CalibrationFileError(f"a calibration path must be a file name; got {type(path).__name__}")
         path = Path(path)
         source = path.name
-        if path.is_dir():
-            raise CalibrationFileError(f"{path}: is a folder, not a calibration file")
-        if not path.is_file():
+        problem = not_a_file(path)
+        if problem == "no such file":
             raise CalibrationFileError(f"{path}: no such file")
+        if problem is not None:
+            raise CalibrationFileError(f"{path}: is {problem}, not a calibration file")
         if path.stat().st_size > _MAX_FILE_BYTES:
             raise CalibrationFileError(f"{source}: {path.stat().st_size} bytes is too large for a calibration "
                                        f"file (at most {_MAX_FILE_BYTES}); not an fmscal calibration")

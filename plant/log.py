@@ -8,7 +8,7 @@ Planar (the paper's problem)::
     t,theta,x,y,M,fx,fy
 
 in SI units (s, rad, m, N m, N). ``theta, x, y`` is the measured pose in the
-inertial frame, ``theta`` continuous (one wrapped into (-pi, pi] is unwrapped,
+inertial frame, ``theta`` continuous (one wrapped into (-pi, pi] or [0, 2 pi) is unwrapped,
 with a note in :attr:`Log.notes`); ``M, fx, fy`` is the raw
 sensor reading ``w_hat`` in the body frame at the sensor interface.
 
@@ -44,7 +44,7 @@ import numpy as np
 
 from ._checks import as_finite_array, as_positive_scalar
 from .errors import FmscalError
-from .files import atomic_write_text
+from .files import atomic_write_text, not_a_file
 from .model import PlanarModel, SpatialModel, model_for_columns
 from .payload import Payload
 from .rigid_body import SpatialPayload
@@ -100,7 +100,7 @@ class Log:
         True where the pose was measured.
     notes : list of str
         What was done to the data on reading it: a ``theta`` wrapped into
-        (-pi, pi] (as vision systems and quaternion-to-yaw conversions give
+        (-pi, pi] or [0, 2 pi) (as vision systems and quaternion-to-yaw conversions give
         it) is unwrapped, a quaternion sequence that flips sign is made
         continuous, and said so here.
 
@@ -188,16 +188,22 @@ class Log:
                               f"(q and -q are one attitude; the first at t = {first:g} s); made it continuous")
 
     def _unwrap_theta(self):
-        """Unwrap a ``theta`` wrapped into (-pi, pi] (its ~2 pi jumps between poses), with a note."""
+        """Unwrap a ``theta`` wrapped into (-pi, pi] or [0, 2 pi) (its ~2 pi jumps between poses), with a note."""
         rows = np.flatnonzero(self.has_pose)
         theta = self.pose[rows, 0]
         jumps = np.abs(np.diff(theta)) > np.pi
-        if not jumps.any() or np.max(np.abs(theta)) > np.pi + 1e-6:
+        if not jumps.any():
+            return
+        if np.max(np.abs(theta)) <= np.pi + 1e-6:
+            interval = "(-pi, pi]"
+        elif np.min(theta) >= -1e-6 and np.max(theta) <= 2 * np.pi + 1e-6:
+            interval = "[0, 2 pi)"
+        else:
             return
         self.pose = self.pose.copy()
         self.pose[rows, 0] = np.unwrap(theta)
         first = self.t[rows[1:][jumps][0]]
-        self.notes.append(f"{self.name}: theta is wrapped into (-pi, pi] ({int(jumps.sum())} jump(s) of about "
+        self.notes.append(f"{self.name}: theta is wrapped into {interval} ({int(jumps.sum())} jump(s) of about "
                           f"2 pi between poses, the first at t = {first:g} s); unwrapped it")
 
     def __len__(self):
@@ -371,10 +377,11 @@ def _as_path(path, what="log"):
     if not isinstance(path, (str, os.PathLike)):
         raise LogError(f"a {what} must be given as a file name; got {type(path).__name__}")
     path = Path(path)
-    if path.is_dir():
-        raise LogError(f"{_echo(str(path))}: is a folder, not a {what} file")
-    if not path.is_file():
+    problem = not_a_file(path)
+    if problem == "no such file":
         raise LogError(f"{_echo(str(path))}: no such file")
+    if problem is not None:
+        raise LogError(f"{_echo(str(path))}: is {problem}, not a {what} file")
     return path
 
 
@@ -382,6 +389,31 @@ def _echo(text, limit=80):
     """``text`` fit for a one-line message: control characters escaped, at most ``limit`` characters."""
     text = text.encode("unicode_escape").decode("ascii") if not text.isprintable() else text
     return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def _wrong_field_count(data, n):
+    """The first line of CSV bytes ``data`` (1-based, after the header) without ``n`` fields, and its count.
+
+    Counts the commas of every line at once (numpy), so that a row of a
+    million cells is refused at once: pandas would take the extra cells of
+    a first data row as index columns, slowly. Empty lines are skipped, as
+    pandas skips them.
+
+    Returns
+    -------
+    line, fields : int
+        ``(0, n)`` if every line has ``n`` fields.
+    """
+    b = np.frombuffer(data, dtype=np.uint8)
+    newlines = np.flatnonzero(b == ord("\n"))
+    starts = np.concatenate([[0], newlines + 1])
+    ends = np.concatenate([newlines, [len(b)]])
+    ends = ends - ((ends > starts) & (b[np.maximum(ends - 1, 0)] == ord("\r")))     # CRLF line ends
+    commas = np.flatnonzero(b == ord(","))
+    fields = np.searchsorted(commas, ends) - np.searchsorted(commas, starts) + 1
+    bad = np.flatnonzero((fields != n) & (ends > starts))
+    bad = bad[bad > 0]                                  # the header is checked on its own
+    return (int(bad[0]) + 1, int(fields[bad[0]])) if len(bad) else (0, n)
 
 
 def _read_csv(path, required, empty_rule):
@@ -397,7 +429,6 @@ def _read_csv(path, required, empty_rule):
     except UnicodeDecodeError as err:
         raise LogError(f"{path.name}: not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}); "
                        "save the CSV as UTF-8 (the columns are plain ASCII)") from None
-    del data
     text = text.removeprefix("\ufeff")       # a byte-order mark some spreadsheets write
     first = text.split("\n", 1)[0].strip()
     header = [h.strip() for h in first.split(",")]
@@ -412,6 +443,11 @@ def _read_csv(path, required, empty_rule):
     if missing:
         raise LogError(f"{path.name}: missing column(s) {', '.join(missing)}; expected the header "
                        f"{','.join(required)} (got {_echo(','.join(header))})")
+    line, fields = _wrong_field_count(data, len(header))
+    del data
+    if line:
+        raise LogError(f"{path.name}: line {line} has {fields} fields; the header has {len(header)} "
+                       f"({_echo(','.join(header))}); every row needs one cell per column")
     match = _NONFINITE.search(text)
     if match:
         line = text.count("\n", 0, match.start()) + 1

@@ -103,6 +103,12 @@ def diagnose_units(log, payload):
     if 20 < moment / force < 160 and 1 / _FAR < force < _FAR:
         return [UnitFinding("degrees", f"theta looks like degrees, not radians: the moment the poses imply is {moment / force:.0f} "
                 f"times the force's share (57 for degrees); convert theta to rad")]
+    # both far, and alike: the readings' scale (x and y in mm scale the force only, the moment in part)
+    if force > _FAR and moment > _FAR and 0.6 < moment / force < 1.7:
+        return [UnitFinding(COUNTS, f"the readings are about {1 / np.sqrt(force * moment):.3g} times the wrench "
+                f"the poses imply: S's entries will be near {np.sqrt(force * moment):.3g} (readings not in N m and "
+                f"N?); methods that start from S0 of order one (adaptive, high-gain, ekf) may not reach it: use "
+                f"least-squares, or give the readings in N m and N")]
     if force > _FAR:
         return [UnitFinding("millimetres", f"x and y look like millimetres, not metres: the forces the poses imply are {force:.3g} times "
                 f"the readings (1000 for mm; else the readings are not in N); convert x and y to m")]

@@ -263,14 +263,14 @@ def test_a_failed_calibrate_save_is_one_line_and_keeps_the_old_file(folder, monk
 
 
 def test_simulate_never_leaves_a_log_without_its_sidecar(folder, monkeypatch, capsys):
-    real, calls = os.replace, []
+    real, calls = os.link, []              # without --overwrite each file is linked into place
 
     def second_fails(src, dst):
         calls.append(dst)
         if len(calls) == 2:
             raise OSError(28, "No space left on device")
         real(src, dst)
-    monkeypatch.setattr(os, "replace", second_fails)
+    monkeypatch.setattr(os, "link", second_fails)
     before = _snapshot(folder)
     assert main(["simulate", "--duration", "1", "--out", str(folder / "new.csv")]) == 2
     assert not (folder / "new.csv").exists() and not (folder / "new.truth.json").exists()

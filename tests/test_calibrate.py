@@ -161,7 +161,9 @@ GOOD_ROWS = "".join(f"{0.001 * k},{0.0},{0.0},{0.0},1,1,1\n" for k in range(20))
      "not strictly increasing"),
     (lambda d: _write(d / "uneven.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS.replace("0.002,", "0.0021,", 1)),
      "not evenly sampled"),
-    (lambda d: _write(d / "short.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS[:60]), "too few rows"),
+    (lambda d: _write(d / "short.csv", "t,theta,x,y,M,fx,fy\n" + "".join(GOOD_ROWS.splitlines(True)[:3])),
+     "too few rows"),
+    (lambda d: _write(d / "cut.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS[:60]), "has 4 fields; the header has 7"),
     (lambda d: _write(d / "nopose.csv", "t,theta,x,y,M,fx,fy\n" + "".join(
         f"{0.001 * k},{'0,0,0' if k < 3 else ',,'},1,1,1\n" for k in range(20))), "too few pose measurements"),
 ])
