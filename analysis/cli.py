@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_calibration import add_apply, add_calibrate
+from .cli_spatial import add_identify_payload
 from .cli_import import add_import
 from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
                          strict)
@@ -45,13 +46,15 @@ MAX_LAM = 1e7
 
 
 def _add_simulate(sub):
-    from fmscal.plant import SCENARIOS
+    from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
+    every = {**SCENARIOS, **SPATIAL_SCENARIOS}
     p = sub.add_parser("simulate", help="simulate a scenario and write LOG.csv and LOG.truth.json",
-                       description="Simulate a named scenario. Writes the log (t,theta,x,y,M,fx,fy) "
-                                   "and the sidecar LOG.truth.json. Scenarios: " +
-                                   "; ".join(f"{k}: {v.description}" for k, v in SCENARIOS.items()))
-    p.add_argument("--scenario", default="paper", choices=sorted(SCENARIOS), metavar="NAME",
-                   help="one of: " + ", ".join(SCENARIOS))
+                       description="Simulate a named scenario. Writes the log (planar t,theta,x,y,M,fx,fy; "
+                                   "spatial t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) and the sidecar "
+                                   "LOG.truth.json. Scenarios: " +
+                                   "; ".join(f"{k}: {v.description}" for k, v in every.items()))
+    p.add_argument("--scenario", default="paper", choices=sorted(every), metavar="NAME",
+                   help="one of: " + ", ".join(every))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, help="s (default: the scenario's)")
     p.add_argument("--dt", type=float, help="sample time, s (default: the scenario's, 0.001)")
@@ -72,8 +75,16 @@ def _add_simulate(sub):
 
 def cmd_simulate(args):
     from fmscal.plant import get_scenario
+    from fmscal.plant import SPATIAL_SCENARIOS
     check_seeds(seed=args.seed)
-    sc = get_scenario(args.scenario)
+    spatial = args.scenario in SPATIAL_SCENARIOS
+    sc = SPATIAL_SCENARIOS[args.scenario] if spatial else get_scenario(args.scenario)
+    if spatial:
+        for option, value in (("--mass", args.mass), ("--inertia", args.inertia), ("--rho", args.rho),
+                              ("--offset", args.offset)):
+            if value is not None:
+                raise CliError(f"{option} is for the planar scenarios; {args.scenario} has its own tool and a "
+                               "random offset (the sidecar records them)")
     changes = {}
     if args.duration is not None:
         changes["duration"] = positive(args.duration, "--duration")
@@ -273,7 +284,15 @@ def _write_comparison(out, duration, table, curves, text):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, with usage errors on one line (exit 2) instead of usage plus error."""
+    """argparse, with usage errors on one line (exit 2) instead of usage plus error.
+
+    A negative number in scientific notation (``--inertia ... -1e-4``) is a
+    value, not an option: argparse alone takes only ``-1`` and ``-0.5``.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
@@ -296,8 +315,8 @@ def build_parser():
     return parser
 
 
-_COMMANDS = [_add_simulate, add_calibrate, add_apply, _add_reproduce, _add_compare, _add_ablation, add_sweep,
-             add_bench, _add_check_gains, add_import]
+_COMMANDS = [_add_simulate, add_calibrate, add_apply, add_identify_payload, _add_reproduce, _add_compare,
+             _add_ablation, add_sweep, add_bench, _add_check_gains, add_import]
 
 
 def main(argv=None):

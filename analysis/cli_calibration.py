@@ -15,18 +15,25 @@ def add_calibrate(sub):
     from fmscal.observers import method_names
     from .calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD
     p = sub.add_parser("calibrate", help="estimate S from a recorded log",
-                       description="Estimate the calibration matrix S from a log (t,theta,x,y,M,fx,fy; "
-                                   "rad, m, N m, N) and the payload's mass properties. Prints S_hat with "
-                                   "its one-sigma uncertainty, whether the run converged, warnings about "
-                                   "excitation and model consistency, and E with --truth.")
+                       description="Estimate the calibration matrix S from a log and the payload's mass "
+                                   "properties: planar (t,theta,x,y,M,fx,fy; rad, m, N m, N) or spatial "
+                                   "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz: a 6-axis sensor; the header tells). "
+                                   "Prints S_hat with its one-sigma uncertainty, whether the run converged, "
+                                   "warnings about excitation and model consistency, and E with --truth.")
     p.add_argument("log", metavar="LOG.csv")
     p.add_argument("--mass", type=float, required=True, metavar="KG")
-    p.add_argument("--inertia", type=float, required=True, metavar="KGM2", help="I_G about the centre of mass")
-    p.add_argument("--rho", type=float, nargs=2, required=True, metavar=("RX", "RY"),
-                   help="offset of the centre of mass from the sensor, body frame, m (negative values as written)")
-    p.add_argument("--observer", choices=method_names(calibrates=True), default=DEFAULT_METHOD,
-                   help=f"method (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at the "
-                        "information floor; its noise model is estimated from the log unless given)")
+    p.add_argument("--inertia", type=float, nargs="+", required=True, metavar="I",
+                   help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
+                        "tensor about the centre of mass in sensor axes")
+    p.add_argument("--rho", type=float, nargs="+", required=True, metavar="R",
+                   help="the centre of mass from the sensor, m: planar RX RY (body frame, from G to the sensor "
+                        "as in the paper), spatial X Y Z (the centre of mass in the sensor frame); negative "
+                        "values as written")
+    p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
+                   help="spatial logs: gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
+    p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
+                   help=f"method for a planar log (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at "
+                        "the information floor; its noise model is estimated from the log unless given)")
     p.add_argument("--pose-noise", type=float, nargs=2, metavar=("SD_RAD", "SD_M"),
                    help="pose noise standard deviations (default: estimated from the log)")
     p.add_argument("--wrench-noise", type=float, nargs=3, metavar=("SD_M", "SD_FX", "SD_FY"),
@@ -54,13 +61,14 @@ def cmd_calibrate(args):
     from dataclasses import replace
 
     from fmscal.plant import Payload, file_sha256, read_log, read_truth
-    from .calibrate import calibrate
+    from fmscal.plant.log import log_kind
+    from .calibrate import DEFAULT_METHOD, calibrate
+    from .cli_spatial import calibrate_spatial
     from .plots import plot_calibration
-    for name, value in (("--mass", args.mass), ("--inertia", args.inertia)):
-        positive(value, name)
+    positive(args.mass, "--mass")
     for value in args.rho:
         if not np.isfinite(value):
-            raise CliError(f"--rho must be two finite numbers in m; got {args.rho}")
+            raise CliError(f"--rho must be finite numbers in m; got {args.rho}")
     for option, values in (("--pose-noise", args.pose_noise), ("--wrench-noise", args.wrench_noise)):
         if values is not None and not all(np.isfinite(v) and v >= 0 for v in values):
             raise CliError(f"{option} must be non-negative standard deviations; got {values}")
@@ -75,7 +83,15 @@ def cmd_calibrate(args):
         raise CliError("--force applies to --save; give --save CAL.json too")
     check_outputs([(args.save, "--save"), (args.plot, "--plot")],
                   [(args.log, "the log"), (args.truth, "the --truth file")], overwrite=args.overwrite)
-    payload = Payload(args.mass, args.inertia, tuple(args.rho))
+    if log_kind(args.log) == "spatial":
+        return calibrate_spatial(args)
+    if len(args.rho) != 2 or len(args.inertia) != 1:
+        raise CliError(f"a planar log takes --rho RX RY (2 numbers, m) and --inertia I_G (1 number, kg m^2); got "
+                       f"{len(args.rho)} and {len(args.inertia)} (three and six are for a spatial log)")
+    if args.gravity is not None:
+        raise CliError("--gravity is for spatial logs; a planar log moves in a plane with no gravity in it")
+    args.observer = args.observer or DEFAULT_METHOD
+    payload = Payload(args.mass, positive(args.inertia[0], "--inertia"), tuple(args.rho))
     log = read_log(args.log)
     for note in log.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
@@ -142,15 +158,15 @@ def _print_calibration(args, log, out, result):
 def add_apply(sub):
     p = sub.add_parser("apply", help="turn raw readings into calibrated wrenches with a saved calibration",
                        description="Apply a calibration saved by fmscal calibrate --save: w = S (w_hat - b) "
-                                   "for every row of READINGS.csv (columns t,M,fx,fy, or a full log); "
-                                   "writes t,M,fx,fy.")
+                                   "for every row of READINGS.csv (columns t,M,fx,fy, or t,tx,ty,tz,fx,fy,fz "
+                                   "for a spatial calibration, or a full log); writes the same columns.")
     p.add_argument("calibration", metavar="CAL.json")
     p.add_argument("readings", metavar="READINGS.csv")
     p.add_argument("--out", required=True, metavar="WRENCH.csv")
     p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
     p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
-    p.add_argument("--inertia", type=float, metavar="KGM2")
-    p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"))
+    p.add_argument("--inertia", type=float, nargs="+", metavar="I", help="planar I_G, or the six spatial entries")
+    p.add_argument("--rho", type=float, nargs="+", metavar="R", help="planar RX RY, or spatial X Y Z")
     p.set_defaults(func=cmd_apply)
 
 
@@ -161,7 +177,14 @@ def cmd_apply(args):
         raise CliError("give all of --mass, --inertia and --rho to check the payload, or none")
     payload = None
     if all(given):
-        payload = Payload(positive(args.mass, "--mass"), positive(args.inertia, "--inertia"), tuple(args.rho))
+        if len(args.rho) == 3:
+            from .cli_spatial import spatial_payload
+            payload = spatial_payload(args.mass, args.rho, args.inertia)
+        elif len(args.rho) != 2 or len(args.inertia) != 1:
+            raise CliError(f"--rho and --inertia take 2 and 1 numbers (planar) or 3 and 6 (spatial); got "
+                           f"{len(args.rho)} and {len(args.inertia)}")
+        else:
+            payload = Payload(positive(args.mass, "--mass"), positive(args.inertia[0], "--inertia"), tuple(args.rho))
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
     check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],
@@ -171,12 +194,16 @@ def cmd_apply(args):
         print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
               file=sys.stderr)
     t, w_hat = read_readings(args.readings)
+    if w_hat.shape[1] != calibration.size:
+        raise CliError(f"{Path(args.readings).name} holds {w_hat.shape[1]} reading columns; the calibration is "
+                       f"{calibration.size}x{calibration.size} ({'spatial' if calibration.size == 6 else 'planar'})")
     w = calibration.apply(w_hat)
     bad = ~np.isfinite(w).all(axis=1)
     if bad.any():
         raise CliError(f"the calibration gives a wrench that is not finite (overflow) at row {np.argmax(bad) + 1} of "
                        f"{Path(args.readings).name}; its S or b is far outside any sensor's range: nothing written")
-    lines = ["t,M,fx,fy"] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
+    header = "t,tx,ty,tz,fx,fy,fz" if calibration.size == 6 else "t,M,fx,fy"
+    lines = [header] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
     atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "
           f"{calibration.method}, {calibration.date})")

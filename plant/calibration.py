@@ -8,6 +8,10 @@ offset ``b``; ``b = 0`` where it was not estimated). The file is JSON::
      "method": "least-squares", "log": {"name": "run.csv", "sha256": "..."},
      "latency": s or null, "date": "2026-11-22T10:00:00+00:00", "forced": false}
 
+A spatial calibration has the same keys with ``S`` 6x6, ``b`` in the
+reading's order ``tx .. fz``, and the payload's ``rho`` (3 numbers) and
+``inertia`` (its 6 entries ``Ixx Iyy Izz Ixy Ixz Iyz``).
+
 ``forced`` is true when the calibration was saved although its run had not
 converged (``fmscal calibrate --save --force``); files without it are read as
 not forced.
@@ -25,6 +29,7 @@ import numpy as np
 from .errors import FmscalError
 from .files import atomic_write_text, not_a_file
 from .payload import Payload
+from .rigid_body import SpatialPayload
 from .sensor import check_calibration
 
 __all__ = ["Calibration", "CalibrationFileError", "file_sha256", "FORMAT"]
@@ -65,17 +70,19 @@ class Calibration:
 
     Parameters
     ----------
-    S : array_like, shape (3, 3)
-        Calibration matrix, non-singular.
-    payload : plant.Payload
-        The mass properties the calibration was estimated with.
+    S : array_like, shape (n, n)
+        Calibration matrix, non-singular: 3x3 (planar) or 6x6 (spatial).
+    payload : plant.Payload or plant.SpatialPayload
+        The mass properties the calibration was estimated with (the one of
+        its case).
     method : str
         The estimator (``least-squares``, ``ekf``, ...).
-    S_std : array_like, shape (3, 3), optional
+    S_std : array_like, shape (n, n), optional
         One-sigma uncertainty of each entry.
-    b, b_std : array_like, shape (3,), optional
-        Offset ``[M, f_x, f_y]`` in the raw reading's units (N m, N) and its
-        uncertainty; None: not estimated (taken as zero).
+    b, b_std : array_like, shape (n,), optional
+        Offset in the raw reading's order and units (planar ``[M, f_x,
+        f_y]``, spatial ``[tx .. fz]``; N m, N) and its uncertainty; None:
+        not estimated (taken as zero).
     log_name, log_sha256 : str
         The log it came from, and a hash of the log file's contents.
     latency : float, optional
@@ -101,10 +108,12 @@ class Calibration:
 
     def __post_init__(self):
         set_ = object.__setattr__
-        set_(self, "S", check_calibration(self.S, "S"))
-        if not isinstance(self.payload, Payload):
-            raise TypeError(f"payload must be a plant.Payload; got {type(self.payload).__name__}")
-        for name, shape in (("S_std", (3, 3)), ("b", (3,)), ("b_std", (3,))):
+        n = 6 if np.shape(self.S) == (6, 6) else 3
+        set_(self, "S", check_calibration(self.S, "S", size=n))
+        kind = SpatialPayload if n == 6 else Payload
+        if not isinstance(self.payload, kind):
+            raise TypeError(f"payload must be a plant.{kind.__name__} for a {n}x{n} S; got {type(self.payload).__name__}")
+        for name, shape in (("S_std", (n, n)), ("b", (n,)), ("b_std", (n,))):
             value = getattr(self, name)
             if value is not None:
                 set_(self, name, _matrix(value, shape, name, "calibration"))
@@ -115,25 +124,32 @@ class Calibration:
             set_(self, "date", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
 
     @property
+    def size(self):
+        """``n_w``: 3 (planar) or 6 (spatial)."""
+        return self.S.shape[0]
+
+    @property
     def offset(self):
-        """``b``, zeros where it was not estimated; shape (3,)."""
-        return np.zeros(3) if self.b is None else self.b
+        """``b``, zeros where it was not estimated; shape (n,)."""
+        return np.zeros(self.size) if self.b is None else self.b
 
     def apply(self, w_hat):
         """Calibrated wrench ``w = S (w_hat - b)``.
 
         Parameters
         ----------
-        w_hat : array_like, shape (3,) or (N, 3)
-            Raw readings ``[M, f_x, f_y]``, N m and N.
+        w_hat : array_like, shape (n,) or (N, n)
+            Raw readings in the reading's order (planar ``[M, f_x, f_y]``,
+            spatial ``[tx .. fz]``), N m and N.
 
         Returns
         -------
         ndarray, same shape as ``w_hat``
         """
         w_hat = np.asarray(w_hat, dtype=float)
-        if w_hat.ndim not in (1, 2) or w_hat.shape[-1] != 3:
-            raise FmscalError(f"w_hat must have shape (3,) or (N, 3); got {w_hat.shape}")
+        n = self.size
+        if w_hat.ndim not in (1, 2) or w_hat.shape[-1] != n:
+            raise FmscalError(f"w_hat must have shape ({n},) or (N, {n}); got {w_hat.shape}")
         if not np.all(np.isfinite(w_hat)):
             raise FmscalError("w_hat holds NaN or infinite values")
         return (w_hat - self.offset) @ self.S.T
@@ -162,7 +178,7 @@ class Calibration:
         Parameters
         ----------
         path : str or Path
-        payload : plant.Payload, optional
+        payload : plant.Payload or plant.SpatialPayload, optional
             If given, the file must have been made for these mass properties.
 
         Returns
@@ -176,8 +192,8 @@ class Calibration:
             of the wrong shape or not finite, a singular ``S``, or another
             payload.
         """
-        if payload is not None and not isinstance(payload, Payload):
-            raise TypeError(f"payload must be a plant.Payload or None; got {type(payload).__name__}")
+        if payload is not None and not isinstance(payload, (Payload, SpatialPayload)):
+            raise TypeError(f"payload must be a plant.Payload, a SpatialPayload or None; got {type(payload).__name__}")
         if not isinstance(path, (str, os.PathLike)):
             raise CalibrationFileError(f"a calibration path must be a file name; got {type(path).__name__}")
         path = Path(path)
@@ -202,16 +218,17 @@ class Calibration:
         missing = [k for k in ("S", "payload", "method") if k not in data]
         if missing:
             raise CalibrationFileError(f"{source}: missing key(s) {', '.join(missing)}")
+        n = 6 if np.shape(data["S"]) == (6, 6) else 3
         try:
-            file_payload = Payload.from_dict(data["payload"])
+            file_payload = (SpatialPayload if n == 6 else Payload).from_dict(data["payload"])
         except (KeyError, TypeError, ValueError) as err:
             raise CalibrationFileError(f"{source}: payload must hold mass, inertia and rho ({err})") from None
-        if payload is not None and not file_payload.isclose(payload):
+        if payload is not None and (type(payload) is not type(file_payload) or not file_payload.isclose(payload)):
             raise CalibrationFileError(f"{source}: made for another payload ({_describe(file_payload)}), "
                                        f"not {_describe(payload)}")
-        S = _matrix(data["S"], (3, 3), "S", source)
+        S = _matrix(data["S"], (n, n), "S", source)
         optional = {}
-        for name, shape in (("S_std", (3, 3)), ("b", (3,)), ("b_std", (3,))):
+        for name, shape in (("S_std", (n, n)), ("b", (n,)), ("b_std", (n,))):
             if data.get(name) is not None:
                 optional[name] = _matrix(data[name], shape, name, source)
         latency = data.get("latency")
@@ -242,4 +259,7 @@ def _short(value, limit=60):
 
 
 def _describe(payload):
-    return f"m = {payload.mass:g} kg, I_G = {payload.inertia:g} kg m^2, rho = ({payload.rho[0]:g}, {payload.rho[1]:g}) m"
+    rho = ", ".join(f"{r:g}" for r in payload.rho)
+    if isinstance(payload, SpatialPayload):
+        return f"m = {payload.mass:g} kg, rho = ({rho}) m, inertia = ({', '.join(f'{i:g}' for i in payload.inertia)}) kg m^2"
+    return f"m = {payload.mass:g} kg, I_G = {payload.inertia:g} kg m^2, rho = ({rho}) m"

@@ -50,7 +50,7 @@ from .payload import Payload
 from .rigid_body import SpatialPayload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
-__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "COLUMNS", "SPATIAL_COLUMNS",
+__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS", "SPATIAL_COLUMNS",
            "READING_COLUMNS", "QUATERNION_TOLERANCE"]
 
 #: Column names of a planar log, in order.
@@ -322,6 +322,28 @@ def read_log(path):
                frame[list(case.wrench_names)].to_numpy(), name=path.name)
 
 
+def log_kind(path):
+    """``"spatial"`` when a log file's header names the spatial columns, else ``"planar"``.
+
+    Reads the first line only; a file that is neither is left to
+    :func:`read_log` (its errors are the planar format's).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    LogError
+        Not a readable file.
+    """
+    return "spatial" if _looks_spatial(_as_path(path, "log")) else "planar"
+
+
 def _looks_spatial(path):
     """True when the file's header names the spatial columns (the planar format otherwise, and its errors)."""
     with open(path, "rb") as f:
@@ -338,7 +360,7 @@ READING_COLUMNS = ("t", "M", "fx", "fy")
 
 
 def read_readings(path):
-    """Read raw sensor readings: a CSV with columns ``t,M,fx,fy`` (a full log will do).
+    """Read raw sensor readings: a CSV with columns ``t,M,fx,fy`` or ``t,tx,ty,tz,fx,fy,fz`` (a full log will do).
 
     Parameters
     ----------
@@ -348,8 +370,9 @@ def read_readings(path):
     -------
     t : ndarray, shape (N,)
         s, strictly increasing (even sampling is not required).
-    w_hat : ndarray, shape (N, 3)
-        ``[M, f_x, f_y]``, N m and N.
+    w_hat : ndarray, shape (N, 3) or (N, 6)
+        Planar ``[M, f_x, f_y]`` or, where the header names ``tx, ty, tz``,
+        spatial ``[tx, ty, tz, fx, fy, fz]``; N m and N.
 
     Raises
     ------
@@ -358,12 +381,15 @@ def read_readings(path):
         infinite, time not strictly increasing, no rows.
     """
     path = _as_path(path, "readings")
-    frame = _read_csv(path, READING_COLUMNS, "every t, M, fx, fy cell must be a number")
+    with open(path, "rb") as f:
+        first = f.readline(4096).decode("utf-8", errors="replace")
+    names = SpatialModel.wrench_names if "tx" in {h.strip() for h in first.split(",")} else _WRENCH
+    frame = _read_csv(path, ("t", *names), f"every t, {', '.join(names)} cell must be a number")
     t = frame["t"].to_numpy()
-    w_hat = frame[list(_WRENCH)].to_numpy()
+    w_hat = frame[list(names)].to_numpy()
     if len(t) == 0:
         raise LogError(f"{path.name}: no readings")
-    for name, values in (("t", t), *((c, w_hat[:, j]) for j, c in enumerate(_WRENCH))):
+    for name, values in (("t", t), *((c, w_hat[:, j]) for j, c in enumerate(names))):
         if not np.all(np.isfinite(values)):
             raise LogError(f"{path.name}: column {name} has a missing, NaN or infinite value at row {_first_bad(values)}")
     steps = np.diff(t)
@@ -386,9 +412,13 @@ def _as_path(path, what="log"):
 
 
 def _echo(text, limit=80):
-    """``text`` fit for a one-line message: control characters escaped, at most ``limit`` characters."""
+    """``text`` fit for a one-line message: control characters escaped, at most ``limit`` characters.
+
+    A longer text keeps its start and its end (a path's file name is at its end).
+    """
     text = text.encode("unicode_escape").decode("ascii") if not text.isprintable() else text
-    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+    half = limit // 2
+    return text if len(text) <= limit else f"{text[:half]}...{text[-half:]} ({len(text)} characters)"
 
 
 def _wrong_field_count(data, n):

@@ -135,6 +135,12 @@ class SpatialPayload:
         """Build from a mapping with keys ``mass``, ``rho``, ``inertia``."""
         return cls(data["mass"], data["rho"], data["inertia"])
 
+    def isclose(self, other, rtol=1e-9):
+        """Return True if ``other`` has the same mass properties."""
+        return bool(np.isclose(self.mass, other.mass, rtol=rtol)
+                    and np.allclose(self.rho, other.rho, rtol=rtol, atol=1e-12)
+                    and np.allclose(self.inertia, other.inertia, rtol=rtol, atol=1e-15))
+
 
 def _cross(a, b, o):
     """``a x b`` for 3-vectors of numbers or casadi symbols."""

@@ -7,8 +7,10 @@ links, so that loops can sit in it).
 
 import hashlib
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -51,10 +53,18 @@ def _snapshot(folder):
 
 
 @pytest.fixture
-def folder(base, tmp_path):
-    """A copy of the inputs, with symlink loops (``loop``, ``loop.csv``, ``loop.json``, ...) and a FIFO."""
-    d = tmp_path / "work"
-    d.mkdir()
+def folder(base):
+    """A copy of the inputs, with symlink loops (``loop``, ``loop.csv``, ``loop.json``, ...) and a FIFO.
+
+    Under a short path: messages echo at most 80 characters of a path (its start and its end), and
+    the expected words hold the whole path (pytest's own temporary folders run longer under xdist).
+    """
+    d = Path(tempfile.mkdtemp(prefix="fm"))
+    yield _filled(base, d)
+    shutil.rmtree(d, ignore_errors=True)
+
+
+def _filled(base, d):
     for f in base.iterdir():
         (d / f.name).write_bytes(f.read_bytes())
     for name in ("loop", "loop.csv", "loop.json", "loop.png", "loop.mcap"):

@@ -178,7 +178,7 @@ def test_bad_logs_are_refused_with_one_line(tmp_path, make, message):
 @pytest.mark.parametrize("args, message", [
     (["--mass", "0", "--inertia", "0.3", "--rho", "0", "0"], "--mass must be positive"),
     (["--mass", "6", "--inertia", "-1", "--rho", "0", "0"], "--inertia must be positive"),
-    (["--mass", "6", "--inertia", "0.3", "--rho", "0.1"], "--rho: expected 2 arguments"),
+    (["--mass", "6", "--inertia", "0.3", "--rho", "0.1"], "a planar log takes --rho RX RY (2 numbers, m)"),
     (["--mass", "6", "--inertia", "0.3", "--rho", "0.1", "x"], "invalid float value: 'x'"),
     (["--mass", "6", "--inertia", "0.3", "--rho", "0", "0", "--pose-noise", "-1", "0"], "--pose-noise must be"),
 ])

@@ -1,0 +1,175 @@
+"""The commands on spatial logs: ``calibrate`` of a 6-axis sensor, and ``identify-payload``.
+
+A spatial log (header ``t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz``) goes where a
+planar one goes: ``fmscal calibrate`` picks the case from the header. In 3D
+the calibration is the reference fit (smoothed inverse dynamics and least
+squares with the errors in variables compensated,
+:func:`fmscal.observers.inverse_dynamics_fit.fit_inverse_dynamics`); the
+floor and the online observers are not there yet, and the options that only
+they use are refused in one line.
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .cli_common import CliError, positive, strict
+
+__all__ = ["calibrate_spatial", "spatial_payload", "gravity_of", "SPATIAL_METHOD"]
+
+#: The method a spatial calibration records (the reference fit).
+SPATIAL_METHOD = "inverse-dynamics"
+_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
+
+
+def spatial_payload(mass, rho, inertia):
+    """The payload from ``--mass``, ``--rho X Y Z`` and ``--inertia IXX IYY IZZ IXY IXZ IYZ``, or a one-line error."""
+    from fmscal.plant import SpatialPayload
+    if rho is None or inertia is None or len(rho) != 3 or len(inertia) != 6:
+        raise CliError(f"a spatial log takes --rho X Y Z (3 numbers, m) and --inertia IXX IYY IZZ IXY IXZ IYZ "
+                       f"(6 numbers, kg m^2, about the centre of mass, sensor axes); got {len(rho or ())} and "
+                       f"{len(inertia or ())}")
+    return SpatialPayload(positive(mass, "--mass"), tuple(rho), tuple(inertia))
+
+
+def gravity_of(args):
+    """``--gravity GX GY GZ`` (m/s^2, pose frame) or the default, checked."""
+    from fmscal.plant.rigid_body import GRAVITY
+    g = args.gravity if getattr(args, "gravity", None) is not None else GRAVITY
+    if not (all(np.isfinite(v) for v in g) and 0 < np.linalg.norm(g) < 1e3):
+        raise CliError(f"--gravity must be three finite numbers in m/s^2 (the pose frame's gravity); got {list(g)}")
+    return tuple(float(v) for v in g)
+
+
+def _refuse_planar_options(args):
+    """One line for an option the spatial calibration does not take (yet)."""
+    given = [(args.observer is not None, "--observer", "the floor and the online observers are not there yet"),
+             (args.pose_noise is not None, "--pose-noise", "the noise is estimated from the log"),
+             (args.wrench_noise is not None, "--wrench-noise", "the noise is estimated from the log"),
+             (args.latency is not None, "--latency", "no latency is estimated or shifted in 3D yet"),
+             (args.plot is not None, "--plot", "no figure of a spatial calibration yet"),
+             (not args.offset, "--no-offset", "the offset is always estimated in 3D")]
+    for present, option, why in given:
+        if present:
+            raise CliError(f"{option} is not taken on a spatial log ({why}); the spatial calibration is the "
+                           f"reference fit of smoothed inverse dynamics")
+
+
+def calibrate_spatial(args):
+    """``fmscal calibrate`` on a spatial log: ``S`` (6x6) and the offset, with what the log did not determine."""
+    from fmscal.observers.inverse_dynamics_fit import fit_inverse_dynamics
+    from fmscal.plant import Calibration, file_sha256, read_log, read_truth
+    from .metrics import block_errors
+    payload = spatial_payload(args.mass, args.rho, args.inertia)
+    _refuse_planar_options(args)
+    gravity = gravity_of(args)
+    log = read_log(args.log)
+    for note in log.notes:
+        print(f"fmscal calibrate: note: {note}", file=sys.stderr)
+    truth = read_truth(args.truth) if args.truth else None
+    if truth is not None and truth.schedule.size != 6:
+        raise CliError(f"{args.truth} is the truth of a planar log; this log is spatial")
+    fit = fit_inverse_dynamics(log, payload, gravity=gravity)
+    for warning in fit.warnings:
+        print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
+    out = {"observer": SPATIAL_METHOD, "kind": "spatial", "S": fit.S_hat.tolist(), "S_std": fit.S_std.tolist(),
+           "b": fit.b.tolist(), "b_std": fit.b_std.tolist(), "converged": fit.converged,
+           "undetermined": [d.tolist() for d in fit.undetermined], "warnings": list(fit.warnings)}
+    if truth is not None:
+        out["E"], out["E_torque"], out["E_force"] = block_errors(fit.S_hat, truth.S_at(log.t[-1]))
+    saved = bool(args.save) and (fit.converged or args.force)
+    if saved:
+        Calibration(S=fit.S_hat, payload=payload, method=SPATIAL_METHOD, S_std=fit.S_std, b=fit.b, b_std=fit.b_std,
+                    log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
+                    forced=not fit.converged).save(args.save)
+    out["saved"] = saved
+    if args.json:
+        print(json.dumps(strict(out), allow_nan=False))
+    else:
+        _print(args, log, out)
+    if args.save and not saved:
+        raise CliError(f"did not save {args.save}: the log does not determine S in every direction; add --force "
+                       "to save it anyway (marked as forced)")
+
+
+def _print(args, log, out):
+    print(f"{Path(args.log).name}: spatial, {len(log)} samples, {log.duration:g} s, "
+          f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
+    S, S_std = np.array(out["S"]), np.array(out["S_std"])
+    print("S_hat +- one sigma (rows and columns tx ty tz fx fy fz):")
+    for i in range(6):
+        print("  " + "  ".join(f"{S[i, j]:+.4f}+-{S_std[i, j]:.0e}" for j in range(6)))
+    print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in
+                                            zip(_NAMES, out["b"], out["b_std"])))
+    print(f"converged: {'yes' if out['converged'] else 'no'}"
+          + (f" ({len(out['undetermined'])} direction(s) of the reading not determined)" if out["undetermined"] else ""))
+    if "E" in out:
+        print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g} (SI units); torque block {out['E_torque']:.4g}, "
+              f"force block {out['E_force']:.4g}")
+    if out["saved"]:
+        print(f"saved the calibration to {args.save}")
+
+
+def add_identify_payload(sub):
+    """Add ``fmscal identify-payload`` to the subcommands ``sub``."""
+    p = sub.add_parser("identify-payload", help="estimate the payload's mass properties and the offset, S known",
+                       description="With the calibration S known (the identity, or --calibration CAL.json), "
+                                   "estimate the sensor's offset, the payload's mass and centre of mass (static "
+                                   "poses suffice) and its inertia (motion needed) from a spatial log, with "
+                                   "one-sigma uncertainties, and say what the log did not determine.")
+    p.add_argument("log", metavar="LOG.csv")
+    p.add_argument("--calibration", metavar="CAL.json", help="a spatial calibration (default: S = I)")
+    p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
+                   help="gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
+    p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report the errors")
+    p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.set_defaults(func=cmd_identify_payload)
+
+
+def cmd_identify_payload(args):
+    """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log, ``S`` known."""
+    from fmscal.observers.payload_fit import INERTIA_NAMES, identify_payload
+    from fmscal.plant import Calibration, read_log, read_truth
+    gravity = gravity_of(args)
+    S = None
+    if args.calibration:
+        calibration = Calibration.load(args.calibration)
+        if calibration.size != 6:
+            raise CliError(f"{args.calibration} is a planar calibration (3x3); identify-payload takes a spatial one")
+        if calibration.forced:
+            print(f"fmscal identify-payload: warning: {args.calibration} was saved with --force", file=sys.stderr)
+        S = calibration.S
+    log = read_log(args.log)
+    if log.kind != "spatial":
+        raise CliError(f"{Path(args.log).name} is a planar log; identify-payload takes a spatial log "
+                       "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz)")
+    fit = identify_payload(log, S=S, gravity=gravity)
+    for warning in fit.warnings:
+        print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
+    out = fit.to_dict()
+    if args.truth:
+        truth = read_truth(args.truth)
+        p = truth.payload
+        out["mass_error"] = fit.mass - p.mass
+        out["rho_error"] = (fit.rho - np.array(p.rho)).tolist()
+        if truth.offset is not None:
+            out["b_error"] = (fit.b - truth.offset).tolist()
+    if args.json:
+        print(json.dumps(strict(out), allow_nan=False))
+        return
+    print(f"{Path(args.log).name}: {len(log)} samples, {log.duration:g} s; S "
+          f"{'from ' + args.calibration if args.calibration else '= I'}")
+    print(f"mass: {fit.mass:.5g} +- {fit.mass_std:.2g} kg")
+    print("centre of mass [mm]: " + "  ".join(f"{v * 1e3:+.3f} +- {s * 1e3:.2g}" for v, s in zip(fit.rho, fit.rho_std)))
+    if fit.inertia is None:
+        print("inertia: not determined by this log")
+    else:
+        print("inertia about the centre of mass [kg m^2]: " + "  ".join(
+            f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
+    print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
+    print(f"converged: {'yes' if fit.converged else 'no'}")
+    if args.truth:
+        print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
+              + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm")

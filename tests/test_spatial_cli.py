@@ -1,0 +1,94 @@
+"""The commands on spatial logs: simulate, calibrate, apply, identify-payload (issue 22)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fmscal.analysis.cli import main
+from fmscal.plant import read_truth
+
+TOOL = ["--mass", "1.2", "--rho", "0.01", "-0.005", "0.06", "--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4",
+        "1.5e-4"]
+
+
+@pytest.fixture(scope="module")
+def arm(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("spatial")
+    assert main(["simulate", "--scenario", "spatial-arm", "--duration", "20", "--seed", "2",
+                 "--out", str(folder / "arm.csv")]) == 0
+    return folder
+
+
+def _json(capsys):
+    return json.loads(capsys.readouterr().out)
+
+
+def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
+    assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--truth", str(arm / "arm.truth.json"), "--json",
+                 "--save", str(arm / "cal.json")]) == 0
+    out = _json(capsys)
+    assert out["kind"] == "spatial" and out["converged"] and out["saved"]
+    assert np.shape(out["S"]) == (6, 6) and np.shape(out["S_std"]) == (6, 6) and len(out["b"]) == len(out["b_std"]) == 6
+    assert out["E_torque"] < 0.02 and out["E_force"] < 0.02
+    truth = read_truth(arm / "arm.truth.json")
+    assert np.abs(np.array(out["b"]) - truth.offset).max() < 0.02 * np.abs(truth.offset).max()
+    assert main(["apply", str(arm / "cal.json"), str(arm / "arm.csv"), "--out", str(arm / "w.csv"), *TOOL]) == 0
+    header = (arm / "w.csv").read_text().splitlines()[0]
+    assert header == "t,tx,ty,tz,fx,fy,fz"
+
+
+def test_identify_payload_with_the_saved_calibration(arm, capsys):
+    if not (arm / "cal.json").exists():
+        assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--save", str(arm / "cal.json")]) == 0
+        capsys.readouterr()
+    assert main(["identify-payload", str(arm / "arm.csv"), "--calibration", str(arm / "cal.json"), "--json"]) == 0
+    out = _json(capsys)
+    assert abs(out["mass"] - 1.2) < 0.012
+    assert np.abs(np.array(out["rho"]) - [0.01, -0.005, 0.06]).max() < 2e-3
+    assert out["inertia"] is not None and out["converged"]
+
+
+def test_static_poses_are_not_saved_as_a_calibration(tmp_path, capsys):
+    log = tmp_path / "static.csv"
+    assert main(["simulate", "--scenario", "spatial-static", "--duration", "40", "--out", str(log)]) == 0
+    assert main(["calibrate", str(log), *TOOL, "--save", str(tmp_path / "cal.json")]) == 2
+    err = capsys.readouterr().err
+    assert "angular acceleration" in err and "did not save" in err and not (tmp_path / "cal.json").exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--mass", "1.2", "--rho", "0.2", "0.25", "--inertia", "0.75"], "a spatial log takes --rho X Y Z"),
+    ([*TOOL, "--plot", "{d}/p.png"], "--plot is not taken on a spatial log"),
+    ([*TOOL, "--observer", "ekf"], "--observer is not taken on a spatial log"),
+    ([*TOOL, "--gravity", "0", "0", "inf"], "--gravity must be three finite numbers"),
+    (["--mass", "1.2", "--rho", "0", "0", "0.06", "--inertia", "1", "1", "3", "0", "0", "0"], "triangle inequality"),
+])
+def test_a_wrong_flag_on_a_spatial_log_is_one_line(arm, capsys, args, message):
+    assert main(["calibrate", str(arm / "arm.csv"), *[a.format(d=arm) for a in args]]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_spatial_flags_on_a_planar_log_are_one_line(tmp_path, capsys):
+    log = tmp_path / "paper.csv"
+    assert main(["simulate", "--duration", "2", "--out", str(log)]) == 0
+    assert main(["calibrate", str(log), *TOOL]) == 2
+    assert "a planar log takes --rho RX RY" in capsys.readouterr().err
+    assert main(["identify-payload", str(log)]) == 2
+    assert "identify-payload takes a spatial log" in capsys.readouterr().err
+
+
+def test_a_quaternion_off_unit_norm_is_one_line(arm, tmp_path, capsys):
+    lines = (arm / "arm.csv").read_text().splitlines()
+    cells = lines[5].split(",")
+    cells[1] = repr(float(cells[1]) * 1.1)
+    lines[5] = ",".join(cells)
+    (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", str(tmp_path / "bad.csv"), *TOOL]) == 2
+    assert "expected a unit quaternion" in capsys.readouterr().err
+
+
+def test_planar_scenario_options_are_refused_for_a_spatial_scenario(tmp_path, capsys):
+    assert main(["simulate", "--scenario", "spatial-weak", "--rho", "0.1", "0.2", "--out", str(tmp_path / "x.csv")]) == 2
+    assert "--rho is for the planar scenarios" in capsys.readouterr().err
