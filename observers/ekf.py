@@ -15,7 +15,7 @@ from fmscal.plant._compile import BufferedCall, compile_function
 from fmscal.plant.errors import FmscalError
 
 from .base import Estimate, Observer, log_inputs
-from .ekf_step import OUTPUTS, PARAMS, model, state_layout, whole_step
+from .ekf_step import PARAMS, output_layout, model, state_layout, whole_step
 from .eiv import EivCompensation
 from .max_likelihood import _pack, _unpack
 from .noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
@@ -301,7 +301,7 @@ class AugmentedEKF(Observer):
         with progress_bar(len(U), self.name) as bar:
             z, (Y,) = chunks.run(self._packed(), inputs, healthy=self._healthy_outputs, outputs=True, states=False,
                                  progress=bar.update)
-        out = OUTPUTS(self.n_cols)
+        out = output_layout(self.n_cols)
         calibration = np.vstack([self._s_out, out.part(Y, "s")])
         x = np.vstack([self._kf.x[0:6, 0], out.part(Y, "x")])
         q = np.concatenate([self._q_history[:1], out.part(Y, "q")[:, 0]])
@@ -341,7 +341,7 @@ class AugmentedEKF(Observer):
 
     def _healthy_outputs(self, Y, k0):
         """Leading rows of the compiled step's outputs that :meth:`_healthy` would pass."""
-        out = OUTPUTS(self.n_cols)
+        out = output_layout(self.n_cols)
         with np.errstate(invalid="ignore"):
             return self._healthy_rows(Y, out.part(Y, "s"), k0, bad=~(out.part(Y, "P_min")[:, 0] > 0))
 

@@ -26,7 +26,7 @@ from .max_likelihood import _cholesky_solve, _layout as _eiv_layout, _pack, _unp
 from .noise_level import level_update
 from .state import INPUT, StateLayout
 
-__all__ = ["model", "whole_step", "state_layout", "PARAMS", "OUTPUTS"]
+__all__ = ["model", "whole_step", "state_layout", "output_layout", "PARAMS"]
 
 #: Measured states ``[theta, X, Y]`` (``H`` selects them).
 POSE = [0, 2, 4]
@@ -34,10 +34,13 @@ POSE = [0, 2, 4]
 #: variances, those the errors-in-variables filter holds (:attr:`observers.eiv.EivCompensation.state`),
 #: the level's settings (:attr:`observers.noise_level.NoiseLevel.settings`) and whether it adapts (1 or 0).
 PARAMS = StateLayout(("R", 3), ("var_w", 3), ("eiv_q", 5), ("level", 7), ("adapt", 1))
-#: Per-step outputs of :func:`whole_step`: the motion, the reported ``[S | c]`` (row order), the
-#: intensity after the step, and ``sum(P)``, ``min(diag(P))`` for the health test.
-OUTPUTS = lambda n: StateLayout(("x", 6), ("s", 3 * n), ("q", 1), ("P_sum", 1), ("P_min", 1))   # noqa: E731
 _CHUNK = 1000
+
+
+def output_layout(n):
+    """The per-step outputs of :func:`whole_step`: the motion ``x`` (6), the reported ``[S | c]`` (``3n``, row
+    order), the intensity ``q`` after the step (1/s), and ``sum(P)``, ``min(diag(P))`` for the health test."""
+    return StateLayout(("x", 6), ("s", 3 * n), ("q", 1), ("P_sum", 1), ("P_min", 1))
 
 
 def state_layout(n, eiv):
@@ -102,14 +105,14 @@ def model(payload, offset):
 
 
 def _step(z, u_prev, u, dt, p, payload, n, eiv):
-    """One sample of the whole filter (module docstring), on casadi symbols.
+    """One sample of the whole filter (module docstring; the motion of eq. (1)), on casadi symbols.
 
     ``z`` is packed by :func:`state_layout`, ``u_prev`` and ``u`` are the
     samples at the step's ends (:data:`observers.state.INPUT`), ``dt`` the
     step (s), ``p`` the parameters (:data:`PARAMS`). Returns ``z`` after the
-    sample and the outputs (:func:`OUTPUTS`).
+    sample and the outputs (:func:`output_layout`).
     """
-    d, m = 6 + 3 * n, 3 * n
+    d = 6 + 3 * n
     L = state_layout(n, eiv)
     st, pp = L.unpack(z), PARAMS.unpack(p)
     a, b = INPUT.unpack(u_prev), INPUT.unpack(u)
@@ -144,7 +147,7 @@ def _step(z, u_prev, u, dt, p, payload, n, eiv):
     for i in range(1, d):
         P_min = ca.fmin(P_min, P_new[i, i])
     P_sum = 2 * ca.sum1(P_packed) - ca.sum1(ca.diag(P_new))
-    out = OUTPUTS(n).pack(o, x=x_new[:6], s=s, q=q, P_sum=P_sum, P_min=P_min)
+    out = output_layout(n).pack(o, x=x_new[:6], s=s, q=q, P_sum=P_sum, P_min=P_min)
     return L.pack(o, **parts), out
 
 

@@ -77,7 +77,7 @@ def test_compiled_run_stops_where_the_filter_diverges():
     """The health test runs on the compiled path too: readings that jump to 1e9 at sample 1200 throw S_hat past
     the divergence bound there; both paths stop at the same sample and report the run diverged. A covariance
     that is not finite or not positive on its diagonal stops it as well."""
-    from fmscal.observers.ekf_step import OUTPUTS
+    from fmscal.observers.ekf_step import output_layout
     sc = plant.get_scenario("paper").with_(duration=1.5)
     log, truth, _ = sc.generate(0)
     w_hat = log.w_hat.copy()
@@ -87,7 +87,7 @@ def test_compiled_run_stops_where_the_filter_diverges():
     fast, slow = ekf.run(bad, truth.S0), ekf.run(bad, truth.S0, compiled=False)
     assert fast.diverged and slow.diverged and fast.S_std is None
     assert len(fast.t) == len(slow.t) == 1201 and np.all(np.isfinite(fast.S_hat_history))
-    out = OUTPUTS(ekf.n_cols)
+    out = output_layout(ekf.n_cols)
     Y = np.tile(out.pack(None, x=np.zeros(6), s=np.eye(3).ravel(), q=0.0, P_sum=1.0, P_min=1e-6), (5, 1))
     assert ekf._healthy_outputs(Y, 2000) == 5
     for column, value in (("P_min", 0.0), ("P_min", np.nan), ("P_sum", np.inf)):
