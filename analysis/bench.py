@@ -32,6 +32,7 @@ from fmscal.observers import FLOOR_METHOD, METHODS, AugmentedEKF, RecursiveObser
 from fmscal.plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
 from fmscal.plant.excitation import PaperWrench
 
+from .comparison import run_case
 from .reproduce import REPRODUCED_OBSERVERS, REPRODUCED_SCENARIOS, reproduce
 from .sweep import SWEEP_OBSERVERS, sweep
 
@@ -218,7 +219,8 @@ def run_bench(settings=None, progress=True):
         ``ekf_filter_run_s`` (``eiv=False``), ``floor_run_s``: whole runs on one log; ``ekf_us`` (compiled),
         ``ekf_numpy_us`` (filterpy), ``bare_filterpy_us``, ``buffer_call_us``, ``trigger_us``, ``ordinary_call_us``),
         ``simulator`` (``compiled_us``, ``numpy_us``), ``reproduce``
-        and ``sweep`` (``wall_s``, ``numpy_estimate_s``, ``steps``).
+        and ``sweep`` (``wall_s``, ``numpy_estimate_s``, ``case_cpu_s`` (one case's processor time in
+        this process), ``runs``, ``diverged``).
     """
     s = settings or BenchSettings()
     observers = _observer_speeds(s)
@@ -235,11 +237,16 @@ def run_bench(settings=None, progress=True):
         steps_est += sum(n * _numpy_us(name, observers, ekf) for name in REPRODUCED_OBSERVERS)
     cores = os.cpu_count() or 1
     repro = {"wall_s": wall, "numpy_estimate_s": steps_est * 1e-6 / cores}     # reproduce runs on every core
+    # one case's processor time in this process: what the sweep costs on cores of its own, the machine's load aside
+    run_case("paper", s.sweep_seeds, SWEEP_OBSERVERS, min(s.sweep_s, 2.0))                 # built once
+    cpu = time.process_time()
+    run_case("paper", s.sweep_seeds, SWEEP_OBSERVERS, s.sweep_s)
+    case_cpu = time.process_time() - cpu
     wall, table = _timed(lambda: sweep(["paper"], s.sweep_seeds, observers=SWEEP_OBSERVERS, duration=s.sweep_s,
                                        n_jobs=-1, progress=progress))
     n = s.sweep_s / get_scenario("paper").dt
     per_case = n * (simulator["numpy_us"] + sum(_numpy_us(name, observers, ekf) for name in SWEEP_OBSERVERS))
-    sweep_out = {"wall_s": wall, "numpy_estimate_s": s.sweep_seeds * per_case * 1e-6 / cores,
+    sweep_out = {"wall_s": wall, "numpy_estimate_s": s.sweep_seeds * per_case * 1e-6 / cores, "case_cpu_s": case_cpu,
                  "runs": len(table), "diverged": int(table["diverged"].sum())}
     return {"machine": machine_description(), "settings": s.__dict__, "observers": observers, "ekf": ekf,
             "simulator": simulator, "reproduce": repro, "sweep": sweep_out}
@@ -297,8 +304,11 @@ def bench_markdown(report):
     w = report["sweep"]
     full = s["sweep_seeds"] >= 100 and s["sweep_s"] >= 100
     verdict = _verdict(w["wall_s"] < TARGETS["sweep_s"]) if full else "not the full job"
+    cores = report["machine"]["cores"] or 1
     lines.append(f"| sweep: {s['sweep_seeds']} seeds x {s['sweep_s']:g} s x {', '.join(SWEEP_OBSERVERS)} and the floor "
-                 f"({w['runs']} runs, {w['diverged']} diverged), every core | {w['wall_s']:.1f} s | "
+                 f"({w['runs']} runs, {w['diverged']} diverged), every core; one case's processor time "
+                 f"{w['case_cpu_s']:.2f} s, x {s['sweep_seeds']} / {cores} cores = "
+                 f"{w['case_cpu_s'] * s['sweep_seeds'] / cores:.0f} s | {w['wall_s']:.1f} s | "
                  f"{w['numpy_estimate_s']:.0f} s (estimated) | {w['numpy_estimate_s'] / w['wall_s']:.0f}x | "
                  f"< {TARGETS['sweep_s']:g} s: {verdict} |")
     lines += ["", "Plain numpy: the same transition evaluated in numpy one step at a time "
