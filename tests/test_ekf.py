@@ -73,6 +73,24 @@ def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
     assert raised.any() if noise_factor < 1 else not raised.any()     # the level is exercised, and only there
 
 
+def test_the_whole_step_runs_on_casadis_virtual_machine_too(monkeypatch):
+    """Without a C compiler the whole step runs on casadi's virtual machine, with the same numbers."""
+    from fmscal.observers import ekf_step
+    monkeypatch.setenv("FMSCAL_COMPILER", "none")
+    ekf_step.whole_step.cache_clear()
+    try:
+        log, truth, _ = plant.get_scenario("paper").with_(duration=0.5).generate(0)
+        ekf = AugmentedEKF(plant.PAPER_PAYLOAD, noise=truth.noise)
+        fast = ekf.run(log, truth.S0)
+        assert ekf_step.whole_step(plant.PAPER_PAYLOAD, 3, True).fun.class_name() != "External"
+        slow = ekf.run(log, truth.S0, compiled=False)
+    finally:
+        ekf_step.whole_step.cache_clear()
+    early = int(round(0.1 / log.dt))
+    _close(fast.S_hat_history[early:], slow.S_hat_history[early:])
+    _close(fast.S_std, slow.S_std)
+
+
 def test_compiled_run_stops_where_the_filter_diverges():
     """The health test runs on the compiled path too: readings that jump to 1e9 at sample 1200 throw S_hat past
     the divergence bound there; both paths stop at the same sample and report the run diverged. A covariance
