@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant import Log, Payload
-from fmscal.plant._compile import ChunkedSteps
+from fmscal.plant._compile import ChunkedSteps, compiler
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.sensor import check_calibration
 
@@ -38,6 +38,8 @@ from .state import INPUT
 __all__ = ["Observer", "RecursiveObserver", "Estimate", "log_inputs"]
 
 _CHUNK = 1000          # steps per compiled call
+_CHUNKED = {}          # a step function (serialized) -> its ChunkedSteps, this process: one build per setting
+_CHUNKED_MAX = 64
 
 
 @dataclass
@@ -398,6 +400,11 @@ class RecursiveObserver(Observer):
             ident = self.name.replace("-", "_")
             step = ca.Function(f"{ident}_step", [z, u_prev, u, dt],
                                [ca.densify(self._transition(z, u_prev, u, dt))])
-            self._chunks = ChunkedSteps(step, _CHUNK)
+            key = (compiler(), step.serialize())      # observers of the same settings share one build
+            if key not in _CHUNKED:
+                if len(_CHUNKED) >= _CHUNKED_MAX:
+                    _CHUNKED.clear()
+                _CHUNKED[key] = ChunkedSteps(step, _CHUNK)
+            self._chunks = _CHUNKED[key]
             self._build_time = time.perf_counter() - start       # one-off: not the run's cost
         return self._chunks
