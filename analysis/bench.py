@@ -8,9 +8,12 @@ best of two or three repeats (noise only ever adds time):
   step generated as C and called through buffers) against its readable path
   (``run(compiled=False)``: the same transition evaluated in numpy, one step
   at a time), on the paper's scenario;
-- the EKF's step against filterpy's bare ``predict`` + ``update`` with
-  matrices of the same sizes, and the casadi call through ``Function.buffer()``
-  against the same function called the ordinary way;
+- the whole run of the EKF (compiled, as by default) and of the
+  maximum-likelihood floor against the adaptive default's on the same log;
+  the EKF's readable path (filterpy's ``ExtendedKalmanFilter``) against
+  filterpy's bare ``predict`` + ``update`` with matrices of the same sizes, and
+  the casadi call through ``Function.buffer()`` against the same function
+  called the ordinary way;
 - the simulator's compiled RK4 against its numpy loop;
 - the wall time of ``fmscal reproduce`` and of a Monte Carlo sweep, beside
   the time the readable paths would take for the same steps, estimated from
@@ -25,18 +28,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmscal.observers import METHODS, AugmentedEKF, RecursiveObserver, make_observer
+from fmscal.observers import FLOOR_METHOD, METHODS, AugmentedEKF, RecursiveObserver, make_observer
 from fmscal.plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
 from fmscal.plant.excitation import PaperWrench
 
+from .comparison import run_case
 from .reproduce import REPRODUCED_OBSERVERS, REPRODUCED_SCENARIOS, reproduce
 from .sweep import SWEEP_OBSERVERS, sweep
 
 __all__ = ["BenchSettings", "run_bench", "bench_markdown", "machine_description", "TARGETS"]
 
-#: The targets of issue 7, checked by :func:`bench_markdown`.
-TARGETS = {"compiled_over_numpy": 10.0, "steps_per_s_stretch": 1e6, "ekf_over_bare_filterpy": 2.0,
-           "reproduce_s": 60.0, "sweep_s": 600.0}
+#: The targets of issues 7 and 25, checked by :func:`bench_markdown`: run times as ratios to the
+#: adaptive default's on the same log, wall times in s.
+TARGETS = {"compiled_over_numpy": 10.0, "steps_per_s_stretch": 1e6, "ekf_over_adaptive": 4.0,
+           "floor_over_adaptive": 3.0, "reproduce_s": 60.0, "sweep_s": 90.0}
+#: The method every run-time ratio is taken against.
+_REFERENCE = "adaptive"
 #: Observers whose compiled path is benchmarked: every registered recursive observer.
 _COMPILED = tuple(m.name for m in METHODS.values() if issubclass(m.cls, RecursiveObserver))
 
@@ -52,7 +59,7 @@ class BenchSettings:
     numpy_s : float
         Log length for the readable (numpy) paths.
     ekf_s : float
-        Log length for the EKF and bare filterpy.
+        Log length for the EKF's readable (filterpy) path and bare filterpy.
     reproduce_scale : float
         Fraction of ``fmscal reproduce``'s scenario lengths (1: the real job).
     sweep_seeds : int
@@ -135,11 +142,23 @@ def _bare_filterpy_us(n):
 
 
 def _ekf_speeds(s):
-    log, truth = _log(s.ekf_s)
-    plain_filter = AugmentedEKF(PAPER_PAYLOAD, noise=truth.noise, eiv=False)     # the filter of [3]
-    filter_only = _best(lambda: plain_filter.run(log, truth.S0), 2)
-    ekf = AugmentedEKF(PAPER_PAYLOAD, noise=truth.noise)                          # and its compensation
-    elapsed = _best(lambda: ekf.run(log, truth.S0), 2)
+    """The EKF and the floor: whole runs against the adaptive default's (best of 3, the same log, interleaved),
+    the readable path's step against bare filterpy, and the casadi call through buffers."""
+    log, truth = _log(s.fast_s)
+    runs = {"reference": make_observer(_REFERENCE, PAPER_PAYLOAD),
+            "ekf_default": AugmentedEKF(PAPER_PAYLOAD, noise=truth.noise),
+            "ekf_filter": AugmentedEKF(PAPER_PAYLOAD, noise=truth.noise, eiv=False),     # the filter of [3]
+            "floor": make_observer(FLOOR_METHOD, PAPER_PAYLOAD, truth.noise)}
+    for obs in runs.values():
+        obs.run(log.head(10), truth.S0 if obs.online else None)                      # built once
+    times = {name: [] for name in runs}
+    for _ in range(3):            # interleaved: a slow spell of the shared machine slows every method alike
+        for name, obs in runs.items():
+            times[name].append(_timed(lambda: obs.run(log, truth.S0 if obs.online else None))[0])
+    out = {f"{name}_run_s": min(t) for name, t in times.items()}
+    slow_log, _ = _log(s.ekf_s)
+    ekf = runs["ekf_default"]
+    readable = _best(lambda: ekf.run(slow_log, truth.S0, compiled=False), 2)
     xs = np.concatenate([np.zeros(6), truth.S0.ravel()])
     w0, w1 = log.w_hat[0], log.w_hat[1]
     calls = 20000 if s.ekf_s >= 10 else 2000
@@ -149,14 +168,14 @@ def _ekf_speeds(s):
     var_w, P_S, q_dt = np.ones(3), np.eye(9).ravel(), 1e-8
 
     def ordinary():
-        out = fun(xs, w0, w1, log.dt, var_w, P_S, q_dt)
-        return [np.asarray(o) for o in out]
+        res = fun(xs, w0, w1, log.dt, var_w, P_S, q_dt)
+        return [np.asarray(o) for o in res]
 
     plain = _best(lambda: [ordinary() for _ in range(calls // 10)], 2)
-    return {"ekf_us": 1e6 * elapsed / len(log), "ekf_filter_us": 1e6 * filter_only / len(log),
-            "bare_filterpy_us": _bare_filterpy_us(len(log)),
-            "buffer_call_us": 1e6 * buffered / calls, "trigger_us": 1e6 * trigger / calls,
-            "ordinary_call_us": 1e6 * plain / (calls // 10)}
+    out.update({"ekf_us": 1e6 * out["ekf_default_run_s"] / len(log), "ekf_numpy_us": 1e6 * readable / len(slow_log),
+                "bare_filterpy_us": _bare_filterpy_us(len(slow_log)), "buffer_call_us": 1e6 * buffered / calls,
+                "trigger_us": 1e6 * trigger / calls, "ordinary_call_us": 1e6 * plain / (calls // 10)})
+    return out
 
 
 def _simulator_speeds(s):
@@ -170,7 +189,7 @@ def _simulator_speeds(s):
 
 
 def _numpy_us(name, observers, ekf):
-    """Per-step cost of a method's readable path (the EKF has one path).
+    """Per-step cost of a method's readable path (the EKF's: filterpy's ``ExtendedKalmanFilter``).
 
     The maximum-likelihood floor has no plain path measured here: it counts
     0, so the estimates understate the plain time (the report says so).
@@ -178,7 +197,7 @@ def _numpy_us(name, observers, ekf):
     if name in observers:
         return observers[name]["numpy_us"]
     if name == AugmentedEKF.name:
-        return ekf["ekf_us"]
+        return ekf["ekf_numpy_us"]
     return 0.0
 
 
@@ -188,7 +207,7 @@ def run_bench(settings=None, progress=True):
     Parameters
     ----------
     settings : BenchSettings, optional
-        Default: the full benchmark (about 5 minutes on 2 cores).
+        Default: the full benchmark (a few minutes on 2 cores).
     progress : bool
         Progress bars for the reproduction and the sweep.
 
@@ -196,10 +215,12 @@ def run_bench(settings=None, progress=True):
     -------
     dict
         ``machine``, ``settings``, ``observers`` (``{name: {first_run_us,
-        compiled_us, numpy_us}}``), ``ekf`` (``ekf_us``, ``ekf_filter_us``
-        (``eiv=False``), ``bare_filterpy_us``, ``buffer_call_us``, ``trigger_us``, ``ordinary_call_us``),
+        compiled_us, numpy_us}}``), ``ekf`` (``reference_run_s`` (the adaptive default), ``ekf_default_run_s``,
+        ``ekf_filter_run_s`` (``eiv=False``), ``floor_run_s``: whole runs on one log; ``ekf_us`` (compiled),
+        ``ekf_numpy_us`` (filterpy), ``bare_filterpy_us``, ``buffer_call_us``, ``trigger_us``, ``ordinary_call_us``),
         ``simulator`` (``compiled_us``, ``numpy_us``), ``reproduce``
-        and ``sweep`` (``wall_s``, ``numpy_estimate_s``, ``steps``).
+        and ``sweep`` (``wall_s``, ``numpy_estimate_s``, ``case_cpu_s`` (one case's processor time in
+        this process), ``runs``, ``diverged``).
     """
     s = settings or BenchSettings()
     observers = _observer_speeds(s)
@@ -216,11 +237,16 @@ def run_bench(settings=None, progress=True):
         steps_est += sum(n * _numpy_us(name, observers, ekf) for name in REPRODUCED_OBSERVERS)
     cores = os.cpu_count() or 1
     repro = {"wall_s": wall, "numpy_estimate_s": steps_est * 1e-6 / cores}     # reproduce runs on every core
+    # one case's processor time in this process: what the sweep costs on cores of its own, the machine's load aside
+    run_case("paper", s.sweep_seeds, SWEEP_OBSERVERS, min(s.sweep_s, 2.0))                 # built once
+    cpu = time.process_time()
+    run_case("paper", s.sweep_seeds, SWEEP_OBSERVERS, s.sweep_s)
+    case_cpu = time.process_time() - cpu
     wall, table = _timed(lambda: sweep(["paper"], s.sweep_seeds, observers=SWEEP_OBSERVERS, duration=s.sweep_s,
                                        n_jobs=-1, progress=progress))
     n = s.sweep_s / get_scenario("paper").dt
     per_case = n * (simulator["numpy_us"] + sum(_numpy_us(name, observers, ekf) for name in SWEEP_OBSERVERS))
-    sweep_out = {"wall_s": wall, "numpy_estimate_s": s.sweep_seeds * per_case * 1e-6 / cores,
+    sweep_out = {"wall_s": wall, "numpy_estimate_s": s.sweep_seeds * per_case * 1e-6 / cores, "case_cpu_s": case_cpu,
                  "runs": len(table), "diverged": int(table["diverged"].sum())}
     return {"machine": machine_description(), "settings": s.__dict__, "observers": observers, "ekf": ekf,
             "simulator": simulator, "reproduce": repro, "sweep": sweep_out}
@@ -247,14 +273,20 @@ def bench_markdown(report):
                      f">= {TARGETS['compiled_over_numpy']:g}x: {_verdict(ratio >= TARGETS['compiled_over_numpy'])}; "
                      f"1e6 steps/s: {_verdict(steps >= TARGETS['steps_per_s_stretch'])} |")
     e = report["ekf"]
-    ratio = e["ekf_filter_us"] / e["bare_filterpy_us"]
-    lines.append(f"| `ekf` step ({s['ekf_s']:g} s), the filter of [3] (`eiv=False`), against filterpy's bare "
-                 f"predict + update | {e['ekf_filter_us']:.3g} us | {e['bare_filterpy_us']:.3g} us (bare filterpy) | "
-                 f"{ratio:.2f}x | "
-                 f"<= {TARGETS['ekf_over_bare_filterpy']:g}x: {_verdict(ratio <= TARGETS['ekf_over_bare_filterpy'])} |")
-    lines.append(f"| `ekf` step ({s['ekf_s']:g} s) as it runs by default, with the errors-in-variables compensation "
-                 f"(`observers.eiv`) | {e['ekf_us']:.3g} us | {e['bare_filterpy_us']:.3g} us (bare filterpy) | "
-                 f"{e['ekf_us'] / e['bare_filterpy_us']:.2f}x | - |")
+    ref = e["reference_run_s"]
+    for key, label, target in (
+            ("ekf_default_run_s", "`ekf` run as by default (compiled, with the errors-in-variables compensation)",
+             "ekf_over_adaptive"),
+            ("ekf_filter_run_s", "`ekf` run, the filter of [3] (`eiv=False`, compiled)", None),
+            ("floor_run_s", f"`{FLOOR_METHOD}` run (the floor)", "floor_over_adaptive")):
+        ratio = e[key] / ref
+        verdict = f"<= {TARGETS[target]:g}x: {_verdict(ratio <= TARGETS[target])}" if target else "-"
+        lines.append(f"| {label}, against the `{_REFERENCE}` default's run on the same log ({s['fast_s']:g} s) | "
+                     f"{e[key]:.3g} s | {ref:.3g} s (`{_REFERENCE}`) | {ratio:.2f}x | {verdict} |")
+    lines.append(f"| `ekf` step: compiled against its readable path (`compiled=False`, filterpy's "
+                 f"`ExtendedKalmanFilter`, {s['ekf_s']:g} s); filterpy's bare predict + update "
+                 f"{e['bare_filterpy_us']:.3g} us | {e['ekf_us']:.3g} us | {e['ekf_numpy_us']:.3g} us | "
+                 f"{e['ekf_numpy_us'] / e['ekf_us']:.0f}x | - |")
     lines.append(f"| casadi `x_next, F, Q` of the EKF: `Function.buffer()` against an ordinary call | "
                  f"{e['buffer_call_us']:.3g} us with the copies in and out ({e['trigger_us']:.3g} us the call "
                  f"alone) | {e['ordinary_call_us']:.3g} us (ordinary call) | "
@@ -272,14 +304,18 @@ def bench_markdown(report):
     w = report["sweep"]
     full = s["sweep_seeds"] >= 100 and s["sweep_s"] >= 100
     verdict = _verdict(w["wall_s"] < TARGETS["sweep_s"]) if full else "not the full job"
-    lines.append(f"| sweep: {s['sweep_seeds']} seeds x {s['sweep_s']:g} s x {', '.join(SWEEP_OBSERVERS)} "
-                 f"({w['runs']} runs, {w['diverged']} diverged), every core | {w['wall_s']:.1f} s | "
+    cores = report["machine"]["cores"] or 1
+    lines.append(f"| sweep: {s['sweep_seeds']} seeds x {s['sweep_s']:g} s x {', '.join(SWEEP_OBSERVERS)} and the floor "
+                 f"({w['runs']} runs, {w['diverged']} diverged), every core; one case's processor time "
+                 f"{w['case_cpu_s']:.2f} s, x {s['sweep_seeds']} / {cores} cores = "
+                 f"{w['case_cpu_s'] * s['sweep_seeds'] / cores:.0f} s | {w['wall_s']:.1f} s | "
                  f"{w['numpy_estimate_s']:.0f} s (estimated) | {w['numpy_estimate_s'] / w['wall_s']:.0f}x | "
                  f"< {TARGETS['sweep_s']:g} s: {verdict} |")
     lines += ["", "Plain numpy: the same transition evaluated in numpy one step at a time "
-              "(`run(compiled=False)`, `integrate(compiled=False)`). The EKF is measured against filterpy "
-              "alone, with matrices of the same sizes. Estimated: the steps of the job times the per-step "
-              "costs of the plain paths measured above (the EKF at its own cost: it has one path; the "
+              "(`run(compiled=False)`, `integrate(compiled=False)`; the EKF's: filterpy's `ExtendedKalmanFilter` "
+              "with the casadi model). Run ratios: whole runs (`Observer.run`) on the same log in this process, "
+              "interleaved, the best of 3 each. Estimated: the steps of the job times the per-step "
+              "costs of the plain paths measured above (the "
               "maximum-likelihood floor, which `reproduce` and every sweep case also run, is left out, "
               "so the estimate understates), divided by the cores (`reproduce` and the sweep run on every core). "
               "The first-run figure includes building the observer "

@@ -26,7 +26,7 @@ import numpy as np
 
 from fmscal.plant import Log, Payload
 from fmscal.plant._checks import as_bool
-from fmscal.plant._compile import ChunkedSteps
+from fmscal.plant._compile import ChunkedSteps, compiler
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.sensor import check_calibration
 
@@ -43,6 +43,8 @@ __all__ = ["Observer", "RecursiveObserver", "Estimate", "log_inputs", "MAX_S0"]
 MAX_S0 = 1e9
 
 _CHUNK = 1000          # steps per compiled call
+_CHUNKED = {}          # a step function (serialized) -> its ChunkedSteps, this process: one build per setting
+_CHUNKED_MAX = 64
 
 
 @dataclass
@@ -135,7 +137,7 @@ class Observer:
         self._u_prev = None
 
     # --- the whole log --------------------------------------------------------
-    def run(self, log, S0=None):
+    def run(self, log, S0=None, compiled=True):
         """Run over a whole log.
 
         Parameters
@@ -144,11 +146,17 @@ class Observer:
         S0 : array_like, shape (3, 3), optional
             Initial estimate of ``S`` for an online method (default the
             identity). An offline method needs none and refuses one.
+        compiled : bool
+            True (default): the method's step compiled by casadi and run in
+            chunks, where it has one (the recursive observers, the EKF, the
+            floor); False: its readable path, step by step (numpy; the EKF's
+            on filterpy). Results agree to rounding. Least squares has one path.
 
         Returns
         -------
         ObserverResult
         """
+        self._use_compiled = bool(compiled)
         if not isinstance(log, Log):
             raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
         if S0 is not None and not self.online:
@@ -276,6 +284,32 @@ class Observer:
             return True
         return float(np.abs(calibration.reshape(3, self.n_cols)[:, :3]).max()) < self._bound
 
+    def _healthy_rows(self, values, calibration, k0, bad=None):
+        """Leading rows that :meth:`_healthy` would pass, for a chunk of a compiled run.
+
+        Parameters
+        ----------
+        values : ndarray, shape (M, k)
+            Every number of each row, all of which must be finite.
+        calibration : ndarray, shape (M, 3 n)
+            ``[S_hat | c_hat]`` of each row (row order), within the divergence bound from the grace on.
+        k0 : int
+            The rows are steps ``k0 + 1`` on.
+        bad : ndarray of bool, shape (M,), optional
+            Rows a method's own test fails.
+
+        Returns
+        -------
+        int
+        """
+        S = calibration.reshape(len(calibration), 3, self.n_cols)[:, :, :3].reshape(len(calibration), 9)
+        steps = k0 + 1 + np.arange(len(calibration))
+        with np.errstate(invalid="ignore"):
+            bad = (~np.all(np.isfinite(values), axis=1) | ((np.max(np.abs(S), axis=1) >= self._bound)
+                                                           & (steps >= self._grace))
+                   | (False if bad is None else bad))
+        return int(np.argmax(bad)) if bad.any() else len(calibration)
+
     # --- shared ---------------------------------------------------------------------
     def _augmented(self, o, w_hat):
         """The reading the model multiplies: ``w_hat``, or ``[w_hat, 1]`` with the offset."""
@@ -351,25 +385,6 @@ class RecursiveObserver(Observer):
         raise NotImplementedError
 
     # --- Observer --------------------------------------------------------------------
-    def run(self, log, S0=None, compiled=True):
-        """Run over a whole log (:meth:`Observer.run`).
-
-        Parameters
-        ----------
-        log : plant.Log
-        S0 : array_like, shape (3, 3), optional
-            Initial estimate of ``S``; default the identity.
-        compiled : bool
-            True (default): the transition compiled by casadi; False: the
-            same transition in numpy, step by step. Results agree to 1e-9.
-
-        Returns
-        -------
-        ObserverResult
-        """
-        self._use_compiled = bool(compiled)
-        return super().run(log, S0)
-
     def _estimate(self, log, S0):
         if not getattr(self, "_use_compiled", True):
             return super()._estimate(log, S0)
@@ -398,12 +413,7 @@ class RecursiveObserver(Observer):
 
     def _healthy_prefix(self, Z, k0):
         """Leading rows of ``Z`` (steps ``k0 + 1`` on) that :meth:`Observer._healthy` would pass."""
-        S = self.state.part(Z, "S").reshape(len(Z), 3, self.n_cols)[:, :, :3].reshape(len(Z), 9)
-        steps = k0 + 1 + np.arange(len(Z))
-        with np.errstate(invalid="ignore"):
-            bad = ~np.all(np.isfinite(Z), axis=1) | ((np.max(np.abs(S), axis=1) >= self._bound)
-                                                      & (steps >= self._grace))
-        return int(np.argmax(bad)) if bad.any() else len(Z)
+        return self._healthy_rows(Z, self.state.part(Z, "S"), k0)
 
     def _compiled_steps(self):
         """The transition compiled once per observer (:class:`plant._compile.ChunkedSteps`)."""
@@ -416,6 +426,11 @@ class RecursiveObserver(Observer):
             ident = self.name.replace("-", "_")
             step = ca.Function(f"{ident}_step", [z, u_prev, u, dt],
                                [ca.densify(self._transition(z, u_prev, u, dt))])
-            self._chunks = ChunkedSteps(step, _CHUNK)
+            key = (compiler(), step.serialize())      # observers of the same settings share one build
+            if key not in _CHUNKED:
+                if len(_CHUNKED) >= _CHUNKED_MAX:
+                    _CHUNKED.clear()
+                _CHUNKED[key] = ChunkedSteps(step, _CHUNK)
+            self._chunks = _CHUNKED[key]
             self._build_time = time.perf_counter() - start       # one-off: not the run's cost
         return self._chunks

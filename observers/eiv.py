@@ -22,6 +22,9 @@ compensation (bias-compensated least squares)::
 
     A = (J + lam I)^-1 B,      T = I + g A,      s_c = T s,      cov_c = T P_ss T^T
 
+(``s_c`` is formed as ``s + g (J + lam I)^-1 (B s)`` each sample; ``T`` itself only
+when asked, for the covariance).
+
 with ``g <= 1`` limiting the correction to a tenth of ``|s|`` while the
 information is still rank-deficient (the first samples; ``g = 1`` after).
 ``A`` is the relative attenuation, a property of the signals and the noise
@@ -70,9 +73,7 @@ def _compensation(z, u, q, s, payload, n):
     -------
     z_next : shape (size,)
     s_c : shape (3n,)
-        The compensated estimate ``T s``.
-    T : shape (3n, 3n)
-        The compensation, ``I + g A``.
+        The compensated estimate ``T s = s + g A s`` (:func:`compensation_matrix` gives ``T``).
     """
     o = ops(z, u, q, s)
     m = 3 * n
@@ -82,11 +83,35 @@ def _compensation(z, u, q, s, payload, n):
     p = o.vcat([q[0:3], mx.flat(o, W), q[3:6]])          # the parameters of _filter_step (it reads no s0)
     z_next = _filter_step(z, u, p, payload, n, eiv=True)
     st = _layout(n).unpack(z_next)
-    J = _unpack(o, st.J, m)
-    A = _cholesky_apply(o, _information_factor(o, J, m), _bias_matrix(o, st.beta, var_w, n), m)
-    corr = o.dot(A, mx.col(s))
-    T = mx.eye(o, m) + _correction_limit(o, mx.col(s), corr, m) * A
-    return z_next, o.dot(T, mx.col(s)), T
+    factor = _information_factor(o, _unpack(o, st.J, m), m)
+    s_col = mx.col(s)
+    corr = _cholesky_apply(o, factor, o.dot(_bias_matrix(o, st.beta, var_w, n), s_col), m)    # A s
+    return z_next, mx.vec(s_col + _correction_limit(o, s_col, corr, m) * corr)
+
+
+def compensation_matrix(z, var_w, s, n):
+    """The compensation ``T = I + g A`` after a sample (module docstring), in numpy.
+
+    Parameters
+    ----------
+    z : ndarray, shape (size,)
+        Packed state of the separate-bias filter after the sample.
+    var_w : ndarray, shape (3,)
+        The raw reading's noise variances.
+    s : ndarray, shape (3n,)
+        The filter's estimate after the sample (the ``s`` of :func:`_compensation`).
+    n : int
+        Columns of ``[S | c]``: 3, or 4 with the offset.
+
+    Returns
+    -------
+    ndarray, shape (3n, 3n)
+    """
+    o, m = ops(z), 3 * n
+    st = _layout(n).unpack(z)
+    A = _cholesky_apply(o, _information_factor(o, _unpack(o, st.J, m), m), _bias_matrix(o, st.beta, var_w, n), m)
+    s_col = mx.col(s)
+    return mx.eye(o, m) + _correction_limit(o, s_col, o.dot(A, s_col), m) * A
 
 
 @lru_cache(maxsize=8)
@@ -97,8 +122,8 @@ def _compiled(payload, n):
     u = ca.SX.sym("u", 12)
     q = ca.SX.sym("q", 6)
     s = ca.SX.sym("s", 3 * n)
-    z_next, s_c, T = _compensation(z, u, q, s, payload, n)
-    fun = ca.Function(f"eiv_compensation{n}", [z, u, q, s], [ca.densify(z_next), ca.densify(s_c), ca.densify(T)])
+    z_next, s_c = _compensation(z, u, q, s, payload, n)
+    fun = ca.Function(f"eiv_compensation{n}", [z, u, q, s], [ca.densify(z_next), ca.densify(s_c)])
     return compile_function(fun)
 
 
@@ -115,7 +140,7 @@ class EivCompensation:
     def __init__(self, payload, n):
         self.payload, self.n = payload, int(n)
         self._call = BufferedCall(_compiled(payload, self.n))
-        self._T_flat = None                      # the last step's T, column-major (None: no step yet)
+        self._s = None                           # the last step's s (None: no step yet)
 
     def reset(self, pose, pose_sd, wrench_sd):
         """Start at the first sample.
@@ -135,7 +160,7 @@ class EivCompensation:
         z_in[:] = _initial_state(np.asarray(pose, dtype=float), pose_var, self.n)
         q_in[1:3] = pose_var[:2]
         q_in[3:6] = np.square(np.asarray(wrench_sd, dtype=float))
-        self._T_flat = None
+        self._s = None
 
     def step(self, has_pose, theta, pose, w_hat, dt, s):
         """One sample: advance the separate-bias filter and compensate ``s``.
@@ -170,15 +195,26 @@ class EivCompensation:
         q_in[0] = dt
         s_in[:] = s
         call()
-        z_next, s_c, T = call.outputs
+        z_next, s_c = call.outputs
         z_in[:] = z_next
-        self._T_flat = T
+        self._s = np.array(s, dtype=float)
         return s_c.copy()
+
+    @property
+    def state(self):
+        """The separate-bias filter's packed state and its parameters ``[h, angle variance, position variance,
+        Sigma (3)]`` (views: writing them sets the filter, as :meth:`step` leaves it)."""
+        z_in, _, q_in, _ = self._call.inputs
+        return z_in, q_in
+
+    def set_last(self, s):
+        """Take ``s`` as the estimate of the last step (for :attr:`T`), after :attr:`state` was written."""
+        self._s = np.array(s, dtype=float)
 
     @property
     def T(self):
         """The compensation after the last :meth:`step`, shape (3n, 3n) (identity before any)."""
-        m = 3 * self.n
-        if self._T_flat is None:
-            return np.eye(m)
-        return self._T_flat.reshape(m, m).T.copy()             # casadi stores column-major
+        if self._s is None:
+            return np.eye(3 * self.n)
+        z_in, q_in = self.state
+        return compensation_matrix(z_in, q_in[3:6], self._s, self.n)

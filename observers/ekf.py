@@ -1,20 +1,25 @@
 """Augmented-state extended Kalman filter in the manner of Aghili (ICRA 2000)."""
 
 import math
+import time
+from functools import lru_cache
 
-import casadi as ca
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from fmscal.plant import NoiseSpec, rk4_step
+from fmscal.plant import NoiseSpec
+from fmscal.plant._backend import ops
 from fmscal.plant.noise import estimate_noise
 from fmscal.plant._checks import as_bool, as_positive_scalar
 from fmscal.plant._compile import BufferedCall, compile_function
 from fmscal.plant.errors import FmscalError
 
-from .base import Observer
+from .base import Estimate, Observer, log_inputs
+from .ekf_step import PARAMS, output_layout, model, state_layout, whole_step
 from .eiv import EivCompensation
+from .max_likelihood import _pack, _unpack
 from .noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
+from .progress import progress_bar
 from .state import INPUT
 
 __all__ = ["AugmentedEKF"]
@@ -43,10 +48,16 @@ class AugmentedEKF(Observer):
     states (random walks), the motion follows eq. (1) with ``w = S w_hat``
     (:func:`plant.rk4_step`, the raw reading linear over the step), and the
     measurement is ``[theta, X, Y]``. casadi derives the transition Jacobian
-    ``F``, the noise Jacobians and ``H`` from the plant's single definition;
-    the compiled function is called through ``casadi.Function.buffer()``.
-    filterpy's ``ExtendedKalmanFilter`` does the predict and the update
-    (Joseph form, so ``P`` stays symmetric positive definite).
+    ``F``, the noise Jacobians and ``H`` from the plant's single definition
+    (:func:`observers.ekf_step.model`). The update is in Joseph form, so
+    ``P`` stays symmetric positive definite. Two paths run the same filter:
+    :meth:`run` by default generates the whole step (predict, update, the
+    adjustable random walk and the errors-in-variables filter below) with
+    casadi and runs it in compiled chunks (:func:`observers.ekf_step.whole_step`);
+    ``run(compiled=False)``, and :meth:`step` sample by sample, hand the
+    compiled ``x_next``, ``F`` and ``Q`` to filterpy's
+    ``ExtendedKalmanFilter``, which does the predict and the update. They agree
+    to rounding (``tests/test_ekf.py``).
 
     Tuning rule: ``R = diag(angle_sd^2, position_sd^2, position_sd^2)`` from
     the pose noise; ``Q`` is the raw reading's noise carried through the
@@ -178,49 +189,11 @@ class AugmentedEKF(Observer):
         self.dim_x = 6 + 3 * self.n_cols
         self._H = np.zeros((3, self.dim_x))
         self._H[0, 0] = self._H[1, 2] = self._H[2, 4] = 1.0
-        self._jacobians, self._predict = self._compile()
+        self._jacobians, self._predict = (BufferedCall(f) for f in _compiled_model(payload, self.offset))
         self.eiv = EivCompensation(payload, self.n_cols) if as_bool(eiv, "eiv") else None
         self.reset()
 
     # --- the model, from the plant ------------------------------------------
-    def _compile(self):
-        """casadi: the step of eq. (1) with ``w = S w_hat``, its Jacobians and ``Q``, compiled once."""
-        n, dim = self.n_cols, self.dim_x
-        xs = ca.SX.sym("xs", dim)
-        w0 = ca.SX.sym("w0", 3)
-        w1 = ca.SX.sym("w1", 3)
-        dt = ca.SX.sym("dt")
-        S = ca.reshape(xs[6:dim], n, 3).T                   # [S | c], row order
-        a0, a1 = (ca.vertcat(w, 1) if self.offset else w for w in (w0, w1))
-        d0, d1 = ca.SX.sym("d0", 3), ca.SX.sym("d1", 3)     # a perturbation of the true wrench, at 0
-        d = ca.vertcat(d0, d1)
-        x_d = rk4_step(xs[0:6], S @ a0 + d0, S @ (a0 + a1) / 2 + (d0 + d1) / 2, S @ a1 + d1, dt, self.payload)
-        x_next = ca.substitute(x_d, d, ca.DM.zeros(6))
-        f = ca.vertcat(x_next, xs[6:dim])
-        # dense outputs: the buffers are read as full column-major matrices
-        F = ca.densify(ca.jacobian(f, xs))
-        J0 = ca.densify(ca.jacobian(f, w0))
-        J1 = ca.densify(ca.jacobian(f, w1))
-        var_w = ca.SX.sym("var_w", 3)                       # wrench noise variances
-        P_S_flat = ca.SX.sym("P_S", (3 * n) ** 2)
-        P_S = ca.reshape(P_S_flat, 3 * n, 3 * n)              # covariance of [S | c] (symmetric: either order)
-        q_dt = ca.SX.sym("q_dt")                            # q_S dt
-        # the true wrench's noise S n, with S uncertain: E[S Sigma S^T] = S_hat Sigma S_hat^T + Delta,
-        # Delta_ij = sum_l Sigma_l cov(s_il, s_jl), carried through the step as the wrench itself is:
-        # J_d, the step's Jacobian with respect to the true wrench at both ends (one reading's whole
-        # effect, once a step), so that J_d S_hat = J_0 + J_1 of the motion
-        W = S[:, 0:3] @ ca.diag(var_w) @ S[:, 0:3].T
-        for i in range(3):
-            for j in range(3):
-                W[i, j] += sum(var_w[l] * P_S[n * i + l, n * j + l] for l in range(3))
-        J_d = ca.substitute(ca.jacobian(x_d, d0) + ca.jacobian(x_d, d1), d, ca.DM.zeros(6))
-        Q = (ca.diagcat(J_d @ W @ J_d.T, ca.SX(3 * n, 3 * n))
-             + ca.diag(ca.vertcat(ca.DM.zeros(6), q_dt * ca.DM.ones(3 * n))))
-        jacobians = ca.Function("ekf_jacobians", [xs, w0, w1, dt], [f, F, J0, J1])
-        predict = ca.Function("ekf_predict", [xs, w0, w1, dt, var_w, P_S_flat, q_dt],
-                              [f, F, ca.densify(Q)])
-        return BufferedCall(compile_function(jacobians)), BufferedCall(compile_function(predict))
-
     def transition(self, xs, w0, w1, dt):
         """The discrete step and its Jacobians (the compiled casadi call).
 
@@ -299,13 +272,78 @@ class AugmentedEKF(Observer):
             self._run_noise = estimate_noise(log)
             info["noise"] = self._run_noise.to_dict()
             info["noise_estimated"] = True
-        estimate = super()._estimate(log, S0)
+        if getattr(self, "_use_compiled", True):
+            estimate, q = self._estimate_compiled(log)
+        else:
+            estimate = super()._estimate(log, S0)
+            q = np.array(self._q_history[:len(estimate.calibration)])
         self._run_noise = None
-        q = np.array(self._q_history[:len(estimate.calibration)]) if self._q_history else np.full(1, self.q_S)
         info["q_S_history"] = q
         estimate.info = info
         estimate.warnings = _random_walk_warnings(log.t[:len(q)], q)
         return estimate
+
+    def _estimate_compiled(self, log):
+        """The whole log through :func:`observers.ekf_step.whole_step`; the filter left where it ended.
+
+        Returns
+        -------
+        Estimate
+        q_history : ndarray, shape (M,)
+        """
+        U = log_inputs(log)
+        self._start(U[0])
+        start = time.perf_counter()
+        chunks = whole_step(self.payload, self.n_cols, self.eiv is not None)
+        self._build_time = time.perf_counter() - start              # one-off: not the run's cost
+        n_steps = len(U) - 1
+        inputs = [U[:-1], U[1:], np.full((n_steps, 1), log.dt), np.broadcast_to(self._params(), (n_steps, PARAMS.size))]
+        with progress_bar(len(U), self.name) as bar:
+            z, (Y,) = chunks.run(self._packed(), inputs, healthy=self._healthy_outputs, outputs=True, states=False,
+                                 progress=bar.update)
+        out = output_layout(self.n_cols)
+        calibration = np.vstack([self._s_out, out.part(Y, "s")])
+        x = np.vstack([self._kf.x[0:6, 0], out.part(Y, "x")])
+        q = np.concatenate([self._q_history[:1], out.part(Y, "q")[:, 0]])
+        self._unpacked(z, calibration[-1])
+        self._u_prev = U[len(calibration) - 1]
+        return Estimate(calibration, x, cov=self._covariance(), diverged=len(Y) < n_steps), q
+
+    def _params(self):
+        """The per-log parameters of the compiled step (:data:`observers.ekf_step.PARAMS`), after :meth:`_start`."""
+        level = self.level.settings if self.level is not None else (0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+        eiv_q = self.eiv.state[1][1:6] if self.eiv is not None else np.ones(5)
+        return PARAMS.pack(None, R=np.diag(self._kf.R), var_w=self._var_w, eiv_q=eiv_q, level=level,
+                           adapt=float(self.level is not None))
+
+    def _packed(self):
+        """The running filter as the compiled step's state (:func:`observers.ekf_step.state_layout`)."""
+        kf, level = self._kf, self.level
+        parts = dict(x=kf.x[:, 0], P=_pack(kf.P, self.dim_x), q=self._q_history[-1],
+                     eps_bar=level.eps_bar if level is not None else 0.0, since=self._since_pose)
+        if self.eiv is not None:
+            parts["eiv"] = self.eiv.state[0]
+        return state_layout(self.n_cols, self.eiv is not None).pack(None, **parts)
+
+    def _unpacked(self, z, s_out):
+        """Set the running filter from the compiled step's state ``z``, its reported estimate ``s_out``."""
+        st = state_layout(self.n_cols, self.eiv is not None).unpack(z)
+        self._kf.x = st.x.reshape(-1, 1).copy()
+        self._kf.P = np.asarray(_unpack(ops(z), st.P, self.dim_x))
+        self._since_pose = float(st.since)
+        if self.level is not None:
+            self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
+        self._q_history = [float(st.q)]
+        if self.eiv is not None:
+            self.eiv.state[0][:] = st.eiv
+            self.eiv.set_last(st.x[6:])
+        self._s_out = np.array(s_out, dtype=float)
+
+    def _healthy_outputs(self, Y, k0):
+        """Leading rows of the compiled step's outputs that :meth:`_healthy` would pass."""
+        out = output_layout(self.n_cols)
+        with np.errstate(invalid="ignore"):
+            return self._healthy_rows(Y, out.part(Y, "s"), k0, bad=~(out.part(Y, "P_min")[:, 0] > 0))
 
     def _start(self, u):
         u = INPUT.unpack(np.asarray(u, dtype=float))
@@ -365,6 +403,13 @@ class AugmentedEKF(Observer):
         P = self._kf.P
         # a NaN or inf anywhere makes the sum non-finite: one reduction
         return super()._healthy(x, calibration, k) and math.isfinite(float(P.sum())) and bool(P.diagonal().min() > 0)
+
+
+@lru_cache(maxsize=8)
+def _compiled_model(payload, offset):
+    """The model's Jacobians and ``x_next, F, Q`` (:func:`observers.ekf_step.model`), compiled."""
+    jacobians, predict, _ = model(payload, offset)
+    return compile_function(jacobians), compile_function(predict)
 
 
 #: The noise model of a live filter that was told none (``step`` without a log to estimate it from).

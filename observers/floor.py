@@ -50,7 +50,8 @@ class MaximumLikelihood(Observer):
         self.passes = passes
 
     def _estimate(self, log, S0):
-        fit = fit_max_likelihood(log, self.payload, self.noise, self.offset, self.passes)
+        fit = fit_max_likelihood(log, self.payload, self.noise, self.offset, self.passes,
+                                 compiled=getattr(self, "_use_compiled", True))
         calibration = fit.S_history.reshape(len(fit.S_history), -1).copy()
         calibration[-1] = fit.S_aug.ravel()          # the whole log's estimate
         info = {"noise": fit.noise.to_dict(), "noise_estimated": fit.noise_estimated, "passes": fit.passes}

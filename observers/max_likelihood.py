@@ -280,8 +280,8 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
             var_w = np.square(noise.wrench_sd)
             p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), var_w, s0])
             # the bias moments only where the estimate is the result (the last pass)
-            if compiled:
-                z_end, Y = _run_compiled(z0, U, p, payload, n, k == passes - 1, bar.update)
+            if compiled:     # the history only where it is the result (the last pass)
+                z_end, Y = _run_compiled(z0, U, p, payload, n, k == passes - 1, bar.update, k == passes - 1)
             else:
                 z_end, Y = _run_numpy(z0, U, p, payload, n, k == passes - 1)
             S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
@@ -608,20 +608,31 @@ def _run_numpy(z0, U, p, payload, n, eiv):
 
 
 @lru_cache(maxsize=8)
-def _chunked_steps(payload, n, eiv):
-    """:func:`_step` run in compiled chunks of :data:`_CHUNK` samples (:class:`plant._compile.ChunkedSteps`)."""
+def _chunked_steps(payload, n, eiv, history=True):
+    """:func:`_step` run in compiled chunks of :data:`_CHUNK` samples (:class:`plant._compile.ChunkedSteps`);
+    ``history=False``: :func:`_filter_step` alone (a pass whose estimate history is not wanted)."""
     size = _layout(n).size
     z = ca.SX.sym("z", size)
     u = ca.SX.sym("u", _N_IN)
     p = ca.SX.sym("p", 15 + 3 * n)
-    z_next, out = _step(z, u, p, payload, n, eiv)
-    name = f"max_likelihood{n}{'' if eiv else '_plain'}"
-    step = ca.Function(f"{name}_step", [z, u, p], [ca.densify(z_next), ca.densify(out)])
+    if history:
+        z_next, out = _step(z, u, p, payload, n, eiv)
+        outputs = [ca.densify(z_next), ca.densify(out)]
+    else:
+        outputs = [ca.densify(_filter_step(z, u, p, payload, n, eiv))]
+    name = f"max_likelihood{n}{'' if eiv else '_plain'}{'' if history else '_filter'}"
+    step = ca.Function(f"{name}_step", [z, u, p], outputs)
     return ChunkedSteps(step, _CHUNK)
 
 
-def _run_compiled(z0, U, p, payload, n, eiv, progress=None):
-    """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`."""
-    z_end, (Y,) = _chunked_steps(payload, n, eiv).run(z0, [U, np.broadcast_to(p, (len(U), len(p)))],
-                                                       outputs=True, states=False, progress=progress)
+def _run_compiled(z0, U, p, payload, n, eiv, progress=None, history=True):
+    """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`.
+
+    Returns the last state and the history (None with ``history=False``).
+    """
+    steps = _chunked_steps(payload, n, eiv, history)
+    inputs = [U, np.broadcast_to(p, (len(U), len(p)))]
+    if not history:
+        return steps.run(z0, inputs, states=False, progress=progress), None
+    z_end, (Y,) = steps.run(z0, inputs, outputs=True, states=False, progress=progress)
     return z_end, Y

@@ -14,13 +14,12 @@ fit while nothing changes, and re-opens its calibration states when the
 innovations say that something did.
 """
 
-import math
-
 from scipy.stats import chi2, norm
 
+from fmscal.plant._backend import ops
 from fmscal.plant.errors import FmscalError
 
-__all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE", "DEFAULT_Q_START"]
+__all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE", "DEFAULT_Q_START", "level_update"]
 
 #: Degrees of freedom of the pose innovation ``[theta, X, Y]``.
 NIS_DOF = 3
@@ -103,10 +102,14 @@ class NoiseLevel:
         self.q = self.q_base
         self.eps_bar = float(NIS_DOF)
 
+    @property
+    def settings(self):
+        """``(q_base, q_start, q_max, inflation, window, rise, fall)``, as :func:`level_update` takes them."""
+        return (self.q_base, self.q_start, self.q_max, self.inflation, self.window, self.rise, self.fall)
+
     def bound(self, a):
         """The alarm bound of the NIS average for a forgetting factor ``a``."""
-        spread = _Z * math.sqrt(2 * NIS_DOF * (1 - a) / (1 + a))
-        return self.inflation * (NIS_DOF + spread)
+        return _bound(ops(a), a, self.inflation)
 
     def update(self, nis, h):
         """Take the NIS of one pose, ``h`` seconds after the previous one; return the new intensity.
@@ -123,16 +126,46 @@ class NoiseLevel:
         float
             The random-walk intensity for the following predictions, 1/s.
         """
-        a = math.exp(-h / self.window)
-        self.eps_bar = a * self.eps_bar + (1 - a) * min(nis, NIS_CLIP)
-        if self.eps_bar > self.bound(a):
-            self.q = min(max(self.q, self.q_start) * math.exp(self.rise * h), self.q_max)
-        elif self.q > self.q_base:
-            q = self.q * math.exp(-self.fall * h)
-            self.q = q if q >= max(self.q_start, self.q_base) else self.q_base
+        q, eps_bar = level_update(self.q, self.eps_bar, nis, h, self.settings)
+        self.q, self.eps_bar = float(q), float(eps_bar)
         return self.q
 
     @property
     def raised(self):
         """True while the intensity is above its base level."""
         return self.q > self.q_base
+
+
+def _bound(o, a, inflation):
+    """The 99.9 % bound of the NIS average for a forgetting factor ``a``, widened by ``inflation`` (class docstring)."""
+    return inflation * (NIS_DOF + _Z * o.sqrt(2 * NIS_DOF * (1 - a) / (1 + a)))
+
+
+def level_update(q, eps_bar, nis, h, settings):
+    """One pose's update of the level (:class:`NoiseLevel`), for numbers or casadi symbols alike.
+
+    Parameters
+    ----------
+    q, eps_bar : float or casadi.SX
+        The intensity (1/s) and the NIS average before the pose.
+    nis : float or casadi.SX
+        ``nu^T S_nu^-1 nu`` of the pose's innovation.
+    h : float or casadi.SX
+        Time since the previous pose, s.
+    settings : tuple
+        ``(q_base, q_start, q_max, inflation, window, rise, fall)`` (:attr:`NoiseLevel.settings`).
+
+    Returns
+    -------
+    q, eps_bar
+        After the pose.
+    """
+    q_base, q_start, q_max, inflation, window, rise, fall = settings
+    o = ops(q, eps_bar, nis, h, *settings)
+    a = o.exp(-h / window)
+    eps_bar = a * eps_bar + (1 - a) * o.fmin(nis, NIS_CLIP)
+    raised = o.fmin(o.fmax(q, q_start) * o.exp(rise * h), q_max)
+    fallen = q * o.exp(-fall * h)
+    fallen = o.if_else(fallen >= o.fmax(q_start, q_base), fallen, q_base)
+    q = o.if_else(eps_bar > _bound(o, a, inflation), raised, o.if_else(q > q_base, fallen, q))
+    return q, eps_bar

@@ -32,6 +32,88 @@ def test_casadi_jacobians_match_finite_differences_of_the_plant():
             np.testing.assert_allclose(J[:, j], column, atol=1e-7)
 
 
+def _close(a, b, rel=1e-9):
+    """``a`` equals ``b`` to ``rel`` of ``b``'s largest entry (entries near zero within the same absolute error)."""
+    assert a.shape == b.shape and np.max(np.abs(a - b)) <= rel * np.max(np.abs(b)), np.max(np.abs(a - b))
+
+
+@pytest.mark.parametrize("scenario, seed, settings, noise_factor", [
+    ("paper", 0, {}, 1.0),
+    ("vision-50hz", 4, {"offset": True}, 1.0),        # multi-rate, with the offset column
+    ("other-payload", 2, {}, 0.5),                    # told half the noise: the level rises
+])
+def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
+    """The whole step compiled (the default) and filterpy's ExtendedKalmanFilter (``compiled=False``) agree to
+    1e-9 relative: estimate, ``P``, ``S_std``, the compensation and the random-walk level; the filter left where
+    either path ended."""
+    sc = plant.get_scenario(scenario).with_(duration=2.0)
+    log, truth, _ = sc.generate(seed)
+    ekf = AugmentedEKF(sc.payload, noise=truth.noise.scaled(noise_factor), **settings)
+    runs = []
+    for compiled in (True, False):
+        result = ekf.run(log, truth.S0, compiled=compiled)
+        runs.append((result, ekf._kf.P.copy(), ekf._kf.x.copy(), ekf.eiv.T, ekf.level.q, ekf.level.eps_bar))
+    (fast, P_fast, x_fast, T_fast, *level_fast), (slow, P_slow, x_slow, T_slow, *level_slow) = runs
+    assert not fast.diverged and len(fast.t) == len(slow.t) == len(log)
+    # over the first 0.1 s the compensation solves with a rank-deficient information: rounding amplified
+    early = int(round(0.1 / log.dt))
+    _close(fast.S_hat_history[early:], slow.S_hat_history[early:])
+    _close(fast.S_hat_history, slow.S_hat_history, 1e-6)
+    _close(fast.x_hat_history, slow.x_hat_history)
+    _close(fast.S_std, slow.S_std)
+    if settings.get("offset"):
+        _close(fast.b, slow.b)
+        _close(fast.b_std, slow.b_std)
+    _close(P_fast, P_slow)
+    _close(x_fast, x_slow)
+    _close(T_fast, T_slow)
+    _close(fast.info["q_S_history"], slow.info["q_S_history"])
+    _close(np.array(level_fast), np.array(level_slow))
+    raised = slow.info["q_S_history"] > 0
+    assert raised.any() if noise_factor < 1 else not raised.any()     # the level is exercised, and only there
+
+
+def test_the_whole_step_runs_on_casadis_virtual_machine_too(monkeypatch):
+    """Without a C compiler the whole step runs on casadi's virtual machine, with the same numbers."""
+    from fmscal.observers import ekf_step
+    monkeypatch.setenv("FMSCAL_COMPILER", "none")
+    ekf_step.whole_step.cache_clear()
+    try:
+        log, truth, _ = plant.get_scenario("paper").with_(duration=0.5).generate(0)
+        ekf = AugmentedEKF(plant.PAPER_PAYLOAD, noise=truth.noise)
+        fast = ekf.run(log, truth.S0)
+        assert ekf_step.whole_step(plant.PAPER_PAYLOAD, 3, True).fun.class_name() != "External"
+        slow = ekf.run(log, truth.S0, compiled=False)
+    finally:
+        ekf_step.whole_step.cache_clear()
+    early = int(round(0.1 / log.dt))
+    _close(fast.S_hat_history[early:], slow.S_hat_history[early:])
+    _close(fast.S_std, slow.S_std)
+
+
+def test_compiled_run_stops_where_the_filter_diverges():
+    """The health test runs on the compiled path too: readings that jump to 1e9 at sample 1200 throw S_hat past
+    the divergence bound there; both paths stop at the same sample and report the run diverged. A covariance
+    that is not finite or not positive on its diagonal stops it as well."""
+    from fmscal.observers.ekf_step import output_layout
+    sc = plant.get_scenario("paper").with_(duration=1.5)
+    log, truth, _ = sc.generate(0)
+    w_hat = log.w_hat.copy()
+    w_hat[1200:] = 1e9
+    bad = plant.Log(log.t, log.pose, w_hat)
+    ekf = AugmentedEKF(sc.payload, noise=truth.noise)
+    fast, slow = ekf.run(bad, truth.S0), ekf.run(bad, truth.S0, compiled=False)
+    assert fast.diverged and slow.diverged and fast.S_std is None
+    assert len(fast.t) == len(slow.t) == 1201 and np.all(np.isfinite(fast.S_hat_history))
+    out = output_layout(ekf.n_cols)
+    Y = np.tile(out.pack(None, x=np.zeros(6), s=np.eye(3).ravel(), q=0.0, P_sum=1.0, P_min=1e-6), (5, 1))
+    assert ekf._healthy_outputs(Y, 2000) == 5
+    for column, value in (("P_min", 0.0), ("P_min", np.nan), ("P_sum", np.inf)):
+        Z = Y.copy()
+        Z[3, out.slices[column]] = value
+        assert ekf._healthy_outputs(Z, 2000) == 3, column
+
+
 @pytest.fixture(scope="module")
 def paper_30s():
     return plant.get_scenario("paper").with_(duration=30.0).generate(0)

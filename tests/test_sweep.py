@@ -83,8 +83,9 @@ def test_the_bench_runs_in_its_short_mode(tmp_path, capsys):
     code = main(["bench", "--quick", "--out", str(tmp_path / "bench.md")])
     assert code == 0
     text = capsys.readouterr().out
-    for row in ("`adaptive` step", "`high-gain` step", "`ekf` step", "(`eiv=False`)", "Function.buffer()", "simulator",
-                "`fmscal reproduce`", "sweep:"):
+    for row in ("`adaptive` step", "`high-gain` step", "`ekf` step", "`ekf` run as by default", "(`eiv=False`",
+                "`max-likelihood` run (the floor)", "Function.buffer()", "simulator", "`fmscal reproduce`",
+                "sweep:"):
         assert row in text
     assert "not the full job" in text                # the short mode does not claim the targets
     assert (tmp_path / "bench.md").read_text() == text.rstrip("\n") + "\n"
