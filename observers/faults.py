@@ -48,6 +48,7 @@ def saturation(log):
     Parameters
     ----------
     log : plant.Log
+        Planar or spatial: every channel of its reading is checked.
 
     Returns
     -------
@@ -56,7 +57,8 @@ def saturation(log):
         the share of the samples there. Empty when none is.
     """
     out = []
-    for j, name in enumerate(_CHANNELS):
+    names = log.columns[-log.w_hat.shape[1]:] if hasattr(log, "columns") else _CHANNELS
+    for j, name in enumerate(names):
         v = log.w_hat[:, j]
         levels = np.unique(v)
         if len(levels) < 2:
