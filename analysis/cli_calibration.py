@@ -43,7 +43,7 @@ def add_calibrate(sub):
                         "--no-offset for an offset-free sensor, as in the paper)")
     p.add_argument("--latency", type=float, metavar="S",
                    help="delay of the pose stream behind the sensor stream, s (default: estimated)")
-    p.add_argument("--max-latency", type=float, default=DEFAULT_MAX_LATENCY, metavar="S",
+    p.add_argument("--max-latency", type=float, default=None, metavar="S",
                    help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
@@ -62,7 +62,7 @@ def cmd_calibrate(args):
 
     from fmscal.plant import Payload, file_sha256, read_log, read_truth
     from fmscal.plant.log import log_kind
-    from .calibrate import DEFAULT_METHOD, calibrate
+    from .calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, calibrate
     from .cli_spatial import calibrate_spatial
     from .plots import plot_calibration
     positive(args.mass, "--mass")
@@ -74,7 +74,8 @@ def cmd_calibrate(args):
             raise CliError(f"{option} must be non-negative standard deviations; got {values}")
     if args.latency is not None and not (np.isfinite(args.latency) and args.latency >= 0):
         raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
-    positive(args.max_latency, "--max-latency")
+    if args.max_latency is not None:
+        positive(args.max_latency, "--max-latency")
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
     if args.plot and not args.plot.endswith(".png"):
@@ -91,12 +92,16 @@ def cmd_calibrate(args):
     if args.gravity is not None:
         raise CliError("--gravity is for spatial logs; a planar log moves in a plane with no gravity in it")
     args.observer = args.observer or DEFAULT_METHOD
+    if args.max_latency is None:
+        args.max_latency = DEFAULT_MAX_LATENCY
     payload = Payload(args.mass, positive(args.inertia[0], "--inertia"), tuple(args.rho))
     log = read_log(args.log)
     for note in log.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
     log_sha256 = file_sha256(args.log) if args.save else ""
     truth = read_truth(args.truth) if args.truth else None
+    if truth is not None and truth.schedule.size != 3:
+        raise CliError(f"{args.truth} is the truth of a spatial log; this log is planar")
     report = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
                        offset=args.offset, latency=args.latency, max_latency=args.max_latency)
     for warning in report.warnings:

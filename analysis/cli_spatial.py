@@ -43,12 +43,22 @@ def gravity_of(args):
     return tuple(float(v) for v in g)
 
 
+def _spatial_truth(path):
+    """The truth sidecar at ``path`` (None without one), refused if it is a planar log's."""
+    from fmscal.plant import read_truth
+    truth = read_truth(path) if path else None
+    if truth is not None and truth.schedule.size != 6:
+        raise CliError(f"{path} is the truth of a planar log; this log is spatial")
+    return truth
+
+
 def _refuse_planar_options(args):
     """One line for an option the spatial calibration does not take (yet)."""
     given = [(args.observer is not None, "--observer", "the floor and the online observers are not there yet"),
              (args.pose_noise is not None, "--pose-noise", "the noise is estimated from the log"),
              (args.wrench_noise is not None, "--wrench-noise", "the noise is estimated from the log"),
              (args.latency is not None, "--latency", "no latency is estimated or shifted in 3D yet"),
+             (args.max_latency is not None, "--max-latency", "no latency is estimated in 3D yet"),
              (args.plot is not None, "--plot", "no figure of a spatial calibration yet"),
              (not args.offset, "--no-offset", "the offset is always estimated in 3D")]
     for present, option, why in given:
@@ -59,8 +69,9 @@ def _refuse_planar_options(args):
 
 def calibrate_spatial(args):
     """``fmscal calibrate`` on a spatial log: ``S`` (6x6) and the offset, with what the log did not determine."""
+    from fmscal.observers.faults import saturation
     from fmscal.observers.inverse_dynamics_fit import fit_inverse_dynamics
-    from fmscal.plant import Calibration, file_sha256, read_log, read_truth
+    from fmscal.plant import Calibration, file_sha256, read_log
     from .metrics import block_errors
     payload = spatial_payload(args.mass, args.rho, args.inertia)
     _refuse_planar_options(args)
@@ -68,30 +79,32 @@ def calibrate_spatial(args):
     log = read_log(args.log)
     for note in log.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
-    truth = read_truth(args.truth) if args.truth else None
-    if truth is not None and truth.schedule.size != 6:
-        raise CliError(f"{args.truth} is the truth of a planar log; this log is spatial")
+    truth = _spatial_truth(args.truth)
+    print("fmscal calibrate: note: the pose stream's latency is not estimated in 3D: shift the poses of a log "
+          "whose tracker lags the sensor before calibrating", file=sys.stderr)
     fit = fit_inverse_dynamics(log, payload, gravity=gravity)
-    for warning in fit.warnings:
+    warnings = [*saturation(log), *fit.warnings]
+    for warning in warnings:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
+    converged = fit.converged and len(warnings) == len(fit.warnings)
     out = {"observer": SPATIAL_METHOD, "kind": "spatial", "S": fit.S_hat.tolist(), "S_std": fit.S_std.tolist(),
-           "b": fit.b.tolist(), "b_std": fit.b_std.tolist(), "converged": fit.converged,
-           "undetermined": [d.tolist() for d in fit.undetermined], "warnings": list(fit.warnings)}
+           "b": fit.b.tolist(), "b_std": fit.b_std.tolist(), "converged": converged,
+           "undetermined": [d.tolist() for d in fit.undetermined], "warnings": warnings}
     if truth is not None:
         out["E"], out["E_torque"], out["E_force"] = block_errors(fit.S_hat, truth.S_at(log.t[-1]))
-    saved = bool(args.save) and (fit.converged or args.force)
+    saved = bool(args.save) and (converged or args.force)
     if saved:
         Calibration(S=fit.S_hat, payload=payload, method=SPATIAL_METHOD, S_std=fit.S_std, b=fit.b, b_std=fit.b_std,
                     log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
-                    forced=not fit.converged).save(args.save)
+                    forced=not converged).save(args.save)
     out["saved"] = saved
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
     else:
         _print(args, log, out)
     if args.save and not saved:
-        raise CliError(f"did not save {args.save}: the log does not determine S in every direction; add --force "
-                       "to save it anyway (marked as forced)")
+        why = "the log does not determine S in every direction" if not fit.converged else "the reading saturates"
+        raise CliError(f"did not save {args.save}: {why}; add --force to save it anyway (marked as forced)")
 
 
 def _print(args, log, out):
@@ -131,7 +144,7 @@ def add_identify_payload(sub):
 def cmd_identify_payload(args):
     """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log, ``S`` known."""
     from fmscal.observers.payload_fit import INERTIA_NAMES, identify_payload
-    from fmscal.plant import Calibration, read_log, read_truth
+    from fmscal.plant import Calibration, read_log
     gravity = gravity_of(args)
     S = None
     if args.calibration:
@@ -145,12 +158,12 @@ def cmd_identify_payload(args):
     if log.kind != "spatial":
         raise CliError(f"{Path(args.log).name} is a planar log; identify-payload takes a spatial log "
                        "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz)")
+    truth = _spatial_truth(args.truth)
     fit = identify_payload(log, S=S, gravity=gravity)
     for warning in fit.warnings:
         print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
     out = fit.to_dict()
-    if args.truth:
-        truth = read_truth(args.truth)
+    if truth is not None:
         p = truth.payload
         out["mass_error"] = fit.mass - p.mass
         out["rho_error"] = (fit.rho - np.array(p.rho)).tolist()
@@ -170,6 +183,6 @@ def cmd_identify_payload(args):
             f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
     print(f"converged: {'yes' if fit.converged else 'no'}")
-    if args.truth:
+    if truth is not None:
         print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
               + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm")

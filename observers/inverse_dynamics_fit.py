@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fmscal.plant.differentiate import spatial_motion
+from fmscal.plant._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.differentiate import edge, spatial_motion
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.noise import estimate_noise
 from fmscal.plant.rigid_body import GRAVITY, SpatialPayload
@@ -119,22 +120,25 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     """
     if not isinstance(payload, SpatialPayload):
         raise FmscalError(f"fit_inverse_dynamics takes a SpatialPayload; got {type(payload).__name__}")
+    gravity = as_finite_array(gravity, (3,), "gravity")
+    block = as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
-    trim = slice(len(log.t) // 200 + 5, len(log.t) - len(log.t) // 200 - 5)     # the filter's edges
-    I_c, rho, m = payload.I_c, np.asarray(payload.rho), payload.mass
-    r = np.array([[0, -rho[2], rho[1]], [rho[2], 0, -rho[0]], [-rho[1], rho[0], 0]])
-    I_O = I_c - m * r @ r                                                         # parallel axis
-    pi = np.r_[m, m * rho, I_O[0, 0], I_O[1, 1], I_O[2, 2], I_O[0, 1], I_O[0, 2], I_O[1, 2]]
-    w = regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], gravity) @ pi          # (N, 6)
+    trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
+    w = regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], gravity) @ payload.inertial_parameters  # (N, 6)
     X = np.c_[log.w_hat[trim], np.ones(len(w))]                                        # (N, 7)
     spread = np.r_[np.std(X[:, :6], axis=0), 1.0]
-    Xs = X / np.maximum(spread, 1e-300)
+    wrench_sd = np.array(estimate_noise(log).wrench_sd)
+    dead = np.flatnonzero(spread[:6] <= np.maximum(3 * wrench_sd, 1e-12 * np.abs(X[:, :6]).max(axis=0)))
+    if len(dead):
+        raise FmscalError(f"{log.name}: the reading {', '.join(READING_NAMES[j] for j in dead)} does not move beyond "
+                          "its noise: a stuck or dead channel, or a log that never loads it; S cannot be estimated")
+    Xs = X / spread
     # the reading's noise covariance in scaled units (the constant 1 has none)
-    noise = np.r_[estimate_noise(log).wrench_sd, 0.0] / np.maximum(spread, 1e-300) if eiv else np.zeros(7)
-    sigma = np.diag(noise ** 2)
+    sigma = np.diag((np.r_[wrench_sd, 0.0] / spread) ** 2 if eiv else np.zeros(7))
     information = Xs.T @ Xs - len(Xs) * sigma
-    u, s, _ = np.linalg.svd(information)
-    inverse = (u / s) @ u.T if s[-1] > 1e-14 * s[0] else np.linalg.pinv(information, rcond=1e-14)
+    lam, u = np.linalg.eigh(information)            # symmetric; with the noise taken out, maybe indefinite
+    kept = lam > 1e-12 * lam.max()
+    inverse = (u[:, kept] / lam[kept]) @ u[:, kept].T
     theta = inverse @ Xs.T @ w                                                           # (7, 6): rows of [S|c]^T
     e = w - Xs @ theta
     blocks = ((log.t[trim] - log.t[trim][0]) // block).astype(int)
@@ -147,7 +151,8 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     unscale = np.tile(1.0 / np.maximum(spread, 1e-300), 6)
     cov = cov_scaled * np.outer(unscale, unscale)
     S_aug = (theta / np.maximum(spread, 1e-300)[:, None]).T                              # (6, 7)
-    undetermined = [u[:, k] for k in range(7) if _relative_std(u[:, k], s[k], e, spread) > UNDETERMINED_STD]
+    undetermined = [u[:, k] for k in range(7)
+                    if not kept[k] or _relative_std(u[:, k], lam[k], e, spread) > UNDETERMINED_STD]
     warnings = [_describe(d) for d in undetermined]
     S_hat, c = S_aug[:, :6], S_aug[:, 6]
     S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(6, 7)[:, :6]
@@ -171,7 +176,12 @@ def _relative_std(direction, information, e, spread):
 
 
 def _offset(S_hat, c, cov):
-    """``b = -S^-1 c`` and its uncertainty by the delta method (``S`` and ``c`` both uncertain)."""
+    """``b = -S^-1 c`` and its uncertainty by the delta method (``S`` and ``c`` both uncertain).
+
+    NaN where ``S_hat`` is singular (a direction the log did not determine left at zero).
+    """
+    if not np.isfinite(np.linalg.cond(S_hat)) or np.linalg.cond(S_hat) > 1e12:
+        return np.full(6, np.nan), np.full(6, np.nan)
     S_inv = np.linalg.inv(S_hat)
     b = -S_inv @ c
     # d b = -S^-1 (dS b + dc): Jacobian with respect to vec([S | c]) in row order

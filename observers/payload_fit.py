@@ -26,9 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fmscal.plant.differentiate import spatial_motion
+from fmscal.plant._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.differentiate import edge, spatial_motion
 from fmscal.plant.errors import FmscalError
-from fmscal.plant.rigid_body import GRAVITY
+from fmscal.plant.rigid_body import GRAVITY, SpatialPayload, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
 __all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED"]
@@ -87,13 +88,6 @@ class PayloadFit:
                 "converged": bool(self.converged)}
 
 
-def _skew(v):
-    """``[v]x`` for every row of ``v`` (N, 3): shape (N, 3, 3)."""
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
-                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
-
-
 def _inertia_map(v):
     """``L(v)`` with ``I v = L(v) [Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` for every row of ``v``: (N, 3, 6)."""
     z = np.zeros(len(v))
@@ -116,14 +110,11 @@ def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY):
     ndarray, shape (N, 6, 10)
         Columns ``m, h (3), I_O (6, :data:`INERTIA_NAMES` order)``.
     """
-    w, x, y, z = q.T
-    R = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1),
-                  np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1),
-                  np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1)], 1)
+    R = np.moveaxis(rotation_matrix(q.T), -1, 0)                         # (N, 3, 3), one per sample
     a_g = np.einsum("nji,nj->ni", R, p_ddot - np.asarray(gravity, dtype=float))
-    A, Om = _skew(alpha), _skew(omega)
+    A, Om = skew(alpha), skew(omega)
     W = np.zeros((len(q), 6, 10))
-    W[:, :3, 1:4] = -_skew(a_g)                                         # h x a_g
+    W[:, :3, 1:4] = -skew(a_g)                                          # h x a_g
     W[:, :3, 4:] = _inertia_map(alpha) + Om @ _inertia_map(omega)       # I_O alpha + omega x (I_O omega)
     W[:, 3:, 0] = a_g                                                   # m a_g
     W[:, 3:, 1:4] = A + Om @ Om                                         # alpha x h + omega x (omega x h)
@@ -174,8 +165,10 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0):
     PayloadFit
     """
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
+    gravity = as_finite_array(gravity, (3,), "gravity")
+    block = as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
-    trim = slice(len(log.t) // 200 + 5, len(log.t) - len(log.t) // 200 - 5)       # the filter's edges
+    trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
     y = (log.w_hat @ S.T)[trim]
     n = len(y)
@@ -192,9 +185,18 @@ def _physical(theta):
     m, h, io = theta[0], theta[1:4], theta[4:10]
     rho = h / m
     I_O = np.array([[io[0], io[3], io[4]], [io[3], io[1], io[5]], [io[4], io[5], io[2]]])
-    r = _skew(rho[None])[0]
+    r = skew(rho)
     I_c = I_O + m * r @ r
     return np.r_[m, rho, I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]]
+
+
+def _possible(values):
+    """True when ``(m, rho, I_c)`` is a body that can exist (positive definite, triangle inequality)."""
+    try:
+        SpatialPayload(values[0], values[1:4], values[4:10])
+    except FmscalError:
+        return False
+    return True
 
 
 def _report(theta, cov, S, residual_rms):
@@ -221,7 +223,7 @@ def _report(theta, cov, S, residual_rms):
     mass_ok = std[0] < DETERMINED * values[0]
     rho_ok = np.all(std[1:4] < np.maximum(DETERMINED * np.linalg.norm(values[1:4]), 1e-3))
     inertia_scale = max(np.mean(values[4:7]), 1e-9)
-    inertia_ok = bool(np.all(std[4:] < DETERMINED * inertia_scale)) and np.all(values[4:7] > 0)
+    inertia_ok = bool(np.all(std[4:] < DETERMINED * inertia_scale)) and _possible(values)
     offset_ok = bool(np.all(np.isfinite(b_std)))
     if not mass_ok or not rho_ok:
         warnings.append("the mass and centre of mass are not determined: hold the payload at attitudes that turn "

@@ -18,7 +18,7 @@ from scipy.signal import savgol_filter
 
 from .errors import FmscalError
 
-__all__ = ["spatial_motion", "ORDER"]
+__all__ = ["spatial_motion", "edge", "ORDER"]
 #: Degree of the local polynomial (a quintic keeps the smoothing bias of a 0.2 s window below 0.1 % at 0.5 Hz).
 ORDER = 5
 
@@ -30,6 +30,29 @@ def _batch_product(p, q):
         p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0] + p[:, 2] * q[:, 3] - p[:, 3] * q[:, 2],
         p[:, 0] * q[:, 2] - p[:, 1] * q[:, 3] + p[:, 2] * q[:, 0] + p[:, 3] * q[:, 1],
         p[:, 0] * q[:, 3] + p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1] + p[:, 3] * q[:, 0]], axis=1)
+
+
+def _samples(log, window):
+    """The window's length in samples: odd, at least 7."""
+    if not (isinstance(window, (int, float)) and np.isfinite(window) and window > 0):
+        raise FmscalError(f"window must be a positive number of seconds; got {window!r}")
+    return max(7, int(round(window / log.dt)) // 2 * 2 + 1)
+
+
+def edge(log, window=0.2):
+    """Samples at each end of the log where the smoothing window runs off it (its half length).
+
+    Parameters
+    ----------
+    log : plant.Log
+    window : float
+        s, as for :func:`spatial_motion`.
+
+    Returns
+    -------
+    int
+    """
+    return _samples(log, window) // 2
 
 
 def spatial_motion(log, window=0.2):
@@ -58,9 +81,10 @@ def spatial_motion(log, window=0.2):
     """
     if getattr(log, "kind", None) != "spatial":
         raise FmscalError(f"spatial_motion takes a spatial log; got a {getattr(log, 'kind', type(log).__name__)} one")
-    k = int(round(window / log.dt)) // 2 * 2 + 1
-    if not 7 <= k <= len(log):
-        raise FmscalError(f"window must span 7 to {len(log)} samples; {window:g} s is {k}")
+    k = _samples(log, window)
+    if k > len(log):
+        raise FmscalError(f"{log.name}: the log is {log.duration:g} s; differentiating its poses needs at least "
+                          f"{window:g} s (the smoothing window)")
     rows = np.flatnonzero(log.has_pose)
     pose = np.column_stack([np.interp(log.t, log.t[rows], log.pose[rows, j]) for j in range(7)])
 

@@ -298,7 +298,7 @@ class SpatialModel(Model):
             p_ddot = R ([rho]x K tau_O + (I/m - [rho]x K [rho]x) f) + ...
         """
         K = np.linalg.inv(self.payload.I_c)
-        r = _skew(self.payload.rho)
+        r = rigid_body.skew(self.payload.rho)
         R = rigid_body.rotation_matrix(x[3:7])
         top = np.hstack([r @ K, np.eye(3) / self.payload.mass - r @ K @ r])
         bottom = np.hstack([K, -K @ r])
@@ -316,11 +316,6 @@ class SpatialModel(Model):
     def state_derivative(self, x, w):
         """``x'`` under Newton-Euler (:func:`fmscal.plant.rigid_body.state_derivative`)."""
         return rigid_body.state_derivative(x, w, self.payload, self.gravity)
-
-
-def _skew(v):
-    """``[v]x``, the cross-product matrix: ``[v]x u = v x u``."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def model_for_columns(header):

@@ -43,7 +43,7 @@ from .errors import FmscalError
 __all__ = [
     "SpatialPayload", "GRAVITY",
     "quaternion_multiply", "quaternion_conjugate", "rotation_matrix",
-    "sensor_wrench", "body_acceleration", "state_derivative", "rk4_step", "prescribed_motion",
+    "sensor_wrench", "body_acceleration", "state_derivative", "rk4_step", "prescribed_motion", "skew",
     "NQ", "NV", "NX",
 ]
 
@@ -126,6 +126,19 @@ class SpatialPayload:
         """The inertia tensor about the centre of mass, ``B`` axes, shape (3, 3)."""
         return _inertia_matrix(self.inertia)
 
+    @property
+    def I_O(self):
+        """The inertia tensor about the sensor point: ``I_c - m [rho]x^2`` (parallel axes), shape (3, 3)."""
+        r = skew(self.rho)
+        return self.I_c - self.mass * r @ r
+
+    @property
+    def inertial_parameters(self):
+        """``pi = (m, m rho, I_O)``: the ten parameters the wrench is linear in, ``I_O`` as its six entries."""
+        I_O = self.I_O
+        return np.r_[self.mass, self.mass * np.asarray(self.rho),
+                     I_O[0, 0], I_O[1, 1], I_O[2, 2], I_O[0, 1], I_O[0, 2], I_O[1, 2]]
+
     def to_dict(self):
         """Return ``{"mass", "rho", "inertia"}`` (inertia as the six entries) for JSON files."""
         return {"mass": self.mass, "rho": list(self.rho), "inertia": list(self.inertia)}
@@ -140,6 +153,23 @@ class SpatialPayload:
         return bool(np.isclose(self.mass, other.mass, rtol=rtol)
                     and np.allclose(self.rho, other.rho, rtol=rtol, atol=1e-12)
                     and np.allclose(self.inertia, other.inertia, rtol=rtol, atol=1e-15))
+
+
+def skew(v):
+    """``[v]x``, the cross-product matrix (``[v]x u = v x u``), for one vector or every row of many.
+
+    Parameters
+    ----------
+    v : array_like, shape (3,) or (N, 3)
+
+    Returns
+    -------
+    ndarray, shape (3, 3) or (N, 3, 3)
+    """
+    v = np.asarray(v, dtype=float)
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    zero = np.zeros_like(x)
+    return np.stack([np.stack([zero, -z, y], -1), np.stack([z, zero, -x], -1), np.stack([-y, x, zero], -1)], -2)
 
 
 def _cross(a, b, o):

@@ -5,6 +5,7 @@ import pytest
 
 from fmscal.analysis.metrics import block_errors
 from fmscal.observers.inverse_dynamics_fit import fit_inverse_dynamics
+from fmscal.plant import FmscalError
 from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
 
 
@@ -18,7 +19,7 @@ def test_with_the_noise_compensated_the_arm_is_calibrated_with_honest_uncertaint
         S = truth.S_at(0.0)
         fit = fit_inverse_dynamics(log, truth.payload)
         E, E_torque, E_force = block_errors(fit.S_hat, S)
-        assert E_torque < 0.02 and E_force < 0.02 and E < 0.3
+        assert E_torque < 0.02 and E_force < 0.02 and E < 0.2
         z = (fit.S_hat - S) / fit.S_std
         assert 0.5 < np.sqrt(np.mean(z ** 2)) < 1.6
         assert np.abs((fit.b - truth.offset) / fit.b_std).max() < 4
@@ -41,6 +42,23 @@ def test_static_poses_leave_directions_undetermined_and_say_what_to_record():
     assert any("angular acceleration" in w for w in fit.warnings)
     for d in fit.undetermined:
         assert np.linalg.norm(d) == pytest.approx(1.0)
+
+
+def test_a_dead_channel_is_one_error_not_a_singular_matrix(arm_logs):
+    log, truth, _ = arm_logs[0]
+    from fmscal.plant.log import Log
+    w_hat = log.w_hat.copy()
+    w_hat[:, 0] = 0.25                                   # tx stuck
+    with pytest.raises(FmscalError, match="the reading tx does not move"):
+        fit_inverse_dynamics(Log(log.t, log.pose, w_hat, "stuck"), truth.payload)
+
+
+@pytest.mark.parametrize("kwargs, message", [({"block": 0}, "block"), ({"gravity": [0, -9.81]}, "gravity"),
+                                             ({"window": -1}, "window")])
+def test_settings_are_checked(arm_logs, kwargs, message):
+    log, truth, _ = arm_logs[0]
+    with pytest.raises(FmscalError, match=message):
+        fit_inverse_dynamics(log, truth.payload, **kwargs)
 
 
 def test_block_errors_split_units():

@@ -15,11 +15,12 @@ def test_arm_gives_mass_within_1_percent_and_centre_of_mass_within_2_mm(seed):
     p = truth.payload
     assert abs(fit.mass - p.mass) < 0.01 * p.mass
     assert np.abs(fit.rho - np.array(p.rho)).max() < 2e-3
-    assert np.abs(fit.inertia[:3] - np.array(p.inertia)[:3]).max() < 0.02 * np.mean(p.inertia[:3])
+    assert np.abs(fit.inertia - np.array(p.inertia)).max() < 0.02 * np.mean(p.inertia[:3])      # products too
     assert np.abs(fit.b - truth.offset).max() < 0.02 * np.abs(truth.offset).max()
     # the uncertainties are of the error's size (not a thousand times too small or too large)
     z = np.abs(np.r_[fit.mass - p.mass, fit.rho - p.rho] / np.r_[fit.mass_std, fit.rho_std])
     assert z.max() < 5 and 1e-5 < fit.mass_std / p.mass < 1e-2
+    assert np.all((1e-7 < fit.rho_std) & (fit.rho_std < 1e-4))          # m: neither nil nor above the error allowed
     assert fit.converged and not fit.warnings
 
 

@@ -14,9 +14,11 @@ TOOL = ["--mass", "1.2", "--rho", "0.01", "-0.005", "0.06", "--inertia", "4e-3",
 
 @pytest.fixture(scope="module")
 def arm(tmp_path_factory):
+    """A 20 s spatial-arm log, its sidecar, and a calibration saved from it (``cal0.json``)."""
     folder = tmp_path_factory.mktemp("spatial")
     assert main(["simulate", "--scenario", "spatial-arm", "--duration", "20", "--seed", "2",
                  "--out", str(folder / "arm.csv")]) == 0
+    assert main(["calibrate", str(folder / "arm.csv"), *TOOL, "--save", str(folder / "cal0.json")]) == 0
     return folder
 
 
@@ -39,10 +41,8 @@ def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
 
 
 def test_identify_payload_with_the_saved_calibration(arm, capsys):
-    if not (arm / "cal.json").exists():
-        assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--save", str(arm / "cal.json")]) == 0
-        capsys.readouterr()
-    assert main(["identify-payload", str(arm / "arm.csv"), "--calibration", str(arm / "cal.json"), "--json"]) == 0
+    capsys.readouterr()
+    assert main(["identify-payload", str(arm / "arm.csv"), "--calibration", str(arm / "cal0.json"), "--json"]) == 0
     out = _json(capsys)
     assert abs(out["mass"] - 1.2) < 0.012
     assert np.abs(np.array(out["rho"]) - [0.01, -0.005, 0.06]).max() < 2e-3
@@ -87,6 +87,28 @@ def test_a_quaternion_off_unit_norm_is_one_line(arm, tmp_path, capsys):
     (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
     assert main(["calibrate", str(tmp_path / "bad.csv"), *TOOL]) == 2
     assert "expected a unit quaternion" in capsys.readouterr().err
+
+
+def test_a_saturating_channel_is_not_saved(arm, tmp_path, capsys):
+    lines = (arm / "arm.csv").read_text().splitlines()
+    fz = np.array([float(line.split(",")[-1]) for line in lines[1:]])
+    top = np.percentile(fz, 80)
+    clipped = [lines[0]] + [",".join([*line.split(",")[:-1], repr(float(min(v, top)))]) for line, v in zip(lines[1:], fz)]
+    (tmp_path / "clip.csv").write_text("\n".join(clipped) + "\n")
+    assert main(["calibrate", str(tmp_path / "clip.csv"), *TOOL, "--save", str(tmp_path / "cal.json")]) == 2
+    err = capsys.readouterr().err
+    assert "the reading fz is pinned at" in err and "did not save" in err and not (tmp_path / "cal.json").exists()
+
+
+def test_a_truth_of_the_other_case_is_one_line(arm, tmp_path, capsys):
+    assert main(["simulate", "--duration", "2", "--out", str(tmp_path / "p.csv")]) == 0
+    assert main(["identify-payload", str(arm / "arm.csv"), "--truth", str(tmp_path / "p.truth.json")]) == 2
+    assert "is the truth of a planar log" in capsys.readouterr().err
+    assert main(["calibrate", str(tmp_path / "p.csv"), "--mass", "2.5", "--rho", "0.2", "0.25", "--inertia", "0.75",
+                 "--truth", str(arm / "arm.truth.json")]) == 2
+    assert "is the truth of a spatial log" in capsys.readouterr().err
+    assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--max-latency", "0.1"]) == 2
+    assert "--max-latency is not taken on a spatial log" in capsys.readouterr().err
 
 
 def test_planar_scenario_options_are_refused_for_a_spatial_scenario(tmp_path, capsys):
