@@ -209,7 +209,8 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
                  and not faults and not disagreement)
     return CalibrationReport(calibration=calibration, result=result, converged=converged,
                              noise=noise, noise_estimated=noise_estimated, latency_estimated=latency_estimated,
-                             warnings=warnings, units=units, fit={k: v for k, v in reference.report.items() if k != "warnings"},
+                             warnings=warnings, units=units,
+                             fit={k: v for k, v in reference.report.items() if k != "warnings"},
                              E=E)
 
 

@@ -18,8 +18,8 @@ import numpy as np
 from .cli_calibration import add_apply, add_calibrate
 from .cli_spatial import add_identify_payload
 from .cli_import import add_import
-from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
-                         strict)
+from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes,
+                         positive, strict)
 from .files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs, claim_folder,
                     exclusive)
 from .cli_scale import add_bench, add_sweep

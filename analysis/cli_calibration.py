@@ -47,7 +47,8 @@ def add_calibrate(sub):
                    help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
-    p.add_argument("--plot", metavar="FILE.png", help="draw each entry of S_hat against time with its one-sigma band, and the pose residual")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="draw each entry of S_hat against time with its one-sigma band, and the pose residual")
     p.add_argument("--save", metavar="CAL.json",
                    help="write the calibration here (for fmscal apply), only if the run converged and the "
                         "log's units look right; written atomically, never onto the log or --truth")
@@ -126,7 +127,7 @@ def cmd_calibrate(args):
 
 
 def _not_savable(report):
-    """Why the calibration of ``report`` (:class:`analysis.calibrate.CalibrationReport`) should not be saved, or None."""
+    """Why the calibration of ``report`` (a ``CalibrationReport``) should not be saved, or None."""
     if report.units:
         return "the log's units look wrong (" + report.units[0].split(":")[0] + ")"
     if not report.converged:

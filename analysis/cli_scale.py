@@ -2,8 +2,8 @@
 
 import json
 
-from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
-                         strict)
+from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes,
+                         positive, strict)
 from .files import atomic_write, atomic_write_text, check_outputs
 
 

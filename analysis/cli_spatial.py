@@ -116,8 +116,9 @@ def _print(args, log, out):
         print("  " + "  ".join(f"{S[i, j]:+.4f}+-{S_std[i, j]:.0e}" for j in range(6)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in
                                             zip(_NAMES, out["b"], out["b_std"])))
+    undetermined = len(out["undetermined"])
     print(f"converged: {'yes' if out['converged'] else 'no'}"
-          + (f" ({len(out['undetermined'])} direction(s) of the reading not determined)" if out["undetermined"] else ""))
+          + (f" ({undetermined} direction(s) of the reading not determined)" if undetermined else ""))
     if "E" in out:
         print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g} (SI units); torque block {out['E_torque']:.4g}, "
               f"force block {out['E_force']:.4g}")

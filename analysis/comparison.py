@@ -11,8 +11,8 @@ from fmscal.plant.errors import FmscalError
 
 from .metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
 
-__all__ = ["simulate_case", "tail_error", "floor_error", "run_observer", "run_case", "seed_list", "compare", "summarise", "summary_markdown",
-           "CHECKPOINTS"]
+__all__ = ["simulate_case", "tail_error", "floor_error", "run_observer", "run_case", "seed_list", "compare",
+           "summarise", "summary_markdown", "CHECKPOINTS"]
 
 #: Columns of a sweep's table that tell its rows apart besides scenario and observer.
 _SWEEP_KEYS = ("noise_scale", "settings")

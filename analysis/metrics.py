@@ -4,8 +4,8 @@ import numpy as np
 
 from fmscal.plant._checks import as_finite_array
 
-__all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "convergence_time", "CONVERGENCE_THRESHOLD",
-           "CONVERGENCE_HOLD", "TAIL_FRACTION"]
+__all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "convergence_time",
+           "CONVERGENCE_THRESHOLD", "CONVERGENCE_HOLD", "TAIL_FRACTION"]
 
 #: Default threshold on E for :func:`convergence_time`.
 CONVERGENCE_THRESHOLD = 0.05

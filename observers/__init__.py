@@ -15,7 +15,7 @@ from .gains import check_gains, double_pole_gains
 from .floor import MaximumLikelihood
 from .registry import FLOOR_METHOD, METHODS, Method, get_method, make_observer, method_label, method_names
 
-__all__ = ["Observer", "RecursiveObserver", "Estimate", "ObserverResult", "settled",
-           "AdaptiveObserver", "PaperAdaptiveObserver", "HighGainObserver", "AugmentedEKF", "LeastSquares", "MaximumLikelihood", "FLOOR_METHOD",
-           "check_gains", "double_pole_gains", "METHODS", "Method", "get_method", "make_observer", "method_names",
-           "method_label", "MAX_S0"]
+__all__ = ["Observer", "RecursiveObserver", "Estimate", "ObserverResult", "settled", "AdaptiveObserver",
+           "PaperAdaptiveObserver", "HighGainObserver", "AugmentedEKF", "LeastSquares", "MaximumLikelihood",
+           "FLOOR_METHOD", "check_gains", "double_pole_gains", "METHODS", "Method", "get_method", "make_observer",
+           "method_names", "method_label", "MAX_S0"]

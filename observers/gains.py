@@ -51,7 +51,8 @@ class GainReport(dict):
             lines.append(f"  assumption 2 of Theorem 1 with P = I (V_1 = e'e/2 decreasing): "
                          f"{'holds' if r['assumption_2_holds'] else 'does NOT hold'}")
             if r["P"] is not None:
-                lines.append(f"  Lyapunov P of (A-KC)' P + P (A-KC) = -I: eigenvalues {_fmt(np.linalg.eigvalsh(r['P']))}")
+                eigenvalues = _fmt(np.linalg.eigvalsh(r["P"]))
+                lines.append(f"  Lyapunov P of (A-KC)' P + P (A-KC) = -I: eigenvalues {eigenvalues}")
         return "\n".join(lines)
 
 

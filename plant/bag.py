@@ -36,7 +36,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FmscalError
 from .files import not_a_file
 from .log import Log, LogError
 

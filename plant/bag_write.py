@@ -74,7 +74,8 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     ts = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE)
     T = ts.types
     Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
-    Vector3, Point, Quaternion = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Quaternion"]
+    Vector3, Point = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"]
+    Quaternion = T["geometry_msgs/msg/Quaternion"]
     rng = np.random.default_rng(seed)
     stamps = start_time_ns + np.round(log.t * 1e9).astype(np.int64)
 

@@ -112,7 +112,8 @@ class Calibration:
         set_(self, "S", check_calibration(self.S, "S", size=n))
         kind = SpatialPayload if n == 6 else Payload
         if not isinstance(self.payload, kind):
-            raise TypeError(f"payload must be a plant.{kind.__name__} for a {n}x{n} S; got {type(self.payload).__name__}")
+            raise TypeError(f"payload must be a plant.{kind.__name__} for a {n}x{n} S; "
+                            f"got {type(self.payload).__name__}")
         for name, shape in (("S_std", (n, n)), ("b", (n,)), ("b_std", (n,))):
             value = getattr(self, name)
             if value is not None:
@@ -261,5 +262,6 @@ def _short(value, limit=60):
 def _describe(payload):
     rho = ", ".join(f"{r:g}" for r in payload.rho)
     if isinstance(payload, SpatialPayload):
-        return f"m = {payload.mass:g} kg, rho = ({rho}) m, inertia = ({', '.join(f'{i:g}' for i in payload.inertia)}) kg m^2"
+        inertia = ", ".join(f"{i:g}" for i in payload.inertia)
+        return f"m = {payload.mass:g} kg, rho = ({rho}) m, inertia = ({inertia}) kg m^2"
     return f"m = {payload.mass:g} kg, I_G = {payload.inertia:g} kg m^2, rho = ({rho}) m"

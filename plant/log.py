@@ -50,8 +50,8 @@ from .payload import Payload
 from .rigid_body import SpatialPayload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
-__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS", "SPATIAL_COLUMNS",
-           "READING_COLUMNS", "QUATERNION_TOLERANCE"]
+__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
+           "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE"]
 
 #: Column names of a planar log, in order.
 COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
@@ -391,7 +391,8 @@ def read_readings(path):
         raise LogError(f"{path.name}: no readings")
     for name, values in (("t", t), *((c, w_hat[:, j]) for j, c in enumerate(names))):
         if not np.all(np.isfinite(values)):
-            raise LogError(f"{path.name}: column {name} has a missing, NaN or infinite value at row {_first_bad(values)}")
+            raise LogError(f"{path.name}: column {name} has a missing, NaN or infinite value "
+                           f"at row {_first_bad(values)}")
     steps = np.diff(t)
     if np.any(steps <= 0):
         raise LogError(f"{path.name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")

@@ -147,7 +147,7 @@ class Scenario:
     latency: float = 0.0
 
     def check_size(self):
-        """Raise :class:`FmscalError` if the log would have fewer than ``plant.log.MIN_SAMPLES`` or more than :data:`MAX_SAMPLES` samples."""
+        """Raise :class:`FmscalError` for fewer than ``MIN_SAMPLES`` or more than :data:`MAX_SAMPLES` samples."""
         if not (np.isfinite(self.duration) and self.duration > 0 and np.isfinite(self.dt) and self.dt > 0):
             raise FmscalError(f"duration and dt must be positive and finite; got {self.duration} s and {self.dt} s")
         n = self.duration / self.dt

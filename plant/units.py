@@ -101,8 +101,8 @@ def diagnose_units(log, payload):
         return []
     moment, force = scale
     if 20 < moment / force < 160 and 1 / _FAR < force < _FAR:
-        return [UnitFinding("degrees", f"theta looks like degrees, not radians: the moment the poses imply is {moment / force:.0f} "
-                f"times the force's share (57 for degrees); convert theta to rad")]
+        return [UnitFinding("degrees", f"theta looks like degrees, not radians: the moment the poses imply is "
+                f"{moment / force:.0f} times the force's share (57 for degrees); convert theta to rad")]
     # both far, and alike: the readings' scale (x and y in mm scale the force only, the moment in part)
     if force > _FAR and moment > _FAR and 0.6 < moment / force < 1.7:
         return [UnitFinding(COUNTS, f"the readings are about {1 / np.sqrt(force * moment):.3g} times the wrench "
@@ -110,12 +110,13 @@ def diagnose_units(log, payload):
                 f"N?); methods that start from S0 of order one (adaptive, high-gain, ekf) may not reach it: use "
                 f"least-squares, or give the readings in N m and N")]
     if force > _FAR:
-        return [UnitFinding("millimetres", f"x and y look like millimetres, not metres: the forces the poses imply are {force:.3g} times "
-                f"the readings (1000 for mm; else the readings are not in N); convert x and y to m")]
+        return [UnitFinding("millimetres", f"x and y look like millimetres, not metres: the forces the poses imply "
+                f"are {force:.3g} times the readings (1000 for mm; else the readings are not in N); convert x and y "
+                f"to m")]
     if force < 1 / _FAR and moment < 1 / _FAR:
         size = np.sqrt(force * moment)
-        return [UnitFinding(COUNTS, f"the readings are about {1 / size:.3g} times the wrench the poses imply: S's entries will be "
-                f"near {size:.3g} (readings in sensor counts?); methods that start from S0 of order one "
-                f"(adaptive, high-gain, ekf) may not reach it: use least-squares, or give the readings in "
-                f"N m and N")]
+        return [UnitFinding(COUNTS, f"the readings are about {1 / size:.3g} times the wrench the poses imply: S's "
+                f"entries will be near {size:.3g} (readings in sensor counts?); methods that start from S0 of "
+                f"order one (adaptive, high-gain, ekf) may not reach it: use least-squares, or give the readings "
+                f"in N m and N")]
     return []

@@ -21,7 +21,8 @@ def _is_png(path):
 
 
 def test_importing_the_plots_leaves_the_backend_alone():
-    code = ("import matplotlib; matplotlib.use('svg'); import fmscal.analysis.plots, fmscal.analysis.cli, fmscal.analysis.reproduce; "
+    code = ("import matplotlib; matplotlib.use('svg'); "
+            "import fmscal.analysis.plots, fmscal.analysis.cli, fmscal.analysis.reproduce; "
             "print(matplotlib.get_backend())")          # (python-control imports pyplot; that alone switches nothing)
     env = {**os.environ, "MPLBACKEND": "svg"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)

@@ -30,7 +30,8 @@ def test_plain_least_squares_is_biased_where_the_torque_carries_little_of_its_ow
     """Errors in variables: the reading's noise shrinks S along the weakly excited directions."""
     for log, truth, _ in arm_logs:
         S = truth.S_at(0.0)
-        plain, compensated = fit_inverse_dynamics(log, truth.payload, eiv=False), fit_inverse_dynamics(log, truth.payload)
+        plain = fit_inverse_dynamics(log, truth.payload, eiv=False)
+        compensated = fit_inverse_dynamics(log, truth.payload)
         assert block_errors(plain.S_hat, S)[1] > 5 * block_errors(compensated.S_hat, S)[1]
         assert np.sqrt(np.mean(((plain.S_hat - S) / plain.S_std) ** 2)) > 3        # and overconfident
 

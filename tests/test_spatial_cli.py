@@ -93,7 +93,8 @@ def test_a_saturating_channel_is_not_saved(arm, tmp_path, capsys):
     lines = (arm / "arm.csv").read_text().splitlines()
     fz = np.array([float(line.split(",")[-1]) for line in lines[1:]])
     top = np.percentile(fz, 80)
-    clipped = [lines[0]] + [",".join([*line.split(",")[:-1], repr(float(min(v, top)))]) for line, v in zip(lines[1:], fz)]
+    clipped = [lines[0]] + [",".join([*line.split(",")[:-1], repr(float(min(v, top)))])
+                            for line, v in zip(lines[1:], fz)]
     (tmp_path / "clip.csv").write_text("\n".join(clipped) + "\n")
     assert main(["calibrate", str(tmp_path / "clip.csv"), *TOOL, "--save", str(tmp_path / "cal.json")]) == 2
     err = capsys.readouterr().err
@@ -112,5 +113,6 @@ def test_a_truth_of_the_other_case_is_one_line(arm, tmp_path, capsys):
 
 
 def test_planar_scenario_options_are_refused_for_a_spatial_scenario(tmp_path, capsys):
-    assert main(["simulate", "--scenario", "spatial-weak", "--rho", "0.1", "0.2", "--out", str(tmp_path / "x.csv")]) == 2
+    out = str(tmp_path / "x.csv")
+    assert main(["simulate", "--scenario", "spatial-weak", "--rho", "0.1", "0.2", "--out", out]) == 2
     assert "--rho is for the planar scenarios" in capsys.readouterr().err
