@@ -19,7 +19,8 @@ def add_import(sub):
                                    "with rosbags (pip install 'fmscal[ros]'): the sensor as "
                                    "geometry_msgs/WrenchStamped (M = torque.z, fx = force.x, fy = force.y), the "
                                    "pose as PoseStamped, TransformStamped or nav_msgs/Odometry (theta the yaw, "
-                                   "unwrapped). Times are the header stamps, t = 0 at the first wrench sample; "
+                                   "unwrapped); with --spatial all six components and the whole pose. Times are "
+                                   "the header stamps, t = 0 at the first wrench sample; "
                                    "each pose goes to the nearest wrench sample. Writes the log, the sidecar "
                                    "LOG.import.json of what was imported, and prints the import report.")
     p.add_argument("bag", metavar="BAG")
@@ -27,9 +28,13 @@ def add_import(sub):
     p.add_argument("--pose-topic", required=True, metavar="TOPIC",
                    help="the payload's PoseStamped, TransformStamped or Odometry topic")
     p.add_argument("--out", required=True, metavar="LOG.csv")
-    p.add_argument("--pose-offset", type=float, nargs=2, default=(0.0, 0.0), metavar=("DX", "DY"),
-                   help="the tracked marker frame's origin relative to the payload's centre of mass, "
-                        "body frame, m (default 0 0)")
+    p.add_argument("--pose-offset", type=float, nargs="+", default=None, metavar="D",
+                   help="planar DX DY: the tracked marker frame's origin relative to the payload's centre of mass, "
+                        "body frame, m; with --spatial DX DY DZ: the tracked frame's origin from the sensor point, "
+                        "sensor axes, m (default zeros)")
+    p.add_argument("--spatial", action="store_true",
+                   help="keep the whole pose and all six wrench components: a spatial log "
+                        "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) of a 6-axis sensor")
     p.add_argument("--start", type=float, metavar="S", help="keep stamps from S s after the first wrench stamp")
     p.add_argument("--end", type=float, metavar="S", help="keep stamps up to S s after the first wrench stamp")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out and its sidecar")
@@ -47,10 +52,13 @@ def cmd_import(args):
     if bag.is_dir() and any(_inside(f, bag) for f in (out, sidecar)):
         raise CliError(f"--out {out} would write into the bag {bag}; choose another path")
     check_outputs([(out, "--out"), (sidecar, "--out's sidecar")], [(bag, "the bag")], overwrite=args.overwrite)
-    if not all(np.isfinite(v) for v in args.pose_offset):
-        raise CliError(f"--pose-offset must be two finite numbers in m; got {list(args.pose_offset)}")
-    log, report = import_bag(bag, args.wrench_topic, args.pose_topic, tuple(args.pose_offset),
-                             args.start, args.end)
+    n = 3 if args.spatial else 2
+    offset = tuple(args.pose_offset) if args.pose_offset is not None else (0.0,) * n
+    if len(offset) != n or not all(np.isfinite(v) for v in offset):
+        raise CliError(f"--pose-offset must be {n} finite numbers in m{' with --spatial' if args.spatial else ''}; "
+                       f"got {list(offset)}")
+    log, report = import_bag(bag, args.wrench_topic, args.pose_topic, offset, args.start, args.end,
+                             spatial=args.spatial)
     text = json.dumps(strict({"log": out.name, "samples": len(log), "duration_s": log.duration,
                               "pose_measurements": int(log.has_pose.sum()), **report}), indent=2, allow_nan=False)
     # both or neither: the sidecar first, the log last (plant.files.atomic_write_many)

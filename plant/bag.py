@@ -26,6 +26,9 @@ How a bag becomes a log:
   pose offset.
 * The log runs over the span both streams share, cut further by
   ``start``/``end``.
+* With ``spatial=True`` the log is spatial: all six wrench components
+  (``tx .. fz``) and the whole pose (the quaternion, and the position moved
+  from the tracked frame to the sensor point by the pose offset).
 
 :func:`plant.bag_write.write_bag` writes a log as a bag (for tests, and to try
 the import on a simulated run).
@@ -38,6 +41,8 @@ import numpy as np
 
 from .files import not_a_file
 from .log import Log, LogError
+from .model import SpatialModel
+from .rigid_body import rotation_matrix
 
 __all__ = ["BagError", "import_bag", "read_bag", "format_report",
            "WRENCH_TYPE", "POSE_TYPES", "MAX_WRENCH_GAP", "MAX_TILT_DEG", "MAX_OUT_OF_PLANE"]
@@ -76,7 +81,7 @@ def read_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None,
     return import_bag(path, wrench_topic, pose_topic, pose_offset, start, end)[0]
 
 
-def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None, end=None):
+def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None, end=None, spatial=False):
     """Read a ROS bag into a log, with a report of what was imported.
 
     Parameters
@@ -88,13 +93,19 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
     pose_topic : str
         Topic of ``geometry_msgs/PoseStamped``, ``geometry_msgs/TransformStamped``
         or ``nav_msgs/Odometry`` (the tracked payload).
-    pose_offset : (float, float)
+    pose_offset : (float, float), or (float, float, float) with ``spatial``
         ``[DX, DY]``, m: the tracked marker frame's origin relative to the
         payload's centre of mass, in the body frame. The log's position is the
-        centre of mass, ``[X, Y] = marker - R(theta) [DX, DY]``.
+        centre of mass, ``[X, Y] = marker - R(theta) [DX, DY]``. With
+        ``spatial``, ``[DX, DY, DZ]``: the tracked frame's origin from the
+        sensor point, in the sensor's axes (the tracked frame's axes are the
+        sensor's); the log's position is ``p = marker - R(q) [DX, DY, DZ]``.
     start, end : float, optional
         Keep only stamps in ``[start, end]`` s after the first wrench stamp
         of the bag.
+    spatial : bool
+        Keep the whole pose and all six wrench components: a spatial log
+        (``t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz``) of a 6-axis sensor.
 
     Returns
     -------
@@ -124,7 +135,7 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         wrench stream, or too little data for a log.
     """
     path = Path(path)
-    offset = _pair(pose_offset, "pose_offset")
+    offset = _numbers(pose_offset, "pose_offset", 3 if spatial else 2)
     for name, value in (("start", start), ("end", end)):
         if value is not None and not np.isfinite(value):
             raise BagError(f"{name} must be a finite number of seconds; got {value}")
@@ -132,6 +143,8 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         raise BagError(f"end must be after start; got start {start}, end {end}")
     pose_type, wrench_msgs, pose_msgs = _read_messages(path, wrench_topic, pose_topic)
     t_w, w, w_ignored, w_info = _stream(wrench_msgs, "wrench", path.name)
+    if spatial:                                 # [torque.x, torque.y, torque.z, force.x, force.y, force.z]
+        w, w_ignored = np.column_stack([w_ignored[:, :2], w[:, :1], w[:, 1:], w_ignored[:, 2:]]), w_ignored[:, :0]
     t_p, p, p_info = _stream(pose_msgs, "pose", path.name)
     origin = t_w[0]                                     # ns of the bag's first wrench stamp
     tw = (t_w - origin) * 1e-9
@@ -153,11 +166,15 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         raise BagError(f"{path.name}: too few messages in the span both streams share "
                        f"({len(tw)} wrench, {len(tp)} pose)")
 
-    theta, xy, tilt, z = _planar_pose(p, offset)
+    if spatial:
+        values, xyz = _spatial_pose(p, offset), p[:, :3]
+    else:
+        theta, xy, tilt, z = _planar_pose(p, offset)
+        values = np.column_stack([theta, xy])
     grid, w_grid, resampled = _even_grid(tw, w, path.name)
     k = np.clip(np.round((tp - grid[0]) / (grid[1] - grid[0])).astype(int), 0, len(grid) - 1)
     snap = np.abs(grid[k] - tp)
-    pose = np.full((len(grid), 3), np.nan)
+    pose = np.full((len(grid), values.shape[1]), np.nan)
     best = np.full(len(grid), np.inf)
     merged = 0
     for i in np.argsort(snap, kind="stable"):           # nearest pose wins a sample
@@ -165,7 +182,7 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
             merged += 1
             continue
         best[k[i]] = snap[i]
-        pose[k[i]] = (theta[i], *xy[i])
+        pose[k[i]] = values[i]
     rows = np.flatnonzero(~np.isnan(pose[:, 0]))
     first, last = rows[0], rows[-1]
     t0 = grid[first]
@@ -175,7 +192,7 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
     def rms(a):
         return [float(v) for v in np.sqrt(np.mean(np.square(a), axis=0))]
 
-    in_plane = float(np.max(np.ptp(xy, axis=0)))
+    names = SpatialModel.wrench_names if spatial else ("M", "fx", "fy")
     report = {
         "bag": str(path), "wrench_topic": wrench_topic, "pose_topic": pose_topic, "pose_type": pose_type,
         "start_time_ns": int(origin + round(t0 * 1e9)),
@@ -188,27 +205,32 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         "resampled": resampled,
         "snap_error_max_s": float(snap.max()),
         "poses_merged": int(merged),
-        "tilt_max_deg": float(np.degrees(tilt.max())),
-        "out_of_plane_m": float(np.ptp(z)),
-        "in_plane_m": in_plane,
-        "rms_used": dict(zip(("M", "fx", "fy"), rms(w[used_w]))),
-        "rms_ignored": dict(zip(("torque.x", "torque.y", "force.z"), rms(w_ignored[used_w]))),
+        "spatial": bool(spatial),
+        "rms_used": dict(zip(names, rms(w[used_w]))),
+        "rms_ignored": {} if spatial else dict(zip(("torque.x", "torque.y", "force.z"), rms(w_ignored[used_w]))),
         "pose_offset": list(offset),
     }
+    if spatial:
+        report["motion_m"] = float(np.max(np.ptp(xyz, axis=0)))
+    else:
+        report.update({"tilt_max_deg": float(np.degrees(tilt.max())), "out_of_plane_m": float(np.ptp(z)),
+                       "in_plane_m": float(np.max(np.ptp(xy, axis=0)))})
     report["wrench"]["dropped"] = _dropped(tw)             # frames missing within the span used
     report["pose"]["dropped"] = _dropped(tp)
     report["warnings"] = _warnings(report)
     return log, report
 
 
-def _pair(value, name):
+def _numbers(value, name, n):
+    """``value`` as ``n`` finite numbers (m), or a one-line :class:`BagError`."""
+    word = {2: "two", 3: "three"}[n]
     try:
-        pair = tuple(float(v) for v in value)
+        numbers = tuple(float(v) for v in value)
     except (TypeError, ValueError):
-        raise BagError(f"{name} must be two numbers in m; got {value!r}") from None
-    if len(pair) != 2 or not all(np.isfinite(pair)):
-        raise BagError(f"{name} must be two finite numbers in m; got {value!r}")
-    return pair
+        raise BagError(f"{name} must be {word} numbers in m; got {value!r}") from None
+    if len(numbers) != n or not all(np.isfinite(numbers)):
+        raise BagError(f"{name} must be {word} finite numbers in m; got {value!r}")
+    return numbers
 
 
 def _open_reader(path):
@@ -362,18 +384,31 @@ def _even_grid(t, w, name):
                        f"({steps.max() / dt:.0f} steps of {dt:.4g} s; at most {MAX_WRENCH_GAP} are "
                        "resampled over); cut it out with start/end")
     grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
-    w_grid = np.column_stack([np.interp(grid, t, w[:, j]) for j in range(3)])
+    w_grid = np.column_stack([np.interp(grid, t, w[:, j]) for j in range(w.shape[1])])
     return grid, w_grid, {"step_s": dt, "steps_min_s": float(steps.min()), "steps_max_s": float(steps.max()),
                           "spread": spread}
 
 
-def _planar_pose(p, offset):
-    """Yaw (unwrapped), centre-of-mass position, tilt and height from ``[x, y, z, qx, qy, qz, qw]`` rows."""
+def _unit_quaternions(p):
+    """The ``[qx, qy, qz, qw]`` columns of pose rows, normalised; a zero quaternion is one line."""
     q = p[:, 3:7]
     norm = np.linalg.norm(q, axis=1)
     if np.any(norm < 1e-6):
         raise BagError(f"a pose message has a zero quaternion (message {int(np.argmax(norm < 1e-6)) + 1} by stamp)")
-    x, y, z, w = (q / norm[:, None]).T
+    return q / norm[:, None]
+
+
+def _spatial_pose(p, offset):
+    """Rows ``[qw, qx, qy, qz, x, y, z]`` of the sensor frame from ``[x, y, z, qx, qy, qz, qw]`` of the tracked one."""
+    x, y, z, w = _unit_quaternions(p).T
+    q = np.column_stack([w, x, y, z])
+    R = np.moveaxis(rotation_matrix(q.T), -1, 0)
+    return np.column_stack([q, p[:, :3] - R @ np.asarray(offset, dtype=float)])
+
+
+def _planar_pose(p, offset):
+    """Yaw (unwrapped), centre-of-mass position, tilt and height from ``[x, y, z, qx, qy, qz, qw]`` rows."""
+    x, y, z, w = _unit_quaternions(p).T
     yaw = np.unwrap(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
     tilt = np.arccos(np.clip(1 - 2 * (x * x + y * y), -1.0, 1.0))     # body z against world z
     c, s = np.cos(yaw), np.sin(yaw)
@@ -388,10 +423,10 @@ def _utc(ns):
 
 def _warnings(r):
     out = []
-    if r["tilt_max_deg"] > MAX_TILT_DEG:
+    if not r.get("spatial") and r["tilt_max_deg"] > MAX_TILT_DEG:
         out.append(f"the tracked body tilts up to {r['tilt_max_deg']:.2g} deg (more than {MAX_TILT_DEG:g}): "
                    "the motion is not planar and the planar model does not hold")
-    if r["out_of_plane_m"] > MAX_OUT_OF_PLANE:
+    if not r.get("spatial") and r["out_of_plane_m"] > MAX_OUT_OF_PLANE:
         out.append(f"the tracked body travels {r['out_of_plane_m']:.3g} m out of the plane (more than "
                    f"{MAX_OUT_OF_PLANE:g} m): the planar model does not hold")
     if r["resampled"] is not None:
@@ -431,12 +466,16 @@ def format_report(report):
         f"({report['span_s'][1] - report['span_s'][0]:.3f} s); t = 0 is {report['start_time_utc']} "
         f"({report['start_time_ns']} ns)",
         f"  poses snapped to the nearest wrench sample: largest error {report['snap_error_max_s'] * 1e3:.3g} ms",
-        f"  planarity: tilt up to {report['tilt_max_deg']:.3g} deg, {report['out_of_plane_m'] * 1e3:.3g} mm out of "
-        f"the plane (the motion spans {report['in_plane_m']:.3g} m in it)",
+        (f"  spatial: the whole pose and all six wrench components; the motion spans {report['motion_m']:.3g} m"
+         if report["spatial"] else
+         f"  planarity: tilt up to {report['tilt_max_deg']:.3g} deg, {report['out_of_plane_m'] * 1e3:.3g} mm out of "
+         f"the plane (the motion spans {report['in_plane_m']:.3g} m in it)"),
         "  rms used:    " + ", ".join(f"{k} {v:.4g}" for k, v in used.items()) + " (N m, N)",
-        "  rms ignored: " + ", ".join(f"{k} {v:.4g}" for k, v in ignored.items()) + " (N m, N)",
     ]
+    if ignored:
+        lines.append("  rms ignored: " + ", ".join(f"{k} {v:.4g}" for k, v in ignored.items()) + " (N m, N)")
     if any(report["pose_offset"]):
-        lines.append(f"  pose offset (marker from the centre of mass, body frame): "
-                     f"{report['pose_offset'][0]:g}, {report['pose_offset'][1]:g} m")
+        frame = "the sensor point, sensor axes" if report["spatial"] else "the centre of mass, body frame"
+        lines.append(f"  pose offset (marker from {frame}): "
+                     + ", ".join(f"{v:g}" for v in report["pose_offset"]) + " m")
     return "\n".join(lines)

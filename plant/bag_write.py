@@ -4,7 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bag import WRENCH_TYPE, BagError, _pair
+from .bag import WRENCH_TYPE, BagError, _numbers
+from .rigid_body import rotation_matrix
 
 __all__ = ["write_bag"]
 
@@ -38,7 +39,7 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         Absolute time of the log's first sample, ns.
     receive_jitter : float
         s, at least 0.
-    pose_offset : (float, float)
+    pose_offset : (float, float), or (float, float, float) for a spatial log
         The marker's origin relative to the centre of mass, body frame, m.
     pose_stamp_jitter : float
         s, at least 0, less than half a sample.
@@ -70,7 +71,10 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         raise BagError(f"pose_stamp_jitter must be in [0, {log.dt / 2:g}) s; got {pose_stamp_jitter}")
     if not (np.isfinite(wrench_drop_rate) and 0 <= wrench_drop_rate < 0.5):
         raise BagError(f"wrench_drop_rate must be in [0, 0.5); got {wrench_drop_rate}")
-    dx, dy = _pair(pose_offset, "pose_offset")
+    spatial = getattr(log, "kind", "planar") == "spatial"
+    if spatial and len(pose_offset) == 2 and not any(pose_offset):
+        pose_offset = (0.0, 0.0, 0.0)
+    offset = np.asarray(_numbers(pose_offset, "pose_offset", 3 if spatial else 2))
     ts = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE)
     T = ts.types
     Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
@@ -86,20 +90,30 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         return Header(**kw)
 
     def wrench_msg(ns, row):
-        M, fx, fy = row
+        tx, ty, tz, fx, fy, fz = row if spatial else (0.0, 0.0, row[0], row[1], row[2], 0.0)
         return T["geometry_msgs/msg/WrenchStamped"](
             header=header(ns), wrench=T["geometry_msgs/msg/Wrench"](
-                force=Vector3(x=float(fx), y=float(fy), z=0.0), torque=Vector3(x=0.0, y=0.0, z=float(M))))
+                force=Vector3(x=float(fx), y=float(fy), z=float(fz)), torque=Vector3(x=float(tx), y=float(ty),
+                                                                                   z=float(tz))))
 
-    def pose_msg(ns, theta, X, Y):
+    def marker(pose):
+        """The tracked frame's position and attitude ``(px, py, pz, q)`` at a log's pose."""
+        if spatial:
+            qw, qx, qy, qz = pose[:4]
+            px, py, pz = pose[4:] + rotation_matrix(pose[:4]) @ offset
+            return px, py, pz, Quaternion(x=float(qx), y=float(qy), z=float(qz), w=float(qw))
+        theta, X, Y = pose
         c, s = np.cos(theta), np.sin(theta)
-        px, py = X + c * dx - s * dy, Y + s * dx + c * dy
-        q = Quaternion(x=0.0, y=0.0, z=float(np.sin(theta / 2)), w=float(np.cos(theta / 2)))
+        px, py = X + c * offset[0] - s * offset[1], Y + s * offset[0] + c * offset[1]
+        return px, py, 0.0, Quaternion(x=0.0, y=0.0, z=float(np.sin(theta / 2)), w=float(np.cos(theta / 2)))
+
+    def pose_msg(ns, pose):
+        px, py, pz, q = marker(pose)
         if pose_type == "TransformStamped":
             return T[full[pose_type]](header=header(ns), child_frame_id="payload",
                                       transform=T["geometry_msgs/msg/Transform"](
-                                          translation=Vector3(x=float(px), y=float(py), z=0.0), rotation=q))
-        pose = T["geometry_msgs/msg/Pose"](position=Point(x=float(px), y=float(py), z=0.0), orientation=q)
+                                          translation=Vector3(x=float(px), y=float(py), z=float(pz)), rotation=q))
+        pose = T["geometry_msgs/msg/Pose"](position=Point(x=float(px), y=float(py), z=float(pz)), orientation=q)
         if pose_type == "PoseStamped":
             return T[full[pose_type]](header=header(ns), pose=pose)
         cov = np.zeros(36)
@@ -115,7 +129,7 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     messages = [(0, ns, wrench_msg(ns, row)) for ns, row, ok in zip(stamps, log.w_hat, sent) if ok]
     rows = np.flatnonzero(log.has_pose)
     shift = np.round(rng.uniform(-pose_stamp_jitter, pose_stamp_jitter, len(rows)) * 1e9).astype(np.int64)
-    messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, *log.pose[k])) for k, d in zip(rows, shift)]
+    messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, log.pose[k])) for k, d in zip(rows, shift)]
     received = [int(ns) + 1_000_000 + int(rng.uniform(0, receive_jitter) * 1e9) for _, ns, _ in messages]
     order = np.argsort(received, kind="stable")
     if storage == "ros1":
