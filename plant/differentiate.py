@@ -17,19 +17,11 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from .errors import FmscalError
+from .rigid_body import quaternion_multiply
 
 __all__ = ["spatial_motion", "edge", "ORDER"]
 #: Degree of the local polynomial (a quintic keeps the smoothing bias of a 0.2 s window below 0.1 % at 0.5 Hz).
 ORDER = 5
-
-
-def _batch_product(p, q):
-    """Hamilton products ``p (x) q`` of two (N, 4) arrays, row by row (as :func:`rigid_body.quaternion_multiply`)."""
-    return np.stack([
-        p[:, 0] * q[:, 0] - p[:, 1] * q[:, 1] - p[:, 2] * q[:, 2] - p[:, 3] * q[:, 3],
-        p[:, 0] * q[:, 1] + p[:, 1] * q[:, 0] + p[:, 2] * q[:, 3] - p[:, 3] * q[:, 2],
-        p[:, 0] * q[:, 2] - p[:, 1] * q[:, 3] + p[:, 2] * q[:, 0] + p[:, 3] * q[:, 1],
-        p[:, 0] * q[:, 3] + p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1] + p[:, 3] * q[:, 0]], axis=1)
 
 
 def _samples(log, window):
@@ -94,6 +86,6 @@ def spatial_motion(log, window=0.2):
     q = smooth(pose[:, :4], 0)
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     conj = q * np.array([1.0, -1.0, -1.0, -1.0])                 # q*, row by row
-    omega = 2 * _batch_product(conj, smooth(pose[:, :4], 1))[:, 1:]
-    alpha = 2 * _batch_product(conj, smooth(pose[:, :4], 2))[:, 1:]
+    omega = 2 * quaternion_multiply(conj.T, smooth(pose[:, :4], 1).T)[1:].T
+    alpha = 2 * quaternion_multiply(conj.T, smooth(pose[:, :4], 2).T)[1:].T
     return q, omega, alpha, smooth(pose[:, 4:], 2)

@@ -57,7 +57,7 @@ __all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth"
 COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
 #: Column names of a spatial log, in order.
 SPATIAL_COLUMNS = ("t", *SpatialModel.pose_names, *SpatialModel.wrench_names)
-_POSE, _WRENCH = PlanarModel.pose_names, PlanarModel.wrench_names
+_WRENCH = PlanarModel.wrench_names
 #: Largest departure of a logged quaternion's norm from 1 that is taken for rounding (and normalised).
 QUATERNION_TOLERANCE = 1e-3
 _CASES = {(len(m.pose_names), len(m.wrench_names)): m for m in (PlanarModel, SpatialModel)}

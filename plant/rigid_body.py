@@ -192,16 +192,17 @@ def quaternion_multiply(p, q):
 
     Parameters
     ----------
-    p, q : array_like or casadi.SX, shape (4,)
+    p, q : array_like or casadi.SX, shape (4,), or ndarray, shape (4, N)
+        One quaternion each, or (numbers only) one per column.
 
     Returns
     -------
-    ndarray or casadi.SX, shape (4,)
+    ndarray or casadi.SX, shape (4,) or (4, N)
     """
-    o = ops(p, q)
     pw, px, py, pz = p[0], p[1], p[2], p[3]
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]
-    return o.vcat([
+    stack = ops(p, q).vcat if is_symbolic(p, q) else np.stack
+    return stack([
         pw * qw - px * qx - py * qy - pz * qz,
         pw * qx + px * qw + py * qz - pz * qy,
         pw * qy - px * qz + py * qw + pz * qx,
