@@ -146,12 +146,12 @@ def _print_calibration(args, log, out, result):
               f"position sd {n['position_sd']:.3g} m")
     S, S_std = np.array(out["S"]), out["S_std"]
     print("S_hat" + (" +- one sigma:" if S_std is not None else " (this method gives no uncertainty):"))
-    for i in range(3):
-        cells = [f"{S[i, j]:+.5f}" + (f" +- {S_std[i][j]:.1e}" if S_std is not None else "") for j in range(3)]
+    for i in range(len(S)):
+        cells = [f"{S[i, j]:+.5f}" + (f" +- {S_std[i][j]:.1e}" if S_std is not None else "") for j in range(len(S))]
         print("  " + "   ".join(cells))
     if out["b"] is not None:
         b, b_std = out["b"], out["b_std"]
-        cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(3)]
+        cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(len(b))]
         print("offset b [N m, N, N]: " + "   ".join(cells))
     print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
     print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {result.t[-1]:g} s)")

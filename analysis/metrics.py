@@ -21,8 +21,9 @@ def calibration_error(S_hat, S):
     Parameters
     ----------
     S_hat, S : array_like, shape (n, n)
-        Estimate and true calibration matrix, in SI units: 3x3 (planar) or
-        6x6 (spatial, where N and N m mix: :func:`block_errors`).
+        Estimate and true calibration matrix, in SI units: ``n`` is the
+        model's ``n_w`` (3 planar; 6 spatial, where N and N m mix:
+        :func:`block_errors`).
 
     Returns
     -------
@@ -34,7 +35,7 @@ def calibration_error(S_hat, S):
     >>> calibration_error(np.eye(3), np.eye(3))
     0.0
     """
-    n = np.shape(S)[0] if np.ndim(S) == 2 and np.shape(S)[0] in (3, 6) else 3
+    n = np.shape(S)[0] if np.ndim(S) == 2 and np.shape(S)[0] >= 1 else 3
     S_hat = as_finite_array(S_hat, (n, n), "S_hat")
     S = as_finite_array(S, (n, n), "S")
     return float(np.linalg.norm(np.eye(n) - S_hat @ np.linalg.inv(S), 2))
@@ -69,8 +70,8 @@ def error_history(S_hat_history, S_true):
 
     Parameters
     ----------
-    S_hat_history : ndarray, shape (N, 3, 3)
-    S_true : ndarray, shape (3, 3) or (N, 3, 3)
+    S_hat_history : ndarray, shape (N, n, n)
+    S_true : ndarray, shape (n, n) or (N, n, n)
         The true ``S``, constant or at each sample.
 
     Returns
@@ -80,7 +81,7 @@ def error_history(S_hat_history, S_true):
     S_true = np.asarray(S_true, dtype=float)
     if S_true.ndim == 3 and len(S_true) and np.all(S_true == S_true[:1]):
         S_true = S_true[0]                      # a constant S given at every sample: inverted once
-    D = np.eye(3) - np.asarray(S_hat_history, dtype=float) @ np.linalg.inv(S_true)
+    D = np.eye(S_true.shape[-1]) - np.asarray(S_hat_history, dtype=float) @ np.linalg.inv(S_true)
     # the largest singular value, as the root of the largest eigenvalue of D^T D (half an SVD's time)
     return np.sqrt(np.maximum(np.linalg.eigvalsh(np.swapaxes(D, -1, -2) @ D)[:, -1], 0.0))
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from fmscal.observers import method_label
 from fmscal.plant.files import atomic_write
+from fmscal.plant.model import PlanarModel
 
 __all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "thinned",
            "wandering_methods"]
@@ -140,10 +141,11 @@ def _S_limits(histories, S_true, clipped, i, j, bands=None):
 
 
 def _S_panels(fig, spec, times, histories, S_true, t_true, clipped, bands=None):
-    """The nine entries of S_hat in a 3 x 3 block of ``spec``; returns the axes."""
-    axes = spec.subgridspec(3, 3, hspace=0.35, wspace=0.3).subplots(sharex=True)
-    for i in range(3):
-        for j in range(3):
+    """The entries of S_hat in an n x n block of ``spec`` (3 x 3 in the plane); returns the axes."""
+    n = next(iter(histories.values())).shape[-1]
+    axes = spec.subgridspec(n, n, hspace=0.35, wspace=0.3).subplots(sharex=True, squeeze=False)
+    for i in range(n):
+        for j in range(n):
             ax = axes[i, j]
             for name, h in histories.items():
                 line, = ax.plot(times[name], h[:, i, j], label=_label(name, clipped), **_style(name, clipped))
@@ -294,7 +296,7 @@ def plot_calibration(result, log, path, title, truth=None):
     handles, labels = axes[0, 0].get_legend_handles_labels()
     row = outer[1].subgridspec(1, 3, wspace=0.3).subplots()
     has = log.has_pose[:n]
-    fitted = result.x_hat_history[:, [0, 2, 4]]
+    fitted = result.x_hat_history[:, list(PlanarModel.q_index)]      # the pose the fit shows (planar)
     residual = log.pose[:n][has] - fitted[has]
     for ax, k, name, scale, unit in zip(row, range(3), ("theta", "X", "Y"), (1e3, 1e3, 1e3), ("mrad", "mm", "mm")):
         ax.plot(log.t[:n][has], residual[:, k] * scale, ".", ms=1.5, color="tab:gray")

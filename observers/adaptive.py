@@ -43,6 +43,7 @@ from . import _matrix as mx
 from .base import RecursiveObserver
 from .gains import double_pole_gains
 from .highgain import discrete_gain
+from .discretise import position_increment, velocity_increment
 from .state import INPUT, StateLayout
 
 __all__ = ["AdaptiveObserver", "DEFAULT_LAM", "GAINS"]
@@ -115,7 +116,8 @@ class AdaptiveObserver(RecursiveObserver):
 
     Parameters
     ----------
-    payload : plant.Payload
+    model : plant.PlanarModel or plant.Payload
+        The planar problem (a payload stands for its planar model).
     lam : float
         Pole of each channel (double), rad/s: the bandwidth of the filter
         ``1/(s + lam)^2`` on the regressor (change 1, 2).
@@ -149,7 +151,7 @@ class AdaptiveObserver(RecursiveObserver):
     (3, 3)
     """
 
-    def __init__(self, payload, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
+    def __init__(self, model, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
                  threshold=8.0, step_ratio=5.0, t_forget=0.05, memory=0.2, offset=False):
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
@@ -165,9 +167,10 @@ class AdaptiveObserver(RecursiveObserver):
         #: The continuous-time injection gains whose double poles at ``-lam`` the sampled gain
         #: ``L_h`` images (eqs. 6, 7, 14; ``fmscal check-gains --config adaptive``).
         self.K1, self.K2 = double_pole_gains(self.lam)
-        super().__init__(payload, offset=offset)
+        super().__init__(model, offset=offset)
 
     name = "adaptive"
+    models = ("planar",)        # eqs. (4)-(8): the paper's planar structure
 
     def _layout(self):
         # since: time from the last pose to sample n; scale: each parameter set's prior information;
@@ -190,7 +193,7 @@ class AdaptiveObserver(RecursiveObserver):
         test1, test2 = np.zeros(4 * n + 2), np.zeros(8 * n + 2)
         test1[3 * n:4 * n] = info[0]
         test2[6 * n:8 * n] = info[1]
-        return self.state.pack(None, x=[pose[0], 0.0, pose[1], 0.0, pose[2], 0.0], S=self._initial_S(S0),
+        return self.state.pack(None, x=self.model.rest_state(pose), S=self._initial_S(S0),
                                since=0.0, scale=info, ups_t=np.zeros(2 * n), ups_c=np.zeros(2 * n),
                                ups_s=np.zeros(2 * n), P1=(np.eye(n) / (_PRIOR * info[0])).ravel(),
                                Pre=(np.eye(n) / (_PRIOR * info[1])).ravel(), Pim=np.zeros(n * n),
@@ -320,8 +323,8 @@ class AdaptiveObserver(RecursiveObserver):
         ups = [st.ups_t, st.ups_c, st.ups_s]
         g_p, g_v, ups_pred = [], [], []
         for (b0, b1), up in zip(bases, ups):
-            g_p.append([dt * dt * (2 * b0[j] + b1[j]) / 6 for j in range(n)])
-            g_v.append([dt * (b0[j] + b1[j]) / 2 for j in range(n)])
+            g_p.append([position_increment(dt, b0[j], b1[j]) for j in range(n)])
+            g_v.append([velocity_increment(dt, b0[j], b1[j]) for j in range(n)])
             ups_pred.append([[up[j] + dt * up[n + j] + g_p[-1][j] for j in range(n)],
                              [up[n + j] + g_v[-1][j] for j in range(n)]])
         dot = lambda a, b: sum(a[j] * b[j] for j in range(n))

@@ -88,7 +88,8 @@ class PaperAdaptiveObserver(RecursiveObserver):
 
     Parameters
     ----------
-    payload : plant.Payload
+    model : plant.PlanarModel or plant.Payload
+        The planar problem (a payload stands for its planar model).
     K1 : array_like, shape (2, 1), optional
         Injection gain of the angular observer (6); default the paper's.
     K2 : array_like, shape (4, 2), optional
@@ -108,20 +109,21 @@ class PaperAdaptiveObserver(RecursiveObserver):
     """
 
     name = "adaptive-paper"
+    models = ("planar",)        # eqs. (4)-(8): the paper's planar structure
 
-    def __init__(self, payload, K1=None, K2=None, delta=PAPER_DELTA, offset=False):
+    def __init__(self, model, K1=None, K2=None, delta=PAPER_DELTA, offset=False):
         self.K1 = as_finite_array(PAPER_K1 if K1 is None else K1, (2, 1), "K1")
         self.K2 = as_finite_array(PAPER_K2 if K2 is None else K2, (4, 2), "K2")
         self.delta = as_positive_scalar(delta, "delta")
         self.K = injection_matrix(self.K1, self.K2)
-        super().__init__(payload, offset=offset)
+        super().__init__(model, offset=offset)
 
     def _layout(self):
         # e_prev: the output error at the previous pose, for the backward difference of eq. (15)
         return StateLayout(("x", 6), ("S", 3 * self.n_cols), ("e_prev", 3))
 
     def _initial_state(self, S0, u):
-        x = np.array([u.pose[0], 0.0, u.pose[1], 0.0, u.pose[2], 0.0])
+        x = self.model.rest_state(u.pose)
         return self.state.pack(None, x=x, S=self._initial_S(S0), e_prev=np.zeros(3))
 
     def _transition(self, z, u_prev, u, dt):

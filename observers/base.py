@@ -1,8 +1,14 @@
 """The one contract every method of the toolkit follows: :class:`Observer`.
 
 Every method (the observers, the EKF, the offline references) is an
-:class:`Observer`: built as ``Method(payload, ..., offset=False)``, run on a
-whole log with ``run(log, S0=None) -> ObserverResult``. The base class does
+:class:`Observer`: built as ``Method(model, ..., offset=False)`` on the
+problem's :class:`fmscal.plant.Model` (a payload stands for its case's model),
+run on a whole log with ``run(log, S0=None) -> ObserverResult``. Every size
+(the wrench, the motion state, the calibration entries) comes from the model.
+An observer holds its settings; what one run holds (the start, the divergence
+bound, the previous sample, the noise model used, the build time) lives in a
+:class:`RunData` that :meth:`Observer.reset` and :meth:`Observer.run` create,
+as pinocchio's ``model.createData()``. The base class does
 what they share, once: input validation, timing, the offset ``b`` from
 ``[S | c]``, the uncertainties from a covariance, the ``converged`` and
 ``diverged`` flags. A method writes only what is its own:
@@ -24,7 +30,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from fmscal.plant import Log, Payload
+from fmscal.plant import Log
+from fmscal.plant.model import as_model
 from fmscal.plant._checks import as_bool
 from fmscal.plant._compile import ChunkedSteps, compiler
 from fmscal.plant.errors import FmscalError
@@ -32,11 +39,10 @@ from fmscal.plant.sensor import check_calibration
 
 from .convergence import DIVERGENCE_GRACE, EVIDENCE_TOLERANCE, divergence_bound, informed, moved, settled
 from .progress import EVERY, progress_bar
-from .result import ObserverResult, initial_calibration, offset_std, split_calibration
+from .result import ObserverResult, calibration_uncertainty, initial_calibration, split_calibration
 from .samples import check_sample, pack_input
-from .state import INPUT
 
-__all__ = ["Observer", "RecursiveObserver", "Estimate", "log_inputs", "MAX_S0"]
+__all__ = ["Observer", "RecursiveObserver", "Estimate", "RunData", "log_inputs", "MAX_S0"]
 
 #: Largest magnitude of an entry of an initial estimate ``S0``: the readings' scale (log values up to
 #: 1e9, :data:`plant.log.MAX_MAGNITUDE`) times it stays far from overflow in every observer.
@@ -53,12 +59,12 @@ class Estimate:
 
     Attributes
     ----------
-    calibration : ndarray, shape (N, 3 n)
-        ``[S_hat | c_hat]`` after each sample, row order (``n`` = 3, or 4
-        with the offset). Shorter than the log where the run diverged.
-    x : ndarray, shape (N, 6)
-        The motion estimate ``[theta, theta', X, X', Y, Y']``.
-    cov : ndarray, shape (3 n, 3 n), or None
+    calibration : ndarray, shape (N, n_w n)
+        ``[S_hat | c_hat]`` after each sample, row order (``n`` = ``n_w``, or
+        ``n_w + 1`` with the offset). Shorter than the log where the run diverged.
+    x : ndarray, shape (N, nx)
+        The motion estimate in the model's state layout.
+    cov : ndarray, shape (n_w n, n_w n), or None
         Covariance of the final ``[S_hat | c_hat]`` (row order), where the
         method has one: gives ``S_std`` and ``b_std``.
     diverged : bool
@@ -78,10 +84,49 @@ class Estimate:
     warnings: list = field(default_factory=list)
 
 
-def log_inputs(log):
-    """Every sample's step input ``[has_pose, theta, X, Y, M, f_x, f_y]``, shape (N, 7).
+@dataclass
+class RunData:
+    """What one run of an :class:`Observer` holds, apart from its settings.
 
-    Pose entries are zero where the log has no pose (:data:`observers.state.INPUT`).
+    Created by :meth:`Observer.reset` (a live sensor) and :meth:`Observer.run`
+    (a log); an observer's settings never change while it runs.
+
+    Attributes
+    ----------
+    S0 : ndarray, shape (n_w, n_w)
+        The start.
+    bound : float
+        The divergence bound on ``max |s_ij|`` (:func:`observers.convergence.divergence_bound`).
+    grace : int
+        Steps judged on finiteness only (:data:`observers.convergence.DIVERGENCE_GRACE`).
+    u_prev : ndarray or None
+        The previous sample's input (:attr:`fmscal.plant.Model.input_layout`); None before the first.
+    compiled : bool
+        The compiled path (True) or the readable one.
+    noise : plant.NoiseSpec or None
+        The noise model this run uses, where the method has one.
+    build_time : float
+        Seconds spent building a compiled step (not the run's cost).
+    evidence_time : float
+        Seconds of the least-squares check that gives a method without an
+        uncertainty its evidence (not the run's cost).
+    """
+
+    S0: np.ndarray
+    bound: float
+    grace: int = 0
+    u_prev: np.ndarray = None
+    compiled: bool = True
+    noise: object = None
+    build_time: float = 0.0
+    evidence_time: float = 0.0
+
+
+def log_inputs(log):
+    """Every sample's step input ``[has_pose, pose, w_hat]``, shape (N, 1 + n_pose + n_w).
+
+    Pose entries are zero where the log has no pose (:attr:`fmscal.plant.Model.input_layout`;
+    planar: ``[has_pose, theta, X, Y, M, f_x, f_y]``).
     """
     return np.column_stack([log.has_pose, np.nan_to_num(log.pose), log.w_hat])
 
@@ -91,8 +136,10 @@ class Observer:
 
     Parameters
     ----------
-    payload : plant.Payload
-        The payload's known mass properties.
+    model : plant.Model, plant.Payload or plant.SpatialPayload
+        The problem: its sizes, layouts and dynamics, with the payload's
+        known mass properties. A payload stands for its case's model
+        (:func:`fmscal.plant.model.as_model`).
     offset : bool
         Also estimate the sensor's offset ``b`` in ``w = S (w_hat - b)``:
         the method runs on ``w = S w_hat + c`` (the reading augmented by a
@@ -106,8 +153,19 @@ class Observer:
     online : bool
         True: works sample by sample (:meth:`reset`, :meth:`step`); False:
         fits a whole log (:meth:`run` only).
+    models : tuple of str
+        The cases (:attr:`fmscal.plant.Model.name`) the method is defined
+        for; empty: any model. The paper's observer and the high-gain
+        observer of [4] are planar by definition.
+    model : plant.Model
+    payload
+        The model's payload.
+    n_w : int
+        Components of the wrench (3 planar, 6 spatial).
     n_cols : int
-        Columns of the estimated ``[S | c]``: 3, or 4 with the offset.
+        Columns of the estimated ``[S | c]``: ``n_w``, or ``n_w + 1`` with the offset.
+    run_data : RunData
+        What the current run holds.
 
     Notes
     -----
@@ -124,17 +182,24 @@ class Observer:
 
     name = "observer"
     online = True
+    models = ()
 
-    def __init__(self, payload, offset=False):
-        if not isinstance(payload, Payload):
-            raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
-        self.payload = payload
+    def __init__(self, model, offset=False):
+        self.model = as_model(model, type(self).__name__)
+        if self.models and self.model.name not in self.models:
+            raise FmscalError(f"{type(self).__name__} is defined for {' and '.join(self.models)} models; "
+                              f"got a {self.model.name} model")
+        self.payload = self.model.payload
         self.offset = as_bool(offset, "offset")
-        self.n_cols = 4 if self.offset else 3
-        self._S0 = np.eye(3)
-        self._bound = divergence_bound(self._S0)
-        self._grace = 0
-        self._u_prev = None
+        self.n_w = self.model.n_w
+        self.n_cols = self.n_w + int(self.offset)
+        self.run_data = self._new_run(None)
+
+    def _new_run(self, S0, log=None, compiled=True):
+        """A fresh :class:`RunData` from ``S0`` (default the identity), its bound from the log's scale."""
+        S0 = np.eye(self.n_w) if S0 is None else S0
+        grace = int(round(DIVERGENCE_GRACE / log.dt)) if log is not None else 0     # steps judged on finiteness
+        return RunData(S0=S0, bound=divergence_bound(S0, log, self.payload), grace=grace, compiled=bool(compiled))
 
     # --- the whole log --------------------------------------------------------
     def run(self, log, S0=None, compiled=True):
@@ -143,7 +208,8 @@ class Observer:
         Parameters
         ----------
         log : plant.Log
-        S0 : array_like, shape (3, 3), optional
+            A log of the model's case.
+        S0 : array_like, shape (n_w, n_w), optional
             Initial estimate of ``S`` for an online method (default the
             identity). An offline method needs none and refuses one.
         compiled : bool
@@ -155,31 +221,37 @@ class Observer:
         Returns
         -------
         ObserverResult
+
+        Raises
+        ------
+        TypeError
+            ``log`` is not a :class:`plant.Log`.
+        FmscalError
+            A log of another case than the model's, or ``S0`` for an offline method.
         """
-        self._use_compiled = bool(compiled)
         if not isinstance(log, Log):
             raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
+        self.model.check_log(log, self.name)
         if S0 is not None and not self.online:
             raise FmscalError(f"{self.name} fits the whole log and takes no starting estimate; got S0, "
                               "pass S0=None")
         start = time.perf_counter()
         if self.online:
-            self.reset(S0)
-            self._bound = divergence_bound(self._S0, log, self.payload)     # relative to the data's scale
-            self._grace = int(round(DIVERGENCE_GRACE / log.dt))             # steps judged on finiteness only
-        self._build_time = self._evidence_time = 0.0
-        estimate = self._estimate(log, self._S0)
+            self.reset(S0)                             # checks S0
+            S0 = self.run_data.S0
+        self.run_data = run = self._new_run(S0, log if self.online else None, compiled)   # bound: the data's scale
+        estimate = self._estimate(log, run.S0)
         result = self._result(log, estimate)
-        result.wall_time = time.perf_counter() - start - self._build_time - self._evidence_time
-        if self._build_time:
-            result.info["build_time"] = self._build_time
+        result.wall_time = time.perf_counter() - start - run.build_time - run.evidence_time
+        if run.build_time:
+            result.info["build_time"] = run.build_time
         return result
 
     def _estimate(self, log, S0):
         """The pass over the whole log. Online default: :meth:`_start`, then :meth:`_advance` per sample."""
         U = log_inputs(log)
-        n, d = len(U), 3 * self.n_cols
-        calibration, x = np.empty((n, d)), np.empty((n, 6))
+        n, d = len(U), self.n_w * self.n_cols
+        calibration, x = np.empty((n, d)), np.empty((n, self.model.nx))
         diverged = False
         with progress_bar(n, self.name) as bar:           # shown on a long log in a terminal only
             for k in range(n):
@@ -196,7 +268,7 @@ class Observer:
         if diverged:                        # keep the last healthy estimate; row k is the bad one
             k = max(k, 1)
             calibration, x = calibration[:k], x[:k]
-        self._u_prev = U[len(calibration) - 1]
+        self.run_data.u_prev = U[len(calibration) - 1]
         return Estimate(calibration, x, cov=self._covariance(), diverged=diverged)
 
     # --- sample by sample -------------------------------------------------------
@@ -205,23 +277,21 @@ class Observer:
 
         Parameters
         ----------
-        S0 : array_like, shape (3, 3), optional
+        S0 : array_like, shape (n_w, n_w), optional
             A non-singular initial estimate of ``S``, entries at most
             :data:`MAX_S0` in magnitude.
 
         Raises
         ------
         FmscalError
-            ``S0`` not a finite 3x3 matrix of numbers, or an entry beyond :data:`MAX_S0`.
+            ``S0`` not a finite ``n_w x n_w`` matrix of numbers, or an entry beyond :data:`MAX_S0`.
         """
         self._require_online("reset")
-        self._S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
-        if np.max(np.abs(self._S0)) > MAX_S0:
+        S0 = np.eye(self.n_w) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf, size=self.n_w)
+        if np.max(np.abs(S0)) > MAX_S0:
             raise FmscalError(f"S0 entries must be at most {MAX_S0:g} in magnitude (N and N m per unit of the reading; "
-                              f"beyond it the observers' products overflow); got {np.max(np.abs(self._S0)):.3g}")
-        self._bound = divergence_bound(self._S0)
-        self._grace = 0
-        self._u_prev = None
+                              f"beyond it the observers' products overflow); got {np.max(np.abs(S0)):.3g}")
+        self.run_data = self._new_run(S0)
 
     def step(self, dt, pose, w_hat):
         """Take one sample.
@@ -230,27 +300,28 @@ class Observer:
         ----------
         dt : float
             Time since the previous sample, s (ignored on the first call).
-        pose : array_like, shape (3,), or None
-            Measured ``[theta, X, Y]`` (rad, m), or None when the vision
-            system gave none: the method predicts without correcting.
-        w_hat : array_like, shape (3,)
-            Raw sensor reading ``[M, f_x, f_y]``.
+        pose : array_like, shape (n_pose,), or None
+            The measured pose (planar ``[theta, X, Y]``, rad and m), or None
+            when the tracker gave none: the method predicts without correcting.
+        w_hat : array_like, shape (n_w,)
+            Raw sensor reading (planar ``[M, f_x, f_y]``).
 
         Returns
         -------
-        x_hat : ndarray, shape (6,)
-        S_hat : ndarray, shape (3, 3)
+        x_hat : ndarray, shape (nx,)
+        S_hat : ndarray, shape (n_w, n_w)
         """
         self._require_online("step")
-        pose, w_hat = check_sample(dt, pose, w_hat, first=self._u_prev is None)
-        u = pack_input(pose, w_hat)
-        if self._u_prev is None:
+        run = self.run_data
+        pose, w_hat = check_sample(dt, pose, w_hat, first=run.u_prev is None, model=self.model)
+        u = pack_input(pose, w_hat, self.model)
+        if run.u_prev is None:
             self._start(u)
         else:
-            self._advance(self._u_prev, u, float(dt))
-        self._u_prev = u
+            self._advance(run.u_prev, u, float(dt))
+        run.u_prev = u
         x, calibration = self._current()
-        return np.array(x, dtype=float), np.reshape(calibration, (3, self.n_cols))[:, :3].copy()
+        return np.array(x, dtype=float), np.reshape(calibration, (self.n_w, self.n_cols))[:, :self.n_w].copy()
 
     def _require_online(self, what):
         if not self.online:
@@ -259,7 +330,8 @@ class Observer:
 
     # --- to implement (online) ------------------------------------------------------
     def _start(self, u):
-        """Take the first sample ``u`` (:data:`observers.state.INPUT`, with a pose), from ``self._S0``."""
+        """Take the first sample ``u`` (:attr:`fmscal.plant.Model.input_layout`, with a pose), from
+        ``self.run_data.S0``."""
         raise NotImplementedError
 
     def _advance(self, u_prev, u, dt):
@@ -267,7 +339,7 @@ class Observer:
         raise NotImplementedError
 
     def _current(self):
-        """The estimate now: ``x_hat`` (6,) and ``[S_hat | c_hat]`` (3 n,), row order."""
+        """The estimate now: ``x_hat`` (nx,) and ``[S_hat | c_hat]`` (n_w n,), row order."""
         raise NotImplementedError
 
     def _covariance(self):
@@ -280,9 +352,10 @@ class Observer:
         # a NaN or inf anywhere makes the sum non-finite: one reduction per array
         if not math.isfinite(float(x.sum()) + float(calibration.sum())):
             return False
-        if k is not None and k < self._grace:
+        if k is not None and k < self.run_data.grace:
             return True
-        return float(np.abs(calibration.reshape(3, self.n_cols)[:, :3]).max()) < self._bound
+        n_w = self.n_w
+        return float(np.abs(calibration.reshape(n_w, self.n_cols)[:, :n_w]).max()) < self.run_data.bound
 
     def _healthy_rows(self, values, calibration, k0, bad=None):
         """Leading rows that :meth:`_healthy` would pass, for a chunk of a compiled run.
@@ -291,7 +364,7 @@ class Observer:
         ----------
         values : ndarray, shape (M, k)
             Every number of each row, all of which must be finite.
-        calibration : ndarray, shape (M, 3 n)
+        calibration : ndarray, shape (M, n_w n)
             ``[S_hat | c_hat]`` of each row (row order), within the divergence bound from the grace on.
         k0 : int
             The rows are steps ``k0 + 1`` on.
@@ -302,11 +375,13 @@ class Observer:
         -------
         int
         """
-        S = calibration.reshape(len(calibration), 3, self.n_cols)[:, :, :3].reshape(len(calibration), 9)
-        steps = k0 + 1 + np.arange(len(calibration))
+        n_w, M = self.n_w, len(calibration)
+        S = calibration.reshape(M, n_w, self.n_cols)[:, :, :n_w].reshape(M, n_w * n_w)
+        steps = k0 + 1 + np.arange(M)
+        run = self.run_data
         with np.errstate(invalid="ignore"):
-            bad = (~np.all(np.isfinite(values), axis=1) | ((np.max(np.abs(S), axis=1) >= self._bound)
-                                                           & (steps >= self._grace))
+            bad = (~np.all(np.isfinite(values), axis=1) | ((np.max(np.abs(S), axis=1) >= run.bound)
+                                                           & (steps >= run.grace))
                    | (False if bad is None else bad))
         return int(np.argmax(bad)) if bad.any() else len(calibration)
 
@@ -326,18 +401,15 @@ class Observer:
             return informed(S_hat, S_std)
         from .evidence import log_uncertainty        # here: least squares is itself an Observer
         start = time.perf_counter()
-        value = log_uncertainty(log, self.payload, self.offset, enough=EVIDENCE_TOLERANCE)
-        self._evidence_time = time.perf_counter() - start      # a check of the log: not the method's cost
+        value = log_uncertainty(log, self.model, self.offset, enough=EVIDENCE_TOLERANCE)
+        self.run_data.evidence_time = time.perf_counter() - start      # a check of the log: not the method's cost
         return value <= EVIDENCE_TOLERANCE
 
     def _result(self, log, est):
         """The :class:`ObserverResult` of an estimate: offset, uncertainties and flags, for every method."""
-        S_hist, b = split_calibration(est.calibration, self.n_cols)
-        S_std = b_std = None
-        if not est.diverged and est.cov is not None:
-            S_std = np.sqrt(np.maximum(np.diag(est.cov), 0)).reshape(3, self.n_cols)[:, :3]
-            if b is not None:
-                b_std = offset_std(S_hist[-1], b, est.cov)
+        S_hist, _ = split_calibration(est.calibration, self.n_cols, self.offset)
+        final = np.reshape(est.calibration[-1], (self.n_w, self.n_cols))
+        S_std, b, b_std = calibration_uncertainty(final, None if est.diverged else est.cov, self.offset)
         if est.diverged:
             b = None
         honest = S_std is None or bool(np.all(np.isfinite(S_std)) and np.all(S_std > 0))
@@ -354,8 +426,8 @@ class RecursiveObserver(Observer):
     """An online method whose step is one function of numbers or casadi symbols.
 
     A subclass names the parts of its packed state in :attr:`state` (a
-    :class:`observers.state.StateLayout` with at least ``x``, 6 motion
-    states, and ``S``, the ``3 n`` calibration entries) and implements
+    :class:`observers.state.StateLayout` with at least ``x``, the ``nx``
+    motion states, and ``S``, the ``n_w n`` calibration entries) and implements
     :meth:`_initial_state` and :meth:`_transition`. The transition is
     written once with :func:`plant._backend.ops`: :meth:`run` either loops it
     in numpy (``compiled=False``, the readable path) or compiles it with
@@ -363,8 +435,8 @@ class RecursiveObserver(Observer):
     give the same numbers to 1e-9.
     """
 
-    def __init__(self, payload, offset=False):
-        super().__init__(payload, offset)
+    def __init__(self, model, offset=False):
+        super().__init__(model, offset)
         self.state = self._layout()
         self._z = None
         self._chunks = None
@@ -380,13 +452,13 @@ class RecursiveObserver(Observer):
 
     def _transition(self, z, u_prev, u, dt):
         """One step: ``z`` at sample n, the inputs at samples n (``u_prev``) and n+1 (``u``),
-        ``[has_pose, theta, X, Y, M, f_x, f_y]`` (:data:`observers.state.INPUT`), ``dt`` in s.
+        ``[has_pose, pose, w_hat]`` (:attr:`fmscal.plant.Model.input_layout`), ``dt`` in s.
         Returns ``z`` at n+1. Must work on numpy arrays and casadi SX."""
         raise NotImplementedError
 
     # --- Observer --------------------------------------------------------------------
     def _estimate(self, log, S0):
-        if not getattr(self, "_use_compiled", True):
+        if not self.run_data.compiled:
             return super()._estimate(log, S0)
         U = log_inputs(log)
         self._start(U[0])
@@ -396,13 +468,13 @@ class RecursiveObserver(Observer):
                                            healthy=self._healthy_prefix, progress=bar.update, with_start=True)
         diverged = len(Z) < len(U)
         self._z = Z[-1].copy()
-        self._u_prev = U[len(Z) - 1]
+        self.run_data.u_prev = U[len(Z) - 1]
         return Estimate(self.state.part(Z, "S"), self.state.part(Z, "x"), cov=self._covariance(),
                         diverged=diverged)
 
     def _start(self, u):
-        u = INPUT.unpack(np.asarray(u, dtype=float))
-        self._z = self._initial_state(self._S0, u)
+        u = self.model.input_layout.unpack(np.asarray(u, dtype=float))
+        self._z = self._initial_state(self.run_data.S0, u)
 
     def _advance(self, u_prev, u, dt):
         self._z = self._transition(self._z, u_prev, u, dt)
@@ -420,8 +492,8 @@ class RecursiveObserver(Observer):
         if self._chunks is None:
             start = time.perf_counter()
             z = ca.SX.sym("z", self.state.size)
-            u_prev = ca.SX.sym("u_prev", INPUT.size)
-            u = ca.SX.sym("u", INPUT.size)
+            u_prev = ca.SX.sym("u_prev", self.model.input_layout.size)
+            u = ca.SX.sym("u", self.model.input_layout.size)
             dt = ca.SX.sym("dt")
             ident = self.name.replace("-", "_")
             step = ca.Function(f"{ident}_step", [z, u_prev, u, dt],
@@ -432,5 +504,5 @@ class RecursiveObserver(Observer):
                     _CHUNKED.clear()
                 _CHUNKED[key] = ChunkedSteps(step, _CHUNK)
             self._chunks = _CHUNKED[key]
-            self._build_time = time.perf_counter() - start       # one-off: not the run's cost
+            self.run_data.build_time = time.perf_counter() - start       # one-off: not the run's cost
         return self._chunks

@@ -31,7 +31,7 @@ def settled(S_history, fraction=SETTLE_FRACTION, tolerance=SETTLE_TOLERANCE):
 
     Parameters
     ----------
-    S_history : ndarray, shape (N, 3, 3)
+    S_history : ndarray, shape (N, n_w, n_w)
 
     Returns
     -------
@@ -57,7 +57,7 @@ def moved(S_history, tolerance=SETTLE_TOLERANCE):
 
     Parameters
     ----------
-    S_history : ndarray, shape (N, 3, 3)
+    S_history : ndarray, shape (N, n_w, n_w)
     tolerance : float
 
     Returns
@@ -66,9 +66,9 @@ def moved(S_history, tolerance=SETTLE_TOLERANCE):
     """
     gap = S_history - S_history[0]
     bound = tolerance * max(np.linalg.norm(S_history[-1], 2), 1e-12)
-    # the 2-norm is at least the Frobenius norm over sqrt(3): the cheap test first
+    # the 2-norm is at least the Frobenius norm over sqrt(rank): the cheap test first
     frob = np.sqrt(np.einsum("nij,nij->n", gap, gap))
-    if np.any(frob > np.sqrt(3) * bound):
+    if np.any(frob > np.sqrt(S_history.shape[-1]) * bound):
         return True
     near = frob > bound
     return bool(near.any() and np.max(np.linalg.norm(gap[near], ord=2, axis=(1, 2))) > bound)
@@ -79,8 +79,8 @@ def informed(S_hat, S_std, tolerance=EVIDENCE_TOLERANCE):
 
     Parameters
     ----------
-    S_hat : array_like, shape (3, 3)
-    S_std : array_like, shape (3, 3)
+    S_hat : array_like, shape (n_w, n_w)
+    S_std : array_like, shape (n_w, n_w)
         One-sigma uncertainty of each entry.
     tolerance : float
 
@@ -108,7 +108,7 @@ def divergence_bound(S0, log=None, payload=None, factor=DIVERGENCE_FACTOR):
 
     Parameters
     ----------
-    S0 : array_like, shape (3, 3)
+    S0 : array_like, shape (n_w, n_w)
         The initial estimate.
     log : plant.Log, optional
         Without a log (a live sensor, :meth:`observers.Observer.step`), the
@@ -123,10 +123,11 @@ def divergence_bound(S0, log=None, payload=None, factor=DIVERGENCE_FACTOR):
         Bound on ``max |s_ij|`` of ``S_hat``.
     """
     S0 = np.asarray(S0, dtype=float)
-    if S0.shape != (3, 3) or not np.all(np.isfinite(S0)):
-        raise FmscalError(f"S0 must be a finite 3x3 matrix; got shape {S0.shape}")
-    scale = implied_scale(log, payload) if log is not None else None
-    data = max(scale) if scale is not None else (1.0 if log is None else 0.0)
+    if S0.ndim != 2 or S0.shape[0] != S0.shape[1] or not np.all(np.isfinite(S0)):
+        raise FmscalError(f"S0 must be a finite square matrix; got shape {S0.shape}")
+    # the scale the poses imply is read off the planar eq. (1); other cases go by S0
+    scale = implied_scale(log, payload) if log is not None and getattr(log, "kind", "planar") == "planar" else None
+    data = max(scale) if scale is not None else (1.0 if log is None or log.kind != "planar" else 0.0)
     size = max(float(np.max(np.abs(S0))), data)
     if size == 0:
         size = 1.0             # nothing to go by: S of order one, as for N m and N

@@ -15,12 +15,11 @@ from fmscal.plant._compile import BufferedCall, compile_function
 from fmscal.plant.errors import FmscalError
 
 from .base import Estimate, Observer, log_inputs
-from .ekf_step import PARAMS, output_layout, model, state_layout, whole_step
+from .ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
 from .eiv import EivCompensation
-from .max_likelihood import _pack, _unpack
+from .kalman import pack_lower, unpack_lower
 from .noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
 from .progress import progress_bar
-from .state import INPUT
 
 __all__ = ["AugmentedEKF"]
 
@@ -33,8 +32,8 @@ class _CalibrationEKF(ExtendedKalmanFilter):
     ``Q`` are set before every predict, from the same compiled call.
     """
 
-    def __init__(self, dim_x):
-        super().__init__(dim_x=dim_x, dim_z=3)
+    def __init__(self, dim_x, dim_z):
+        super().__init__(dim_x=dim_x, dim_z=dim_z)
         self.x_next = np.zeros(dim_x)
 
     def predict_x(self, u=0):
@@ -42,14 +41,15 @@ class _CalibrationEKF(ExtendedKalmanFilter):
 
 
 class AugmentedEKF(Observer):
-    """Extended Kalman filter on ``[theta, theta', X, X', Y, Y', s_11, ..., s_33]``.
+    """Extended Kalman filter on the motion and the calibration, planar ``[theta, ..., Y', s_11, ..., s_33]``.
 
-    A reconstruction of [3] for the planar case: the calibration entries are
+    A reconstruction of [3] for the planar case (and for any model linear in
+    its channels, the tests' rail among them): the calibration entries are
     states (random walks), the motion follows eq. (1) with ``w = S w_hat``
     (:func:`plant.rk4_step`, the raw reading linear over the step), and the
     measurement is ``[theta, X, Y]``. casadi derives the transition Jacobian
     ``F``, the noise Jacobians and ``H`` from the plant's single definition
-    (:func:`observers.ekf_step.model`). The update is in Joseph form, so
+    (:func:`observers.ekf_step.model_step`). The update is in Joseph form, so
     ``P`` stays symmetric positive definite. Two paths run the same filter:
     :meth:`run` by default generates the whole step (predict, update, the
     adjustable random walk and the errors-in-variables filter below) with
@@ -77,9 +77,8 @@ class AugmentedEKF(Observer):
     wrench at both ends). ``Delta`` matters only while ``S`` is still
     uncertain (the first seconds); without it the filter, evaluating the
     noise at a wrong early ``S_hat``, weights its first poses wrongly and,
-    never forgetting on a constant ``S``, keeps that error (on one seed of
-    ``random-S`` the final E was 1.67x the floor's without ``Delta``, 1.06x
-    with it). On top, ``q dt`` on each
+    never forgetting on a constant ``S``, keeps that error (the site's
+    comparison page measures what ``Delta`` is worth). On top, ``q dt`` on each
     calibration entry: a random walk whose intensity ``q`` is 0 (``q_S``, a
     constant ``S``) until the normalized innovation squared of the poses
     says that ``S`` moved; then it starts at ``q_S_start`` and rises
@@ -92,7 +91,7 @@ class AugmentedEKF(Observer):
     with respect to ``S`` holds the noisy reading, whose noise is also the
     process noise of the same step; the correlation attenuates ``S_hat``
     towards zero by a fraction that grows with the square of the wrench
-    noise (2x the floor's E on the ``noisy`` scenario). The reported
+    noise (largest on the ``noisy`` scenario). The reported
     estimate is compensated to first order, ``S_c = T S_hat`` and
     ``P_c = T P T^T`` with ``T = I + (J + lam I)^-1 B`` (the correction
     limited to a tenth of ``|S_hat|`` over the first samples, while ``J``
@@ -118,7 +117,10 @@ class AugmentedEKF(Observer):
 
     Parameters
     ----------
-    payload : plant.Payload
+    model : plant.Model or plant.Payload
+        The problem (a model linear in its channels:
+        :attr:`fmscal.plant.Model.linear_channels`); a payload stands for the
+        planar model of it. Every size of the filter comes from the model.
     noise : plant.NoiseSpec, optional
         Noise standard deviations in the units of the log. None: estimated
         from the log (:func:`plant.noise.estimate_noise`) and reported in
@@ -166,13 +168,11 @@ class AugmentedEKF(Observer):
 
     name = "ekf"
 
-    def __init__(self, payload, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
+    def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
                  adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START,
                  eiv=True):
-        super().__init__(payload, offset=offset)
-        if noise is not None and not isinstance(noise, NoiseSpec):
-            raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
-        self.noise = noise
+        super().__init__(model, offset=offset)
+        self.noise = None if noise is None else self.model.check_noise(noise)
         self.adapt_q = as_bool(adapt_q, "adapt_q")
         self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=True)
         self.S0_sd, self.v0_sd = as_positive_scalar(S0_sd, "S0_sd"), as_positive_scalar(v0_sd, "v0_sd")
@@ -185,12 +185,13 @@ class AugmentedEKF(Observer):
             self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
                                                                           allow_zero=True), q_start=q_S_start)
         self.c0_sd = None if c0_sd is None else as_positive_scalar(c0_sd, "c0_sd")
-        #: The filter's state size: 6 motion states and the entries of ``[S | c]``.
-        self.dim_x = 6 + 3 * self.n_cols
-        self._H = np.zeros((3, self.dim_x))
-        self._H[0, 0] = self._H[1, 2] = self._H[2, 4] = 1.0
-        self._jacobians, self._predict = (BufferedCall(f) for f in _compiled_model(payload, self.offset))
-        self.eiv = EivCompensation(payload, self.n_cols) if as_bool(eiv, "eiv") else None
+        model = self.model
+        #: The filter's state size: the model's motion states and the entries of ``[S | c]``.
+        self.dim_x = model.nx + self.n_w * self.n_cols
+        self._H = np.zeros((model.n_pose, self.dim_x))
+        self._H[np.arange(model.n_pose), list(model.q_index)] = 1.0       # the pose is the configuration
+        self._jacobians, self._predict = (BufferedCall(f) for f in _compiled_model(model, self.offset))
+        self.eiv = EivCompensation(model, self.n_cols) if as_bool(eiv, "eiv") else None
         self.reset()
 
     # --- the model, from the plant ------------------------------------------
@@ -201,16 +202,16 @@ class AugmentedEKF(Observer):
         -------
         x_next : ndarray, shape (d,)
         F : ndarray, shape (d, d)
-        J0, J1 : ndarray, shape (d, 3)
+        J0, J1 : ndarray, shape (d, n_w)
             Jacobians with respect to the raw readings at the step's start
-            and end. ``d`` = :attr:`dim_x` (15, or 18 with the offset).
+            and end. ``d`` = :attr:`dim_x` (planar: 15, or 18 with the offset).
         """
-        call, d = self._jacobians, self.dim_x
+        call, d, n_w = self._jacobians, self.dim_x, self.n_w
         for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
             buffer[:] = value
         call()
         f, F, J0, J1 = call.outputs                           # casadi stores column-major
-        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(3, d).T.copy(), J1.reshape(3, d).T.copy()
+        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(n_w, d).T.copy(), J1.reshape(n_w, d).T.copy()
 
     def predict_matrices(self, xs, w0, w1, dt, P_S=None):
         """``x_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
@@ -219,11 +220,11 @@ class AugmentedEKF(Observer):
         ----------
         xs : ndarray, shape (d,)
             The state at the step's start.
-        w0, w1 : ndarray, shape (3,)
+        w0, w1 : ndarray, shape (n_w,)
             The raw readings at the step's start and end.
         dt : float
             The step, s.
-        P_S : ndarray, shape (3n, 3n), optional
+        P_S : ndarray, shape (n_w n, n_w n), optional
             Covariance of the calibration entries (``Delta`` of the tuning
             rule); default the running filter's.
 
@@ -238,21 +239,21 @@ class AugmentedEKF(Observer):
         xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
         var_in[:] = self._var_w
-        m = 3 * self.n_cols
-        P_in.reshape(m, m)[:] = self._kf.P[6:, 6:] if P_S is None else np.reshape(P_S, (m, m))   # symmetric
+        m, nx = self.n_w * self.n_cols, self.model.nx
+        P_in.reshape(m, m)[:] = self._kf.P[nx:, nx:] if P_S is None else np.reshape(P_S, (m, m))   # symmetric
         q_in[0] = (self.level.q if self.level is not None else self.q_S) * dt
         call()
         f, F, Q = call.outputs
         return f.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
 
     def H(self, xs=None):
-        """Measurement Jacobian: ``[theta, X, Y]`` are states 0, 2, 4; shape (3, d)."""
+        """Measurement Jacobian: the pose is the configuration (planar ``[theta, X, Y]``, states 0, 2, 4);
+        shape (n_pose, d)."""
         return self._H
 
-    @staticmethod
-    def hx(xs):
-        """The measured pose ``[theta, X, Y]`` of a state column, shape (3, 1) (states 0, 2, 4)."""
-        return np.asarray(xs).reshape(-1, 1)[0:5:2]
+    def hx(self, xs):
+        """The measured pose of a state column, shape (n_pose, 1) (:meth:`fmscal.plant.Model.measure`)."""
+        return np.asarray(self.model.measure(np.ravel(xs)[:self.model.nx])).reshape(-1, 1)
 
     # --- Observer ---------------------------------------------------------------
     def reset(self, S0=None):
@@ -266,18 +267,18 @@ class AugmentedEKF(Observer):
 
     def _estimate(self, log, S0):
         """The filter over the log, with the noise model told or estimated from the log."""
-        self._run_noise = self.noise
+        run = self.run_data
+        run.noise = self.noise
         info = {}
-        if self._run_noise is None:
-            self._run_noise = estimate_noise(log)
-            info["noise"] = self._run_noise.to_dict()
+        if run.noise is None:
+            run.noise = estimate_noise(log)
+            info["noise"] = run.noise.to_dict()
             info["noise_estimated"] = True
-        if getattr(self, "_use_compiled", True):
+        if run.compiled:
             estimate, q = self._estimate_compiled(log)
         else:
             estimate = super()._estimate(log, S0)
             q = np.array(self._q_history[:len(estimate.calibration)])
-        self._run_noise = None
         info["q_S_history"] = q
         estimate.info = info
         estimate.warnings = _random_walk_warnings(log.t[:len(q)], q)
@@ -294,105 +295,115 @@ class AugmentedEKF(Observer):
         U = log_inputs(log)
         self._start(U[0])
         start = time.perf_counter()
-        chunks = whole_step(self.payload, self.n_cols, self.eiv is not None)
-        self._build_time = time.perf_counter() - start              # one-off: not the run's cost
+        chunks = whole_step(self.model, self.n_cols, self.eiv is not None)
+        self.run_data.build_time = time.perf_counter() - start              # one-off: not the run's cost
         n_steps = len(U) - 1
-        inputs = [U[:-1], U[1:], np.full((n_steps, 1), log.dt), np.broadcast_to(self._params(), (n_steps, PARAMS.size))]
+        params = self._params()
+        inputs = [U[:-1], U[1:], np.full((n_steps, 1), log.dt), np.broadcast_to(params, (n_steps, len(params)))]
         with progress_bar(len(U), self.name) as bar:
             z, (Y,) = chunks.run(self._packed(), inputs, healthy=self._healthy_outputs, outputs=True, states=False,
                                  progress=bar.update)
-        out = output_layout(self.n_cols)
+        out = output_layout(self.model, self.n_cols)
         calibration = np.vstack([self._s_out, out.part(Y, "s")])
-        x = np.vstack([self._kf.x[0:6, 0], out.part(Y, "x")])
+        x = np.vstack([self._kf.x[0:self.model.nx, 0], out.part(Y, "x")])
         q = np.concatenate([self._q_history[:1], out.part(Y, "q")[:, 0]])
         self._unpacked(z, calibration[-1])
-        self._u_prev = U[len(calibration) - 1]
+        self.run_data.u_prev = U[len(calibration) - 1]
         return Estimate(calibration, x, cov=self._covariance(), diverged=len(Y) < n_steps), q
 
     def _params(self):
-        """The per-log parameters of the compiled step (:data:`observers.ekf_step.PARAMS`), after :meth:`_start`."""
+        """The per-log parameters of the compiled step (:func:`observers.ekf_step.params_layout`), after
+        :meth:`_start`."""
         level = self.level.settings if self.level is not None else (0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-        eiv_q = self.eiv.state[1][1:6] if self.eiv is not None else np.ones(5)
-        return PARAMS.pack(None, R=np.diag(self._kf.R), var_w=self._var_w, eiv_q=eiv_q, level=level,
-                           adapt=float(self.level is not None))
+        size = self.model.n_pose + self.n_w
+        eiv_q = self.eiv.state[1][1:] if self.eiv is not None else np.ones(size)     # the settings but the step
+        return params_layout(self.model).pack(None, R=np.diag(self._kf.R), var_w=self._var_w, eiv_q=eiv_q,
+                                              level=level, adapt=float(self.level is not None))
 
     def _packed(self):
         """The running filter as the compiled step's state (:func:`observers.ekf_step.state_layout`)."""
         kf, level = self._kf, self.level
-        parts = dict(x=kf.x[:, 0], P=_pack(kf.P, self.dim_x), q=self._q_history[-1],
+        parts = dict(x=kf.x[:, 0], P=pack_lower(kf.P, self.dim_x), q=self._q_history[-1],
                      eps_bar=level.eps_bar if level is not None else 0.0, since=self._since_pose)
         if self.eiv is not None:
             parts["eiv"] = self.eiv.state[0]
-        return state_layout(self.n_cols, self.eiv is not None).pack(None, **parts)
+        return state_layout(self.model, self.n_cols, self.eiv is not None).pack(None, **parts)
 
     def _unpacked(self, z, s_out):
         """Set the running filter from the compiled step's state ``z``, its reported estimate ``s_out``."""
-        st = state_layout(self.n_cols, self.eiv is not None).unpack(z)
+        st = state_layout(self.model, self.n_cols, self.eiv is not None).unpack(z)
         self._kf.x = st.x.reshape(-1, 1).copy()
-        self._kf.P = np.asarray(_unpack(ops(z), st.P, self.dim_x))
+        self._kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
         self._since_pose = float(st.since)
         if self.level is not None:
             self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
         self._q_history = [float(st.q)]
         if self.eiv is not None:
             self.eiv.state[0][:] = st.eiv
-            self.eiv.set_last(st.x[6:])
+            self.eiv.set_last(st.x[self.model.nx:])
         self._s_out = np.array(s_out, dtype=float)
 
     def _healthy_outputs(self, Y, k0):
         """Leading rows of the compiled step's outputs that :meth:`_healthy` would pass."""
-        out = output_layout(self.n_cols)
+        out = output_layout(self.model, self.n_cols)
         with np.errstate(invalid="ignore"):
             return self._healthy_rows(Y, out.part(Y, "s"), k0, bad=~(out.part(Y, "P_min")[:, 0] > 0))
 
     def _start(self, u):
-        u = INPUT.unpack(np.asarray(u, dtype=float))
+        model = self.model
+        u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
         pose, w_hat = u.pose, u.w_hat
-        noise = getattr(self, "_run_noise", None) or self.noise or _NOMINAL_NOISE
-        kf = _CalibrationEKF(self.dim_x)
-        kf.x = np.concatenate([[pose[0], 0, pose[1], 0, pose[2], 0], self._initial_S(self._S0)]).reshape(-1, 1)
-        pose_var = np.maximum(noise.pose_sd, 1e-6) ** 2
-        S_var = np.full((3, self.n_cols), self.S0_sd ** 2)
+        noise = self.run_data.noise or self.noise or _nominal_noise(model)
+        kf = _CalibrationEKF(self.dim_x, model.n_pose)
+        kf.x = np.concatenate([model.rest_state(pose), self._initial_S(self.run_data.S0)]).reshape(-1, 1)
+        pose_sd = model.pose_sd(noise)
+        pose_var = np.maximum(pose_sd, 1e-6) ** 2
+        S_var = np.full((self.n_w, self.n_cols), self.S0_sd ** 2)
         if self.offset:
             c0_sd = self.c0_sd if self.c0_sd is not None else self.S0_sd * max(float(np.linalg.norm(w_hat)), 1.0)
-            S_var[:, 3] = c0_sd ** 2
-        kf.P = np.diag(np.concatenate([[pose_var[0], self.v0_sd ** 2, pose_var[1], self.v0_sd ** 2,
-                                        pose_var[2], self.v0_sd ** 2], S_var.ravel()]))
+            S_var[:, self.n_w] = c0_sd ** 2
+        motion_var = np.zeros(model.nx)
+        motion_var[list(model.q_index)] = pose_var                  # the first pose, to its noise
+        motion_var[list(model.v_index)] = self.v0_sd ** 2           # the velocities, to v0_sd
+        kf.P = np.diag(np.concatenate([motion_var, S_var.ravel()]))
         kf.R = np.diag(pose_var)
         self._var_w = np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
         self._kf = kf
-        self._s_out = kf.x[6:, 0].copy()
+        self._s_out = kf.x[model.nx:, 0].copy()
         if self.eiv is not None:
-            self.eiv.reset(pose, noise.pose_sd, np.sqrt(self._var_w))
+            self.eiv.reset(pose, pose_sd, np.sqrt(self._var_w))
         self._since_pose = 0.0
         self._q_history = [self.level.q if self.level is not None else self.q_S]
 
     def _advance(self, u_prev, u, dt):
         """Predict over ``dt`` with the raw readings at both ends, update with the pose."""
-        kf = self._kf
-        has_pose, pose, w_hat = u[0], u[1:4], u[4:7]
-        theta_prev = kf.x[0, 0]
-        kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], u_prev[4:7], w_hat, dt)
+        kf, model = self._kf, self.model
+        layout = model.input_layout
+        has_pose, pose, w_hat = u[0], u[layout.slices["pose"]], u[layout.slices["w_hat"]]
+        w_prev = u_prev[layout.slices["w_hat"]]
+        q_prev = model.configuration(kf.x[:model.nx, 0])
+        kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], w_prev, w_hat, dt)
         kf.predict()
         self._since_pose += dt
         if has_pose:
-            kf.update(np.reshape(pose, (3, 1)), self.H, self.hx)
+            kf.update(np.reshape(pose, (-1, 1)), self.H, self.hx)
             if self.level is not None:
                 y = kf.y[:, 0]
                 self.level.update(float(y @ kf.SI @ y), self._since_pose)      # NIS of this pose
             self._since_pose = 0.0
         self._q_history.append(self.level.q if self.level is not None else self.q_S)
-        s = kf.x[6:, 0]
+        s = kf.x[model.nx:, 0]
         if self.eiv is None:
             self._s_out = s.copy()
-        else:      # the errors-in-variables compensation (observers.eiv), with the filter's angles
-            self._s_out = self.eiv.step(has_pose, (theta_prev, kf.x[0, 0]), pose, (u_prev[4:7], w_hat), dt, s)
+        else:      # the errors-in-variables compensation (observers.eiv), with the filter's configuration
+            q_now = model.configuration(kf.x[:model.nx, 0])
+            self._s_out = self.eiv.step(has_pose, (q_prev, q_now), pose, (w_prev, w_hat), dt, s)
 
     def _current(self):
-        return self._kf.x[0:6, 0], self._s_out
+        return self._kf.x[0:self.model.nx, 0], self._s_out
 
     def _covariance(self):
-        P = self._kf.P[6:, 6:]
+        P = self._kf.P[self.model.nx:, self.model.nx:]
         if self.eiv is None:
             return P.copy()
         T = self.eiv.T
@@ -406,14 +417,16 @@ class AugmentedEKF(Observer):
 
 
 @lru_cache(maxsize=8)
-def _compiled_model(payload, offset):
-    """The model's Jacobians and ``x_next, F, Q`` (:func:`observers.ekf_step.model`), compiled."""
-    jacobians, predict, _ = model(payload, offset)
+def _compiled_model(model, offset):
+    """The model's Jacobians and ``x_next, F, Q`` (:func:`observers.ekf_step.model_step`), compiled."""
+    jacobians, predict, _ = model_step(model, offset)
     return compile_function(jacobians), compile_function(predict)
 
 
-#: The noise model of a live filter that was told none (``step`` without a log to estimate it from).
-_NOMINAL_NOISE = NoiseSpec((0.05, 0.05, 0.05), np.deg2rad(0.1), 1e-4)
+def _nominal_noise(model):
+    """The noise model of a live filter that was told none (``step`` without a log to estimate it from):
+    0.05 on each reading component, 0.1 degree and 0.1 mm on the pose."""
+    return NoiseSpec((0.05,) * model.n_w, np.deg2rad(0.1), 1e-4)
 
 
 def _random_walk_warnings(t, q_history):

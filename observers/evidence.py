@@ -20,13 +20,13 @@ __all__ = ["log_uncertainty", "EVIDENCE_PREFIX"]
 EVIDENCE_PREFIX = 20.0
 
 
-def log_uncertainty(log, payload, offset=False, enough=None, prefix=EVIDENCE_PREFIX):
+def log_uncertainty(log, model, offset=False, enough=None, prefix=EVIDENCE_PREFIX):
     """The relative one-sigma uncertainty of ``S`` that a least-squares fit of the log leaves.
 
     Parameters
     ----------
     log : plant.Log
-    payload : plant.Payload
+    model : plant.Model or plant.Payload
     offset : bool
         Fit the sensor's offset too (as the method that asks did).
     enough : float, optional
@@ -43,7 +43,7 @@ def log_uncertainty(log, payload, offset=False, enough=None, prefix=EVIDENCE_PRE
         every entry (information condition number above
         :data:`observers.least_squares.EXCITATION_COND_LIMIT`).
     """
-    fit = LeastSquares(payload, offset=offset)
+    fit = LeastSquares(model, offset=offset)
     parts = [log]
     if enough is not None and log.duration > 2 * prefix:
         parts.insert(0, log.between(log.t[0], log.t[0] + prefix))

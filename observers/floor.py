@@ -1,7 +1,5 @@
 """The information floor as a method: the maximum-likelihood estimate behind the Observer contract."""
 
-from fmscal.plant import NoiseSpec
-
 from .base import Estimate, Observer
 from .max_likelihood import fit_max_likelihood
 
@@ -21,7 +19,9 @@ class MaximumLikelihood(Observer):
 
     Parameters
     ----------
-    payload : plant.Payload
+    model : plant.Model or plant.Payload
+        The problem, a model linear in its channels (a payload stands for
+        the planar model of it).
     noise : plant.NoiseSpec, optional
         The log's noise standard deviations; None: estimated from the log
         (reported in ``result.info["noise"]``).
@@ -42,16 +42,14 @@ class MaximumLikelihood(Observer):
     name = "max-likelihood"
     online = False
 
-    def __init__(self, payload, noise=None, passes=2, offset=False):
-        super().__init__(payload, offset=offset)
-        if noise is not None and not isinstance(noise, NoiseSpec):
-            raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
-        self.noise = noise
+    def __init__(self, model, noise=None, passes=2, offset=False):
+        super().__init__(model, offset=offset)
+        self.noise = None if noise is None else self.model.check_noise(noise)
         self.passes = passes
 
     def _estimate(self, log, S0):
-        fit = fit_max_likelihood(log, self.payload, self.noise, self.offset, self.passes,
-                                 compiled=getattr(self, "_use_compiled", True))
+        fit = fit_max_likelihood(log, self.model, self.noise, self.offset, self.passes,
+                                 compiled=self.run_data.compiled)
         calibration = fit.S_history.reshape(len(fit.S_history), -1).copy()
         calibration[-1] = fit.S_aug.ravel()          # the whole log's estimate
         info = {"noise": fit.noise.to_dict(), "noise_estimated": fit.noise_estimated, "passes": fit.passes}

@@ -32,12 +32,13 @@ class Consistency:
     consistent : bool
         The two halves agree within their uncertainty.
     statistic : float
-        ``sum((S_a - S_b)^2 / (sd_a^2 + sd_b^2))`` over the 9 entries; about
-        chi-square with 9 degrees of freedom for a constant ``S``.
+        ``sum((S_a - S_b)^2 / (sd_a^2 + sd_b^2))`` over the ``n_w^2`` entries
+        (9 in the plane); about chi-square with as many degrees of freedom
+        for a constant ``S``.
     p_value : float
         Probability of a statistic at least this large for a constant ``S``.
     S_halves : (ndarray, ndarray)
-        The two fits, each shape (3, 3).
+        The two fits, each shape (n_w, n_w).
     change_time : float or None
         Where the windowed fits place the largest change, s (None when
         consistent).
@@ -54,7 +55,8 @@ class Consistency:
 
 
 def _difference_statistic(a, b):
-    """Chi-square-like distance of two least-squares fits (``ObserverResult``), and its p-value (9 dof)."""
+    """Chi-square-like distance of two least-squares fits (``ObserverResult``), and its p-value (one degree
+    of freedom per entry of ``S``)."""
     var = np.asarray(a.S_std) ** 2 + np.asarray(b.S_std) ** 2
     d2 = (a.S_hat - b.S_hat) ** 2
     if not np.all(var > 0):
@@ -64,13 +66,14 @@ def _difference_statistic(a, b):
     return stat, float(chi2.sf(stat, d2.size))
 
 
-def consistency_check(log, payload, offset=True, significance=DEFAULT_SIGNIFICANCE, windows=DEFAULT_WINDOWS):
+def consistency_check(log, model, offset=True, significance=DEFAULT_SIGNIFICANCE, windows=DEFAULT_WINDOWS):
     """Whether a log is consistent with one constant ``S``: fits of its two halves agree.
 
     Each half is fitted by least squares (:class:`observers.LeastSquares`);
     the difference of the two ``S`` estimates, entry by entry over their
     combined variance (``S_std`` of each; correlations between entries are
-    ignored), is compared with chi-square with 9 degrees of freedom. When it
+    ignored), is compared with chi-square with one degree of freedom per
+    entry (9 in the plane). When it
     is too large, the log is cut into ``windows`` equal parts and fitted part
     by part; the largest difference between neighbouring parts places the
     change.
@@ -78,7 +81,8 @@ def consistency_check(log, payload, offset=True, significance=DEFAULT_SIGNIFICAN
     Parameters
     ----------
     log : plant.Log
-    payload : plant.Payload
+    model : plant.Model or plant.Payload
+        The problem (a payload stands for its case's model).
     offset : bool
         Fit the sensor's offset too (as ``fmscal calibrate`` does by default).
     significance : float
@@ -100,7 +104,7 @@ def consistency_check(log, payload, offset=True, significance=DEFAULT_SIGNIFICAN
         raise FmscalError(f"significance must be in (0, 1); got {significance}")
     t0, t1 = float(log.t[0]), float(log.t[-1]) + log.dt
     middle = 0.5 * (t0 + t1)
-    fit = LeastSquares(payload, offset=offset)
+    fit = LeastSquares(model, offset=offset)
     first, second = fit.run(log.between(t0, middle)), fit.run(log.between(middle, t1))
     stat, p = _difference_statistic(first, second)
     out = Consistency(consistent=p >= significance, statistic=stat, p_value=p,
@@ -117,7 +121,8 @@ def consistency_check(log, payload, offset=True, significance=DEFAULT_SIGNIFICAN
     jumps = [(_difference_statistic(x, y)[0] if x is not None and y is not None else -1.0, edge)
              for x, y, edge in zip(parts[:-1], parts[1:], edges[1:-1])]
     best, when = max(jumps)
-    threshold = chi2.isf(significance, 9)
+    dof = first.S_hat.size
+    threshold = chi2.isf(significance, dof)
     changed = [edge for stat_, edge in jumps if stat_ > threshold]
     if len(changed) > 1:
         out.change_time = float(when)
@@ -129,9 +134,9 @@ def consistency_check(log, payload, offset=True, significance=DEFAULT_SIGNIFICAN
                 f"{when + (t1 - t0) / windows:.3g} s)"
     else:
         where = f"somewhere in t = {t0:.3g} .. {t1:.3g} s"
-    worst = np.unravel_index(np.argmax(np.abs(first.S_hat - second.S_hat)), (3, 3))
+    worst = np.unravel_index(np.argmax(np.abs(first.S_hat - second.S_hat)), first.S_hat.shape)
     out.warning = (f"S changed during the log {where}: fits of its two halves differ by "
-                   f"{np.sqrt(stat / 9):.3g} sigma per entry (s_{worst[0] + 1}{worst[1] + 1}: "
+                   f"{np.sqrt(stat / dof):.3g} sigma per entry (s_{worst[0] + 1}{worst[1] + 1}: "
                    f"{first.S_hat[worst]:.4g} then {second.S_hat[worst]:.4g}); one constant S does not "
                    f"describe it")
     return out

@@ -44,6 +44,7 @@ from fmscal.plant._checks import as_positive_scalar
 from . import _matrix as mx
 from .base import RecursiveObserver
 from .gains import double_pole_gains
+from .discretise import position_increment, velocity_increment
 from .state import INPUT, StateLayout
 from fmscal.plant.errors import FmscalError
 
@@ -119,7 +120,8 @@ class HighGainObserver(RecursiveObserver):
 
     Parameters
     ----------
-    payload : plant.Payload
+    model : plant.PlanarModel or plant.Payload
+        The planar problem (a payload stands for its planar model).
     lam : float
         High-gain parameter, rad/s: poles of ``A_i - K_i C_i`` at ``-lam``.
     gamma : float
@@ -145,7 +147,9 @@ class HighGainObserver(RecursiveObserver):
     (3, 3)
     """
 
-    def __init__(self, payload, lam=DEFAULT_HIGH_GAIN, gamma=1.0, normalisation="matrix",
+    models = ("planar",)        # [4] is planar by definition
+
+    def __init__(self, model, lam=DEFAULT_HIGH_GAIN, gamma=1.0, normalisation="matrix",
                  t_decay=20.0, floor=0.1, name="high-gain", offset=False):
         self.lam = as_positive_scalar(lam, "lam")
         self.gamma = as_positive_scalar(gamma, "gamma")
@@ -156,19 +160,19 @@ class HighGainObserver(RecursiveObserver):
         self.floor = as_positive_scalar(floor, "floor")
         self.name = str(name)
         self.K1, self.K2 = double_pole_gains(self.lam)
-        super().__init__(payload, offset=offset)
+        super().__init__(model, offset=offset)
 
     #: The configuration closest to the seed paper's account of [4] (``high-gain-ref4``).
     REF4_SETTINGS = {"lam": REF4_HIGH_GAIN, "gamma": 1.0, "normalisation": "scalar", "t_decay": None,
                      "name": "high-gain-ref4"}
 
     @classmethod
-    def ref4(cls, payload, **overrides):
+    def ref4(cls, model, **overrides):
         """The configuration closest to the seed paper's account of [4] (``high-gain-ref4``).
 
         ``overrides`` change single settings (keywords of the constructor).
         """
-        return cls(payload, **{**cls.REF4_SETTINGS, **overrides})
+        return cls(model, **{**cls.REF4_SETTINGS, **overrides})
 
     def _layout(self):
         # t: time since the start (gain decay); ups_*: the sensitivity filters Upsilon of the
@@ -180,7 +184,7 @@ class HighGainObserver(RecursiveObserver):
 
     def _initial_state(self, S0, u):
         n = self.n_cols
-        x = np.array([u.pose[0], 0.0, u.pose[1], 0.0, u.pose[2], 0.0])
+        x = self.model.rest_state(u.pose)
         # R starts isotropic at the size C Upsilon will have, |psi| / lam^2 (the filter's DC gain)
         w = self._augmented(ops(u.w_hat), u.w_hat)
         psi_t, psi_x, psi_y = (np.array(v) for v in regressors(u.pose[0], w, self.payload))
@@ -227,8 +231,8 @@ class HighGainObserver(RecursiveObserver):
         x_pred, ups_pred, H = [], [], []
         for c in range(3):
             n_par = len(psi0[c])
-            g_p = [dt * dt * (2 * psi0[c][j] + psi1[c][j]) / 6 for j in range(n_par)]
-            g_v = [dt * (psi0[c][j] + psi1[c][j]) / 2 for j in range(n_par)]
+            g_p = [position_increment(dt, psi0[c][j], psi1[c][j]) for j in range(n_par)]
+            g_v = [velocity_increment(dt, psi0[c][j], psi1[c][j]) for j in range(n_par)]
             phi = phis[c]
             pos, vel = x[2 * c], x[2 * c + 1]
             x_pred.append([pos + dt * vel + sum(g_p[j] * phi[j] for j in range(n_par)),

@@ -6,7 +6,10 @@ eqs. (4), (5)::
     theta'' = psi_theta(t) . phi_1,   X'' = psi_X(t) . phi_2,   Y'' = psi_Y(t) . phi_2
 
 with the regressors of :func:`plant.regressors` (built from
-:func:`plant.input_matrix`). Integrated twice over a window starting at
+:func:`plant.input_matrix`). The channels and their parameter groups come
+from the model (:meth:`fmscal.plant.Model.parameter_groups`,
+:meth:`fmscal.plant.Model.channel_regressors`): any model linear in its
+channels runs through the same code. Integrated twice over a window starting at
 ``t_0``, each measured position is ``p(t) = p_0 + v_0 (t - t_0) + Z(t) . phi``
 with ``Z`` the double integral of the regressor. The fit eliminates ``p_0``
 and ``v_0`` in each window (it projects out a line) and solves the normal
@@ -16,12 +19,13 @@ twice-integrated wrench noise stays near the pose noise.
 
 import numpy as np
 
-from fmscal.plant import S_from_phi, phi_1, regressors
+from fmscal.plant import S_from_phi, phi_1
 from fmscal.plant._checks import as_positive_scalar
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.noise import estimate_noise
 
 from .base import Estimate, Observer
+from .discretise import position_increment, velocity_increment
 
 __all__ = ["LeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
 
@@ -58,7 +62,9 @@ class LeastSquares(Observer):
 
     Parameters
     ----------
-    payload : plant.Payload
+    model : plant.Model or plant.Payload
+        The problem, a model linear in its channels (a payload stands for
+        the planar model of it).
     window : float
         Window length in s over which the raw reading is integrated twice.
     offset : bool
@@ -76,8 +82,10 @@ class LeastSquares(Observer):
     name = "least-squares"
     online = False
 
-    def __init__(self, payload, window=0.5, offset=False):
-        super().__init__(payload, offset=offset)
+    def __init__(self, model, window=0.5, offset=False):
+        super().__init__(model, offset=offset)
+        if not self.model.linear_channels:
+            raise FmscalError(f"LeastSquares fits models linear in their channels; got a {self.model.name} model")
         self.window = as_positive_scalar(window, "window")
         self.report = FitReport()
 
@@ -85,23 +93,23 @@ class LeastSquares(Observer):
         """Double integrals of each channel's regressor from the log's start.
 
         The regressor is taken linear between samples (as the observers do),
-        the angle interpolated between pose measurements.
+        the configuration interpolated between pose measurements.
 
         Returns
         -------
-        list of three ndarrays, shapes (N, n), (N, 2n), (N, 2n)
-            ``n`` = 3, or 4 with the offset.
+        list of ndarrays, one per channel, each shape (N, len(phi) of its group)
+            Planar: (N, n), (N, 2n), (N, 2n), ``n`` = 3, or 4 with the offset.
         """
         t = log.t
-        theta = np.interp(t, t[log.has_pose], log.pose[log.has_pose, 0])
+        q = np.array([np.interp(t, t[log.has_pose], log.pose[log.has_pose, j]) for j in range(self.model.n_pose)])
         reading = log.w_hat.T if not self.offset else np.vstack([log.w_hat.T, np.ones(len(t))])
-        psi = [np.array(v).T for v in regressors(theta, reading, self.payload)]
+        psi = self.model.channel_regressors(q, reading)
         h = np.diff(t)[:, None]
         out = []
         for P in psi:
-            dv = h * (P[:-1] + P[1:]) / 2
+            dv = velocity_increment(h, P[:-1], P[1:])
             V = np.vstack([np.zeros(P.shape[1]), np.cumsum(dv, axis=0)])
-            dp = V[:-1] * h + h * h * (2 * P[:-1] + P[1:]) / 6
+            dp = V[:-1] * h + position_increment(h, P[:-1], P[1:])
             out.append(np.vstack([np.zeros(P.shape[1]), np.cumsum(dp, axis=0)]))
         return out
 
@@ -161,7 +169,7 @@ class LeastSquares(Observer):
         if len(windows) < 2:
             raise FmscalError(f"{log.name}: too short for least squares with {self.window:g} s windows: "
                              f"need at least 2 windows of 3 pose measurements, got {len(windows)}")
-        groups = [[0], [1, 2]]           # channels of each parameter set: phi_1 <- theta; phi_2 <- X, Y
+        groups = self.model.parameter_groups()      # planar: phi_1 <- theta; phi_2 <- X, Y
         phis, covs, residuals, histories = [], [], {}, []
         for channels in groups:
             info, rhs, per_window = self._normal_equations(log, Z, channels, windows)
@@ -185,11 +193,13 @@ class LeastSquares(Observer):
             covs.append(info_inv @ meat @ info_inv * len(per_window) / max(len(per_window) - len(phi), 1))
             phis.append(phi)
             histories.append(_running_fits(per_window, len(log)))
-        n = len(phis[0])                              # 3, or 4 with the offset column c
-        S_aug = S_from_phi(phis[0], phis[1], self.payload)
-        T = _phi_to_S_map(self.payload, n)
-        cov_phi = np.zeros((3 * n, 3 * n))
-        cov_phi[:n, :n], cov_phi[n:, n:] = covs
+        n, m = self.n_cols, self.n_w * self.n_cols
+        S_aug = self.model.params_from_phi(phis, n)
+        T = _phi_to_S_map(self.model, [len(phi) for phi in phis], n)
+        cov_phi, k = np.zeros((m, m)), 0
+        for cov in covs:                              # the groups share no unknown: block diagonal
+            cov_phi[k:k + len(cov), k:k + len(cov)] = cov
+            k += len(cov)
         cov_S = T @ cov_phi @ T.T                     # of [S | c], row order
         self.report = self._diagnose(log, cov_S, residuals, n)
         # the running fits mapped to [S | c] in one product (S_from_phi is the linear map T);
@@ -201,7 +211,7 @@ class LeastSquares(Observer):
                         warnings=list(self.report["warnings"]))
 
     def offset_bias(self, log, S, b):
-        """What an offset left out does to the fit: the predicted ``S_hat - S``.
+        """What an offset left out does to the fit: the predicted ``S_hat - S`` (the planar model).
 
         An offset ``b`` adds ``G(theta) c`` (``c = -S b``) to the
         accelerations; a fit without it projects that motion onto the
@@ -220,10 +230,17 @@ class LeastSquares(Observer):
         -------
         ndarray, shape (3, 3)
             ``S_hat - S`` of :meth:`run` with ``offset=False`` on noise-free data.
+
+        Raises
+        ------
+        FmscalError
+            The model is not planar (this reads eqs. (4), (5) directly).
         """
+        if self.model.name != "planar":
+            raise FmscalError(f"offset_bias reads eqs. (4), (5) of the planar model; got a {self.model.name} model")
         S = np.asarray(S, dtype=float)
         c = -S @ np.asarray(b, dtype=float)
-        with_c = LeastSquares(self.payload, self.window, offset=True)
+        with_c = LeastSquares(self.model, self.window, offset=True)
         Z_all = with_c._double_integrals(log)                    # (N, 4), (N, 8), (N, 8)
         S_c = np.column_stack([np.zeros((3, 3)), c])             # the offset alone, as [0 | c]
         phi_c = [phi_1(S_c, self.payload), S_c[1:].ravel()]
@@ -249,34 +266,39 @@ class LeastSquares(Observer):
             eigval, eigvec = np.zeros(len(scaled)), np.eye(len(scaled))
         cond = float(eigval[-1] / eigval[0]) if eigval[0] > 0 else float("inf")
         noise = estimate_noise(log)
-        pose_sd = np.array(noise.pose_sd)
-        rms = np.array([residuals[0], residuals[1], residuals[2]])
+        pose_sd = self.model.pose_sd(noise)
+        rms = np.array([residuals[c] for c in range(self.model.nv)])
         ratio = float(np.max(rms / np.maximum(pose_sd, 1e-12))) if np.all(pose_sd > 0) else float("nan")
         warnings = []
+        n_w = self.n_w
         if cond > EXCITATION_COND_LIMIT:
-            weakest = eigvec[:, 0].reshape(3, n)
-            i, j = np.unravel_index(np.argmax(np.abs(weakest)), (3, n))
-            entry = f"s_{i + 1}{j + 1}" if j < 3 else f"the offset c_{i + 1}"
-            what = "all nine entries of S" if n == 3 else "all nine entries of S and the offset"
+            weakest = eigvec[:, 0].reshape(n_w, n)
+            i, j = np.unravel_index(np.argmax(np.abs(weakest)), (n_w, n))
+            entry = f"s_{i + 1}{j + 1}" if j < n_w else f"the offset c_{i + 1}"
+            entries = {1: "S", 3: "all nine entries of S"}.get(n_w, f"all {n_w * n_w} entries of S")
+            what = entries if n == n_w else f"{entries} and the offset"
             warnings.append(f"the log does not excite {what} (information matrix condition "
                             f"number {cond:.3g} > {EXCITATION_COND_LIMIT:.0e}; weakest along {entry}): "
                             "drive every wrench component, or no method can recover S")
         if np.isfinite(ratio) and ratio > CONSISTENCY_RATIO_LIMIT:
-            names = ["theta", "X", "Y"]
+            names = [name if name == "theta" else name.upper() for name in self.model.pose_names]
             worst = int(np.argmax(rms / np.maximum(pose_sd, 1e-12)))
             warnings.append(f"the log does not match the model: the fit residual of {names[worst]} is "
                             f"{ratio:.3g}x the pose noise estimated from the log (> {CONSISTENCY_RATIO_LIMIT:g}); "
                             "check units (angles in rad, positions in m), the mass properties (m, I_G, rho), "
                             "a sensor offset left out and the pose latency")
-        return FitReport(information_cond=cond, weakest_direction=eigvec[:, 0].reshape(3, n)[:, :3].tolist(),
+        return FitReport(information_cond=cond, weakest_direction=eigvec[:, 0].reshape(n_w, n)[:, :n_w].tolist(),
                          residual_rms=rms.tolist(), pose_noise_estimate=pose_sd.tolist(),
                          consistency_ratio=ratio, warnings=warnings)
 
     def _fitted_motion(self, log, Z, phis, windows):
-        """``[theta, theta', X, X', Y, Y']`` of the fit: per window a line plus ``Z phi``."""
-        x = np.full((len(log), 6), np.nan)
+        """The motion of the fit (planar ``[theta, theta', X, X', Y, Y']``): per window a line plus ``Z phi``."""
+        model = self.model
+        x = np.full((len(log), model.nx), np.nan)
         t = log.t
-        for c, phi in ((0, phis[0]), (1, phis[1]), (2, phis[1])):
+        group_of = {c: g for g, channels in enumerate(model.parameter_groups()) for c in channels}
+        for c in range(model.nv):
+            phi = phis[group_of[c]]
             forced = Z[c] @ phi
             dforced = np.gradient(forced, t)
             for rows in windows:
@@ -285,10 +307,10 @@ class LeastSquares(Observer):
                 A = np.column_stack([np.ones(len(rows)), t[rows] - t[rows[0]]])
                 p0, v0 = np.linalg.lstsq(A, log.pose[rows, c] - forced[rows], rcond=None)[0]
                 span = slice(rows[0], rows[-1] + 1)
-                x[span, 2 * c] = p0 + v0 * (t[span] - t[rows[0]]) + forced[span]
-                x[span, 2 * c + 1] = v0 + dforced[span]
+                x[span, model.q_index[c]] = p0 + v0 * (t[span] - t[rows[0]]) + forced[span]
+                x[span, model.v_index[c]] = v0 + dforced[span]
         # samples between windows without a fit (rare): hold the last value
-        for col in range(6):
+        for col in range(model.nx):
             good = np.isfinite(x[:, col])
             x[:, col] = np.interp(t, t[good], x[good, col]) if good.any() else 0.0
         return x
@@ -310,14 +332,17 @@ def _running_fits(per_window, n):
     return out
 
 
-def _phi_to_S_map(payload, n=3):
-    """The matrix ``T`` with ``vec([S | c]) = T [phi_1, phi_2]`` (row order), from eqs. (4), (5).
+def _phi_to_S_map(model, sizes, n):
+    """The matrix ``T`` with ``vec([S | c]) = T [phi_1, phi_2, ...]`` (row order): the model's
+    :meth:`fmscal.plant.Model.params_from_phi` (planar: eqs. (4), (5) inverted), column by column.
 
-    ``n`` columns: 3, or 4 with the offset ``c``; ``T`` is ``3n x 3n``.
+    ``sizes`` are the groups' parameter counts, ``n`` the columns of ``[S | c]``.
     """
-    T = np.zeros((3 * n, 3 * n))
-    for k in range(3 * n):
-        e = np.zeros(3 * n)
+    m = sum(sizes)
+    T = np.zeros((m, m))
+    ends = np.cumsum(sizes)[:-1]
+    for k in range(m):
+        e = np.zeros(m)
         e[k] = 1.0
-        T[:, k] = np.ravel(S_from_phi(e[:n], e[n:], payload))
+        T[:, k] = np.ravel(model.params_from_phi(np.split(e, ends), n))
     return T

@@ -68,11 +68,14 @@ with ``D_n`` the part of the batch design that the reading's noise makes;
 ``B_(i l),(a l) = Sigma_l beta_ai`` (entries ``s_il``; none for the offset
 column), and ``beta`` (3x3) follows from the cross-moments ``Gamma_ai`` of
 the filter's error with the noise-driven part of ``M``, propagated forward
-with the filter (six 6x6 matrices, :func:`_filter_step`). Its covariance is the
+with the filter (six 6x6 matrices, :func:`fmscal.observers.kalman.filter_step`). Its covariance is the
 sandwich ``(J - B)^-1 J (J - B)^-1``, the motion ``x + M s_hat``. ``Q``
 depends on ``S`` itself, so the filter runs again with ``Q`` at the first
 pass's estimate (``passes=2``).
 
+The filter's pieces are :mod:`fmscal.observers.kalman`, written for any
+model linear in its channels (:attr:`fmscal.plant.Model.linear_channels`:
+the planar model, and the tests' rail); the sizes all come from the model.
 Two paths run the same step (:func:`_step`, written once for numpy and
 casadi): a numpy loop (the readable path) and the step compiled with casadi
 over chunks of 1000 samples (the fast path); they agree to rounding (1e-9
@@ -87,33 +90,25 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant import Log, NoiseSpec, Payload, input_matrix
+from fmscal.plant import Log
 from fmscal.plant._backend import ops
 from fmscal.plant._compile import ChunkedSteps
 from fmscal.plant.errors import FmscalError
+from fmscal.plant.model import Model, as_model
 from fmscal.plant.noise import estimate_noise
-from fmscal.plant.sensor import check_calibration
+from fmscal.plant.sensor import NoiseSpec, check_calibration
 
 from . import _matrix as mx
+from .kalman import V0_SD  # noqa: F401  (re-exported: the prior's settings live in kalman)
+from .kalman import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit, filter_layout, filter_step,
+                     information_factor, initial_state, input_layout, params_layout, unpack_lower)
 from .progress import progress_bar
-from .state import StateLayout
-from .result import initial_calibration, offset_from_c, offset_std
+from .result import calibration_uncertainty, initial_calibration
 
-__all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "V0_SD", "POSE_SD_FLOOR"]
+__all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "log_steps"]
 
-#: Prior standard deviation of the initial velocities (rad/s, m/s); the first pose is the
-#: prior of the initial position. A few samples of poses outweigh it.
-V0_SD = 1.0
-#: Floor on the pose noise standard deviations (rad, m), so that a noise-free log keeps a
-#: well-conditioned filter.
-POSE_SD_FLOOR = 1e-6
 _CHUNK = 1000            # samples per compiled call
-_REG_REL = 1e-10         # history only: S_hat_k = S0 + (J + lam I)^-1 (r - J S0), lam relative to trace(J)
-_REG_ABS = 1e-12
-_CORRECTION_LIMIT = 0.1  # history only: the bias correction at most this fraction of |s_hat|
 _HISTORY_RADIUS = 10.0   # history only: |S_hat - S0| <= this times (|S0| + 1), Frobenius norms
-_PAIRS = [(a, b) for a in range(3) for b in range(a + 1)]     # (a, i), i <= a: Gamma and beta, packed
-_N_IN = 12               # per-step input: has_next, theta_k, theta_k+1, pose_k+1 (3), w_k (3), w_k+1 (3)
 
 
 @dataclass
@@ -122,13 +117,13 @@ class MaximumLikelihoodFit:
 
     Attributes
     ----------
-    S_aug : ndarray, shape (3, n)
-        The estimate of ``[S | c]`` in ``w = S w_hat + c``; ``n`` = 3, or 4
-        with the offset.
-    cov_aug : ndarray, shape (3n, 3n)
+    S_aug : ndarray, shape (n_w, n)
+        The estimate of ``[S | c]`` in ``w = S w_hat + c``; ``n`` = ``n_w``
+        (3 in the plane), or ``n_w + 1`` with the offset.
+    cov_aug : ndarray, shape (n_w n, n_w n)
         Its covariance, entries in row order, from the information the log
         held about them: ``(J - B)^-1 J (J - B)^-1`` (module docstring).
-    S_history : ndarray, shape (N, 3, n)
+    S_history : ndarray, shape (N, n_w, n)
         The filtered estimate after each sample (the data up to it), for E
         against time; its last row is ``S_aug``. Defined from the first
         sample by a negligible pull towards ``S0`` (relative weight ``1e-10``
@@ -137,10 +132,10 @@ class MaximumLikelihoodFit:
         out), and held within ``10 (|S0| + 1)`` of ``S0`` (Frobenius norm of
         the ``S`` entries) over the first samples, where the information
         does not yet pin every entry and the estimate is ill-determined.
-    x_history : ndarray, shape (N, 6)
-        The filtered motion ``[theta, theta', X, X', Y, Y']`` (rad, rad/s, m,
-        m/s) after each sample, with the estimate of that sample: filtered,
-        not smoothed.
+    x_history : ndarray, shape (N, nx)
+        The filtered motion in the model's layout (planar ``[theta, theta',
+        X, X', Y, Y']``, rad, rad/s, m, m/s) after each sample, with the
+        estimate of that sample: filtered, not smoothed.
     noise : plant.NoiseSpec
         The noise model used.
     noise_estimated : bool
@@ -148,11 +143,11 @@ class MaximumLikelihoodFit:
     passes : int
         Filter passes run; each after the first takes the process noise at
         the previous pass's ``S``.
-    payload : plant.Payload
-    information : ndarray, shape (3n, 3n)
+    model : plant.Model
+    information : ndarray, shape (n_w n, n_w n)
         ``J``, the information the last pass accumulated about ``[S | c]``
         (row order), as if the readings were exact.
-    eiv_bias : ndarray, shape (3n, 3n)
+    eiv_bias : ndarray, shape (n_w n, n_w n)
         ``B``, its part that the reading's own noise contributes (the
         errors in variables): the estimate solves ``(J - B) s = r``.
     wall_time : float
@@ -166,7 +161,7 @@ class MaximumLikelihoodFit:
     noise: NoiseSpec
     noise_estimated: bool
     passes: int
-    payload: Payload = None
+    model: Model = None
     information: np.ndarray = None
     eiv_bias: np.ndarray = None
     wall_time: float = 0.0
@@ -174,31 +169,47 @@ class MaximumLikelihoodFit:
     @property
     def offset(self):
         """True when the fit estimated the offset column ``c``."""
-        return self.S_aug.shape[1] == 4
+        return self.S_aug.shape[1] == self.S_aug.shape[0] + 1
+
+    @property
+    def payload(self):
+        """The model's payload."""
+        return self.model.payload
 
     @property
     def S_hat(self):
-        """The estimate of ``S``, shape (3, 3)."""
-        return self.S_aug[:, :3].copy()
+        """The estimate of ``S``, shape (n_w, n_w)."""
+        return self.S_aug[:, :len(self.S_aug)].copy()
 
     @property
     def S_std(self):
-        """One-sigma uncertainty of each entry of ``S``, shape (3, 3)."""
-        n = self.S_aug.shape[1]
-        return np.sqrt(np.maximum(np.diag(self.cov_aug), 0)).reshape(3, n)[:, :3]
+        """One-sigma uncertainty of each entry of ``S``, shape (n_w, n_w)."""
+        return calibration_uncertainty(self.S_aug, self.cov_aug, self.offset)[0]
 
     @property
     def b(self):
-        """The sensor's offset ``b = -S^-1 c`` (N m, N), shape (3,); None without the offset."""
-        return offset_from_c(self.S_hat, self.S_aug[:, 3]) if self.offset else None
+        """The sensor's offset ``b = -S^-1 c`` (N m, N), shape (n_w,); None without the offset."""
+        return calibration_uncertainty(self.S_aug, self.cov_aug, self.offset)[1]
 
     @property
     def b_std(self):
-        """One-sigma uncertainty of :attr:`b`, shape (3,); None without the offset."""
-        return offset_std(self.S_hat, self.b, self.cov_aug) if self.offset else None
+        """One-sigma uncertainty of :attr:`b`, shape (n_w,); None without the offset."""
+        return calibration_uncertainty(self.S_aug, self.cov_aug, self.offset)[2]
 
 
-def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None, compiled=True):
+def log_steps(log, model):
+    """Every step's input to the filter (:func:`fmscal.observers.kalman.input_layout`), shape (N - 1, size).
+
+    The configuration in ``A(q)`` is the measured pose, interpolated between
+    poses on a multi-rate log (as least squares takes it).
+    """
+    rows = log.has_pose
+    q = np.column_stack([np.interp(log.t, log.t[rows], log.pose[rows, j]) for j in range(model.n_pose)])
+    return np.column_stack([log.has_pose[1:], q[:-1], q[1:], np.nan_to_num(log.pose[1:]),
+                            log.w_hat[:-1], log.w_hat[1:]])
+
+
+def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, compiled=True):
     """The maximum-likelihood estimate of ``S`` (and the offset) from a whole log.
 
     Module docstring for the model and the filter: a Kalman filter on the
@@ -210,10 +221,12 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
     Parameters
     ----------
     log : plant.Log
-        Full-rate or multi-rate (samples without a pose only predict). For a
-        pose stream that lags the sensor, pass ``log.shift_poses(latency)``.
-    payload : plant.Payload
-        The payload's known mass properties.
+        A log of the model's case, full-rate or multi-rate (samples without
+        a pose only predict). For a pose stream that lags the sensor, pass
+        ``log.shift_poses(latency)``.
+    model : plant.Model or plant.Payload
+        The problem (a model with :attr:`fmscal.plant.Model.linear_channels`);
+        a :class:`plant.Payload` stands for the planar model of it.
     noise : plant.NoiseSpec, optional
         Noise standard deviations of the log. None: estimated from the log
         (:func:`plant.estimate_noise`). Pose standard deviations are floored
@@ -228,7 +241,7 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
         Only the last pass carries the errors-in-variables moments (the
         others only set the next pass's noise model), at about twice the
         cost of each of the others.
-    S0 : array_like, shape (3, 3), optional
+    S0 : array_like, shape (n_w, n_w), optional
         Where the first pass evaluates the process noise, and where the
         history starts; default the identity (a sensor's nominal calibration).
     compiled : bool
@@ -244,167 +257,86 @@ def fit_max_likelihood(log, payload, noise=None, offset=False, passes=2, S0=None
     Raises
     ------
     TypeError
-        ``log`` not a :class:`plant.Log`, ``payload`` not a
-        :class:`plant.Payload`, ``noise`` neither None nor a
+        ``log`` not a :class:`plant.Log`, ``noise`` neither None nor a
         :class:`plant.NoiseSpec`.
     FmscalError
-        ``passes`` not a positive integer, ``S0`` not a finite 3x3 matrix, or
-        a log that does not excite every entry of ``[S | c]`` (singular
-        information).
+        No model, a log of another case, ``passes`` not a positive integer,
+        ``S0`` not a finite ``n_w x n_w`` matrix, or a log that does not
+        excite every entry of ``[S | c]`` (singular information).
     """
+    model = as_model(model, "fit_max_likelihood")
     if not isinstance(log, Log):
         raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
-    if not isinstance(payload, Payload):
-        raise TypeError(f"payload must be a plant.Payload; got {type(payload).__name__}")
-    if noise is not None and not isinstance(noise, NoiseSpec):
-        raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
+    model.check_log(log, "the maximum-likelihood fit")
+    if noise is not None:
+        model.check_noise(noise)
     if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
         raise FmscalError(f"passes must be a positive integer; got {passes!r}")
     start = time.perf_counter()
-    S0 = np.eye(3) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf)
+    n_w = model.n_w
+    S0 = np.eye(n_w) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf, size=n_w)
     noise_estimated = noise is None
     if noise_estimated:
         noise = estimate_noise(log)
-    n = 4 if offset else 3
+    n = n_w + int(bool(offset))
     s0 = initial_calibration(S0, offset)
-    theta = np.interp(log.t, log.t[log.has_pose], log.pose[log.has_pose, 0])
-    U = np.column_stack([log.has_pose[1:], theta[:-1], theta[1:], np.nan_to_num(log.pose[1:]),
-                         log.w_hat[:-1], log.w_hat[1:]])
-    pose_var = np.maximum(noise.pose_sd, POSE_SD_FLOOR) ** 2
-    z0 = _initial_state(log.pose[0], pose_var, n)
+    U = log_steps(log, model)
+    pose_var = np.maximum(model.pose_sd(noise), POSE_SD_FLOOR) ** 2
+    z0 = initial_state(model, log.pose[0], pose_var, n)
+    var_w = np.square(noise.wrench_sd)
     S_noise = S0
+    nx = model.nx
     with progress_bar(int(passes) * len(U), "max-likelihood") as bar:     # a long log in a terminal only
         for k in range(int(passes)):
-            # the process noise at the current S: G(theta) S Sigma S^T G(theta)^T, eq. (1)
-            W = S_noise @ np.diag(np.square(noise.wrench_sd)) @ S_noise.T
-            var_w = np.square(noise.wrench_sd)
-            p = np.concatenate([[log.dt, pose_var[0], pose_var[1]], W.ravel(), var_w, s0])
-            # the bias moments only where the estimate is the result (the last pass)
-            if compiled:     # the history only where it is the result (the last pass)
-                z_end, Y = _run_compiled(z0, U, p, payload, n, k == passes - 1, bar.update, k == passes - 1)
+            # the process noise at the current S: A(q) S Sigma S^T A(q)^T (eq. 1 in the plane)
+            W = S_noise @ np.diag(var_w) @ S_noise.T
+            p = params_layout(model, n).pack(None, h=log.dt, R=pose_var, W=W.ravel(), var_w=var_w, s0=s0)
+            last = k == passes - 1       # the bias moments and the history only where the estimate is the result
+            if compiled:
+                z_end, Y = _run_compiled(z0, U, p, model, n, last, bar.update, last)
             else:
-                z_end, Y = _run_numpy(z0, U, p, payload, n, k == passes - 1)
-            S_aug, cov_aug, J, B = _solve_information(z_end, n, var_w, log.name)
-            S_noise = S_aug[:, :3]
-    Y = np.vstack([np.concatenate([z0[:6], s0]), Y])
-    Y[-1, 6:] = S_aug.ravel()                          # the history ends at the estimate
+                z_end, Y = _run_numpy(z0, U, p, model, n, last)
+            S_aug, cov_aug, J, B = _solve_information(z_end, model, n, var_w, log.name)
+            S_noise = S_aug[:, :n_w]
+    Y = np.vstack([np.concatenate([z0[:nx], s0]), Y])
+    Y[-1, nx:] = S_aug.ravel()                          # the history ends at the estimate
     return MaximumLikelihoodFit(
-        S_aug=S_aug, cov_aug=cov_aug, S_history=Y[:, 6:].reshape(-1, 3, n), x_history=Y[:, :6].copy(),
-        noise=noise, noise_estimated=noise_estimated, passes=int(passes), payload=payload,
+        S_aug=S_aug, cov_aug=cov_aug, S_history=Y[:, nx:].reshape(-1, n_w, n), x_history=Y[:, :nx].copy(),
+        noise=noise, noise_estimated=noise_estimated, passes=int(passes), model=model,
         information=J, eiv_bias=B, wall_time=time.perf_counter() - start)
 
 
-# --- the packed state -------------------------------------------------------------------------
+def _step(z, u, p, model, n, eiv=True):
+    """One sample of the filter (:func:`fmscal.observers.kalman.filter_step`) and the estimate so far.
 
-def _layout(n):
-    """The packed state for ``n`` columns of ``[S | c]`` (``m = 3 n`` unknowns), a :class:`observers.state.StateLayout`.
-
-    x (6), P (6x6 packed lower, 21), M (6 x m), J (m x m packed lower), r (m), and the
-    moments of the errors-in-variables correction (:func:`_filter_step`): N (6 x 3), K (the last
-    gain, 6 x 3), Gamma (6 matrices 6 x 6, row order, for (a, i) with i <= a), beta (3 x 3
-    symmetric, packed lower, 6)
-    """
-    m = 3 * n
-    return StateLayout(("x", 6), ("P", 21), ("M", 6 * m), ("J", m * (m + 1) // 2), ("r", m),
-                       ("N", 18), ("K", 18), ("Gam", 6 * 36), ("beta", 6))
-
-
-def _initial_state(pose, pose_var, n):
-    """The filter at the first sample: the first pose, velocities with prior :data:`V0_SD`, no information."""
-    L = _layout(n)
-    z = np.zeros(L.size)
-    z[L.slices["x"]] = [pose[0], 0.0, pose[1], 0.0, pose[2], 0.0]
-    P = np.diag([pose_var[0], V0_SD ** 2, pose_var[1], V0_SD ** 2, pose_var[1], V0_SD ** 2])
-    z[L.slices["P"]] = _pack(P, 6)
-    return z
-
-
-def _pack(A, k):
-    """Lower triangle of a symmetric ``k x k`` matrix, row by row (numpy or casadi)."""
-    o = ops(A)
-    return o.vcat([A[i, j] for i in range(k) for j in range(i + 1)])
-
-
-def _unpack(o, v, k):
-    """The symmetric ``k x k`` matrix from its packed lower triangle."""
-    idx = lambda i, j: i * (i + 1) // 2 + j if j <= i else j * (j + 1) // 2 + i     # noqa: E731
-    return o.matrix([[v[idx(i, j)] for j in range(k)] for i in range(k)])
-
-
-def _cholesky(o, A, k):
-    """Lower Cholesky factor of a symmetric positive definite ``k x k`` ``A``, as lists of scalars.
-
-    Written in scalar operations so that numpy and casadi run the same
-    arithmetic; only the lower triangle of ``A`` is read.
-    """
-    Lc = [[None] * k for _ in range(k)]
-    for j in range(k):
-        Lc[j][j] = o.sqrt(A[j, j] - sum(Lc[j][q] * Lc[j][q] for q in range(j)))
-        for i in range(j + 1, k):
-            Lc[i][j] = (A[i, j] - sum(Lc[i][q] * Lc[j][q] for q in range(j))) / Lc[j][j]
-    return Lc
-
-
-def _cholesky_apply(o, Lc, B, k):
-    """``A^-1 B`` from the factor of :func:`_cholesky`; ``B`` is ``k x cols``."""
-    cols = B.shape[1]
-    out = [[None] * cols for _ in range(k)]
-    for c in range(cols):
-        yv = [None] * k
-        for i in range(k):
-            yv[i] = (B[i, c] - sum(Lc[i][q] * yv[q] for q in range(i))) / Lc[i][i]
-        for i in reversed(range(k)):
-            out[i][c] = (yv[i] - sum(Lc[q][i] * out[q][c] for q in range(i + 1, k))) / Lc[i][i]
-    return o.matrix(out)
-
-
-def _cholesky_solve(o, A, B, k):
-    """``A^-1 B`` for a symmetric positive definite ``k x k`` ``A``."""
-    return _cholesky_apply(o, _cholesky(o, A, k), B, k)
-
-
-# --- one step ---------------------------------------------------------------------------------
-
-def _regressor_rows(o, theta, w_hat, payload, n):
-    """``d a / d s`` at one sample: row ``c`` of ``G(theta) kron [w_hat; 1]^T``, shape (3, 3n).
-
-    ``a = G(theta) [S | c] w_aug`` (eq. 1, :func:`plant.input_matrix`), so
-    ``d a_c / d s_ij = G_ci w_aug_j`` with ``s`` in row order.
-    """
-    G = input_matrix(theta, payload)
-    w = [w_hat[j] for j in range(3)] + ([1.0] if n == 4 else [])
-    return o.matrix([[G[c, i] * w[j] for i in range(3) for j in range(n)] for c in range(3)])
-
-
-def _step(z, u, p, payload, n, eiv=True):
-    """One sample of the filter (:func:`_filter_step`) and the estimate so far, for the history.
-
-    Parameters are those of :func:`_filter_step`.
+    Parameters are those of :func:`fmscal.observers.kalman.filter_step`.
 
     Returns
     -------
     z_next : shape (size,)
-    out : shape (6 + 3n,)
+    out : shape (nx + n_w n,)
         The motion ``x + M s_hat`` and ``s_hat`` after the sample.
     """
     o = ops(z, u, p)
-    m, L = 3 * n, _layout(n)
-    z_next = _filter_step(z, u, p, payload, n, eiv)
-    st = L.unpack(z_next)
-    J = _unpack(o, st.J, m)
-    M = mx.as_matrix(o, st.M, 6, m)
-    var_w, s0 = p[12:15], p[15:15 + m]
+    nx, n_w = model.nx, model.n_w
+    m = n_w * n
+    z_next = filter_step(model, z, u, p, n, eiv)
+    st = filter_layout(model, n).unpack(z_next, scalars=False)
+    pp = params_layout(model, n).unpack(p, scalars=False)
+    J = unpack_lower(o, st.J, m)
+    M = mx.as_matrix(o, st.M, nx, m)
+    var_w, s0 = pp.var_w, pp.s0
     # the estimate so far (the final one is solved exactly, in numpy): the uncorrected
     # s_u = S0 + (J + lam I)^-1 (r - J S0), then s_u + (J + lam I)^-1 B s_u, the first-order
-    # solution of (J - B) s = r, the correction limited (:func:`_correction_limit`) while the
+    # solution of (J - B) s = r, the correction limited (kalman.correction_limit) while the
     # information is still rank-deficient (the first samples)
-    chol = _information_factor(o, J, m)
-    s_u = mx.col(s0) + _cholesky_apply(o, chol, mx.col(st.r) - o.dot(J, mx.col(s0)), m)
-    corr = (_cholesky_apply(o, chol, o.dot(_bias_matrix(o, st.beta, var_w, n), s_u), m) if eiv
+    chol = information_factor(o, J, m)
+    s_u = mx.col(s0) + cholesky_apply(o, chol, mx.col(st.r) - o.dot(J, mx.col(s0)), m)
+    corr = (cholesky_apply(o, chol, o.dot(bias_matrix(o, st.beta, var_w, n_w, n), s_u), m) if eiv
             else 0.0 * s_u)
-    s_hat = s_u + corr * _correction_limit(o, s_u, corr, m)
+    s_hat = s_u + corr * correction_limit(o, s_u, corr, m)
     # and held within a radius of S0 while the information cannot place every entry yet
-    s_entries = [n * i + j for i in range(3) for j in range(3)]
+    s_entries = [n * i + j for i in range(n_w) for j in range(n_w)]
     step_size = o.sqrt(sum((s_hat[k, 0] - s0[k]) ** 2 for k in s_entries))
     radius = _HISTORY_RADIUS * (o.sqrt(sum(s0[k] * s0[k] for k in s_entries)) + 1.0)
     s_hat = mx.col(s0) + (s_hat - mx.col(s0)) / o.fmax(1.0, step_size / radius)
@@ -412,165 +344,11 @@ def _step(z, u, p, payload, n, eiv=True):
     return z_next, o.vcat([mx.vec(x_hat), mx.vec(s_hat)])
 
 
-def _information_factor(o, J, m):
-    """Cholesky factor (:func:`_cholesky`) of ``J + lam I``, ``lam`` a ``1e-10`` of ``J``'s mean diagonal.
-
-    The information is rank-deficient over the first samples; the small
-    ``lam`` (a pull towards the start, negligible once every entry is
-    excited) keeps the estimate defined from the first sample.
-    """
-    trace = sum(J[i, i] for i in range(m))
-    return _cholesky(o, J + (_REG_REL * trace / m + _REG_ABS) * mx.eye(o, m), m)
-
-
-def _correction_limit(o, s, corr, m):
-    """The factor (<= 1) that keeps a bias correction ``corr`` within a tenth of ``|s|``.
-
-    The correction is a first-order term, about 1e-3 of ``|s|`` once the
-    log has excited every entry; the limit only acts over the first samples,
-    where the information is still rank-deficient.
-    """
-    size_s = o.sqrt(sum(s[i, 0] * s[i, 0] for i in range(m)))
-    size_c = o.sqrt(sum(corr[i, 0] * corr[i, 0] for i in range(m)))
-    return 1.0 / o.fmax(1.0, size_c / (_CORRECTION_LIMIT * size_s + _REG_ABS))
-
-
-def _filter_step(z, u, p, payload, n, eiv=True):
-    """One sample of the separate-bias Kalman filter and its bias moments (module docstring).
-
-    Parameters
-    ----------
-    z : ndarray or casadi.SX, shape (size,)
-        Packed state at sample ``k`` (:func:`_layout`).
-    u : ndarray or casadi.SX, shape (12,)
-        ``[has_pose_k+1, theta_k, theta_k+1, pose_k+1 (3), w_hat_k (3), w_hat_k+1 (3)]``:
-        ``theta`` the measured angle (interpolated between poses), the pose
-        zeros where there is none.
-    p : ndarray or casadi.SX, shape (15 + 3n,)
-        ``[h, angle variance, position variance, W (3x3, row order), Sigma (3), s0 (3n)]``
-        with ``W = S Sigma S^T`` the reading's noise in true-wrench units and
-        ``Sigma`` the reading's noise variances.
-    payload : plant.Payload
-    n : int
-        Columns of ``[S | c]``: 3, or 4 with the offset.
-    eiv : bool
-        Propagate the moments of the errors-in-variables correction (False:
-        they are carried unchanged, and the history is uncorrected; for a
-        pass whose estimate only sets the next pass's noise model).
-
-    Returns
-    -------
-    z_next : shape (size,)
-        Packed state after the sample.
-    """
-    o = ops(z, u, p)
-    m, st = 3 * n, _layout(n).unpack(z)
-    x = st.x
-    P = _unpack(o, st.P, 6)
-    M = mx.as_matrix(o, st.M, 6, m)
-    J = _unpack(o, st.J, m)
-    r = st.r
-    Nz = mx.as_matrix(o, st.N, 6, 3)
-    K_last = mx.as_matrix(o, st.K, 6, 3)
-    gam = st.Gam
-    beta = st.beta
-    has, h = u[0], p[0]
-    W = mx.as_matrix(o, p[3:12], 3)
-    # prediction over the step: Phi = diag of [[1, h], [0, 1]] per channel theta, X, Y
-    Phi = o.matrix([[1.0 if i == j else (h if (j == i + 1 and i % 2 == 0) else 0.0) for j in range(6)]
-                    for i in range(6)])
-    x_pred = o.dot(Phi, mx.col(x))
-    # process noise: [h^2, h] [h^2, h]^T (x) G W G^T at the step's start (white, module docstring)
-    G0 = input_matrix(u[1], payload)
-    G1 = input_matrix(u[2], payload)
-    A = o.dot(o.dot(G0, W), G0.T)
-    g = [h * h, h]
-    Q = o.matrix([[g[i % 2] * g[j % 2] * A[i // 2, j // 2] for j in range(6)] for i in range(6)])
-    P_pred = o.dot(o.dot(Phi, P), Phi.T) + Q
-    # the regressor linear over the step: U = [h^2 (2 u_k + u_k+1) / 6; h (u_k + u_k+1) / 2] per channel
-    R0 = _regressor_rows(o, u[1], u[6:9], payload, n)
-    R1 = _regressor_rows(o, u[2], u[9:12], payload, n)
-    U = o.matrix([[(h * h * (2 * R0[i // 2, j] + R1[i // 2, j]) / 6 if i % 2 == 0
-                    else h * (R0[i // 2, j] + R1[i // 2, j]) / 2) for j in range(m)] for i in range(6)])
-    M_pred = o.dot(Phi, M) + U
-    # errors in variables: Gamma_(a, i) = E[filter error x (part of M's column i driven by the
-    # reading's noise)], per unit S_a. and variance; its source is the noise n_k, which drives both
-    # the step's process noise ([h^2, h] (x) G_k e_a) and the regressor (A (x) G_k e_i, plus
-    # N e_i = (I - K C) (D (x) G_k e_i) already in M from the last step)
-    w_p = [h * h, h]
-    w_a = [h * h / 3, h / 2]
-    gam_pred = []
-    # (the pose at k carried -(h^2 / 6) eps_k: the last update put K (h^2 / 6) eps_k in the error)
-    # beta is symmetric (it is E[D_n^T V^-1 D_n] of the batch form, D_n the design's part
-    # driven by the noise): the pairs i <= a are enough
-    if eiv:
-        PhiKG = o.dot(o.dot(Phi, K_last), G0)
-        src_left = [[w_p[i % 2] * G0[i // 2, a] - h * h / 6 * PhiKG[i, a] for i in range(6)]
-                    for a in range(3)]
-        PhiN = o.dot(Phi, Nz)
-        src_right = [[PhiN[i, b] + w_a[i % 2] * G0[i // 2, b] for i in range(6)] for b in range(3)]
-        for q, (a, b) in enumerate(_PAIRS):
-            Gm = mx.as_matrix(o, gam[36 * q:36 * (q + 1)], 6)
-            source = o.matrix([[src_left[a][i] * src_right[b][j] for j in range(6)] for i in range(6)])
-            gam_pred.append(o.dot(o.dot(Phi, Gm), Phi.T) + source)
-    # correction with the pose (none without one: has = 0)
-    pos = [0, 2, 4]
-    CP = P_pred[pos, :]                                   # C P-, 3 x 6
-    H = M_pred[pos, :]                                    # C M-, 3 x m
-    e = mx.col(u[3:6]) - x_pred[pos, :]                   # innovation of the filter run with s = 0
-    V = P_pred[pos, :][:, pos] + o.matrix([[p[1], 0.0, 0.0], [0.0, p[2], 0.0], [0.0, 0.0, p[2]]])
-    rhs = o.matrix([[CP[i, j] for j in range(6)] + [H[i, j] for j in range(m)] + [e[i, 0]]
-                    + [1.0 if i == j else 0.0 for j in range(3)] for i in range(3)])
-    X = _cholesky_solve(o, V, rhs, 3)                     # V^-1 [C P-, H, e, I]
-    Vi_CP, Vi_H, Vi_e, Vi = X[:, 0:6], X[:, 6:6 + m], X[:, 6 + m:7 + m], X[:, 7 + m:10 + m]
-    K = has * Vi_CP.T                                     # Kalman gain, 6 x 3 (zero without a pose)
-    x_next = x_pred + o.dot(K, e)
-    P_next = P_pred - o.dot(K, CP)
-    M_next = M_pred - o.dot(K, H)
-    J_next = J + has * o.dot(H.T, Vi_H)
-    r_next = mx.col(r) + has * o.dot(H.T, Vi_e)
-    # the bias moments: beta_ab += trace(V^-1 C Gamma_ab C^T), plus the pose at k+1 itself
-    # (its -(h^2 / 6) eps_k+1 against H's (h^2 / 6) G_k+1 n_k+1); Gamma <- (I - K C) Gamma (I - K C)^T
-    GViG = o.dot(o.dot(G1.T, Vi), G1)
-    beta_next, gam_next = [], []
-    if not eiv:
-        beta_next, gam_next = [beta[q] for q in range(len(_PAIRS))], [gam]
-    for q, ((a, b), Gm) in enumerate(zip(_PAIRS, gam_pred)):
-        CGC = Gm[pos, :][:, pos]
-        beta_next.append(beta[q] + has * (sum(Vi[i, j] * CGC[j, i] for i in range(3) for j in range(3))
-                                          + (h * h / 6) ** 2 * GViG[a, b]))
-        Gk = Gm - o.dot(K, Gm[pos, :])
-        gam_next.append(mx.flat(o, Gk - o.dot(Gk[:, pos], K.T)))
-    d_end = o.matrix([[(h * h / 6 if i % 2 == 0 else h / 2) * G1[i // 2, b] for b in range(3)]
-                      for i in range(6)])
-    N_next = d_end - o.dot(K, d_end[pos, :]) if eiv else Nz
-    z_next = o.vcat([mx.vec(x_next), _pack(P_next, 6), mx.flat(o, M_next), _pack(J_next, m), mx.vec(r_next),
-                     mx.flat(o, N_next), mx.flat(o, K if eiv else K_last), o.vcat(gam_next),
-                     o.vcat(beta_next)])
-    return z_next
-
-
-def _bias_matrix(o, beta, var_w, n):
-    """The errors-in-variables bias of the information, ``B`` with ``E[r - J s] = -B s``; shape (3n, 3n).
-
-    ``B_(i l),(a l') = delta_l l' Sigma_l beta_(a i)`` for entries ``s_il`` in row
-    order, ``beta`` (3 x 3, symmetric) packed lower; the offset column
-    (``l = 3``, a constant 1 without noise) has none.
-    """
-    idx = lambda a, i: a * (a + 1) // 2 + i if i <= a else i * (i + 1) // 2 + a     # noqa: E731
-    rows = []
-    for i in range(3):
-        for l in range(n):
-            rows.append([beta[idx(a, i)] * var_w[l] if (l2 == l and l < 3) else 0.0
-                         for a in range(3) for l2 in range(n)])
-    return o.matrix(rows)
-
-
-def _solve_information(z, n, var_w, name):
+def _solve_information(z, model, n, var_w, name):
     """``s_hat = (J - B)^-1 r`` and its covariance from the final state (numpy, no prior).
 
     ``J`` is the information, ``B`` the errors-in-variables bias
-    (:func:`_bias_matrix`); the covariance is the sandwich
+    (:func:`fmscal.observers.kalman.bias_matrix`); the covariance is the sandwich
     ``(J - B)^-1 J (J - B)^-1``.
 
     Raises
@@ -578,59 +356,60 @@ def _solve_information(z, n, var_w, name):
     FmscalError
         The information is singular: the log does not excite every entry.
     """
-    m, L = 3 * n, _layout(n)
+    n_w = model.n_w
+    m, L = n_w * n, filter_layout(model, n)
     o = ops(z)
-    J = _unpack(o, z[L.slices["J"]], m)
+    J = unpack_lower(o, z[L.slices["J"]], m)
     r = z[L.slices["r"]]
-    B = _bias_matrix(o, z[L.slices["beta"]], var_w, n)
+    B = bias_matrix(o, z[L.slices["beta"]], var_w, n_w, n)
     d = np.sqrt(np.maximum(np.diag(J), 1e-300))
     scaled = J / np.outer(d, d)                         # unit diagonal: a unit-free condition number
     Jc = (J - B) / np.outer(d, d)
     if not np.all(np.isfinite(J)) or np.linalg.cond(scaled) > 1e12 or np.linalg.cond(Jc) > 1e12:
-        what = "all nine entries of S" if n == 3 else "all nine entries of S and the offset"
+        entries = {1: "S", 3: "all nine entries of S"}.get(n_w, f"all {n_w * n_w} entries of S")
+        what = entries if n == n_w else f"{entries} and the offset"
         raise FmscalError(f"{name}: the log does not excite {what}; the information matrix is singular")
     Jc_inv = np.linalg.inv(Jc)
     s = (Jc_inv @ (r / d)) / d
     cov = (Jc_inv @ scaled @ Jc_inv.T) / np.outer(d, d)
     cov = (cov + cov.T) / 2
-    return s.reshape(3, n), cov, J, B
+    return s.reshape(n_w, n), cov, J, B
 
 
 # --- the two paths ----------------------------------------------------------------------------
 
-def _run_numpy(z0, U, p, payload, n, eiv):
+def _run_numpy(z0, U, p, model, n, eiv):
     """The step in numpy, sample by sample (the readable path)."""
-    Y = np.empty((len(U), 6 + 3 * n))
+    Y = np.empty((len(U), model.nx + model.n_w * n))
     z = z0
     for k in range(len(U)):
-        z, Y[k] = _step(z, U[k], p, payload, n, eiv)
+        z, Y[k] = _step(z, U[k], p, model, n, eiv)
     return z, Y
 
 
 @lru_cache(maxsize=8)
-def _chunked_steps(payload, n, eiv, history=True):
+def _chunked_steps(model, n, eiv, history=True):
     """:func:`_step` run in compiled chunks of :data:`_CHUNK` samples (:class:`plant._compile.ChunkedSteps`);
-    ``history=False``: :func:`_filter_step` alone (a pass whose estimate history is not wanted)."""
-    size = _layout(n).size
-    z = ca.SX.sym("z", size)
-    u = ca.SX.sym("u", _N_IN)
-    p = ca.SX.sym("p", 15 + 3 * n)
+    ``history=False``: :func:`fmscal.observers.kalman.filter_step` alone (a pass whose history is not wanted)."""
+    z = ca.SX.sym("z", filter_layout(model, n).size)
+    u = ca.SX.sym("u", input_layout(model).size)
+    p = ca.SX.sym("p", params_layout(model, n).size)
     if history:
-        z_next, out = _step(z, u, p, payload, n, eiv)
+        z_next, out = _step(z, u, p, model, n, eiv)
         outputs = [ca.densify(z_next), ca.densify(out)]
     else:
-        outputs = [ca.densify(_filter_step(z, u, p, payload, n, eiv))]
-    name = f"max_likelihood{n}{'' if eiv else '_plain'}{'' if history else '_filter'}"
+        outputs = [ca.densify(filter_step(model, z, u, p, n, eiv))]
+    name = f"max_likelihood_{model.name}{n}{'' if eiv else '_plain'}{'' if history else '_filter'}"
     step = ca.Function(f"{name}_step", [z, u, p], outputs)
     return ChunkedSteps(step, _CHUNK)
 
 
-def _run_compiled(z0, U, p, payload, n, eiv, progress=None, history=True):
+def _run_compiled(z0, U, p, model, n, eiv, progress=None, history=True):
     """The step compiled, :data:`_CHUNK` samples per call; same numbers as :func:`_run_numpy`.
 
     Returns the last state and the history (None with ``history=False``).
     """
-    steps = _chunked_steps(payload, n, eiv, history)
+    steps = _chunked_steps(model, n, eiv, history)
     inputs = [U, np.broadcast_to(p, (len(U), len(p)))]
     if not history:
         return steps.run(z0, inputs, states=False, progress=progress), None

@@ -10,7 +10,6 @@ import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from fmscal.plant import NoiseSpec
 from fmscal.plant._checks import as_bool, as_number
 from fmscal.plant.errors import FmscalError
 
@@ -66,12 +65,18 @@ class Method:
     summary: str
     paper_claim: float = None
 
-    def build(self, payload, noise=None, settings=None):
-        """The method for ``payload``, with its documented defaults and ``settings`` on top.
+    @property
+    def models(self):
+        """The cases the method is defined for (:attr:`observers.Observer.models`); empty: any model."""
+        return self.cls.models
+
+    def build(self, model, noise=None, settings=None):
+        """The method for ``model``, with its documented defaults and ``settings`` on top.
 
         Parameters
         ----------
-        payload : plant.Payload
+        model : plant.Model or plant.Payload
+            The problem (a payload stands for its case's model).
         noise : plant.NoiseSpec, optional
             What a method with a noise model is told; None: it estimates the
             noise from the log. Ignored by methods without one.
@@ -90,10 +95,8 @@ class Method:
         """
         kwargs = {**self.defaults, **self.check_settings(settings)}
         if self.needs_noise_model:
-            if noise is not None and not isinstance(noise, NoiseSpec):
-                raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(noise).__name__}")
-            kwargs.setdefault("noise", noise)
-        return self.cls(payload, **kwargs)
+            kwargs.setdefault("noise", noise)            # the method checks it against its model
+        return self.cls(model, **kwargs)
 
 
     def check_settings(self, settings):
@@ -124,7 +127,7 @@ class Method:
         if not isinstance(settings, Mapping):
             raise FmscalError(f"settings must be a dict of constructor arguments; got {type(settings).__name__}")
         params = {k: v.default for k, v in inspect.signature(self.cls.__init__).parameters.items()
-                  if k not in ("self", "payload") and v.kind == v.POSITIONAL_OR_KEYWORD}
+                  if k not in ("self", "model") and v.kind == v.POSITIONAL_OR_KEYWORD}
         for key, value in settings.items():
             if key not in params:
                 raise FmscalError(f"{self.name}: no setting {key!r}; its settings: {', '.join(params)}")
@@ -180,14 +183,14 @@ def get_method(name):
         raise FmscalError(f"unknown observer {name!r}; expected one of {', '.join(METHODS)}") from None
 
 
-def make_observer(name, payload, noise=None, settings=None):
+def make_observer(name, model, noise=None, settings=None):
     """A method by name, with its documented defaults (:meth:`Method.build`).
 
     Parameters
     ----------
     name : str
         A key of :data:`METHODS`.
-    payload : plant.Payload
+    model : plant.Model or plant.Payload
     noise : plant.NoiseSpec, optional
         What a method with a noise model is told; None: estimated from the log.
     settings : dict, optional
@@ -197,7 +200,7 @@ def make_observer(name, payload, noise=None, settings=None):
     -------
     observers.Observer
     """
-    return get_method(name).build(payload, noise, settings)
+    return get_method(name).build(model, noise, settings)
 
 
 def method_names(role=None, online=None, calibrates=None):

@@ -1,15 +1,18 @@
 """What a method returns, and the algebra of the calibration entries ``[S | c]``.
 
-Every method estimates ``S`` (3x3), and with ``offset=True`` the augmented
-``[S | c]`` (3x4) of ``w = S w_hat + c = S (w_hat - b)``: the raw reading is
-augmented by a constant 1. The entries are kept flat in row order.
+Every method estimates ``S`` (``n_w x n_w``: 3x3 in the plane, 6x6 in space;
+the model's :attr:`fmscal.plant.Model.n_w`), and with ``offset=True`` the
+augmented ``[S | c]`` (``n_w x (n_w + 1)``) of ``w = S w_hat + c = S (w_hat -
+b)``: the raw reading is augmented by a constant 1. The entries are kept flat
+in row order.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ObserverResult", "initial_calibration", "split_calibration", "offset_from_c", "offset_std"]
+__all__ = ["ObserverResult", "initial_calibration", "split_calibration", "calibration_uncertainty", "offset_from_c",
+           "offset_std"]
 
 
 @dataclass
@@ -22,12 +25,14 @@ class ObserverResult:
         The method's name in the registry (:data:`observers.METHODS`).
     t : ndarray, shape (N,)
         Times, s. Shorter than the log's if the run diverged and stopped.
-    S_hat : ndarray, shape (3, 3)
-        The final estimate of ``S``.
-    S_hat_history : ndarray, shape (N, 3, 3)
-    x_hat_history : ndarray, shape (N, 6)
-        ``[theta, theta', X, X', Y, Y']``.
-    S_std : ndarray, shape (3, 3), or None
+    S_hat : ndarray, shape (n_w, n_w)
+        The final estimate of ``S`` (``n_w`` = 3 in the plane, the model's
+        :attr:`fmscal.plant.Model.n_w`).
+    S_hat_history : ndarray, shape (N, n_w, n_w)
+    x_hat_history : ndarray, shape (N, nx)
+        The motion state in the model's layout (planar: ``[theta, theta',
+        X, X', Y, Y']``).
+    S_std : ndarray, shape (n_w, n_w), or None
         One-sigma uncertainty of each entry, where the method has one.
     diverged : bool
         After the first second, an entry of ``S_hat`` left the divergence
@@ -51,10 +56,10 @@ class ObserverResult:
         uncertainty its evidence (:mod:`observers.evidence`).
     info : dict
         Method-specific extras (noise estimates, fit diagnostics, ...).
-    b : ndarray, shape (3,), or None
+    b : ndarray, shape (n_w,), or None
         The sensor's offset in ``w = S (w_hat - b)`` (N m, N), where the
         method was asked to estimate it; None otherwise.
-    b_std : ndarray, shape (3,), or None
+    b_std : ndarray, shape (n_w,), or None
         Its one-sigma uncertainty, where the method has one.
     warnings : list of str
         What the method noticed about the log or its own run, one line each.
@@ -80,68 +85,102 @@ def initial_calibration(S0, offset):
 
     Returns
     -------
-    ndarray, shape (9,) or (12,)
+    ndarray, shape (n_w^2,) or (n_w (n_w + 1),)
         Row order.
     """
-    return np.column_stack([S0, np.zeros(3)]).ravel() if offset else np.ravel(S0)
+    S0 = np.asarray(S0, dtype=float)
+    return np.column_stack([S0, np.zeros(len(S0))]).ravel() if offset else np.ravel(S0)
 
 
-def split_calibration(history, n_cols):
+def split_calibration(history, n_cols, offset=None):
     """``S_hat`` history and the final offset from a history of ``[S_hat | c_hat]``.
 
     Parameters
     ----------
-    history : ndarray, shape (N, 3 n_cols)
+    history : ndarray, shape (N, n_w n_cols)
         Calibration entries in row order, per sample.
     n_cols : int
-        3, or 4 with the offset column.
+        ``n_w``, or ``n_w + 1`` with the offset column.
+    offset : bool, optional
+        Whether the last column is the offset; default: ``n_cols`` is 4 (planar) .
 
     Returns
     -------
-    S_history : ndarray, shape (N, 3, 3)
-    b : ndarray, shape (3,), or None
+    S_history : ndarray, shape (N, n_w, n_w)
+    b : ndarray, shape (n_w,), or None
         :func:`offset_from_c` of the last sample; None without the offset.
     """
-    aug = history.reshape(-1, 3, n_cols)
-    S_hist = aug[:, :, :3]
-    return S_hist, (offset_from_c(S_hist[-1], aug[-1, :, 3]) if n_cols == 4 else None)
+    n_w = n_cols - 1 if (offset if offset is not None else n_cols == 4) else n_cols
+    aug = np.asarray(history).reshape(len(history), n_w, n_cols)
+    S_hist = aug[:, :, :n_w]
+    return S_hist, (offset_from_c(S_hist[-1], aug[-1, :, n_w]) if n_cols > n_w else None)
+
+
+def calibration_uncertainty(S_aug, cov, offset):
+    """``S_std``, ``b`` and ``b_std`` of an estimate of ``[S | c]`` and its covariance: every method's, in one place.
+
+    Parameters
+    ----------
+    S_aug : ndarray, shape (n_w, n)
+        ``[S | c]`` (``n = n_w + 1``) or ``S`` (``n = n_w``).
+    cov : ndarray, shape (n_w n, n_w n), or None
+        Covariance of its entries, row order.
+    offset : bool
+        The last column is the offset ``c``.
+
+    Returns
+    -------
+    S_std : ndarray, shape (n_w, n_w), or None
+        None without a covariance.
+    b, b_std : ndarray, shape (n_w,), or None
+        None without the offset (``b_std`` also without a covariance).
+    """
+    S_aug = np.asarray(S_aug, dtype=float)
+    n_w, n = S_aug.shape
+    S = S_aug[:, :n_w]
+    b = offset_from_c(S, S_aug[:, n_w]) if offset else None
+    if cov is None:
+        return None, b, None
+    S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(n_w, n)[:, :n_w]
+    return S_std, b, (offset_std(S, b, cov) if offset else None)
 
 
 def offset_from_c(S, c):
-    """The sensor's offset ``b = -S^-1 c`` from ``w = S w_hat + c = S (w_hat - b)``; shape (3,).
+    """The sensor's offset ``b = -S^-1 c`` from ``w = S w_hat + c = S (w_hat - b)``; shape (n_w,).
 
     NaN where ``S`` is singular (the offset is then undefined).
     """
     try:
         return -np.linalg.solve(S, c)
     except np.linalg.LinAlgError:
-        return np.full(3, np.nan)
+        return np.full(len(c), np.nan)
 
 
 def offset_std(S, b, cov_aug):
     """One-sigma uncertainty of ``b = -S^-1 c``, linearised.
 
     ``db = -S^-1 (dc + dS b)``: the column of entry ``(i, j)`` of ``[S | c]``
-    is ``-S^-1 e_i`` times ``b_j`` (``j < 3``) or 1 (the offset column).
+    is ``-S^-1 e_i`` times ``b_j`` (``j < n_w``) or 1 (the offset column).
 
     Parameters
     ----------
-    S : ndarray, shape (3, 3)
-    b : ndarray, shape (3,)
-    cov_aug : ndarray, shape (12, 12)
+    S : ndarray, shape (n_w, n_w)
+    b : ndarray, shape (n_w,)
+    cov_aug : ndarray, shape (n_w (n_w + 1), n_w (n_w + 1))
         Covariance of ``[S | c]`` in row order.
 
     Returns
     -------
-    ndarray, shape (3,)
+    ndarray, shape (n_w,)
         NaN where ``S`` is singular (as :func:`offset_from_c`).
     """
     try:
         S_inv = np.linalg.inv(S)
     except np.linalg.LinAlgError:
-        return np.full(3, np.nan)
-    J = np.zeros((3, 12))
-    for i in range(3):
-        for j in range(4):
-            J[:, 4 * i + j] = -S_inv[:, i] * (b[j] if j < 3 else 1.0)
+        return np.full(len(b), np.nan)
+    k = len(b)
+    J = np.zeros((k, k * (k + 1)))
+    for i in range(k):
+        for j in range(k + 1):
+            J[:, (k + 1) * i + j] = -S_inv[:, i] * (b[j] if j < k else 1.0)
     return np.sqrt(np.maximum(np.diag(J @ cov_aug @ J.T), 0))

@@ -4,26 +4,40 @@ import numpy as np
 
 from fmscal.plant._checks import as_finite_array, as_number
 from fmscal.plant.errors import FmscalError
-
-from .state import INPUT
+from fmscal.plant.model import PlanarModel
 
 __all__ = ["check_sample", "pack_input"]
 
+_PLANAR = PlanarModel
 
-def check_sample(dt, pose, w_hat, first):
+
+def check_sample(dt, pose, w_hat, first, model=_PLANAR):
     """Validate one live sample for :meth:`Observer.step`; return ``(pose, w_hat)`` as arrays.
+
+    Parameters
+    ----------
+    dt : float or None
+        Time since the previous sample, s (may be None on the first).
+    pose : array_like, shape (n_pose,), or None
+    w_hat : array_like, shape (n_w,)
+    first : bool
+        The first sample after a reset (it needs a pose).
+    model : plant.Model or its class
+        Gives the sizes; default planar.
 
     Raises
     ------
     FmscalError
-        ``w_hat`` not 3 finite numbers, ``pose`` neither None nor 3 finite
-        numbers, no pose on the first sample, or ``dt`` not positive after it.
+        ``w_hat`` not ``n_w`` finite numbers, ``pose`` neither None nor
+        ``n_pose`` finite numbers, no pose on the first sample, or ``dt``
+        not positive after it.
     """
     if not first or dt is not None:
         dt = as_number(dt, "dt")
-    w_hat = _three(w_hat, "w_hat must be 3 finite numbers")
+    n_w, n_pose = len(model.wrench_names), len(model.pose_names)
+    w_hat = _sized(w_hat, n_w, f"w_hat must be {n_w} finite numbers")
     if pose is not None:
-        pose = _three(pose, "pose must be 3 finite numbers or None")
+        pose = _sized(pose, n_pose, f"pose must be {n_pose} finite numbers or None")
     if first:
         if pose is None:
             raise FmscalError("the first sample after reset() needs a pose measurement")
@@ -32,27 +46,30 @@ def check_sample(dt, pose, w_hat, first):
     return pose, w_hat
 
 
-def _three(value, rule):
-    """``value`` as 3 finite floats (text refused), or FmscalError stating ``rule``."""
+def _sized(value, size, rule):
+    """``value`` as ``size`` finite floats (text refused), or FmscalError stating ``rule``."""
     try:
-        return as_finite_array(value, (3,), "")
+        return as_finite_array(value, (size,), "")
     except FmscalError:
         raise FmscalError(f"{rule}; got {value!r}"[:200]) from None
 
 
-def pack_input(pose, w_hat):
-    """One step's input ``[has_pose, theta, X, Y, M, f_x, f_y]`` (:data:`observers.state.INPUT`).
+def pack_input(pose, w_hat, model=_PLANAR):
+    """One step's input ``[has_pose, pose, w_hat]`` (:attr:`fmscal.plant.Model.input_layout`).
 
     Parameters
     ----------
-    pose : ndarray, shape (3,), or None
+    pose : ndarray, shape (n_pose,), or None
         None: no pose at this sample (zeros, ``has_pose`` 0).
-    w_hat : ndarray, shape (3,)
+    w_hat : ndarray, shape (n_w,)
+    model : plant.Model or its class
+        Gives the layout; default planar (``[has_pose, theta, X, Y, M, f_x, f_y]``).
 
     Returns
     -------
-    ndarray, shape (7,)
+    ndarray, shape (1 + n_pose + n_w,)
     """
+    n_pose = len(model.pose_names)
     if pose is None:
-        return INPUT.pack(None, has_pose=0.0, pose=np.zeros(3), w_hat=w_hat)
-    return INPUT.pack(None, has_pose=1.0, pose=pose, w_hat=w_hat)
+        return np.concatenate([[0.0], np.zeros(n_pose), w_hat])
+    return np.concatenate([[1.0], pose, w_hat])

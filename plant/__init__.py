@@ -1,6 +1,6 @@
 """The physics and the sensor: eq. (1) and Newton-Euler in 3D, the models, the calibration matrix, logs, scenarios."""
 
-from .dynamics import (A_1, A_2, B_1, B_2, C_1, C_2, STATE_NAMES, acceleration, input_matrix,
+from .dynamics import (A_1, A_2, B_1, B_2, C_1, C_2, acceleration, input_matrix,
                        phi_1, phi_2, regressors, S_from_phi, state_derivative)
 from .excitation import Excitation, Multisine, PaperWrench, SampledWrench
 from .calibration import Calibration, CalibrationFileError, file_sha256
@@ -8,7 +8,7 @@ from .bag import BagError, import_bag, read_bag
 from .log import COLUMNS, READING_COLUMNS, Log, LogError, Truth, read_log, read_readings, read_truth
 from .payload import PAPER_PAYLOAD, Payload
 from .rigid_body import SpatialPayload
-from .model import Model, PlanarModel, SpatialModel
+from .model import Model, PlanarModel, SpatialModel, as_model
 from .spatial_scenarios import SPATIAL_SCENARIOS, SpatialScenario
 from .scenarios import PAPER_S, SCENARIOS, TABLE_1, Scenario, draw_S, get_scenario
 from .sensor import CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration
@@ -18,13 +18,13 @@ from .errors import FmscalError
 from ._compile import compiler
 
 __all__ = [
-    "A_1", "A_2", "B_1", "B_2", "C_1", "C_2", "STATE_NAMES", "acceleration", "input_matrix",
+    "A_1", "A_2", "B_1", "B_2", "C_1", "C_2", "acceleration", "input_matrix",
     "phi_1", "phi_2", "regressors", "S_from_phi", "state_derivative",
     "Excitation", "Multisine", "PaperWrench", "SampledWrench",
     "Calibration", "CalibrationFileError", "file_sha256",
     "BagError", "import_bag", "read_bag",
     "COLUMNS", "READING_COLUMNS", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",
-    "PAPER_PAYLOAD", "Payload", "SpatialPayload", "Model", "PlanarModel", "SpatialModel",
+    "PAPER_PAYLOAD", "Payload", "SpatialPayload", "Model", "PlanarModel", "SpatialModel", "as_model",
     "SPATIAL_SCENARIOS", "SpatialScenario",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",

@@ -19,11 +19,7 @@ __all__ = [
     "state_derivative",
     "A_1", "C_1", "B_1", "A_2", "C_2", "B_2",
     "regressors", "phi_1", "phi_2", "S_from_phi",
-    "STATE_NAMES",
 ]
-
-#: Names of the six motion states, in the toolkit's order.
-STATE_NAMES = ("theta", "theta_dot", "X", "X_dot", "Y", "Y_dot")
 
 
 def input_matrix(theta, payload):

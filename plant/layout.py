@@ -52,19 +52,22 @@ class StateLayout:
     def __repr__(self):
         return "StateLayout(" + ", ".join(f"{n}={self.sizes[n]}" for n in self.names) + ")"
 
-    def unpack(self, z):
+    def unpack(self, z, scalars=True):
         """The parts of ``z`` by name (a namespace: ``s.x``, ``s.S``).
 
         Parameters
         ----------
         z : ndarray or casadi.SX, shape (size,)
+        scalars : bool
+            Size-1 parts as scalars (default); False: every part a vector,
+            for code written for any size (a model with one channel).
 
         Returns
         -------
         types.SimpleNamespace
-            Views into ``z``; size-1 parts as scalars.
+            Views into ``z``.
         """
-        return SimpleNamespace(**{name: (z[self.slices[name].start] if self.sizes[name] == 1 else
+        return SimpleNamespace(**{name: (z[self.slices[name].start] if scalars and self.sizes[name] == 1 else
                                          z[self.slices[name]]) for name in self.names})
 
     def pack(self, o, **parts):

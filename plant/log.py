@@ -87,11 +87,15 @@ class Log:
         tz, fx, fy, fz]``.
     name : str, optional
         Where the log came from (a file name).
+    model : plant.Model or its class, optional
+        The case the log belongs to; default planar or spatial, from the
+        shapes. Another model (one of the tests' own) names its columns here.
 
     Attributes
     ----------
     kind : str
-        ``"planar"`` or ``"spatial"``, from the shapes.
+        The case's name (:attr:`fmscal.plant.Model.name`): ``"planar"`` or
+        ``"spatial"`` from the shapes, or the given model's.
     columns : tuple of str
         The log's CSV header.
     dt : float
@@ -110,18 +114,27 @@ class Log:
         With a one-line message naming the problem.
     """
 
-    def __init__(self, t, pose, w_hat, name="log"):
+    def __init__(self, t, pose, w_hat, name="log", model=None):
         self.name = str(name)
         self.t = np.asarray(t, dtype=float)
         self.pose = np.asarray(pose, dtype=float)
         self.w_hat = np.asarray(w_hat, dtype=float)
         n = len(self.t)
-        case = _CASES.get((self.pose.shape[-1], self.w_hat.shape[-1])) if self.pose.ndim == self.w_hat.ndim == 2 \
-            else None
+        shapes = (self.pose.shape[-1], self.w_hat.shape[-1]) if self.pose.ndim == self.w_hat.ndim == 2 else None
+        if model is not None:
+            if shapes != (len(model.pose_names), len(model.wrench_names)) or self.t.ndim != 1 \
+                    or self.pose.shape[0] != n or self.w_hat.shape[0] != n:
+                raise LogError(f"{self.name}: a {model.name} log has t (N,), pose (N, {len(model.pose_names)}), "
+                               f"w_hat (N, {len(model.wrench_names)}); got {self.t.shape}, {self.pose.shape}, "
+                               f"{self.w_hat.shape}")
+            case = model
+        else:
+            case = _CASES.get(shapes)
         if self.t.ndim != 1 or case is None or self.pose.shape[0] != n or self.w_hat.shape[0] != n:
             raise LogError(f"{self.name}: expected t (N,), pose (N, 3), w_hat (N, 3) (planar) or pose (N, 7), "
                            f"w_hat (N, 6) (spatial); got {self.t.shape}, {self.pose.shape}, {self.w_hat.shape}")
         self.kind = case.name
+        self._model = model
         self.columns = ("t", *case.pose_names, *case.wrench_names)
         pose_names, wrench_names = case.pose_names, case.wrench_names
         if n < MIN_SAMPLES:
@@ -164,7 +177,7 @@ class Log:
         self.notes = []
         if self.kind == "planar":
             self._unwrap_theta()
-        else:
+        elif self.kind == "spatial":
             self._normalise_quaternions()
 
     def _normalise_quaternions(self):
@@ -257,11 +270,11 @@ class Log:
         pose = np.full_like(self.pose, np.nan)
         pose[:-k] = self.pose[k:]
         first = int(np.argmax(~np.isnan(pose[:, 0])))
-        return Log(self.t[first:], pose[first:], self.w_hat[first:], self.name)
+        return Log(self.t[first:], pose[first:], self.w_hat[first:], self.name, model=self._model)
 
     def head(self, n):
         """The first ``n`` samples as a new Log."""
-        return Log(self.t[:n], self.pose[:n], self.w_hat[:n], self.name)
+        return Log(self.t[:n], self.pose[:n], self.w_hat[:n], self.name, model=self._model)
 
     def between(self, t_start, t_end):
         """The samples with ``t_start <= t < t_end`` as a new Log (from its first pose on).
@@ -285,7 +298,7 @@ class Log:
         if len(poses) == 0:
             raise LogError(f"{self.name}: no pose measurement between t = {t_start:g} and {t_end:g} s")
         keep = keep[keep >= poses[0]]
-        return Log(self.t[keep], self.pose[keep], self.w_hat[keep], self.name)
+        return Log(self.t[keep], self.pose[keep], self.w_hat[keep], self.name, model=self._model)
 
 
 def _first_bad(values):

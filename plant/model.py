@@ -36,7 +36,7 @@ from .layout import StateLayout
 from .payload import Payload
 from .rigid_body import SpatialPayload
 
-__all__ = ["Model", "PlanarModel", "SpatialModel", "model_for_columns"]
+__all__ = ["Model", "PlanarModel", "SpatialModel", "as_model", "model_for_columns"]
 
 
 class Model:
@@ -59,14 +59,34 @@ class Model:
     name = ""
     wrench_names = ()
     pose_names = ()
+    #: The pose's angle and position columns, for the noise model (:meth:`pose_sd`); a
+    #: quaternion's columns are neither (the spatial model says how its noise spreads).
+    angle_names = ()
+    position_names = ()
     nq = nv = 0
     state = None
+    #: True where the configuration moves additively, the pose is the configuration, the
+    #: accelerations have no drift and ``A`` depends on the configuration only: the model is
+    #: then linear in the state and in ``[S | c]`` once the configuration in ``A`` is taken from
+    #: the measured poses, which the floor (:mod:`fmscal.observers.max_likelihood`), least
+    #: squares and the EKF's filter pieces need.
+    linear_channels = False
 
     def __init__(self, payload):
         self.payload = payload
 
     def __repr__(self):
         return f"{type(self).__name__}({self.payload!r})"
+
+    def _key(self):
+        """What makes two models the same problem (compiled steps are cached by it)."""
+        return type(self), self.payload
+
+    def __eq__(self, other):
+        return isinstance(other, Model) and self._key() == other._key()
+
+    def __hash__(self):
+        return hash(self._key())
 
     # --- sizes ------------------------------------------------------------------------------------
     @property
@@ -105,6 +125,59 @@ class Model:
         width = self.n_w + int(bool(offset))
         return StateLayout(*((f"row{i}", width) for i in range(self.n_w)))
 
+    @property
+    def input_layout(self):
+        """One sample as a recursive method's step reads it: ``[has_pose, pose, w_hat]``.
+
+        Pose entries are zero where the sample has none (``has_pose`` 0).
+        """
+        return StateLayout(("has_pose", 1), ("pose", self.n_pose), ("w_hat", self.n_w))
+
+    def pose_sd(self, noise):
+        """Each pose column's noise standard deviation, shape (n_pose,).
+
+        Parameters
+        ----------
+        noise : NoiseSpec
+            ``angle_sd`` for the angle columns, ``position_sd`` for the
+            position columns.
+        """
+        sd = {**{k: noise.angle_sd for k in self.angle_names}, **{k: noise.position_sd for k in self.position_names}}
+        return np.array([sd[k] for k in self.pose_names])
+
+    def check_noise(self, noise, name="noise"):
+        """``noise`` as this model's :class:`NoiseSpec` (``n_w`` reading entries), or a one-line error.
+
+        Raises
+        ------
+        TypeError
+            ``noise`` is not a :class:`NoiseSpec`.
+        FmscalError
+            It holds another number of reading components.
+        """
+        from .sensor import NoiseSpec            # sensor imports nothing of the model's: no cycle at run time
+        if not isinstance(noise, NoiseSpec):
+            raise TypeError(f"{name} must be a plant.NoiseSpec or None; got {type(noise).__name__}")
+        if len(noise.wrench_sd) != self.n_w:
+            raise FmscalError(f"{name}.wrench_sd has the wrong shape; expected {self.n_w} ({self.name}: "
+                              f"{', '.join(self.wrench_names)}) instead of {len(noise.wrench_sd)}")
+        return noise
+
+    def check_log(self, log, who="this method"):
+        """``log`` if it is a log of this model's case, else a one-line :class:`FmscalError`.
+
+        Parameters
+        ----------
+        log : Log
+        who : str
+            Who asks, for the message.
+        """
+        if getattr(log, "kind", None) != self.name:
+            raise FmscalError(f"{log.name}: {who} is set up for {self.name} logs "
+                              f"({','.join(self.columns)}); got a {getattr(log, 'kind', '?')} log "
+                              f"({','.join(getattr(log, 'columns', ()))})")
+        return log
+
     # --- the state's parts ---------------------------------------------------------------------------
     #: Indices of the configuration and of the velocity in the motion state.
     q_index = v_index = ()
@@ -116,6 +189,71 @@ class Model:
     def velocity(self, x):
         """The velocity part of the state, ``nv`` entries."""
         return ops(x).vcat([x[k] for k in self.v_index])
+
+    def state_from(self, q, v):
+        """The motion state with configuration ``q`` (``nq``) and velocity ``v`` (``nv``), numbers or symbols."""
+        where = {**{k: q[i] for i, k in enumerate(self.q_index)}, **{k: v[i] for i, k in enumerate(self.v_index)}}
+        return ops(q, v).vcat([where[k] for k in range(self.nx)])
+
+    def channel(self, k):
+        """The velocity channel (``0 .. nv-1``) state entry ``k`` belongs to, for a model with
+        :attr:`linear_channels` (entry ``q_index[c]`` or ``v_index[c]`` is channel ``c``)."""
+        return self.q_index.index(k) if k in self.q_index else self.v_index.index(k)
+
+    def rk4_step(self, x, w0, w_mid, w1, dt):
+        """One classical RK4 step of :meth:`state_derivative`, the wrench at the step's start, middle and end.
+
+        Parameters
+        ----------
+        x : ndarray or casadi.SX, shape (nx,)
+        w0, w_mid, w1 : ndarray or casadi.SX, shape (n_w,)
+            The true wrench at ``t``, ``t + dt/2`` and ``t + dt``.
+        dt : float or casadi.SX
+            The step, s.
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (nx,)
+        """
+        k1 = self.state_derivative(x, w0)
+        k2 = self.state_derivative(x + dt / 2 * k1, w_mid)
+        k3 = self.state_derivative(x + dt / 2 * k2, w_mid)
+        k4 = self.state_derivative(x + dt * k3, w1)
+        return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    # --- least squares' parameters (linear-channel models) --------------------------------------
+    def parameter_groups(self):
+        """The velocity channels that share a set of linear parameters, for least squares.
+
+        Least squares fits each group alone (they share no unknown). The
+        default is one group, all channels, in the parameters ``s`` themselves.
+        """
+        return [list(range(self.nv))]
+
+    def channel_regressors(self, q, w_aug):
+        """Each channel's regressor in its group's parameters ``phi``: ``a_c = psi_c . phi``.
+
+        Parameters
+        ----------
+        q : ndarray, shape (nq, N)
+            The configuration at each sample (from the measured poses).
+        w_aug : ndarray, shape (n, N)
+            The reading, with a trailing row of ones for the offset column.
+
+        Returns
+        -------
+        list of ndarray, each shape (N, len(phi) of its group)
+            One per velocity channel. By default ``phi = s`` and ``psi_c`` is row
+            ``c`` of :meth:`regressor`.
+        """
+        N = q.shape[1]
+        rows = [self.regressor(self.state_from(q[:, k], np.zeros(self.nv)), w_aug[:, k]) for k in range(N)]
+        U = np.stack(rows)                                  # (N, nv, n_w n)
+        return [U[:, c, :] for c in range(self.nv)]
+
+    def params_from_phi(self, phis, n):
+        """``vec([S | c])`` (row order) from each group's parameters; linear. Default: ``phi = s``."""
+        return np.asarray(phis[0], dtype=float).reshape(self.n_w, n)
 
     # --- checks -----------------------------------------------------------------------------------
     def check_matrix(self, S, name="S"):
@@ -179,6 +317,8 @@ class PlanarModel(Model):
     name = "planar"
     wrench_names = ("M", "fx", "fy")
     pose_names = ("theta", "x", "y")
+    angle_names, position_names = ("theta",), ("x", "y")
+    linear_channels = True
     nq = nv = 3
     state = StateLayout(("theta", 1), ("theta_dot", 1), ("X", 1), ("X_dot", 1), ("Y", 1), ("Y_dot", 1))
     q_index, v_index = (0, 2, 4), (1, 3, 5)
@@ -217,6 +357,23 @@ class PlanarModel(Model):
         """``x'`` under eq. (1) (:func:`fmscal.plant.dynamics.state_derivative`)."""
         return dynamics.state_derivative(x, w, self.payload)
 
+    def rk4_step(self, x, w0, w_mid, w1, dt):
+        """RK4 on eq. (1): :func:`fmscal.plant.simulate.rk4_step` (the simulator's own step)."""
+        from .simulate import rk4_step
+        return rk4_step(x, w0, w_mid, w1, dt, self.payload)
+
+    def parameter_groups(self):
+        """``phi_1`` drives ``theta`` alone, ``phi_2`` drives ``X`` and ``Y`` (eqs. 4, 5): two groups."""
+        return [[0], [1, 2]]
+
+    def channel_regressors(self, q, w_aug):
+        """``psi_theta``, ``psi_X``, ``psi_Y`` of eqs. (4), (5) (:func:`fmscal.plant.dynamics.regressors`)."""
+        return [np.array(v).T for v in dynamics.regressors(q[0], w_aug, self.payload)]
+
+    def params_from_phi(self, phis, n):
+        """``[S | c]`` from ``phi_1``, ``phi_2`` (eqs. 4, 5 inverted, :func:`fmscal.plant.dynamics.S_from_phi`)."""
+        return dynamics.S_from_phi(phis[0], phis[1], self.payload)
+
 
 class SpatialModel(Model):
     """A 6-axis sensor on a payload moving in 3D under gravity (Newton-Euler).
@@ -237,6 +394,7 @@ class SpatialModel(Model):
     name = "spatial"
     wrench_names = ("tx", "ty", "tz", "fx", "fy", "fz")
     pose_names = ("qw", "qx", "qy", "qz", "x", "y", "z")
+    position_names = ("x", "y", "z")
     nq, nv = rigid_body.NQ, rigid_body.NV
     state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))
     q_index, v_index = tuple(range(7)), tuple(range(7, 13))
@@ -246,6 +404,14 @@ class SpatialModel(Model):
             raise FmscalError(f"SpatialModel takes a plant.rigid_body.SpatialPayload; got {type(payload).__name__}")
         super().__init__(payload)
         self.gravity = tuple(float(g) for g in as_finite_array(gravity, (3,), "gravity"))
+
+    def _key(self):
+        return type(self), self.payload, self.gravity
+
+    def pose_sd(self, noise):
+        """Each pose column's noise: a turn of ``angle_sd`` about each axis moves each quaternion
+        component by about ``angle_sd / 2``; ``position_sd`` on ``x, y, z``. Shape (7,)."""
+        return np.r_[np.full(4, noise.angle_sd / 2), np.full(3, noise.position_sd)]
 
     def measure(self, x):
         """The pose ``[q, p]`` (log order) the state shows."""
@@ -316,6 +482,35 @@ class SpatialModel(Model):
     def state_derivative(self, x, w):
         """``x'`` under Newton-Euler (:func:`fmscal.plant.rigid_body.state_derivative`)."""
         return rigid_body.state_derivative(x, w, self.payload, self.gravity)
+
+
+def as_model(model, who="a method"):
+    """The :class:`Model` a method is built on: a model, or a payload (the model of its case).
+
+    Parameters
+    ----------
+    model : Model, Payload or SpatialPayload
+        A payload stands for :class:`PlanarModel` or :class:`SpatialModel` of it.
+    who : str
+        Who asks, for the message.
+
+    Returns
+    -------
+    Model
+
+    Raises
+    ------
+    FmscalError
+        ``model`` is none of these (a model-less call).
+    """
+    if isinstance(model, Model):
+        return model
+    if isinstance(model, Payload):
+        return PlanarModel(model)
+    if isinstance(model, SpatialPayload):
+        return SpatialModel(model)
+    raise FmscalError(f"{who} needs a model (plant.PlanarModel, plant.SpatialModel) or a payload "
+                      f"(plant.Payload, plant.SpatialPayload); got {type(model).__name__}")
 
 
 def model_for_columns(header):

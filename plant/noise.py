@@ -50,9 +50,15 @@ def estimate_noise(log):
         angle = np.sqrt(4.0 / 3.0 * sum(sd([log.pose[r, j] for r in runs]) ** 2 for j in range(4)))
         position = float(np.mean([sd([log.pose[r, j] for r in runs]) for j in range(4, 7)]))
         return NoiseSpec(wrench, float(angle), position)
-    angle = sd([log.pose[r, 0] for r in runs])
-    position = 0.5 * (sd([log.pose[r, 1] for r in runs]) + sd([log.pose[r, 2] for r in runs]))
-    return NoiseSpec(wrench, angle, position)
+    if log.kind == "planar":
+        angle = sd([log.pose[r, 0] for r in runs])
+        position = 0.5 * (sd([log.pose[r, 1] for r in runs]) + sd([log.pose[r, 2] for r in runs]))
+        return NoiseSpec(wrench, angle, position)
+    # another model's log: its angle and position columns by name, each kind's mean
+    model, names = log._model, log.columns[1:1 + log.pose.shape[1]]
+    angle = [sd([log.pose[r, j] for r in runs]) for j, c in enumerate(names) if c in model.angle_names]
+    position = [sd([log.pose[r, j] for r in runs]) for j, c in enumerate(names) if c in model.position_names]
+    return NoiseSpec(wrench, float(np.mean(angle)) if angle else 0.0, float(np.mean(position)) if position else 0.0)
 
 
 def _even_runs(rows):

@@ -116,9 +116,10 @@ class NoiseSpec:
 
     Parameters
     ----------
-    wrench_sd : tuple of 3 or 6 float
+    wrench_sd : tuple of float
         Standard deviation of each component of the raw reading, planar
-        ``[M, f_x, f_y]`` or spatial ``[tx, ty, tz, fx, fy, fz]``, in N m and N.
+        ``[M, f_x, f_y]`` or spatial ``[tx, ty, tz, fx, fy, fz]``, in N m and N
+        (as many as the model's reading has: :meth:`fmscal.plant.Model.check_noise`).
     angle_sd : float
         Standard deviation of the measured angle, in rad (spatial: of the
         attitude about each axis).
@@ -132,8 +133,8 @@ class NoiseSpec:
 
     def __post_init__(self):
         sd = as_finite_array(self.wrench_sd, (-1,), "wrench_sd")
-        if len(sd) not in (3, 6):
-            raise FmscalError(f"wrench_sd has the wrong shape; expected 3 (planar) or 6 (spatial) instead of {len(sd)}")
+        if len(sd) < 1:
+            raise FmscalError("wrench_sd is empty; expected one standard deviation per reading component")
         if np.any(sd < 0):
             raise FmscalError(f"noise standard deviations must be >= 0; got wrench_sd {tuple(sd.tolist())}")
         object.__setattr__(self, "wrench_sd", tuple(float(v) for v in sd))

@@ -6,31 +6,32 @@ import pytest
 from fmscal import plant
 from fmscal.observers import AugmentedEKF
 from fmscal.observers.eiv import _compensation, _compiled, compensation_matrix
-from fmscal.observers.max_likelihood import _initial_state, _layout, fit_max_likelihood
+from fmscal.observers.kalman import filter_layout, initial_state
+from fmscal.observers.max_likelihood import fit_max_likelihood
 
 
 @pytest.mark.parametrize("n", [3, 4])
 def test_compiled_compensation_matches_the_readable_step(n):
     """The compiled call and the same step in numpy agree to rounding, state and output, without and with the
     offset column (which has no noise: its rows of ``T`` stay those of the identity)."""
-    payload = plant.PAPER_PAYLOAD
+    model = plant.PlanarModel(plant.PAPER_PAYLOAD)
     rng = np.random.default_rng(3)
-    z = _initial_state(np.array([0.1, 0.2, -0.3]), np.array([1e-6, 1e-8, 1e-8]), n)
-    q = np.array([1e-3, 1e-6, 1e-8, 4e-4, 2.5e-3, 2.5e-3])
+    z = initial_state(model, np.array([0.1, 0.2, -0.3]), np.array([1e-6, 1e-8, 1e-8]), n)
+    q = np.array([1e-3, 1e-6, 1e-8, 1e-8, 4e-4, 2.5e-3, 2.5e-3])      # h, R (3), var_w (3)
     s = np.hstack([np.eye(3), rng.normal(size=(3, n - 3))]).ravel() + 0.1 * rng.normal(size=3 * n)
-    fun = _compiled(payload, n)
+    fun = _compiled(model, n)
     for k in range(200):
-        u = np.concatenate([[k % 2, 0.1 + 1e-3 * k, 0.1 + 1e-3 * (k + 1)], rng.normal(scale=0.1, size=3),
-                            rng.normal(size=6)])
-        z_np, s_np = _compensation(z, u, q, s, payload, n)
+        q0, q1 = [0.1 + 1e-3 * k, 0.2, -0.3], [0.1 + 1e-3 * (k + 1), 0.2, -0.3]    # the configuration at both ends
+        u = np.concatenate([[k % 2], q0, q1, rng.normal(scale=0.1, size=3), rng.normal(size=6)])
+        z_np, s_np = _compensation(model, z, u, q, s, n)
         z_c, s_c = (np.asarray(v) for v in fun(z, u, q, s))
         np.testing.assert_allclose(z_c.ravel(), np.ravel(z_np), rtol=1e-9, atol=1e-12)
         # the compensation solves with J, still rank-deficient over the first samples: rounding amplified
         np.testing.assert_allclose(s_c.ravel(), np.ravel(s_np), rtol=1e-7, atol=1e-10)
-        T = compensation_matrix(np.ravel(z_np), q[3:6], s, n)           # the same compensation as a matrix
+        T = compensation_matrix(model, np.ravel(z_np), q[4:7], s, n)    # the same compensation as a matrix
         np.testing.assert_allclose(T @ s, np.ravel(s_np), rtol=1e-7, atol=1e-10)
         z = np.ravel(z_np)
-    assert z.size == _layout(n).size
+    assert z.size == filter_layout(model, n).size
     assert np.linalg.norm(T - np.eye(3 * n)) > 1e-6                    # the step did compensate something
     if n == 4:
         np.testing.assert_array_equal(T[:, 3::4], np.eye(12)[:, 3::4])  # nothing multiplies the offset entries

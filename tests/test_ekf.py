@@ -82,7 +82,7 @@ def test_the_whole_step_runs_on_casadis_virtual_machine_too(monkeypatch):
         log, truth, _ = plant.get_scenario("paper").with_(duration=0.5).generate(0)
         ekf = AugmentedEKF(plant.PAPER_PAYLOAD, noise=truth.noise)
         fast = ekf.run(log, truth.S0)
-        assert ekf_step.whole_step(plant.PAPER_PAYLOAD, 3, True).fun.class_name() != "External"
+        assert ekf_step.whole_step(plant.PlanarModel(plant.PAPER_PAYLOAD), 3, True).fun.class_name() != "External"
         slow = ekf.run(log, truth.S0, compiled=False)
     finally:
         ekf_step.whole_step.cache_clear()
@@ -105,7 +105,7 @@ def test_compiled_run_stops_where_the_filter_diverges():
     fast, slow = ekf.run(bad, truth.S0), ekf.run(bad, truth.S0, compiled=False)
     assert fast.diverged and slow.diverged and fast.S_std is None
     assert len(fast.t) == len(slow.t) == 1201 and np.all(np.isfinite(fast.S_hat_history))
-    out = output_layout(ekf.n_cols)
+    out = output_layout(ekf.model, ekf.n_cols)
     Y = np.tile(out.pack(None, x=np.zeros(6), s=np.eye(3).ravel(), q=0.0, P_sum=1.0, P_min=1e-6), (5, 1))
     assert ekf._healthy_outputs(Y, 2000) == 5
     for column, value in (("P_min", 0.0), ("P_min", np.nan), ("P_sum", np.inf)):

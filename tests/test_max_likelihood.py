@@ -208,7 +208,7 @@ def test_bad_inputs_raise_with_the_value_named():
     sc, log, truth = _case("paper", 0, 1.0)
     with pytest.raises(TypeError, match="log must be a plant.Log; got ndarray"):
         fit_max_likelihood(np.zeros((10, 7)), sc.payload)
-    with pytest.raises(TypeError, match="payload must be a plant.Payload; got dict"):
+    with pytest.raises(FmscalError, match="fit_max_likelihood needs a model .* got dict"):
         fit_max_likelihood(log, {"mass": 2.5})
     with pytest.raises(TypeError, match="noise must be a plant.NoiseSpec or None; got tuple"):
         fit_max_likelihood(log, sc.payload, noise=(0.1, 0.1, 0.1))

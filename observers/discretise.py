@@ -1,0 +1,53 @@
+"""The one step discretisation every method shares: a double integrator driven linearly over a step.
+
+Eq. (1) makes each channel a double integrator, ``p'' = a``. With ``a``
+linear over a step ``h`` between its values ``a_k`` and ``a_k+1`` (the
+reading at both ends of the step, as every method takes it), the step is
+exact::
+
+    p_{k+1} = p_k + h v_k + h^2 (2 a_k + a_{k+1}) / 6
+    v_{k+1} = v_k + h (a_k + a_{k+1}) / 2
+
+A regressor ``psi`` with ``a = psi . phi`` moves the same way, so the
+recursive observers (:mod:`fmscal.observers.adaptive`,
+:mod:`fmscal.observers.highgain`), the filter pieces
+(:mod:`fmscal.observers.kalman`) and least squares' double integrals
+(:mod:`fmscal.observers.least_squares`) all call these two functions.
+"""
+
+__all__ = ["position_increment", "velocity_increment"]
+
+
+def position_increment(h, a0, a1):
+    """``h^2 (2 a_k + a_{k+1}) / 6``: what the acceleration adds to the position over the step.
+
+    Parameters
+    ----------
+    h : float, ndarray or casadi.SX
+        The step, s.
+    a0, a1 : float, ndarray or casadi.SX
+        The acceleration (or a regressor entry) at the step's start and end;
+        arrays elementwise.
+
+    Returns
+    -------
+    float, ndarray or casadi.SX
+    """
+    return h * h * (2 * a0 + a1) / 6
+
+
+def velocity_increment(h, a0, a1):
+    """``h (a_k + a_{k+1}) / 2``: what the acceleration adds to the velocity over the step.
+
+    Parameters
+    ----------
+    h : float, ndarray or casadi.SX
+        The step, s.
+    a0, a1 : float, ndarray or casadi.SX
+        The acceleration (or a regressor entry) at the step's start and end.
+
+    Returns
+    -------
+    float, ndarray or casadi.SX
+    """
+    return h * (a0 + a1) / 2

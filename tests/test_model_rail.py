@@ -1,0 +1,140 @@
+"""A second, minimal model through the same code: a payload on a rail (issue 27).
+
+One position ``x``, one force ``f``, a 1x1 ``S`` and an offset: least squares,
+the maximum-likelihood floor and the EKF take every size from the model, so
+they run on it unchanged and recover its ``S`` within their reported
+uncertainty. A call without a model, or a log of another case, is one
+``FmscalError``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from fmscal import plant
+from fmscal.observers import AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares, MaximumLikelihood
+from fmscal.plant._backend import ops
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.layout import StateLayout
+from fmscal.plant.model import Model
+
+S_TRUE, B_TRUE = 1.3, 0.4          # w = S (w_hat - b): N per unit of the reading, reading units
+MASS = 2.0                         # kg
+DT, DURATION = 1e-3, 20.0
+POSE_SD, WRENCH_SD = 1e-4, 0.02    # m, reading units
+
+
+@dataclass(frozen=True)
+class RailPayload:
+    """A mass on a frictionless rail."""
+
+    mass: float
+
+
+class RailModel(Model):
+    """``x'' = f / m``: state ``[x, x']``, pose ``x``, reading ``f``."""
+
+    name = "rail"
+    wrench_names = ("f",)
+    pose_names = ("x",)
+    position_names = ("x",)
+    nq = nv = 1
+    state = StateLayout(("x", 1), ("x_dot", 1))
+    q_index, v_index = (0,), (1,)
+    linear_channels = True
+
+    def measure(self, x):
+        return ops(x).vcat([x[0]])
+
+    def rest_state(self, pose):
+        return np.array([float(np.ravel(pose)[0]), 0.0])
+
+    def input_matrix(self, x):
+        return ops(x).matrix([[1.0 / self.payload.mass]])
+
+    def drift(self, x):
+        return ops(x).vcat([0.0])
+
+    def state_derivative(self, x, w):
+        return ops(x, w).vcat([x[1], w[0] / self.payload.mass])
+
+
+MODEL = RailModel(RailPayload(MASS))
+
+
+def _rail_log(seed):
+    """20 s at 1 kHz of a multisine force, the motion exact (the force's double integral), the pose and the
+    reading noisy, the reading offset and scaled: ``w_hat = w / S + b``."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, DURATION, DT)
+    amp, freq, phase = rng.uniform(0.5, 1.5, 4), np.array([0.3, 0.7, 1.3, 2.1]), rng.uniform(0, 2 * np.pi, 4)
+    w = (amp * np.sin(2 * np.pi * freq * t[:, None] + phase)).sum(axis=1)
+    # x(t) = sum of -a / (m (2 pi f)^2) sin(...), plus the line that makes x(0) = 0, x'(0) = 0 irrelevant: any start
+    x = (-amp / (MASS * (2 * np.pi * freq) ** 2) * np.sin(2 * np.pi * freq * t[:, None] + phase)).sum(axis=1)
+    pose = (x + rng.normal(scale=POSE_SD, size=len(t)))[:, None]
+    w_hat = (w / S_TRUE + B_TRUE + rng.normal(scale=WRENCH_SD, size=len(t)))[:, None]
+    return plant.Log(t, pose, w_hat, name="rail", model=MODEL)
+
+
+@pytest.fixture(scope="module")
+def rail_log():
+    return _rail_log(7)
+
+
+@pytest.fixture(scope="module")
+def results(rail_log):
+    return {name: cls(MODEL, offset=True).run(rail_log) for name, cls in
+            (("least-squares", LeastSquares), ("max-likelihood", MaximumLikelihood), ("ekf", AugmentedEKF))}
+
+
+def test_the_model_gives_the_sizes():
+    assert (MODEL.n_w, MODEL.nq, MODEL.nv, MODEL.nx, MODEL.n_pose) == (1, 1, 1, 2, 1)
+    assert MODEL.columns == ("t", "x", "f") and MODEL.input_layout.size == 3
+    np.testing.assert_allclose(MODEL.regressor(np.zeros(2), np.array([2.0, 1.0])), [[1.0, 0.5]])
+
+
+@pytest.mark.parametrize("name", ["least-squares", "max-likelihood", "ekf"])
+def test_each_method_recovers_S_and_b_within_its_uncertainty(results, name):
+    """Each estimate is within 4 of its own sigma of the truth, and the sigma is informative (a method that
+    reported nothing, or returned its start, fails)."""
+    r = results[name]
+    assert r.S_hat.shape == (1, 1) and r.S_std.shape == (1, 1) and r.b.shape == (1,)
+    assert r.x_hat_history.shape[1] == 2 and not r.diverged
+    assert 0 < r.S_std[0, 0] < 2e-3 and 0 < r.b_std[0] < 2e-3
+    assert abs(r.S_hat[0, 0] - S_TRUE) < 4 * r.S_std[0, 0]
+    assert abs(r.b[0] - B_TRUE) < 4 * r.b_std[0]
+    assert abs(r.S_hat[0, 0] - 1.0) > 0.1                     # it left the identity it starts from
+
+
+def test_the_floor_is_at_least_as_tight_as_least_squares(results):
+    assert results["max-likelihood"].S_std[0, 0] <= 1.05 * results["least-squares"].S_std[0, 0]
+
+
+def test_a_call_without_a_model_is_one_error():
+    for cls in (LeastSquares, MaximumLikelihood, AugmentedEKF):
+        with pytest.raises(FmscalError, match="needs a model"):
+            cls(None)
+        with pytest.raises(FmscalError, match="got dict"):
+            cls({"mass": 2.0})
+
+
+def test_a_log_of_another_case_is_one_error(rail_log):
+    planar_log, _, _ = plant.get_scenario("paper").with_(duration=2.0).generate(0)
+    with pytest.raises(FmscalError, match="set up for rail logs .* got a planar log"):
+        LeastSquares(MODEL).run(planar_log)
+    with pytest.raises(FmscalError, match="set up for planar logs .* got a rail log"):
+        MaximumLikelihood(plant.PAPER_PAYLOAD).run(rail_log)
+    with pytest.raises(FmscalError, match="set up for planar logs .* got a rail log"):
+        AugmentedEKF(plant.PAPER_PAYLOAD).run(rail_log)
+
+
+def test_the_planar_only_observers_refuse_another_model():
+    for cls in (AdaptiveObserver, HighGainObserver):
+        with pytest.raises(FmscalError, match="defined for planar models; got a rail model"):
+            cls(MODEL)
+
+
+def test_a_noise_model_of_another_size_is_one_error():
+    with pytest.raises(FmscalError, match="wrench_sd has the wrong shape; expected 1"):
+        AugmentedEKF(MODEL, noise=plant.NoiseSpec((0.1, 0.1, 0.1), 0.0, 1e-4))
