@@ -105,6 +105,10 @@ class RunData:
         The compiled path (True) or the readable one.
     noise : plant.NoiseSpec or None
         The noise model this run uses, where the method has one.
+    state : object
+        The method's own running state: the packed vector of a
+        :class:`RecursiveObserver`, the filter of the EKF; None before the
+        first sample.
     build_time : float
         Seconds spent building a compiled step (not the run's cost).
     evidence_time : float
@@ -118,6 +122,7 @@ class RunData:
     u_prev: np.ndarray = None
     compiled: bool = True
     noise: object = None
+    state: object = None
     build_time: float = 0.0
     evidence_time: float = 0.0
 
@@ -195,11 +200,10 @@ class Observer:
         self.n_cols = self.n_w + int(self.offset)
         self.run_data = self._new_run(None)
 
-    def _new_run(self, S0, log=None, compiled=True):
-        """A fresh :class:`RunData` from ``S0`` (default the identity), its bound from the log's scale."""
+    def _new_run(self, S0, compiled=True):
+        """A fresh :class:`RunData` from ``S0`` (default the identity)."""
         S0 = np.eye(self.n_w) if S0 is None else S0
-        grace = int(round(DIVERGENCE_GRACE / log.dt)) if log is not None else 0     # steps judged on finiteness
-        return RunData(S0=S0, bound=divergence_bound(S0, log, self.payload), grace=grace, compiled=bool(compiled))
+        return RunData(S0=S0, bound=divergence_bound(S0), compiled=bool(compiled))
 
     # --- the whole log --------------------------------------------------------
     def run(self, log, S0=None, compiled=True):
@@ -237,9 +241,13 @@ class Observer:
                               "pass S0=None")
         start = time.perf_counter()
         if self.online:
-            self.reset(S0)                             # checks S0
-            S0 = self.run_data.S0
-        self.run_data = run = self._new_run(S0, log if self.online else None, compiled)   # bound: the data's scale
+            self.reset(S0)                             # checks S0; a new run
+            run = self.run_data
+            run.bound = divergence_bound(run.S0, log, self.payload)         # relative to the data's scale
+            run.grace = int(round(DIVERGENCE_GRACE / log.dt))               # steps judged on finiteness only
+            run.compiled = bool(compiled)
+        else:
+            self.run_data = run = self._new_run(None, compiled=compiled)
         estimate = self._estimate(log, run.S0)
         result = self._result(log, estimate)
         result.wall_time = time.perf_counter() - start - run.build_time - run.evidence_time
@@ -438,7 +446,6 @@ class RecursiveObserver(Observer):
     def __init__(self, model, offset=False):
         super().__init__(model, offset)
         self.state = self._layout()
-        self._z = None
         self._chunks = None
 
     # --- to implement ----------------------------------------------------------------
@@ -462,25 +469,25 @@ class RecursiveObserver(Observer):
             return super()._estimate(log, S0)
         U = log_inputs(log)
         self._start(U[0])
-        z0 = self._z
+        z0 = self.run_data.state
         with progress_bar(len(U), self.name) as bar:
             Z = self._compiled_steps().run(z0, [U[:-1], U[1:], np.full((len(U) - 1, 1), log.dt)],
                                            healthy=self._healthy_prefix, progress=bar.update, with_start=True)
         diverged = len(Z) < len(U)
-        self._z = Z[-1].copy()
+        self.run_data.state = Z[-1].copy()
         self.run_data.u_prev = U[len(Z) - 1]
         return Estimate(self.state.part(Z, "S"), self.state.part(Z, "x"), cov=self._covariance(),
                         diverged=diverged)
 
     def _start(self, u):
         u = self.model.input_layout.unpack(np.asarray(u, dtype=float))
-        self._z = self._initial_state(self.run_data.S0, u)
+        self.run_data.state = self._initial_state(self.run_data.S0, u)
 
     def _advance(self, u_prev, u, dt):
-        self._z = self._transition(self._z, u_prev, u, dt)
+        self.run_data.state = self._transition(self.run_data.state, u_prev, u, dt)
 
     def _current(self):
-        s = self.state.unpack(self._z)
+        s = self.state.unpack(self.run_data.state)
         return s.x, s.S
 
     def _healthy_prefix(self, Z, k0):

@@ -2,6 +2,7 @@
 
 import math
 import time
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -21,7 +22,7 @@ from .kalman import pack_lower, unpack_lower
 from .noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
 from .progress import progress_bar
 
-__all__ = ["AugmentedEKF"]
+__all__ = ["AugmentedEKF", "FilterRun"]
 
 
 
@@ -38,6 +39,31 @@ class _CalibrationEKF(ExtendedKalmanFilter):
 
     def predict_x(self, u=0):
         self.x = self.x_next.reshape(-1, 1)
+
+
+@dataclass
+class FilterRun:
+    """The EKF's running state (:attr:`observers.RunData.state`): what one run holds.
+
+    Attributes
+    ----------
+    kf : filterpy.kalman.ExtendedKalmanFilter
+        The filter: ``x``, ``P``, ``R`` (filterpy's own).
+    var_w : ndarray, shape (n_w,)
+        The raw reading's noise variances this run uses.
+    s_out : ndarray, shape (n_w n,)
+        The reported ``[S | c]`` (compensated for the errors in variables).
+    since_pose : float
+        Seconds since the last pose.
+    q_history : list of float
+        The random walk's intensity after each sample, 1/s.
+    """
+
+    kf: object
+    var_w: np.ndarray
+    s_out: np.ndarray
+    since_pose: float
+    q_history: list
 
 
 class AugmentedEKF(Observer):
@@ -234,13 +260,14 @@ class AugmentedEKF(Observer):
         F, Q : ndarray, shape (d, d)
             Views of the call's buffers, overwritten by the next call.
         """
+        f = self.run_data.state
         d = self.dim_x
         call = self._predict
         xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
-        var_in[:] = self._var_w
+        var_in[:] = f.var_w
         m, nx = self.n_w * self.n_cols, self.model.nx
-        P_in.reshape(m, m)[:] = self._kf.P[nx:, nx:] if P_S is None else np.reshape(P_S, (m, m))   # symmetric
+        P_in.reshape(m, m)[:] = f.kf.P[nx:, nx:] if P_S is None else np.reshape(P_S, (m, m))   # symmetric
         q_in[0] = (self.level.q if self.level is not None else self.q_S) * dt
         call()
         f, F, Q = call.outputs
@@ -259,9 +286,6 @@ class AugmentedEKF(Observer):
     def reset(self, S0=None):
         """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
         super().reset(S0)
-        self._kf = None
-        self._since_pose = 0.0
-        self._q_history = []
         if self.level is not None:
             self.level.reset()
 
@@ -278,7 +302,7 @@ class AugmentedEKF(Observer):
             estimate, q = self._estimate_compiled(log)
         else:
             estimate = super()._estimate(log, S0)
-            q = np.array(self._q_history[:len(estimate.calibration)])
+            q = np.array(run.state.q_history[:len(estimate.calibration)])
         info["q_S_history"] = q
         estimate.info = info
         estimate.warnings = _random_walk_warnings(log.t[:len(q)], q)
@@ -294,6 +318,7 @@ class AugmentedEKF(Observer):
         """
         U = log_inputs(log)
         self._start(U[0])
+        f = self.run_data.state
         start = time.perf_counter()
         chunks = whole_step(self.model, self.n_cols, self.eiv is not None)
         self.run_data.build_time = time.perf_counter() - start              # one-off: not the run's cost
@@ -304,9 +329,9 @@ class AugmentedEKF(Observer):
             z, (Y,) = chunks.run(self._packed(), inputs, healthy=self._healthy_outputs, outputs=True, states=False,
                                  progress=bar.update)
         out = output_layout(self.model, self.n_cols)
-        calibration = np.vstack([self._s_out, out.part(Y, "s")])
-        x = np.vstack([self._kf.x[0:self.model.nx, 0], out.part(Y, "x")])
-        q = np.concatenate([self._q_history[:1], out.part(Y, "q")[:, 0]])
+        calibration = np.vstack([f.s_out, out.part(Y, "s")])
+        x = np.vstack([f.kf.x[0:self.model.nx, 0], out.part(Y, "x")])
+        q = np.concatenate([f.q_history[:1], out.part(Y, "q")[:, 0]])
         self._unpacked(z, calibration[-1])
         self.run_data.u_prev = U[len(calibration) - 1]
         return Estimate(calibration, x, cov=self._covariance(), diverged=len(Y) < n_steps), q
@@ -314,34 +339,37 @@ class AugmentedEKF(Observer):
     def _params(self):
         """The per-log parameters of the compiled step (:func:`observers.ekf_step.params_layout`), after
         :meth:`_start`."""
+        f = self.run_data.state
         level = self.level.settings if self.level is not None else (0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
         size = self.model.n_pose + self.n_w
         eiv_q = self.eiv.state[1][1:] if self.eiv is not None else np.ones(size)     # the settings but the step
-        return params_layout(self.model).pack(None, R=np.diag(self._kf.R), var_w=self._var_w, eiv_q=eiv_q,
+        return params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, eiv_q=eiv_q,
                                               level=level, adapt=float(self.level is not None))
 
     def _packed(self):
         """The running filter as the compiled step's state (:func:`observers.ekf_step.state_layout`)."""
-        kf, level = self._kf, self.level
-        parts = dict(x=kf.x[:, 0], P=pack_lower(kf.P, self.dim_x), q=self._q_history[-1],
-                     eps_bar=level.eps_bar if level is not None else 0.0, since=self._since_pose)
+        f = self.run_data.state
+        kf, level = f.kf, self.level
+        parts = dict(x=kf.x[:, 0], P=pack_lower(kf.P, self.dim_x), q=f.q_history[-1],
+                     eps_bar=level.eps_bar if level is not None else 0.0, since=f.since_pose)
         if self.eiv is not None:
             parts["eiv"] = self.eiv.state[0]
         return state_layout(self.model, self.n_cols, self.eiv is not None).pack(None, **parts)
 
     def _unpacked(self, z, s_out):
         """Set the running filter from the compiled step's state ``z``, its reported estimate ``s_out``."""
+        f = self.run_data.state
         st = state_layout(self.model, self.n_cols, self.eiv is not None).unpack(z)
-        self._kf.x = st.x.reshape(-1, 1).copy()
-        self._kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
-        self._since_pose = float(st.since)
+        f.kf.x = st.x.reshape(-1, 1).copy()
+        f.kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
+        f.since_pose = float(st.since)
         if self.level is not None:
             self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
-        self._q_history = [float(st.q)]
+        f.q_history = [float(st.q)]
         if self.eiv is not None:
             self.eiv.state[0][:] = st.eiv
             self.eiv.set_last(st.x[self.model.nx:])
-        self._s_out = np.array(s_out, dtype=float)
+        f.s_out = np.array(s_out, dtype=float)
 
     def _healthy_outputs(self, Y, k0):
         """Leading rows of the compiled step's outputs that :meth:`_healthy` would pass."""
@@ -367,43 +395,44 @@ class AugmentedEKF(Observer):
         motion_var[list(model.v_index)] = self.v0_sd ** 2           # the velocities, to v0_sd
         kf.P = np.diag(np.concatenate([motion_var, S_var.ravel()]))
         kf.R = np.diag(pose_var)
-        self._var_w = np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
-        self._kf = kf
-        self._s_out = kf.x[model.nx:, 0].copy()
+        var_w = np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
+        self.run_data.state = FilterRun(kf=kf, var_w=var_w, s_out=kf.x[model.nx:, 0].copy(), since_pose=0.0,
+                                        q_history=[self.level.q if self.level is not None else self.q_S])
         if self.eiv is not None:
-            self.eiv.reset(pose, pose_sd, np.sqrt(self._var_w))
-        self._since_pose = 0.0
-        self._q_history = [self.level.q if self.level is not None else self.q_S]
+            self.eiv.reset(pose, pose_sd, np.sqrt(var_w))
 
     def _advance(self, u_prev, u, dt):
         """Predict over ``dt`` with the raw readings at both ends, update with the pose."""
-        kf, model = self._kf, self.model
+        f = self.run_data.state
+        kf, model = f.kf, self.model
         layout = model.input_layout
         has_pose, pose, w_hat = u[0], u[layout.slices["pose"]], u[layout.slices["w_hat"]]
         w_prev = u_prev[layout.slices["w_hat"]]
         q_prev = model.configuration(kf.x[:model.nx, 0])
         kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], w_prev, w_hat, dt)
         kf.predict()
-        self._since_pose += dt
+        f.since_pose += dt
         if has_pose:
             kf.update(np.reshape(pose, (-1, 1)), self.H, self.hx)
             if self.level is not None:
                 y = kf.y[:, 0]
-                self.level.update(float(y @ kf.SI @ y), self._since_pose)      # NIS of this pose
-            self._since_pose = 0.0
-        self._q_history.append(self.level.q if self.level is not None else self.q_S)
+                self.level.update(float(y @ kf.SI @ y), f.since_pose)      # NIS of this pose
+            f.since_pose = 0.0
+        f.q_history.append(self.level.q if self.level is not None else self.q_S)
         s = kf.x[model.nx:, 0]
         if self.eiv is None:
-            self._s_out = s.copy()
+            f.s_out = s.copy()
         else:      # the errors-in-variables compensation (observers.eiv), with the filter's configuration
             q_now = model.configuration(kf.x[:model.nx, 0])
-            self._s_out = self.eiv.step(has_pose, (q_prev, q_now), pose, (w_prev, w_hat), dt, s)
+            f.s_out = self.eiv.step(has_pose, (q_prev, q_now), pose, (w_prev, w_hat), dt, s)
 
     def _current(self):
-        return self._kf.x[0:self.model.nx, 0], self._s_out
+        f = self.run_data.state
+        return f.kf.x[0:self.model.nx, 0], f.s_out
 
     def _covariance(self):
-        P = self._kf.P[self.model.nx:, self.model.nx:]
+        f = self.run_data.state
+        P = f.kf.P[self.model.nx:, self.model.nx:]
         if self.eiv is None:
             return P.copy()
         T = self.eiv.T
@@ -411,7 +440,8 @@ class AugmentedEKF(Observer):
 
     def _healthy(self, x, calibration, k=None):
         """The base class's test (finite, within the bound), and a finite, positive definite-looking ``P``."""
-        P = self._kf.P
+        f = self.run_data.state
+        P = f.kf.P
         # a NaN or inf anywhere makes the sum non-finite: one reduction
         return super()._healthy(x, calibration, k) and math.isfinite(float(P.sum())) and bool(P.diagonal().min() > 0)
 

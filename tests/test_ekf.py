@@ -52,7 +52,7 @@ def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
     runs = []
     for compiled in (True, False):
         result = ekf.run(log, truth.S0, compiled=compiled)
-        runs.append((result, ekf._kf.P.copy(), ekf._kf.x.copy(), ekf.eiv.T, ekf.level.q, ekf.level.eps_bar))
+        runs.append((result, ekf.run_data.state.kf.P.copy(), ekf.run_data.state.kf.x.copy(), ekf.eiv.T, ekf.level.q, ekf.level.eps_bar))
     (fast, P_fast, x_fast, T_fast, *level_fast), (slow, P_slow, x_slow, T_slow, *level_slow) = runs
     assert not fast.diverged and len(fast.t) == len(slow.t) == len(log)
     # over the first 0.1 s the compensation solves with a rank-deficient information: rounding amplified
@@ -135,7 +135,7 @@ def test_covariance_stays_symmetric_positive_definite(paper_30s):
     for k in range(10000):
         ekf.step(log.dt, log.pose[k], log.w_hat[k])
         if k % 250 == 0:
-            P = ekf._kf.P
+            P = ekf.run_data.state.kf.P
             np.testing.assert_allclose(P, P.T, atol=1e-12 * np.max(np.abs(P)))
             assert np.min(np.linalg.eigvalsh((P + P.T) / 2)) > 0
 
