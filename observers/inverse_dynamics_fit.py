@@ -61,6 +61,13 @@ class InverseDynamicsFit:
     warnings : list of str
     converged : bool
         No direction undetermined.
+    residual_rms : ndarray, shape (6,)
+        The fit's residual per wrench component (N m, N): what the motion
+        asked of the sensor less what the fitted reading gave.
+    unexplained : ndarray, shape (6,)
+        The share of each wrench component's variance the fit does not
+        explain (residual variance over the component's variance), for the
+        latency search (:func:`fmscal.observers.latency.estimate_latency`).
     """
 
     S_hat: np.ndarray
@@ -71,6 +78,8 @@ class InverseDynamicsFit:
     undetermined: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
     converged: bool = False
+    residual_rms: np.ndarray = None
+    unexplained: np.ndarray = None
 
 
 def _describe(direction):
@@ -157,8 +166,11 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     S_hat, c = S_aug[:, :6], S_aug[:, 6]
     S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(6, 7)[:, :6]
     b, b_std = _offset(S_hat, c, cov)
+    residual_rms = np.sqrt(np.mean(e ** 2, axis=0))
+    unexplained = residual_rms ** 2 / np.maximum(np.var(w, axis=0), 1e-300)
     return InverseDynamicsFit(S_hat=S_hat, S_std=S_std, b=b, b_std=b_std, cov=cov, undetermined=undetermined,
-                              warnings=warnings, converged=not undetermined)
+                              warnings=warnings, converged=not undetermined, residual_rms=residual_rms,
+                              unexplained=unexplained)
 
 
 def _relative_std(direction, information, e, spread):

@@ -68,3 +68,22 @@ def test_block_errors_split_units():
     S_hat[0, 3] = 0.01                                  # a force reading's share of a torque, m
     E, E_torque, E_force = block_errors(S_hat, S)
     assert E == pytest.approx(0.01) and E_torque == 0 and E_force == 0
+
+
+@pytest.mark.parametrize("scenario, latency", [("spatial-mocap", 0.02), ("spatial-arm", 0.012)])
+def test_the_pose_streams_latency_is_found_in_3d(scenario, latency):
+    """Shifted back by the right delay the spatial log fits Newton-Euler best: the search finds the delay of a
+    tracker that lags the sensor to one sample (seeded; a search that ignored the shift would return 0)."""
+    from fmscal.observers.latency import estimate_latency
+    from fmscal.plant.model import SpatialModel
+    log, truth, _ = SPATIAL_SCENARIOS[scenario].with_(duration=20.0, latency=latency).generate(1)
+    found, costs = estimate_latency(log, SpatialModel(truth.payload), max_latency=0.05)
+    assert abs(found - latency) <= log.dt + 1e-12
+    assert costs[min(costs)] > 1.5 * min(costs.values())          # the zero shift is clearly worse
+
+
+def test_the_latency_search_refuses_a_log_of_another_case(arm_logs):
+    from fmscal.observers.latency import estimate_latency
+    from fmscal.plant import PAPER_PAYLOAD
+    with pytest.raises(FmscalError, match="set up for planar logs .* got a spatial log"):
+        estimate_latency(arm_logs[0][0], PAPER_PAYLOAD)
