@@ -52,7 +52,8 @@ def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
     runs = []
     for compiled in (True, False):
         result = ekf.run(log, truth.S0, compiled=compiled)
-        runs.append((result, ekf.run_data.state.kf.P.copy(), ekf.run_data.state.kf.x.copy(), ekf.eiv.T, ekf.level.q, ekf.level.eps_bar))
+        kf = ekf.run_data.state.kf
+        runs.append((result, kf.P.copy(), kf.x.copy(), ekf.eiv.T, ekf.level.q, ekf.level.eps_bar))
     (fast, P_fast, x_fast, T_fast, *level_fast), (slow, P_slow, x_slow, T_slow, *level_slow) = runs
     assert not fast.diverged and len(fast.t) == len(slow.t) == len(log)
     # over the first 0.1 s the compensation solves with a rank-deficient information: rounding amplified

@@ -5,34 +5,15 @@ import numpy as np
 import pytest
 
 from fmscal.plant import PAPER_PAYLOAD, FmscalError
-from fmscal.plant.layout import StateLayout
-from fmscal.plant.model import Model, PlanarModel, SpatialModel, model_for_columns
+from fmscal.plant.model import PlanarModel, SpatialModel, model_for_columns
 from fmscal.plant.rigid_body import SpatialPayload
+
+from rail import RailModel, RailPayload
 
 TOOL = SpatialPayload(1.7, [0.02, -0.03, 0.08], [0.012, 0.015, 0.009, 0.001, -0.0005, 0.0008])
 
 
-class RailModel(Model):
-    """A payload on a rail: one position, a 1x1 S (the minimal case; proof that sizes flow from the model)."""
-
-    name = "rail"
-    wrench_names = ("f",)
-    pose_names = ("x",)
-    nq = nv = 1
-    state = StateLayout(("x", 1), ("x_dot", 1))
-    q_index, v_index = (0,), (1,)
-
-    def measure(self, x):
-        return self.configuration(x)
-
-    def input_matrix(self, x):
-        return ca.DM([[1.0 / self.payload]]) if isinstance(x, ca.SX) else np.array([[1.0 / self.payload]])
-
-    def drift(self, x):
-        return np.zeros(1) if not isinstance(x, ca.SX) else ca.DM.zeros(1)
-
-
-MODELS = [PlanarModel(PAPER_PAYLOAD), SpatialModel(TOOL), RailModel(2.0)]
+MODELS = [PlanarModel(PAPER_PAYLOAD), SpatialModel(TOOL), RailModel(RailPayload(2.0))]
 
 
 def _state(model, rng):
@@ -67,7 +48,7 @@ def test_the_regressor_is_the_dynamics_written_for_S(model):
     np.testing.assert_allclose(np.array(y_ca).ravel(), model.measure(x), rtol=0, atol=0)
 
 
-@pytest.mark.parametrize("model", MODELS[:2], ids=lambda m: m.name)
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: m.name)
 def test_the_acceleration_is_the_state_derivative(model):
     rng = np.random.default_rng(1)
     x, w = _state(model, rng), rng.normal(size=model.n_w)

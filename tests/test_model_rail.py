@@ -7,57 +7,19 @@ uncertainty. A call without a model, or a log of another case, is one
 ``FmscalError``.
 """
 
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 
 from fmscal import plant
 from fmscal.observers import AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares, MaximumLikelihood
-from fmscal.plant._backend import ops
 from fmscal.plant.errors import FmscalError
-from fmscal.plant.layout import StateLayout
-from fmscal.plant.model import Model
+
+from rail import RailModel, RailPayload
 
 S_TRUE, B_TRUE = 1.3, 0.4          # w = S (w_hat - b): N per unit of the reading, reading units
 MASS = 2.0                         # kg
 DT, DURATION = 1e-3, 20.0
 POSE_SD, WRENCH_SD = 1e-4, 0.02    # m, reading units
-
-
-@dataclass(frozen=True)
-class RailPayload:
-    """A mass on a frictionless rail."""
-
-    mass: float
-
-
-class RailModel(Model):
-    """``x'' = f / m``: state ``[x, x']``, pose ``x``, reading ``f``."""
-
-    name = "rail"
-    wrench_names = ("f",)
-    pose_names = ("x",)
-    position_names = ("x",)
-    nq = nv = 1
-    state = StateLayout(("x", 1), ("x_dot", 1))
-    q_index, v_index = (0,), (1,)
-    linear_channels = True
-
-    def measure(self, x):
-        return ops(x).vcat([x[0]])
-
-    def rest_state(self, pose):
-        return np.array([float(np.ravel(pose)[0]), 0.0])
-
-    def input_matrix(self, x):
-        return ops(x).matrix([[1.0 / self.payload.mass]])
-
-    def drift(self, x):
-        return ops(x).vcat([0.0])
-
-    def state_derivative(self, x, w):
-        return ops(x, w).vcat([x[1], w[0] / self.payload.mass])
 
 
 MODEL = RailModel(RailPayload(MASS))
