@@ -30,7 +30,10 @@ that sample; every other cell is a finite number. Time is strictly
 increasing and evenly sampled.
 
 Every log, from a file or from the simulator, is validated in one place:
-:meth:`Log.__init__`.
+:meth:`Log.__init__`. Its messages count **rows**, the samples from 1 (the
+header is not a row); the file's own checks, before any row is read, count
+**lines** of the file (the header is line 1, so row ``k`` is line ``k + 1``)
+and say so.
 """
 
 import io
@@ -490,12 +493,12 @@ def _read_csv(path, required, empty_rule):
     line, fields = _wrong_field_count(data, len(header))
     del data
     if line:
-        raise LogError(f"{path.name}: line {line} has {fields} fields; the header has {len(header)} "
-                       f"({_echo(','.join(header))}); every row needs one cell per column")
+        raise LogError(f"{path.name}: line {line} has {fields} fields (row {line - 1}); the header has "
+                       f"{len(header)} ({_echo(','.join(header))}); every row needs one cell per column")
     match = _NONFINITE.search(text)
     if match:
         line = text.count("\n", 0, match.start()) + 1
-        raise LogError(f"{path.name}: line {line} holds a NaN or infinite value; {empty_rule}")
+        raise LogError(f"{path.name}: line {line} (row {line - 1}) holds a NaN or infinite value; {empty_rule}")
     try:
         return pd.read_csv(io.StringIO(text), skipinitialspace=True, dtype=float)
     except pd.errors.ParserError as err:

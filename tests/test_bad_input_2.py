@@ -86,7 +86,7 @@ CASES = [
     # item 3: --jobs, and rows of the wrong width
     (["sweep", "--jobs", "-2", "--duration", "1", "--seeds", "1"], "--jobs must be a positive number"),
     (["reproduce", "--jobs", "-5", "--out", "{d}/rep", "--quick", "0.01"], "--jobs must be a positive number"),
-    (["calibrate", "{d}/wide.csv", *PAYLOAD], "line 2 has 1000007 fields; the header has 7"),
+    (["calibrate", "{d}/wide.csv", *PAYLOAD], "line 2 has 1000007 fields (row 1); the header has 7"),
     (["calibrate", "{d}/wide_late.csv", *PAYLOAD], "line 3001 has 8 fields"),
     (["calibrate", "{d}/narrow_late.csv", *PAYLOAD], "line 4001 has 6 fields"),
     (["apply", "{d}/cal.json", "{d}/wide.csv", "--out", "{d}/w.csv"], "line 2 has 1000007 fields"),
