@@ -168,6 +168,9 @@ def cmd_identify_payload(args):
         p = truth.payload
         out["mass_error"] = fit.mass - p.mass
         out["rho_error"] = (fit.rho - np.array(p.rho)).tolist()
+        # the tensor's six entries (URDF order), in the sensor axes as the fit gives them
+        out["inertia_error"] = None if fit.inertia is None else (np.asarray(fit.inertia) - np.array(
+            [p.I_c[0, 0], p.I_c[1, 1], p.I_c[2, 2], p.I_c[0, 1], p.I_c[0, 2], p.I_c[1, 2]])).tolist()
         if truth.offset is not None:
             out["b_error"] = (fit.b - truth.offset).tolist()
     if args.json:
@@ -186,4 +189,6 @@ def cmd_identify_payload(args):
     print(f"converged: {'yes' if fit.converged else 'no'}")
     if truth is not None:
         print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
-              + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm")
+              + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm"
+              + ("" if out["inertia_error"] is None else ", inertia " + " ".join(
+                  f"{n} {v:+.2g}" for n, v in zip(INERTIA_NAMES, out["inertia_error"])) + " kg m^2"))

@@ -47,6 +47,15 @@ def test_identify_payload_with_the_saved_calibration(arm, capsys):
     assert abs(out["mass"] - 1.2) < 0.012
     assert np.abs(np.array(out["rho"]) - [0.01, -0.005, 0.06]).max() < 2e-3
     assert out["inertia"] is not None and out["converged"]
+    # with the truth: the errors of every group, the inertia's six entries among them (URDF order)
+    assert main(["identify-payload", str(arm / "arm.csv"), "--calibration", str(arm / "cal0.json"), "--json",
+                 "--truth", str(arm / "arm.truth.json")]) == 0
+    errors = _json(capsys)
+    truth = read_truth(arm / "arm.truth.json").payload
+    I_true = [truth.I_c[0, 0], truth.I_c[1, 1], truth.I_c[2, 2], truth.I_c[0, 1], truth.I_c[0, 2], truth.I_c[1, 2]]
+    np.testing.assert_allclose(errors["inertia_error"], np.array(out["inertia"]) - I_true, rtol=1e-12, atol=1e-15)
+    assert np.all(np.abs(errors["inertia_error"]) < 4 * np.array(out["inertia_std"]) + 1e-6)
+    assert abs(errors["mass_error"]) < 0.012 and len(errors["rho_error"]) == 3
 
 
 def test_static_poses_are_not_saved_as_a_calibration(tmp_path, capsys):
