@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .cli_calibration import add_apply, add_calibrate
-from .cli_spatial import add_identify_payload
+from .cli_payload import add_identify_payload
 from .cli_import import add_import
 from .cli_common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes,
                          positive, strict)

@@ -144,7 +144,7 @@ def _columns(keep, vt):
     return np.abs(vt[~keep]).max(axis=0) < 1e-6 if (~keep).any() else np.ones(vt.shape[1], dtype=bool)
 
 
-def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0):
+def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, reading="reaction"):
     """Estimate the payload's mass, centre of mass, inertia and the sensor's offset, with ``S`` known.
 
     Parameters
@@ -159,24 +159,40 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0):
         Smoothing window of the pose differentiation, s.
     block : float
         Length of the blocks of the robust covariance, s.
+    reading : {"reaction", "load"}
+        The reading's sign: the wrench the mount applies to the payload (the
+        toolkit's convention), or the wrench the tool applies to the sensor
+        (``load``: the reading is negated first).
 
     Returns
     -------
     PayloadFit
+
+    Raises
+    ------
+    FmscalError
+        The log does not determine the mass, or its mass comes out negative
+        (the reading follows the other sign convention: the message names the flag).
     """
+    from .static_fit import READINGS
+    if reading not in READINGS:
+        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {reading!r}")
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     gravity = as_finite_array(gravity, (3,), "gravity")
     block = as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
-    y = (log.w_hat @ S.T)[trim]
+    y = ((-1.0 if reading == "load" else 1.0) * log.w_hat @ S.T)[trim]
     n = len(y)
     X = np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
     blocks = np.repeat(((log.t[trim] - log.t[trim][0]) // block).astype(int), 6)
     theta, _, residual = _fit(X, y.ravel(), np.ones(6 * n), blocks)
     sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
     theta, cov, residual = _fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
+    if np.isfinite(cov[0, 0]) and theta[0] < 0:
+        from .static_fit import other_convention
+        raise FmscalError(other_convention(log.name, theta[0], reading))
     return _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
 
 

@@ -163,7 +163,8 @@ GOOD_ROWS = "".join(f"{0.001 * k},{0.0},{0.0},{0.0},1,1,1\n" for k in range(20))
      "not evenly sampled"),
     (lambda d: _write(d / "short.csv", "t,theta,x,y,M,fx,fy\n" + "".join(GOOD_ROWS.splitlines(True)[:3])),
      "too few rows"),
-    (lambda d: _write(d / "cut.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS[:60]), "line 4 has 4 fields (row 3); the header has 7"),
+    (lambda d: _write(d / "cut.csv", "t,theta,x,y,M,fx,fy\n" + GOOD_ROWS[:60]),
+     "line 4 has 4 fields (row 3); the header has 7"),
     (lambda d: _write(d / "nopose.csv", "t,theta,x,y,M,fx,fy\n" + "".join(
         f"{0.001 * k},{'0,0,0' if k < 3 else ',,'},1,1,1\n" for k in range(20))), "too few pose measurements"),
 ])

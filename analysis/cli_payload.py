@@ -1,0 +1,168 @@
+"""``fmscal identify-payload``: what practitioners estimate with ``S`` known, from a spatial log or a pose table.
+
+A spatial log (``t,qw,...,fz``) gives the offset, the mass, the centre of
+mass and, where the motion turns the payload fast enough, the inertia
+(:func:`fmscal.observers.payload_fit.identify_payload`). A pose table (the
+same header without ``t``: one row per held pose) gives the offset, the mass
+and the centre of mass, and, where asked, gravity's direction in the pose
+frame and the sensor's mounting on the tracked frame
+(:func:`fmscal.observers.static_fit.fit_static`), with what the poses
+covered and the next poses to record.
+"""
+
+import json
+import sys
+
+import numpy as np
+
+from .cli_common import CliError, strict
+from .cli_spatial import _NAMES, _spatial_truth
+
+__all__ = ["add_identify_payload", "cmd_identify_payload"]
+
+
+def add_identify_payload(sub):
+    """Add ``fmscal identify-payload`` to the subcommands ``sub``."""
+    p = sub.add_parser("identify-payload", help="estimate the payload's mass properties and the offset, S known",
+                       description="With the calibration S known (the identity, or --calibration CAL.json), "
+                                   "estimate the sensor's offset, the payload's mass and centre of mass (static "
+                                   "poses suffice) and its inertia (motion needed) from a spatial log or a pose "
+                                   "table (the spatial header without t, one row per held pose), with "
+                                   "one-sigma uncertainties, and say what the data did not determine.")
+    p.add_argument("log", metavar="LOG.csv|TABLE.csv")
+    p.add_argument("--calibration", metavar="CAL.json", help="a spatial calibration (default: S = I)")
+    p.add_argument("--gravity", nargs="+", metavar="GX GY GZ|estimate",
+                   help="gravity in the pose frame, m/s^2 (default 0 0 -9.81); 'estimate': its direction is "
+                        "estimated with the payload (a pose table; a tilted or wall-mounted base)")
+    p.add_argument("--mounting", choices=("estimate",),
+                   help="estimate the rotation of the sensor's axes on the tracked frame (a pose table)")
+    p.add_argument("--reading", choices=("reaction", "load"), default="reaction",
+                   help="the reading's sign: reaction (default, the wrench the mount applies to the payload) or "
+                        "load (the wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report)")
+    p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report the errors")
+    p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.set_defaults(func=cmd_identify_payload)
+
+
+def _gravity(args):
+    """``(gravity, estimate)`` from ``--gravity``: three numbers, or ``estimate`` (the default's size, 9.81)."""
+    from fmscal.plant.rigid_body import GRAVITY
+    given = args.gravity
+    if given is None:
+        return GRAVITY, False
+    if given == ["estimate"]:
+        return GRAVITY, True
+    try:
+        g = [float(v) for v in given]
+    except ValueError:
+        g = []
+    if len(g) != 3 or not (all(np.isfinite(g)) and 0 < np.linalg.norm(g) < 1e3):
+        raise CliError(f"--gravity takes three finite numbers in m/s^2 (the pose frame's gravity) or 'estimate'; "
+                       f"got {' '.join(given)[:80]}")
+    return tuple(g), False
+
+
+def _calibration_S(path):
+    """``S`` of a spatial calibration file, or None without one."""
+    from fmscal.plant import Calibration
+    if not path:
+        return None
+    calibration = Calibration.load(path)
+    if calibration.size != 6:
+        raise CliError(f"{path} is a planar calibration (3x3); identify-payload takes a spatial one")
+    if calibration.forced:
+        print(f"fmscal identify-payload: warning: {path} was saved with --force", file=sys.stderr)
+    return calibration.S
+
+
+def cmd_identify_payload(args):
+    """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log or a pose table."""
+    from fmscal.plant.log import _as_path
+    from fmscal.plant.pose_table import is_pose_table
+    gravity, estimate_gravity = _gravity(args)
+    S = _calibration_S(args.calibration)
+    path = _as_path(args.log, "log")
+    if is_pose_table(path):
+        return _identify_table(args, path, S, gravity, estimate_gravity)
+    if estimate_gravity or args.mounting:
+        flag = "--gravity estimate" if estimate_gravity else "--mounting estimate"
+        raise CliError(f"{flag} is taken on a pose table (qw,qx,qy,qz,tx,ty,tz,fx,fy,fz: one row per held pose); "
+                       f"{path.name} is a log: record a table, or give --gravity GX GY GZ")
+    return _identify_log(args, path, S, gravity)
+
+
+def _identify_log(args, path, S, gravity):
+    from fmscal.observers.payload_fit import INERTIA_NAMES, identify_payload
+    from fmscal.plant import read_log
+    log = read_log(path)
+    if log.kind != "spatial":
+        raise CliError(f"{path.name} is a planar log; identify-payload takes a spatial log "
+                       "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) or a pose table")
+    truth = _spatial_truth(args.truth)
+    fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading)
+    for warning in fit.warnings:
+        print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
+    out = {**fit.to_dict(), "gravity": None, "gravity_std_deg": None, "mounting": None, "mounting_deg": None,
+           "mounting_std_deg": None, "reading": args.reading}
+    if truth is not None:
+        p = truth.payload
+        out["mass_error"] = fit.mass - p.mass
+        out["rho_error"] = (fit.rho - np.array(p.rho)).tolist()
+        # the tensor's six entries (URDF order), in the sensor axes as the fit gives them
+        out["inertia_error"] = None if fit.inertia is None else (np.asarray(fit.inertia) - np.array(
+            [p.I_c[0, 0], p.I_c[1, 1], p.I_c[2, 2], p.I_c[0, 1], p.I_c[0, 2], p.I_c[1, 2]])).tolist()
+        if truth.offset is not None:
+            out["b_error"] = (fit.b - truth.offset).tolist()
+    if args.json:
+        print(json.dumps(strict(out), allow_nan=False))
+        return
+    print(f"{path.name}: {len(log)} samples, {log.duration:g} s; S "
+          f"{'from ' + args.calibration if args.calibration else '= I'}; reading {args.reading}")
+    _print_mass(fit)
+    if fit.inertia is None:
+        print("inertia: not determined by this log")
+    else:
+        print("inertia about the centre of mass [kg m^2]: " + "  ".join(
+            f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
+    print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
+    print(f"converged: {'yes' if fit.converged else 'no'}")
+    if truth is not None:
+        print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
+              + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm"
+              + ("" if out["inertia_error"] is None else ", inertia " + " ".join(
+                  f"{n} {v:+.2g}" for n, v in zip(INERTIA_NAMES, out["inertia_error"])) + " kg m^2"))
+
+
+def _print_mass(fit):
+    print(f"mass: {fit.mass:.5g} +- {fit.mass_std:.2g} kg")
+    print("centre of mass [mm]: " + "  ".join(f"{v * 1e3:+.3f} +- {s * 1e3:.2g}" for v, s in zip(fit.rho, fit.rho_std)))
+
+
+def _identify_table(args, path, S, gravity, estimate_gravity):
+    from fmscal.observers.static_fit import fit_static
+    from fmscal.plant.pose_table import read_pose_table
+    if args.truth:
+        raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
+    table = read_pose_table(path)
+    fit = fit_static(table, S=S, gravity=gravity, estimate_gravity=estimate_gravity,
+                     estimate_mounting=args.mounting == "estimate", reading=args.reading)
+    for warning in fit.warnings:
+        print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(strict(fit.to_dict()), allow_nan=False))
+        return
+    source = "from " + args.calibration if args.calibration else "= I"
+    print(f"{path.name}: a pose table of {len(table)} poses; S {source}; reading {args.reading}")
+    _print_mass(fit)
+    print("inertia: not determined by held poses (it needs angular acceleration)")
+    print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
+    if fit.gravity is not None:
+        print(f"gravity in the pose frame [m/s^2]: {' '.join(f'{v:+.4f}' for v in fit.gravity)} "
+              f"(direction +- {fit.gravity_std_deg:.2g} degrees)")
+    if fit.mounting is not None:
+        print(f"mounting (sensor axes on the tracked frame): {fit.mounting_deg:.3f} +- {fit.mounting_std_deg:.2g} "
+              "degrees; matrix rows " + "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in fit.mounting))
+    print(f"gravity directions covered in the sensor frame: a cone of half-angle {fit.cone_deg:.0f} degrees")
+    for words in fit.next_poses:
+        print(f"next pose: {words}")
+    print(f"converged: {'yes' if fit.converged else 'no'}")

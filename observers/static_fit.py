@@ -1,0 +1,458 @@
+"""The static fit of a pose table: mass, centre of mass and offset, with gravity and mounting if asked.
+
+A held pose does not accelerate, so the corrected reading is the weight's
+wrench at the sensor (SPATIAL facts, Newton-Euler at rest) plus the offset::
+
+    y_k = sigma S w_hat_k = [rho x f_k; f_k] + c,       f_k = m M^T R_k^T (-g)
+
+with ``R_k`` the tracked frame's attitude at pose ``k``, ``M`` the sensor's
+axes on it (the mounting; the identity unless estimated), ``g`` gravity in the
+pose frame, ``c = S b`` the offset and ``sigma = +1`` for a sensor that
+reports the wrench the mount applies to the payload (the toolkit's
+convention, ``reaction``) or ``-1`` for one that reports the wrench the tool
+applies to the sensor (``load``: ATI, Robotiq, Bota, OnRobot).
+
+The unknowns are ``m``, ``rho`` (3), ``c`` (6), and where asked the direction
+of gravity (two angles; its size is the standard 9.81 m/s^2 unless told) and
+the mounting ``M`` (a rotation, three angles). The fit is nonlinear least
+squares (Levenberg-Marquardt, :func:`scipy.optimize.least_squares`), started
+from linear fits of the forces and then the torques, each channel weighted by
+its residual spread; the rows are independent (each an average over a held
+pose), so the covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the weighted
+residual variance over its degrees of freedom.
+
+What the table covers: the gravity directions it holds in the sensor frame
+(the half-angle of the cone around their mean), the parameters it leaves
+undetermined (the information's weak directions, in words), and the next
+poses that would most reduce the largest relative uncertainty: candidate
+turns of 45, 90 and 180 degrees about the sensor's axes from the table's
+poses, each scored by the covariance the fit would have with it added.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fmscal.plant._checks import as_finite_array
+from fmscal.plant.errors import FmscalError
+from fmscal.plant.pose_table import PoseTable
+from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
+from fmscal.plant.sensor import check_calibration
+
+__all__ = ["StaticFit", "fit_static", "other_convention", "READINGS", "DETERMINED_REL", "DETERMINED_RHO"]
+
+#: The two sign conventions of a sensor's reading: the wrench on the payload (the toolkit's), or on the sensor.
+READINGS = ("reaction", "load")
+#: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
+DETERMINED_REL = 0.01
+#: The centre of mass counts as determined when each coordinate's one-sigma uncertainty is below this, m.
+DETERMINED_RHO = 1e-3
+_OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
+_AXES = ("x", "y", "z")
+_TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
+
+
+@dataclass
+class StaticFit:
+    """The static fit of a pose table (module docstring), one-sigma uncertainties beside each value.
+
+    Attributes
+    ----------
+    mass, mass_std : float
+        kg.
+    rho, rho_std : ndarray, shape (3,)
+        Centre of mass in the sensor frame, m.
+    b, b_std : ndarray, shape (6,)
+        The sensor's offset in ``w = S (sigma w_hat - b)``, reading order, N m and N.
+    gravity : ndarray, shape (3,), or None
+        Gravity in the pose frame, m/s^2, where estimated.
+    gravity_std_deg : float or None
+        One-sigma uncertainty of its direction, degrees.
+    mounting : ndarray, shape (3, 3), or None
+        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors), where estimated.
+    mounting_deg, mounting_std_deg : float or None
+        The mounting's angle and the one-sigma uncertainty of its rotation, degrees.
+    reading : str
+        The reading's sign convention the fit used (:data:`READINGS`).
+    cone_deg : float
+        Half-angle of the cone of gravity directions the table holds in the sensor frame, degrees.
+    undetermined : list of str
+        The parameters the table leaves undetermined, in words.
+    next_poses : list of str
+        The poses to record next, best first.
+    residual_rms : ndarray, shape (6,)
+        Of the fit, per channel, N m and N.
+    warnings : list of str
+    converged : bool
+        Mass, centre of mass, offset (and gravity, mounting where asked) all determined.
+    cov : ndarray
+        Covariance of the fitted parameters (:attr:`names` order).
+    names : tuple of str
+        The fitted parameters.
+    """
+
+    mass: float
+    mass_std: float
+    rho: np.ndarray
+    rho_std: np.ndarray
+    b: np.ndarray
+    b_std: np.ndarray
+    gravity: np.ndarray = None
+    gravity_std_deg: float = None
+    mounting: np.ndarray = None
+    mounting_deg: float = None
+    mounting_std_deg: float = None
+    reading: str = "reaction"
+    cone_deg: float = 0.0
+    undetermined: list = field(default_factory=list)
+    next_poses: list = field(default_factory=list)
+    residual_rms: np.ndarray = None
+    warnings: list = field(default_factory=list)
+    converged: bool = False
+    cov: np.ndarray = None
+    names: tuple = ()
+
+    def to_dict(self):
+        """The fields as JSON-ready numbers and lists (None where not estimated); the keys of ``identify-payload``."""
+        def listed(v):
+            return None if v is None else [float(x) for x in np.ravel(v)]
+        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
+                "rho_std": listed(self.rho_std), "inertia": None, "inertia_std": None, "b": listed(self.b),
+                "b_std": listed(self.b_std), "gravity": listed(self.gravity),
+                "gravity_std_deg": self.gravity_std_deg,
+                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
+                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
+                "reading": self.reading, "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
+                "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
+                "warnings": list(self.warnings), "converged": bool(self.converged)}
+
+
+def _exp(v):
+    """The rotation matrix of the rotation vector ``v`` (Rodrigues)."""
+    angle = float(np.linalg.norm(v))
+    K = skew(np.asarray(v, dtype=float))
+    if angle < 1e-12:
+        return np.eye(3) + K
+    return np.eye(3) + np.sin(angle) / angle * K + (1 - np.cos(angle)) / angle ** 2 * K @ K
+
+
+def _angle_deg(R):
+    """The angle of a rotation matrix, degrees."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+def _tangent_basis(d):
+    """Two unit vectors orthogonal to the unit vector ``d`` and to each other."""
+    a = np.eye(3)[int(np.argmin(np.abs(d)))]
+    e1 = np.cross(d, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(d, e1)
+
+
+class _Model:
+    """The residuals of the static fit for one table, its parameter layout and its start."""
+
+    def __init__(self, R, y, g_size, d0, M0, estimate_gravity, estimate_mounting):
+        self.R, self.y, self.g_size = R, y, g_size
+        self.d0, self.M0 = d0, M0
+        self.e1, self.e2 = _tangent_basis(d0)
+        self.estimate_gravity, self.estimate_mounting = estimate_gravity, estimate_mounting
+        self.names = ("m", "rho_x", "rho_y", "rho_z", *(f"c_{n}" for n in _OFFSET_NAMES),
+                      *(("gravity_1", "gravity_2") if estimate_gravity else ()),
+                      *(("mount_x", "mount_y", "mount_z") if estimate_mounting else ()))
+
+    def parts(self, theta):
+        """``m, rho, c, gravity direction, M`` from the parameter vector."""
+        m, rho, c = theta[0], theta[1:4], theta[4:10]
+        k = 10
+        d = self.d0
+        if self.estimate_gravity:
+            d = _exp(theta[k] * self.e1 + theta[k + 1] * self.e2) @ self.d0
+            k += 2
+        M = self.M0 @ _exp(theta[k:k + 3]) if self.estimate_mounting else self.M0
+        return m, rho, c, d, M
+
+    def predict(self, theta, R=None):
+        """The corrected reading each pose would show, shape (N, 6)."""
+        m, rho, c, d, M = self.parts(theta)
+        R = self.R if R is None else R
+        a = np.einsum("ji,nkj,k->ni", M, R, -self.g_size * d)              # M^T R^T (-g), sensor axes
+        f = m * a
+        return np.hstack([np.cross(rho, f), f]) + c
+
+    def jacobian(self, theta, R=None, step=1e-7):
+        """d predict / d theta by central differences, shape (6N, p)."""
+        cols = []
+        for i in range(len(theta)):
+            h = step * max(abs(theta[i]), 1.0)
+            up, down = theta.copy(), theta.copy()
+            up[i] += h
+            down[i] -= h
+            cols.append(((self.predict(up, R) - self.predict(down, R)) / (2 * h)).ravel())
+        return np.column_stack(cols)
+
+
+def _start(R, y, g, estimate_gravity, estimate_mounting):
+    """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques."""
+    n = len(R)
+    a0 = np.einsum("nkj,k->nj", R, -g)                                      # R^T (-g), tracked-frame axes
+    f = y[:, 3:]
+    M0, d0, g_size = np.eye(3), g / np.linalg.norm(g), float(np.linalg.norm(g))
+    if estimate_mounting:           # f = B a0 + c_f with B = m M^T: B by least squares, M^T by its polar part
+        X = np.hstack([a0, np.ones((n, 1))])
+        coef = np.linalg.lstsq(X, f, rcond=None)[0]                        # (4, 3): rows B^T, c_f
+        U, s, Vt = np.linalg.svd(coef[:3].T)
+        Mt = U @ Vt
+        if np.linalg.det(Mt) < 0:                                           # a reflection: the load convention
+            Mt = -Mt
+        M0 = Mt.T
+        m = float(np.sum(s) / 3 * np.sign(np.trace(Mt.T @ coef[:3].T)))
+    if estimate_gravity:            # f = M0^T R^T (-u) + c_f with u = m g: linear in u and c_f
+        X = np.concatenate([-np.einsum("ji,nkj->nik", M0, R), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
+        sol = np.linalg.lstsq(X.reshape(3 * n, 6), f.ravel(), rcond=None)[0]
+        u = sol[:3]
+        m = float(np.linalg.norm(u) / g_size)
+        d0 = u / max(np.linalg.norm(u), 1e-300)
+    if not (estimate_gravity or estimate_mounting):     # f = m a + c_f
+        a = np.einsum("ji,nj->ni", M0, a0)
+        X = np.concatenate([a[:, :, None], np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
+        m = float(np.linalg.lstsq(X.reshape(3 * n, 4), f.ravel(), rcond=None)[0][0])
+    a = np.einsum("ji,nkj,k->ni", M0, R, -g_size * d0)
+    force = m * a
+    c_f = np.mean(f - force, axis=0)
+    # the torques: tau = rho x f + c_tau = -[f]x rho + c_tau, linear in rho and c_tau
+    X = np.concatenate([-skew(force), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
+    sol = np.linalg.lstsq(X, y[:, :3].ravel(), rcond=None)[0]
+    return np.r_[m, sol[:3], sol[3:], c_f], d0, M0, g_size
+
+
+def _weighted(model, theta0, weights):
+    """Levenberg-Marquardt from ``theta0`` on the weighted residuals; returns the solution."""
+    fun = lambda th: ((model.predict(th) - model.y) * weights).ravel()     # noqa: E731
+    return least_squares(fun, theta0, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000).x
+
+
+def _extra(theta, model):
+    """Zeros for the gravity and mounting angles: they start at the linear fit's values."""
+    return np.r_[theta, np.zeros(2 if model.estimate_gravity else 0), np.zeros(3 if model.estimate_mounting else 0)]
+
+
+def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction"):
+    """Mass, centre of mass and offset from a pose table (and gravity's direction, the mounting, if asked).
+
+    Parameters
+    ----------
+    table : plant.PoseTable
+    S : array_like, shape (6, 6), optional
+        The calibration (default: the identity).
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2; with ``estimate_gravity`` only its
+        size is taken (and its direction is where the fit starts from).
+    estimate_gravity : bool
+        Estimate gravity's direction in the pose frame (a tilted or
+        wall-mounted base).
+    estimate_mounting : bool
+        Estimate the rotation of the sensor's axes on the tracked frame.
+    reading : {"reaction", "load"}
+        The reading's sign (module docstring).
+
+    Returns
+    -------
+    StaticFit
+
+    Raises
+    ------
+    FmscalError
+        A reading convention that is neither, or a table whose data say the
+        other convention (a negative mass, or gravity pointing up with
+        ``estimate_gravity``).
+    """
+    if not isinstance(table, PoseTable):
+        raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
+    if reading not in READINGS:
+        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {reading!r}")
+    S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
+    g = as_finite_array(gravity, (3,), "gravity")
+    if not np.linalg.norm(g) > 0:
+        raise FmscalError("gravity must not be zero")
+    sign = 1.0 if reading == "reaction" else -1.0
+    y = sign * table.w_hat @ S.T
+    R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
+    theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
+    model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
+    theta = _weighted(model, _extra(theta0, model), np.ones(6))
+    sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
+    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
+    theta = _weighted(model, theta, weights)
+    m, rho, c, d, M = model.parts(theta)
+    other = "load" if reading == "reaction" else "reaction"
+    if m <= 0:
+        raise FmscalError(other_convention(table.name, m, reading))
+    if estimate_gravity and d[2] > 0 and g[2] < 0:
+        raise FmscalError(f"{table.name}: gravity comes out pointing up in the pose frame (z = {d[2]:+.2f}): the "
+                          f"reading follows the other sign convention; pass --reading {other} (the wrench the "
+                          f"{_who(other)})")
+    residual = (model.predict(theta) - y) * weights
+    dof = max(residual.size - len(theta), 1)
+    s2 = float(np.sum(residual ** 2) / dof)
+    J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
+    information = J.T @ J
+    cov, weak = _covariance(information, s2)
+    std = np.sqrt(np.maximum(np.diag(cov), 0))
+    S_inv = np.linalg.inv(S)
+    b = S_inv @ c
+    b_std = np.sqrt(np.maximum(np.diag(S_inv @ np.where(np.isfinite(cov[4:10, 4:10]), cov[4:10, 4:10], 0)
+                                       @ S_inv.T), 0))
+    b_std[~np.isfinite(np.diag(cov)[4:10])] = np.inf
+    out = StaticFit(mass=float(m), mass_std=float(std[0]), rho=rho, rho_std=std[1:4], b=b, b_std=b_std,
+                    reading=reading, residual_rms=sd, cov=cov, names=model.names)
+    k = 10
+    if estimate_gravity:
+        out.gravity = g_size * d
+        out.gravity_std_deg = float(np.degrees(np.sqrt(max(std[k] ** 2 + std[k + 1] ** 2, 0.0) / 2)))
+        k += 2
+    if estimate_mounting:
+        out.mounting = M
+        out.mounting_deg = _angle_deg(M)
+        out.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3)))
+    a = np.einsum("ji,nkj,k->ni", M, R, -d)
+    out.cone_deg = _cone(a)
+    out.undetermined = [_describe(model.names, v) for v in weak]
+    determined = _determined(out, std)
+    out.converged = not out.undetermined and determined
+    out.warnings = list(out.undetermined)
+    if not out.undetermined and not determined:
+        out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
+                            f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
+    out.next_poses = _next_poses(model, theta, information, weights, s2, R)
+    return out
+
+
+def _who(reading):
+    return "mount applies to the payload" if reading == "reaction" else "tool applies to the sensor"
+
+
+def other_convention(name, mass, reading):
+    """The one line for data whose mass comes out negative: it follows the other sign convention.
+
+    Parameters
+    ----------
+    name : str
+        The data's name.
+    mass : float
+        The (negative) mass the fit gave, kg.
+    reading : str
+        The convention the fit used (:data:`READINGS`).
+
+    Returns
+    -------
+    str
+    """
+    other = "load" if reading == "reaction" else "reaction"
+    return (f"{name}: the mass comes out negative ({mass:.4g} kg): the reading follows the other sign convention; "
+            f"pass --reading {other} (the wrench the {_who(other)})")
+
+
+def _covariance(information, s2):
+    """``s^2 J^-1`` on the determined directions (scaled to a unit diagonal), and the weak directions.
+
+    A direction of the scaled information whose eigenvalue is below ``1e-10``
+    of the largest is not determined: its parameters' variances are infinite.
+    """
+    d = np.sqrt(np.maximum(np.diag(information), 1e-300))
+    scaled = information / np.outer(d, d)
+    lam, u = np.linalg.eigh(scaled)
+    weak_mask = lam < 1e-10 * lam[-1]
+    keep = ~weak_mask
+    inverse = (u[:, keep] / lam[keep]) @ u[:, keep].T
+    cov = s2 * inverse / np.outer(d, d)
+    touched = np.abs(u[:, weak_mask]).max(axis=1) > 1e-3 if weak_mask.any() else np.zeros(len(d), dtype=bool)
+    cov[touched, :] = np.inf
+    cov[:, touched] = np.inf
+    return cov, [u[:, k] for k in np.flatnonzero(weak_mask)]
+
+
+def _describe(names, direction):
+    """A weak direction in words: the parameters it mixes and what to record."""
+    big = [names[i] for i in np.argsort(-np.abs(direction)) if abs(direction[i]) > 0.2]
+    pretty = {"m": "the mass", **{f"c_{n}": f"the offset's {n}" for n in _OFFSET_NAMES},
+              **{f"rho_{a}": f"the centre of mass along {a}" for a in _AXES},
+              "gravity_1": "gravity's direction", "gravity_2": "gravity's direction",
+              **{f"mount_{a}": f"the mounting about {a}" for a in _AXES}}
+    words = " and ".join(dict.fromkeys(pretty.get(n, n) for n in big))
+    return (f"{words} are not separated by these poses: they turn gravity through too few directions in the "
+            "sensor frame; tilt the tool about another axis (see the next poses)")
+
+
+def _determined(out, std):
+    return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_RHO)
+                and np.all(np.isfinite(std)))
+
+
+def _cone(a):
+    """Half-angle of the cone of unit directions ``a`` around their mean, degrees (180 when they surround it)."""
+    u = a / np.linalg.norm(a, axis=1)[:, None]
+    mean = u.mean(axis=0)
+    if np.linalg.norm(mean) < 1e-9:
+        return 180.0
+    mean /= np.linalg.norm(mean)
+    return float(np.degrees(np.max(np.arccos(np.clip(u @ mean, -1.0, 1.0)))))
+
+
+def _candidates(R):
+    """Poses the user can reach: turns of 45, 90, 180 degrees about a sensor axis from each pose of the table.
+
+    Returns
+    -------
+    list of (str, ndarray (3, 3))
+        Each described in words and as the tracked frame's attitude.
+    """
+    out = []
+    for k, Rk in enumerate(R):
+        for i, axis in enumerate(_AXES):
+            for angle in _TURNS:
+                turn = _exp(np.radians(angle) * np.eye(3)[i])
+                out.append((f"from pose {k + 1}, turn the tool {angle:+g} degrees about its {axis} axis", Rk @ turn))
+    return out
+
+
+def _relative_std(cov, theta):
+    """Each parameter's one-sigma uncertainty on a common scale: the mass relative to it, the centre of mass
+    in mm, the offset relative to the weight's wrench, the angles in degrees."""
+    std = np.sqrt(np.maximum(np.diag(cov), 0))
+    scale = np.ones(len(theta))
+    scale[0] = DETERMINED_REL * abs(theta[0])
+    scale[1:4] = DETERMINED_RHO
+    scale[4:10] = max(abs(theta[0]) * 9.81, 1e-9) * 1e-3 * np.r_[np.full(3, 0.1), np.ones(3)]
+    scale[10:] = np.radians(0.2)
+    return std / scale
+
+
+def _next_poses(model, theta, information, weights, s2, R, count=3):
+    """The candidate poses that most reduce the largest scaled uncertainty (:func:`_relative_std`), best first."""
+    current = _relative_std(_covariance(information, s2)[0], theta)
+    worst_now = float(np.max(current))
+    scored = []
+    for words, Rc in _candidates(R):
+        J = model.jacobian(theta, R=Rc[None]) * weights[:, None]          # the pose's six weighted rows
+        cov, _ = _covariance(information + J.T @ J, s2)
+        worst = float(np.max(_relative_std(cov, theta)))
+        scored.append((worst, words))
+    scored.sort(key=lambda item: item[0])
+    best = []
+    for worst, words in scored:
+        if words in (w for _, w in best):
+            continue
+        if np.isfinite(worst_now) and worst >= 0.99 * worst_now:
+            break
+        best.append((worst, words))
+        if len(best) == count:
+            break
+    return [f"{words} (the largest uncertainty {_ratio(worst_now, worst)})" for worst, words in best]
+
+
+def _ratio(before, after):
+    if not np.isfinite(before):
+        return "becomes finite" if np.isfinite(after) else "stays undetermined"
+    return f"falls to {after / before:.0%} of what it is"

@@ -1,0 +1,73 @@
+"""``fmscal identify-payload`` on pose tables and on logs of either sign convention (issue 28)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fmscal.analysis.cli import main
+from fmscal.observers.static_fit import _exp
+from fmscal.plant import read_log
+from fmscal.plant.pose_table import simulate_table, write_pose_table
+from fmscal.plant.spatial_scenarios import TOOL
+
+OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
+KEYS = {"mass", "mass_std", "rho", "rho_std", "inertia", "inertia_std", "b", "b_std", "gravity", "mounting",
+        "mounting_deg", "warnings", "converged"}
+
+
+def _run(capsys, args):
+    code = main(args)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_a_table_in_the_load_convention_names_the_flag_then_fits(tmp_path, capsys):
+    path = tmp_path / "held.csv"
+    write_pose_table(simulate_table(TOOL, n=12, seed=2, offset=OFFSET, reading="load"), path)
+    code, out, err = _run(capsys, ["identify-payload", str(path)])
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--reading load" in err and "-1.2" in err
+    assert "mass:" not in out                                       # never a negative mass printed
+    code, out, err = _run(capsys, ["identify-payload", str(path), "--reading", "load", "--json"])
+    fit = json.loads(out)
+    assert code == 0 and KEYS <= set(fit) and fit["inertia"] is None and fit["converged"]
+    assert abs(fit["mass"] - TOOL.mass) < 0.012 and np.abs(np.array(fit["rho"]) - TOOL.rho).max() < 2e-3
+    assert fit["gravity"] is None and fit["mounting"] is None and fit["next_poses"]
+
+
+def test_a_tilted_base_and_a_bolted_askew_sensor_in_one_table(tmp_path, capsys):
+    tilt = _exp(np.radians(15.0) * np.array([0.0, 1.0, 0.0]))
+    mount = _exp(np.radians(5.0) * np.array([1.0, 0.0, 0.0]))
+    path = tmp_path / "tilted.csv"
+    write_pose_table(simulate_table(TOOL, n=30, seed=5, gravity=tilt @ [0, 0, -9.81], mounting=mount,
+                                    offset=OFFSET), path)
+    code, out, err = _run(capsys, ["identify-payload", str(path), "--gravity", "estimate", "--mounting",
+                                   "estimate", "--json"])
+    fit = json.loads(out)
+    assert code == 0, err
+    error = np.degrees(np.arccos(np.clip(np.dot(fit["gravity"], tilt @ [0, 0, -9.81]) / 9.81 ** 2, -1, 1)))
+    assert error < 0.3 and fit["mounting_deg"] == pytest.approx(5.0, abs=0.3)
+    code, out, err = _run(capsys, ["identify-payload", str(path), "--gravity", "estimate", "--mounting", "estimate"])
+    assert code == 0 and "gravity in the pose frame" in out and "mounting" in out and "next pose:" in out
+
+
+def test_a_log_in_the_load_convention_and_flags_a_log_does_not_take(tmp_path, capsys):
+    assert main(["simulate", "--scenario", "spatial-arm", "--duration", "20", "--seed", "1",
+                 "--out", str(tmp_path / "arm.csv")]) == 0
+    log = read_log(tmp_path / "arm.csv")
+    log.w_hat = -log.w_hat                                          # a sensor that reports the load
+    log.write(tmp_path / "load.csv")
+    code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "load.csv")])
+    assert code == 2 and "--reading load" in err and len(err.strip().splitlines()) == 1
+    code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "load.csv"), "--reading", "load", "--json"])
+    fit = json.loads(out)
+    code_r, out_r, _ = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--json"])
+    same = json.loads(out_r)                                        # the same data in the toolkit's convention
+    assert code == code_r == 0 and fit["reading"] == "load" and KEYS <= set(fit)
+    assert fit["mass"] == pytest.approx(same["mass"], rel=1e-9) and fit["mass"] > 1.0
+    np.testing.assert_allclose(fit["rho"], same["rho"], rtol=1e-9)
+    for flags in (["--gravity", "estimate"], ["--mounting", "estimate"]):
+        code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), *flags])
+        assert code == 2 and "pose table" in err and len(err.strip().splitlines()) == 1
+    code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "1", "2"])
+    assert code == 2 and "three finite numbers" in err

@@ -1,0 +1,131 @@
+"""Pose tables and their static fit: the sensor's sign, gravity's direction, the mounting, coverage (issue 28)."""
+
+import numpy as np
+import pytest
+
+from fmscal.observers.static_fit import _exp, fit_static
+from fmscal.plant import FmscalError
+from fmscal.plant.log import LogError
+from fmscal.plant.pose_table import is_pose_table, read_pose_table, simulate_table, write_pose_table
+from fmscal.plant.spatial_scenarios import TOOL
+
+OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])       # N m, N
+TILT = _exp(np.radians(10.0) * np.array([1.0, 0.3, 0.0]) / np.linalg.norm([1.0, 0.3, 0.0]))   # a tilted base
+MOUNT = _exp(np.radians(7.0) * np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5]))    # a sensor bolted askew
+G = np.array([0.0, 0.0, -9.81])
+
+
+def _angle(R):
+    return np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
+
+
+@pytest.fixture(scope="module")
+def twenty_seeds():
+    """Twelve poses each, gravity along -z: the fits of 20 seeded tables."""
+    return [fit_static(simulate_table(TOOL, n=12, seed=seed, offset=OFFSET)) for seed in range(20)]
+
+
+def test_mass_centre_of_mass_and_offset_with_honest_uncertainties(twenty_seeds):
+    z = []
+    for fit in twenty_seeds:
+        assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass
+        assert np.abs(fit.rho - TOOL.rho).max() < 2e-3
+        assert fit.converged and fit.gravity is None and fit.mounting is None
+        z.append(np.r_[(fit.mass - TOOL.mass) / fit.mass_std, (fit.rho - TOOL.rho) / fit.rho_std,
+                       (fit.b - OFFSET) / fit.b_std])
+    spread = np.std(z)
+    assert 0.7 < spread < 1.4, spread
+
+
+def test_the_load_convention_is_named_never_a_negative_mass():
+    table = simulate_table(TOOL, n=12, seed=3, offset=OFFSET, reading="load")
+    with pytest.raises(FmscalError, match="mass comes out negative .* pass --reading load"):
+        fit_static(table)
+    fit = fit_static(table, reading="load")
+    assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass and fit.reading == "load"
+    np.testing.assert_allclose(fit.b, OFFSET, atol=5 * fit.b_std.max())     # of the reading negated, as simulated
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_tilted_base_gravity_is_recovered_within_a_fifth_of_a_degree(seed):
+    table = simulate_table(TOOL, n=24, seed=seed, gravity=TILT @ G, offset=OFFSET)
+    fixed = fit_static(table)                                      # gravity along -z: the data disagree
+    fit = fit_static(table, estimate_gravity=True)
+    error = np.degrees(np.arccos(np.clip(fit.gravity @ (TILT @ G) / 9.81 ** 2, -1, 1)))
+    assert error < 0.2 and 0 < fit.gravity_std_deg < 0.2
+    assert np.linalg.norm(fit.gravity) == pytest.approx(9.81)
+    assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass
+    assert fixed.residual_rms[3:].max() > 10 * fit.residual_rms[3:].max()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_mounting_rotation_is_recovered_within_a_fifth_of_a_degree(seed):
+    table = simulate_table(TOOL, n=24, seed=seed, mounting=MOUNT, offset=OFFSET)
+    fit = fit_static(table, estimate_mounting=True)
+    assert _angle(fit.mounting.T @ MOUNT) < 0.2
+    assert fit.mounting_deg == pytest.approx(7.0, abs=0.2) and 0 < fit.mounting_std_deg < 0.2
+    assert np.abs(fit.rho - TOOL.rho).max() < 2e-3
+
+
+def test_poses_about_one_axis_leave_gravity_and_the_offset_unseparated():
+    """Turns about one sensor axis keep gravity's component along it: with gravity's direction unknown, the
+    offset along that axis and the tilt do not separate; the fit says so and is not converged."""
+    angles = np.radians(np.linspace(0.0, 330.0, 12))
+    q = np.column_stack([np.cos(angles / 2), np.zeros(12), np.sin(angles / 2), np.zeros(12)])    # about y
+    tilt = _exp(np.radians(20.0) * np.array([1.0, 0.0, 0.0]))
+    table = simulate_table(TOOL, q=q, n=12, seed=0, gravity=tilt @ G, offset=OFFSET)
+    fit = fit_static(table, estimate_gravity=True)
+    assert not fit.converged and fit.undetermined
+    assert any("offset's fy" in words for words in fit.undetermined), fit.undetermined
+    assert fit.next_poses and "about its" in fit.next_poses[0]
+
+
+def test_the_first_suggested_pose_reduces_the_largest_uncertainty():
+    """A table of small tilts: the suggestion, recorded in simulation, lowers the largest uncertainty."""
+    table = simulate_table(TOOL, n=6, seed=4, offset=OFFSET, spread=np.radians(25.0))
+    before = fit_static(table)
+    words = before.next_poses[0]
+    k, axis, angle = _parse(words)
+    R = _exp(np.radians(angle) * np.eye(3)["xyz".index(axis)])
+    q_new = _quaternion(_rotation(table.q[k - 1]) @ R)
+    after = fit_static(simulate_table(TOOL, n=7, seed=4, offset=OFFSET, q=np.vstack([table.q, q_new])))
+    worst = lambda f: max(f.mass_std / (0.01 * f.mass), np.max(f.rho_std) / 1e-3)      # noqa: E731
+    assert worst(after) < 0.8 * worst(before), (words, worst(before), worst(after))
+
+
+def _parse(words):
+    """``(pose, axis, degrees)`` of "from pose K, turn the tool A degrees about its X axis (...)"."""
+    pose = int(words.split("from pose ")[1].split(",")[0])
+    angle = float(words.split("turn the tool ")[1].split()[0])
+    return pose, words.split("about its ")[1][0], angle
+
+
+def _rotation(q):
+    from fmscal.plant.rigid_body import rotation_matrix
+    return np.asarray(rotation_matrix(q))
+
+
+def _quaternion(R):
+    from scipy.spatial.transform import Rotation
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    return np.array([w, x, y, z])
+
+
+def test_a_table_round_trips_and_bad_tables_are_one_line(tmp_path):
+    table = simulate_table(TOOL, n=8, seed=1, offset=OFFSET)
+    path = tmp_path / "table.csv"
+    write_pose_table(table, path)
+    assert is_pose_table(path)
+    back = read_pose_table(path)
+    np.testing.assert_allclose(back.q, table.q, rtol=1e-15)
+    np.testing.assert_allclose(back.w_hat, table.w_hat, rtol=1e-15)
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(path.read_text().splitlines()[:4]) + "\n")
+    with pytest.raises(LogError, match="at least 4 poses .* got 3"):
+        read_pose_table(short)
+    bad = tmp_path / "bad.csv"
+    lines = path.read_text().splitlines()
+    lines[2] = "0.5,0.5,0.5,0.9," + lines[2].split(",", 4)[4]
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(LogError, match="row 2 has norm"):
+        read_pose_table(bad)
