@@ -2,7 +2,9 @@
 
 A spatial log (``t,qw,...,fz``) gives the offset, the mass, the centre of
 mass and, where the motion turns the payload fast enough, the inertia
-(:func:`fmscal.observers.payload_fit.identify_payload`). A pose table (the
+(:func:`fmscal.observers.payload_fit.identify_payload`). An attitude-only
+log (no ``x,y,z``) gives its held segments as a pose table
+(:func:`fmscal.plant.pose_table.held_table`). A pose table (the
 same header without ``t``: one row per held pose) gives the offset, the mass
 and the centre of mass, and, where asked, gravity's direction in the pose
 frame and the sensor's mounting on the tracked frame
@@ -78,12 +80,16 @@ def _calibration_S(path):
 def cmd_identify_payload(args):
     """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log or a pose table."""
     from fmscal.plant.log import _as_path
-    from fmscal.plant.pose_table import is_pose_table
+    from fmscal.plant.pose_table import held_table, is_attitude_log, is_pose_table, read_attitude_log, read_pose_table
     gravity, estimate_gravity = _gravity(args)
     S = _calibration_S(args.calibration)
     path = _as_path(args.log, "log")
     if is_pose_table(path):
-        return _identify_table(args, path, S, gravity, estimate_gravity)
+        return _identify_table(args, path, read_pose_table(path), S, gravity, estimate_gravity)
+    if is_attitude_log(path):
+        table, _, why = held_table(read_attitude_log(path))
+        print(f"fmscal identify-payload: note: {why}", file=sys.stderr)
+        return _identify_table(args, path, table, S, gravity, estimate_gravity)
     if estimate_gravity or args.mounting:
         flag = "--gravity estimate" if estimate_gravity else "--mounting estimate"
         raise CliError(f"{flag} is taken on a pose table (qw,qx,qy,qz,tx,ty,tz,fx,fy,fz: one row per held pose); "
@@ -138,12 +144,10 @@ def _print_mass(fit):
     print("centre of mass [mm]: " + "  ".join(f"{v * 1e3:+.3f} +- {s * 1e3:.2g}" for v, s in zip(fit.rho, fit.rho_std)))
 
 
-def _identify_table(args, path, S, gravity, estimate_gravity):
+def _identify_table(args, path, table, S, gravity, estimate_gravity):
     from fmscal.observers.static_fit import fit_static
-    from fmscal.plant.pose_table import read_pose_table
     if args.truth:
         raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
-    table = read_pose_table(path)
     fit = fit_static(table, S=S, gravity=gravity, estimate_gravity=estimate_gravity,
                      estimate_mounting=args.mounting == "estimate", reading=args.reading)
     for warning in fit.warnings:
@@ -152,7 +156,7 @@ def _identify_table(args, path, S, gravity, estimate_gravity):
         print(json.dumps(strict(fit.to_dict()), allow_nan=False))
         return
     source = "from " + args.calibration if args.calibration else "= I"
-    print(f"{path.name}: a pose table of {len(table)} poses; S {source}; reading {args.reading}")
+    print(f"{path.name}: {len(table)} held poses; S {source}; reading {args.reading}")
     _print_mass(fit)
     print("inertia: not determined by held poses (it needs angular acceleration)")
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))

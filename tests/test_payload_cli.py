@@ -71,3 +71,15 @@ def test_a_log_in_the_load_convention_and_flags_a_log_does_not_take(tmp_path, ca
         assert code == 2 and "pose table" in err and len(err.strip().splitlines()) == 1
     code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "1", "2"])
     assert code == 2 and "three finite numbers" in err
+
+
+def test_an_attitude_only_log_through_the_command(tmp_path, capsys):
+    from fmscal.plant.pose_table import ATTITUDE_COLUMNS, simulate_attitude_log
+    log = simulate_attitude_log(TOOL, seed=1, offset=OFFSET)
+    path = tmp_path / "imu.csv"
+    np.savetxt(path, np.column_stack([log.t, log.q, log.w_hat]), delimiter=",", header=",".join(ATTITUDE_COLUMNS),
+               comments="")
+    code, out, err = _run(capsys, ["identify-payload", str(path), "--json"])
+    fit = json.loads(out)
+    assert code == 0 and "held segments" in err and "% of the log" in err
+    assert abs(fit["mass"] - TOOL.mass) < 0.012 and fit["inertia"] is None
