@@ -41,6 +41,11 @@ def add_identify_payload(sub):
     p.add_argument("--reading", choices=("reaction", "load"), default="reaction",
                    help="the reading's sign: reaction (default, the wrench the mount applies to the payload) or "
                         "load (the wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report)")
+    p.add_argument("--urdf", metavar="ROBOT.urdf",
+                   help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
+                        "names; rad): poses of --frame by forward kinematics (pinocchio: pip install "
+                        "\"fmscal[robot]\")")
+    p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report the errors")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
     p.set_defaults(func=cmd_identify_payload)
@@ -84,6 +89,18 @@ def cmd_identify_payload(args):
     gravity, estimate_gravity = _gravity(args)
     S = _calibration_S(args.calibration)
     path = _as_path(args.log, "log")
+    if (args.urdf is None) != (args.frame is None):
+        raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
+    if args.urdf is not None:
+        from fmscal.plant.kinematics import RobotKinematics, read_joint_data
+        from fmscal.plant.pose_table import PoseTable
+        data = read_joint_data(path, RobotKinematics(args.urdf, args.frame))
+        if isinstance(data, PoseTable):
+            return _identify_table(args, path, data, S, gravity, estimate_gravity)
+        if estimate_gravity or args.mounting:
+            raise CliError("--gravity estimate and --mounting estimate are taken on a table of held poses; "
+                           f"{path.name} is a log (it has t)")
+        return _identify_log(args, path, data, S, gravity)
     if is_pose_table(path):
         return _identify_table(args, path, read_pose_table(path), S, gravity, estimate_gravity)
     if is_attitude_log(path):
@@ -94,13 +111,12 @@ def cmd_identify_payload(args):
         flag = "--gravity estimate" if estimate_gravity else "--mounting estimate"
         raise CliError(f"{flag} is taken on a pose table (qw,qx,qy,qz,tx,ty,tz,fx,fy,fz: one row per held pose); "
                        f"{path.name} is a log: record a table, or give --gravity GX GY GZ")
-    return _identify_log(args, path, S, gravity)
-
-
-def _identify_log(args, path, S, gravity):
-    from fmscal.observers.payload_fit import INERTIA_NAMES, identify_payload
     from fmscal.plant import read_log
-    log = read_log(path)
+    return _identify_log(args, path, read_log(path), S, gravity)
+
+
+def _identify_log(args, path, log, S, gravity):
+    from fmscal.observers.payload_fit import INERTIA_NAMES, identify_payload
     if log.kind != "spatial":
         raise CliError(f"{path.name} is a planar log; identify-payload takes a spatial log "
                        "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) or a pose table")

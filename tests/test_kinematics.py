@@ -1,0 +1,78 @@
+"""Poses from joint angles by pinocchio's forward kinematics, on a real robot's URDF (issue 28)."""
+
+import json
+import sysconfig
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fmscal.analysis.cli import main
+from fmscal.plant import FmscalError
+from fmscal.plant.kinematics import RobotKinematics, joint_columns
+from fmscal.plant.pose_table import simulate_table
+from fmscal.plant.rigid_body import rotation_matrix
+from fmscal.plant.spatial_scenarios import TOOL
+
+OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
+
+
+def _ur5():
+    """The UR5's URDF as example-robot-data (a test dependency) installs it."""
+    roots = {Path(sysconfig.get_paths()[k]) for k in ("purelib", "platlib")}
+    for root in roots:
+        path = root / "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
+        if path.exists():
+            return path
+    raise AssertionError(f"example-robot-data's UR5 URDF not found under {sorted(map(str, roots))}: "
+                         "pip install -e \".[test]\"")
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    return RobotKinematics(_ur5(), "tool0")
+
+
+def test_the_pose_is_pinocchios_frame_placement_in_the_logs_order(ur5):
+    """The quaternion (scalar first) turns the same way as pinocchio's rotation; the position is its translation."""
+    import pinocchio as pin
+    rng = np.random.default_rng(0)
+    joints = rng.uniform(-np.pi, np.pi, (5, 6))
+    poses = ur5.poses(joints)
+    data = ur5.model.createData()
+    for q, pose in zip(joints, poses):
+        pin.framesForwardKinematics(ur5.model, data, q)
+        placement = data.oMf[ur5.frame_id]
+        np.testing.assert_allclose(np.asarray(rotation_matrix(pose[:4])), placement.rotation, atol=1e-12)
+        np.testing.assert_allclose(pose[4:], placement.translation, atol=1e-12)
+        assert abs(np.linalg.norm(pose[:4]) - 1) < 1e-12
+    assert ur5.joint_names[0] == "shoulder_pan_joint" and len(ur5.joint_names) == 6
+
+
+def test_a_table_of_joint_angles_gives_the_payload(ur5, tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    joints = rng.uniform(-np.pi, np.pi, (16, 6))
+    table = simulate_table(TOOL, n=16, seed=1, offset=OFFSET, q=ur5.poses(joints)[:, :4])
+    for names in ([f"q{i + 1}" for i in range(6)], list(ur5.joint_names)):
+        path = tmp_path / "joints.csv"
+        rows = np.hstack([joints, table.w_hat])
+        path.write_text(",".join([*names, "tx", "ty", "tz", "fx", "fy", "fz"]) + "\n"
+                        + "\n".join(",".join(f"{v:.17g}" for v in row) for row in rows) + "\n")
+        assert main(["identify-payload", str(path), "--urdf", str(_ur5()), "--frame", "tool0", "--json"]) == 0
+        fit = json.loads(capsys.readouterr().out)
+        assert abs(fit["mass"] - TOOL.mass) < 0.01 * TOOL.mass
+        assert np.abs(np.array(fit["rho"]) - TOOL.rho).max() < 2e-3 and fit["converged"]
+
+
+def test_a_frame_the_urdf_lacks_and_joints_that_do_not_match_are_one_line(tmp_path, capsys):
+    with pytest.raises(FmscalError, match="has no frame 'sensor'"):
+        RobotKinematics(_ur5(), "sensor")
+    with pytest.raises(FmscalError, match="do not match the URDF's 6 joints: name them q1,q2"):
+        joint_columns(["t", "a", "b", "tx", "ty", "tz", "fx", "fy", "fz"], [f"j{i}" for i in range(6)])
+    path = tmp_path / "five.csv"
+    path.write_text("q1,q2,q3,q4,q5,tx,ty,tz,fx,fy,fz\n" + "0,0,0,0,0,0,0,0,0,0,1\n" * 5)
+    assert main(["identify-payload", str(path), "--urdf", str(_ur5()), "--frame", "tool0"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "do not match the URDF's 6 joints" in err
+    assert main(["identify-payload", str(path), "--urdf", str(_ur5())]) == 2
+    assert "--urdf and --frame go together" in capsys.readouterr().err
