@@ -35,6 +35,10 @@ def add_import(sub):
     p.add_argument("--spatial", action="store_true",
                    help="keep the whole pose and all six wrench components: a spatial log "
                         "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) of a 6-axis sensor")
+    p.add_argument("--urdf", metavar="ROBOT.urdf",
+                   help="the pose topic is the arm's sensor_msgs/JointState: the pose of --frame by forward "
+                        "kinematics (pinocchio: pip install \"fmscal[robot]\"); implies --spatial")
+    p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
     p.add_argument("--start", type=float, metavar="S", help="keep stamps from S s after the first wrench stamp")
     p.add_argument("--end", type=float, metavar="S", help="keep stamps up to S s after the first wrench stamp")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out and its sidecar")
@@ -52,13 +56,21 @@ def cmd_import(args):
     if bag.is_dir() and any(_inside(f, bag) for f in (out, sidecar)):
         raise CliError(f"--out {out} would write into the bag {bag}; choose another path")
     check_outputs([(out, "--out"), (sidecar, "--out's sidecar")], [(bag, "the bag")], overwrite=args.overwrite)
+    if (args.urdf is None) != (args.frame is None):
+        raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
+    kinematics = None
+    if args.urdf is not None:
+        from fmscal.plant.kinematics import RobotKinematics
+        if args.pose_offset is not None:
+            raise CliError("--pose-offset is not taken with --urdf: name the sensor's own frame with --frame")
+        kinematics, args.spatial = RobotKinematics(args.urdf, args.frame), True
     n = 3 if args.spatial else 2
     offset = tuple(args.pose_offset) if args.pose_offset is not None else (0.0,) * n
     if len(offset) != n or not all(np.isfinite(v) for v in offset):
         raise CliError(f"--pose-offset must be {n} finite numbers in m{' with --spatial' if args.spatial else ''}; "
                        f"got {list(offset)}")
     log, report = import_bag(bag, args.wrench_topic, args.pose_topic, offset, args.start, args.end,
-                             spatial=args.spatial)
+                             spatial=args.spatial, kinematics=kinematics)
     text = json.dumps(strict({"log": out.name, "samples": len(log), "duration_s": log.duration,
                               "pose_measurements": int(log.has_pose.sum()), **report}), indent=2, allow_nan=False)
     # both or neither: the sidecar first, the log last (plant.files.atomic_write_many)

@@ -45,7 +45,7 @@ from .model import SpatialModel
 from .rigid_body import rotation_matrix
 
 __all__ = ["BagError", "import_bag", "read_bag", "format_report",
-           "WRENCH_TYPE", "POSE_TYPES", "MAX_WRENCH_GAP", "MAX_TILT_DEG", "MAX_OUT_OF_PLANE"]
+           "WRENCH_TYPE", "POSE_TYPES", "JOINT_TYPE", "MAX_WRENCH_GAP", "MAX_TILT_DEG", "MAX_OUT_OF_PLANE"]
 
 #: The sensor's message type (rosbags' normalised name).
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
@@ -53,6 +53,8 @@ WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
 POSE_TYPES = {"geometry_msgs/msg/PoseStamped": ("pose", "position", "orientation"),
               "geometry_msgs/msg/TransformStamped": ("transform", "translation", "rotation"),
               "nav_msgs/msg/Odometry": ("pose.pose", "position", "orientation")}
+#: The arm's joint angles (with a URDF, the sensor frame's pose by forward kinematics).
+JOINT_TYPE = "sensor_msgs/msg/JointState"
 #: Longest hole in the wrench stream that is resampled over, in time steps.
 MAX_WRENCH_GAP = 10
 #: Tilt of the tracked body beyond which the planar model is warned about, degrees.
@@ -81,7 +83,8 @@ def read_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None,
     return import_bag(path, wrench_topic, pose_topic, pose_offset, start, end)[0]
 
 
-def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None, end=None, spatial=False):
+def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None, end=None, spatial=False,
+               kinematics=None):
     """Read a ROS bag into a log, with a report of what was imported.
 
     Parameters
@@ -106,6 +109,10 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
     spatial : bool
         Keep the whole pose and all six wrench components: a spatial log
         (``t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz``) of a 6-axis sensor.
+    kinematics : plant.kinematics.RobotKinematics, optional
+        The pose topic is the arm's ``sensor_msgs/JointState``: each message's
+        joints (by name) give the sensor frame's pose by forward kinematics
+        (a spatial log; the pose offset is then zero).
 
     Returns
     -------
@@ -135,13 +142,15 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         wrench stream, or too little data for a log.
     """
     path = Path(path)
+    if kinematics is not None and not spatial:
+        raise BagError("joint angles give a spatial pose: import them with spatial=True (--spatial)")
     offset = _numbers(pose_offset, "pose_offset", 3 if spatial else 2)
     for name, value in (("start", start), ("end", end)):
         if value is not None and not np.isfinite(value):
             raise BagError(f"{name} must be a finite number of seconds; got {value}")
     if start is not None and end is not None and not end > start:
         raise BagError(f"end must be after start; got start {start}, end {end}")
-    pose_type, wrench_msgs, pose_msgs = _read_messages(path, wrench_topic, pose_topic)
+    pose_type, wrench_msgs, pose_msgs = _read_messages(path, wrench_topic, pose_topic, kinematics)
     t_w, w, w_ignored, w_info = _stream(wrench_msgs, "wrench", path.name)
     if spatial:                                 # [torque.x, torque.y, torque.z, force.x, force.y, force.z]
         w, w_ignored = np.column_stack([w_ignored[:, :2], w[:, :1], w[:, 1:], w_ignored[:, 2:]]), w_ignored[:, :0]
@@ -276,14 +285,15 @@ def _refuse_foreign(err, what):
     raise BagError(f"{what} ({message})") from None
 
 
-def _read_messages(path, wrench_topic, pose_topic):
-    """The pose type and the (stamp ns, message) lists of both topics."""
+def _read_messages(path, wrench_topic, pose_topic, kinematics=None):
+    """The pose type and the (stamp ns, values) lists of both topics (poses as ``x, y, z, qx, qy, qz, qw``)."""
     reader = _open_reader(path)
     try:
         topics = {name: info.msgtype for name, info in reader.topics.items()}
         present = ", ".join(f"{name} ({typ})" for name, typ in sorted(topics.items())) or "none"
+        pose_types = (JOINT_TYPE,) if kinematics is not None else tuple(POSE_TYPES)
         for role, topic, wanted in (("wrench", wrench_topic, (WRENCH_TYPE,)),
-                                    ("pose", pose_topic, tuple(POSE_TYPES))):
+                                    ("pose", pose_topic, pose_types)):
             if topic not in topics:
                 raise BagError(f"{path.name}: no {role} topic {topic!r}; topics present: {present}")
             if topics[topic] not in wanted:
@@ -303,6 +313,10 @@ def _read_messages(path, wrench_topic, pose_topic):
         pose_type = topics[pose_topic]
     finally:
         reader.close()
+    if kinematics is not None:
+        poses = _joint_poses([m for _, m in out[pose_topic]], kinematics, path.name)
+        return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
+                [(s, (*p[4:], *p[1:4], p[0])) for (s, _), p in zip(out[pose_topic], poses)])
     where = POSE_TYPES[pose_type]
 
     def pose_values(msg):
@@ -311,12 +325,31 @@ def _read_messages(path, wrench_topic, pose_topic):
         p, q = getattr(msg, where[1]), getattr(msg, where[2])
         return (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
 
-    def wrench_values(msg):
-        f, m = msg.wrench.force, msg.wrench.torque
-        return (m.z, f.x, f.y, m.x, m.y, f.z)
-
-    return (pose_type, [(s, wrench_values(m)) for s, m in out[wrench_topic]],
+    return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
             [(s, pose_values(m)) for s, m in out[pose_topic]])
+
+
+def _wrench_values(msg):
+    """``[torque.z, force.x, force.y, torque.x, torque.y, force.z]`` of a WrenchStamped (planar first)."""
+    f, m = msg.wrench.force, msg.wrench.torque
+    return (m.z, f.x, f.y, m.x, m.y, f.z)
+
+
+def _joint_poses(messages, kinematics, name):
+    """The sensor frame's pose (``[qw, qx, qy, qz, x, y, z]``) of every JointState message, its joints by name."""
+    wanted = kinematics.joint_names
+    rows = np.empty((len(messages), len(wanted)))
+    for k, msg in enumerate(messages):
+        by_name = dict(zip(msg.name, np.asarray(msg.position, dtype=float)))
+        missing = [j for j in wanted if j not in by_name]
+        if missing:
+            raise BagError(f"{name}: JointState message {k + 1} has no {', '.join(missing)} (it names "
+                           f"{', '.join(msg.name) or 'no joint'}); the URDF's joints are {', '.join(wanted)}")
+        rows[k] = [by_name[j] for j in wanted]
+    if not np.all(np.isfinite(rows)):
+        raise BagError(f"{name}: a JointState message holds a NaN or infinite position "
+                       f"(message {int(np.argmax(~np.isfinite(rows).all(axis=1))) + 1})")
+    return kinematics.poses(rows) if len(rows) else np.empty((0, 7))
 
 
 #: A stamp earlier than the one recorded before it by more than this many of the stream's steps is a

@@ -12,7 +12,8 @@ __all__ = ["write_bag"]
 
 def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_topic="/mocap/payload/pose",
               pose_type="PoseStamped", start_time_ns=1_700_000_000_000_000_000, receive_jitter=0.0,
-              pose_offset=(0.0, 0.0), pose_stamp_jitter=0.0, wrench_drop_rate=0.0, seed=0):
+              pose_offset=(0.0, 0.0), pose_stamp_jitter=0.0, wrench_drop_rate=0.0, seed=0, joints=None,
+              joint_names=None):
     """Write a log as a ROS bag, as a rig's recorder would.
 
     The reading goes out as ``WrenchStamped`` at every sample, the pose as
@@ -34,7 +35,9 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         ``"mcap"`` or ``"sqlite3"`` (ROS 2), ``"ros1"``.
     wrench_topic, pose_topic : str
     pose_type : str
-        ``"PoseStamped"``, ``"TransformStamped"`` or ``"Odometry"``.
+        ``"PoseStamped"``, ``"TransformStamped"``, ``"Odometry"``, or
+        ``"JointState"`` (the arm's joints ``joints`` at every pose, named
+        ``joint_names``; the log's poses are then not written).
     start_time_ns : int
         Absolute time of the log's first sample, ns.
     receive_jitter : float
@@ -48,6 +51,10 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         the last), in [0, 0.5).
     seed : int
         Seeds the jitters.
+    joints : array_like, shape (N, n), optional
+        The joint angles at every sample of the log (``pose_type="JointState"``), rad.
+    joint_names : sequence of str, optional
+        Their names, as the URDF names its joints.
 
     Returns
     -------
@@ -62,9 +69,11 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     if storage not in ("mcap", "sqlite3", "ros1"):
         raise BagError(f"storage must be mcap, sqlite3 or ros1; got {storage!r}")
     full = {"PoseStamped": "geometry_msgs/msg/PoseStamped", "TransformStamped": "geometry_msgs/msg/TransformStamped",
-            "Odometry": "nav_msgs/msg/Odometry"}
+            "Odometry": "nav_msgs/msg/Odometry", "JointState": "sensor_msgs/msg/JointState"}
     if pose_type not in full:
         raise BagError(f"pose_type must be one of {', '.join(full)}; got {pose_type!r}")
+    if pose_type == "JointState" and (joints is None or joint_names is None or np.shape(joints)[0] != len(log.t)):
+        raise BagError("a JointState bag needs joints (one row per sample of the log) and joint_names")
     if not (np.isfinite(receive_jitter) and receive_jitter >= 0):
         raise BagError(f"receive_jitter must be a non-negative number of seconds; got {receive_jitter}")
     if not (np.isfinite(pose_stamp_jitter) and 0 <= pose_stamp_jitter < log.dt / 2):
@@ -107,7 +116,11 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         px, py = X + c * offset[0] - s * offset[1], Y + s * offset[0] + c * offset[1]
         return px, py, 0.0, Quaternion(x=0.0, y=0.0, z=float(np.sin(theta / 2)), w=float(np.cos(theta / 2)))
 
-    def pose_msg(ns, pose):
+    def pose_msg(ns, pose, k):
+        if pose_type == "JointState":
+            return T[full[pose_type]](header=header(ns), name=list(joint_names),
+                                      position=np.ascontiguousarray(joints[k], dtype=np.float64),
+                                      velocity=np.zeros(0), effort=np.zeros(0))
         px, py, pz, q = marker(pose)
         if pose_type == "TransformStamped":
             return T[full[pose_type]](header=header(ns), child_frame_id="payload",
@@ -129,7 +142,7 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     messages = [(0, ns, wrench_msg(ns, row)) for ns, row, ok in zip(stamps, log.w_hat, sent) if ok]
     rows = np.flatnonzero(log.has_pose)
     shift = np.round(rng.uniform(-pose_stamp_jitter, pose_stamp_jitter, len(rows)) * 1e9).astype(np.int64)
-    messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, log.pose[k])) for k, d in zip(rows, shift)]
+    messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, log.pose[k], k)) for k, d in zip(rows, shift)]
     received = [int(ns) + 1_000_000 + int(rng.uniform(0, receive_jitter) * 1e9) for _, ns, _ in messages]
     order = np.argsort(received, kind="stable")
     if storage == "ros1":

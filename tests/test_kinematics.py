@@ -76,3 +76,29 @@ def test_a_frame_the_urdf_lacks_and_joints_that_do_not_match_are_one_line(tmp_pa
     assert len(err.strip().splitlines()) == 1 and "do not match the URDF's 6 joints" in err
     assert main(["identify-payload", str(path), "--urdf", str(_ur5())]) == 2
     assert "--urdf and --frame go together" in capsys.readouterr().err
+
+
+def test_a_bag_of_joint_states_imports_as_a_spatial_log(ur5, tmp_path, capsys):
+    """An arm's bag: WrenchStamped and sensor_msgs/JointState; with the URDF the import writes the sensor frame's
+    poses (pinocchio's forward kinematics of the joints, by name, in any order in the message)."""
+    from fmscal.plant import Log, read_log
+    from fmscal.plant.bag_write import write_bag
+    t = np.arange(0.0, 2.0, 0.005)
+    joints = 0.5 * np.sin(np.outer(t, [0.7, 1.1, 0.9, 1.3, 0.5, 1.7]) + np.arange(6))
+    poses = ur5.poses(joints)
+    log = Log(t, poses, np.tile(OFFSET, (len(t), 1)), name="arm")
+    order = [5, 0, 3, 1, 4, 2]                                  # the message names the joints in its own order
+    bag = write_bag(log, tmp_path / "arm_bag", pose_type="JointState", pose_topic="/joint_states",
+                    joints=joints[:, order], joint_names=[ur5.joint_names[i] for i in order])
+    out = tmp_path / "arm.csv"
+    assert main(["import", str(bag), "--wrench-topic", "/ft_sensor/wrench", "--pose-topic", "/joint_states",
+                 "--urdf", str(_ur5()), "--frame", "tool0", "--out", str(out)]) == 0
+    back = read_log(out)
+    assert back.kind == "spatial" and len(back) == len(t)
+    np.testing.assert_allclose(back.pose, poses, atol=1e-9)
+    np.testing.assert_allclose(back.w_hat, log.w_hat, atol=1e-12)
+    capsys.readouterr()
+    assert main(["import", str(bag), "--wrench-topic", "/ft_sensor/wrench", "--pose-topic", "/joint_states",
+                 "--urdf", str(_ur5()), "--frame", "tool0", "--out", str(tmp_path / "again.csv"),
+                 "--pose-offset", "0", "0", "0"]) == 2
+    assert "--pose-offset is not taken with --urdf" in capsys.readouterr().err
