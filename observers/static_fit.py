@@ -68,11 +68,11 @@ class StaticFit:
     gravity : ndarray, shape (3,), or None
         Gravity in the pose frame, m/s^2, where estimated.
     gravity_std_deg : float or None
-        One-sigma uncertainty of its direction, degrees.
+        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
     mounting : ndarray, shape (3, 3), or None
         The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors), where estimated.
     mounting_deg, mounting_std_deg : float or None
-        The mounting's angle and the one-sigma uncertainty of its rotation, degrees.
+        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
     reading : str
         The reading's sign convention the fit used (:data:`READINGS`).
     cone_deg : float
