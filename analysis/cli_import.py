@@ -38,7 +38,11 @@ def add_import(sub):
     p.add_argument("--urdf", metavar="ROBOT.urdf",
                    help="the pose topic is the arm's sensor_msgs/JointState: the pose of --frame by forward "
                         "kinematics (pinocchio: pip install \"fmscal[robot]\"); implies --spatial")
-    p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
+    p.add_argument("--frame", metavar="FRAME",
+                   help="the sensor's frame: in the URDF (with --urdf), or in the transform tree (with --parent)")
+    p.add_argument("--parent", metavar="FRAME",
+                   help="the pose topic is /tf (tf2_msgs/TFMessage, with /tf_static where the bag has it): the "
+                        "pose of --frame in this frame, the chain of transforms composed; implies --spatial")
     p.add_argument("--start", type=float, metavar="S", help="keep stamps from S s after the first wrench stamp")
     p.add_argument("--end", type=float, metavar="S", help="keep stamps up to S s after the first wrench stamp")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out and its sidecar")
@@ -56,9 +60,16 @@ def cmd_import(args):
     if bag.is_dir() and any(_inside(f, bag) for f in (out, sidecar)):
         raise CliError(f"--out {out} would write into the bag {bag}; choose another path")
     check_outputs([(out, "--out"), (sidecar, "--out's sidecar")], [(bag, "the bag")], overwrite=args.overwrite)
-    if (args.urdf is None) != (args.frame is None):
-        raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
-    kinematics = None
+    if args.urdf is not None and args.parent is not None:
+        raise CliError("--urdf (joint angles) and --parent (a transform tree) are two sources of the pose; give one")
+    if (args.urdf is not None or args.parent is not None) != (args.frame is not None):
+        raise CliError("--frame goes with --urdf (the sensor's frame in the URDF) or --parent (the frame whose pose "
+                       "in the tree is wanted)")
+    kinematics, tf_frames = None, None
+    if args.parent is not None:
+        if args.pose_offset is not None:
+            raise CliError("--pose-offset is not taken with --parent: name the sensor's own frame with --frame")
+        tf_frames, args.spatial = (args.parent, args.frame), True
     if args.urdf is not None:
         from fmscal.plant.kinematics import RobotKinematics
         if args.pose_offset is not None:
@@ -70,7 +81,7 @@ def cmd_import(args):
         raise CliError(f"--pose-offset must be {n} finite numbers in m{' with --spatial' if args.spatial else ''}; "
                        f"got {list(offset)}")
     log, report = import_bag(bag, args.wrench_topic, args.pose_topic, offset, args.start, args.end,
-                             spatial=args.spatial, kinematics=kinematics)
+                             spatial=args.spatial, kinematics=kinematics, tf_frames=tf_frames)
     text = json.dumps(strict({"log": out.name, "samples": len(log), "duration_s": log.duration,
                               "pose_measurements": int(log.has_pose.sum()), **report}), indent=2, allow_nan=False)
     # both or neither: the sidecar first, the log last (plant.files.atomic_write_many)

@@ -45,7 +45,7 @@ from .model import SpatialModel
 from .rigid_body import rotation_matrix
 
 __all__ = ["BagError", "import_bag", "read_bag", "format_report",
-           "WRENCH_TYPE", "POSE_TYPES", "JOINT_TYPE", "MAX_WRENCH_GAP", "MAX_TILT_DEG", "MAX_OUT_OF_PLANE"]
+           "WRENCH_TYPE", "POSE_TYPES", "JOINT_TYPE", "TF_TYPE", "MAX_WRENCH_GAP", "MAX_TILT_DEG", "MAX_OUT_OF_PLANE"]
 
 #: The sensor's message type (rosbags' normalised name).
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
@@ -55,6 +55,9 @@ POSE_TYPES = {"geometry_msgs/msg/PoseStamped": ("pose", "position", "orientation
               "nav_msgs/msg/Odometry": ("pose.pose", "position", "orientation")}
 #: The arm's joint angles (with a URDF, the sensor frame's pose by forward kinematics).
 JOINT_TYPE = "sensor_msgs/msg/JointState"
+#: A robot's transform tree (``/tf``, with the fixed transforms on ``/tf_static``): the sensor frame's pose is
+#: the chain from a parent frame to it, composed.
+TF_TYPE = "tf2_msgs/msg/TFMessage"
 #: Longest hole in the wrench stream that is resampled over, in time steps.
 MAX_WRENCH_GAP = 10
 #: Tilt of the tracked body beyond which the planar model is warned about, degrees.
@@ -84,7 +87,7 @@ def read_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None,
 
 
 def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=None, end=None, spatial=False,
-               kinematics=None):
+               kinematics=None, tf_frames=None):
     """Read a ROS bag into a log, with a report of what was imported.
 
     Parameters
@@ -113,6 +116,12 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         The pose topic is the arm's ``sensor_msgs/JointState``: each message's
         joints (by name) give the sensor frame's pose by forward kinematics
         (a spatial log; the pose offset is then zero).
+    tf_frames : (str, str), optional
+        ``(parent, frame)``: the pose topic is ``/tf`` (``tf2_msgs/TFMessage``,
+        with ``/tf_static`` read too where the bag has it), and the sensor
+        frame's pose is the chain of transforms from ``parent`` down to
+        ``frame``, composed at the stamps of its first moving link (the
+        other moving links interpolated there). A spatial log.
 
     Returns
     -------
@@ -142,15 +151,15 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         wrench stream, or too little data for a log.
     """
     path = Path(path)
-    if kinematics is not None and not spatial:
-        raise BagError("joint angles give a spatial pose: import them with spatial=True (--spatial)")
+    if (kinematics is not None or tf_frames is not None) and not spatial:
+        raise BagError("joint angles and transforms give a spatial pose: import them with spatial=True (--spatial)")
     offset = _numbers(pose_offset, "pose_offset", 3 if spatial else 2)
     for name, value in (("start", start), ("end", end)):
         if value is not None and not np.isfinite(value):
             raise BagError(f"{name} must be a finite number of seconds; got {value}")
     if start is not None and end is not None and not end > start:
         raise BagError(f"end must be after start; got start {start}, end {end}")
-    pose_type, wrench_msgs, pose_msgs = _read_messages(path, wrench_topic, pose_topic, kinematics)
+    pose_type, wrench_msgs, pose_msgs = _read_messages(path, wrench_topic, pose_topic, kinematics, tf_frames)
     t_w, w, w_ignored, w_info = _stream(wrench_msgs, "wrench", path.name)
     if spatial:                                 # [torque.x, torque.y, torque.z, force.x, force.y, force.z]
         w, w_ignored = np.column_stack([w_ignored[:, :2], w[:, :1], w[:, 1:], w_ignored[:, 2:]]), w_ignored[:, :0]
@@ -285,13 +294,14 @@ def _refuse_foreign(err, what):
     raise BagError(f"{what} ({message})") from None
 
 
-def _read_messages(path, wrench_topic, pose_topic, kinematics=None):
+def _read_messages(path, wrench_topic, pose_topic, kinematics=None, tf_frames=None):
     """The pose type and the (stamp ns, values) lists of both topics (poses as ``x, y, z, qx, qy, qz, qw``)."""
     reader = _open_reader(path)
     try:
         topics = {name: info.msgtype for name, info in reader.topics.items()}
         present = ", ".join(f"{name} ({typ})" for name, typ in sorted(topics.items())) or "none"
-        pose_types = (JOINT_TYPE,) if kinematics is not None else tuple(POSE_TYPES)
+        pose_types = ((JOINT_TYPE,) if kinematics is not None else (TF_TYPE,) if tf_frames is not None
+                      else tuple(POSE_TYPES))
         for role, topic, wanted in (("wrench", wrench_topic, (WRENCH_TYPE,)),
                                     ("pose", pose_topic, pose_types)):
             if topic not in topics:
@@ -302,10 +312,16 @@ def _read_messages(path, wrench_topic, pose_topic, kinematics=None):
         out = {wrench_topic: [], pose_topic: []}
         if wrench_topic == pose_topic:
             raise BagError(f"the wrench and pose topics must differ; got {wrench_topic!r} for both")
+        static = "/tf_static" if tf_frames is not None and topics.get("/tf_static") == TF_TYPE else None
+        if static:
+            out[static] = []
         connections = [c for c in reader.connections if c.topic in out]
         try:
             for connection, _, raw in reader.messages(connections=connections):
                 msg = reader.deserialize(raw, connection.msgtype)
+                if connection.msgtype == TF_TYPE:             # no header of its own: one per transform
+                    out[connection.topic].append((0, msg))
+                    continue
                 stamp = msg.header.stamp
                 out[connection.topic].append((int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), msg))
         except Exception as err:
@@ -313,6 +329,11 @@ def _read_messages(path, wrench_topic, pose_topic, kinematics=None):
         pose_type = topics[pose_topic]
     finally:
         reader.close()
+    if tf_frames is not None:
+        from .tf_chain import chain_poses
+        return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
+                chain_poses([m for _, m in out[pose_topic]], [m for _, m in out.get(static, [])], *tf_frames,
+                            path.name))
     if kinematics is not None:
         poses = _joint_poses([m for _, m in out[pose_topic]], kinematics, path.name)
         return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
