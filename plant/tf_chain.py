@@ -110,8 +110,8 @@ def chain_poses(dynamic, static, parent, frame, name="bag"):
             at = (stamps - stamps[0]) * 1e-9
             rotations = Rotation.concatenate([r for (_, r, _), k in zip(series, keep) if k])
             R_link = Slerp(times, rotations)(at) if len(times) > 1 else Rotation.concatenate([rotations] * len(at))
-            p_link = np.column_stack([np.interp(at, times, np.array([q for (_, _, q), k in zip(series, keep) if k])[:, j])
-                                      for j in range(3)])
+            positions = np.array([q for (_, _, q), k in zip(series, keep) if k])
+            p_link = np.column_stack([np.interp(at, times, positions[:, j]) for j in range(3)])
         else:
             _, (_, r, q) = fixed[c]
             R_link, p_link = Rotation.concatenate([r] * len(stamps)), np.tile(q, (len(stamps), 1))
