@@ -1,11 +1,18 @@
 """An adaptive observer at the information floor: eqs. (6)-(8) with filtered regressors and a least-squares gain.
 
-The observer keeps the paper's structure: ``x_hat`` follows eqs. (6), (7),
-propagated with ``G(theta) S_hat w_hat`` and corrected by an output injection
-``K C e``; the adaptation acts on ``phi_1``, ``phi_2`` of eqs. (4), (5) with the
-regressor of eq. (8), ``G(theta)^T . w_hat^T`` (the rows of ``B_1``, ``B_2``,
-:func:`plant.regressors`). What changes is how the error and the
-gain are formed (class docstring, numbered).
+The observer keeps the paper's structure, written for any model linear in its
+channels (:attr:`fmscal.plant.Model.linear_channels`): each velocity channel
+``c`` is a double integrator of its position (a configuration entry, which the
+pose measures) driven by ``a_c = psi_c(q, w_hat) . phi_g``, ``phi_g`` the
+parameters of the channel's group (:meth:`fmscal.plant.Model.parameter_groups`,
+:meth:`fmscal.plant.Model.channel_regressor_rows`). For the planar model these
+are eqs. (4), (5): ``phi_1`` drives ``theta``, ``phi_2`` drives ``X`` and ``Y``,
+with the regressor of eq. (8), ``G(theta)^T . w_hat^T`` (the rows of ``B_1``,
+``B_2``, :func:`plant.regressors`). ``x_hat`` follows eqs. (6), (7), propagated
+with ``A(q) S_hat w_hat`` (planar: ``G(theta) S_hat w_hat``) and corrected by an
+output injection ``K C e``; the adaptation acts on the groups' parameters.
+What changes from the paper is how the error and the gain are formed (class
+docstring, numbered).
 
 Why it reaches the floor. With both poles of each channel's observer at
 ``-lam``, the output error is the regressor passed through one stable
@@ -19,8 +26,8 @@ averages the whole log as an offline fit would; the noise in the regressor
 (the raw reading's) is filtered to a negligible bias.
 
 Discrete form (as :mod:`observers.highgain`): the exact double-integrator
-step with the regressor linear over the step; per pose, with ``h`` the time
-since the previous pose,
+step with the regressor linear over the step (:mod:`observers.discretise`);
+per channel and pose, with ``h`` the time since the previous pose,
 
     x^-           = Phi x_n + G_n phi_n          Upsilon^- = Phi Upsilon_n + G_n
     e             = y_{n+1} - C x^-               H = C Upsilon^-
@@ -29,22 +36,23 @@ since the previous pose,
     x_{n+1}       = x^- + L_h e + Upsilon_{n+1} (phi_{n+1} - phi_n)
 
 with ``L_h`` placing the eigenvalues of ``(I - L_h C) Phi(h)`` at
-``exp(-lam h)``.
+``exp(-lam h)``; ``S_hat`` is ``[S | c]`` of the groups' ``phi``
+(:meth:`fmscal.plant.Model.params_from_phi`; planar: :func:`plant.S_from_phi`).
 """
 
 import numpy as np
 
-from fmscal.plant import S_from_phi, phi_1, phi_2, regressors
 from fmscal.plant._backend import ops
 from fmscal.plant._checks import as_bool, as_positive_scalar
 from fmscal.plant.errors import FmscalError
+from fmscal.plant.model import as_model
 
 from . import _matrix as mx
 from .base import RecursiveObserver
 from .gains import double_pole_gains
 from .highgain import discrete_gain
 from .discretise import position_increment, velocity_increment
-from .state import INPUT, StateLayout
+from .state import StateLayout
 
 __all__ = ["AdaptiveObserver", "DEFAULT_LAM", "GAINS"]
 
@@ -61,10 +69,15 @@ _T_STEP = 0.05         # s, time constant of the forgetting while the step test 
 class AdaptiveObserver(RecursiveObserver):
     """Adaptive observer of eqs. (6)-(8) with filtered regressors and a least-squares gain.
 
-    Module docstring for the equations. The changes from the paper's
-    observer (:class:`observers.PaperAdaptiveObserver`), each switched by a
-    setting so that :func:`analysis.ablation.ablation` measures them one by
-    one:
+    Module docstring for the equations. It runs on any model linear in its
+    channels (:attr:`fmscal.plant.Model.linear_channels`: the planar model,
+    the tests' rail) and takes every size and layout from it: the motion
+    state (``nx``), one channel per velocity (``nv``), one parameter set
+    ``phi_g`` per group of :meth:`fmscal.plant.Model.parameter_groups`
+    (planar: ``phi_1`` of eq. (4), ``phi_2`` of eq. (5)). The changes from
+    the paper's observer (:class:`observers.PaperAdaptiveObserver`), each
+    switched by a setting so that :func:`analysis.ablation.ablation`
+    measures them one by one:
 
     1. **Discrete observer, poles at -lam** (eqs. 6, 7, 14): the exact
        double-integrator step with the wrench linear over the step, and the
@@ -74,22 +87,25 @@ class AdaptiveObserver(RecursiveObserver):
     2. **Filtered regressor, position error** (eqs. 8, 15): the law is driven
        by the position error ``e`` and the regressor of eq. (8) passed through
        the observer's own error filter (Kreisselmeier's sensitivity filter
-       ``Upsilon``, ``H = C Upsilon``), in place of velocity errors from
-       differenced poses (eq. 15) and the raw regressor. The correction
-       ``Upsilon dphi`` keeps ``e = H phi_tilde`` exact while ``phi_hat``
-       moves. Without the least-squares gain (``gain="gradient"``) the step
-       is the normalised gradient ``dphi = gamma h H^T e / |H|^2``
+       ``Upsilon``, one per channel, ``H = C Upsilon``), in place of velocity
+       errors from differenced poses (eq. 15) and the raw regressor. The
+       correction ``Upsilon dphi`` keeps ``e = H phi_tilde`` exact while
+       ``phi_hat`` moves. Without the least-squares gain (``gain="gradient"``)
+       the step is the normalised gradient ``dphi = gamma h H^T e / |H|^2``
        (eq. 8's ``delta`` made scale-free).
     3. **Least-squares gain** (eq. 8's ``delta``): ``delta`` becomes the
        recursive least-squares covariance ``P`` of each parameter set, so
        the estimate is the least-squares fit of all poses so far
-       (``gain="least-squares"``). ``P`` starts from a prior worth a
-       thousandth of a sample; no noise model is needed (the innovations
-       are weighted alike). ``phi_2`` is fitted from the X and Y errors
-       together in complex form: eq. (1) rotates the force, so
-       ``X + iY = zeta . (s_2 + i s_3)`` with ``zeta`` the filtered
-       ``exp(i theta) w_hat / m``, and ``P`` is a 3x3 Hermitian matrix (the
-       same fit as a 6x6 real one, for a quarter of the work).
+       (``gain="least-squares"``). The channels of one group update it in
+       turn (:meth:`_group_rls`; planar: ``phi_2`` from the X error, then
+       the Y error), the same fit as both rows at once. ``P`` starts from a
+       prior worth a thousandth of a sample; no noise model is needed (the
+       innovations are weighted alike). (Planar ``phi_2`` could also be
+       fitted in complex form, ``X + iY = zeta . (s_2 + i s_3)`` with a 3x3
+       Hermitian ``P``: the same fit, which earlier releases used. Measured
+       on a 60 s ``paper`` log, the real 6x6 form costs 1.08-1.16x the
+       complex one per step (1.12-1.25x with the offset), for one code path
+       for every model; its estimates differ by rounding, 1e-13.)
     4. **Forgetting on evidence of change** (``track=True``; the paper's
        law has a constant gain and so never stops adapting): a change test
        per parameter set on the a priori errors, free of the noise's level
@@ -116,8 +132,9 @@ class AdaptiveObserver(RecursiveObserver):
 
     Parameters
     ----------
-    model : plant.PlanarModel or plant.Payload
-        The planar problem (a payload stands for its planar model).
+    model : plant.Model or plant.Payload
+        The problem, a model with :attr:`fmscal.plant.Model.linear_channels`
+        (a payload stands for its case's model; the planar one).
     lam : float
         Pole of each channel (double), rad/s: the bandwidth of the filter
         ``1/(s + lam)^2`` on the regressor (change 1, 2).
@@ -143,6 +160,12 @@ class AdaptiveObserver(RecursiveObserver):
     offset : bool
         Also estimate the sensor's offset ``b`` (``result.b``).
 
+    Raises
+    ------
+    FmscalError
+        A model that is not linear in its channels (the spatial one), or a
+        bad setting.
+
     Examples
     --------
     >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
@@ -151,8 +174,14 @@ class AdaptiveObserver(RecursiveObserver):
     (3, 3)
     """
 
+    name = "adaptive"
+
     def __init__(self, model, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
                  threshold=8.0, step_ratio=5.0, t_forget=0.05, memory=0.2, offset=False):
+        model = as_model(model, type(self).__name__)
+        if not model.linear_channels:
+            raise FmscalError(f"AdaptiveObserver runs on models linear in their channels (planar, or one of your "
+                              f"own with linear_channels); got a {model.name} model")
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")
@@ -165,76 +194,101 @@ class AdaptiveObserver(RecursiveObserver):
         self.t_forget = as_positive_scalar(t_forget, "t_forget")
         self.memory = as_positive_scalar(memory, "memory")
         #: The continuous-time injection gains whose double poles at ``-lam`` the sampled gain
-        #: ``L_h`` images (eqs. 6, 7, 14; ``fmscal check-gains --config adaptive``).
+        #: ``L_h`` images (eqs. 6, 7, 14; ``fmscal check-gains --config adaptive``): ``K1`` of each
+        #: channel, ``K2`` the planar translational pair.
         self.K1, self.K2 = double_pole_gains(self.lam)
         super().__init__(model, offset=offset)
 
-    name = "adaptive"
-    models = ("planar",)        # eqs. (4)-(8): the paper's planar structure
+    # --- the structure, from the model ------------------------------------------------------
+    def _groups(self):
+        """Each parameter group of the model: its channels and its parameter count ``k``."""
+        model = self.model
+        rows = model.channel_regressor_rows(np.zeros(model.nq), np.ones(self.n_cols))
+        return [(list(channels), len(rows[channels[0]])) for channels in model.parameter_groups()]
 
     def _layout(self):
-        # since: time from the last pose to sample n; scale: each parameter set's prior information;
-        # ups_c, ups_s: the filtered cos(theta) w_hat / m and sin(theta) w_hat / m, from which both
-        # translational regressors are made; Pre + i Pim: the translational covariance in complex form
-        # (change 3); test1, test2: the averages of each parameter set's change test (_change_test)
-        n = self.n_cols
-        return StateLayout(("x", 6), ("S", 3 * n), ("since", 1), ("scale", 2), ("ups_t", 2 * n), ("ups_c", 2 * n),
-                           ("ups_s", 2 * n), ("P1", n * n), ("Pre", n * n), ("Pim", n * n), ("test1", 4 * n + 2),
-                           ("test2", 8 * n + 2))
+        # called once by RecursiveObserver.__init__: the groups' structure is read from the model here.
+        # since: time from the last pose to sample n; scale: each parameter group's prior information;
+        # ups<c>: channel c's sensitivity filter Upsilon (position row, velocity row: 2 x k of its group);
+        # P<g>: group g's covariance (k x k, change 3); test<g>: the averages of its change test (_change_test)
+        self._structure = self._groups()
+        parts = [("x", self.model.nx), ("S", self.n_w * self.n_cols), ("since", 1), ("scale", len(self._structure))]
+        parts += [(f"ups{c}", 2 * k) for channels, k in self._structure for c in channels]
+        parts += [(f"P{g}", k * k) for g, (_, k) in enumerate(self._structure)]
+        parts += [(f"test{g}", 4 * k + 2) for g, (_, k) in enumerate(self._structure)]
+        return StateLayout(*parts)
 
     def _initial_state(self, S0, u):
-        n = self.n_cols
-        pose = u.pose
+        model = self.model
+        pose, w_hat = np.atleast_1d(u.pose), np.atleast_1d(u.w_hat)
         # the size H = C Upsilon will have, |psi| / lam^2 (the filter's DC gain), sets the prior
-        w = self._augmented(ops(u.w_hat), u.w_hat)
-        psi_t, psi_x, psi_y = (np.array(v) for v in regressors(pose[0], w, self.payload))
-        info = [max(psi_t @ psi_t / n, 1e-12) / self.lam ** 4,
-                max((psi_x @ psi_x + psi_y @ psi_y) / (2 * n), 1e-12) / self.lam ** 4]
-        test1, test2 = np.zeros(4 * n + 2), np.zeros(8 * n + 2)
-        test1[3 * n:4 * n] = info[0]
-        test2[6 * n:8 * n] = info[1]
-        return self.state.pack(None, x=self.model.rest_state(pose), S=self._initial_S(S0),
-                               since=0.0, scale=info, ups_t=np.zeros(2 * n), ups_c=np.zeros(2 * n),
-                               ups_s=np.zeros(2 * n), P1=(np.eye(n) / (_PRIOR * info[0])).ravel(),
-                               Pre=(np.eye(n) / (_PRIOR * info[1])).ravel(), Pim=np.zeros(n * n),
-                               test1=test1, test2=test2)
+        w = self._augmented(ops(w_hat), w_hat)
+        psi = [np.array(row, dtype=float) for row in model.channel_regressor_rows(pose, w)]
+        parts, info = {}, []
+        for g, (channels, k) in enumerate(self._structure):
+            info.append(max(sum(psi[c] @ psi[c] for c in channels) / k, 1e-12) / self.lam ** 4)
+            parts.update({f"ups{c}": np.zeros(2 * k) for c in channels})
+            parts[f"P{g}"] = (np.eye(k) / (_PRIOR * info[g])).ravel()
+            parts[f"test{g}"] = np.zeros(4 * k + 2)
+            parts[f"test{g}"][3 * k:4 * k] = info[g]
+        return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info,
+                               **parts)
 
     # --- the adaptation -------------------------------------------------------
     @staticmethod
     def _rls(P, h, e, k):
         """Recursive least squares, one measurement ``e = h . phi_tilde`` (change 3).
 
-        Returns ``(d_phi, P_next)``; ``P`` a list of ``k`` rows.
+        ``g = P h / (1 + h^T P h)``, ``phi += g e``, ``P -= g (P h)^T``.
+
+        Parameters
+        ----------
+        P : list of k lists of k
+            The covariance, symmetric.
+        h : list of k
+            The regressor row ``H``.
+        e : float or casadi.SX
+            The a priori error.
+        k : int
+
+        Returns
+        -------
+        d_phi : list of k
+        P_next : list of k lists of k
+            Symmetric: each entry below the diagonal is its mirror's.
         """
         Ph = [sum(P[i][j] * h[j] for j in range(k)) for i in range(k)]
         denom = 1.0 + sum(h[i] * Ph[i] for i in range(k))
         d_phi = [Ph[i] * e / denom for i in range(k)]
-        return d_phi, [[P[i][j] - Ph[i] * Ph[j] / denom for j in range(k)] for i in range(k)]
+        upper = {(i, j): P[i][j] - Ph[i] * Ph[j] / denom for i in range(k) for j in range(i, k)}
+        return d_phi, [[upper[min(i, j), max(i, j)] for j in range(k)] for i in range(k)]
 
-    @staticmethod
-    def _complex_rls(A, B, hc, hs, e_x, e_y, k):
-        """Recursive least squares of ``phi_2`` from the X and Y errors together, in complex form.
+    @classmethod
+    def _group_rls(cls, P, rows, errors, k):
+        """Recursive least squares of one group from each of its channels in turn (change 3).
 
-        ``X + iY = zeta . (s_2 + i s_3)`` with ``zeta = hc + i hs`` (the
-        filtered ``exp(i theta) w_hat / m``); ``P = A + iB`` Hermitian, ``A``
-        symmetric and ``B`` antisymmetric (lists of ``k`` rows). With
-        ``h = conj(zeta)``: ``g = P h / (1 + h^H P h)``, ``phi += g e``,
-        ``P -= g (P h)^H``, the same as the real update on both rows.
+        The channel after the first sees its error with the update so far
+        taken out, ``e_c - H_c . d_phi``: the same fit as all rows at once.
+
+        Parameters
+        ----------
+        P : list of k lists of k
+        rows : list of lists of k
+            Each channel's regressor row ``H_c``.
+        errors : list
+            Each channel's a priori error.
+        k : int
 
         Returns
         -------
-        d_s2, d_s3 : lists of k
-        A_next, B_next : lists of k rows
+        d_phi : list of k
+        P_next : list of k lists of k
         """
-        hr, hi = hc, [-v for v in hs]
-        pr = [sum(A[i][j] * hr[j] - B[i][j] * hi[j] for j in range(k)) for i in range(k)]
-        pi = [sum(A[i][j] * hi[j] + B[i][j] * hr[j] for j in range(k)) for i in range(k)]
-        denom = 1.0 + sum(hr[i] * pr[i] + hi[i] * pi[i] for i in range(k))
-        d_s2 = [(pr[i] * e_x - pi[i] * e_y) / denom for i in range(k)]
-        d_s3 = [(pr[i] * e_y + pi[i] * e_x) / denom for i in range(k)]
-        A = [[A[i][j] - (pr[i] * pr[j] + pi[i] * pi[j]) / denom for j in range(k)] for i in range(k)]
-        B = [[B[i][j] - (pi[i] * pr[j] - pr[i] * pi[j]) / denom for j in range(k)] for i in range(k)]
-        return d_s2, d_s3, A, B
+        d_phi, P = cls._rls(P, rows[0], errors[0], k)
+        for h, e in zip(rows[1:], errors[1:]):
+            d, P = cls._rls(P, h, e - sum(h[j] * d_phi[j] for j in range(k)), k)
+            d_phi = [d_phi[j] + d[j] for j in range(k)]
+        return d_phi, P
 
     def _gradient(self, rows, errors, k, step, scale):
         """Normalised gradient ``gamma h H^T e / |H|^2`` (change 2 without 3)."""
@@ -301,83 +355,69 @@ class AdaptiveObserver(RecursiveObserver):
         return o.fmin(o.exp(h * rate), o.fmax(cap / (trace + _FLOOR), 1.0))
 
     def _transition(self, z, u_prev, u, dt):
-        """One step (module docstring), the class docstring's changes 1-5."""
+        """One step (module docstring), the class docstring's changes 1-5, channel by channel from the model."""
         o = ops(z, u)
-        p, n = self.payload, self.n_cols
-        st, now, nxt = self.state.unpack(z), INPUT.unpack(u_prev), INPUT.unpack(u)
-        x, S, pose, has = st.x, st.S, now.pose, now.has_pose
-        since, scale = st.since, st.scale
+        model, n = self.model, self.n_cols
+        st = self.state.unpack(z, scalars=False)
+        now, nxt = model.input_layout.unpack(u_prev, scalars=False), model.input_layout.unpack(u, scalars=False)
+        x, S, pose, has = st.x, st.S, now.pose, now.has_pose[0]
+        since, scale = st.since[0], st.scale
         w = self._augmented(o, now.w_hat)
-        has_next, pose_next, w_next = nxt.has_pose, nxt.pose, self._augmented(o, nxt.w_hat)
-        phi1 = phi_1(S, p)                      # eq. (4)
-        phi2 = phi_2(S)                         # eq. (5): rows 2, 3 of [S | c]
-        s2, s3 = phi2[:n], phi2[n:]
-        # 1. regressors of eq. (8) at both ends of the step (rows of B_1, B_2), linear over it;
-        #    the angle at n is the measured one where there is one. Eq. (1) rotates the force:
-        #    psi_X = [c, -s] and psi_Y = [s, c] with c = cos(theta) w_hat / m, s = sin(theta) w_hat / m,
-        #    so three filtered vectors carry all three regressors.
-        theta = has * pose[0] + (1 - has) * x[0]
-        psi0 = regressors(theta, w, p)
-        psi1 = regressors(x[0] + dt * x[1], w_next, p)
-        bases = [(psi0[0], psi1[0]), (psi0[1][:n], psi1[1][:n]), (psi0[2][:n], psi1[2][:n])]   # theta, c, s
-        ups = [st.ups_t, st.ups_c, st.ups_s]
-        g_p, g_v, ups_pred = [], [], []
-        for (b0, b1), up in zip(bases, ups):
-            g_p.append([position_increment(dt, b0[j], b1[j]) for j in range(n)])
-            g_v.append([velocity_increment(dt, b0[j], b1[j]) for j in range(n)])
-            ups_pred.append([[up[j] + dt * up[n + j] + g_p[-1][j] for j in range(n)],
-                             [up[n + j] + g_v[-1][j] for j in range(n)]])
-        dot = lambda a, b: sum(a[j] * b[j] for j in range(n))
-        # eqs. (6), (7): x_hat propagated with G(theta) S_hat w_hat (= B_1 phi_1, B_2 phi_2)
-        push = [(dot(g_p[0], phi1), dot(g_v[0], phi1)),
-                (dot(g_p[1], s2) - dot(g_p[2], s3), dot(g_v[1], s2) - dot(g_v[2], s3)),
-                (dot(g_p[2], s2) + dot(g_p[1], s3), dot(g_v[2], s2) + dot(g_v[1], s3))]
-        x_pred = [[x[2 * c] + dt * x[2 * c + 1] + push[c][0], x[2 * c + 1] + push[c][1]] for c in range(3)]
+        has_next, pose_next, w_next = nxt.has_pose[0], nxt.pose, self._augmented(o, nxt.w_hat)
+        qi, vi = model.q_index, model.v_index
+        phis = model.phi_from_params(S, n)             # planar: phi_1, phi_2 of eqs. (4), (5)
+        # 1. regressors of eq. (8) at both ends of the step (planar: the rows of B_1, B_2), linear over it;
+        #    the configuration at n is the measured one where there is one (the pose is the configuration)
+        q0 = o.vcat([has * pose[c] + (1 - has) * x[qi[c]] for c in range(model.nq)])
+        q1 = o.vcat([x[qi[c]] + dt * x[vi[c]] for c in range(model.nq)])
+        psi0, psi1 = model.channel_regressor_rows(q0, w), model.channel_regressor_rows(q1, w_next)
+        dot = lambda a, b: sum(a[j] * b[j] for j in range(len(a)))
+        flat = lambda M: o.vcat([v for r in M for v in r])
+        group_of = {c: g for g, (channels, _) in enumerate(self._structure) for c in channels}
+        # eqs. (6), (7): x_hat propagated with A(q) S_hat w_hat (planar: G(theta) S_hat w_hat = B_1 phi_1,
+        # B_2 phi_2); each channel's filter Upsilon^- and its C Upsilon^- (zero without a pose)
+        x_pred, ups_pred, rows = [], [], []
+        for c in range(model.nv):
+            phi, up, k = phis[group_of[c]], getattr(st, f"ups{c}"), len(psi0[c])
+            g_p = [position_increment(dt, psi0[c][j], psi1[c][j]) for j in range(k)]
+            g_v = [velocity_increment(dt, psi0[c][j], psi1[c][j]) for j in range(k)]
+            x_pred.append([x[qi[c]] + dt * x[vi[c]] + dot(g_p, phi), x[vi[c]] + dot(g_v, phi)])
+            ups_pred.append([[up[j] + dt * up[k + j] + g_p[j] for j in range(k)],
+                             [up[k + j] + g_v[j] for j in range(k)]])
+            rows.append([has_next * v for v in ups_pred[c][0]])
         # a priori position errors at n+1 (true minus estimate), zero without a pose
-        e = [has_next * (pose_next[c] - x_pred[c][0]) for c in range(3)]
-        # 2. the filtered regressors C Upsilon^- (zero without a pose)
-        h_t, h_c, h_s = ([has_next * v for v in up[0]] for up in ups_pred)
-        rows_t, rows_xy = [h_t], [h_c + [-v for v in h_s], h_s + h_c]
-        P1 = [[st.P1[n * i + j] for j in range(n)] for i in range(n)]
-        A = [[st.Pre[n * i + j] for j in range(n)] for i in range(n)]
-        B = [[st.Pim[n * i + j] for j in range(n)] for i in range(n)]
+        e = [has_next * (pose_next[c] - x_pred[c][0]) for c in range(model.nv)]
         h = since + dt                            # 5. time since the previous pose
-        if self.gain == "least-squares":          # 3. recursive least squares
-            d_phi1, P1 = self._rls(P1, h_t, e[0], n)
-            d_s2, d_s3, A, B = self._complex_rls(A, B, h_c, h_s, e[1], e[2], n)
-            d_phi2 = d_s2 + d_s3
-        else:
-            d_phi1 = self._gradient(rows_t, e[0:1], n, has_next * h, scale[0])
-            d_phi2 = self._gradient(rows_xy, e[1:3], 2 * n, has_next * h, scale[1])
-            d_s2, d_s3 = d_phi2[:n], d_phi2[n:]
-        # 4. the change test, and forgetting while it fires (off: the test's averages stay put)
-        test1, test2 = st.test1, st.test2
+        hp = has_next * h
         if self.track:
-            hp = has_next * h
             alphas = [1 - o.exp(-hp / tau) for tau in (self.window, _DRIFT_WINDOWS * self.window, 10 * self.window,
                                                          self.window / 4)]
-            test1, rate1 = self._change_test(o, rows_t, e[0:1], test1, alphas, n)
-            test2, rate2 = self._change_test(o, rows_xy, e[1:3], test2, alphas, 2 * n)
-            f1 = self._growth(o, sum(P1[i][i] for i in range(n)), test1[3 * n:4 * n], rate1, hp)
-            f2 = self._growth(o, 2 * sum(A[i][i] for i in range(n)), test2[6 * n:8 * n], rate2, hp)
-            P1 = [[f1 * v for v in r] for r in P1]
-            A = [[f2 * v for v in r] for r in A]
-            B = [[f2 * v for v in r] for r in B]
-            test1, test2 = o.vcat(test1), o.vcat(test2)
+        d_phis, parts = [], {}
+        for g, (channels, k) in enumerate(self._structure):
+            g_rows, g_errors = [rows[c] for c in channels], [e[c] for c in channels]
+            P = [[getattr(st, f"P{g}")[k * i + j] for j in range(k)] for i in range(k)]
+            if self.gain == "least-squares":      # 3. recursive least squares, the group's channels in turn
+                d_phi, P = self._group_rls(P, g_rows, g_errors, k)
+            else:
+                d_phi = self._gradient(g_rows, g_errors, k, hp, scale[g])
+            # 4. the change test, and forgetting while it fires (off: the test's averages stay put)
+            test = getattr(st, f"test{g}")
+            if self.track:
+                test, rate = self._change_test(o, g_rows, g_errors, test, alphas, k)
+                f = self._growth(o, sum(P[i][i] for i in range(k)), test[3 * k:4 * k], rate, hp)
+                P = [[f * v for v in r] for r in P]
+                test = o.vcat(test)
+            parts[f"P{g}"], parts[f"test{g}"] = flat(P), test
+            d_phis.append(d_phi)
         # 1. correction: Upsilon_n+1 = (I - L_h C) Upsilon^-, x_n+1 = x^- + L_h e + Upsilon_n+1 d_phi
         l1, l2 = discrete_gain(o, self.lam, h)
         l1, l2 = has_next * l1, has_next * l2
-        new = [[[(1 - l1) * up[0][j] for j in range(n)], [up[1][j] - l2 * up[0][j] for j in range(n)]]
-               for up in ups_pred]
-        shift = [[dot(new[0][r], d_phi1) for r in range(2)],
-                 [dot(new[1][r], d_s2) - dot(new[2][r], d_s3) for r in range(2)],
-                 [dot(new[2][r], d_s2) + dot(new[1][r], d_s3) for r in range(2)]]
-        x_next = []
-        for c in range(3):
-            x_next += [x_pred[c][0] + l1 * e[c] + shift[c][0], x_pred[c][1] + l2 * e[c] + shift[c][1]]
-        S_next = mx.flat(o, S_from_phi(phi1 + o.vcat(d_phi1), phi2 + o.vcat(d_phi2), p))
-        flat = lambda M: o.vcat([v for r in M for v in r])
-        return self.state.pack(o, x=o.vcat(x_next), S=S_next, since=(1 - has_next) * h, scale=scale,
-                               ups_t=o.vcat(new[0][0] + new[0][1]), ups_c=o.vcat(new[1][0] + new[1][1]),
-                               ups_s=o.vcat(new[2][0] + new[2][1]), P1=flat(P1), Pre=flat(A), Pim=flat(B),
-                               test1=test1, test2=test2)
+        entries = [None] * model.nx
+        for c in range(model.nv):
+            up, d_phi = ups_pred[c], d_phis[group_of[c]]
+            new = [[(1 - l1) * v for v in up[0]], [up[1][j] - l2 * up[0][j] for j in range(len(up[0]))]]
+            parts[f"ups{c}"] = o.vcat(new[0] + new[1])
+            entries[qi[c]] = x_pred[c][0] + l1 * e[c] + dot(new[0], d_phi)
+            entries[vi[c]] = x_pred[c][1] + l2 * e[c] + dot(new[1], d_phi)
+        S_next = mx.flat(o, model.params_from_phi([phi + o.vcat(d) for phi, d in zip(phis, d_phis)], n))
+        return self.state.pack(o, x=o.vcat(entries), S=S_next, since=(1 - has_next) * h, scale=scale, **parts)

@@ -221,17 +221,53 @@ class Model:
         k4 = self.state_derivative(x + dt * k3, w1)
         return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
-    # --- least squares' parameters (linear-channel models) --------------------------------------
+    # --- the channels' parameters (linear-channel models) -------------------------------------------
     def parameter_groups(self):
-        """The velocity channels that share a set of linear parameters, for least squares.
+        """The velocity channels that share a set of linear parameters ``phi``.
 
-        Least squares fits each group alone (they share no unknown). The
-        default is one group, all channels, in the parameters ``s`` themselves.
+        Least squares fits each group alone (they share no unknown), and the
+        adaptive observer (:class:`fmscal.observers.AdaptiveObserver`) runs
+        one recursive fit per group. The default is one group, all channels,
+        in the parameters ``s = vec([S | c])`` themselves.
+
+        Returns
+        -------
+        list of list of int
+            Each group's channels (``0 .. nv-1``), every channel in one group.
         """
         return [list(range(self.nv))]
 
+    def channel_regressor_rows(self, q, w_aug):
+        """Each channel's regressor in its group's parameters at one sample: ``a_c = psi_c . phi``.
+
+        Written for numbers and casadi symbols alike, so that a recursive
+        method's compiled step reads its regressors from the model.
+
+        Parameters
+        ----------
+        q : ndarray or casadi.SX, shape (nq,)
+            The configuration (for a model with :attr:`linear_channels`, the
+            measured pose).
+        w_aug : ndarray or casadi.SX, shape (n,)
+            The reading, ``n = n_w``, or ``n_w + 1`` with a trailing constant
+            1 for the offset column.
+
+        Returns
+        -------
+        list of list
+            One list per velocity channel (``nv``), of its group's parameter
+            count (``len(phi)``), entries numbers or casadi expressions. By
+            default ``phi = s`` and ``psi_c`` is row ``c`` of :meth:`regressor`
+            at rest at ``q``.
+        """
+        o = ops(q, w_aug)
+        x = self.state_from(q, o.vcat([0.0] * self.nv))
+        U = self.regressor(x, w_aug)
+        m = U.shape[1]
+        return [[U[c, j] for j in range(m)] for c in range(self.nv)]
+
     def channel_regressors(self, q, w_aug):
-        """Each channel's regressor in its group's parameters ``phi``: ``a_c = psi_c . phi``.
+        """Each channel's regressor over a whole log (numpy): :meth:`channel_regressor_rows` per sample.
 
         Parameters
         ----------
@@ -243,16 +279,45 @@ class Model:
         Returns
         -------
         list of ndarray, each shape (N, len(phi) of its group)
-            One per velocity channel. By default ``phi = s`` and ``psi_c`` is row
-            ``c`` of :meth:`regressor`.
+            One per velocity channel.
         """
-        N = q.shape[1]
-        rows = [self.regressor(self.state_from(q[:, k], np.zeros(self.nv)), w_aug[:, k]) for k in range(N)]
-        U = np.stack(rows)                                  # (N, nv, n_w n)
-        return [U[:, c, :] for c in range(self.nv)]
+        rows = [self.channel_regressor_rows(q[:, k], w_aug[:, k]) for k in range(q.shape[1])]
+        return [np.array([r[c] for r in rows], dtype=float) for c in range(self.nv)]
+
+    def phi_from_params(self, s, n):
+        """Each group's parameters from ``vec([S | c])`` (row order); linear, inverse of :meth:`params_from_phi`.
+
+        Parameters
+        ----------
+        s : ndarray or casadi.SX, shape (n_w n,)
+            The flat ``[S | c]``, numbers or symbols.
+        n : int
+            Columns of ``[S | c]``: ``n_w``, or ``n_w + 1`` with the offset.
+
+        Returns
+        -------
+        list of ndarray or casadi.SX
+            One vector per :meth:`parameter_groups` group. Default: ``[s]``.
+        """
+        return [s]
 
     def params_from_phi(self, phis, n):
-        """``vec([S | c])`` (row order) from each group's parameters; linear. Default: ``phi = s``."""
+        """``[S | c]`` from each group's parameters; linear. Default: ``phi = s``.
+
+        Parameters
+        ----------
+        phis : list of ndarray or casadi.SX
+            One vector per :meth:`parameter_groups` group.
+        n : int
+            Columns of ``[S | c]``.
+
+        Returns
+        -------
+        ndarray, shape (n_w, n), or casadi.SX, shape (n_w n,)
+            Numbers as a matrix; symbols as a flat vector in row order.
+        """
+        if is_symbolic(*phis):
+            return ops(*phis).vcat(phis)
         return np.asarray(phis[0], dtype=float).reshape(self.n_w, n)
 
     # --- checks -----------------------------------------------------------------------------------
@@ -366,9 +431,21 @@ class PlanarModel(Model):
         """``phi_1`` drives ``theta`` alone, ``phi_2`` drives ``X`` and ``Y`` (eqs. 4, 5): two groups."""
         return [[0], [1, 2]]
 
+    def channel_regressor_rows(self, q, w_aug):
+        """``psi_theta``, ``psi_X``, ``psi_Y`` of eqs. (4), (5) (:func:`fmscal.plant.dynamics.regressors`).
+
+        ``q`` may also hold one angle per sample (``q[0]`` of shape (N,),
+        ``w_aug`` (n, N)): the entries are then arrays of shape (N,).
+        """
+        return list(dynamics.regressors(q[0], w_aug, self.payload))
+
     def channel_regressors(self, q, w_aug):
-        """``psi_theta``, ``psi_X``, ``psi_Y`` of eqs. (4), (5) (:func:`fmscal.plant.dynamics.regressors`)."""
-        return [np.array(v).T for v in dynamics.regressors(q[0], w_aug, self.payload)]
+        """``psi_theta``, ``psi_X``, ``psi_Y`` of eqs. (4), (5) over a whole log, in one call."""
+        return [np.array(v).T for v in self.channel_regressor_rows(q, w_aug)]
+
+    def phi_from_params(self, s, n):
+        """``phi_1``, ``phi_2`` of eqs. (4), (5) (:func:`fmscal.plant.dynamics.phi_1`, ``phi_2``)."""
+        return [dynamics.phi_1(s, self.payload), dynamics.phi_2(s)]
 
     def params_from_phi(self, phis, n):
         """``[S | c]`` from ``phi_1``, ``phi_2`` (eqs. 4, 5 inverted, :func:`fmscal.plant.dynamics.S_from_phi`)."""

@@ -161,22 +161,22 @@ def test_ablation_short_mode():
         ablation(floor=3.0)
 
 
-def test_complex_least_squares_is_the_real_fit_of_both_rows():
-    """The 3x3 Hermitian update equals the 6x6 real one on the X and Y rows taken in turn."""
+def test_group_least_squares_is_the_batch_fit_of_its_rows():
+    """Each channel of a group in turn (planar: phi_2 from the X row, then the Y row) gives the regularised
+    batch least-squares fit of every row so far, and its covariance (change 3)."""
     rng = np.random.default_rng(4)
-    n = 3
-    M = rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n))
-    P = M @ M.conj().T + np.eye(n)                        # Hermitian positive definite
-    A, B = P.real, P.imag
-    P_real = np.block([[A, -B], [B, A]])                  # the same covariance on [s_2, s_3]
-    hc, hs = rng.standard_normal(n), rng.standard_normal(n)
-    e_x, e_y = 0.3, -0.7
-    d_s2, d_s3, A1, B1 = AdaptiveObserver._complex_rls(A.tolist(), B.tolist(), list(hc), list(hs),
-                                                               e_x, e_y, n)
-    row_x, row_y = np.concatenate([hc, -hs]), np.concatenate([hs, hc])
-    d1, P1 = AdaptiveObserver._rls(P_real.tolist(), list(row_x), e_x, 2 * n)
-    d2, P2 = AdaptiveObserver._rls(P1, list(row_y), e_y - row_y @ np.array(d1), 2 * n)
-    assert np.allclose(np.concatenate([d_s2, d_s3]), np.array(d1) + np.array(d2), atol=1e-12)
-    assert np.allclose(np.block([[np.array(A1), -np.array(B1)], [np.array(B1), np.array(A1)]]), np.array(P2),
-                       atol=1e-12)
-    assert not np.allclose(d_s3, 0)
+    k, steps = 6, 5
+    M = rng.standard_normal((k, k))
+    P0 = M @ M.T + np.eye(k)                               # the prior covariance
+    phi0, phi_true = rng.standard_normal(k), rng.standard_normal(k)
+    H = rng.standard_normal((steps, 2, k))                 # two channels' rows per step
+    y = H @ phi_true + 0.1 * rng.standard_normal((steps, 2))
+    P, phi = P0.tolist(), phi0.copy()
+    for rows, ys in zip(H, y):
+        d_phi, P = AdaptiveObserver._group_rls(P, rows.tolist(), list(ys - rows @ phi), k)
+        phi = phi + np.array(d_phi)
+    A, Y = H.reshape(-1, k), y.ravel()
+    info = np.linalg.inv(P0) + A.T @ A
+    np.testing.assert_allclose(phi, np.linalg.solve(info, np.linalg.solve(P0, phi0) + A.T @ Y), atol=1e-12)
+    np.testing.assert_allclose(np.array(P), np.linalg.inv(info), atol=1e-12)
+    assert np.array_equal(np.array(P), np.array(P).T)       # kept symmetric to the last bit

@@ -48,6 +48,34 @@ def test_the_regressor_is_the_dynamics_written_for_S(model):
     np.testing.assert_allclose(np.array(y_ca).ravel(), model.measure(x), rtol=0, atol=0)
 
 
+@pytest.mark.parametrize("model", [MODELS[0], MODELS[2]], ids=lambda m: m.name)
+def test_the_channel_regressors_are_the_dynamics_in_each_groups_parameters(model):
+    """``a_c = psi_c . phi_g`` per channel, ``phi`` from ``[S | c]`` and back, for numbers and casadi symbols, one
+    sample at a time or a whole log (the hooks least squares and the adaptive default read)."""
+    rng = np.random.default_rng(1)
+    q, S, c, w_hat = rng.normal(size=model.nq), rng.normal(size=(model.n_w, model.n_w)), rng.normal(size=model.n_w), \
+        rng.normal(size=model.n_w)
+    w_aug, s = np.r_[w_hat, 1.0], np.c_[S, c].ravel()
+    n = model.n_w + 1
+    a = model.acceleration(model.state_from(q, np.zeros(model.nv)), S @ w_hat + c)
+    rows, phis = model.channel_regressor_rows(q, w_aug), model.phi_from_params(s, n)
+    group_of = {ch: g for g, channels in enumerate(model.parameter_groups()) for ch in channels}
+    np.testing.assert_allclose([np.dot(rows[ch], phis[group_of[ch]]) for ch in range(model.nv)], a, rtol=1e-12,
+                               atol=1e-12)
+    np.testing.assert_allclose(np.ravel(model.params_from_phi(phis, n)), s, rtol=1e-12, atol=1e-12)
+    qs, ws, ss = ca.SX.sym("q", model.nq), ca.SX.sym("w", n), ca.SX.sym("s", model.n_w * n)
+    f = ca.Function("f", [qs, ws, ss], [ca.vertcat(*[v for r in model.channel_regressor_rows(qs, ws) for v in r]),
+                                        model.params_from_phi(model.phi_from_params(ss, n), n)])
+    rows_ca, s_ca = f(q, w_aug, s)
+    np.testing.assert_allclose(np.array(rows_ca).ravel(), np.concatenate(rows), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.array(s_ca).ravel(), s, rtol=1e-12, atol=1e-12)
+    Q, W = rng.normal(size=(model.nq, 5)), np.vstack([rng.normal(size=(model.n_w, 5)), np.ones(5)])
+    whole = model.channel_regressors(Q, W)
+    for k in range(5):
+        for ch, row in enumerate(model.channel_regressor_rows(Q[:, k], W[:, k])):
+            np.testing.assert_allclose(whole[ch][k], row, rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: m.name)
 def test_the_acceleration_is_the_state_derivative(model):
     rng = np.random.default_rng(1)

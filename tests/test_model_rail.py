@@ -1,17 +1,19 @@
 """A second, minimal model through the same code: a payload on a rail (issue 27).
 
 One position ``x``, one force ``f``, a 1x1 ``S`` and an offset: least squares,
-the maximum-likelihood floor and the EKF take every size from the model, so
-they run on it unchanged and recover its ``S`` within their reported
-uncertainty. A call without a model, or a log of another case, is one
-``FmscalError``.
+the maximum-likelihood floor, the EKF and the adaptive default take every size
+from the model, so they run on it unchanged; the first three recover its ``S``
+within their reported uncertainty, the adaptive default (which reports none)
+as closely as the floor does. A call without a model, or a log of another
+case, is one ``FmscalError``; so is a planar-only observer on the rail.
 """
 
 import numpy as np
 import pytest
 
 from fmscal import plant
-from fmscal.observers import AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares, MaximumLikelihood
+from fmscal.observers import (AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares, MaximumLikelihood,
+                              PaperAdaptiveObserver, get_method)
 from fmscal.plant.errors import FmscalError
 
 from rail import RailModel, RailPayload
@@ -25,15 +27,19 @@ POSE_SD, WRENCH_SD = 1e-4, 0.02    # m, reading units
 MODEL = RailModel(RailPayload(MASS))
 
 
-def _rail_log(seed):
+def _rail_log(seed, at_rest=False):
     """20 s at 1 kHz of a multisine force, the motion exact (the force's double integral), the pose and the
-    reading noisy, the reading offset and scaled: ``w_hat = w / S + b``."""
+    reading noisy, the reading offset and scaled: ``w_hat = w / S + b``. ``at_rest``: the payload starts at
+    rest (``x'(0) = 0``), as every simulated planar log does; else it starts moving."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, DURATION, DT)
     amp, freq, phase = rng.uniform(0.5, 1.5, 4), np.array([0.3, 0.7, 1.3, 2.1]), rng.uniform(0, 2 * np.pi, 4)
     w = (amp * np.sin(2 * np.pi * freq * t[:, None] + phase)).sum(axis=1)
-    # x(t) = sum of -a / (m (2 pi f)^2) sin(...), plus the line that makes x(0) = 0, x'(0) = 0 irrelevant: any start
+    # x(t) = sum of -a / (m (2 pi f)^2) sin(...): it starts moving (least squares, the floor and the EKF take any
+    # start); at rest, plus the line t sum a cos(phase) / (m 2 pi f) that cancels x'(0)
     x = (-amp / (MASS * (2 * np.pi * freq) ** 2) * np.sin(2 * np.pi * freq * t[:, None] + phase)).sum(axis=1)
+    if at_rest:
+        x = x + t * (amp * np.cos(phase) / (MASS * 2 * np.pi * freq)).sum()
     pose = (x + rng.normal(scale=POSE_SD, size=len(t)))[:, None]
     w_hat = (w / S_TRUE + B_TRUE + rng.normal(scale=WRENCH_SD, size=len(t)))[:, None]
     return plant.Log(t, pose, w_hat, name="rail", model=MODEL)
@@ -42,6 +48,11 @@ def _rail_log(seed):
 @pytest.fixture(scope="module")
 def rail_log():
     return _rail_log(7)
+
+
+@pytest.fixture(scope="module")
+def rail_log_at_rest():
+    return _rail_log(7, at_rest=True)
 
 
 @pytest.fixture(scope="module")
@@ -91,10 +102,52 @@ def test_a_log_of_another_case_is_one_error(rail_log):
         AugmentedEKF(plant.PAPER_PAYLOAD).run(rail_log)
 
 
+def test_the_adaptive_default_recovers_S_and_b_as_closely_as_the_floor(rail_log_at_rest):
+    """The adaptive default (as the registry builds it) on the rail, against the maximum-likelihood floor on the
+    same log.
+
+    It reports no uncertainty, so its error is held to the floor's own: within 1.3x of the floor's
+    ``|S_hat - S|`` (issue 15's margin) plus one of the floor's sigma, since on one log and one entry the floor's
+    error is one Gaussian draw of that sigma and may fall near zero by chance. An estimate still carrying its
+    start, or a bias of a few sigma, fails; over seeds 1-8 the margin holds with room.
+
+    The log starts at rest, as the observer does (:meth:`fmscal.plant.Model.rest_state`): from a moving start
+    the first second's velocity error is fitted as data and biases ``S_hat`` for a while (it fades as 1/t).
+    """
+    adaptive = get_method("adaptive").build(MODEL, None, {"offset": True}).run(rail_log_at_rest, S0=np.eye(1))
+    floor = MaximumLikelihood(MODEL, offset=True).run(rail_log_at_rest)
+    assert adaptive.S_hat.shape == (1, 1) and adaptive.b.shape == (1,) and adaptive.S_std is None
+    assert adaptive.x_hat_history.shape == (len(rail_log_at_rest), 2) and not adaptive.diverged and adaptive.converged
+    assert abs(adaptive.S_hat[0, 0] - S_TRUE) <= 1.3 * abs(floor.S_hat[0, 0] - S_TRUE) + floor.S_std[0, 0]
+    assert abs(adaptive.b[0] - B_TRUE) <= 1.3 * abs(floor.b[0] - B_TRUE) + floor.b_std[0]
+    assert abs(adaptive.S_hat[0, 0] - 1.0) > 0.1                # it left the identity it starts from
+
+
+def test_the_adaptive_default_step_by_step_is_its_run(rail_log_at_rest):
+    log = rail_log_at_rest.head(2000)
+    obs = AdaptiveObserver(MODEL, offset=True)
+    slow, fast = obs.run(log, compiled=False), obs.run(log, compiled=True)
+    assert np.max(np.abs(slow.S_hat_history - fast.S_hat_history)) < 1e-9
+    assert np.max(np.abs(slow.x_hat_history - fast.x_hat_history)) < 1e-9
+    obs.reset()
+    for k in range(len(log)):
+        x_hat, S_hat = obs.step(log.dt, log.pose[k] if log.has_pose[k] else None, log.w_hat[k])
+    assert np.allclose(S_hat, slow.S_hat, rtol=0, atol=1e-12)
+    assert np.allclose(x_hat, slow.x_hat_history[-1], rtol=0, atol=1e-12)
+    # without the offset the calibration is one number; it runs as well
+    assert AdaptiveObserver(MODEL).run(log).S_hat.shape == (1, 1)
+
+
 def test_the_planar_only_observers_refuse_another_model():
-    for cls in (AdaptiveObserver, HighGainObserver):
+    for cls in (HighGainObserver, PaperAdaptiveObserver):
         with pytest.raises(FmscalError, match="defined for planar models; got a rail model"):
             cls(MODEL)
+
+
+def test_the_adaptive_default_refuses_a_model_not_linear_in_its_channels():
+    from fmscal.plant.spatial_scenarios import TOOL
+    with pytest.raises(FmscalError, match="linear in their channels .*; got a spatial model"):
+        AdaptiveObserver(plant.SpatialModel(TOOL))
 
 
 def test_a_noise_model_of_another_size_is_one_error():
