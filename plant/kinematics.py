@@ -89,7 +89,7 @@ class RobotKinematics:
 
 
 def joint_columns(header, joint_names):
-    """Which columns of ``header`` hold the joints, in the URDF's order: ``q1 .. qn`` or the joints' names.
+    """Which columns of ``header`` hold the joints, in the URDF's order: ``q1`` to ``qn``, or the joints' names.
 
     Parameters
     ----------
