@@ -54,7 +54,7 @@ from .rigid_body import SpatialPayload
 from .sensor import CalibrationSchedule, NoiseSpec, check_calibration
 
 __all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
-           "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE"]
+           "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE", "unit_quaternions"]
 
 #: Column names of a planar log, in order.
 COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
@@ -72,6 +72,33 @@ MAX_MAGNITUDE = 1e9
 
 class LogError(FmscalError):
     """A log that cannot be used: the message names the problem."""
+
+
+def unit_quaternions(q, name, rows=None, hint=""):
+    """Quaternions within :data:`QUATERNION_TOLERANCE` of unit norm, normalised; else a one-line :class:`LogError`.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 4)
+    name : str
+        The data's name, for the message.
+    rows : ndarray of int, shape (N,), optional
+        Each quaternion's row (from 0) in the data; default ``0 .. N-1``.
+    hint : str
+        Appended to the message inside its parenthesis.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+    """
+    norm = np.linalg.norm(q, axis=1)
+    off = np.abs(norm - 1) > QUATERNION_TOLERANCE
+    if off.any():
+        k = int(np.argmax(off))
+        row = (k if rows is None else int(rows[k])) + 1
+        raise LogError(f"{name}: the quaternion qw,qx,qy,qz at row {row} has norm {norm[k]:.6g}; "
+                       f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g}{hint})")
+    return q / norm[:, None]
 
 
 class Log:
@@ -186,14 +213,7 @@ class Log:
     def _normalise_quaternions(self):
         """Unit quaternions within :data:`QUATERNION_TOLERANCE`, normalised and made sign-continuous (with a note)."""
         rows = np.flatnonzero(self.has_pose)
-        q = self.pose[rows, :4]
-        norm = np.linalg.norm(q, axis=1)
-        off = np.abs(norm - 1) > QUATERNION_TOLERANCE
-        if off.any():
-            k = int(np.argmax(off))
-            raise LogError(f"{self.name}: the quaternion qw,qx,qy,qz at row {rows[k] + 1} has norm {norm[k]:.6g}; "
-                           f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g})")
-        q = q / norm[:, None]
+        q = unit_quaternions(self.pose[rows, :4], self.name, rows)
         flips = np.sum(q[1:] * q[:-1], axis=1) < 0
         sign = np.cumprod(np.r_[1.0, np.where(flips, -1.0, 1.0)])
         self.pose = self.pose.copy()

@@ -29,7 +29,7 @@ import numpy as np
 from ._checks import as_finite_array
 from .errors import FmscalError
 from .files import atomic_write_text
-from .log import QUATERNION_TOLERANCE, LogError, _as_path, _echo, _read_csv
+from .log import LogError, _as_path, _echo, _read_csv, unit_quaternions
 from .rigid_body import GRAVITY, SpatialPayload, rotation_matrix
 
 __all__ = ["PoseTable", "read_pose_table", "write_pose_table", "is_pose_table", "simulate_table",
@@ -75,13 +75,7 @@ class PoseTable:
         if len(self.q) < MIN_POSES:
             raise LogError(f"{self.name}: a pose table needs at least {MIN_POSES} poses for its ten unknowns "
                            f"(mass, centre of mass, offset); got {len(self.q)}")
-        norm = np.linalg.norm(self.q, axis=1)
-        off = np.abs(norm - 1) > QUATERNION_TOLERANCE
-        if off.any():
-            k = int(np.argmax(off))
-            raise LogError(f"{self.name}: the quaternion qw,qx,qy,qz at row {k + 1} has norm {norm[k]:.6g}; "
-                           f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g})")
-        self.q = self.q / norm[:, None]
+        self.q = unit_quaternions(self.q, self.name)
 
     def __len__(self):
         return len(self.q)
@@ -217,14 +211,8 @@ class AttitudeLog:
         steps = np.diff(self.t)
         if np.any(steps <= 0):
             raise LogError(f"{self.name}: time is not strictly increasing at row {int(np.argmax(steps <= 0)) + 2}")
-        norm = np.linalg.norm(self.q, axis=1)
-        off = np.abs(norm - 1) > QUATERNION_TOLERANCE
-        if off.any():
-            k = int(np.argmax(off))
-            raise LogError(f"{self.name}: the quaternion qw,qx,qy,qz at row {k + 1} has norm {norm[k]:.6g}; "
-                           f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g}; a norm that "
-                           "drifts is a tracker or an integration to fix first)")
-        q = self.q / norm[:, None]
+        q = unit_quaternions(self.q, self.name, hint="; a norm that drifts is a tracker or an integration to "
+                                                      "fix first")
         flips = np.sum(q[1:] * q[:-1], axis=1) < 0
         self.q = q * np.cumprod(np.r_[1.0, np.where(flips, -1.0, 1.0)])[:, None]
 
