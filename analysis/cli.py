@@ -241,10 +241,9 @@ def _add_compare(sub):
 
 def cmd_compare(args):
     from fmscal.observers import get_method
-    from fmscal.plant import get_scenario
-    from .comparison import compare, summarise, summary_markdown
+    from .comparison import case_scenario, compare, summarise, summary_markdown
     for name in args.scenario:
-        get_scenario(name)                      # FmscalError naming the choices
+        case_scenario(name)                     # FmscalError naming the choices
     for name in args.observer:
         get_method(name)                        # FmscalError naming the methods
     check_seeds(seeds=args.seeds)
@@ -252,7 +251,7 @@ def cmd_compare(args):
         positive(args.duration, "--duration")
     check_sizes(args.scenario, args.duration)
     if args.out:
-        scenarios = dict.fromkeys(get_scenario(name).name for name in args.scenario)
+        scenarios = dict.fromkeys(case_scenario(name).name for name in args.scenario)
         check_output_dir(args.out, [f"E_{sc}.png" for sc in scenarios] + ["summary.md", "runs.csv"],
                          overwrite=args.overwrite)
     with claim_folder(args.out) if args.out else contextlib.nullcontext():

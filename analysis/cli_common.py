@@ -42,16 +42,16 @@ def add_scenarios_and_observers(p, default_observers):
     from fmscal.observers import METHODS
     from fmscal.plant import SCENARIOS
     p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
-                   help="one or more of: " + ", ".join(SCENARIOS))
+                   help="one or more of: " + ", ".join(SCENARIOS) + " (compare also takes the spatial ones)")
     p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
                    help="one or more of: " + ", ".join(METHODS) + f" (default: {' '.join(default_observers)})")
 
 
 def check_sizes(scenarios, duration=None):
     """Refuse, before any work, a run whose simulated logs would exceed :data:`plant.scenarios.MAX_SAMPLES`."""
-    from fmscal.plant import get_scenario
+    from .comparison import case_scenario
     for name in scenarios:
-        sc = get_scenario(name)
+        sc = case_scenario(name)
         (sc.with_(duration=duration) if duration is not None else sc).check_size()
 
 

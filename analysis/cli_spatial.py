@@ -2,11 +2,13 @@
 
 A spatial log (header ``t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz``) goes where a
 planar one goes: ``fmscal calibrate`` picks the case from the header. In 3D
-the calibration is the reference fit (smoothed inverse dynamics and least
-squares with the errors in variables compensated,
-:func:`fmscal.observers.inverse_dynamics_fit.fit_inverse_dynamics`); the
-floor and the online observers are not there yet, and the options that only
-they use are refused in one line.
+the calibration is the maximum-likelihood floor, linearised about the
+smoothed motion (:mod:`fmscal.observers.linearised_floor`), or the reference
+fit (``--observer least-squares``: smoothed inverse dynamics and least
+squares, :func:`fmscal.observers.inverse_dynamics_fit.fit_inverse_dynamics`),
+both through the one registry; the pose stream's latency is estimated as in
+the plane. The online observers are not there yet in 3D, and the options
+that only they use are refused in one line.
 """
 
 import json
@@ -17,10 +19,10 @@ import numpy as np
 
 from .cli_common import CliError, positive, strict
 
-__all__ = ["calibrate_spatial", "spatial_payload", "gravity_of", "SPATIAL_METHOD"]
+__all__ = ["calibrate_spatial", "spatial_payload", "gravity_of", "SPATIAL_METHODS"]
 
-#: The method a spatial calibration records (the reference fit).
-SPATIAL_METHOD = "inverse-dynamics"
+#: The methods ``fmscal calibrate`` runs on a spatial log; the first is the default (the floor).
+SPATIAL_METHODS = ("max-likelihood", "least-squares")
 _NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 
 
@@ -54,56 +56,66 @@ def _spatial_truth(path):
 
 def _refuse_planar_options(args):
     """One line for an option the spatial calibration does not take (yet)."""
-    given = [(args.observer is not None, "--observer", "the floor and the online observers are not there yet"),
-             (args.pose_noise is not None, "--pose-noise", "the noise is estimated from the log"),
+    if args.observer is not None and args.observer not in SPATIAL_METHODS:
+        raise CliError(f"--observer {args.observer} does not run on a spatial log yet; a spatial log takes "
+                       f"{' or '.join(SPATIAL_METHODS)} (default {SPATIAL_METHODS[0]})")
+    given = [(args.pose_noise is not None, "--pose-noise", "the noise is estimated from the log"),
              (args.wrench_noise is not None, "--wrench-noise", "the noise is estimated from the log"),
-             (args.latency is not None, "--latency", "no latency is estimated or shifted in 3D yet"),
-             (args.max_latency is not None, "--max-latency", "no latency is estimated in 3D yet"),
-             (args.plot is not None, "--plot", "no figure of a spatial calibration yet"),
              (not args.offset, "--no-offset", "the offset is always estimated in 3D")]
     for present, option, why in given:
         if present:
-            raise CliError(f"{option} is not taken on a spatial log ({why}); the spatial calibration is the "
-                           f"reference fit of smoothed inverse dynamics")
+            raise CliError(f"{option} is not taken on a spatial log ({why})")
 
 
 def calibrate_spatial(args):
     """``fmscal calibrate`` on a spatial log: ``S`` (6x6) and the offset, with what the log did not determine."""
+    from fmscal.observers import make_observer
     from fmscal.observers.faults import saturation
-    from fmscal.observers.inverse_dynamics_fit import fit_inverse_dynamics
-    from fmscal.plant import Calibration, file_sha256, read_log
+    from fmscal.observers.latency import estimate_latency
+    from fmscal.plant import Calibration, SpatialModel, file_sha256, read_log
+    from .calibrate import DEFAULT_MAX_LATENCY
     from .metrics import block_errors
+    from .plots import plot_calibration
     payload = spatial_payload(args.mass, args.rho, args.inertia)
     _refuse_planar_options(args)
-    gravity = gravity_of(args)
+    name = args.observer or SPATIAL_METHODS[0]
+    model = SpatialModel(payload, gravity_of(args))
     log = read_log(args.log)
     for note in log.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
     truth = _spatial_truth(args.truth)
-    print("fmscal calibrate: note: the pose stream's latency is not estimated in 3D: shift the poses of a log "
-          "whose tracker lags the sensor before calibrating", file=sys.stderr)
-    fit = fit_inverse_dynamics(log, payload, gravity=gravity)
-    warnings = [*saturation(log), *fit.warnings]
+    latency_estimated = args.latency is None
+    latency = args.latency
+    if latency_estimated:
+        latency, _ = estimate_latency(log, model, args.max_latency or DEFAULT_MAX_LATENCY, offset=True)
+    aligned = log.shift_poses(latency)
+    result = make_observer(name, model, settings={"offset": True}).run(aligned)
+    saturated = saturation(log)
+    warnings = [*saturated, *result.warnings]
     for warning in warnings:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
-    converged = fit.converged and len(warnings) == len(fit.warnings)
-    out = {"observer": SPATIAL_METHOD, "kind": "spatial", "S": fit.S_hat.tolist(), "S_std": fit.S_std.tolist(),
-           "b": fit.b.tolist(), "b_std": fit.b_std.tolist(), "converged": converged,
-           "undetermined": [d.tolist() for d in fit.undetermined], "warnings": warnings}
+    converged = bool(result.converged and not saturated)
+    out = {"observer": name, "kind": "spatial", "S": result.S_hat.tolist(), "S_std": result.S_std.tolist(),
+           "b": result.b.tolist(), "b_std": result.b_std.tolist(), "latency": float(latency),
+           "latency_estimated": latency_estimated, "converged": converged,
+           "undetermined": result.info.get("undetermined", []), "warnings": warnings}
     if truth is not None:
-        out["E"], out["E_torque"], out["E_force"] = block_errors(fit.S_hat, truth.S_at(log.t[-1]))
+        out["E"], out["E_torque"], out["E_force"] = block_errors(result.S_hat, truth.S_at(aligned.t[-1]))
+    if args.plot:                 # before saving: a failing plot leaves no calibration behind
+        plot_calibration(result, aligned, args.plot, f"{Path(args.log).name}: entries of S_hat ({name}) and the "
+                         "pose residual", truth, model)
     saved = bool(args.save) and (converged or args.force)
     if saved:
-        Calibration(S=fit.S_hat, payload=payload, method=SPATIAL_METHOD, S_std=fit.S_std, b=fit.b, b_std=fit.b_std,
-                    log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
-                    forced=not converged).save(args.save)
+        Calibration(S=result.S_hat, payload=payload, method=name, S_std=result.S_std, b=result.b,
+                    b_std=result.b_std, latency=float(latency), log_name=Path(args.log).name,
+                    log_sha256=file_sha256(args.log), forced=not converged).save(args.save)
     out["saved"] = saved
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
     else:
         _print(args, log, out)
     if args.save and not saved:
-        why = "the log does not determine S in every direction" if not fit.converged else "the reading saturates"
+        why = "the reading saturates" if saturated else "the run did not converge (see the warnings)"
         raise CliError(f"did not save {args.save}: {why}; add --force to save it anyway (marked as forced)")
 
 
@@ -116,6 +128,7 @@ def _print(args, log, out):
         print("  " + "  ".join(f"{S[i, j]:+.4f}+-{S_std[i, j]:.0e}" for j in range(6)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in
                                             zip(_NAMES, out["b"], out["b_std"])))
+    print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
     undetermined = len(out["undetermined"])
     print(f"converged: {'yes' if out['converged'] else 'no'}"
           + (f" ({undetermined} direction(s) of the reading not determined)" if undetermined else ""))

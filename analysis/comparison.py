@@ -5,13 +5,15 @@ import pandas as pd
 from tqdm import tqdm
 
 from fmscal.observers import FLOOR_METHOD, METHODS, get_method, method_label
-from fmscal.plant import get_scenario
+from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, SpatialModel, SpatialScenario, get_scenario
+from fmscal.plant.model import as_model
 from fmscal.plant._checks import as_positive_scalar
 from fmscal.plant.errors import FmscalError
 
 from .metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
 
-__all__ = ["simulate_case", "tail_error", "floor_error", "run_observer", "run_case", "seed_list", "compare",
+__all__ = ["case_scenario", "case_model",
+           "simulate_case", "tail_error", "floor_error", "run_observer", "run_case", "seed_list", "compare",
            "summarise", "summary_markdown", "CHECKPOINTS"]
 
 #: Columns of a sweep's table that tell its rows apart besides scenario and observer.
@@ -48,17 +50,43 @@ def simulate_case(scenario, seed, duration=None, noise_scale=1.0):
         What an observer with a noise model is told (the scenario may tell
         it a wrong figure on purpose).
     """
-    sc = get_scenario(scenario) if isinstance(scenario, str) else scenario
+    sc = case_scenario(scenario) if isinstance(scenario, str) else scenario
     if duration is not None:
         sc = sc.with_(duration=as_positive_scalar(duration, "duration"))
     noise_scale = float(noise_scale)
     if not (np.isfinite(noise_scale) and noise_scale >= 0):
         raise FmscalError(f"noise_scale must be a non-negative number; got {noise_scale}")
+    if noise_scale != 1.0 and isinstance(sc, SpatialScenario):
+        raise FmscalError(f"{sc.name}: the noise of a spatial scenario is not scaled yet; noise_scale must be 1")
     if noise_scale != 1.0:
         sc = sc.with_(wrench_noise=sc.wrench_noise * noise_scale, angle_sd=sc.angle_sd * noise_scale,
                       position_sd=sc.position_sd * noise_scale)
     log, truth, _ = sc.generate(int(seed))
     return sc, log, truth, truth.told_noise_spec()
+
+
+def case_scenario(name):
+    """The scenario called ``name``: planar (:data:`plant.SCENARIOS`) or spatial (:data:`plant.SPATIAL_SCENARIOS`).
+
+    Raises
+    ------
+    FmscalError
+        No such scenario; the message lists both cases' names.
+    """
+    if isinstance(name, str) and name in SPATIAL_SCENARIOS:
+        return SPATIAL_SCENARIOS[name]
+    try:
+        return get_scenario(name)
+    except FmscalError:
+        raise FmscalError(f"unknown scenario {name!r}; expected one of {', '.join([*SCENARIOS, *SPATIAL_SCENARIOS])}"
+                          ) from None
+
+
+def case_model(scenario):
+    """The model the methods run on for a scenario: its payload's, with its gravity in 3D."""
+    if isinstance(scenario, SpatialScenario):
+        return SpatialModel(scenario.payload, scenario.gravity)
+    return as_model(scenario.payload)
 
 
 def _aligned(log, truth, settings):
@@ -99,7 +127,8 @@ def floor_error(log, truth, payload):
     ----------
     log : plant.Log
     truth : plant.Truth
-    payload : plant.Payload
+    payload : plant.Model or plant.Payload
+        The problem (a payload stands for its case's model).
 
     Returns
     -------
@@ -124,7 +153,8 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     log : plant.Log
     truth : plant.Truth
         ``S`` against time, and ``S0`` (every online method starts from it).
-    payload : plant.Payload
+    payload : plant.Model or plant.Payload
+        The problem (a payload stands for its case's model).
     told_noise : plant.NoiseSpec, optional
     settings : dict, optional
         Constructor keyword arguments. Where the scenario has a sensor
@@ -196,10 +226,11 @@ def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=N
         ``{observer: (t, E, S_hat_history)}``, decimated to at most 2000 points.
     """
     sc, log, truth, told = simulate_case(scenario, seed, duration)
-    floor = floor_error(log, truth, sc.payload)
+    model = case_model(sc)
+    floor = floor_error(log, truth, model)
     rows, curves = [], {}
     for name in observers:
-        out = run_observer(name, log, truth, sc.payload, told, (settings or {}).get(name), histories, floor)
+        out = run_observer(name, log, truth, model, told, (settings or {}).get(name), histories, floor)
         row, curves[name] = out if histories else (out, None)
         rows.append({"scenario": sc.name, "seed": int(seed), **row})
     return (rows, curves) if histories else rows
@@ -223,7 +254,9 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
     Parameters
     ----------
     scenarios : sequence of str
-        Names from :data:`plant.SCENARIOS`.
+        Names from :data:`plant.SCENARIOS` or :data:`plant.SPATIAL_SCENARIOS`
+        (a spatial scenario runs the methods that take a spatial model:
+        ``max-likelihood`` and ``least-squares``).
     seeds : int or sequence of int
         ``N`` means seeds ``0 .. N-1``.
     observers : sequence of str
@@ -258,7 +291,7 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
     seeds = seed_list(seeds)
     for name in observers:
         get_method(name)                        # FmscalError naming the methods
-    scenarios = [get_scenario(s).name for s in scenarios]
+    scenarios = [case_scenario(s).name for s in scenarios]
     rows, curves = [], {}
     cases = [(s, seed) for s in scenarios for seed in seeds]
     for scenario, seed in tqdm(cases, desc="compare", disable=not progress):

@@ -267,7 +267,7 @@ def plot_S_entries(results, truth, path, title):
     _save(fig, path, dpi=90)
 
 
-def plot_calibration(result, log, path, title, truth=None):
+def plot_calibration(result, log, path, title, truth=None, model=None):
     """A calibration's figure: each entry of ``S_hat`` with its one-sigma band, and the pose residual.
 
     Parameters
@@ -283,25 +283,29 @@ def plot_calibration(result, log, path, title, truth=None):
     title : str
     truth : plant.Truth, optional
         Its ``S(t)`` is drawn dashed.
+    model : plant.Model, optional
+        The problem; default the planar model (a spatial run needs its
+        model: the residual is the position's and the attitude's, a turn
+        about the sensor's axes).
     """
     n = len(result.t)
     step = _thin(n)
     t = result.t[::step]
-    fig = _figure((11, 9.5))
-    outer = fig.add_gridspec(2, 1, height_ratios=[3.0, 1.0], hspace=0.3)
+    n_w = result.S_hat.shape[0]
+    fig = _figure((11, 9.5) if n_w <= 3 else (16, 15))
+    outer = fig.add_gridspec(2, 1, height_ratios=[3.0 if n_w <= 3 else 5.0, 1.0], hspace=0.3)
     S_true = None if truth is None else truth.S_at(t)
     bands = {result.observer: result.S_std}
     axes = _S_panels(fig, outer[0], {result.observer: t}, {result.observer: result.S_hat_history[::step]},
                      S_true, t, set(), bands)
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    row = outer[1].subgridspec(1, 3, wspace=0.3).subplots()
     has = log.has_pose[:n]
-    fitted = result.x_hat_history[:, list(PlanarModel.q_index)]      # the pose the fit shows (planar)
-    residual = log.pose[:n][has] - fitted[has]
-    for ax, k, name, scale, unit in zip(row, range(3), ("theta", "X", "Y"), (1e3, 1e3, 1e3), ("mrad", "mm", "mm")):
-        ax.plot(log.t[:n][has], residual[:, k] * scale, ".", ms=1.5, color="tab:gray")
-        ax.set_title(f"pose residual {name} [{unit}] (rms {np.sqrt(np.mean(residual[:, k] ** 2)) * scale:.3g})",
-                     fontsize=9)
+    panels = _pose_residuals(result, log, model, n)
+    row = outer[1].subgridspec(1, len(panels), wspace=0.3).subplots(squeeze=False)[0]
+    for ax, (name, unit, values) in zip(row, panels):
+        for k in range(values.shape[1]):
+            ax.plot(log.t[:n][has], values[:, k], ".", ms=1.5, color="tab:gray" if values.shape[1] == 1 else None)
+        ax.set_title(f"pose residual {name} [{unit}] (rms {np.sqrt(np.mean(values ** 2)):.3g})", fontsize=9)
         ax.set_xlabel("t [s]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(True, alpha=0.3)
@@ -312,3 +316,16 @@ def plot_calibration(result, log, path, title, truth=None):
     fig.suptitle(title + "\n(each entry's scale: the second half of the run and three sigma; "
                  "the start's transient runs off it)", fontsize=11)
     _save(fig, path, dpi=90)
+
+
+def _pose_residuals(result, log, model, n):
+    """``[(name, unit, values (M, k))]``: the measured pose less the one the fit shows, at the pose samples."""
+    has = log.has_pose[:n]
+    if model is None or model.name == "planar":
+        fitted = result.x_hat_history[:, list(PlanarModel.q_index)]      # the pose the fit shows (planar)
+        residual = (log.pose[:n][has] - fitted[has]) * 1e3
+        return [(name, unit, residual[:, [k]]) for k, name, unit in
+                zip(range(3), ("theta", "X", "Y"), ("mrad", "mm", "mm"))]
+    from fmscal.observers.linearised_floor import configuration_residuals
+    residual = configuration_residuals(model, result.x_hat_history[:n][has], log.pose[:n][has]) * 1e3
+    return [("x, y, z", "mm", residual[:, 0:3]), ("about the sensor axes", "mrad", residual[:, 3:6])]

@@ -162,6 +162,10 @@ class Observer:
         The cases (:attr:`fmscal.plant.Model.name`) the method is defined
         for; empty: any model. The paper's observer and the high-gain
         observer of [4] are planar by definition.
+    linear_channels_only : bool
+        The method needs a model linear in its channels
+        (:attr:`fmscal.plant.Model.linear_channels`: the planar one); the
+        online methods in 3D are still to come.
     model : plant.Model
     payload
         The model's payload.
@@ -188,12 +192,16 @@ class Observer:
     name = "observer"
     online = True
     models = ()
+    linear_channels_only = False
 
     def __init__(self, model, offset=False):
         self.model = as_model(model, type(self).__name__)
         if self.models and self.model.name not in self.models:
             raise FmscalError(f"{type(self).__name__} is defined for {' and '.join(self.models)} models; "
                               f"got a {self.model.name} model")
+        if self.linear_channels_only and not self.model.linear_channels:
+            raise FmscalError(f"{type(self).__name__} needs a model linear in its channels (planar); it does not "
+                              f"run on a {self.model.name} model yet")
         self.payload = self.model.payload
         self.offset = as_bool(offset, "offset")
         self.n_w = self.model.n_w
@@ -421,8 +429,12 @@ class Observer:
         if est.diverged:
             b = None
         honest = S_std is None or bool(np.all(np.isfinite(S_std)) and np.all(S_std > 0))
-        converged = bool(not est.diverged and est.checks_passed and honest and settled(S_hist)
-                         and (not self.online or moved(S_hist)) and self._evidence(log, S_hist[-1], S_std))
+        # settling and evidence are judged in the reading's own scale where the model has one (3D: N m and N)
+        scale = self.model.reading_scale(log)
+        judged = S_hist if scale is None else S_hist * scale[None, None, :] / scale[None, :, None]
+        judged_std = S_std if (scale is None or S_std is None) else S_std * scale[None, :] / scale[:, None]
+        converged = bool(not est.diverged and est.checks_passed and honest and settled(judged)
+                         and (not self.online or moved(judged)) and self._evidence(log, judged[-1], judged_std))
         return ObserverResult(
             observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,

@@ -193,6 +193,7 @@ class AugmentedEKF(Observer):
     """
 
     name = "ekf"
+    linear_channels_only = True
 
     def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
                  adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START,

@@ -20,8 +20,11 @@ class MaximumLikelihood(Observer):
     Parameters
     ----------
     model : plant.Model or plant.Payload
-        The problem, a model linear in its channels (a payload stands for
-        the planar model of it).
+        The problem (a payload stands for its case's model). A model without
+        linear channels (the spatial one) is linearised about the smoothed
+        motion (:mod:`fmscal.observers.linearised_floor`), and the checks fail
+        where the log leaves a direction of the reading undetermined
+        (``result.info["undetermined"]``, the warnings say what to record).
     noise : plant.NoiseSpec, optional
         The log's noise standard deviations; None: estimated from the log
         (reported in ``result.info["noise"]``).
@@ -52,5 +55,7 @@ class MaximumLikelihood(Observer):
                                  compiled=self.run_data.compiled)
         calibration = fit.S_history.reshape(len(fit.S_history), -1).copy()
         calibration[-1] = fit.S_aug.ravel()          # the whole log's estimate
-        info = {"noise": fit.noise.to_dict(), "noise_estimated": fit.noise_estimated, "passes": fit.passes}
-        return Estimate(calibration, fit.x_history, cov=fit.cov_aug, info=info)
+        info = {"noise": fit.noise.to_dict(), "noise_estimated": fit.noise_estimated, "passes": fit.passes,
+                "undetermined": [d.tolist() for d in fit.undetermined]}
+        return Estimate(calibration, fit.x_history, cov=fit.cov_aug, info=info, checks_passed=not fit.undetermined,
+                        warnings=list(fit.warnings))

@@ -33,7 +33,7 @@ from fmscal.plant.rigid_body import GRAVITY, SpatialPayload
 
 from .payload_fit import regressor
 
-__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "UNDETERMINED_STD", "READING_NAMES"]
+__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "describe_direction", "UNDETERMINED_STD", "READING_NAMES"]
 
 #: The augmented reading's components, the directions in which the information is reported.
 READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
@@ -64,6 +64,8 @@ class InverseDynamicsFit:
     residual_rms : ndarray, shape (6,)
         The fit's residual per wrench component (N m, N): what the motion
         asked of the sensor less what the fitted reading gave.
+    c : ndarray, shape (6,)
+        The offset column of ``[S | c]`` (``c = -S b``), as fitted.
     unexplained : ndarray, shape (6,)
         The share of each wrench component's variance the fit does not
         explain (residual variance over the component's variance), for the
@@ -80,10 +82,25 @@ class InverseDynamicsFit:
     converged: bool = False
     residual_rms: np.ndarray = None
     unexplained: np.ndarray = None
+    c: np.ndarray = None
+
+    @property
+    def S_aug(self):
+        """``[S | c]``, shape (6, 7), of ``w = S w_hat + c``, the fitted matrix (``c = -S b``)."""
+        return np.c_[self.S_hat, self.c]
 
 
-def _describe(direction):
+def describe_direction(direction):
     """A user's words for an undetermined direction of the reading (its components scaled to their spread).
+
+    Parameters
+    ----------
+    direction : ndarray, shape (7,)
+        A unit direction of the augmented reading ``[tx .. fz, 1]``.
+
+    Returns
+    -------
+    str
 
     A direction with a torque share (a quarter of its square or more) is torque
     the force does not already explain, which only angular acceleration makes.
@@ -162,7 +179,7 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     S_aug = (theta / np.maximum(spread, 1e-300)[:, None]).T                              # (6, 7)
     undetermined = [u[:, k] for k in range(7)
                     if not kept[k] or _relative_std(u[:, k], lam[k], e, spread) > UNDETERMINED_STD]
-    warnings = [_describe(d) for d in undetermined]
+    warnings = [describe_direction(d) for d in undetermined]
     S_hat, c = S_aug[:, :6], S_aug[:, 6]
     S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(6, 7)[:, :6]
     b, b_std = _offset(S_hat, c, cov)
@@ -170,7 +187,7 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     unexplained = residual_rms ** 2 / np.maximum(np.var(w, axis=0), 1e-300)
     return InverseDynamicsFit(S_hat=S_hat, S_std=S_std, b=b, b_std=b_std, cov=cov, undetermined=undetermined,
                               warnings=warnings, converged=not undetermined, residual_rms=residual_rms,
-                              unexplained=unexplained)
+                              unexplained=unexplained, c=c)
 
 
 def _relative_std(direction, information, e, spread):

@@ -84,10 +84,31 @@ class LeastSquares(Observer):
 
     def __init__(self, model, window=0.5, offset=False):
         super().__init__(model, offset=offset)
-        if not self.model.linear_channels:
-            raise FmscalError(f"LeastSquares fits models linear in their channels; got a {self.model.name} model")
+        if not self.model.linear_channels and self.model.name != "spatial":
+            raise FmscalError(f"LeastSquares fits models linear in their channels, or the spatial one; got a "
+                              f"{self.model.name} model")
+        if self.model.name == "spatial" and not self.offset:
+            raise FmscalError("least squares on a spatial model always estimates the offset (smoothed inverse "
+                              "dynamics, fmscal.observers.inverse_dynamics_fit); pass offset=True")
         self.window = as_positive_scalar(window, "window")
         self.report = FitReport()
+
+    def _estimate_spatial(self, log):
+        """The spatial reference: smoothed inverse dynamics and least squares, one batch fit.
+
+        Every row of the calibration history holds the whole log's fit (a
+        batch fit has no running estimate); the motion is the smoothed poses'
+        (:func:`fmscal.plant.differentiate.smoothed_state`); the checks pass
+        when the log determines every direction of the reading
+        (``result.info["undetermined"]``, the warnings say what to record).
+        """
+        from fmscal.plant.differentiate import smoothed_state
+        from .inverse_dynamics_fit import fit_inverse_dynamics
+        fit = fit_inverse_dynamics(log, self.model.payload, self.model.gravity)
+        calibration = np.tile(fit.S_aug.ravel(), (len(log), 1))
+        info = {"undetermined": [d.tolist() for d in fit.undetermined], "residual_rms": fit.residual_rms.tolist()}
+        return Estimate(calibration, smoothed_state(log), cov=fit.cov, checks_passed=fit.converged,
+                        info=info, warnings=list(fit.warnings))
 
     def _double_integrals(self, log):
         """Double integrals of each channel's regressor from the log's start.
@@ -159,7 +180,13 @@ class LeastSquares(Observer):
         method's checks pass when the excitation and consistency checks find
         nothing (``result.info["fit"]`` holds the :class:`FitReport`, and
         ``result.warnings`` its warnings).
+
+        On a spatial model the fit is smoothed inverse dynamics
+        (:func:`fmscal.observers.inverse_dynamics_fit.fit_inverse_dynamics`,
+        :meth:`_estimate_spatial`).
         """
+        if self.model.name == "spatial":
+            return self._estimate_spatial(log)
         Z = self._double_integrals(log)
         windows = self._windows(log)
         if len(windows) < 2 and log.duration >= 2 * self.window:      # long enough: the poses too sparse

@@ -24,6 +24,7 @@ class _NumpyOps:
     fmax = staticmethod(np.maximum)
     fmin = staticmethod(np.minimum)
     fabs = staticmethod(np.abs)
+    atan2 = staticmethod(np.arctan2)
 
     @staticmethod
     def vcat(items):
@@ -63,6 +64,7 @@ class _CasadiOps:
     fmax = staticmethod(ca.fmax)
     fmin = staticmethod(ca.fmin)
     fabs = staticmethod(ca.fabs)
+    atan2 = staticmethod(ca.atan2)
 
     @staticmethod
     def vcat(items):

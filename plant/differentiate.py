@@ -19,7 +19,7 @@ from scipy.signal import savgol_filter
 from .errors import FmscalError
 from .rigid_body import quaternion_multiply
 
-__all__ = ["spatial_motion", "edge", "ORDER"]
+__all__ = ["spatial_motion", "smoothed_state", "edge", "ORDER"]
 #: Degree of the local polynomial (a quintic keeps the smoothing bias of a 0.2 s window below 0.1 % at 0.5 Hz).
 ORDER = 5
 
@@ -71,6 +71,35 @@ def spatial_motion(log, window=0.2):
     FmscalError
         Not a spatial log, or a window shorter than 7 samples or longer than the log.
     """
+    q, omega, alpha, _, _, p_ddot = _smoothed(log, window)
+    return q, omega, alpha, p_ddot
+
+
+def smoothed_state(log, window=0.2):
+    """The motion state ``[p, q, v, omega]`` at every sample from the smoothed poses, shape (N, 13).
+
+    The layout of :class:`fmscal.plant.SpatialModel`'s state: position (m)
+    and velocity (m/s) of the sensor point in the world, unit quaternion,
+    angular velocity in sensor axes (rad/s). The nominal motion the spatial
+    floor is linearised about (:mod:`fmscal.observers.linearised_floor`).
+
+    Parameters
+    ----------
+    log : plant.Log
+        A spatial log.
+    window : float
+        Savitzky-Golay window, s, as for :func:`spatial_motion`.
+
+    Returns
+    -------
+    ndarray, shape (N, 13)
+    """
+    q, omega, _, p, v, _ = _smoothed(log, window)
+    return np.column_stack([p, q, v, omega])
+
+
+def _smoothed(log, window):
+    """``q, omega, alpha, p, p_dot, p_ddot`` from the Savitzky-Golay filter of the poses."""
     if getattr(log, "kind", None) != "spatial":
         raise FmscalError(f"spatial_motion takes a spatial log; got a {getattr(log, 'kind', type(log).__name__)} one")
     k = _samples(log, window)
@@ -88,4 +117,4 @@ def spatial_motion(log, window=0.2):
     conj = q * np.array([1.0, -1.0, -1.0, -1.0])                 # q*, row by row
     omega = 2 * quaternion_multiply(conj.T, smooth(pose[:, :4], 1).T)[1:].T
     alpha = 2 * quaternion_multiply(conj.T, smooth(pose[:, :4], 2).T)[1:].T
-    return q, omega, alpha, smooth(pose[:, 4:], 2)
+    return q, omega, alpha, smooth(pose[:, 4:], 0), smooth(pose[:, 4:], 1), smooth(pose[:, 4:], 2)

@@ -320,6 +320,20 @@ class Model:
             return ops(*phis).vcat(phis)
         return np.asarray(phis[0], dtype=float).reshape(self.n_w, n)
 
+    def reading_scale(self, log):
+        """The scale of each reading component in ``log``, in which a method's settling and evidence
+        are judged (``S`` as ``D^-1 S D``); None: ``S`` as it is (the planar default).
+
+        Parameters
+        ----------
+        log : plant.Log
+
+        Returns
+        -------
+        ndarray, shape (n_w,), or None
+        """
+        return None
+
     # --- checks -----------------------------------------------------------------------------------
     def check_matrix(self, S, name="S"):
         """``S`` as a finite ``n_w x n_w`` float array, or a one-line :class:`FmscalError`."""
@@ -485,6 +499,16 @@ class SpatialModel(Model):
     def _key(self):
         return type(self), self.payload, self.gravity
 
+    def reading_scale(self, log):
+        """Each reading component's spread in ``log`` (N m, N), shape (6,).
+
+        Torque and force differ by two orders of magnitude: in SI units a
+        2-norm of ``S`` is the force-from-torque entries' alone. Settling and
+        evidence are judged on ``D^-1 S D``, ``D`` these spreads.
+        """
+        spread = np.std(log.w_hat, axis=0)
+        return np.maximum(spread, 1e-12 * max(float(spread.max()), 1e-300))
+
     def pose_sd(self, noise):
         """Each pose column's noise: a turn of ``angle_sd`` about each axis moves each quaternion
         component by about ``angle_sd / 2``; ``position_sd`` on ``x, y, z``. Shape (7,)."""
@@ -505,14 +529,17 @@ class SpatialModel(Model):
         """The configuration ``[p, q]`` moved by ``dq = [dp (world), dphi (sensor axes)]``.
 
         ``p + dp`` and ``q (x) exp(dphi / 2)``: the rotation vector ``dphi``
-        turns the body about its own axes, as ``omega dt`` does.
+        turns the body about its own axes, as ``omega dt`` does. Numbers or
+        casadi symbols; differentiable at ``dphi = 0`` (the small-angle series
+        there reads no square root).
         """
         o = ops(q, dq)
         dphi = dq[3:6]
-        angle = o.sqrt(dphi[0] * dphi[0] + dphi[1] * dphi[1] + dphi[2] * dphi[2])
+        angle2 = dphi[0] * dphi[0] + dphi[1] * dphi[1] + dphi[2] * dphi[2]
+        angle = o.sqrt(o.fmax(angle2, 1e-300))
         half = 0.5 * angle
         # sin(angle/2)/angle, its series below 1e-8 rad (exact to rounding there)
-        k = o.if_else(angle > 1e-8, o.sin(half) / o.fmax(angle, 1e-300), 0.5 - angle * angle / 48.0)
+        k = o.if_else(angle > 1e-8, o.sin(half) / angle, 0.5 - angle2 / 48.0)
         step = o.vcat([o.cos(half), k * dphi[0], k * dphi[1], k * dphi[2]])
         return o.vcat([q[0:3] + dq[0:3], rigid_body.quaternion_multiply(q[3:7], step)])
 
@@ -520,16 +547,19 @@ class SpatialModel(Model):
         """The move ``dq = [dp, dphi]`` taking ``q0`` to ``q1`` (inverse of :meth:`integrate`).
 
         ``dphi = 2 log(q0* (x) q1)``, taken on the short way round (``q`` and
-        ``-q`` are one attitude).
+        ``-q`` are one attitude). Numbers or casadi symbols.
         """
-        q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+        o = ops(q0, q1)
+        if not is_symbolic(q0, q1):
+            q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
         rel = rigid_body.quaternion_multiply(rigid_body.quaternion_conjugate(q0[3:7]), q1[3:7])
-        if rel[0] < 0:
-            rel = -rel
-        s = np.linalg.norm(rel[1:])
-        angle = 2.0 * np.arctan2(s, rel[0])
-        dphi = rel[1:] * (angle / s if s > 1e-300 else 2.0)
-        return np.r_[q1[0:3] - q0[0:3], dphi]
+        sign = o.if_else(rel[0] < 0, -1.0, 1.0)
+        w = sign * rel[0]
+        s2 = rel[1] * rel[1] + rel[2] * rel[2] + rel[3] * rel[3]
+        s = o.sqrt(o.fmax(s2, 1e-300))
+        # 2 atan2(s, w) / s, its series 2/w (1 - s^2 / (3 w^2)) where s is tiny
+        k = sign * o.if_else(s > 1e-8, 2.0 * o.atan2(s, w) / s, 2.0 / w * (1.0 - s2 / (3.0 * w * w)))
+        return o.vcat([q1[0:3] - q0[0:3], k * rel[1], k * rel[2], k * rel[3]])
 
     def input_matrix(self, x):
         """``A(x)``, shape (6, 6): ``[p_ddot; alpha] = A(x) [tau_O; f] + d(x)``.

@@ -30,7 +30,8 @@ def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
     assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--truth", str(arm / "arm.truth.json"), "--json",
                  "--save", str(arm / "cal.json")]) == 0
     out = _json(capsys)
-    assert out["kind"] == "spatial" and out["converged"] and out["saved"]
+    assert out["kind"] == "spatial" and out["converged"] and out["saved"] and out["observer"] == "max-likelihood"
+    assert out["latency_estimated"] and out["latency"] == 0.0 and out["undetermined"] == []
     assert np.shape(out["S"]) == (6, 6) and np.shape(out["S_std"]) == (6, 6) and len(out["b"]) == len(out["b_std"]) == 6
     assert out["E_torque"] < 0.02 and out["E_force"] < 0.02
     truth = read_truth(arm / "arm.truth.json")
@@ -38,6 +39,16 @@ def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
     assert main(["apply", str(arm / "cal.json"), str(arm / "arm.csv"), "--out", str(arm / "w.csv"), *TOOL]) == 0
     header = (arm / "w.csv").read_text().splitlines()[0]
     assert header == "t,tx,ty,tz,fx,fy,fz"
+
+
+def test_the_reference_fit_and_a_figure_of_a_spatial_calibration(arm, capsys):
+    capsys.readouterr()
+    assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--observer", "least-squares", "--latency", "0",
+                 "--truth", str(arm / "arm.truth.json"), "--json", "--plot", str(arm / "ls.png")]) == 0
+    out = _json(capsys)
+    assert out["observer"] == "least-squares" and out["converged"] and not out["latency_estimated"]
+    assert out["E_torque"] < 0.03 and out["E_force"] < 0.03
+    assert (arm / "ls.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_identify_payload_with_the_saved_calibration(arm, capsys):
@@ -68,8 +79,8 @@ def test_static_poses_are_not_saved_as_a_calibration(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["--mass", "1.2", "--rho", "0.2", "0.25", "--inertia", "0.75"], "a spatial log takes --rho X Y Z"),
-    ([*TOOL, "--plot", "{d}/p.png"], "--plot is not taken on a spatial log"),
-    ([*TOOL, "--observer", "ekf"], "--observer is not taken on a spatial log"),
+    ([*TOOL, "--observer", "ekf"], "--observer ekf does not run on a spatial log yet"),
+    ([*TOOL, "--no-offset"], "--no-offset is not taken on a spatial log"),
     ([*TOOL, "--gravity", "0", "0", "inf"], "--gravity must be three finite numbers"),
     (["--mass", "1.2", "--rho", "0", "0", "0.06", "--inertia", "1", "1", "3", "0", "0", "0"], "triangle inequality"),
 ])
@@ -117,8 +128,6 @@ def test_a_truth_of_the_other_case_is_one_line(arm, tmp_path, capsys):
     assert main(["calibrate", str(tmp_path / "p.csv"), "--mass", "2.5", "--rho", "0.2", "0.25", "--inertia", "0.75",
                  "--truth", str(arm / "arm.truth.json")]) == 2
     assert "is the truth of a spatial log" in capsys.readouterr().err
-    assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--max-latency", "0.1"]) == 2
-    assert "--max-latency is not taken on a spatial log" in capsys.readouterr().err
 
 
 def test_planar_scenario_options_are_refused_for_a_spatial_scenario(tmp_path, capsys):
