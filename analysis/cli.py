@@ -270,10 +270,10 @@ def cmd_compare(args):
 
 def _write_comparison(out, duration, table, curves, text):
     """compare --out: a figure per scenario, summary.md and runs.csv in ``out``."""
-    from fmscal.plant import get_scenario
+    from .comparison import case_scenario
     from .plots import plot_comparison
     for scenario in dict.fromkeys(table["scenario"]):
-        sc = get_scenario(scenario)
+        sc = case_scenario(scenario)
         truth = sc.with_(duration=duration or sc.duration).generate(0)[1]     # seed 0's S(t)
         plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
                         out / f"E_{scenario}.png",

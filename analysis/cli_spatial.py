@@ -19,10 +19,7 @@ import numpy as np
 
 from .cli_common import CliError, positive, strict
 
-__all__ = ["calibrate_spatial", "spatial_payload", "gravity_of", "SPATIAL_METHODS"]
-
-#: The methods ``fmscal calibrate`` runs on a spatial log; the first is the default (the floor).
-SPATIAL_METHODS = ("max-likelihood", "least-squares")
+__all__ = ["calibrate_spatial", "spatial_payload", "gravity_of"]
 _NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 
 
@@ -54,11 +51,15 @@ def _spatial_truth(path):
     return truth
 
 
-def _refuse_planar_options(args):
-    """One line for an option the spatial calibration does not take (yet)."""
-    if args.observer is not None and args.observer not in SPATIAL_METHODS:
-        raise CliError(f"--observer {args.observer} does not run on a spatial log yet; a spatial log takes "
-                       f"{' or '.join(SPATIAL_METHODS)} (default {SPATIAL_METHODS[0]})")
+def _refuse_planar_options(args, model):
+    """One line for an option the spatial calibration does not take (yet), or a method that does not run in 3D."""
+    from fmscal.observers import FLOOR_METHOD, get_method, method_names
+    if args.observer is not None:
+        get_method(args.observer)                              # an unknown name: FmscalError naming the methods
+        offered = method_names(calibrates=True, model=model)
+        if args.observer not in offered:
+            raise CliError(f"--observer {args.observer} does not run on a spatial log yet; a spatial log takes "
+                           f"{', '.join(offered)} (default {FLOOR_METHOD})")
     given = [(args.pose_noise is not None, "--pose-noise", "the noise is estimated from the log"),
              (args.wrench_noise is not None, "--wrench-noise", "the noise is estimated from the log"),
              (not args.offset, "--no-offset", "the offset is always estimated in 3D")]
@@ -76,10 +77,11 @@ def calibrate_spatial(args):
     from .calibrate import DEFAULT_MAX_LATENCY
     from .metrics import block_errors
     from .plots import plot_calibration
+    from fmscal.observers import FLOOR_METHOD
     payload = spatial_payload(args.mass, args.rho, args.inertia)
-    _refuse_planar_options(args)
-    name = args.observer or SPATIAL_METHODS[0]
     model = SpatialModel(payload, gravity_of(args))
+    _refuse_planar_options(args, model)
+    name = args.observer or FLOOR_METHOD
     log = read_log(args.log)
     for note in log.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
@@ -92,6 +94,8 @@ def calibrate_spatial(args):
     result = make_observer(name, model, settings={"offset": True}).run(aligned)
     saturated = saturation(log)
     warnings = [*saturated, *result.warnings]
+    if not result.converged and not result.warnings:
+        warnings.append(_not_settled(result.observer))
     for warning in warnings:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
     converged = bool(result.converged and not saturated)
@@ -117,6 +121,14 @@ def calibrate_spatial(args):
     if args.save and not saved:
         why = "the reading saturates" if saturated else "the run did not converge (see the warnings)"
         raise CliError(f"did not save {args.save}: {why}; add --force to save it anyway (marked as forced)")
+
+
+def _not_settled(method):
+    """Why a run with every direction determined did not converge: the log was too short to pin ``S`` down."""
+    from fmscal.observers.convergence import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE
+    return (f"{method}: S_hat did not settle within {SETTLE_TOLERANCE:.0%} over the last {SETTLE_FRACTION:.0%} of "
+            f"the log, or its uncertainty is above {EVIDENCE_TOLERANCE:.0%} of it (each reading component in its "
+            f"own scale): record a longer log, or one that turns the payload faster")
 
 
 def _print(args, log, out):

@@ -173,15 +173,18 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     (t, E, S_hat_history) : tuple of ndarray, only with ``history=True``
         Shapes (M,), (M,), (M, 3, 3).
     """
-    log, settings = _aligned(log, truth, settings)
     method = get_method(name)
+    if not method.cls.runs_on(payload):
+        return _not_applicable(name, log, floor, history)
+    log, settings = _aligned(log, truth, settings)
     result = method.build(payload, told_noise, settings).run(log, truth.S0 if method.online else None)
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     bad = result.diverged
     row = {"observer": name, "duration": float(log.duration),
            "E": np.nan if bad else tail_median(E), "E_end": np.nan if bad else float(E[-1]),
            "E_over_floor": np.nan, "floor_E": np.nan if floor is None else float(floor),
-           "convergence_time": np.nan, "diverged": bool(bad), "converged": bool(result.converged)}
+           "convergence_time": np.nan, "diverged": bool(bad), "converged": bool(result.converged),
+           "applicable": True}
     if floor is not None and not bad:
         row["E_over_floor"] = row["E"] / floor if floor > 0 else np.nan        # NaN > 0 is False
     if not bad:
@@ -198,6 +201,15 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
         return row
     step = max(1, len(E) // 2000)
     return row, (result.t[::step], E[::step], result.S_hat_history[::step])
+
+
+def _not_applicable(name, log, floor, history):
+    """The row of a method that does not run on the scenario's model (a planar-only observer in 3D): no figures."""
+    row = {"observer": name, "duration": float(log.duration), "E": np.nan, "E_end": np.nan, "E_over_floor": np.nan,
+           "floor_E": np.nan if floor is None else float(floor), "convergence_time": np.nan, "diverged": False,
+           "converged": False, "applicable": False, "wall_time": np.nan, "wall_per_sim_s": np.nan,
+           "us_per_step": np.nan}
+    return (row, None) if history else row
 
 
 def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=None, histories=False):
@@ -231,7 +243,9 @@ def run_case(scenario, seed, observers=tuple(METHODS), duration=None, settings=N
     rows, curves = [], {}
     for name in observers:
         out = run_observer(name, log, truth, model, told, (settings or {}).get(name), histories, floor)
-        row, curves[name] = out if histories else (out, None)
+        row, curve = out if histories else (out, None)
+        if curve is not None:                   # a method not applicable to the model has no curve
+            curves[name] = curve
         rows.append({"scenario": sc.name, "seed": int(seed), **row})
     return (rows, curves) if histories else rows
 
@@ -337,6 +351,7 @@ def summarise(table):
         row["converged_runs"] = int(g["converged"].sum())
         row["diverged_runs"] = int(g["diverged"].sum())
         row["us_per_step_median"] = g["us_per_step"].median()
+        row["applicable"] = bool(g["applicable"].all()) if "applicable" in g else True
         out.append(row)
     return pd.DataFrame(out)
 
@@ -355,7 +370,14 @@ def summary_markdown(summary, title="Observer comparison"):
     head += [f"median {c[:-len('_median')].replace('E_', 'E at ')}" for c in checkpoints]
     head += ["median convergence time [s]", "converged", "diverged", "cost [us/step]"]
     lines = [f"# {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    refused = {}
     for _, r in summary.iterrows():
+        if not r.get("applicable", True):
+            refused.setdefault(r["observer"], []).append(r["scenario"])
+            cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], method_label(r["observer"]), str(r["seeds"]),
+                     "not applicable"] + ["-"] * (len(head) - len(keys) - 4)
+            lines.append("| " + " | ".join(cells) + " |")
+            continue
         cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], method_label(r["observer"]), str(r["seeds"]),
                  f"{_fmt(r['E_median'])} [{_fmt(r['E_q25'])}, {_fmt(r['E_q75'])}]",
                  f"{_fmt(r['E_over_floor_median'], '.2f')} [{_fmt(r['E_over_floor_max'], '.2f')}]"]
@@ -363,4 +385,13 @@ def summary_markdown(summary, title="Observer comparison"):
         cells += [_fmt(r["convergence_time_median"], ".1f"), f"{r['converged_runs']}/{r['seeds']}",
                   f"{r['diverged_runs']}/{r['seeds']}", _fmt(r["us_per_step_median"], ".1f")]
         lines.append("| " + " | ".join(cells) + " |")
+    if refused:
+        lines += ["", "Not applicable: " + "; ".join(
+            f"{name} on {', '.join(dict.fromkeys(scenarios))} ({_refusal(name, scenarios[0])})"
+            for name, scenarios in refused.items()) + "."]
     return "\n".join(lines) + "\n"
+
+
+def _refusal(name, scenario):
+    """Why method ``name`` does not run on ``scenario``'s model, in the method's own words."""
+    return get_method(name).cls.refusal(case_model(case_scenario(scenario)))

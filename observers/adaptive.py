@@ -175,13 +175,14 @@ class AdaptiveObserver(RecursiveObserver):
     """
 
     name = "adaptive"
+    linear_channels_only = True
 
     def __init__(self, model, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
                  threshold=8.0, step_ratio=5.0, t_forget=0.05, memory=0.2, offset=False):
         model = as_model(model, type(self).__name__)
-        if not model.linear_channels:
-            raise FmscalError(f"AdaptiveObserver runs on models linear in their channels (planar, or one of your "
-                              f"own with linear_channels); got a {model.name} model")
+        refusal = self.refusal(model)
+        if refusal is not None:                  # before the layouts below read the model's channels
+            raise FmscalError(refusal)
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")

@@ -164,8 +164,8 @@ class Observer:
         observer of [4] are planar by definition.
     linear_channels_only : bool
         The method needs a model linear in its channels
-        (:attr:`fmscal.plant.Model.linear_channels`: the planar one); the
-        online methods in 3D are still to come.
+        (:attr:`fmscal.plant.Model.linear_channels`: the planar one).
+        :meth:`runs_on` reads both.
     model : plant.Model
     payload
         The model's payload.
@@ -196,17 +196,51 @@ class Observer:
 
     def __init__(self, model, offset=False):
         self.model = as_model(model, type(self).__name__)
-        if self.models and self.model.name not in self.models:
-            raise FmscalError(f"{type(self).__name__} is defined for {' and '.join(self.models)} models; "
-                              f"got a {self.model.name} model")
-        if self.linear_channels_only and not self.model.linear_channels:
-            raise FmscalError(f"{type(self).__name__} needs a model linear in its channels (planar); it does not "
-                              f"run on a {self.model.name} model yet")
+        refusal = self.refusal(self.model)
+        if refusal is not None:
+            raise FmscalError(refusal)
         self.payload = self.model.payload
         self.offset = as_bool(offset, "offset")
         self.n_w = self.model.n_w
         self.n_cols = self.n_w + int(self.offset)
         self.run_data = self._new_run(None)
+
+    @classmethod
+    def refusal(cls, model):
+        """Why the method does not run on ``model``, in one line; None where it does.
+
+        Read from :attr:`models` and :attr:`linear_channels_only`; a method
+        with other limits extends it.
+
+        Parameters
+        ----------
+        model : plant.Model
+
+        Returns
+        -------
+        str or None
+        """
+        if cls.models and model.name not in cls.models:
+            return f"{cls.__name__} is defined for {' and '.join(cls.models)} models; got a {model.name} model"
+        if cls.linear_channels_only and not model.linear_channels:
+            return (f"{cls.__name__} needs a model linear in its channels (planar); it does not run on a "
+                    f"{model.name} model yet")
+        return None
+
+    @classmethod
+    def runs_on(cls, model):
+        """Whether the method runs on ``model`` (:meth:`refusal` is None).
+
+        Parameters
+        ----------
+        model : plant.Model or plant.Payload
+            A payload stands for its case's model.
+
+        Returns
+        -------
+        bool
+        """
+        return cls.refusal(as_model(model, cls.__name__)) is None
 
     def _new_run(self, S0, compiled=True):
         """A fresh :class:`RunData` from ``S0`` (default the identity)."""

@@ -84,14 +84,18 @@ class LeastSquares(Observer):
 
     def __init__(self, model, window=0.5, offset=False):
         super().__init__(model, offset=offset)
-        if not self.model.linear_channels and self.model.name != "spatial":
-            raise FmscalError(f"LeastSquares fits models linear in their channels, or the spatial one; got a "
-                              f"{self.model.name} model")
         if self.model.name == "spatial" and not self.offset:
             raise FmscalError("least squares on a spatial model always estimates the offset (smoothed inverse "
                               "dynamics, fmscal.observers.inverse_dynamics_fit); pass offset=True")
         self.window = as_positive_scalar(window, "window")
         self.report = FitReport()
+
+    @classmethod
+    def refusal(cls, model):
+        """Least squares fits models linear in their channels, and the spatial one (smoothed inverse dynamics)."""
+        if not model.linear_channels and model.name != "spatial":
+            return f"LeastSquares fits models linear in their channels, or the spatial one; got a {model.name} model"
+        return super().refusal(model)
 
     def _estimate_spatial(self, log):
         """The spatial reference: smoothed inverse dynamics and least squares, one batch fit.

@@ -203,7 +203,7 @@ def make_observer(name, model, noise=None, settings=None):
     return get_method(name).build(model, noise, settings)
 
 
-def method_names(role=None, online=None, calibrates=None):
+def method_names(role=None, online=None, calibrates=None, model=None):
     """Names of the registered methods, in registry order, optionally filtered.
 
     Parameters
@@ -212,6 +212,8 @@ def method_names(role=None, online=None, calibrates=None):
         Keep these roles (``"design"``, ``"paper"``, ``"reference"``).
     online : bool, optional
     calibrates : bool, optional
+    model : plant.Model or plant.Payload, optional
+        Keep the methods that run on it (:meth:`observers.Observer.runs_on`).
 
     Returns
     -------
@@ -220,7 +222,8 @@ def method_names(role=None, online=None, calibrates=None):
     roles = (role,) if isinstance(role, str) else role
     return tuple(m.name for m in METHODS.values()
                  if (roles is None or m.role in roles) and (online is None or m.online == online)
-                 and (calibrates is None or m.calibrates == calibrates))
+                 and (calibrates is None or m.calibrates == calibrates)
+                 and (model is None or m.cls.runs_on(model)))
 
 
 def method_label(name):

@@ -17,8 +17,11 @@ ARM = SPATIAL_SCENARIOS["spatial-arm"]
 SEEDS = range(20)
 
 
-def _E(S_hat, S):
-    return float(np.linalg.norm(np.eye(6) - S_hat @ np.linalg.inv(S), 2))
+def _E(S_hat, S, scale=None):
+    """E of eq. (16) in SI units; with ``scale`` (each reading component's spread), unit-free: ``D^-1 (I - S_hat
+    S^-1) D``, each component in its own scale."""
+    D = np.ones(6) if scale is None else np.asarray(scale)
+    return float(np.linalg.norm((np.eye(6) - S_hat @ np.linalg.inv(S)) * D[None, :] / D[:, None], 2))
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +37,9 @@ def twenty_arms():
         ref = fit_inverse_dynamics(log, scenario.payload, scenario.gravity)
         z_S.append(((fit.S_hat - S) / fit.S_std).ravel())
         z_b.append((fit.b - truth.offset) / fit.b_std)
-        E_floor.append(_E(fit.S_hat, S))
-        E_ref.append(_E(ref.S_hat, S))
+        scale = np.std(log.w_hat, axis=0)
+        E_floor.append([_E(fit.S_hat, S), _E(fit.S_hat, S, scale)])
+        E_ref.append([_E(ref.S_hat, S), _E(ref.S_hat, S, scale)])
     return np.array(z_S), np.array(z_b), np.array(E_floor), np.array(E_ref)
 
 
@@ -49,10 +53,15 @@ def test_the_floor_uncertainty_is_honest_over_20_seeds(twenty_arms):
 
 @pytest.mark.slow
 def test_the_floor_is_not_beaten_by_the_reference_fit(twenty_arms):
+    """Median over 20 seeds: the floor ahead, in SI units (measured 0.93x) and each reading component in its
+    own scale (0.71x); seed by seed the reference is luckier on a few, by at most 1.17x (measured)."""
     _, _, E_floor, E_ref = twenty_arms
-    ratio = np.median(E_floor) / np.median(E_ref)
-    assert 0.3 < ratio <= 1.0, (np.median(E_floor), np.median(E_ref))
+    ratio = np.median(E_floor, axis=0) / np.median(E_ref, axis=0)
+    assert 0.3 < ratio[0] <= 1.0 and 0.3 < ratio[1] <= 0.85, ratio
     assert np.all(E_floor <= 1.2 * E_ref), np.c_[E_floor, E_ref]
+    # the issue's check: over 3 seeds, the floor and least squares (the reference fit) within 1.3x of each other
+    three = np.median(E_floor[:3, 0]) / np.median(E_ref[:3, 0])
+    assert 1 / 1.3 <= three <= 1.3, three
 
 
 @pytest.fixture(scope="module")
@@ -102,3 +111,42 @@ def test_the_online_observers_refuse_a_spatial_model_in_one_line():
     for name in ("ekf", "adaptive", "high-gain"):
         with pytest.raises(FmscalError, match="spatial"):
             make_observer(name, model)
+
+
+@pytest.fixture(scope="module")
+def mujoco_arm():
+    """20 s of ``spatial-arm`` integrated by MuJoCo (tests/mujoco_log.py), and fmscal's own log of the same draw."""
+    pytest.importorskip("mujoco")                 # the [test] extra installs it; on CI a skip fails
+    from mujoco_log import mujoco_log
+    scenario = ARM.with_(duration=20.0)
+    log, S, b = mujoco_log(scenario, seed=4)
+    own, truth, _ = scenario.generate(4)
+    return scenario, log, S, b, own, truth
+
+
+def test_a_log_written_by_mujoco_calibrates_at_the_floor(mujoco_arm, tmp_path, capsys):
+    """Another engine's log: ``fmscal calibrate`` gives the floor's E of fmscal's own log of the same draw."""
+    from fmscal.analysis.cli import main
+    from fmscal.analysis.metrics import block_errors
+    scenario, log, S, b, own, truth = mujoco_arm
+    np.testing.assert_allclose(truth.S_at(0.0), S, rtol=0, atol=0)      # the same draw: only the engine differs
+    # MuJoCo integrates the wrench open loop: its path drifts from the imposed one (measured 8.6e-5 m over 20 s,
+    # four times the pose noise): the log is its own, of the same motion
+    drift = np.abs(log.pose[:, 4:] - own.pose[:, 4:]).max()
+    assert scenario.position_sd < drift < 1e-3
+    log.write(tmp_path / "mujoco.csv")
+    p = scenario.payload
+    args = ["calibrate", str(tmp_path / "mujoco.csv"), "--mass", str(p.mass), "--rho", *map(str, p.rho),
+            "--inertia", *map(str, p.inertia), "--json"]
+    capsys.readouterr()
+    assert main(args) == 0
+    import json
+    out = json.loads(capsys.readouterr().out)
+    assert out["converged"] and out["observer"] == "max-likelihood" and out["undetermined"] == []
+    assert out["latency"] == 0.0
+    S_hat, S_std = np.array(out["S"]), np.array(out["S_std"])
+    z = np.r_[((S_hat - S) / S_std).ravel(), (np.array(out["b"]) - b) / np.array(out["b_std"])]
+    assert 0.6 < z.std() < 1.5 and np.abs(z).max() < 4.5
+    own_fit = fit_max_likelihood(own, SpatialModel(p, scenario.gravity), offset=True)
+    E_mujoco, E_own = np.array(block_errors(S_hat, S)), np.array(block_errors(own_fit.S_hat, S))
+    np.testing.assert_allclose(E_mujoco, E_own, rtol=0.01)     # whole, torque and force blocks; measured 3e-6

@@ -1,0 +1,79 @@
+"""A spatial log written by MuJoCo, an engine independent of fmscal's simulator.
+
+The payload is a MuJoCo free body with the tool's mass, centre of mass and
+full inertia tensor, driven by six motors on a site at the sensor point
+(force along and torque about the sensor's axes) with the wrench a scenario's
+motion needs. MuJoCo integrates at a tenth of the log's sample time (RK4),
+the wrench held at its mid-step value over each sub-step, so that its
+trajectory is the continuous one to well below the pose noise; the log
+samples it at the scenario's rate. The reading and the poses are then made
+as a scenario makes them (``w_hat = S^-1 w + b + n``, a turn of white noise
+about the sensor's axes, white position noise), with the random draws in the
+scenario's order, so that the same seed gives fmscal's own simulation of the
+same motion, noise and sensor: the two logs differ only by the engine.
+"""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from fmscal.plant import Log
+from fmscal.plant.spatial_scenarios import draw_spatial_S
+
+SUBSTEPS = 10
+
+
+def mujoco_model(payload, gravity, dt):
+    """A MuJoCo model of ``payload`` on a free joint, six motors at the sensor point ``O``."""
+    import mujoco
+    inertial = (f'<inertial pos="{" ".join(map(str, payload.rho))}" mass="{payload.mass}" '
+                f'fullinertia="{" ".join(map(str, payload.inertia))}"/>')
+    motors = "".join(f'<motor site="O" ctrllimited="false" gear="{" ".join(str(int(i == j)) for i in range(6))}"/>'
+                     for j in range(6))
+    return mujoco.MjModel.from_xml_string(
+        f'<mujoco><option timestep="{dt}" integrator="RK4" gravity="{" ".join(map(str, gravity))}"/>'
+        f'<worldbody><body name="payload"><freejoint/>{inertial}<site name="O"/></body></worldbody>'
+        f'<actuator>{motors}</actuator></mujoco>')
+
+
+def mujoco_log(scenario, seed):
+    """A log of ``scenario``'s motion as MuJoCo integrates it; ``(log, S, b)``.
+
+    Parameters
+    ----------
+    scenario : plant.SpatialScenario
+        A scenario with a pose at every sample, no latency and no dropped frames.
+    seed : int
+
+    Returns
+    -------
+    log : plant.Log
+    S : ndarray, shape (6, 6)
+    b : ndarray, shape (6,)
+    """
+    import mujoco
+    dt, n = scenario.dt, int(round(scenario.duration / scenario.dt)) + 1
+    rng = np.random.default_rng(seed)
+    motion = scenario.motion_function(rng)
+    x0 = np.array(motion(0.0)[0]).ravel()
+    wrench = np.array(motion.map(n)(np.arange(n) * dt)[1]).T               # what the sensor reads, at the samples
+    fine = np.array(motion.map((n - 1) * SUBSTEPS)((np.arange((n - 1) * SUBSTEPS) + 0.5) * dt / SUBSTEPS)[1]).T
+    model = mujoco_model(scenario.payload, scenario.gravity, dt / SUBSTEPS)
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = x0[:7], x0[7:13]                           # free joint: v in W, omega in B
+    qpos = np.empty((n, 7))
+    qpos[0] = data.qpos
+    ctrl = np.c_[fine[:, 3:], fine[:, :3]]                                  # motors: force first
+    for k in range(n - 1):
+        for j in range(SUBSTEPS):
+            data.ctrl[:] = ctrl[k * SUBSTEPS + j]
+            mujoco.mj_step(model, data)
+        qpos[k + 1] = data.qpos
+    S = draw_spatial_S(rng, scenario.crosstalk)
+    b = np.r_[rng.normal(0, scenario.offset_sd[0], 3), rng.normal(0, scenario.offset_sd[1], 3)]
+    sd = np.r_[[scenario.torque_sd] * 3, [scenario.force_sd] * 3]
+    w_hat = np.linalg.solve(S, wrench.T).T + b + rng.standard_normal((n, 6)) * sd
+    pose = np.c_[qpos[:, 3:7], qpos[:, 0:3]]                                # log order: q, p
+    turn = Rotation.from_rotvec(rng.standard_normal((n, 3)) * scenario.angle_sd)
+    pose[:, :4] = np.roll((Rotation.from_quat(np.roll(pose[:, :4], -1, axis=1)) * turn).as_quat(), 1, axis=1)
+    pose[:, 4:] += rng.standard_normal((n, 3)) * scenario.position_sd
+    return Log(np.arange(n) * dt, pose, w_hat, name=f"mujoco-{scenario.name}-seed{seed}"), S, b
