@@ -57,8 +57,9 @@ def simulate_case(scenario, seed, duration=None, noise_scale=1.0):
     if not (np.isfinite(noise_scale) and noise_scale >= 0):
         raise FmscalError(f"noise_scale must be a non-negative number; got {noise_scale}")
     if noise_scale != 1.0 and isinstance(sc, SpatialScenario):
-        raise FmscalError(f"{sc.name}: the noise of a spatial scenario is not scaled yet; noise_scale must be 1")
-    if noise_scale != 1.0:
+        sc = sc.with_(torque_sd=sc.torque_sd * noise_scale, force_sd=sc.force_sd * noise_scale,
+                      angle_sd=sc.angle_sd * noise_scale, position_sd=sc.position_sd * noise_scale)
+    elif noise_scale != 1.0:
         sc = sc.with_(wrench_noise=sc.wrench_noise * noise_scale, angle_sd=sc.angle_sd * noise_scale,
                       position_sd=sc.position_sd * noise_scale)
     log, truth, _ = sc.generate(int(seed))

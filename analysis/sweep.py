@@ -13,10 +13,9 @@ import pandas as pd
 from tqdm import tqdm
 
 from fmscal.observers import get_method, make_observer, method_names
-from fmscal.plant import get_scenario
 from fmscal.plant.errors import FmscalError
 
-from .comparison import floor_error, run_observer, seed_list, simulate_case
+from .comparison import case_model, case_scenario, floor_error, run_observer, seed_list, simulate_case
 
 __all__ = ["sweep", "run_local", "worker_count", "expand_settings", "settings_label", "TIMING_COLUMNS",
            "SWEEP_OBSERVERS",
@@ -72,11 +71,14 @@ def expand_settings(observers, grid=None):
     return variants
 
 
-def _check_variants(variants, payload):
-    """Build each variant once here, so that a misspelt setting fails before any work is sent."""
+def _check_variants(variants, model):
+    """Build each variant once here, so that a misspelt setting fails before any work is sent (the methods
+    that do not run on ``model`` are shown as not applicable, unbuilt)."""
     for name, settings in variants:
+        if not get_method(name).cls.runs_on(model):
+            continue
         try:
-            make_observer(name, payload, None, settings)
+            make_observer(name, model, None, {"offset": True, **settings})    # as on a rig with an offset
         except TypeError as err:
             raise FmscalError(f"{name}: {err}") from err
 
@@ -85,10 +87,11 @@ def _run_case(case):
     """One case: simulate once, run every variant. Module-level so that it pickles."""
     index, scenario, seed, noise_scale, duration, variants = case
     sc, log, truth, told = simulate_case(scenario, seed, duration, noise_scale)
-    floor = floor_error(log, truth, sc.payload)
+    model = case_model(sc)
+    floor = floor_error(log, truth, model)
     rows = []
     for name, settings in variants:
-        row = run_observer(name, log, truth, sc.payload, told, settings, floor=floor)
+        row = run_observer(name, log, truth, model, told, settings, floor=floor)
         rows.append({"case": index, "scenario": sc.name, "seed": int(seed), "noise_scale": float(noise_scale),
                      "settings": settings_label(settings), **row})
     return index, rows
@@ -218,7 +221,9 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
     Parameters
     ----------
     scenarios : sequence of str
-        Names from :data:`plant.SCENARIOS`.
+        Names from :data:`plant.SCENARIOS` or :data:`plant.SPATIAL_SCENARIOS`
+        (a method that does not run on a scenario's model gets a row marked
+        ``applicable`` False, without figures).
     seeds : int or sequence of int
         ``N`` means seeds ``0 .. N-1``.
     noise_scales : sequence of float
@@ -250,13 +255,14 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
         :func:`analysis.comparison.compare`.
     """
     seeds = seed_list(seeds)
-    scenarios = [get_scenario(s).name for s in scenarios]
+    scenarios = [case_scenario(s).name for s in scenarios]
     noise_scales = [float(f) for f in np.atleast_1d(noise_scales)]
     for f in noise_scales:
         if not (np.isfinite(f) and f >= 0):
             raise FmscalError(f"noise scales must be non-negative numbers; got {f}")
     variants = expand_settings(observers, settings)
-    _check_variants(variants, get_scenario(scenarios[0]).payload)
+    for name in dict.fromkeys(scenarios):
+        _check_variants(variants, case_model(case_scenario(name)))
     cases = [(i, sc, seed, f, duration, variants)
              for i, (sc, f, seed) in enumerate(itertools.product(scenarios, noise_scales, seeds))]
     client, owned = _client(scheduler, scheduler_timeout) if scheduler is not None else (None, False)

@@ -18,7 +18,9 @@ Scenarios (:data:`SPATIAL_SCENARIOS`):
   200 Hz, 2 % of frames dropped, 5 ms behind the sensor, 0.1 mm and 0.1 deg;
 - ``spatial-static``: ten held attitudes under gravity (3 s each), joined
   by slow 5 s moves: the log determines only part of ``S``;
-- ``spatial-weak``: small rotations (a few degrees) and small translations.
+- ``spatial-weak``: small rotations (a few degrees) and small translations;
+- ``spatial-drift``: ``spatial-arm`` with each channel's gain drifting by
+  5 % over the run.
 """
 
 from dataclasses import dataclass, replace
@@ -121,6 +123,10 @@ class SpatialScenario:
         Standard deviations of the offset's torque and force parts, N m and N.
     gravity : tuple of 3 float
         m/s^2, world frame.
+    drift : float
+        Relative change of each channel's gain over the run (a sensor
+        warming up): ``S(t) = S (I + drift diag(d) t / T)``, ``d`` a random
+        sign per channel, in 1 s steps; 0: ``S`` constant.
     """
 
     name: str
@@ -141,6 +147,7 @@ class SpatialScenario:
     crosstalk: float = 0.02
     offset_sd: tuple = (0.05, 1.0)
     gravity: tuple = GRAVITY
+    drift: float = 0.0
 
     def with_(self, **changes):
         """A copy with some settings changed (duration, dt, ...)."""
@@ -176,6 +183,15 @@ class SpatialScenario:
             raise FmscalError(f"unknown motion {self.motion!r}; expected 'multisine' or 'static'")
         return prescribed_motion(t, position, _zyx(*angles), self.payload, self.gravity)
 
+    def _schedule(self, S, rng):
+        """``S(t)``: constant, or with :attr:`drift` each channel's gain moved linearly over the run in 1 s steps
+        (the signs drawn only then, so that a scenario without drift keeps its draws)."""
+        if not self.drift:
+            return CalibrationSchedule(S)
+        signs = rng.choice([-1.0, 1.0], 6)
+        n = int(np.ceil(self.duration))
+        return CalibrationSchedule([(float(k), S @ np.diag(1.0 + self.drift * signs * k / n)) for k in range(n)])
+
     def generate(self, seed=0, noise_free=False):
         """Simulate the scenario.
 
@@ -201,6 +217,7 @@ class SpatialScenario:
         rng = np.random.default_rng(seed)
         motion = self.motion_function(rng)
         S = draw_spatial_S(rng, self.crosstalk)
+        schedule = self._schedule(S, rng)
         b = np.r_[rng.normal(0, self.offset_sd[0], 3), rng.normal(0, self.offset_sd[1], 3)]
         n = int(round(self.duration / self.dt)) + 1
         t = np.arange(n) * self.dt
@@ -211,7 +228,6 @@ class SpatialScenario:
         noise = NoiseSpec((self.torque_sd,) * 3 + (self.force_sd,) * 3, self.angle_sd, self.position_sd)
         if noise_free:
             noise = NoiseSpec((0.0,) * 6)
-        schedule = CalibrationSchedule(S)
         w_hat = schedule.raw_reading(t, w) + b + rng.standard_normal((n, 6)) * np.array(noise.wrench_sd)
         turn = Rotation.from_rotvec(rng.standard_normal((n, 3)) * noise.angle_sd)    # about the sensor's axes
         measured = Rotation.from_quat(np.roll(pose[:, :4], -1, axis=1)) * turn       # scipy: scalar last
@@ -219,7 +235,8 @@ class SpatialScenario:
         pose[:, 4:] += rng.standard_normal((n, 3)) * noise.position_sd
         pose[~pose_frames(n, self.dt, self.pose_rate, self.drop_rate, rng)] = np.nan
         settings = {"duration": self.duration, "dt": self.dt, "pose_rate": self.pose_rate,
-                    "drop_rate": self.drop_rate, "gravity": list(self.gravity), "description": self.description}
+                    "drop_rate": self.drop_rate, "gravity": list(self.gravity), "drift": self.drift,
+                    "description": self.description}
         truth = Truth(self.name, int(seed), schedule, np.eye(6), self.payload, noise, offset=b,
                       latency=float(self.latency), settings=settings)
         return Log(t, pose, w_hat, name=f"{self.name}-seed{seed}"), truth, x_true
@@ -237,4 +254,6 @@ SPATIAL_SCENARIOS = {s.name: s for s in [
                     motion="static", angle_amplitude=(0.8, 0.8, 0.8), duration=80.0),
     SpatialScenario("spatial-weak", "Small motions: a few degrees, 3 cm.",
                     angle_amplitude=(0.06, 0.06, 0.06), position_amplitude=0.03),
+    SpatialScenario("spatial-drift", "The arm's motion and encoders, each channel's gain drifting by 5 % over "
+                                     "the 60 s (a sensor warming up): which methods follow it.", drift=0.05),
 ]}

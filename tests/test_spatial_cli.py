@@ -134,3 +134,15 @@ def test_planar_scenario_options_are_refused_for_a_spatial_scenario(tmp_path, ca
     out = str(tmp_path / "x.csv")
     assert main(["simulate", "--scenario", "spatial-weak", "--rho", "0.1", "0.2", "--out", out]) == 2
     assert "--rho is for the planar scenarios" in capsys.readouterr().err
+
+
+def test_compare_takes_a_spatial_scenario_and_writes_its_figure(tmp_path, capsys):
+    out = tmp_path / "cmp"
+    assert main(["compare", "--scenario", "spatial-arm", "--seeds", "1", "--duration", "3", "--observer",
+                 "least-squares", "max-likelihood", "high-gain", "--out", str(out)]) == 0
+    text = (out / "summary.md").read_text()
+    assert "| spatial-arm | high-gain (reconstruction of [4]) | 1 | not applicable |" in text
+    assert "HighGainObserver is defined for planar models" in text
+    assert (out / "E_spatial-arm.png").read_bytes()[:4] == b"\x89PNG"
+    assert main(["compare", "--scenario", "spatial-nowhere"]) == 2
+    assert "spatial-arm" in capsys.readouterr().err                    # the message lists both cases' scenarios

@@ -82,3 +82,17 @@ def test_a_spatial_log_and_its_truth_round_trip(tmp_path, arm):
     np.testing.assert_array_equal(back.S_at(0.0), truth.S_at(0.0))
     np.testing.assert_array_equal(back.offset, truth.offset)
     assert back.payload == truth.payload and back.noise == truth.noise
+
+
+def test_spatial_drift_moves_each_gain_by_its_stated_share_and_nothing_else():
+    scenario = SPATIAL_SCENARIOS["spatial-drift"].with_(duration=10.0)
+    log, truth, x = scenario.generate(2)
+    S0, S_end = truth.S_at(0.0), truth.S_at(log.t[-1])
+    gains = np.diag(np.linalg.solve(S0, S_end))                   # S(t) = S0 (I + drift diag(d) t / T)
+    np.testing.assert_allclose(np.abs(gains - 1), 0.05 * 9 / 10, rtol=1e-12)      # the last 1 s step: 9/10
+    assert len(set(np.sign(gains - 1))) == 2                      # signs drawn per channel (this seed: both)
+    np.testing.assert_allclose(np.linalg.solve(S0, S_end), np.diag(gains), atol=1e-12)
+    # a scenario without drift keeps its draws: spatial-arm's log is spatial-drift's motion, S0 and noise
+    arm, arm_truth, arm_x = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=10.0).generate(2)
+    np.testing.assert_array_equal(arm_x, x)
+    np.testing.assert_array_equal(arm_truth.S_at(0.0), S0)

@@ -94,3 +94,17 @@ def test_the_bench_runs_in_its_short_mode(tmp_path, capsys):
 def test_a_scheduler_that_is_neither_an_address_nor_a_client_is_refused():
     with pytest.raises(TypeError, match="tcp://HOST:PORT"):
         sweep(["paper"], 1, observers=["adaptive"], duration=1, scheduler=8786, progress=False)
+
+
+def test_a_spatial_sweep_scales_the_noise_and_shows_the_planar_methods_as_not_applicable():
+    from fmscal.analysis.comparison import summarise, summary_markdown
+    table = sweep(["spatial-arm"], seeds=1, noise_scales=[1.0, 4.0], observers=["least-squares", "adaptive"],
+                  duration=3.0, n_jobs=1, progress=False)
+    assert len(table) == 4 and set(table["observer"]) == {"least-squares", "adaptive"}
+    planar = table[table["observer"] == "adaptive"]
+    assert not planar["applicable"].any() and planar["E"].isna().all() and not planar["diverged"].any()
+    ls = table[table["observer"] == "least-squares"].set_index("noise_scale")
+    assert ls["applicable"].all() and ls["E"].notna().all()
+    assert ls.loc[4.0, "E"] > 1.5 * ls.loc[1.0, "E"]                  # four times the noise: a worse fit
+    text = summary_markdown(summarise(table))
+    assert "| not applicable |" in text and "needs a model linear in its channels" in text
