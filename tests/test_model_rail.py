@@ -146,7 +146,7 @@ def test_the_planar_only_observers_refuse_another_model():
 
 def test_the_adaptive_default_refuses_a_model_not_linear_in_its_channels():
     from fmscal.plant.spatial_scenarios import TOOL
-    with pytest.raises(FmscalError, match="linear in their channels .*; got a spatial model"):
+    with pytest.raises(FmscalError, match="needs a model linear in its channels .*; it does not run on a spatial"):
         AdaptiveObserver(plant.SpatialModel(TOOL))
 
 
