@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmscal.observers import FLOOR_METHOD, METHODS, AugmentedEKF, RecursiveObserver, make_observer
+from fmscal.observers import FLOOR_METHOD, METHODS, AugmentedEKF, RecursiveObserver, make_observer, method_names
 from fmscal.plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
 from fmscal.plant.excitation import PaperWrench
 
@@ -41,7 +41,7 @@ __all__ = ["BenchSettings", "run_bench", "bench_markdown", "machine_description"
 #: The targets of issues 7 and 25, checked by :func:`bench_markdown`: run times as ratios to the
 #: adaptive default's on the same log, wall times in s.
 TARGETS = {"compiled_over_numpy": 10.0, "steps_per_s_stretch": 1e6, "ekf_over_adaptive": 4.0,
-           "floor_over_adaptive": 3.0, "reproduce_s": 60.0, "sweep_s": 90.0}
+           "floor_over_adaptive": 3.0, "reproduce_s": 60.0, "sweep_s": 90.0, "spatial_fit_s": 10.0}
 #: The method every run-time ratio is taken against.
 _REFERENCE = "adaptive"
 #: Observers whose compiled path is benchmarked: every registered recursive observer.
@@ -65,6 +65,8 @@ class BenchSettings:
     sweep_seeds : int
     sweep_s : float
         Length of each sweep run, s.
+    spatial_s : float
+        Length of the ``spatial-arm`` log (1 kHz) the spatial fits run on, s.
     """
 
     fast_s: float = 100.0
@@ -73,11 +75,13 @@ class BenchSettings:
     reproduce_scale: float = 1.0
     sweep_seeds: int = 100
     sweep_s: float = 100.0
+    spatial_s: float = 60.0
 
     @classmethod
     def quick(cls):
         """A short mode (a few seconds) that exercises every measurement; not for docs/speed.md."""
-        return cls(fast_s=5.0, numpy_s=0.5, ekf_s=1.0, reproduce_scale=0.02, sweep_seeds=4, sweep_s=2.0)
+        return cls(fast_s=5.0, numpy_s=0.5, ekf_s=1.0, reproduce_scale=0.02, sweep_seeds=4, sweep_s=2.0,
+                   spatial_s=2.0)
 
 
 def machine_description():
@@ -220,7 +224,8 @@ def run_bench(settings=None, progress=True):
         ``ekf_numpy_us`` (filterpy), ``bare_filterpy_us``, ``buffer_call_us``, ``trigger_us``, ``ordinary_call_us``),
         ``simulator`` (``compiled_us``, ``numpy_us``), ``reproduce``
         and ``sweep`` (``wall_s``, ``numpy_estimate_s``, ``case_cpu_s`` (one case's processor time in
-        this process), ``runs``, ``diverged``).
+        this process), ``runs``, ``diverged``), ``spatial`` (``{method: s}``: whole fits of a
+        ``spatial-arm`` log, the best of 2).
     """
     s = settings or BenchSettings()
     observers = _observer_speeds(s)
@@ -249,7 +254,7 @@ def run_bench(settings=None, progress=True):
     sweep_out = {"wall_s": wall, "numpy_estimate_s": s.sweep_seeds * per_case * 1e-6 / cores, "case_cpu_s": case_cpu,
                  "runs": len(table), "diverged": int(table["diverged"].sum())}
     return {"machine": machine_description(), "settings": s.__dict__, "observers": observers, "ekf": ekf,
-            "simulator": simulator, "reproduce": repro, "sweep": sweep_out}
+            "simulator": simulator, "reproduce": repro, "sweep": sweep_out, "spatial": _spatial_speeds(s)}
 
 
 def _verdict(ok):
@@ -311,6 +316,12 @@ def bench_markdown(report):
                  f"{w['case_cpu_s'] * s['sweep_seeds'] / cores:.0f} s | {w['wall_s']:.1f} s | "
                  f"{w['numpy_estimate_s']:.0f} s (estimated) | {w['numpy_estimate_s'] / w['wall_s']:.0f}x | "
                  f"< {TARGETS['sweep_s']:g} s: {verdict} |")
+    sp = report.get("spatial", {})
+    full = s.get("spatial_s", 0) >= 60
+    for name, wall in sp.items():
+        verdict = _verdict(wall < TARGETS["spatial_fit_s"]) if full else "not the full log"
+        lines.append(f"| `{name}` on a {s['spatial_s']:g} s `spatial-arm` log at 1 kHz (6x6 `S` and the offset, "
+                     f"whole fit) | {wall:.3g} s | - | - | < {TARGETS['spatial_fit_s']:g} s: {verdict} |")
     lines += ["", "Plain numpy: the same transition evaluated in numpy one step at a time "
               "(`run(compiled=False)`, `integrate(compiled=False)`; the EKF's: filterpy's `ExtendedKalmanFilter` "
               "with the casadi model). Run ratios: whole runs (`Observer.run`) on the same log in this process, "
@@ -321,3 +332,15 @@ def bench_markdown(report):
               "The first-run figure includes building the observer "
               "(symbolic step, C generation, loading the cached library)."]
     return "\n".join(lines) + "\n"
+
+
+def _spatial_speeds(s):
+    """Whole fits of a ``spatial-arm`` log by every method that calibrates in 3D, the best of 2 each, s."""
+    from fmscal.plant import SPATIAL_SCENARIOS, SpatialModel
+    scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=s.spatial_s)
+    log, _, _ = scenario.generate(0)
+    model = SpatialModel(scenario.payload, scenario.gravity)
+    out = {}
+    for name in method_names(calibrates=True, online=False, model=model):
+        out[name] = _best(lambda: make_observer(name, model, settings={"offset": True}).run(log), 2)
+    return out
