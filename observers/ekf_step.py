@@ -176,4 +176,4 @@ def whole_step(model, n, eiv):
     z_next, out = _step(model, z, u_prev, u, dt, p, n, eiv)
     step = ca.Function(f"ekf_{model.name}{n}{'' if eiv else '_plain'}_step", [z, u_prev, u, dt, p],
                        [ca.densify(z_next), ca.densify(out)])
-    return ChunkedSteps(step, _CHUNK)
+    return ChunkedSteps(step, _CHUNK, keep_states=False)

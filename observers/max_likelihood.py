@@ -449,7 +449,7 @@ def _chunked_steps(model, n, eiv, history=True):
         outputs = [ca.densify(filter_step(model, z, u, p, n, eiv))]
     name = f"max_likelihood_{model.name}{n}{'' if eiv else '_plain'}{'' if history else '_filter'}"
     step = ca.Function(f"{name}_step", [z, u, p], outputs)
-    return ChunkedSteps(step, _CHUNK)
+    return ChunkedSteps(step, _CHUNK, keep_states=False)
 
 
 def _run_compiled(z0, U, p, model, n, eiv, progress=None, history=True):
