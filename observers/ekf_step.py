@@ -21,7 +21,7 @@ from fmscal.plant._compile import ChunkedSteps
 from fmscal.plant.layout import StateLayout
 
 from .eiv import _compensation
-from .kalman import cholesky_solve, filter_layout, pack_lower, unpack_lower
+from .kalman import filter_layout, pack_lower, spd_inverse, unpack_lower
 from .noise_level import level_update
 
 __all__ = ["model_step", "whole_step", "state_layout", "output_layout", "params_layout"]
@@ -135,9 +135,9 @@ def _step(model, z, u_prev, u, dt, p, n, eiv):
     PHT = P_pred[:, pose]
     R = ca.diag(pp.R)
     y = b.pose - x_pred[pose]
-    X = cholesky_solve(o, P_pred[pose, pose] + R, ca.horzcat(PHT.T, y), n_y)    # S^-1 [H P, y]
-    K = has * X[:, :d].T
-    nis = ca.dot(y, X[:, d])
+    SI = spd_inverse(o, P_pred[pose, pose] + R, n_y)     # S^-1 (filterpy's SI)
+    K = has * (PHT @ SI)
+    nis = ca.dot(y, SI @ y)
     x_new = x_pred + K @ y
     A = P_pred - K @ PHT.T                                # (I - K H) P
     P_new = A - (A[:, pose] - K @ R) @ K.T                 # (I - K H) P (I - K H)^T + K R K^T
@@ -175,5 +175,5 @@ def whole_step(model, n, eiv):
     p = ca.SX.sym("p", params_layout(model).size)
     z_next, out = _step(model, z, u_prev, u, dt, p, n, eiv)
     step = ca.Function(f"ekf_{model.name}{n}{'' if eiv else '_plain'}_step", [z, u_prev, u, dt, p],
-                       [ca.densify(z_next), ca.densify(out)])
-    return ChunkedSteps(step, _CHUNK)
+                       ca.cse([ca.densify(z_next), ca.densify(out)]))     # each repeated expression once
+    return ChunkedSteps(step, _CHUNK, keep_states=False)

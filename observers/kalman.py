@@ -47,7 +47,7 @@ from .discretise import position_increment, velocity_increment
 
 __all__ = ["filter_layout", "input_layout", "params_layout", "initial_state", "filter_step", "bias_matrix",
            "information_factor", "correction_limit", "pack_lower", "unpack_lower", "cholesky", "cholesky_apply",
-           "cholesky_solve", "V0_SD", "POSE_SD_FLOOR"]
+           "cholesky_solve", "spd_inverse", "V0_SD", "POSE_SD_FLOOR"]
 
 #: Prior standard deviation of the initial velocities (rad/s, m/s); the first pose is the
 #: prior of the initial position. A few samples of poses outweigh it.
@@ -182,6 +182,24 @@ def cholesky_solve(o, A, B, k):
     return cholesky_apply(o, cholesky(o, A, k), B, k)
 
 
+def spd_inverse(o, A, k):
+    """``A^-1`` of a small symmetric positive definite ``k x k`` ``A``: ``L^-T L^-1`` (``L``: :func:`cholesky`).
+
+    For a matrix that many columns are divided by (the innovation covariance
+    of a few poses): a product with it costs no divisions, where a solve per
+    column (:func:`cholesky_apply`) takes ``2 k``. Only the lower triangle of
+    ``A`` is read; the result is symmetric.
+    """
+    Lc = cholesky(o, A, k)
+    inv = [[None] * k for _ in range(k)]                  # L^-1, lower triangular, by forward substitution
+    for j in range(k):
+        inv[j][j] = 1.0 / Lc[j][j]
+        for i in range(j + 1, k):
+            inv[i][j] = -sum(Lc[i][q] * inv[q][j] for q in range(j, i)) / Lc[i][i]
+    lower = [[sum(inv[q][i] * inv[q][j] for q in range(i, k)) for j in range(i + 1)] for i in range(k)]
+    return o.matrix([[lower[max(i, j)][min(i, j)] for j in range(k)] for i in range(k)])
+
+
 def information_factor(o, J, m):
     """Cholesky factor (:func:`cholesky`) of ``J + lam I``, ``lam`` a ``1e-10`` of ``J``'s mean diagonal.
 
@@ -307,10 +325,8 @@ def filter_step(model, z, u, p, n, eiv=True):
     e = mx.col(uu.pose) - x_pred[pos, :]                  # e = y - C x- (the filter run with s = 0)
     R = o.matrix([[pp.R[i] if i == j else 0.0 for j in range(n_y)] for i in range(n_y)])
     V = P_pred[pos, :][:, pos] + R                        # V = C P- C^T + R
-    rhs = o.matrix([[CP[i, j] for j in range(nx)] + [H[i, j] for j in range(m)] + [e[i, 0]]
-                    + [1.0 if i == j else 0.0 for j in range(n_y)] for i in range(n_y)])
-    X = cholesky_solve(o, V, rhs, n_y)                    # V^-1 [C P-, H, e, I]
-    Vi_CP, Vi_H, Vi_e, Vi = X[:, 0:nx], X[:, nx:nx + m], X[:, nx + m:nx + m + 1], X[:, nx + m + 1:nx + m + 1 + n_y]
+    Vi = spd_inverse(o, V, n_y)                           # V^-1, then products with it (no division per column)
+    Vi_CP, Vi_H, Vi_e = o.dot(Vi, CP), o.dot(Vi, H), o.dot(Vi, e)
     K = has * Vi_CP.T                                     # K = P- C^T V^-1 (zero without a pose)
     x_next = x_pred + o.dot(K, e)                         # x = x- + K e
     P_next = P_pred - o.dot(K, CP)                        # P = P- - K C P-

@@ -435,21 +435,33 @@ def _run_numpy(z0, U, p, model, n, eiv):
     return z, Y
 
 
+def _carried(model, n, eiv):
+    """The size of the leading part of the state that a compiled pass carries: all of it with the
+    errors-in-variables moments, else the filter's own ``x, P, M, J, r`` (the moments pass unchanged)."""
+    L = filter_layout(model, n)
+    return L.size if eiv else L.slices["r"].stop
+
+
 @lru_cache(maxsize=8)
 def _chunked_steps(model, n, eiv, history=True):
     """:func:`_step` run in compiled chunks of :data:`_CHUNK` samples (:class:`plant._compile.ChunkedSteps`);
-    ``history=False``: :func:`fmscal.observers.kalman.filter_step` alone (a pass whose history is not wanted)."""
-    z = ca.SX.sym("z", filter_layout(model, n).size)
+    ``history=False``: :func:`fmscal.observers.kalman.filter_step` alone (a pass whose history is not wanted).
+    The state is the part :func:`_carried` names."""
+    L = filter_layout(model, n)
+    size = _carried(model, n, eiv)
+    z = ca.SX.sym("z", size)
+    z_full = ca.vertcat(z, ca.SX.zeros(L.size - size))       # moments that eiv=False does not read
     u = ca.SX.sym("u", input_layout(model).size)
     p = ca.SX.sym("p", params_layout(model, n).size)
     if history:
-        z_next, out = _step(z, u, p, model, n, eiv)
-        outputs = [ca.densify(z_next), ca.densify(out)]
+        z_next, out = _step(z_full, u, p, model, n, eiv)
+        outputs = [ca.densify(z_next[:size]), ca.densify(out)]
     else:
-        outputs = [ca.densify(filter_step(model, z, u, p, n, eiv))]
+        outputs = [ca.densify(filter_step(model, z_full, u, p, n, eiv)[:size])]
+    outputs = ca.cse(outputs)                                 # one evaluation of each repeated expression
     name = f"max_likelihood_{model.name}{n}{'' if eiv else '_plain'}{'' if history else '_filter'}"
     step = ca.Function(f"{name}_step", [z, u, p], outputs)
-    return ChunkedSteps(step, _CHUNK)
+    return ChunkedSteps(step, _CHUNK, keep_states=False)
 
 
 def _run_compiled(z0, U, p, model, n, eiv, progress=None, history=True):
@@ -459,7 +471,6 @@ def _run_compiled(z0, U, p, model, n, eiv, progress=None, history=True):
     """
     steps = _chunked_steps(model, n, eiv, history)
     inputs = [U, np.broadcast_to(p, (len(U), len(p)))]
-    if not history:
-        return steps.run(z0, inputs, states=False, progress=progress), None
-    z_end, (Y,) = steps.run(z0, inputs, outputs=True, states=False, progress=progress)
-    return z_end, Y
+    size = _carried(model, n, eiv)
+    z_end, Y = steps.run(z0[:size], inputs, outputs=True, states=False, progress=progress)
+    return np.concatenate([z_end, z0[size:]]), (Y[0] if history else None)

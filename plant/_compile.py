@@ -25,7 +25,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["compile_function", "compiler", "BufferedCall", "ChunkedSteps"]
+__all__ = ["compile_function", "compile_functions", "compiler", "BufferedCall", "ChunkedSteps"]
 
 # no -ffast-math and no fused multiply-adds (-ffp-contract=off): the C code rounds each operation as numpy does
 _FLAGS = ("-O3", "-ffp-contract=off", "-fPIC", "-shared")
@@ -83,16 +83,37 @@ def compile_function(fun):
     casadi.Function
         Same inputs, outputs and results (to rounding: no fast-math).
     """
+    return compile_functions([fun])[0]
+
+
+def compile_functions(funs):
+    """Several casadi functions generated as C into one library, compiled once (:func:`compile_function`).
+
+    Functions that call the same function (the loops of one step,
+    :class:`ChunkedSteps`) share its code and its build.
+
+    Parameters
+    ----------
+    funs : sequence of casadi.Function
+        Distinct names.
+
+    Returns
+    -------
+    list of casadi.Function
+        The compiled functions in the order given, or ``funs`` themselves without a compiler.
+    """
+    funs = list(funs)
     cc = compiler()
     if cc is None:
-        return fun
-    name = fun.name()
+        return funs
+    name = funs[0].name()
     gen = ca.CodeGenerator(f"{name}.c")
-    gen.add(fun)
+    for fun in funs:
+        gen.add(fun)
     source = gen.dump()
     key = hashlib.sha256((source + cc + " ".join(_FLAGS + _NATIVE) + _machine()).encode()).hexdigest()[:20]
     if key in _loaded:
-        return _loaded[key]
+        return list(_loaded[key])
     try:
         directory = _cache_dir()
         library = directory / f"{name}_{key}.so"
@@ -108,16 +129,16 @@ def compile_function(fun):
                     subprocess.run([cc, *_FLAGS, str(src), "-o", str(out), "-lm"], check=True,
                                    capture_output=True, text=True)
                 os.replace(out, library)          # atomic: parallel workers may race
-        compiled = ca.external(name, str(library))
+        compiled = [ca.external(fun.name(), str(library)) for fun in funs]
     except (OSError, subprocess.CalledProcessError, RuntimeError) as err:
         if not _warned:
             detail = getattr(err, "stderr", "") or str(err)
             warnings.warn(f"fmscal: C compilation failed ({detail.strip()[:200]}); "
-                          "using casadi's virtual machine", RuntimeWarning, stacklevel=2)
+                          "using casadi's virtual machine", RuntimeWarning, stacklevel=3)
             _warned.append(True)
-        return fun
+        return funs
     _loaded[key] = compiled
-    return compiled
+    return list(compiled)
 
 
 class BufferedCall:
@@ -174,14 +195,31 @@ class ChunkedSteps:
         other outputs (optional) per-step values that are not carried on.
     chunk : int
         Steps per compiled call.
+    keep_states : bool
+        True (default): the compiled chunk returns the state after each of its
+        steps. False: only the state after its last one, and the per-step
+        outputs, so that a large state is not written out after every step;
+        then only ``run(states=False)``, and the steps past the last whole
+        chunk (and those a health test keeps of a chunk) run through loops of
+        a tenth, a hundredth, ... of the chunk, down to one step, built into
+        the same library.
     """
 
-    def __init__(self, step, chunk):
+    def __init__(self, step, chunk, keep_states=True):
         self.chunk = int(chunk)
+        self.keep_states = bool(keep_states)
         self.nz = step.nnz_in(0)
         self.sizes = [step.nnz_in(i) for i in range(1, step.n_in())]
         self.out_sizes = [step.nnz_out(i) for i in range(1, step.n_out())]
-        self.fun = compile_function(step.mapaccum(f"{step.name()}_chunk", self.chunk))
+        if self.keep_states:
+            self.fun = compile_function(step.mapaccum(f"{step.name()}_chunk", self.chunk))
+            return
+        lengths = [self.chunk]
+        while lengths[-1] > 1:
+            lengths.append(max(lengths[-1] // 10, 1))
+        loops = compile_functions([_last_state_loop(step, k, f"{step.name()}_last{k}") for k in lengths])
+        self._loops = list(zip(lengths, loops))
+        self.fun = loops[0]
 
     def run(self, z0, inputs, healthy=None, outputs=False, states=True, progress=None, with_start=False):
         """Run the recursion from ``z0`` over the rows of ``inputs``.
@@ -215,6 +253,11 @@ class ChunkedSteps:
         Y : list of ndarray, each shape (M, size), only with ``outputs=True``
             The step's other outputs, row ``k`` from step ``k``.
         """
+        if not self.keep_states:
+            if states:
+                raise ValueError("a ChunkedSteps built with keep_states=False runs with states=False only")
+            z, Y = self._run_last(z0, inputs, healthy, progress)
+            return (z, Y) if outputs else z
         n = len(inputs[0]) if inputs else 0
         call = BufferedCall(self.fun)              # buffers of this run: safe across threads
         z_in, *u_in = call.inputs
@@ -250,3 +293,56 @@ class ChunkedSteps:
         else:
             Z = Z_all[:first + m]
         return (Z, [y[:m] for y in Y]) if outputs else Z
+
+    def _run_last(self, z0, inputs, healthy, progress):
+        """:meth:`run` with ``states=False`` on the loops of ``keep_states=False``: the last state, the outputs."""
+        n = len(inputs[0]) if inputs else 0
+        calls = [(k, BufferedCall(fun)) for k, fun in self._loops]      # buffers of this run: safe across threads
+        Y = [np.empty((n, size)) for size in self.out_sizes]
+        z = np.array(z0, dtype=float)
+        m = n
+        for k0 in range(0, n, self.chunk):
+            k1 = min(k0 + self.chunk, n)
+            z_next = self._advance(calls, z, inputs, k0, k1, Y)
+            if progress is not None:
+                progress(k1 - k0)
+            keep = k1 - k0 if healthy is None else healthy(Y[0][k0:k1], k0)
+            if keep < k1 - k0:                  # the state after the kept steps: run them again
+                z, m = self._advance(calls, z, inputs, k0, k0 + keep, None), k0 + keep
+                break
+            z = z_next
+        return z, [y[:m] for y in Y]
+
+    def _advance(self, calls, z, inputs, k0, k1, Y):
+        """The state after steps ``k0 .. k1 - 1`` from ``z``, through the longest loops that fit; their
+        outputs written to rows ``k0 .. k1 - 1`` of ``Y`` (None: not kept)."""
+        z = np.array(z, dtype=float)
+        for k, call in calls:
+            z_in, *u_in = call.inputs
+            z_out, *y_out = call.outputs
+            while k1 - k0 >= k:
+                z_in[:] = z
+                for buf, values, size in zip(u_in, inputs, self.sizes):
+                    buf.reshape(k, size)[:] = values[k0:k0 + k]           # column-major: one row per step
+                call()
+                if Y is not None:
+                    for y, buf, size in zip(Y, y_out, self.out_sizes):
+                        y[k0:k0 + k] = buf.reshape(k, size)
+                z[:] = z_out
+                k0 += k
+        return z
+
+
+def _last_state_loop(step, length, name):
+    """``step`` run ``length`` times: the state after the last step and every step's other outputs.
+
+    The ``mapaccum`` of ``step`` without the states between (:class:`ChunkedSteps`, ``keep_states=False``):
+    the same inputs, the first output the state, the others ``(size, length)``.
+    """
+    z0 = ca.MX.sym("z", step.sparsity_in(0))
+    rows = [ca.MX.sym(f"u{i}", step.nnz_in(i), length) for i in range(1, step.n_in())]
+    z, outputs = z0, []
+    for k in range(length):
+        z, *y = step.call([z, *[r[:, k] for r in rows]])
+        outputs.append(y)
+    return ca.Function(name, [z0, *rows], [z, *[ca.horzcat(*col) for col in zip(*outputs)]])
