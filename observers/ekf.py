@@ -217,10 +217,15 @@ class AugmentedEKF(Observer):
             if q_S_max < q_S_start:
                 raise FmscalError(f"q_S_max must be at least q_S and q_S_start ({q_S_start:g}); got {q_S_max:g}")
             self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
-                                                                          allow_zero=True), q_start=q_S_start)
+                                                                          allow_zero=True), q_start=q_S_start,
+                                    dof=self._innovation_size())
         self.c0_sd = None if c0_sd is None else as_positive_scalar(c0_sd, "c0_sd")
         self._build(as_bool(eiv, "eiv"))
         self.reset()
+
+    def _innovation_size(self):
+        """Entries of a pose innovation (the NIS's degrees of freedom): the pose's."""
+        return self.model.n_pose
 
     def _build(self, eiv):
         """The model's part of the filter: its size, ``H``, the compiled step, the compensation."""

@@ -121,16 +121,17 @@ def error_step(model, offset):
     dt = ca.SX.sym("dt")
     e = ca.SX.sym("e", d)                                   # the error state at the step's start
     dw = ca.SX.sym("dw", n_w)                               # a perturbation of the true wrench at both ends
+    d0, d1 = ca.SX.sym("d0", n_w), ca.SX.sym("d1", n_w)     # perturbations of the raw readings
     x, s = xs[0:nx], xs[nx:]
     S = ca.reshape(s + e[ne:], n, n_w).T                    # [S | c] (x) the error, row order
-    a0, a1 = (ca.vertcat(w, 1) if offset else w for w in (w0, w1))
+    a0, a1 = (ca.vertcat(w, 1) if offset else w for w in (w0 + d0, w1 + d1))
     moved = _predicted(model, model.state_integrate(x, e[0:ne]), S @ a0 + dw, S @ a1 + dw, dt)
-    nominal = ca.vertcat(e, dw)
-    at_nominal = lambda expr: ca.substitute(expr, nominal, ca.DM.zeros(d + n_w))     # noqa: E731
+    nominal = ca.vertcat(e, dw, d0, d1)
+    at_nominal = lambda expr: ca.substitute(expr, nominal, ca.DM.zeros(d + 3 * n_w))     # noqa: E731
     x_next = at_nominal(moved)
     error = ca.vertcat(model.state_difference(x_next, moved), e[ne:])      # e_k+1 = moved (-) x_next
     F = at_nominal(ca.jacobian(error, e))
-    J0, J1, J_d = (ca.densify(at_nominal(ca.jacobian(error, v))) for v in (w0, w1, dw))
+    J0, J1, J_d = (ca.densify(at_nominal(ca.jacobian(error, v))) for v in (d0, d1, dw))
     xs_next = ca.vertcat(x_next, s)
     var_w = ca.SX.sym("var_w", n_w)
     P_S_flat = ca.SX.sym("P_S", m * m)
@@ -230,7 +231,7 @@ def _step(model, z, u_prev, u, dt, p, n):
     _, xs_new, G = inject(xs_pred, pose, K @ y)
     P_new = G @ P_upd @ G.T
     P_packed = pack_lower(P_new, d)
-    q, eps_bar = level_update(st.q, st.eps_bar, nis, st.since + dt, tuple(pp.level[i] for i in range(7)))
+    q, eps_bar = level_update(st.q, st.eps_bar, nis, st.since + dt, tuple(pp.level[i] for i in range(7)), nv)
     adapt = has * pp.adapt > 0.5
     q, eps_bar = ca.if_else(adapt, q, st.q), ca.if_else(adapt, eps_bar, st.eps_bar)
     since = (1 - has) * (st.since + dt)
@@ -298,6 +299,10 @@ class ErrorStateEKF(AugmentedEKF):
     dim_x : int
         The error state's size: ``2 nv + n_w n`` (spatial: 48, or 54 with the offset).
     """
+
+    def _innovation_size(self):
+        """The pose innovation in the error state, ``[dp, dphi]``: ``nv`` entries."""
+        return self.model.nv
 
     def _build(self, eiv):
         model = self.model

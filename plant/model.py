@@ -563,10 +563,14 @@ class SpatialModel(Model):
 
     def check_pose(self, pose, name="pose"):
         """One pose as 7 finite numbers whose quaternion is of unit norm (within
-        :data:`fmscal.plant.log.QUATERNION_TOLERANCE`, then normalised), or a one-line :class:`FmscalError`."""
+        :data:`fmscal.plant.log.QUATERNION_TOLERANCE`), or a one-line :class:`FmscalError`.
+
+        The pose is returned as it is: :meth:`difference` reads a quaternion's
+        direction only, and :meth:`rest_state` normalises it.
+        """
         from .log import unit_quaternions         # log imports this module
-        pose = super().check_pose(pose, name).copy()
-        pose[:4] = unit_quaternions(pose[None, :4], name)[0]
+        pose = super().check_pose(pose, name)
+        unit_quaternions(pose[None, :4], name)
         return pose
 
     def rest_state(self, pose):
