@@ -13,9 +13,15 @@ recursive observers (:mod:`fmscal.observers.adaptive`,
 :mod:`fmscal.observers.highgain`), the filter pieces
 (:mod:`fmscal.observers.kalman`) and least squares' double integrals
 (:mod:`fmscal.observers.least_squares`) all call these two functions.
+
+On a configuration that does not move additively (a unit quaternion),
+:func:`move` takes the same step on the model's manifold: the configuration
+by :meth:`fmscal.plant.Model.integrate` of the position increment, the
+velocity additively. The spatial floor (:mod:`fmscal.observers.linearised_floor`)
+and the spatial EKF (:mod:`fmscal.observers.ekf_error_state`) step with it.
 """
 
-__all__ = ["position_increment", "velocity_increment"]
+__all__ = ["position_increment", "velocity_increment", "move"]
 
 
 def position_increment(h, a0, a1):
@@ -51,3 +57,34 @@ def velocity_increment(h, a0, a1):
     float, ndarray or casadi.SX
     """
     return h * (a0 + a1) / 2
+
+
+def move(model, x, a0, a1, h):
+    """The state ``x`` moved over a step ``h`` with the acceleration linear from ``a0`` to ``a1``.
+
+    The two increments above, on the model's configuration::
+
+        q_{k+1}  = q_k (+) (h nu_k + h^2 (2 a_k + a_{k+1}) / 6)
+        nu_{k+1} = nu_k + h (a_k + a_{k+1}) / 2
+
+    ``(+)`` is :meth:`fmscal.plant.Model.integrate` (in space a turn about
+    the sensor's axes, so that ``h omega`` turns the body as the angular
+    velocity does; in the plane an addition).
+
+    Parameters
+    ----------
+    model : plant.Model
+    x : ndarray or casadi.SX, shape (nx,)
+        The state at the step's start.
+    a0, a1 : ndarray or casadi.SX, shape (nv,)
+        The accelerations at the step's start and end.
+    h : float or casadi.SX
+        The step, s.
+
+    Returns
+    -------
+    ndarray or casadi.SX, shape (nx,)
+    """
+    nu = model.velocity(x)
+    q = model.integrate(model.configuration(x), position_increment(h, a0, a1) + h * nu)
+    return model.state_from(q, nu + velocity_increment(h, a0, a1))

@@ -14,6 +14,7 @@ from fmscal.plant.noise import estimate_noise
 from fmscal.plant._checks import as_bool, as_positive_scalar
 from fmscal.plant._compile import BufferedCall, compile_function
 from fmscal.plant.errors import FmscalError
+from fmscal.plant.model import as_model
 
 from .base import Estimate, Observer, log_inputs
 from .ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
@@ -193,7 +194,13 @@ class AugmentedEKF(Observer):
     """
 
     name = "ekf"
-    linear_channels_only = True
+
+    def __new__(cls, model=None, *args, **kwargs):
+        """On a model without linear channels (the spatial one) the filter is the error-state form."""
+        if cls is AugmentedEKF and model is not None and not as_model(model, cls.__name__).linear_channels:
+            from .ekf_error_state import ErrorStateEKF      # it builds on this module
+            cls = ErrorStateEKF
+        return super().__new__(cls)
 
     def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
                  adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START,
@@ -210,16 +217,25 @@ class AugmentedEKF(Observer):
             if q_S_max < q_S_start:
                 raise FmscalError(f"q_S_max must be at least q_S and q_S_start ({q_S_start:g}); got {q_S_max:g}")
             self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
-                                                                          allow_zero=True), q_start=q_S_start)
+                                                                          allow_zero=True), q_start=q_S_start,
+                                    dof=self._innovation_size())
         self.c0_sd = None if c0_sd is None else as_positive_scalar(c0_sd, "c0_sd")
+        self._build(as_bool(eiv, "eiv"))
+        self.reset()
+
+    def _innovation_size(self):
+        """Entries of a pose innovation (the NIS's degrees of freedom): the pose's."""
+        return self.model.n_pose
+
+    def _build(self, eiv):
+        """The model's part of the filter: its size, ``H``, the compiled step, the compensation."""
         model = self.model
         #: The filter's state size: the model's motion states and the entries of ``[S | c]``.
         self.dim_x = model.nx + self.n_w * self.n_cols
         self._H = np.zeros((model.n_pose, self.dim_x))
         self._H[np.arange(model.n_pose), list(model.q_index)] = 1.0       # the pose is the configuration
         self._jacobians, self._predict = (BufferedCall(f) for f in _compiled_model(model, self.offset))
-        self.eiv = EivCompensation(model, self.n_cols) if as_bool(eiv, "eiv") else None
-        self.reset()
+        self.eiv = EivCompensation(model, self.n_cols) if eiv else None
 
     # --- the model, from the plant ------------------------------------------
     def transition(self, xs, w0, w1, dt):
@@ -321,7 +337,7 @@ class AugmentedEKF(Observer):
         self._start(U[0])
         f = self.run_data.state
         start = time.perf_counter()
-        chunks = whole_step(self.model, self.n_cols, self.eiv is not None)
+        chunks = self._whole_step()
         self.run_data.build_time = time.perf_counter() - start              # one-off: not the run's cost
         n_steps = len(U) - 1
         params = self._params()
@@ -330,22 +346,32 @@ class AugmentedEKF(Observer):
             z, (Y,) = chunks.run(self._packed(), inputs, healthy=self._healthy_outputs, outputs=True, states=False,
                                  progress=bar.update)
         out = output_layout(self.model, self.n_cols)
-        calibration = np.vstack([f.s_out, out.part(Y, "s")])
-        x = np.vstack([f.kf.x[0:self.model.nx, 0], out.part(Y, "x")])
+        x0, s0 = self._current()
+        calibration = np.vstack([s0, out.part(Y, "s")])
+        x = np.vstack([x0, out.part(Y, "x")])
         q = np.concatenate([f.q_history[:1], out.part(Y, "q")[:, 0]])
         self._unpacked(z, calibration[-1])
         self.run_data.u_prev = U[len(calibration) - 1]
         return Estimate(calibration, x, cov=self._covariance(), diverged=len(Y) < n_steps), q
 
+    def _whole_step(self):
+        """The whole step compiled in chunks (:func:`observers.ekf_step.whole_step`)."""
+        return whole_step(self.model, self.n_cols, self.eiv is not None)
+
+    def _level_settings(self):
+        """The random-walk level's settings for a compiled step, and whether it adapts (1 or 0)."""
+        level = self.level.settings if self.level is not None else (0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+        return level, float(self.level is not None)
+
     def _params(self):
         """The per-log parameters of the compiled step (:func:`observers.ekf_step.params_layout`), after
         :meth:`_start`."""
         f = self.run_data.state
-        level = self.level.settings if self.level is not None else (0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+        level, adapt = self._level_settings()
         size = self.model.n_pose + self.n_w
         eiv_q = self.eiv.state[1][1:] if self.eiv is not None else np.ones(size)     # the settings but the step
         return params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, eiv_q=eiv_q,
-                                              level=level, adapt=float(self.level is not None))
+                                              level=level, adapt=adapt)
 
     def _packed(self):
         """The running filter as the compiled step's state (:func:`observers.ekf_step.state_layout`)."""
@@ -382,25 +408,48 @@ class AugmentedEKF(Observer):
         model = self.model
         u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
         pose, w_hat = u.pose, u.w_hat
-        noise = self.run_data.noise or self.noise or _nominal_noise(model)
+        noise, S_var, var_w = self._prior(w_hat)
         kf = _CalibrationEKF(self.dim_x, model.n_pose)
         kf.x = np.concatenate([model.rest_state(pose), self._initial_S(self.run_data.S0)]).reshape(-1, 1)
         pose_sd = model.pose_sd(noise)
         pose_var = np.maximum(pose_sd, 1e-6) ** 2
+        motion_var = np.zeros(model.nx)
+        motion_var[list(model.q_index)] = pose_var                  # the first pose, to its noise
+        motion_var[list(model.v_index)] = self.v0_sd ** 2           # the velocities, to v0_sd
+        kf.P = np.diag(np.concatenate([motion_var, S_var]))
+        kf.R = np.diag(pose_var)
+        self.run_data.state = FilterRun(kf=kf, var_w=var_w, s_out=kf.x[model.nx:, 0].copy(), since_pose=0.0,
+                                        q_history=[self._q_now()])
+        if self.eiv is not None:
+            self.eiv.reset(pose, pose_sd, np.sqrt(var_w))
+
+    def _prior(self, w_hat):
+        """The noise model of the run, the prior variances of ``[S | c]`` (flat, row order) and the reading's
+        noise variances, at the first sample's reading ``w_hat``.
+
+        ``S0_sd^2`` on each entry of ``S``; ``c0_sd^2`` on the offset column,
+        by default ``S0_sd`` times the size of the first reading (at least 1).
+        """
+        noise = self.run_data.noise or self.noise or _nominal_noise(self.model)
         S_var = np.full((self.n_w, self.n_cols), self.S0_sd ** 2)
         if self.offset:
             c0_sd = self.c0_sd if self.c0_sd is not None else self.S0_sd * max(float(np.linalg.norm(w_hat)), 1.0)
             S_var[:, self.n_w] = c0_sd ** 2
-        motion_var = np.zeros(model.nx)
-        motion_var[list(model.q_index)] = pose_var                  # the first pose, to its noise
-        motion_var[list(model.v_index)] = self.v0_sd ** 2           # the velocities, to v0_sd
-        kf.P = np.diag(np.concatenate([motion_var, S_var.ravel()]))
-        kf.R = np.diag(pose_var)
-        var_w = np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
-        self.run_data.state = FilterRun(kf=kf, var_w=var_w, s_out=kf.x[model.nx:, 0].copy(), since_pose=0.0,
-                                        q_history=[self.level.q if self.level is not None else self.q_S])
-        if self.eiv is not None:
-            self.eiv.reset(pose, pose_sd, np.sqrt(var_w))
+        return noise, S_var.ravel(), np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
+
+    def _q_now(self):
+        """The random walk's intensity now, 1/s."""
+        return self.level.q if self.level is not None else self.q_S
+
+    def _pose_update(self, z):
+        """filterpy's update with the pose measurement ``z`` (column), then the level at its NIS."""
+        f = self.run_data.state
+        kf = f.kf
+        kf.update(z, self.H, self.hx)
+        if self.level is not None:
+            y = kf.y[:, 0]
+            self.level.update(float(y @ kf.SI @ y), f.since_pose)      # NIS of this pose
+        f.since_pose = 0.0
 
     def _advance(self, u_prev, u, dt):
         """Predict over ``dt`` with the raw readings at both ends, update with the pose."""
@@ -414,12 +463,8 @@ class AugmentedEKF(Observer):
         kf.predict()
         f.since_pose += dt
         if has_pose:
-            kf.update(np.reshape(pose, (-1, 1)), self.H, self.hx)
-            if self.level is not None:
-                y = kf.y[:, 0]
-                self.level.update(float(y @ kf.SI @ y), f.since_pose)      # NIS of this pose
-            f.since_pose = 0.0
-        f.q_history.append(self.level.q if self.level is not None else self.q_S)
+            self._pose_update(np.reshape(pose, (-1, 1)))
+        f.q_history.append(self._q_now())
         s = kf.x[model.nx:, 0]
         if self.eiv is None:
             f.s_out = s.copy()

@@ -74,7 +74,7 @@ from fmscal.plant.differentiate import smoothed_state
 from fmscal.plant.layout import StateLayout
 
 from . import _matrix as mx
-from .discretise import position_increment, velocity_increment
+from .discretise import move, position_increment, velocity_increment
 from .inverse_dynamics_fit import UNDETERMINED_STD, describe_direction
 from .kalman import (POSE_SD_FLOOR, V0_SD, bias_matrix, cholesky, cholesky_apply, correction_limit,
                      information_factor, pack_lower, unpack_lower)
@@ -123,14 +123,8 @@ def _one_step(model, x0, x1, w0, w1, delta, h):
     ``w0``, ``w1`` are the true wrench at the step's ends; the acceleration
     at the end is the nominal's (``x1``). Returns the error state at ``k+1``.
     """
-    nq, nv = model.nq, model.nv
-    q0 = model.integrate(x0[0:nq], delta[0:nv])
-    nu0 = x0[nq:] + delta[nv:]
-    a0 = model.acceleration(model.state_from(q0, nu0), w0)
-    a1 = model.acceleration(x1, w1)
-    q_next = model.integrate(q0, position_increment(h, a0, a1) + h * nu0)
-    nu_next = nu0 + velocity_increment(h, a0, a1)
-    return ca.vertcat(model.difference(x1[0:nq], q_next), nu_next - x1[nq:])
+    start = model.state_integrate(x0, delta)
+    return model.state_difference(x1, move(model, start, model.acceleration(start, w0), model.acceleration(x1, w1), h))
 
 
 def _regressor_step(model, x0, x1, w0, w1, h):

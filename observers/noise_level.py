@@ -2,8 +2,9 @@
 
 A change in the sensor's calibration shows in the pose innovations before
 it shows anywhere else: their normalized innovation squared (NIS)
-``eps = nu^T S_nu^-1 nu`` is chi-square with 3 degrees of freedom while the
-filter's model holds, and grows while its ``S_hat`` lags the true ``S``.
+``eps = nu^T S_nu^-1 nu`` is chi-square with 3 degrees of freedom (the
+planar pose; 6 for a spatial pose, ``dof``) while the filter's model
+holds, and grows while its ``S_hat`` lags the true ``S``.
 :class:`NoiseLevel` watches a fading-memory average of the NIS and raises
 the random-walk intensity while that average is above its bound, lowering
 it back to the base level otherwise: the adjustable-level process noise of
@@ -21,7 +22,7 @@ from fmscal.plant.errors import FmscalError
 
 __all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE", "DEFAULT_Q_START", "level_update"]
 
-#: Degrees of freedom of the pose innovation ``[theta, X, Y]``.
+#: Degrees of freedom of the planar pose innovation ``[theta, X, Y]`` (the default ``dof``).
 NIS_DOF = 3
 #: One NIS sample counts at most this much (the 99.9 % point of chi-square(3)),
 #: so that a single outlier in the poses cannot raise the level.
@@ -41,8 +42,9 @@ class NoiseLevel:
     ``h`` the time since the previous pose,
 
     - ``a = exp(-h / window)``, ``eps_bar_k = a eps_bar_{k-1} + (1 - a) eps_k``
-      (starting at 3, its mean under a consistent filter);
-    - ``bound = (1 + tolerance)^2 (3 + z sqrt(6 (1 - a) / (1 + a)))``, with
+      (starting at ``dof`` = 3, its mean under a consistent filter);
+    - ``bound = (1 + tolerance)^2 (3 + z sqrt(6 (1 - a) / (1 + a)))`` (with
+      ``dof`` degrees of freedom ``dof + z sqrt(2 dof (1 - a) / (1 + a))``), with
       ``z`` the 99.9 % normal point: the 99.9 % bound of ``eps_bar`` for a
       consistent filter, widened for a noise model whose standard deviations
       are off by up to ``tolerance``;
@@ -82,10 +84,14 @@ class NoiseLevel:
         The current intensity, 1/s.
     eps_bar : float
         The current NIS average.
+    ``dof`` (default :data:`NIS_DOF`) is the pose innovation's size: 6 for
+    a spatial pose in the error state ``[dp, dphi]``. The NIS is clipped at
+    the 99.9 % point of chi-square(``dof``).
     """
 
     def __init__(self, q_base, q_max, tolerance=DEFAULT_TOLERANCE, window=1.0, rise=10.0, fall=1.0,
-                 q_start=None):
+                 q_start=None, dof=NIS_DOF):
+        self.dof = int(dof)
         self.q_base, self.q_max = float(q_base), float(q_max)
         if q_start is None:
             q_start = self.q_base if self.q_base > 0 else DEFAULT_Q_START
@@ -98,9 +104,9 @@ class NoiseLevel:
         self.reset()
 
     def reset(self):
-        """Back to the base intensity and a NIS average of 3."""
+        """Back to the base intensity and a NIS average of ``dof``."""
         self.q = self.q_base
-        self.eps_bar = float(NIS_DOF)
+        self.eps_bar = float(self.dof)
 
     @property
     def settings(self):
@@ -109,7 +115,7 @@ class NoiseLevel:
 
     def bound(self, a):
         """The alarm bound of the NIS average for a forgetting factor ``a``."""
-        return _bound(ops(a), a, self.inflation)
+        return _bound(ops(a), a, self.inflation, self.dof)
 
     def update(self, nis, h):
         """Take the NIS of one pose, ``h`` seconds after the previous one; return the new intensity.
@@ -126,7 +132,7 @@ class NoiseLevel:
         float
             The random-walk intensity for the following predictions, 1/s.
         """
-        q, eps_bar = level_update(self.q, self.eps_bar, nis, h, self.settings)
+        q, eps_bar = level_update(self.q, self.eps_bar, nis, h, self.settings, self.dof)
         self.q, self.eps_bar = float(q), float(eps_bar)
         return self.q
 
@@ -136,12 +142,12 @@ class NoiseLevel:
         return self.q > self.q_base
 
 
-def _bound(o, a, inflation):
+def _bound(o, a, inflation, dof=NIS_DOF):
     """The 99.9 % bound of the NIS average for a forgetting factor ``a``, widened by ``inflation`` (class docstring)."""
-    return inflation * (NIS_DOF + _Z * o.sqrt(2 * NIS_DOF * (1 - a) / (1 + a)))
+    return inflation * (dof + _Z * o.sqrt(2 * dof * (1 - a) / (1 + a)))
 
 
-def level_update(q, eps_bar, nis, h, settings):
+def level_update(q, eps_bar, nis, h, settings, dof=NIS_DOF):
     """One pose's update of the level (:class:`NoiseLevel`), for numbers or casadi symbols alike.
 
     Parameters
@@ -154,6 +160,8 @@ def level_update(q, eps_bar, nis, h, settings):
         Time since the previous pose, s.
     settings : tuple
         ``(q_base, q_start, q_max, inflation, window, rise, fall)`` (:attr:`NoiseLevel.settings`).
+    dof : int
+        The pose innovation's size (:attr:`NoiseLevel.dof`).
 
     Returns
     -------
@@ -163,9 +171,10 @@ def level_update(q, eps_bar, nis, h, settings):
     q_base, q_start, q_max, inflation, window, rise, fall = settings
     o = ops(q, eps_bar, nis, h, *settings)
     a = o.exp(-h / window)
-    eps_bar = a * eps_bar + (1 - a) * o.fmin(nis, NIS_CLIP)
+    clip = NIS_CLIP if dof == NIS_DOF else float(chi2.ppf(0.999, dof))
+    eps_bar = a * eps_bar + (1 - a) * o.fmin(nis, clip)
     raised = o.fmin(o.fmax(q, q_start) * o.exp(rise * h), q_max)
     fallen = q * o.exp(-fall * h)
     fallen = o.if_else(fallen >= o.fmax(q_start, q_base), fallen, q_base)
-    q = o.if_else(eps_bar > _bound(o, a, inflation), raised, o.if_else(q > q_base, fallen, q))
+    q = o.if_else(eps_bar > _bound(o, a, inflation, dof), raised, o.if_else(q > q_base, fallen, q))
     return q, eps_bar

@@ -4,7 +4,7 @@ import numpy as np
 
 from fmscal.plant._checks import as_finite_array, as_number
 from fmscal.plant.errors import FmscalError
-from fmscal.plant.model import PlanarModel
+from fmscal.plant.model import Model, PlanarModel
 
 __all__ = ["check_sample", "pack_input"]
 
@@ -29,8 +29,9 @@ def check_sample(dt, pose, w_hat, first, model=_PLANAR):
     ------
     FmscalError
         ``w_hat`` not ``n_w`` finite numbers, ``pose`` neither None nor
-        ``n_pose`` finite numbers, no pose on the first sample, or ``dt``
-        not positive after it.
+        ``n_pose`` finite numbers (spatial: its quaternion not of unit norm
+        within :data:`fmscal.plant.log.QUATERNION_TOLERANCE`), no pose on the
+        first sample, or ``dt`` not positive after it.
     """
     if not first or dt is not None:
         dt = as_number(dt, "dt")
@@ -38,6 +39,8 @@ def check_sample(dt, pose, w_hat, first, model=_PLANAR):
     w_hat = _sized(w_hat, n_w, f"w_hat must be {n_w} finite numbers")
     if pose is not None:
         pose = _sized(pose, n_pose, f"pose must be {n_pose} finite numbers or None")
+        if isinstance(model, Model):
+            pose = model.check_pose(pose)          # the model's own rule (a unit quaternion in space)
     if first:
         if pose is None:
             raise FmscalError("the first sample after reset() needs a pose measurement")

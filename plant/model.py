@@ -195,6 +195,43 @@ class Model:
         where = {**{k: q[i] for i, k in enumerate(self.q_index)}, **{k: v[i] for i, k in enumerate(self.v_index)}}
         return ops(q, v).vcat([where[k] for k in range(self.nx)])
 
+    def state_integrate(self, x, dx):
+        """The state ``x`` moved by an error state ``dx = [dq, dnu]`` (``2 nv``): ``x (+) dx``.
+
+        The configuration by :meth:`integrate`, the velocity additively;
+        numbers or casadi symbols.
+
+        Parameters
+        ----------
+        x : ndarray or casadi.SX, shape (nx,)
+        dx : ndarray or casadi.SX, shape (2 nv,)
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (nx,)
+        """
+        o = ops(x, dx)
+        dq = o.vcat([dx[i] for i in range(self.nv)])
+        dnu = o.vcat([dx[self.nv + i] for i in range(self.nv)])
+        return self.state_from(self.integrate(self.configuration(x), dq), self.velocity(x) + dnu)
+
+    def state_difference(self, x0, x1):
+        """The error state taking ``x0`` to ``x1``: ``x1 (-) x0 = [difference(q0, q1), nu1 - nu0]``, shape (2 nv,).
+
+        The inverse of :meth:`state_integrate`; numbers or casadi symbols.
+        """
+        o = ops(x0, x1)
+        return o.vcat([self.difference(self.configuration(x0), self.configuration(x1)),
+                       self.velocity(x1) - self.velocity(x0)])
+
+    def pose_configuration(self, pose):
+        """The configuration (``nq``) a measured pose (log columns, ``n_pose``) shows; numbers or symbols.
+
+        The inverse of :meth:`measure` on the configuration. Default: the
+        pose is the configuration.
+        """
+        return ops(pose).vcat([pose[i] for i in range(self.nq)])
+
     def channel(self, k):
         """The velocity channel (``0 .. nv-1``) state entry ``k`` belongs to, for a model with
         :attr:`linear_channels` (entry ``q_index[c]`` or ``v_index[c]`` is channel ``c``)."""
@@ -518,6 +555,23 @@ class SpatialModel(Model):
         """The pose ``[q, p]`` (log order) the state shows."""
         o = ops(x)
         return o.vcat([x[3:7], x[0:3]])
+
+    def pose_configuration(self, pose):
+        """The configuration ``[p, q]`` of a measured pose ``[q, p]`` (log order); numbers or symbols."""
+        o = ops(pose)
+        return o.vcat([pose[4:7], pose[0:4]])
+
+    def check_pose(self, pose, name="pose"):
+        """One pose as 7 finite numbers whose quaternion is of unit norm (within
+        :data:`fmscal.plant.log.QUATERNION_TOLERANCE`), or a one-line :class:`FmscalError`.
+
+        The pose is returned as it is: :meth:`difference` reads a quaternion's
+        direction only, and :meth:`rest_state` normalises it.
+        """
+        from .log import unit_quaternions         # log imports this module
+        pose = super().check_pose(pose, name)
+        unit_quaternions(pose[None, :4], name)
+        return pose
 
     def rest_state(self, pose):
         """The state at rest at a measured pose ``[q, p]``: ``[p, q, 0, 0]``."""

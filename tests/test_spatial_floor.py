@@ -108,7 +108,7 @@ def test_static_poses_leave_directions_undetermined_and_not_converged():
 def test_the_online_observers_refuse_a_spatial_model_in_one_line():
     from fmscal.plant.errors import FmscalError
     model = SpatialModel(ARM.payload)
-    for name in ("ekf", "adaptive", "high-gain"):
+    for name in ("adaptive", "high-gain"):
         with pytest.raises(FmscalError, match="spatial"):
             make_observer(name, model)
 

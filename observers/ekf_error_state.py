@@ -1,0 +1,455 @@
+"""The EKF on a model whose attitude is a unit quaternion: the error-state (multiplicative) form.
+
+:class:`observers.AugmentedEKF` on a model without linear channels (the
+spatial one, :class:`fmscal.plant.SpatialModel`) is an :class:`ErrorStateEKF`:
+the same filter, tuning rule, random-walk level and health checks, with the
+model-specific step written here. A unit quaternion is not a vector: adding
+a Kalman correction to it leaves the unit sphere, and its covariance (4x4
+for 3 degrees of freedom) is singular. The filter therefore holds
+
+- a **nominal** state: the motion ``x = [p, q, v, omega]`` (13 numbers,
+  :attr:`fmscal.plant.SpatialModel.state`) and ``s = vec([S | c])`` (row
+  order), propagated by the model;
+- an **error state** ``e = [dp, dphi, dv, domega, ds]`` (``d = 12 + n_w n``),
+  ``x_true = x (+) e`` (:meth:`fmscal.plant.Model.state_integrate`: ``dphi``
+  a turn about the sensor's axes, ``q (x) exp(dphi / 2)``), ``s_true = s +
+  ds``. filterpy's ``x`` is ``e`` and ``P`` its covariance; ``e`` is zero
+  between steps.
+
+One step (one equation a line)::
+
+    x-   = f(x, s, w_hat_k, w_hat_k+1)                 nominal (below)
+    F    = d e_k+1 / d e_k,   J_i = d e_k+1 / d w_hat_i  (casadi, at e = 0)
+    P-   = F P F^T + Q
+    y    = difference(q(x-), pose)   = [dp, dphi]       (the pose in the error state)
+    V    = H P- H^T + R,   K = P- H^T V^-1,   H = [I_6 0]
+    e    = K y
+    P    = (I - K H) P- (I - K H)^T + K R K^T           (Joseph form)
+    x, s = x- (+) e[:12],  s + e[12:]                    (injection)
+    P    = G P G^T,   G = d e+ / d e at e               (the reset; I but for
+                                                        I - [dphi / 2]x on the turn)
+    e    = 0
+
+The nominal step ``f`` is the discretisation every method shares
+(:func:`observers.discretise.move`: the acceleration linear over the step,
+the configuration moved on the manifold), with the acceleration at the
+step's end taken at the state that the start's acceleration reaches (Heun's
+predictor); the acceleration is the model's Newton-Euler
+(:meth:`fmscal.plant.SpatialModel.acceleration`, ``a = A(x) w + d(x)``) of
+the true wrench ``w = [S | c] [w_hat; 1]``. ``F``, the reading Jacobians
+and ``G`` are casadi's automatic derivatives of that one map and of the
+model's ``integrate`` and ``difference``: nothing is differentiated by hand.
+
+Tuning rule (as in the plane, :class:`observers.AugmentedEKF`):
+``R = diag(position_sd^2 (x3), angle_sd^2 (x3))`` in the error state;
+``Q = J_d W J_d^T`` with ``J_d`` the step's Jacobian with respect to a
+perturbation of the true wrench at both ends (one reading's whole effect,
+once a step: ``[h^2 / 2, h] A`` to first order) and ``W = S_hat Sigma
+S_hat^T + Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il, s_jl)`` the
+uncertainty of ``S`` from ``P``; ``q dt`` on each calibration entry, the
+random walk that the NIS of the poses raises (``adapt_q``).
+"""
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from fmscal.plant._backend import ops
+from fmscal.plant._compile import BufferedCall, ChunkedSteps, compile_function
+from fmscal.plant.layout import StateLayout
+
+from .discretise import move
+from .ekf import AugmentedEKF, FilterRun, _CalibrationEKF
+from .ekf_step import output_layout
+from .kalman import cholesky_solve, pack_lower, unpack_lower
+from .linearised_floor import _error_variances
+from .noise_level import level_update
+
+__all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
+           "error_params_layout"]
+
+_CHUNK = 1000
+
+
+# --- the model's step, its Jacobians and Q ------------------------------------------------------------
+
+def _predicted(model, x, w0, w1, h):
+    """The nominal step (module docstring): :func:`observers.discretise.move` with the acceleration at the
+    step's end taken at the state the start's acceleration, held over the step, reaches."""
+    a0 = model.acceleration(x, w0)
+    return move(model, x, a0, model.acceleration(move(model, x, a0, a0, h), w1), h)
+
+
+def _sizes(model, offset):
+    """``n`` (columns of ``[S | c]``), ``m`` (its entries), ``ne`` (the motion's error state) and ``d``."""
+    n = model.n_w + int(bool(offset))
+    m, ne = model.n_w * n, 2 * model.nv
+    return n, m, ne, ne + m
+
+
+@lru_cache(maxsize=8)
+def error_step(model, offset):
+    """The nominal step, its error-state Jacobians and ``Q`` (module docstring), as casadi Functions.
+
+    Parameters
+    ----------
+    model : plant.Model
+        A model with ``integrate`` and ``difference`` (the spatial one).
+    offset : bool
+        With the offset column ``c``.
+
+    Returns
+    -------
+    jacobians : casadi.Function
+        ``(xs, w0, w1, dt) -> (xs_next, F, J0, J1)``: ``xs = [x, s]`` the
+        nominal (``nx + m``), ``F`` (d x d) the error state's transition,
+        ``J0``, ``J1`` (d x n_w) its Jacobians with respect to the raw
+        readings at the step's start and end.
+    predict : casadi.Function
+        ``(xs, w0, w1, dt, var_w, P_S, q_dt) -> (xs_next, F, Q)``; ``P_S``
+        the covariance of ``s`` (flat, symmetric), ``q_dt`` the random
+        walk's ``q dt``. Dense outputs.
+    predict_sparse : casadi.Function
+        The same with ``F`` and ``Q`` sparse, for :func:`whole_error_step` to inline.
+    """
+    n_w, nx = model.n_w, model.nx
+    n, m, ne, d = _sizes(model, offset)
+    xs = ca.SX.sym("xs", nx + m)
+    w0, w1 = ca.SX.sym("w0", n_w), ca.SX.sym("w1", n_w)
+    dt = ca.SX.sym("dt")
+    e = ca.SX.sym("e", d)                                   # the error state at the step's start
+    dw = ca.SX.sym("dw", n_w)                               # a perturbation of the true wrench at both ends
+    d0, d1 = ca.SX.sym("d0", n_w), ca.SX.sym("d1", n_w)     # perturbations of the raw readings
+    x, s = xs[0:nx], xs[nx:]
+    S = ca.reshape(s + e[ne:], n, n_w).T                    # [S | c] (x) the error, row order
+    a0, a1 = (ca.vertcat(w, 1) if offset else w for w in (w0 + d0, w1 + d1))
+    moved = _predicted(model, model.state_integrate(x, e[0:ne]), S @ a0 + dw, S @ a1 + dw, dt)
+    nominal = ca.vertcat(e, dw, d0, d1)
+    at_nominal = lambda expr: ca.substitute(expr, nominal, ca.DM.zeros(d + 3 * n_w))     # noqa: E731
+    x_next = at_nominal(moved)
+    error = ca.vertcat(model.state_difference(x_next, moved), e[ne:])      # e_k+1 = moved (-) x_next
+    F = at_nominal(ca.jacobian(error, e))
+    J0, J1, J_d = (ca.densify(at_nominal(ca.jacobian(error, v))) for v in (d0, d1, dw))
+    xs_next = ca.vertcat(x_next, s)
+    var_w = ca.SX.sym("var_w", n_w)
+    P_S_flat = ca.SX.sym("P_S", m * m)
+    P_S = ca.reshape(P_S_flat, m, m)
+    q_dt = ca.SX.sym("q_dt")
+    # the true wrench's noise S n with S uncertain: E[S Sigma S^T] = S_hat Sigma S_hat^T + Delta,
+    # Delta_ij = sum_l Sigma_l cov(s_il, s_jl) (entry s_il at n i + l)
+    S_w = ca.reshape(s, n, n_w).T[:, 0:n_w]
+    W = S_w @ ca.diag(var_w) @ S_w.T + sum(var_w[k] * P_S[k:m:n, k:m:n] for k in range(n_w))
+    Q = J_d @ W @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
+    inputs = [xs, w0, w1, dt, var_w, P_S_flat, q_dt]
+    jacobians = ca.Function("ekf_error_jacobians", [xs, w0, w1, dt], [xs_next, ca.densify(F), J0, J1])
+    predict = ca.Function("ekf_error_predict", inputs, [xs_next, ca.densify(F), ca.densify(Q)])
+    sparse = ca.Function("ekf_error_predict_sparse", inputs, [xs_next, F, Q])
+    return jacobians, predict, sparse
+
+
+@lru_cache(maxsize=8)
+def injection(model, offset):
+    """The injection of an error state into the nominal and the reset of ``P`` (module docstring).
+
+    Returns
+    -------
+    dense : casadi.Function
+        ``(xs, pose, e) -> (y, xs_new, G)``: ``y = difference(q(x), pose)``,
+        the pose (log columns) in the error state (``nv``); ``xs_new = xs
+        (+) e``; ``G`` (d x d) the Jacobian of the error after the
+        injection with respect to the error before it, at ``e``.
+    sparse : casadi.Function
+        The same with ``G`` sparse (the identity but for the turn's 3x3 block).
+    """
+    nx = model.nx
+    n, m, ne, d = _sizes(model, offset)
+    xs = ca.SX.sym("xs", nx + m)
+    pose = ca.SX.sym("pose", model.n_pose)
+    e = ca.SX.sym("e", d)
+    x = xs[0:nx]
+    y = model.difference(model.configuration(x), model.pose_configuration(pose))
+    x_new = model.state_integrate(x, e[0:ne])
+    xs_new = ca.vertcat(x_new, xs[nx:] + e[ne:])
+    before = ca.SX.sym("before", d)                         # the true error before the injection
+    after = ca.vertcat(model.state_difference(x_new, model.state_integrate(x, before[0:ne])), before[ne:] - e[ne:])
+    G = ca.substitute(ca.jacobian(after, before), before, e)
+    return (ca.Function("ekf_error_injection", [xs, pose, e], [y, xs_new, ca.densify(G)]),
+            ca.Function("ekf_error_injection_sparse", [xs, pose, e], [y, xs_new, G]))
+
+
+@lru_cache(maxsize=8)
+def _compiled(model, offset):
+    """:func:`error_step`'s ``jacobians`` and ``predict`` and :func:`injection` (dense), compiled."""
+    jacobians, predict, _ = error_step(model, offset)
+    inject = injection(model, offset)[0]
+    return compile_function(jacobians), compile_function(predict), compile_function(inject)
+
+
+# --- the whole step, compiled ----------------------------------------------------------------------
+
+def error_state_layout(model, n):
+    """The packed state of :func:`whole_error_step`: the nominal ``xs = [x, s]`` (``nx + n_w n``), ``P``
+    (packed lower, ``d = 2 nv + n_w n``), the level's ``q`` and NIS average, the time since the last pose."""
+    m, d = model.n_w * n, 2 * model.nv + model.n_w * n
+    return StateLayout(("xs", model.nx + m), ("P", d * (d + 1) // 2), ("q", 1), ("eps_bar", 1), ("since", 1))
+
+
+def error_params_layout(model):
+    """Per-log parameters of :func:`whole_error_step`: the pose noise variances in the error state (``R``,
+    ``nv``), the reading's noise variances, the level's settings and whether it adapts (1 or 0)."""
+    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("level", 7), ("adapt", 1))
+
+
+def _step(model, z, u_prev, u, dt, p, n):
+    """One sample of the whole error-state filter (module docstring), on casadi symbols."""
+    nv, n_w, nx = model.nv, model.n_w, model.nx
+    offset = n == n_w + 1
+    _, m, ne, d = _sizes(model, offset)
+    L = error_state_layout(model, n)
+    st, pp = L.unpack(z), error_params_layout(model).unpack(p, scalars=False)
+    a, b = model.input_layout.unpack(u_prev, scalars=False), model.input_layout.unpack(u, scalars=False)
+    has = u[0]
+    o = ops(z)
+    P = unpack_lower(o, st.P, d)
+    # predict: the nominal moves, the error stays zero, P- = F P F^T + Q (the lower triangle kept)
+    xs_pred, F, Q = error_step(model, offset)[2](st.xs, a.w_hat, b.w_hat, dt, pp.var_w, ca.vec(P[ne:, ne:]),
+                                                 st.q * dt)
+    P_pred = unpack_lower(o, pack_lower(F @ (P @ F.T) + Q, d), d)
+    # update with the pose in the error state (H = [I 0]); no pose: the pose the nominal shows, K = 0
+    pose = has * b.pose + (1 - has) * model.measure(xs_pred[0:nx])
+    inject = injection(model, offset)[1]
+    y = inject(xs_pred, pose, ca.DM.zeros(d))[0]
+    PHT = P_pred[:, 0:nv]
+    R = ca.diag(pp.R)
+    X = cholesky_solve(o, P_pred[0:nv, 0:nv] + R, ca.horzcat(PHT.T, y), nv)     # V^-1 [H P-, y]
+    K = has * X[:, 0:d].T
+    nis = ca.dot(y, X[:, d])
+    A = P_pred - K @ PHT.T                                   # (I - K H) P-
+    P_upd = A - (A[:, 0:nv] - K @ R) @ K.T                   # (I - K H) P- (I - K H)^T + K R K^T
+    _, xs_new, G = inject(xs_pred, pose, K @ y)
+    P_new = G @ P_upd @ G.T
+    P_packed = pack_lower(P_new, d)
+    q, eps_bar = level_update(st.q, st.eps_bar, nis, st.since + dt, tuple(pp.level[i] for i in range(7)), nv)
+    adapt = has * pp.adapt > 0.5
+    q, eps_bar = ca.if_else(adapt, q, st.q), ca.if_else(adapt, eps_bar, st.eps_bar)
+    since = (1 - has) * (st.since + dt)
+    P_min = ca.mmin(ca.diag(P_new))
+    P_sum = 2 * ca.sum1(P_packed) - ca.sum1(ca.diag(P_new))
+    out = output_layout(model, n).pack(o, x=xs_new[0:nx], s=xs_new[nx:], q=q, P_sum=P_sum, P_min=P_min)
+    return L.pack(o, xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since), out
+
+
+@lru_cache(maxsize=8)
+def whole_error_step(model, n):
+    """:func:`_step` for one model, run in compiled chunks (:class:`plant._compile.ChunkedSteps`).
+
+    Run it with the inputs ``[U[:-1], U[1:], dt, p]`` (``U`` the log's
+    samples, :func:`observers.base.log_inputs`; ``dt`` and ``p``
+    (:func:`error_params_layout`) one row per step); its per-step outputs
+    are :func:`observers.ekf_step.output_layout`'s.
+    """
+    size = model.input_layout.size
+    z = ca.SX.sym("z", error_state_layout(model, n).size)
+    u_prev, u = ca.SX.sym("u_prev", size), ca.SX.sym("u", size)
+    dt = ca.SX.sym("dt")
+    p = ca.SX.sym("p", error_params_layout(model).size)
+    z_next, out = _step(model, z, u_prev, u, dt, p, n)
+    step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p],
+                       [ca.densify(z_next), ca.densify(out)])
+    return ChunkedSteps(step, _CHUNK)
+
+
+# --- the filter -----------------------------------------------------------------------------------
+
+@dataclass
+class NominalRun(FilterRun):
+    """The error-state EKF's running state: :class:`observers.ekf.FilterRun` and the nominal.
+
+    ``kf.x`` is the error state ``e`` (zero between steps) and ``kf.P`` its
+    covariance (d x d).
+
+    Attributes
+    ----------
+    xs : ndarray, shape (nx + n_w n,)
+        The nominal ``[x, s]``: the motion (spatial ``[p, q, v, omega]``) and
+        ``vec([S | c])``, row order.
+    """
+
+    xs: np.ndarray = None
+
+
+class ErrorStateEKF(AugmentedEKF):
+    """:class:`observers.AugmentedEKF` on a model whose attitude is a unit quaternion (module docstring).
+
+    Built by ``AugmentedEKF(model, ...)`` (registry name ``ekf``) when the
+    model has no linear channels; it takes the same settings. The state is
+    the nominal motion ``[p, q, v, omega]`` and ``[S | c]`` with the error
+    state ``[dp, dphi, dv, domega, ds]`` (``dphi`` a turn about the sensor's
+    axes) in filterpy's ``x``; after each pose the correction is injected into
+    the nominal (the quaternion by :meth:`fmscal.plant.SpatialModel.integrate`)
+    and the error reset to zero. ``R`` is ``position_sd^2`` on ``dp`` and
+    ``angle_sd^2`` on ``dphi``; ``P_0`` the pose noise on ``[dp, dphi]``,
+    ``v0_sd^2`` on ``[dv, domega]`` (m/s, rad/s), ``S0_sd^2`` on ``S`` and
+    ``c0_sd^2`` on ``c``.
+
+    Attributes
+    ----------
+    dim_x : int
+        The error state's size: ``2 nv + n_w n`` (spatial: 48, or 54 with the offset).
+    """
+
+    def _innovation_size(self):
+        """The pose innovation in the error state, ``[dp, dphi]``: ``nv`` entries."""
+        return self.model.nv
+
+    def _build(self, eiv):
+        model = self.model
+        _, m, self._ne, self.dim_x = _sizes(model, self.offset)
+        self._H = np.eye(model.nv, self.dim_x)
+        self._jacobians, self._predict, self._inject = (BufferedCall(f) for f in _compiled(model, self.offset))
+        self.eiv = None
+
+    # --- the model, from the plant --------------------------------------------------------------
+    def transition(self, xs, w0, w1, dt):
+        """The nominal step and the error state's Jacobians (the compiled casadi call).
+
+        Parameters
+        ----------
+        xs : ndarray, shape (nx + n_w n,)
+            The nominal ``[x, s]``.
+        w0, w1 : ndarray, shape (n_w,)
+            The raw readings at the step's start and end.
+        dt : float
+            The step, s.
+
+        Returns
+        -------
+        xs_next : ndarray, shape (nx + n_w n,)
+        F : ndarray, shape (d, d)
+        J0, J1 : ndarray, shape (d, n_w)
+            Jacobians of the error state with respect to the raw readings at
+            the step's start and end.
+        """
+        call, d, n_w = self._jacobians, self.dim_x, self.n_w
+        for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
+            buffer[:] = value
+        call()
+        f, F, J0, J1 = call.outputs
+        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(n_w, d).T.copy(), J1.reshape(n_w, d).T.copy()
+
+    def predict_matrices(self, xs, w0, w1, dt, P_S=None):
+        """``xs_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
+
+        Parameters as :meth:`transition`; ``P_S`` (``n_w n`` square) the
+        covariance of ``s`` (default the running filter's).
+
+        Returns
+        -------
+        xs_next : ndarray, shape (nx + n_w n,)
+        F, Q : ndarray, shape (d, d)
+            Views of the call's buffers, overwritten by the next call.
+        """
+        f, d, m = self.run_data.state, self.dim_x, self.dim_x - self._ne
+        call = self._predict
+        xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
+        xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
+        var_in[:] = f.var_w
+        P_in.reshape(m, m)[:] = f.kf.P[self._ne:, self._ne:] if P_S is None else np.reshape(P_S, (m, m))
+        q_in[0] = self._q_now() * dt
+        call()
+        xs_next, F, Q = call.outputs
+        return xs_next.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
+
+    def inject(self, xs, pose, e):
+        """The pose in the error state, and the injection of ``e`` (:func:`injection`).
+
+        Returns
+        -------
+        y : ndarray, shape (nv,)
+            ``difference(q(x), pose)``: ``[dp (m, world), dphi (rad, sensor axes)]``.
+        xs_new : ndarray, shape (nx + n_w n,)
+            ``xs (+) e``.
+        G : ndarray, shape (d, d)
+            The reset of ``P`` (``P <- G P G^T``).
+        """
+        call, d = self._inject, self.dim_x
+        for buffer, value in zip(call.inputs, (xs, pose, e)):
+            buffer[:] = value
+        call()
+        y, xs_new, G = call.outputs
+        return y.copy(), xs_new.copy(), G.reshape(d, d).T.copy()
+
+    def H(self, e=None):
+        """Measurement Jacobian in the error state: ``[I_nv 0]`` (the pose is ``[dp, dphi]``); shape (nv, d)."""
+        return self._H
+
+    def hx(self, e):
+        """The pose error a state error shows: ``e[:nv]``, shape (nv, 1)."""
+        return np.reshape(e, (-1, 1))[:self.model.nv]
+
+    # --- Observer ---------------------------------------------------------------------------------
+    def _start(self, u):
+        model = self.model
+        u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
+        noise, S_var, var_w = self._prior(u.w_hat)
+        kf = _CalibrationEKF(self.dim_x, model.nv)           # x_next = 0: the error stays zero over a predict
+        R = _error_variances(model, noise)
+        kf.P = np.diag(np.concatenate([R, np.full(model.nv, self.v0_sd ** 2), S_var]))
+        kf.R = np.diag(R)
+        s = self._initial_S(self.run_data.S0)
+        self.run_data.state = NominalRun(kf=kf, var_w=var_w, s_out=s.copy(), since_pose=0.0,
+                                         q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]))
+
+    def _advance(self, u_prev, u, dt):
+        """Predict the nominal and ``P`` over ``dt``; with a pose, update, inject and reset."""
+        f = self.run_data.state
+        kf, layout = f.kf, self.model.input_layout
+        has_pose, pose, w_hat = u[0], u[layout.slices["pose"]], u[layout.slices["w_hat"]]
+        f.xs, kf.F, kf.Q = self.predict_matrices(f.xs, u_prev[layout.slices["w_hat"]], w_hat, dt)
+        kf.predict()
+        f.since_pose += dt
+        if has_pose:
+            y = self.inject(f.xs, pose, np.zeros(self.dim_x))[0]
+            self._pose_update(y.reshape(-1, 1))
+            _, f.xs, G = self.inject(f.xs, pose, kf.x[:, 0])
+            kf.P = G @ kf.P @ G.T
+            kf.x = np.zeros((self.dim_x, 1))
+        f.q_history.append(self._q_now())
+        f.s_out = f.xs[self.model.nx:].copy()
+
+    def _current(self):
+        f = self.run_data.state
+        return f.xs[:self.model.nx], f.s_out
+
+    def _covariance(self):
+        return self.run_data.state.kf.P[self._ne:, self._ne:].copy()
+
+    # --- the compiled path (:meth:`AugmentedEKF._estimate_compiled`) ------------------------------
+    def _whole_step(self):
+        return whole_error_step(self.model, self.n_cols)
+
+    def _params(self):
+        f = self.run_data.state
+        level, adapt = self._level_settings()
+        return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, level=level,
+                                                    adapt=adapt)
+
+    def _packed(self):
+        f = self.run_data.state
+        return error_state_layout(self.model, self.n_cols).pack(
+            None, xs=f.xs, P=pack_lower(f.kf.P, self.dim_x), q=f.q_history[-1],
+            eps_bar=self.level.eps_bar if self.level is not None else 0.0, since=f.since_pose)
+
+    def _unpacked(self, z, s_out):
+        f = self.run_data.state
+        st = error_state_layout(self.model, self.n_cols).unpack(z)
+        f.xs = st.xs.copy()
+        f.kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
+        f.kf.x = np.zeros((self.dim_x, 1))
+        f.since_pose = float(st.since)
+        if self.level is not None:
+            self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
+        f.q_history = [float(st.q)]
+        f.s_out = np.array(s_out, dtype=float)
