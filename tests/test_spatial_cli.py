@@ -79,7 +79,7 @@ def test_static_poses_are_not_saved_as_a_calibration(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["--mass", "1.2", "--rho", "0.2", "0.25", "--inertia", "0.75"], "a spatial log takes --rho X Y Z"),
-    ([*TOOL, "--observer", "ekf"], "--observer ekf does not run on a spatial log yet"),
+    ([*TOOL, "--observer", "high-gain"], "--observer high-gain does not run on a spatial log yet"),
     ([*TOOL, "--no-offset"], "--no-offset is not taken on a spatial log"),
     ([*TOOL, "--gravity", "0", "0", "inf"], "--gravity must be three finite numbers"),
     (["--mass", "1.2", "--rho", "0", "0", "0.06", "--inertia", "1", "1", "3", "0", "0", "0"], "triangle inequality"),
