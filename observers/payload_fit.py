@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fmscal.plant._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.calibration import reading_sign
 from fmscal.plant.differentiate import edge, spatial_motion
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.rigid_body import GRAVITY, SpatialPayload, rotation_matrix, skew
@@ -174,16 +175,14 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
         The log does not determine the mass, or its mass comes out negative
         (the reading follows the other sign convention: the message names the flag).
     """
-    from .static_fit import READINGS
-    if reading not in READINGS:
-        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {reading!r}")
+    sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     gravity = as_finite_array(gravity, (3,), "gravity")
     block = as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
-    y = ((-1.0 if reading == "load" else 1.0) * log.w_hat @ S.T)[trim]
+    y = (sign * log.w_hat @ S.T)[trim]
     n = len(y)
     X = np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
     blocks = np.repeat(((log.t[trim] - log.t[trim][0]) // block).astype(int), 6)

@@ -35,15 +35,14 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fmscal.plant._checks import as_finite_array
+from fmscal.plant.calibration import READINGS, reading_sign
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.pose_table import PoseTable
 from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
-__all__ = ["StaticFit", "fit_static", "other_convention", "READINGS", "DETERMINED_REL", "DETERMINED_RHO"]
+__all__ = ["StaticFit", "fit_static", "other_convention", "DETERMINED_REL", "DETERMINED_RHO"]
 
-#: The two sign conventions of a sensor's reading: the wrench on the payload (the toolkit's), or on the sensor.
-READINGS = ("reaction", "load")
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
 #: The centre of mass counts as determined when each coordinate's one-sigma uncertainty is below this, m.
@@ -74,7 +73,7 @@ class StaticFit:
     mounting_deg, mounting_std_deg : float or None
         The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
     reading : str
-        The reading's sign convention the fit used (:data:`READINGS`).
+        The reading's sign convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
     cone_deg : float
         Half-angle of the cone of gravity directions the table holds in the sensor frame, degrees.
     undetermined : list of str
@@ -270,13 +269,11 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     """
     if not isinstance(table, PoseTable):
         raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
-    if reading not in READINGS:
-        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {reading!r}")
+    sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     g = as_finite_array(gravity, (3,), "gravity")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
-    sign = 1.0 if reading == "reaction" else -1.0
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
@@ -343,7 +340,7 @@ def other_convention(name, mass, reading):
     mass : float
         The (negative) mass the fit gave, kg.
     reading : str
-        The convention the fit used (:data:`READINGS`).
+        The convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
 
     Returns
     -------
