@@ -38,9 +38,10 @@ def add_identify_payload(sub):
                         "estimated with the payload (a pose table; a tilted or wall-mounted base)")
     p.add_argument("--mounting", choices=("estimate",),
                    help="estimate the rotation of the sensor's axes on the tracked frame (a pose table)")
-    p.add_argument("--reading", choices=("reaction", "load"), default="reaction",
-                   help="the reading's sign: reaction (default, the wrench the mount applies to the payload) or "
-                        "load (the wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report)")
+    p.add_argument("--reading", choices=("reaction", "load"), default=None,
+                   help="the reading's sign: reaction (the wrench the mount applies to the payload) or load (the "
+                        "wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report); default: "
+                        "the one --calibration recorded, else reaction")
     p.add_argument("--urdf", metavar="ROBOT.urdf",
                    help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
                         "names; rad): poses of --frame by forward kinematics (pinocchio: pip install "
@@ -69,16 +70,26 @@ def _gravity(args):
     return tuple(g), False
 
 
-def _calibration_S(path):
-    """``S`` of a spatial calibration file, or None without one."""
+def _calibration_S(args):
+    """``S`` of the spatial calibration file ``--calibration`` (None without one); sets ``args.reading``.
+
+    The reading's sign is the one the file recorded; ``--reading`` may repeat
+    it, not contradict it (the sign is the sensor's, and ``S`` was fitted to it).
+    """
     from fmscal.plant import Calibration
+    path = args.calibration
     if not path:
+        args.reading = args.reading or "reaction"
         return None
     calibration = Calibration.load(path)
     if calibration.size != 6:
         raise CliError(f"{path} is a planar calibration (3x3); identify-payload takes a spatial one")
     if calibration.forced:
         print(f"fmscal identify-payload: warning: {path} was saved with --force", file=sys.stderr)
+    if args.reading is not None and args.reading != calibration.reading:
+        raise CliError(f"--reading {args.reading} contradicts {path}, recorded with the reading "
+                       f"{calibration.reading}: drop --reading, or recalibrate with --reading {args.reading}")
+    args.reading = calibration.reading
     return calibration.S
 
 
@@ -87,7 +98,7 @@ def cmd_identify_payload(args):
     from fmscal.plant.log import _as_path
     from fmscal.plant.pose_table import held_table, is_attitude_log, is_pose_table, read_attitude_log, read_pose_table
     gravity, estimate_gravity = _gravity(args)
-    S = _calibration_S(args.calibration)
+    S = _calibration_S(args)
     path = _as_path(args.log, "log")
     if (args.urdf is None) != (args.frame is None):
         raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")

@@ -35,13 +35,15 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fmscal.plant._checks import as_finite_array
-from fmscal.plant.calibration import READINGS, reading_sign
+from fmscal.plant.calibration import reading_sign
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.pose_table import PoseTable
 from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
-__all__ = ["StaticFit", "fit_static", "other_convention", "DETERMINED_REL", "DETERMINED_RHO"]
+from .inverse_dynamics_fit import InverseDynamicsFit
+
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "DETERMINED_REL", "DETERMINED_RHO"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
@@ -324,6 +326,74 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
                             f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
     out.next_poses = _next_poses(model, theta, information, weights, s2, R)
     return out
+
+
+def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
+    """``S`` and the offset from a pose table, the payload known: what held poses can and cannot determine.
+
+    At a held pose the payload needs the weight's wrench at the sensor,
+    ``w_k = [rho x f_k; f_k]`` with ``f_k = -m R_k^T g`` (Newton-Euler at
+    rest, :func:`fmscal.observers.payload_fit.regressor` with no motion),
+    exact given the pose. The reading is ``sigma w_hat_k = A w_k + b`` with
+    ``A = S^-1`` (eq. 3 inverted); it is fitted row by row by least squares
+    on the exact regressor ``[w_k; 1]``, the rows independent
+    (:func:`fmscal.observers.inverse_dynamics_fit.fit_readings`): no errors
+    in variables. The wrenches ``w_k`` span at most three of the six
+    directions (the torque is ``rho x f``, fixed by the force), so ``A``, and
+    with it ``S``, is determined on at most three: on the others the estimate
+    keeps the identity, and they are reported as undetermined directions of
+    the reading (where ``S_hat`` is the identity, the same directions). No
+    single entry of ``S`` is determined (``S_std`` is infinite) and the fit
+    never counts as converged. The offset ``b`` is the fit's intercept,
+    determined when gravity turns through more than one direction in the
+    sensor frame.
+
+    Parameters
+    ----------
+    table : plant.PoseTable
+    mass : float
+        The payload's mass, kg.
+    rho : array_like, shape (3,)
+        Its centre of mass in the sensor frame, m.
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+    reading : {"reaction", "load"}
+        The reading's sign convention (:data:`fmscal.plant.calibration.READINGS`).
+
+    Returns
+    -------
+    InverseDynamicsFit
+        ``S_hat`` and ``S_std`` (6, 6), ``b`` and ``b_std`` (6,, reading
+        order, N m and N), ``undetermined`` (unit directions of ``[tx .. fz,
+        1]``, each component scaled by the wrench's spread) and their
+        warnings; ``converged`` False.
+    """
+    from .inverse_dynamics_fit import fit_readings
+    from .payload_fit import regressor
+    if not isinstance(table, PoseTable):
+        raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
+    sign = reading_sign(reading)
+    g = as_finite_array(gravity, (3,), "gravity")
+    rho = as_finite_array(rho, (3,), "rho")
+    if not (np.isfinite(mass) and mass > 0):
+        raise FmscalError(f"mass must be a positive number of kg; got {mass}")
+    if not np.linalg.norm(g) > 0:
+        raise FmscalError("gravity must not be zero")
+    still = np.zeros((len(table), 3))
+    pi = np.r_[mass, mass * rho, np.zeros(6)]                         # (m, h, I_O): the inertia plays no part
+    w = regressor(table.q, still, still, still, g) @ pi                # (N, 6), exact given the poses
+    # the reading on the wrench: [A | b], A = S^-1, the identity where the poses say nothing
+    inverse = fit_readings(sign * table.w_hat, w, prior=np.c_[np.eye(6), np.zeros(6)], held=True)
+    A, b = inverse.S_hat, inverse.c
+    b_std = np.sqrt(np.maximum(np.diag(inverse.cov)[6::7], 0))
+    if np.linalg.cond(A) > 1e12:
+        raise FmscalError(f"{table.name}: the readings do not follow the weight (the fitted map from wrench to "
+                          "reading is singular): check the units (N, N m) and the quaternions' frame")
+    S_hat = np.linalg.inv(A)
+    return InverseDynamicsFit(S_hat=S_hat, S_std=np.full((6, 6), np.inf), b=b, b_std=b_std,
+                              cov=np.full((42, 42), np.inf), undetermined=inverse.undetermined,
+                              warnings=inverse.warnings, converged=False, residual_rms=inverse.residual_rms,
+                              c=-S_hat @ b)
 
 
 def _who(reading):
