@@ -103,7 +103,11 @@ def calibrate_spatial(args):
     result = make_observer(name, model, settings={"offset": True}).run(aligned)
     saturated = saturation(log)
     warnings = [*saturated, *result.warnings]
-    converged = bool(result.converged and not saturated)
+    flipped = bool(np.trace(result.S_hat[3:, 3:]) < 0)      # a negative force gain: the other sign convention
+    if flipped:
+        from fmscal.observers.static_fit import other_sign
+        warnings.append(other_sign(Path(args.log).name, reading))
+    converged = bool(result.converged and not saturated and not flipped)
     out = {"observer": name, "kind": "spatial", "S": result.S_hat.tolist(), "S_std": result.S_std.tolist(),
            "b": result.b.tolist(), "b_std": result.b_std.tolist(), "latency": float(latency),
            "latency_estimated": latency_estimated, "converged": converged,
@@ -113,7 +117,8 @@ def calibrate_spatial(args):
     if args.plot:                 # before saving: a failing plot leaves no calibration behind
         plot_calibration(result, aligned, args.plot, f"{Path(args.log).name}: entries of S_hat ({name}) and the "
                          "pose residual", truth, model)
-    why = "the reading saturates" if saturated else "the run did not converge (see the warnings)"
+    why = ("the reading saturates" if saturated else "the reading follows the other sign convention" if flipped
+           else "the run did not converge (see the warnings)")
     summary = (f"{Path(args.log).name}: spatial, {len(log)} samples, {log.duration:g} s, "
                f"{int(log.has_pose.sum())} pose measurements; method {name}")
     _report(args, out, payload, summary, why)

@@ -43,7 +43,8 @@ from fmscal.plant.sensor import check_calibration
 
 from .inverse_dynamics_fit import InverseDynamicsFit
 
-__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "DETERMINED_REL", "DETERMINED_RHO"]
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "other_sign", "DETERMINED_REL",
+           "DETERMINED_RHO"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
@@ -385,6 +386,8 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
     # the reading on the wrench: [A | b], A = S^-1, the identity where the poses say nothing
     inverse = fit_readings(sign * table.w_hat, w, prior=np.c_[np.eye(6), np.zeros(6)], held=True)
     A, b = inverse.S_hat, inverse.c
+    if np.trace(A[3:, 3:]) < 0:                     # the reading falls where the weight rises: the other sign
+        raise FmscalError(other_sign(table.name, reading))
     b_std = np.sqrt(np.maximum(np.diag(inverse.cov)[6::7], 0))
     if np.linalg.cond(A) > 1e12:
         raise FmscalError(f"{table.name}: the readings do not follow the weight (the fitted map from wrench to "
@@ -398,6 +401,25 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
 
 def _who(reading):
     return "mount applies to the payload" if reading == "reaction" else "tool applies to the sensor"
+
+
+def other_sign(name, reading):
+    """The one line for data whose force gain comes out negative: the reading follows the other sign convention.
+
+    Parameters
+    ----------
+    name : str
+        The data's name.
+    reading : str
+        The convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
+
+    Returns
+    -------
+    str
+    """
+    other = "load" if reading == "reaction" else "reaction"
+    return (f"{name}: the force reading falls where the weight rises (a negative gain): the reading follows the "
+            f"other sign convention; pass --reading {other} (the wrench the {_who(other)})")
 
 
 def other_convention(name, mass, reading):
