@@ -75,6 +75,8 @@ class StaticFit:
         The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors), where estimated.
     mounting_deg, mounting_std_deg : float or None
         The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
+    mounting_axis : ndarray, shape (3,), or None
+        The mounting's unit axis (tracked-frame axes), where estimated.
     reading : str
         The reading's sign convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
     cone_deg : float
@@ -105,6 +107,7 @@ class StaticFit:
     mounting: np.ndarray = None
     mounting_deg: float = None
     mounting_std_deg: float = None
+    mounting_axis: np.ndarray = None
     reading: str = "reaction"
     cone_deg: float = 0.0
     undetermined: list = field(default_factory=list)
@@ -125,7 +128,8 @@ class StaticFit:
                 "gravity_std_deg": self.gravity_std_deg,
                 "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
                 "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
-                "reading": self.reading, "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
+                "mounting_axis": listed(self.mounting_axis), "reading": self.reading,
+                "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
                 "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
                 "warnings": list(self.warnings), "converged": bool(self.converged)}
 
@@ -142,6 +146,15 @@ def _exp(v):
 def _angle_deg(R):
     """The angle of a rotation matrix, degrees."""
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+def _axis(M):
+    """The unit axis of the rotation ``M`` (any unit vector for no rotation)."""
+    v = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
+    if np.linalg.norm(v) < 1e-12:
+        _, u = np.linalg.eigh(M + M.T)
+        return u[:, -1]
+    return v / np.linalg.norm(v)
 
 
 def _tangent_basis(d):
@@ -195,10 +208,18 @@ class _Model:
         return np.column_stack(cols)
 
 
-def _start(R, y, g, estimate_gravity, estimate_mounting):
-    """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques."""
+def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
+    """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques.
+
+    ``acc`` (N, 3), the tracked point's acceleration in the pose frame, m/s^2,
+    for samples of a log (default: held, none); its share of the force,
+    ``m M^T R^T acc``, joins the linear fits, and the rotation's share is left
+    to the nonlinear fit that follows.
+    """
     n = len(R)
     a0 = np.einsum("nkj,k->nj", R, -g)                                      # R^T (-g), tracked-frame axes
+    if acc is not None:
+        a0 = a0 + np.einsum("nkj,nk->nj", R, acc)
     f = y[:, 3:]
     M0, d0, g_size = np.eye(3), g / np.linalg.norm(g), float(np.linalg.norm(g))
     if estimate_mounting:           # f = B a0 + c_f with B = m M^T: B by least squares, M^T by its polar part
@@ -210,9 +231,11 @@ def _start(R, y, g, estimate_gravity, estimate_mounting):
             Mt = -Mt
         M0 = Mt.T
         m = float(np.sum(s) / 3 * np.sign(np.trace(Mt.T @ coef[:3].T)))
-    if estimate_gravity:            # f = M0^T R^T (-u) + c_f with u = m g: linear in u and c_f
+    if estimate_gravity:            # f = M0^T R^T (m acc - u) + c_f with u = m g: linear in u and c_f (and m)
         X = np.concatenate([-np.einsum("ji,nkj->nik", M0, R), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
-        sol = np.linalg.lstsq(X.reshape(3 * n, 6), f.ravel(), rcond=None)[0]
+        if acc is not None:
+            X = np.concatenate([X, np.einsum("ji,nkj,nk->ni", M0, R, acc)[:, :, None]], axis=2)
+        sol = np.linalg.lstsq(X.reshape(3 * n, X.shape[2]), f.ravel(), rcond=None)[0]
         u = sol[:3]
         m = float(np.linalg.norm(u) / g_size)
         d0 = u / max(np.linalg.norm(u), 1e-300)
@@ -315,6 +338,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     if estimate_mounting:
         out.mounting = M
         out.mounting_deg = _angle_deg(M)
+        out.mounting_axis = _axis(M)
         out.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3)))
     a = np.einsum("ji,nkj,k->ni", M, R, -d)
     out.cone_deg = _cone(a)
