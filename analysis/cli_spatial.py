@@ -105,8 +105,8 @@ def calibrate_spatial(args):
     warnings = [*saturated, *result.warnings]
     flipped = bool(np.trace(result.S_hat[3:, 3:]) < 0)      # a negative force gain: the other sign convention
     if flipped:
-        from fmscal.observers.static_fit import other_sign
-        warnings.append(other_sign(Path(args.log).name, reading))
+        from fmscal.observers.static_fit import other_convention
+        warnings.append(other_convention(Path(args.log).name, None, reading))
     converged = bool(result.converged and not saturated and not flipped)
     out = {"observer": name, "kind": "spatial", "S": result.S_hat.tolist(), "S_std": result.S_std.tolist(),
            "b": result.b.tolist(), "b_std": result.b_std.tolist(), "latency": float(latency),

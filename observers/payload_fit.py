@@ -43,8 +43,42 @@ INERTIA_NAMES = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
 DETERMINED = 0.02
 
 
+@dataclass(kw_only=True)
+class _Rotations:
+    """Gravity's direction and the sensor's mounting where a fit estimated them (None otherwise).
+
+    Attributes
+    ----------
+    gravity : ndarray, shape (3,), or None
+        Gravity in the pose frame, m/s^2.
+    gravity_std_deg : float or None
+        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
+    mounting : ndarray, shape (3, 3), or None
+        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors).
+    mounting_deg, mounting_std_deg : float or None
+        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
+    mounting_axis : ndarray, shape (3,), or None
+        The mounting's unit axis (tracked-frame axes).
+    """
+
+    gravity: np.ndarray = None
+    gravity_std_deg: float = None
+    mounting: np.ndarray = None
+    mounting_deg: float = None
+    mounting_std_deg: float = None
+    mounting_axis: np.ndarray = None
+
+    def rotations_dict(self):
+        """The six fields as JSON-ready numbers and lists (None where not estimated)."""
+        return {"gravity": None if self.gravity is None else [float(v) for v in self.gravity],
+                "gravity_std_deg": self.gravity_std_deg,
+                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
+                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
+                "mounting_axis": None if self.mounting_axis is None else [float(v) for v in self.mounting_axis]}
+
+
 @dataclass
-class PayloadFit:
+class PayloadFit(_Rotations):
     """The payload's mass properties and the sensor's offset, with one-sigma uncertainties.
 
     Attributes
@@ -64,16 +98,11 @@ class PayloadFit:
         What the log did not determine, in words a user acts on.
     converged : bool
         Every group (mass, centre of mass, inertia, offset) determined.
-    gravity : ndarray, shape (3,), or None
-        Gravity in the pose frame, m/s^2, where estimated.
-    gravity_std_deg : float or None
-        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
-    mounting : ndarray, shape (3, 3), or None
-        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors), where estimated.
-    mounting_deg, mounting_std_deg : float or None
-        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
-    mounting_axis : ndarray, shape (3,), or None
-        The mounting's unit axis (tracked-frame axes), where estimated.
+    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
+        Gravity's direction and the sensor's mounting, where estimated
+        (:meth:`rotations_dict`): gravity in the pose frame (m/s^2), its
+        direction's uncertainty, the sensor's axes on the tracked frame
+        (3x3), its angle, uncertainty (degrees) and unit axis; None otherwise.
     """
 
     mass: float
@@ -87,12 +116,6 @@ class PayloadFit:
     residual_rms: np.ndarray
     warnings: list = field(default_factory=list)
     converged: bool = False
-    gravity: np.ndarray = None
-    gravity_std_deg: float = None
-    mounting: np.ndarray = None
-    mounting_deg: float = None
-    mounting_std_deg: float = None
-    mounting_axis: np.ndarray = None
 
     def to_dict(self):
         """The fields as JSON-ready numbers and lists (None where undetermined)."""
@@ -102,11 +125,7 @@ class PayloadFit:
                 "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
                 "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
                 "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
-                "converged": bool(self.converged), "gravity": listed(self.gravity),
-                "gravity_std_deg": self.gravity_std_deg,
-                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
-                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
-                "mounting_axis": listed(self.mounting_axis)}
+                "converged": bool(self.converged), **self.rotations_dict()}
 
 
 def _inertia_map(v):
@@ -266,7 +285,7 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
     """
     from scipy.optimize import least_squares
 
-    from .static_fit import _angle_deg, _axis, _exp, _start, _tangent_basis, other_convention, other_sign
+    from .static_fit import _angle_deg, _axis, _exp, _start, _tangent_basis, other_convention
     q, omega, alpha, p_ddot = motion
     g = np.asarray(gravity, dtype=float)
     R = np.moveaxis(rotation_matrix(q.T), -1, 0)
@@ -313,7 +332,7 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
     cov = _sandwich(J, e, blocks, inverse, determined)
     g_hat, M = parts(eta)
     if estimate_gravity and g_hat[2] > 0 > g[2]:             # gravity up: the reading's sign is the other one
-        raise FmscalError(other_sign(name, reading))
+        raise FmscalError(other_convention(name, None, reading))
     if np.isfinite(cov[0, 0]) and theta[0] < 0:
         raise FmscalError(other_convention(name, theta[0], reading))
     fit = _report(theta, cov[:16, :16], S, np.sqrt(np.mean((e / weights).reshape(n, 6) ** 2, axis=0)))

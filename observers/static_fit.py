@@ -42,8 +42,9 @@ from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
 from .inverse_dynamics_fit import InverseDynamicsFit
+from .payload_fit import _Rotations
 
-__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "other_sign", "DETERMINED_REL",
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "DETERMINED_REL",
            "DETERMINED_RHO"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
@@ -56,7 +57,7 @@ _TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
 
 
 @dataclass
-class StaticFit:
+class StaticFit(_Rotations):
     """The static fit of a pose table (module docstring), one-sigma uncertainties beside each value.
 
     Attributes
@@ -67,16 +68,8 @@ class StaticFit:
         Centre of mass in the sensor frame, m.
     b, b_std : ndarray, shape (6,)
         The sensor's offset in ``w = S (sigma w_hat - b)``, reading order, N m and N.
-    gravity : ndarray, shape (3,), or None
-        Gravity in the pose frame, m/s^2, where estimated.
-    gravity_std_deg : float or None
-        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
-    mounting : ndarray, shape (3, 3), or None
-        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors), where estimated.
-    mounting_deg, mounting_std_deg : float or None
-        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
-    mounting_axis : ndarray, shape (3,), or None
-        The mounting's unit axis (tracked-frame axes), where estimated.
+    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
+        Where asked, as a log's fit gives them (:class:`fmscal.observers.payload_fit.PayloadFit`).
     reading : str
         The reading's sign convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
     cone_deg : float
@@ -102,12 +95,6 @@ class StaticFit:
     rho_std: np.ndarray
     b: np.ndarray
     b_std: np.ndarray
-    gravity: np.ndarray = None
-    gravity_std_deg: float = None
-    mounting: np.ndarray = None
-    mounting_deg: float = None
-    mounting_std_deg: float = None
-    mounting_axis: np.ndarray = None
     reading: str = "reaction"
     cone_deg: float = 0.0
     undetermined: list = field(default_factory=list)
@@ -124,11 +111,7 @@ class StaticFit:
             return None if v is None else [float(x) for x in np.ravel(v)]
         return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
                 "rho_std": listed(self.rho_std), "inertia": None, "inertia_std": None, "b": listed(self.b),
-                "b_std": listed(self.b_std), "gravity": listed(self.gravity),
-                "gravity_std_deg": self.gravity_std_deg,
-                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
-                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
-                "mounting_axis": listed(self.mounting_axis), "reading": self.reading,
+                "b_std": listed(self.b_std), **self.rotations_dict(), "reading": self.reading,
                 "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
                 "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
                 "warnings": list(self.warnings), "converged": bool(self.converged)}
@@ -411,7 +394,7 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
     inverse = fit_readings(sign * table.w_hat, w, prior=np.c_[np.eye(6), np.zeros(6)], held=True)
     A, b = inverse.S_hat, inverse.c
     if np.trace(A[3:, 3:]) < 0:                     # the reading falls where the weight rises: the other sign
-        raise FmscalError(other_sign(table.name, reading))
+        raise FmscalError(other_convention(table.name, None, reading))
     b_std = np.sqrt(np.maximum(np.diag(inverse.cov)[6::7], 0))
     if np.linalg.cond(A) > 1e12:
         raise FmscalError(f"{table.name}: the readings do not follow the weight (the fitted map from wrench to "
@@ -427,34 +410,16 @@ def _who(reading):
     return "mount applies to the payload" if reading == "reaction" else "tool applies to the sensor"
 
 
-def other_sign(name, reading):
-    """The one line for data whose force gain comes out negative: the reading follows the other sign convention.
-
-    Parameters
-    ----------
-    name : str
-        The data's name.
-    reading : str
-        The convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
-
-    Returns
-    -------
-    str
-    """
-    other = "load" if reading == "reaction" else "reaction"
-    return (f"{name}: the force reading falls where the weight rises (a negative gain): the reading follows the "
-            f"other sign convention; pass --reading {other} (the wrench the {_who(other)})")
-
-
 def other_convention(name, mass, reading):
-    """The one line for data whose mass comes out negative: it follows the other sign convention.
+    """The one line for data whose mass (or force gain) comes out negative: it follows the other sign convention.
 
     Parameters
     ----------
     name : str
         The data's name.
-    mass : float
-        The (negative) mass the fit gave, kg.
+    mass : float or None
+        The (negative) mass the fit gave, kg; None: a fit of ``S`` whose
+        force gain came out negative (or gravity pointing up).
     reading : str
         The convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
 
@@ -463,8 +428,10 @@ def other_convention(name, mass, reading):
     str
     """
     other = "load" if reading == "reaction" else "reaction"
-    return (f"{name}: the mass comes out negative ({mass:.4g} kg): the reading follows the other sign convention; "
-            f"pass --reading {other} (the wrench the {_who(other)})")
+    what = ("the force reading falls where the weight rises (a negative gain)" if mass is None
+            else f"the mass comes out negative ({mass:.4g} kg)")
+    return (f"{name}: {what}: the reading follows the other sign convention; pass --reading {other} (the wrench the "
+            f"{_who(other)})")
 
 
 def _covariance(information, s2):
