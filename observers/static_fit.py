@@ -371,7 +371,7 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
     Returns
     -------
     InverseDynamicsFit
-        ``S_hat`` and ``S_std`` (6, 6), ``b`` and ``b_std`` (6,, reading
+        ``S_hat`` and ``S_std`` (6, 6), ``b`` and ``b_std`` (6; reading
         order, N m and N), ``undetermined`` (unit directions of ``[tx .. fz,
         1]``, each component scaled by the wrench's spread) and their
         warnings; ``converged`` False.

@@ -200,3 +200,21 @@ def test_the_calibration_file_records_the_sign_and_older_files_read_as_reaction(
         Calibration.load(tmp_path / "bad.json")
     with pytest.raises(FmscalError, match="reading must be one of"):
         Calibration(S=S_TRUE, payload=payload, method="x", reading="up")
+
+
+def test_an_attitude_only_log_is_calibrated_on_its_held_segments(tmp_path, capsys):
+    from fmscal.plant.pose_table import ATTITUDE_COLUMNS, simulate_attitude_log
+    log = simulate_attitude_log(TOOL, seed=1, offset=OFFSET)
+    path = tmp_path / "imu.csv"
+    np.savetxt(path, np.column_stack([log.t, log.q, log.w_hat]), delimiter=",", header=",".join(ATTITUDE_COLUMNS),
+               comments="", fmt="%.17g")
+    code, out, err = _run(capsys, ["calibrate", str(path), *PAYLOAD, "--json"])
+    report = json.loads(out)
+    assert code == 0 and report["kind"] == "table" and not report["converged"] and len(report["undetermined"]) == 3
+    assert "held segments" in err and np.all(np.abs(np.array(report["b"]) - OFFSET) < 4 * np.array(report["b_std"]))
+
+
+def test_one_attitude_held_six_times_leaves_the_offset_undetermined():
+    table = simulate_table(TOOL, n=6, seed=1, offset=OFFSET, q=[[1.0, 0.0, 0.0, 0.0]] * 6)
+    fit = calibrate_table(table, TOOL.mass, TOOL.rho)
+    assert len(fit.undetermined) == 6 and not np.isfinite(fit.b_std).any() and not fit.converged
