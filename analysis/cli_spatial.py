@@ -131,6 +131,21 @@ def calibrate_table(args, path):
     (:func:`fmscal.observers.static_fit.calibrate_table`): the report names
     the directions of the reading it is not determined along, ``converged``
     is false, and ``--save`` needs ``--force``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``fmscal calibrate``'s options (``--mass``, ``--rho X Y Z``,
+        ``--gravity``, ``--reading``, ``--inertia`` only to save, ``--save``,
+        ``--force``, ``--json``).
+    path : Path
+        The pose table, or the attitude-only log.
+
+    Raises
+    ------
+    CliError
+        An option a table does not take, a planar ``--rho``, ``--save``
+        without ``--inertia`` or without ``--force``.
     """
     from fmscal.observers.static_fit import calibrate_table as fit_table
     from fmscal.plant.pose_table import held_table, is_pose_table, read_attitude_log, read_pose_table
