@@ -17,20 +17,26 @@ def add_calibrate(sub):
     p = sub.add_parser("calibrate", help="estimate S from a recorded log",
                        description="Estimate the calibration matrix S from a log and the payload's mass "
                                    "properties: planar (t,theta,x,y,M,fx,fy; rad, m, N m, N) or spatial "
-                                   "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz: a 6-axis sensor; the header tells). "
+                                   "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz: a 6-axis sensor; the header tells), "
+                                   "or a pose table (the spatial header without t, one row per held pose: "
+                                   "reports the directions of S held poses cannot determine, never converged). "
                                    "Prints S_hat with its one-sigma uncertainty, whether the run converged, "
                                    "warnings about excitation and model consistency, and E with --truth.")
-    p.add_argument("log", metavar="LOG.csv")
+    p.add_argument("log", metavar="LOG.csv|TABLE.csv")
     p.add_argument("--mass", type=float, required=True, metavar="KG")
-    p.add_argument("--inertia", type=float, nargs="+", required=True, metavar="I",
+    p.add_argument("--inertia", type=float, nargs="+", metavar="I",
                    help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
-                        "tensor about the centre of mass in sensor axes")
+                        "tensor about the centre of mass in sensor axes (a pose table needs it only with --save)")
     p.add_argument("--rho", type=float, nargs="+", required=True, metavar="R",
                    help="the centre of mass from the sensor, m: planar RX RY (body frame, from G to the sensor "
                         "as in the paper), spatial X Y Z (the centre of mass in the sensor frame); negative "
                         "values as written")
     p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
                    help="spatial logs: gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
+    p.add_argument("--reading", choices=("reaction", "load"), default=None,
+                   help="spatial logs and tables: the reading's sign, reaction (default, the wrench the mount "
+                        "applies to the payload) or load (the wrench the tool applies to the sensor, as ATI, "
+                        "Robotiq, Bota and OnRobot report); recorded in the saved calibration")
     p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
                    help=f"method for a planar log (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at "
                         "the information floor; its noise model is estimated from the log unless given)")
@@ -62,9 +68,10 @@ def cmd_calibrate(args):
     from dataclasses import replace
 
     from fmscal.plant import Payload, file_sha256, read_log, read_truth
-    from fmscal.plant.log import log_kind
+    from fmscal.plant.log import _as_path, log_kind
+    from fmscal.plant.pose_table import is_attitude_log, is_pose_table
     from .calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, calibrate
-    from .cli_spatial import calibrate_spatial
+    from .cli_spatial import calibrate_spatial, calibrate_table
     from .plots import plot_calibration
     positive(args.mass, "--mass")
     for value in args.rho:
@@ -85,13 +92,19 @@ def cmd_calibrate(args):
         raise CliError("--force applies to --save; give --save CAL.json too")
     check_outputs([(args.save, "--save"), (args.plot, "--plot")],
                   [(args.log, "the log"), (args.truth, "the --truth file")], overwrite=args.overwrite)
+    path = _as_path(args.log, "log")
+    if is_pose_table(path) or is_attitude_log(path):
+        return calibrate_table(args, path)
     if log_kind(args.log) == "spatial":
         return calibrate_spatial(args)
-    if len(args.rho) != 2 or len(args.inertia) != 1:
+    inertia = args.inertia or []
+    if len(args.rho) != 2 or len(inertia) != 1:
         raise CliError(f"a planar log takes --rho RX RY (2 numbers, m) and --inertia I_G (1 number, kg m^2); got "
-                       f"{len(args.rho)} and {len(args.inertia)} (three and six are for a spatial log)")
+                       f"{len(args.rho)} and {len(inertia)} (three and six are for a spatial log)")
     if args.gravity is not None:
         raise CliError("--gravity is for spatial logs; a planar log moves in a plane with no gravity in it")
+    if args.reading is not None:
+        raise CliError("--reading is taken on a spatial log or a pose table; a planar log's sign is the toolkit's")
     args.observer = args.observer or DEFAULT_METHOD
     if args.max_latency is None:
         args.max_latency = DEFAULT_MAX_LATENCY
@@ -163,7 +176,8 @@ def _print_calibration(args, log, out, result):
 
 def add_apply(sub):
     p = sub.add_parser("apply", help="turn raw readings into calibrated wrenches with a saved calibration",
-                       description="Apply a calibration saved by fmscal calibrate --save: w = S (w_hat - b) "
+                       description="Apply a calibration saved by fmscal calibrate --save: w = S (w_hat - b), or "
+                                   "w = S (-w_hat - b) for a calibration recorded with --reading load, "
                                    "for every row of READINGS.csv (columns t,M,fx,fy, or t,tx,ty,tz,fx,fy,fz "
                                    "for a spatial calibration, or a full log); writes the same columns.")
     p.add_argument("calibration", metavar="CAL.json")
@@ -203,7 +217,7 @@ def cmd_apply(args):
     if w_hat.shape[1] != calibration.size:
         raise CliError(f"{Path(args.readings).name} holds {w_hat.shape[1]} reading columns; the calibration is "
                        f"{calibration.size}x{calibration.size} ({'spatial' if calibration.size == 6 else 'planar'})")
-    w = calibration.apply(w_hat)
+    w = calibration.apply(w_hat)                            # the sign of a load reading turned first
     bad = ~np.isfinite(w).all(axis=1)
     if bad.any():
         raise CliError(f"the calibration gives a wrench that is not finite (overflow) at row {np.argmax(bad) + 1} of "
@@ -212,4 +226,4 @@ def cmd_apply(args):
     lines = [header] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
     atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "
-          f"{calibration.method}, {calibration.date})")
+          f"{calibration.method}, {calibration.date}; reading {calibration.reading})")

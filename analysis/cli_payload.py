@@ -35,12 +35,14 @@ def add_identify_payload(sub):
     p.add_argument("--calibration", metavar="CAL.json", help="a spatial calibration (default: S = I)")
     p.add_argument("--gravity", nargs="+", metavar="GX GY GZ|estimate",
                    help="gravity in the pose frame, m/s^2 (default 0 0 -9.81); 'estimate': its direction is "
-                        "estimated with the payload (a pose table; a tilted or wall-mounted base)")
+                        "estimated with the payload (a tilted or wall-mounted base)")
     p.add_argument("--mounting", choices=("estimate",),
-                   help="estimate the rotation of the sensor's axes on the tracked frame (a pose table)")
-    p.add_argument("--reading", choices=("reaction", "load"), default="reaction",
-                   help="the reading's sign: reaction (default, the wrench the mount applies to the payload) or "
-                        "load (the wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report)")
+                   help="estimate the rotation of the sensor's axes on the tracked frame (a sensor bolted at an "
+                        "angle), as a matrix and an angle about an axis")
+    p.add_argument("--reading", choices=("reaction", "load"), default=None,
+                   help="the reading's sign: reaction (the wrench the mount applies to the payload) or load (the "
+                        "wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report); default: "
+                        "the one --calibration recorded, else reaction")
     p.add_argument("--urdf", metavar="ROBOT.urdf",
                    help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
                         "names; rad): poses of --frame by forward kinematics (pinocchio: pip install "
@@ -69,16 +71,26 @@ def _gravity(args):
     return tuple(g), False
 
 
-def _calibration_S(path):
-    """``S`` of a spatial calibration file, or None without one."""
+def _calibration_S(args):
+    """``S`` of the spatial calibration file ``--calibration`` (None without one); sets ``args.reading``.
+
+    The reading's sign is the one the file recorded; ``--reading`` may repeat
+    it, not contradict it (the sign is the sensor's, and ``S`` was fitted to it).
+    """
     from fmscal.plant import Calibration
+    path = args.calibration
     if not path:
+        args.reading = args.reading or "reaction"
         return None
     calibration = Calibration.load(path)
     if calibration.size != 6:
         raise CliError(f"{path} is a planar calibration (3x3); identify-payload takes a spatial one")
     if calibration.forced:
         print(f"fmscal identify-payload: warning: {path} was saved with --force", file=sys.stderr)
+    if args.reading is not None and args.reading != calibration.reading:
+        raise CliError(f"--reading {args.reading} contradicts {path}, recorded with the reading "
+                       f"{calibration.reading}: drop --reading, or recalibrate with --reading {args.reading}")
+    args.reading = calibration.reading
     return calibration.S
 
 
@@ -87,7 +99,7 @@ def cmd_identify_payload(args):
     from fmscal.plant.log import _as_path
     from fmscal.plant.pose_table import held_table, is_attitude_log, is_pose_table, read_attitude_log, read_pose_table
     gravity, estimate_gravity = _gravity(args)
-    S = _calibration_S(args.calibration)
+    S = _calibration_S(args)
     path = _as_path(args.log, "log")
     if (args.urdf is None) != (args.frame is None):
         raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
@@ -97,35 +109,28 @@ def cmd_identify_payload(args):
         data = read_joint_data(path, RobotKinematics(args.urdf, args.frame))
         if isinstance(data, PoseTable):
             return _identify_table(args, path, data, S, gravity, estimate_gravity)
-        if estimate_gravity or args.mounting:
-            raise CliError("--gravity estimate and --mounting estimate are taken on a table of held poses; "
-                           f"{path.name} is a log (it has t)")
-        return _identify_log(args, path, data, S, gravity)
+        return _identify_log(args, path, data, S, gravity, estimate_gravity)
     if is_pose_table(path):
         return _identify_table(args, path, read_pose_table(path), S, gravity, estimate_gravity)
     if is_attitude_log(path):
         table, _, why = held_table(read_attitude_log(path))
         print(f"fmscal identify-payload: note: {why}", file=sys.stderr)
         return _identify_table(args, path, table, S, gravity, estimate_gravity)
-    if estimate_gravity or args.mounting:
-        flag = "--gravity estimate" if estimate_gravity else "--mounting estimate"
-        raise CliError(f"{flag} is taken on a pose table (qw,qx,qy,qz,tx,ty,tz,fx,fy,fz: one row per held pose); "
-                       f"{path.name} is a log: record a table, or give --gravity GX GY GZ")
     from fmscal.plant import read_log
-    return _identify_log(args, path, read_log(path), S, gravity)
+    return _identify_log(args, path, read_log(path), S, gravity, estimate_gravity)
 
 
-def _identify_log(args, path, log, S, gravity):
+def _identify_log(args, path, log, S, gravity, estimate_gravity):
     from fmscal.observers.payload_fit import INERTIA_NAMES, identify_payload
     if log.kind != "spatial":
         raise CliError(f"{path.name} is a planar log; identify-payload takes a spatial log "
                        "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) or a pose table")
     truth = _spatial_truth(args.truth)
-    fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading)
+    fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
+                           estimate_mounting=args.mounting == "estimate")
     for warning in fit.warnings:
         print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
-    out = {**fit.to_dict(), "gravity": None, "gravity_std_deg": None, "mounting": None, "mounting_deg": None,
-           "mounting_std_deg": None, "reading": args.reading}
+    out = {**fit.to_dict(), "reading": args.reading}
     if truth is not None:
         p = truth.payload
         out["mass_error"] = fit.mass - p.mass
@@ -147,6 +152,7 @@ def _identify_log(args, path, log, S, gravity):
         print("inertia about the centre of mass [kg m^2]: " + "  ".join(
             f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
+    _print_rotations(fit)
     print(f"converged: {'yes' if fit.converged else 'no'}")
     if truth is not None:
         print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
@@ -158,6 +164,17 @@ def _identify_log(args, path, log, S, gravity):
 def _print_mass(fit):
     print(f"mass: {fit.mass:.5g} +- {fit.mass_std:.2g} kg")
     print("centre of mass [mm]: " + "  ".join(f"{v * 1e3:+.3f} +- {s * 1e3:.2g}" for v, s in zip(fit.rho, fit.rho_std)))
+
+
+def _print_rotations(fit):
+    """Gravity's direction and the mounting, where the fit estimated them."""
+    if fit.gravity is not None:
+        print(f"gravity in the pose frame [m/s^2]: {' '.join(f'{v:+.4f}' for v in fit.gravity)} "
+              f"(direction +- {fit.gravity_std_deg:.2g} degrees)")
+    if fit.mounting is not None:
+        about = " about " + " ".join(f"{v:+.4f}" for v in fit.mounting_axis)
+        print(f"mounting (sensor axes on the tracked frame): {fit.mounting_deg:.3f} +- {fit.mounting_std_deg:.2g} "
+              f"degrees{about}; matrix rows " + "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in fit.mounting))
 
 
 def _identify_table(args, path, table, S, gravity, estimate_gravity):
@@ -176,12 +193,7 @@ def _identify_table(args, path, table, S, gravity, estimate_gravity):
     _print_mass(fit)
     print("inertia: not determined by held poses (it needs angular acceleration)")
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
-    if fit.gravity is not None:
-        print(f"gravity in the pose frame [m/s^2]: {' '.join(f'{v:+.4f}' for v in fit.gravity)} "
-              f"(direction +- {fit.gravity_std_deg:.2g} degrees)")
-    if fit.mounting is not None:
-        print(f"mounting (sensor axes on the tracked frame): {fit.mounting_deg:.3f} +- {fit.mounting_std_deg:.2g} "
-              "degrees; matrix rows " + "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in fit.mounting))
+    _print_rotations(fit)
     print(f"gravity directions covered in the sensor frame: a cone of half-angle {fit.cone_deg:.0f} degrees")
     for words in fit.next_poses:
         print(f"next pose: {words}")

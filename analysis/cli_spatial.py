@@ -9,6 +9,14 @@ squares, :func:`fmscal.observers.inverse_dynamics_fit.fit_inverse_dynamics`),
 both through the one registry; the pose stream's latency is estimated as in
 the plane. The online observers are not there yet in 3D, and the options
 that only they use are refused in one line.
+
+A pose table (the same header without ``t``, one row per held pose; or an
+attitude-only log, its held segments) goes to ``fmscal calibrate`` too
+(:func:`calibrate_table`): held poses never determine ``S`` in full, so the
+report names the directions of the reading they leave undetermined and is
+never converged. ``--reading load`` turns the reading's sign first (a sensor
+that reports the wrench the tool applies to it) and is recorded in the
+saved calibration.
 """
 
 import json
@@ -19,7 +27,7 @@ import numpy as np
 
 from .cli_common import CliError, positive, strict
 
-__all__ = ["calibrate_spatial", "spatial_payload", "gravity_of"]
+__all__ = ["calibrate_spatial", "calibrate_table", "spatial_payload", "gravity_of"]
 _NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 
 
@@ -73,7 +81,8 @@ def calibrate_spatial(args):
     from fmscal.observers import make_observer
     from fmscal.observers.faults import saturation
     from fmscal.observers.latency import estimate_latency
-    from fmscal.plant import Calibration, SpatialModel, file_sha256, read_log
+    from fmscal.plant import SpatialModel, read_log
+    from fmscal.plant.calibration import reading_sign
     from .calibrate import DEFAULT_MAX_LATENCY
     from .metrics import block_errors
     from .plots import plot_calibration
@@ -85,6 +94,8 @@ def calibrate_spatial(args):
     log = read_log(args.log)
     for note in log.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
+    reading = args.reading or "reaction"
+    log.w_hat = reading_sign(reading) * log.w_hat             # the toolkit's sign: S and b are of sigma w_hat
     truth = _spatial_truth(args.truth)
     latency_estimated = args.latency is None
     latency = args.latency
@@ -96,30 +107,113 @@ def calibrate_spatial(args):
     warnings = [*saturated, *result.warnings]
     if not result.converged and not result.warnings:
         warnings.append(_not_settled(result.observer))
-    for warning in warnings:
-        print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
-    converged = bool(result.converged and not saturated)
+    flipped = bool(np.trace(result.S_hat[3:, 3:]) < 0)      # a negative force gain: the other sign convention
+    if flipped:
+        from fmscal.observers.static_fit import other_convention
+        warnings.append(other_convention(Path(args.log).name, None, reading))
+    converged = bool(result.converged and not saturated and not flipped)
     out = {"observer": name, "kind": "spatial", "S": result.S_hat.tolist(), "S_std": result.S_std.tolist(),
            "b": result.b.tolist(), "b_std": result.b_std.tolist(), "latency": float(latency),
            "latency_estimated": latency_estimated, "converged": converged,
-           "undetermined": result.info.get("undetermined", []), "warnings": warnings}
+           "undetermined": result.info.get("undetermined", []), "warnings": warnings, "reading": reading}
     if truth is not None:
         out["E"], out["E_torque"], out["E_force"] = block_errors(result.S_hat, truth.S_at(aligned.t[-1]))
     if args.plot:                 # before saving: a failing plot leaves no calibration behind
         plot_calibration(result, aligned, args.plot, f"{Path(args.log).name}: entries of S_hat ({name}) and the "
                          "pose residual", truth, model)
+    why = ("the reading saturates" if saturated else "the reading follows the other sign convention" if flipped
+           else "the run did not converge (see the warnings)")
+    summary = (f"{Path(args.log).name}: spatial, {len(log)} samples, {log.duration:g} s, "
+               f"{int(log.has_pose.sum())} pose measurements; method {name}")
+    _report(args, out, payload, summary, why)
+
+
+def calibrate_table(args, path):
+    """``fmscal calibrate`` on a pose table (or an attitude-only log's held segments): what held poses determine.
+
+    ``S`` is never determined in full from held poses
+    (:func:`fmscal.observers.static_fit.calibrate_table`): the report names
+    the directions of the reading it is not determined along, ``converged``
+    is false, and ``--save`` needs ``--force``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``fmscal calibrate``'s options (``--mass``, ``--rho X Y Z``,
+        ``--gravity``, ``--reading``, ``--inertia`` only to save, ``--save``,
+        ``--force``, ``--json``).
+    path : Path
+        The pose table, or the attitude-only log.
+
+    Raises
+    ------
+    CliError
+        An option a table does not take, a planar ``--rho``, ``--save``
+        without ``--inertia`` or without ``--force``.
+    """
+    from fmscal.observers.static_fit import calibrate_table as fit_table
+    from fmscal.plant.pose_table import held_table, is_pose_table, read_attitude_log, read_pose_table
+    rho = args.rho
+    if len(rho) != 3:
+        raise CliError(f"a pose table takes --rho X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
+                       f"got {len(rho)}")
+    mass = positive(args.mass, "--mass")
+    given = [(args.observer is not None, "--observer", "held poses have one fit, least squares"),
+             (args.latency is not None, "--latency", "held poses have no time"),
+             (args.max_latency is not None, "--max-latency", "held poses have no time"),
+             (args.plot is not None, "--plot", "a figure of S against time needs a log"),
+             (args.truth is not None, "--truth", "a pose table has no truth sidecar"),
+             (args.pose_noise is not None, "--pose-noise", "held poses are taken as exact"),
+             (args.wrench_noise is not None, "--wrench-noise", "the noise is estimated from the residuals"),
+             (not args.offset, "--no-offset", "the offset is always estimated in 3D")]
+    for present, option, why in given:
+        if present:
+            raise CliError(f"{option} is not taken on a pose table ({why})")
+    payload = None
+    if args.inertia is not None:
+        payload = spatial_payload(mass, rho, args.inertia)
+    elif args.save:
+        raise CliError("--save records the payload in the calibration file: give --inertia IXX IYY IZZ IXY IXZ IYZ "
+                       "too (held poses do not use it)")
+    if is_pose_table(path):
+        table, what = read_pose_table(path), "pose table"
+    else:
+        table, _, note = held_table(read_attitude_log(path))
+        print(f"fmscal calibrate: note: {note}", file=sys.stderr)
+        what = "attitude-only log, its held segments"
+    reading = args.reading or "reaction"
+    fit = fit_table(table, mass, rho, gravity_of(args), reading)
+    name = "static-least-squares"
+    out = {"observer": name, "kind": "table", "poses": len(table), "S": fit.S_hat.tolist(),
+           "S_std": fit.S_std.tolist(), "b": fit.b.tolist(), "b_std": fit.b_std.tolist(), "latency": None,
+           "latency_estimated": False, "converged": False,
+           "undetermined": [d.tolist() for d in fit.undetermined], "warnings": list(fit.warnings),
+           "reading": reading}
+    summary = f"{path.name}: {what}, {len(table)} held poses; method {name} (S = I where the poses say nothing)"
+    _report(args, out, payload, summary, "held poses never determine S in full (see the warnings)")
+
+
+def _report(args, out, payload, summary, why):
+    """Warnings on stderr, the calibration saved if it converged (or ``--force``), the report, the refusal."""
+    from fmscal.plant import Calibration, file_sha256
+    for warning in out["warnings"]:
+        print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
+    converged = out["converged"]
     saved = bool(args.save) and (converged or args.force)
     if saved:
-        Calibration(S=result.S_hat, payload=payload, method=name, S_std=result.S_std, b=result.b,
-                    b_std=result.b_std, latency=float(latency), log_name=Path(args.log).name,
-                    log_sha256=file_sha256(args.log), forced=not converged).save(args.save)
+        def finite(key):
+            value = np.asarray(out[key], dtype=float)
+            return value if np.all(np.isfinite(value)) else None
+        Calibration(S=np.array(out["S"]), payload=payload, method=out["observer"], S_std=finite("S_std"),
+                    b=np.array(out["b"]), b_std=finite("b_std"), latency=out["latency"],
+                    log_name=Path(args.log).name, log_sha256=file_sha256(args.log), forced=not converged,
+                    reading=out["reading"]).save(args.save)
     out["saved"] = saved
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
     else:
-        _print(args, log, out)
+        _print(args, summary, out)
     if args.save and not saved:
-        why = "the reading saturates" if saturated else "the run did not converge (see the warnings)"
         raise CliError(f"did not save {args.save}: {why}; add --force to save it anyway (marked as forced)")
 
 
@@ -131,16 +225,17 @@ def _not_settled(method):
             f"own scale): record a longer log, or one that turns the payload faster")
 
 
-def _print(args, log, out):
-    print(f"{Path(args.log).name}: spatial, {len(log)} samples, {log.duration:g} s, "
-          f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
+def _print(args, summary, out):
+    print(summary)
     S, S_std = np.array(out["S"]), np.array(out["S_std"])
-    print("S_hat +- one sigma (rows and columns tx ty tz fx fy fz):")
+    print("S_hat +- one sigma (rows and columns tx ty tz fx fy fz; inf: not determined):")
     for i in range(6):
         print("  " + "  ".join(f"{S[i, j]:+.4f}+-{S_std[i, j]:.0e}" for j in range(6)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in
                                             zip(_NAMES, out["b"], out["b_std"])))
-    print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
+    print(f"reading: {out['reading']}")
+    if out["latency"] is not None:
+        print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
     undetermined = len(out["undetermined"])
     print(f"converged: {'yes' if out['converged'] else 'no'}"
           + (f" ({undetermined} direction(s) of the reading not determined)" if undetermined else ""))

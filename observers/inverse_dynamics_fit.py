@@ -33,7 +33,8 @@ from fmscal.plant.rigid_body import GRAVITY, SpatialPayload
 
 from .payload_fit import regressor
 
-__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "describe_direction", "UNDETERMINED_STD", "READING_NAMES"]
+__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "UNDETERMINED_STD",
+           "READING_NAMES"]
 
 #: The augmented reading's components, the directions in which the information is reported.
 READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
@@ -90,13 +91,16 @@ class InverseDynamicsFit:
         return np.c_[self.S_hat, self.c]
 
 
-def describe_direction(direction):
+def describe_direction(direction, held=False):
     """A user's words for an undetermined direction of the reading (its components scaled to their spread).
 
     Parameters
     ----------
     direction : ndarray, shape (7,)
         A unit direction of the augmented reading ``[tx .. fz, 1]``.
+    held : bool
+        The data are held poses (a pose table): the remedy is what held
+        poses can and cannot give.
 
     Returns
     -------
@@ -108,6 +112,13 @@ def describe_direction(direction):
     torque = float(np.sum(direction[:3] ** 2))
     parts = " ".join(f"{'+' if c >= 0 else '-'}{abs(c):.2f} {name}" for c, name in zip(direction, READING_NAMES)
                      if abs(c) >= 0.2).lstrip("+")
+    if held and torque >= 0.25:
+        return (f"S is not determined along the reading {parts}: the torque there is only what the force makes "
+                "about the centre of mass, and held poses never make more (that needs angular acceleration); "
+                "record a moving log (t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) to determine it")
+    if held:
+        return (f"S is not determined along the reading {parts}: the force hardly changes there; hold the tool at "
+                "attitudes that turn gravity through more directions in the sensor frame (tilt it about another axis)")
     if torque >= 0.25:
         return (f"S is not determined along the reading {parts}: the torque there is only what the force makes "
                 "about the centre of mass; the log holds too little angular acceleration (rotate the payload "
@@ -151,38 +162,94 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     w = regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], gravity) @ payload.inertial_parameters  # (N, 6)
-    X = np.c_[log.w_hat[trim], np.ones(len(w))]                                        # (N, 7)
-    spread = np.r_[np.std(X[:, :6], axis=0), 1.0]
     wrench_sd = np.array(estimate_noise(log).wrench_sd)
-    dead = np.flatnonzero(spread[:6] <= np.maximum(3 * wrench_sd, 1e-12 * np.abs(X[:, :6]).max(axis=0)))
+    spread = np.std(log.w_hat[trim], axis=0)
+    dead = np.flatnonzero(spread <= np.maximum(3 * wrench_sd, 1e-12 * np.abs(log.w_hat[trim]).max(axis=0)))
     if len(dead):
         raise FmscalError(f"{log.name}: the reading {', '.join(READING_NAMES[j] for j in dead)} does not move beyond "
                           "its noise: a stuck or dead channel, or a log that never loads it; S cannot be estimated")
+    blocks = ((log.t[trim] - log.t[trim][0]) // block).astype(int)
+    return fit_readings(w, log.w_hat[trim], blocks, wrench_sd if eiv else None)
+
+
+def fit_readings(w, w_hat, blocks=None, wrench_sd=None, prior=None, held=False):
+    """Least squares of ``[S | c]`` in ``w_k = S w_hat_k + c`` (eq. 3 with the offset ``c = -S b``), row by row.
+
+    The regressor of every row is the augmented reading ``[w_hat_k; 1]``,
+    each component scaled by its spread; what it leaves undetermined is
+    reported as directions of that reading (module docstring).
+
+    Parameters
+    ----------
+    w : ndarray, shape (N, 6)
+        The wrench each sample needed (Newton-Euler), N m and N.
+    w_hat : ndarray, shape (N, 6)
+        The readings (sign-corrected), N m and N.
+    blocks : ndarray of int, shape (N,), optional
+        Each sample's block of time: the covariance is the cluster-robust
+        sandwich over them. None: the samples are independent (the rows of a
+        pose table), the covariance is ``s_i^2 (X^T X)^-1`` for row ``i``
+        with ``s_i^2`` its residual variance over ``N - k`` degrees of
+        freedom (``k`` the directions fitted).
+    wrench_sd : ndarray, shape (6,), optional
+        The reading's noise: the normal equations lose its share,
+        ``(X^T X - N Sigma) theta = X^T w`` (errors in variables, Deming's
+        regression); None: plain least squares.
+    prior : ndarray, shape (6, 7), optional
+        ``[S | c]`` where the data say nothing: the estimate is the least
+        squares fit on the determined directions and the prior on the
+        undetermined ones (the fit nearest the prior). None: every direction
+        is fitted.
+    held : bool
+        The data are held poses: the warnings say what held poses cannot give.
+
+    Returns
+    -------
+    InverseDynamicsFit
+        With ``S_std`` infinite on every entry an undetermined direction
+        touches, when ``prior`` is given.
+    """
+    X = np.c_[w_hat, np.ones(len(w))]                                                  # (N, 7)
+    spread = np.r_[np.std(X[:, :6], axis=0), 1.0]
+    spread[spread <= 0] = 1.0                               # a constant component: the constant's direction
     Xs = X / spread
     # the reading's noise covariance in scaled units (the constant 1 has none)
-    sigma = np.diag((np.r_[wrench_sd, 0.0] / spread) ** 2 if eiv else np.zeros(7))
+    sigma = np.diag((np.r_[wrench_sd, 0.0] / spread) ** 2 if wrench_sd is not None else np.zeros(7))
     information = Xs.T @ Xs - len(Xs) * sigma
     lam, u = np.linalg.eigh(information)            # symmetric; with the noise taken out, maybe indefinite
     kept = lam > 1e-12 * lam.max()
+    theta0 = np.zeros((7, 6)) if prior is None else (np.asarray(prior, dtype=float) * spread).T
     inverse = (u[:, kept] / lam[kept]) @ u[:, kept].T
-    theta = inverse @ Xs.T @ w                                                           # (7, 6): rows of [S|c]^T
+    theta = theta0 + inverse @ Xs.T @ (w - Xs @ theta0)                                 # (7, 6): rows of [S|c]^T
     e = w - Xs @ theta
-    blocks = ((log.t[trim] - log.t[trim][0]) // block).astype(int)
-    scores = np.zeros((blocks.max() + 1, 7, 6))
-    # each sample's share of the estimating equation X^T e + Sigma theta = 0
-    np.add.at(scores, blocks, Xs[:, :, None] * e[:, None, :] + (sigma @ theta)[None])
-    scores = scores.transpose(0, 2, 1).reshape(len(scores), 42)                          # row order of [S|c]
+    weak = np.array([not kept[k] or _relative_std(u[:, k], lam[k], e, spread) > UNDETERMINED_STD for k in range(7)])
+    if prior is not None and (weak & kept).any():                   # the weak directions left at the prior
+        kept &= ~weak
+        inverse = (u[:, kept] / lam[kept]) @ u[:, kept].T
+        theta = theta0 + inverse @ Xs.T @ (w - Xs @ theta0)
+        e = w - Xs @ theta
     bread = np.kron(np.eye(6), inverse)
-    cov_scaled = bread @ (scores.T @ scores) @ bread
+    if blocks is None:                                      # independent rows: s_i^2 (X^T X)^-1 for row i
+        s2 = np.sum(e ** 2, axis=0) / max(len(e) - int(kept.sum()), 1)
+        cov_scaled = np.kron(np.diag(s2), inverse)
+    else:
+        scores = np.zeros((blocks.max() + 1, 7, 6))
+        # each sample's share of the estimating equation X^T e + Sigma theta = 0
+        np.add.at(scores, blocks, Xs[:, :, None] * e[:, None, :] + (sigma @ theta)[None])
+        scores = scores.transpose(0, 2, 1).reshape(len(scores), 42)                      # row order of [S|c]
+        cov_scaled = bread @ (scores.T @ scores) @ bread
     unscale = np.tile(1.0 / np.maximum(spread, 1e-300), 6)
     cov = cov_scaled * np.outer(unscale, unscale)
     S_aug = (theta / np.maximum(spread, 1e-300)[:, None]).T                              # (6, 7)
-    undetermined = [u[:, k] for k in range(7)
-                    if not kept[k] or _relative_std(u[:, k], lam[k], e, spread) > UNDETERMINED_STD]
-    warnings = [describe_direction(d) for d in undetermined]
+    undetermined = [u[:, k] for k in np.flatnonzero(weak)]
+    warnings = [describe_direction(d, held) for d in undetermined]
     S_hat, c = S_aug[:, :6], S_aug[:, 6]
-    S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(6, 7)[:, :6]
     b, b_std = _offset(S_hat, c, cov)
+    if prior is not None and undetermined:                  # the prior's entries are not estimates
+        touched = np.tile(np.abs(np.array(undetermined)).max(axis=0) > 1e-6, 6)
+        cov[touched, :] = np.inf
+        cov[:, touched] = np.inf
+    S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(6, 7)[:, :6]
     residual_rms = np.sqrt(np.mean(e ** 2, axis=0))
     unexplained = residual_rms ** 2 / np.maximum(np.var(w, axis=0), 1e-300)
     return InverseDynamicsFit(S_hat=S_hat, S_std=S_std, b=b, b_std=b_std, cov=cov, undetermined=undetermined,

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fmscal.plant._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.calibration import reading_sign
 from fmscal.plant.differentiate import edge, spatial_motion
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.rigid_body import GRAVITY, SpatialPayload, rotation_matrix, skew
@@ -42,8 +43,42 @@ INERTIA_NAMES = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
 DETERMINED = 0.02
 
 
+@dataclass(kw_only=True)
+class _Rotations:
+    """Gravity's direction and the sensor's mounting where a fit estimated them (None otherwise).
+
+    Attributes
+    ----------
+    gravity : ndarray, shape (3,), or None
+        Gravity in the pose frame, m/s^2.
+    gravity_std_deg : float or None
+        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
+    mounting : ndarray, shape (3, 3), or None
+        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors).
+    mounting_deg, mounting_std_deg : float or None
+        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
+    mounting_axis : ndarray, shape (3,), or None
+        The mounting's unit axis (tracked-frame axes).
+    """
+
+    gravity: np.ndarray = None
+    gravity_std_deg: float = None
+    mounting: np.ndarray = None
+    mounting_deg: float = None
+    mounting_std_deg: float = None
+    mounting_axis: np.ndarray = None
+
+    def rotations_dict(self):
+        """The six fields as JSON-ready numbers and lists (None where not estimated)."""
+        return {"gravity": None if self.gravity is None else [float(v) for v in self.gravity],
+                "gravity_std_deg": self.gravity_std_deg,
+                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
+                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
+                "mounting_axis": None if self.mounting_axis is None else [float(v) for v in self.mounting_axis]}
+
+
 @dataclass
-class PayloadFit:
+class PayloadFit(_Rotations):
     """The payload's mass properties and the sensor's offset, with one-sigma uncertainties.
 
     Attributes
@@ -63,6 +98,11 @@ class PayloadFit:
         What the log did not determine, in words a user acts on.
     converged : bool
         Every group (mass, centre of mass, inertia, offset) determined.
+    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
+        Gravity's direction and the sensor's mounting, where estimated
+        (:meth:`rotations_dict`): gravity in the pose frame (m/s^2), its
+        direction's uncertainty, the sensor's axes on the tracked frame
+        (3x3), its angle, uncertainty (degrees) and unit axis; None otherwise.
     """
 
     mass: float
@@ -85,7 +125,7 @@ class PayloadFit:
                 "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
                 "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
                 "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
-                "converged": bool(self.converged)}
+                "converged": bool(self.converged), **self.rotations_dict()}
 
 
 def _inertia_map(v):
@@ -96,14 +136,23 @@ def _inertia_map(v):
                      np.stack([z, z, w, z, x, y], 1)], 1)
 
 
-def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY):
-    """The Newton-Euler regressor ``W`` with ``[tau_O; f] = W pi``, for every sample.
+def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY, mounting=None):
+    """The Newton-Euler regressor ``W`` with ``[tau_O; f] = W pi``, for every sample (module docstring).
 
     Parameters
     ----------
     q : ndarray, shape (N, 4)
-    omega, alpha, p_ddot : ndarray, shape (N, 3)
+        Attitudes of the tracked frame, unit quaternions, scalar first.
+    omega, alpha : ndarray, shape (N, 3)
+        Angular velocity and acceleration in the tracked frame's axes, rad/s and rad/s^2.
+    p_ddot : ndarray, shape (N, 3)
+        Acceleration of the sensor point in the pose frame, m/s^2.
     gravity : array_like, shape (3,)
+        m/s^2, pose frame.
+    mounting : ndarray, shape (3, 3), optional
+        The sensor's axes on the tracked frame (sensor vectors to tracked-frame
+        vectors, ``M``): the sensor's attitude is ``R M``, its rates
+        ``M^T omega`` and ``M^T alpha``. Default the identity.
 
     Returns
     -------
@@ -111,6 +160,8 @@ def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY):
         Columns ``m, h (3), I_O (6, :data:`INERTIA_NAMES` order)``.
     """
     R = np.moveaxis(rotation_matrix(q.T), -1, 0)                         # (N, 3, 3), one per sample
+    if mounting is not None:                                             # the sensor's axes: R M, M^T omega
+        R, omega, alpha = R @ mounting, omega @ mounting, alpha @ mounting
     a_g = np.einsum("nji,nj->ni", R, p_ddot - np.asarray(gravity, dtype=float))
     A, Om = skew(alpha), skew(omega)
     W = np.zeros((len(q), 6, 10))
@@ -124,19 +175,30 @@ def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY):
 def _fit(X, y, weights, blocks):
     """Weighted least squares ``y ~ X theta`` with the cluster-robust covariance over ``blocks``."""
     Xw = X * weights[:, None]
-    information = Xw.T @ Xw
+    inverse, columns = _pseudo_inverse(Xw)
+    theta = inverse @ (Xw.T @ (y * weights))
+    cov = _sandwich(Xw, (y - X @ theta) * weights, blocks, inverse, columns)
+    return theta, cov, y - X @ theta
+
+
+def _pseudo_inverse(J):
+    """``(J^T J)^+`` on the directions it determines (scaled to a unit diagonal), and the columns those alone touch."""
+    information = J.T @ J
     scale = np.sqrt(np.maximum(np.diag(information), 1e-300))
     u, s, vt = np.linalg.svd(information / np.outer(scale, scale))
     keep = s > 1e-12 * s[0]
-    inverse = (vt[keep].T / s[keep]) @ u[:, keep].T / np.outer(scale, scale)
-    theta = inverse @ (Xw.T @ (y * weights))
-    e = (y - X @ theta) * weights
-    scores = np.zeros((blocks.max() + 1, X.shape[1]))
-    np.add.at(scores, blocks, Xw * e[:, None])
+    return (vt[keep].T / s[keep]) @ u[:, keep].T / np.outer(scale, scale), _columns(keep, vt)
+
+
+def _sandwich(J, e, blocks, inverse, columns):
+    """The cluster-robust covariance ``B (sum_b s_b s_b^T) B`` over ``blocks``, ``s_b`` a block's ``J^T e``;
+    infinite for the parameters that touch a direction not determined."""
+    scores = np.zeros((blocks.max() + 1, J.shape[1]))
+    np.add.at(scores, blocks, J * e[:, None])
     cov = inverse @ (scores.T @ scores) @ inverse
-    cov[:, ~_columns(keep, vt)] = np.inf
-    cov[~_columns(keep, vt), :] = np.inf
-    return theta, cov, y - X @ theta
+    cov[:, ~columns] = np.inf
+    cov[~columns, :] = np.inf
+    return cov
 
 
 def _columns(keep, vt):
@@ -144,7 +206,8 @@ def _columns(keep, vt):
     return np.abs(vt[~keep]).max(axis=0) < 1e-6 if (~keep).any() else np.ones(vt.shape[1], dtype=bool)
 
 
-def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, reading="reaction"):
+def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, reading="reaction", estimate_gravity=False,
+                     estimate_mounting=False):
     """Estimate the payload's mass, centre of mass, inertia and the sensor's offset, with ``S`` known.
 
     Parameters
@@ -163,6 +226,12 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
         The reading's sign: the wrench the mount applies to the payload (the
         toolkit's convention), or the wrench the tool applies to the sensor
         (``load``: the reading is negated first).
+    estimate_gravity : bool
+        Estimate gravity's direction in the pose frame too (a tilted or
+        wall-mounted base); only the size of ``gravity`` is taken.
+    estimate_mounting : bool
+        Estimate the rotation ``M`` of the sensor's axes on the tracked frame
+        too (a sensor bolted at an angle): :func:`regressor` with ``mounting``.
 
     Returns
     -------
@@ -174,19 +243,21 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
         The log does not determine the mass, or its mass comes out negative
         (the reading follows the other sign convention: the message names the flag).
     """
-    from .static_fit import READINGS
-    if reading not in READINGS:
-        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {reading!r}")
+    sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     gravity = as_finite_array(gravity, (3,), "gravity")
     block = as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
-    y = ((-1.0 if reading == "load" else 1.0) * log.w_hat @ S.T)[trim]
+    y = (sign * log.w_hat @ S.T)[trim]
     n = len(y)
-    X = np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
     blocks = np.repeat(((log.t[trim] - log.t[trim][0]) // block).astype(int), 6)
+    if estimate_gravity or estimate_mounting:
+        motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
+        return _identify_rotations(log.name, motion, y, gravity, blocks, S, reading, estimate_gravity,
+                                   estimate_mounting)
+    X = _design(W)
     theta, _, residual = _fit(X, y.ravel(), np.ones(6 * n), blocks)
     sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
     theta, cov, residual = _fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
@@ -194,6 +265,87 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
         from .static_fit import other_convention
         raise FmscalError(other_convention(log.name, theta[0], reading))
     return _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
+
+
+def _design(W):
+    """The design matrix of ``[tau_O; f] + c = W pi + c``: ``[W | I]`` stacked, shape (6N, 16)."""
+    n = len(W)
+    return np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
+
+
+def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_gravity, estimate_mounting):
+    """:func:`identify_payload` with gravity's direction and/or the mounting estimated too.
+
+    Variable projection: for given angles (gravity's two across its start
+    direction, the mounting's rotation vector about its start) the payload
+    and the offset are the weighted least squares of the linear model; the
+    angles minimise what is left (Levenberg-Marquardt). The covariance is the
+    cluster-robust sandwich over the full Jacobian (the linear parameters and
+    the angles together), so the angles' uncertainty enters the payload's.
+    """
+    from scipy.optimize import least_squares
+
+    from .static_fit import _angle_deg, _axis, _exp, _start, _tangent_basis, other_convention
+    q, omega, alpha, p_ddot = motion
+    g = np.asarray(gravity, dtype=float)
+    R = np.moveaxis(rotation_matrix(q.T), -1, 0)
+    _, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting, acc=p_ddot)
+    e1, e2 = _tangent_basis(d0)
+    k_g = 2 if estimate_gravity else 0
+
+    def parts(eta):
+        d = _exp(eta[0] * e1 + eta[1] * e2) @ d0 if estimate_gravity else d0
+        M = M0 @ _exp(eta[k_g:k_g + 3]) if estimate_mounting else M0
+        return g_size * d, M
+
+    def design(eta):
+        g_eta, M = parts(eta)
+        return _design(regressor(q, omega, alpha, p_ddot, g_eta, M if estimate_mounting else None))
+
+    def solve(eta, weights):
+        X = design(eta)
+        Xw = X * weights[:, None]
+        theta = _pseudo_inverse(Xw)[0] @ (Xw.T @ (y.ravel() * weights))
+        return X, theta
+
+    def residual(eta, weights):
+        X, theta = solve(eta, weights)
+        return (y.ravel() - X @ theta) * weights
+
+    n = len(y)
+    eta = np.zeros(k_g + (3 if estimate_mounting else 0))
+    weights = np.ones(6 * n)
+    for _ in range(2):                      # plain, then each channel weighted by its residual spread
+        eta = least_squares(residual, eta, args=(weights,), method="lm", xtol=1e-12, ftol=1e-12).x
+        sd = np.sqrt(np.mean((residual(eta, weights) / weights).reshape(n, 6) ** 2, axis=0))
+        weights = np.tile(1.0 / np.maximum(sd, 1e-12), n)
+    X, theta = solve(eta, weights)
+    e = (y.ravel() - X @ theta) * weights
+    # the full Jacobian: the linear parameters' columns, and the angles' by central differences
+    columns = []
+    for i in range(len(eta)):
+        step = np.zeros(len(eta))
+        step[i] = 1e-6
+        columns.append((design(eta + step) @ theta - design(eta - step) @ theta) / 2e-6)
+    J = np.column_stack([X, *columns]) * weights[:, None]
+    inverse, determined = _pseudo_inverse(J)
+    cov = _sandwich(J, e, blocks, inverse, determined)
+    g_hat, M = parts(eta)
+    if estimate_gravity and g_hat[2] > 0 > g[2]:             # gravity up: the reading's sign is the other one
+        raise FmscalError(other_convention(name, None, reading))
+    if np.isfinite(cov[0, 0]) and theta[0] < 0:
+        raise FmscalError(other_convention(name, theta[0], reading))
+    fit = _report(theta, cov[:16, :16], S, np.sqrt(np.mean((e / weights).reshape(n, 6) ** 2, axis=0)))
+    std = np.sqrt(np.maximum(np.diag(cov)[16:], 0))
+    if estimate_gravity:
+        fit.gravity = g_hat
+        fit.gravity_std_deg = float(np.degrees(np.sqrt((std[0] ** 2 + std[1] ** 2) / 2)))
+    if estimate_mounting:
+        fit.mounting = M
+        fit.mounting_deg = _angle_deg(M)
+        fit.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k_g:k_g + 3] ** 2) / 3)))
+        fit.mounting_axis = _axis(M)
+    return fit
 
 
 def _physical(theta):

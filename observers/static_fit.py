@@ -35,15 +35,18 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fmscal.plant._checks import as_finite_array
+from fmscal.plant.calibration import reading_sign
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.pose_table import PoseTable
 from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
-__all__ = ["StaticFit", "fit_static", "other_convention", "READINGS", "DETERMINED_REL", "DETERMINED_RHO"]
+from .inverse_dynamics_fit import InverseDynamicsFit
+from .payload_fit import _Rotations
 
-#: The two sign conventions of a sensor's reading: the wrench on the payload (the toolkit's), or on the sensor.
-READINGS = ("reaction", "load")
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "DETERMINED_REL",
+           "DETERMINED_RHO"]
+
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
 #: The centre of mass counts as determined when each coordinate's one-sigma uncertainty is below this, m.
@@ -54,7 +57,7 @@ _TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
 
 
 @dataclass
-class StaticFit:
+class StaticFit(_Rotations):
     """The static fit of a pose table (module docstring), one-sigma uncertainties beside each value.
 
     Attributes
@@ -65,16 +68,10 @@ class StaticFit:
         Centre of mass in the sensor frame, m.
     b, b_std : ndarray, shape (6,)
         The sensor's offset in ``w = S (sigma w_hat - b)``, reading order, N m and N.
-    gravity : ndarray, shape (3,), or None
-        Gravity in the pose frame, m/s^2, where estimated.
-    gravity_std_deg : float or None
-        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
-    mounting : ndarray, shape (3, 3), or None
-        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors), where estimated.
-    mounting_deg, mounting_std_deg : float or None
-        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
+    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
+        Where asked, as a log's fit gives them (:class:`fmscal.observers.payload_fit.PayloadFit`).
     reading : str
-        The reading's sign convention the fit used (:data:`READINGS`).
+        The reading's sign convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
     cone_deg : float
         Half-angle of the cone of gravity directions the table holds in the sensor frame, degrees.
     undetermined : list of str
@@ -98,11 +95,6 @@ class StaticFit:
     rho_std: np.ndarray
     b: np.ndarray
     b_std: np.ndarray
-    gravity: np.ndarray = None
-    gravity_std_deg: float = None
-    mounting: np.ndarray = None
-    mounting_deg: float = None
-    mounting_std_deg: float = None
     reading: str = "reaction"
     cone_deg: float = 0.0
     undetermined: list = field(default_factory=list)
@@ -119,11 +111,8 @@ class StaticFit:
             return None if v is None else [float(x) for x in np.ravel(v)]
         return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
                 "rho_std": listed(self.rho_std), "inertia": None, "inertia_std": None, "b": listed(self.b),
-                "b_std": listed(self.b_std), "gravity": listed(self.gravity),
-                "gravity_std_deg": self.gravity_std_deg,
-                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
-                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
-                "reading": self.reading, "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
+                "b_std": listed(self.b_std), **self.rotations_dict(), "reading": self.reading,
+                "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
                 "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
                 "warnings": list(self.warnings), "converged": bool(self.converged)}
 
@@ -140,6 +129,15 @@ def _exp(v):
 def _angle_deg(R):
     """The angle of a rotation matrix, degrees."""
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+def _axis(M):
+    """The unit axis of the rotation ``M`` (any unit vector for no rotation)."""
+    v = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
+    if np.linalg.norm(v) < 1e-12:
+        _, u = np.linalg.eigh(M + M.T)
+        return u[:, -1]
+    return v / np.linalg.norm(v)
 
 
 def _tangent_basis(d):
@@ -193,10 +191,18 @@ class _Model:
         return np.column_stack(cols)
 
 
-def _start(R, y, g, estimate_gravity, estimate_mounting):
-    """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques."""
+def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
+    """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques.
+
+    ``acc`` (N, 3), the tracked point's acceleration in the pose frame, m/s^2,
+    for samples of a log (default: held, none); its share of the force,
+    ``m M^T R^T acc``, joins the linear fits, and the rotation's share is left
+    to the nonlinear fit that follows.
+    """
     n = len(R)
     a0 = np.einsum("nkj,k->nj", R, -g)                                      # R^T (-g), tracked-frame axes
+    if acc is not None:
+        a0 = a0 + np.einsum("nkj,nk->nj", R, acc)
     f = y[:, 3:]
     M0, d0, g_size = np.eye(3), g / np.linalg.norm(g), float(np.linalg.norm(g))
     if estimate_mounting:           # f = B a0 + c_f with B = m M^T: B by least squares, M^T by its polar part
@@ -208,9 +214,11 @@ def _start(R, y, g, estimate_gravity, estimate_mounting):
             Mt = -Mt
         M0 = Mt.T
         m = float(np.sum(s) / 3 * np.sign(np.trace(Mt.T @ coef[:3].T)))
-    if estimate_gravity:            # f = M0^T R^T (-u) + c_f with u = m g: linear in u and c_f
+    if estimate_gravity:            # f = M0^T R^T (m acc - u) + c_f with u = m g: linear in u and c_f (and m)
         X = np.concatenate([-np.einsum("ji,nkj->nik", M0, R), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
-        sol = np.linalg.lstsq(X.reshape(3 * n, 6), f.ravel(), rcond=None)[0]
+        if acc is not None:
+            X = np.concatenate([X, np.einsum("ji,nkj,nk->ni", M0, R, acc)[:, :, None]], axis=2)
+        sol = np.linalg.lstsq(X.reshape(3 * n, X.shape[2]), f.ravel(), rcond=None)[0]
         u = sol[:3]
         m = float(np.linalg.norm(u) / g_size)
         d0 = u / max(np.linalg.norm(u), 1e-300)
@@ -270,13 +278,11 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     """
     if not isinstance(table, PoseTable):
         raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
-    if reading not in READINGS:
-        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {reading!r}")
+    sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     g = as_finite_array(gravity, (3,), "gravity")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
-    sign = 1.0 if reading == "reaction" else -1.0
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
@@ -315,6 +321,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     if estimate_mounting:
         out.mounting = M
         out.mounting_deg = _angle_deg(M)
+        out.mounting_axis = _axis(M)
         out.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3)))
     a = np.einsum("ji,nkj,k->ni", M, R, -d)
     out.cone_deg = _cone(a)
@@ -329,29 +336,102 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     return out
 
 
+def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
+    """``S`` and the offset from a pose table, the payload known: what held poses can and cannot determine.
+
+    At a held pose the payload needs the weight's wrench at the sensor,
+    ``w_k = [rho x f_k; f_k]`` with ``f_k = -m R_k^T g`` (Newton-Euler at
+    rest, :func:`fmscal.observers.payload_fit.regressor` with no motion),
+    exact given the pose. The reading is ``sigma w_hat_k = A w_k + b`` with
+    ``A = S^-1`` (eq. 3 inverted); it is fitted row by row by least squares
+    on the exact regressor ``[w_k; 1]``, the rows independent
+    (:func:`fmscal.observers.inverse_dynamics_fit.fit_readings`): no errors
+    in variables. The wrenches ``w_k`` span at most three of the six
+    directions (the torque is ``rho x f``, fixed by the force), so ``A``, and
+    with it ``S``, is determined on at most three: on the others the estimate
+    keeps the identity, and they are reported as undetermined directions of
+    the reading (where ``S_hat`` is the identity, the same directions). No
+    single entry of ``S`` is determined (``S_std`` is infinite) and the fit
+    never counts as converged. The offset ``b`` is the fit's intercept,
+    determined when gravity turns through more than one direction in the
+    sensor frame.
+
+    Parameters
+    ----------
+    table : plant.PoseTable
+    mass : float
+        The payload's mass, kg.
+    rho : array_like, shape (3,)
+        Its centre of mass in the sensor frame, m.
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+    reading : {"reaction", "load"}
+        The reading's sign convention (:data:`fmscal.plant.calibration.READINGS`).
+
+    Returns
+    -------
+    InverseDynamicsFit
+        ``S_hat`` and ``S_std`` (6, 6), ``b`` and ``b_std`` (6; reading
+        order, N m and N), ``undetermined`` (unit directions of ``[tx .. fz,
+        1]``, each component scaled by the wrench's spread) and their
+        warnings; ``converged`` False.
+    """
+    from .inverse_dynamics_fit import fit_readings
+    from .payload_fit import regressor
+    if not isinstance(table, PoseTable):
+        raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
+    sign = reading_sign(reading)
+    g = as_finite_array(gravity, (3,), "gravity")
+    rho = as_finite_array(rho, (3,), "rho")
+    if not (np.isfinite(mass) and mass > 0):
+        raise FmscalError(f"mass must be a positive number of kg; got {mass}")
+    if not np.linalg.norm(g) > 0:
+        raise FmscalError("gravity must not be zero")
+    still = np.zeros((len(table), 3))
+    pi = np.r_[mass, mass * rho, np.zeros(6)]                         # (m, h, I_O): the inertia plays no part
+    w = regressor(table.q, still, still, still, g) @ pi                # (N, 6), exact given the poses
+    # the reading on the wrench: [A | b], A = S^-1, the identity where the poses say nothing
+    inverse = fit_readings(sign * table.w_hat, w, prior=np.c_[np.eye(6), np.zeros(6)], held=True)
+    A, b = inverse.S_hat, inverse.c
+    if np.trace(A[3:, 3:]) < 0:                     # the reading falls where the weight rises: the other sign
+        raise FmscalError(other_convention(table.name, None, reading))
+    b_std = np.sqrt(np.maximum(np.diag(inverse.cov)[6::7], 0))
+    if np.linalg.cond(A) > 1e12:
+        raise FmscalError(f"{table.name}: the readings do not follow the weight (the fitted map from wrench to "
+                          "reading is singular): check the units (N, N m) and the quaternions' frame")
+    S_hat = np.linalg.inv(A)
+    return InverseDynamicsFit(S_hat=S_hat, S_std=np.full((6, 6), np.inf), b=b, b_std=b_std,
+                              cov=np.full((42, 42), np.inf), undetermined=inverse.undetermined,
+                              warnings=inverse.warnings, converged=False, residual_rms=inverse.residual_rms,
+                              c=-S_hat @ b)
+
+
 def _who(reading):
     return "mount applies to the payload" if reading == "reaction" else "tool applies to the sensor"
 
 
 def other_convention(name, mass, reading):
-    """The one line for data whose mass comes out negative: it follows the other sign convention.
+    """The one line for data whose mass (or force gain) comes out negative: it follows the other sign convention.
 
     Parameters
     ----------
     name : str
         The data's name.
-    mass : float
-        The (negative) mass the fit gave, kg.
+    mass : float or None
+        The (negative) mass the fit gave, kg; None: a fit of ``S`` whose
+        force gain came out negative (or gravity pointing up).
     reading : str
-        The convention the fit used (:data:`READINGS`).
+        The convention the fit used (:data:`fmscal.plant.calibration.READINGS`).
 
     Returns
     -------
     str
     """
     other = "load" if reading == "reaction" else "reaction"
-    return (f"{name}: the mass comes out negative ({mass:.4g} kg): the reading follows the other sign convention; "
-            f"pass --reading {other} (the wrench the {_who(other)})")
+    what = ("the force reading falls where the weight rises (a negative gain)" if mass is None
+            else f"the mass comes out negative ({mass:.4g} kg)")
+    return (f"{name}: {what}: the reading follows the other sign convention; pass --reading {other} (the wrench the "
+            f"{_who(other)})")
 
 
 def _covariance(information, s2):

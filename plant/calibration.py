@@ -1,12 +1,18 @@
 """A calibration as a file: what ``fmscal calibrate --save`` writes and ``fmscal apply`` uses.
 
-The calibrated wrench is ``w = S (w_hat - b)`` (eq. 3 with the sensor's
-offset ``b``; ``b = 0`` where it was not estimated). The file is JSON::
+The calibrated wrench is ``w = S (sigma w_hat - b)`` (eq. 3 with the
+sensor's offset ``b``, ``b = 0`` where it was not estimated, and the
+reading's sign ``sigma``). ``sigma = +1`` for a sensor that reports the
+toolkit's wrench, the one the mount applies to the payload (``reading``
+``"reaction"``, the default), and ``-1`` for one that reports the wrench
+the tool applies to the sensor (``"load"``: ATI, Robotiq, Bota, OnRobot);
+``b`` is in the sign-corrected reading ``sigma w_hat``. The file is JSON::
 
     {"format": "fmscal-calibration/1", "S": [[...] x3], "S_std": [[...] x3] or null,
      "b": [M, fx, fy] or null, "b_std": [...] or null, "payload": {"mass", "inertia", "rho"},
      "method": "least-squares", "log": {"name": "run.csv", "sha256": "..."},
-     "latency": s or null, "date": "2026-11-22T10:00:00+00:00", "forced": false}
+     "latency": s or null, "date": "2026-11-22T10:00:00+00:00", "forced": false,
+     "reading": "reaction"}
 
 A spatial calibration has the same keys with ``S`` 6x6, ``b`` in the
 reading's order ``tx .. fz``, and the payload's ``rho`` (3 numbers) and
@@ -14,7 +20,8 @@ reading's order ``tx .. fz``, and the payload's ``rho`` (3 numbers) and
 
 ``forced`` is true when the calibration was saved although its run had not
 converged (``fmscal calibrate --save --force``); files without it are read as
-not forced.
+not forced, and files without ``reading`` as ``"reaction"`` (the only
+convention before it was recorded).
 """
 
 import datetime
@@ -32,12 +39,14 @@ from .payload import Payload
 from .rigid_body import SpatialPayload
 from .sensor import check_calibration
 
-__all__ = ["Calibration", "CalibrationFileError", "file_sha256", "FORMAT"]
+__all__ = ["Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "FORMAT", "READINGS"]
 
 #: The format tag every calibration file carries.
 FORMAT = "fmscal-calibration/1"
 #: A calibration file is a few kB; anything above this is refused unread.
 _MAX_FILE_BYTES = 1 << 20
+#: The two sign conventions of a sensor's reading: the wrench on the payload (the toolkit's), or on the sensor.
+READINGS = ("reaction", "load")
 
 
 class CalibrationFileError(FmscalError):
@@ -53,6 +62,30 @@ def file_sha256(path):
     return h.hexdigest()
 
 
+def reading_sign(reading):
+    """``sigma``, the sign that turns a reading of the convention ``reading`` into the toolkit's (module docstring).
+
+    Parameters
+    ----------
+    reading : {"reaction", "load"}
+        The wrench the mount applies to the payload (the toolkit's), or the
+        wrench the tool applies to the sensor.
+
+    Returns
+    -------
+    float
+        ``+1.0`` or ``-1.0``.
+
+    Raises
+    ------
+    FmscalError
+        Neither convention.
+    """
+    if not isinstance(reading, str) or reading not in READINGS:
+        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {_short(reading)}")
+    return 1.0 if reading == "reaction" else -1.0
+
+
 def _matrix(value, shape, name, source):
     try:
         arr = np.asarray(value, dtype=float)
@@ -66,7 +99,7 @@ def _matrix(value, shape, name, source):
 
 @dataclass(frozen=True)
 class Calibration:
-    """A sensor calibration: ``w = S (w_hat - b)``.
+    """A sensor calibration: ``w = S (sigma w_hat - b)`` (module docstring).
 
     Parameters
     ----------
@@ -82,7 +115,8 @@ class Calibration:
     b, b_std : array_like, shape (n,), optional
         Offset in the raw reading's order and units (planar ``[M, f_x,
         f_y]``, spatial ``[tx .. fz]``; N m, N) and its uncertainty; None:
-        not estimated (taken as zero).
+        not estimated (taken as zero); in the sign-corrected reading
+        ``sigma w_hat``.
     log_name, log_sha256 : str
         The log it came from, and a hash of the log file's contents.
     latency : float, optional
@@ -92,6 +126,9 @@ class Calibration:
     forced : bool
         True if it was saved although the run had not converged
         (``--force``): use it knowing that.
+    reading : {"reaction", "load"}
+        The reading's sign convention (:data:`READINGS`): ``"load"`` turns
+        each reading's sign before ``S`` and ``b`` apply.
     """
 
     S: np.ndarray
@@ -105,6 +142,7 @@ class Calibration:
     latency: float = None
     date: str = None
     forced: bool = False
+    reading: str = "reaction"
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -121,6 +159,7 @@ class Calibration:
         if not isinstance(self.forced, (bool, np.bool_)):
             raise TypeError(f"forced must be True or False; got {self.forced!r}")
         set_(self, "forced", bool(self.forced))
+        reading_sign(self.reading)
         if self.date is None:
             set_(self, "date", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
 
@@ -135,7 +174,7 @@ class Calibration:
         return np.zeros(self.size) if self.b is None else self.b
 
     def apply(self, w_hat):
-        """Calibrated wrench ``w = S (w_hat - b)``.
+        """Calibrated wrench ``w = S (sigma w_hat - b)`` (module docstring).
 
         Parameters
         ----------
@@ -153,7 +192,7 @@ class Calibration:
             raise FmscalError(f"w_hat must have shape ({n},) or (N, {n}); got {w_hat.shape}")
         if not np.all(np.isfinite(w_hat)):
             raise FmscalError("w_hat holds NaN or infinite values")
-        return (w_hat - self.offset) @ self.S.T
+        return (reading_sign(self.reading) * w_hat - self.offset) @ self.S.T
 
     def to_dict(self):
         """The JSON document (module docstring)."""
@@ -162,7 +201,7 @@ class Calibration:
         return {"format": FORMAT, "S": listed(self.S), "S_std": listed(self.S_std), "b": listed(self.b),
                 "b_std": listed(self.b_std), "payload": self.payload.to_dict(), "method": self.method,
                 "log": {"name": self.log_name, "sha256": self.log_sha256}, "latency": self.latency,
-                "date": self.date, "forced": self.forced}
+                "date": self.date, "forced": self.forced, "reading": self.reading}
 
     def save(self, path):
         """Write the calibration as JSON, atomically (a temporary file, then a rename).
@@ -242,13 +281,16 @@ class Calibration:
         forced = data.get("forced", False)
         if not isinstance(forced, bool):
             raise CalibrationFileError(f"{source}: forced must be true or false; got {_short(forced)}")
+        reading = data.get("reading", "reaction")
+        if reading not in READINGS:
+            raise CalibrationFileError(f"{source}: reading must be one of {', '.join(READINGS)}; got {_short(reading)}")
         for key in ("method", "date"):
             if data.get(key) is not None and not isinstance(data[key], str):
                 raise CalibrationFileError(f"{source}: {key} must be a string; got {_short(data[key])}")
         try:
             return cls(S=S, payload=file_payload, method=data["method"], log_name=log.get("name", ""),
                        log_sha256=log.get("sha256", ""), latency=latency, date=data.get("date"),
-                       forced=forced, **optional)
+                       forced=forced, reading=reading, **optional)
         except ValueError as err:
             raise CalibrationFileError(f"{source}: {err}") from None
 
