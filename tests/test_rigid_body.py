@@ -76,18 +76,6 @@ def test_numpy_and_casadi_give_the_same_step():
         np.testing.assert_allclose(np.array(step(x0, w0)).ravel(), rk4_step(x0, w0, 1e-3, TOOL), rtol=1e-13, atol=1e-15)
 
 
-def _mujoco_model(dt):
-    inertial = (f'<inertial pos="{" ".join(map(str, TOOL.rho))}" mass="{TOOL.mass}" '
-                f'fullinertia="{" ".join(map(str, TOOL.inertia))}"/>')
-    # six motors on a site at the sensor point: force along and torque about the sensor's axes
-    motors = "".join(f'<motor site="O" ctrllimited="false" gear="{" ".join(str(int(i == j)) for i in range(6))}"/>'
-                     for j in range(6))
-    return mujoco.MjModel.from_xml_string(
-        f'<mujoco><option timestep="{dt}" integrator="RK4" gravity="{" ".join(map(str, GRAVITY))}"/>'
-        f'<worldbody><body name="payload"><freejoint/>{inertial}<site name="O"/></body></worldbody>'
-        f'<actuator>{motors}</actuator></mujoco>')
-
-
 def test_simulator_matches_mujoco_over_20_s_of_spatial_arm():
     """20 s of the spatial-arm scenario's motion (tens of degrees about every axis), its true wrench as logged."""
     dt, n = 1e-3, 20_000
@@ -98,7 +86,8 @@ def test_simulator_matches_mujoco_over_20_s_of_spatial_arm():
     ours = ca.Function("step", [xs, ws], [rk4_step(xs, ws, dt, TOOL)]).mapaccum(n)
     x = np.array(ours(x0, wrench.T)).T                                   # x[k] after k + 1 steps
 
-    model = _mujoco_model(dt)
+    from mujoco_log import mujoco_model            # tests/mujoco_log.py: the one MuJoCo model of a payload
+    model = mujoco_model(TOOL, GRAVITY, dt)
     data = mujoco.MjData(model)
     data.qpos[:], data.qvel[:] = x0[:7], np.r_[x0[7:10], x0[10:13]]      # free joint: v in W, omega in B
     qpos = np.empty((n, 7))
