@@ -48,7 +48,7 @@ from fmscal.plant.errors import FmscalError
 from fmscal.plant.model import as_model
 
 from . import _matrix as mx
-from .adaptive_spatial import SpatialLaw
+from .adaptive_spatial import SPATIAL_LAM, SpatialLaw
 from .base import RecursiveObserver
 from .gains import double_pole_gains
 from .highgain import discrete_gain
@@ -136,9 +136,12 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
     model : plant.Model or plant.Payload
         The problem, a model with :attr:`fmscal.plant.Model.linear_channels`
         (a payload stands for its case's model; the planar one).
-    lam : float
+    lam : float or None
         Pole of each channel (double), rad/s: the bandwidth of the filter
-        ``1/(s + lam)^2`` on the regressor (change 1, 2).
+        ``1/(s + lam)^2`` on the regressor (change 1, 2). None: the
+        model's default, :data:`DEFAULT_LAM` (5) on a model linear in its
+        channels, :data:`observers.adaptive_spatial.SPATIAL_LAM` (20) on the
+        spatial model.
     gain : {"least-squares", "gradient"}
         Change 3 on or off.
     gamma : float
@@ -186,12 +189,14 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         return (f"{cls.__name__} needs a model linear in its channels or the spatial model; "
                 f"it does not run on a {model.name} model")
 
-    def __init__(self, model, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
+    def __init__(self, model, lam=None, gain="least-squares", gamma=1.0, track=True, window=1.0,
                  threshold=8.0, step_ratio=5.0, t_forget=0.05, memory=0.2, offset=False):
         model = as_model(model, type(self).__name__)
         refusal = self.refusal(model)
         if refusal is not None:                  # before the layouts below read the model's channels
             raise FmscalError(refusal)
+        if lam is None:
+            lam = DEFAULT_LAM if model.linear_channels else SPATIAL_LAM
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")
