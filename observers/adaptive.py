@@ -48,6 +48,7 @@ from fmscal.plant.errors import FmscalError
 from fmscal.plant.model import as_model
 
 from . import _matrix as mx
+from .adaptive_spatial import SPATIAL_LAM, SpatialLaw
 from .base import RecursiveObserver
 from .gains import double_pole_gains
 from .highgain import discrete_gain
@@ -66,7 +67,7 @@ _DRIFT_WINDOWS = 20   # the drift statistic averages the windowed score over thi
 _T_STEP = 0.05         # s, time constant of the forgetting while the step test fires
 
 
-class AdaptiveObserver(RecursiveObserver):
+class AdaptiveObserver(SpatialLaw, RecursiveObserver):
     """Adaptive observer of eqs. (6)-(8) with filtered regressors and a least-squares gain.
 
     Module docstring for the equations. It runs on any model linear in its
@@ -135,9 +136,12 @@ class AdaptiveObserver(RecursiveObserver):
     model : plant.Model or plant.Payload
         The problem, a model with :attr:`fmscal.plant.Model.linear_channels`
         (a payload stands for its case's model; the planar one).
-    lam : float
+    lam : float or None
         Pole of each channel (double), rad/s: the bandwidth of the filter
-        ``1/(s + lam)^2`` on the regressor (change 1, 2).
+        ``1/(s + lam)^2`` on the regressor (change 1, 2). None: the
+        model's default, :data:`DEFAULT_LAM` (5) on a model linear in its
+        channels, :data:`observers.adaptive_spatial.SPATIAL_LAM` (20) on the
+        spatial model.
     gain : {"least-squares", "gradient"}
         Change 3 on or off.
     gamma : float
@@ -175,14 +179,24 @@ class AdaptiveObserver(RecursiveObserver):
     """
 
     name = "adaptive"
-    linear_channels_only = True
 
-    def __init__(self, model, lam=DEFAULT_LAM, gain="least-squares", gamma=1.0, track=True, window=1.0,
+    @classmethod
+    def refusal(cls, model):
+        """None on a model linear in its channels and on the spatial model (its own law,
+        :mod:`observers.adaptive_spatial`); else why not, in one line."""
+        if model.linear_channels or model.name == "spatial":
+            return super().refusal(model)
+        return (f"{cls.__name__} needs a model linear in its channels or the spatial model; "
+                f"it does not run on a {model.name} model")
+
+    def __init__(self, model, lam=None, gain="least-squares", gamma=1.0, track=True, window=1.0,
                  threshold=8.0, step_ratio=5.0, t_forget=0.05, memory=0.2, offset=False):
         model = as_model(model, type(self).__name__)
         refusal = self.refusal(model)
         if refusal is not None:                  # before the layouts below read the model's channels
             raise FmscalError(refusal)
+        if lam is None:
+            lam = DEFAULT_LAM if model.linear_channels else SPATIAL_LAM
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")
@@ -211,10 +225,17 @@ class AdaptiveObserver(RecursiveObserver):
         # called once by RecursiveObserver.__init__: the groups' structure is read from the model here.
         # since: time from the last pose to sample n; scale: each parameter group's prior information;
         # ups<c>: channel c's sensitivity filter Upsilon (position row, velocity row: 2 x k of its group);
+        # spatial: the motion about C and its filters (SpatialLaw._spatial_parts) in their place;
         # P<g>: group g's covariance (k x k, change 3); test<g>: the averages of its change test (_change_test)
-        self._structure = self._groups()
+        self._spatial = not self.model.linear_channels
+        if self._spatial:
+            self._K = np.linalg.inv(self.payload.I_c)
+        self._structure = self._spatial_structure() if self._spatial else self._groups()
         parts = [("x", self.model.nx), ("S", self.n_w * self.n_cols), ("since", 1), ("scale", len(self._structure))]
-        parts += [(f"ups{c}", 2 * k) for channels, k in self._structure for c in channels]
+        if self._spatial:
+            parts += self._spatial_parts()
+        else:
+            parts += [(f"ups{c}", 2 * k) for channels, k in self._structure for c in channels]
         parts += [(f"P{g}", k * k) for g, (_, k) in enumerate(self._structure)]
         parts += [(f"test{g}", 4 * k + 2) for g, (_, k) in enumerate(self._structure)]
         return StateLayout(*parts)
@@ -224,6 +245,13 @@ class AdaptiveObserver(RecursiveObserver):
         pose, w_hat = np.atleast_1d(u.pose), np.atleast_1d(u.w_hat)
         # the size H = C Upsilon will have, |psi| / lam^2 (the filter's DC gain), sets the prior
         w = self._augmented(ops(w_hat), w_hat)
+        if self._spatial:
+            parts, info = self._spatial_initial(pose, w)
+            for g, (_, k) in enumerate(self._structure):
+                parts[f"P{g}"] = (np.eye(k) / (_PRIOR * info[g])).ravel()
+                parts[f"test{g}"] = np.r_[np.zeros(3 * k), np.full(k, info[g]), 0.0, 0.0]
+            return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info,
+                                   **parts)
         psi = [np.array(row, dtype=float) for row in model.channel_regressor_rows(pose, w)]
         parts, info = {}, []
         for g, (channels, k) in enumerate(self._structure):
@@ -355,12 +383,59 @@ class AdaptiveObserver(RecursiveObserver):
         cap = sum(1.0 / (d_i * self.memory + _FLOOR) for d_i in d) * h
         return o.fmin(o.exp(h * rate), o.fmax(cap / (trace + _FLOOR), 1.0))
 
+    def _adapt(self, o, st, rows, errors, hp, scale):
+        """The adaptation of every parameter group from its channels' rows and errors (changes 3, 4, 5).
+
+        Parameters
+        ----------
+        o : ops namespace
+        st : namespace
+            The packed state's parts (``P<g>``, ``test<g>``).
+        rows, errors : lists
+            Each channel's regressor row ``H_c = C Upsilon_c^-`` and a priori
+            error (zero without a pose), indexed as the groups' channels.
+        hp : float or casadi.SX
+            The time since the previous pose where a pose arrives, else 0, s.
+        scale : vector
+            Each group's prior information.
+
+        Returns
+        -------
+        d_phis : list of lists
+            Each group's step ``d_phi``.
+        parts : dict
+            The packed state's new ``P<g>`` and ``test<g>``.
+        """
+        if self.track:
+            alphas = [1 - o.exp(-hp / tau) for tau in (self.window, _DRIFT_WINDOWS * self.window, 10 * self.window,
+                                                         self.window / 4)]
+        d_phis, parts = [], {}
+        for g, (channels, k) in enumerate(self._structure):
+            g_rows, g_errors = [rows[c] for c in channels], [errors[c] for c in channels]
+            P = [[getattr(st, f"P{g}")[k * i + j] for j in range(k)] for i in range(k)]
+            if self.gain == "least-squares":      # 3. recursive least squares, the group's channels in turn
+                d_phi, P = self._group_rls(P, g_rows, g_errors, k)
+            else:
+                d_phi = self._gradient(g_rows, g_errors, k, hp, scale[g])
+            # 4. the change test, and forgetting while it fires (off: the test's averages stay put)
+            test = getattr(st, f"test{g}")
+            if self.track:
+                test, rate = self._change_test(o, g_rows, g_errors, test, alphas, k)
+                f = self._growth(o, sum(P[i][i] for i in range(k)), test[3 * k:4 * k], rate, hp)
+                P = [[f * v for v in r] for r in P]
+                test = o.vcat(test)
+            parts[f"P{g}"], parts[f"test{g}"] = o.vcat([v for r in P for v in r]), test
+            d_phis.append(d_phi)
+        return d_phis, parts
+
     def _transition(self, z, u_prev, u, dt):
         """One step (module docstring), the class docstring's changes 1-5, channel by channel from the model."""
         o = ops(z, u)
         model, n = self.model, self.n_cols
         st = self.state.unpack(z, scalars=False)
         now, nxt = model.input_layout.unpack(u_prev, scalars=False), model.input_layout.unpack(u, scalars=False)
+        if self._spatial:
+            return self._spatial_transition(o, st, now, nxt, dt)
         x, S, pose, has = st.x, st.S, now.pose, now.has_pose[0]
         since, scale = st.since[0], st.scale
         w = self._augmented(o, now.w_hat)
@@ -373,7 +448,6 @@ class AdaptiveObserver(RecursiveObserver):
         q1 = o.vcat([x[qi[c]] + dt * x[vi[c]] for c in range(model.nq)])
         psi0, psi1 = model.channel_regressor_rows(q0, w), model.channel_regressor_rows(q1, w_next)
         dot = lambda a, b: sum(a[j] * b[j] for j in range(len(a)))
-        flat = lambda M: o.vcat([v for r in M for v in r])
         group_of = {c: g for g, (channels, _) in enumerate(self._structure) for c in channels}
         # eqs. (6), (7): x_hat propagated with A(q) S_hat w_hat (planar: G(theta) S_hat w_hat = B_1 phi_1,
         # B_2 phi_2); each channel's filter Upsilon^- and its C Upsilon^- (zero without a pose)
@@ -389,27 +463,7 @@ class AdaptiveObserver(RecursiveObserver):
         # a priori position errors at n+1 (true minus estimate), zero without a pose
         e = [has_next * (pose_next[c] - x_pred[c][0]) for c in range(model.nv)]
         h = since + dt                            # 5. time since the previous pose
-        hp = has_next * h
-        if self.track:
-            alphas = [1 - o.exp(-hp / tau) for tau in (self.window, _DRIFT_WINDOWS * self.window, 10 * self.window,
-                                                         self.window / 4)]
-        d_phis, parts = [], {}
-        for g, (channels, k) in enumerate(self._structure):
-            g_rows, g_errors = [rows[c] for c in channels], [e[c] for c in channels]
-            P = [[getattr(st, f"P{g}")[k * i + j] for j in range(k)] for i in range(k)]
-            if self.gain == "least-squares":      # 3. recursive least squares, the group's channels in turn
-                d_phi, P = self._group_rls(P, g_rows, g_errors, k)
-            else:
-                d_phi = self._gradient(g_rows, g_errors, k, hp, scale[g])
-            # 4. the change test, and forgetting while it fires (off: the test's averages stay put)
-            test = getattr(st, f"test{g}")
-            if self.track:
-                test, rate = self._change_test(o, g_rows, g_errors, test, alphas, k)
-                f = self._growth(o, sum(P[i][i] for i in range(k)), test[3 * k:4 * k], rate, hp)
-                P = [[f * v for v in r] for r in P]
-                test = o.vcat(test)
-            parts[f"P{g}"], parts[f"test{g}"] = flat(P), test
-            d_phis.append(d_phi)
+        d_phis, parts = self._adapt(o, st, rows, e, has_next * h, scale)
         # 1. correction: Upsilon_n+1 = (I - L_h C) Upsilon^-, x_n+1 = x^- + L_h e + Upsilon_n+1 d_phi
         l1, l2 = discrete_gain(o, self.lam, h)
         l1, l2 = has_next * l1, has_next * l2

@@ -145,9 +145,15 @@ def test_the_planar_only_observers_refuse_another_model():
 
 
 def test_the_adaptive_default_refuses_a_model_not_linear_in_its_channels():
-    from fmscal.plant.spatial_scenarios import TOOL
-    with pytest.raises(FmscalError, match="needs a model linear in its channels .*; it does not run on a spatial"):
-        AdaptiveObserver(plant.SpatialModel(TOOL))
+    """Linear in its channels, or the spatial model (its own law, tests/test_spatial_adaptive.py); nothing else."""
+
+    class BentRail(RailModel):
+        name = "bent-rail"
+        linear_channels = False
+
+    with pytest.raises(FmscalError, match="needs a model linear in its channels or the spatial model; it does not "
+                                          "run on a bent-rail model"):
+        AdaptiveObserver(BentRail(RailPayload(MASS)))
 
 
 def test_a_noise_model_of_another_size_is_one_error():

@@ -98,13 +98,13 @@ def test_a_scheduler_that_is_neither_an_address_nor_a_client_is_refused():
 
 def test_a_spatial_sweep_scales_the_noise_and_shows_the_planar_methods_as_not_applicable():
     from fmscal.analysis.comparison import summarise, summary_markdown
-    table = sweep(["spatial-arm"], seeds=1, noise_scales=[1.0, 4.0], observers=["least-squares", "adaptive"],
+    table = sweep(["spatial-arm"], seeds=1, noise_scales=[1.0, 4.0], observers=["least-squares", "high-gain"],
                   duration=3.0, n_jobs=1, progress=False)
-    assert len(table) == 4 and set(table["observer"]) == {"least-squares", "adaptive"}
-    planar = table[table["observer"] == "adaptive"]
+    assert len(table) == 4 and set(table["observer"]) == {"least-squares", "high-gain"}
+    planar = table[table["observer"] == "high-gain"]
     assert not planar["applicable"].any() and planar["E"].isna().all() and not planar["diverged"].any()
     ls = table[table["observer"] == "least-squares"].set_index("noise_scale")
     assert ls["applicable"].all() and ls["E"].notna().all()
     assert ls.loc[4.0, "E"] > 1.5 * ls.loc[1.0, "E"]                  # four times the noise: a worse fit
     text = summary_markdown(summarise(table))
-    assert "| not applicable |" in text and "needs a model linear in its channels" in text
+    assert "| not applicable |" in text and "HighGainObserver is defined for planar models" in text
