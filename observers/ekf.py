@@ -341,7 +341,8 @@ class AugmentedEKF(Observer):
         self.run_data.build_time = time.perf_counter() - start              # one-off: not the run's cost
         n_steps = len(U) - 1
         params = self._params()
-        inputs = [U[:-1], U[1:], np.full((n_steps, 1), log.dt), np.broadcast_to(params, (n_steps, len(params)))]
+        inputs = [U[:-1], U[1:], np.full((n_steps, 1), log.dt), np.broadcast_to(params, (n_steps, len(params))),
+                  *self._extra_inputs(n_steps)]
         with progress_bar(len(U), self.name) as bar:
             z, (Y,) = chunks.run(self._packed(), inputs, healthy=self._healthy_outputs, outputs=True, states=False,
                                  progress=bar.update)
@@ -353,6 +354,10 @@ class AugmentedEKF(Observer):
         self._unpacked(z, calibration[-1])
         self.run_data.u_prev = U[len(calibration) - 1]
         return Estimate(calibration, x, cov=self._covariance(), diverged=len(Y) < n_steps), q
+
+    def _extra_inputs(self, n_steps):
+        """Per-step inputs of the compiled step beyond the samples, the step and the parameters: none here."""
+        return []
 
     def _whole_step(self):
         """The whole step compiled in chunks (:func:`observers.ekf_step.whole_step`)."""

@@ -47,7 +47,31 @@ perturbation of the true wrench at both ends (one reading's whole effect,
 once a step: ``[h^2 / 2, h] A`` to first order) and ``W = S_hat Sigma
 S_hat^T + Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il, s_jl)`` the
 uncertainty of ``S`` from ``P``; ``q dt`` on each calibration entry, the
-random walk that the NIS of the poses raises (``adapt_q``).
+random walk that the NIS of the poses raises (``adapt_q``). ``Delta`` enters
+``W`` inflated by :data:`DELTA_INFLATION` (4): over the first seconds the
+filter linearises at an ``S_hat`` far from ``S`` and its ``P`` of ``S`` is
+smaller than its error, so that with ``Delta`` as it is the first poses
+weigh too much and, ``S`` being constant, their error stays (measured on
+ten noise draws of one 10 s ``spatial-arm`` motion: the scatter of the
+torque-about-z row 3.0 times its ``S_std`` with ``Delta``, 1.4 with ``4 Delta``).
+It is an empirical inflation, not a derived term.
+
+Errors in variables (as in the plane, :mod:`observers.eiv`, with the
+floor's seeded copy, :mod:`observers.linearised_floor`). The step's
+Jacobian with respect to ``s`` holds the noisy reading, whose noise is also
+the process noise of the same step; the estimate is attenuated by
+``J^-1 B s``. Beside the filter runs a copy of its motion error driven by a
+seeded draw of the reading's and the pose's noise (a motion-only filter
+``P_m``, the copy ``eps``, its regressor ``Mn`` and ``b_n = sum Mn^T V^-1
+nu``, :func:`observers.linearised_floor.copy_predict`), whose mean is
+``-B s``. The reported estimate is compensated to first order, with the
+filter's own ``P`` of ``s`` for ``J^-1``::
+
+    s_c = s + g P_ss (B s) = s - g P_ss b_n,      P_c = T P_ss T^T,  T = I + g P_ss B
+
+(``g <= 1`` keeps the correction within a tenth of ``|s|`` while ``P`` is
+still the prior, :func:`observers.kalman.correction_limit`); the filter runs
+on its own estimate, ``eiv=False`` reports it as it is.
 """
 
 from dataclasses import dataclass
@@ -64,13 +88,18 @@ from .discretise import move
 from .ekf import AugmentedEKF, FilterRun, _CalibrationEKF
 from .ekf_step import output_layout
 from .kalman import cholesky_solve, pack_lower, unpack_lower
-from .linearised_floor import _error_variances
+from . import _matrix as mx
+from .kalman import bias_matrix, correction_limit
+from .linearised_floor import _error_variances, beta_from_copy, copy_predict
 from .noise_level import level_update
 
 __all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
-           "error_params_layout"]
+           "error_params_layout", "copy_layout", "eiv_copy", "DELTA_INFLATION"]
 
 _CHUNK = 1000
+_SEED = 20261124          # the errors-in-variables copy's draw: fixed, so that a run is repeatable
+#: Factor on ``Delta`` (the uncertainty of ``S``) in ``Q`` (module docstring): empirical.
+DELTA_INFLATION = 4.0
 
 
 # --- the model's step, its Jacobians and Q ------------------------------------------------------------
@@ -140,7 +169,7 @@ def error_step(model, offset):
     # the true wrench's noise S n with S uncertain: E[S Sigma S^T] = S_hat Sigma S_hat^T + Delta,
     # Delta_ij = sum_l Sigma_l cov(s_il, s_jl) (entry s_il at n i + l)
     S_w = ca.reshape(s, n, n_w).T[:, 0:n_w]
-    W = S_w @ ca.diag(var_w) @ S_w.T + sum(var_w[k] * P_S[k:m:n, k:m:n] for k in range(n_w))
+    W = S_w @ ca.diag(var_w) @ S_w.T + DELTA_INFLATION * sum(var_w[k] * P_S[k:m:n, k:m:n] for k in range(n_w))
     Q = J_d @ W @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
     inputs = [xs, w0, w1, dt, var_w, P_S_flat, q_dt]
     jacobians = ca.Function("ekf_error_jacobians", [xs, w0, w1, dt], [xs_next, ca.densify(F), J0, J1])
@@ -187,22 +216,102 @@ def _compiled(model, offset):
     return compile_function(jacobians), compile_function(predict), compile_function(inject)
 
 
+# --- the errors-in-variables copy --------------------------------------------------------------------
+
+def copy_layout(model):
+    """The copy's packed state (module docstring): the motion-only filter's ``P_m`` (packed lower, ``2 nv``),
+    the copy's error ``eps``, its regressor ``Mn`` (``2 nv x n_w^2``, row order) and ``b_n`` (``n_w^2``)."""
+    ne, ms = 2 * model.nv, model.n_w ** 2
+    return StateLayout(("Pm", ne * (ne + 1) // 2), ("eps", ne), ("Mn", ne * ms), ("bn", ms))
+
+
+def _copy(model, c, Phi, Q, x0, x1, S, n0, n1, v, has, R, h):
+    """One step of the copy (module docstring) on casadi symbols: ``Phi``, ``Q`` the filter's motion blocks,
+    ``S`` the filter's ``S`` at the step's start, ``n0``, ``n1``, ``v`` the scaled draws."""
+    nv, ne, ms = model.nv, 2 * model.nv, model.n_w ** 2
+    o = ops(c)
+    st = copy_layout(model).unpack(c, scalars=False)
+    Pm = unpack_lower(o, st.Pm, ne)
+    Pm_pred = Phi @ Pm @ Phi.T + Q                                     # P_m- = Phi P_m Phi^T + Q
+    eps_pred, Mn_pred = copy_predict(model, x0, x1, S, n0, n1, h, Phi, st.eps, mx.as_matrix(o, st.Mn, ne, ms))
+    nu = eps_pred[0:nv] + v                                            # the copy's innovation
+    Hn = Mn_pred[0:nv, :]
+    X = cholesky_solve(o, Pm_pred[0:nv, 0:nv] + ca.diag(R), ca.horzcat(Pm_pred[0:nv, :], Hn, nu), nv)
+    K = has * X[:, 0:ne].T                                             # K = P_m- H^T V^-1
+    bn = st.bn + has * (Hn.T @ X[:, ne + ms])                          # b_n += Hn^T V^-1 nu
+    Pm_new = Pm_pred - K @ Pm_pred[0:nv, :]
+    return copy_layout(model).pack(o, Pm=pack_lower(Pm_new, ne), eps=eps_pred - K @ nu,
+                                   Mn=mx.flat(o, Mn_pred - K @ Hn), bn=bn)
+
+
+def _compensated(model, P_ss, s, bn, n):
+    """``s_c = s - g P_ss b_n`` (``b_n`` on the ``S`` columns of ``s``; module docstring), on casadi symbols."""
+    n_w = model.n_w
+    o = ops(s)
+    idx = [n * i + j for i in range(n_w) for j in range(n_w)]
+    corr = -(P_ss[:, idx] @ bn)                                        # P_ss (B s), B s = -b_n in expectation
+    return s + correction_limit(o, s, corr, n_w * n) * corr
+
+
+@lru_cache(maxsize=8)
+def eiv_copy(model, offset):
+    """The copy's step and the compensation as casadi Functions (module docstring).
+
+    Returns
+    -------
+    step : casadi.Function
+        ``(c, F, Q, x0, x1, s, draw, has, R, var_w, h) -> c_next``; ``draw``
+        the standard normal draws at the step's two samples (``[n, v]`` each,
+        ``n_w + nv``), scaled here by ``sqrt(var_w)`` and ``sqrt(R)``.
+    compensate : casadi.Function
+        ``(P_ss, s, bn) -> s_c``.
+    """
+    n_w, nv, nx = model.n_w, model.nv, model.nx
+    n, m, ne, d = _sizes(model, offset)
+    k = n_w + nv
+    c = ca.SX.sym("c", copy_layout(model).size)
+    F, Q = ca.SX.sym("F", d, d), ca.SX.sym("Q", d, d)
+    x0, x1 = ca.SX.sym("x0", nx), ca.SX.sym("x1", nx)
+    s = ca.SX.sym("s", m)
+    draw = ca.SX.sym("draw", 2 * k)
+    has, h = ca.SX.sym("has"), ca.SX.sym("h")
+    R, var_w = ca.SX.sym("R", nv), ca.SX.sym("var_w", n_w)
+    sd = ca.sqrt(var_w)
+    S = ca.reshape(s, n, n_w).T[:, 0:n_w]
+    c_next = _copy(model, c, F[0:ne, 0:ne], Q[0:ne, 0:ne], x0, x1, S, draw[0:n_w] * sd, draw[k:k + n_w] * sd,
+                   draw[k + n_w:2 * k] * ca.sqrt(R), has, R, h)
+    step = ca.Function("ekf_eiv_copy", [c, F, Q, x0, x1, s, draw, has, R, var_w, h], [ca.densify(c_next)])
+    P_ss, bn = ca.SX.sym("P_ss", m, m), ca.SX.sym("bn", n_w * n_w)
+    compensate = ca.Function("ekf_eiv_compensate", [P_ss, s, bn], [ca.densify(_compensated(model, P_ss, s, bn, n))])
+    return step, compensate
+
+
+@lru_cache(maxsize=8)
+def _compiled_copy(model, offset):
+    """:func:`eiv_copy`'s two Functions, compiled."""
+    step, compensate = eiv_copy(model, offset)
+    return compile_function(step), compile_function(compensate)
+
+
 # --- the whole step, compiled ----------------------------------------------------------------------
 
 def error_state_layout(model, n):
     """The packed state of :func:`whole_error_step`: the nominal ``xs = [x, s]`` (``nx + n_w n``), ``P``
-    (packed lower, ``d = 2 nv + n_w n``), the level's ``q`` and NIS average, the time since the last pose."""
+    (packed lower, ``d = 2 nv + n_w n``), the level's ``q`` and NIS average, the time since the last pose,
+    the errors-in-variables copy (:func:`copy_layout`)."""
     m, d = model.n_w * n, 2 * model.nv + model.n_w * n
-    return StateLayout(("xs", model.nx + m), ("P", d * (d + 1) // 2), ("q", 1), ("eps_bar", 1), ("since", 1))
+    return StateLayout(("xs", model.nx + m), ("P", d * (d + 1) // 2), ("q", 1), ("eps_bar", 1), ("since", 1),
+                       ("copy", copy_layout(model).size))
 
 
 def error_params_layout(model):
     """Per-log parameters of :func:`whole_error_step`: the pose noise variances in the error state (``R``,
-    ``nv``), the reading's noise variances, the level's settings and whether it adapts (1 or 0)."""
-    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("level", 7), ("adapt", 1))
+    ``nv``), the reading's noise variances, the level's settings, whether it adapts and whether the estimate is
+    compensated for the errors in variables (1 or 0 each)."""
+    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("level", 7), ("adapt", 1), ("eiv", 1))
 
 
-def _step(model, z, u_prev, u, dt, p, n):
+def _step(model, z, u_prev, u, dt, p, draw, n):
     """One sample of the whole error-state filter (module docstring), on casadi symbols."""
     nv, n_w, nx = model.nv, model.n_w, model.nx
     offset = n == n_w + 1
@@ -237,26 +346,33 @@ def _step(model, z, u_prev, u, dt, p, n):
     since = (1 - has) * (st.since + dt)
     P_min = ca.mmin(ca.diag(P_new))
     P_sum = 2 * ca.sum1(P_packed) - ca.sum1(ca.diag(P_new))
-    out = output_layout(model, n).pack(o, x=xs_new[0:nx], s=xs_new[nx:], q=q, P_sum=P_sum, P_min=P_min)
-    return L.pack(o, xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since), out
+    # the errors-in-variables copy and the compensated estimate
+    copy_step, compensate = eiv_copy(model, offset)
+    c = copy_step(st.copy, F, Q, st.xs[0:nx], xs_pred[0:nx], st.xs[nx:], draw, has, pp.R, pp.var_w, dt)
+    s_c = compensate(P_new[ne:, ne:], xs_new[nx:], copy_layout(model).unpack(c, scalars=False).bn)
+    s_out = pp.eiv * s_c + (1 - pp.eiv) * xs_new[nx:]
+    out = output_layout(model, n).pack(o, x=xs_new[0:nx], s=s_out, q=q, P_sum=P_sum, P_min=P_min)
+    return L.pack(o, xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since, copy=c), out
 
 
 @lru_cache(maxsize=8)
 def whole_error_step(model, n):
     """:func:`_step` for one model, run in compiled chunks (:class:`plant._compile.ChunkedSteps`).
 
-    Run it with the inputs ``[U[:-1], U[1:], dt, p]`` (``U`` the log's
-    samples, :func:`observers.base.log_inputs`; ``dt`` and ``p``
-    (:func:`error_params_layout`) one row per step); its per-step outputs
-    are :func:`observers.ekf_step.output_layout`'s.
+    Run it with the inputs ``[U[:-1], U[1:], dt, p, draw]`` (``U`` the log's
+    samples, :func:`observers.base.log_inputs`; ``dt``, ``p``
+    (:func:`error_params_layout`) and the copy's standard normal draws at
+    the step's two samples one row per step); its per-step outputs are
+    :func:`observers.ekf_step.output_layout`'s.
     """
     size = model.input_layout.size
     z = ca.SX.sym("z", error_state_layout(model, n).size)
     u_prev, u = ca.SX.sym("u_prev", size), ca.SX.sym("u", size)
     dt = ca.SX.sym("dt")
     p = ca.SX.sym("p", error_params_layout(model).size)
-    z_next, out = _step(model, z, u_prev, u, dt, p, n)
-    step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p],
+    draw = ca.SX.sym("draw", 2 * (model.n_w + model.nv))
+    z_next, out = _step(model, z, u_prev, u, dt, p, draw, n)
+    step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p, draw],
                        [ca.densify(z_next), ca.densify(out)])
     return ChunkedSteps(step, _CHUNK)
 
@@ -275,9 +391,18 @@ class NominalRun(FilterRun):
     xs : ndarray, shape (nx + n_w n,)
         The nominal ``[x, s]``: the motion (spatial ``[p, q, v, omega]``) and
         ``vec([S | c])``, row order.
+    copy : ndarray, shape (copy_layout(model).size,)
+        The errors-in-variables copy (:func:`copy_layout`).
+    rng : numpy.random.Generator
+        The copy's draws, seeded at the run's start.
+    draw : ndarray, shape (n_w + nv,)
+        The copy's standard normal draw at the last sample (reading, pose).
     """
 
     xs: np.ndarray = None
+    copy: np.ndarray = None
+    rng: object = None
+    draw: np.ndarray = None
 
 
 class ErrorStateEKF(AugmentedEKF):
@@ -309,7 +434,10 @@ class ErrorStateEKF(AugmentedEKF):
         _, m, self._ne, self.dim_x = _sizes(model, self.offset)
         self._H = np.eye(model.nv, self.dim_x)
         self._jacobians, self._predict, self._inject = (BufferedCall(f) for f in _compiled(model, self.offset))
-        self.eiv = None
+        self._copy_step, self._compensate = (BufferedCall(f) for f in _compiled_copy(model, self.offset))
+        self.eiv = None                  # the planar compensation (observers.eiv); here the copy below
+        #: Whether the reported estimate is compensated for the errors in variables (module docstring).
+        self.eiv_on = bool(eiv)
 
     # --- the model, from the plant --------------------------------------------------------------
     def transition(self, xs, w0, w1, dt):
@@ -399,17 +527,26 @@ class ErrorStateEKF(AugmentedEKF):
         kf.P = np.diag(np.concatenate([R, np.full(model.nv, self.v0_sd ** 2), S_var]))
         kf.R = np.diag(R)
         s = self._initial_S(self.run_data.S0)
+        ne = self._ne
+        copy = np.zeros(copy_layout(model).size)
+        copy[copy_layout(model).slices["Pm"]] = pack_lower(kf.P[:ne, :ne], ne)
+        rng = np.random.default_rng(_SEED)
         self.run_data.state = NominalRun(kf=kf, var_w=var_w, s_out=s.copy(), since_pose=0.0,
-                                         q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]))
+                                         q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]),
+                                         copy=copy, rng=rng, draw=rng.standard_normal(model.n_w + model.nv))
 
     def _advance(self, u_prev, u, dt):
         """Predict the nominal and ``P`` over ``dt``; with a pose, update, inject and reset."""
         f = self.run_data.state
         kf, layout = f.kf, self.model.input_layout
         has_pose, pose, w_hat = u[0], u[layout.slices["pose"]], u[layout.slices["w_hat"]]
-        f.xs, kf.F, kf.Q = self.predict_matrices(f.xs, u_prev[layout.slices["w_hat"]], w_hat, dt)
+        nx = self.model.nx
+        xs_start = f.xs
+        f.xs, F, Q = self.predict_matrices(f.xs, u_prev[layout.slices["w_hat"]], w_hat, dt)
+        kf.F, kf.Q = F.copy(), Q.copy()
         kf.predict()
         f.since_pose += dt
+        x_pred = f.xs[:nx].copy()
         if has_pose:
             y = self.inject(f.xs, pose, np.zeros(self.dim_x))[0]
             self._pose_update(y.reshape(-1, 1))
@@ -417,14 +554,44 @@ class ErrorStateEKF(AugmentedEKF):
             kf.P = G @ kf.P @ G.T
             kf.x = np.zeros((self.dim_x, 1))
         f.q_history.append(self._q_now())
-        f.s_out = f.xs[self.model.nx:].copy()
+        # the errors-in-variables copy (module docstring), the compensated estimate
+        draw = f.rng.standard_normal(self.model.n_w + self.model.nv)
+        f.copy = self._call(self._copy_step, f.copy, kf.F, kf.Q, xs_start[:nx], x_pred, xs_start[nx:],
+                            np.r_[f.draw, draw], float(has_pose), np.diag(kf.R), f.var_w, dt)
+        f.draw = draw
+        s = f.xs[nx:]
+        f.s_out = self._call(self._compensate, kf.P[self._ne:, self._ne:], s, self._bn()) if self.eiv_on else s.copy()
+
+    @staticmethod
+    def _call(call, *values):
+        """A compiled call through its buffers (matrices column-major); its first output, copied."""
+        for buffer, value in zip(call.inputs, values):
+            buffer[:] = np.ravel(value, order="F")
+        call()
+        return call.outputs[0].copy()
+
+    def _bn(self):
+        """The copy's ``b_n`` (module docstring)."""
+        return self.run_data.state.copy[copy_layout(self.model).slices["bn"]]
 
     def _current(self):
         f = self.run_data.state
         return f.xs[:self.model.nx], f.s_out
 
     def _covariance(self):
-        return self.run_data.state.kf.P[self._ne:, self._ne:].copy()
+        """``P`` of ``[S | c]``, compensated (``T P T^T``, module docstring) unless ``eiv=False``."""
+        f = self.run_data.state
+        P = f.kf.P[self._ne:, self._ne:]
+        if not self.eiv_on:
+            return P.copy()
+        n_w, n = self.n_w, self.n_cols
+        s = f.xs[self.model.nx:]
+        o = ops(P)
+        B = bias_matrix(o, beta_from_copy(self._bn(), s, f.var_w, n_w, n), f.var_w, n_w, n)
+        A = P @ B
+        s_col = s.reshape(-1, 1)
+        T = np.eye(len(s)) + correction_limit(o, s_col, A @ s_col, len(s)) * A
+        return T @ P @ T.T
 
     # --- the compiled path (:meth:`AugmentedEKF._estimate_compiled`) ------------------------------
     def _whole_step(self):
@@ -434,18 +601,26 @@ class ErrorStateEKF(AugmentedEKF):
         f = self.run_data.state
         level, adapt = self._level_settings()
         return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, level=level,
-                                                    adapt=adapt)
+                                                    adapt=adapt, eiv=float(self.eiv_on))
+
+    def _extra_inputs(self, n_steps):
+        """The copy's draws at each step's two samples, continuing the run's stream (as :meth:`_advance` draws)."""
+        f = self.run_data.state
+        rows = np.vstack([f.draw, f.rng.standard_normal((n_steps, self.model.n_w + self.model.nv))])
+        f.draw = rows[-1]                    # where the run ends (a stopped run is not continued)
+        return [np.hstack([rows[:-1], rows[1:]])]
 
     def _packed(self):
         f = self.run_data.state
         return error_state_layout(self.model, self.n_cols).pack(
             None, xs=f.xs, P=pack_lower(f.kf.P, self.dim_x), q=f.q_history[-1],
-            eps_bar=self.level.eps_bar if self.level is not None else 0.0, since=f.since_pose)
+            eps_bar=self.level.eps_bar if self.level is not None else 0.0, since=f.since_pose, copy=f.copy)
 
     def _unpacked(self, z, s_out):
         f = self.run_data.state
         st = error_state_layout(self.model, self.n_cols).unpack(z)
         f.xs = st.xs.copy()
+        f.copy = st.copy.copy()
         f.kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
         f.kf.x = np.zeros((self.dim_x, 1))
         f.since_pose = float(st.since)

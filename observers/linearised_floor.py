@@ -80,7 +80,8 @@ from .kalman import (POSE_SD_FLOOR, V0_SD, bias_matrix, cholesky, cholesky_apply
                      information_factor, pack_lower, unpack_lower)
 from .progress import progress_bar
 
-__all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout"]
+__all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout", "copy_predict",
+           "beta_from_copy"]
 
 _CHUNK = 1000            # the history's resolution, samples
 _CALL = 100              # samples per compiled call (casadi builds a longer accumulation of this step slowly)
@@ -133,6 +134,43 @@ def _regressor_step(model, x0, x1, w0, w1, h):
     return ca.vertcat(position_increment(h, R0, R1), velocity_increment(h, R0, R1))
 
 
+def copy_predict(model, x0, x1, S, n0, n1, h, Phi, eps, Mn):
+    """The errors-in-variables copy over one step (module docstring), on casadi symbols.
+
+    A seeded draw ``n`` of the reading's noise moves the truth by ``-A S n``
+    against the model (the filter's error ``eps``) and enters the regressor
+    as ``A (I (x) n^T)`` (the sensitivity ``Mn``)::
+
+        eps- = Phi eps - [h^2 (2 A_k S n_k + A_k+1 S n_k+1) / 6; h (A_k S n_k + A_k+1 S n_k+1) / 2]
+        Mn-  = Phi Mn + U_k(n)
+
+    Parameters
+    ----------
+    model : plant.Model
+    x0, x1 : casadi.SX, shape (nx,)
+        The motion at the step's ends.
+    S : casadi.SX, shape (n_w, n_w)
+        The calibration that carries the noise (without the offset column).
+    n0, n1 : casadi.SX, shape (n_w,)
+        The draw of the reading's noise at the step's ends.
+    h : casadi.SX
+        The step, s.
+    Phi : casadi.SX, shape (ne, ne)
+        The error state's transition.
+    eps : casadi.SX, shape (ne,)
+    Mn : casadi.SX, shape (ne, n_w n_w)
+
+    Returns
+    -------
+    eps_pred : casadi.SX, shape (ne,)
+    Mn_pred : casadi.SX, shape (ne, n_w n_w)
+    """
+    an0 = ca.mtimes(model.input_matrix(x0), ca.mtimes(S, n0))
+    an1 = ca.mtimes(model.input_matrix(x1), ca.mtimes(S, n1))
+    drive = ca.vertcat(position_increment(h, an0, an1), velocity_increment(h, an0, an1))
+    return ca.mtimes(Phi, eps) - drive, ca.mtimes(Phi, Mn) + _regressor_step(model, x0, x1, n0, n1, h)
+
+
 def _augment(w, n_w, n):
     return ca.vertcat(w, 1.0) if n == n_w + 1 else w
 
@@ -175,15 +213,8 @@ def _step(model, n, eiv, history):
     if eiv:
         # the copy: the reading's noise n (a seeded draw) moves the truth by -A S n against the
         # model, and enters the regressor as A (x) n; the pose's noise v
-        Mn = mx.as_matrix(o, st.Mn, ne, ms)
-        n0, n1 = uu.n0, uu.n1
-        Un = _regressor_step(model, uu.x0, uu.x1, n0, n1, h)             # (ne, ms): S columns only
-        S_only = S_bar[:, 0:n_w]
-        A1 = model.input_matrix(uu.x1)
-        an0, an1 = ca.mtimes(A0, ca.mtimes(S_only, n0)), ca.mtimes(A1, ca.mtimes(S_only, n1))
-        drive = ca.vertcat(position_increment(h, an0, an1), velocity_increment(h, an0, an1))
-        eps_pred = ca.mtimes(Phi, st.eps) - drive
-        Mn_pred = ca.mtimes(Phi, Mn) + Un
+        eps_pred, Mn_pred = copy_predict(model, uu.x0, uu.x1, S_bar[:, 0:n_w], uu.n0, uu.n1, h, Phi, st.eps,
+                                         mx.as_matrix(o, st.Mn, ne, ms))
         nu = eps_pred[0:nv] + uu.v
         Hn = Mn_pred[0:nv, :]
         cols += [Hn, nu]
@@ -301,7 +332,7 @@ def _np_ops():
     return ops(np.zeros(1))
 
 
-def _beta_from_copy(bn, s_bar, var_w, n_w, n):
+def beta_from_copy(bn, s_bar, var_w, n_w, n):
     """``beta`` (packed lower, as :func:`fmscal.observers.kalman.bias_matrix` reads it) from the copy's
     ``sum D_n^T V^-1 nu``, whose mean is ``-B s_bar``: ``(B s)_il = Sigma_l (beta S)_il``."""
     S_bar = s_bar.reshape(n_w, n)[:, :n_w]
@@ -387,7 +418,7 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
             o = _np_ops()
             J = unpack_lower(o, z[L.slices["J"]], m)
             r = z[L.slices["r"]]
-            B = (bias_matrix(o, _beta_from_copy(z[L.slices["bn"]], s_bar, var_w, n_w, n), var_w, n_w, n)
+            B = (bias_matrix(o, beta_from_copy(z[L.slices["bn"]], s_bar, var_w, n_w, n), var_w, n_w, n)
                  if eiv else np.zeros((m, m)))
             S_aug, cov = solve_information(J, r, B, model, n, log.name, singular="truncate")
             s_hist_bar, s_bar = s_bar, S_aug.ravel()
@@ -395,7 +426,7 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
     S_history = np.empty((N, m))
     S_history[0] = s0
     for (end, zp), k0 in zip(snapshots, starts):
-        Bp = (bias_matrix(o, _beta_from_copy(zp[L.slices["bn"]], s_hist_bar, var_w, n_w, n), var_w, n_w, n)
+        Bp = (bias_matrix(o, beta_from_copy(zp[L.slices["bn"]], s_hist_bar, var_w, n_w, n), var_w, n_w, n)
               if "bn" in L.slices else np.zeros((m, m)))
         S_history[k0 + 1:end + 1] = _history_estimate(unpack_lower(o, zp[L.slices["J"]], m), zp[L.slices["r"]], Bp,
                                                        s0, m, n_w, n)

@@ -180,13 +180,13 @@ def test_a_diverging_run_is_an_error_not_an_answer(short_log, compiled):
 
 
 def test_the_ekf_against_the_floor_on_spatial_arm(three_arms):
-    """Measured (20 s, seeds 0-2): E / floor = 2.21, 1.56, 2.62; the filter's estimate of the weakly excited
-    rows (the torque about z) carries the errors-in-variables bias the floor removes. The 1.3x target is
-    not reached: this asserts what is measured, both ways."""
+    """Issue 23's target: within 1.3x of the floor. Measured (20 s, seeds 0-2, the tail's median E): 1.15, 1.39,
+    1.47 with the errors-in-variables compensation and ``Delta`` inflated (2.21, 1.56, 2.62 before). Seed 0
+    meets the target, seeds 1 and 2 do not: this asserts what is measured, both ways."""
     E_ekf, E_floor = three_arms
     ratio = E_ekf / E_floor
-    assert np.all((1.3 < ratio) & (ratio < 3.2)), ratio
-    assert 1.5 < np.median(ratio) < 2.6, ratio
+    assert np.all((0.8 < ratio) & (ratio < 1.6)), ratio
+    assert ratio.min() < 1.3 and 1.2 < np.median(ratio) < 1.5, ratio
 
 
 @pytest.fixture(scope="module")
@@ -205,11 +205,35 @@ def twenty_short_arms():
 
 
 def test_the_z_scores_over_20_seeds(twenty_short_arms):
-    """Measured (10 s, seeds 0-19): the spread of z is 1.78 for S and 1.39 for b, not within [0.8, 1.25]: ``S_std``
-    is too small by the errors-in-variables bias, largest on the torque-about-z row (spread 2.4; 1.0 on the
-    force-z row). Asserted as measured, both ways."""
+    """Issue 23: the spread of z within [0.8, 1.25]. Measured (10 s, seeds 0-19): 1.07 for S (mean -0.09) and 1.06
+    for b (1.78 and 1.39 before the compensation); the torque-about-z row the widest, 1.37."""
     z_S, z_b = twenty_short_arms
-    assert 1.5 < z_S.std() < 2.1 and abs(z_S.mean()) < 0.5, (z_S.std(), z_S.mean())
-    assert 1.15 < z_b.std() < 1.65 and abs(z_b.mean()) < 0.3, (z_b.std(), z_b.mean())
+    assert 0.8 <= z_S.std() <= 1.25 and abs(z_S.mean()) < 0.3, (z_S.std(), z_S.mean())
+    assert 0.8 <= z_b.std() <= 1.25 and abs(z_b.mean()) < 0.3, (z_b.std(), z_b.mean())
     rows = z_S.reshape(-1, 6, 6).std(axis=(0, 2))
-    assert rows[2] == rows.max() and rows[5] < 1.25, rows
+    assert rows.max() < 1.6, rows
+
+
+def test_eiv_false_reports_the_filters_own_estimate(short_log):
+    """``eiv=False``: the estimate and ``P`` as the filter holds them; the default compensates both."""
+    log, truth = short_log
+    plain = AugmentedEKF(MODEL, noise=truth.noise, offset=True, eiv=False)
+    result = plain.run(log)
+    f = plain.run_data.state
+    np.testing.assert_array_equal(result.S_hat_history[-1], f.xs[13:].reshape(6, 7)[:, :6])
+    compensated = AugmentedEKF(MODEL, noise=truth.noise, offset=True).run(log)
+    assert not np.array_equal(compensated.S_hat, result.S_hat) and not np.array_equal(compensated.S_std, result.S_std)
+
+
+@pytest.mark.slow
+def test_a_log_written_by_mujoco_at_the_floor():
+    """Issue 23: on MuJoCo's log (tests/mujoco_log.py) within 1.3x of the floor's E, the noise estimated from the
+    log by both. Measured (seed 4, 20 s, the tail's median E): 0.83."""
+    pytest.importorskip("mujoco")
+    from mujoco_log import mujoco_log
+    log, S, _ = mujoco_log(ARM.with_(duration=20.0), seed=4)
+    floor = make_observer("max-likelihood", MODEL, settings={"offset": True}).run(log)
+    result = make_observer("ekf", MODEL, settings={"offset": True}).run(log)
+    assert not result.diverged
+    E_ekf = np.median([_E(S_hat, S) for S_hat in result.S_hat_history[-len(log) // 10:]])
+    assert 0.5 < E_ekf / _E(floor.S_hat, S) <= 1.3, E_ekf / _E(floor.S_hat, S)
