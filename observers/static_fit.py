@@ -44,8 +44,8 @@ from fmscal.plant.sensor import check_calibration
 from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
-__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "DETERMINED_REL",
-           "DETERMINED_RHO"]
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "DETERMINED_REL",
+           "DETERMINED_RHO", "TILT_RATIO", "TILT_SIGMAS"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
@@ -54,6 +54,11 @@ DETERMINED_RHO = 1e-3
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 _AXES = ("x", "y", "z")
 _TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
+#: With gravity's direction fixed, the fit is told to estimate it when estimating it lowers the force
+#: residuals' rms by more than this factor ...
+TILT_RATIO = 3.0
+#: ... and the tilt it finds is more than this many of its standard deviations.
+TILT_SIGMAS = 5.0
 
 
 @dataclass
@@ -329,11 +334,80 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     determined = _determined(out, std)
     out.converged = not out.undetermined and determined
     out.warnings = list(out.undetermined)
-    if not out.undetermined and not determined:
+    tilted = None if estimate_gravity or out.undetermined else _tilt(R, y, g, estimate_mounting,
+                                                                      model.predict(theta) - y)
+    if tilted is not None:                  # the model is wrong: more poses would not help
+        out.warnings.append(tilted)
+        out.converged = False
+    elif not out.undetermined and not determined:
         out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
                             f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
     out.next_poses = _next_poses(model, theta, information, weights, s2, R)
     return out
+
+
+def _tilt(R, y, g, estimate_mounting, residual):
+    """The warning of :func:`tilt_warning` when the table needs gravity's direction estimated, else None.
+
+    The fit is repeated with gravity's direction estimated (the start and the
+    two weighted passes of :func:`fit_static`, without its report), and its
+    force residuals compared with ``residual``, those of the fit with gravity
+    fixed.
+    """
+    theta0, d0, M0, g_size = _start(R, y, g, True, estimate_mounting)
+    model = _Model(R, y, g_size, d0, M0, True, estimate_mounting)
+    theta = _weighted(model, _extra(theta0, model), np.ones(6))
+    sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
+    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
+    theta = _weighted(model, theta, weights)
+    free = model.predict(theta) - y
+    weighted = free * weights
+    s2 = float(np.sum(weighted ** 2) / max(weighted.size - len(theta), 1))
+    J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
+    cov, weak = _covariance(J.T @ J, s2)
+    if weak:
+        return None
+    std = np.sqrt(np.maximum(np.diag(cov)[10:12], 0))
+    d = model.parts(theta)[3]
+    return tilt_warning(_force_rms(residual), _force_rms(free), g, d,
+                        float(np.degrees(np.sqrt((std[0] ** 2 + std[1] ** 2) / 2))))
+
+
+def _force_rms(residual):
+    """The rms of the force channels of residuals shaped (N, 6), N."""
+    return float(np.sqrt(np.mean(np.square(residual[:, 3:]))))
+
+
+def tilt_warning(fixed_rms, free_rms, gravity, direction, std_deg):
+    """The warning for data that gravity along the direction given does not explain, and a tilted one does.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms with gravity's direction fixed and estimated, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    direction : array_like, shape (3,)
+        Gravity's direction as estimated, pose frame.
+    std_deg : float
+        One-sigma uncertainty of the estimated direction about each axis across it, degrees.
+
+    Returns
+    -------
+    str or None
+        None unless the residuals fall by more than :data:`TILT_RATIO` and
+        the tilt is more than :data:`TILT_SIGMAS` standard deviations.
+    """
+    given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
+    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    tilt = float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0))))
+    ratio = fixed_rms / max(free_rms, 1e-300)
+    if not (ratio > TILT_RATIO and tilt > TILT_SIGMAS * std_deg):
+        return None
+    along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
+    return (f"the force residuals are {ratio:.0f} times the noise with gravity along {along}; the data are "
+            f"explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add --gravity estimate "
+            "(a tilted or wall-mounted base; or --mounting estimate, a sensor bolted askew)")
 
 
 def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):

@@ -47,3 +47,19 @@ def test_a_planar_log_is_refused():
     log, _, _ = get_scenario("paper").with_(duration=1.0).generate(0)
     with pytest.raises(FmscalError, match="spatial log"):
         identify_payload(log)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_tilted_base_with_gravity_along_minus_z_says_to_estimate_it(seed):
+    """A base tilted 5 degrees: with gravity along -z the log's fit names --gravity estimate and is not
+    converged; the same log on a level base, and the tilted one with gravity estimated, do not."""
+    from fmscal.observers.static_fit import _exp
+    tilted = tuple(_exp(np.radians(5.0) * np.array([1.0, 0.0, 0.0])) @ np.array([0.0, 0.0, -9.81]))
+    scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=8.0)
+    log, truth, _ = scenario.with_(gravity=tilted).generate(seed)
+    fit = identify_payload(log, S=truth.S_at(0.0))
+    assert not fit.converged and "--gravity estimate" in fit.warnings[0] and "tilted 5 degrees" in fit.warnings[0]
+    free = identify_payload(log, S=truth.S_at(0.0), estimate_gravity=True)
+    assert not any("--gravity estimate" in w for w in free.warnings)
+    level, truth, _ = scenario.generate(seed)
+    assert not any("--gravity estimate" in w for w in identify_payload(level, S=truth.S_at(0.0)).warnings)

@@ -149,3 +149,17 @@ def test_an_attitude_log_without_enough_holds_is_one_line():
     log = simulate_attitude_log(TOOL, poses=3, seed=0)
     with pytest.raises(LogError, match="needs at least 4 held poses"):
         held_table(log)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_tilted_base_fitted_with_gravity_along_minus_z_says_to_estimate_it(seed, twenty_seeds):
+    """Gravity fixed along -z on a base tilted 10 degrees: the fit names --gravity estimate and is not converged;
+    on the untilted tables (twenty seeds) and with gravity estimated it stays silent."""
+    table = simulate_table(TOOL, n=24, seed=seed, gravity=TILT @ G, offset=OFFSET)
+    fixed = fit_static(table)
+    told = [w for w in fixed.warnings if "--gravity estimate" in w]
+    assert not fixed.converged and len(told) == 1, fixed.warnings
+    assert "times the noise with gravity along -z" in told[0] and "tilted 10 degrees" in told[0]
+    assert not any("record more poses" in w for w in fixed.warnings)
+    assert not any("--gravity estimate" in w for w in fit_static(table, estimate_gravity=True).warnings)
+    assert not any("--gravity estimate" in w for fit in twenty_seeds for w in fit.warnings)
