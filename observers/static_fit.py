@@ -45,7 +45,7 @@ from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "DETERMINED_REL",
-           "DETERMINED_RHO", "TILT_RATIO", "TILT_SIGMAS"]
+           "DETERMINED_RHO", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
@@ -59,6 +59,9 @@ _TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
 TILT_RATIO = 3.0
 #: ... and the tilt it finds is more than this many of its standard deviations.
 TILT_SIGMAS = 5.0
+#: Poses whose gravity directions in the sensor frame all lie within a cone of this half-angle (degrees)
+#: do not separate the weight from the offset: refused.
+MIN_CONE_DEG = 1.0
 
 
 @dataclass
@@ -290,6 +293,10 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         raise FmscalError("gravity must not be zero")
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
+    # gravity's directions in the sensor frame (a mounting turns them all alike); with gravity estimated,
+    # those of the first pose's gravity: poses that all hold one attitude
+    _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
+                     "the mass and the offset")
     theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
     model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
     theta = _weighted(model, _extra(theta0, model), np.ones(6))
@@ -461,6 +468,7 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
         raise FmscalError(f"mass must be a positive number of kg; got {mass}")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
+    _refuse_untilted(table.name, np.moveaxis(rotation_matrix(table.q.T), -1, 0), g, "S and the offset")
     still = np.zeros((len(table), 3))
     pi = np.r_[mass, mass * rho, np.zeros(6)]                         # (m, h, I_O): the inertia plays no part
     w = regressor(table.q, still, still, still, g) @ pi                # (N, 6), exact given the poses
@@ -534,14 +542,26 @@ def _describe(names, direction):
               **{f"rho_{a}": f"the centre of mass along {a}" for a in _AXES},
               "gravity_1": "gravity's direction", "gravity_2": "gravity's direction",
               **{f"mount_{a}": f"the mounting about {a}" for a in _AXES}}
-    words = " and ".join(dict.fromkeys(pretty.get(n, n) for n in big))
-    return (f"{words} are not separated by these poses: they turn gravity through too few directions in the "
+    parts = list(dict.fromkeys(pretty.get(n, n) for n in big))
+    verb = "is not determined" if len(parts) == 1 else "are not separated"
+    return (f"{' and '.join(parts)} {verb} by these poses: they turn gravity through too few directions in the "
             "sensor frame; tilt the tool about another axis (see the next poses)")
 
 
 def _determined(out, std):
     return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_RHO)
                 and np.all(np.isfinite(std)))
+
+
+def _refuse_untilted(name, R, g, what):
+    """Raise :class:`FmscalError` when the attitudes ``R`` (N, 3, 3) keep gravity ``g`` within
+    :data:`MIN_CONE_DEG` of one direction in the sensor frame (one attitude held, or turns about gravity)."""
+    cone = _cone(np.einsum("nkj,k->nj", R, -np.asarray(g, dtype=float)))
+    if cone < MIN_CONE_DEG:
+        raise FmscalError(f"{name}: the poses do not tilt gravity in the sensor frame (all within {cone:.1f} "
+                          f"degrees of one direction; {MIN_CONE_DEG:g} needed, tens of degrees useful): {what} "
+                          "cannot be separated; hold the tool in at least four attitudes tilted 30 degrees or "
+                          "more about two different horizontal axes")
 
 
 def _cone(a):
