@@ -51,6 +51,11 @@ def add_calibrate(sub):
                    help="delay of the pose stream behind the sensor stream, s (default: estimated)")
     p.add_argument("--max-latency", type=float, default=None, metavar="S",
                    help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
+    p.add_argument("--urdf", metavar="ROBOT.urdf",
+                   help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
+                        "names; rad), in a spatial log or a table: poses of --frame by forward kinematics "
+                        "(pinocchio: pip install \"fmscal[robot]\")")
+    p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
     p.add_argument("--plot", metavar="FILE.png",
@@ -69,9 +74,9 @@ def cmd_calibrate(args):
 
     from fmscal.plant import Payload, file_sha256, read_log, read_truth
     from fmscal.plant.log import _as_path, log_kind
-    from fmscal.plant.pose_table import is_attitude_log, is_pose_table
+    from fmscal.plant.pose_table import PoseTable, is_attitude_log, is_pose_table
     from .calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, calibrate
-    from .cli_spatial import calibrate_spatial, calibrate_table
+    from .cli_spatial import calibrate_spatial, calibrate_table, joint_data
     from .plots import plot_calibration
     positive(args.mass, "--mass")
     for value in args.rho:
@@ -93,6 +98,11 @@ def cmd_calibrate(args):
     check_outputs([(args.save, "--save"), (args.plot, "--plot")],
                   [(args.log, "the log"), (args.truth, "the --truth file")], overwrite=args.overwrite)
     path = _as_path(args.log, "log")
+    data = joint_data(args, path)
+    if isinstance(data, PoseTable):
+        return calibrate_table(args, path, table=data)
+    if data is not None:
+        return calibrate_spatial(args, log=data)
     if is_pose_table(path) or is_attitude_log(path):
         return calibrate_table(args, path)
     if log_kind(args.log) == "spatial":

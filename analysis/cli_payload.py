@@ -18,7 +18,7 @@ import sys
 import numpy as np
 
 from .cli_common import CliError, strict
-from .cli_spatial import _NAMES, _spatial_truth
+from .cli_spatial import _NAMES, _spatial_truth, joint_data
 
 __all__ = ["add_identify_payload", "cmd_identify_payload"]
 
@@ -101,12 +101,9 @@ def cmd_identify_payload(args):
     gravity, estimate_gravity = _gravity(args)
     S = _calibration_S(args)
     path = _as_path(args.log, "log")
-    if (args.urdf is None) != (args.frame is None):
-        raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
-    if args.urdf is not None:
-        from fmscal.plant.kinematics import RobotKinematics, read_joint_data
+    data = joint_data(args, path)
+    if data is not None:
         from fmscal.plant.pose_table import PoseTable
-        data = read_joint_data(path, RobotKinematics(args.urdf, args.frame))
         if isinstance(data, PoseTable):
             return _identify_table(args, path, data, S, gravity, estimate_gravity)
         return _identify_log(args, path, data, S, gravity, estimate_gravity)

@@ -27,7 +27,7 @@ import numpy as np
 
 from .cli_common import CliError, positive, strict
 
-__all__ = ["calibrate_spatial", "calibrate_table", "spatial_payload", "gravity_of"]
+__all__ = ["calibrate_spatial", "calibrate_table", "spatial_payload", "gravity_of", "joint_data"]
 _NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 
 
@@ -48,6 +48,33 @@ def gravity_of(args):
     if not (all(np.isfinite(v) for v in g) and 0 < np.linalg.norm(g) < 1e3):
         raise CliError(f"--gravity must be three finite numbers in m/s^2 (the pose frame's gravity); got {list(g)}")
     return tuple(float(v) for v in g)
+
+
+def joint_data(args, path):
+    """The log or table ``path`` whose pose columns are joint angles, as poses of ``--frame`` (``--urdf``).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``urdf`` and ``frame`` (both None, or both given).
+    path : Path
+
+    Returns
+    -------
+    plant.Log or plant.PoseTable or None
+        None without ``--urdf``: the file holds poses.
+
+    Raises
+    ------
+    CliError
+        One of ``--urdf`` and ``--frame`` without the other.
+    """
+    if (args.urdf is None) != (args.frame is None):
+        raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
+    if args.urdf is None:
+        return None
+    from fmscal.plant.kinematics import RobotKinematics, read_joint_data
+    return read_joint_data(path, RobotKinematics(args.urdf, args.frame))
 
 
 def _spatial_truth(path):
@@ -76,8 +103,16 @@ def _refuse_planar_options(args, model):
             raise CliError(f"{option} is not taken on a spatial log ({why})")
 
 
-def calibrate_spatial(args):
-    """``fmscal calibrate`` on a spatial log: ``S`` (6x6) and the offset, with what the log did not determine."""
+def calibrate_spatial(args, log=None):
+    """``fmscal calibrate`` on a spatial log: ``S`` (6x6) and the offset, with what the log did not determine.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``fmscal calibrate``'s options.
+    log : plant.Log, optional
+        The log (from joint angles, :func:`joint_data`); default: read from ``args.log``.
+    """
     from fmscal.observers import make_observer
     from fmscal.observers.faults import saturation
     from fmscal.observers.latency import estimate_latency
@@ -91,7 +126,7 @@ def calibrate_spatial(args):
     model = SpatialModel(payload, gravity_of(args))
     _refuse_planar_options(args, model)
     name = args.observer or FLOOR_METHOD
-    log = read_log(args.log)
+    log = read_log(args.log) if log is None else log
     for note in log.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
     reading = args.reading or "reaction"
@@ -128,7 +163,7 @@ def calibrate_spatial(args):
     _report(args, out, payload, summary, why)
 
 
-def calibrate_table(args, path):
+def calibrate_table(args, path, table=None):
     """``fmscal calibrate`` on a pose table (or an attitude-only log's held segments): what held poses determine.
 
     ``S`` is never determined in full from held poses
@@ -144,6 +179,8 @@ def calibrate_table(args, path):
         ``--force``, ``--json``).
     path : Path
         The pose table, or the attitude-only log.
+    table : plant.PoseTable, optional
+        The table (from joint angles, :func:`joint_data`); default: read from ``path``.
 
     Raises
     ------
@@ -175,7 +212,9 @@ def calibrate_table(args, path):
     elif args.save:
         raise CliError("--save records the payload in the calibration file: give --inertia IXX IYY IZZ IXY IXZ IYZ "
                        "too (held poses do not use it)")
-    if is_pose_table(path):
+    if table is not None:
+        what = "table of joint angles"
+    elif is_pose_table(path):
         table, what = read_pose_table(path), "pose table"
     else:
         table, _, note = held_table(read_attitude_log(path))

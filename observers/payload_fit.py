@@ -253,18 +253,52 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
     y = (sign * log.w_hat @ S.T)[trim]
     n = len(y)
     blocks = np.repeat(((log.t[trim] - log.t[trim][0]) // block).astype(int), 6)
+    motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
     if estimate_gravity or estimate_mounting:
-        motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
-        return _identify_rotations(log.name, motion, y, gravity, blocks, S, reading, estimate_gravity,
-                                   estimate_mounting)
-    X = _design(W)
-    theta, _, residual = _fit(X, y.ravel(), np.ones(6 * n), blocks)
-    sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
-    theta, cov, residual = _fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
-    if np.isfinite(cov[0, 0]) and theta[0] < 0:
-        from .static_fit import other_convention
-        raise FmscalError(other_convention(log.name, theta[0], reading))
-    return _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
+        fit = _identify_rotations(log.name, motion, y, gravity, blocks, S, reading, estimate_gravity,
+                                  estimate_mounting)
+    else:
+        X = _design(W)
+        theta, _, residual = _fit(X, y.ravel(), np.ones(6 * n), blocks)
+        sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
+        theta, cov, residual = _fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
+        if np.isfinite(cov[0, 0]) and theta[0] < 0:
+            from .static_fit import other_convention
+            raise FmscalError(other_convention(log.name, theta[0], reading))
+        fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
+    if not estimate_gravity:
+        _check_tilt(fit, log.name, motion, y, gravity, blocks, S, reading, estimate_mounting)
+    return fit
+
+
+def _check_tilt(fit, name, motion, y, gravity, blocks, S, reading, estimate_mounting):
+    """Warn, and clear ``converged``, when the log needs gravity's direction estimated (gravity fixed in ``fit``).
+
+    Cheap on the common path: the fit is repeated with gravity's direction
+    estimated only when the force residuals exceed :data:`fmscal.observers.
+    static_fit.TILT_RATIO` times the reading's noise, estimated from the
+    differences of consecutive samples (``rms(diff) / sqrt 2``; white noise
+    assumed, a log whose reading changes much between samples opens the
+    check less often); the warning is :func:`fmscal.observers.static_fit.tilt_warning`'s.
+    """
+    from .static_fit import TILT_RATIO, tilt_warning
+    force = y[:, 3:]
+    noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
+    fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
+    if not fixed > TILT_RATIO * noise:
+        return
+    try:
+        free = _identify_rotations(name, motion, y, gravity, blocks, S, reading, True, estimate_mounting)
+    except FmscalError:
+        return
+    std = free.gravity_std_deg
+    if not np.isfinite(std):
+        return
+    warning = tilt_warning(fixed, float(np.sqrt(np.mean(np.square(free.residual_rms[3:])))), gravity, free.gravity,
+                           std)
+    if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
+        fit.warnings.insert(0, warning)
+        fit.converged = False
 
 
 def _design(W):

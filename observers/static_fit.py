@@ -44,8 +44,8 @@ from fmscal.plant.sensor import check_calibration
 from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
-__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "DETERMINED_REL",
-           "DETERMINED_RHO"]
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "DETERMINED_REL",
+           "DETERMINED_RHO", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
@@ -54,6 +54,14 @@ DETERMINED_RHO = 1e-3
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 _AXES = ("x", "y", "z")
 _TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
+#: With gravity's direction fixed, the fit is told to estimate it when estimating it lowers the force
+#: residuals' rms by more than this factor ...
+TILT_RATIO = 3.0
+#: ... and the tilt it finds is more than this many of its standard deviations.
+TILT_SIGMAS = 5.0
+#: Poses whose gravity directions in the sensor frame all lie within a cone of this half-angle (degrees)
+#: do not separate the weight from the offset: refused.
+MIN_CONE_DEG = 1.0
 
 
 @dataclass
@@ -285,6 +293,10 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         raise FmscalError("gravity must not be zero")
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
+    # gravity's directions in the sensor frame (a mounting turns them all alike); with gravity estimated,
+    # those of the first pose's gravity: poses that all hold one attitude
+    _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
+                     "the mass and the offset")
     theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
     model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
     theta = _weighted(model, _extra(theta0, model), np.ones(6))
@@ -329,11 +341,80 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     determined = _determined(out, std)
     out.converged = not out.undetermined and determined
     out.warnings = list(out.undetermined)
-    if not out.undetermined and not determined:
+    tilted = None if estimate_gravity or out.undetermined else _tilt(R, y, g, estimate_mounting,
+                                                                      model.predict(theta) - y)
+    if tilted is not None:                  # the model is wrong: more poses would not help
+        out.warnings.append(tilted)
+        out.converged = False
+    elif not out.undetermined and not determined:
         out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
                             f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
     out.next_poses = _next_poses(model, theta, information, weights, s2, R)
     return out
+
+
+def _tilt(R, y, g, estimate_mounting, residual):
+    """The warning of :func:`tilt_warning` when the table needs gravity's direction estimated, else None.
+
+    The fit is repeated with gravity's direction estimated (the start and the
+    two weighted passes of :func:`fit_static`, without its report), and its
+    force residuals compared with ``residual``, those of the fit with gravity
+    fixed.
+    """
+    theta0, d0, M0, g_size = _start(R, y, g, True, estimate_mounting)
+    model = _Model(R, y, g_size, d0, M0, True, estimate_mounting)
+    theta = _weighted(model, _extra(theta0, model), np.ones(6))
+    sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
+    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
+    theta = _weighted(model, theta, weights)
+    free = model.predict(theta) - y
+    weighted = free * weights
+    s2 = float(np.sum(weighted ** 2) / max(weighted.size - len(theta), 1))
+    J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
+    cov, weak = _covariance(J.T @ J, s2)
+    if weak:
+        return None
+    std = np.sqrt(np.maximum(np.diag(cov)[10:12], 0))
+    d = model.parts(theta)[3]
+    return tilt_warning(_force_rms(residual), _force_rms(free), g, d,
+                        float(np.degrees(np.sqrt((std[0] ** 2 + std[1] ** 2) / 2))))
+
+
+def _force_rms(residual):
+    """The rms of the force channels of residuals shaped (N, 6), N."""
+    return float(np.sqrt(np.mean(np.square(residual[:, 3:]))))
+
+
+def tilt_warning(fixed_rms, free_rms, gravity, direction, std_deg):
+    """The warning for data that gravity along the direction given does not explain, and a tilted one does.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms with gravity's direction fixed and estimated, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    direction : array_like, shape (3,)
+        Gravity's direction as estimated, pose frame.
+    std_deg : float
+        One-sigma uncertainty of the estimated direction about each axis across it, degrees.
+
+    Returns
+    -------
+    str or None
+        None unless the residuals fall by more than :data:`TILT_RATIO` and
+        the tilt is more than :data:`TILT_SIGMAS` standard deviations.
+    """
+    given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
+    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    tilt = float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0))))
+    ratio = fixed_rms / max(free_rms, 1e-300)
+    if not (ratio > TILT_RATIO and tilt > TILT_SIGMAS * std_deg):
+        return None
+    along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
+    return (f"the force residuals are {ratio:.0f} times the noise with gravity along {along}; the data are "
+            f"explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add --gravity estimate "
+            "(a tilted or wall-mounted base; or --mounting estimate, a sensor bolted askew)")
 
 
 def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
@@ -387,6 +468,7 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
         raise FmscalError(f"mass must be a positive number of kg; got {mass}")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
+    _refuse_untilted(table.name, np.moveaxis(rotation_matrix(table.q.T), -1, 0), g, "S and the offset")
     still = np.zeros((len(table), 3))
     pi = np.r_[mass, mass * rho, np.zeros(6)]                         # (m, h, I_O): the inertia plays no part
     w = regressor(table.q, still, still, still, g) @ pi                # (N, 6), exact given the poses
@@ -460,14 +542,26 @@ def _describe(names, direction):
               **{f"rho_{a}": f"the centre of mass along {a}" for a in _AXES},
               "gravity_1": "gravity's direction", "gravity_2": "gravity's direction",
               **{f"mount_{a}": f"the mounting about {a}" for a in _AXES}}
-    words = " and ".join(dict.fromkeys(pretty.get(n, n) for n in big))
-    return (f"{words} are not separated by these poses: they turn gravity through too few directions in the "
+    parts = list(dict.fromkeys(pretty.get(n, n) for n in big))
+    verb = "is not determined" if len(parts) == 1 else "are not separated"
+    return (f"{' and '.join(parts)} {verb} by these poses: they turn gravity through too few directions in the "
             "sensor frame; tilt the tool about another axis (see the next poses)")
 
 
 def _determined(out, std):
     return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_RHO)
                 and np.all(np.isfinite(std)))
+
+
+def _refuse_untilted(name, R, g, what):
+    """Raise :class:`FmscalError` when the attitudes ``R`` (N, 3, 3) keep gravity ``g`` within
+    :data:`MIN_CONE_DEG` of one direction in the sensor frame (one attitude held, or turns about gravity)."""
+    cone = _cone(np.einsum("nkj,k->nj", R, -np.asarray(g, dtype=float)))
+    if cone < MIN_CONE_DEG:
+        raise FmscalError(f"{name}: the poses do not tilt gravity in the sensor frame (all within {cone:.1f} "
+                          f"degrees of one direction; {MIN_CONE_DEG:g} needed, tens of degrees useful): {what} "
+                          "cannot be separated; hold the tool in at least four attitudes tilted 30 degrees or "
+                          "more about two different horizontal axes")
 
 
 def _cone(a):

@@ -16,10 +16,12 @@ The joint columns are named ``q1 .. qn`` in the URDF's joint order (pinocchio's
 import numpy as np
 
 from .errors import FmscalError
+from .log import _as_path, _echo
 
 __all__ = ["RobotKinematics", "joint_columns", "read_joint_data"]
 
 _WRENCH = ("tx", "ty", "tz", "fx", "fy", "fz")
+_OTHERS = ("t", *_WRENCH)                   # the columns of a joint log that are not joints
 
 
 class RobotKinematics:
@@ -50,6 +52,7 @@ class RobotKinematics:
         except ImportError:
             raise FmscalError("--urdf needs pinocchio: pip install \"fmscal[robot]\"") from None
         self._pin = pin
+        urdf = _as_path(urdf, "URDF")
         try:
             self.model = pin.buildModelFromUrdf(str(urdf))
         except Exception as err:                              # pinocchio raises plain ValueError/RuntimeError
@@ -108,12 +111,17 @@ def joint_columns(header, joint_names):
     numbered = [f"q{i + 1}" for i in range(len(joint_names))]
     for names in (numbered, list(joint_names)):
         if set(names) <= set(header):
+            extra = [h for h in header if h not in (*_OTHERS, *names)]
+            if extra:
+                raise FmscalError(f"the header has {len(names) + len(extra)} joint columns ({_echo(','.join(extra))} "
+                                  f"beyond {names[0]}..{names[-1]}); the URDF has {len(joint_names)} joints: "
+                                  "drop the extra columns, or give the URDF of the robot that logged them")
             return names
     return _mismatch(header, joint_names, numbered)
 
 
 def _mismatch(header, joint_names, numbered):
-    others = [h for h in header if h not in ("t", "tx", "ty", "tz", "fx", "fy", "fz")]
+    others = [h for h in header if h not in _OTHERS]
     raise FmscalError(f"the joint columns {','.join(others)[:120]} do not match the URDF's {len(joint_names)} joints: "
                       f"name them {','.join(numbered)} (the URDF's order) or {','.join(joint_names)}")
 
@@ -139,7 +147,7 @@ def read_joint_data(path, kinematics):
     plant.LogError, FmscalError
         The file's problems, or joint columns that do not match the URDF.
     """
-    from .log import Log, LogError, _as_path, _echo, _read_csv
+    from .log import Log, LogError, _read_csv
     from .pose_table import PoseTable
     path = _as_path(path, "log")
     with open(path, "rb") as f:

@@ -102,3 +102,43 @@ def test_a_bag_of_joint_states_imports_as_a_spatial_log(ur5, tmp_path, capsys):
                  "--urdf", str(_ur5()), "--frame", "tool0", "--out", str(tmp_path / "again.csv"),
                  "--pose-offset", "0", "0", "0"]) == 2
     assert "--pose-offset is not taken with --urdf" in capsys.readouterr().err
+
+
+def test_joint_columns_beyond_the_urdfs_and_a_missing_urdf_are_one_line(tmp_path, capsys):
+    """q1..q7 against the UR5's six joints: refused (never q7 dropped); a URDF that is not there: said so."""
+    with pytest.raises(FmscalError, match=r"7 joint columns \(q7 beyond q1\.\.q6\); the URDF has 6 joints"):
+        joint_columns(["q1", "q2", "q3", "q4", "q5", "q6", "q7", "tx", "ty", "tz", "fx", "fy", "fz"],
+                      [f"j{i}" for i in range(6)])
+    assert joint_columns(["t", *(f"q{i}" for i in range(1, 7)), "tx", "ty", "tz", "fx", "fy", "fz"],
+                         [f"j{i}" for i in range(6)]) == [f"q{i}" for i in range(1, 7)]
+    path = tmp_path / "seven.csv"
+    path.write_text("q1,q2,q3,q4,q5,q6,q7,tx,ty,tz,fx,fy,fz\n" + "0.1,0.2,0.3,0.4,0.5,0.6,0,0,0,0,0,0,1\n" * 5)
+    for command in ("identify-payload", "calibrate"):
+        extra = ["--mass", "1.2", "--rho", "0", "0", "0.05"] if command == "calibrate" else []
+        assert main([command, str(path), "--urdf", str(_ur5()), "--frame", "tool0", *extra]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "7 joint columns" in err and "6 joints" in err, err
+    assert main(["identify-payload", str(path), "--urdf", str(tmp_path / "robot.urdf"), "--frame", "tool0"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "robot.urdf" in err and ": no such file" in err
+    assert "not a URDF" not in err
+
+
+def test_calibrate_takes_a_table_of_joint_angles(ur5, tmp_path, capsys):
+    """The poses from the joints as identify-payload takes them: calibrate reports the table's offset, and
+    --urdf without --frame is one line."""
+    rng = np.random.default_rng(2)
+    joints = rng.uniform(-np.pi, np.pi, (16, 6))
+    table = simulate_table(TOOL, n=16, seed=2, offset=OFFSET, q=ur5.poses(joints)[:, :4])
+    path = tmp_path / "joints.csv"
+    path.write_text("q1,q2,q3,q4,q5,q6,tx,ty,tz,fx,fy,fz\n"
+                    + "\n".join(",".join(f"{v:.17g}" for v in row) for row in np.hstack([joints, table.w_hat])) + "\n")
+    payload = ["--mass", repr(TOOL.mass), "--rho", *map(repr, TOOL.rho)]
+    assert main(["calibrate", str(path), "--urdf", str(_ur5()), "--frame", "tool0", *payload, "--json"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
+    assert report["kind"] == "table" and report["poses"] == 16 and not report["converged"]
+    b, b_std = np.array(report["b"]), np.array(report["b_std"])
+    assert np.all(np.abs(b - OFFSET) < 4 * b_std) and np.all(b_std < 0.05)
+    assert main(["calibrate", str(path), "--urdf", str(_ur5()), *payload]) == 2
+    assert "--urdf and --frame go together" in capsys.readouterr().err

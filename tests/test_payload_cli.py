@@ -91,3 +91,14 @@ def test_an_attitude_only_log_through_the_command(tmp_path, capsys):
     fit = json.loads(out)
     assert code == 0 and "held segments" in err and "% of the log" in err
     assert abs(fit["mass"] - TOOL.mass) < 0.012 and fit["inertia"] is None
+
+
+def test_a_tilted_table_without_gravity_estimate_names_the_flag(tmp_path, capsys):
+    tilt = _exp(np.radians(15.0) * np.array([0.0, 1.0, 0.0]))
+    path = tmp_path / "tilted.csv"
+    write_pose_table(simulate_table(TOOL, n=24, seed=5, gravity=tilt @ [0, 0, -9.81], offset=OFFSET), path)
+    code, out, err = _run(capsys, ["identify-payload", str(path)])
+    assert code == 0 and "converged: no" in out and "--gravity estimate" in err and "tilted 15 degrees" in err
+    assert "record more poses" not in err and len(err.strip().splitlines()) == 1
+    code, out, err = _run(capsys, ["identify-payload", str(path), "--gravity", "estimate"])
+    assert code == 0 and "--gravity estimate" not in err

@@ -214,7 +214,32 @@ def test_an_attitude_only_log_is_calibrated_on_its_held_segments(tmp_path, capsy
     assert "held segments" in err and np.all(np.abs(np.array(report["b"]) - OFFSET) < 4 * np.array(report["b_std"]))
 
 
-def test_one_attitude_held_six_times_leaves_the_offset_undetermined():
+def test_one_attitude_held_six_times_is_refused_in_one_line(tmp_path, capsys):
+    """One attitude, or turns about the vertical only: gravity never tilts in the sensor frame, and the offset
+    cannot be told from the weight: one line, exit 2 (a table, and an attitude-only log's held segments)."""
     table = simulate_table(TOOL, n=6, seed=1, offset=OFFSET, q=[[1.0, 0.0, 0.0, 0.0]] * 6)
-    fit = calibrate_table(table, TOOL.mass, TOOL.rho)
-    assert len(fit.undetermined) == 6 and not np.isfinite(fit.b_std).any() and not fit.converged
+    with pytest.raises(FmscalError, match="do not tilt gravity in the sensor frame"):
+        calibrate_table(table, TOOL.mass, TOOL.rho)
+    write_pose_table(table, tmp_path / "same.csv")
+    write_attitude_log_about_the_vertical(tmp_path / "yaw.csv")
+    for name in ("same.csv", "yaw.csv"):
+        for command in (["calibrate", str(tmp_path / name), *PAYLOAD], ["identify-payload", str(tmp_path / name)]):
+            code, out, err = _run(capsys, command)
+            lines = [line for line in err.strip().splitlines() if ": note:" not in line]
+            assert code == 2 and out == "" and len(lines) == 1, (command, err)
+            assert "do not tilt gravity in the sensor frame (all within 0.0 degrees" in lines[0]
+            assert ("S and the offset" if command[0] == "calibrate" else "the mass and the offset") in lines[0]
+
+
+def write_attitude_log_about_the_vertical(path, holds=6):
+    """An attitude-only log: the tool held level at ``holds`` headings, turned about the vertical between them."""
+    from fmscal.plant.pose_table import ATTITUDE_COLUMNS
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, holds * 3.5, 0.01)
+    k, u = np.divmod(t, 3.5)
+    heading = np.radians(40.0) * (k + np.clip((u - 2.0) / 1.5, 0.0, 1.0))      # 2 s held, 1.5 s turning
+    q = np.column_stack([np.cos(heading / 2), 0 * t, 0 * t, np.sin(heading / 2)])
+    f = np.array([0.0, 0.0, TOOL.mass * 9.81])
+    w = np.r_[np.cross(TOOL.rho, f), f] + OFFSET + rng.normal(size=(len(t), 6)) * SD
+    np.savetxt(path, np.column_stack([t, q, w]), delimiter=",", header=",".join(ATTITUDE_COLUMNS), comments="",
+               fmt="%.17g")
