@@ -75,13 +75,13 @@ on its own estimate, ``eiv=False`` reports it as it is.
 """
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import casadi as ca
 import numpy as np
 
 from fmscal.plant._backend import ops
-from fmscal.plant._compile import BufferedCall, ChunkedSteps, compile_function
+from fmscal.plant._compile import BufferedCall, ChunkedSteps
 from fmscal.plant.layout import StateLayout
 
 from .discretise import move
@@ -209,11 +209,15 @@ def injection(model, offset):
 
 
 @lru_cache(maxsize=8)
-def _compiled(model, offset):
-    """:func:`error_step`'s ``jacobians`` and ``predict`` and :func:`injection` (dense), compiled."""
+def _readable(model, offset):
+    """:func:`error_step`'s ``jacobians`` and ``predict`` and :func:`injection` (dense), for the readable path.
+
+    Evaluated by casadi's virtual machine, not built as C: the readable path
+    is for reading and checking, and building these in C took 20 s and more
+    on a fresh machine (the compiled run builds its own whole step).
+    """
     jacobians, predict, _ = error_step(model, offset)
-    inject = injection(model, offset)[0]
-    return compile_function(jacobians), compile_function(predict), compile_function(inject)
+    return jacobians, predict, injection(model, offset)[0]
 
 
 # --- the errors-in-variables copy --------------------------------------------------------------------
@@ -284,13 +288,6 @@ def eiv_copy(model, offset):
     P_ss, bn = ca.SX.sym("P_ss", m, m), ca.SX.sym("bn", n_w * n_w)
     compensate = ca.Function("ekf_eiv_compensate", [P_ss, s, bn], [ca.densify(_compensated(model, P_ss, s, bn, n))])
     return step, compensate
-
-
-@lru_cache(maxsize=8)
-def _compiled_copy(model, offset):
-    """:func:`eiv_copy`'s two Functions, compiled."""
-    step, compensate = eiv_copy(model, offset)
-    return compile_function(step), compile_function(compensate)
 
 
 # --- the whole step, compiled ----------------------------------------------------------------------
@@ -433,11 +430,17 @@ class ErrorStateEKF(AugmentedEKF):
         model = self.model
         _, m, self._ne, self.dim_x = _sizes(model, self.offset)
         self._H = np.eye(model.nv, self.dim_x)
-        self._jacobians, self._predict, self._inject = (BufferedCall(f) for f in _compiled(model, self.offset))
-        self._copy_step, self._compensate = (BufferedCall(f) for f in _compiled_copy(model, self.offset))
         self.eiv = None                  # the planar compensation (observers.eiv); here the copy below
         #: Whether the reported estimate is compensated for the errors in variables (module docstring).
         self.eiv_on = bool(eiv)
+
+    @cached_property
+    def _calls(self):
+        """The readable path's calls (``jacobians``, ``predict``, ``inject``, the copy's ``copy_step`` and
+        ``compensate``; :func:`_readable`, :func:`eiv_copy`), made on first use: the compiled run needs none."""
+        names = ("jacobians", "predict", "inject", "copy_step", "compensate")
+        functions = (*_readable(self.model, self.offset), *eiv_copy(self.model, self.offset))
+        return dict(zip(names, (BufferedCall(f) for f in functions)))
 
     # --- the model, from the plant --------------------------------------------------------------
     def transition(self, xs, w0, w1, dt):
@@ -460,7 +463,7 @@ class ErrorStateEKF(AugmentedEKF):
             Jacobians of the error state with respect to the raw readings at
             the step's start and end.
         """
-        call, d, n_w = self._jacobians, self.dim_x, self.n_w
+        call, d, n_w = self._calls["jacobians"], self.dim_x, self.n_w
         for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
             buffer[:] = value
         call()
@@ -480,7 +483,7 @@ class ErrorStateEKF(AugmentedEKF):
             Views of the call's buffers, overwritten by the next call.
         """
         f, d, m = self.run_data.state, self.dim_x, self.dim_x - self._ne
-        call = self._predict
+        call = self._calls["predict"]
         xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
         var_in[:] = f.var_w
@@ -502,7 +505,7 @@ class ErrorStateEKF(AugmentedEKF):
         G : ndarray, shape (d, d)
             The reset of ``P`` (``P <- G P G^T``).
         """
-        call, d = self._inject, self.dim_x
+        call, d = self._calls["inject"], self.dim_x
         for buffer, value in zip(call.inputs, (xs, pose, e)):
             buffer[:] = value
         call()
@@ -556,11 +559,12 @@ class ErrorStateEKF(AugmentedEKF):
         f.q_history.append(self._q_now())
         # the errors-in-variables copy (module docstring), the compensated estimate
         draw = f.rng.standard_normal(self.model.n_w + self.model.nv)
-        f.copy = self._call(self._copy_step, f.copy, kf.F, kf.Q, xs_start[:nx], x_pred, xs_start[nx:],
+        f.copy = self._call(self._calls["copy_step"], f.copy, kf.F, kf.Q, xs_start[:nx], x_pred, xs_start[nx:],
                             np.r_[f.draw, draw], float(has_pose), np.diag(kf.R), f.var_w, dt)
         f.draw = draw
         s = f.xs[nx:]
-        f.s_out = self._call(self._compensate, kf.P[self._ne:, self._ne:], s, self._bn()) if self.eiv_on else s.copy()
+        f.s_out = (self._call(self._calls["compensate"], kf.P[self._ne:, self._ne:], s, self._bn()) if self.eiv_on
+                   else s.copy())
 
     @staticmethod
     def _call(call, *values):
