@@ -178,14 +178,17 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     if not method.cls.runs_on(payload):
         return _not_applicable(name, log, floor, history)
     log, settings = _aligned(log, truth, settings)
-    result = method.build(payload, told_noise, settings).run(log, truth.S0 if method.online else None)
+    try:
+        result = method.build(payload, told_noise, settings).run(log, truth.S0 if method.online else None)
+    except FmscalError as err:     # the method refuses this log (a reading that never moves, ...): a row, said why
+        return _not_applicable(name, log, floor, history, refused=str(err))
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     bad = result.diverged
     row = {"observer": name, "duration": float(log.duration),
            "E": np.nan if bad else tail_median(E), "E_end": np.nan if bad else float(E[-1]),
            "E_over_floor": np.nan, "floor_E": np.nan if floor is None else float(floor),
            "convergence_time": np.nan, "diverged": bool(bad), "converged": bool(result.converged),
-           "applicable": True}
+           "applicable": True, "refused": ""}
     if floor is not None and not bad:
         row["E_over_floor"] = row["E"] / floor if floor > 0 else np.nan        # NaN > 0 is False
     if not bad:
@@ -204,12 +207,13 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     return row, (result.t[::step], E[::step], result.S_hat_history[::step])
 
 
-def _not_applicable(name, log, floor, history):
-    """The row of a method that does not run on the scenario's model (a planar-only observer in 3D): no figures."""
+def _not_applicable(name, log, floor, history, refused=""):
+    """The row of a method that does not run on the scenario's model (a planar-only observer in 3D), or that
+    refused this log (``refused``, its one-line reason; the method runs on the model): no figures."""
     row = {"observer": name, "duration": float(log.duration), "E": np.nan, "E_end": np.nan, "E_over_floor": np.nan,
            "floor_E": np.nan if floor is None else float(floor), "convergence_time": np.nan, "diverged": False,
-           "converged": False, "applicable": False, "wall_time": np.nan, "wall_per_sim_s": np.nan,
-           "us_per_step": np.nan}
+           "converged": False, "applicable": bool(refused), "refused": refused, "wall_time": np.nan,
+           "wall_per_sim_s": np.nan, "us_per_step": np.nan}
     return (row, None) if history else row
 
 
@@ -353,6 +357,8 @@ def summarise(table):
         row["diverged_runs"] = int(g["diverged"].sum())
         row["us_per_step_median"] = g["us_per_step"].median()
         row["applicable"] = bool(g["applicable"].all()) if "applicable" in g else True
+        reasons = [r for r in g["refused"] if isinstance(r, str) and r] if "refused" in g else []
+        row["refused_runs"], row["refused"] = len(reasons), (reasons[0] if reasons else "")
         out.append(row)
     return pd.DataFrame(out)
 
@@ -371,8 +377,15 @@ def summary_markdown(summary, title="Observer comparison"):
     head += [f"median {c[:-len('_median')].replace('E_', 'E at ')}" for c in checkpoints]
     head += ["median convergence time [s]", "converged", "diverged", "cost [us/step]"]
     lines = [f"# {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    refused = {}
+    refused, refusals = {}, {}
     for _, r in summary.iterrows():
+        if isinstance(r.get("refused"), str) and r["refused"]:
+            refusals.setdefault((r["observer"], r["refused"].split(": ", 1)[-1]), []).append(r["scenario"])
+        if r.get("refused_runs", 0) == r["seeds"]:
+            cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], method_label(r["observer"]), str(r["seeds"]),
+                     "refused the log"] + ["-"] * (len(head) - len(keys) - 4)
+            lines.append("| " + " | ".join(cells) + " |")
+            continue
         if not r.get("applicable", True):
             refused.setdefault(r["observer"], []).append(r["scenario"])
             cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], method_label(r["observer"]), str(r["seeds"]),
@@ -390,6 +403,10 @@ def summary_markdown(summary, title="Observer comparison"):
         lines += ["", "Not applicable: " + "; ".join(
             f"{name} on {', '.join(dict.fromkeys(scenarios))} ({_refusal(name, scenarios[0])})"
             for name, scenarios in refused.items()) + "."]
+    if refusals:
+        lines += ["", "Refused the log: " + "; ".join(
+            f"{name} on {', '.join(dict.fromkeys(scenarios))} ({why})" for (name, why), scenarios in refusals.items())
+            + "."]
     return "\n".join(lines) + "\n"
 
 

@@ -109,3 +109,16 @@ def test_a_spatial_sweep_scales_the_noise_and_shows_the_planar_methods_as_not_ap
     assert ls.loc[4.0, "E"] > 1.5 * ls.loc[1.0, "E"]                  # four times the noise: a worse fit
     text = summary_markdown(summarise(table))
     assert "| not applicable |" in text and "HighGainObserver is defined for planar models" in text
+
+
+def test_a_method_that_refuses_a_log_is_a_row_that_says_why_not_an_abort():
+    """spatial-weak's torque and vertical force never move beyond their noise: least squares refuses the log in one
+    line; the comparison goes on with the other methods and names the refusal under its table."""
+    from fmscal.analysis.comparison import run_case, summarise, summary_markdown
+    rows = run_case("spatial-weak", 0, ["least-squares", "adaptive"], duration=2.0)
+    refused, ran = rows
+    assert "does not move beyond its noise" in refused["refused"] and refused["applicable"]
+    assert ran["refused"] == "" and ran["E"] > 0
+    text = summary_markdown(summarise(pd.DataFrame(rows)))
+    assert "| refused the log |" in text and "Refused the log: least-squares on spatial-weak (the reading" in text
+    assert text.count("refused the log") == 1                       # the adaptive observer's row has figures
