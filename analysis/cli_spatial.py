@@ -6,9 +6,10 @@ the calibration is the maximum-likelihood floor, linearised about the
 smoothed motion (:mod:`fmscal.observers.linearised_floor`), or the reference
 fit (``--observer least-squares``: smoothed inverse dynamics and least
 squares, :func:`fmscal.observers.inverse_dynamics_fit.fit_inverse_dynamics`),
-both through the one registry; the pose stream's latency is estimated as in
-the plane. The online observers are not there yet in 3D, and the options
-that only they use are refused in one line.
+both through the one registry, as are the online methods that run in 3D
+(``--observer adaptive``, which reports no uncertainty, or ``ekf``); the pose
+stream's latency is estimated as in the plane, and the options that only the
+planar methods use are refused in one line.
 
 A pose table (the same header without ``t``, one row per held pose; or an
 attitude-only log, its held segments) goes to ``fmscal calibrate`` too
@@ -138,6 +139,9 @@ def calibrate_spatial(args, log=None):
         latency, _ = estimate_latency(log, model, args.max_latency or DEFAULT_MAX_LATENCY, offset=True)
     aligned = log.shift_poses(latency)
     result = make_observer(name, model, settings={"offset": True}).run(aligned)
+    if result.diverged:                  # a diverging estimate is an error, never an answer
+        raise CliError(f"{name} diverged on {Path(args.log).name}"
+                       + (f": {result.warnings[-1]}" if result.warnings else "") + "; no calibration")
     saturated = saturation(log)
     warnings = [*saturated, *result.warnings]
     if not result.converged and not result.warnings:
@@ -147,8 +151,9 @@ def calibrate_spatial(args, log=None):
         from fmscal.observers.static_fit import other_convention
         warnings.append(other_convention(Path(args.log).name, None, reading))
     converged = bool(result.converged and not saturated and not flipped)
-    out = {"observer": name, "kind": "spatial", "S": result.S_hat.tolist(), "S_std": result.S_std.tolist(),
-           "b": result.b.tolist(), "b_std": result.b_std.tolist(), "latency": float(latency),
+    listed = lambda v: None if v is None else v.tolist()          # the adaptive observer reports no uncertainty
+    out = {"observer": name, "kind": "spatial", "S": result.S_hat.tolist(), "S_std": listed(result.S_std),
+           "b": result.b.tolist(), "b_std": listed(result.b_std), "latency": float(latency),
            "latency_estimated": latency_estimated, "converged": converged,
            "undetermined": result.info.get("undetermined", []), "warnings": warnings, "reading": reading}
     if truth is not None:
@@ -266,12 +271,18 @@ def _not_settled(method):
 
 def _print(args, summary, out):
     print(summary)
-    S, S_std = np.array(out["S"]), np.array(out["S_std"])
-    print("S_hat +- one sigma (rows and columns tx ty tz fx fy fz; inf: not determined):")
-    for i in range(6):
-        print("  " + "  ".join(f"{S[i, j]:+.4f}+-{S_std[i, j]:.0e}" for j in range(6)))
-    print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in
-                                            zip(_NAMES, out["b"], out["b_std"])))
+    S = np.array(out["S"])
+    if out["S_std"] is None:
+        print(f"S_hat (rows and columns tx ty tz fx fy fz; {out['observer']} reports no uncertainty):")
+        for i in range(6):
+            print("  " + "  ".join(f"{S[i, j]:+.4f}" for j in range(6)))
+    else:
+        S_std = np.array(out["S_std"])
+        print("S_hat +- one sigma (rows and columns tx ty tz fx fy fz; inf: not determined):")
+        for i in range(6):
+            print("  " + "  ".join(f"{S[i, j]:+.4f}+-{S_std[i, j]:.0e}" for j in range(6)))
+    b_std = out["b_std"] if out["b_std"] is not None else [np.nan] * 6
+    print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in zip(_NAMES, out["b"], b_std)))
     print(f"reading: {out['reading']}")
     if out["latency"] is not None:
         print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")

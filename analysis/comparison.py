@@ -178,10 +178,12 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     if not method.cls.runs_on(payload):
         return _not_applicable(name, log, floor, history)
     log, settings = _aligned(log, truth, settings)
+    observer = method.build(payload, told_noise, settings)      # a wrong setting is an error, not a row
     try:
-        result = method.build(payload, told_noise, settings).run(log, truth.S0 if method.online else None)
+        result = observer.run(log, truth.S0 if method.online else None)
     except FmscalError as err:     # the method refuses this log (a reading that never moves, ...): a row, said why
-        return _not_applicable(name, log, floor, history, refused=str(err))
+        reason = str(err).removeprefix(f"{log.name}: ")
+        return _not_applicable(name, log, floor, history, refused=reason or str(err))
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     bad = result.diverged
     row = {"observer": name, "duration": float(log.duration),
@@ -380,7 +382,8 @@ def summary_markdown(summary, title="Observer comparison"):
     refused, refusals = {}, {}
     for _, r in summary.iterrows():
         if isinstance(r.get("refused"), str) and r["refused"]:
-            refusals.setdefault((r["observer"], r["refused"].split(": ", 1)[-1]), []).append(r["scenario"])
+            refusals.setdefault((r["observer"], r["refused"]), []).append(
+                f"{r['scenario']} ({r['refused_runs']} of {r['seeds']} seeds)")
         if r.get("refused_runs", 0) == r["seeds"]:
             cells = [r["scenario"], *[_fmt(r[k], "g") for k in keys], method_label(r["observer"]), str(r["seeds"]),
                      "refused the log"] + ["-"] * (len(head) - len(keys) - 4)

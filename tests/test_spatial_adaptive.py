@@ -159,13 +159,13 @@ GAMMA_DIVERGING = 1e6
 def test_the_adaptive_default_against_the_floor_on_spatial_arm(three_arms):
     """Measured (20 s, seeds 0-2): E / floor = 1.02, 1.03, 1.35: the issue's 1.3x holds for the median; the
     third seed's floor is the lowest of the three (its E 0.09 against 0.16, 0.19)."""
-    assert np.all((0.7 < three_arms) & (three_arms < 1.6)), three_arms
+    assert np.all((0.7 < three_arms) & (three_arms < 1.45)), three_arms
     assert 0.8 < np.median(three_arms) < 1.3, three_arms
 
 
 def test_the_adaptive_default_against_the_floor_on_spatial_mocap(three_mocaps):
     """Measured (20 s, seeds 0-2, 200 Hz poses with 2 % dropped): E / floor = 1.37, 1.03, 1.31 (target 2x)."""
-    assert np.all((0.7 < three_mocaps) & (three_mocaps < 2.0)), three_mocaps
+    assert np.all((0.7 < three_mocaps) & (three_mocaps < 1.5)), three_mocaps
 
 
 @pytest.mark.slow

@@ -120,5 +120,6 @@ def test_a_method_that_refuses_a_log_is_a_row_that_says_why_not_an_abort():
     assert "does not move beyond its noise" in refused["refused"] and refused["applicable"]
     assert ran["refused"] == "" and ran["E"] > 0
     text = summary_markdown(summarise(pd.DataFrame(rows)))
-    assert "| refused the log |" in text and "Refused the log: least-squares on spatial-weak (the reading" in text
+    assert "| refused the log |" in text
+    assert "Refused the log: least-squares on spatial-weak (1 of 1 seeds) (the reading tz, fz does not move" in text
     assert text.count("refused the log") == 1                       # the adaptive observer's row has figures
