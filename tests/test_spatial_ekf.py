@@ -10,7 +10,6 @@ from fmscal.observers import AugmentedEKF, make_observer
 from fmscal.observers.ekf_error_state import ErrorStateEKF
 from fmscal.observers.max_likelihood import fit_max_likelihood
 from fmscal.plant import SpatialModel
-from fmscal.plant.errors import FmscalError
 from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
@@ -141,30 +140,6 @@ def test_poses_may_be_missing_and_the_quaternion_may_flip_sign(short_log):
     x_same, S_same = ekf.step(log.dt, log.pose[101], log.w_hat[101])
     np.testing.assert_allclose(S_flip, S_same, rtol=0, atol=1e-12)
     np.testing.assert_allclose(x_flip, x_same, rtol=0, atol=1e-12)
-
-
-@pytest.mark.parametrize("call, match", [
-    (lambda e: e.step(1e-3, [1.2, 0, 0, 0, 0, 0, 0], np.zeros(6)), "unit quaternion"),
-    (lambda e: e.step(1e-3, [1, 0, 0, 0, 0, np.nan, 0], np.zeros(6)), "7 finite numbers"),
-    (lambda e: e.step(1e-3, [1, 0, 0, 0, 0, 0, 0], np.r_[np.zeros(5), np.nan]), "6 finite numbers"),
-    (lambda e: e.step(1e-3, [1, 0, 0, 0, 0, 0], np.zeros(6)), "7 finite numbers"),
-    (lambda e: e.step(1e-3, [1, 0, 0, 0, 0, 0, 0], np.zeros(3)), "6 finite numbers"),
-    (lambda e: e.step(0.0, [1, 0, 0, 0, 0, 0, 0], np.zeros(6)), "dt must be positive"),
-    (lambda e: e.step(-1e-3, None, np.zeros(6)), "dt must be positive"),
-])
-def test_bad_samples_are_one_error_each(call, match):
-    ekf = AugmentedEKF(MODEL)
-    ekf.reset()
-    ekf.step(None, [1, 0, 0, 0, 0, 0, 0], np.zeros(6))
-    with pytest.raises(FmscalError, match=match):
-        call(ekf)
-
-
-def test_a_first_sample_with_a_zero_quaternion_is_refused():
-    ekf = AugmentedEKF(MODEL)
-    ekf.reset()
-    with pytest.raises(FmscalError, match="unit quaternion"):
-        ekf.step(None, [0, 0, 0, 0, 0, 0, 0], np.zeros(6))
 
 
 @pytest.mark.parametrize("compiled", [True, False])
