@@ -297,12 +297,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     # those of the first pose's gravity: poses that all hold one attitude
     _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
                      "the mass and the offset")
-    theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
-    model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
-    theta = _weighted(model, _extra(theta0, model), np.ones(6))
-    sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
-    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
-    theta = _weighted(model, theta, weights)
+    model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting)
     m, rho, c, d, M = model.parts(theta)
     other = "load" if reading == "reaction" else "reaction"
     if m <= 0:
@@ -311,11 +306,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         raise FmscalError(f"{table.name}: gravity comes out pointing up in the pose frame (z = {d[2]:+.2f}): the "
                           f"reading follows the other sign convention; pass --reading {other} (the wrench the "
                           f"{_who(other)})")
-    residual = (model.predict(theta) - y) * weights
-    dof = max(residual.size - len(theta), 1)
-    s2 = float(np.sum(residual ** 2) / dof)
-    J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
-    information = J.T @ J
+    s2, information = _weighted_information(model, theta, weights, y)
     cov, weak = _covariance(information, s2)
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
@@ -353,6 +344,43 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     return out
 
 
+def _two_passes(R, y, g, estimate_gravity, estimate_mounting):
+    """The fit's start and its two passes, the second weighted by each channel's residual rms in the first.
+
+    Returns
+    -------
+    model : _Model
+    theta : ndarray
+        The parameters after the weighted pass.
+    weights : ndarray, shape (6,)
+        Each reading channel's weight, 1 / its first-pass residual rms.
+    sd : ndarray, shape (6,)
+        The first pass's residual rms per channel (N m, N).
+    g_size : float
+        Gravity's magnitude, m/s^2.
+    """
+    theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
+    model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
+    theta = _weighted(model, _extra(theta0, model), np.ones(6))
+    sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
+    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
+    return model, _weighted(model, theta, weights), weights, sd, g_size
+
+
+def _weighted_information(model, theta, weights, y):
+    """The weighted residuals' variance per degree of freedom and the information ``J^T J`` of the weighted fit.
+
+    Returns
+    -------
+    s2 : float
+    information : ndarray, shape (p, p)
+    """
+    residual = (model.predict(theta) - y) * weights
+    s2 = float(np.sum(residual ** 2) / max(residual.size - len(theta), 1))
+    J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
+    return s2, J.T @ J
+
+
 def _tilt(R, y, g, estimate_mounting, residual):
     """The warning of :func:`tilt_warning` when the table needs gravity's direction estimated, else None.
 
@@ -361,17 +389,10 @@ def _tilt(R, y, g, estimate_mounting, residual):
     force residuals compared with ``residual``, those of the fit with gravity
     fixed.
     """
-    theta0, d0, M0, g_size = _start(R, y, g, True, estimate_mounting)
-    model = _Model(R, y, g_size, d0, M0, True, estimate_mounting)
-    theta = _weighted(model, _extra(theta0, model), np.ones(6))
-    sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
-    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
-    theta = _weighted(model, theta, weights)
+    model, theta, weights, _, _ = _two_passes(R, y, g, True, estimate_mounting)
     free = model.predict(theta) - y
-    weighted = free * weights
-    s2 = float(np.sum(weighted ** 2) / max(weighted.size - len(theta), 1))
-    J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
-    cov, weak = _covariance(J.T @ J, s2)
+    s2, information = _weighted_information(model, theta, weights, y)
+    cov, weak = _covariance(information, s2)
     if weak:
         return None
     std = np.sqrt(np.maximum(np.diag(cov)[10:12], 0))
