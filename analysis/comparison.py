@@ -176,14 +176,14 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     """
     method = get_method(name)
     if not method.cls.runs_on(payload):
-        return _not_applicable(name, log, floor, history)
+        return _row_without_figures(name, log, floor, history)
     log, settings = _aligned(log, truth, settings)
     observer = method.build(payload, told_noise, settings)      # a wrong setting is an error, not a row
     try:
         result = observer.run(log, truth.S0 if method.online else None)
     except FmscalError as err:     # the method refuses this log (a reading that never moves, ...): a row, said why
         reason = str(err).removeprefix(f"{log.name}: ")
-        return _not_applicable(name, log, floor, history, refused=reason or str(err))
+        return _row_without_figures(name, log, floor, history, refused=reason or str(err))
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     bad = result.diverged
     row = {"observer": name, "duration": float(log.duration),
@@ -209,7 +209,7 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
     return row, (result.t[::step], E[::step], result.S_hat_history[::step])
 
 
-def _not_applicable(name, log, floor, history, refused=""):
+def _row_without_figures(name, log, floor, history, refused=""):
     """The row of a method that does not run on the scenario's model (a planar-only observer in 3D), or that
     refused this log (``refused``, its one-line reason; the method runs on the model): no figures."""
     row = {"observer": name, "duration": float(log.duration), "E": np.nan, "E_end": np.nan, "E_over_floor": np.nan,

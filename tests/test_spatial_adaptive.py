@@ -7,6 +7,7 @@ the floor's E that of ``make_observer("max-likelihood", ..., {"offset": True})``
 import numpy as np
 import pytest
 
+from fmscal.analysis.metrics import calibration_error, error_history, tail_median
 from fmscal.observers import AdaptiveObserver, make_observer
 from fmscal.observers.adaptive_spatial import SPATIAL_LAM, params_from_phi, phi_from_params
 from fmscal.plant import SpatialModel
@@ -17,17 +18,12 @@ MOCAP = SPATIAL_SCENARIOS["spatial-mocap"]
 MODEL = SpatialModel(ARM.payload, ARM.gravity)
 
 
-def _E(S_hat, S):
-    return float(np.linalg.norm(np.eye(6) - S_hat @ np.linalg.inv(S), 2))
-
-
 def _ratio(log, S, model=MODEL):
     """The adaptive default's E (median over the run's last tenth) over the floor's E, on ``log``."""
     result = AdaptiveObserver(model, offset=True).run(log)
     assert not result.diverged and np.all(np.isfinite(result.S_hat_history))
-    tail = result.S_hat_history[-len(log) // 10:]
     floor = make_observer("max-likelihood", model, settings={"offset": True}).run(log)
-    return np.median([_E(S_hat, S) for S_hat in tail]) / _E(floor.S_hat, S)
+    return tail_median(error_history(result.S_hat_history, S)) / calibration_error(floor.S_hat, S)
 
 
 @pytest.fixture(scope="module")

@@ -6,6 +6,7 @@ Each group of logs is simulated once (module fixtures).
 import numpy as np
 import pytest
 
+from fmscal.analysis.metrics import calibration_error, error_history, tail_median
 from fmscal.observers import AugmentedEKF, make_observer
 from fmscal.observers.ekf_error_state import ErrorStateEKF
 from fmscal.observers.max_likelihood import fit_max_likelihood
@@ -14,10 +15,6 @@ from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
 MODEL = SpatialModel(ARM.payload, ARM.gravity)
-
-
-def _E(S_hat, S):
-    return float(np.linalg.norm(np.eye(6) - S_hat @ np.linalg.inv(S), 2))
 
 
 def _close(a, b, rel=1e-9):
@@ -41,9 +38,8 @@ def three_arms():
         S = truth.S_at(log.t[-1])
         result = make_observer("ekf", MODEL, truth.noise, {"offset": True}).run(log)
         assert not result.diverged and result.converged
-        tail = result.S_hat_history[-len(log) // 10:]
-        E_ekf.append(np.median([_E(S_hat, S) for S_hat in tail]))
-        E_floor.append(_E(fit_max_likelihood(log, MODEL, offset=True).S_hat, S))
+        E_ekf.append(tail_median(error_history(result.S_hat_history, S)))
+        E_floor.append(calibration_error(fit_max_likelihood(log, MODEL, offset=True).S_hat, S))
     return np.array(E_ekf), np.array(E_floor)
 
 
@@ -210,5 +206,5 @@ def test_a_log_written_by_mujoco_at_the_floor():
     floor = make_observer("max-likelihood", MODEL, settings={"offset": True}).run(log)
     result = make_observer("ekf", MODEL, settings={"offset": True}).run(log)
     assert not result.diverged
-    E_ekf = np.median([_E(S_hat, S) for S_hat in result.S_hat_history[-len(log) // 10:]])
-    assert 0.5 < E_ekf / _E(floor.S_hat, S) <= 1.3, E_ekf / _E(floor.S_hat, S)
+    ratio = tail_median(error_history(result.S_hat_history, S)) / calibration_error(floor.S_hat, S)
+    assert 0.5 < ratio <= 1.3, ratio
