@@ -1,6 +1,5 @@
 """Gain checks on python-control: poles of A - K C, observability, Lyapunov P."""
 
-import control
 import numpy as np
 
 from fmscal.plant import A_1, A_2, C_1, C_2
@@ -62,6 +61,7 @@ def _fmt(values):
 
 
 def _check(A, C, K):
+    import control              # here, not at the top: it takes a second to import, and only checks need it
     F = A - K @ C
     poles = np.linalg.eigvals(F)
     poles = poles[np.lexsort((poles.imag, poles.real))]
@@ -123,5 +123,6 @@ def sampled_poles(K1, dt):
     """
     K1 = as_finite_array(K1, (2, 1), "K1")
     dt = as_positive_scalar(dt, "dt")
+    import control
     closed = control.ss(A_1 - K1 @ C_1, np.zeros((2, 1)), C_1, 0)
     return np.sort_complex(control.sample_system(closed, dt).poles())

@@ -5,7 +5,8 @@ hundred operations; the same function generated as C and built by the system
 C compiler runs several times faster. :func:`compile_function` does that
 (``-O3`` for this machine's processor, without fast-math or fused
 multiply-adds), caching the shared library by the hash of its source and the
-processor (``FMSCAL_CACHE`` or ``~/.cache/fmscal``), and falls back to the
+processor (``FMSCAL_CACHE`` or ``~/.cache/fmscal``; processes that need the
+same library at once build it once, under a file lock), and falls back to the
 virtual machine, with one warning, where no compiler is found. ``FMSCAL_COMPILER=none`` asks for the virtual
 machine; ``FMSCAL_COMPILER=gcc`` (or ``cc``, ``clang``) names the compiler.
 
@@ -13,6 +14,7 @@ machine; ``FMSCAL_COMPILER=gcc`` (or ``cc``, ``clang``) names the compiler.
 (``casadi.Function.buffer()``): a call then costs no conversion at all.
 """
 
+import contextlib
 import hashlib
 import os
 import platform
@@ -24,6 +26,11 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+
+try:
+    import fcntl
+except ImportError:                       # Windows
+    fcntl = None
 
 __all__ = ["compile_function", "compile_functions", "compiler", "BufferedCall", "ChunkedSteps"]
 
@@ -123,17 +130,9 @@ def compile_functions(funs):
         directory = _cache_dir()
         library = directory / f"{name}_{key}.so"
         if not library.exists():
-            with tempfile.TemporaryDirectory(dir=directory) as tmp:
-                src = Path(tmp) / f"{name}.c"
-                src.write_text(source)
-                out = Path(tmp) / "lib.so"
-                try:
-                    subprocess.run([cc, *flags, *_NATIVE, str(src), "-o", str(out), "-lm"], check=True,
-                                   capture_output=True, text=True)
-                except subprocess.CalledProcessError:       # a compiler without -march=native
-                    subprocess.run([cc, *flags, str(src), "-o", str(out), "-lm"], check=True,
-                                   capture_output=True, text=True)
-                os.replace(out, library)          # atomic: parallel workers may race
+            with _build_lock(directory / f"{name}_{key}.lock"):
+                if not library.exists():          # built by another process while this one waited
+                    _build(cc, flags, source, name, directory, library)
         compiled = [ca.external(fun.name(), str(library)) for fun in funs]
     except (OSError, subprocess.CalledProcessError, RuntimeError) as err:
         if not _warned:
@@ -144,6 +143,37 @@ def compile_functions(funs):
         return funs
     _loaded[key] = compiled
     return list(compiled)
+
+
+@contextlib.contextmanager
+def _build_lock(path):
+    """Hold an exclusive lock on ``path`` (POSIX ``flock``): parallel processes (test workers, a sweep's workers)
+    that need the same library on a fresh machine build it once, the others wait for it. Without ``fcntl``
+    (Windows) no lock: each builds its own copy and the atomic rename keeps the cache whole."""
+    if fcntl is None:
+        yield
+        return
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _build(cc, flags, source, name, directory, library):
+    """Compile ``source`` into the shared library ``library`` (written whole, by an atomic rename)."""
+    with tempfile.TemporaryDirectory(dir=directory) as tmp:
+        src = Path(tmp) / f"{name}.c"
+        src.write_text(source)
+        out = Path(tmp) / "lib.so"
+        try:
+            subprocess.run([cc, *flags, *_NATIVE, str(src), "-o", str(out), "-lm"], check=True,
+                           capture_output=True, text=True)
+        except subprocess.CalledProcessError:       # a compiler without -march=native
+            subprocess.run([cc, *flags, str(src), "-o", str(out), "-lm"], check=True,
+                           capture_output=True, text=True)
+        os.replace(out, library)          # atomic: a reader never sees half a library
 
 
 class BufferedCall:

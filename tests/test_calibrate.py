@@ -1,5 +1,7 @@
 """fmscal calibrate and the least-squares reference: recovery, warnings, and bad input."""
 
+import contextlib
+import io
 import json
 import subprocess
 import sys
@@ -28,19 +30,34 @@ def other_log(tmp_path_factory):
     return out, truth
 
 
+@pytest.fixture(scope="module")
+def calibrated(other_log):
+    """``fmscal calibrate --json`` of the other payload's log by a method (None: the default), each run once."""
+    path, _ = other_log
+    done = {}
+
+    def by(method=None):
+        if method not in done:
+            done[method] = _calibrate_json(path, *(["--observer", method] if method else []))
+        return done[method]
+    return by
+
+
 def _calibrate_json(path, *extra):
-    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", str(path), *PAYLOAD_ARGS,
-                           "--truth", str(path.with_suffix(".truth.json")), "--json", *extra],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout, parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
+    """``fmscal calibrate --json`` in this process (the command line's own entry, ``main``): its JSON, strict."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["calibrate", str(path), *PAYLOAD_ARGS, "--truth", str(path.with_suffix(".truth.json")),
+                     "--json", *extra])
+    assert code == 0, err.getvalue()
+    return json.loads(out.getvalue(), parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
 
 
 @pytest.mark.parametrize("method, tolerance", [("max-likelihood", 0.01), ("least-squares", 0.01), ("ekf", 0.02),
                                                ("high-gain", 0.02), ("adaptive", 0.01)])
-def test_every_method_recovers_S_of_another_payload(other_log, method, tolerance):
-    path, truth = other_log
-    out = _calibrate_json(path, "--observer", method)
+def test_every_method_recovers_S_of_another_payload(other_log, calibrated, method, tolerance):
+    _, truth = other_log
+    out = calibrated(method)
     assert out["observer"] == method
     assert out["converged"] is True
     assert calibration_error(truth.S0, truth.S_at(0)) > 1.0
@@ -48,10 +65,9 @@ def test_every_method_recovers_S_of_another_payload(other_log, method, tolerance
     assert (out["S_std"] is None) == (method in ("high-gain", "adaptive"))
 
 
-def test_least_squares_and_ekf_agree(other_log):
-    path, truth = other_log
-    ls, ekf = _calibrate_json(path, "--observer", "least-squares"), _calibrate_json(path, "--observer", "ekf")
-    assert _calibrate_json(path)["observer"] == "max-likelihood"            # the default: the floor
+def test_least_squares_and_ekf_agree(calibrated):
+    ls, ekf = calibrated("least-squares"), calibrated("ekf")
+    assert calibrated()["observer"] == "max-likelihood"            # the default: the floor
     diff = np.abs(np.array(ls["S"]) - np.array(ekf["S"]))
     assert np.all(diff < 3 * np.hypot(np.array(ls["S_std"]), np.array(ekf["S_std"])) + 1e-3)
     assert not any("random walk" in w for w in ekf["warnings"])        # a constant S: nothing moved
@@ -168,12 +184,19 @@ GOOD_ROWS = "".join(f"{0.001 * k},{0.0},{0.0},{0.0},1,1,1\n" for k in range(20))
     (lambda d: _write(d / "nopose.csv", "t,theta,x,y,M,fx,fy\n" + "".join(
         f"{0.001 * k},{'0,0,0' if k < 3 else ',,'},1,1,1\n" for k in range(20))), "too few pose measurements"),
 ])
-def test_bad_logs_are_refused_with_one_line(tmp_path, make, message):
-    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", make(tmp_path), *PAYLOAD_ARGS],
-                          capture_output=True, text=True)
-    assert proc.returncode != 0
+def test_bad_logs_are_refused_with_one_line(tmp_path, make, message, capsys):
+    assert main(["calibrate", make(tmp_path), *PAYLOAD_ARGS]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], lines
+
+
+def test_the_installed_command_refuses_a_bad_log_in_one_line(tmp_path):
+    """The same through a new process, as a user's shell runs it: exit 2, one line, no traceback."""
+    proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", str(tmp_path / "absent.csv"),
+                           *PAYLOAD_ARGS], capture_output=True, text=True)
+    assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0], proc.stderr
+    assert len(lines) == 1 and "no such file" in lines[0], proc.stderr
 
 
 @pytest.mark.parametrize("args, message", [

@@ -38,6 +38,30 @@ def test_the_c_library_gives_the_same_numbers_and_is_cached(tmp_path, monkeypatc
     np.testing.assert_array_equal(call.outputs[0], [9.0, 5.0])
 
 
+@pytest.mark.skipif(_compile.compiler() is None, reason="no C compiler on this machine")
+def test_workers_that_need_the_same_library_build_it_once(tmp_path, monkeypatch):
+    """Two threads (as two test or sweep workers on a fresh machine) ask for one new library at once: the
+    compiler runs once, the other waits for its library (a slow compiler that counts its runs)."""
+    import threading
+    runs = tmp_path / "runs"
+    slow_cc = tmp_path / "slow-cc"
+    slow_cc.write_text(f"#!/bin/sh\necho run >> {runs}\nsleep 1\nexec {_compile.compiler()} \"$@\"\n")
+    slow_cc.chmod(0o755)
+    monkeypatch.setenv("FMSCAL_COMPILER", str(slow_cc))
+    monkeypatch.setenv("FMSCAL_CACHE", str(tmp_path))
+    x = ca.SX.sym("x", 2)
+    fun = ca.Function("built_once", [x], [x * 3.0])
+    results = []
+    threads = [threading.Thread(target=lambda: results.append(compile_function(fun))) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert runs.read_text().splitlines() == ["run"]
+    assert [f.class_name() for f in results] == ["External", "External"]
+    assert len(list(tmp_path.glob("built_once_*.so"))) == 1
+
+
 def test_a_failing_compiler_falls_back_with_one_warning(tmp_path, monkeypatch):
     monkeypatch.setenv("FMSCAL_COMPILER", "false")          # exits 1: a broken toolchain
     monkeypatch.setenv("FMSCAL_CACHE", str(tmp_path))
