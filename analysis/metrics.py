@@ -4,7 +4,7 @@ import numpy as np
 
 from fmscal.plant._checks import as_finite_array
 
-__all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "convergence_time",
+__all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "tail_seen", "convergence_time",
            "CONVERGENCE_THRESHOLD", "CONVERGENCE_HOLD", "TAIL_FRACTION"]
 
 #: Default threshold on E for :func:`convergence_time`.
@@ -108,6 +108,33 @@ def tail_median(E, fraction=TAIL_FRACTION):
     if len(E) == 0:
         return float("nan")
     return float(np.median(E[min(int((1 - fraction) * len(E)), len(E) - 1):]))
+
+
+def tail_seen(n, fraction=TAIL_FRACTION):
+    """The samples an online estimate has seen at the middle of the tail that :func:`tail_median` takes.
+
+    The rule for holding an online method's tail median to the floor: the
+    floor is fitted on the same samples. An estimate after sample ``k`` has
+    seen ``k`` samples; over the last ``fraction`` of a run of ``n`` the
+    median of a settling estimate is its value at the tail's middle, after
+    ``n (1 - fraction / 2)`` samples, while a fit of the whole log has seen
+    all ``n``. On a log whose last tenth still adds much information (the
+    floor's E on 20 s of ``spatial-arm``, seed 2, is 0.131 on its first 95 %
+    and 0.091 on all of it), the two differ by more than the methods do.
+
+    Parameters
+    ----------
+    n : int
+        Samples in the run.
+    fraction : float
+        Share of the run at its end, in (0, 1], as for :func:`tail_median`.
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
+    return max(int(round(n * (1 - fraction / 2))), 1)
 
 
 def convergence_time(t, E, threshold=CONVERGENCE_THRESHOLD, hold=CONVERGENCE_HOLD):

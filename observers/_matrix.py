@@ -58,3 +58,20 @@ def regularised_solve(o, R, b, n, rel=1e-3, floor=1e-12):
     """
     trace = sum(R[i, i] for i in range(n))
     return o.solve(R + (rel * trace / n + floor) * eye(o, n), b)
+
+
+def symmetric_from_upper(v, k):
+    """A symmetric ``k x k`` matrix (list of rows) from its upper triangle in row order
+    (``k (k + 1) / 2`` entries, :func:`upper`): each entry below the diagonal is its mirror's."""
+    index, at = {}, 0
+    for i in range(k):
+        for j in range(i, k):
+            index[i, j] = at
+            at += 1
+    return [[v[index[min(i, j), max(i, j)]] for j in range(k)] for i in range(k)]
+
+
+def upper(M):
+    """The upper triangle of a square matrix (list of rows or ndarray) in row order."""
+    k = len(M)
+    return [M[i][j] for i in range(k) for j in range(i, k)]

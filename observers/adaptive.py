@@ -226,7 +226,8 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         # since: time from the last pose to sample n; scale: each parameter group's prior information;
         # ups<c>: channel c's sensitivity filter Upsilon (position row, velocity row: 2 x k of its group);
         # spatial: the motion about C and its filters (SpatialLaw._spatial_parts) in their place;
-        # P<g>: group g's covariance (k x k, change 3); test<g>: the averages of its change test (_change_test)
+        # P<g>: group g's covariance (k x k, change 3; its upper triangle, row order);
+        # test<g>: the averages of its change test (_change_test)
         self._spatial = not self.model.linear_channels
         if self._spatial:
             self._K = np.linalg.inv(self.payload.I_c)
@@ -236,7 +237,7 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
             parts += self._spatial_parts()
         else:
             parts += [(f"ups{c}", 2 * k) for channels, k in self._structure for c in channels]
-        parts += [(f"P{g}", k * k) for g, (_, k) in enumerate(self._structure)]
+        parts += [(f"P{g}", k * (k + 1) // 2) for g, (_, k) in enumerate(self._structure)]     # upper triangle
         parts += [(f"test{g}", 4 * k + 2) for g, (_, k) in enumerate(self._structure)]
         return StateLayout(*parts)
 
@@ -248,7 +249,7 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         if self._spatial:
             parts, info = self._spatial_initial(pose, w)
             for g, (_, k) in enumerate(self._structure):
-                parts[f"P{g}"] = (np.eye(k) / (_PRIOR * info[g])).ravel()
+                parts[f"P{g}"] = np.array(mx.upper(np.eye(k) / (_PRIOR * info[g])))
                 parts[f"test{g}"] = np.r_[np.zeros(3 * k), np.full(k, info[g]), 0.0, 0.0]
             return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info,
                                    **parts)
@@ -257,7 +258,7 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         for g, (channels, k) in enumerate(self._structure):
             info.append(max(sum(psi[c] @ psi[c] for c in channels) / k, 1e-12) / self.lam ** 4)
             parts.update({f"ups{c}": np.zeros(2 * k) for c in channels})
-            parts[f"P{g}"] = (np.eye(k) / (_PRIOR * info[g])).ravel()
+            parts[f"P{g}"] = np.array(mx.upper(np.eye(k) / (_PRIOR * info[g])))
             parts[f"test{g}"] = np.zeros(4 * k + 2)
             parts[f"test{g}"][3 * k:4 * k] = info[g]
         return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info,
@@ -265,43 +266,23 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
 
     # --- the adaptation -------------------------------------------------------
     @staticmethod
-    def _rls(P, h, e, k):
-        """Recursive least squares, one measurement ``e = h . phi_tilde`` (change 3).
+    def _group_rls(P, rows, errors, k):
+        """Recursive least squares of one group from each of its channels in turn (change 3).
 
-        ``g = P h / (1 + h^T P h)``, ``phi += g e``, ``P -= g (P h)^T``.
+        Per channel ``c``, one measurement ``e_c = H_c . phi_tilde``:
+        ``g_c = P_c H_c / (1 + H_c^T P_c H_c)``, ``phi += g_c e_c``,
+        ``P_c+1 = P_c - g_c (P_c H_c)^T``. The channel after the first sees
+        its error with the update so far taken out, ``e_c - H_c . d_phi``:
+        the same fit as all rows at once. The updates are kept as their
+        rank-one terms, so that ``P_c H_c = P H_c - sum_{b<c} g_b ((P_b H_b) . H_c)``
+        costs ``k`` products per earlier channel in place of a product by
+        ``P_c``, and ``P`` is written once, ``P - sum_c g_c (P_c H_c)^T``;
+        one division per channel (``g_c``).
 
         Parameters
         ----------
         P : list of k lists of k
             The covariance, symmetric.
-        h : list of k
-            The regressor row ``H``.
-        e : float or casadi.SX
-            The a priori error.
-        k : int
-
-        Returns
-        -------
-        d_phi : list of k
-        P_next : list of k lists of k
-            Symmetric: each entry below the diagonal is its mirror's.
-        """
-        Ph = [sum(P[i][j] * h[j] for j in range(k)) for i in range(k)]
-        denom = 1.0 + sum(h[i] * Ph[i] for i in range(k))
-        d_phi = [Ph[i] * e / denom for i in range(k)]
-        upper = {(i, j): P[i][j] - Ph[i] * Ph[j] / denom for i in range(k) for j in range(i, k)}
-        return d_phi, [[upper[min(i, j), max(i, j)] for j in range(k)] for i in range(k)]
-
-    @classmethod
-    def _group_rls(cls, P, rows, errors, k):
-        """Recursive least squares of one group from each of its channels in turn (change 3).
-
-        The channel after the first sees its error with the update so far
-        taken out, ``e_c - H_c . d_phi``: the same fit as all rows at once.
-
-        Parameters
-        ----------
-        P : list of k lists of k
         rows : list of lists of k
             Each channel's regressor row ``H_c``.
         errors : list
@@ -312,12 +293,26 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         -------
         d_phi : list of k
         P_next : list of k lists of k
+            Symmetric: each entry below the diagonal is its mirror's.
         """
-        d_phi, P = cls._rls(P, rows[0], errors[0], k)
-        for h, e in zip(rows[1:], errors[1:]):
-            d, P = cls._rls(P, h, e - sum(h[j] * d_phi[j] for j in range(k)), k)
-            d_phi = [d_phi[j] + d[j] for j in range(k)]
-        return d_phi, P
+        gains, products, d_phi = [], [], None
+        for h, e in zip(rows, errors):
+            Ph = [sum(P[i][j] * h[j] for j in range(k)) for i in range(k)]
+            for g, Pb in zip(gains, products):
+                c = sum(Pb[j] * h[j] for j in range(k))
+                Ph = [Ph[i] - g[i] * c for i in range(k)]
+            denom = 1.0 + sum(h[i] * Ph[i] for i in range(k))
+            g = [v / denom for v in Ph]
+            if d_phi is None:
+                d_phi = [g[i] * e for i in range(k)]
+            else:
+                e = e - sum(h[j] * d_phi[j] for j in range(k))
+                d_phi = [d_phi[j] + g[j] * e for j in range(k)]
+            gains.append(g)
+            products.append(Ph)
+        upper = {(i, j): P[i][j] - sum(g[i] * Pb[j] for g, Pb in zip(gains, products))
+                 for i in range(k) for j in range(i, k)}
+        return d_phi, [[upper[min(i, j), max(i, j)] for j in range(k)] for i in range(k)]
 
     def _gradient(self, rows, errors, k, step, scale):
         """Normalised gradient ``gamma h H^T e / |H|^2`` (change 2 without 3)."""
@@ -412,7 +407,7 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         d_phis, parts = [], {}
         for g, (channels, k) in enumerate(self._structure):
             g_rows, g_errors = [rows[c] for c in channels], [errors[c] for c in channels]
-            P = [[getattr(st, f"P{g}")[k * i + j] for j in range(k)] for i in range(k)]
+            P = mx.symmetric_from_upper(getattr(st, f"P{g}"), k)
             if self.gain == "least-squares":      # 3. recursive least squares, the group's channels in turn
                 d_phi, P = self._group_rls(P, g_rows, g_errors, k)
             else:
@@ -424,7 +419,7 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
                 f = self._growth(o, sum(P[i][i] for i in range(k)), test[3 * k:4 * k], rate, hp)
                 P = [[f * v for v in r] for r in P]
                 test = o.vcat(test)
-            parts[f"P{g}"], parts[f"test{g}"] = o.vcat([v for r in P for v in r]), test
+            parts[f"P{g}"], parts[f"test{g}"] = o.vcat(mx.upper(P)), test
             d_phis.append(d_phi)
         return d_phis, parts
 

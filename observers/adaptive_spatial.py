@@ -287,7 +287,7 @@ class SpatialLaw:
         e_y = [has_next * (m * (nxt.pose[4 + i] + arm[i]) - y_pred[i]) for i in range(3)]
         # the fit starts once the observer's own transient from rest has decayed (WARM_UP poles' time constants)
         age = st.age[0] + dt
-        fit = has_next * o.if_else(age >= WARM_UP / self.lam, 1.0, 0.0)
+        fit = has_next * (age >= WARM_UP / self.lam)
         rows = [[fit * v for v in r] for r in U_d + U_y]
         h = st.since[0] + dt
         d_phis, parts = self._adapt(o, st, rows, [fit * v for v in e_d + e_y], fit * h, st.scale)

@@ -517,13 +517,15 @@ class RecursiveObserver(Observer):
         self._start(U[0])
         z0 = self.run_data.state
         with progress_bar(len(U), self.name) as bar:
-            Z = self._compiled_steps().run(z0, [U[:-1], U[1:], np.full((len(U) - 1, 1), log.dt)],
-                                           healthy=self._healthy_prefix, progress=bar.update, with_start=True)
-        diverged = len(Z) < len(U)
-        self.run_data.state = Z[-1].copy()
-        self.run_data.u_prev = U[len(Z) - 1]
-        return Estimate(self.state.part(Z, "S"), self.state.part(Z, "x"), cov=self._covariance(),
-                        diverged=diverged)
+            z, (XS,) = self._compiled_steps().run(z0, [U[:-1], U[1:], np.full((len(U) - 1, 1), log.dt)],
+                                                  healthy=self._healthy_prefix, progress=bar.update,
+                                                  outputs=True, states=False)
+        XS = np.vstack([self._reported(z0)[None, :], XS])
+        diverged = len(XS) < len(U)
+        self.run_data.state = z
+        self.run_data.u_prev = U[len(XS) - 1]
+        nx = self.model.nx
+        return Estimate(XS[:, nx:], XS[:, :nx], cov=self._covariance(), diverged=diverged)
 
     def _start(self, u):
         u = self.model.input_layout.unpack(np.asarray(u, dtype=float))
@@ -536,9 +538,14 @@ class RecursiveObserver(Observer):
         s = self.state.unpack(self.run_data.state)
         return s.x, s.S
 
-    def _healthy_prefix(self, Z, k0):
-        """Leading rows of ``Z`` (steps ``k0 + 1`` on) that :meth:`Observer._healthy` would pass."""
-        return self._healthy_rows(Z, self.state.part(Z, "S"), k0)
+    def _reported(self, z):
+        """``[x, S]`` of a packed state (numpy or casadi): what a compiled run keeps of each step."""
+        sl = self.state.slices
+        return ca.vertcat(z[sl["x"]], z[sl["S"]]) if isinstance(z, ca.SX) else np.r_[z[sl["x"]], z[sl["S"]]]
+
+    def _healthy_prefix(self, XS, k0):
+        """Leading rows of ``XS`` (``[x, S]`` of steps ``k0 + 1`` on) that :meth:`Observer._healthy` would pass."""
+        return self._healthy_rows(XS, XS[:, self.model.nx:], k0)
 
     def _compiled_steps(self):
         """The transition compiled once per observer (:class:`plant._compile.ChunkedSteps`)."""
@@ -549,13 +556,14 @@ class RecursiveObserver(Observer):
             u = ca.SX.sym("u", self.model.input_layout.size)
             dt = ca.SX.sym("dt")
             ident = self.name.replace("-", "_")
-            step = ca.Function(f"{ident}_step", [z, u_prev, u, dt],
-                               [ca.densify(self._transition(z, u_prev, u, dt))])
+            z_next = ca.cse(ca.densify(self._transition(z, u_prev, u, dt)))     # each repeated expression once
+            # the next state, and what the run keeps of it (x and S): the whole state is carried, not written out
+            step = ca.Function(f"{ident}_step", [z, u_prev, u, dt], [z_next, self._reported(z_next)])
             key = (compiler(), step.serialize())      # observers of the same settings share one build
             if key not in _CHUNKED:
                 if len(_CHUNKED) >= _CHUNKED_MAX:
                     _CHUNKED.clear()
-                _CHUNKED[key] = ChunkedSteps(step, _CHUNK)
+                _CHUNKED[key] = ChunkedSteps(step, _CHUNK, keep_states=False)
             self._chunks = _CHUNKED[key]
             self.run_data.build_time = time.perf_counter() - start       # one-off: not the run's cost
         return self._chunks

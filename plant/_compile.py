@@ -42,6 +42,9 @@ _NATIVE = ("-march=native",)
 # of straight-line code for a few per cent of run time (measured on the spatial EKF's 4 MB step: 33 s to
 # build at -O3, 15 s at -O1, its whole run 5 % slower)
 _LARGE_SOURCE = 1_000_000
+# a loop that keeps only its last state (ChunkedSteps(keep_states=False)) writes out this many steps one after
+# another, and repeats that block (casadi mapaccum) for longer loops: 1000 steps written out took seconds to build
+_UNROLLED = 10
 _loaded = {}                               # source hash -> casadi.Function, this process
 _warned = []
 
@@ -372,10 +375,16 @@ def _last_state_loop(step, length, name):
     """``step`` run ``length`` times: the state after the last step and every step's other outputs.
 
     The ``mapaccum`` of ``step`` without the states between (:class:`ChunkedSteps`, ``keep_states=False``):
-    the same inputs, the first output the state, the others ``(size, length)``.
+    the same inputs, the first output the state, the others ``(size, length)``. Up to :data:`_UNROLLED`
+    steps are written out one after another; a longer loop is a ``mapaccum`` of such blocks, which writes
+    out only every block's last state and builds in a fraction of the time of the steps written out.
     """
     z0 = ca.MX.sym("z", step.sparsity_in(0))
     rows = [ca.MX.sym(f"u{i}", step.nnz_in(i), length) for i in range(1, step.n_in())]
+    if length > _UNROLLED and length % _UNROLLED == 0:
+        blocks = _last_state_loop(step, _UNROLLED, f"{name}_block").mapaccum(f"{name}_blocks", length // _UNROLLED)
+        Z, *Y = blocks.call([z0, *rows])           # a block's inputs and outputs: _UNROLLED columns each, in turn
+        return ca.Function(name, [z0, *rows], [Z[:, -1], *Y])
     z, outputs = z0, []
     for k in range(length):
         z, *y = step.call([z, *[r[:, k] for r in rows]])

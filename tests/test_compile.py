@@ -107,17 +107,19 @@ def test_fast_and_readable_simulators_agree(backend, monkeypatch):
 
 
 @pytest.mark.parametrize("backend", ["c", "vm"])
-def test_chunks_that_keep_only_the_last_state_run_the_same_recursion(backend, monkeypatch):
+@pytest.mark.parametrize("chunk", [25, 40])
+def test_chunks_that_keep_only_the_last_state_run_the_same_recursion(backend, chunk, monkeypatch):
     """``keep_states=False``: the same last state and outputs as the chunks that keep every state, over a run
     that is not a whole number of chunks, and where a health test stops it within a chunk (the kept steps
-    replayed); it refuses to keep every state."""
+    replayed); it refuses to keep every state. A chunk of 25 steps is written out step after step, one of 40
+    is four blocks of 10 (``_compile._UNROLLED``)."""
     if backend == "vm":
         monkeypatch.setenv("FMSCAL_COMPILER", "none")
     z, a, b = ca.SX.sym("z", 3), ca.SX.sym("a", 2), ca.SX.sym("b")
     z_next = ca.vertcat(ca.sin(z[0]) + a[0] * z[2], z[1] * b + a[1], z[2] * 0.9 + z[0] / (1 + z[1] ** 2))
-    step = ca.Function(f"last_state_test_{backend}", [z, a, b], [z_next, ca.vertcat(z_next[0] + z_next[1], b)])
-    every = _compile.ChunkedSteps(step, 25)
-    last = _compile.ChunkedSteps(step, 25, keep_states=False)
+    step = ca.Function(f"last_state_test_{backend}_{chunk}", [z, a, b], [z_next, ca.vertcat(z_next[0] + z_next[1], b)])
+    every = _compile.ChunkedSteps(step, chunk)
+    last = _compile.ChunkedSteps(step, chunk, keep_states=False)
     rng = np.random.default_rng(3)
     inputs = [rng.standard_normal((263, 2)), rng.uniform(0.5, 1.0, (263, 1))]
     z0 = np.array([0.1, 0.2, 0.3])
@@ -126,7 +128,7 @@ def test_chunks_that_keep_only_the_last_state_run_the_same_recursion(backend, mo
     np.testing.assert_allclose(z_end, Z[-1], rtol=1e-14, atol=0.0)
     np.testing.assert_allclose(Y_last, Y, rtol=1e-14, atol=0.0)
 
-    def healthy(rows, k0):                    # stops at step 137, within the sixth chunk
+    def healthy(rows, k0):                    # stops at step 137, within a chunk
         return min(len(rows), max(137 - k0, 0))
 
     z_stop, (Y_stop,) = last.run(z0, inputs, healthy=healthy, outputs=True, states=False)

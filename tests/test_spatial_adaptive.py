@@ -1,13 +1,16 @@
 """The adaptive observer on a spatial log (issue 23): the planar law's class on the spatial model, against the floor.
 
 Each group of logs is simulated once (module fixtures); E is the median over the last tenth of the run,
-the floor's E that of ``make_observer("max-likelihood", ..., {"offset": True})`` on the same log.
+the floor's E that of ``make_observer("max-likelihood", ..., {"offset": True})`` on the samples that median
+has seen (:func:`fmscal.analysis.metrics.tail_seen`: the first 95 % of the log). Against the floor of the
+whole log the ratio also counts what the last 5 % of the log adds, which on 20 s of ``spatial-arm`` is up
+to a third of the floor's E (seed 2: 0.131 on 95 %, 0.091 on all; the observer's own E 0.122 and 0.103).
 """
 
 import numpy as np
 import pytest
 
-from fmscal.analysis.metrics import calibration_error, error_history, tail_median
+from fmscal.analysis.metrics import calibration_error, error_history, tail_median, tail_seen
 from fmscal.observers import AdaptiveObserver, make_observer
 from fmscal.observers.adaptive_spatial import SPATIAL_LAM, params_from_phi, phi_from_params
 from fmscal.plant import SpatialModel
@@ -19,10 +22,10 @@ MODEL = SpatialModel(ARM.payload, ARM.gravity)
 
 
 def _ratio(log, S, model=MODEL):
-    """The adaptive default's E (median over the run's last tenth) over the floor's E, on ``log``."""
+    """The adaptive default's E (median over the run's last tenth) over the floor's E on the samples it has seen."""
     result = AdaptiveObserver(model, offset=True).run(log)
     assert not result.diverged and np.all(np.isfinite(result.S_hat_history))
-    floor = make_observer("max-likelihood", model, settings={"offset": True}).run(log)
+    floor = make_observer("max-likelihood", model, settings={"offset": True}).run(log.head(tail_seen(len(log))))
     return tail_median(error_history(result.S_hat_history, S)) / calibration_error(floor.S_hat, S)
 
 
@@ -128,21 +131,24 @@ GAMMA_DIVERGING = 1e6
 
 
 def test_the_adaptive_default_against_the_floor_on_spatial_arm(three_arms):
-    """Measured (20 s, seeds 0-2): E / floor = 1.02, 1.03, 1.35: the issue's 1.3x holds for the median; the
-    third seed's floor is the lowest of the three (its E 0.09 against 0.16, 0.19)."""
-    assert np.all((0.7 < three_arms) & (three_arms < 1.45)), three_arms
-    assert 0.8 < np.median(three_arms) < 1.3, three_arms
+    """Measured (20 s, seeds 0-2): E / floor of the same samples = 1.01, 0.98, 0.93 (seeds 3-8: 0.99, 1.18, 1.11,
+    1.00, 1.08, 0.94); against the floor of the whole log 1.02, 1.03, 1.35, the third seed's last 5 % adding
+    much (module docstring). The issue's 1.3x on every seed."""
+    assert np.all((0.7 < three_arms) & (three_arms < 1.3)), three_arms
+    assert 0.85 < np.median(three_arms) < 1.15, three_arms
 
 
 def test_the_adaptive_default_against_the_floor_on_spatial_mocap(three_mocaps):
-    """Measured (20 s, seeds 0-2, 200 Hz poses with 2 % dropped): E / floor = 1.37, 1.03, 1.31 (target 2x)."""
+    """Measured (20 s, seeds 0-2, 200 Hz poses with 2 % dropped): E / floor of the same samples = 1.35, 0.91,
+    1.04 (of the whole log 1.37, 1.03, 1.31; target 2x)."""
     assert np.all((0.7 < three_mocaps) & (three_mocaps < 1.5)), three_mocaps
 
 
 @pytest.mark.slow
 def test_a_log_written_by_mujoco_is_fitted_at_the_floor():
     """Another engine's log (tests/mujoco_log.py, 20 s of ``spatial-arm``, seed 4): E within 1.3x of the floor's
-    on that log (the issue's bound; measured 1.27)."""
+    on the same samples (the issue's bound; measured 1.18, as on fmscal's own log of that seed; 1.27 against the
+    floor of the whole log)."""
     pytest.importorskip("mujoco")
     from mujoco_log import mujoco_log
     log, S, _ = mujoco_log(ARM.with_(duration=20.0), seed=4)

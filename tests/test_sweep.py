@@ -86,7 +86,8 @@ def test_the_bench_runs_in_its_short_mode(tmp_path, capsys):
     for row in ("`adaptive` step", "`high-gain` step", "`ekf` step", "`ekf` run as by default", "(`eiv=False`",
                 "`max-likelihood` run (the floor)", "Function.buffer()", "simulator", "`fmscal reproduce`",
                 "sweep:", "`max-likelihood` on a 2 s `spatial-arm` log", "`least-squares` on a 2 s `spatial-arm` log",
-                "`adaptive` step on that `spatial-arm` log", "`ekf` step on that `spatial-arm` log"):
+                "`adaptive` step on that `spatial-arm` log", "`ekf` step on that `spatial-arm` log",
+                "`adaptive` whole run on that log"):
         assert row in text
     assert "not the full job" in text and "not the full log" in text      # the short mode claims no target
     assert (tmp_path / "bench.md").read_text() == text.rstrip("\n") + "\n"
