@@ -40,21 +40,39 @@ the true wrench ``w = [S | c] [w_hat; 1]``. ``F``, the reading Jacobians
 and ``G`` are casadi's automatic derivatives of that one map and of the
 model's ``integrate`` and ``difference``: nothing is differentiated by hand.
 
-Tuning rule (as in the plane, :class:`observers.AugmentedEKF`):
-``R = diag(position_sd^2 (x3), angle_sd^2 (x3))`` in the error state;
-``Q = J_d W J_d^T`` with ``J_d`` the step's Jacobian with respect to a
-perturbation of the true wrench at both ends (one reading's whole effect,
-once a step: ``[h^2 / 2, h] A`` to first order) and ``W = S_hat Sigma
-S_hat^T + Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il, s_jl)`` the
-uncertainty of ``S`` from ``P``; ``q dt`` on each calibration entry, the
-random walk that the NIS of the poses raises (``adapt_q``). ``Delta`` enters
-``W`` inflated by :data:`DELTA_INFLATION` (4): over the first seconds the
-filter linearises at an ``S_hat`` far from ``S`` and its ``P`` of ``S`` is
-smaller than its error, so that with ``Delta`` as it is the first poses
-weigh too much and, ``S`` being constant, their error stays (measured on
-ten noise draws of one 10 s ``spatial-arm`` motion: the scatter of the
-torque-about-z row 3.0 times its ``S_std`` with ``Delta``, 1.4 with ``4 Delta``).
-It is an empirical inflation, not a derived term.
+Tuning rule. ``R = diag(position_sd^2 (x3), angle_sd^2 (x3))`` in the error
+state; ``Q = J_d S_Q Sigma S_Q^T J_d^T`` with ``J_d`` the step's Jacobian
+with respect to a perturbation of the true wrench at both ends (one
+reading's whole effect, once a step: ``[h^2 / 2, h] A`` to first order),
+``Sigma`` the reading's noise and ``S_Q`` the ``S`` the run starts from
+(``run(log, S0)``, ``reset(S0)``; the identity by default: a sensor's
+nominal calibration), as the floor's first pass takes it
+(:mod:`observers.linearised_floor`); ``q dt`` on each calibration entry,
+the random walk that the NIS of the poses raises (``adapt_q``).
+
+Why not the running estimate, as in the plane (:class:`observers.AugmentedEKF`:
+``W = S_hat Sigma S_hat^T + Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il,
+s_jl)``). ``Delta`` itself is derived, with no factor: for an error ``dS``
+of ``S_hat`` and the noise ``n`` independent and Gaussian, ``E[(dS n)(dS
+n)^T] = Delta``, what a second-order filter adds. What fails in 3D is the
+term it is added to. Over the first seconds the torque readings are barely
+excited, the errors in variables pull their gains towards zero (seed 1 of
+``spatial-arm`` after 1 s: the gain of the torque about z at 0.15 with ``Q``
+at the true ``S``, 0.0 with ``Q`` at the estimate, against 1.0), and
+``Q``'s row of that torque falls with the gain squared: the filter takes the yaw for
+noise-free, its ``P`` of ``S`` falls below its error (the spread of the
+z-scores of ``S`` 2.4 after 2 s on seeds 1 and 2 with ``Delta`` as derived)
+and, ``S`` being constant, that error stays. The factor 4 on ``Delta``
+(issue 23's empirical setting) drowned part of it. With the noise at
+``S0`` the filter is the floor's linear filter, online: on 20 s of
+``spatial-arm`` (seeds 0-8) its estimate ends 0.08-0.17 of the floor's
+standard deviations from the floor's (RMS over the entries), against
+0.28-0.78 with ``4 Delta``, and with ``Q`` at the true ``S``
+the same (0.11, 0.10 on seeds 1, 2). An ``S0`` off by a gain scales ``Q``
+and so ``S_std``, not the estimate: ``S0 = 0.8 I`` ends as near the floor
+(0.1 of its standard deviations) with ``S_std`` 0.81 times the floor's
+(start from the sensor's factory calibration, within a few per cent of
+``S``: then the noise model is off by as much).
 
 Errors in variables (as in the plane, :mod:`observers.eiv`, with the
 floor's seeded copy, :mod:`observers.linearised_floor`). The step's
@@ -94,12 +112,10 @@ from .linearised_floor import _error_variances, beta_from_copy, copy_predict
 from .noise_level import level_update
 
 __all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
-           "error_params_layout", "copy_layout", "eiv_copy", "DELTA_INFLATION"]
+           "error_params_layout", "copy_layout", "eiv_copy"]
 
 _CHUNK = 1000
 _SEED = 20261124          # the errors-in-variables copy's draw: fixed, so that a run is repeatable
-#: Factor on ``Delta`` (the uncertainty of ``S``) in ``Q`` (module docstring): empirical.
-DELTA_INFLATION = 4.0
 
 
 # --- the model's step, its Jacobians and Q ------------------------------------------------------------
@@ -137,9 +153,10 @@ def error_step(model, offset):
         ``J0``, ``J1`` (d x n_w) its Jacobians with respect to the raw
         readings at the step's start and end.
     predict : casadi.Function
-        ``(xs, w0, w1, dt, var_w, P_S, q_dt) -> (xs_next, F, Q)``; ``P_S``
-        the covariance of ``s`` (flat, symmetric), ``q_dt`` the random
-        walk's ``q dt``. Dense outputs.
+        ``(xs, w0, w1, dt, var_w, S_Q, q_dt) -> (xs_next, F, Q)``; ``S_Q``
+        the ``S`` (n_w x n_w, flat, row order) at which the reading's noise
+        is carried into the wrench (the run's start ``S0``), ``q_dt`` the
+        random walk's ``q dt``. Dense outputs.
     predict_sparse : casadi.Function
         The same with ``F`` and ``Q`` sparse, for :func:`whole_error_step` to inline.
     """
@@ -163,15 +180,12 @@ def error_step(model, offset):
     J0, J1, J_d = (ca.densify(at_nominal(ca.jacobian(error, v))) for v in (d0, d1, dw))
     xs_next = ca.vertcat(x_next, s)
     var_w = ca.SX.sym("var_w", n_w)
-    P_S_flat = ca.SX.sym("P_S", m * m)
-    P_S = ca.reshape(P_S_flat, m, m)
+    S_Q_flat = ca.SX.sym("S_Q", n_w * n_w)
+    S_Q = ca.reshape(S_Q_flat, n_w, n_w).T                  # row order
     q_dt = ca.SX.sym("q_dt")
-    # the true wrench's noise S n with S uncertain: E[S Sigma S^T] = S_hat Sigma S_hat^T + Delta,
-    # Delta_ij = sum_l Sigma_l cov(s_il, s_jl) (entry s_il at n i + l)
-    S_w = ca.reshape(s, n, n_w).T[:, 0:n_w]
-    W = S_w @ ca.diag(var_w) @ S_w.T + DELTA_INFLATION * sum(var_w[k] * P_S[k:m:n, k:m:n] for k in range(n_w))
-    Q = J_d @ W @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
-    inputs = [xs, w0, w1, dt, var_w, P_S_flat, q_dt]
+    # the true wrench's noise S n, S taken at the run's start S_Q (module docstring: not the running estimate)
+    Q = J_d @ S_Q @ ca.diag(var_w) @ S_Q.T @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
+    inputs = [xs, w0, w1, dt, var_w, S_Q_flat, q_dt]
     jacobians = ca.Function("ekf_error_jacobians", [xs, w0, w1, dt], [xs_next, ca.densify(F), J0, J1])
     predict = ca.Function("ekf_error_predict", inputs, [xs_next, ca.densify(F), ca.densify(Q)])
     sparse = ca.Function("ekf_error_predict_sparse", inputs, [xs_next, F, Q])
@@ -303,9 +317,11 @@ def error_state_layout(model, n):
 
 def error_params_layout(model):
     """Per-log parameters of :func:`whole_error_step`: the pose noise variances in the error state (``R``,
-    ``nv``), the reading's noise variances, the level's settings, whether it adapts and whether the estimate is
-    compensated for the errors in variables (1 or 0 each)."""
-    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("level", 7), ("adapt", 1), ("eiv", 1))
+    ``nv``), the reading's noise variances, the ``S`` at which ``Q`` carries them (``S_Q``, the run's ``S0``,
+    row order), the level's settings, whether it adapts and whether the estimate is compensated for the errors
+    in variables (1 or 0 each)."""
+    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("S_Q", model.n_w ** 2), ("level", 7), ("adapt", 1),
+                       ("eiv", 1))
 
 
 def _step(model, z, u_prev, u, dt, p, draw, n):
@@ -320,8 +336,7 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     o = ops(z)
     P = unpack_lower(o, st.P, d)
     # predict: the nominal moves, the error stays zero, P- = F P F^T + Q (the lower triangle kept)
-    xs_pred, F, Q = error_step(model, offset)[2](st.xs, a.w_hat, b.w_hat, dt, pp.var_w, ca.vec(P[ne:, ne:]),
-                                                 st.q * dt)
+    xs_pred, F, Q = error_step(model, offset)[2](st.xs, a.w_hat, b.w_hat, dt, pp.var_w, pp.S_Q, st.q * dt)
     P_pred = unpack_lower(o, pack_lower(F @ (P @ F.T) + Q, d), d)
     # update with the pose in the error state (H = [I 0]); no pose: the pose the nominal shows, K = 0
     pose = has * b.pose + (1 - has) * model.measure(xs_pred[0:nx])
@@ -394,12 +409,15 @@ class NominalRun(FilterRun):
         The copy's draws, seeded at the run's start.
     draw : ndarray, shape (n_w + nv,)
         The copy's standard normal draw at the last sample (reading, pose).
+    S_Q : ndarray, shape (n_w, n_w)
+        The ``S`` at which ``Q`` carries the reading's noise: the run's ``S0``.
     """
 
     xs: np.ndarray = None
     copy: np.ndarray = None
     rng: object = None
     draw: np.ndarray = None
+    S_Q: np.ndarray = None
 
 
 class ErrorStateEKF(AugmentedEKF):
@@ -412,7 +430,9 @@ class ErrorStateEKF(AugmentedEKF):
     axes) in filterpy's ``x``; after each pose the correction is injected into
     the nominal (the quaternion by :meth:`fmscal.plant.SpatialModel.integrate`)
     and the error reset to zero. ``R`` is ``position_sd^2`` on ``dp`` and
-    ``angle_sd^2`` on ``dphi``; ``P_0`` the pose noise on ``[dp, dphi]``,
+    ``angle_sd^2`` on ``dphi``; ``Q`` carries the reading's noise at the run's
+    ``S0``, not at the running estimate as in the plane (module docstring);
+    ``P_0`` the pose noise on ``[dp, dphi]``,
     ``v0_sd^2`` on ``[dv, domega]`` (m/s, rad/s), ``S0_sd^2`` on ``S`` and
     ``c0_sd^2`` on ``c``.
 
@@ -470,11 +490,12 @@ class ErrorStateEKF(AugmentedEKF):
         f, F, J0, J1 = call.outputs
         return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(n_w, d).T.copy(), J1.reshape(n_w, d).T.copy()
 
-    def predict_matrices(self, xs, w0, w1, dt, P_S=None):
+    def predict_matrices(self, xs, w0, w1, dt, S_Q=None):
         """``xs_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
 
-        Parameters as :meth:`transition`; ``P_S`` (``n_w n`` square) the
-        covariance of ``s`` (default the running filter's).
+        Parameters as :meth:`transition`; ``S_Q`` (``n_w`` square) the ``S``
+        at which ``Q`` carries the reading's noise (default the running
+        filter's: the run's ``S0``).
 
         Returns
         -------
@@ -482,12 +503,12 @@ class ErrorStateEKF(AugmentedEKF):
         F, Q : ndarray, shape (d, d)
             Views of the call's buffers, overwritten by the next call.
         """
-        f, d, m = self.run_data.state, self.dim_x, self.dim_x - self._ne
+        f, d = self.run_data.state, self.dim_x
         call = self._calls["predict"]
-        xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
+        xs_in, w0_in, w1_in, dt_in, var_in, S_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
         var_in[:] = f.var_w
-        P_in.reshape(m, m)[:] = f.kf.P[self._ne:, self._ne:] if P_S is None else np.reshape(P_S, (m, m))
+        S_in[:] = np.ravel(f.S_Q if S_Q is None else S_Q)
         q_in[0] = self._q_now() * dt
         call()
         xs_next, F, Q = call.outputs
@@ -536,7 +557,8 @@ class ErrorStateEKF(AugmentedEKF):
         rng = np.random.default_rng(_SEED)
         self.run_data.state = NominalRun(kf=kf, var_w=var_w, s_out=s.copy(), since_pose=0.0,
                                          q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]),
-                                         copy=copy, rng=rng, draw=rng.standard_normal(model.n_w + model.nv))
+                                         copy=copy, rng=rng, draw=rng.standard_normal(model.n_w + model.nv),
+                                         S_Q=s.reshape(model.n_w, -1)[:, :model.n_w].copy())
 
     def _advance(self, u_prev, u, dt):
         """Predict the nominal and ``P`` over ``dt``; with a pose, update, inject and reset."""
@@ -604,8 +626,8 @@ class ErrorStateEKF(AugmentedEKF):
     def _params(self):
         f = self.run_data.state
         level, adapt = self._level_settings()
-        return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, level=level,
-                                                    adapt=adapt, eiv=float(self.eiv_on))
+        return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, S_Q=f.S_Q.ravel(),
+                                                    level=level, adapt=adapt, eiv=float(self.eiv_on))
 
     def _extra_inputs(self, n_steps):
         """The copy's draws at each step's two samples, continuing the run's stream (as :meth:`_advance` draws)."""
