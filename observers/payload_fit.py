@@ -17,7 +17,9 @@ from the poses by smoothing differentiation (:func:`fmscal.plant.
 differentiate.spatial_motion`); the fit is weighted least squares (the
 channel's noise estimated from a first pass), and its covariance is the
 cluster-robust sandwich over blocks of time, so that correlated residuals
-(drift, smoothing) do not make it claim too much. Then ``rho = h / m`` and
+(drift, smoothing) do not make it claim too much: the blocks five times the
+residuals' correlation time, not shorter than the smoothing window, and the
+small-sample factor of few blocks (:mod:`fmscal.observers.cluster_covariance`). Then ``rho = h / m`` and
 ``I_c = I_O + m [rho]x^2`` (the parallel-axis theorem), their uncertainties
 by the delta method.
 """
@@ -32,6 +34,8 @@ from fmscal.plant.differentiate import edge, spatial_motion
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.rigid_body import GRAVITY, SpatialPayload, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
+
+from .cluster_covariance import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
 
 __all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED"]
 
@@ -98,6 +102,8 @@ class PayloadFit(_Rotations):
         What the log did not determine, in words a user acts on.
     converged : bool
         Every group (mass, centre of mass, inertia, offset) determined.
+    block : float or None
+        Length of the blocks of time of the cluster-robust covariance, s (:func:`block_length`).
     gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
         Gravity's direction and the sensor's mounting, where estimated
         (:meth:`rotations_dict`): gravity in the pose frame (m/s^2), its
@@ -116,6 +122,7 @@ class PayloadFit(_Rotations):
     residual_rms: np.ndarray
     warnings: list = field(default_factory=list)
     converged: bool = False
+    block: float = None
 
     def to_dict(self):
         """The fields as JSON-ready numbers and lists (None where undetermined)."""
@@ -172,41 +179,7 @@ def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY, mounting=None):
     return W
 
 
-def _fit(X, y, weights, blocks):
-    """Weighted least squares ``y ~ X theta`` with the cluster-robust covariance over ``blocks``."""
-    Xw = X * weights[:, None]
-    inverse, columns = _pseudo_inverse(Xw)
-    theta = inverse @ (Xw.T @ (y * weights))
-    cov = _sandwich(Xw, (y - X @ theta) * weights, blocks, inverse, columns)
-    return theta, cov, y - X @ theta
-
-
-def _pseudo_inverse(J):
-    """``(J^T J)^+`` on the directions it determines (scaled to a unit diagonal), and the columns those alone touch."""
-    information = J.T @ J
-    scale = np.sqrt(np.maximum(np.diag(information), 1e-300))
-    u, s, vt = np.linalg.svd(information / np.outer(scale, scale))
-    keep = s > 1e-12 * s[0]
-    return (vt[keep].T / s[keep]) @ u[:, keep].T / np.outer(scale, scale), _columns(keep, vt)
-
-
-def _sandwich(J, e, blocks, inverse, columns):
-    """The cluster-robust covariance ``B (sum_b s_b s_b^T) B`` over ``blocks``, ``s_b`` a block's ``J^T e``;
-    infinite for the parameters that touch a direction not determined."""
-    scores = np.zeros((blocks.max() + 1, J.shape[1]))
-    np.add.at(scores, blocks, J * e[:, None])
-    cov = inverse @ (scores.T @ scores) @ inverse
-    cov[:, ~columns] = np.inf
-    cov[~columns, :] = np.inf
-    return cov
-
-
-def _columns(keep, vt):
-    """Parameters that touch only the kept directions of the information."""
-    return np.abs(vt[~keep]).max(axis=0) < 1e-6 if (~keep).any() else np.ones(vt.shape[1], dtype=bool)
-
-
-def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, reading="reaction", estimate_gravity=False,
+def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, reading="reaction", estimate_gravity=False,
                      estimate_mounting=False):
     """Estimate the payload's mass, centre of mass, inertia and the sensor's offset, with ``S`` known.
 
@@ -220,8 +193,9 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
         Gravity in the pose frame, m/s^2.
     window : float
         Smoothing window of the pose differentiation, s.
-    block : float
-        Length of the blocks of the robust covariance, s.
+    block : float, optional
+        Length of the blocks of the robust covariance, s; default the rule of
+        :func:`block_length` (eq. (U2)) on the fit's residuals.
     reading : {"reaction", "load"}
         The reading's sign: the wrench the mount applies to the payload (the
         toolkit's convention), or the wrench the tool applies to the sensor
@@ -246,32 +220,42 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
     sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     gravity = as_finite_array(gravity, (3,), "gravity")
-    block = as_positive_scalar(block, "block")
+    block = None if block is None else as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
     y = (sign * log.w_hat @ S.T)[trim]
     n = len(y)
-    blocks = np.repeat(((log.t[trim] - log.t[trim][0]) // block).astype(int), 6)
+    times = (log.t[trim], window, block)
     motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
     if estimate_gravity or estimate_mounting:
-        fit = _identify_rotations(log.name, motion, y, gravity, blocks, S, reading, estimate_gravity,
+        fit = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
                                   estimate_mounting)
     else:
         X = _design(W)
-        theta, _, residual = _fit(X, y.ravel(), np.ones(6 * n), blocks)
+        theta, _, residual = weighted_fit(X, y.ravel(), np.ones(6 * n))
         sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
-        theta, cov, residual = _fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
+        blocks, length = time_blocks(residual.reshape(n, 6), *times)
+        theta, cov, residual = weighted_fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
         if np.isfinite(cov[0, 0]) and theta[0] < 0:
             from .static_fit import other_convention
             raise FmscalError(other_convention(log.name, theta[0], reading))
         fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
+        _blocks_used(fit, blocks, length)
     if not estimate_gravity:
-        _check_tilt(fit, log.name, motion, y, gravity, blocks, S, reading, estimate_mounting)
+        _check_tilt(fit, log.name, motion, y, gravity, times, S, reading, estimate_mounting)
     return fit
 
 
-def _check_tilt(fit, name, motion, y, gravity, blocks, S, reading, estimate_mounting):
+def _blocks_used(fit, blocks, length):
+    """Record the blocks' length in ``fit``, and warn when they are too few (:func:`few_blocks`)."""
+    fit.block = float(length)
+    warning = few_blocks(blocks, length)
+    if warning is not None:
+        fit.warnings.append(warning)
+
+
+def _check_tilt(fit, name, motion, y, gravity, times, S, reading, estimate_mounting):
     """Warn, and clear ``converged``, when the log needs gravity's direction estimated (gravity fixed in ``fit``).
 
     Cheap on the common path: the fit is repeated with gravity's direction
@@ -288,7 +272,7 @@ def _check_tilt(fit, name, motion, y, gravity, blocks, S, reading, estimate_moun
     if not fixed > TILT_RATIO * noise:
         return
     try:
-        free = _identify_rotations(name, motion, y, gravity, blocks, S, reading, True, estimate_mounting)
+        free = _identify_rotations(name, motion, y, gravity, times, S, reading, True, estimate_mounting)
     except FmscalError:
         return
     std = free.gravity_std_deg
@@ -307,7 +291,7 @@ def _design(W):
     return np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
 
 
-def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_gravity, estimate_mounting):
+def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting):
     """:func:`identify_payload` with gravity's direction and/or the mounting estimated too.
 
     Variable projection: for given angles (gravity's two across its start
@@ -339,7 +323,7 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
     def solve(eta, weights):
         X = design(eta)
         Xw = X * weights[:, None]
-        theta = _pseudo_inverse(Xw)[0] @ (Xw.T @ (y.ravel() * weights))
+        theta = pseudo_inverse(Xw)[0] @ (Xw.T @ (y.ravel() * weights))
         return X, theta
 
     def residual(eta, weights):
@@ -355,6 +339,7 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
         weights = np.tile(1.0 / np.maximum(sd, 1e-12), n)
     X, theta = solve(eta, weights)
     e = (y.ravel() - X @ theta) * weights
+    blocks, length = time_blocks(e.reshape(n, 6), *times)
     # the full Jacobian: the linear parameters' columns, and the angles' by central differences
     columns = []
     for i in range(len(eta)):
@@ -362,14 +347,15 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
         step[i] = 1e-6
         columns.append((design(eta + step) @ theta - design(eta - step) @ theta) / 2e-6)
     J = np.column_stack([X, *columns]) * weights[:, None]
-    inverse, determined = _pseudo_inverse(J)
-    cov = _sandwich(J, e, blocks, inverse, determined)
+    inverse, determined = pseudo_inverse(J)
+    cov = sandwich(J, e, blocks, inverse, determined)
     g_hat, M = parts(eta)
     if estimate_gravity and g_hat[2] > 0 > g[2]:             # gravity up: the reading's sign is the other one
         raise FmscalError(other_convention(name, None, reading))
     if np.isfinite(cov[0, 0]) and theta[0] < 0:
         raise FmscalError(other_convention(name, theta[0], reading))
     fit = _report(theta, cov[:16, :16], S, np.sqrt(np.mean((e / weights).reshape(n, 6) ** 2, axis=0)))
+    _blocks_used(fit, blocks, length)
     std = np.sqrt(np.maximum(np.diag(cov)[16:], 0))
     if estimate_gravity:
         fit.gravity = g_hat
