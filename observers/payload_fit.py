@@ -242,8 +242,8 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
             raise FmscalError(other_convention(log.name, theta[0], reading))
         fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
         _blocks_used(fit, blocks, length)
-    if not estimate_gravity:
-        _check_tilt(fit, log.name, motion, y, gravity, times, S, reading, estimate_mounting)
+    if not (estimate_gravity and estimate_mounting):
+        _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting)
     return fit
 
 
@@ -255,31 +255,37 @@ def _blocks_used(fit, blocks, length):
         fit.warnings.append(warning)
 
 
-def _check_tilt(fit, name, motion, y, gravity, times, S, reading, estimate_mounting):
-    """Warn, and clear ``converged``, when the log needs gravity's direction estimated (gravity fixed in ``fit``).
+def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting):
+    """Warn, and clear ``converged``, when gravity's tilt or the mounting explains what ``fit`` leaves.
 
-    Cheap on the common path: the fit is repeated with gravity's direction
-    estimated only when the force residuals exceed :data:`fmscal.observers.
+    Cheap on the common path: the fit is repeated, once with gravity's
+    direction estimated and once with the mounting (each where ``fit`` did
+    not), only when the force residuals exceed :data:`fmscal.observers.
     static_fit.TILT_RATIO` times the reading's noise, estimated from the
     differences of consecutive samples (``rms(diff) / sqrt 2``; white noise
     assumed, a log whose reading changes much between samples opens the
-    check less often); the warning is :func:`fmscal.observers.static_fit.tilt_warning`'s.
+    check less often); the warning is :func:`fmscal.observers.static_fit.rotation_warning`'s.
     """
-    from .static_fit import TILT_RATIO, tilt_warning
+    from .static_fit import TILT_RATIO, rotation_warning
     force = y[:, 3:]
     noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
     if not fixed > TILT_RATIO * noise:
         return
-    try:
-        free = _identify_rotations(name, motion, y, gravity, times, S, reading, True, estimate_mounting)
-    except FmscalError:
-        return
-    std = free.gravity_std_deg
-    if not np.isfinite(std):
-        return
-    warning = tilt_warning(fixed, float(np.sqrt(np.mean(np.square(free.residual_rms[3:])))), gravity, free.gravity,
-                           std)
+
+    def refit(gravity_free, mounting_free):
+        try:
+            free = _identify_rotations(name, motion, y, gravity, times, S, reading, gravity_free, mounting_free)
+        except FmscalError:
+            return None
+        return free, float(np.sqrt(np.mean(np.square(free.residual_rms[3:]))))
+
+    tilted = mounted = None
+    if not estimate_gravity and (free := refit(True, estimate_mounting)) is not None:
+        tilted = (free[1], free[0].gravity, free[0].gravity_std_deg)
+    if not estimate_mounting and (free := refit(estimate_gravity, True)) is not None:
+        mounted = (free[1], free[0].mounting_deg, free[0].mounting_std_deg)
+    warning = rotation_warning(fixed, gravity, tilted, mounted)
     if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
         fit.warnings.insert(0, warning)
         fit.converged = False

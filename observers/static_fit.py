@@ -44,7 +44,8 @@ from fmscal.plant.sensor import check_calibration
 from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
-__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "DETERMINED_REL",
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
+           "rotation_warning", "DETERMINED_REL",
            "DETERMINED_RHO", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
@@ -54,8 +55,8 @@ DETERMINED_RHO = 1e-3
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 _AXES = ("x", "y", "z")
 _TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
-#: With gravity's direction fixed, the fit is told to estimate it when estimating it lowers the force
-#: residuals' rms by more than this factor ...
+#: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
+#: the force residuals' rms by more than this factor ...
 TILT_RATIO = 3.0
 #: ... and the tilt it finds is more than this many of its standard deviations.
 TILT_SIGMAS = 5.0
@@ -332,8 +333,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     determined = _determined(out, std)
     out.converged = not out.undetermined and determined
     out.warnings = list(out.undetermined)
-    tilted = None if estimate_gravity or out.undetermined else _tilt(R, y, g, estimate_mounting,
-                                                                      model.predict(theta) - y)
+    both = estimate_gravity and estimate_mounting
+    tilted = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
+                                                                   model.predict(theta) - y)
     if tilted is not None:                  # the model is wrong: more poses would not help
         out.warnings.append(tilted)
         out.converged = False
@@ -381,24 +383,35 @@ def _weighted_information(model, theta, weights, y):
     return s2, J.T @ J
 
 
-def _tilt(R, y, g, estimate_mounting, residual):
-    """The warning of :func:`tilt_warning` when the table needs gravity's direction estimated, else None.
+def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
+    """The warning of :func:`rotation_warning` when the table needs gravity's direction or the mounting
+    estimated, else None.
 
-    The fit is repeated with gravity's direction estimated (the start and the
-    two weighted passes of :func:`fit_static`, without its report), and its
-    force residuals compared with ``residual``, those of the fit with gravity
-    fixed.
+    The fit is repeated with gravity's direction estimated, and with the
+    mounting (each where the fit did not; the start and the two weighted
+    passes of :func:`fit_static`, without its report), and their force
+    residuals compared with ``residual``, those of the fit as asked.
     """
-    model, theta, weights, _, _ = _two_passes(R, y, g, True, estimate_mounting)
-    free = model.predict(theta) - y
-    s2, information = _weighted_information(model, theta, weights, y)
-    cov, weak = _covariance(information, s2)
-    if weak:
-        return None
-    std = np.sqrt(np.maximum(np.diag(cov)[10:12], 0))
-    d = model.parts(theta)[3]
-    return tilt_warning(_force_rms(residual), _force_rms(free), g, d,
-                        float(np.degrees(np.sqrt((std[0] ** 2 + std[1] ** 2) / 2))))
+    def refit(gravity_free, mounting_free):
+        model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free)
+        s2, information = _weighted_information(model, theta, weights, y)
+        cov, weak = _covariance(information, s2)
+        if weak:
+            return None, None, None
+        std = np.sqrt(np.maximum(np.diag(cov), 0))
+        return _force_rms(model.predict(theta) - y), model.parts(theta), std
+
+    tilted = mounted = None
+    if not estimate_gravity:
+        rms, parts, std = refit(True, estimate_mounting)
+        if rms is not None:
+            tilted = (rms, parts[3], float(np.degrees(np.sqrt((std[10] ** 2 + std[11] ** 2) / 2))))
+    if not estimate_mounting:
+        rms, parts, std = refit(estimate_gravity, True)
+        if rms is not None:
+            k = 12 if estimate_gravity else 10
+            mounted = (rms, _angle_deg(parts[4]), float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3))))
+    return rotation_warning(_force_rms(residual), g, tilted, mounted)
 
 
 def _force_rms(residual):
@@ -429,13 +442,73 @@ def tilt_warning(fixed_rms, free_rms, gravity, direction, std_deg):
     given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
     direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
     tilt = float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0))))
-    ratio = fixed_rms / max(free_rms, 1e-300)
-    if not (ratio > TILT_RATIO and tilt > TILT_SIGMAS * std_deg):
+    if not _explains(fixed_rms, free_rms, tilt, std_deg):
         return None
     along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
-    return (f"the force residuals are {ratio:.0f} times the noise with gravity along {along}; the data are "
-            f"explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add --gravity estimate "
-            "(a tilted or wall-mounted base; or --mounting estimate, a sensor bolted askew)")
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with gravity along "
+            f"{along}; the data are explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add "
+            "--gravity estimate (a tilted or wall-mounted base)")
+
+
+def mounting_warning(fixed_rms, free_rms, angle_deg, std_deg):
+    """The warning for data that the sensor square on the tracked frame does not explain, and a mounting rotation does.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms with the mounting fixed (the identity) and estimated, N.
+    angle_deg, std_deg : float
+        The estimated mounting's angle, and the one-sigma uncertainty of its rotation about each axis, degrees.
+
+    Returns
+    -------
+    str or None
+        None unless the residuals fall by more than :data:`TILT_RATIO` and
+        the angle is more than :data:`TILT_SIGMAS` standard deviations.
+    """
+    if not _explains(fixed_rms, free_rms, angle_deg, std_deg):
+        return None
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with the sensor square "
+            f"on the tracked frame; the data are explained with the sensor turned {angle_deg:.2g} degrees on it (+- "
+            f"{std_deg:.1g}): add --mounting estimate (a sensor bolted askew)")
+
+
+def _explains(fixed_rms, free_rms, angle_deg, std_deg):
+    """The residuals fall by more than :data:`TILT_RATIO`, at an angle beyond :data:`TILT_SIGMAS` sigmas."""
+    return bool(fixed_rms > TILT_RATIO * max(free_rms, 1e-300) and np.isfinite(std_deg)
+                and angle_deg > TILT_SIGMAS * std_deg)
+
+
+def rotation_warning(fixed_rms, gravity, tilted=None, mounted=None):
+    """The one line for data the fit's rotations do not explain: which of gravity's tilt and the mounting does.
+
+    Each explains when estimating it lowers the force residuals' rms more
+    than :data:`TILT_RATIO` times and finds an angle beyond
+    :data:`TILT_SIGMAS` standard deviations (:func:`tilt_warning`,
+    :func:`mounting_warning`); where both do, the one with the lower
+    residuals is named (the poses tell a turn of the world from a turn on
+    the tool when they turn the tool about several axes).
+
+    Parameters
+    ----------
+    fixed_rms : float
+        The force residuals' rms of the fit as asked, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    tilted : tuple (free_rms, direction, std_deg), optional
+        The fit with gravity's direction estimated (:func:`tilt_warning`); None: not tried.
+    mounted : tuple (free_rms, angle_deg, std_deg), optional
+        The fit with the mounting estimated (:func:`mounting_warning`); None: not tried.
+
+    Returns
+    -------
+    str or None
+    """
+    tilt = None if tilted is None else tilt_warning(fixed_rms, tilted[0], gravity, tilted[1], tilted[2])
+    mount = None if mounted is None else mounting_warning(fixed_rms, *mounted)
+    if tilt is not None and (mount is None or tilted[0] <= mounted[0]):
+        return tilt
+    return mount
 
 
 def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):

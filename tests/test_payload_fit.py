@@ -1,5 +1,7 @@
 """identify_payload: the practitioners' job (mass, centre of mass, inertia, offset) with S known (issue 22)."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -51,7 +53,8 @@ def test_a_planar_log_is_refused():
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_a_tilted_base_with_gravity_along_minus_z_says_to_estimate_it(seed):
-    """A base tilted 5 degrees: with gravity along -z the log's fit names --gravity estimate and is not
+    """A base tilted 5 degrees: with gravity along -z the log's fit names --gravity estimate (never --mounting
+    estimate: the arm's turns about every axis tell a turn of the world from one on the tool) and is not
     converged; the same log on a level base, and the tilted one with gravity estimated, do not."""
     from fmscal.observers.static_fit import _exp
     tilted = tuple(_exp(np.radians(5.0) * np.array([1.0, 0.0, 0.0])) @ np.array([0.0, 0.0, -9.81]))
@@ -59,10 +62,45 @@ def test_a_tilted_base_with_gravity_along_minus_z_says_to_estimate_it(seed):
     log, truth, _ = scenario.with_(gravity=tilted).generate(seed)
     fit = identify_payload(log, S=truth.S_at(0.0))
     assert not fit.converged and "--gravity estimate" in fit.warnings[0] and "tilted 5 degrees" in fit.warnings[0]
+    assert not any("--mounting estimate" in w for w in fit.warnings)
     free = identify_payload(log, S=truth.S_at(0.0), estimate_gravity=True)
-    assert not any("--gravity estimate" in w for w in free.warnings)
+    assert not any("--gravity estimate" in w or "--mounting estimate" in w for w in free.warnings)
     level, truth, _ = scenario.generate(seed)
-    assert not any("--gravity estimate" in w for w in identify_payload(level, S=truth.S_at(0.0)).warnings)
+    assert not any("estimate" in w for w in identify_payload(level, S=truth.S_at(0.0)).warnings)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_sensor_bolted_askew_names_the_mounting_not_gravity(seed):
+    """The sensor turned 7 degrees on the tracked frame, gravity along -z: the log's fit names --mounting estimate
+    with the angle found (7 degrees, measured 6.98 to 7.0), not --gravity estimate, and is not converged; with the
+    mounting estimated it is silent."""
+    from scipy.spatial.transform import Rotation
+
+    from fmscal.observers.static_fit import _exp
+    mount = _exp(np.radians(7.0) * np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5]))
+    log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=8.0).generate(seed)
+    sensor = Rotation.from_quat(np.roll(log.pose[:, :4], -1, axis=1))          # the poses are the tracked frame's
+    log.pose[:, :4] = np.roll((sensor * Rotation.from_matrix(mount.T)).as_quat(), 1, axis=1)
+    fit = identify_payload(log, S=truth.S_at(0.0))
+    assert not fit.converged and "--mounting estimate" in fit.warnings[0], fit.warnings
+    assert float(re.search(r"turned ([\d.]+) degrees", fit.warnings[0]).group(1)) == pytest.approx(7.0, abs=0.2)
+    assert not any("--gravity estimate" in w for w in fit.warnings)
+    free = identify_payload(log, S=truth.S_at(0.0), estimate_mounting=True)
+    assert not any("--mounting estimate" in w or "--gravity estimate" in w for w in free.warnings)
+
+
+def test_where_both_rotations_explain_the_lower_residuals_are_named():
+    """rotation_warning's choice: each explains (residuals 10 and 20 times lower, angles far beyond 5 sigmas); the
+    better one is named alone, either way round; neither explains: None."""
+    from fmscal.observers.static_fit import rotation_warning
+    g = [0.0, 0.0, -9.81]
+    tilted = np.array([0.0, np.sin(np.radians(4.0)), -np.cos(np.radians(4.0))])
+    both = rotation_warning(1.0, g, (0.1, tilted, 0.1), (0.05, 6.0, 0.1))
+    assert "--mounting estimate" in both and "turned 6 degrees" in both and "--gravity" not in both
+    both = rotation_warning(1.0, g, (0.05, tilted, 0.1), (0.1, 6.0, 0.1))
+    assert "--gravity estimate" in both and "tilted 4 degrees" in both and "--mounting" not in both
+    assert rotation_warning(1.0, g, (0.5, tilted, 0.1), (0.5, 6.0, 0.1)) is None            # residuals fall 2x
+    assert rotation_warning(1.0, g, (0.1, tilted, 1.0), (0.1, 6.0, 2.0)) is None            # angles within 5 sigmas
 
 
 @pytest.fixture(scope="module")
