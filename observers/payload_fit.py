@@ -25,6 +25,7 @@ by the delta method.
 """
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,7 +38,7 @@ from fmscal.plant.sensor import check_calibration
 
 from .cluster_covariance import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
 
-__all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED"]
+__all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED", "HOLD", "REFERENCES"]
 
 #: The six entries of an inertia tensor, as URDF and MuJoCo's ``fullinertia`` write them.
 INERTIA_NAMES = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
@@ -103,7 +104,14 @@ class PayloadFit(_Rotations):
     converged : bool
         Every group (mass, centre of mass, inertia, offset) determined.
     block : float or None
-        Length of the blocks of time of the cluster-robust covariance, s (:func:`block_length`).
+        Length of the blocks of time of the cluster-robust covariance, s
+        (:func:`fmscal.observers.cluster_covariance.block_length`).
+    cone_deg : float or None
+        Half-angle of the cone of gravity directions the log holds in the sensor frame, degrees.
+    undetermined : list of str
+        The parameters the log determines poorly or not at all, in words.
+    next_poses : list of str
+        The held poses to record next, best first, as a table's (:mod:`fmscal.observers.coverage`).
     gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
         Gravity's direction and the sensor's mounting, where estimated
         (:meth:`rotations_dict`): gravity in the pose frame (m/s^2), its
@@ -123,6 +131,9 @@ class PayloadFit(_Rotations):
     warnings: list = field(default_factory=list)
     converged: bool = False
     block: float = None
+    cone_deg: float = None
+    undetermined: list = field(default_factory=list)
+    next_poses: list = field(default_factory=list)
 
     def to_dict(self):
         """The fields as JSON-ready numbers and lists (None where undetermined)."""
@@ -132,7 +143,9 @@ class PayloadFit(_Rotations):
                 "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
                 "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
                 "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
-                "converged": bool(self.converged), **self.rotations_dict()}
+                "converged": bool(self.converged), **self.rotations_dict(),
+                "cone_deg": None if self.cone_deg is None else float(self.cone_deg),
+                "undetermined": list(self.undetermined), "next_poses": list(self.next_poses)}
 
 
 def _inertia_map(v):
@@ -229,8 +242,8 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     times = (log.t[trim], window, block)
     motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
     if estimate_gravity or estimate_mounting:
-        fit = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
-                                  estimate_mounting)
+        fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
+                                               estimate_mounting)
     else:
         X = _design(W)
         theta, _, residual = weighted_fit(X, y.ravel(), np.ones(6 * n))
@@ -242,6 +255,11 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
             raise FmscalError(other_convention(log.name, theta[0], reading))
         fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
         _blocks_used(fit, blocks, length)
+        Xw = X / np.tile(np.maximum(sd, 1e-12), n)[:, None]
+        information = _Information(Xw.T @ Xw, theta, np.zeros(0), residual / np.tile(np.maximum(sd, 1e-12), n),
+                                   1.0 / np.maximum(sd, 1e-12), (float(np.linalg.norm(gravity)),
+                                   gravity / np.linalg.norm(gravity), np.eye(3), False, False))
+    _coverage(fit, motion[0], log.t[trim], information)
     if not (estimate_gravity and estimate_mounting):
         _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting)
     return fit
@@ -275,7 +293,7 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
 
     def refit(gravity_free, mounting_free):
         try:
-            free = _identify_rotations(name, motion, y, gravity, times, S, reading, gravity_free, mounting_free)
+            free = _identify_rotations(name, motion, y, gravity, times, S, reading, gravity_free, mounting_free)[0]
         except FmscalError:
             return None
         return free, float(np.sqrt(np.mean(np.square(free.residual_rms[3:]))))
@@ -289,6 +307,87 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
         fit.warnings.insert(0, warning)
         fit.converged = False
+
+
+class _Information(NamedTuple):
+    """What the coverage of a log's fit needs (:func:`_coverage`).
+
+    Attributes
+    ----------
+    information : ndarray, shape (p, p)
+        The weighted information over ``(pi (10), c (6), angles)``.
+    theta : ndarray, shape (16,)
+        ``pi`` and ``c``.
+    eta : ndarray
+        The angles of gravity's direction and of the mounting, where estimated (the parameters of
+        :class:`fmscal.observers.static_fit._Model`).
+    residual : ndarray
+        The weighted residuals.
+    weights : ndarray, shape (6,)
+        Each channel's weight.
+    frame : tuple
+        ``(g_size, d0, M0, estimate_gravity, estimate_mounting)``: the angles' origin.
+    """
+
+    information: np.ndarray
+    theta: np.ndarray
+    eta: np.ndarray
+    residual: np.ndarray
+    weights: np.ndarray
+    frame: tuple
+
+
+#: How long a suggested pose of a log is held, s: its samples count in the score of the next poses
+#: (eq. (N1) of :mod:`fmscal.observers.coverage`).
+HOLD = 3.0
+#: How many attitudes, evenly spaced along a log, the suggested turns start from.
+REFERENCES = 10
+
+
+def _coverage(fit, q, t, info):
+    """A log's ``cone_deg``, ``undetermined`` and ``next_poses`` in ``fit``, as a table's (:mod:`fmscal.observers.
+    coverage`).
+
+    The cone is of gravity's directions in the sensor frame over the log's
+    samples. The information is taken to the physical parameters ``(m, rho,
+    I_c, c, angles)`` (``F' = T^-T F T^-1``, ``T`` their Jacobian in ``pi``);
+    the parameters the log determines worse than :data:`DETERMINED` (2 % of
+    the mass, of the centre of mass's distance or 1 mm, of the inertia's mean
+    diagonal; the offset only where not determined) are named in words. The
+    next poses are scored as a table's, eq. (N1), on the information with the
+    inertia eliminated (held poses do not inform it), each pose held
+    :data:`HOLD` s, from :data:`REFERENCES` attitudes along the log. The
+    covariance there is the model-based ``s^2 F^-1``; the reported
+    uncertainties are the cluster-robust ones.
+    """
+    from .coverage import cone_deg, in_words, next_poses, weak_directions
+    from .static_fit import _OFFSET_NAMES, _Model
+    g_size, d0, M0, estimate_gravity, estimate_mounting = info.frame
+    model = _Model(None, None, g_size, d0, M0, estimate_gravity, estimate_mounting)
+    theta = info.theta
+    R = np.moveaxis(rotation_matrix(q.T), -1, 0)
+    values = _physical(theta[:10])
+    _, _, _, d, M = model.parts(np.r_[values[:4], theta[10:16], info.eta])
+    fit.cone_deg = cone_deg(np.einsum("ji,nkj,k->ni", M, R, -d))
+    T = np.eye(len(info.information))
+    T[:10, :10] = _physical_jacobian(theta[:10])
+    T_inv = np.linalg.inv(T)
+    F = T_inv.T @ info.information @ T_inv
+    s2 = float(np.sum(info.residual ** 2) / max(info.residual.size - len(F), 1))
+    names = ("m", "rho_x", "rho_y", "rho_z", *(f"I_{n}" for n in INERTIA_NAMES), *(f"c_{n}" for n in _OFFSET_NAMES),
+             *model.names[10:])
+    scale = np.r_[DETERMINED * values[0], np.full(3, max(DETERMINED * np.linalg.norm(values[1:4]), 1e-3)),
+                  np.full(6, DETERMINED * max(np.mean(values[4:7]), 1e-9)), np.full(6, np.inf),
+                  np.full(len(info.eta), np.radians(0.2))]
+    fit.undetermined = in_words(names, weak_directions(F, s2, scale), "this log")
+    keep = np.r_[0:4, 10:len(F)]                          # the inertia eliminated: F_kk - F_ki F_ii^+ F_ik
+    F_t = F[np.ix_(keep, keep)] - F[np.ix_(keep, range(4, 10))] @ np.linalg.pinv(F[4:10, 4:10]) @ F[np.ix_(
+        range(4, 10), keep)]
+    refs = np.unique(np.linspace(0, len(t) - 1, REFERENCES).round().astype(int))
+    dt = float(np.median(np.diff(t)))
+    fit.next_poses = next_poses(model, np.r_[values[:4], theta[10:16], info.eta], F_t, info.weights, s2, R[refs],
+                                [f"the attitude at t = {t[k]:.1f} s" for k in refs], rows=HOLD / dt,
+                                held=f" and hold it {HOLD:g} s")
 
 
 def _design(W):
@@ -371,7 +470,8 @@ def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gr
         fit.mounting_deg = _angle_deg(M)
         fit.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k_g:k_g + 3] ** 2) / 3)))
         fit.mounting_axis = _axis(M)
-    return fit
+    frame = (g_size, d0, M0, estimate_gravity, estimate_mounting)
+    return fit, _Information(J.T @ J, theta, eta, e, weights[:6], frame)
 
 
 def _physical(theta):
@@ -382,6 +482,17 @@ def _physical(theta):
     r = skew(rho)
     I_c = I_O + m * r @ r
     return np.r_[m, rho, I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]]
+
+
+def _physical_jacobian(pi):
+    """``d (m, rho, I_c) / d pi`` by central differences, shape (10, 10)."""
+    J = np.zeros((10, 10))
+    step = 1e-7 * np.maximum(np.abs(pi), 1e-6)
+    for i in range(10):
+        d = np.zeros(10)
+        d[i] = step[i]
+        J[:, i] = (_physical(pi + d) - _physical(pi - d)) / (2 * step[i])
+    return J
 
 
 def _possible(values):
@@ -399,12 +510,7 @@ def _report(theta, cov, S, residual_rms):
                           "motion explains (is the reading in N and the pose in m and unit quaternions?)")
     values = _physical(theta[:10])
     finite = np.isfinite(np.diag(cov)[:10])
-    J = np.zeros((10, 10))
-    step = 1e-7 * np.maximum(np.abs(theta[:10]), 1e-6)
-    for i in range(10):
-        d = np.zeros(10)
-        d[i] = step[i]
-        J[:, i] = (_physical(theta[:10] + d) - _physical(theta[:10] - d)) / (2 * step[i])
+    J = _physical_jacobian(theta[:10])
     sub = np.where(np.outer(finite, finite), cov[:10, :10], 0.0)
     std = np.sqrt(np.maximum(np.diag(J @ sub @ J.T), 0))
     std[np.abs(J[:, ~finite]).max(axis=1) > 0 if (~finite).any() else np.zeros(10, dtype=bool)] = np.inf

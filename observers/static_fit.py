@@ -26,7 +26,13 @@ What the table covers: the gravity directions it holds in the sensor frame
 undetermined (the information's weak directions, in words), and the next
 poses that would most reduce the largest relative uncertainty: candidate
 turns of 45, 90 and 180 degrees about the sensor's axes from the table's
-poses, each scored by the covariance the fit would have with it added.
+poses, each scored by the covariance the fit would have with it added
+(:mod:`fmscal.observers.coverage`, the machinery a log's fit shares).
+
+Gravity along ``-z`` and the sensor square on the tracked frame are checked:
+the fit is repeated with gravity's direction estimated and with the mounting,
+and where one of them explains the residuals the fit says which flag to add
+(:func:`rotation_warning`).
 """
 
 from dataclasses import dataclass, field
@@ -41,20 +47,16 @@ from fmscal.plant.pose_table import PoseTable
 from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
+from .coverage import DETERMINED_REL, DETERMINED_RHO, covariance, in_words, next_poses
+from .coverage import cone_deg as _cone
+from .coverage import rotation as _exp
 from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
-           "rotation_warning", "DETERMINED_REL",
-           "DETERMINED_RHO", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
+           "rotation_warning", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
-#: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
-DETERMINED_REL = 0.01
-#: The centre of mass counts as determined when each coordinate's one-sigma uncertainty is below this, m.
-DETERMINED_RHO = 1e-3
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
-_AXES = ("x", "y", "z")
-_TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
 TILT_RATIO = 3.0
@@ -124,15 +126,6 @@ class StaticFit(_Rotations):
                 "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
                 "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
                 "warnings": list(self.warnings), "converged": bool(self.converged)}
-
-
-def _exp(v):
-    """The rotation matrix of the rotation vector ``v`` (Rodrigues)."""
-    angle = float(np.linalg.norm(v))
-    K = skew(np.asarray(v, dtype=float))
-    if angle < 1e-12:
-        return np.eye(3) + K
-    return np.eye(3) + np.sin(angle) / angle * K + (1 - np.cos(angle)) / angle ** 2 * K @ K
 
 
 def _angle_deg(R):
@@ -308,7 +301,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
                           f"reading follows the other sign convention; pass --reading {other} (the wrench the "
                           f"{_who(other)})")
     s2, information = _weighted_information(model, theta, weights, y)
-    cov, weak = _covariance(information, s2)
+    cov, weak = covariance(information, s2)
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
     b = S_inv @ c
@@ -329,20 +322,20 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         out.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3)))
     a = np.einsum("ji,nkj,k->ni", M, R, -d)
     out.cone_deg = _cone(a)
-    out.undetermined = [_describe(model.names, v) for v in weak]
+    out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
     determined = _determined(out, std)
     out.converged = not out.undetermined and determined
     out.warnings = list(out.undetermined)
     both = estimate_gravity and estimate_mounting
-    tilted = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
-                                                                   model.predict(theta) - y)
-    if tilted is not None:                  # the model is wrong: more poses would not help
-        out.warnings.append(tilted)
+    rotated = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
+                                                                    model.predict(theta) - y)
+    if rotated is not None:                 # the model is wrong: more poses would not help
+        out.warnings.append(rotated)
         out.converged = False
     elif not out.undetermined and not determined:
         out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
                             f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
-    out.next_poses = _next_poses(model, theta, information, weights, s2, R)
+    out.next_poses = next_poses(model, theta, information, weights, s2, R, [f"pose {k + 1}" for k in range(len(R))])
     return out
 
 
@@ -395,7 +388,7 @@ def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
     def refit(gravity_free, mounting_free):
         model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free)
         s2, information = _weighted_information(model, theta, weights, y)
-        cov, weak = _covariance(information, s2)
+        cov, weak = covariance(information, s2)
         if weak:
             return None, None, None
         std = np.sqrt(np.maximum(np.diag(cov), 0))
@@ -610,38 +603,6 @@ def other_convention(name, mass, reading):
             f"{_who(other)})")
 
 
-def _covariance(information, s2):
-    """``s^2 J^-1`` on the determined directions (scaled to a unit diagonal), and the weak directions.
-
-    A direction of the scaled information whose eigenvalue is below ``1e-10``
-    of the largest is not determined: its parameters' variances are infinite.
-    """
-    d = np.sqrt(np.maximum(np.diag(information), 1e-300))
-    scaled = information / np.outer(d, d)
-    lam, u = np.linalg.eigh(scaled)
-    weak_mask = lam < 1e-10 * lam[-1]
-    keep = ~weak_mask
-    inverse = (u[:, keep] / lam[keep]) @ u[:, keep].T
-    cov = s2 * inverse / np.outer(d, d)
-    touched = np.abs(u[:, weak_mask]).max(axis=1) > 1e-3 if weak_mask.any() else np.zeros(len(d), dtype=bool)
-    cov[touched, :] = np.inf
-    cov[:, touched] = np.inf
-    return cov, [u[:, k] for k in np.flatnonzero(weak_mask)]
-
-
-def _describe(names, direction):
-    """A weak direction in words: the parameters it mixes and what to record."""
-    big = [names[i] for i in np.argsort(-np.abs(direction)) if abs(direction[i]) > 0.2]
-    pretty = {"m": "the mass", **{f"c_{n}": f"the offset's {n}" for n in _OFFSET_NAMES},
-              **{f"rho_{a}": f"the centre of mass along {a}" for a in _AXES},
-              "gravity_1": "gravity's direction", "gravity_2": "gravity's direction",
-              **{f"mount_{a}": f"the mounting about {a}" for a in _AXES}}
-    parts = list(dict.fromkeys(pretty.get(n, n) for n in big))
-    verb = "is not determined" if len(parts) == 1 else "are not separated"
-    return (f"{' and '.join(parts)} {verb} by these poses: they turn gravity through too few directions in the "
-            "sensor frame; tilt the tool about another axis (see the next poses)")
-
-
 def _determined(out, std):
     return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_RHO)
                 and np.all(np.isfinite(std)))
@@ -656,71 +617,3 @@ def _refuse_untilted(name, R, g, what):
                           f"degrees of one direction; {MIN_CONE_DEG:g} needed, tens of degrees useful): {what} "
                           "cannot be separated; hold the tool in at least four attitudes tilted 30 degrees or "
                           "more about two different horizontal axes")
-
-
-def _cone(a):
-    """Half-angle of the cone of unit directions ``a`` around their mean, degrees (180 when they surround it)."""
-    u = a / np.linalg.norm(a, axis=1)[:, None]
-    mean = u.mean(axis=0)
-    if np.linalg.norm(mean) < 1e-9:
-        return 180.0
-    mean /= np.linalg.norm(mean)
-    return float(np.degrees(np.max(np.arccos(np.clip(u @ mean, -1.0, 1.0)))))
-
-
-def _candidates(R):
-    """Poses the user can reach: turns of 45, 90, 180 degrees about a sensor axis from each pose of the table.
-
-    Returns
-    -------
-    list of (str, ndarray (3, 3))
-        Each described in words and as the tracked frame's attitude.
-    """
-    out = []
-    for k, Rk in enumerate(R):
-        for i, axis in enumerate(_AXES):
-            for angle in _TURNS:
-                turn = _exp(np.radians(angle) * np.eye(3)[i])
-                out.append((f"from pose {k + 1}, turn the tool {angle:+g} degrees about its {axis} axis", Rk @ turn))
-    return out
-
-
-def _relative_std(cov, theta):
-    """Each parameter's one-sigma uncertainty on a common scale: the mass relative to it, the centre of mass
-    in mm, the offset relative to the weight's wrench, the angles in degrees."""
-    std = np.sqrt(np.maximum(np.diag(cov), 0))
-    scale = np.ones(len(theta))
-    scale[0] = DETERMINED_REL * abs(theta[0])
-    scale[1:4] = DETERMINED_RHO
-    scale[4:10] = max(abs(theta[0]) * 9.81, 1e-9) * 1e-3 * np.r_[np.full(3, 0.1), np.ones(3)]
-    scale[10:] = np.radians(0.2)
-    return std / scale
-
-
-def _next_poses(model, theta, information, weights, s2, R, count=3):
-    """The candidate poses that most reduce the largest scaled uncertainty (:func:`_relative_std`), best first."""
-    current = _relative_std(_covariance(information, s2)[0], theta)
-    worst_now = float(np.max(current))
-    scored = []
-    for words, Rc in _candidates(R):
-        J = model.jacobian(theta, R=Rc[None]) * weights[:, None]          # the pose's six weighted rows
-        cov, _ = _covariance(information + J.T @ J, s2)
-        worst = float(np.max(_relative_std(cov, theta)))
-        scored.append((worst, words))
-    scored.sort(key=lambda item: item[0])
-    best = []
-    for worst, words in scored:
-        if words in (w for _, w in best):
-            continue
-        if np.isfinite(worst_now) and worst >= 0.99 * worst_now:
-            break
-        best.append((worst, words))
-        if len(best) == count:
-            break
-    return [f"{words} (the largest uncertainty {_ratio(worst_now, worst)})" for worst, words in best]
-
-
-def _ratio(before, after):
-    if not np.isfinite(before):
-        return "becomes finite" if np.isfinite(after) else "stays undetermined"
-    return f"falls to {after / before:.0%} of what it is"

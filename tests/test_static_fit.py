@@ -175,6 +175,19 @@ def test_a_tilted_base_fitted_with_gravity_along_minus_z_says_to_estimate_it(see
     assert not any("estimate" in w for fit in twenty_seeds for w in fit.warnings)
 
 
+def test_a_sensor_two_degrees_askew_is_named_on_every_seed(twenty_seeds):
+    """Twelve poses, the sensor turned 2 degrees on the tracked frame: --mounting estimate named on each of 20 seeds
+    with the angle found (measured 1.9 to 2.2 degrees), --gravity estimate never; on the square sensor's twenty
+    tables (the fixture) neither is (measured over 6, 12 and 24 poses: named at 1 degree on 4, 1 and 0 of 20)."""
+    axis = np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5])
+    for seed in range(20):
+        fit = fit_static(simulate_table(TOOL, n=12, seed=seed, mounting=_exp(np.radians(2.0) * axis), offset=OFFSET))
+        told = [w for w in fit.warnings if "--mounting estimate" in w]
+        assert len(told) == 1 and not any("--gravity estimate" in w for w in fit.warnings), (seed, fit.warnings)
+        assert 1.7 < float(re.search(r"turned ([\d.]+) degrees", told[0]).group(1)) < 2.3
+    assert not any("estimate" in w for fit in twenty_seeds for w in fit.warnings)
+
+
 def _about(axis, degrees):
     """Unit quaternions (scalar first) of turns by ``degrees`` about ``axis``."""
     half = np.radians(np.asarray(degrees, dtype=float)) / 2
@@ -207,8 +220,8 @@ def test_poses_tilted_two_degrees_are_fitted_not_refused():
 
 
 def test_a_weak_direction_of_one_parameter_reads_in_the_singular():
-    from fmscal.observers.static_fit import _describe
+    from fmscal.observers.coverage import describe
     names = ("m", "rho_x", "rho_y", "rho_z")
-    assert _describe(names, np.array([0.0, 0.0, 0.0, 1.0])).startswith("the centre of mass along z is not determined")
-    assert _describe(names, np.array([0.7, 0.0, 0.7, 0.0])).startswith(
+    assert describe(names, np.array([0.0, 0.0, 0.0, 1.0])).startswith("the centre of mass along z is not determined")
+    assert describe(names, np.array([0.7, 0.0, 0.7, 0.0])).startswith(
         "the mass and the centre of mass along y are not separated")
