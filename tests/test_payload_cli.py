@@ -93,6 +93,7 @@ def test_an_attitude_only_log_through_the_command(tmp_path, capsys):
     fit = json.loads(out)
     assert code == 0 and "held segments" in err and "% of the log" in err
     assert abs(fit["mass"] - TOOL.mass) < 0.012 and fit["inertia"] is None
+    assert KEYS <= set(fit) and fit["cone_deg"] > 10 and fit["next_poses"][0].startswith("from pose ")
 
 
 def test_a_tilted_table_without_gravity_estimate_names_the_flag(tmp_path, capsys):
