@@ -19,9 +19,14 @@ channel's noise estimated from a first pass), and its covariance is the
 cluster-robust sandwich over blocks of time, so that correlated residuals
 (drift, smoothing) do not make it claim too much: the blocks five times the
 residuals' correlation time, not shorter than the smoothing window, and the
-small-sample factor of few blocks (:mod:`fmscal.observers.cluster_covariance`). Then ``rho = h / m`` and
-``I_c = I_O + m [rho]x^2`` (the parallel-axis theorem), their uncertainties
-by the delta method.
+small-sample factor of few blocks (:mod:`fmscal.observers.cluster_covariance`).
+Then ``rho = h / m`` and ``I_c = I_O + m [rho]x^2`` (the parallel-axis
+theorem), their uncertainties by the delta method.
+
+Like a pose table's fit, the log's reports what it covered and the held
+poses to record next (:mod:`fmscal.observers.coverage`), and names the flag
+(``--gravity estimate`` or ``--mounting estimate``) whose rotation explains
+residuals far above the noise.
 """
 
 from dataclasses import dataclass, field
