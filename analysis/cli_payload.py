@@ -2,7 +2,8 @@
 
 A spatial log (``t,qw,...,fz``) gives the offset, the mass, the centre of
 mass and, where the motion turns the payload fast enough, the inertia
-(:func:`fmscal.observers.payload_fit.identify_payload`). An attitude-only
+(:func:`fmscal.observers.payload_fit.identify_payload`), with what the log
+covered and the next poses to record, as for a table. An attitude-only
 log (no ``x,y,z``) gives its held segments as a pose table
 (:func:`fmscal.plant.pose_table.held_table`). A pose table (the
 same header without ``t``: one row per held pose) gives the offset, the mass
@@ -150,6 +151,7 @@ def _identify_log(args, path, log, S, gravity, estimate_gravity):
             f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
     _print_rotations(fit)
+    _print_coverage(fit, fit.undetermined)
     print(f"converged: {'yes' if fit.converged else 'no'}")
     if truth is not None:
         print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
@@ -191,7 +193,15 @@ def _identify_table(args, path, table, S, gravity, estimate_gravity):
     print("inertia: not determined by held poses (it needs angular acceleration)")
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
     _print_rotations(fit)
+    _print_coverage(fit)
+    print(f"converged: {'yes' if fit.converged else 'no'}")
+
+
+def _print_coverage(fit, undetermined=()):
+    """The cone of gravity directions covered, what the data left (a log's; a table's are its warnings), the next
+    poses."""
     print(f"gravity directions covered in the sensor frame: a cone of half-angle {fit.cone_deg:.0f} degrees")
+    for words in undetermined:
+        print(f"left: {words}")
     for words in fit.next_poses:
         print(f"next pose: {words}")
-    print(f"converged: {'yes' if fit.converged else 'no'}")

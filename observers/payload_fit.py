@@ -17,12 +17,20 @@ from the poses by smoothing differentiation (:func:`fmscal.plant.
 differentiate.spatial_motion`); the fit is weighted least squares (the
 channel's noise estimated from a first pass), and its covariance is the
 cluster-robust sandwich over blocks of time, so that correlated residuals
-(drift, smoothing) do not make it claim too much. Then ``rho = h / m`` and
-``I_c = I_O + m [rho]x^2`` (the parallel-axis theorem), their uncertainties
-by the delta method.
+(drift, smoothing) do not make it claim too much: the blocks five times the
+residuals' correlation time, not shorter than the smoothing window, and the
+small-sample factor of few blocks (:mod:`fmscal.observers.cluster_covariance`).
+Then ``rho = h / m`` and ``I_c = I_O + m [rho]x^2`` (the parallel-axis
+theorem), their uncertainties by the delta method.
+
+Like a pose table's fit, the log's reports what it covered and the held
+poses to record next (:mod:`fmscal.observers.coverage`), and names the flag
+(``--gravity estimate`` or ``--mounting estimate``) whose rotation explains
+residuals far above the noise.
 """
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,7 +41,9 @@ from fmscal.plant.errors import FmscalError
 from fmscal.plant.rigid_body import GRAVITY, SpatialPayload, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
-__all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED"]
+from .cluster_covariance import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
+
+__all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED", "HOLD", "REFERENCES"]
 
 #: The six entries of an inertia tensor, as URDF and MuJoCo's ``fullinertia`` write them.
 INERTIA_NAMES = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
@@ -98,6 +108,15 @@ class PayloadFit(_Rotations):
         What the log did not determine, in words a user acts on.
     converged : bool
         Every group (mass, centre of mass, inertia, offset) determined.
+    block : float or None
+        Length of the blocks of time of the cluster-robust covariance, s
+        (:func:`fmscal.observers.cluster_covariance.block_length`).
+    cone_deg : float or None
+        Half-angle of the cone of gravity directions the log holds in the sensor frame, degrees.
+    undetermined : list of str
+        The parameters the log determines poorly or not at all, in words.
+    next_poses : list of str
+        The held poses to record next, best first, as a table's (:mod:`fmscal.observers.coverage`).
     gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
         Gravity's direction and the sensor's mounting, where estimated
         (:meth:`rotations_dict`): gravity in the pose frame (m/s^2), its
@@ -116,6 +135,10 @@ class PayloadFit(_Rotations):
     residual_rms: np.ndarray
     warnings: list = field(default_factory=list)
     converged: bool = False
+    block: float = None
+    cone_deg: float = None
+    undetermined: list = field(default_factory=list)
+    next_poses: list = field(default_factory=list)
 
     def to_dict(self):
         """The fields as JSON-ready numbers and lists (None where undetermined)."""
@@ -125,7 +148,9 @@ class PayloadFit(_Rotations):
                 "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
                 "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
                 "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
-                "converged": bool(self.converged), **self.rotations_dict()}
+                "converged": bool(self.converged), **self.rotations_dict(),
+                "cone_deg": None if self.cone_deg is None else float(self.cone_deg),
+                "undetermined": list(self.undetermined), "next_poses": list(self.next_poses)}
 
 
 def _inertia_map(v):
@@ -172,41 +197,7 @@ def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY, mounting=None):
     return W
 
 
-def _fit(X, y, weights, blocks):
-    """Weighted least squares ``y ~ X theta`` with the cluster-robust covariance over ``blocks``."""
-    Xw = X * weights[:, None]
-    inverse, columns = _pseudo_inverse(Xw)
-    theta = inverse @ (Xw.T @ (y * weights))
-    cov = _sandwich(Xw, (y - X @ theta) * weights, blocks, inverse, columns)
-    return theta, cov, y - X @ theta
-
-
-def _pseudo_inverse(J):
-    """``(J^T J)^+`` on the directions it determines (scaled to a unit diagonal), and the columns those alone touch."""
-    information = J.T @ J
-    scale = np.sqrt(np.maximum(np.diag(information), 1e-300))
-    u, s, vt = np.linalg.svd(information / np.outer(scale, scale))
-    keep = s > 1e-12 * s[0]
-    return (vt[keep].T / s[keep]) @ u[:, keep].T / np.outer(scale, scale), _columns(keep, vt)
-
-
-def _sandwich(J, e, blocks, inverse, columns):
-    """The cluster-robust covariance ``B (sum_b s_b s_b^T) B`` over ``blocks``, ``s_b`` a block's ``J^T e``;
-    infinite for the parameters that touch a direction not determined."""
-    scores = np.zeros((blocks.max() + 1, J.shape[1]))
-    np.add.at(scores, blocks, J * e[:, None])
-    cov = inverse @ (scores.T @ scores) @ inverse
-    cov[:, ~columns] = np.inf
-    cov[~columns, :] = np.inf
-    return cov
-
-
-def _columns(keep, vt):
-    """Parameters that touch only the kept directions of the information."""
-    return np.abs(vt[~keep]).max(axis=0) < 1e-6 if (~keep).any() else np.ones(vt.shape[1], dtype=bool)
-
-
-def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, reading="reaction", estimate_gravity=False,
+def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, reading="reaction", estimate_gravity=False,
                      estimate_mounting=False):
     """Estimate the payload's mass, centre of mass, inertia and the sensor's offset, with ``S`` known.
 
@@ -220,8 +211,9 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
         Gravity in the pose frame, m/s^2.
     window : float
         Smoothing window of the pose differentiation, s.
-    block : float
-        Length of the blocks of the robust covariance, s.
+    block : float, optional
+        Length of the blocks of the robust covariance, s; default the rule of
+        :func:`block_length` (eq. (U2)) on the fit's residuals.
     reading : {"reaction", "load"}
         The reading's sign: the wrench the mount applies to the payload (the
         toolkit's convention), or the wrench the tool applies to the sensor
@@ -246,59 +238,161 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=1.0, readin
     sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     gravity = as_finite_array(gravity, (3,), "gravity")
-    block = as_positive_scalar(block, "block")
+    block = None if block is None else as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
     y = (sign * log.w_hat @ S.T)[trim]
     n = len(y)
-    blocks = np.repeat(((log.t[trim] - log.t[trim][0]) // block).astype(int), 6)
+    times = (log.t[trim], window, block)
     motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
     if estimate_gravity or estimate_mounting:
-        fit = _identify_rotations(log.name, motion, y, gravity, blocks, S, reading, estimate_gravity,
-                                  estimate_mounting)
+        fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
+                                               estimate_mounting)
     else:
         X = _design(W)
-        theta, _, residual = _fit(X, y.ravel(), np.ones(6 * n), blocks)
+        theta, _, residual = weighted_fit(X, y.ravel(), np.ones(6 * n))
         sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
-        theta, cov, residual = _fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
+        blocks, length = time_blocks(residual.reshape(n, 6), *times)
+        theta, cov, residual = weighted_fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
         if np.isfinite(cov[0, 0]) and theta[0] < 0:
             from .static_fit import other_convention
             raise FmscalError(other_convention(log.name, theta[0], reading))
         fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
-    if not estimate_gravity:
-        _check_tilt(fit, log.name, motion, y, gravity, blocks, S, reading, estimate_mounting)
+        _blocks_used(fit, blocks, length)
+        Xw = X / np.tile(np.maximum(sd, 1e-12), n)[:, None]
+        information = _Information(Xw.T @ Xw, theta, np.zeros(0), residual / np.tile(np.maximum(sd, 1e-12), n),
+                                   1.0 / np.maximum(sd, 1e-12), (float(np.linalg.norm(gravity)),
+                                   gravity / np.linalg.norm(gravity), np.eye(3), False, False))
+    _coverage(fit, motion[0], log.t[trim], information)
+    if not (estimate_gravity and estimate_mounting):
+        _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting)
     return fit
 
 
-def _check_tilt(fit, name, motion, y, gravity, blocks, S, reading, estimate_mounting):
-    """Warn, and clear ``converged``, when the log needs gravity's direction estimated (gravity fixed in ``fit``).
+def _blocks_used(fit, blocks, length):
+    """Record the blocks' length in ``fit``, and warn when they are too few (:func:`few_blocks`)."""
+    fit.block = float(length)
+    warning = few_blocks(blocks, length)
+    if warning is not None:
+        fit.warnings.append(warning)
 
-    Cheap on the common path: the fit is repeated with gravity's direction
-    estimated only when the force residuals exceed :data:`fmscal.observers.
+
+def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting):
+    """Warn, and clear ``converged``, when gravity's tilt or the mounting explains what ``fit`` leaves.
+
+    Cheap on the common path: the fit is repeated, once with gravity's
+    direction estimated and once with the mounting (each where ``fit`` did
+    not), only when the force residuals exceed :data:`fmscal.observers.
     static_fit.TILT_RATIO` times the reading's noise, estimated from the
     differences of consecutive samples (``rms(diff) / sqrt 2``; white noise
     assumed, a log whose reading changes much between samples opens the
-    check less often); the warning is :func:`fmscal.observers.static_fit.tilt_warning`'s.
+    check less often); the warning is :func:`fmscal.observers.static_fit.rotation_warning`'s.
     """
-    from .static_fit import TILT_RATIO, tilt_warning
+    from .static_fit import TILT_RATIO, rotation_warning
     force = y[:, 3:]
     noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
     if not fixed > TILT_RATIO * noise:
         return
-    try:
-        free = _identify_rotations(name, motion, y, gravity, blocks, S, reading, True, estimate_mounting)
-    except FmscalError:
-        return
-    std = free.gravity_std_deg
-    if not np.isfinite(std):
-        return
-    warning = tilt_warning(fixed, float(np.sqrt(np.mean(np.square(free.residual_rms[3:])))), gravity, free.gravity,
-                           std)
+
+    def refit(gravity_free, mounting_free):
+        try:
+            free = _identify_rotations(name, motion, y, gravity, times, S, reading, gravity_free, mounting_free)[0]
+        except FmscalError:
+            return None
+        return free, float(np.sqrt(np.mean(np.square(free.residual_rms[3:]))))
+
+    tilted = mounted = None
+    if not estimate_gravity and (free := refit(True, estimate_mounting)) is not None:
+        tilted = (free[1], free[0].gravity, free[0].gravity_std_deg)
+    if not estimate_mounting and (free := refit(estimate_gravity, True)) is not None:
+        mounted = (free[1], free[0].mounting_deg, free[0].mounting_std_deg)
+    warning = rotation_warning(fixed, gravity, tilted, mounted)
     if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
         fit.warnings.insert(0, warning)
         fit.converged = False
+
+
+class _Information(NamedTuple):
+    """What the coverage of a log's fit needs (:func:`_coverage`).
+
+    Attributes
+    ----------
+    information : ndarray, shape (p, p)
+        The weighted information over ``(pi (10), c (6), angles)``.
+    theta : ndarray, shape (16,)
+        ``pi`` and ``c``.
+    eta : ndarray
+        The angles of gravity's direction and of the mounting, where estimated (the parameters of
+        :class:`fmscal.observers.static_fit._Model`).
+    residual : ndarray
+        The weighted residuals.
+    weights : ndarray, shape (6,)
+        Each channel's weight.
+    frame : tuple
+        ``(g_size, d0, M0, estimate_gravity, estimate_mounting)``: the angles' origin.
+    """
+
+    information: np.ndarray
+    theta: np.ndarray
+    eta: np.ndarray
+    residual: np.ndarray
+    weights: np.ndarray
+    frame: tuple
+
+
+#: How long a suggested pose of a log is held, s: its samples count in the score of the next poses
+#: (eq. (N1) of :mod:`fmscal.observers.coverage`).
+HOLD = 3.0
+#: How many attitudes, evenly spaced along a log, the suggested turns start from.
+REFERENCES = 10
+
+
+def _coverage(fit, q, t, info):
+    """A log's ``cone_deg``, ``undetermined`` and ``next_poses`` in ``fit``, as a table's (:mod:`fmscal.observers.
+    coverage`).
+
+    The cone is of gravity's directions in the sensor frame over the log's
+    samples. The information is taken to the physical parameters ``(m, rho,
+    I_c, c, angles)`` (``F' = T^-T F T^-1``, ``T`` their Jacobian in ``pi``);
+    the parameters the log determines worse than :data:`DETERMINED` (2 % of
+    the mass, of the centre of mass's distance or 1 mm, of the inertia's mean
+    diagonal; the offset only where not determined) are named in words. The
+    next poses are scored as a table's, eq. (N1), on the information with the
+    inertia eliminated (held poses do not inform it), each pose held
+    :data:`HOLD` s, from :data:`REFERENCES` attitudes along the log. The
+    covariance there is the model-based ``s^2 F^-1``; the reported
+    uncertainties are the cluster-robust ones.
+    """
+    from .coverage import cone_deg, in_words, next_poses, weak_directions
+    from .static_fit import _OFFSET_NAMES, _Model
+    g_size, d0, M0, estimate_gravity, estimate_mounting = info.frame
+    model = _Model(None, None, g_size, d0, M0, estimate_gravity, estimate_mounting)
+    theta = info.theta
+    R = np.moveaxis(rotation_matrix(q.T), -1, 0)
+    values = _physical(theta[:10])
+    _, _, _, d, M = model.parts(np.r_[values[:4], theta[10:16], info.eta])
+    fit.cone_deg = cone_deg(np.einsum("ji,nkj,k->ni", M, R, -d))
+    T = np.eye(len(info.information))
+    T[:10, :10] = _physical_jacobian(theta[:10])
+    T_inv = np.linalg.inv(T)
+    F = T_inv.T @ info.information @ T_inv
+    s2 = float(np.sum(info.residual ** 2) / max(info.residual.size - len(F), 1))
+    names = ("m", "rho_x", "rho_y", "rho_z", *(f"I_{n}" for n in INERTIA_NAMES), *(f"c_{n}" for n in _OFFSET_NAMES),
+             *model.names[10:])
+    scale = np.r_[DETERMINED * values[0], np.full(3, max(DETERMINED * np.linalg.norm(values[1:4]), 1e-3)),
+                  np.full(6, DETERMINED * max(np.mean(values[4:7]), 1e-9)), np.full(6, np.inf),
+                  np.full(len(info.eta), np.radians(0.2))]
+    fit.undetermined = in_words(names, weak_directions(F, s2, scale), "this log")
+    keep = np.r_[0:4, 10:len(F)]                          # the inertia eliminated: F_kk - F_ki F_ii^+ F_ik
+    F_t = F[np.ix_(keep, keep)] - F[np.ix_(keep, range(4, 10))] @ np.linalg.pinv(F[4:10, 4:10]) @ F[np.ix_(
+        range(4, 10), keep)]
+    refs = np.unique(np.linspace(0, len(t) - 1, REFERENCES).round().astype(int))
+    dt = float(np.median(np.diff(t)))
+    fit.next_poses = next_poses(model, np.r_[values[:4], theta[10:16], info.eta], F_t, info.weights, s2, R[refs],
+                                [f"the attitude at t = {t[k]:.1f} s" for k in refs], rows=HOLD / dt,
+                                held=f" and hold it {HOLD:g} s")
 
 
 def _design(W):
@@ -307,7 +401,7 @@ def _design(W):
     return np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
 
 
-def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_gravity, estimate_mounting):
+def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting):
     """:func:`identify_payload` with gravity's direction and/or the mounting estimated too.
 
     Variable projection: for given angles (gravity's two across its start
@@ -339,7 +433,7 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
     def solve(eta, weights):
         X = design(eta)
         Xw = X * weights[:, None]
-        theta = _pseudo_inverse(Xw)[0] @ (Xw.T @ (y.ravel() * weights))
+        theta = pseudo_inverse(Xw)[0] @ (Xw.T @ (y.ravel() * weights))
         return X, theta
 
     def residual(eta, weights):
@@ -355,6 +449,7 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
         weights = np.tile(1.0 / np.maximum(sd, 1e-12), n)
     X, theta = solve(eta, weights)
     e = (y.ravel() - X @ theta) * weights
+    blocks, length = time_blocks(e.reshape(n, 6), *times)
     # the full Jacobian: the linear parameters' columns, and the angles' by central differences
     columns = []
     for i in range(len(eta)):
@@ -362,14 +457,15 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
         step[i] = 1e-6
         columns.append((design(eta + step) @ theta - design(eta - step) @ theta) / 2e-6)
     J = np.column_stack([X, *columns]) * weights[:, None]
-    inverse, determined = _pseudo_inverse(J)
-    cov = _sandwich(J, e, blocks, inverse, determined)
+    inverse, determined = pseudo_inverse(J)
+    cov = sandwich(J, e, blocks, inverse, determined)
     g_hat, M = parts(eta)
     if estimate_gravity and g_hat[2] > 0 > g[2]:             # gravity up: the reading's sign is the other one
         raise FmscalError(other_convention(name, None, reading))
     if np.isfinite(cov[0, 0]) and theta[0] < 0:
         raise FmscalError(other_convention(name, theta[0], reading))
     fit = _report(theta, cov[:16, :16], S, np.sqrt(np.mean((e / weights).reshape(n, 6) ** 2, axis=0)))
+    _blocks_used(fit, blocks, length)
     std = np.sqrt(np.maximum(np.diag(cov)[16:], 0))
     if estimate_gravity:
         fit.gravity = g_hat
@@ -379,7 +475,8 @@ def _identify_rotations(name, motion, y, gravity, blocks, S, reading, estimate_g
         fit.mounting_deg = _angle_deg(M)
         fit.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k_g:k_g + 3] ** 2) / 3)))
         fit.mounting_axis = _axis(M)
-    return fit
+    frame = (g_size, d0, M0, estimate_gravity, estimate_mounting)
+    return fit, _Information(J.T @ J, theta, eta, e, weights[:6], frame)
 
 
 def _physical(theta):
@@ -390,6 +487,17 @@ def _physical(theta):
     r = skew(rho)
     I_c = I_O + m * r @ r
     return np.r_[m, rho, I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]]
+
+
+def _physical_jacobian(pi):
+    """``d (m, rho, I_c) / d pi`` by central differences, shape (10, 10)."""
+    J = np.zeros((10, 10))
+    step = 1e-7 * np.maximum(np.abs(pi), 1e-6)
+    for i in range(10):
+        d = np.zeros(10)
+        d[i] = step[i]
+        J[:, i] = (_physical(pi + d) - _physical(pi - d)) / (2 * step[i])
+    return J
 
 
 def _possible(values):
@@ -407,12 +515,7 @@ def _report(theta, cov, S, residual_rms):
                           "motion explains (is the reading in N and the pose in m and unit quaternions?)")
     values = _physical(theta[:10])
     finite = np.isfinite(np.diag(cov)[:10])
-    J = np.zeros((10, 10))
-    step = 1e-7 * np.maximum(np.abs(theta[:10]), 1e-6)
-    for i in range(10):
-        d = np.zeros(10)
-        d[i] = step[i]
-        J[:, i] = (_physical(theta[:10] + d) - _physical(theta[:10] - d)) / (2 * step[i])
+    J = _physical_jacobian(theta[:10])
     sub = np.where(np.outer(finite, finite), cov[:10, :10], 0.0)
     std = np.sqrt(np.maximum(np.diag(J @ sub @ J.T), 0))
     std[np.abs(J[:, ~finite]).max(axis=1) > 0 if (~finite).any() else np.zeros(10, dtype=bool)] = np.inf

@@ -26,7 +26,13 @@ What the table covers: the gravity directions it holds in the sensor frame
 undetermined (the information's weak directions, in words), and the next
 poses that would most reduce the largest relative uncertainty: candidate
 turns of 45, 90 and 180 degrees about the sensor's axes from the table's
-poses, each scored by the covariance the fit would have with it added.
+poses, each scored by the covariance the fit would have with it added
+(:mod:`fmscal.observers.coverage`, the machinery a log's fit shares).
+
+Gravity along ``-z`` and the sensor square on the tracked frame are checked:
+the fit is repeated with gravity's direction estimated and with the mounting,
+and where one of them explains the residuals the fit says which flag to add
+(:func:`rotation_warning`).
 """
 
 from dataclasses import dataclass, field
@@ -41,21 +47,18 @@ from fmscal.plant.pose_table import PoseTable
 from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
+from .coverage import DETERMINED_REL, DETERMINED_RHO, covariance, in_words, next_poses
+from .coverage import cone_deg as _cone
+from .coverage import rotation as _exp
 from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
-__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "DETERMINED_REL",
-           "DETERMINED_RHO", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
+           "rotation_warning", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
-#: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
-DETERMINED_REL = 0.01
-#: The centre of mass counts as determined when each coordinate's one-sigma uncertainty is below this, m.
-DETERMINED_RHO = 1e-3
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
-_AXES = ("x", "y", "z")
-_TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
-#: With gravity's direction fixed, the fit is told to estimate it when estimating it lowers the force
-#: residuals' rms by more than this factor ...
+#: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
+#: the force residuals' rms by more than this factor ...
 TILT_RATIO = 3.0
 #: ... and the tilt it finds is more than this many of its standard deviations.
 TILT_SIGMAS = 5.0
@@ -123,15 +126,6 @@ class StaticFit(_Rotations):
                 "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
                 "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
                 "warnings": list(self.warnings), "converged": bool(self.converged)}
-
-
-def _exp(v):
-    """The rotation matrix of the rotation vector ``v`` (Rodrigues)."""
-    angle = float(np.linalg.norm(v))
-    K = skew(np.asarray(v, dtype=float))
-    if angle < 1e-12:
-        return np.eye(3) + K
-    return np.eye(3) + np.sin(angle) / angle * K + (1 - np.cos(angle)) / angle ** 2 * K @ K
 
 
 def _angle_deg(R):
@@ -307,7 +301,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
                           f"reading follows the other sign convention; pass --reading {other} (the wrench the "
                           f"{_who(other)})")
     s2, information = _weighted_information(model, theta, weights, y)
-    cov, weak = _covariance(information, s2)
+    cov, weak = covariance(information, s2)
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
     b = S_inv @ c
@@ -328,19 +322,20 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         out.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3)))
     a = np.einsum("ji,nkj,k->ni", M, R, -d)
     out.cone_deg = _cone(a)
-    out.undetermined = [_describe(model.names, v) for v in weak]
+    out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
     determined = _determined(out, std)
     out.converged = not out.undetermined and determined
     out.warnings = list(out.undetermined)
-    tilted = None if estimate_gravity or out.undetermined else _tilt(R, y, g, estimate_mounting,
-                                                                      model.predict(theta) - y)
-    if tilted is not None:                  # the model is wrong: more poses would not help
-        out.warnings.append(tilted)
+    both = estimate_gravity and estimate_mounting
+    rotated = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
+                                                                    model.predict(theta) - y)
+    if rotated is not None:                 # the model is wrong: more poses would not help
+        out.warnings.append(rotated)
         out.converged = False
     elif not out.undetermined and not determined:
         out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
                             f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
-    out.next_poses = _next_poses(model, theta, information, weights, s2, R)
+    out.next_poses = next_poses(model, theta, information, weights, s2, R, [f"pose {k + 1}" for k in range(len(R))])
     return out
 
 
@@ -381,24 +376,35 @@ def _weighted_information(model, theta, weights, y):
     return s2, J.T @ J
 
 
-def _tilt(R, y, g, estimate_mounting, residual):
-    """The warning of :func:`tilt_warning` when the table needs gravity's direction estimated, else None.
+def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
+    """The warning of :func:`rotation_warning` when the table needs gravity's direction or the mounting
+    estimated, else None.
 
-    The fit is repeated with gravity's direction estimated (the start and the
-    two weighted passes of :func:`fit_static`, without its report), and its
-    force residuals compared with ``residual``, those of the fit with gravity
-    fixed.
+    The fit is repeated with gravity's direction estimated, and with the
+    mounting (each where the fit did not; the start and the two weighted
+    passes of :func:`fit_static`, without its report), and their force
+    residuals compared with ``residual``, those of the fit as asked.
     """
-    model, theta, weights, _, _ = _two_passes(R, y, g, True, estimate_mounting)
-    free = model.predict(theta) - y
-    s2, information = _weighted_information(model, theta, weights, y)
-    cov, weak = _covariance(information, s2)
-    if weak:
-        return None
-    std = np.sqrt(np.maximum(np.diag(cov)[10:12], 0))
-    d = model.parts(theta)[3]
-    return tilt_warning(_force_rms(residual), _force_rms(free), g, d,
-                        float(np.degrees(np.sqrt((std[0] ** 2 + std[1] ** 2) / 2))))
+    def refit(gravity_free, mounting_free):
+        model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free)
+        s2, information = _weighted_information(model, theta, weights, y)
+        cov, weak = covariance(information, s2)
+        if weak:
+            return None, None, None
+        std = np.sqrt(np.maximum(np.diag(cov), 0))
+        return _force_rms(model.predict(theta) - y), model.parts(theta), std
+
+    tilted = mounted = None
+    if not estimate_gravity:
+        rms, parts, std = refit(True, estimate_mounting)
+        if rms is not None:
+            tilted = (rms, parts[3], float(np.degrees(np.sqrt((std[10] ** 2 + std[11] ** 2) / 2))))
+    if not estimate_mounting:
+        rms, parts, std = refit(estimate_gravity, True)
+        if rms is not None:
+            k = 12 if estimate_gravity else 10
+            mounted = (rms, _angle_deg(parts[4]), float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3))))
+    return rotation_warning(_force_rms(residual), g, tilted, mounted)
 
 
 def _force_rms(residual):
@@ -429,13 +435,73 @@ def tilt_warning(fixed_rms, free_rms, gravity, direction, std_deg):
     given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
     direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
     tilt = float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0))))
-    ratio = fixed_rms / max(free_rms, 1e-300)
-    if not (ratio > TILT_RATIO and tilt > TILT_SIGMAS * std_deg):
+    if not _explains(fixed_rms, free_rms, tilt, std_deg):
         return None
     along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
-    return (f"the force residuals are {ratio:.0f} times the noise with gravity along {along}; the data are "
-            f"explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add --gravity estimate "
-            "(a tilted or wall-mounted base; or --mounting estimate, a sensor bolted askew)")
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with gravity along "
+            f"{along}; the data are explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add "
+            "--gravity estimate (a tilted or wall-mounted base)")
+
+
+def mounting_warning(fixed_rms, free_rms, angle_deg, std_deg):
+    """The warning for data that the sensor square on the tracked frame does not explain, and a mounting rotation does.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms with the mounting fixed (the identity) and estimated, N.
+    angle_deg, std_deg : float
+        The estimated mounting's angle, and the one-sigma uncertainty of its rotation about each axis, degrees.
+
+    Returns
+    -------
+    str or None
+        None unless the residuals fall by more than :data:`TILT_RATIO` and
+        the angle is more than :data:`TILT_SIGMAS` standard deviations.
+    """
+    if not _explains(fixed_rms, free_rms, angle_deg, std_deg):
+        return None
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with the sensor square "
+            f"on the tracked frame; the data are explained with the sensor turned {angle_deg:.2g} degrees on it (+- "
+            f"{std_deg:.1g}): add --mounting estimate (a sensor bolted askew)")
+
+
+def _explains(fixed_rms, free_rms, angle_deg, std_deg):
+    """The residuals fall by more than :data:`TILT_RATIO`, at an angle beyond :data:`TILT_SIGMAS` sigmas."""
+    return bool(fixed_rms > TILT_RATIO * max(free_rms, 1e-300) and np.isfinite(std_deg)
+                and angle_deg > TILT_SIGMAS * std_deg)
+
+
+def rotation_warning(fixed_rms, gravity, tilted=None, mounted=None):
+    """The one line for data the fit's rotations do not explain: which of gravity's tilt and the mounting does.
+
+    Each explains when estimating it lowers the force residuals' rms more
+    than :data:`TILT_RATIO` times and finds an angle beyond
+    :data:`TILT_SIGMAS` standard deviations (:func:`tilt_warning`,
+    :func:`mounting_warning`); where both do, the one with the lower
+    residuals is named (the poses tell a turn of the world from a turn on
+    the tool when they turn the tool about several axes).
+
+    Parameters
+    ----------
+    fixed_rms : float
+        The force residuals' rms of the fit as asked, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    tilted : tuple (free_rms, direction, std_deg), optional
+        The fit with gravity's direction estimated (:func:`tilt_warning`); None: not tried.
+    mounted : tuple (free_rms, angle_deg, std_deg), optional
+        The fit with the mounting estimated (:func:`mounting_warning`); None: not tried.
+
+    Returns
+    -------
+    str or None
+    """
+    tilt = None if tilted is None else tilt_warning(fixed_rms, tilted[0], gravity, tilted[1], tilted[2])
+    mount = None if mounted is None else mounting_warning(fixed_rms, *mounted)
+    if tilt is not None and (mount is None or tilted[0] <= mounted[0]):
+        return tilt
+    return mount
 
 
 def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
@@ -537,38 +603,6 @@ def other_convention(name, mass, reading):
             f"{_who(other)})")
 
 
-def _covariance(information, s2):
-    """``s^2 J^-1`` on the determined directions (scaled to a unit diagonal), and the weak directions.
-
-    A direction of the scaled information whose eigenvalue is below ``1e-10``
-    of the largest is not determined: its parameters' variances are infinite.
-    """
-    d = np.sqrt(np.maximum(np.diag(information), 1e-300))
-    scaled = information / np.outer(d, d)
-    lam, u = np.linalg.eigh(scaled)
-    weak_mask = lam < 1e-10 * lam[-1]
-    keep = ~weak_mask
-    inverse = (u[:, keep] / lam[keep]) @ u[:, keep].T
-    cov = s2 * inverse / np.outer(d, d)
-    touched = np.abs(u[:, weak_mask]).max(axis=1) > 1e-3 if weak_mask.any() else np.zeros(len(d), dtype=bool)
-    cov[touched, :] = np.inf
-    cov[:, touched] = np.inf
-    return cov, [u[:, k] for k in np.flatnonzero(weak_mask)]
-
-
-def _describe(names, direction):
-    """A weak direction in words: the parameters it mixes and what to record."""
-    big = [names[i] for i in np.argsort(-np.abs(direction)) if abs(direction[i]) > 0.2]
-    pretty = {"m": "the mass", **{f"c_{n}": f"the offset's {n}" for n in _OFFSET_NAMES},
-              **{f"rho_{a}": f"the centre of mass along {a}" for a in _AXES},
-              "gravity_1": "gravity's direction", "gravity_2": "gravity's direction",
-              **{f"mount_{a}": f"the mounting about {a}" for a in _AXES}}
-    parts = list(dict.fromkeys(pretty.get(n, n) for n in big))
-    verb = "is not determined" if len(parts) == 1 else "are not separated"
-    return (f"{' and '.join(parts)} {verb} by these poses: they turn gravity through too few directions in the "
-            "sensor frame; tilt the tool about another axis (see the next poses)")
-
-
 def _determined(out, std):
     return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_RHO)
                 and np.all(np.isfinite(std)))
@@ -583,71 +617,3 @@ def _refuse_untilted(name, R, g, what):
                           f"degrees of one direction; {MIN_CONE_DEG:g} needed, tens of degrees useful): {what} "
                           "cannot be separated; hold the tool in at least four attitudes tilted 30 degrees or "
                           "more about two different horizontal axes")
-
-
-def _cone(a):
-    """Half-angle of the cone of unit directions ``a`` around their mean, degrees (180 when they surround it)."""
-    u = a / np.linalg.norm(a, axis=1)[:, None]
-    mean = u.mean(axis=0)
-    if np.linalg.norm(mean) < 1e-9:
-        return 180.0
-    mean /= np.linalg.norm(mean)
-    return float(np.degrees(np.max(np.arccos(np.clip(u @ mean, -1.0, 1.0)))))
-
-
-def _candidates(R):
-    """Poses the user can reach: turns of 45, 90, 180 degrees about a sensor axis from each pose of the table.
-
-    Returns
-    -------
-    list of (str, ndarray (3, 3))
-        Each described in words and as the tracked frame's attitude.
-    """
-    out = []
-    for k, Rk in enumerate(R):
-        for i, axis in enumerate(_AXES):
-            for angle in _TURNS:
-                turn = _exp(np.radians(angle) * np.eye(3)[i])
-                out.append((f"from pose {k + 1}, turn the tool {angle:+g} degrees about its {axis} axis", Rk @ turn))
-    return out
-
-
-def _relative_std(cov, theta):
-    """Each parameter's one-sigma uncertainty on a common scale: the mass relative to it, the centre of mass
-    in mm, the offset relative to the weight's wrench, the angles in degrees."""
-    std = np.sqrt(np.maximum(np.diag(cov), 0))
-    scale = np.ones(len(theta))
-    scale[0] = DETERMINED_REL * abs(theta[0])
-    scale[1:4] = DETERMINED_RHO
-    scale[4:10] = max(abs(theta[0]) * 9.81, 1e-9) * 1e-3 * np.r_[np.full(3, 0.1), np.ones(3)]
-    scale[10:] = np.radians(0.2)
-    return std / scale
-
-
-def _next_poses(model, theta, information, weights, s2, R, count=3):
-    """The candidate poses that most reduce the largest scaled uncertainty (:func:`_relative_std`), best first."""
-    current = _relative_std(_covariance(information, s2)[0], theta)
-    worst_now = float(np.max(current))
-    scored = []
-    for words, Rc in _candidates(R):
-        J = model.jacobian(theta, R=Rc[None]) * weights[:, None]          # the pose's six weighted rows
-        cov, _ = _covariance(information + J.T @ J, s2)
-        worst = float(np.max(_relative_std(cov, theta)))
-        scored.append((worst, words))
-    scored.sort(key=lambda item: item[0])
-    best = []
-    for worst, words in scored:
-        if words in (w for _, w in best):
-            continue
-        if np.isfinite(worst_now) and worst >= 0.99 * worst_now:
-            break
-        best.append((worst, words))
-        if len(best) == count:
-            break
-    return [f"{words} (the largest uncertainty {_ratio(worst_now, worst)})" for worst, words in best]
-
-
-def _ratio(before, after):
-    if not np.isfinite(before):
-        return "becomes finite" if np.isfinite(after) else "stays undetermined"
-    return f"falls to {after / before:.0%} of what it is"

@@ -13,6 +13,10 @@ The joint columns are named ``q1 .. qn`` in the URDF's joint order (pinocchio's
 ``pip install "fmscal[robot]"``.
 """
 
+import os
+import sys
+from contextlib import contextmanager
+
 import numpy as np
 
 from .errors import FmscalError
@@ -22,6 +26,27 @@ __all__ = ["RobotKinematics", "joint_columns", "read_joint_data"]
 
 _WRENCH = ("tx", "ty", "tz", "fx", "fy", "fz")
 _OTHERS = ("t", *_WRENCH)                   # the columns of a joint log that are not joints
+
+
+@contextmanager
+def _quiet_stderr():
+    """File descriptor 2 on the null device for the block, restored after it (as it was, even on an error).
+
+    urdfdom, under pinocchio, writes its parse errors to the C library's
+    stderr before pinocchio raises; the error the caller reports says the same
+    in one line.
+    """
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+            try:
+                yield
+            finally:
+                os.dup2(saved, 2)
+    finally:
+        os.close(saved)
 
 
 class RobotKinematics:
@@ -54,7 +79,8 @@ class RobotKinematics:
         self._pin = pin
         urdf = _as_path(urdf, "URDF")
         try:
-            self.model = pin.buildModelFromUrdf(str(urdf))
+            with _quiet_stderr():                               # urdfdom prints its own two lines there
+                self.model = pin.buildModelFromUrdf(str(urdf))
         except Exception as err:                              # pinocchio raises plain ValueError/RuntimeError
             raise FmscalError(f"{urdf}: not a URDF pinocchio can read ({str(err).splitlines()[0][:120]})") from None
         if not self.model.existFrame(str(frame)):

@@ -127,6 +127,10 @@ class SpatialScenario:
         Relative change of each channel's gain over the run (a sensor
         warming up): ``S(t) = S (I + drift diag(d) t / T)``, ``d`` a random
         sign per channel, in 1 s steps; 0: ``S`` constant.
+    targets : tuple of (yaw, pitch, roll), optional
+        For ``"static"``: the held attitudes as ZYX angles, rad, in turn
+        (the first from the start, each next one reached 8 s later; the last
+        held to the end); default drawn from ``angle_amplitude``.
     """
 
     name: str
@@ -148,6 +152,7 @@ class SpatialScenario:
     offset_sd: tuple = (0.05, 1.0)
     gravity: tuple = GRAVITY
     drift: float = 0.0
+    targets: tuple = None
 
     def with_(self, **changes):
         """A copy with some settings changed (duration, dt, ...)."""
@@ -173,8 +178,12 @@ class SpatialScenario:
                                     for f in ((0.12, 0.27, 0.41), (0.14, 0.33, 0.45), (0.16, 0.25, 0.39))])
         elif self.motion == "static":
             hold, move = 3.0, 5.0
-            k = int(np.ceil(self.duration / (hold + move))) + 1
-            targets = np.cumsum(rng.uniform(-1, 1, (k, 3)) * np.asarray(self.angle_amplitude), axis=0)
+            if self.targets is None:
+                k = int(np.ceil(self.duration / (hold + move))) + 1
+                targets = np.cumsum(rng.uniform(-1, 1, (k, 3)) * np.asarray(self.angle_amplitude), axis=0)
+            else:
+                targets = np.asarray(self.targets, dtype=float).reshape(-1, 3)
+                k = len(targets)
             angles = [targets[0, j] + sum((targets[i, j] - targets[i - 1, j]) *
                                           _smoothstep((t - i * (hold + move) + move) / move) for i in range(1, k))
                       for j in range(3)]

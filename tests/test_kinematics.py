@@ -1,6 +1,7 @@
 """Poses from joint angles by pinocchio's forward kinematics, on a real robot's URDF (issue 28)."""
 
 import json
+import os
 import sysconfig
 from pathlib import Path
 
@@ -142,3 +143,19 @@ def test_calibrate_takes_a_table_of_joint_angles(ur5, tmp_path, capsys):
     assert np.all(np.abs(b - OFFSET) < 4 * b_std) and np.all(b_std < 0.05)
     assert main(["calibrate", str(path), "--urdf", str(_ur5()), *payload]) == 2
     assert "--urdf and --frame go together" in capsys.readouterr().err
+
+
+def test_a_malformed_urdf_is_our_one_line_and_nothing_from_urdfdom(tmp_path, capfd):
+    """urdfdom prints two C-level lines to file descriptor 2 on a malformed URDF; the command's stderr holds only its
+    own line, and file descriptor 2 works after it."""
+    bad = tmp_path / "bad.urdf"
+    bad.write_text('<robot name="x"><link name="a"></robot>\n')
+    path = tmp_path / "joints.csv"
+    path.write_text("q1,q2,tx,ty,tz,fx,fy,fz\n" + "0.1,0.2,0,0,0,0,0,1\n" * 5)
+    capfd.readouterr()
+    assert main(["identify-payload", str(path), "--urdf", str(bad), "--frame", "tool0"]) == 2
+    err = capfd.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "not a URDF pinocchio can read" in err, err
+    assert "XML_ERROR" not in err and "model.cpp" not in err
+    os.write(2, b"after\n")
+    assert capfd.readouterr().err == "after\n"

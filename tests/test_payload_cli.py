@@ -13,7 +13,7 @@ from fmscal.plant.spatial_scenarios import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 KEYS = {"mass", "mass_std", "rho", "rho_std", "inertia", "inertia_std", "b", "b_std", "gravity", "mounting",
-        "mounting_deg", "warnings", "converged"}
+        "mounting_deg", "warnings", "converged", "cone_deg", "undetermined", "next_poses"}
 
 
 def _run(capsys, args):
@@ -77,6 +77,8 @@ def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsy
     code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "estimate",
                                    "--mounting", "estimate"])
     assert code == 0 and "gravity in the pose frame" in out and "mounting (sensor axes on the tracked frame)" in out
+    assert "gravity directions covered in the sensor frame: a cone of half-angle" in out
+    assert "next pose: from the attitude at t = " in out
     code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "1", "2"])
     assert code == 2 and "three finite numbers" in err
 
@@ -91,6 +93,7 @@ def test_an_attitude_only_log_through_the_command(tmp_path, capsys):
     fit = json.loads(out)
     assert code == 0 and "held segments" in err and "% of the log" in err
     assert abs(fit["mass"] - TOOL.mass) < 0.012 and fit["inertia"] is None
+    assert KEYS <= set(fit) and fit["cone_deg"] > 10 and fit["next_poses"][0].startswith("from pose ")
 
 
 def test_a_tilted_table_without_gravity_estimate_names_the_flag(tmp_path, capsys):
