@@ -7,7 +7,24 @@ import numpy as np
 from .bag import WRENCH_TYPE, BagError, _numbers
 from .rigid_body import rotation_matrix
 
-__all__ = ["write_bag"]
+__all__ = ["write_bag", "write_tf_bag"]
+
+
+def _header(T, ns, frame_id="world", ros1=False):
+    """A ``std_msgs/Header`` stamped ``ns`` (absolute, ns) in ``frame_id`` (ROS 1's with ``seq`` 0)."""
+    kw = {"stamp": T["builtin_interfaces/msg/Time"](sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000)),
+          "frame_id": frame_id}
+    if ros1:
+        kw["seq"] = 0
+    return T["std_msgs/msg/Header"](**kw)
+
+
+def _wrench(T, header, row):
+    """A ``WrenchStamped`` of one reading ``(tx, ty, tz, fx, fy, fz)``, N m and N."""
+    V = T["geometry_msgs/msg/Vector3"]
+    tx, ty, tz, fx, fy, fz = (float(v) for v in row)
+    return T["geometry_msgs/msg/WrenchStamped"](header=header, wrench=T["geometry_msgs/msg/Wrench"](
+        force=V(x=fx, y=fy, z=fz), torque=V(x=tx, y=ty, z=tz)))
 
 
 def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_topic="/mocap/payload/pose",
@@ -86,24 +103,16 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     offset = np.asarray(_numbers(pose_offset, "pose_offset", 3 if spatial else 2))
     ts = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.ROS2_HUMBLE)
     T = ts.types
-    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
     Vector3, Point = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"]
     Quaternion = T["geometry_msgs/msg/Quaternion"]
     rng = np.random.default_rng(seed)
     stamps = start_time_ns + np.round(log.t * 1e9).astype(np.int64)
 
     def header(ns):
-        kw = {"stamp": Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000)), "frame_id": "world"}
-        if storage == "ros1":
-            kw["seq"] = 0
-        return Header(**kw)
+        return _header(T, ns, ros1=storage == "ros1")
 
     def wrench_msg(ns, row):
-        tx, ty, tz, fx, fy, fz = row if spatial else (0.0, 0.0, row[0], row[1], row[2], 0.0)
-        return T["geometry_msgs/msg/WrenchStamped"](
-            header=header(ns), wrench=T["geometry_msgs/msg/Wrench"](
-                force=Vector3(x=float(fx), y=float(fy), z=float(fz)), torque=Vector3(x=float(tx), y=float(ty),
-                                                                                   z=float(tz))))
+        return _wrench(T, header(ns), row if spatial else (0.0, 0.0, row[0], row[1], row[2], 0.0))
 
     def marker(pose):
         """The tracked frame's position and attitude ``(px, py, pz, q)`` at a log's pose."""
@@ -158,4 +167,90 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         for i in order:
             which, _, msg = messages[i]
             writer.write(conns[which], int(received[i]), serialize(msg, msg.__msgtype__))
+    return path
+
+
+def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wrench", tf_every=1,
+                 start_time_ns=1_700_000_000_000_000_000):
+    """Write a robot's run as a ROS 2 bag of ``/tf``, ``/tf_static`` and a ``WrenchStamped`` topic.
+
+    A robot driver publishes its transform tree: the moving links on ``/tf``
+    (``tf2_msgs/TFMessage``), the fixed ones once on ``/tf_static``; the
+    sensor's driver publishes the reading. Header stamps are
+    ``start_time_ns`` plus ``t``; each message is received 1 ms after its
+    stamp.
+
+    Parameters
+    ----------
+    path : str or Path
+        A new folder (a ROS 2 bag, sqlite3); never overwritten.
+    t : array_like, shape (N,)
+        Sample times, s, increasing.
+    wrench : array_like, shape (N, 6)
+        The reading at every sample, ``(tx, ty, tz, fx, fy, fz)``, N m and N.
+    links : sequence of (str, str, scipy.spatial.transform.Rotation, array_like)
+        The moving links ``(parent, child, R, p)``: ``R`` (N rotations) and
+        ``p`` (N, 3), m, the child's attitude and origin in the parent's frame
+        at every sample.
+    static : sequence of (str, str, scipy.spatial.transform.Rotation, array_like)
+        The fixed links ``(parent, child, R, p)`` (one rotation, ``p`` (3,)).
+    wrench_topic : str
+    tf_every : int
+        ``/tf`` is published at every ``tf_every``-th sample (from the first).
+    start_time_ns : int
+        Absolute time of ``t = 0``, ns.
+
+    Returns
+    -------
+    pathlib.Path
+        The bag written.
+
+    Raises
+    ------
+    BagError
+        The path exists, or the arrays' shapes do not match ``t``.
+    """
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    if path.exists():
+        raise BagError(f"{path}: exists already; a bag is never overwritten")
+    t = np.asarray(t, dtype=float)
+    wrench = np.asarray(wrench, dtype=float)
+    if t.ndim != 1 or wrench.shape != (len(t), 6):
+        raise BagError(f"wrench must have shape (len(t), 6) = ({len(t)}, 6); got {wrench.shape}")
+    for parent, child, R, p in links:
+        if len(R) != len(t) or np.shape(p) != (len(t), 3):
+            raise BagError(f"the moving link {parent} -> {child} needs {len(t)} rotations and positions of shape "
+                           f"({len(t)}, 3); got {len(R)} and {np.shape(p)}")
+    if not (isinstance(tf_every, (int, np.integer)) and tf_every >= 1):
+        raise BagError(f"tf_every must be a positive integer; got {tf_every!r}")
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    V = T["geometry_msgs/msg/Vector3"]
+
+    def transform(ns, parent, child, R, p):
+        x, y, z, w = (float(v) for v in R.as_quat())
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=_header(T, ns, parent), child_frame_id=child, transform=T["geometry_msgs/msg/Transform"](
+                translation=V(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                rotation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)))
+
+    def write(connection, ns, msg):
+        writer.write(connection, ns + 1_000_000, ts.serialize_cdr(msg, msg.__msgtype__))
+
+    TF = T["tf2_msgs/msg/TFMessage"]
+    stamps = start_time_ns + np.round(t * 1e9).astype(np.int64)
+    with Writer(path, version=8) as writer:
+        wc = writer.add_connection(wrench_topic, WRENCH_TYPE, typestore=ts)
+        tc = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ts)
+        if len(static):
+            sc = writer.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts)
+            write(sc, int(stamps[0]), TF(transforms=[transform(int(stamps[0]), *link) for link in static]))
+        for k, ns in enumerate(int(s) for s in stamps):
+            write(wc, ns, _wrench(T, _header(T, ns), wrench[k]))
+            if k % tf_every == 0:
+                write(tc, ns, TF(transforms=[transform(ns, parent, child, R[k], p[k])
+                                             for parent, child, R, p in links]))
     return path
