@@ -18,6 +18,8 @@ import sys
 
 import numpy as np
 
+from fmscal.plant.rigid_body import _inertia_matrix
+
 from .cli_common import CliError, strict
 from .cli_spatial import _NAMES, _spatial_truth, joint_data
 
@@ -151,6 +153,7 @@ def _identify_log(args, path, log, S, gravity, estimate_gravity):
             f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
     _print_rotations(fit)
+    _print_calibrate_flags(fit)
     _print_coverage(fit, fit.undetermined)
     print(f"converged: {'yes' if fit.converged else 'no'}")
     if truth is not None:
@@ -174,6 +177,31 @@ def _print_rotations(fit):
         about = " about " + " ".join(f"{v:+.4f}" for v in fit.mounting_axis)
         print(f"mounting (sensor axes on the tracked frame): {fit.mounting_deg:.3f} +- {fit.mounting_std_deg:.2g} "
               f"degrees{about}; matrix rows " + "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in fit.mounting))
+
+
+def _print_calibrate_flags(fit):
+    """Where gravity or the mounting was estimated on a log, the payload as ``fmscal calibrate`` takes it.
+
+    ``calibrate`` estimates ``S`` in full, which absorbs the mounting, so it
+    works in the axes of the frame the poses track: the centre of mass
+    ``M rho`` and the inertia ``M I M^T`` there (``M`` the mounting, sensor
+    axes to the tracked frame's), and the estimated gravity. Given in the
+    sensor's own axes they would be wrong by the mounting's turn, and ``S``
+    would absorb that too.
+    """
+    if fit.gravity is None and fit.mounting is None:
+        return
+    M = np.eye(3) if fit.mounting is None else np.asarray(fit.mounting)
+    flags = f"--mass {fit.mass:.6g} --rho {' '.join(f'{v:.6g}' for v in M @ np.asarray(fit.rho))}"
+    if fit.inertia is not None:
+        inertia = M @ _inertia_matrix(fit.inertia) @ M.T
+        entries = (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2])
+        flags += f" --inertia {' '.join(f'{v:.6g}' for v in entries)}"
+    if fit.gravity is not None:
+        flags += f" --gravity {' '.join(f'{v:.6g}' for v in fit.gravity)}"
+    if fit.inertia is None:
+        flags += " (and --inertia, which this log did not determine, in the same axes)"
+    print(f"for fmscal calibrate (the tracked frame's axes): {flags}")
 
 
 def _identify_table(args, path, table, S, gravity, estimate_gravity):

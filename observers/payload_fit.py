@@ -289,7 +289,7 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     assumed, a log whose reading changes much between samples opens the
     check less often); the warning is :func:`fmscal.observers.static_fit.rotation_warning`'s.
     """
-    from .static_fit import TILT_RATIO, rotation_warning
+    from .static_fit import TILT_RATIO, both_rotations_warning, rotation_warning
     force = y[:, 3:]
     noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
@@ -309,6 +309,9 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     if not estimate_mounting and (free := refit(estimate_gravity, True)) is not None:
         mounted = (free[1], free[0].mounting_deg, free[0].mounting_std_deg)
     warning = rotation_warning(fixed, gravity, tilted, mounted)
+    if warning is None and not (estimate_gravity or estimate_mounting) and (free := refit(True, True)) is not None:
+        warning = both_rotations_warning(fixed, free[1], gravity, free[0].gravity, free[0].gravity_std_deg,
+                                         free[0].mounting_deg, free[0].mounting_std_deg)
     if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
         fit.warnings.insert(0, warning)
         fit.converged = False

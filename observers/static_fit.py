@@ -54,7 +54,7 @@ from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
-           "rotation_warning", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
+           "rotation_warning", "both_rotations_warning", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
@@ -404,7 +404,14 @@ def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
         if rms is not None:
             k = 12 if estimate_gravity else 10
             mounted = (rms, _angle_deg(parts[4]), float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3))))
-    return rotation_warning(_force_rms(residual), g, tilted, mounted)
+    warning = rotation_warning(_force_rms(residual), g, tilted, mounted)
+    if warning is None and not (estimate_gravity or estimate_mounting):
+        rms, parts, std = refit(True, True)
+        if rms is not None:
+            warning = both_rotations_warning(
+                _force_rms(residual), rms, g, parts[3], float(np.degrees(np.sqrt((std[10] ** 2 + std[11] ** 2) / 2))),
+                _angle_deg(parts[4]), float(np.degrees(np.sqrt(np.sum(std[12:15] ** 2) / 3))))
+    return warning
 
 
 def _force_rms(residual):
@@ -464,6 +471,43 @@ def mounting_warning(fixed_rms, free_rms, angle_deg, std_deg):
     return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with the sensor square "
             f"on the tracked frame; the data are explained with the sensor turned {angle_deg:.2g} degrees on it (+- "
             f"{std_deg:.1g}): add --mounting estimate (a sensor bolted askew)")
+
+
+def both_rotations_warning(fixed_rms, free_rms, gravity, direction, gravity_std_deg, angle_deg, mounting_std_deg):
+    """The warning for data that neither gravity's tilt nor the mounting explains alone, and both together do.
+
+    A tilted base and a sensor bolted askew at once: each rotation alone
+    leaves the other's residuals, so neither single check fires
+    (:func:`rotation_warning`). The fit with both estimated explains the
+    data when its force residuals fall by more than :data:`TILT_RATIO` and
+    both angles are beyond :data:`TILT_SIGMAS` standard deviations.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms of the fit as asked and with both rotations estimated, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    direction : array_like, shape (3,)
+        Gravity's direction as estimated, pose frame.
+    gravity_std_deg, angle_deg, mounting_std_deg : float
+        The direction's one-sigma uncertainty, the mounting's angle and its one-sigma uncertainty, degrees.
+
+    Returns
+    -------
+    str or None
+    """
+    given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
+    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    tilt = float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0))))
+    if not (_explains(fixed_rms, free_rms, tilt, gravity_std_deg)
+            and _explains(fixed_rms, free_rms, angle_deg, mounting_std_deg)):
+        return None
+    along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with gravity along "
+            f"{along} and the sensor square on the tracked frame; the data are explained with gravity tilted "
+            f"{tilt:.2g} degrees (+- {gravity_std_deg:.1g}) and the sensor turned {angle_deg:.2g} degrees (+- "
+            f"{mounting_std_deg:.1g}): add --gravity estimate --mounting estimate")
 
 
 def _explains(fixed_rms, free_rms, angle_deg, std_deg):

@@ -89,6 +89,26 @@ def test_a_sensor_bolted_askew_names_the_mounting_not_gravity(seed):
     assert not any("--mounting estimate" in w or "--gravity estimate" in w for w in free.warnings)
 
 
+def test_a_tilted_base_and_a_sensor_askew_together_name_both_flags():
+    """A base tilted 4 degrees and the sensor turned 3 degrees on the tracked frame: neither rotation alone explains
+    the residuals (each leaves the other's), both together do: the one line names --gravity estimate --mounting
+    estimate with both angles found, and the fit is not converged; with both estimated it is silent."""
+    from scipy.spatial.transform import Rotation
+
+    from fmscal.observers.static_fit import _exp
+    tilted = tuple(_exp(np.radians(4.0) * np.array([1.0, 0.0, 0.0])) @ np.array([0.0, 0.0, -9.81]))
+    mount = _exp(np.radians(3.0) * np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5]))
+    log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=8.0, gravity=tilted).generate(0)
+    sensor = Rotation.from_quat(np.roll(log.pose[:, :4], -1, axis=1))
+    log.pose[:, :4] = np.roll((sensor * Rotation.from_matrix(mount.T)).as_quat(), 1, axis=1)
+    fit = identify_payload(log, S=truth.S_at(0.0))
+    assert not fit.converged and "--gravity estimate --mounting estimate" in fit.warnings[0], fit.warnings
+    assert float(re.search(r"gravity tilted ([\d.]+) degrees", fit.warnings[0]).group(1)) == pytest.approx(4.0, abs=0.2)
+    assert float(re.search(r"turned ([\d.]+) degrees", fit.warnings[0]).group(1)) == pytest.approx(3.0, abs=0.2)
+    free = identify_payload(log, S=truth.S_at(0.0), estimate_gravity=True, estimate_mounting=True)
+    assert not any("--mounting estimate" in w or "--gravity estimate" in w for w in free.warnings)
+
+
 def test_where_both_rotations_explain_the_lower_residuals_are_named():
     """rotation_warning's choice: each explains (residuals 10 and 20 times lower, angles far beyond 5 sigmas); the
     better one is named alone, either way round; neither explains: None."""

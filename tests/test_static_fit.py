@@ -188,6 +188,21 @@ def test_a_sensor_two_degrees_askew_is_named_on_every_seed(twenty_seeds):
     assert not any("estimate" in w for fit in twenty_seeds for w in fit.warnings)
 
 
+def test_a_tilted_base_and_a_sensor_askew_together_name_both_flags():
+    """Twenty-four poses on a base tilted 4 degrees, the sensor turned 3 degrees on the tracked frame: the one line
+    names --gravity estimate --mounting estimate with both angles, and with both estimated the fit is silent."""
+    tilt = _exp(np.radians(4.0) * np.array([1.0, 0.3, 0.0]) / np.linalg.norm([1.0, 0.3, 0.0]))
+    mount = _exp(np.radians(3.0) * np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5]))
+    table = simulate_table(TOOL, n=24, seed=0, gravity=tilt @ G, mounting=mount, offset=OFFSET)
+    fit = fit_static(table)
+    told = [w for w in fit.warnings if "estimate" in w]
+    assert not fit.converged and len(told) == 1 and "--gravity estimate --mounting estimate" in told[0], fit.warnings
+    assert float(re.search(r"gravity tilted ([\d.]+) degrees", told[0]).group(1)) == pytest.approx(4.0, abs=0.2)
+    assert float(re.search(r"turned ([\d.]+) degrees", told[0]).group(1)) == pytest.approx(3.0, abs=0.2)
+    free = fit_static(table, estimate_gravity=True, estimate_mounting=True)
+    assert not any("estimate" in w for w in free.warnings)
+
+
 def _about(axis, degrees):
     """Unit quaternions (scalar first) of turns by ``degrees`` about ``axis``."""
     half = np.radians(np.asarray(degrees, dtype=float)) / 2
