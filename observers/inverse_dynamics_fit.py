@@ -31,6 +31,7 @@ from fmscal.plant.errors import FmscalError
 from fmscal.plant.noise import estimate_noise
 from fmscal.plant.rigid_body import GRAVITY, SpatialPayload
 
+from .cluster_covariance import block_length, few_blocks
 from .payload_fit import regressor
 
 __all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "UNDETERMINED_STD",
@@ -127,7 +128,7 @@ def describe_direction(direction, held=False):
             "through more directions in the sensor frame, or accelerate the payload")
 
 
-def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, eiv=True):
+def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=None, eiv=True):
     """Estimate ``S`` and the offset of a spatial log by smoothed inverse dynamics and least squares.
 
     Parameters
@@ -140,8 +141,10 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
         Gravity in the pose frame, m/s^2.
     window : float
         Smoothing window of the pose differentiation, s.
-    block : float
-        Length of the blocks of the robust covariance, s.
+    block : float, optional
+        Length of the blocks of the robust covariance, s. None (default):
+        five correlation times of the residuals of a first fit, not shorter
+        than ``window`` (eqs. (U1), (U2) of :mod:`fmscal.observers.cluster_covariance`).
     eiv : bool
         Compensate the errors in variables: the reading is the regressor and
         its noise shrinks ``S`` along the directions the log barely excites
@@ -158,7 +161,8 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     if not isinstance(payload, SpatialPayload):
         raise FmscalError(f"fit_inverse_dynamics takes a SpatialPayload; got {type(payload).__name__}")
     gravity = as_finite_array(gravity, (3,), "gravity")
-    block = as_positive_scalar(block, "block")
+    if block is not None:
+        block = as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     w = regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], gravity) @ payload.inertial_parameters  # (N, 6)
@@ -168,8 +172,16 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=1.0, e
     if len(dead):
         raise FmscalError(f"{log.name}: the reading {', '.join(READING_NAMES[j] for j in dead)} does not move beyond "
                           "its noise: a stuck or dead channel, or a log that never loads it; S cannot be estimated")
-    blocks = ((log.t[trim] - log.t[trim][0]) // block).astype(int)
-    return fit_readings(w, log.w_hat[trim], blocks, wrench_sd if eiv else None)
+    t = log.t[trim]
+    if block is None:                                       # eq. (U2) on the residuals of a first fit
+        first = fit_readings(w, log.w_hat[trim], None, wrench_sd if eiv else None)
+        block = block_length(w - log.w_hat[trim] @ first.S_hat.T - first.c, log.dt, window)
+    blocks = ((t - t[0]) // block).astype(int)
+    fit = fit_readings(w, log.w_hat[trim], blocks, wrench_sd if eiv else None)
+    warning = few_blocks(blocks, block)
+    if warning is not None:
+        fit.warnings.append(warning)
+    return fit
 
 
 def fit_readings(w, w_hat, blocks=None, wrench_sd=None, prior=None, held=False):
@@ -187,7 +199,8 @@ def fit_readings(w, w_hat, blocks=None, wrench_sd=None, prior=None, held=False):
         The readings (sign-corrected), N m and N.
     blocks : ndarray of int, shape (N,), optional
         Each sample's block of time: the covariance is the cluster-robust
-        sandwich over them. None: the samples are independent (the rows of a
+        sandwich over them, with the small-sample factor of eq. (U3)
+        (:mod:`fmscal.observers.cluster_covariance`). None: the samples are independent (the rows of a
         pose table), the covariance is ``s_i^2 (X^T X)^-1`` for row ``i``
         with ``s_i^2`` its residual variance over ``N - k`` degrees of
         freedom (``k`` the directions fitted).
@@ -237,7 +250,9 @@ def fit_readings(w, w_hat, blocks=None, wrench_sd=None, prior=None, held=False):
         # each sample's share of the estimating equation X^T e + Sigma theta = 0
         np.add.at(scores, blocks, Xs[:, :, None] * e[:, None, :] + (sigma @ theta)[None])
         scores = scores.transpose(0, 2, 1).reshape(len(scores), 42)                      # row order of [S|c]
-        cov_scaled = bread @ (scores.T @ scores) @ bread
+        g = int(np.count_nonzero(np.bincount(blocks)))
+        n, k = len(e), int(kept.sum())            # the small-sample factor of eq. (U3), cluster_covariance
+        cov_scaled = g / max(g - 1, 1) * (n - 1) / max(n - k, 1) * bread @ (scores.T @ scores) @ bread
     unscale = np.tile(1.0 / np.maximum(spread, 1e-300), 6)
     cov = cov_scaled * np.outer(unscale, unscale)
     S_aug = (theta / np.maximum(spread, 1e-300)[:, None]).T                              # (6, 7)

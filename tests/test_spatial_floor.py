@@ -29,7 +29,7 @@ def twenty_arms():
     """The floor and the reference fit on 20 seeds of a 20 s ``spatial-arm``: z-scores and E."""
     scenario = ARM.with_(duration=20.0)
     model = SpatialModel(scenario.payload, scenario.gravity)
-    z_S, z_b, E_floor, E_ref = [], [], [], []
+    z_S, z_b, E_floor, E_ref, z_ref = [], [], [], [], []
     for seed in SEEDS:
         log, truth, _ = scenario.generate(seed)
         S = truth.S_at(log.t[-1])
@@ -40,22 +40,33 @@ def twenty_arms():
         scale = np.std(log.w_hat, axis=0)
         E_floor.append([_E(fit.S_hat, S), _E(fit.S_hat, S, scale)])
         E_ref.append([_E(ref.S_hat, S), _E(ref.S_hat, S, scale)])
-    return np.array(z_S), np.array(z_b), np.array(E_floor), np.array(E_ref)
+        z_ref.append(np.r_[((ref.S_hat - S) / ref.S_std).ravel(), (ref.b - truth.offset) / ref.b_std])
+    return np.array(z_S), np.array(z_b), np.array(E_floor), np.array(E_ref), np.array(z_ref)
 
 
 @pytest.mark.slow
 def test_the_floor_uncertainty_is_honest_over_20_seeds(twenty_arms):
-    z_S, z_b, _, _ = twenty_arms
+    z_S, z_b, _, _, _ = twenty_arms
     # measured: 1.01 for S, 1.12 for the offset
     assert 0.8 <= z_S.std() <= 1.25 and abs(z_S.mean()) < 0.15
     assert 0.8 <= z_b.std() <= 1.25 and abs(z_b.mean()) < 0.4
 
 
 @pytest.mark.slow
+def test_the_reference_fits_uncertainty_is_honest_over_20_seeds(twenty_arms):
+    """Least squares' S_std and b_std (cluster-robust over blocks of five correlation times of its residuals, with
+    the small-sample factor): the z-scores' rms measured 1.09 for S and 1.18 for b (1.18 and 1.45 with fixed 1 s
+    blocks; at 10 s 1.12 and 1.04, against 1.41 and 1.51)."""
+    z_ref = twenty_arms[4]
+    rms_S, rms_b = np.sqrt(np.mean(z_ref[:, :36] ** 2)), np.sqrt(np.mean(z_ref[:, 36:] ** 2))
+    assert 0.8 <= rms_S <= 1.25 and 0.8 <= rms_b <= 1.4, (rms_S, rms_b)
+
+
+@pytest.mark.slow
 def test_the_floor_is_not_beaten_by_the_reference_fit(twenty_arms):
     """Median over 20 seeds: the floor ahead, in SI units (measured 0.93x) and each reading component in its
     own scale (0.71x); seed by seed the reference is luckier on a few, by at most 1.17x (measured)."""
-    _, _, E_floor, E_ref = twenty_arms
+    _, _, E_floor, E_ref, _ = twenty_arms
     ratio = np.median(E_floor, axis=0) / np.median(E_ref, axis=0)
     assert 0.3 < ratio[0] <= 1.0 and 0.3 < ratio[1] <= 0.85, ratio
     assert np.all(E_floor <= 1.2 * E_ref), np.c_[E_floor, E_ref]
