@@ -56,7 +56,7 @@ def test_the_floor_uncertainty_is_honest_over_20_seeds(twenty_arms):
 def test_the_reference_fits_uncertainty_is_honest_over_20_seeds(twenty_arms):
     """Least squares' S_std and b_std (cluster-robust over blocks of five correlation times of its residuals, with
     the small-sample factor): the z-scores' rms measured 1.09 for S and 1.18 for b (1.18 and 1.45 with fixed 1 s
-    blocks; at 10 s 1.12 and 1.04, against 1.41 and 1.51)."""
+    blocks and no small-sample factor)."""
     z_ref = twenty_arms[4]
     rms_S, rms_b = np.sqrt(np.mean(z_ref[:, :36] ** 2)), np.sqrt(np.mean(z_ref[:, 36:] ** 2))
     assert 0.8 <= rms_S <= 1.25 and 0.8 <= rms_b <= 1.4, (rms_S, rms_b)
