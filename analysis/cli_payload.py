@@ -179,27 +179,36 @@ def _print_rotations(fit):
               f"degrees{about}; matrix rows " + "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in fit.mounting))
 
 
-def _print_calibrate_flags(fit):
-    """Where gravity or the mounting was estimated on a log, the payload as ``fmscal calibrate`` takes it.
+def _print_calibrate_flags(fit, table=False):
+    """Where gravity or the mounting was estimated, the payload as ``fmscal calibrate`` takes it.
 
     ``calibrate`` estimates ``S`` in full, which absorbs the mounting, so it
     works in the axes of the frame the poses track: the centre of mass
     ``M rho`` and the inertia ``M I M^T`` there (``M`` the mounting, sensor
     axes to the tracked frame's), and the estimated gravity. Given in the
     sensor's own axes they would be wrong by the mounting's turn, and ``S``
-    would absorb that too.
+    would absorb that too. Only where the mass and the centre of mass are
+    determined (each within :data:`fmscal.observers.payload_fit.DETERMINED`
+    of the mass, and of the centre of mass's distance); a table's
+    ``calibrate`` takes no inertia.
     """
+    from fmscal.observers.payload_fit import DETERMINED
     if fit.gravity is None and fit.mounting is None:
+        return
+    rho_scale = max(float(np.linalg.norm(fit.rho)), 1e-3)
+    if not (fit.mass_std < DETERMINED * abs(fit.mass) and np.all(np.asarray(fit.rho_std) < DETERMINED * rho_scale)):
+        print("for fmscal calibrate: no payload to pass on, the mass and the centre of mass are not determined")
         return
     M = np.eye(3) if fit.mounting is None else np.asarray(fit.mounting)
     flags = f"--mass {fit.mass:.6g} --rho {' '.join(f'{v:.6g}' for v in M @ np.asarray(fit.rho))}"
-    if fit.inertia is not None:
-        inertia = M @ _inertia_matrix(fit.inertia) @ M.T
+    known = None if table else fit.inertia                  # held poses never give the inertia
+    if known is not None:
+        inertia = M @ _inertia_matrix(known) @ M.T
         entries = (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2])
         flags += f" --inertia {' '.join(f'{v:.6g}' for v in entries)}"
     if fit.gravity is not None:
         flags += f" --gravity {' '.join(f'{v:.6g}' for v in fit.gravity)}"
-    if fit.inertia is None:
+    if known is None and not table:
         flags += " (and --inertia, which this log did not determine, in the same axes)"
     print(f"for fmscal calibrate (the tracked frame's axes): {flags}")
 
@@ -221,6 +230,7 @@ def _identify_table(args, path, table, S, gravity, estimate_gravity):
     print("inertia: not determined by held poses (it needs angular acceleration)")
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
     _print_rotations(fit)
+    _print_calibrate_flags(fit, table=True)
     _print_coverage(fit)
     print(f"converged: {'yes' if fit.converged else 'no'}")
 

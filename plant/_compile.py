@@ -152,16 +152,27 @@ def compile_functions(funs):
 def _build_lock(path):
     """Hold an exclusive lock on ``path`` (POSIX ``flock``): parallel processes (test workers, a sweep's workers)
     that need the same library on a fresh machine build it once, the others wait for it. Without ``fcntl``
-    (Windows) no lock: each builds its own copy and the atomic rename keeps the cache whole."""
+    (Windows), or where the lock cannot be taken (a file system without locks, a lock file another user
+    owns), no lock: each builds its own copy and the atomic rename keeps the cache whole."""
     if fcntl is None:
         yield
         return
-    with open(path, "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
+    try:
+        handle = open(path, "a")
+    except OSError:                       # a lock file another user owns, a read-only cache
+        handle = None
+    if handle is not None:
         try:
-            yield
-        finally:
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        except OSError:                   # a file system without locks (NFS without lockd)
+            handle.close()
+            handle = None
+    try:
+        yield                             # unlocked where no lock was taken: the atomic rename keeps the cache whole
+    finally:
+        if handle is not None:
             fcntl.flock(handle, fcntl.LOCK_UN)
+            handle.close()
 
 
 def _build(cc, flags, source, name, directory, library):

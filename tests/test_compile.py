@@ -62,6 +62,19 @@ def test_workers_that_need_the_same_library_build_it_once(tmp_path, monkeypatch)
     assert len(list(tmp_path.glob("built_once_*.so"))) == 1
 
 
+@pytest.mark.skipif(_compile.compiler() is None, reason="no C compiler on this machine")
+def test_a_lock_that_cannot_be_taken_builds_unlocked(tmp_path, monkeypatch):
+    """A file system without locks (flock raises, as on NFS without lockd): the library is built and used, not
+    left to casadi's virtual machine."""
+    def no_locks(handle, operation):
+        raise OSError(37, "No locks available")
+    monkeypatch.setenv("FMSCAL_CACHE", str(tmp_path))
+    monkeypatch.setattr(_compile.fcntl, "flock", no_locks)
+    x = ca.SX.sym("x", 2)
+    compiled = compile_function(ca.Function("built_unlocked", [x], [x * 5.0]))
+    assert compiled.class_name() == "External"
+
+
 def test_a_failing_compiler_falls_back_with_one_warning(tmp_path, monkeypatch):
     monkeypatch.setenv("FMSCAL_COMPILER", "false")          # exits 1: a broken toolchain
     monkeypatch.setenv("FMSCAL_CACHE", str(tmp_path))

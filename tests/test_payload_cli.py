@@ -49,6 +49,10 @@ def test_a_tilted_base_and_a_bolted_askew_sensor_in_one_table(tmp_path, capsys):
     assert error < 0.3 and fit["mounting_deg"] == pytest.approx(5.0, abs=0.3)
     code, out, err = _run(capsys, ["identify-payload", str(path), "--gravity", "estimate", "--mounting", "estimate"])
     assert code == 0 and "gravity in the pose frame" in out and "mounting" in out and "next pose:" in out
+    line = next(x for x in out.splitlines() if x.startswith("for fmscal calibrate (the tracked frame's axes): "))
+    numbers = _flags(line)                      # a table's calibrate takes no inertia
+    assert "--inertia" not in line and set(numbers) == {"--mass", "--rho", "--gravity"}
+    np.testing.assert_allclose(numbers["--rho"], mount @ TOOL.rho, atol=3e-4)
 
 
 def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsys):
@@ -106,8 +110,8 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
     from fmscal.analysis.cli_payload import _print_calibrate_flags
     from fmscal.observers.static_fit import _exp
     M = _exp(np.radians(30.0) * np.array([0.0, 0.0, 1.0]))
-    fit = SimpleNamespace(mass=2.0, rho=[0.1, 0.0, 0.05], inertia=[0.01, 0.02, 0.03, 0.0, 0.0, 0.0],
-                          gravity=None, mounting=M)
+    fit = SimpleNamespace(mass=2.0, mass_std=0.001, rho=[0.1, 0.0, 0.05], rho_std=[1e-4] * 3,
+                          inertia=[0.01, 0.02, 0.03, 0.0, 0.0, 0.0], gravity=None, mounting=M)
     _print_calibrate_flags(fit)
     numbers = _flags(capsys.readouterr().out.strip())
     np.testing.assert_allclose(numbers["--rho"], [0.1 * np.cos(np.pi / 6), 0.1 * np.sin(np.pi / 6), 0.05], atol=1e-6)
@@ -115,6 +119,10 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
     np.testing.assert_allclose(numbers["--inertia"], [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]],
                                atol=1e-7)
     assert "--gravity" not in numbers
+    fit.mass_std = 0.1                                  # 5 % of the mass: not determined, nothing to pass on
+    _print_calibrate_flags(fit)
+    assert capsys.readouterr().out.strip() == ("for fmscal calibrate: no payload to pass on, the mass and the centre "
+                                               "of mass are not determined")
 
 
 def test_an_attitude_only_log_through_the_command(tmp_path, capsys):

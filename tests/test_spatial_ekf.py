@@ -191,9 +191,9 @@ def test_a_diverging_run_is_an_error_not_an_answer(short_log, compiled):
 
 def test_the_ekf_against_the_floor_on_spatial_arm(three_arms):
     """Issue 23's target: within 1.3x of the floor. The tail's median E over the floor's E on the samples that
-    median has seen, measured (20 s): 1.00, 1.08, 0.96 on seeds 0-2 (seeds 3-8: 0.91, 1.12, 1.04, 1.06, 0.99,
-    1.07). Against the floor of the whole log 1.01, 1.14, 1.39: on seed 2 E is still falling at 20 s, the last
-    5 % of the log adding much (the floor's own filtered estimate is 1.35 times its final E at 18 s). With ``Q``
+    median has seen, measured (20 s): 1.00, 1.08, 0.96 on seeds 0-2 (seeds 3-8: benchmarks/online_floor_3d.py).
+    Against the floor of the whole log 1.01, 1.14, 1.39: on seed 2 E is still falling at 20 s, the last 5 % of the
+    log adding much (the floor's own filtered estimate is 1.35 times its final E at 18 s). With ``Q``
     at the running estimate and ``4 Delta`` (before) 1.15, 1.39, 1.47 against the whole log. The estimate ends
     0.09, 0.11, 0.10 of the floor's standard deviations from the floor's (RMS over the entries; 0.56, 0.78, 0.65
     before)."""
