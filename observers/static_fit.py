@@ -439,12 +439,9 @@ def tilt_warning(fixed_rms, free_rms, gravity, direction, std_deg):
         None unless the residuals fall by more than :data:`TILT_RATIO` and
         the tilt is more than :data:`TILT_SIGMAS` standard deviations.
     """
-    given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
-    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
-    tilt = float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0))))
+    tilt, along = _tilt(gravity, direction)
     if not _explains(fixed_rms, free_rms, tilt, std_deg):
         return None
-    along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
     return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with gravity along "
             f"{along}; the data are explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add "
             "--gravity estimate (a tilted or wall-mounted base)")
@@ -497,17 +494,22 @@ def both_rotations_warning(fixed_rms, free_rms, gravity, direction, gravity_std_
     -------
     str or None
     """
-    given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
-    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
-    tilt = float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0))))
+    tilt, along = _tilt(gravity, direction)
     if not (_explains(fixed_rms, free_rms, tilt, gravity_std_deg)
             and _explains(fixed_rms, free_rms, angle_deg, mounting_std_deg)):
         return None
-    along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
     return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with gravity along "
             f"{along} and the sensor square on the tracked frame; the data are explained with gravity tilted "
             f"{tilt:.2g} degrees (+- {gravity_std_deg:.1g}) and the sensor turned {angle_deg:.2g} degrees (+- "
             f"{mounting_std_deg:.1g}): add --gravity estimate --mounting estimate")
+
+
+def _tilt(gravity, direction):
+    """The angle between the gravity given and the direction estimated, degrees, and the given one in words."""
+    given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
+    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
+    return float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0)))), along
 
 
 def _explains(fixed_rms, free_rms, angle_deg, std_deg):
