@@ -35,7 +35,27 @@ MIN_BLOCKS = 10
 
 
 def weighted_fit(X, y, weights, blocks=None):
-    """Weighted least squares ``y ~ X theta``, with the cluster-robust covariance over ``blocks`` (None: none)."""
+    """Weighted least squares ``y ~ X theta``, with the cluster-robust covariance over ``blocks`` (None: none).
+
+    Parameters
+    ----------
+    X : ndarray, shape (N, p)
+        The design.
+    y : ndarray, shape (N,)
+        The observations.
+    weights : ndarray, shape (N,)
+        Each row's weight (one over its noise's standard deviation).
+    blocks : ndarray of int, shape (N,), optional
+        Each row's block of time (:func:`time_blocks`).
+
+    Returns
+    -------
+    theta : ndarray, shape (p,)
+    cov : ndarray, shape (p, p) or None
+        Eq. (U3) (:func:`sandwich`); None without ``blocks``.
+    residual : ndarray, shape (N,)
+        ``y - X theta``, unweighted.
+    """
     Xw = X * weights[:, None]
     inverse, columns = pseudo_inverse(Xw)
     theta = inverse @ (Xw.T @ (y * weights))
@@ -99,7 +119,20 @@ def block_length(residual, dt, window):
 
 
 def pseudo_inverse(J):
-    """``(J^T J)^+`` on the directions it determines (scaled to a unit diagonal), and the columns those alone touch."""
+    """``(J^T J)^+`` on the directions it determines (scaled to a unit diagonal), and the columns those alone touch.
+
+    Parameters
+    ----------
+    J : ndarray, shape (N, p)
+        The weighted design.
+
+    Returns
+    -------
+    inverse : ndarray, shape (p, p)
+        The pseudo-inverse of the information, singular values below ``1e-12`` of the largest dropped.
+    columns : ndarray of bool, shape (p,)
+        The parameters that touch no dropped direction.
+    """
     information = J.T @ J
     scale = np.sqrt(np.maximum(np.diag(information), 1e-300))
     u, s, vt = np.linalg.svd(information / np.outer(scale, scale))
@@ -116,6 +149,21 @@ def sandwich(J, e, blocks, inverse, columns):
     the rows and ``K`` the parameters determined (Stata's CR1: the sum over
     few blocks falls short of the variance by about ``(G - 1) / G``);
     infinite for the parameters that touch a direction not determined.
+
+    Parameters
+    ----------
+    J : ndarray, shape (N, p)
+        The weighted design.
+    e : ndarray, shape (N,)
+        The weighted residuals.
+    blocks : ndarray of int, shape (N,)
+        Each row's block.
+    inverse, columns
+        :func:`pseudo_inverse` of ``J``.
+
+    Returns
+    -------
+    ndarray, shape (p, p)
     """
     scores = np.zeros((blocks.max() + 1, J.shape[1]))
     np.add.at(scores, blocks, J * e[:, None])

@@ -296,7 +296,8 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
     -------
     list of str
         Each with the factor by which the largest uncertainty falls; only
-        poses that lower it by more than 1 %.
+        poses that lower it by more than 1 % (or make it finite where it is
+        not): empty when no single pose would.
     """
     worst_now = float(np.max(relative_std(covariance(information, s2)[0], theta)))
     candidates = _candidates(references, labels)
@@ -310,8 +311,8 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
     for worst, words in scored:
         if words in (w for _, w in best):
             continue
-        if np.isfinite(worst_now) and worst >= 0.99 * worst_now:
-            break
+        if (np.isfinite(worst_now) and worst >= 0.99 * worst_now) or not np.isfinite(worst):
+            break                           # sorted: no later pose lowers it, or none makes it finite
         best.append((worst, words))
         if len(best) == count:
             break
@@ -320,5 +321,5 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
 
 def _ratio(before, after):
     if not np.isfinite(before):
-        return "becomes finite" if np.isfinite(after) else "stays undetermined"
+        return "becomes finite"
     return f"falls to {after / before:.0%} of what it is"
