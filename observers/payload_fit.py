@@ -416,7 +416,7 @@ def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gr
     """
     from scipy.optimize import least_squares
 
-    from .static_fit import _angle_deg, _axis, _exp, _start, _tangent_basis, other_convention
+    from .static_fit import _angle_deg, _axis, _exp, _start, _tangent_basis, gravity_up, other_convention
     q, omega, alpha, p_ddot = motion
     g = np.asarray(gravity, dtype=float)
     R = np.moveaxis(rotation_matrix(q.T), -1, 0)
@@ -463,13 +463,14 @@ def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gr
     inverse, determined = pseudo_inverse(J)
     cov = sandwich(J, e, blocks, inverse, determined)
     g_hat, M = parts(eta)
-    if estimate_gravity and g_hat[2] > 0 > g[2]:             # gravity up: the reading's sign is the other one
-        raise FmscalError(other_convention(name, None, reading))
+    std = np.sqrt(np.maximum(np.diag(cov)[16:], 0))
+    # gravity up, where its direction is determined: the reading's sign is the other one, or the base upside down
+    if estimate_gravity and g_hat[2] > 0 > g[2] and np.all(np.isfinite(std[:2])) and np.all(std[:2] < 0.5):
+        raise FmscalError(gravity_up(name, g_hat[2] / np.linalg.norm(g_hat), reading))
     if np.isfinite(cov[0, 0]) and theta[0] < 0:
         raise FmscalError(other_convention(name, theta[0], reading))
     fit = _report(theta, cov[:16, :16], S, np.sqrt(np.mean((e / weights).reshape(n, 6) ** 2, axis=0)))
     _blocks_used(fit, blocks, length)
-    std = np.sqrt(np.maximum(np.diag(cov)[16:], 0))
     if estimate_gravity:
         fit.gravity = g_hat
         fit.gravity_std_deg = float(np.degrees(np.sqrt((std[0] ** 2 + std[1] ** 2) / 2)))

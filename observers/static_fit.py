@@ -54,7 +54,7 @@ from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
-           "rotation_warning", "both_rotations_warning", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
+           "rotation_warning", "both_rotations_warning", "gravity_up", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
@@ -293,13 +293,10 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
                      "the mass and the offset")
     model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting)
     m, rho, c, d, M = model.parts(theta)
-    other = "load" if reading == "reaction" else "reaction"
     if m <= 0:
         raise FmscalError(other_convention(table.name, m, reading))
     if estimate_gravity and d[2] > 0 and g[2] < 0:
-        raise FmscalError(f"{table.name}: gravity comes out pointing up in the pose frame (z = {d[2]:+.2f}): the "
-                          f"reading follows the other sign convention; pass --reading {other} (the wrench the "
-                          f"{_who(other)})")
+        raise FmscalError(gravity_up(table.name, d[2], reading))
     s2, information = _weighted_information(model, theta, weights, y)
     cov, weak = covariance(information, s2)
     std = np.sqrt(np.maximum(np.diag(cov), 0))
@@ -647,6 +644,32 @@ def other_convention(name, mass, reading):
             else f"the mass comes out negative ({mass:.4g} kg)")
     return (f"{name}: {what}: the reading follows the other sign convention; pass --reading {other} (the wrench the "
             f"{_who(other)})")
+
+
+def gravity_up(name, z, reading):
+    """The one line for a fit whose estimated gravity points up in the pose frame.
+
+    A weight read in the other sign convention and a base upside down (a robot
+    hung from a ceiling) give the same data: ``m R^T g`` changes sign either
+    way. The line names both, and the flag for each.
+
+    Parameters
+    ----------
+    name : str
+        The data's name.
+    z : float
+        The estimated gravity direction's z component (positive).
+    reading : str
+        The convention the fit used.
+
+    Returns
+    -------
+    str
+    """
+    other = "load" if reading == "reaction" else "reaction"
+    return (f"{name}: gravity comes out pointing up in the pose frame (z = {z:+.2f}): the reading follows the other "
+            f"sign convention, pass --reading {other} (the wrench the {_who(other)}); or the base hangs upside down "
+            "(a robot on a ceiling), give --gravity 0 0 9.81")
 
 
 def _determined(out, std):

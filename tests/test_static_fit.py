@@ -203,6 +203,16 @@ def test_a_tilted_base_and_a_sensor_askew_together_name_both_flags():
     assert not any("estimate" in w for w in free.warnings)
 
 
+def test_gravity_up_names_the_reading_and_a_base_upside_down():
+    """A robot hung from a ceiling (gravity along +z of its base): with gravity estimated the fit cannot tell it
+    from a reading of the other sign, and says both, with each flag; told the gravity, it fits the payload."""
+    table = simulate_table(TOOL, n=12, seed=0, gravity=-G, offset=OFFSET)
+    with pytest.raises(FmscalError, match=r"pointing up .*--reading load.*--gravity 0 0 9.81"):
+        fit_static(table, estimate_gravity=True)
+    fit = fit_static(table, gravity=-G)
+    assert fit.mass == pytest.approx(TOOL.mass, rel=0.01) and not any("estimate" in w for w in fit.warnings)
+
+
 def _about(axis, degrees):
     """Unit quaternions (scalar first) of turns by ``degrees`` about ``axis``."""
     half = np.radians(np.asarray(degrees, dtype=float)) / 2
