@@ -47,7 +47,7 @@ from fmscal.plant.pose_table import PoseTable
 from fmscal.plant.rigid_body import GRAVITY, rotation_matrix, skew
 from fmscal.plant.sensor import check_calibration
 
-from .coverage import DETERMINED_REL, DETERMINED_RHO, covariance, in_words, next_poses
+from .coverage import _OFFSET_NAMES, DETERMINED_REL, DETERMINED_RHO, covariance, in_words, next_poses
 from .coverage import cone_deg as _cone
 from .coverage import rotation as _exp
 from .inverse_dynamics_fit import InverseDynamicsFit
@@ -56,7 +56,6 @@ from .payload_fit import _Rotations
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "gravity_up", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
 
-_OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
 TILT_RATIO = 3.0
