@@ -26,8 +26,8 @@ correlation); white residuals get blocks of the smoothing window, 25 in 5 s.
 
 import numpy as np
 
-__all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "correlation_time", "block_length", "time_blocks",
-           "few_blocks", "MIN_BLOCKS"]
+__all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "small_sample_factor", "correlation_time", "block_length",
+           "time_blocks", "few_blocks", "MIN_BLOCKS"]
 
 #: Fewer blocks than this and the variance itself has under nine degrees of freedom: z-scores then run
 #: above 1.13 of their rms (``sqrt((G - 1) / (G - 3))``) and the fit warns.
@@ -167,13 +167,31 @@ def sandwich(J, e, blocks, inverse, columns):
     """
     scores = np.zeros((blocks.max() + 1, J.shape[1]))
     np.add.at(scores, blocks, J * e[:, None])
-    g = int(np.count_nonzero(np.bincount(blocks)))
-    n, k = J.shape[0], int(np.linalg.matrix_rank(inverse))
-    factor = g / max(g - 1, 1) * (n - 1) / max(n - k, 1)
+    factor = small_sample_factor(blocks, J.shape[0], int(np.linalg.matrix_rank(inverse)))
     cov = factor * inverse @ (scores.T @ scores) @ inverse
     cov[:, ~columns] = np.inf
     cov[~columns, :] = np.inf
     return cov
+
+
+def small_sample_factor(blocks, n, k):
+    """The small-sample factor of eq. (U3), ``G / (G - 1) (N - 1) / (N - K)`` (Stata's CR1).
+
+    Parameters
+    ----------
+    blocks : ndarray of int
+        Each row's block (``G`` the blocks holding a row).
+    n : int
+        The rows ``N``.
+    k : int
+        The parameters determined ``K``.
+
+    Returns
+    -------
+    float
+    """
+    g = int(np.count_nonzero(np.bincount(blocks)))
+    return g / max(g - 1, 1) * (n - 1) / max(n - k, 1)
 
 
 def _columns(keep, vt):

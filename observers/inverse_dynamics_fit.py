@@ -31,7 +31,7 @@ from fmscal.plant.errors import FmscalError
 from fmscal.plant.noise import estimate_noise
 from fmscal.plant.rigid_body import GRAVITY, SpatialPayload
 
-from .cluster_covariance import block_length, few_blocks
+from .cluster_covariance import block_length, few_blocks, small_sample_factor
 from .payload_fit import regressor
 
 __all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "UNDETERMINED_STD",
@@ -250,9 +250,7 @@ def fit_readings(w, w_hat, blocks=None, wrench_sd=None, prior=None, held=False):
         # each sample's share of the estimating equation X^T e + Sigma theta = 0
         np.add.at(scores, blocks, Xs[:, :, None] * e[:, None, :] + (sigma @ theta)[None])
         scores = scores.transpose(0, 2, 1).reshape(len(scores), 42)                      # row order of [S|c]
-        g = int(np.count_nonzero(np.bincount(blocks)))
-        n, k = len(e), int(kept.sum())            # the small-sample factor of eq. (U3), cluster_covariance
-        cov_scaled = g / max(g - 1, 1) * (n - 1) / max(n - k, 1) * bread @ (scores.T @ scores) @ bread
+        cov_scaled = small_sample_factor(blocks, len(e), int(kept.sum())) * bread @ (scores.T @ scores) @ bread
     unscale = np.tile(1.0 / np.maximum(spread, 1e-300), 6)
     cov = cov_scaled * np.outer(unscale, unscale)
     S_aug = (theta / np.maximum(spread, 1e-300)[:, None]).T                              # (6, 7)
