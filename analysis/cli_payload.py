@@ -187,16 +187,13 @@ def _print_calibrate_flags(fit, table=False):
     ``M rho`` and the inertia ``M I M^T`` there (``M`` the mounting, sensor
     axes to the tracked frame's), and the estimated gravity. Given in the
     sensor's own axes they would be wrong by the mounting's turn, and ``S``
-    would absorb that too. Only where the mass and the centre of mass are
-    determined (each within :data:`fmscal.observers.payload_fit.DETERMINED`
-    of the mass, and of the centre of mass's distance); a table's
+    would absorb that too. Only where the fit determined the mass and the
+    centre of mass (``payload_determined``, by its own rule); a table's
     ``calibrate`` takes no inertia.
     """
-    from fmscal.observers.payload_fit import DETERMINED
     if fit.gravity is None and fit.mounting is None:
         return
-    rho_scale = max(float(np.linalg.norm(fit.rho)), 1e-3)
-    if not (fit.mass_std < DETERMINED * abs(fit.mass) and np.all(np.asarray(fit.rho_std) < DETERMINED * rho_scale)):
+    if not fit.payload_determined:
         print("for fmscal calibrate: no payload to pass on, the mass and the centre of mass are not determined")
         return
     M = np.eye(3) if fit.mounting is None else np.asarray(fit.mounting)

@@ -108,6 +108,8 @@ class PayloadFit(_Rotations):
         What the log did not determine, in words a user acts on.
     converged : bool
         Every group (mass, centre of mass, inertia, offset) determined.
+    payload_determined : bool
+        The mass and the centre of mass each determined (within :data:`DETERMINED`).
     block : float or None
         Length of the blocks of time of the cluster-robust covariance, s
         (:func:`fmscal.observers.cluster_covariance.block_length`).
@@ -135,6 +137,7 @@ class PayloadFit(_Rotations):
     residual_rms: np.ndarray
     warnings: list = field(default_factory=list)
     converged: bool = False
+    payload_determined: bool = False
     block: float = None
     cone_deg: float = None
     undetermined: list = field(default_factory=list)
@@ -546,4 +549,5 @@ def _report(theta, cov, S, residual_rms):
     return PayloadFit(mass=values[0], mass_std=std[0], rho=values[1:4], rho_std=std[1:4],
                       inertia=values[4:] if inertia_ok else None, inertia_std=std[4:] if inertia_ok else None,
                       b=b, b_std=b_std, residual_rms=residual_rms, warnings=warnings,
-                      converged=bool(mass_ok and rho_ok and inertia_ok and offset_ok))
+                      converged=bool(mass_ok and rho_ok and inertia_ok and offset_ok),
+                      payload_determined=bool(mass_ok and rho_ok))

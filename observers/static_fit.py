@@ -93,6 +93,9 @@ class StaticFit(_Rotations):
     warnings : list of str
     converged : bool
         Mass, centre of mass, offset (and gravity, mounting where asked) all determined.
+    payload_determined : bool
+        The mass and the centre of mass each determined (within ``DETERMINED_REL`` and ``DETERMINED_RHO`` of
+        :mod:`fmscal.observers.coverage`).
     cov : ndarray
         Covariance of the fitted parameters (:attr:`names` order).
     names : tuple of str
@@ -112,6 +115,7 @@ class StaticFit(_Rotations):
     residual_rms: np.ndarray = None
     warnings: list = field(default_factory=list)
     converged: bool = False
+    payload_determined: bool = False
     cov: np.ndarray = None
     names: tuple = ()
 
@@ -320,6 +324,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     out.cone_deg = _cone(a)
     out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
     determined = _determined(out, std)
+    out.payload_determined = determined
     out.converged = not out.undetermined and determined
     out.warnings = list(out.undetermined)
     both = estimate_gravity and estimate_mounting

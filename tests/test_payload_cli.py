@@ -110,8 +110,8 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
     from fmscal.analysis.cli_payload import _print_calibrate_flags
     from fmscal.observers.static_fit import _exp
     M = _exp(np.radians(30.0) * np.array([0.0, 0.0, 1.0]))
-    fit = SimpleNamespace(mass=2.0, mass_std=0.001, rho=[0.1, 0.0, 0.05], rho_std=[1e-4] * 3,
-                          inertia=[0.01, 0.02, 0.03, 0.0, 0.0, 0.0], gravity=None, mounting=M)
+    fit = SimpleNamespace(mass=2.0, rho=[0.1, 0.0, 0.05], inertia=[0.01, 0.02, 0.03, 0.0, 0.0, 0.0], gravity=None,
+                          mounting=M, payload_determined=True)
     _print_calibrate_flags(fit)
     numbers = _flags(capsys.readouterr().out.strip())
     np.testing.assert_allclose(numbers["--rho"], [0.1 * np.cos(np.pi / 6), 0.1 * np.sin(np.pi / 6), 0.05], atol=1e-6)
@@ -119,7 +119,7 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
     np.testing.assert_allclose(numbers["--inertia"], [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]],
                                atol=1e-7)
     assert "--gravity" not in numbers
-    fit.mass_std = 0.1                                  # 5 % of the mass: not determined, nothing to pass on
+    fit.payload_determined = False                      # the fit's own verdict: nothing to pass on
     _print_calibrate_flags(fit)
     assert capsys.readouterr().out.strip() == ("for fmscal calibrate: no payload to pass on, the mass and the centre "
                                                "of mass are not determined")
