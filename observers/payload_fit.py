@@ -290,9 +290,9 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     static_fit.TILT_RATIO` times the reading's noise, estimated from the
     differences of consecutive samples (``rms(diff) / sqrt 2``; white noise
     assumed, a log whose reading changes much between samples opens the
-    check less often); the warning is :func:`fmscal.observers.static_fit.rotation_warning`'s.
+    check less often); the warning is :func:`fmscal.observers.static_fit.rotation_check`'s.
     """
-    from .static_fit import TILT_RATIO, both_rotations_warning, rotation_warning
+    from .static_fit import TILT_RATIO, Refit, rotation_check
     force = y[:, 3:]
     noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
@@ -304,17 +304,10 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
             free = _identify_rotations(name, motion, y, gravity, times, S, reading, gravity_free, mounting_free)[0]
         except FmscalError:
             return None
-        return free, float(np.sqrt(np.mean(np.square(free.residual_rms[3:]))))
+        return Refit(float(np.sqrt(np.mean(np.square(free.residual_rms[3:])))), free.gravity, free.gravity_std_deg,
+                     free.mounting_deg, free.mounting_std_deg)
 
-    tilted = mounted = None
-    if not estimate_gravity and (free := refit(True, estimate_mounting)) is not None:
-        tilted = (free[1], free[0].gravity, free[0].gravity_std_deg)
-    if not estimate_mounting and (free := refit(estimate_gravity, True)) is not None:
-        mounted = (free[1], free[0].mounting_deg, free[0].mounting_std_deg)
-    warning = rotation_warning(fixed, gravity, tilted, mounted)
-    if warning is None and not (estimate_gravity or estimate_mounting) and (free := refit(True, True)) is not None:
-        warning = both_rotations_warning(fixed, free[1], gravity, free[0].gravity, free[0].gravity_std_deg,
-                                         free[0].mounting_deg, free[0].mounting_std_deg)
+    warning = rotation_check(fixed, gravity, refit, estimate_gravity, estimate_mounting)
     if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
         fit.warnings.insert(0, warning)
         fit.converged = False

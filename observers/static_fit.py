@@ -36,6 +36,7 @@ and where one of them explains the residuals the fit says which flag to add
 """
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -54,7 +55,8 @@ from .inverse_dynamics_fit import InverseDynamicsFit
 from .payload_fit import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
-           "rotation_warning", "both_rotations_warning", "gravity_up", "TILT_RATIO", "TILT_SIGMAS", "MIN_CONE_DEG"]
+           "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
+           "TILT_SIGMAS", "MIN_CONE_DEG"]
 
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
@@ -378,12 +380,11 @@ def _weighted_information(model, theta, weights, y):
 
 
 def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
-    """The warning of :func:`rotation_warning` when the table needs gravity's direction or the mounting
+    """The warning of :func:`rotation_check` when the table needs gravity's direction or the mounting
     estimated, else None.
 
-    The fit is repeated with gravity's direction estimated, and with the
-    mounting (each where the fit did not; the start and the two weighted
-    passes of :func:`fit_static`, without its report), and their force
+    The fit is repeated with the rotations free (the start and the two
+    weighted passes of :func:`fit_static`, without its report), and its force
     residuals compared with ``residual``, those of the fit as asked.
     """
     def refit(gravity_free, mounting_free):
@@ -391,27 +392,74 @@ def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
         s2, information = _weighted_information(model, theta, weights, y)
         cov, weak = covariance(information, s2)
         if weak:
-            return None, None, None
+            return None
         std = np.sqrt(np.maximum(np.diag(cov), 0))
-        return _force_rms(model.predict(theta) - y), model.parts(theta), std
+        parts = model.parts(theta)
+        k = 12 if gravity_free else 10                      # the mounting's angles follow gravity's two
+        return Refit(_force_rms(model.predict(theta) - y),
+                     parts[3] if gravity_free else None,
+                     float(np.degrees(np.sqrt((std[10] ** 2 + std[11] ** 2) / 2))) if gravity_free else None,
+                     _angle_deg(parts[4]) if mounting_free else None,
+                     float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3))) if mounting_free else None)
 
+    return rotation_check(_force_rms(residual), g, refit, estimate_gravity, estimate_mounting)
+
+
+class Refit(NamedTuple):
+    """A fit repeated with gravity's direction or the mounting free, as :func:`rotation_check` compares it.
+
+    Attributes
+    ----------
+    force_rms : float
+        Its force residuals' rms, N.
+    gravity : ndarray, shape (3,), or None
+        Gravity's estimated direction (pose frame), where free.
+    gravity_std_deg : float or None
+        Its one-sigma uncertainty, degrees.
+    mounting_deg, mounting_std_deg : float or None
+        The mounting's angle and its one-sigma uncertainty, degrees, where free.
+    """
+
+    force_rms: float
+    gravity: np.ndarray
+    gravity_std_deg: float
+    mounting_deg: float
+    mounting_std_deg: float
+
+
+def rotation_check(fixed_rms, gravity, refit, estimate_gravity, estimate_mounting):
+    """The one line for data that a rotation the fit did not estimate explains, else None; tables and logs alike.
+
+    Fits again with gravity's direction free, and with the mounting free (each
+    where the fit did not estimate it), and names the one that explains the
+    data (:func:`rotation_warning`); where neither alone does and the fit
+    estimated neither, with both free (:func:`both_rotations_warning`).
+
+    Parameters
+    ----------
+    fixed_rms : float
+        The force residuals' rms of the fit as asked, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    refit : callable
+        ``refit(gravity_free, mounting_free)``: the fit repeated so, a :class:`Refit`, or None where it does
+        not determine its parameters.
+    estimate_gravity, estimate_mounting : bool
+        What the fit as asked estimated.
+
+    Returns
+    -------
+    str or None
+    """
     tilted = mounted = None
-    if not estimate_gravity:
-        rms, parts, std = refit(True, estimate_mounting)
-        if rms is not None:
-            tilted = (rms, parts[3], float(np.degrees(np.sqrt((std[10] ** 2 + std[11] ** 2) / 2))))
-    if not estimate_mounting:
-        rms, parts, std = refit(estimate_gravity, True)
-        if rms is not None:
-            k = 12 if estimate_gravity else 10
-            mounted = (rms, _angle_deg(parts[4]), float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3))))
-    warning = rotation_warning(_force_rms(residual), g, tilted, mounted)
-    if warning is None and not (estimate_gravity or estimate_mounting):
-        rms, parts, std = refit(True, True)
-        if rms is not None:
-            warning = both_rotations_warning(
-                _force_rms(residual), rms, g, parts[3], float(np.degrees(np.sqrt((std[10] ** 2 + std[11] ** 2) / 2))),
-                _angle_deg(parts[4]), float(np.degrees(np.sqrt(np.sum(std[12:15] ** 2) / 3))))
+    if not estimate_gravity and (free := refit(True, estimate_mounting)) is not None:
+        tilted = (free.force_rms, free.gravity, free.gravity_std_deg)
+    if not estimate_mounting and (free := refit(estimate_gravity, True)) is not None:
+        mounted = (free.force_rms, free.mounting_deg, free.mounting_std_deg)
+    warning = rotation_warning(fixed_rms, gravity, tilted, mounted)
+    if warning is None and not (estimate_gravity or estimate_mounting) and (free := refit(True, True)) is not None:
+        warning = both_rotations_warning(fixed_rms, free.force_rms, gravity, free.gravity, free.gravity_std_deg,
+                                         free.mounting_deg, free.mounting_std_deg)
     return warning
 
 
