@@ -14,7 +14,7 @@ against the motion's period and long against the pose interval.
 """
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.signal import oaconvolve, savgol_coeffs, savgol_filter
 
 from .errors import FmscalError
 from .rigid_body import quaternion_multiply
@@ -110,7 +110,7 @@ def _smoothed(log, window):
     pose = np.column_stack([np.interp(log.t, log.t[rows], log.pose[rows, j]) for j in range(7)])
 
     def smooth(values, derivative):
-        return savgol_filter(values, k, ORDER, deriv=derivative, delta=log.dt, axis=0, mode="interp")
+        return _savgol(values, k, derivative, log.dt)
 
     q = smooth(pose[:, :4], 0)
     q /= np.linalg.norm(q, axis=1, keepdims=True)
@@ -118,3 +118,16 @@ def _smoothed(log, window):
     omega = 2 * quaternion_multiply(conj.T, smooth(pose[:, :4], 1).T)[1:].T
     alpha = 2 * quaternion_multiply(conj.T, smooth(pose[:, :4], 2).T)[1:].T
     return q, omega, alpha, smooth(pose[:, 4:], 0), smooth(pose[:, 4:], 1), smooth(pose[:, 4:], 2)
+
+
+def _savgol(values, k, derivative, dt):
+    """``scipy.signal.savgol_filter(values, k, ORDER, derivative, delta=dt, axis=0, mode="interp")``, its interior
+    convolved by overlap-add (2-3x faster than the direct convolution for a window of hundreds of samples; equal
+    to rounding, 1e-14 of the largest value) and its ends, where the window runs off the log, from the polynomial
+    fitted to the first and last ``k`` samples as ``mode="interp"`` does."""
+    coefficients = savgol_coeffs(k, ORDER, deriv=derivative, delta=dt, use="conv")
+    out = oaconvolve(values, coefficients[:, None], mode="same", axes=0)
+    h = k // 2
+    out[:h] = savgol_filter(values[:k], k, ORDER, deriv=derivative, delta=dt, axis=0, mode="interp")[:h]
+    out[-h:] = savgol_filter(values[-k:], k, ORDER, deriv=derivative, delta=dt, axis=0, mode="interp")[-h:]
+    return out

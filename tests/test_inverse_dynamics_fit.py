@@ -87,3 +87,20 @@ def test_the_latency_search_refuses_a_log_of_another_case(arm_logs):
     from fmscal.plant import PAPER_PAYLOAD
     with pytest.raises(FmscalError, match="set up for planar logs .* got a spatial log"):
         estimate_latency(arm_logs[0][0], PAPER_PAYLOAD)
+
+
+@pytest.mark.parametrize("n", [201, 202, 2001])
+def test_the_fast_smoothing_is_scipys_savgol_filter(n):
+    """The poses' smoothing (overlap-add inside, the end polynomials at the ends) equals ``savgol_filter`` with
+    ``mode="interp"`` to rounding, values and both derivatives, down to a log one window long; a wrong end or
+    a shifted interior would be off by the signal's own size."""
+    from scipy.signal import savgol_filter
+
+    from fmscal.plant.differentiate import ORDER, _savgol
+    rng = np.random.default_rng(3)
+    t = np.arange(n) * 1e-3
+    values = np.column_stack([np.sin(7 * t + 1), t ** 3, rng.normal(size=n)])
+    for derivative in (0, 1, 2):
+        expected = savgol_filter(values, 201, ORDER, deriv=derivative, delta=1e-3, axis=0, mode="interp")
+        got = _savgol(values, 201, derivative, 1e-3)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max())

@@ -129,6 +129,7 @@ def twenty_logs():
     return [SPATIAL_SCENARIOS["spatial-arm"].with_(duration=20.0).generate(seed)[:2] for seed in range(20)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("duration", [5.0, 10.0, 20.0])
 def test_the_mass_and_centre_of_mass_uncertainties_of_a_log_hold_over_twenty_seeds(twenty_logs, duration):
     """z-scores of mass and centre of mass on spatial-arm logs (S told), 20 seeds: their rms (not np.std, which

@@ -76,6 +76,7 @@ def test_a_load_reading_with_gravity_estimated_names_the_flag(tilted):
     assert _degrees(fit.gravity, G_TILTED) < 0.2
 
 
+@pytest.mark.slow
 def test_the_rotations_uncertainties_hold_over_eight_seeds():
     """z-scores of gravity's direction (two angles across it) and of the mounting (three), 10 s logs."""
     from fmscal.observers.static_fit import _tangent_basis

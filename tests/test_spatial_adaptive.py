@@ -134,6 +134,7 @@ def test_a_diverging_run_is_an_error_not_an_answer(compiled):
 GAMMA_DIVERGING = 1e6
 
 
+@pytest.mark.slow
 def test_the_adaptive_default_against_the_floor_on_spatial_arm(three_arms):
     """Measured (20 s, seeds 0-2): E / floor of the same samples = 1.01, 0.98, 0.93; against the floor of the whole
     log 1.02, 1.03, 1.35, the third seed's last 5 % adding much (module docstring). The issue's 1.3x on every seed,
@@ -144,6 +145,7 @@ def test_the_adaptive_default_against_the_floor_on_spatial_arm(three_arms):
     assert np.all((0.7 < whole) & (whole < 1.45)), whole
 
 
+@pytest.mark.slow
 def test_the_adaptive_default_against_the_floor_on_spatial_mocap(three_mocaps):
     """Measured (20 s, seeds 0-2, 200 Hz poses with 2 % dropped): E / floor of the same samples = 1.35, 0.91,
     1.04 (of the whole log 1.37, 1.03, 1.31; target 2x)."""

@@ -150,17 +150,18 @@ def test_compare_takes_a_spatial_scenario_and_writes_its_figure(tmp_path, capsys
 
 def test_the_online_methods_calibrate_a_spatial_log(arm, capsys):
     """The adaptive observer (no uncertainty of its own) and the EKF through calibrate: S near the floor's, printed
-    and in JSON, no uncertainty claimed where the method gives none."""
+    and in JSON, no uncertainty claimed where the method gives none. The latency is told (the log has none):
+    its search, the same for every method, is tested with the floor above."""
     log, sidecar = str(arm / "arm.csv"), str(arm / "arm.truth.json")
     capsys.readouterr()
     E = {}
     for name in ("max-likelihood", "adaptive", "ekf"):
-        assert main(["calibrate", log, *TOOL, "--observer", name, "--truth", sidecar, "--json"]) == 0
+        assert main(["calibrate", log, *TOOL, "--observer", name, "--latency", "0", "--truth", sidecar, "--json"]) == 0
         out = json.loads(capsys.readouterr().out)
         assert out["observer"] == name and np.array(out["S"]).shape == (6, 6) and len(out["b"]) == 6
         assert (out["S_std"] is None) == (name == "adaptive") and (out["b_std"] is None) == (name == "adaptive")
         E[name] = out["E"]
     assert 0.5 < E["adaptive"] / E["max-likelihood"] < 2.0 and 0.5 < E["ekf"] / E["max-likelihood"] < 2.0, E
-    assert main(["calibrate", log, *TOOL, "--observer", "adaptive"]) == 0
+    assert main(["calibrate", log, *TOOL, "--observer", "adaptive", "--latency", "0"]) == 0
     text = capsys.readouterr().out
     assert "adaptive reports no uncertainty" in text and "+-" in text.split("offset b")[1]

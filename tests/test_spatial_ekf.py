@@ -191,6 +191,7 @@ def test_a_diverging_run_is_an_error_not_an_answer(short_log, compiled):
     assert np.all(np.isfinite(result.S_hat_history))
 
 
+@pytest.mark.slow
 def test_the_ekf_against_the_floor_on_spatial_arm(three_arms):
     """Issue 23's target: within 1.3x of the floor. The tail's median E over the floor's E on the samples that
     median has seen, measured (20 s): 1.00, 1.08, 0.96 on seeds 0-2 (seeds 3-8: benchmarks/online_floor_3d.py).
@@ -223,6 +224,7 @@ def twenty_short_arms():
     return np.array(z_S), np.array(z_b)
 
 
+@pytest.mark.slow
 def test_the_z_scores_over_20_seeds(twenty_short_arms):
     """Issue 23: the spread of z within [0.8, 1.25]. Measured (10 s, seeds 0-19): 1.02 for S (mean -0.07) and 1.01
     for b (1.07 and 1.06 with ``Q`` at the running estimate and ``4 Delta``; 1.78 and 1.39 before the compensation);

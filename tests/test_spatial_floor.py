@@ -135,6 +135,7 @@ def mujoco_arm():
     return scenario, log, S, b, own, truth
 
 
+@pytest.mark.slow
 def test_a_log_written_by_mujoco_calibrates_at_the_floor(mujoco_arm, tmp_path, capsys):
     """Another engine's log: ``fmscal calibrate`` gives the floor's E of fmscal's own log of the same draw."""
     from fmscal.analysis.cli import main
