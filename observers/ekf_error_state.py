@@ -165,6 +165,23 @@ def error_step(model, offset):
     xs = ca.SX.sym("xs", nx + m)
     w0, w1 = ca.SX.sym("w0", n_w), ca.SX.sym("w1", n_w)
     dt = ca.SX.sym("dt")
+    var_w = ca.SX.sym("var_w", n_w)
+    S_Q_flat = ca.SX.sym("S_Q", n_w * n_w)
+    q_dt = ca.SX.sym("q_dt")
+    xs_next, F, Q, J0, J1 = _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt)
+    inputs = [xs, w0, w1, dt, var_w, S_Q_flat, q_dt]
+    jacobians = ca.Function("ekf_error_jacobians", [xs, w0, w1, dt], [xs_next, ca.densify(F), J0, J1])
+    predict = ca.Function("ekf_error_predict", inputs, [xs_next, ca.densify(F), ca.densify(Q)])
+    sparse = ca.Function("ekf_error_predict_sparse", inputs, [xs_next, F, Q])
+    return jacobians, predict, sparse
+
+
+def _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt):
+    """:func:`error_step`'s expressions on the given casadi symbols: ``xs_next``, ``F`` (sparse), ``Q``
+    (sparse), ``J0``, ``J1``. The whole compiled step (:func:`_step`) writes them on its own inputs, the
+    payload among them."""
+    n_w, nx = model.n_w, model.nx
+    n, m, ne, d = _sizes(model, offset)
     e = ca.SX.sym("e", d)                                   # the error state at the step's start
     dw = ca.SX.sym("dw", n_w)                               # a perturbation of the true wrench at both ends
     d0, d1 = ca.SX.sym("d0", n_w), ca.SX.sym("d1", n_w)     # perturbations of the raw readings
@@ -179,17 +196,10 @@ def error_step(model, offset):
     F = at_nominal(ca.jacobian(error, e))
     J0, J1, J_d = (ca.densify(at_nominal(ca.jacobian(error, v))) for v in (d0, d1, dw))
     xs_next = ca.vertcat(x_next, s)
-    var_w = ca.SX.sym("var_w", n_w)
-    S_Q_flat = ca.SX.sym("S_Q", n_w * n_w)
     S_Q = ca.reshape(S_Q_flat, n_w, n_w).T                  # row order
-    q_dt = ca.SX.sym("q_dt")
     # the true wrench's noise S n, S taken at the run's start S_Q (module docstring: not the running estimate)
     Q = J_d @ S_Q @ ca.diag(var_w) @ S_Q.T @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
-    inputs = [xs, w0, w1, dt, var_w, S_Q_flat, q_dt]
-    jacobians = ca.Function("ekf_error_jacobians", [xs, w0, w1, dt], [xs_next, ca.densify(F), J0, J1])
-    predict = ca.Function("ekf_error_predict", inputs, [xs_next, ca.densify(F), ca.densify(Q)])
-    sparse = ca.Function("ekf_error_predict_sparse", inputs, [xs_next, F, Q])
-    return jacobians, predict, sparse
+    return xs_next, F, Q, J0, J1
 
 
 @lru_cache(maxsize=8)
@@ -271,6 +281,18 @@ def _compensated(model, P_ss, s, bn, n):
     return s + correction_limit(o, s, corr, n_w * n) * corr
 
 
+def _copy_step(model, offset, c, F, Q, x0, x1, s, draw, has, R, var_w, h):
+    """:func:`eiv_copy`'s step on the given casadi symbols (``F``, ``Q`` the whole error state's): the draws
+    scaled, ``S`` read from ``s``, then :func:`_copy`."""
+    n_w, nv = model.n_w, model.nv
+    n, _, ne, _ = _sizes(model, offset)
+    k = n_w + nv
+    sd = ca.sqrt(var_w)
+    S = ca.reshape(s, n, n_w).T[:, 0:n_w]
+    return _copy(model, c, F[0:ne, 0:ne], Q[0:ne, 0:ne], x0, x1, S, draw[0:n_w] * sd, draw[k:k + n_w] * sd,
+                 draw[k + n_w:2 * k] * ca.sqrt(R), has, R, h)
+
+
 @lru_cache(maxsize=8)
 def eiv_copy(model, offset):
     """The copy's step and the compensation as casadi Functions (module docstring).
@@ -294,10 +316,7 @@ def eiv_copy(model, offset):
     draw = ca.SX.sym("draw", 2 * k)
     has, h = ca.SX.sym("has"), ca.SX.sym("h")
     R, var_w = ca.SX.sym("R", nv), ca.SX.sym("var_w", n_w)
-    sd = ca.sqrt(var_w)
-    S = ca.reshape(s, n, n_w).T[:, 0:n_w]
-    c_next = _copy(model, c, F[0:ne, 0:ne], Q[0:ne, 0:ne], x0, x1, S, draw[0:n_w] * sd, draw[k:k + n_w] * sd,
-                   draw[k + n_w:2 * k] * ca.sqrt(R), has, R, h)
+    c_next = _copy_step(model, offset, c, F, Q, x0, x1, s, draw, has, R, var_w, h)
     step = ca.Function("ekf_eiv_copy", [c, F, Q, x0, x1, s, draw, has, R, var_w, h], [ca.densify(c_next)])
     P_ss, bn = ca.SX.sym("P_ss", m, m), ca.SX.sym("bn", n_w * n_w)
     compensate = ca.Function("ekf_eiv_compensate", [P_ss, s, bn], [ca.densify(_compensated(model, P_ss, s, bn, n))])
@@ -321,7 +340,7 @@ def error_params_layout(model):
     row order), the level's settings, whether it adapts and whether the estimate is compensated for the errors
     in variables (1 or 0 each)."""
     return StateLayout(("R", model.nv), ("var_w", model.n_w), ("S_Q", model.n_w ** 2), ("level", 7), ("adapt", 1),
-                       ("eiv", 1))
+                       ("eiv", 1), ("payload", model.payload_size))
 
 
 def _step(model, z, u_prev, u, dt, p, draw, n):
@@ -335,8 +354,9 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     has = u[0]
     o = ops(z)
     P = unpack_lower(o, st.P, d)
+    dynamics = model.with_payload_symbols(pp.payload)       # the payload and the gravity read from p, not built in
     # predict: the nominal moves, the error stays zero, P- = F P F^T + Q (the lower triangle kept)
-    xs_pred, F, Q = error_step(model, offset)[2](st.xs, a.w_hat, b.w_hat, dt, pp.var_w, pp.S_Q, st.q * dt)
+    xs_pred, F, Q, _, _ = _error_step(dynamics, offset, st.xs, a.w_hat, b.w_hat, dt, pp.var_w, pp.S_Q, st.q * dt)
     P_pred = unpack_lower(o, pack_lower(F @ (P @ F.T) + Q, d), d)
     # update with the pose in the error state (H = [I 0]); no pose: the pose the nominal shows, K = 0
     pose = has * b.pose + (1 - has) * model.measure(xs_pred[0:nx])
@@ -359,17 +379,21 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     P_min = ca.mmin(ca.diag(P_new))
     P_sum = 2 * ca.sum1(P_packed) - ca.sum1(ca.diag(P_new))
     # the errors-in-variables copy and the compensated estimate
-    copy_step, compensate = eiv_copy(model, offset)
-    c = copy_step(st.copy, F, Q, st.xs[0:nx], xs_pred[0:nx], st.xs[nx:], draw, has, pp.R, pp.var_w, dt)
+    compensate = eiv_copy(model, offset)[1]
+    c = _copy_step(dynamics, offset, st.copy, F, Q, st.xs[0:nx], xs_pred[0:nx], st.xs[nx:], draw, has, pp.R,
+                   pp.var_w, dt)
     s_c = compensate(P_new[ne:, ne:], xs_new[nx:], copy_layout(model).unpack(c, scalars=False).bn)
     s_out = pp.eiv * s_c + (1 - pp.eiv) * xs_new[nx:]
     out = output_layout(model, n).pack(o, x=xs_new[0:nx], s=s_out, q=q, P_sum=P_sum, P_min=P_min)
     return L.pack(o, xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since, copy=c), out
 
 
-@lru_cache(maxsize=8)
+_WHOLE = {}             # (model class, n) -> ChunkedSteps
+
+
 def whole_error_step(model, n):
-    """:func:`_step` for one model, run in compiled chunks (:class:`plant._compile.ChunkedSteps`).
+    """:func:`_step` run in compiled chunks (:class:`plant._compile.ChunkedSteps`), built once for every
+    payload and gravity of a model class (they are inputs, in ``p``).
 
     Run it with the inputs ``[U[:-1], U[1:], dt, p, draw]`` (``U`` the log's
     samples, :func:`observers.base.log_inputs`; ``dt``, ``p``
@@ -377,16 +401,21 @@ def whole_error_step(model, n):
     the step's two samples one row per step); its per-step outputs are
     :func:`observers.ekf_step.output_layout`'s.
     """
-    size = model.input_layout.size
-    z = ca.SX.sym("z", error_state_layout(model, n).size)
-    u_prev, u = ca.SX.sym("u_prev", size), ca.SX.sym("u", size)
-    dt = ca.SX.sym("dt")
-    p = ca.SX.sym("p", error_params_layout(model).size)
-    draw = ca.SX.sym("draw", 2 * (model.n_w + model.nv))
-    z_next, out = _step(model, z, u_prev, u, dt, p, draw, n)
-    step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p, draw],
-                       [ca.densify(z_next), ca.densify(out)])
-    return ChunkedSteps(step, _CHUNK)
+    key = (type(model), n) if model.payload_size else (model, n)
+    if key not in _WHOLE:
+        size = model.input_layout.size
+        z = ca.SX.sym("z", error_state_layout(model, n).size)
+        u_prev, u = ca.SX.sym("u_prev", size), ca.SX.sym("u", size)
+        dt = ca.SX.sym("dt")
+        p = ca.SX.sym("p", error_params_layout(model).size)
+        draw = ca.SX.sym("draw", 2 * (model.n_w + model.nv))
+        z_next, out = _step(model, z, u_prev, u, dt, p, draw, n)
+        step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p, draw],
+                           [ca.densify(z_next), ca.densify(out)])
+        if len(_WHOLE) >= 8:
+            _WHOLE.clear()
+        _WHOLE[key] = ChunkedSteps(step, _CHUNK)
+    return _WHOLE[key]
 
 
 # --- the filter -----------------------------------------------------------------------------------
@@ -627,7 +656,8 @@ class ErrorStateEKF(AugmentedEKF):
         f = self.run_data.state
         level, adapt = self._level_settings()
         return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, S_Q=f.S_Q.ravel(),
-                                                    level=level, adapt=adapt, eiv=float(self.eiv_on))
+                                                    level=level, adapt=adapt, eiv=float(self.eiv_on),
+                                                    payload=self.model.payload_vector())
 
     def _extra_inputs(self, n_steps):
         """The copy's draws at each step's two samples, continuing the run's stream (as :meth:`_advance` draws)."""

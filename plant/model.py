@@ -88,6 +88,36 @@ class Model:
     def __hash__(self):
         return hash(self._key())
 
+    # --- the payload at run time ------------------------------------------------------------------
+    #: Numbers :meth:`payload_vector` gives (0: the payload is compiled into each step as constants).
+    payload_size = 0
+
+    def payload_vector(self):
+        """The payload's mass properties (and the gravity) as the numbers a compiled step takes at run time.
+
+        Returns
+        -------
+        ndarray, shape (payload_size,)
+            Empty where the model's steps take the payload as constants.
+        """
+        return np.empty(0)
+
+    def with_payload_symbols(self, values):
+        """The model with its payload (and gravity) read from the casadi expression ``values``.
+
+        A step built on it takes :meth:`payload_vector` as an input, and one build serves every payload.
+
+        Parameters
+        ----------
+        values : casadi.SX, shape (payload_size,)
+
+        Returns
+        -------
+        Model
+            This model itself where ``payload_size`` is 0.
+        """
+        return self
+
     # --- sizes ------------------------------------------------------------------------------------
     @property
     def n_w(self):
@@ -536,6 +566,28 @@ class SpatialModel(Model):
     def _key(self):
         return type(self), self.payload, self.gravity
 
+    #: The payload's 22 numbers (:meth:`SpatialPayload.as_vector`), the two 3x6 blocks of ``A`` the payload
+    #: alone makes (:meth:`input_matrix`) and the gravity's 3.
+    payload_size = rigid_body.PayloadSymbols.size + 36 + 3
+
+    def payload_vector(self):
+        """``[m, rho, I_c, I_c^-1]`` (:meth:`SpatialPayload.as_vector`), ``A``'s payload blocks (row by row)
+        and the gravity, shape (61,)."""
+        top, bottom = self._input_blocks()
+        return np.r_[self.payload.as_vector(), top.ravel(), bottom.ravel(), self.gravity]
+
+    def with_payload_symbols(self, values):
+        """This model's case with the payload and the gravity read from ``values`` (:meth:`payload_vector`'s
+        order): the dynamics on it are casadi expressions of them (:class:`rigid_body.PayloadSymbols`), with
+        the numbers' own operations (``A``'s blocks read from the vector, as the numbers' are computed once).
+        """
+        k = rigid_body.PayloadSymbols.size
+        model = object.__new__(type(self))             # not __init__: its checks are on numbers
+        model.payload = rigid_body.PayloadSymbols(values[0:k])
+        model._blocks = (ca.reshape(values[k:k + 18], 6, 3).T, ca.reshape(values[k + 18:k + 36], 6, 3).T)
+        model.gravity = values[k + 36:self.payload_size]
+        return model
+
     def reading_scale(self, log):
         """Each reading component's spread in ``log`` (N m, N), shape (6,).
 
@@ -624,14 +676,23 @@ class SpatialModel(Model):
             alpha  = K tau_O - K [rho]x f + alpha_0
             p_ddot = R ([rho]x K tau_O + (I/m - [rho]x K [rho]x) f) + ...
         """
-        K = np.linalg.inv(self.payload.I_c)
-        r = rigid_body.skew(self.payload.rho)
         R = rigid_body.rotation_matrix(x[3:7])
-        top = np.hstack([r @ K, np.eye(3) / self.payload.mass - r @ K @ r])
-        bottom = np.hstack([K, -K @ r])
+        if isinstance(self.payload, rigid_body.PayloadSymbols):              # read at run time
+            top, bottom = self._blocks
+            return ca.vertcat(ca.mtimes(R, top), bottom)
+        top, bottom = self._input_blocks()
         if is_symbolic(x):
             return ca.vertcat(ca.mtimes(R, ca.DM(top)), ca.DM(bottom))
         return np.vstack([R @ top, bottom])
+
+    def _input_blocks(self):
+        """The blocks of :meth:`input_matrix` the payload alone makes, ``K = I_c^-1``:
+        ``[[rho]x K, I/m - [rho]x K [rho]x]`` and ``[K, -K [rho]x]``, each shape (3, 6)."""
+        K = self.payload.I_c_inv
+        r = rigid_body.skew(self.payload.rho)
+        top = np.hstack([r @ K, np.eye(3) / self.payload.mass - r @ K @ r])
+        bottom = np.hstack([K, -K @ r])
+        return top, bottom
 
     def drift(self, x):
         """``d(x)``: gravity and the gyroscopic and centripetal terms, shape (6,)."""

@@ -41,7 +41,7 @@ from ._checks import as_finite_array, as_positive_scalar
 from .errors import FmscalError
 
 __all__ = [
-    "SpatialPayload", "GRAVITY",
+    "SpatialPayload", "PayloadSymbols", "GRAVITY",
     "quaternion_multiply", "quaternion_conjugate", "rotation_matrix",
     "sensor_wrench", "body_acceleration", "state_derivative", "rk4_step", "prescribed_motion", "skew",
     "NQ", "NV", "NX",
@@ -127,6 +127,21 @@ class SpatialPayload:
         return _inertia_matrix(self.inertia)
 
     @property
+    def I_c_inv(self):
+        """``I_c^-1``, shape (3, 3): what the forward dynamics (:func:`body_acceleration`) divides by."""
+        return np.linalg.inv(self.I_c)
+
+    def as_vector(self):
+        """The mass properties as the numbers a compiled step takes at run time (:class:`PayloadSymbols`).
+
+        Returns
+        -------
+        ndarray, shape (22,)
+            ``m`` (kg), ``rho`` (3, m), ``I_c`` (9, row by row, kg m^2) and ``I_c^-1`` (9, row by row).
+        """
+        return np.r_[self.mass, self.rho, self.I_c.ravel(), self.I_c_inv.ravel()]
+
+    @property
     def I_O(self):
         """The inertia tensor about the sensor point: ``I_c - m [rho]x^2`` (parallel axes), shape (3, 3)."""
         r = skew(self.rho)
@@ -179,12 +194,51 @@ def _cross(a, b, o):
 
 def _mv(M, v, o):
     """Matrix times vector; a numeric matrix is lifted for casadi."""
+    if isinstance(M, ca.SX):
+        return o.dot(M, v)
     return o.dot(ca.DM(M), v) if is_symbolic(v) else np.asarray(M) @ v
 
 
 def _vector(values, o):
-    """A constant vector in the backend of ``o``."""
+    """A constant vector in the backend of ``o`` (a casadi expression as it is)."""
+    if isinstance(values, ca.SX):
+        return values
     return o.vcat([float(v) for v in values])
+
+
+class PayloadSymbols:
+    """A payload's mass properties as casadi expressions, read from a vector (:meth:`SpatialPayload.as_vector`).
+
+    The dynamics written on it (:func:`body_acceleration`, :func:`sensor_wrench`) take the payload at run
+    time: a step built on it is compiled once for every payload, where a :class:`SpatialPayload`'s numbers
+    would be constants of the generated C, built again for each payload.
+
+    Parameters
+    ----------
+    values : casadi.SX, shape (22,)
+        In the order of :meth:`SpatialPayload.as_vector`.
+
+    Attributes
+    ----------
+    mass : casadi.SX
+    rho : casadi.SX, shape (3,)
+    I_c, I_c_inv : casadi.SX, shape (3, 3)
+    """
+
+    size = 22
+
+    def __init__(self, values):
+        if not isinstance(values, ca.SX) or values.numel() != self.size:
+            raise ValueError(f"PayloadSymbols takes a casadi.SX of {self.size} entries; got {values!r}")
+        self.mass = values[0]
+        self.rho = values[1:4]
+        self.I_c = ca.reshape(values[4:13], 3, 3).T               # casadi reshapes column by column
+        self.I_c_inv = ca.reshape(values[13:22], 3, 3).T
+
+
+def _rho(payload):
+    """The centre of mass ``rho``: numbers as an array, or a :class:`PayloadSymbols`' expression."""
+    return payload.rho if isinstance(payload.rho, ca.SX) else np.array(payload.rho)
 
 
 def quaternion_multiply(p, q):
@@ -253,8 +307,8 @@ def sensor_wrench(q, omega, alpha, p_ddot, payload, gravity=GRAVITY):
         Angular velocity (rad/s) and acceleration (rad/s^2) in ``B``.
     p_ddot : array_like or casadi.SX, shape (3,)
         Acceleration of the origin ``O`` in ``W``, m/s^2.
-    payload : SpatialPayload
-    gravity : array_like, shape (3,)
+    payload : SpatialPayload or PayloadSymbols
+    gravity : array_like or casadi.SX, shape (3,)
         Gravity in ``W``, m/s^2.
 
     Returns
@@ -265,7 +319,7 @@ def sensor_wrench(q, omega, alpha, p_ddot, payload, gravity=GRAVITY):
     o = ops(q, omega, alpha, p_ddot)
     if not is_symbolic(q, omega, alpha, p_ddot):
         q, omega, alpha, p_ddot = (np.asarray(v, dtype=float) for v in (q, omega, alpha, p_ddot))
-    rho = np.array(payload.rho)
+    rho = _rho(payload)
     a_g = o.dot(rotation_matrix(q).T, p_ddot - _vector(gravity, o))
     f = payload.mass * (a_g + _cross(alpha, rho, o) + _cross(omega, _cross(omega, rho, o), o))
     tau_O = _mv(payload.I_c, alpha, o) + _cross(omega, _mv(payload.I_c, omega, o), o) + _cross(rho, f, o)
@@ -290,8 +344,8 @@ def body_acceleration(q, omega, w, payload, gravity=GRAVITY):
         Angular velocity in ``B``, rad/s.
     w : array_like or casadi.SX, shape (6,)
         True wrench ``[tau_O, f]`` in ``B``, N m and N.
-    payload : SpatialPayload
-    gravity : array_like, shape (3,)
+    payload : SpatialPayload or PayloadSymbols
+    gravity : array_like or casadi.SX, shape (3,)
 
     Returns
     -------
@@ -303,10 +357,10 @@ def body_acceleration(q, omega, w, payload, gravity=GRAVITY):
     o = ops(q, omega, w)
     if not is_symbolic(q, omega, w):
         q, omega, w = (np.asarray(v, dtype=float) for v in (q, omega, w))
-    rho = np.array(payload.rho)
+    rho = _rho(payload)
     tau_O, f = w[0:3], w[3:6]
     tau_C = tau_O - _cross(rho, f, o)
-    alpha = _mv(np.linalg.inv(payload.I_c), tau_C - _cross(omega, _mv(payload.I_c, omega, o), o), o)
+    alpha = _mv(payload.I_c_inv, tau_C - _cross(omega, _mv(payload.I_c, omega, o), o), o)
     a_g = f / payload.mass - _cross(alpha, rho, o) - _cross(omega, _cross(omega, rho, o), o)
     return alpha, o.dot(rotation_matrix(q), a_g) + _vector(gravity, o)
 

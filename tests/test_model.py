@@ -120,3 +120,48 @@ def test_a_model_refuses_the_other_case_payload():
         PlanarModel(TOOL)
     with pytest.raises(FmscalError, match="gravity"):
         SpatialModel(TOOL, gravity=[0, 0])
+
+
+def test_the_payload_read_at_run_time_gives_the_numbers_dynamics():
+    """The spatial model with its payload and gravity read from a vector (what the floor's and the EKF's
+    compiled steps take as an input) gives the acceleration, ``A`` and ``d`` of the model built on the numbers,
+    to the last bit or so, for two payloads and a tilted gravity through one casadi function; a payload or
+    a gravity read from the wrong entries would be off by their own size."""
+    model = SpatialModel(TOOL)
+    values = ca.SX.sym("payload", model.payload_size)
+    x, w = ca.SX.sym("x", model.nx), ca.SX.sym("w", model.n_w)
+    symbolic = model.with_payload_symbols(values)
+    f = ca.Function("f", [x, w, values], [symbolic.acceleration(x, w), symbolic.input_matrix(x), symbolic.drift(x)])
+    rng = np.random.default_rng(5)
+    other = SpatialPayload(0.6, [0.0, 0.04, -0.02], [2e-3, 3e-3, 4e-3, 0.0, 2e-4, 0.0])
+    for numbers in (model, SpatialModel(other, gravity=(0.8, -0.3, -9.7))):
+        for _ in range(5):
+            xk, wk = _state(numbers, rng), rng.normal(size=6)
+            acc, A, d = (np.asarray(v) for v in f(xk, wk, numbers.payload_vector()))
+            np.testing.assert_allclose(acc.ravel(), numbers.acceleration(xk, wk), rtol=1e-13, atol=1e-13)
+            np.testing.assert_allclose(A, numbers.input_matrix(xk), rtol=1e-13, atol=1e-13)
+            np.testing.assert_allclose(d.ravel(), numbers.drift(xk), rtol=1e-13, atol=1e-13)
+    assert PlanarModel(PAPER_PAYLOAD).payload_size == 0 and PlanarModel(PAPER_PAYLOAD).payload_vector().size == 0
+
+
+def test_the_spatial_floor_and_ekf_are_built_once_for_every_payload_and_gravity(monkeypatch):
+    """The compiled steps of the spatial floor and EKF take the payload and the gravity as inputs: another
+    payload or gravity finds the same step, and the step built afresh for it is the same function (no number
+    of the payload in it), where each payload once built its own (10-17 s on a fresh machine). The steps are
+    kept as casadi functions here, not compiled."""
+    from fmscal.observers import ekf_error_state, linearised_floor
+    for module in (ekf_error_state, linearised_floor):
+        monkeypatch.setattr(module, "ChunkedSteps", lambda step, chunk, **kwargs: step)
+    monkeypatch.setattr(linearised_floor, "_CHUNKED", {})
+    monkeypatch.setattr(ekf_error_state, "_WHOLE", {})
+    a = SpatialModel(TOOL)
+    b = SpatialModel(SpatialPayload(0.6, [0.0, 0.04, -0.02], [2e-3, 3e-3, 4e-3, 0.0, 2e-4, 0.0]),
+                     gravity=(0.8, 0, -9.7))
+    floor, ekf = linearised_floor._chunked(a, 7, True, True), ekf_error_state.whole_error_step(a, 7)
+    assert linearised_floor._chunked(b, 7, True, True) is floor and ekf_error_state.whole_error_step(b, 7) is ekf
+    linearised_floor._CHUNKED.clear()
+    ekf_error_state._WHOLE.clear()
+    assert linearised_floor._chunked(b, 7, True, True).serialize() == floor.serialize()
+    assert ekf_error_state.whole_error_step(b, 7).serialize() == ekf.serialize()
+    assert floor.nnz_in(2) == linearised_floor._params_layout(a, 7).size and not np.array_equal(
+        a.payload_vector(), b.payload_vector())
