@@ -338,9 +338,10 @@ def error_params_layout(model):
     """Per-log parameters of :func:`whole_error_step`: the pose noise variances in the error state (``R``,
     ``nv``), the reading's noise variances, the ``S`` at which ``Q`` carries them (``S_Q``, the run's ``S0``,
     row order), the level's settings, whether it adapts and whether the estimate is compensated for the errors
-    in variables (1 or 0 each)."""
+    in variables (1 or 0 each), and the payload and the gravity (:meth:`fmscal.plant.Model.payload_vector`,
+    where the model's step reads them at run time)."""
     return StateLayout(("R", model.nv), ("var_w", model.n_w), ("S_Q", model.n_w ** 2), ("level", 7), ("adapt", 1),
-                       ("eiv", 1), ("payload", model.payload_size))
+                       ("eiv", 1), *model.payload_parts())
 
 
 def _step(model, z, u_prev, u, dt, p, draw, n):
@@ -354,7 +355,7 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     has = u[0]
     o = ops(z)
     P = unpack_lower(o, st.P, d)
-    dynamics = model.with_payload_symbols(pp.payload)       # the payload and the gravity read from p, not built in
+    dynamics = model.with_payload_symbols(getattr(pp, "payload", None))     # the payload and gravity, read from p
     # predict: the nominal moves, the error stays zero, P- = F P F^T + Q (the lower triangle kept)
     xs_pred, F, Q, _, _ = _error_step(dynamics, offset, st.xs, a.w_hat, b.w_hat, dt, pp.var_w, pp.S_Q, st.q * dt)
     P_pred = unpack_lower(o, pack_lower(F @ (P @ F.T) + Q, d), d)
@@ -388,7 +389,7 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     return L.pack(o, xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since, copy=c), out
 
 
-_WHOLE = {}             # (model class, n) -> ChunkedSteps
+_WHOLE = {}             # (model.compiled_key(), n) -> ChunkedSteps
 
 
 def whole_error_step(model, n):
@@ -401,7 +402,7 @@ def whole_error_step(model, n):
     the step's two samples one row per step); its per-step outputs are
     :func:`observers.ekf_step.output_layout`'s.
     """
-    key = (type(model), n) if model.payload_size else (model, n)
+    key = (model.compiled_key(), n)
     if key not in _WHOLE:
         size = model.input_layout.size
         z = ca.SX.sym("z", error_state_layout(model, n).size)
@@ -657,7 +658,7 @@ class ErrorStateEKF(AugmentedEKF):
         level, adapt = self._level_settings()
         return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, S_Q=f.S_Q.ravel(),
                                                     level=level, adapt=adapt, eiv=float(self.eiv_on),
-                                                    payload=self.model.payload_vector())
+                                                    **self.model.payload_values())
 
     def _extra_inputs(self, n_steps):
         """The copy's draws at each step's two samples, continuing the run's stream (as :meth:`_advance` draws)."""

@@ -117,7 +117,7 @@ def _params_layout(model, n):
     """``h``, the error-state pose variances ``R``, ``W = S Sigma S^T``, ``s_bar``, and the payload and the
     gravity (:meth:`fmscal.plant.Model.payload_vector`: one build of the step serves every payload)."""
     return StateLayout(("h", 1), ("R", model.nv), ("W", model.n_w * model.n_w), ("s", model.n_w * n),
-                       ("payload", model.payload_size))
+                       *model.payload_parts())
 
 
 def _one_step(model, x0, x1, w0, w1, delta, h):
@@ -188,7 +188,7 @@ def _step(model, n, eiv, history):
     st = L.unpack(z, scalars=False)
     uu = _input_layout(model, eiv).unpack(u, scalars=False)
     pp = _params_layout(model, n).unpack(p, scalars=False)
-    model = model.with_payload_symbols(pp.payload)                    # the payload read from p, not built in
+    model = model.with_payload_symbols(getattr(pp, "payload", None))   # the payload read from p, not built in
     o = _ops()
     h, has = pp.h, uu.has
     S_bar = mx.as_matrix(o, pp.s, n_w, n)
@@ -250,13 +250,13 @@ def _ops():
     return ops(ca.SX.sym("o"))
 
 
-_CHUNKED = {}           # (model class, n, eiv, history) -> ChunkedSteps
+_CHUNKED = {}           # (model.compiled_key(), n, eiv, history) -> ChunkedSteps
 
 
 def _chunked(model, n, eiv, history):
-    """:func:`_step` compiled in chunks of :data:`_CALL` samples, once per model class: the payload and the
-    gravity are inputs (a model whose ``payload_size`` is 0 would build its own)."""
-    key = (type(model), n, eiv, history) if model.payload_size else (model, n, eiv, history)
+    """:func:`_step` compiled in chunks of :data:`_CALL` samples, once for every payload and gravity of a
+    model whose step reads them at run time (:meth:`fmscal.plant.Model.compiled_key`)."""
+    key = (model.compiled_key(), n, eiv, history)
     if key not in _CHUNKED:
         if len(_CHUNKED) >= 8:
             _CHUNKED.clear()
@@ -403,8 +403,7 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
             inputs = np.hstack(base + ([draw_n[:-1], draw_n[1:], draw_v[1:]] if eiv else []))
             S_noise = s_bar.reshape(n_w, n)[:, :n_w]
             W = S_noise @ np.diag(var_w) @ S_noise.T
-            p = _params_layout(model, n).pack(None, h=log.dt, R=var, W=W.ravel(), s=s_bar,
-                                              payload=model.payload_vector())
+            p = _params_layout(model, n).pack(None, h=log.dt, R=var, W=W.ravel(), s=s_bar, **model.payload_values())
             L = error_layout(model, n, eiv)
             z = _initial_state(model, n, eiv, y[0] if log.has_pose[0] else np.zeros(model.nv), var)
             motion, snapshots = [], []

@@ -25,6 +25,8 @@ pose ``theta, X, Y``) and :class:`SpatialModel` (a 6-axis sensor: ``[tau,
 f]``, pose ``q, p``, under gravity).
 """
 
+import copy
+
 import casadi as ca
 import numpy as np
 
@@ -102,6 +104,20 @@ class Model:
         """
         return np.empty(0)
 
+    def compiled_key(self):
+        """What a compiled step written on this model depends on (its cache key): the model itself, less what
+        :meth:`payload_vector` carries where the step reads that at run time."""
+        return self._key()
+
+    def payload_parts(self):
+        """The part :meth:`payload_vector` takes in a compiled step's parameters (a
+        :class:`~fmscal.plant.layout.StateLayout` part): ``[("payload", payload_size)]``, or none at size 0."""
+        return [("payload", self.payload_size)] if self.payload_size else []
+
+    def payload_values(self):
+        """:meth:`payload_vector` by that part's name, for ``StateLayout.pack``: ``{"payload": ...}``, or none."""
+        return {"payload": self.payload_vector()} if self.payload_size else {}
+
     def with_payload_symbols(self, values):
         """The model with its payload (and gravity) read from the casadi expression ``values``.
 
@@ -109,7 +125,7 @@ class Model:
 
         Parameters
         ----------
-        values : casadi.SX, shape (payload_size,)
+        values : casadi.SX, shape (payload_size,), or None where ``payload_size`` is 0
 
         Returns
         -------
@@ -566,23 +582,46 @@ class SpatialModel(Model):
     def _key(self):
         return type(self), self.payload, self.gravity
 
+    def compiled_key(self):
+        """:meth:`Model.compiled_key`: the key without the payload and the gravity (a compiled step reads them)."""
+        key = self._key()
+        return (key[0], *key[3:])
+
     #: The payload's 22 numbers (:meth:`SpatialPayload.as_vector`), the two 3x6 blocks of ``A`` the payload
     #: alone makes (:meth:`input_matrix`) and the gravity's 3.
     payload_size = rigid_body.PayloadSymbols.size + 36 + 3
 
     def payload_vector(self):
-        """``[m, rho, I_c, I_c^-1]`` (:meth:`SpatialPayload.as_vector`), ``A``'s payload blocks (row by row)
-        and the gravity, shape (61,)."""
+        """The payload and the gravity as a compiled step takes them.
+
+        Returns
+        -------
+        ndarray, shape (61,)
+            ``m`` (kg), ``rho`` (m), ``I_c`` and ``I_c^-1`` row by row (:meth:`SpatialPayload.as_vector`),
+            the two 3x6 blocks of ``A`` the payload alone makes, row by row (:meth:`input_matrix`), and the
+            gravity (m/s^2, world frame).
+        """
         top, bottom = self._input_blocks()
         return np.r_[self.payload.as_vector(), top.ravel(), bottom.ravel(), self.gravity]
 
     def with_payload_symbols(self, values):
-        """This model's case with the payload and the gravity read from ``values`` (:meth:`payload_vector`'s
-        order): the dynamics on it are casadi expressions of them (:class:`rigid_body.PayloadSymbols`), with
-        the numbers' own operations (``A``'s blocks read from the vector, as the numbers' are computed once).
+        """This model with the payload and the gravity read from ``values``.
+
+        The dynamics on it are casadi expressions of them (:class:`rigid_body.PayloadSymbols`), with the
+        numbers' own operations: ``A``'s blocks are read from the vector, as the numbers' path computes
+        them once. The model is for writing a step, not for a cache key (casadi symbols do not hash).
+
+        Parameters
+        ----------
+        values : casadi.SX, shape (61,)
+            In :meth:`payload_vector`'s order.
+
+        Returns
+        -------
+        SpatialModel
         """
         k = rigid_body.PayloadSymbols.size
-        model = object.__new__(type(self))             # not __init__: its checks are on numbers
+        model = copy.copy(self)                        # every attribute of this model; the payload's replaced
         model.payload = rigid_body.PayloadSymbols(values[0:k])
         model._blocks = (ca.reshape(values[k:k + 18], 6, 3).T, ca.reshape(values[k + 18:k + 36], 6, 3).T)
         model.gravity = values[k + 36:self.payload_size]

@@ -375,8 +375,8 @@ def state_derivative(x, w, payload, gravity=GRAVITY):
     ----------
     x : array_like or casadi.SX, shape (13,)
     w : array_like or casadi.SX, shape (6,)
-    payload : SpatialPayload
-    gravity : array_like, shape (3,)
+    payload : SpatialPayload or PayloadSymbols
+    gravity : array_like or casadi.SX, shape (3,)
 
     Returns
     -------
@@ -404,8 +404,8 @@ def rk4_step(x, w, dt, payload, gravity=GRAVITY):
         Wrench held constant over the step (zero-order hold), ``B``.
     dt : float
         Step in s, positive.
-    payload : SpatialPayload
-    gravity : array_like, shape (3,)
+    payload : SpatialPayload or PayloadSymbols
+    gravity : array_like or casadi.SX, shape (3,)
 
     Returns
     -------

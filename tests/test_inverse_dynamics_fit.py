@@ -89,17 +89,19 @@ def test_the_latency_search_refuses_a_log_of_another_case(arm_logs):
         estimate_latency(arm_logs[0][0], PAPER_PAYLOAD)
 
 
-@pytest.mark.parametrize("n", [201, 202, 2001])
+@pytest.mark.parametrize("n", [201, 202, 2001, 60001])
 def test_the_fast_smoothing_is_scipys_savgol_filter(n):
     """The poses' smoothing (overlap-add inside, the end polynomials at the ends) equals ``savgol_filter`` with
-    ``mode="interp"`` to rounding, values and both derivatives, down to a log one window long; a wrong end or
-    a shifted interior would be off by the signal's own size."""
+    ``mode="interp"`` to rounding, values and both derivatives, on signals of a pose's size (a quaternion's
+    component, a position in m, a noise) from a log one window long to 60 s at 1 kHz: measured 2e-15 (values),
+    1e-14 (velocities), 3e-14 (accelerations) of the largest; a wrong end or a shifted interior would be off by
+    the signal's own size."""
     from scipy.signal import savgol_filter
 
     from fmscal.plant.differentiate import ORDER, _savgol
     rng = np.random.default_rng(3)
     t = np.arange(n) * 1e-3
-    values = np.column_stack([np.sin(7 * t + 1), t ** 3, rng.normal(size=n)])
+    values = np.column_stack([np.sin(7 * t + 1), 1.5 + np.sin(0.3 * t), 1e-3 * rng.normal(size=n)])
     for derivative in (0, 1, 2):
         expected = savgol_filter(values, 201, ORDER, deriv=derivative, delta=1e-3, axis=0, mode="interp")
         got = _savgol(values, 201, derivative, 1e-3)

@@ -159,3 +159,21 @@ def test_the_adaptive_default_refuses_a_model_not_linear_in_its_channels():
 def test_a_noise_model_of_another_size_is_one_error():
     with pytest.raises(FmscalError, match="wrench_sd has the wrong shape; expected 1"):
         AugmentedEKF(MODEL, noise=plant.NoiseSpec((0.1, 0.1, 0.1), 0.0, 1e-4))
+
+
+def test_a_model_that_builds_its_payload_in_has_no_payload_part_in_the_steps_parameters():
+    """``payload_size`` 0 (a model of the user's own, here a rail without linear channels): the compiled
+    steps' parameters (the spatial floor's, the spatial EKF's) have no payload part, and a step written on the
+    model keeps its own numbers and is cached by the whole model."""
+    from fmscal.observers import linearised_floor
+    from fmscal.observers.ekf_error_state import error_params_layout
+
+    class BentRail(RailModel):
+        name = "bent-rail"
+        linear_channels = False
+
+    model = BentRail(RailPayload(MASS))
+    assert model.payload_size == 0 and model.payload_parts() == [] and model.payload_values() == {}
+    assert "payload" not in linearised_floor._params_layout(model, 2).names
+    assert "payload" not in error_params_layout(model).names
+    assert model.compiled_key() == model._key() and model.with_payload_symbols(None) is model

@@ -11,6 +11,7 @@ from fmscal.observers import AugmentedEKF, make_observer
 from fmscal.observers.ekf_error_state import ErrorStateEKF
 from fmscal.observers.max_likelihood import fit_max_likelihood
 from fmscal.plant import Log, SpatialModel
+from fmscal.plant.rigid_body import SpatialPayload
 from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
@@ -93,30 +94,37 @@ def test_compiled_run_matches_filterpy(short_log):
     """The whole step compiled (the default) and filterpy's ExtendedKalmanFilter agree to rounding: estimate,
     motion, S_std, b, P and the nominal the filter ends at, each to 1e-9 of its largest entry or to 4 times what
     one unit in the last place of the readings changes it by in the compiled run, where that is larger (and never
-    beyond 1e-7 of the largest entry, whatever the nudge).
+    beyond 1e-7 of the largest entry, whatever the nudge). The compiled step reads the payload and the gravity
+    at run time, filterpy's path builds them in: a second payload with a tilted gravity, run on the step the
+    first one built, is held to the same bound.
 
     The first samples, with the prior's ``S0_sd = 3`` against poses to 2e-5 m, amplify rounding: measured (seed
     1, 0.5 s), the two paths differ by 3.3e-9 (S_hat), 6e-11 (motion), 3e-10 (S_std, P), 2.8e-8 (b) of the
     largest entry, and one ulp of the readings moves the compiled run by 3.1e-9, 5e-11, 3e-10, 2.4e-8.
     """
     log, truth = short_log
-    ekf = AugmentedEKF(MODEL, noise=truth.noise, offset=True)
-
-    def outcome(log, compiled=True):
-        result = ekf.run(log, compiled=compiled)
-        assert not result.diverged and len(result.t) == len(log)
-        f = ekf.run_data.state
-        return dict(S=result.S_hat_history, x=result.x_hat_history, S_std=result.S_std, b=result.b,
-                    b_std=result.b_std, P=f.kf.P.copy(), xs=f.xs.copy())
-
-    fast, slow = outcome(log), outcome(log, compiled=False)
     ulp = 2.0 ** -52 * np.random.default_rng(0).choice([-1.0, 1.0], log.w_hat.shape)
-    nudged = outcome(Log(log.t, log.pose, log.w_hat * (1 + ulp), name="nudged"))
-    assert np.all(slow["S"][-1] != np.eye(6))                              # the filter moved S
-    for name in fast:
-        nudge = 4 * np.max(np.abs(nudged[name] - fast[name]))
-        _close(fast[name], slow[name], rounding=min(nudge, 1e-7 * np.max(np.abs(slow[name]))))   # never beyond 1e-7
-    np.testing.assert_allclose(np.linalg.norm(fast["x"][:, 3:7], axis=1), 1.0, rtol=0, atol=1e-12)
+    # the compiled step reads the payload and the gravity at run time (one build for all), filterpy's path
+    # builds them in: a second payload and a tilted gravity, run on the step the first one built, agree too
+    other = SpatialModel(SpatialPayload(0.9, [0.03, 0.01, 0.04], [3e-3, 4e-3, 2e-3, 1e-4, 0.0, -2e-4]),
+                         gravity=(0.5, -0.2, -9.79))
+    for model in (MODEL, other):
+        ekf = AugmentedEKF(model, noise=truth.noise, offset=True)
+
+        def outcome(log, compiled=True):
+            result = ekf.run(log, compiled=compiled)
+            assert not result.diverged and len(result.t) == len(log)
+            f = ekf.run_data.state
+            return dict(S=result.S_hat_history, x=result.x_hat_history, S_std=result.S_std, b=result.b,
+                        b_std=result.b_std, P=f.kf.P.copy(), xs=f.xs.copy())
+
+        fast, slow = outcome(log), outcome(log, compiled=False)
+        nudged = outcome(Log(log.t, log.pose, log.w_hat * (1 + ulp), name="nudged"))
+        assert np.all(slow["S"][-1] != np.eye(6))                              # the filter moved S
+        for name in fast:
+            nudge = 4 * np.max(np.abs(nudged[name] - fast[name]))
+            _close(fast[name], slow[name], rounding=min(nudge, 1e-7 * np.max(np.abs(slow[name]))))   # <= 1e-7
+        np.testing.assert_allclose(np.linalg.norm(fast["x"][:, 3:7], axis=1), 1.0, rtol=0, atol=1e-12)
 
 
 def test_q_carries_the_noise_at_the_runs_start_not_at_the_estimate(short_log):

@@ -97,6 +97,8 @@ def test_the_floor_runs_behind_the_observer_contract(arm_log):
 
 
 def test_the_compiled_floor_matches_casadis_virtual_machine():
+    """The same step (the payload and the gravity read at run time), compiled and on casadi's virtual machine;
+    that step's dynamics are the numbers' own (``tests/test_model.py``)."""
     log, _, _ = ARM.with_(duration=0.6).generate(1)
     model = SpatialModel(ARM.payload, ARM.gravity)
     fast = fit_max_likelihood(log, model, offset=True)
