@@ -229,7 +229,8 @@ class PayloadSymbols:
 
     def __init__(self, values):
         if not isinstance(values, ca.SX) or values.numel() != self.size:
-            raise ValueError(f"PayloadSymbols takes a casadi.SX of {self.size} entries; got {values!r}")
+            got = f"a casadi.SX of {values.numel()} entries" if isinstance(values, ca.SX) else type(values).__name__
+            raise ValueError(f"PayloadSymbols takes a casadi.SX of {self.size} entries; got {got}")
         self.mass = values[0]
         self.rho = values[1:4]
         self.I_c = ca.reshape(values[4:13], 3, 3).T               # casadi reshapes column by column

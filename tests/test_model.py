@@ -6,7 +6,7 @@ import pytest
 
 from fmscal.plant import PAPER_PAYLOAD, FmscalError
 from fmscal.plant.model import PlanarModel, SpatialModel, model_for_columns
-from fmscal.plant.rigid_body import SpatialPayload
+from fmscal.plant.rigid_body import PayloadSymbols, SpatialPayload
 
 from rail import RailModel, RailPayload
 
@@ -142,6 +142,8 @@ def test_the_payload_read_at_run_time_gives_the_numbers_dynamics():
             np.testing.assert_allclose(A, numbers.input_matrix(xk), rtol=1e-13, atol=1e-13)
             np.testing.assert_allclose(d.ravel(), numbers.drift(xk), rtol=1e-13, atol=1e-13)
     assert PlanarModel(PAPER_PAYLOAD).payload_size == 0 and PlanarModel(PAPER_PAYLOAD).payload_vector().size == 0
+    with pytest.raises(ValueError, match="takes a casadi.SX of 22 entries; got a casadi.SX of 3 entries"):
+        PayloadSymbols(ca.SX.sym("short", 3))
 
 
 def test_the_spatial_floor_and_ekf_are_built_once_for_every_payload_and_gravity(monkeypatch):
