@@ -33,7 +33,7 @@ import numpy as np
 from fmscal.plant import Log
 from fmscal.plant.model import as_model
 from fmscal.plant._checks import as_bool
-from fmscal.plant._compile import ChunkedSteps, compiler
+from fmscal.plant._compile import ChunkedSteps, build_once, compiler
 from fmscal.plant.errors import FmscalError
 from fmscal.plant.sensor import check_calibration
 
@@ -560,10 +560,7 @@ class RecursiveObserver(Observer):
             # the next state, and what the run keeps of it (x and S): the whole state is carried, not written out
             step = ca.Function(f"{ident}_step", [z, u_prev, u, dt], [z_next, self._reported(z_next)])
             key = (compiler(), step.serialize())      # observers of the same settings share one build
-            if key not in _CHUNKED:
-                if len(_CHUNKED) >= _CHUNKED_MAX:
-                    _CHUNKED.clear()
-                _CHUNKED[key] = ChunkedSteps(step, _CHUNK, keep_states=False)
-            self._chunks = _CHUNKED[key]
+            self._chunks = build_once(_CHUNKED, key, lambda: ChunkedSteps(step, _CHUNK, keep_states=False),
+                                      _CHUNKED_MAX)
             self.run_data.build_time = time.perf_counter() - start       # one-off: not the run's cost
         return self._chunks

@@ -99,7 +99,7 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant._backend import ops
-from fmscal.plant._compile import BufferedCall, ChunkedSteps
+from fmscal.plant._compile import BufferedCall, ChunkedSteps, build_once
 from fmscal.plant.layout import StateLayout
 
 from .discretise import move
@@ -402,8 +402,7 @@ def whole_error_step(model, n):
     the step's two samples one row per step); its per-step outputs are
     :func:`observers.ekf_step.output_layout`'s.
     """
-    key = (model.compiled_key(), n)
-    if key not in _WHOLE:
+    def build():
         size = model.input_layout.size
         z = ca.SX.sym("z", error_state_layout(model, n).size)
         u_prev, u = ca.SX.sym("u_prev", size), ca.SX.sym("u", size)
@@ -413,10 +412,9 @@ def whole_error_step(model, n):
         z_next, out = _step(model, z, u_prev, u, dt, p, draw, n)
         step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p, draw],
                            [ca.densify(z_next), ca.densify(out)])
-        if len(_WHOLE) >= 8:
-            _WHOLE.clear()
-        _WHOLE[key] = ChunkedSteps(step, _CHUNK)
-    return _WHOLE[key]
+        return ChunkedSteps(step, _CHUNK)
+
+    return build_once(_WHOLE, (model.compiled_key(), n), build, 8)
 
 
 # --- the filter -----------------------------------------------------------------------------------

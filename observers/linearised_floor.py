@@ -69,7 +69,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant._compile import ChunkedSteps
+from fmscal.plant._compile import ChunkedSteps, build_once
 from fmscal.plant.differentiate import smoothed_state
 from fmscal.plant.layout import StateLayout
 
@@ -256,12 +256,8 @@ _CHUNKED = {}           # (model.compiled_key(), n, eiv, history) -> ChunkedStep
 def _chunked(model, n, eiv, history):
     """:func:`_step` compiled in chunks of :data:`_CALL` samples, once for every payload and gravity of a
     model whose step reads them at run time (:meth:`fmscal.plant.Model.compiled_key`)."""
-    key = (model.compiled_key(), n, eiv, history)
-    if key not in _CHUNKED:
-        if len(_CHUNKED) >= 8:
-            _CHUNKED.clear()
-        _CHUNKED[key] = ChunkedSteps(_step(model, n, eiv, history), _CALL)
-    return _CHUNKED[key]
+    return build_once(_CHUNKED, (model.compiled_key(), n, eiv, history),
+                      lambda: ChunkedSteps(_step(model, n, eiv, history), _CALL), 8)
 
 
 # --- the driver -----------------------------------------------------------------------------------

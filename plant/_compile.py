@@ -32,7 +32,7 @@ try:
 except ImportError:                       # Windows
     fcntl = None
 
-__all__ = ["compile_function", "compile_functions", "compiler", "BufferedCall", "ChunkedSteps"]
+__all__ = ["compile_function", "compile_functions", "compiler", "BufferedCall", "ChunkedSteps", "build_once"]
 
 # no -ffast-math and no fused multiply-adds (-ffp-contract=off): the C code rounds each operation as numpy does
 _FLAGS = ("-O3", "-ffp-contract=off", "-fPIC", "-shared")
@@ -188,6 +188,31 @@ def _build(cc, flags, source, name, directory, library):
             subprocess.run([cc, *flags, str(src), "-o", str(out), "-lm"], check=True,
                            capture_output=True, text=True)
         os.replace(out, library)          # atomic: a reader never sees half a library
+
+
+def build_once(cache, key, build, limit):
+    """``cache[key]``, made by ``build()`` the first time: a process's compiled steps, one build per key.
+
+    Parameters
+    ----------
+    cache : dict
+    key : hashable
+    build : callable
+        ``build()``: the value (a :class:`ChunkedSteps`), called only where ``key`` is missing.
+    limit : int
+        The cache is emptied when it holds this many, so that a long sweep over settings does not keep
+        every build.
+
+    Returns
+    -------
+    object
+        ``cache[key]``.
+    """
+    if key not in cache:
+        if len(cache) >= limit:
+            cache.clear()
+        cache[key] = build()
+    return cache[key]
 
 
 class BufferedCall:
