@@ -1,8 +1,8 @@
 """The online methods in 3D against the floor, seed by seed: ``python benchmarks/online_floor_3d.py [SEEDS]``.
 
 For each seed of a 20 s ``spatial-arm`` log (default seeds 0-8), the adaptive observer's and the EKF's E (the
-median over the run's last tenth, :func:`fmscal.analysis.metrics.tail_median`) over the floor's E, the floor
-fitted on the samples that median has seen (:func:`fmscal.analysis.metrics.tail_seen`) and on the whole log.
+median over the run's last tenth, :func:`fmscal.analysis._metrics.tail_median`) over the floor's E, the floor
+fitted on the samples that median has seen (:func:`fmscal.analysis._metrics.tail_seen`) and on the whole log.
 The tests assert seeds 0-2 (``tests/test_spatial_adaptive.py``, ``tests/test_spatial_ekf.py``); this prints
 the seeds beside them, as docs/comparison.md quotes them. About a minute on 2 cores.
 """
@@ -11,10 +11,10 @@ import sys
 
 import numpy as np
 
-from fmscal.analysis.metrics import calibration_error, error_history, tail_median, tail_seen
+from fmscal.analysis._metrics import calibration_error, error_history, tail_median, tail_seen
 from fmscal.observers import make_observer
 from fmscal.plant import SpatialModel
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 
 def main(seeds):

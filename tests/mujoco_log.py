@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from fmscal.plant import Log
-from fmscal.plant.spatial_scenarios import draw_spatial_S
+from fmscal.plant.scenarios._spatial import draw_spatial_S
 
 SUBSTEPS = 10
 

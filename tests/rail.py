@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmscal.plant._backend import ops
-from fmscal.plant.layout import StateLayout
-from fmscal.plant.model import Model
+from fmscal.plant.numerics._backend import ops
+from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.physics._model import Model
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ import pytest
 from fmscal import plant
 from fmscal.analysis import calibration_error, error_history
 from fmscal.observers import AdaptiveObserver, PaperAdaptiveObserver, check_gains
-from fmscal.observers.adaptive_paper import PAPER_K1, PAPER_K2
+from fmscal.observers.adaptive._paper import PAPER_K1, PAPER_K2
 
 
 @pytest.fixture(scope="module")

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from fmscal import plant
-from fmscal.analysis.ablation import ABLATION_STEPS, ablation, ablation_markdown, tail_error
-from fmscal.analysis.comparison import floor_error, simulate_case
-from fmscal.analysis.metrics import error_history
+from fmscal.analysis._ablation import ABLATION_STEPS, ablation, ablation_markdown, tail_error
+from fmscal.analysis._comparison import floor_error, simulate_case
+from fmscal.analysis._metrics import error_history
 from fmscal.observers import AdaptiveObserver, LeastSquares
-from fmscal.plant.errors import FmscalError
+from fmscal.plant.numerics._errors import FmscalError
 
 FLOOR_MARGIN = 1.3        # issue 15: within 1.3x of the floor on the constant-S scenarios
 

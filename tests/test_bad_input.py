@@ -1,6 +1,6 @@
 """The fmscal command line over bad input: one line, exit status 2, no traceback, no file touched.
 
-Every case runs ``analysis.cli.main`` in-process on a copy of a small folder
+Every case runs ``analysis.cli._main.main`` in-process on a copy of a small folder
 (a 5 s simulated log, its sidecar, a saved calibration and a gallery of bad
 files) and checks that the folder is exactly as it was afterwards: no file
 created, removed or changed.
@@ -226,7 +226,7 @@ def test_no_runtime_warning_reaches_stderr(folder, capsys):
 
 
 def test_set_reads_booleans_strictly_and_numbers_as_numbers():
-    from fmscal.analysis.cli_scale import parse_settings
+    from fmscal.analysis.cli._scale import parse_settings
     grid = parse_settings(["adaptive:offset=no,YES,0,1,false,True", "high-gain:lam=1,2.5"])
     assert grid == {"adaptive": {"offset": [False, True, False, True, False, True]},
                     "high-gain": {"lam": [1, 2.5]}}
@@ -294,7 +294,7 @@ def test_a_failed_overwrite_keeps_the_old_log_and_its_sidecar(folder, monkeypatc
 
 
 def test_a_failing_plot_leaves_no_saved_calibration(folder, monkeypatch, capsys):
-    from fmscal.analysis import plots
+    from fmscal.analysis import _plots as plots
     def broken(*args, **kwargs):
         raise OSError(5, "Input/output error")
     monkeypatch.setattr(plots, "plot_calibration", broken)

@@ -156,7 +156,7 @@ def _square(x):
 def test_workers_are_capped_at_the_items_and_the_cores(monkeypatch):
     import joblib
     from tqdm import tqdm
-    from fmscal.analysis.sweep import run_local, worker_count
+    from fmscal.analysis._sweep import run_local, worker_count
     cores = os.cpu_count() or 1
     assert worker_count(1000, 1) == 1
     assert worker_count(1000, 3) == min(3, cores)
@@ -182,7 +182,7 @@ def test_workers_are_capped_at_the_items_and_the_cores(monkeypatch):
 # --- item 5: races ---------------------------------------------------------------------------------------------
 
 def test_an_output_that_appears_meanwhile_is_not_replaced(tmp_path):
-    from fmscal.plant.files import OutputExistsError, atomic_write_many, atomic_write_text, exclusive
+    from fmscal.plant.io._files import OutputExistsError, atomic_write_many, atomic_write_text, exclusive
     target = tmp_path / "out.json"
 
     def slow_writer(tmp):                # another run places its file while this one writes
@@ -201,7 +201,7 @@ def test_an_output_that_appears_meanwhile_is_not_replaced(tmp_path):
 
 def test_without_hard_links_the_name_is_still_claimed_exclusively(tmp_path, monkeypatch):
     import errno
-    from fmscal.plant.files import OutputExistsError, atomic_write_text, exclusive
+    from fmscal.plant.io._files import OutputExistsError, atomic_write_text, exclusive
 
     def no_links(src, dst):
         raise OSError(errno.EPERM, "Operation not permitted")
@@ -215,7 +215,7 @@ def test_without_hard_links_the_name_is_still_claimed_exclusively(tmp_path, monk
 
 
 def test_a_folder_is_claimed_by_one_run(tmp_path):
-    from fmscal.plant.files import LOCK_NAME, claim_folder
+    from fmscal.plant.io._files import LOCK_NAME, claim_folder
     out = tmp_path / "new" / "d"
     with claim_folder(out):
         assert (out / LOCK_NAME).read_text().strip() == str(os.getpid())
@@ -258,7 +258,7 @@ def test_two_saves_at_once_one_succeeds(folder):
 def test_two_runs_past_their_checks_place_one_output(command, folder, monkeypatch, capsys):
     """Both runs pass the existence check, then both place their file: exactly one succeeds."""
     import threading
-    from fmscal.plant import files
+    from fmscal.plant.io import _files as files
     barrier, real, waited = threading.Barrier(2, timeout=60), files._place, set()
 
     def together(tmp, path):
@@ -423,7 +423,7 @@ def test_theta_in_zero_to_two_pi_is_unwrapped_not_taken_for_degrees(logs, capsys
 
 
 def test_readings_far_from_si_are_not_taken_for_millimetres(logs):
-    from fmscal.plant.units import COUNTS, diagnose_units
+    from fmscal.plant.io._units import COUNTS, diagnose_units
     payload = plant.read_truth(logs / "log.truth.json").payload
     tiny = diagnose_units(plant.read_log(logs / "tiny.csv"), payload)
     assert [f.kind for f in tiny] == [COUNTS] and "millimetres" not in tiny[0].message
@@ -435,7 +435,7 @@ def test_readings_far_from_si_are_not_taken_for_millimetres(logs):
 
 def test_an_unroutable_scheduler_is_not_said_to_accept_connections(monkeypatch):
     import socket
-    from fmscal.analysis.sweep import _probe
+    from fmscal.analysis._sweep import _probe
 
     def unroutable(address, timeout):
         raise socket.timeout("timed out")
@@ -459,7 +459,7 @@ def _wrench_messages(n=200, step_ns=1_000_000):
 
 
 def test_import_refuses_a_clock_jumping_back_and_zero_stamps():
-    from fmscal.plant.bag import BagError, _stream
+    from fmscal.plant.io._bag import BagError, _stream
     messages = _wrench_messages()
     assert _stream(messages, "wrench", "b.mcap")[3]["duplicate_stamps"] == 0
     jumped = messages[:120] + [(s - 5_000_000_000, v) for s, v in messages[120:]]
@@ -476,7 +476,7 @@ def test_import_refuses_a_clock_jumping_back_and_zero_stamps():
 def test_a_singular_estimate_is_named_for_its_cause_not_as_a_bad_matrix(folder, monkeypatch):
     """An estimate with a zero row (a spike that swamps the fit): not 'S is singular' as if the user gave S."""
     from dataclasses import replace
-    from fmscal.analysis.calibrate import calibrate
+    from fmscal.analysis._calibrate import calibrate
     from fmscal.observers import LeastSquares
     real = LeastSquares.run
 

@@ -1,15 +1,15 @@
-"""ROS bags in: plant.bag and fmscal import (bags written here with rosbags' own writers)."""
+"""ROS bags in: plant.io._bag and fmscal import (bags written here with rosbags' own writers)."""
 
 import json
 
 import numpy as np
 import pytest
 
-from fmscal.analysis.calibrate import calibrate
+from fmscal.analysis._calibrate import calibrate
 from fmscal.analysis.cli import main
 from fmscal.plant import FmscalError, get_scenario, read_log, read_truth
-from fmscal.plant.bag import BagError, import_bag, read_bag
-from fmscal.plant.bag_write import write_bag
+from fmscal.plant.io._bag import BagError, import_bag, read_bag
+from fmscal.plant.io._bag_write import write_bag
 
 WRENCH, POSE = "/ft_sensor/wrench", "/mocap/payload/pose"
 OFFSET = (0.05, -0.02)          # marker origin from the centre of mass, body frame, m
@@ -113,7 +113,7 @@ def test_window_cuts_the_log_and_moves_t0(rig):
 
 
 def test_uneven_wrench_stamps_resampled_and_a_hole_refused():
-    from fmscal.plant.bag import _even_grid
+    from fmscal.plant.io._bag import _even_grid
     rng = np.random.default_rng(0)
     t = np.arange(2000) * 1e-3 + rng.uniform(-5e-5, 5e-5, 2000)          # 5 % jitter
     w = np.column_stack([np.sin(t), np.cos(t), t])
@@ -128,7 +128,7 @@ def test_uneven_wrench_stamps_resampled_and_a_hole_refused():
 
 
 def test_tilt_and_out_of_plane_travel_warned(rig, tmp_path):
-    from fmscal.plant.bag import _planar_pose, _warnings
+    from fmscal.plant.io._bag import _planar_pose, _warnings
     n = 50
     tilt = np.deg2rad(5.0)                                  # about x
     q = np.tile([np.sin(tilt / 2), 0.0, 0.0, np.cos(tilt / 2)], (n, 1))

@@ -11,9 +11,9 @@ import pytest
 
 from fmscal import plant
 from fmscal.analysis.cli import main
-from fmscal.analysis.metrics import calibration_error
+from fmscal.analysis._metrics import calibration_error
 from fmscal.observers import AugmentedEKF, LeastSquares
-from fmscal.observers.base import ObserverResult
+from fmscal.observers.core._base import ObserverResult
 
 OTHER = plant.Payload(6.0, 0.3, (-0.15, 0.4))
 PAYLOAD_ARGS = ["--mass", "6", "--inertia", "0.3", "--rho", "-0.15", "0.4"]
@@ -88,7 +88,7 @@ def test_least_squares_uncertainty_is_honest(scenario):
     """Issue 15: over 20 seeds the z-scores ``(S_hat - S) / S_std`` (and of ``b`` on the rig, with its offset,
     50 Hz poses and latency) have a spread between 0.8 and 1.25 and a mean near 0: neither overconfident
     nor needlessly cautious."""
-    from fmscal.analysis.comparison import simulate_case
+    from fmscal.analysis._comparison import simulate_case
     z_S, z_b = [], []
     for seed in range(20):
         sc, log, truth, _ = simulate_case(scenario, seed, 30.0)
@@ -216,7 +216,7 @@ def test_bad_payload_arguments_are_refused_with_one_line(other_log, args, messag
 def test_readings_in_counts_are_named_and_fail_only_the_methods_that_start_from_S0():
     """A reading in sensor counts makes S's entries tiny: every method warns, the offline fit absorbs it (its units
     check passes), an online method starting from S0 of order one does not (its units check fails)."""
-    from fmscal.analysis.calibrate import calibrate
+    from fmscal.analysis._calibrate import calibrate
     sc = plant.get_scenario("paper").with_(duration=20.0)
     log, truth, _ = sc.generate(0)
     counts = plant.Log(log.t, log.pose, log.w_hat * 1e4)

@@ -53,7 +53,7 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
 
 def test_reproduce_gives_the_same_rows_on_one_process_and_on_two(tmp_path):
     """The scenario and method pairs run on worker processes; the table does not depend on how many."""
-    from fmscal.analysis.reproduce import reproduce
+    from fmscal.analysis._reproduce import reproduce
     rows = [reproduce(tmp_path / str(n), duration_scale=0.02, progress=False, n_jobs=n) for n in (1, 2)]
     strip = lambda table: [{k: v for k, v in r.items() if k != "wall_time"} for r in table]     # noqa: E731
     assert strip(rows[0]) == strip(rows[1])

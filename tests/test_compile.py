@@ -6,9 +6,9 @@ import pytest
 
 from fmscal import plant
 from fmscal.observers import AdaptiveObserver, HighGainObserver
-from fmscal.plant import _compile
-from fmscal.plant._compile import BufferedCall, compile_function
-from fmscal.plant.excitation import PaperWrench
+from fmscal.plant.numerics import _compile as _compile
+from fmscal.plant.numerics._compile import BufferedCall, compile_function
+from fmscal.plant.physics._excitation import PaperWrench
 
 LOGS = [("paper", 0), ("vision-50hz", 4), ("other-payload", 2)]
 
@@ -110,12 +110,12 @@ def test_fast_and_readable_observers_agree(backend, scenario, seed, monkeypatch)
 def test_fast_and_readable_simulators_agree(backend, monkeypatch):
     if backend == "vm":
         monkeypatch.setenv("FMSCAL_COMPILER", "none")
-        plant.simulate._compiled_steps.cache_clear()
+        plant.physics._simulate._compiled_steps.cache_clear()
     t = np.arange(0, 1.2, 1e-3)                       # not a whole number of chunks
     payload = plant.Payload(6.0, 0.3, (-0.15, 0.4))
     fast = plant.integrate(payload, PaperWrench(), t)
     slow = plant.integrate(payload, PaperWrench(), t, compiled=False)
-    plant.simulate._compiled_steps.cache_clear()
+    plant.physics._simulate._compiled_steps.cache_clear()
     np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-12)
 
 

@@ -10,8 +10,8 @@ import pytest
 from fmscal import plant
 from fmscal.analysis.cli import build_parser, main
 from fmscal.observers import METHODS, Method, Observer, ObserverResult, RecursiveObserver, make_observer, method_names
-from fmscal.observers.state import INPUT, StateLayout
-from fmscal.plant.errors import FmscalError
+from fmscal.observers.core._state import INPUT, StateLayout
+from fmscal.plant.numerics._errors import FmscalError
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +60,7 @@ def test_step_after_reset_agrees_with_run(name, short_log):
         x, S = obs.step(log.dt, pose, log.w_hat[k])
         x_steps.append(x)
         S_steps.append(S)
-    # over the first 0.1 s the EKF's compensation (observers.eiv) solves with a still rank-deficient information,
+    # over the first 0.1 s the EKF's compensation (kalman._eiv) solves with a still rank-deficient information,
     # which amplifies the rounding by which its compiled run and its filterpy steps differ (tests/test_eiv.py)
     early = int(round(0.1 / log.dt))
     np.testing.assert_allclose(np.array(S_steps)[early:], result.S_hat_history[early:], rtol=0, atol=1e-9)
@@ -142,7 +142,7 @@ def test_importing_every_module_leaves_the_matplotlib_backend_alone():
 
 def test_a_genuine_bug_keeps_its_traceback(monkeypatch):
     """The CLI turns the toolkit's input errors into one line; anything else is a bug and is raised."""
-    import fmscal.analysis.cli as cli
+    import fmscal.analysis.cli._main as cli
 
     def broken(args):
         raise ZeroDivisionError("a bug")
@@ -161,7 +161,8 @@ def test_state_layout_packs_and_unpacks_numbers_and_symbols_alike():
     np.testing.assert_array_equal(s.S, np.eye(3).ravel())
     zs = ca.SX.sym("z", layout.size)
     parts = layout.unpack(zs)
-    packed = layout.pack(__import__("fmscal.plant._backend", fromlist=["ops"]).ops(zs), x=parts.x, S=parts.S, t=parts.t)
+    ops = __import__("fmscal.plant.numerics._backend", fromlist=["ops"]).ops
+    packed = layout.pack(ops(zs), x=parts.x, S=parts.S, t=parts.t)
     f = ca.Function("f", [zs], [packed])
     np.testing.assert_array_equal(np.array(f(z)).ravel(), z)
     with pytest.raises(ValueError, match="missing"):

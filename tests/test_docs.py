@@ -107,7 +107,7 @@ def test_the_packages_have_public_names():
     # Guards the collection itself: a broken walk must not pass every check vacuously.
     assert 150 < len(ALL_PUBLIC) < 1000
     assert "fmscal.observers.AdaptiveObserver" in ALL_PUBLIC
-    assert "fmscal.analysis.comparison.compare" in ALL_PUBLIC
+    assert "fmscal.analysis._comparison.compare" in ALL_PUBLIC
 
 
 @pytest.mark.parametrize("path", sorted(ALL_PUBLIC))
@@ -140,6 +140,6 @@ def test_the_api_reference_lists_only_public_names(package):
 
 def test_data_docs_are_found_and_missing_ones_are_not():
     # The '#:' reader itself, both ways: a documented constant, a package re-export, a non-name.
-    assert "Times" in data_doc("fmscal.analysis.comparison.CHECKPOINTS")
+    assert "Times" in data_doc("fmscal.analysis._comparison.CHECKPOINTS")
     assert data_doc("fmscal.plant.PAPER_S")
-    assert data_doc("fmscal.analysis.comparison.no_such_constant") == ""
+    assert data_doc("fmscal.analysis._comparison.no_such_constant") == ""

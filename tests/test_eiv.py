@@ -1,13 +1,13 @@
-"""The errors-in-variables compensation the EKF reports through (observers.eiv)."""
+"""The errors-in-variables compensation the EKF reports through (observers.kalman._eiv)."""
 
 import numpy as np
 import pytest
 
 from fmscal import plant
 from fmscal.observers import AugmentedEKF
-from fmscal.observers.eiv import _compensation, _compiled, compensation_matrix
-from fmscal.observers.kalman import filter_layout, initial_state
-from fmscal.observers.max_likelihood import fit_max_likelihood
+from fmscal.observers.kalman._eiv import _compensation, _compiled, compensation_matrix
+from fmscal.observers.kalman._filter import filter_layout, initial_state
+from fmscal.observers.batch._max_likelihood import fit_max_likelihood
 
 
 @pytest.mark.parametrize("n", [3, 4])

@@ -76,7 +76,7 @@ def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
 
 def test_the_whole_step_runs_on_casadis_virtual_machine_too(monkeypatch):
     """Without a C compiler the whole step runs on casadi's virtual machine, with the same numbers."""
-    from fmscal.observers import ekf_step
+    from fmscal.observers.kalman import _ekf_step as ekf_step
     monkeypatch.setenv("FMSCAL_COMPILER", "none")
     ekf_step.whole_step.cache_clear()
     try:
@@ -96,7 +96,7 @@ def test_compiled_run_stops_where_the_filter_diverges():
     """The health test runs on the compiled path too: readings that jump to 1e9 at sample 1200 throw S_hat past
     the divergence bound there; both paths stop at the same sample and report the run diverged. A covariance
     that is not finite or not positive on its diagonal stops it as well."""
-    from fmscal.observers.ekf_step import output_layout
+    from fmscal.observers.kalman._ekf_step import output_layout
     sc = plant.get_scenario("paper").with_(duration=1.5)
     log, truth, _ = sc.generate(0)
     w_hat = log.w_hat.copy()
@@ -256,7 +256,7 @@ def _median_E_last_10pct(result, truth):
 def test_ekf_defaults_reach_the_constant_S_filter_on_a_constant_S(scenario, seed):
     """Issue 15: with its defaults (no random walk until the innovations raise one) the EKF is within 1.3x
     of the same filter with no random walk at all, told the true noise, on a sensor that does not change."""
-    from fmscal.analysis.comparison import simulate_case
+    from fmscal.analysis._comparison import simulate_case
     sc, log, truth, noise = simulate_case(scenario, seed, 40.0)
     E = {name: _median_E_last_10pct(AugmentedEKF(sc.payload, noise=noise, **kw).run(log, truth.S0), truth)
          for name, kw in (("default", {}), ("floor", {"q_S": 0.0, "adapt_q": False}))}
@@ -265,7 +265,7 @@ def test_ekf_defaults_reach_the_constant_S_filter_on_a_constant_S(scenario, seed
 
 def _z_scores(scenario, seed, duration, told):
     """``(S_hat - S) / S_std`` (9,) and, with an offset, ``(b_hat - b) / b_std`` (3,) of one seeded run."""
-    from fmscal.analysis.comparison import simulate_case
+    from fmscal.analysis._comparison import simulate_case
     sc, log, truth, noise = simulate_case(scenario, seed, duration)
     offset = truth.offset is not None
     result = AugmentedEKF(sc.payload, noise=noise if told else None, offset=offset).run(
@@ -291,7 +291,7 @@ def test_ekf_uncertainties_are_honest_over_seeds(scenario, duration, told):
 @pytest.mark.slow
 def test_ekf_uncertainties_are_honest_on_random_S():
     """The same two-sided spread on random S (entries up to 3, condition number up to 20), where the noisy
-    reading in the regressor biased the uncompensated filter (spread 1.45): the compensation (observers.eiv)
+    reading in the regressor biased the uncompensated filter (spread 1.45): the compensation (observers.kalman._eiv)
     and the uncertainty of S in Q make it honest."""
     z = np.array([_z_scores("random-S", seed, 25.0, True)[0] for seed in range(20)])
     assert 0.8 < z.std() < 1.25 and abs(z.mean()) < 0.3
@@ -302,7 +302,7 @@ def test_ekf_defaults_are_at_the_floor_where_the_reading_is_noisy():
     """Issue 15: on ``noisy`` and ``random-S`` (where the noisy reading in the regressor cost the uncompensated
     EKF 1.4-1.8x) the EKF with its defaults is within 1.3x of the floor on the median over seeds, and no seed is
     below 0.7x (the floor is what the data allow) or above 1.6x."""
-    from fmscal.analysis.comparison import compare
+    from fmscal.analysis._comparison import compare
     table = compare(["noisy", "random-S"], 3, ["ekf"], duration=60, progress=False)
     for scenario, g in table[table["observer"] == "ekf"].groupby("scenario"):
         ratio = g["E_over_floor"].to_numpy()

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from fmscal import plant
-from fmscal.analysis.ablation import ablation, ablation_markdown
+from fmscal.analysis._ablation import ablation, ablation_markdown
 from fmscal.analysis.cli import main
-from fmscal.analysis.comparison import compare, summarise, summary_markdown
-from fmscal.analysis.sweep import sweep
+from fmscal.analysis._comparison import compare, summarise, summary_markdown
+from fmscal.analysis._sweep import sweep
 from fmscal.observers import AdaptiveObserver, HighGainObserver
-from fmscal.observers.convergence import informed, moved
-from fmscal.observers.evidence import log_uncertainty
+from fmscal.observers.core._convergence import informed, moved
+from fmscal.observers.diagnostics._evidence import log_uncertainty
 
 
 @pytest.fixture(scope="module")

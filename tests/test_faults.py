@@ -9,7 +9,7 @@ import pytest
 from fmscal import plant
 from fmscal.analysis.cli import main
 from fmscal.observers import LeastSquares
-from fmscal.observers.faults import offset_drift, saturation
+from fmscal.observers.diagnostics._faults import offset_drift, saturation
 
 PAPER_ARGS = ["--mass", str(plant.PAPER_PAYLOAD.mass), "--inertia", str(plant.PAPER_PAYLOAD.inertia),
               "--rho", *(str(r) for r in plant.PAPER_PAYLOAD.rho)]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fmscal.analysis.cli import main
-from fmscal.analysis.plots import plot_comparison, wandering_methods
+from fmscal.analysis._plots import plot_comparison, wandering_methods
 from fmscal.plant import PAPER_PAYLOAD
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -22,7 +22,7 @@ def _is_png(path):
 
 def test_importing_the_plots_leaves_the_backend_alone():
     code = ("import matplotlib; matplotlib.use('svg'); "
-            "import fmscal.analysis.plots, fmscal.analysis.cli, fmscal.analysis.reproduce; "
+            "import fmscal.analysis._plots, fmscal.analysis.cli._main, fmscal.analysis._reproduce; "
             "print(matplotlib.get_backend())")          # (python-control imports pyplot; that alone switches nothing)
     env = {**os.environ, "MPLBACKEND": "svg"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)

@@ -1,11 +1,11 @@
-"""observers.health: one constant S or not, and a divergence bound of the data's own size."""
+"""observers.diagnostics._health: one constant S or not, and a divergence bound of the data's own size."""
 
 import numpy as np
 import pytest
 
 from fmscal import plant
-from fmscal.observers.convergence import divergence_bound
-from fmscal.observers.health import consistency_check
+from fmscal.observers.core._convergence import divergence_bound
+from fmscal.observers.diagnostics._health import consistency_check
 
 
 @pytest.fixture(scope="module")

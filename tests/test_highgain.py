@@ -7,8 +7,8 @@ import pytest
 from fmscal import plant
 from fmscal.analysis import calibration_error
 from fmscal.observers import HighGainObserver, check_gains, double_pole_gains
-from fmscal.observers.gains import sampled_poles
-from fmscal.observers.highgain import discrete_gain
+from fmscal.observers.core._gains import sampled_poles
+from fmscal.observers.adaptive._highgain import discrete_gain
 
 
 @pytest.mark.parametrize("lam", [5.0, 20.0, 80.0])

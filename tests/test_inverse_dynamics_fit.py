@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from fmscal.analysis.metrics import block_errors
-from fmscal.observers.inverse_dynamics_fit import fit_inverse_dynamics
+from fmscal.analysis._metrics import block_errors
+from fmscal.observers.batch._inverse_dynamics import fit_inverse_dynamics
 from fmscal.plant import FmscalError
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +47,7 @@ def test_static_poses_leave_directions_undetermined_and_say_what_to_record():
 
 def test_a_dead_channel_is_one_error_not_a_singular_matrix(arm_logs):
     log, truth, _ = arm_logs[0]
-    from fmscal.plant.log import Log
+    from fmscal.plant.io._log import Log
     w_hat = log.w_hat.copy()
     w_hat[:, 0] = 0.25                                   # tx stuck
     with pytest.raises(FmscalError, match="the reading tx does not move"):
@@ -74,8 +74,8 @@ def test_block_errors_split_units():
 def test_the_pose_streams_latency_is_found_in_3d(scenario, latency):
     """Shifted back by the right delay the spatial log fits Newton-Euler best: the search finds the delay of a
     tracker that lags the sensor to one sample (seeded; a search that ignored the shift would return 0)."""
-    from fmscal.observers.latency import estimate_latency
-    from fmscal.plant.model import SpatialModel
+    from fmscal.observers.batch._latency import estimate_latency
+    from fmscal.plant.physics._model import SpatialModel
     log, truth, _ = SPATIAL_SCENARIOS[scenario].with_(duration=20.0, latency=latency).generate(1)
     found, costs = estimate_latency(log, SpatialModel(truth.payload), max_latency=0.05)
     assert abs(found - latency) <= log.dt + 1e-12
@@ -83,7 +83,7 @@ def test_the_pose_streams_latency_is_found_in_3d(scenario, latency):
 
 
 def test_the_latency_search_refuses_a_log_of_another_case(arm_logs):
-    from fmscal.observers.latency import estimate_latency
+    from fmscal.observers.batch._latency import estimate_latency
     from fmscal.plant import PAPER_PAYLOAD
     with pytest.raises(FmscalError, match="set up for planar logs .* got a spatial log"):
         estimate_latency(arm_logs[0][0], PAPER_PAYLOAD)
@@ -98,7 +98,7 @@ def test_the_fast_smoothing_is_scipys_savgol_filter(n):
     the signal's own size."""
     from scipy.signal import savgol_filter
 
-    from fmscal.plant.differentiate import ORDER, _savgol
+    from fmscal.plant.physics._differentiate import ORDER, _savgol
     rng = np.random.default_rng(3)
     t = np.arange(n) * 1e-3
     values = np.column_stack([np.sin(7 * t + 1), 1.5 + np.sin(0.3 * t), 1e-3 * rng.normal(size=n)])

@@ -10,10 +10,10 @@ import pytest
 
 from fmscal.analysis.cli import main
 from fmscal.plant import FmscalError
-from fmscal.plant.kinematics import RobotKinematics, joint_columns
-from fmscal.plant.pose_table import simulate_table
-from fmscal.plant.rigid_body import rotation_matrix
-from fmscal.plant.spatial_scenarios import TOOL
+from fmscal.plant.io._kinematics import RobotKinematics, joint_columns
+from fmscal.plant.io._pose_table import simulate_table
+from fmscal.plant.physics._rigid_body import rotation_matrix
+from fmscal.plant.scenarios._spatial import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 
@@ -83,7 +83,7 @@ def test_a_bag_of_joint_states_imports_as_a_spatial_log(ur5, tmp_path, capsys):
     """An arm's bag: WrenchStamped and sensor_msgs/JointState; with the URDF the import writes the sensor frame's
     poses (pinocchio's forward kinematics of the joints, by name, in any order in the message)."""
     from fmscal.plant import Log, read_log
-    from fmscal.plant.bag_write import write_bag
+    from fmscal.plant.io._bag_write import write_bag
     t = np.arange(0.0, 2.0, 0.005)
     joints = 0.5 * np.sin(np.outer(t, [0.7, 1.1, 0.9, 1.3, 0.5, 1.7]) + np.arange(6))
     poses = ur5.poses(joints)

@@ -6,8 +6,8 @@ import pytest
 from fmscal import plant
 from fmscal.analysis import calibration_error
 from fmscal.observers import LeastSquares
-from fmscal.observers.max_likelihood import POSE_SD_FLOOR, V0_SD, MaximumLikelihoodFit, fit_max_likelihood
-from fmscal.plant.errors import FmscalError
+from fmscal.observers.batch._max_likelihood import POSE_SD_FLOOR, V0_SD, MaximumLikelihoodFit, fit_max_likelihood
+from fmscal.plant.numerics._errors import FmscalError
 
 
 def _case(name="paper", seed=0, duration=10.0, **changes):

@@ -14,7 +14,7 @@ import pytest
 from fmscal import plant
 from fmscal.observers import (AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares, MaximumLikelihood,
                               PaperAdaptiveObserver, get_method)
-from fmscal.plant.errors import FmscalError
+from fmscal.plant.numerics._errors import FmscalError
 
 from rail import RailModel, RailPayload
 
@@ -165,8 +165,8 @@ def test_a_model_that_builds_its_payload_in_has_no_payload_part_in_the_steps_par
     """``payload_size`` 0 (a model of the user's own, here a rail without linear channels): the compiled
     steps' parameters (the spatial floor's, the spatial EKF's) have no payload part, and a step written on the
     model keeps its own numbers and is cached by the whole model."""
-    from fmscal.observers import linearised_floor
-    from fmscal.observers.ekf_error_state import error_params_layout
+    from fmscal.observers.batch import _linearised_floor as linearised_floor
+    from fmscal.observers.kalman._error_state import error_params_layout
 
     class BentRail(RailModel):
         name = "bent-rail"

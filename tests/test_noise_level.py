@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fmscal.observers.noise_level import NIS_CLIP, NoiseLevel
+from fmscal.observers.kalman._noise_level import NIS_CLIP, NoiseLevel
 
 DT = 1e-3
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from fmscal.analysis.cli import main
-from fmscal.observers.static_fit import _exp
+from fmscal.observers.payload._static_fit import _exp
 from fmscal.plant import read_log
-from fmscal.plant.pose_table import simulate_table, write_pose_table
-from fmscal.plant.spatial_scenarios import TOOL
+from fmscal.plant.io._pose_table import simulate_table, write_pose_table
+from fmscal.plant.scenarios._spatial import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 KEYS = {"mass", "mass_std", "rho", "rho_std", "inertia", "inertia_std", "b", "b_std", "gravity", "mounting",
@@ -107,8 +107,8 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
     ``M I M^T`` (calibrate's S absorbs the mounting, so it works in the tracked frame's axes)."""
     from types import SimpleNamespace
 
-    from fmscal.analysis.cli_payload import _print_calibrate_flags
-    from fmscal.observers.static_fit import _exp
+    from fmscal.analysis.cli._payload import _print_calibrate_flags
+    from fmscal.observers.payload._static_fit import _exp
     M = _exp(np.radians(30.0) * np.array([0.0, 0.0, 1.0]))
     fit = SimpleNamespace(mass=2.0, rho=[0.1, 0.0, 0.05], inertia=[0.01, 0.02, 0.03, 0.0, 0.0, 0.0], gravity=None,
                           mounting=M, payload_determined=True)
@@ -126,7 +126,7 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
 
 
 def test_an_attitude_only_log_through_the_command(tmp_path, capsys):
-    from fmscal.plant.pose_table import ATTITUDE_COLUMNS, simulate_attitude_log
+    from fmscal.plant.io._pose_table import ATTITUDE_COLUMNS, simulate_attitude_log
     log = simulate_attitude_log(TOOL, seed=1, offset=OFFSET)
     path = tmp_path / "imu.csv"
     np.savetxt(path, np.column_stack([log.t, log.q, log.w_hat]), delimiter=",", header=",".join(ATTITUDE_COLUMNS),

@@ -5,9 +5,9 @@ import re
 import numpy as np
 import pytest
 
-from fmscal.observers.payload_fit import identify_payload
+from fmscal.observers.payload._payload_fit import identify_payload
 from fmscal.plant import FmscalError
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -56,7 +56,7 @@ def test_a_tilted_base_with_gravity_along_minus_z_says_to_estimate_it(seed):
     """A base tilted 5 degrees: with gravity along -z the log's fit names --gravity estimate (never --mounting
     estimate: the arm's turns about every axis tell a turn of the world from one on the tool) and is not
     converged; the same log on a level base, and the tilted one with gravity estimated, do not."""
-    from fmscal.observers.static_fit import _exp
+    from fmscal.observers.payload._static_fit import _exp
     tilted = tuple(_exp(np.radians(5.0) * np.array([1.0, 0.0, 0.0])) @ np.array([0.0, 0.0, -9.81]))
     scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=8.0)
     log, truth, _ = scenario.with_(gravity=tilted).generate(seed)
@@ -76,7 +76,7 @@ def test_a_sensor_bolted_askew_names_the_mounting_not_gravity(seed):
     mounting estimated it is silent."""
     from scipy.spatial.transform import Rotation
 
-    from fmscal.observers.static_fit import _exp
+    from fmscal.observers.payload._static_fit import _exp
     mount = _exp(np.radians(7.0) * np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5]))
     log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=8.0).generate(seed)
     sensor = Rotation.from_quat(np.roll(log.pose[:, :4], -1, axis=1))          # the poses are the tracked frame's
@@ -95,7 +95,7 @@ def test_a_tilted_base_and_a_sensor_askew_together_name_both_flags():
     estimate with both angles found, and the fit is not converged; with both estimated it is silent."""
     from scipy.spatial.transform import Rotation
 
-    from fmscal.observers.static_fit import _exp
+    from fmscal.observers.payload._static_fit import _exp
     tilted = tuple(_exp(np.radians(4.0) * np.array([1.0, 0.0, 0.0])) @ np.array([0.0, 0.0, -9.81]))
     mount = _exp(np.radians(3.0) * np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5]))
     log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=8.0, gravity=tilted).generate(0)
@@ -112,7 +112,7 @@ def test_a_tilted_base_and_a_sensor_askew_together_name_both_flags():
 def test_where_both_rotations_explain_the_lower_residuals_are_named():
     """rotation_warning's choice: each explains (residuals 10 and 20 times lower, angles far beyond 5 sigmas); the
     better one is named alone, either way round; neither explains: None."""
-    from fmscal.observers.static_fit import rotation_warning
+    from fmscal.observers.payload._static_fit import rotation_warning
     g = [0.0, 0.0, -9.81]
     tilted = np.array([0.0, np.sin(np.radians(4.0)), -np.cos(np.radians(4.0))])
     both = rotation_warning(1.0, g, (0.1, tilted, 0.1), (0.05, 6.0, 0.1))
@@ -148,7 +148,7 @@ def test_the_blocks_follow_the_residuals_correlation_time():
     """White residuals get blocks of the smoothing window; residuals of a first-order process with a 50-sample
     time constant (integrated correlation time (1 + a) / (1 - a) = 99 samples, a = exp(-1/50)) get five of it, within
     a fifth (the estimate's noise over 20000 samples); fewer than ten blocks are said."""
-    from fmscal.observers.cluster_covariance import block_length, correlation_time, few_blocks, time_blocks
+    from fmscal.observers.batch._cluster_covariance import block_length, correlation_time, few_blocks, time_blocks
     rng = np.random.default_rng(0)
     white = rng.standard_normal((20000, 6))
     assert 0.9 < correlation_time(white) < 1.2
@@ -189,8 +189,8 @@ def test_a_log_turned_about_one_axis_names_its_narrow_cone_and_a_pose_that_helps
     determined, the torque offset along x) and widens the cone past 90 degrees."""
     from scipy.spatial.transform import Rotation
 
-    from fmscal.observers.coverage import rotation
-    from fmscal.plant.rigid_body import rotation_matrix
+    from fmscal.observers.payload._coverage import rotation
+    from fmscal.plant.physics._rigid_body import rotation_matrix
     log, _, _ = _about_x().generate(0)
     before = identify_payload(log)                              # S = I: no crosstalk simulated
     assert 14.0 < before.cone_deg < 20.0 and not before.converged

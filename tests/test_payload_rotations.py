@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fmscal.observers.payload_fit import identify_payload
-from fmscal.observers.static_fit import _exp
-from fmscal.plant.errors import FmscalError
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS, TOOL
+from fmscal.observers.payload._payload_fit import identify_payload
+from fmscal.observers.payload._static_fit import _exp
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS, TOOL
 
 TILT = _exp(np.radians(15.0) * np.array([0.6, 0.8, 0.0]))                 # a base tilted 15 degrees
 G_TILTED = TILT @ np.array([0.0, 0.0, -9.81])
@@ -79,7 +79,7 @@ def test_a_load_reading_with_gravity_estimated_names_the_flag(tilted):
 @pytest.mark.slow
 def test_the_rotations_uncertainties_hold_over_eight_seeds():
     """z-scores of gravity's direction (two angles across it) and of the mounting (three), 10 s logs."""
-    from fmscal.observers.static_fit import _tangent_basis
+    from fmscal.observers.payload._static_fit import _tangent_basis
     short = ARM.with_(duration=10.0, dt=2e-3, gravity=tuple(G_TILTED))
     e1, e2 = _tangent_basis(G_TILTED / 9.81)
     z = []

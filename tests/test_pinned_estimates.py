@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmscal.analysis.comparison import simulate_case
+from fmscal.analysis._comparison import simulate_case
 from fmscal.observers import METHODS, get_method
 
 PINS = Path(__file__).parent / "data" / "pinned_estimates.json"

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fmscal.observers.practitioners import CALIB_FORCE_G, calib_force, plain_fit
-from fmscal.observers.static_fit import _exp
-from fmscal.plant.errors import FmscalError
-from fmscal.plant.pose_table import simulate_table
-from fmscal.plant.spatial_scenarios import TOOL
+from fmscal.observers.payload._practitioners import CALIB_FORCE_G, calib_force, plain_fit
+from fmscal.observers.payload._static_fit import _exp
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.io._pose_table import simulate_table
+from fmscal.plant.scenarios._spatial import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 MOUNT = _exp(np.radians(7.0) * np.array([0.3, 1.0, 0.5]) / np.linalg.norm([0.3, 1.0, 0.5]))

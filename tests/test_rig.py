@@ -7,12 +7,12 @@ import pytest
 
 from fmscal import plant
 from fmscal.analysis import calibration_error
-from fmscal.analysis.calibrate import calibrate
+from fmscal.analysis._calibrate import calibrate
 from fmscal.analysis.cli import main
 from fmscal.observers import make_observer
-from fmscal.analysis.sensitivity import derived_error, distortion, perturbed, sensitivity, tolerable_error
+from fmscal.analysis._sensitivity import derived_error, distortion, perturbed, sensitivity, tolerable_error
 from fmscal.observers import LeastSquares
-from fmscal.observers.latency import estimate_latency
+from fmscal.observers.batch._latency import estimate_latency
 from fmscal.plant import Calibration, CalibrationFileError, PAPER_PAYLOAD
 
 B_TRUE = np.array([0.3, 2.0, -1.5])
@@ -237,7 +237,7 @@ def test_simulate_calibrate_save_apply_on_a_multi_rate_log_with_an_offset(tmp_pa
 
 
 def test_the_offset_of_a_singular_estimate_is_nan_not_an_exception():
-    from fmscal.observers.result import offset_from_c, offset_std
+    from fmscal.observers.core._result import offset_from_c, offset_std
     S = np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]])
     b = offset_from_c(S, np.ones(3))
     assert np.all(np.isnan(b)) and np.all(np.isnan(offset_std(S, b, np.eye(12))))

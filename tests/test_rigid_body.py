@@ -13,9 +13,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fmscal.plant import FmscalError
-from fmscal.plant.rigid_body import (GRAVITY, SpatialPayload, body_acceleration, quaternion_multiply, rk4_step,
+from fmscal.plant.physics._rigid_body import (GRAVITY, SpatialPayload, body_acceleration, quaternion_multiply, rk4_step,
                                      rotation_matrix, sensor_wrench)
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 pin = pytest.importorskip("pinocchio")          # the [test] extra installs it; on CI a skip fails
 mujoco = pytest.importorskip("mujoco")

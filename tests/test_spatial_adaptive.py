@@ -2,7 +2,7 @@
 
 Each group of logs is simulated once (module fixtures); E is the median over the last tenth of the run,
 the floor's E that of ``make_observer("max-likelihood", ..., {"offset": True})`` on the samples that median
-has seen (:func:`fmscal.analysis.metrics.tail_seen`: the first 95 % of the log). Against the floor of the
+has seen (:func:`fmscal.analysis._metrics.tail_seen`: the first 95 % of the log). Against the floor of the
 whole log the ratio also counts what the last 5 % of the log adds, which on 20 s of ``spatial-arm`` is up
 to a third of the floor's E (seed 2: 0.131 on 95 %, 0.091 on all; the observer's own E 0.122 and 0.103).
 """
@@ -10,11 +10,11 @@ to a third of the floor's E (seed 2: 0.131 on 95 %, 0.091 on all; the observer's
 import numpy as np
 import pytest
 
-from fmscal.analysis.metrics import calibration_error, error_history, tail_median, tail_seen
+from fmscal.analysis._metrics import calibration_error, error_history, tail_median, tail_seen
 from fmscal.observers import AdaptiveObserver, make_observer
-from fmscal.observers.adaptive_spatial import SPATIAL_LAM, params_from_phi, phi_from_params
+from fmscal.observers.adaptive._spatial import SPATIAL_LAM, params_from_phi, phi_from_params
 from fmscal.plant import SpatialModel
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
 MOCAP = SPATIAL_SCENARIOS["spatial-mocap"]

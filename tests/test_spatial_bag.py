@@ -7,9 +7,9 @@ pytest.importorskip("rosbags")          # the [ros] extra; README's test command
 
 from fmscal.analysis.cli import main                            # noqa: E402
 from fmscal.plant import read_log                               # noqa: E402
-from fmscal.plant.bag import import_bag                         # noqa: E402
-from fmscal.plant.bag_write import write_bag                    # noqa: E402
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS   # noqa: E402
+from fmscal.plant.io._bag import import_bag                         # noqa: E402
+from fmscal.plant.io._bag_write import write_bag                    # noqa: E402
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS   # noqa: E402
 
 OFFSET = (0.01, -0.02, 0.05)            # the tracked frame's origin from the sensor point, sensor axes, m
 

@@ -6,13 +6,13 @@ Each group of logs is simulated once (module fixtures).
 import numpy as np
 import pytest
 
-from fmscal.analysis.metrics import calibration_error, error_history, tail_median, tail_seen
+from fmscal.analysis._metrics import calibration_error, error_history, tail_median, tail_seen
 from fmscal.observers import AugmentedEKF, make_observer
-from fmscal.observers.ekf_error_state import ErrorStateEKF
-from fmscal.observers.max_likelihood import fit_max_likelihood
+from fmscal.observers.kalman._error_state import ErrorStateEKF
+from fmscal.observers.batch._max_likelihood import fit_max_likelihood
 from fmscal.plant import Log, SpatialModel
-from fmscal.plant.rigid_body import SpatialPayload
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.physics._rigid_body import SpatialPayload
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
 MODEL = SpatialModel(ARM.payload, ARM.gravity)
@@ -33,7 +33,7 @@ def short_log():
 @pytest.fixture(scope="module")
 def three_arms():
     """The EKF (its tail's median E), the floor on the samples that median has seen
-    (:func:`fmscal.analysis.metrics.tail_seen`) and on the whole log, on 3 seeds of a 20 s ``spatial-arm``, and
+    (:func:`fmscal.analysis._metrics.tail_seen`) and on the whole log, on 3 seeds of a 20 s ``spatial-arm``, and
     the RMS over the 36 entries of the distance between the EKF's and the whole log's floor's estimates at the
     end, in the floor's standard deviations."""
     scenario = ARM.with_(duration=20.0)
@@ -128,7 +128,7 @@ def test_compiled_run_matches_filterpy(short_log):
 
 
 def test_q_carries_the_noise_at_the_runs_start_not_at_the_estimate(short_log):
-    """``Q`` (module docstring of :mod:`observers.ekf_error_state`): the reading's noise carried into the wrench at
+    """``Q`` (module docstring of :mod:`observers.kalman._error_state`): the reading's noise carried into the wrench at
     ``S_Q``, the ``S0`` the run starts from, not at the running estimate: ``Q = J_d S_Q Sigma S_Q^T J_d^T`` on the
     motion, ``J_d = (J_0 + J_1) S_hat^-1`` (a perturbation of the true wrench at both ends is one of the raw
     readings by ``S_hat^-1``), at the nominal and at a nominal whose ``[S | c]`` is far from ``S0``."""

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from fmscal.observers import make_observer
-from fmscal.observers.inverse_dynamics_fit import fit_inverse_dynamics
-from fmscal.observers.max_likelihood import fit_max_likelihood
+from fmscal.observers.batch._inverse_dynamics import fit_inverse_dynamics
+from fmscal.observers.batch._max_likelihood import fit_max_likelihood
 from fmscal.plant import SpatialModel
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
 SEEDS = range(20)
@@ -90,7 +90,7 @@ def test_the_floor_runs_behind_the_observer_contract(arm_log):
     z = (result.S_hat - truth.S_at(log.t[-1])) / result.S_std
     assert np.abs(z).max() < 5
     # the motion the fit shows follows the poses to about their noise
-    from fmscal.observers.linearised_floor import configuration_residuals
+    from fmscal.observers.batch._linearised_floor import configuration_residuals
     residual = configuration_residuals(model, result.x_hat_history, log.pose)
     assert 0.5 * ARM.position_sd < np.sqrt(np.mean(residual[:, :3] ** 2)) < 1.5 * ARM.position_sd
     assert 0.5 * ARM.angle_sd < np.sqrt(np.mean(residual[:, 3:] ** 2)) < 1.5 * ARM.angle_sd
@@ -120,7 +120,7 @@ def test_static_poses_leave_directions_undetermined_and_not_converged():
 
 def test_the_planar_only_observer_refuses_a_spatial_model_in_one_line():
     """The high-gain reconstruction is planar; the adaptive default runs in 3D (tests/test_spatial_adaptive.py)."""
-    from fmscal.plant.errors import FmscalError
+    from fmscal.plant.numerics._errors import FmscalError
     model = SpatialModel(ARM.payload)
     with pytest.raises(FmscalError, match="spatial"):
         make_observer("high-gain", model)
@@ -141,7 +141,7 @@ def mujoco_arm():
 def test_a_log_written_by_mujoco_calibrates_at_the_floor(mujoco_arm, tmp_path, capsys):
     """Another engine's log: ``fmscal calibrate`` gives the floor's E of fmscal's own log of the same draw."""
     from fmscal.analysis.cli import main
-    from fmscal.analysis.metrics import block_errors
+    from fmscal.analysis._metrics import block_errors
     scenario, log, S, b, own, truth = mujoco_arm
     np.testing.assert_allclose(truth.S_at(0.0), S, rtol=0, atol=0)      # the same draw: only the engine differs
     # MuJoCo integrates the wrench open loop: its path drifts from the imposed one (measured 8.6e-5 m over 20 s,

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from fmscal.plant import LogError, read_log
-from fmscal.plant.log import SPATIAL_COLUMNS, Log
+from fmscal.plant.io._log import SPATIAL_COLUMNS, Log
 
 
 def _spatial(n=50, seed=0):

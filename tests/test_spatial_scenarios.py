@@ -5,8 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fmscal.plant import read_log, read_truth
-from fmscal.plant.rigid_body import sensor_wrench
-from fmscal.plant.spatial_scenarios import SPATIAL_SCENARIOS
+from fmscal.plant.physics._rigid_body import sensor_wrench
+from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,11 @@ import re
 import numpy as np
 import pytest
 
-from fmscal.observers.static_fit import _exp, fit_static
+from fmscal.observers.payload._static_fit import _exp, fit_static
 from fmscal.plant import FmscalError
-from fmscal.plant.log import LogError
-from fmscal.plant.pose_table import is_pose_table, read_pose_table, simulate_table, write_pose_table
-from fmscal.plant.spatial_scenarios import TOOL
+from fmscal.plant.io._log import LogError
+from fmscal.plant.io._pose_table import is_pose_table, read_pose_table, simulate_table, write_pose_table
+from fmscal.plant.scenarios._spatial import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])       # N m, N
 TILT = _exp(np.radians(10.0) * np.array([1.0, 0.3, 0.0]) / np.linalg.norm([1.0, 0.3, 0.0]))   # a tilted base
@@ -111,7 +111,7 @@ def _parse(words):
 
 
 def _rotation(q):
-    from fmscal.plant.rigid_body import rotation_matrix
+    from fmscal.plant.physics._rigid_body import rotation_matrix
     return np.asarray(rotation_matrix(q))
 
 
@@ -144,7 +144,7 @@ def test_a_table_round_trips_and_bad_tables_are_one_line(tmp_path):
 def test_an_attitude_only_log_uses_its_held_segments_and_its_uncertainty_covers_a_drift():
     """No positions: only the held segments are used (and said so); with the offset drifting slowly the
     residual-based uncertainty still covers the truth (over 6 seeds, every mass within 3 sigma)."""
-    from fmscal.plant.pose_table import held_table, simulate_attitude_log
+    from fmscal.plant.io._pose_table import held_table, simulate_attitude_log
     for seed in range(6):
         log = simulate_attitude_log(TOOL, seed=seed, offset=OFFSET, drift=[0, 0, 0, 0.004, 0.002, -0.004])
         table, used, why = held_table(log)
@@ -155,7 +155,7 @@ def test_an_attitude_only_log_uses_its_held_segments_and_its_uncertainty_covers_
 
 
 def test_an_attitude_log_without_enough_holds_is_one_line():
-    from fmscal.plant.pose_table import held_table, simulate_attitude_log
+    from fmscal.plant.io._pose_table import held_table, simulate_attitude_log
     log = simulate_attitude_log(TOOL, poses=3, seed=0)
     with pytest.raises(LogError, match="needs at least 4 held poses"):
         held_table(log)
@@ -223,7 +223,7 @@ def _about(axis, degrees):
                                _about((0, 0, 1), np.arange(0, 360, 30)) + [0, 1e-3, 0, 0]],
                          ids=["one attitude", "turns about the vertical", "within a tenth of a degree"])
 def test_poses_that_do_not_tilt_gravity_are_refused_in_one_line(q):
-    from fmscal.observers.static_fit import calibrate_table
+    from fmscal.observers.payload._static_fit import calibrate_table
     q = q / np.linalg.norm(q, axis=1)[:, None]
     table = simulate_table(TOOL, q=q, n=len(q), seed=1, offset=OFFSET)
     for fit in (fit_static, lambda t: fit_static(t, estimate_mounting=True),
@@ -245,7 +245,7 @@ def test_poses_tilted_two_degrees_are_fitted_not_refused():
 
 
 def test_a_weak_direction_of_one_parameter_reads_in_the_singular():
-    from fmscal.observers.coverage import describe
+    from fmscal.observers.payload._coverage import describe
     names = ("m", "rho_x", "rho_y", "rho_z")
     assert describe(names, np.array([0.0, 0.0, 0.0, 1.0])).startswith("the centre of mass along z is not determined")
     assert describe(names, np.array([0.7, 0.0, 0.7, 0.0])).startswith(

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from fmscal.analysis.cli import main
-from fmscal.analysis.sweep import TIMING_COLUMNS, expand_settings, settings_label, sweep
+from fmscal.analysis._sweep import TIMING_COLUMNS, expand_settings, settings_label, sweep
 
 GRID = {"high-gain": {"lam": [10.0, 20.0]}}
 
@@ -99,7 +99,7 @@ def test_a_scheduler_that_is_neither_an_address_nor_a_client_is_refused():
 
 
 def test_a_spatial_sweep_scales_the_noise_and_shows_the_planar_methods_as_not_applicable():
-    from fmscal.analysis.comparison import summarise, summary_markdown
+    from fmscal.analysis._comparison import summarise, summary_markdown
     table = sweep(["spatial-arm"], seeds=1, noise_scales=[1.0, 4.0], observers=["least-squares", "high-gain"],
                   duration=3.0, n_jobs=1, progress=False)
     assert len(table) == 4 and set(table["observer"]) == {"least-squares", "high-gain"}
@@ -115,7 +115,7 @@ def test_a_spatial_sweep_scales_the_noise_and_shows_the_planar_methods_as_not_ap
 def test_a_method_that_refuses_a_log_is_a_row_that_says_why_not_an_abort():
     """spatial-weak's torque and vertical force never move beyond their noise: least squares refuses the log in one
     line; the comparison goes on with the other methods and names the refusal under its table."""
-    from fmscal.analysis.comparison import run_case, summarise, summary_markdown
+    from fmscal.analysis._comparison import run_case, summarise, summary_markdown
     rows = run_case("spatial-weak", 0, ["least-squares", "adaptive"], duration=2.0)
     refused, ran = rows
     assert "does not move beyond its noise" in refused["refused"] and refused["applicable"]

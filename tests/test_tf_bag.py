@@ -5,8 +5,8 @@ import pytest
 
 from fmscal.analysis.cli import main
 from fmscal.plant import read_log
-from fmscal.plant.bag_write import write_tf_bag
-from fmscal.plant.rigid_body import rotation_matrix
+from fmscal.plant.io._bag_write import write_tf_bag
+from fmscal.plant.physics._rigid_body import rotation_matrix
 from scipy.spatial.transform import Rotation
 
 def test_the_chain_from_the_base_to_the_sensor_is_composed(tmp_path, capsys):

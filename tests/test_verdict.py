@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fmscal.analysis.comparison import compare
+from fmscal.analysis._comparison import compare
 
 SEEDS = 3
 MARGIN = 1.3

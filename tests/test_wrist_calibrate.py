@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from fmscal.analysis.cli import main
-from fmscal.observers.static_fit import calibrate_table
+from fmscal.observers.payload._static_fit import calibrate_table
 from fmscal.plant import Calibration, CalibrationFileError, SpatialPayload, read_log
-from fmscal.plant.errors import FmscalError
-from fmscal.plant.pose_table import simulate_table, write_pose_table
-from fmscal.plant.spatial_scenarios import TOOL
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.io._pose_table import simulate_table, write_pose_table
+from fmscal.plant.scenarios._spatial import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 S_TRUE = np.eye(6) + 0.03 * np.random.default_rng(7).normal(size=(6, 6))
@@ -27,7 +27,7 @@ def _run(capsys, args):
 
 def _weight(table):
     """The wrench each held pose needs, ``[rho x f; f]`` with ``f = -m R^T g``."""
-    from fmscal.plant.rigid_body import GRAVITY, rotation_matrix
+    from fmscal.plant.physics._rigid_body import GRAVITY, rotation_matrix
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     f = TOOL.mass * np.einsum("nkj,k->nj", R, -np.asarray(GRAVITY))
     return np.hstack([np.cross(TOOL.rho, f), f])
@@ -203,7 +203,7 @@ def test_the_calibration_file_records_the_sign_and_older_files_read_as_reaction(
 
 
 def test_an_attitude_only_log_is_calibrated_on_its_held_segments(tmp_path, capsys):
-    from fmscal.plant.pose_table import ATTITUDE_COLUMNS, simulate_attitude_log
+    from fmscal.plant.io._pose_table import ATTITUDE_COLUMNS, simulate_attitude_log
     log = simulate_attitude_log(TOOL, seed=1, offset=OFFSET)
     path = tmp_path / "imu.csv"
     np.savetxt(path, np.column_stack([log.t, log.q, log.w_hat]), delimiter=",", header=",".join(ATTITUDE_COLUMNS),
@@ -233,7 +233,7 @@ def test_one_attitude_held_six_times_is_refused_in_one_line(tmp_path, capsys):
 
 def write_attitude_log_about_the_vertical(path, holds=6):
     """An attitude-only log: the tool held level at ``holds`` headings, turned about the vertical between them."""
-    from fmscal.plant.pose_table import ATTITUDE_COLUMNS
+    from fmscal.plant.io._pose_table import ATTITUDE_COLUMNS
     rng = np.random.default_rng(5)
     t = np.arange(0.0, holds * 3.5, 0.01)
     k, u = np.divmod(t, 3.5)

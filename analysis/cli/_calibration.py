@@ -1,0 +1,239 @@
+"""``fmscal calibrate`` and ``fmscal apply``: a calibration from a log, and applied to readings."""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from fmscal.analysis.cli._common import CliError, positive, strict
+from fmscal.analysis.cli._files import atomic_write_text, check_outputs
+
+
+def add_calibrate(sub):
+    from fmscal.observers import method_names
+    from fmscal.analysis._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD
+    p = sub.add_parser("calibrate", help="estimate S from a recorded log",
+                       description="Estimate the calibration matrix S from a log and the payload's mass "
+                                   "properties: planar (t,theta,x,y,M,fx,fy; rad, m, N m, N) or spatial "
+                                   "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz: a 6-axis sensor; the header tells), "
+                                   "or a pose table (the spatial header without t, one row per held pose: "
+                                   "reports the directions of S held poses cannot determine, never converged). "
+                                   "Prints S_hat with its one-sigma uncertainty, whether the run converged, "
+                                   "warnings about excitation and model consistency, and E with --truth.")
+    p.add_argument("log", metavar="LOG.csv|TABLE.csv")
+    p.add_argument("--mass", type=float, required=True, metavar="KG")
+    p.add_argument("--inertia", type=float, nargs="+", metavar="I",
+                   help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
+                        "tensor about the centre of mass in sensor axes (a pose table needs it only with --save)")
+    p.add_argument("--rho", type=float, nargs="+", required=True, metavar="R",
+                   help="the centre of mass from the sensor, m: planar RX RY (body frame, from G to the sensor "
+                        "as in the paper), spatial X Y Z (the centre of mass in the sensor frame); negative "
+                        "values as written")
+    p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
+                   help="spatial logs: gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
+    p.add_argument("--reading", choices=("reaction", "load"), default=None,
+                   help="spatial logs and tables: the reading's sign, reaction (default, the wrench the mount "
+                        "applies to the payload) or load (the wrench the tool applies to the sensor, as ATI, "
+                        "Robotiq, Bota and OnRobot report); recorded in the saved calibration")
+    p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
+                   help=f"method for a planar log (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at "
+                        "the information floor; its noise model is estimated from the log unless given)")
+    p.add_argument("--pose-noise", type=float, nargs=2, metavar=("SD_RAD", "SD_M"),
+                   help="pose noise standard deviations (default: estimated from the log)")
+    p.add_argument("--wrench-noise", type=float, nargs=3, metavar=("SD_M", "SD_FX", "SD_FY"),
+                   help="raw-reading noise standard deviations, N m and N (default: estimated from the log)")
+    p.add_argument("--offset", action=argparse.BooleanOptionalAction, default=True,
+                   help="estimate the sensor's offset b in w = S (w_hat - b) with S (default: yes; "
+                        "--no-offset for an offset-free sensor, as in the paper)")
+    p.add_argument("--latency", type=float, metavar="S",
+                   help="delay of the pose stream behind the sensor stream, s (default: estimated)")
+    p.add_argument("--max-latency", type=float, default=None, metavar="S",
+                   help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
+    p.add_argument("--urdf", metavar="ROBOT.urdf",
+                   help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
+                        "names; rad), in a spatial log or a table: poses of --frame by forward kinematics "
+                        "(pinocchio: pip install \"fmscal[robot]\")")
+    p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
+    p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report E")
+    p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="draw each entry of S_hat against time with its one-sigma band, and the pose residual")
+    p.add_argument("--save", metavar="CAL.json",
+                   help="write the calibration here (for fmscal apply), only if the run converged and the "
+                        "log's units look right; written atomically, never onto the log or --truth")
+    p.add_argument("--force", action="store_true",
+                   help="save even a calibration that did not converge; the file records \"forced\": true")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --save or --plot file")
+    p.set_defaults(func=cmd_calibrate)
+
+
+def cmd_calibrate(args):
+    from dataclasses import replace
+
+    from fmscal.plant import Payload, file_sha256, read_log, read_truth
+    from fmscal.plant.io._log import _as_path, log_kind
+    from fmscal.plant.io._pose_table import PoseTable, is_attitude_log, is_pose_table
+    from fmscal.analysis._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, calibrate
+    from fmscal.analysis.cli._spatial import calibrate_spatial, calibrate_table, joint_data
+    from fmscal.analysis._plots import plot_calibration
+    positive(args.mass, "--mass")
+    for value in args.rho:
+        if not np.isfinite(value):
+            raise CliError(f"--rho must be finite numbers in m; got {args.rho}")
+    for option, values in (("--pose-noise", args.pose_noise), ("--wrench-noise", args.wrench_noise)):
+        if values is not None and not all(np.isfinite(v) and v >= 0 for v in values):
+            raise CliError(f"{option} must be non-negative standard deviations; got {values}")
+    if args.latency is not None and not (np.isfinite(args.latency) and args.latency >= 0):
+        raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
+    if args.max_latency is not None:
+        positive(args.max_latency, "--max-latency")
+    if args.save and not args.save.endswith(".json"):
+        raise CliError(f"--save must end in .json; got {args.save}")
+    if args.plot and not args.plot.endswith(".png"):
+        raise CliError(f"--plot must end in .png; got {args.plot}")
+    if args.force and not args.save:
+        raise CliError("--force applies to --save; give --save CAL.json too")
+    check_outputs([(args.save, "--save"), (args.plot, "--plot")],
+                  [(args.log, "the log"), (args.truth, "the --truth file")], overwrite=args.overwrite)
+    path = _as_path(args.log, "log")
+    data = joint_data(args, path)
+    if isinstance(data, PoseTable):
+        return calibrate_table(args, path, table=data)
+    if data is not None:
+        return calibrate_spatial(args, log=data)
+    if is_pose_table(path) or is_attitude_log(path):
+        return calibrate_table(args, path)
+    if log_kind(args.log) == "spatial":
+        return calibrate_spatial(args)
+    inertia = args.inertia or []
+    if len(args.rho) != 2 or len(inertia) != 1:
+        raise CliError(f"a planar log takes --rho RX RY (2 numbers, m) and --inertia I_G (1 number, kg m^2); got "
+                       f"{len(args.rho)} and {len(inertia)} (three and six are for a spatial log)")
+    if args.gravity is not None:
+        raise CliError("--gravity is for spatial logs; a planar log moves in a plane with no gravity in it")
+    if args.reading is not None:
+        raise CliError("--reading is taken on a spatial log or a pose table; a planar log's sign is the toolkit's")
+    args.observer = args.observer or DEFAULT_METHOD
+    if args.max_latency is None:
+        args.max_latency = DEFAULT_MAX_LATENCY
+    payload = Payload(args.mass, positive(args.inertia[0], "--inertia"), tuple(args.rho))
+    log = read_log(args.log)
+    for note in log.notes:
+        print(f"fmscal calibrate: note: {note}", file=sys.stderr)
+    log_sha256 = file_sha256(args.log) if args.save else ""
+    truth = read_truth(args.truth) if args.truth else None
+    if truth is not None and truth.schedule.size != 3:
+        raise CliError(f"{args.truth} is the truth of a spatial log; this log is planar")
+    report = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
+                       offset=args.offset, latency=args.latency, max_latency=args.max_latency)
+    for warning in report.warnings:
+        print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
+    if args.plot:                 # before saving: a failing plot leaves no calibration behind
+        plot_calibration(report.result, log.shift_poses(report.calibration.latency), args.plot,
+                         f"{Path(args.log).name}: entries of S_hat ({report.calibration.method}) and the pose residual",
+                         truth)
+    refusal = _not_savable(report)
+    saved = bool(args.save) and (refusal is None or args.force)
+    if saved:
+        replace(report.calibration, log_name=Path(args.log).name, log_sha256=log_sha256,
+                forced=refusal is not None).save(args.save)
+    result, out = report.result, report.to_dict()
+    out["saved"] = saved
+    if args.json:
+        print(json.dumps(strict(out), allow_nan=False))
+    else:
+        _print_calibration(args, log, out, result)
+    if args.save and refusal is not None and not args.force:
+        raise CliError(f"did not save {args.save}: {refusal}; add --force to save it anyway (marked as forced)")
+
+
+def _not_savable(report):
+    """Why the calibration of ``report`` (a ``CalibrationReport``) should not be saved, or None."""
+    if report.units:
+        return "the log's units look wrong (" + report.units[0].split(":")[0] + ")"
+    if not report.converged:
+        return "the run did not converge"
+    return None
+
+
+def _print_calibration(args, log, out, result):
+    """The human-readable report of ``fmscal calibrate``."""
+    print(f"{Path(args.log).name}: {len(log)} samples, {log.duration:g} s, "
+          f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
+    if out["noise_estimated"]:
+        n = out["noise"]
+        print(f"noise estimated from the log ({' and '.join(out['noise_estimated'])}): wrench sd "
+              f"{', '.join(f'{v:.3g}' for v in n['wrench_sd'])}; angle sd {n['angle_sd']:.3g} rad; "
+              f"position sd {n['position_sd']:.3g} m")
+    S, S_std = np.array(out["S"]), out["S_std"]
+    print("S_hat" + (" +- one sigma:" if S_std is not None else " (this method gives no uncertainty):"))
+    for i in range(len(S)):
+        cells = [f"{S[i, j]:+.5f}" + (f" +- {S_std[i][j]:.1e}" if S_std is not None else "") for j in range(len(S))]
+        print("  " + "   ".join(cells))
+    if out["b"] is not None:
+        b, b_std = out["b"], out["b_std"]
+        cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(len(b))]
+        print("offset b [N m, N, N]: " + "   ".join(cells))
+    print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
+    print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {result.t[-1]:g} s)")
+    if "E" in out:
+        print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")
+    if out["saved"]:
+        print(f"saved the calibration to {args.save}")
+
+
+def add_apply(sub):
+    p = sub.add_parser("apply", help="turn raw readings into calibrated wrenches with a saved calibration",
+                       description="Apply a calibration saved by fmscal calibrate --save: w = S (w_hat - b), or "
+                                   "w = S (-w_hat - b) for a calibration recorded with --reading load, "
+                                   "for every row of READINGS.csv (columns t,M,fx,fy, or t,tx,ty,tz,fx,fy,fz "
+                                   "for a spatial calibration, or a full log); writes the same columns.")
+    p.add_argument("calibration", metavar="CAL.json")
+    p.add_argument("readings", metavar="READINGS.csv")
+    p.add_argument("--out", required=True, metavar="WRENCH.csv")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
+    p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
+    p.add_argument("--inertia", type=float, nargs="+", metavar="I", help="planar I_G, or the six spatial entries")
+    p.add_argument("--rho", type=float, nargs="+", metavar="R", help="planar RX RY, or spatial X Y Z")
+    p.set_defaults(func=cmd_apply)
+
+
+def cmd_apply(args):
+    from fmscal.plant import Calibration, Payload, read_readings
+    given = [v is not None for v in (args.mass, args.inertia, args.rho)]
+    if any(given) and not all(given):
+        raise CliError("give all of --mass, --inertia and --rho to check the payload, or none")
+    payload = None
+    if all(given):
+        if len(args.rho) == 3:
+            from fmscal.analysis.cli._spatial import spatial_payload
+            payload = spatial_payload(args.mass, args.rho, args.inertia)
+        elif len(args.rho) != 2 or len(args.inertia) != 1:
+            raise CliError(f"--rho and --inertia take 2 and 1 numbers (planar) or 3 and 6 (spatial); got "
+                           f"{len(args.rho)} and {len(args.inertia)}")
+        else:
+            payload = Payload(positive(args.mass, "--mass"), positive(args.inertia[0], "--inertia"), tuple(args.rho))
+    if not args.out.endswith(".csv"):
+        raise CliError(f"--out must end in .csv; got {args.out}")
+    check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],
+                  overwrite=args.overwrite)
+    calibration = Calibration.load(args.calibration, payload)
+    if calibration.forced:
+        print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
+              file=sys.stderr)
+    t, w_hat = read_readings(args.readings)
+    if w_hat.shape[1] != calibration.size:
+        raise CliError(f"{Path(args.readings).name} holds {w_hat.shape[1]} reading columns; the calibration is "
+                       f"{calibration.size}x{calibration.size} ({'spatial' if calibration.size == 6 else 'planar'})")
+    w = calibration.apply(w_hat)                            # the sign of a load reading turned first
+    bad = ~np.isfinite(w).all(axis=1)
+    if bad.any():
+        raise CliError(f"the calibration gives a wrench that is not finite (overflow) at row {np.argmax(bad) + 1} of "
+                       f"{Path(args.readings).name}; its S or b is far outside any sensor's range: nothing written")
+    header = "t,tx,ty,tz,fx,fy,fz" if calibration.size == 6 else "t,M,fx,fy"
+    lines = [header] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
+    atomic_write_text(args.out, "\n".join(lines) + "\n")
+    print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "
+          f"{calibration.method}, {calibration.date}; reading {calibration.reading})")

@@ -1,0 +1,74 @@
+"""What every ``fmscal`` command shares: the user-error type and small input helpers."""
+
+import numpy as np
+
+from fmscal.plant.numerics._errors import FmscalError
+
+__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes", "check_seeds",
+           "MAX_SEEDS"]
+
+#: Most seeds a compare or sweep runs (each seed simulates every scenario).
+MAX_SEEDS = 100_000
+
+
+class CliError(FmscalError):
+    """A user error: printed as one line, exit status 2."""
+
+
+def strict(value):
+    """A JSON-ready copy: NaN and infinity become None, numpy scalars plain."""
+    if isinstance(value, dict):
+        return {k: strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def positive(value, name):
+    """``value`` if it is a positive finite number, else a :class:`CliError` naming ``name``."""
+    if not np.isfinite(value) or value <= 0:
+        raise CliError(f"{name} must be positive; got {value}")
+    return value
+
+
+def add_scenarios_and_observers(p, default_observers):
+    """``--scenario`` and ``--observer`` (several names each), as compare and sweep take them."""
+    from fmscal.observers import METHODS
+    from fmscal.plant import SCENARIOS
+    p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
+                   help="one or more of: " + ", ".join(SCENARIOS) + " (compare also takes the spatial ones)")
+    p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
+                   help="one or more of: " + ", ".join(METHODS) + f" (default: {' '.join(default_observers)})")
+
+
+def check_sizes(scenarios, duration=None):
+    """Refuse, before any work, a run whose simulated logs would exceed :data:`plant.scenarios._planar.MAX_SAMPLES`."""
+    from fmscal.analysis._comparison import case_scenario
+    for name in scenarios:
+        sc = case_scenario(name)
+        (sc.with_(duration=duration) if duration is not None else sc).check_size()
+
+
+def check_seeds(seed=None, seeds=None):
+    """Refuse a negative ``--seed``, and a ``--seeds`` count outside 1 .. :data:`MAX_SEEDS`."""
+    if seed is not None and seed < 0:
+        raise CliError(f"--seed must be a non-negative integer; got {seed}")
+    if seeds is not None and not 1 <= seeds <= MAX_SEEDS:
+        raise CliError(f"--seeds must be at least 1 and at most {MAX_SEEDS}; got {seeds}")
+
+
+def add_jobs(p):
+    """The ``--jobs`` option of a command that runs on local worker processes."""
+    p.add_argument("--jobs", type=int, default=-1, metavar="N", help="local worker processes (default -1: every core)")
+
+
+def check_jobs(jobs):
+    """Refuse a ``--jobs`` that is neither a positive count nor -1 (every core)."""
+    if jobs == 0 or jobs < -1:
+        raise CliError(f"--jobs must be a positive number of processes or -1 (every core); got {jobs}")

@@ -1,0 +1,349 @@
+"""The ``fmscal`` command line.
+
+Every command answers bad input (a :class:`plant.FmscalError`, or a file that
+cannot be read or written) with one line on stderr and exit status 2. Any other
+exception is a bug in the toolkit and shows its traceback.
+"""
+
+import argparse
+import contextlib
+import json
+import re
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from fmscal.analysis.cli._calibration import add_apply, add_calibrate
+from fmscal.analysis.cli._payload import add_identify_payload
+from fmscal.analysis.cli._import import add_import
+from fmscal.analysis.cli._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds,
+                                         check_sizes, positive, strict)
+from fmscal.analysis.cli._files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir,
+                                        check_outputs, claim_folder, exclusive)
+from fmscal.analysis.cli._scale import add_bench, add_sweep
+
+__all__ = ["main", "build_parser", "MAX_LAM"]
+
+#: Longest error message printed, characters (a message echoing a huge input is cut).
+MAX_MESSAGE = 400
+#: Most characters of one echoed word (a file name, a value the user gave) an error message prints.
+MAX_ECHO = 80
+
+
+def one_line(message):
+    """``message`` fit for one line of stderr: control characters escaped, each echoed word (a run
+    without spaces, as a path or a value is) cut to its first and last :data:`MAX_ECHO` / 2
+    characters, the whole to :data:`MAX_MESSAGE`."""
+    if not message.isprintable():
+        message = message.encode("unicode_escape").decode("ascii")
+    half = MAX_ECHO // 2                 # a path keeps its start and its end, where the file's name is
+    message = re.sub(r"\S{%d,}" % (MAX_ECHO + 1), lambda m: m.group()[:half] + "..." + m.group()[-half:], message)
+    return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
+#: Largest high-gain parameter check-gains accepts, rad/s (a million times the default's 20).
+MAX_LAM = 1e7
+
+
+def _add_simulate(sub):
+    from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
+    every = {**SCENARIOS, **SPATIAL_SCENARIOS}
+    p = sub.add_parser("simulate", help="simulate a scenario and write LOG.csv and LOG.truth.json",
+                       description="Simulate a named scenario. Writes the log (planar t,theta,x,y,M,fx,fy; "
+                                   "spatial t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) and the sidecar "
+                                   "LOG.truth.json. Scenarios: " +
+                                   "; ".join(f"{k}: {v.description}" for k, v in every.items()))
+    p.add_argument("--scenario", default="paper", choices=sorted(every), metavar="NAME",
+                   help="one of: " + ", ".join(every))
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--duration", type=float, help="s (default: the scenario's)")
+    p.add_argument("--dt", type=float, help="sample time, s (default: the scenario's, 0.001)")
+    p.add_argument("--noise-free", action="store_true", help="no measurement noise")
+    p.add_argument("--pose-rate", type=float, metavar="HZ", help="pose measurements per second")
+    p.add_argument("--drop-rate", type=float, metavar="FRAC", help="fraction of pose frames dropped")
+    p.add_argument("--mass", type=float, metavar="KG", help="payload mass (default: the scenario's)")
+    p.add_argument("--inertia", type=float, metavar="KGM2", help="payload I_G (default: the scenario's)")
+    p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"), help="offset, m (default: the scenario's)")
+    p.add_argument("--offset", type=float, nargs=3, metavar=("B_M", "B_FX", "B_FY"),
+                   help="sensor offset b in w = S (w_hat - b), N m and N (default: the scenario's)")
+    p.add_argument("--latency", type=float, metavar="S",
+                   help="delay of the pose stream behind the sensor stream, s (default: the scenario's)")
+    p.add_argument("--out", required=True, metavar="LOG.csv")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing LOG.csv and LOG.truth.json")
+    p.set_defaults(func=cmd_simulate)
+
+
+def cmd_simulate(args):
+    from fmscal.plant import get_scenario
+    from fmscal.plant import SPATIAL_SCENARIOS
+    check_seeds(seed=args.seed)
+    spatial = args.scenario in SPATIAL_SCENARIOS
+    sc = SPATIAL_SCENARIOS[args.scenario] if spatial else get_scenario(args.scenario)
+    if spatial:
+        for option, value in (("--mass", args.mass), ("--inertia", args.inertia), ("--rho", args.rho),
+                              ("--offset", args.offset)):
+            if value is not None:
+                raise CliError(f"{option} is for the planar scenarios; {args.scenario} has its own tool and a "
+                               "random offset (the sidecar records them)")
+    changes = {}
+    if args.duration is not None:
+        changes["duration"] = positive(args.duration, "--duration")
+    if args.dt is not None:
+        changes["dt"] = positive(args.dt, "--dt")
+    if args.pose_rate is not None:
+        changes["pose_rate"] = positive(args.pose_rate, "--pose-rate")
+    if args.drop_rate is not None:
+        if not 0 <= args.drop_rate < 1:
+            raise CliError(f"--drop-rate must be in [0, 1); got {args.drop_rate}")
+        changes["drop_rate"] = args.drop_rate
+    if args.offset is not None:
+        if not all(np.isfinite(v) for v in args.offset):
+            raise CliError(f"--offset must be three finite numbers (N m, N, N); got {args.offset}")
+        changes["offset"] = tuple(args.offset)
+    if args.latency is not None:
+        if not (np.isfinite(args.latency) and args.latency >= 0):
+            raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
+        changes["latency"] = args.latency
+    if args.mass is not None or args.inertia is not None or args.rho is not None:
+        from fmscal.plant import Payload
+        p = sc.payload
+        changes["payload"] = Payload(positive(args.mass, "--mass") if args.mass is not None else p.mass,
+                                     positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
+                                     tuple(args.rho) if args.rho is not None else p.rho)
+    sc = sc.with_(**changes)
+    if not sc.latency < sc.duration / 2:
+        raise CliError(f"--latency must be less than half the run ({sc.duration / 2:g} s): the poses are shifted "
+                       f"by it; got {sc.latency:g} s")
+    out = Path(args.out)
+    if out.suffix != ".csv":
+        raise CliError(f"--out must end in .csv; got {out}")
+    truth_path = out.with_suffix(".truth.json")
+    check_outputs([(out, "--out"), (truth_path, "--out's sidecar")], overwrite=args.overwrite)
+    sc.check_size()
+    log, truth, _ = sc.generate(args.seed, noise_free=args.noise_free)
+    # the sidecar first, the log last: never a log without its sidecar
+    atomic_write_many([(truth_path, truth.write), (out, log.write)])
+    print(f"wrote {out} ({len(log)} samples, {log.duration:g} s) and {truth_path}")
+
+
+def _add_check_gains(sub):
+    p = sub.add_parser("check-gains", help="poles, observability and Theorem 1's assumption 2 for the gains",
+                       description="Check observer gains with python-control: poles of A - K C, "
+                                   "observability of (A, C), the Lyapunov P, and whether assumption 2 "
+                                   "of Theorem 1 holds with P = I.")
+    from fmscal.observers import METHODS, RecursiveObserver
+    configs = [name for name, m in METHODS.items() if issubclass(m.cls, RecursiveObserver)]
+    p.add_argument("--config", choices=["paper", *configs], default="paper",
+                   help="the gains of one observer: " + ", ".join(configs) + "; paper is adaptive-paper, "
+                        "eq. (14) as printed; with --lam, the high-gain observer with poles at -LAM")
+    p.add_argument("--lam", type=float, default=None,
+                   help="high-gain parameter in rad/s for the high-gain configurations")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_check_gains)
+
+
+def cmd_check_gains(args):
+    from fmscal.observers import HighGainObserver, PaperAdaptiveObserver, check_gains, make_observer
+    from fmscal.plant import PAPER_PAYLOAD
+    if args.config == "paper":
+        obs = PaperAdaptiveObserver(PAPER_PAYLOAD)
+    else:
+        obs = make_observer(args.config, PAPER_PAYLOAD)
+    if args.lam is not None and not isinstance(obs, HighGainObserver):
+        raise CliError(f"--lam applies to the high-gain configurations; got --config {args.config}")
+    if args.lam is not None:
+        if args.lam > MAX_LAM:
+            raise CliError(f"--lam must be at most {MAX_LAM:g} rad/s (the gains grow as lam^2); got {args.lam:g}")
+        obs = HighGainObserver(PAPER_PAYLOAD, lam=positive(args.lam, "--lam"))
+    report = check_gains(obs.K1, obs.K2)
+    if args.json:
+        print(json.dumps({k: {"poles": [[complex(p).real, complex(p).imag] for p in v["poles"]],
+                              "observable": v["observable"], "stable": v["stable"],
+                              "sym_eigs": v["sym_eigs"].tolist(),
+                              "assumption_2_holds": v["assumption_2_holds"]}
+                          for k, v in report.items()}, indent=2))
+    else:
+        print(f"gains of the {obs.name} configuration")
+        print(report)
+
+
+def _add_reproduce(sub):
+    p = sub.add_parser("reproduce", help="the paper's section 4: Figs. 2-4 and claimed vs measured E",
+                       description="Run the paper, noisy and time-varying scenarios for every observer; "
+                                   "write PNG figures and summary.md to --out.")
+    p.add_argument("--out", default="reproduce", metavar="DIR")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quick", type=float, default=1.0, metavar="FRACTION",
+                   help="run this fraction of each scenario's length (default 1: the paper's)")
+    p.add_argument("--overwrite", action="store_true", help="replace figures and summary.md already in DIR")
+    add_jobs(p)
+    p.set_defaults(func=cmd_reproduce)
+
+
+def cmd_reproduce(args):
+    from fmscal.analysis._reproduce import output_names, reproduce
+    if not 0 < args.quick <= 1:
+        raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
+    check_seeds(seed=args.seed)
+    check_jobs(args.jobs)
+    check_output_dir(args.out, output_names(), overwrite=args.overwrite)
+    with claim_folder(args.out):                # one run's alone: a second one at once is refused
+        reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
+    print((Path(args.out) / "summary.md").read_text())
+
+
+def _add_ablation(sub):
+    p = sub.add_parser("ablation", help="the adaptive observer's changes from the paper, added one at a time",
+                       description="From the paper's observer as printed, each documented change of the adaptive "
+                                   "default added in turn: median E over seeds (E the median over the last 10 % "
+                                   "of each run) against the maximum-likelihood floor on the same logs, and the "
+                                   "cost per step.")
+    p.add_argument("--scenario", nargs="+", default=["paper", "noisy"], metavar="NAME")
+    p.add_argument("--seeds", type=int, default=3, metavar="N", help="seeds 0 .. N-1 (default 3)")
+    p.add_argument("--duration", type=float, default=100.0, metavar="S", help="run length in s (default 100)")
+    p.add_argument("--quick", action="store_true", help="one seed of 20 s: the same rows, for a check")
+    p.add_argument("--json", action="store_true", help="print the table as JSON (strict) instead")
+    p.set_defaults(func=cmd_ablation)
+
+
+def cmd_ablation(args):
+    from fmscal.plant import get_scenario
+    from fmscal.analysis._ablation import QUICK_SETTINGS, ablation, ablation_markdown
+    for name in args.scenario:
+        get_scenario(name)                      # FmscalError naming the choices
+    check_seeds(seeds=args.seeds)               # --quick or not: a bad --seeds is not ignored
+    seeds, duration = (QUICK_SETTINGS["seeds"], QUICK_SETTINGS["duration"]) if args.quick else \
+        (args.seeds, positive(args.duration, "--duration"))
+    check_seeds(seeds=seeds)
+    check_sizes(args.scenario, duration)
+    table = ablation(args.scenario, seeds, duration, progress=not args.json)
+    if args.json:
+        print(json.dumps(strict(table.to_dict(orient="records")), indent=1, allow_nan=False))
+    else:
+        print(ablation_markdown(table))
+
+
+def _add_compare(sub):
+    from fmscal.observers import METHODS
+    from fmscal.plant import SCENARIOS
+    p = sub.add_parser("compare", help="run the observers side by side on identical data",
+                       description="Run every observer on the same simulated logs (same data, same "
+                                   "initial S_hat) over scenarios and seeds; print the table of E, "
+                                   "convergence time and cost. Scenarios: " + ", ".join(SCENARIOS))
+    add_scenarios_and_observers(p, METHODS)
+    p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0 .. N-1 (default 1)")
+    p.add_argument("--duration", type=float, metavar="S", help="run length in s (default: each scenario's)")
+    p.add_argument("--json", action="store_true", help="print a JSON list of rows (strict JSON) instead")
+    p.add_argument("--out", metavar="DIR", help="write E-against-time plots, summary.md and runs.csv here")
+    p.add_argument("--overwrite", action="store_true", help="replace those files if DIR already holds them")
+    p.set_defaults(func=cmd_compare)
+
+
+def cmd_compare(args):
+    from fmscal.observers import get_method
+    from fmscal.analysis._comparison import case_scenario, compare, summarise, summary_markdown
+    for name in args.scenario:
+        case_scenario(name)                     # FmscalError naming the choices
+    for name in args.observer:
+        get_method(name)                        # FmscalError naming the methods
+    check_seeds(seeds=args.seeds)
+    if args.duration is not None:
+        positive(args.duration, "--duration")
+    check_sizes(args.scenario, args.duration)
+    if args.out:
+        scenarios = dict.fromkeys(case_scenario(name).name for name in args.scenario)
+        check_output_dir(args.out, [f"E_{sc}.png" for sc in scenarios] + ["summary.md", "runs.csv"],
+                         overwrite=args.overwrite)
+    with claim_folder(args.out) if args.out else contextlib.nullcontext():
+        table, curves = compare(args.scenario, args.seeds, args.observer, args.duration,
+                                progress=not args.json, histories=True)
+        summary = summarise(table)
+        text = summary_markdown(summary, f"Observer comparison ({args.seeds} seed(s), "
+                                         f"{'each scenario' if args.duration is None else f'{args.duration:g} s'})")
+        if args.out:
+            _write_comparison(Path(args.out), args.duration, table, curves, text)
+    if args.json:
+        print(json.dumps(strict(table.to_dict(orient="records")), indent=1, allow_nan=False))
+    else:
+        print(text)
+
+
+def _write_comparison(out, duration, table, curves, text):
+    """compare --out: a figure per scenario, summary.md and runs.csv in ``out``."""
+    from fmscal.analysis._comparison import case_scenario
+    from fmscal.analysis._plots import plot_comparison
+    for scenario in dict.fromkeys(table["scenario"]):
+        sc = case_scenario(scenario)
+        truth = sc.with_(duration=duration or sc.duration).generate(0)[1]     # seed 0's S(t)
+        plot_comparison({obs: v for (name, obs), v in curves.items() if name == scenario}, truth,
+                        out / f"E_{scenario}.png",
+                        f"E against time and the entries of S_hat, scenario '{scenario}' (seed 0)")
+    atomic_write_text(out / "summary.md", text)
+    atomic_write(out / "runs.csv", lambda tmp: table.to_csv(tmp, index=False))
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with usage errors on one line (exit 2) instead of usage plus error.
+
+    A negative number in scientific notation (``--inertia ... -1e-4``) is a
+    value, not an option: argparse alone takes only ``-1`` and ``-0.5``.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
+
+
+def build_parser():
+    """The ``fmscal`` argument parser: every subcommand with its options.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser :func:`main` uses; ``fmscal --help`` prints it.
+    """
+    parser = _Parser(
+        prog="fmscal",
+        description="Calibrate a force-moment sensor from motion, and compare the observers that do it.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in _COMMANDS:
+        add(sub)
+    return parser
+
+
+_COMMANDS = [_add_simulate, add_calibrate, add_apply, add_identify_payload, _add_reproduce, _add_compare,
+             _add_ablation, add_sweep, add_bench, _add_check_gains, add_import]
+
+
+def main(argv=None):
+    """Entry point of ``fmscal``; returns the exit status."""
+    from fmscal.plant import FmscalError
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:            # --help, or a usage error already printed on one line
+        return stop.code
+    try:
+        # numpy's RuntimeWarnings on degenerate input would break the one-line promise: the
+        # commands report such input themselves (warnings, converged flags, refusals)
+        # without --overwrite, no output replaces a file, even one that appears while the command works
+        with exclusive(not getattr(args, "overwrite", False)), np.errstate(all="ignore"), \
+                warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            args.func(args)
+    except (FmscalError, OSError) as err:      # the user's input or files; any other error is a bug
+        message = str(err).splitlines()[0] if str(err) else type(err).__name__
+        print(f"fmscal {args.command}: error: {one_line(message)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fmscal: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+def console():
+    """The installed ``fmscal`` script: :func:`main` on the process's arguments, its code as the exit status."""
+    sys.exit(main())

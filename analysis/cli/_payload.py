@@ -1,0 +1,243 @@
+"""``fmscal identify-payload``: what practitioners estimate with ``S`` known, from a spatial log or a pose table.
+
+A spatial log (``t,qw,...,fz``) gives the offset, the mass, the centre of
+mass and, where the motion turns the payload fast enough, the inertia
+(:func:`fmscal.observers.payload.identify_payload`), with what the log
+covered and the next poses to record, as for a table. An attitude-only
+log (no ``x,y,z``) gives its held segments as a pose table
+(:func:`fmscal.plant.io.held_table`). A pose table (the
+same header without ``t``: one row per held pose) gives the offset, the mass
+and the centre of mass, and, where asked, gravity's direction in the pose
+frame and the sensor's mounting on the tracked frame
+(:func:`fmscal.observers.payload.fit_static`), with what the poses
+covered and the next poses to record.
+"""
+
+import json
+import sys
+
+import numpy as np
+
+from fmscal.plant.physics._rigid_body import _inertia_matrix
+
+from fmscal.analysis.cli._common import CliError, strict
+from fmscal.analysis.cli._spatial import _NAMES, _spatial_truth, joint_data
+
+__all__ = ["add_identify_payload", "cmd_identify_payload"]
+
+
+def add_identify_payload(sub):
+    """Add ``fmscal identify-payload`` to the subcommands ``sub``."""
+    p = sub.add_parser("identify-payload", help="estimate the payload's mass properties and the offset, S known",
+                       description="With the calibration S known (the identity, or --calibration CAL.json), "
+                                   "estimate the sensor's offset, the payload's mass and centre of mass (static "
+                                   "poses suffice) and its inertia (motion needed) from a spatial log or a pose "
+                                   "table (the spatial header without t, one row per held pose), with "
+                                   "one-sigma uncertainties, and say what the data did not determine.")
+    p.add_argument("log", metavar="LOG.csv|TABLE.csv")
+    p.add_argument("--calibration", metavar="CAL.json", help="a spatial calibration (default: S = I)")
+    p.add_argument("--gravity", nargs="+", metavar="GX GY GZ|estimate",
+                   help="gravity in the pose frame, m/s^2 (default 0 0 -9.81); 'estimate': its direction is "
+                        "estimated with the payload (a tilted or wall-mounted base)")
+    p.add_argument("--mounting", choices=("estimate",),
+                   help="estimate the rotation of the sensor's axes on the tracked frame (a sensor bolted at an "
+                        "angle), as a matrix and an angle about an axis")
+    p.add_argument("--reading", choices=("reaction", "load"), default=None,
+                   help="the reading's sign: reaction (the wrench the mount applies to the payload) or load (the "
+                        "wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report); default: "
+                        "the one --calibration recorded, else reaction")
+    p.add_argument("--urdf", metavar="ROBOT.urdf",
+                   help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
+                        "names; rad): poses of --frame by forward kinematics (pinocchio: pip install "
+                        "\"fmscal[robot]\")")
+    p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
+    p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report the errors")
+    p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.set_defaults(func=cmd_identify_payload)
+
+
+def _gravity(args):
+    """``(gravity, estimate)`` from ``--gravity``: three numbers, or ``estimate`` (the default's size, 9.81)."""
+    from fmscal.plant.physics._rigid_body import GRAVITY
+    given = args.gravity
+    if given is None:
+        return GRAVITY, False
+    if given == ["estimate"]:
+        return GRAVITY, True
+    try:
+        g = [float(v) for v in given]
+    except ValueError:
+        g = []
+    if len(g) != 3 or not (all(np.isfinite(g)) and 0 < np.linalg.norm(g) < 1e3):
+        raise CliError(f"--gravity takes three finite numbers in m/s^2 (the pose frame's gravity) or 'estimate'; "
+                       f"got {' '.join(given)[:80]}")
+    return tuple(g), False
+
+
+def _calibration_S(args):
+    """``S`` of the spatial calibration file ``--calibration`` (None without one); sets ``args.reading``.
+
+    The reading's sign is the one the file recorded; ``--reading`` may repeat
+    it, not contradict it (the sign is the sensor's, and ``S`` was fitted to it).
+    """
+    from fmscal.plant import Calibration
+    path = args.calibration
+    if not path:
+        args.reading = args.reading or "reaction"
+        return None
+    calibration = Calibration.load(path)
+    if calibration.size != 6:
+        raise CliError(f"{path} is a planar calibration (3x3); identify-payload takes a spatial one")
+    if calibration.forced:
+        print(f"fmscal identify-payload: warning: {path} was saved with --force", file=sys.stderr)
+    if args.reading is not None and args.reading != calibration.reading:
+        raise CliError(f"--reading {args.reading} contradicts {path}, recorded with the reading "
+                       f"{calibration.reading}: drop --reading, or recalibrate with --reading {args.reading}")
+    args.reading = calibration.reading
+    return calibration.S
+
+
+def cmd_identify_payload(args):
+    """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log or a pose table."""
+    from fmscal.plant.io._log import _as_path
+    from fmscal.plant.io._pose_table import (held_table, is_attitude_log, is_pose_table, read_attitude_log,
+                                             read_pose_table)
+    gravity, estimate_gravity = _gravity(args)
+    S = _calibration_S(args)
+    path = _as_path(args.log, "log")
+    data = joint_data(args, path)
+    if data is not None:
+        from fmscal.plant.io._pose_table import PoseTable
+        if isinstance(data, PoseTable):
+            return _identify_table(args, path, data, S, gravity, estimate_gravity)
+        return _identify_log(args, path, data, S, gravity, estimate_gravity)
+    if is_pose_table(path):
+        return _identify_table(args, path, read_pose_table(path), S, gravity, estimate_gravity)
+    if is_attitude_log(path):
+        table, _, why = held_table(read_attitude_log(path))
+        print(f"fmscal identify-payload: note: {why}", file=sys.stderr)
+        return _identify_table(args, path, table, S, gravity, estimate_gravity)
+    from fmscal.plant import read_log
+    return _identify_log(args, path, read_log(path), S, gravity, estimate_gravity)
+
+
+def _identify_log(args, path, log, S, gravity, estimate_gravity):
+    from fmscal.observers.payload._payload_fit import INERTIA_NAMES, identify_payload
+    if log.kind != "spatial":
+        raise CliError(f"{path.name} is a planar log; identify-payload takes a spatial log "
+                       "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) or a pose table")
+    truth = _spatial_truth(args.truth)
+    fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
+                           estimate_mounting=args.mounting == "estimate")
+    for warning in fit.warnings:
+        print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
+    out = {**fit.to_dict(), "reading": args.reading}
+    if truth is not None:
+        p = truth.payload
+        out["mass_error"] = fit.mass - p.mass
+        out["rho_error"] = (fit.rho - np.array(p.rho)).tolist()
+        # the tensor's six entries (URDF order), in the sensor axes as the fit gives them
+        out["inertia_error"] = None if fit.inertia is None else (np.asarray(fit.inertia) - np.array(
+            [p.I_c[0, 0], p.I_c[1, 1], p.I_c[2, 2], p.I_c[0, 1], p.I_c[0, 2], p.I_c[1, 2]])).tolist()
+        if truth.offset is not None:
+            out["b_error"] = (fit.b - truth.offset).tolist()
+    if args.json:
+        print(json.dumps(strict(out), allow_nan=False))
+        return
+    print(f"{path.name}: {len(log)} samples, {log.duration:g} s; S "
+          f"{'from ' + args.calibration if args.calibration else '= I'}; reading {args.reading}")
+    _print_mass(fit)
+    if fit.inertia is None:
+        print("inertia: not determined by this log")
+    else:
+        print("inertia about the centre of mass [kg m^2]: " + "  ".join(
+            f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
+    print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
+    _print_rotations(fit)
+    _print_calibrate_flags(fit)
+    _print_coverage(fit, fit.undetermined)
+    print(f"converged: {'yes' if fit.converged else 'no'}")
+    if truth is not None:
+        print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
+              + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm"
+              + ("" if out["inertia_error"] is None else ", inertia " + " ".join(
+                  f"{n} {v:+.2g}" for n, v in zip(INERTIA_NAMES, out["inertia_error"])) + " kg m^2"))
+
+
+def _print_mass(fit):
+    print(f"mass: {fit.mass:.5g} +- {fit.mass_std:.2g} kg")
+    print("centre of mass [mm]: " + "  ".join(f"{v * 1e3:+.3f} +- {s * 1e3:.2g}" for v, s in zip(fit.rho, fit.rho_std)))
+
+
+def _print_rotations(fit):
+    """Gravity's direction and the mounting, where the fit estimated them."""
+    if fit.gravity is not None:
+        print(f"gravity in the pose frame [m/s^2]: {' '.join(f'{v:+.4f}' for v in fit.gravity)} "
+              f"(direction +- {fit.gravity_std_deg:.2g} degrees)")
+    if fit.mounting is not None:
+        about = " about " + " ".join(f"{v:+.4f}" for v in fit.mounting_axis)
+        print(f"mounting (sensor axes on the tracked frame): {fit.mounting_deg:.3f} +- {fit.mounting_std_deg:.2g} "
+              f"degrees{about}; matrix rows " + "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in fit.mounting))
+
+
+def _print_calibrate_flags(fit, table=False):
+    """Where gravity or the mounting was estimated, the payload as ``fmscal calibrate`` takes it.
+
+    ``calibrate`` estimates ``S`` in full, which absorbs the mounting, so it
+    works in the axes of the frame the poses track: the centre of mass
+    ``M rho`` and the inertia ``M I M^T`` there (``M`` the mounting, sensor
+    axes to the tracked frame's), and the estimated gravity. Given in the
+    sensor's own axes they would be wrong by the mounting's turn, and ``S``
+    would absorb that too. Only where the fit determined the mass and the
+    centre of mass (``payload_determined``, by its own rule); a table's
+    ``calibrate`` takes no inertia.
+    """
+    if fit.gravity is None and fit.mounting is None:
+        return
+    if not fit.payload_determined:
+        print("for fmscal calibrate: no payload to pass on, the mass and the centre of mass are not determined")
+        return
+    M = np.eye(3) if fit.mounting is None else np.asarray(fit.mounting)
+    flags = f"--mass {fit.mass:.6g} --rho {' '.join(f'{v:.6g}' for v in M @ np.asarray(fit.rho))}"
+    known = None if table else fit.inertia                  # held poses never give the inertia
+    if known is not None:
+        inertia = M @ _inertia_matrix(known) @ M.T
+        entries = (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2])
+        flags += f" --inertia {' '.join(f'{v:.6g}' for v in entries)}"
+    if fit.gravity is not None:
+        flags += f" --gravity {' '.join(f'{v:.6g}' for v in fit.gravity)}"
+    if known is None and not table:
+        flags += " (and --inertia, which this log did not determine, in the same axes)"
+    print(f"for fmscal calibrate (the tracked frame's axes): {flags}")
+
+
+def _identify_table(args, path, table, S, gravity, estimate_gravity):
+    from fmscal.observers.payload._static_fit import fit_static
+    if args.truth:
+        raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
+    fit = fit_static(table, S=S, gravity=gravity, estimate_gravity=estimate_gravity,
+                     estimate_mounting=args.mounting == "estimate", reading=args.reading)
+    for warning in fit.warnings:
+        print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(strict(fit.to_dict()), allow_nan=False))
+        return
+    source = "from " + args.calibration if args.calibration else "= I"
+    print(f"{path.name}: {len(table)} held poses; S {source}; reading {args.reading}")
+    _print_mass(fit)
+    print("inertia: not determined by held poses (it needs angular acceleration)")
+    print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
+    _print_rotations(fit)
+    _print_calibrate_flags(fit, table=True)
+    _print_coverage(fit)
+    print(f"converged: {'yes' if fit.converged else 'no'}")
+
+
+def _print_coverage(fit, undetermined=()):
+    """The cone of gravity directions covered, what the data left (a log's; a table's are its warnings), the next
+    poses."""
+    print(f"gravity directions covered in the sensor frame: a cone of half-angle {fit.cone_deg:.0f} degrees")
+    for words in undetermined:
+        print(f"left: {words}")
+    for words in fit.next_poses:
+        print(f"next pose: {words}")

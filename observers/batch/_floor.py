@@ -1,0 +1,61 @@
+"""The information floor as a method: the maximum-likelihood estimate behind the Observer contract."""
+
+from fmscal.observers.core._base import Estimate, Observer
+from fmscal.observers.batch._max_likelihood import fit_max_likelihood
+
+__all__ = ["MaximumLikelihood"]
+
+
+class MaximumLikelihood(Observer):
+    """Maximum-likelihood estimate of ``S`` from a whole log: what the data allow.
+
+    An offline method (``max-likelihood`` in the registry): it fits the
+    whole log with :func:`observers.batch.fit_max_likelihood`
+    (a Kalman filter on the motion of eq. (1) with the exact discretisation,
+    the reading's noise as process noise, a flat prior on ``[S | c]``, two
+    passes; module docstring there) and reports ``S_std`` (and ``b_std``)
+    from the information the log held. Every table divides a method's E by
+    this one's on the same log (``E / floor``).
+
+    Parameters
+    ----------
+    model : plant.Model or plant.Payload
+        The problem (a payload stands for its case's model). A model without
+        linear channels (the spatial one) is linearised about the smoothed
+        motion (:mod:`fmscal.observers.batch._linearised_floor`), and the checks fail
+        where the log leaves a direction of the reading undetermined
+        (``result.info["undetermined"]``, the warnings say what to record).
+    noise : plant.NoiseSpec, optional
+        The log's noise standard deviations; None: estimated from the log
+        (reported in ``result.info["noise"]``).
+    passes : int
+        Filter passes (the process noise of each after the first at the
+        previous estimate).
+    offset : bool
+        Also estimate the sensor's offset ``b`` (``result.b``, ``result.b_std``).
+
+    Examples
+    --------
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
+    >>> log, truth, _ = get_scenario("paper").with_(duration=5.0).generate(0)
+    >>> MaximumLikelihood(PAPER_PAYLOAD).run(log).S_std.shape
+    (3, 3)
+    """
+
+    name = "max-likelihood"
+    online = False
+
+    def __init__(self, model, noise=None, passes=2, offset=False):
+        super().__init__(model, offset=offset)
+        self.noise = None if noise is None else self.model.check_noise(noise)
+        self.passes = passes
+
+    def _estimate(self, log, S0):
+        fit = fit_max_likelihood(log, self.model, self.noise, self.offset, self.passes,
+                                 compiled=self.run_data.compiled)
+        calibration = fit.S_history.reshape(len(fit.S_history), -1).copy()
+        calibration[-1] = fit.S_aug.ravel()          # the whole log's estimate
+        info = {"noise": fit.noise.to_dict(), "noise_estimated": fit.noise_estimated, "passes": fit.passes,
+                "undetermined": [d.tolist() for d in fit.undetermined]}
+        return Estimate(calibration, fit.x_history, cov=fit.cov_aug, info=info, checks_passed=not fit.undetermined,
+                        warnings=list(fit.warnings))

@@ -1,0 +1,300 @@
+"""The plain reference in 3D: smoothed inverse dynamics, then least squares for ``[S | c]``.
+
+What a practitioner would write first. The poses are smoothed and
+differentiated (:func:`fmscal.plant.physics.spatial_motion`); with the
+payload known, Newton-Euler gives the wrench each sample needed
+(``w_k = W_k pi``, :func:`fmscal.observers.payload.regressor`); and
+``w_k = S w_hat_k + c`` is fitted row by row by least squares on the
+augmented reading ``[w_hat_k; 1]``, the covariance cluster-robust over
+blocks of time. The smoothing biases the accelerations and the
+differentiated noise enters ``w_k``: the floor (the motion model, not a
+differentiated pose) is what this is measured against.
+
+What the log determines. Every row of ``[S | c]`` is read off the same
+regressor, the augmented reading, so the information about ``S`` lies in
+the second-moment matrix of ``[w_hat; 1]``: a direction of the reading
+along which the log does not vary leaves ``S`` undetermined on it, for every
+row at once. Static poses make every wrench ``[rho x f; f]`` (3 dimensions
+of 6), so three directions of the reading stay undetermined: mostly torque
+directions, which only angular acceleration (``I alpha + omega x I omega``)
+can excite. :attr:`InverseDynamicsFit.undetermined` lists them, and the
+warnings say what to record.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.physics._differentiate import edge, spatial_motion
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.io._noise import estimate_noise
+from fmscal.plant.physics._rigid_body import GRAVITY, SpatialPayload, regressor
+
+from fmscal.observers.batch._cluster_covariance import block_length, few_blocks, small_sample_factor
+
+__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "UNDETERMINED_STD",
+           "READING_NAMES"]
+
+#: The augmented reading's components, the directions in which the information is reported.
+READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
+#: A direction of the reading counts as undetermined when ``S`` along it (a unit direction of the
+#: readings scaled to their spread) has a one-sigma uncertainty above this: 5 % of a unit gain.
+UNDETERMINED_STD = 0.05
+
+
+@dataclass
+class InverseDynamicsFit:
+    """``[S | c]`` of a spatial log by smoothed inverse dynamics and least squares.
+
+    Attributes
+    ----------
+    S_hat, S_std : ndarray, shape (6, 6)
+        The estimate of ``S`` in ``w = S (w_hat - b)`` and its one-sigma uncertainty.
+    b, b_std : ndarray, shape (6,)
+        The offset (reading order, N m and N) and its uncertainty.
+    cov : ndarray, shape (42, 42)
+        Covariance of ``vec([S | c])``, row order.
+    undetermined : list of ndarray, shape (7,)
+        Unit directions of the augmented reading ``[tx .. fz, 1]`` (each
+        component scaled by its spread in the log) along which ``S`` is not
+        determined.
+    warnings : list of str
+    converged : bool
+        No direction undetermined.
+    residual_rms : ndarray, shape (6,)
+        The fit's residual per wrench component (N m, N): what the motion
+        asked of the sensor less what the fitted reading gave.
+    c : ndarray, shape (6,)
+        The offset column of ``[S | c]`` (``c = -S b``), as fitted.
+    unexplained : ndarray, shape (6,)
+        The share of each wrench component's variance the fit does not
+        explain (residual variance over the component's variance), for the
+        latency search (:func:`fmscal.observers.batch.estimate_latency`).
+    """
+
+    S_hat: np.ndarray
+    S_std: np.ndarray
+    b: np.ndarray
+    b_std: np.ndarray
+    cov: np.ndarray
+    undetermined: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    converged: bool = False
+    residual_rms: np.ndarray = None
+    unexplained: np.ndarray = None
+    c: np.ndarray = None
+
+    @property
+    def S_aug(self):
+        """``[S | c]``, shape (6, 7), of ``w = S w_hat + c``, the fitted matrix (``c = -S b``)."""
+        return np.c_[self.S_hat, self.c]
+
+
+def describe_direction(direction, held=False):
+    """A user's words for an undetermined direction of the reading (its components scaled to their spread).
+
+    Parameters
+    ----------
+    direction : ndarray, shape (7,)
+        A unit direction of the augmented reading ``[tx .. fz, 1]``.
+    held : bool
+        The data are held poses (a pose table): the remedy is what held
+        poses can and cannot give.
+
+    Returns
+    -------
+    str
+
+    A direction with a torque share (a quarter of its square or more) is torque
+    the force does not already explain, which only angular acceleration makes.
+    """
+    torque = float(np.sum(direction[:3] ** 2))
+    parts = " ".join(f"{'+' if c >= 0 else '-'}{abs(c):.2f} {name}" for c, name in zip(direction, READING_NAMES)
+                     if abs(c) >= 0.2).lstrip("+")
+    if held and torque >= 0.25:
+        return (f"S is not determined along the reading {parts}: the torque there is only what the force makes "
+                "about the centre of mass, and held poses never make more (that needs angular acceleration); "
+                "record a moving log (t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) to determine it")
+    if held:
+        return (f"S is not determined along the reading {parts}: the force hardly changes there; hold the tool at "
+                "attitudes that turn gravity through more directions in the sensor frame (tilt it about another axis)")
+    if torque >= 0.25:
+        return (f"S is not determined along the reading {parts}: the torque there is only what the force makes "
+                "about the centre of mass; the log holds too little angular acceleration (rotate the payload "
+                "faster, about more axes)")
+    return (f"S is not determined along the reading {parts}: the force hardly changes there; turn gravity "
+            "through more directions in the sensor frame, or accelerate the payload")
+
+
+def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=None, eiv=True):
+    """Estimate ``S`` and the offset of a spatial log by smoothed inverse dynamics and least squares.
+
+    Parameters
+    ----------
+    log : plant.Log
+        A spatial log.
+    payload : plant.SpatialPayload
+        The payload's mass properties (known).
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+    window : float
+        Smoothing window of the pose differentiation, s.
+    block : float, optional
+        Length of the blocks of the robust covariance, s. None (default):
+        five correlation times of the residuals of a first fit, not shorter
+        than ``window`` (eqs. (U1), (U2) of :mod:`fmscal.observers.batch._cluster_covariance`).
+    eiv : bool
+        Compensate the errors in variables: the reading is the regressor and
+        its noise shrinks ``S`` along the directions the log barely excites
+        (the torque not explained by the force, above all). With ``eiv``
+        the normal equations lose the noise's share, ``(X^T X - N Sigma)
+        theta = X^T w`` (Deming's regression), ``Sigma`` the reading's noise
+        covariance estimated from the log (:func:`fmscal.plant.estimate_noise`).
+        False gives the plain least squares, the reference in its simplest form.
+
+    Returns
+    -------
+    InverseDynamicsFit
+    """
+    if not isinstance(payload, SpatialPayload):
+        raise FmscalError(f"fit_inverse_dynamics takes a SpatialPayload; got {type(payload).__name__}")
+    gravity = as_finite_array(gravity, (3,), "gravity")
+    if block is not None:
+        block = as_positive_scalar(block, "block")
+    q, omega, alpha, p_ddot = spatial_motion(log, window)
+    trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
+    w = regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], gravity) @ payload.inertial_parameters  # (N, 6)
+    wrench_sd = np.array(estimate_noise(log).wrench_sd)
+    spread = np.std(log.w_hat[trim], axis=0)
+    dead = np.flatnonzero(spread <= np.maximum(3 * wrench_sd, 1e-12 * np.abs(log.w_hat[trim]).max(axis=0)))
+    if len(dead):
+        raise FmscalError(f"{log.name}: the reading {', '.join(READING_NAMES[j] for j in dead)} does not move beyond "
+                          "its noise: a stuck or dead channel, or a log that never loads it; S cannot be estimated")
+    t = log.t[trim]
+    if block is None:                                       # eq. (U2) on the residuals of a first fit
+        first = fit_readings(w, log.w_hat[trim], None, wrench_sd if eiv else None)
+        block = block_length(w - log.w_hat[trim] @ first.S_hat.T - first.c, log.dt, window)
+    blocks = ((t - t[0]) // block).astype(int)
+    fit = fit_readings(w, log.w_hat[trim], blocks, wrench_sd if eiv else None)
+    warning = few_blocks(blocks, block)
+    if warning is not None:
+        fit.warnings.append(warning)
+    return fit
+
+
+def fit_readings(w, w_hat, blocks=None, wrench_sd=None, prior=None, held=False):
+    """Least squares of ``[S | c]`` in ``w_k = S w_hat_k + c`` (eq. 3 with the offset ``c = -S b``), row by row.
+
+    The regressor of every row is the augmented reading ``[w_hat_k; 1]``,
+    each component scaled by its spread; what it leaves undetermined is
+    reported as directions of that reading (module docstring).
+
+    Parameters
+    ----------
+    w : ndarray, shape (N, 6)
+        The wrench each sample needed (Newton-Euler), N m and N.
+    w_hat : ndarray, shape (N, 6)
+        The readings (sign-corrected), N m and N.
+    blocks : ndarray of int, shape (N,), optional
+        Each sample's block of time: the covariance is the cluster-robust
+        sandwich over them, with the small-sample factor of eq. (U3)
+        (:mod:`fmscal.observers.batch._cluster_covariance`). None: the samples are independent (the rows of a
+        pose table), the covariance is ``s_i^2 (X^T X)^-1`` for row ``i``
+        with ``s_i^2`` its residual variance over ``N - k`` degrees of
+        freedom (``k`` the directions fitted).
+    wrench_sd : ndarray, shape (6,), optional
+        The reading's noise: the normal equations lose its share,
+        ``(X^T X - N Sigma) theta = X^T w`` (errors in variables, Deming's
+        regression); None: plain least squares.
+    prior : ndarray, shape (6, 7), optional
+        ``[S | c]`` where the data say nothing: the estimate is the least
+        squares fit on the determined directions and the prior on the
+        undetermined ones (the fit nearest the prior). None: every direction
+        is fitted.
+    held : bool
+        The data are held poses: the warnings say what held poses cannot give.
+
+    Returns
+    -------
+    InverseDynamicsFit
+        With ``S_std`` infinite on every entry an undetermined direction
+        touches, when ``prior`` is given.
+    """
+    X = np.c_[w_hat, np.ones(len(w))]                                                  # (N, 7)
+    spread = np.r_[np.std(X[:, :6], axis=0), 1.0]
+    spread[spread <= 0] = 1.0                               # a constant component: the constant's direction
+    Xs = X / spread
+    # the reading's noise covariance in scaled units (the constant 1 has none)
+    sigma = np.diag((np.r_[wrench_sd, 0.0] / spread) ** 2 if wrench_sd is not None else np.zeros(7))
+    information = Xs.T @ Xs - len(Xs) * sigma
+    lam, u = np.linalg.eigh(information)            # symmetric; with the noise taken out, maybe indefinite
+    kept = lam > 1e-12 * lam.max()
+    theta0 = np.zeros((7, 6)) if prior is None else (np.asarray(prior, dtype=float) * spread).T
+    inverse = (u[:, kept] / lam[kept]) @ u[:, kept].T
+    theta = theta0 + inverse @ Xs.T @ (w - Xs @ theta0)                                 # (7, 6): rows of [S|c]^T
+    e = w - Xs @ theta
+    weak = np.array([not kept[k] or _relative_std(u[:, k], lam[k], e, spread) > UNDETERMINED_STD for k in range(7)])
+    if prior is not None and (weak & kept).any():                   # the weak directions left at the prior
+        kept &= ~weak
+        inverse = (u[:, kept] / lam[kept]) @ u[:, kept].T
+        theta = theta0 + inverse @ Xs.T @ (w - Xs @ theta0)
+        e = w - Xs @ theta
+    bread = np.kron(np.eye(6), inverse)
+    if blocks is None:                                      # independent rows: s_i^2 (X^T X)^-1 for row i
+        s2 = np.sum(e ** 2, axis=0) / max(len(e) - int(kept.sum()), 1)
+        cov_scaled = np.kron(np.diag(s2), inverse)
+    else:
+        scores = np.zeros((blocks.max() + 1, 7, 6))
+        # each sample's share of the estimating equation X^T e + Sigma theta = 0
+        np.add.at(scores, blocks, Xs[:, :, None] * e[:, None, :] + (sigma @ theta)[None])
+        scores = scores.transpose(0, 2, 1).reshape(len(scores), 42)                      # row order of [S|c]
+        cov_scaled = small_sample_factor(blocks, len(e), int(kept.sum())) * bread @ (scores.T @ scores) @ bread
+    unscale = np.tile(1.0 / np.maximum(spread, 1e-300), 6)
+    cov = cov_scaled * np.outer(unscale, unscale)
+    S_aug = (theta / np.maximum(spread, 1e-300)[:, None]).T                              # (6, 7)
+    undetermined = [u[:, k] for k in np.flatnonzero(weak)]
+    warnings = [describe_direction(d, held) for d in undetermined]
+    S_hat, c = S_aug[:, :6], S_aug[:, 6]
+    b, b_std = _offset(S_hat, c, cov)
+    if prior is not None and undetermined:                  # the prior's entries are not estimates
+        touched = np.tile(np.abs(np.array(undetermined)).max(axis=0) > 1e-6, 6)
+        cov[touched, :] = np.inf
+        cov[:, touched] = np.inf
+    S_std = np.sqrt(np.maximum(np.diag(cov), 0)).reshape(6, 7)[:, :6]
+    residual_rms = np.sqrt(np.mean(e ** 2, axis=0))
+    unexplained = residual_rms ** 2 / np.maximum(np.var(w, axis=0), 1e-300)
+    return InverseDynamicsFit(S_hat=S_hat, S_std=S_std, b=b, b_std=b_std, cov=cov, undetermined=undetermined,
+                              warnings=warnings, converged=not undetermined, residual_rms=residual_rms,
+                              unexplained=unexplained, c=c)
+
+
+def _relative_std(direction, information, e, spread):
+    """The uncertainty of ``S`` along a direction of the scaled reading, relative to a unit gain.
+
+    Along the unit direction ``d`` of the scaled reading the fit's uncertainty
+    is ``sigma / sqrt(lambda)`` (wrench units per scaled unit, ``lambda`` the
+    information along ``d``, ``sigma`` the largest residual spread of a row);
+    a unit gain maps the same move of the reading to ``|d * spread|`` of
+    wrench, the force channels' spread standing in for the constant's.
+    """
+    sigma = np.sqrt(np.mean(e ** 2, axis=0).max())
+    scale = np.r_[spread[:6], spread[3:6].mean()]
+    return sigma / np.sqrt(max(information, 1e-300)) / max(np.linalg.norm(direction * scale), 1e-300)
+
+
+def _offset(S_hat, c, cov):
+    """``b = -S^-1 c`` and its uncertainty by the delta method (``S`` and ``c`` both uncertain).
+
+    NaN where ``S_hat`` is singular (a direction the log did not determine left at zero).
+    """
+    if not np.isfinite(np.linalg.cond(S_hat)) or np.linalg.cond(S_hat) > 1e12:
+        return np.full(6, np.nan), np.full(6, np.nan)
+    S_inv = np.linalg.inv(S_hat)
+    b = -S_inv @ c
+    # d b = -S^-1 (dS b + dc): Jacobian with respect to vec([S | c]) in row order
+    J = np.zeros((6, 42))
+    for i in range(6):
+        J[:, 7 * i:7 * i + 6] = -np.outer(S_inv[:, i], b)
+        J[:, 7 * i + 6] = -S_inv[:, i]
+    return b, np.sqrt(np.maximum(np.diag(J @ cov @ J.T), 0))

@@ -1,0 +1,20 @@
+"""The contract every method follows (:class:`Observer`), what it returns, and the pieces every method
+shares: convergence rules, the step discretisation, gains checks, progress.
+"""
+
+from ._convergence import (settled, moved, informed, divergence_bound, DIVERGENCE_FACTOR, DIVERGENCE_GRACE,
+    SETTLE_FRACTION, SETTLE_TOLERANCE, EVIDENCE_TOLERANCE)
+from ._result import (ObserverResult, initial_calibration, split_calibration, calibration_uncertainty,
+    offset_from_c, offset_std)
+from ._samples import (check_sample, pack_input)
+from ._state import (StateLayout, INPUT)
+from ._discretise import (position_increment, velocity_increment, move)
+from ._progress import (progress_bar, MIN_SAMPLES, EVERY)
+from ._gains import (double_pole_gains, check_gains, GainReport, sampled_poles)
+from ._base import (Observer, RecursiveObserver, Estimate, RunData, log_inputs, MAX_S0)
+
+__all__ = ["settled", "moved", "informed", "divergence_bound", "ObserverResult", "initial_calibration",
+           "split_calibration", "calibration_uncertainty", "offset_from_c", "offset_std", "check_sample",
+           "pack_input", "StateLayout", "position_increment", "velocity_increment", "move", "progress_bar",
+           "double_pole_gains", "check_gains", "GainReport", "sampled_poles", "Observer", "RecursiveObserver",
+           "Estimate", "RunData", "log_inputs"]

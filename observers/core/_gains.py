@@ -1,0 +1,128 @@
+"""Gain checks on python-control: poles of A - K C, observability, Lyapunov P."""
+
+import numpy as np
+
+from fmscal.plant import A_1, A_2, C_1, C_2
+from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
+
+__all__ = ["double_pole_gains", "check_gains", "GainReport", "sampled_poles"]
+
+
+def double_pole_gains(lam):
+    """Injection gains placing both poles of each channel at ``-lam``.
+
+    For the double integrator with position output, ``K = [2 lam, lam^2]^T``
+    gives ``det(sI - A + K C) = (s + lam)^2``.
+
+    Parameters
+    ----------
+    lam : float
+        Pole magnitude in rad/s, positive.
+
+    Returns
+    -------
+    K1 : ndarray, shape (2, 1)
+        For the angular observer, eq. (6).
+    K2 : ndarray, shape (4, 2)
+        For the translational observer, eq. (7), decoupled in X and Y.
+    """
+    lam = as_positive_scalar(lam, "lam")
+    K1 = np.array([[2 * lam], [lam ** 2]])
+    K2 = np.zeros((4, 2))
+    K2[0, 0] = K2[2, 1] = 2 * lam
+    K2[1, 0] = K2[3, 1] = lam ** 2
+    return K1, K2
+
+
+class GainReport(dict):
+    """The result of :func:`check_gains`: a dict with a readable ``str``."""
+
+    def __str__(self):
+        lines = []
+        for key in ("angular", "translational"):
+            r = self[key]
+            lines.append(f"{key} subsystem, eq. ({'6' if key == 'angular' else '7'}):")
+            lines.append(f"  poles of A - K C: {_fmt(r['poles'])}")
+            lines.append(f"  observable (rank of obsv(A, C) = {r['obsv_rank']} of {r['n']}): "
+                         f"{'yes' if r['observable'] else 'no'}")
+            lines.append(f"  stable: {'yes' if r['stable'] else 'no'}")
+            lines.append(f"  eigenvalues of the symmetric part of A - K C: {_fmt(r['sym_eigs'])}")
+            lines.append(f"  assumption 2 of Theorem 1 with P = I (V_1 = e'e/2 decreasing): "
+                         f"{'holds' if r['assumption_2_holds'] else 'does NOT hold'}")
+            if r["P"] is not None:
+                eigenvalues = _fmt(np.linalg.eigvalsh(r["P"]))
+                lines.append(f"  Lyapunov P of (A-KC)' P + P (A-KC) = -I: eigenvalues {eigenvalues}")
+        return "\n".join(lines)
+
+
+def _fmt(values):
+    return "[" + ", ".join(f"{v.real:.4g}{'' if abs(v.imag) < 1e-12 else f'{v.imag:+.4g}j'}"
+                           if np.iscomplexobj(v) else f"{v:.4g}" for v in values) + "]"
+
+
+def _check(A, C, K):
+    import control              # here, not at the top: it takes a second to import, and only checks need it
+    F = A - K @ C
+    poles = np.linalg.eigvals(F)
+    poles = poles[np.lexsort((poles.imag, poles.real))]
+    rank = int(np.linalg.matrix_rank(control.obsv(A, C)))
+    stable = bool(np.all(poles.real < 0))
+    sym_eigs = np.linalg.eigvalsh(F + F.T) / 2
+    P = control.lyap(F.T, np.eye(len(A))) if stable else None
+    return {"poles": poles, "n": len(A), "obsv_rank": rank, "observable": rank == len(A),
+            "stable": stable, "sym_eigs": sym_eigs,
+            "assumption_2_holds": bool(np.all(sym_eigs < 0)), "P": P}
+
+
+def check_gains(K1, K2):
+    """Check the injection gains of eq. (14) with python-control.
+
+    Parameters
+    ----------
+    K1 : array_like, shape (2, 1)
+    K2 : array_like, shape (4, 2)
+
+    Returns
+    -------
+    GainReport
+        For ``"angular"`` and ``"translational"``: ``poles`` of ``A - K C``,
+        ``observable`` (rank of ``control.obsv``), ``stable``, ``sym_eigs``
+        (eigenvalues of the symmetric part of ``A - K C``),
+        ``assumption_2_holds`` (``V_1 = e^T e / 2`` decreases for every
+        error, i.e. the symmetric part is negative definite: assumption 2 of
+        Theorem 1 with ``P = I``), and ``P`` from ``control.lyap``.
+
+    Examples
+    --------
+    >>> from fmscal.observers.adaptive._adaptive import PAPER_K1, PAPER_K2
+    >>> report = check_gains(PAPER_K1, PAPER_K2)
+    >>> bool(report["angular"]["assumption_2_holds"])
+    False
+    """
+    K1 = as_finite_array(K1, (2, 1), "K1")
+    K2 = as_finite_array(K2, (4, 2), "K2")
+    return GainReport(angular=_check(A_1, C_1, K1), translational=_check(A_2, C_2, K2))
+
+
+def sampled_poles(K1, dt):
+    """Poles of one channel ``A_1 - K_1 C_1`` sampled at ``dt``, by python-control.
+
+    The sampled images ``exp(p dt)`` of the continuous poles: where the
+    high-gain observer (:class:`observers.HighGainObserver`) places the
+    eigenvalues of its discrete error recursion.
+
+    Parameters
+    ----------
+    K1 : array_like, shape (2, 1)
+    dt : float
+        Sample time, s.
+
+    Returns
+    -------
+    ndarray, shape (2,)
+    """
+    K1 = as_finite_array(K1, (2, 1), "K1")
+    dt = as_positive_scalar(dt, "dt")
+    import control
+    closed = control.ss(A_1 - K1 @ C_1, np.zeros((2, 1)), C_1, 0)
+    return np.sort_complex(control.sample_system(closed, dt).poles())

@@ -1,0 +1,521 @@
+"""Augmented-state extended Kalman filter in the manner of Aghili (ICRA 2000)."""
+
+import math
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from fmscal.plant import NoiseSpec
+from fmscal.plant.numerics._backend import ops
+from fmscal.plant.io._noise import estimate_noise
+from fmscal.plant.numerics._checks import as_bool, as_positive_scalar
+from fmscal.plant.numerics._compile import BufferedCall, compile_function
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.physics._model import as_model
+
+from fmscal.observers.core._base import Estimate, Observer, log_inputs
+from fmscal.observers.kalman._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
+from fmscal.observers.kalman._eiv import EivCompensation
+from fmscal.observers.kalman._filter import pack_lower, unpack_lower
+from fmscal.observers.kalman._noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
+from fmscal.observers.core._progress import progress_bar
+
+__all__ = ["AugmentedEKF", "FilterRun"]
+
+
+
+class _CalibrationEKF(ExtendedKalmanFilter):
+    """filterpy's EKF with the state transition of eq. (1) compiled by casadi.
+
+    ``predict_x`` is overridden to take ``x_next``; ``x_next``, ``F`` and
+    ``Q`` are set before every predict, from the same compiled call.
+    """
+
+    def __init__(self, dim_x, dim_z):
+        super().__init__(dim_x=dim_x, dim_z=dim_z)
+        self.x_next = np.zeros(dim_x)
+
+    def predict_x(self, u=0):
+        self.x = self.x_next.reshape(-1, 1)
+
+
+@dataclass
+class FilterRun:
+    """The EKF's running state (:attr:`observers.RunData.state`): what one run holds.
+
+    Attributes
+    ----------
+    kf : filterpy.kalman.ExtendedKalmanFilter
+        The filter: ``x``, ``P``, ``R`` (filterpy's own).
+    var_w : ndarray, shape (n_w,)
+        The raw reading's noise variances this run uses.
+    s_out : ndarray, shape (n_w n,)
+        The reported ``[S | c]`` (compensated for the errors in variables).
+    since_pose : float
+        Seconds since the last pose.
+    q_history : list of float
+        The random walk's intensity after each sample, 1/s.
+    """
+
+    kf: object
+    var_w: np.ndarray
+    s_out: np.ndarray
+    since_pose: float
+    q_history: list
+
+
+class AugmentedEKF(Observer):
+    """Extended Kalman filter on the motion and the calibration, planar ``[theta, ..., Y', s_11, ..., s_33]``.
+
+    A reconstruction of [3] for the planar case (and for any model linear in
+    its channels, the tests' rail among them): the calibration entries are
+    states (random walks), the motion follows eq. (1) with ``w = S w_hat``
+    (:func:`plant.rk4_step`, the raw reading linear over the step), and the
+    measurement is ``[theta, X, Y]``. casadi derives the transition Jacobian
+    ``F``, the noise Jacobians and ``H`` from the plant's single definition
+    (:func:`observers.kalman.model_step`). The update is in Joseph form, so
+    ``P`` stays symmetric positive definite. Two paths run the same filter:
+    :meth:`run` by default generates the whole step (predict, update, the
+    adjustable random walk and the errors-in-variables filter below) with
+    casadi and runs it in compiled chunks (:func:`observers.kalman.whole_step`);
+    ``run(compiled=False)``, and :meth:`step` sample by sample, hand the
+    compiled ``x_next``, ``F`` and ``Q`` to filterpy's
+    ``ExtendedKalmanFilter``, which does the predict and the update. They agree
+    to rounding (``tests/test_ekf.py``).
+
+    Tuning rule: ``R = diag(angle_sd^2, position_sd^2, position_sd^2)`` from
+    the pose noise; ``Q`` is the raw reading's noise carried through the
+    dynamics, ``Q = J diag(wrench_sd^2) J^T`` with ``J = J_0 + J_1`` the
+    sum of the step's Jacobians with respect to the raw readings at its two
+    ends. Each reading's noise enters two consecutive steps (through ``J_1``
+    of one and ``J_0`` of the next), so the process noise of eq. (1) is
+    correlated from step to step; the filter's white ``Q`` must carry each
+    reading once, with its whole effect: ``J_0 Sigma J_0^T + J_1 Sigma
+    J_1^T`` (each end as an independent draw) would give the motion half
+    the wrench noise's low-frequency power and make ``S_std`` about
+    ``sqrt(2)`` too small. The true wrench's noise is ``S n`` with ``S``
+    itself uncertain: its covariance is ``E[S Sigma S^T] = S_hat Sigma
+    S_hat^T + Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il, s_jl)`` from the
+    calibration block of ``P``, carried through the step as the wrench is
+    (``J_d Delta J_d^T``, ``J_d`` the step's Jacobian with respect to the true
+    wrench at both ends). ``Delta`` matters only while ``S`` is still
+    uncertain (the first seconds); without it the filter, evaluating the
+    noise at a wrong early ``S_hat``, weights its first poses wrongly and,
+    never forgetting on a constant ``S``, keeps that error (the site's
+    comparison page measures what ``Delta`` is worth). On top, ``q dt`` on each
+    calibration entry: a random walk whose intensity ``q`` is 0 (``q_S``, a
+    constant ``S``) until the normalized innovation squared of the poses
+    says that ``S`` moved; then it starts at ``q_S_start`` and rises
+    towards ``q_S_max``, and falls back to 0 once the innovations are
+    consistent again (:class:`observers.kalman.NoiseLevel`,
+    ``adapt_q``). ``P_0`` is the pose noise on the positions, ``v0_sd^2``
+    on the velocities and ``S0_sd^2`` on the calibration entries.
+
+    Errors in variables (``eiv``, a change from [3]). The step's Jacobian
+    with respect to ``S`` holds the noisy reading, whose noise is also the
+    process noise of the same step; the correlation attenuates ``S_hat``
+    towards zero by a fraction that grows with the square of the wrench
+    noise (largest on the ``noisy`` scenario). The reported
+    estimate is compensated to first order, ``S_c = T S_hat`` and
+    ``P_c = T P T^T`` with ``T = I + (J + lam I)^-1 B`` (the correction
+    limited to a tenth of ``|S_hat|`` over the first samples, while ``J``
+    is still rank-deficient), from the information
+    ``J`` and its noise-made part ``B`` that a separate-bias filter run
+    beside the EKF accumulates (:class:`observers.kalman.EivCompensation`, the
+    same step as the floor's); the filter itself runs on its own estimate.
+    ``eiv=False`` reports the filter's estimate as it is.
+
+    With a fixed random walk the filter must choose between averaging (a
+    constant ``S``) and forgetting (a moving ``S``); the adjustable level
+    does both: on a constant ``S`` it stays at zero and the filter is the
+    constant-``S`` filter, and after a step in ``S`` (Table 1) it raises
+    the intensity until the innovations are consistent again. A sensor that
+    drifts fast and steadily (the ``drift`` scenario, 0.2 per 100 s) keeps
+    the innovations only a little above their bound; it is followed better
+    with a fixed random walk of its rate (``q_S=1e-5, adapt_q=False``).
+
+    ``S_std`` (and ``b_std``) come from ``P`` (compensated). Over seeds,
+    the z-scores ``(S_hat - S) / S_std`` have a spread near 1 on the
+    ``paper``, ``real-rig`` and ``random-S`` scenarios, told the noise or
+    estimating it (``tests/test_ekf.py``).
+
+    Parameters
+    ----------
+    model : plant.Model or plant.Payload
+        The problem (a model linear in its channels:
+        :attr:`fmscal.plant.Model.linear_channels`); a payload stands for the
+        planar model of it. Every size of the filter comes from the model.
+    noise : plant.NoiseSpec, optional
+        Noise standard deviations in the units of the log. None: estimated
+        from the log (:func:`plant.io._noise.estimate_noise`) and reported in
+        ``result.info["noise"]``. ``result.info["q_S_history"]`` (N,) holds
+        the random-walk intensity after each sample, 1/s.
+    q_S : float
+        Base random-walk intensity of each calibration entry, 1/s: the
+        entries are assumed to wander by ``sqrt(q_S t)`` over ``t`` seconds
+        (1e-8: about 0.006 an hour). Default 0: a constant ``S`` while the
+        innovations are consistent (with ``adapt_q=False``: throughout).
+    S0_sd : float
+        Initial standard deviation of each calibration entry.
+    v0_sd : float
+        Initial standard deviation of the velocities (rad/s, m/s).
+    offset : bool
+        Also estimate the sensor's offset ``b`` (``result.b``, with
+        ``result.b_std`` from ``P``): three more states ``c_1..c_3`` in
+        ``w = S w_hat + c``, ``c = -S b``, with the same random walk. Off by
+        default, as in the paper.
+    c0_sd : float, optional
+        Initial standard deviation of each ``c_i`` (N m, N); default
+        ``S0_sd`` times the size of the first reading (at least 1).
+    adapt_q : bool
+        Raise the intensity while the innovations say ``S`` moved (default).
+        False: a fixed random walk of ``q_S``.
+    q_S_max : float
+        Largest intensity the adaptation reaches, 1/s.
+    q_S_start : float
+        Intensity the adaptation starts from when the innovations first say
+        that ``S`` moved, 1/s (at least ``q_S``).
+    eiv : bool
+        Compensate the reported estimate and ``P`` for the noisy reading in
+        the regressor (default; class docstring). False: the filter's
+        estimate as it is, as in [3].
+    nis_tolerance : float
+        Relative error of the noise standard deviations that the adaptation
+        tolerates without raising the intensity (0.25: 25 %); a larger value
+        reacts to larger changes only.
+
+    Attributes
+    ----------
+    level : observers.kalman.NoiseLevel or None
+        The adjustable random-walk intensity (None with ``adapt_q=False``).
+    """
+
+    name = "ekf"
+
+    def __new__(cls, model=None, *args, **kwargs):
+        """On a model without linear channels (the spatial one) the filter is the error-state form."""
+        if cls is AugmentedEKF and model is not None and not as_model(model, cls.__name__).linear_channels:
+            from fmscal.observers.kalman._error_state import ErrorStateEKF      # it builds on this module
+            cls = ErrorStateEKF
+        return super().__new__(cls)
+
+    def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
+                 adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START,
+                 eiv=True):
+        super().__init__(model, offset=offset)
+        self.noise = None if noise is None else self.model.check_noise(noise)
+        self.adapt_q = as_bool(adapt_q, "adapt_q")
+        self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=True)
+        self.S0_sd, self.v0_sd = as_positive_scalar(S0_sd, "S0_sd"), as_positive_scalar(v0_sd, "v0_sd")
+        self.level = None
+        if self.adapt_q:
+            q_S_max = as_positive_scalar(q_S_max, "q_S_max")
+            q_S_start = max(as_positive_scalar(q_S_start, "q_S_start"), self.q_S)
+            if q_S_max < q_S_start:
+                raise FmscalError(f"q_S_max must be at least q_S and q_S_start ({q_S_start:g}); got {q_S_max:g}")
+            self.level = NoiseLevel(self.q_S, q_S_max, as_positive_scalar(nis_tolerance, "nis_tolerance",
+                                                                          allow_zero=True), q_start=q_S_start,
+                                    dof=self._innovation_size())
+        self.c0_sd = None if c0_sd is None else as_positive_scalar(c0_sd, "c0_sd")
+        self._build(as_bool(eiv, "eiv"))
+        self.reset()
+
+    def _innovation_size(self):
+        """Entries of a pose innovation (the NIS's degrees of freedom): the pose's."""
+        return self.model.n_pose
+
+    def _build(self, eiv):
+        """The model's part of the filter: its size, ``H``, the compiled step, the compensation."""
+        model = self.model
+        #: The filter's state size: the model's motion states and the entries of ``[S | c]``.
+        self.dim_x = model.nx + self.n_w * self.n_cols
+        self._H = np.zeros((model.n_pose, self.dim_x))
+        self._H[np.arange(model.n_pose), list(model.q_index)] = 1.0       # the pose is the configuration
+        self._jacobians, self._predict = (BufferedCall(f) for f in _compiled_model(model, self.offset))
+        self.eiv = EivCompensation(model, self.n_cols) if eiv else None
+
+    # --- the model, from the plant ------------------------------------------
+    def transition(self, xs, w0, w1, dt):
+        """The discrete step and its Jacobians (the compiled casadi call).
+
+        Returns
+        -------
+        x_next : ndarray, shape (d,)
+        F : ndarray, shape (d, d)
+        J0, J1 : ndarray, shape (d, n_w)
+            Jacobians with respect to the raw readings at the step's start
+            and end. ``d`` = :attr:`dim_x` (planar: 15, or 18 with the offset).
+        """
+        call, d, n_w = self._jacobians, self.dim_x, self.n_w
+        for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
+            buffer[:] = value
+        call()
+        f, F, J0, J1 = call.outputs                           # casadi stores column-major
+        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(n_w, d).T.copy(), J1.reshape(n_w, d).T.copy()
+
+    def predict_matrices(self, xs, w0, w1, dt, P_S=None):
+        """``x_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
+
+        Parameters
+        ----------
+        xs : ndarray, shape (d,)
+            The state at the step's start.
+        w0, w1 : ndarray, shape (n_w,)
+            The raw readings at the step's start and end.
+        dt : float
+            The step, s.
+        P_S : ndarray, shape (n_w n, n_w n), optional
+            Covariance of the calibration entries (``Delta`` of the tuning
+            rule); default the running filter's.
+
+        Returns
+        -------
+        x_next : ndarray, shape (d,)
+        F, Q : ndarray, shape (d, d)
+            Views of the call's buffers, overwritten by the next call.
+        """
+        f = self.run_data.state
+        d = self.dim_x
+        call = self._predict
+        xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
+        xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
+        var_in[:] = f.var_w
+        m, nx = self.n_w * self.n_cols, self.model.nx
+        P_in.reshape(m, m)[:] = f.kf.P[nx:, nx:] if P_S is None else np.reshape(P_S, (m, m))   # symmetric
+        q_in[0] = (self.level.q if self.level is not None else self.q_S) * dt
+        call()
+        f, F, Q = call.outputs
+        return f.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
+
+    def H(self, xs=None):
+        """Measurement Jacobian: the pose is the configuration (planar ``[theta, X, Y]``, states 0, 2, 4);
+        shape (n_pose, d)."""
+        return self._H
+
+    def hx(self, xs):
+        """The measured pose of a state column, shape (n_pose, 1) (:meth:`fmscal.plant.Model.measure`)."""
+        return np.asarray(self.model.measure(np.ravel(xs)[:self.model.nx])).reshape(-1, 1)
+
+    # --- Observer ---------------------------------------------------------------
+    def reset(self, S0=None):
+        """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
+        super().reset(S0)
+        if self.level is not None:
+            self.level.reset()
+
+    def _estimate(self, log, S0):
+        """The filter over the log, with the noise model told or estimated from the log."""
+        run = self.run_data
+        run.noise = self.noise
+        info = {}
+        if run.noise is None:
+            run.noise = estimate_noise(log)
+            info["noise"] = run.noise.to_dict()
+            info["noise_estimated"] = True
+        if run.compiled:
+            estimate, q = self._estimate_compiled(log)
+        else:
+            estimate = super()._estimate(log, S0)
+            q = np.array(run.state.q_history[:len(estimate.calibration)])
+        info["q_S_history"] = q
+        estimate.info = info
+        estimate.warnings = _random_walk_warnings(log.t[:len(q)], q)
+        return estimate
+
+    def _estimate_compiled(self, log):
+        """The whole log through :func:`observers.kalman.whole_step`; the filter left where it ended.
+
+        Returns
+        -------
+        Estimate
+        q_history : ndarray, shape (M,)
+        """
+        U = log_inputs(log)
+        self._start(U[0])
+        f = self.run_data.state
+        start = time.perf_counter()
+        chunks = self._whole_step()
+        self.run_data.build_time = time.perf_counter() - start              # one-off: not the run's cost
+        n_steps = len(U) - 1
+        params = self._params()
+        inputs = [U[:-1], U[1:], np.full((n_steps, 1), log.dt), np.broadcast_to(params, (n_steps, len(params))),
+                  *self._extra_inputs(n_steps)]
+        with progress_bar(len(U), self.name) as bar:
+            z, (Y,) = chunks.run(self._packed(), inputs, healthy=self._healthy_outputs, outputs=True, states=False,
+                                 progress=bar.update)
+        out = output_layout(self.model, self.n_cols)
+        x0, s0 = self._current()
+        calibration = np.vstack([s0, out.part(Y, "s")])
+        x = np.vstack([x0, out.part(Y, "x")])
+        q = np.concatenate([f.q_history[:1], out.part(Y, "q")[:, 0]])
+        self._unpacked(z, calibration[-1])
+        self.run_data.u_prev = U[len(calibration) - 1]
+        return Estimate(calibration, x, cov=self._covariance(), diverged=len(Y) < n_steps), q
+
+    def _extra_inputs(self, n_steps):
+        """Per-step inputs of the compiled step beyond the samples, the step and the parameters: none here."""
+        return []
+
+    def _whole_step(self):
+        """The whole step compiled in chunks (:func:`observers.kalman.whole_step`)."""
+        return whole_step(self.model, self.n_cols, self.eiv is not None)
+
+    def _level_settings(self):
+        """The random-walk level's settings for a compiled step, and whether it adapts (1 or 0)."""
+        level = self.level.settings if self.level is not None else (0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+        return level, float(self.level is not None)
+
+    def _params(self):
+        """The per-log parameters of the compiled step (:func:`observers.kalman._ekf_step.params_layout`), after
+        :meth:`_start`."""
+        f = self.run_data.state
+        level, adapt = self._level_settings()
+        size = self.model.n_pose + self.n_w
+        eiv_q = self.eiv.state[1][1:] if self.eiv is not None else np.ones(size)     # the settings but the step
+        return params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, eiv_q=eiv_q,
+                                              level=level, adapt=adapt)
+
+    def _packed(self):
+        """The running filter as the compiled step's state (:func:`observers.kalman.state_layout`)."""
+        f = self.run_data.state
+        kf, level = f.kf, self.level
+        parts = dict(x=kf.x[:, 0], P=pack_lower(kf.P, self.dim_x), q=f.q_history[-1],
+                     eps_bar=level.eps_bar if level is not None else 0.0, since=f.since_pose)
+        if self.eiv is not None:
+            parts["eiv"] = self.eiv.state[0]
+        return state_layout(self.model, self.n_cols, self.eiv is not None).pack(None, **parts)
+
+    def _unpacked(self, z, s_out):
+        """Set the running filter from the compiled step's state ``z``, its reported estimate ``s_out``."""
+        f = self.run_data.state
+        st = state_layout(self.model, self.n_cols, self.eiv is not None).unpack(z)
+        f.kf.x = st.x.reshape(-1, 1).copy()
+        f.kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
+        f.since_pose = float(st.since)
+        if self.level is not None:
+            self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
+        f.q_history = [float(st.q)]
+        if self.eiv is not None:
+            self.eiv.state[0][:] = st.eiv
+            self.eiv.set_last(st.x[self.model.nx:])
+        f.s_out = np.array(s_out, dtype=float)
+
+    def _healthy_outputs(self, Y, k0):
+        """Leading rows of the compiled step's outputs that :meth:`_healthy` would pass."""
+        out = output_layout(self.model, self.n_cols)
+        with np.errstate(invalid="ignore"):
+            return self._healthy_rows(Y, out.part(Y, "s"), k0, bad=~(out.part(Y, "P_min")[:, 0] > 0))
+
+    def _start(self, u):
+        model = self.model
+        u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
+        pose, w_hat = u.pose, u.w_hat
+        noise, S_var, var_w = self._prior(w_hat)
+        kf = _CalibrationEKF(self.dim_x, model.n_pose)
+        kf.x = np.concatenate([model.rest_state(pose), self._initial_S(self.run_data.S0)]).reshape(-1, 1)
+        pose_sd = model.pose_sd(noise)
+        pose_var = np.maximum(pose_sd, 1e-6) ** 2
+        motion_var = np.zeros(model.nx)
+        motion_var[list(model.q_index)] = pose_var                  # the first pose, to its noise
+        motion_var[list(model.v_index)] = self.v0_sd ** 2           # the velocities, to v0_sd
+        kf.P = np.diag(np.concatenate([motion_var, S_var]))
+        kf.R = np.diag(pose_var)
+        self.run_data.state = FilterRun(kf=kf, var_w=var_w, s_out=kf.x[model.nx:, 0].copy(), since_pose=0.0,
+                                        q_history=[self._q_now()])
+        if self.eiv is not None:
+            self.eiv.reset(pose, pose_sd, np.sqrt(var_w))
+
+    def _prior(self, w_hat):
+        """The noise model of the run, the prior variances of ``[S | c]`` (flat, row order) and the reading's
+        noise variances, at the first sample's reading ``w_hat``.
+
+        ``S0_sd^2`` on each entry of ``S``; ``c0_sd^2`` on the offset column,
+        by default ``S0_sd`` times the size of the first reading (at least 1).
+        """
+        noise = self.run_data.noise or self.noise or _nominal_noise(self.model)
+        S_var = np.full((self.n_w, self.n_cols), self.S0_sd ** 2)
+        if self.offset:
+            c0_sd = self.c0_sd if self.c0_sd is not None else self.S0_sd * max(float(np.linalg.norm(w_hat)), 1.0)
+            S_var[:, self.n_w] = c0_sd ** 2
+        return noise, S_var.ravel(), np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
+
+    def _q_now(self):
+        """The random walk's intensity now, 1/s."""
+        return self.level.q if self.level is not None else self.q_S
+
+    def _pose_update(self, z):
+        """filterpy's update with the pose measurement ``z`` (column), then the level at its NIS."""
+        f = self.run_data.state
+        kf = f.kf
+        kf.update(z, self.H, self.hx)
+        if self.level is not None:
+            y = kf.y[:, 0]
+            self.level.update(float(y @ kf.SI @ y), f.since_pose)      # NIS of this pose
+        f.since_pose = 0.0
+
+    def _advance(self, u_prev, u, dt):
+        """Predict over ``dt`` with the raw readings at both ends, update with the pose."""
+        f = self.run_data.state
+        kf, model = f.kf, self.model
+        layout = model.input_layout
+        has_pose, pose, w_hat = u[0], u[layout.slices["pose"]], u[layout.slices["w_hat"]]
+        w_prev = u_prev[layout.slices["w_hat"]]
+        q_prev = model.configuration(kf.x[:model.nx, 0])
+        kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], w_prev, w_hat, dt)
+        kf.predict()
+        f.since_pose += dt
+        if has_pose:
+            self._pose_update(np.reshape(pose, (-1, 1)))
+        f.q_history.append(self._q_now())
+        s = kf.x[model.nx:, 0]
+        if self.eiv is None:
+            f.s_out = s.copy()
+        else:      # the errors-in-variables compensation (observers.kalman._eiv), with the filter's configuration
+            q_now = model.configuration(kf.x[:model.nx, 0])
+            f.s_out = self.eiv.step(has_pose, (q_prev, q_now), pose, (w_prev, w_hat), dt, s)
+
+    def _current(self):
+        f = self.run_data.state
+        return f.kf.x[0:self.model.nx, 0], f.s_out
+
+    def _covariance(self):
+        f = self.run_data.state
+        P = f.kf.P[self.model.nx:, self.model.nx:]
+        if self.eiv is None:
+            return P.copy()
+        T = self.eiv.T
+        return T @ P @ T.T
+
+    def _healthy(self, x, calibration, k=None):
+        """The base class's test (finite, within the bound), and a finite, positive definite-looking ``P``."""
+        f = self.run_data.state
+        P = f.kf.P
+        # a NaN or inf anywhere makes the sum non-finite: one reduction
+        return super()._healthy(x, calibration, k) and math.isfinite(float(P.sum())) and bool(P.diagonal().min() > 0)
+
+
+@lru_cache(maxsize=8)
+def _compiled_model(model, offset):
+    """The model's Jacobians and ``x_next, F, Q`` (:func:`observers.kalman.model_step`), compiled."""
+    jacobians, predict, _ = model_step(model, offset)
+    return compile_function(jacobians), compile_function(predict)
+
+
+def _nominal_noise(model):
+    """The noise model of a live filter that was told none (``step`` without a log to estimate it from):
+    0.05 on each reading component, 0.1 degree and 0.1 mm on the pose."""
+    return NoiseSpec((0.05,) * model.n_w, np.deg2rad(0.1), 1e-4)
+
+
+def _random_walk_warnings(t, q_history):
+    """A warning if the EKF raised its random walk on S (its innovations said S moved)."""
+    raised = q_history > 1.01 * q_history.min()
+    if not raised.any():
+        return []
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    return [f"the EKF raised its random walk on S for {raised.sum() * dt:.1f} s (first at t = "
+            f"{t[np.argmax(raised)]:.1f} s): S may have changed during the log, or the noise model is "
+            f"more than {DEFAULT_TOLERANCE * 100:g} % off"]

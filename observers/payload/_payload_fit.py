@@ -1,0 +1,503 @@
+"""What practitioners estimate with ``S`` known: the payload's mass properties and the offset.
+
+With the calibration ``S`` known (the identity, or a calibration file such
+as the factory matrix), the corrected reading ``S w_hat`` of a spatial log
+is linear in the ten inertial parameters ``pi = (m, h = m rho, I_O)`` and in
+the offset ``c = S b`` (Newton-Euler at the sensor point, in sensor axes;
+``I_O`` the inertia about the sensor point)::
+
+    f     = m a_g + alpha x h + omega x (omega x h)
+    tau_O = I_O alpha + omega x (I_O omega) + h x a_g
+    S w_hat = [tau_O; f] + c
+
+with ``a_g = R^T (p_ddot - g)``. Static poses (``omega = alpha = 0``)
+determine ``m``, ``h`` and ``c`` when gravity covers enough directions in
+the sensor frame; the inertia needs angular acceleration. The motion comes
+from the poses by smoothing differentiation (:func:`fmscal.plant.
+differentiate.spatial_motion`); the fit is weighted least squares (the
+channel's noise estimated from a first pass), and its covariance is the
+cluster-robust sandwich over blocks of time, so that correlated residuals
+(drift, smoothing) do not make it claim too much: the blocks five times the
+residuals' correlation time, not shorter than the smoothing window, and the
+small-sample factor of few blocks (:mod:`fmscal.observers.batch._cluster_covariance`).
+Then ``rho = h / m`` and ``I_c = I_O + m [rho]x^2`` (the parallel-axis
+theorem), their uncertainties by the delta method.
+
+Like a pose table's fit, the log's reports what it covered and the held
+poses to record next (:mod:`fmscal.observers.payload._coverage`), and names the flag
+(``--gravity estimate`` or ``--mounting estimate``) whose rotation explains
+residuals far above the noise.
+"""
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.io._calibration import reading_sign
+from fmscal.plant.physics._differentiate import edge, spatial_motion
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.physics._rigid_body import (GRAVITY, INERTIA_NAMES, SpatialPayload, regressor,
+                                             rotation_matrix, skew)
+from fmscal.plant.physics._sensor import check_calibration
+
+from fmscal.observers.batch._cluster_covariance import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
+
+__all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED", "HOLD", "REFERENCES"]
+
+#: The six entries of an inertia tensor, as URDF and MuJoCo's ``fullinertia`` write them.
+#: A group (mass, centre of mass, inertia) counts as determined when its one-sigma uncertainty is below
+#: this fraction of its size: above it, the noise of the differentiated poses biases the fit by as much
+#: (errors in variables: on spatial-weak and spatial-static the inertia comes out low by several sigma).
+DETERMINED = 0.02
+
+
+@dataclass(kw_only=True)
+class _Rotations:
+    """Gravity's direction and the sensor's mounting where a fit estimated them (None otherwise).
+
+    Attributes
+    ----------
+    gravity : ndarray, shape (3,), or None
+        Gravity in the pose frame, m/s^2.
+    gravity_std_deg : float or None
+        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
+    mounting : ndarray, shape (3, 3), or None
+        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors).
+    mounting_deg, mounting_std_deg : float or None
+        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
+    mounting_axis : ndarray, shape (3,), or None
+        The mounting's unit axis (tracked-frame axes).
+    """
+
+    gravity: np.ndarray = None
+    gravity_std_deg: float = None
+    mounting: np.ndarray = None
+    mounting_deg: float = None
+    mounting_std_deg: float = None
+    mounting_axis: np.ndarray = None
+
+    def rotations_dict(self):
+        """The six fields as JSON-ready numbers and lists (None where not estimated)."""
+        return {"gravity": None if self.gravity is None else [float(v) for v in self.gravity],
+                "gravity_std_deg": self.gravity_std_deg,
+                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
+                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
+                "mounting_axis": None if self.mounting_axis is None else [float(v) for v in self.mounting_axis]}
+
+
+@dataclass
+class PayloadFit(_Rotations):
+    """The payload's mass properties and the sensor's offset, with one-sigma uncertainties.
+
+    Attributes
+    ----------
+    mass, mass_std : float
+        kg.
+    rho, rho_std : ndarray, shape (3,)
+        Centre of mass in the sensor frame, m.
+    inertia, inertia_std : ndarray, shape (6,), or None
+        Inertia about the centre of mass, sensor axes (:data:`INERTIA_NAMES`),
+        kg m^2; None where the log does not determine it.
+    b, b_std : ndarray, shape (6,)
+        The sensor's offset in ``w = S (w_hat - b)``, reading order, N m and N.
+    residual_rms : ndarray, shape (6,)
+        Of the fit, per channel of the corrected reading, N m and N.
+    warnings : list of str
+        What the log did not determine, in words a user acts on.
+    converged : bool
+        Every group (mass, centre of mass, inertia, offset) determined.
+    payload_determined : bool
+        The mass and the centre of mass each determined (within :data:`DETERMINED`).
+    block : float or None
+        Length of the blocks of time of the cluster-robust covariance, s
+        (:func:`fmscal.observers.batch.block_length`).
+    cone_deg : float or None
+        Half-angle of the cone of gravity directions the log holds in the sensor frame, degrees.
+    undetermined : list of str
+        The parameters the log determines poorly or not at all, in words.
+    next_poses : list of str
+        The held poses to record next, best first, as a table's (:mod:`fmscal.observers.payload._coverage`).
+    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
+        Gravity's direction and the sensor's mounting, where estimated
+        (:meth:`rotations_dict`): gravity in the pose frame (m/s^2), its
+        direction's uncertainty, the sensor's axes on the tracked frame
+        (3x3), its angle, uncertainty (degrees) and unit axis; None otherwise.
+    """
+
+    mass: float
+    mass_std: float
+    rho: np.ndarray
+    rho_std: np.ndarray
+    inertia: np.ndarray
+    inertia_std: np.ndarray
+    b: np.ndarray
+    b_std: np.ndarray
+    residual_rms: np.ndarray
+    warnings: list = field(default_factory=list)
+    converged: bool = False
+    payload_determined: bool = False
+    block: float = None
+    cone_deg: float = None
+    undetermined: list = field(default_factory=list)
+    next_poses: list = field(default_factory=list)
+
+    def to_dict(self):
+        """The fields as JSON-ready numbers and lists (None where undetermined)."""
+        def listed(v):
+            return None if v is None else [float(x) for x in np.ravel(v)]
+        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
+                "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
+                "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
+                "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
+                "converged": bool(self.converged), **self.rotations_dict(),
+                "cone_deg": None if self.cone_deg is None else float(self.cone_deg),
+                "undetermined": list(self.undetermined), "next_poses": list(self.next_poses)}
+
+
+def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, reading="reaction", estimate_gravity=False,
+                     estimate_mounting=False):
+    """Estimate the payload's mass, centre of mass, inertia and the sensor's offset, with ``S`` known.
+
+    Parameters
+    ----------
+    log : plant.Log
+        A spatial log.
+    S : array_like, shape (6, 6), optional
+        The calibration (default: the identity).
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+    window : float
+        Smoothing window of the pose differentiation, s.
+    block : float, optional
+        Length of the blocks of the robust covariance, s; default the rule of
+        :func:`block_length` (eq. (U2)) on the fit's residuals.
+    reading : {"reaction", "load"}
+        The reading's sign: the wrench the mount applies to the payload (the
+        toolkit's convention), or the wrench the tool applies to the sensor
+        (``load``: the reading is negated first).
+    estimate_gravity : bool
+        Estimate gravity's direction in the pose frame too (a tilted or
+        wall-mounted base); only the size of ``gravity`` is taken.
+    estimate_mounting : bool
+        Estimate the rotation ``M`` of the sensor's axes on the tracked frame
+        too (a sensor bolted at an angle): :func:`regressor` with ``mounting``.
+
+    Returns
+    -------
+    PayloadFit
+
+    Raises
+    ------
+    FmscalError
+        The log does not determine the mass, or its mass comes out negative
+        (the reading follows the other sign convention: the message names the flag).
+    """
+    sign = reading_sign(reading)
+    S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
+    gravity = as_finite_array(gravity, (3,), "gravity")
+    block = None if block is None else as_positive_scalar(block, "block")
+    q, omega, alpha, p_ddot = spatial_motion(log, window)
+    trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
+    W = regressor(q, omega, alpha, p_ddot, gravity)[trim]
+    y = (sign * log.w_hat @ S.T)[trim]
+    n = len(y)
+    times = (log.t[trim], window, block)
+    motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
+    if estimate_gravity or estimate_mounting:
+        fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
+                                               estimate_mounting)
+    else:
+        X = _design(W)
+        theta, _, residual = weighted_fit(X, y.ravel(), np.ones(6 * n))
+        sd = np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0))
+        blocks, length = time_blocks(residual.reshape(n, 6), *times)
+        theta, cov, residual = weighted_fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
+        if np.isfinite(cov[0, 0]) and theta[0] < 0:
+            from fmscal.observers.payload._static_fit import other_convention
+            raise FmscalError(other_convention(log.name, theta[0], reading))
+        fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
+        _blocks_used(fit, blocks, length)
+        Xw = X / np.tile(np.maximum(sd, 1e-12), n)[:, None]
+        information = _Information(Xw.T @ Xw, theta, np.zeros(0), residual / np.tile(np.maximum(sd, 1e-12), n),
+                                   1.0 / np.maximum(sd, 1e-12), (float(np.linalg.norm(gravity)),
+                                   gravity / np.linalg.norm(gravity), np.eye(3), False, False))
+    _coverage(fit, motion[0], log.t[trim], information)
+    if not (estimate_gravity and estimate_mounting):
+        _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting)
+    return fit
+
+
+def _blocks_used(fit, blocks, length):
+    """Record the blocks' length in ``fit``, and warn when they are too few (:func:`few_blocks`)."""
+    fit.block = float(length)
+    warning = few_blocks(blocks, length)
+    if warning is not None:
+        fit.warnings.append(warning)
+
+
+def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting):
+    """Warn, and clear ``converged``, when gravity's tilt or the mounting explains what ``fit`` leaves.
+
+    Cheap on the common path: the fit is repeated, once with gravity's
+    direction estimated and once with the mounting (each where ``fit`` did
+    not), only when the force residuals exceed :data:`fmscal.observers.
+    static_fit.TILT_RATIO` times the reading's noise, estimated from the
+    differences of consecutive samples (``rms(diff) / sqrt 2``; white noise
+    assumed, a log whose reading changes much between samples opens the
+    check less often); the warning is :func:`fmscal.observers.payload.rotation_check`'s.
+    """
+    from fmscal.observers.payload._static_fit import TILT_RATIO, Refit, rotation_check
+    force = y[:, 3:]
+    noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
+    fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
+    if not fixed > TILT_RATIO * noise:
+        return
+
+    def refit(gravity_free, mounting_free):
+        try:
+            free = _identify_rotations(name, motion, y, gravity, times, S, reading, gravity_free, mounting_free)[0]
+        except FmscalError:
+            return None
+        return Refit(float(np.sqrt(np.mean(np.square(free.residual_rms[3:])))), free.gravity, free.gravity_std_deg,
+                     free.mounting_deg, free.mounting_std_deg)
+
+    warning = rotation_check(fixed, gravity, refit, estimate_gravity, estimate_mounting)
+    if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
+        fit.warnings.insert(0, warning)
+        fit.converged = False
+
+
+class _Information(NamedTuple):
+    """What the coverage of a log's fit needs (:func:`_coverage`).
+
+    Attributes
+    ----------
+    information : ndarray, shape (p, p)
+        The weighted information over ``(pi (10), c (6), angles)``.
+    theta : ndarray, shape (16,)
+        ``pi`` and ``c``.
+    eta : ndarray
+        The angles of gravity's direction and of the mounting, where estimated (the parameters of
+        :class:`fmscal.observers.static_fit._Model`).
+    residual : ndarray
+        The weighted residuals.
+    weights : ndarray, shape (6,)
+        Each channel's weight.
+    frame : tuple
+        ``(g_size, d0, M0, estimate_gravity, estimate_mounting)``: the angles' origin.
+    """
+
+    information: np.ndarray
+    theta: np.ndarray
+    eta: np.ndarray
+    residual: np.ndarray
+    weights: np.ndarray
+    frame: tuple
+
+
+#: How long a suggested pose of a log is held, s: its samples count in the score of the next poses
+#: (eq. (N1) of :mod:`fmscal.observers.payload._coverage`).
+HOLD = 3.0
+#: How many attitudes, evenly spaced along a log, the suggested turns start from.
+REFERENCES = 10
+
+
+def _coverage(fit, q, t, info):
+    """A log's ``cone_deg``, ``undetermined`` and ``next_poses`` in ``fit``, as a table's (:mod:`fmscal.observers.
+    coverage`).
+
+    The cone is of gravity's directions in the sensor frame over the log's
+    samples. The information is taken to the physical parameters ``(m, rho,
+    I_c, c, angles)`` (``F' = T^-T F T^-1``, ``T`` their Jacobian in ``pi``);
+    the parameters the log determines worse than :data:`DETERMINED` (2 % of
+    the mass, of the centre of mass's distance or 1 mm, of the inertia's mean
+    diagonal; the offset only where not determined) are named in words. The
+    next poses are scored as a table's, eq. (N1), on the information with the
+    inertia eliminated (held poses do not inform it), each pose held
+    :data:`HOLD` s, from :data:`REFERENCES` attitudes along the log. The
+    covariance there is the model-based ``s^2 F^-1``; the reported
+    uncertainties are the cluster-robust ones.
+    """
+    from fmscal.observers.payload._coverage import cone_deg, in_words, next_poses, weak_directions
+    from fmscal.observers.payload._static_fit import _OFFSET_NAMES, _Model
+    g_size, d0, M0, estimate_gravity, estimate_mounting = info.frame
+    model = _Model(None, None, g_size, d0, M0, estimate_gravity, estimate_mounting)
+    theta = info.theta
+    R = np.moveaxis(rotation_matrix(q.T), -1, 0)
+    values = _physical(theta[:10])
+    _, _, _, d, M = model.parts(np.r_[values[:4], theta[10:16], info.eta])
+    fit.cone_deg = cone_deg(np.einsum("ji,nkj,k->ni", M, R, -d))
+    T = np.eye(len(info.information))
+    T[:10, :10] = _physical_jacobian(theta[:10])
+    T_inv = np.linalg.inv(T)
+    F = T_inv.T @ info.information @ T_inv
+    s2 = float(np.sum(info.residual ** 2) / max(info.residual.size - len(F), 1))
+    names = ("m", "rho_x", "rho_y", "rho_z", *(f"I_{n}" for n in INERTIA_NAMES), *(f"c_{n}" for n in _OFFSET_NAMES),
+             *model.names[10:])
+    scale = np.r_[DETERMINED * values[0], np.full(3, max(DETERMINED * np.linalg.norm(values[1:4]), 1e-3)),
+                  np.full(6, DETERMINED * max(np.mean(values[4:7]), 1e-9)), np.full(6, np.inf),
+                  np.full(len(info.eta), np.radians(0.2))]
+    fit.undetermined = in_words(names, weak_directions(F, s2, scale), "this log")
+    keep = np.r_[0:4, 10:len(F)]                          # the inertia eliminated: F_kk - F_ki F_ii^+ F_ik
+    F_t = F[np.ix_(keep, keep)] - F[np.ix_(keep, range(4, 10))] @ np.linalg.pinv(F[4:10, 4:10]) @ F[np.ix_(
+        range(4, 10), keep)]
+    refs = np.unique(np.linspace(0, len(t) - 1, REFERENCES).round().astype(int))
+    dt = float(np.median(np.diff(t)))
+    fit.next_poses = next_poses(model, np.r_[values[:4], theta[10:16], info.eta], F_t, info.weights, s2, R[refs],
+                                [f"the attitude at t = {t[k]:.1f} s" for k in refs], rows=HOLD / dt,
+                                held=f" and hold it {HOLD:g} s")
+
+
+def _design(W):
+    """The design matrix of ``[tau_O; f] + c = W pi + c``: ``[W | I]`` stacked, shape (6N, 16)."""
+    n = len(W)
+    return np.concatenate([W, np.broadcast_to(np.eye(6), (n, 6, 6))], axis=2).reshape(6 * n, 16)
+
+
+def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting):
+    """:func:`identify_payload` with gravity's direction and/or the mounting estimated too.
+
+    Variable projection: for given angles (gravity's two across its start
+    direction, the mounting's rotation vector about its start) the payload
+    and the offset are the weighted least squares of the linear model; the
+    angles minimise what is left (Levenberg-Marquardt). The covariance is the
+    cluster-robust sandwich over the full Jacobian (the linear parameters and
+    the angles together), so the angles' uncertainty enters the payload's.
+    """
+    from scipy.optimize import least_squares
+
+    from fmscal.observers.payload._static_fit import (_angle_deg, _axis, _exp, _start, _tangent_basis, gravity_up,
+                                                      other_convention)
+    q, omega, alpha, p_ddot = motion
+    g = np.asarray(gravity, dtype=float)
+    R = np.moveaxis(rotation_matrix(q.T), -1, 0)
+    _, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting, acc=p_ddot)
+    e1, e2 = _tangent_basis(d0)
+    k_g = 2 if estimate_gravity else 0
+
+    def parts(eta):
+        d = _exp(eta[0] * e1 + eta[1] * e2) @ d0 if estimate_gravity else d0
+        M = M0 @ _exp(eta[k_g:k_g + 3]) if estimate_mounting else M0
+        return g_size * d, M
+
+    def design(eta):
+        g_eta, M = parts(eta)
+        return _design(regressor(q, omega, alpha, p_ddot, g_eta, M if estimate_mounting else None))
+
+    def solve(eta, weights):
+        X = design(eta)
+        Xw = X * weights[:, None]
+        theta = pseudo_inverse(Xw)[0] @ (Xw.T @ (y.ravel() * weights))
+        return X, theta
+
+    def residual(eta, weights):
+        X, theta = solve(eta, weights)
+        return (y.ravel() - X @ theta) * weights
+
+    n = len(y)
+    eta = np.zeros(k_g + (3 if estimate_mounting else 0))
+    weights = np.ones(6 * n)
+    for _ in range(2):                      # plain, then each channel weighted by its residual spread
+        eta = least_squares(residual, eta, args=(weights,), method="lm", xtol=1e-12, ftol=1e-12).x
+        sd = np.sqrt(np.mean((residual(eta, weights) / weights).reshape(n, 6) ** 2, axis=0))
+        weights = np.tile(1.0 / np.maximum(sd, 1e-12), n)
+    X, theta = solve(eta, weights)
+    e = (y.ravel() - X @ theta) * weights
+    blocks, length = time_blocks(e.reshape(n, 6), *times)
+    # the full Jacobian: the linear parameters' columns, and the angles' by central differences
+    columns = []
+    for i in range(len(eta)):
+        step = np.zeros(len(eta))
+        step[i] = 1e-6
+        columns.append((design(eta + step) @ theta - design(eta - step) @ theta) / 2e-6)
+    J = np.column_stack([X, *columns]) * weights[:, None]
+    inverse, determined = pseudo_inverse(J)
+    cov = sandwich(J, e, blocks, inverse, determined)
+    g_hat, M = parts(eta)
+    std = np.sqrt(np.maximum(np.diag(cov)[16:], 0))
+    # gravity up, where its direction is determined: the reading's sign is the other one, or the base upside down
+    if estimate_gravity and g_hat[2] > 0 > g[2] and np.all(np.isfinite(std[:2])) and np.all(std[:2] < 0.5):
+        raise FmscalError(gravity_up(name, g_hat[2] / np.linalg.norm(g_hat), reading))
+    if np.isfinite(cov[0, 0]) and theta[0] < 0:
+        raise FmscalError(other_convention(name, theta[0], reading))
+    fit = _report(theta, cov[:16, :16], S, np.sqrt(np.mean((e / weights).reshape(n, 6) ** 2, axis=0)))
+    _blocks_used(fit, blocks, length)
+    if estimate_gravity:
+        fit.gravity = g_hat
+        fit.gravity_std_deg = float(np.degrees(np.sqrt((std[0] ** 2 + std[1] ** 2) / 2)))
+    if estimate_mounting:
+        fit.mounting = M
+        fit.mounting_deg = _angle_deg(M)
+        fit.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k_g:k_g + 3] ** 2) / 3)))
+        fit.mounting_axis = _axis(M)
+    frame = (g_size, d0, M0, estimate_gravity, estimate_mounting)
+    return fit, _Information(J.T @ J, theta, eta, e, weights[:6], frame)
+
+
+def _physical(theta):
+    """``(m, rho, I_c entries)`` from ``pi = (m, h, I_O)``: ``rho = h / m``, ``I_c = I_O + m [rho]x^2``."""
+    m, h, io = theta[0], theta[1:4], theta[4:10]
+    rho = h / m
+    I_O = np.array([[io[0], io[3], io[4]], [io[3], io[1], io[5]], [io[4], io[5], io[2]]])
+    r = skew(rho)
+    I_c = I_O + m * r @ r
+    return np.r_[m, rho, I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]]
+
+
+def _physical_jacobian(pi):
+    """``d (m, rho, I_c) / d pi`` by central differences, shape (10, 10)."""
+    J = np.zeros((10, 10))
+    step = 1e-7 * np.maximum(np.abs(pi), 1e-6)
+    for i in range(10):
+        d = np.zeros(10)
+        d[i] = step[i]
+        J[:, i] = (_physical(pi + d) - _physical(pi - d)) / (2 * step[i])
+    return J
+
+
+def _possible(values):
+    """True when ``(m, rho, I_c)`` is a body that can exist (positive definite, triangle inequality)."""
+    try:
+        SpatialPayload(values[0], values[1:4], values[4:10])
+    except FmscalError:
+        return False
+    return True
+
+
+def _report(theta, cov, S, residual_rms):
+    if not np.isfinite(cov[0, 0]) or theta[0] <= 0:
+        raise FmscalError("the log does not determine the payload's mass: it holds no force that gravity or "
+                          "motion explains (is the reading in N and the pose in m and unit quaternions?)")
+    values = _physical(theta[:10])
+    finite = np.isfinite(np.diag(cov)[:10])
+    J = _physical_jacobian(theta[:10])
+    sub = np.where(np.outer(finite, finite), cov[:10, :10], 0.0)
+    std = np.sqrt(np.maximum(np.diag(J @ sub @ J.T), 0))
+    std[np.abs(J[:, ~finite]).max(axis=1) > 0 if (~finite).any() else np.zeros(10, dtype=bool)] = np.inf
+    S_inv = np.linalg.inv(S)
+    cov_c = cov[10:, 10:]
+    b = S_inv @ theta[10:]
+    b_std = np.sqrt(np.maximum(np.diag(S_inv @ np.where(np.isfinite(cov_c), cov_c, 0) @ S_inv.T), 0))
+    b_std[~np.isfinite(np.diag(cov_c))] = np.inf
+    warnings = []
+    mass_ok = std[0] < DETERMINED * values[0]
+    rho_ok = np.all(std[1:4] < np.maximum(DETERMINED * np.linalg.norm(values[1:4]), 1e-3))
+    inertia_scale = max(np.mean(values[4:7]), 1e-9)
+    inertia_ok = bool(np.all(std[4:] < DETERMINED * inertia_scale)) and _possible(values)
+    offset_ok = bool(np.all(np.isfinite(b_std)))
+    if not mass_ok or not rho_ok:
+        warnings.append("the mass and centre of mass are not determined: hold the payload at attitudes that turn "
+                        "gravity through several directions in the sensor frame")
+    if not inertia_ok:
+        warnings.append("the inertia is not determined: the log holds too little angular acceleration "
+                        "(rotate faster, or about more axes)")
+    if not offset_ok:
+        warnings.append("the offset is not separated from the weight: turn gravity through more directions "
+                        "in the sensor frame")
+    return PayloadFit(mass=values[0], mass_std=std[0], rho=values[1:4], rho_std=std[1:4],
+                      inertia=values[4:] if inertia_ok else None, inertia_std=std[4:] if inertia_ok else None,
+                      b=b, b_std=b_std, residual_rms=residual_rms, warnings=warnings,
+                      converged=bool(mass_ok and rho_ok and inertia_ok and offset_ok),
+                      payload_determined=bool(mass_ok and rho_ok))

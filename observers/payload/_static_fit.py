@@ -1,0 +1,741 @@
+"""The static fit of a pose table: mass, centre of mass and offset, with gravity and mounting if asked.
+
+A held pose does not accelerate, so the corrected reading is the weight's
+wrench at the sensor (SPATIAL facts, Newton-Euler at rest) plus the offset::
+
+    y_k = sigma S w_hat_k = [rho x f_k; f_k] + c,       f_k = m M^T R_k^T (-g)
+
+with ``R_k`` the tracked frame's attitude at pose ``k``, ``M`` the sensor's
+axes on it (the mounting; the identity unless estimated), ``g`` gravity in the
+pose frame, ``c = S b`` the offset and ``sigma = +1`` for a sensor that
+reports the wrench the mount applies to the payload (the toolkit's
+convention, ``reaction``) or ``-1`` for one that reports the wrench the tool
+applies to the sensor (``load``: ATI, Robotiq, Bota, OnRobot).
+
+The unknowns are ``m``, ``rho`` (3), ``c`` (6), and where asked the direction
+of gravity (two angles; its size is the standard 9.81 m/s^2 unless told) and
+the mounting ``M`` (a rotation, three angles). The fit is nonlinear least
+squares (Levenberg-Marquardt, :func:`scipy.optimize.least_squares`), started
+from linear fits of the forces and then the torques, each channel weighted by
+its residual spread; the rows are independent (each an average over a held
+pose), so the covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the weighted
+residual variance over its degrees of freedom.
+
+What the table covers: the gravity directions it holds in the sensor frame
+(the half-angle of the cone around their mean), the parameters it leaves
+undetermined (the information's weak directions, in words), and the next
+poses that would most reduce the largest relative uncertainty: candidate
+turns of 45, 90 and 180 degrees about the sensor's axes from the table's
+poses, each scored by the covariance the fit would have with it added
+(:mod:`fmscal.observers.payload._coverage`, the machinery a log's fit shares).
+
+Gravity along ``-z`` and the sensor square on the tracked frame are checked:
+the fit is repeated with gravity's direction estimated and with the mounting,
+and where one of them explains the residuals the fit says which flag to add
+(:func:`rotation_warning`).
+"""
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fmscal.plant.numerics._checks import as_finite_array
+from fmscal.plant.io._calibration import reading_sign
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.io._pose_table import PoseTable
+from fmscal.plant.physics._rigid_body import GRAVITY, rotation_matrix, skew
+from fmscal.plant.physics._sensor import check_calibration
+
+from fmscal.observers.payload._coverage import (_OFFSET_NAMES, DETERMINED_REL, DETERMINED_RHO, covariance, in_words,
+                                                next_poses)
+from fmscal.observers.payload._coverage import cone_deg as _cone
+from fmscal.observers.payload._coverage import rotation as _exp
+from fmscal.observers.batch._inverse_dynamics import InverseDynamicsFit
+from fmscal.observers.payload._payload_fit import _Rotations
+
+__all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
+           "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
+           "TILT_SIGMAS", "MIN_CONE_DEG"]
+
+#: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
+#: the force residuals' rms by more than this factor ...
+TILT_RATIO = 3.0
+#: ... and the tilt it finds is more than this many of its standard deviations.
+TILT_SIGMAS = 5.0
+#: Poses whose gravity directions in the sensor frame all lie within a cone of this half-angle (degrees)
+#: do not separate the weight from the offset: refused.
+MIN_CONE_DEG = 1.0
+
+
+@dataclass
+class StaticFit(_Rotations):
+    """The static fit of a pose table (module docstring), one-sigma uncertainties beside each value.
+
+    Attributes
+    ----------
+    mass, mass_std : float
+        kg.
+    rho, rho_std : ndarray, shape (3,)
+        Centre of mass in the sensor frame, m.
+    b, b_std : ndarray, shape (6,)
+        The sensor's offset in ``w = S (sigma w_hat - b)``, reading order, N m and N.
+    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
+        Where asked, as a log's fit gives them (:class:`fmscal.observers.payload.PayloadFit`).
+    reading : str
+        The reading's sign convention the fit used (:data:`fmscal.plant.io._calibration.READINGS`).
+    cone_deg : float
+        Half-angle of the cone of gravity directions the table holds in the sensor frame, degrees.
+    undetermined : list of str
+        The parameters the table leaves undetermined, in words.
+    next_poses : list of str
+        The poses to record next, best first.
+    residual_rms : ndarray, shape (6,)
+        Of the fit, per channel, N m and N.
+    warnings : list of str
+    converged : bool
+        Mass, centre of mass, offset (and gravity, mounting where asked) all determined.
+    payload_determined : bool
+        The mass and the centre of mass each determined (within ``DETERMINED_REL`` and ``DETERMINED_RHO`` of
+        :mod:`fmscal.observers.payload._coverage`).
+    cov : ndarray
+        Covariance of the fitted parameters (:attr:`names` order).
+    names : tuple of str
+        The fitted parameters.
+    """
+
+    mass: float
+    mass_std: float
+    rho: np.ndarray
+    rho_std: np.ndarray
+    b: np.ndarray
+    b_std: np.ndarray
+    reading: str = "reaction"
+    cone_deg: float = 0.0
+    undetermined: list = field(default_factory=list)
+    next_poses: list = field(default_factory=list)
+    residual_rms: np.ndarray = None
+    warnings: list = field(default_factory=list)
+    converged: bool = False
+    payload_determined: bool = False
+    cov: np.ndarray = None
+    names: tuple = ()
+
+    def to_dict(self):
+        """The fields as JSON-ready numbers and lists (None where not estimated); the keys of ``identify-payload``."""
+        def listed(v):
+            return None if v is None else [float(x) for x in np.ravel(v)]
+        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
+                "rho_std": listed(self.rho_std), "inertia": None, "inertia_std": None, "b": listed(self.b),
+                "b_std": listed(self.b_std), **self.rotations_dict(), "reading": self.reading,
+                "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
+                "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
+                "warnings": list(self.warnings), "converged": bool(self.converged)}
+
+
+def _angle_deg(R):
+    """The angle of a rotation matrix, degrees."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+def _axis(M):
+    """The unit axis of the rotation ``M`` (any unit vector for no rotation)."""
+    v = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
+    if np.linalg.norm(v) < 1e-12:
+        _, u = np.linalg.eigh(M + M.T)
+        return u[:, -1]
+    return v / np.linalg.norm(v)
+
+
+def _tangent_basis(d):
+    """Two unit vectors orthogonal to the unit vector ``d`` and to each other."""
+    a = np.eye(3)[int(np.argmin(np.abs(d)))]
+    e1 = np.cross(d, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(d, e1)
+
+
+class _Model:
+    """The residuals of the static fit for one table, its parameter layout and its start."""
+
+    def __init__(self, R, y, g_size, d0, M0, estimate_gravity, estimate_mounting):
+        self.R, self.y, self.g_size = R, y, g_size
+        self.d0, self.M0 = d0, M0
+        self.e1, self.e2 = _tangent_basis(d0)
+        self.estimate_gravity, self.estimate_mounting = estimate_gravity, estimate_mounting
+        self.names = ("m", "rho_x", "rho_y", "rho_z", *(f"c_{n}" for n in _OFFSET_NAMES),
+                      *(("gravity_1", "gravity_2") if estimate_gravity else ()),
+                      *(("mount_x", "mount_y", "mount_z") if estimate_mounting else ()))
+
+    def parts(self, theta):
+        """``m, rho, c, gravity direction, M`` from the parameter vector."""
+        m, rho, c = theta[0], theta[1:4], theta[4:10]
+        k = 10
+        d = self.d0
+        if self.estimate_gravity:
+            d = _exp(theta[k] * self.e1 + theta[k + 1] * self.e2) @ self.d0
+            k += 2
+        M = self.M0 @ _exp(theta[k:k + 3]) if self.estimate_mounting else self.M0
+        return m, rho, c, d, M
+
+    def predict(self, theta, R=None):
+        """The corrected reading each pose would show, shape (N, 6)."""
+        m, rho, c, d, M = self.parts(theta)
+        R = self.R if R is None else R
+        a = np.einsum("ji,nkj,k->ni", M, R, -self.g_size * d)              # M^T R^T (-g), sensor axes
+        f = m * a
+        return np.hstack([np.cross(rho, f), f]) + c
+
+    def jacobian(self, theta, R=None, step=1e-7):
+        """d predict / d theta by central differences, shape (6N, p)."""
+        cols = []
+        for i in range(len(theta)):
+            h = step * max(abs(theta[i]), 1.0)
+            up, down = theta.copy(), theta.copy()
+            up[i] += h
+            down[i] -= h
+            cols.append(((self.predict(up, R) - self.predict(down, R)) / (2 * h)).ravel())
+        return np.column_stack(cols)
+
+
+def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
+    """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques.
+
+    ``acc`` (N, 3), the tracked point's acceleration in the pose frame, m/s^2,
+    for samples of a log (default: held, none); its share of the force,
+    ``m M^T R^T acc``, joins the linear fits, and the rotation's share is left
+    to the nonlinear fit that follows.
+    """
+    n = len(R)
+    a0 = np.einsum("nkj,k->nj", R, -g)                                      # R^T (-g), tracked-frame axes
+    if acc is not None:
+        a0 = a0 + np.einsum("nkj,nk->nj", R, acc)
+    f = y[:, 3:]
+    M0, d0, g_size = np.eye(3), g / np.linalg.norm(g), float(np.linalg.norm(g))
+    if estimate_mounting:           # f = B a0 + c_f with B = m M^T: B by least squares, M^T by its polar part
+        X = np.hstack([a0, np.ones((n, 1))])
+        coef = np.linalg.lstsq(X, f, rcond=None)[0]                        # (4, 3): rows B^T, c_f
+        U, s, Vt = np.linalg.svd(coef[:3].T)
+        Mt = U @ Vt
+        if np.linalg.det(Mt) < 0:                                           # a reflection: the load convention
+            Mt = -Mt
+        M0 = Mt.T
+        m = float(np.sum(s) / 3 * np.sign(np.trace(Mt.T @ coef[:3].T)))
+    if estimate_gravity:            # f = M0^T R^T (m acc - u) + c_f with u = m g: linear in u and c_f (and m)
+        X = np.concatenate([-np.einsum("ji,nkj->nik", M0, R), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
+        if acc is not None:
+            X = np.concatenate([X, np.einsum("ji,nkj,nk->ni", M0, R, acc)[:, :, None]], axis=2)
+        sol = np.linalg.lstsq(X.reshape(3 * n, X.shape[2]), f.ravel(), rcond=None)[0]
+        u = sol[:3]
+        m = float(np.linalg.norm(u) / g_size)
+        d0 = u / max(np.linalg.norm(u), 1e-300)
+    if not (estimate_gravity or estimate_mounting):     # f = m a + c_f
+        a = np.einsum("ji,nj->ni", M0, a0)
+        X = np.concatenate([a[:, :, None], np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
+        m = float(np.linalg.lstsq(X.reshape(3 * n, 4), f.ravel(), rcond=None)[0][0])
+    a = np.einsum("ji,nkj,k->ni", M0, R, -g_size * d0)
+    force = m * a
+    c_f = np.mean(f - force, axis=0)
+    # the torques: tau = rho x f + c_tau = -[f]x rho + c_tau, linear in rho and c_tau
+    X = np.concatenate([-skew(force), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
+    sol = np.linalg.lstsq(X, y[:, :3].ravel(), rcond=None)[0]
+    return np.r_[m, sol[:3], sol[3:], c_f], d0, M0, g_size
+
+
+def _weighted(model, theta0, weights):
+    """Levenberg-Marquardt from ``theta0`` on the weighted residuals; returns the solution."""
+    fun = lambda th: ((model.predict(th) - model.y) * weights).ravel()     # noqa: E731
+    return least_squares(fun, theta0, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000).x
+
+
+def _extra(theta, model):
+    """Zeros for the gravity and mounting angles: they start at the linear fit's values."""
+    return np.r_[theta, np.zeros(2 if model.estimate_gravity else 0), np.zeros(3 if model.estimate_mounting else 0)]
+
+
+def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction"):
+    """Mass, centre of mass and offset from a pose table (and gravity's direction, the mounting, if asked).
+
+    Parameters
+    ----------
+    table : plant.PoseTable
+    S : array_like, shape (6, 6), optional
+        The calibration (default: the identity).
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2; with ``estimate_gravity`` only its
+        size is taken (and its direction is where the fit starts from).
+    estimate_gravity : bool
+        Estimate gravity's direction in the pose frame (a tilted or
+        wall-mounted base).
+    estimate_mounting : bool
+        Estimate the rotation of the sensor's axes on the tracked frame.
+    reading : {"reaction", "load"}
+        The reading's sign (module docstring).
+
+    Returns
+    -------
+    StaticFit
+
+    Raises
+    ------
+    FmscalError
+        A reading convention that is neither, or a table whose data say the
+        other convention (a negative mass, or gravity pointing up with
+        ``estimate_gravity``).
+    """
+    if not isinstance(table, PoseTable):
+        raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
+    sign = reading_sign(reading)
+    S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
+    g = as_finite_array(gravity, (3,), "gravity")
+    if not np.linalg.norm(g) > 0:
+        raise FmscalError("gravity must not be zero")
+    y = sign * table.w_hat @ S.T
+    R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
+    # gravity's directions in the sensor frame (a mounting turns them all alike); with gravity estimated,
+    # those of the first pose's gravity: poses that all hold one attitude
+    _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
+                     "the mass and the offset")
+    model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting)
+    m, rho, c, d, M = model.parts(theta)
+    if m <= 0:
+        raise FmscalError(other_convention(table.name, m, reading))
+    if estimate_gravity and d[2] > 0 and g[2] < 0:
+        raise FmscalError(gravity_up(table.name, d[2], reading))
+    s2, information = _weighted_information(model, theta, weights, y)
+    cov, weak = covariance(information, s2)
+    std = np.sqrt(np.maximum(np.diag(cov), 0))
+    S_inv = np.linalg.inv(S)
+    b = S_inv @ c
+    b_std = np.sqrt(np.maximum(np.diag(S_inv @ np.where(np.isfinite(cov[4:10, 4:10]), cov[4:10, 4:10], 0)
+                                       @ S_inv.T), 0))
+    b_std[~np.isfinite(np.diag(cov)[4:10])] = np.inf
+    out = StaticFit(mass=float(m), mass_std=float(std[0]), rho=rho, rho_std=std[1:4], b=b, b_std=b_std,
+                    reading=reading, residual_rms=sd, cov=cov, names=model.names)
+    k = 10
+    if estimate_gravity:
+        out.gravity = g_size * d
+        out.gravity_std_deg = float(np.degrees(np.sqrt(max(std[k] ** 2 + std[k + 1] ** 2, 0.0) / 2)))
+        k += 2
+    if estimate_mounting:
+        out.mounting = M
+        out.mounting_deg = _angle_deg(M)
+        out.mounting_axis = _axis(M)
+        out.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3)))
+    a = np.einsum("ji,nkj,k->ni", M, R, -d)
+    out.cone_deg = _cone(a)
+    out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
+    determined = _determined(out, std)
+    out.payload_determined = determined
+    out.converged = not out.undetermined and determined
+    out.warnings = list(out.undetermined)
+    both = estimate_gravity and estimate_mounting
+    rotated = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
+                                                                    model.predict(theta) - y)
+    if rotated is not None:                 # the model is wrong: more poses would not help
+        out.warnings.append(rotated)
+        out.converged = False
+    elif not out.undetermined and not determined:
+        out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
+                            f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
+    out.next_poses = next_poses(model, theta, information, weights, s2, R, [f"pose {k + 1}" for k in range(len(R))])
+    return out
+
+
+def _two_passes(R, y, g, estimate_gravity, estimate_mounting):
+    """The fit's start and its two passes, the second weighted by each channel's residual rms in the first.
+
+    Returns
+    -------
+    model : _Model
+    theta : ndarray
+        The parameters after the weighted pass.
+    weights : ndarray, shape (6,)
+        Each reading channel's weight, 1 / its first-pass residual rms.
+    sd : ndarray, shape (6,)
+        The first pass's residual rms per channel (N m, N).
+    g_size : float
+        Gravity's magnitude, m/s^2.
+    """
+    theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
+    model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
+    theta = _weighted(model, _extra(theta0, model), np.ones(6))
+    sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
+    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
+    return model, _weighted(model, theta, weights), weights, sd, g_size
+
+
+def _weighted_information(model, theta, weights, y):
+    """The weighted residuals' variance per degree of freedom and the information ``J^T J`` of the weighted fit.
+
+    Returns
+    -------
+    s2 : float
+    information : ndarray, shape (p, p)
+    """
+    residual = (model.predict(theta) - y) * weights
+    s2 = float(np.sum(residual ** 2) / max(residual.size - len(theta), 1))
+    J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
+    return s2, J.T @ J
+
+
+def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
+    """The warning of :func:`rotation_check` when the table needs gravity's direction or the mounting
+    estimated, else None.
+
+    The fit is repeated with the rotations free (the start and the two
+    weighted passes of :func:`fit_static`, without its report), and its force
+    residuals compared with ``residual``, those of the fit as asked.
+    """
+    def refit(gravity_free, mounting_free):
+        model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free)
+        s2, information = _weighted_information(model, theta, weights, y)
+        cov, weak = covariance(information, s2)
+        if weak:
+            return None
+        std = np.sqrt(np.maximum(np.diag(cov), 0))
+        parts = model.parts(theta)
+        k = 12 if gravity_free else 10                      # the mounting's angles follow gravity's two
+        return Refit(_force_rms(model.predict(theta) - y),
+                     parts[3] if gravity_free else None,
+                     float(np.degrees(np.sqrt((std[10] ** 2 + std[11] ** 2) / 2))) if gravity_free else None,
+                     _angle_deg(parts[4]) if mounting_free else None,
+                     float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3))) if mounting_free else None)
+
+    return rotation_check(_force_rms(residual), g, refit, estimate_gravity, estimate_mounting)
+
+
+class Refit(NamedTuple):
+    """A fit repeated with gravity's direction or the mounting free, as :func:`rotation_check` compares it.
+
+    Attributes
+    ----------
+    force_rms : float
+        Its force residuals' rms, N.
+    gravity : ndarray, shape (3,), or None
+        Gravity's estimated direction (pose frame), where free.
+    gravity_std_deg : float or None
+        Its one-sigma uncertainty, degrees.
+    mounting_deg, mounting_std_deg : float or None
+        The mounting's angle and its one-sigma uncertainty, degrees, where free.
+    """
+
+    force_rms: float
+    gravity: np.ndarray
+    gravity_std_deg: float
+    mounting_deg: float
+    mounting_std_deg: float
+
+
+def rotation_check(fixed_rms, gravity, refit, estimate_gravity, estimate_mounting):
+    """The one line for data that a rotation the fit did not estimate explains, else None; tables and logs alike.
+
+    Fits again with gravity's direction free, and with the mounting free (each
+    where the fit did not estimate it), and names the one that explains the
+    data (:func:`rotation_warning`); where neither alone does and the fit
+    estimated neither, with both free (:func:`both_rotations_warning`).
+
+    Parameters
+    ----------
+    fixed_rms : float
+        The force residuals' rms of the fit as asked, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    refit : callable
+        ``refit(gravity_free, mounting_free)``: the fit repeated so, a :class:`Refit`, or None where it does
+        not determine its parameters.
+    estimate_gravity, estimate_mounting : bool
+        What the fit as asked estimated.
+
+    Returns
+    -------
+    str or None
+    """
+    tilted = mounted = None
+    if not estimate_gravity and (free := refit(True, estimate_mounting)) is not None:
+        tilted = (free.force_rms, free.gravity, free.gravity_std_deg)
+    if not estimate_mounting and (free := refit(estimate_gravity, True)) is not None:
+        mounted = (free.force_rms, free.mounting_deg, free.mounting_std_deg)
+    warning = rotation_warning(fixed_rms, gravity, tilted, mounted)
+    if warning is None and not (estimate_gravity or estimate_mounting) and (free := refit(True, True)) is not None:
+        warning = both_rotations_warning(fixed_rms, free.force_rms, gravity, free.gravity, free.gravity_std_deg,
+                                         free.mounting_deg, free.mounting_std_deg)
+    return warning
+
+
+def _force_rms(residual):
+    """The rms of the force channels of residuals shaped (N, 6), N."""
+    return float(np.sqrt(np.mean(np.square(residual[:, 3:]))))
+
+
+def tilt_warning(fixed_rms, free_rms, gravity, direction, std_deg):
+    """The warning for data that gravity along the direction given does not explain, and a tilted one does.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms with gravity's direction fixed and estimated, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    direction : array_like, shape (3,)
+        Gravity's direction as estimated, pose frame.
+    std_deg : float
+        One-sigma uncertainty of the estimated direction about each axis across it, degrees.
+
+    Returns
+    -------
+    str or None
+        None unless the residuals fall by more than :data:`TILT_RATIO` and
+        the tilt is more than :data:`TILT_SIGMAS` standard deviations.
+    """
+    tilt, along = _tilt(gravity, direction)
+    if not _explains(fixed_rms, free_rms, tilt, std_deg):
+        return None
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with gravity along "
+            f"{along}; the data are explained with gravity tilted {tilt:.2g} degrees from it (+- {std_deg:.1g}): add "
+            "--gravity estimate (a tilted or wall-mounted base)")
+
+
+def mounting_warning(fixed_rms, free_rms, angle_deg, std_deg):
+    """The warning for data that the sensor square on the tracked frame does not explain, and a mounting rotation does.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms with the mounting fixed (the identity) and estimated, N.
+    angle_deg, std_deg : float
+        The estimated mounting's angle, and the one-sigma uncertainty of its rotation about each axis, degrees.
+
+    Returns
+    -------
+    str or None
+        None unless the residuals fall by more than :data:`TILT_RATIO` and
+        the angle is more than :data:`TILT_SIGMAS` standard deviations.
+    """
+    if not _explains(fixed_rms, free_rms, angle_deg, std_deg):
+        return None
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with the sensor square "
+            f"on the tracked frame; the data are explained with the sensor turned {angle_deg:.2g} degrees on it (+- "
+            f"{std_deg:.1g}): add --mounting estimate (a sensor bolted askew)")
+
+
+def both_rotations_warning(fixed_rms, free_rms, gravity, direction, gravity_std_deg, angle_deg, mounting_std_deg):
+    """The warning for data that neither gravity's tilt nor the mounting explains alone, and both together do.
+
+    A tilted base and a sensor bolted askew at once: each rotation alone
+    leaves the other's residuals, so neither single check fires
+    (:func:`rotation_warning`). The fit with both estimated explains the
+    data when its force residuals fall by more than :data:`TILT_RATIO` and
+    both angles are beyond :data:`TILT_SIGMAS` standard deviations.
+
+    Parameters
+    ----------
+    fixed_rms, free_rms : float
+        The force residuals' rms of the fit as asked and with both rotations estimated, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    direction : array_like, shape (3,)
+        Gravity's direction as estimated, pose frame.
+    gravity_std_deg, angle_deg, mounting_std_deg : float
+        The direction's one-sigma uncertainty, the mounting's angle and its one-sigma uncertainty, degrees.
+
+    Returns
+    -------
+    str or None
+    """
+    tilt, along = _tilt(gravity, direction)
+    if not (_explains(fixed_rms, free_rms, tilt, gravity_std_deg)
+            and _explains(fixed_rms, free_rms, angle_deg, mounting_std_deg)):
+        return None
+    return (f"the force residuals are {fixed_rms / max(free_rms, 1e-300):.0f} times the noise with gravity along "
+            f"{along} and the sensor square on the tracked frame; the data are explained with gravity tilted "
+            f"{tilt:.2g} degrees (+- {gravity_std_deg:.1g}) and the sensor turned {angle_deg:.2g} degrees (+- "
+            f"{mounting_std_deg:.1g}): add --gravity estimate --mounting estimate")
+
+
+def _tilt(gravity, direction):
+    """The angle between the gravity given and the direction estimated, degrees, and the given one in words."""
+    given = np.asarray(gravity, dtype=float) / np.linalg.norm(gravity)
+    direction = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    along = "-z" if np.allclose(given, [0.0, 0.0, -1.0]) else "the direction given"
+    return float(np.degrees(np.arccos(np.clip(given @ direction, -1.0, 1.0)))), along
+
+
+def _explains(fixed_rms, free_rms, angle_deg, std_deg):
+    """The residuals fall by more than :data:`TILT_RATIO`, at an angle beyond :data:`TILT_SIGMAS` sigmas."""
+    return bool(fixed_rms > TILT_RATIO * max(free_rms, 1e-300) and np.isfinite(std_deg)
+                and angle_deg > TILT_SIGMAS * std_deg)
+
+
+def rotation_warning(fixed_rms, gravity, tilted=None, mounted=None):
+    """The one line for data the fit's rotations do not explain: which of gravity's tilt and the mounting does.
+
+    Each explains when estimating it lowers the force residuals' rms more
+    than :data:`TILT_RATIO` times and finds an angle beyond
+    :data:`TILT_SIGMAS` standard deviations (:func:`tilt_warning`,
+    :func:`mounting_warning`); where both do, the one with the lower
+    residuals is named (the poses tell a turn of the world from a turn on
+    the tool when they turn the tool about several axes).
+
+    Parameters
+    ----------
+    fixed_rms : float
+        The force residuals' rms of the fit as asked, N.
+    gravity : array_like, shape (3,)
+        The gravity given, pose frame.
+    tilted : tuple (free_rms, direction, std_deg), optional
+        The fit with gravity's direction estimated (:func:`tilt_warning`); None: not tried.
+    mounted : tuple (free_rms, angle_deg, std_deg), optional
+        The fit with the mounting estimated (:func:`mounting_warning`); None: not tried.
+
+    Returns
+    -------
+    str or None
+    """
+    tilt = None if tilted is None else tilt_warning(fixed_rms, tilted[0], gravity, tilted[1], tilted[2])
+    mount = None if mounted is None else mounting_warning(fixed_rms, *mounted)
+    if tilt is not None and (mount is None or tilted[0] <= mounted[0]):
+        return tilt
+    return mount
+
+
+def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
+    """``S`` and the offset from a pose table, the payload known: what held poses can and cannot determine.
+
+    At a held pose the payload needs the weight's wrench at the sensor,
+    ``w_k = [rho x f_k; f_k]`` with ``f_k = -m R_k^T g`` (Newton-Euler at
+    rest, :func:`fmscal.observers.payload.regressor` with no motion),
+    exact given the pose. The reading is ``sigma w_hat_k = A w_k + b`` with
+    ``A = S^-1`` (eq. 3 inverted); it is fitted row by row by least squares
+    on the exact regressor ``[w_k; 1]``, the rows independent
+    (:func:`fmscal.observers.batch.fit_readings`): no errors
+    in variables. The wrenches ``w_k`` span at most three of the six
+    directions (the torque is ``rho x f``, fixed by the force), so ``A``, and
+    with it ``S``, is determined on at most three: on the others the estimate
+    keeps the identity, and they are reported as undetermined directions of
+    the reading (where ``S_hat`` is the identity, the same directions). No
+    single entry of ``S`` is determined (``S_std`` is infinite) and the fit
+    never counts as converged. The offset ``b`` is the fit's intercept,
+    determined when gravity turns through more than one direction in the
+    sensor frame.
+
+    Parameters
+    ----------
+    table : plant.PoseTable
+    mass : float
+        The payload's mass, kg.
+    rho : array_like, shape (3,)
+        Its centre of mass in the sensor frame, m.
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+    reading : {"reaction", "load"}
+        The reading's sign convention (:data:`fmscal.plant.io._calibration.READINGS`).
+
+    Returns
+    -------
+    InverseDynamicsFit
+        ``S_hat`` and ``S_std`` (6, 6), ``b`` and ``b_std`` (6; reading
+        order, N m and N), ``undetermined`` (unit directions of ``[tx .. fz,
+        1]``, each component scaled by the wrench's spread) and their
+        warnings; ``converged`` False.
+    """
+    from fmscal.observers.batch._inverse_dynamics import fit_readings
+    from fmscal.plant.physics._rigid_body import regressor
+    if not isinstance(table, PoseTable):
+        raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
+    sign = reading_sign(reading)
+    g = as_finite_array(gravity, (3,), "gravity")
+    rho = as_finite_array(rho, (3,), "rho")
+    if not (np.isfinite(mass) and mass > 0):
+        raise FmscalError(f"mass must be a positive number of kg; got {mass}")
+    if not np.linalg.norm(g) > 0:
+        raise FmscalError("gravity must not be zero")
+    _refuse_untilted(table.name, np.moveaxis(rotation_matrix(table.q.T), -1, 0), g, "S and the offset")
+    still = np.zeros((len(table), 3))
+    pi = np.r_[mass, mass * rho, np.zeros(6)]                         # (m, h, I_O): the inertia plays no part
+    w = regressor(table.q, still, still, still, g) @ pi                # (N, 6), exact given the poses
+    # the reading on the wrench: [A | b], A = S^-1, the identity where the poses say nothing
+    inverse = fit_readings(sign * table.w_hat, w, prior=np.c_[np.eye(6), np.zeros(6)], held=True)
+    A, b = inverse.S_hat, inverse.c
+    if np.trace(A[3:, 3:]) < 0:                     # the reading falls where the weight rises: the other sign
+        raise FmscalError(other_convention(table.name, None, reading))
+    b_std = np.sqrt(np.maximum(np.diag(inverse.cov)[6::7], 0))
+    if np.linalg.cond(A) > 1e12:
+        raise FmscalError(f"{table.name}: the readings do not follow the weight (the fitted map from wrench to "
+                          "reading is singular): check the units (N, N m) and the quaternions' frame")
+    S_hat = np.linalg.inv(A)
+    return InverseDynamicsFit(S_hat=S_hat, S_std=np.full((6, 6), np.inf), b=b, b_std=b_std,
+                              cov=np.full((42, 42), np.inf), undetermined=inverse.undetermined,
+                              warnings=inverse.warnings, converged=False, residual_rms=inverse.residual_rms,
+                              c=-S_hat @ b)
+
+
+def _who(reading):
+    return "mount applies to the payload" if reading == "reaction" else "tool applies to the sensor"
+
+
+def other_convention(name, mass, reading):
+    """The one line for data whose mass (or force gain) comes out negative: it follows the other sign convention.
+
+    Parameters
+    ----------
+    name : str
+        The data's name.
+    mass : float or None
+        The (negative) mass the fit gave, kg; None: a fit of ``S`` whose
+        force gain came out negative (or gravity pointing up).
+    reading : str
+        The convention the fit used (:data:`fmscal.plant.io._calibration.READINGS`).
+
+    Returns
+    -------
+    str
+    """
+    other = "load" if reading == "reaction" else "reaction"
+    what = ("the force reading falls where the weight rises (a negative gain)" if mass is None
+            else f"the mass comes out negative ({mass:.4g} kg)")
+    return (f"{name}: {what}: the reading follows the other sign convention; pass --reading {other} (the wrench the "
+            f"{_who(other)})")
+
+
+def gravity_up(name, z, reading):
+    """The one line for a fit whose estimated gravity points up in the pose frame.
+
+    A weight read in the other sign convention and a base upside down (a robot
+    hung from a ceiling) give the same data: ``m R^T g`` changes sign either
+    way. The line names both, and the flag for each.
+
+    Parameters
+    ----------
+    name : str
+        The data's name.
+    z : float
+        The estimated gravity direction's z component (positive).
+    reading : str
+        The convention the fit used.
+
+    Returns
+    -------
+    str
+    """
+    other = "load" if reading == "reaction" else "reaction"
+    return (f"{name}: gravity comes out pointing up in the pose frame (z = {z:+.2f}): the reading follows the other "
+            f"sign convention, pass --reading {other} (the wrench the {_who(other)}); or the base hangs upside down "
+            "(a robot on a ceiling), give --gravity 0 0 9.81")
+
+
+def _determined(out, std):
+    return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_RHO)
+                and np.all(np.isfinite(std)))
+
+
+def _refuse_untilted(name, R, g, what):
+    """Raise :class:`FmscalError` when the attitudes ``R`` (N, 3, 3) keep gravity ``g`` within
+    :data:`MIN_CONE_DEG` of one direction in the sensor frame (one attitude held, or turns about gravity)."""
+    cone = _cone(np.einsum("nkj,k->nj", R, -np.asarray(g, dtype=float)))
+    if cone < MIN_CONE_DEG:
+        raise FmscalError(f"{name}: the poses do not tilt gravity in the sensor frame (all within {cone:.1f} "
+                          f"degrees of one direction; {MIN_CONE_DEG:g} needed, tens of degrees useful): {what} "
+                          "cannot be separated; hold the tool in at least four attitudes tilted 30 degrees or "
+                          "more about two different horizontal axes")

@@ -1,0 +1,632 @@
+"""The log: a CSV of measured pose and raw sensor reading, and its sidecar.
+
+Two formats (public ones: a user records them on a real rig); the header
+says which case a log is (:func:`fmscal.plant.physics.model_for_columns`).
+
+Planar (the paper's problem)::
+
+    t,theta,x,y,M,fx,fy
+
+in SI units (s, rad, m, N m, N). ``theta, x, y`` is the measured pose in the
+inertial frame, ``theta`` continuous (one wrapped into (-pi, pi] or [0, 2 pi) is unwrapped,
+with a note in :attr:`Log.notes`); ``M, fx, fy`` is the raw
+sensor reading ``w_hat`` in the body frame at the sensor interface.
+
+Spatial (a 6-axis sensor moving in 3D)::
+
+    t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz
+
+``qw, qx, qy, qz`` is the attitude of the sensor frame (origin at the
+sensor's measuring point, the sensor's axes) in an inertial frame with z
+up: a unit quaternion, scalar first, rotating sensor-frame vectors into the
+world; ``x, y, z`` the position of the sensor point, m. ``tx, ty, tz, fx, fy,
+fz`` is the raw reading, torque first. A quaternion off unit norm by more
+than :data:`QUATERNION_TOLERANCE` is refused; within it, it is normalised;
+``q`` and ``-q`` are one attitude, and a sequence that flips sign is made
+continuous (with a note).
+
+In both, empty pose cells on a row (all of them) mean no pose measurement at
+that sample; every other cell is a finite number. Time is strictly
+increasing and evenly sampled.
+
+Every log, from a file or from the simulator, is validated in one place:
+:meth:`Log.__init__`. Its messages count **rows**, the samples from 1 (the
+header is not a row); the file's own checks, before any row is read, count
+**lines** of the file (the header is line 1, so row ``k`` is line ``k + 1``)
+and say so.
+"""
+
+import io
+import json
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.io._files import atomic_write_text, not_a_file
+from fmscal.plant.physics._model import PlanarModel, SpatialModel, model_for_columns
+from fmscal.plant.physics._payload import Payload
+from fmscal.plant.physics._rigid_body import SpatialPayload
+from fmscal.plant.physics._sensor import CalibrationSchedule, NoiseSpec, check_calibration
+
+__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
+           "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE", "unit_quaternions"]
+
+#: Column names of a planar log, in order.
+COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
+#: Column names of a spatial log, in order.
+SPATIAL_COLUMNS = ("t", *SpatialModel.pose_names, *SpatialModel.wrench_names)
+_WRENCH = PlanarModel.wrench_names
+#: Largest departure of a logged quaternion's norm from 1 that is taken for rounding (and normalised).
+QUATERNION_TOLERANCE = 1e-3
+_CASES = {(len(m.pose_names), len(m.wrench_names)): m for m in (PlanarModel, SpatialModel)}
+_SAMPLING_TOLERANCE = 0.01        # relative spread of the time step accepted as even
+MIN_SAMPLES = 10
+#: Largest magnitude accepted in any column (s, rad, m, N m, N; or sensor counts).
+MAX_MAGNITUDE = 1e9
+
+
+class LogError(FmscalError):
+    """A log that cannot be used: the message names the problem."""
+
+
+def unit_quaternions(q, name, rows=None, hint=""):
+    """Quaternions within :data:`QUATERNION_TOLERANCE` of unit norm, normalised; else a one-line :class:`LogError`.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 4)
+    name : str
+        The data's name, for the message.
+    rows : ndarray of int, shape (N,), optional
+        Each quaternion's row (from 0) in the data; default ``0 .. N-1``.
+    hint : str
+        Appended to the message inside its parenthesis.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+    """
+    norm = np.linalg.norm(q, axis=1)
+    off = np.abs(norm - 1) > QUATERNION_TOLERANCE
+    if off.any():
+        k = int(np.argmax(off))
+        row = (k if rows is None else int(rows[k])) + 1
+        raise LogError(f"{name}: the quaternion qw,qx,qy,qz at row {row} has norm {norm[k]:.6g}; "
+                       f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g}{hint})")
+    return q / norm[:, None]
+
+
+class Log:
+    """Measured pose and raw sensor reading on one time grid.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Time in s, strictly increasing, evenly sampled.
+    pose : array_like, shape (N, 3) or (N, 7)
+        Measured pose, a row of NaN where there was no measurement: planar
+        ``[theta, X, Y]`` in rad and m, or spatial ``[qw, qx, qy, qz, x, y,
+        z]`` (unit quaternion, scalar first; m).
+    w_hat : array_like, shape (N, 3) or (N, 6)
+        Raw reading, finite: planar ``[M, f_x, f_y]``, or spatial ``[tx, ty,
+        tz, fx, fy, fz]``.
+    name : str, optional
+        Where the log came from (a file name).
+    model : plant.Model or its class, optional
+        The case the log belongs to; default planar or spatial, from the
+        shapes. Another model (one of the tests' own) names its columns here.
+
+    Attributes
+    ----------
+    kind : str
+        The case's name (:attr:`fmscal.plant.Model.name`): ``"planar"`` or
+        ``"spatial"`` from the shapes, or the given model's.
+    columns : tuple of str
+        The log's CSV header.
+    dt : float
+        The time step, s.
+    has_pose : ndarray of bool, shape (N,)
+        True where the pose was measured.
+    notes : list of str
+        What was done to the data on reading it: a ``theta`` wrapped into
+        (-pi, pi] or [0, 2 pi) (as vision systems and quaternion-to-yaw conversions give
+        it) is unwrapped, a quaternion sequence that flips sign is made
+        continuous, and said so here.
+
+    Raises
+    ------
+    LogError
+        With a one-line message naming the problem.
+    """
+
+    def __init__(self, t, pose, w_hat, name="log", model=None):
+        self.name = str(name)
+        self.t = np.asarray(t, dtype=float)
+        self.pose = np.asarray(pose, dtype=float)
+        self.w_hat = np.asarray(w_hat, dtype=float)
+        n = len(self.t)
+        shapes = (self.pose.shape[-1], self.w_hat.shape[-1]) if self.pose.ndim == self.w_hat.ndim == 2 else None
+        if model is not None:
+            if shapes != (len(model.pose_names), len(model.wrench_names)) or self.t.ndim != 1 \
+                    or self.pose.shape[0] != n or self.w_hat.shape[0] != n:
+                raise LogError(f"{self.name}: a {model.name} log has t (N,), pose (N, {len(model.pose_names)}), "
+                               f"w_hat (N, {len(model.wrench_names)}); got {self.t.shape}, {self.pose.shape}, "
+                               f"{self.w_hat.shape}")
+            case = model
+        else:
+            case = _CASES.get(shapes)
+        if self.t.ndim != 1 or case is None or self.pose.shape[0] != n or self.w_hat.shape[0] != n:
+            raise LogError(f"{self.name}: expected t (N,), pose (N, 3), w_hat (N, 3) (planar) or pose (N, 7), "
+                           f"w_hat (N, 6) (spatial); got {self.t.shape}, {self.pose.shape}, {self.w_hat.shape}")
+        self.kind = case.name
+        self._model = model
+        self.columns = ("t", *case.pose_names, *case.wrench_names)
+        pose_names, wrench_names = case.pose_names, case.wrench_names
+        if n < MIN_SAMPLES:
+            raise LogError(f"{self.name}: too few rows to calibrate; need at least {MIN_SAMPLES}, got {n}")
+        if not np.all(np.isfinite(self.t)):
+            raise LogError(f"{self.name}: column t has a missing, NaN or infinite value at row {_first_bad(self.t)}")
+        for j, col in enumerate(wrench_names):
+            if not np.all(np.isfinite(self.w_hat[:, j])):
+                raise LogError(f"{self.name}: column {col} has a missing, NaN or infinite value "
+                               f"at row {_first_bad(self.w_hat[:, j])}")
+        partial = np.isnan(self.pose).any(axis=1) & ~np.isnan(self.pose).all(axis=1)
+        if partial.any():
+            raise LogError(f"{self.name}: row {np.argmax(partial) + 1} has some but not all of {','.join(pose_names)}; "
+                           f"leave all {len(pose_names)} empty where there is no pose measurement")
+        if np.isinf(self.pose).any():
+            raise LogError(f"{self.name}: pose has an infinite value at row {_first_bad(self.pose.sum(1))}")
+        for col, values in (("t", self.t), *((c, self.pose[:, j]) for j, c in enumerate(pose_names)),
+                            *((c, self.w_hat[:, j]) for j, c in enumerate(wrench_names))):
+            big = np.abs(np.nan_to_num(values)) > MAX_MAGNITUDE
+            if big.any():
+                row = int(np.argmax(big))
+                raise LogError(f"{self.name}: column {col} holds {values[row]:.3g} at row {row + 1}; values beyond "
+                               f"{MAX_MAGNITUDE:.0e} are not measurements in s, rad, m, N m or N")
+        steps = np.diff(self.t)
+        if np.any(steps <= 0):
+            raise LogError(f"{self.name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")
+        self.dt = float(np.median(steps))
+        spread = np.max(np.abs(steps - self.dt)) / self.dt
+        if spread > _SAMPLING_TOLERANCE:
+            raise LogError(f"{self.name}: time is not evenly sampled; steps range from "
+                           f"{steps.min():.6g} to {steps.max():.6g} s (resample to one step)")
+        self.has_pose = ~np.isnan(self.pose[:, 0])
+        if self.has_pose.sum() < MIN_SAMPLES:
+            raise LogError(f"{self.name}: too few pose measurements to calibrate; "
+                           f"need at least {MIN_SAMPLES}, got {int(self.has_pose.sum())}")
+        if not self.has_pose[0]:
+            first = int(np.argmax(self.has_pose))
+            raise LogError(f"{self.name}: the first row has no pose; the log must start with a pose "
+                           f"measurement (the first one is at row {first + 1}); drop the rows before it")
+        self.notes = []
+        if self.kind == "planar":
+            self._unwrap_theta()
+        elif self.kind == "spatial":
+            self._normalise_quaternions()
+
+    def _normalise_quaternions(self):
+        """Unit quaternions within :data:`QUATERNION_TOLERANCE`, normalised and made sign-continuous (with a note)."""
+        rows = np.flatnonzero(self.has_pose)
+        q = unit_quaternions(self.pose[rows, :4], self.name, rows)
+        flips = np.sum(q[1:] * q[:-1], axis=1) < 0
+        sign = np.cumprod(np.r_[1.0, np.where(flips, -1.0, 1.0)])
+        self.pose = self.pose.copy()
+        self.pose[rows, :4] = q * sign[:, None]
+        if flips.any():
+            first = self.t[rows[1:][flips][0]]
+            self.notes.append(f"{self.name}: the quaternion changes sign {int(flips.sum())} time(s) between poses "
+                              f"(q and -q are one attitude; the first at t = {first:g} s); made it continuous")
+
+    def _unwrap_theta(self):
+        """Unwrap a ``theta`` wrapped into (-pi, pi] or [0, 2 pi) (its ~2 pi jumps between poses), with a note."""
+        rows = np.flatnonzero(self.has_pose)
+        theta = self.pose[rows, 0]
+        jumps = np.abs(np.diff(theta)) > np.pi
+        if not jumps.any():
+            return
+        if np.max(np.abs(theta)) <= np.pi + 1e-6:
+            interval = "(-pi, pi]"
+        elif np.min(theta) >= -1e-6 and np.max(theta) <= 2 * np.pi + 1e-6:
+            interval = "[0, 2 pi)"
+        else:
+            return
+        self.pose = self.pose.copy()
+        self.pose[rows, 0] = np.unwrap(theta)
+        first = self.t[rows[1:][jumps][0]]
+        self.notes.append(f"{self.name}: theta is wrapped into {interval} ({int(jumps.sum())} jump(s) of about "
+                          f"2 pi between poses, the first at t = {first:g} s); unwrapped it")
+
+    def __len__(self):
+        return len(self.t)
+
+    @property
+    def duration(self):
+        """Time covered, s."""
+        return float(self.t[-1] - self.t[0])
+
+    def pose_rate(self):
+        """Mean rate of pose measurements, Hz."""
+        return float((self.has_pose.sum() - 1) / max(self.duration, 1e-12))
+
+    def write(self, path):
+        """Write the log as CSV with its header (:attr:`columns`)."""
+        data = np.column_stack([self.t, self.pose, self.w_hat])
+        lines = [",".join(self.columns)]
+        width = self.pose.shape[1]
+        for row, ok in zip(data, self.has_pose):
+            cells = [repr(float(v)) for v in row]
+            if not ok:
+                cells[1:1 + width] = [""] * width
+            lines.append(",".join(cells))
+        atomic_write_text(path, "\n".join(lines) + "\n")
+
+    def shift_poses(self, latency):
+        """The log with the pose stream moved back by ``latency`` to line up with the sensor.
+
+        A vision system that delivers each pose ``latency`` s late logs the
+        pose of ``t - latency`` at ``t``; this returns the log in which each
+        pose sits at the time it was taken. The shift is rounded to whole
+        samples (resolution ``dt``); rows before the first pose after the
+        shift are dropped.
+
+        Parameters
+        ----------
+        latency : float
+            s, at least 0.
+
+        Returns
+        -------
+        Log
+        """
+        latency = float(latency)
+        if not (np.isfinite(latency) and 0 <= latency < self.duration / 2):
+            raise FmscalError(f"latency must be in [0, {self.duration / 2:g}) s for this log; got {latency}")
+        k = int(round(latency / self.dt))
+        if k == 0:
+            return self
+        pose = np.full_like(self.pose, np.nan)
+        pose[:-k] = self.pose[k:]
+        first = int(np.argmax(~np.isnan(pose[:, 0])))
+        return Log(self.t[first:], pose[first:], self.w_hat[first:], self.name, model=self._model)
+
+    def head(self, n):
+        """The first ``n`` samples as a new Log."""
+        return Log(self.t[:n], self.pose[:n], self.w_hat[:n], self.name, model=self._model)
+
+    def between(self, t_start, t_end):
+        """The samples with ``t_start <= t < t_end`` as a new Log (from its first pose on).
+
+        Parameters
+        ----------
+        t_start, t_end : float
+            s, on the log's clock.
+
+        Returns
+        -------
+        Log
+
+        Raises
+        ------
+        LogError
+            Too few samples or poses in the window.
+        """
+        keep = np.flatnonzero((self.t >= t_start) & (self.t < t_end))
+        poses = keep[self.has_pose[keep]]
+        if len(poses) == 0:
+            raise LogError(f"{self.name}: no pose measurement between t = {t_start:g} and {t_end:g} s")
+        keep = keep[keep >= poses[0]]
+        return Log(self.t[keep], self.pose[keep], self.w_hat[keep], self.name, model=self._model)
+
+
+def _first_bad(values):
+    return int(np.argmax(~np.isfinite(values))) + 1
+
+
+_NONFINITE = re.compile(r"(?i)(^|,)\s*[+-]?(nan|inf|infinity)\s*(?=,|$)", re.M)
+
+
+def read_log(path):
+    """Read a log CSV (see the module docstring for the format).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    plant.Log
+
+    Raises
+    ------
+    LogError
+        Missing file, missing or misnamed columns, a cell that is not a
+        number, NaN or infinite values, time not strictly increasing or not
+        evenly sampled, too few rows or pose measurements, a quaternion not
+        of unit norm.
+    """
+    path = _as_path(path, "log")
+    case = SpatialModel if _looks_spatial(path) else PlanarModel
+    frame = _read_csv(path, ("t", *case.pose_names, *case.wrench_names),
+                      "only pose cells may be empty (no measurement)")
+    return Log(frame["t"].to_numpy(), frame[list(case.pose_names)].to_numpy(),
+               frame[list(case.wrench_names)].to_numpy(), name=path.name)
+
+
+def log_kind(path):
+    """``"spatial"`` when a log file's header names the spatial columns, else ``"planar"``.
+
+    Reads the first line only; a file that is neither is left to
+    :func:`read_log` (its errors are the planar format's).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    LogError
+        Not a readable file.
+    """
+    return "spatial" if _looks_spatial(_as_path(path, "log")) else "planar"
+
+
+def _looks_spatial(path):
+    """True when the file's header names the spatial columns (the planar format otherwise, and its errors)."""
+    with open(path, "rb") as f:
+        first = f.readline(4096).decode("utf-8", errors="replace").removeprefix("\ufeff")
+    header = [h.strip() for h in first.split(",")]
+    try:
+        return model_for_columns(header) == "spatial"
+    except FmscalError:
+        return False
+
+
+#: Columns of a file of raw readings (``fmscal apply``); a full log has them too.
+READING_COLUMNS = ("t", "M", "fx", "fy")
+
+
+def read_readings(path):
+    """Read raw sensor readings: a CSV with columns ``t,M,fx,fy`` or ``t,tx,ty,tz,fx,fy,fz`` (a full log will do).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    t : ndarray, shape (N,)
+        s, strictly increasing (even sampling is not required).
+    w_hat : ndarray, shape (N, 3) or (N, 6)
+        Planar ``[M, f_x, f_y]`` or, where the header names ``tx, ty, tz``,
+        spatial ``[tx, ty, tz, fx, fy, fz]``; N m and N.
+
+    Raises
+    ------
+    LogError
+        Missing file or columns, a cell that is empty, not a number, NaN or
+        infinite, time not strictly increasing, no rows.
+    """
+    path = _as_path(path, "readings")
+    with open(path, "rb") as f:
+        first = f.readline(4096).decode("utf-8", errors="replace")
+    names = SpatialModel.wrench_names if "tx" in {h.strip() for h in first.split(",")} else _WRENCH
+    frame = _read_csv(path, ("t", *names), f"every t, {', '.join(names)} cell must be a number")
+    t = frame["t"].to_numpy()
+    w_hat = frame[list(names)].to_numpy()
+    if len(t) == 0:
+        raise LogError(f"{path.name}: no readings")
+    for name, values in (("t", t), *((c, w_hat[:, j]) for j, c in enumerate(names))):
+        if not np.all(np.isfinite(values)):
+            raise LogError(f"{path.name}: column {name} has a missing, NaN or infinite value "
+                           f"at row {_first_bad(values)}")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        raise LogError(f"{path.name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")
+    return t, w_hat
+
+
+def _as_path(path, what="log"):
+    """``path`` as a Path to an existing regular file, or a one-line :class:`LogError`."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise LogError(f"a {what} must be given as a file name; got {type(path).__name__}")
+    path = Path(path)
+    problem = not_a_file(path)
+    if problem == "no such file":
+        raise LogError(f"{_echo(str(path))}: no such file")
+    if problem is not None:
+        raise LogError(f"{_echo(str(path))}: is {problem}, not a {what} file")
+    return path
+
+
+def _echo(text, limit=80):
+    """``text`` fit for a one-line message: control characters escaped, at most ``limit`` characters.
+
+    A longer text keeps its start and its end (a path's file name is at its end).
+    """
+    text = text.encode("unicode_escape").decode("ascii") if not text.isprintable() else text
+    half = limit // 2
+    return text if len(text) <= limit else f"{text[:half]}...{text[-half:]} ({len(text)} characters)"
+
+
+def _wrong_field_count(data, n):
+    """The first line of CSV bytes ``data`` (1-based, after the header) without ``n`` fields, and its count.
+
+    Counts the commas of every line at once (numpy), so that a row of a
+    million cells is refused at once: pandas would take the extra cells of
+    a first data row as index columns, slowly. Empty lines are skipped, as
+    pandas skips them.
+
+    Returns
+    -------
+    line, fields : int
+        ``(0, n)`` if every line has ``n`` fields.
+    """
+    b = np.frombuffer(data, dtype=np.uint8)
+    newlines = np.flatnonzero(b == ord("\n"))
+    starts = np.concatenate([[0], newlines + 1])
+    ends = np.concatenate([newlines, [len(b)]])
+    ends = ends - ((ends > starts) & (b[np.maximum(ends - 1, 0)] == ord("\r")))     # CRLF line ends
+    commas = np.flatnonzero(b == ord(","))
+    fields = np.searchsorted(commas, ends) - np.searchsorted(commas, starts) + 1
+    bad = np.flatnonzero((fields != n) & (ends > starts))
+    bad = bad[bad > 0]                                  # the header is checked on its own
+    return (int(bad[0]) + 1, int(fields[bad[0]])) if len(bad) else (0, n)
+
+
+def _read_csv(path, required, empty_rule):
+    """A CSV with the ``required`` columns, every cell a number or empty; one-line errors."""
+    import pandas as pd
+
+    data = path.read_bytes()
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise LogError(f"{path.name}: holds a NUL byte at offset {nul}; not a text CSV")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise LogError(f"{path.name}: not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}); "
+                       "save the CSV as UTF-8 (the columns are plain ASCII)") from None
+    text = text.removeprefix("\ufeff")       # a byte-order mark some spreadsheets write
+    first = text.split("\n", 1)[0].strip()
+    header = [h.strip() for h in first.split(",")]
+    if len(header) > 2 * len(COLUMNS) + 10 or len(first) > 1000:
+        raise LogError(f"{path.name}: the first line is not a CSV header ({len(header)} cells, {len(first)} "
+                       f"characters: {_echo(first)}); expected {','.join(required)}")
+    duplicated = sorted({h for h in header if header.count(h) > 1})
+    if duplicated:
+        raise LogError(f"{path.name}: column(s) {_echo(', '.join(duplicated))} appear more than once in the header "
+                       f"{_echo(','.join(header))}; keep one of each")
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise LogError(f"{path.name}: missing column(s) {', '.join(missing)}; expected the header "
+                       f"{','.join(required)} (got {_echo(','.join(header))})")
+    line, fields = _wrong_field_count(data, len(header))
+    del data
+    if line:
+        raise LogError(f"{path.name}: line {line} has {fields} fields (row {line - 1}); the header has "
+                       f"{len(header)} ({_echo(','.join(header))}); every row needs one cell per column")
+    match = _NONFINITE.search(text)
+    if match:
+        line = text.count("\n", 0, match.start()) + 1
+        raise LogError(f"{path.name}: line {line} (row {line - 1}) holds a NaN or infinite value; {empty_rule}")
+    try:
+        return pd.read_csv(io.StringIO(text), skipinitialspace=True, dtype=float)
+    except pd.errors.ParserError as err:
+        raise LogError(f"{path.name}: not a well-formed CSV ({_echo(str(err).splitlines()[0])})") from None
+    except ValueError as err:
+        raise LogError(f"{path.name}: a cell is not a number ({_echo(str(err).splitlines()[0])})") from None
+
+
+@dataclass
+class Truth:
+    """What produced a simulated log: the sidecar ``NAME.truth.json``.
+
+    Attributes
+    ----------
+    scenario : str
+    seed : int
+    schedule : plant.CalibrationSchedule
+        The true ``S`` (constant) or its schedule.
+    S0 : ndarray, shape (n_w, n_w)
+        The initial estimate the scenario prescribes to every observer.
+    payload : plant.Payload or plant.SpatialPayload
+    noise : plant.NoiseSpec
+        Standard deviations of the noise added to the log.
+    told_noise : float
+        What a method with a noise model is told, as a multiple of ``noise``
+        (1: the truth; a scenario may tell a wrong figure on purpose).
+    offset : ndarray, shape (n_w,), or None
+        The sensor's offset ``b`` in ``w = S (w_hat - b)``, N m and N.
+    latency : float
+        Delay of the pose stream behind the sensor stream, s.
+    settings : dict
+        The rest of the scenario, for the record (duration, dt, pose rate,
+        dropped frames, outliers, description).
+    """
+
+    scenario: str
+    seed: int
+    schedule: CalibrationSchedule
+    S0: np.ndarray
+    payload: Payload
+    noise: NoiseSpec
+    told_noise: float = 1.0
+    offset: np.ndarray = None
+    latency: float = 0.0
+    settings: dict = field(default_factory=dict)
+
+    def S_at(self, t):
+        """The true ``S`` at time ``t``."""
+        return self.schedule.at(t)
+
+    def told_noise_spec(self):
+        """The :class:`plant.NoiseSpec` a method with a noise model is told (``noise`` times ``told_noise``)."""
+        return self.noise.scaled(self.told_noise)
+
+    def to_json(self):
+        data = {"scenario": self.scenario, "seed": self.seed}
+        data.update(self.schedule.to_json())
+        data["S0"] = np.asarray(self.S0).tolist()
+        data.update(self.payload.to_dict())
+        data["noise"] = self.noise.to_dict()
+        data.update(self.settings)
+        data.update({"told_noise": float(self.told_noise), "latency": float(self.latency),
+                     "offset": None if self.offset is None else [float(v) for v in self.offset]})
+        return data
+
+    def write(self, path):
+        """Write the sidecar as JSON (atomically)."""
+        atomic_write_text(path, json.dumps(self.to_json(), indent=2) + "\n")
+
+
+def read_truth(path):
+    """Read a ``NAME.truth.json`` sidecar into a :class:`Truth`.
+
+    Raises
+    ------
+    LogError
+        Missing file, a folder, not UTF-8, not JSON (or nested too deeply), or a missing key.
+    """
+    path = _as_path(path, "truth")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            raise LogError(f"{path.name}: not a truth sidecar (a JSON {type(data).__name__}, not an object)")
+        if "S" in data:
+            schedule = CalibrationSchedule(data["S"])
+        else:
+            schedule = CalibrationSchedule([(t0, S) for t0, S in data["S_schedule"]])
+        known = {"scenario", "seed", "S", "S_schedule", "S0", "mass", "inertia", "rho", "noise", "told_noise",
+                 "offset", "latency"}
+        offset = data.get("offset")
+        spatial = schedule.size == 6
+        return Truth(
+            scenario=data.get("scenario", "unknown"), seed=data.get("seed"),
+            schedule=schedule, S0=check_calibration(data["S0"], "S0", size=schedule.size),
+            payload=(SpatialPayload if spatial else Payload).from_dict(data), noise=NoiseSpec.from_dict(data["noise"]),
+            told_noise=as_positive_scalar(data.get("told_noise", 1.0), "told_noise"),
+            offset=None if offset is None else as_finite_array(offset, (schedule.size,), "offset"),
+            latency=as_positive_scalar(data.get("latency") or 0.0, "latency", allow_zero=True),
+            settings={k: v for k, v in data.items() if k not in known})
+    except json.JSONDecodeError as err:
+        raise LogError(f"{path.name}: not valid JSON ({err})") from None
+    except RecursionError:
+        raise LogError(f"{path.name}: not a truth sidecar (JSON nested too deeply)") from None
+    except UnicodeDecodeError as err:
+        raise LogError(f"{path.name}: not UTF-8 text (offset {err.start})") from None
+    except LogError:
+        raise
+    except KeyError as err:
+        raise LogError(f"{path.name}: missing key {err} in the truth file") from None
+    except (TypeError, ValueError) as err:
+        raise LogError(f"{path.name}: {str(err).splitlines()[0]}") from None

@@ -1,0 +1,21 @@
+"""The physics: the paper's planar eq. (1), Newton-Euler of one rigid body in 3D, the payload, the sensor's
+model ``w = S (w_hat - b)``, the models that package them, integration and excitation.
+"""
+
+from ._payload import (Payload, PAPER_PAYLOAD)
+from ._sensor import (CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration)
+from ._dynamics import (input_matrix, acceleration, state_derivative, A_1, C_1, B_1, A_2, C_2, B_2, regressors,
+    phi_1, phi_2, S_from_phi)
+from ._rigid_body import (regressor, INERTIA_NAMES, SpatialPayload, PayloadSymbols, GRAVITY, quaternion_multiply,
+    quaternion_conjugate, rotation_matrix, sensor_wrench, body_acceleration, prescribed_motion, skew)
+from ._simulate import (integrate, rk4_step)
+from ._excitation import (Excitation, PaperWrench, Multisine, SampledWrench)
+from ._differentiate import (spatial_motion, smoothed_state, edge, ORDER)
+from ._model import (Model, PlanarModel, SpatialModel, as_model, model_for_columns)
+
+__all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
+           "input_matrix", "acceleration", "state_derivative", "regressors", "phi_1", "phi_2", "S_from_phi",
+           "regressor", "SpatialPayload", "PayloadSymbols", "quaternion_multiply", "quaternion_conjugate",
+           "rotation_matrix", "sensor_wrench", "body_acceleration", "prescribed_motion", "skew", "integrate",
+           "rk4_step", "Excitation", "PaperWrench", "Multisine", "SampledWrench", "spatial_motion",
+           "smoothed_state", "edge", "Model", "PlanarModel", "SpatialModel", "as_model", "model_for_columns"]

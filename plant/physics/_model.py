@@ -1,0 +1,802 @@
+"""The problem's shape in one object: sizes, layouts, columns, measurement, dynamics.
+
+A calibration problem is a rigid payload on a force-moment sensor whose raw
+reading ``w_hat`` (``n_w`` components) gives the true wrench through
+``w = S w_hat + c`` (``S`` n_w x n_w; ``c = -S b`` with ``b`` the sensor's
+offset), while a tracker measures the payload's pose. A :class:`Model` says
+what the problem is, as pinocchio's ``Model`` says what a robot is:
+
+- the sizes: the wrench ``n_w``, the configuration ``nq`` and velocity
+  ``nv`` (they differ when the configuration holds a unit quaternion), the
+  motion state ``nx = nq + nv``, the parameters ``[S | c]``;
+- named layouts of the motion state and of the pose, and the log's columns;
+- the measurement map (the pose a state shows) and the state at rest at a
+  measured pose;
+- ``integrate`` and ``difference`` on the configuration (an angle and a
+  position in the plane; a position and a unit quaternion in space);
+- the dynamics, affine in the wrench: ``a = A(x) w + d(x)`` for the
+  accelerations ``a`` (``nv``), and from it the regressor of ``[S | c]``.
+  They are written once per case (:mod:`fmscal.plant.physics._dynamics`, eq. (1);
+  :mod:`fmscal.plant.physics._rigid_body`, Newton-Euler) for numbers and casadi
+  symbols alike.
+
+Two models: :class:`PlanarModel` (the paper's problem: ``[M, f_x, f_y]``,
+pose ``theta, X, Y``) and :class:`SpatialModel` (a 6-axis sensor: ``[tau,
+f]``, pose ``q, p``, under gravity).
+"""
+
+import copy
+
+import casadi as ca
+import numpy as np
+
+from fmscal.plant.physics import _dynamics as dynamics
+
+from fmscal.plant.physics import _rigid_body as rigid_body
+from fmscal.plant.numerics._backend import is_symbolic, ops
+from fmscal.plant.numerics._checks import as_finite_array
+from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.physics._payload import Payload
+from fmscal.plant.physics._rigid_body import SpatialPayload
+
+__all__ = ["Model", "PlanarModel", "SpatialModel", "as_model", "model_for_columns"]
+
+
+class Model:
+    """What every case shares; a case sets the class attributes and the dynamics.
+
+    Attributes
+    ----------
+    name : str
+        ``"planar"`` or ``"spatial"``.
+    wrench_names, pose_names : tuple of str
+        The reading's and the pose's columns in a log, in order.
+    nq, nv : int
+        Configuration and velocity sizes.
+    state : StateLayout
+        The motion state ``x`` (``nx = nq + nv`` entries) by name.
+    payload
+        The payload's mass properties.
+    """
+
+    name = ""
+    wrench_names = ()
+    pose_names = ()
+    #: The pose's angle and position columns, for the noise model (:meth:`pose_sd`); a
+    #: quaternion's columns are neither (the spatial model says how its noise spreads).
+    angle_names = ()
+    position_names = ()
+    nq = nv = 0
+    state = None
+    #: True where the configuration moves additively, the pose is the configuration, the
+    #: accelerations have no drift and ``A`` depends on the configuration only: the model is
+    #: then linear in the state and in ``[S | c]`` once the configuration in ``A`` is taken from
+    #: the measured poses, which the floor (:mod:`fmscal.observers.batch._max_likelihood`), least
+    #: squares and the EKF's filter pieces need.
+    linear_channels = False
+
+    def __init__(self, payload):
+        self.payload = payload
+
+    def __repr__(self):
+        return f"{type(self).__name__}({self.payload!r})"
+
+    def _key(self):
+        """What makes two models the same problem (compiled steps are cached by it)."""
+        return type(self), self.payload
+
+    def __eq__(self, other):
+        return isinstance(other, Model) and self._key() == other._key()
+
+    def __hash__(self):
+        return hash(self._key())
+
+    # --- the payload at run time ------------------------------------------------------------------
+    #: Numbers :meth:`payload_vector` gives (0: the payload is compiled into each step as constants).
+    payload_size = 0
+
+    def payload_vector(self):
+        """The payload's mass properties (and the gravity) as the numbers a compiled step takes at run time.
+
+        Returns
+        -------
+        ndarray, shape (payload_size,)
+            Empty where the model's steps take the payload as constants.
+        """
+        return np.empty(0)
+
+    def compiled_key(self):
+        """What a compiled step written on this model depends on (its cache key): the model itself, less what
+        :meth:`payload_vector` carries where the step reads that at run time."""
+        return self._key()
+
+    def payload_parts(self):
+        """The part :meth:`payload_vector` takes in a compiled step's parameters (a
+        :class:`~fmscal.plant.numerics.StateLayout` part): ``[("payload", payload_size)]``, or none at size 0."""
+        return [("payload", self.payload_size)] if self.payload_size else []
+
+    def payload_values(self):
+        """:meth:`payload_vector` by that part's name, for ``StateLayout.pack``: ``{"payload": ...}``, or none."""
+        return {"payload": self.payload_vector()} if self.payload_size else {}
+
+    def with_payload_symbols(self, values):
+        """The model with its payload (and gravity) read from the casadi expression ``values``.
+
+        A step built on it takes :meth:`payload_vector` as an input, and one build serves every payload.
+
+        Parameters
+        ----------
+        values : casadi.SX, shape (payload_size,), or None where ``payload_size`` is 0
+
+        Returns
+        -------
+        Model
+            This model itself where ``payload_size`` is 0.
+        """
+        return self
+
+    # --- sizes ------------------------------------------------------------------------------------
+    @property
+    def n_w(self):
+        """Components of the wrench and of the reading."""
+        return len(self.wrench_names)
+
+    @property
+    def n_pose(self):
+        """Numbers in one pose measurement (its columns in a log)."""
+        return len(self.pose_names)
+
+    @property
+    def nx(self):
+        """Size of the motion state."""
+        return self.nq + self.nv
+
+    @property
+    def columns(self):
+        """The log's header: ``t``, the pose, the reading."""
+        return ("t", *self.pose_names, *self.wrench_names)
+
+    def n_params(self, offset=False):
+        """Entries of ``[S | c]``: ``n_w^2``, plus ``n_w`` with the offset column."""
+        return self.n_w * (self.n_w + int(bool(offset)))
+
+    def params(self, offset=False):
+        """The layout of ``vec([S | c])``, row by row (the order every method packs ``S`` in).
+
+        Returns
+        -------
+        StateLayout
+            One part a row of ``[S | c]``: ``row0``, ``row1``, ... each of
+            ``n_w`` entries, or ``n_w + 1`` with the offset column.
+        """
+        width = self.n_w + int(bool(offset))
+        return StateLayout(*((f"row{i}", width) for i in range(self.n_w)))
+
+    @property
+    def input_layout(self):
+        """One sample as a recursive method's step reads it: ``[has_pose, pose, w_hat]``.
+
+        Pose entries are zero where the sample has none (``has_pose`` 0).
+        """
+        return StateLayout(("has_pose", 1), ("pose", self.n_pose), ("w_hat", self.n_w))
+
+    def pose_sd(self, noise):
+        """Each pose column's noise standard deviation, shape (n_pose,).
+
+        Parameters
+        ----------
+        noise : NoiseSpec
+            ``angle_sd`` for the angle columns, ``position_sd`` for the
+            position columns.
+        """
+        sd = {**{k: noise.angle_sd for k in self.angle_names}, **{k: noise.position_sd for k in self.position_names}}
+        return np.array([sd[k] for k in self.pose_names])
+
+    def check_noise(self, noise, name="noise"):
+        """``noise`` as this model's :class:`NoiseSpec` (``n_w`` reading entries), or a one-line error.
+
+        Raises
+        ------
+        TypeError
+            ``noise`` is not a :class:`NoiseSpec`.
+        FmscalError
+            It holds another number of reading components.
+        """
+        from fmscal.plant.physics._sensor import NoiseSpec  # no cycle: sensor imports nothing of the model's
+        if not isinstance(noise, NoiseSpec):
+            raise TypeError(f"{name} must be a plant.NoiseSpec or None; got {type(noise).__name__}")
+        if len(noise.wrench_sd) != self.n_w:
+            raise FmscalError(f"{name}.wrench_sd has the wrong shape; expected {self.n_w} ({self.name}: "
+                              f"{', '.join(self.wrench_names)}) instead of {len(noise.wrench_sd)}")
+        return noise
+
+    def check_log(self, log, who="this method"):
+        """``log`` if it is a log of this model's case, else a one-line :class:`FmscalError`.
+
+        Parameters
+        ----------
+        log : Log
+        who : str
+            Who asks, for the message.
+        """
+        if getattr(log, "kind", None) != self.name:
+            raise FmscalError(f"{log.name}: {who} is set up for {self.name} logs "
+                              f"({','.join(self.columns)}); got a {getattr(log, 'kind', '?')} log "
+                              f"({','.join(getattr(log, 'columns', ()))})")
+        return log
+
+    # --- the state's parts ---------------------------------------------------------------------------
+    #: Indices of the configuration and of the velocity in the motion state.
+    q_index = v_index = ()
+
+    def configuration(self, x):
+        """The configuration part of the state, ``nq`` entries."""
+        return ops(x).vcat([x[k] for k in self.q_index])
+
+    def velocity(self, x):
+        """The velocity part of the state, ``nv`` entries."""
+        return ops(x).vcat([x[k] for k in self.v_index])
+
+    def state_from(self, q, v):
+        """The motion state with configuration ``q`` (``nq``) and velocity ``v`` (``nv``), numbers or symbols."""
+        where = {**{k: q[i] for i, k in enumerate(self.q_index)}, **{k: v[i] for i, k in enumerate(self.v_index)}}
+        return ops(q, v).vcat([where[k] for k in range(self.nx)])
+
+    def state_integrate(self, x, dx):
+        """The state ``x`` moved by an error state ``dx = [dq, dnu]`` (``2 nv``): ``x (+) dx``.
+
+        The configuration by :meth:`integrate`, the velocity additively;
+        numbers or casadi symbols.
+
+        Parameters
+        ----------
+        x : ndarray or casadi.SX, shape (nx,)
+        dx : ndarray or casadi.SX, shape (2 nv,)
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (nx,)
+        """
+        o = ops(x, dx)
+        dq = o.vcat([dx[i] for i in range(self.nv)])
+        dnu = o.vcat([dx[self.nv + i] for i in range(self.nv)])
+        return self.state_from(self.integrate(self.configuration(x), dq), self.velocity(x) + dnu)
+
+    def state_difference(self, x0, x1):
+        """The error state taking ``x0`` to ``x1``: ``x1 (-) x0 = [difference(q0, q1), nu1 - nu0]``, shape (2 nv,).
+
+        The inverse of :meth:`state_integrate`; numbers or casadi symbols.
+        """
+        o = ops(x0, x1)
+        return o.vcat([self.difference(self.configuration(x0), self.configuration(x1)),
+                       self.velocity(x1) - self.velocity(x0)])
+
+    def pose_configuration(self, pose):
+        """The configuration (``nq``) a measured pose (log columns, ``n_pose``) shows; numbers or symbols.
+
+        The inverse of :meth:`measure` on the configuration. Default: the
+        pose is the configuration.
+        """
+        return ops(pose).vcat([pose[i] for i in range(self.nq)])
+
+    def channel(self, k):
+        """The velocity channel (``0 .. nv-1``) state entry ``k`` belongs to, for a model with
+        :attr:`linear_channels` (entry ``q_index[c]`` or ``v_index[c]`` is channel ``c``)."""
+        return self.q_index.index(k) if k in self.q_index else self.v_index.index(k)
+
+    def rk4_step(self, x, w0, w_mid, w1, dt):
+        """One classical RK4 step of :meth:`state_derivative`, the wrench at the step's start, middle and end.
+
+        Parameters
+        ----------
+        x : ndarray or casadi.SX, shape (nx,)
+        w0, w_mid, w1 : ndarray or casadi.SX, shape (n_w,)
+            The true wrench at ``t``, ``t + dt/2`` and ``t + dt``.
+        dt : float or casadi.SX
+            The step, s.
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (nx,)
+        """
+        k1 = self.state_derivative(x, w0)
+        k2 = self.state_derivative(x + dt / 2 * k1, w_mid)
+        k3 = self.state_derivative(x + dt / 2 * k2, w_mid)
+        k4 = self.state_derivative(x + dt * k3, w1)
+        return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    # --- the channels' parameters (linear-channel models) -------------------------------------------
+    def parameter_groups(self):
+        """The velocity channels that share a set of linear parameters ``phi``.
+
+        Least squares fits each group alone (they share no unknown), and the
+        adaptive observer (:class:`fmscal.observers.AdaptiveObserver`) runs
+        one recursive fit per group. The default is one group, all channels,
+        in the parameters ``s = vec([S | c])`` themselves.
+
+        Returns
+        -------
+        list of list of int
+            Each group's channels (``0 .. nv-1``), every channel in one group.
+        """
+        return [list(range(self.nv))]
+
+    def channel_regressor_rows(self, q, w_aug):
+        """Each channel's regressor in its group's parameters at one sample: ``a_c = psi_c . phi``.
+
+        Written for numbers and casadi symbols alike, so that a recursive
+        method's compiled step reads its regressors from the model.
+
+        Parameters
+        ----------
+        q : ndarray or casadi.SX, shape (nq,)
+            The configuration (for a model with :attr:`linear_channels`, the
+            measured pose).
+        w_aug : ndarray or casadi.SX, shape (n,)
+            The reading, ``n = n_w``, or ``n_w + 1`` with a trailing constant
+            1 for the offset column.
+
+        Returns
+        -------
+        list of list
+            One list per velocity channel (``nv``), of its group's parameter
+            count (``len(phi)``), entries numbers or casadi expressions. By
+            default ``phi = s`` and ``psi_c`` is row ``c`` of :meth:`regressor`
+            at rest at ``q``.
+        """
+        o = ops(q, w_aug)
+        x = self.state_from(q, o.vcat([0.0] * self.nv))
+        U = self.regressor(x, w_aug)
+        m = U.shape[1]
+        return [[U[c, j] for j in range(m)] for c in range(self.nv)]
+
+    def channel_regressors(self, q, w_aug):
+        """Each channel's regressor over a whole log (numpy): :meth:`channel_regressor_rows` per sample.
+
+        Parameters
+        ----------
+        q : ndarray, shape (nq, N)
+            The configuration at each sample (from the measured poses).
+        w_aug : ndarray, shape (n, N)
+            The reading, with a trailing row of ones for the offset column.
+
+        Returns
+        -------
+        list of ndarray, each shape (N, len(phi) of its group)
+            One per velocity channel.
+        """
+        rows = [self.channel_regressor_rows(q[:, k], w_aug[:, k]) for k in range(q.shape[1])]
+        return [np.array([r[c] for r in rows], dtype=float) for c in range(self.nv)]
+
+    def phi_from_params(self, s, n):
+        """Each group's parameters from ``vec([S | c])`` (row order); linear, inverse of :meth:`params_from_phi`.
+
+        Parameters
+        ----------
+        s : ndarray or casadi.SX, shape (n_w n,)
+            The flat ``[S | c]``, numbers or symbols.
+        n : int
+            Columns of ``[S | c]``: ``n_w``, or ``n_w + 1`` with the offset.
+
+        Returns
+        -------
+        list of ndarray or casadi.SX
+            One vector per :meth:`parameter_groups` group. Default: ``[s]``.
+        """
+        return [s]
+
+    def params_from_phi(self, phis, n):
+        """``[S | c]`` from each group's parameters; linear. Default: ``phi = s``.
+
+        Parameters
+        ----------
+        phis : list of ndarray or casadi.SX
+            One vector per :meth:`parameter_groups` group.
+        n : int
+            Columns of ``[S | c]``.
+
+        Returns
+        -------
+        ndarray, shape (n_w, n), or casadi.SX, shape (n_w n,)
+            Numbers as a matrix; symbols as a flat vector in row order.
+        """
+        if is_symbolic(*phis):
+            return ops(*phis).vcat(phis)
+        return np.asarray(phis[0], dtype=float).reshape(self.n_w, n)
+
+    def reading_scale(self, log):
+        """The scale of each reading component in ``log``, in which a method's settling and evidence
+        are judged (``S`` as ``D^-1 S D``); None: ``S`` as it is (the planar default).
+
+        Parameters
+        ----------
+        log : plant.Log
+
+        Returns
+        -------
+        ndarray, shape (n_w,), or None
+        """
+        return None
+
+    # --- checks -----------------------------------------------------------------------------------
+    def check_matrix(self, S, name="S"):
+        """``S`` as a finite ``n_w x n_w`` float array, or a one-line :class:`FmscalError`."""
+        return as_finite_array(S, (self.n_w, self.n_w), name)
+
+    def check_pose(self, pose, name="pose"):
+        """One pose as ``n_pose`` finite numbers, or a one-line :class:`FmscalError`."""
+        return as_finite_array(pose, (self.n_pose,), name)
+
+    # --- the dynamics, affine in the wrench --------------------------------------------------------
+    def acceleration(self, x, w):
+        """Accelerations ``a`` (``nv``) the wrench ``w`` makes in state ``x``: ``A(x) w + d(x)``."""
+        o = ops(x, w)
+        A, d = self.input_matrix(x), self.drift(x)
+        return o.dot(A, w) + d
+
+    def regressor(self, x, w_hat):
+        """The regressor ``U`` of ``s = vec([S | c])`` (row order): ``a = U s + d(x)``.
+
+        Since ``S w_hat = (I (x) w_hat^T) s``, ``U = A(x) (I_nw (x) w_hat^T)``.
+
+        Parameters
+        ----------
+        x : ndarray or casadi.SX, shape (nx,)
+        w_hat : ndarray or casadi.SX, shape (n_w,) or (n_w + 1,)
+            The reading; with a trailing constant 1 the offset column ``c``
+            is in ``s`` too.
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (nv, n_w * len(w_hat))
+        """
+        A = self.input_matrix(x)
+        m = w_hat.shape[0] if hasattr(w_hat, "shape") else len(w_hat)
+        if is_symbolic(x, w_hat):
+            return ca.horzcat(*[A[:, i] * w_hat[j] for i in range(self.n_w) for j in range(m)])
+        w_hat = np.asarray(w_hat, dtype=float)
+        return np.hstack([np.outer(A[:, i], w_hat) for i in range(self.n_w)])
+
+
+class PlanarModel(Model):
+    """The paper's planar problem: reading ``[M, f_x, f_y]``, pose ``theta, X, Y`` (eq. 1).
+
+    The motion state is ``[theta, theta', X, X', Y, Y']`` (the toolkit's
+    order since the first release); the configuration is ``[theta, X, Y]``
+    and it moves additively.
+
+    Parameters
+    ----------
+    payload : Payload
+
+    Examples
+    --------
+    >>> from fmscal.plant import PAPER_PAYLOAD
+    >>> model = PlanarModel(PAPER_PAYLOAD)
+    >>> model.n_w, model.nq, model.nv, model.columns
+    (3, 3, 3, ('t', 'theta', 'x', 'y', 'M', 'fx', 'fy'))
+    """
+
+    name = "planar"
+    wrench_names = ("M", "fx", "fy")
+    pose_names = ("theta", "x", "y")
+    angle_names, position_names = ("theta",), ("x", "y")
+    linear_channels = True
+    nq = nv = 3
+    state = StateLayout(("theta", 1), ("theta_dot", 1), ("X", 1), ("X_dot", 1), ("Y", 1), ("Y_dot", 1))
+    q_index, v_index = (0, 2, 4), (1, 3, 5)
+
+    def __init__(self, payload):
+        if not isinstance(payload, Payload):
+            raise FmscalError(f"PlanarModel takes a plant.Payload; got {type(payload).__name__}")
+        super().__init__(payload)
+
+    def measure(self, x):
+        """The pose ``[theta, X, Y]`` the state shows (the measurement map, ``C_1``, ``C_2`` of eqs. 4, 5)."""
+        return self.configuration(x)
+
+    def rest_state(self, pose):
+        """The state at rest at a measured pose: ``[theta, 0, X, 0, Y, 0]``."""
+        theta, X, Y = self.check_pose(pose)
+        return np.array([theta, 0.0, X, 0.0, Y, 0.0])
+
+    def integrate(self, q, dq):
+        """The configuration ``q`` moved by ``dq`` (additive in the plane)."""
+        return q + dq
+
+    def difference(self, q0, q1):
+        """The move ``dq`` taking ``q0`` to ``q1``: ``q1 - q0``."""
+        return q1 - q0
+
+    def input_matrix(self, x):
+        """``A(x) = G(theta)`` of eq. (1), shape (3, 3): ``[theta'', X'', Y''] = G w``."""
+        return dynamics.input_matrix(x[0], self.payload)
+
+    def drift(self, x):
+        """``d(x) = 0``: in the plane the accelerations are linear in the wrench."""
+        return ops(x).vcat([0.0, 0.0, 0.0])
+
+    def state_derivative(self, x, w):
+        """``x'`` under eq. (1) (:func:`fmscal.plant.state_derivative`)."""
+        return dynamics.state_derivative(x, w, self.payload)
+
+    def rk4_step(self, x, w0, w_mid, w1, dt):
+        """RK4 on eq. (1): :func:`fmscal.plant.rk4_step` (the simulator's own step)."""
+        from fmscal.plant.physics._simulate import rk4_step
+        return rk4_step(x, w0, w_mid, w1, dt, self.payload)
+
+    def parameter_groups(self):
+        """``phi_1`` drives ``theta`` alone, ``phi_2`` drives ``X`` and ``Y`` (eqs. 4, 5): two groups."""
+        return [[0], [1, 2]]
+
+    def channel_regressor_rows(self, q, w_aug):
+        """``psi_theta``, ``psi_X``, ``psi_Y`` of eqs. (4), (5) (:func:`fmscal.plant.regressors`).
+
+        ``q`` may also hold one angle per sample (``q[0]`` of shape (N,),
+        ``w_aug`` (n, N)): the entries are then arrays of shape (N,).
+        """
+        return list(dynamics.regressors(q[0], w_aug, self.payload))
+
+    def channel_regressors(self, q, w_aug):
+        """``psi_theta``, ``psi_X``, ``psi_Y`` of eqs. (4), (5) over a whole log, in one call."""
+        return [np.array(v).T for v in self.channel_regressor_rows(q, w_aug)]
+
+    def phi_from_params(self, s, n):
+        """``phi_1``, ``phi_2`` of eqs. (4), (5) (:func:`fmscal.plant.phi_1`, ``phi_2``)."""
+        return [dynamics.phi_1(s, self.payload), dynamics.phi_2(s)]
+
+    def params_from_phi(self, phis, n):
+        """``[S | c]`` from ``phi_1``, ``phi_2`` (eqs. 4, 5 inverted, :func:`fmscal.plant.S_from_phi`)."""
+        return dynamics.S_from_phi(phis[0], phis[1], self.payload)
+
+
+class SpatialModel(Model):
+    """A 6-axis sensor on a payload moving in 3D under gravity (Newton-Euler).
+
+    Reading ``[tx, ty, tz, fx, fy, fz]`` (torque about the sensor point first,
+    sensor axes); pose ``[qw, qx, qy, qz, x, y, z]`` of the sensor frame in
+    the world (unit quaternion, scalar first; position in m). The motion
+    state is ``[p, q, v, omega]`` (:mod:`fmscal.plant.physics._rigid_body`):
+    ``nq = 7``, ``nv = 6``, velocities ``[v (world), omega (sensor axes)]``.
+
+    Parameters
+    ----------
+    payload : SpatialPayload
+    gravity : array_like, shape (3,)
+        Gravity in the world frame, m/s^2.
+    """
+
+    name = "spatial"
+    wrench_names = ("tx", "ty", "tz", "fx", "fy", "fz")
+    pose_names = ("qw", "qx", "qy", "qz", "x", "y", "z")
+    position_names = ("x", "y", "z")
+    nq, nv = rigid_body.NQ, rigid_body.NV
+    state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))
+    q_index, v_index = tuple(range(7)), tuple(range(7, 13))
+
+    def __init__(self, payload, gravity=rigid_body.GRAVITY):
+        if not isinstance(payload, SpatialPayload):
+            raise FmscalError(f"SpatialModel takes a plant.SpatialPayload; got {type(payload).__name__}")
+        super().__init__(payload)
+        self.gravity = tuple(float(g) for g in as_finite_array(gravity, (3,), "gravity"))
+
+    def _key(self):
+        return type(self), self.payload, self.gravity
+
+    def compiled_key(self):
+        """:meth:`Model.compiled_key`: the key without the payload and the gravity (a compiled step reads them)."""
+        key = self._key()
+        return (key[0], *key[3:])
+
+    #: The payload's 22 numbers (:meth:`SpatialPayload.as_vector`), the two 3x6 blocks of ``A`` the payload
+    #: alone makes (:meth:`input_matrix`) and the gravity's 3.
+    payload_size = rigid_body.PayloadSymbols.size + 36 + 3
+
+    def payload_vector(self):
+        """The payload and the gravity as a compiled step takes them.
+
+        Returns
+        -------
+        ndarray, shape (61,)
+            ``m`` (kg), ``rho`` (m), ``I_c`` and ``I_c^-1`` row by row (:meth:`SpatialPayload.as_vector`),
+            the two 3x6 blocks of ``A`` the payload alone makes, row by row (:meth:`input_matrix`), and the
+            gravity (m/s^2, world frame).
+        """
+        top, bottom = self._input_blocks()
+        return np.r_[self.payload.as_vector(), top.ravel(), bottom.ravel(), self.gravity]
+
+    def with_payload_symbols(self, values):
+        """This model with the payload and the gravity read from ``values``.
+
+        The dynamics on it are casadi expressions of them (:class:`rigid_body.PayloadSymbols`), with the
+        numbers' own operations: ``A``'s blocks are read from the vector, as the numbers' path computes
+        them once. The model is for writing a step, not for a cache key (casadi symbols do not hash).
+
+        Parameters
+        ----------
+        values : casadi.SX, shape (61,)
+            In :meth:`payload_vector`'s order.
+
+        Returns
+        -------
+        SpatialModel
+        """
+        k = rigid_body.PayloadSymbols.size
+        model = copy.copy(self)                        # every attribute of this model; the payload's replaced
+        model.payload = rigid_body.PayloadSymbols(values[0:k])
+        model._blocks = (ca.reshape(values[k:k + 18], 6, 3).T, ca.reshape(values[k + 18:k + 36], 6, 3).T)
+        model.gravity = values[k + 36:self.payload_size]
+        return model
+
+    def reading_scale(self, log):
+        """Each reading component's spread in ``log`` (N m, N), shape (6,).
+
+        Torque and force differ by two orders of magnitude: in SI units a
+        2-norm of ``S`` is the force-from-torque entries' alone. Settling and
+        evidence are judged on ``D^-1 S D``, ``D`` these spreads.
+        """
+        spread = np.std(log.w_hat, axis=0)
+        return np.maximum(spread, 1e-12 * max(float(spread.max()), 1e-300))
+
+    def pose_sd(self, noise):
+        """Each pose column's noise: a turn of ``angle_sd`` about each axis moves each quaternion
+        component by about ``angle_sd / 2``; ``position_sd`` on ``x, y, z``. Shape (7,)."""
+        return np.r_[np.full(4, noise.angle_sd / 2), np.full(3, noise.position_sd)]
+
+    def measure(self, x):
+        """The pose ``[q, p]`` (log order) the state shows."""
+        o = ops(x)
+        return o.vcat([x[3:7], x[0:3]])
+
+    def pose_configuration(self, pose):
+        """The configuration ``[p, q]`` of a measured pose ``[q, p]`` (log order); numbers or symbols."""
+        o = ops(pose)
+        return o.vcat([pose[4:7], pose[0:4]])
+
+    def check_pose(self, pose, name="pose"):
+        """One pose as 7 finite numbers whose quaternion is of unit norm (within
+        :data:`fmscal.plant.io._log.QUATERNION_TOLERANCE`), or a one-line :class:`FmscalError`.
+
+        The pose is returned as it is: :meth:`difference` reads a quaternion's
+        direction only, and :meth:`rest_state` normalises it.
+        """
+        from fmscal.plant.io._log import unit_quaternions         # log imports this module
+        pose = super().check_pose(pose, name)
+        unit_quaternions(pose[None, :4], name)
+        return pose
+
+    def rest_state(self, pose):
+        """The state at rest at a measured pose ``[q, p]``: ``[p, q, 0, 0]``."""
+        pose = self.check_pose(pose)
+        q = pose[:4] / np.linalg.norm(pose[:4])
+        return np.r_[pose[4:], q, np.zeros(6)]
+
+    def integrate(self, q, dq):
+        """The configuration ``[p, q]`` moved by ``dq = [dp (world), dphi (sensor axes)]``.
+
+        ``p + dp`` and ``q (x) exp(dphi / 2)``: the rotation vector ``dphi``
+        turns the body about its own axes, as ``omega dt`` does. Numbers or
+        casadi symbols; differentiable at ``dphi = 0`` (the small-angle series
+        there reads no square root).
+        """
+        o = ops(q, dq)
+        dphi = dq[3:6]
+        angle2 = dphi[0] * dphi[0] + dphi[1] * dphi[1] + dphi[2] * dphi[2]
+        angle = o.sqrt(o.fmax(angle2, 1e-300))
+        half = 0.5 * angle
+        # sin(angle/2)/angle, its series below 1e-8 rad (exact to rounding there)
+        k = o.if_else(angle > 1e-8, o.sin(half) / angle, 0.5 - angle2 / 48.0)
+        step = o.vcat([o.cos(half), k * dphi[0], k * dphi[1], k * dphi[2]])
+        return o.vcat([q[0:3] + dq[0:3], rigid_body.quaternion_multiply(q[3:7], step)])
+
+    def difference(self, q0, q1):
+        """The move ``dq = [dp, dphi]`` taking ``q0`` to ``q1`` (inverse of :meth:`integrate`).
+
+        ``dphi = 2 log(q0* (x) q1)``, taken on the short way round (``q`` and
+        ``-q`` are one attitude). Numbers or casadi symbols.
+        """
+        o = ops(q0, q1)
+        if not is_symbolic(q0, q1):
+            q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+        rel = rigid_body.quaternion_multiply(rigid_body.quaternion_conjugate(q0[3:7]), q1[3:7])
+        sign = o.if_else(rel[0] < 0, -1.0, 1.0)
+        w = sign * rel[0]
+        s2 = rel[1] * rel[1] + rel[2] * rel[2] + rel[3] * rel[3]
+        s = o.sqrt(o.fmax(s2, 1e-300))
+        # 2 atan2(s, w) / s, its series 2/w (1 - s^2 / (3 w^2)) where s is tiny
+        k = sign * o.if_else(s > 1e-8, 2.0 * o.atan2(s, w) / s, 2.0 / w * (1.0 - s2 / (3.0 * w * w)))
+        return o.vcat([q1[0:3] - q0[0:3], k * rel[1], k * rel[2], k * rel[3]])
+
+    def input_matrix(self, x):
+        """``A(x)``, shape (6, 6): ``[p_ddot; alpha] = A(x) [tau_O; f] + d(x)``.
+
+        From :func:`fmscal.plant.physics.body_acceleration`, with
+        ``K = I_c^-1``::
+
+            alpha  = K tau_O - K [rho]x f + alpha_0
+            p_ddot = R ([rho]x K tau_O + (I/m - [rho]x K [rho]x) f) + ...
+        """
+        R = rigid_body.rotation_matrix(x[3:7])
+        if isinstance(self.payload, rigid_body.PayloadSymbols):              # read at run time
+            top, bottom = self._blocks
+            return ca.vertcat(ca.mtimes(R, top), bottom)
+        top, bottom = self._input_blocks()
+        if is_symbolic(x):
+            return ca.vertcat(ca.mtimes(R, ca.DM(top)), ca.DM(bottom))
+        return np.vstack([R @ top, bottom])
+
+    def _input_blocks(self):
+        """The blocks of :meth:`input_matrix` the payload alone makes, ``K = I_c^-1``:
+        ``[[rho]x K, I/m - [rho]x K [rho]x]`` and ``[K, -K [rho]x]``, each shape (3, 6)."""
+        K = self.payload.I_c_inv
+        r = rigid_body.skew(self.payload.rho)
+        top = np.hstack([r @ K, np.eye(3) / self.payload.mass - r @ K @ r])
+        bottom = np.hstack([K, -K @ r])
+        return top, bottom
+
+    def drift(self, x):
+        """``d(x)``: gravity and the gyroscopic and centripetal terms, shape (6,)."""
+        o = ops(x)
+        zero = o.vcat([0.0] * 6)
+        alpha_0, p_ddot_0 = rigid_body.body_acceleration(x[3:7], x[10:13], zero, self.payload, self.gravity)
+        return o.vcat([p_ddot_0, alpha_0])
+
+    def state_derivative(self, x, w):
+        """``x'`` under Newton-Euler (:func:`fmscal.plant.physics._rigid_body.state_derivative`)."""
+        return rigid_body.state_derivative(x, w, self.payload, self.gravity)
+
+
+def as_model(model, who="a method"):
+    """The :class:`Model` a method is built on: a model, or a payload (the model of its case).
+
+    Parameters
+    ----------
+    model : Model, Payload or SpatialPayload
+        A payload stands for :class:`PlanarModel` or :class:`SpatialModel` of it.
+    who : str
+        Who asks, for the message.
+
+    Returns
+    -------
+    Model
+
+    Raises
+    ------
+    FmscalError
+        ``model`` is none of these (a model-less call).
+    """
+    if isinstance(model, Model):
+        return model
+    if isinstance(model, Payload):
+        return PlanarModel(model)
+    if isinstance(model, SpatialPayload):
+        return SpatialModel(model)
+    raise FmscalError(f"{who} needs a model (plant.PlanarModel, plant.SpatialModel) or a payload "
+                      f"(plant.Payload, plant.SpatialPayload); got {type(model).__name__}")
+
+
+def model_for_columns(header):
+    """Which case a log's header belongs to: ``"planar"`` or ``"spatial"``.
+
+    Parameters
+    ----------
+    header : sequence of str
+        The column names of a log.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    FmscalError
+        The header holds neither case's columns.
+    """
+    names = set(header)
+    for model in (SpatialModel, PlanarModel):
+        if set(("t", *model.pose_names, *model.wrench_names)) <= names:
+            return model.name
+    expected = " or ".join(f"{','.join(('t', *m.pose_names, *m.wrench_names))} ({m.name})"
+                           for m in (PlanarModel, SpatialModel))
+    raise FmscalError(f"a log's header is {expected}; got {','.join(header)[:200]}")
