@@ -305,9 +305,16 @@ def build_parser():
     argparse.ArgumentParser
         The parser :func:`main` uses; ``fmscal --help`` prints it.
     """
+    from importlib.metadata import PackageNotFoundError, version
     parser = _Parser(
         prog="fmscal",
         description="Calibrate a force-moment sensor from motion, and compare the observers that do it.")
+    try:
+        installed = version("fmscal")           # the installed distribution's, as pip reports it
+    except PackageNotFoundError:                # the folders imported without an installation
+        installed = "unknown (not installed)"
+    parser.add_argument("--version", action="version", version=f"%(prog)s {installed}",
+                        help="print the installed version of fmscal and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in _COMMANDS:
         add(sub)

@@ -101,3 +101,9 @@ def test_ablation_quick_gives_one_row_per_change(capsys):
     assert [r["step"] for r in rows] == [0, 1, 2, 3]
     assert all(r["ratio"] > 0.5 for r in rows)                    # nothing beats the floor by far
     assert rows[0]["ratio"] > 10 * rows[-1]["ratio"]              # the paper's law is far from it
+
+
+def test_version_is_the_installed_distributions(capsys):
+    from importlib.metadata import version
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"fmscal {version('fmscal')}"
