@@ -107,3 +107,12 @@ def test_version_is_the_installed_distributions(capsys):
     from importlib.metadata import version
     assert main(["--version"]) == 0
     assert capsys.readouterr().out.strip() == f"fmscal {version('fmscal')}"
+
+
+def test_simulate_help_lists_every_scenario_on_its_own_line(capsys):
+    assert main(["simulate", "--help"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    for name, sc in {**plant.SCENARIOS, **plant.SPATIAL_SCENARIOS}.items():
+        (line,) = [k for k in lines if k.split()[:1] == [name]]
+        assert sc.description.split()[0] in line
+
