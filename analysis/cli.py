@@ -43,6 +43,8 @@ def one_line(message):
     return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
 #: Largest high-gain parameter check-gains accepts, rad/s (a million times the default's 20).
 MAX_LAM = 1e7
+#: The folder ``fmscal reproduce`` writes without ``--out`` (in the current folder); each run replaces its files.
+REPRODUCE_DIR = "reproduce"
 
 
 def _add_simulate(sub):
@@ -190,7 +192,10 @@ def _add_reproduce(sub):
     p = sub.add_parser("reproduce", help="the paper's section 4: Figs. 2-4 and claimed vs measured E",
                        description="Run the paper, noisy and time-varying scenarios (planar) for every observer; "
                                    "write PNG figures and summary.md to --out, and print the summary.")
-    p.add_argument("--out", default="reproduce", metavar="DIR", help="the folder to write (default: reproduce)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help=f"the folder to write (default: {REPRODUCE_DIR}/ in the current folder, whose figures and "
+                        "summary.md each run replaces; a DIR given here that holds them already is refused "
+                        "without --overwrite)")
     p.add_argument("--seed", type=int, default=0, help="seed of every scenario's noise and initial S_hat (default 0)")
     p.add_argument("--quick", type=float, default=1.0, metavar="FRACTION",
                    help="run this fraction of each scenario's length (default 1: the paper's)")
@@ -205,10 +210,14 @@ def cmd_reproduce(args):
         raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
     check_seeds(seed=args.seed)
     check_jobs(args.jobs)
-    check_output_dir(args.out, output_names(), overwrite=args.overwrite)
-    with claim_folder(args.out):                # one run's alone: a second one at once is refused
-        reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
-    print((Path(args.out) / "summary.md").read_text())
+    # the default folder is the command's own: a second run replaces what the first wrote there (README's quick
+    # start runs again); a folder the user named keeps its files unless --overwrite
+    own = args.out is None
+    out = REPRODUCE_DIR if own else args.out
+    check_output_dir(out, output_names(), overwrite=args.overwrite or own)
+    with claim_folder(out), exclusive(not (args.overwrite or own)):   # one run's alone: a second one at once is refused
+        reproduce(out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
+    print((Path(out) / "summary.md").read_text())
 
 
 def _add_ablation(sub):

@@ -116,3 +116,11 @@ def test_simulate_help_lists_every_scenario_on_its_own_line(capsys):
         (line,) = [k for k in lines if k.split()[:1] == [name]]
         assert sc.description.split()[0] in line
 
+
+def test_reproduce_replaces_its_own_folder_but_not_one_the_user_named(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    for _ in range(2):                  # README's quick start, run twice
+        assert main(["reproduce", "--quick", "0.01", "--jobs", "1"]) == 0
+    assert (tmp_path / "reproduce" / "summary.md").stat().st_size > 0
+    assert main(["reproduce", "--quick", "0.01", "--jobs", "1", "--out", "reproduce"]) == 2
+    assert "add --overwrite" in capsys.readouterr().err
