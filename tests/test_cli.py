@@ -124,3 +124,15 @@ def test_reproduce_replaces_its_own_folder_but_not_one_the_user_named(tmp_path, 
     assert (tmp_path / "reproduce" / "summary.md").stat().st_size > 0
     assert main(["reproduce", "--quick", "0.01", "--jobs", "1", "--out", "reproduce"]) == 2
     assert "add --overwrite" in capsys.readouterr().err
+
+
+def test_reproduce_says_why_the_floor_does_not_converge_where_S_changes():
+    from fmscal.analysis.reproduce import summary_markdown
+    row = {"E_100": 1e-3, "E_end": 1e-3, "E_median_last_10s": 1e-3, "convergence_time": 1.0, "diverged": False,
+           "converged": True, "wall_time": 0.1, "S_hat_100": np.eye(3).tolist(), "S_changes": []}
+    rows = [{**row, "scenario": sc, "observer": obs} for sc in ("paper", "time-varying")
+            for obs in ("adaptive", "max-likelihood")]
+    rows[-1].update(E_end=1.18, converged=False, S_changes=[100.0, 200.0])
+    text = summary_markdown(rows, 0, 1.0)
+    assert "does not converge on time-varying" in text and "at 100 and 200 s" in text and "1.18" in text
+    assert "on paper" not in text
