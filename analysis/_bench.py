@@ -212,7 +212,7 @@ def run_bench(settings=None, progress=True):
     Parameters
     ----------
     settings : BenchSettings, optional
-        Default: the full benchmark (a few minutes on 2 cores).
+        Default: the full benchmark (its run time: docs/speed.md).
     progress : bool
         Progress bars for the reproduction and the sweep.
 

@@ -122,7 +122,7 @@ def floor_error(log, truth, payload):
     log as every method sees it (:func:`run_observer`), with the log's own
     noise (``truth.noise``; not what a scenario tells a method on purpose,
     ``ekf-noise-low``); its E is taken as every method's is
-    (:func:`analysis._metrics.tail_median`).
+    (:func:`analysis.tail_median`).
 
     Parameters
     ----------
@@ -296,7 +296,7 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
     pandas.DataFrame
         One row per observer, scenario and seed: ``observer``, ``scenario``,
         ``seed``, ``duration``, ``E`` (the median over the last 10 % of
-        the run, :func:`analysis._metrics.tail_median`), ``E_end`` (the last
+        the run, :func:`analysis.tail_median`), ``E_end`` (the last
         sample), ``floor_E`` (the floor's E on the same log,
         :func:`floor_error`; NaN where the floor did not converge), ``E_over_floor`` (``E / floor_E``: how much
         accuracy the method leaves on the table), ``E_10s``, ``E_30s``,
@@ -332,7 +332,7 @@ def summarise(table):
     Parameters
     ----------
     table : pandas.DataFrame
-        From :func:`compare` or :func:`analysis._sweep.sweep`.
+        From :func:`compare` or :func:`analysis._sweep`.
 
     Returns
     -------

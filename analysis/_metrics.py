@@ -118,9 +118,10 @@ def tail_seen(n, fraction=TAIL_FRACTION):
     seen ``k`` samples; over the last ``fraction`` of a run of ``n`` the
     median of a settling estimate is its value at the tail's middle, after
     ``n (1 - fraction / 2)`` samples, while a fit of the whole log has seen
-    all ``n``. On a log whose last tenth still adds much information (the
-    floor's E on 20 s of ``spatial-arm``, seed 2, is 0.131 on its first 95 %
-    and 0.091 on all of it), the two differ by more than the methods do.
+    all ``n``. On a log whose last tenth still adds much information (a
+    short spatial log: docs/comparison.md, "In 3D";
+    ``benchmarks/online_floor_3d.py`` prints both floors seed by seed), the
+    two differ by more than the methods do.
 
     Parameters
     ----------

@@ -8,7 +8,10 @@ Legends sit outside the axes, never over a curve. A method whose estimate
 wanders far from the others (the paper's literal configuration under noise)
 does not set the scale: the y-limits come from the well-behaved methods, the
 wandering curve is clipped at the frame, and the title says which method was
-clipped.
+clipped. A method that does not wander but ends far above the best one (the
+high-gain observer of [4] as the seed paper describes it, whose estimate
+chatters about the truth) is drawn thin, lighter and behind the others, so
+that its noisy trace does not hide theirs.
 """
 
 import numpy as np
@@ -24,6 +27,9 @@ _MAX_POINTS = 2000        # points drawn per curve
 #: A method whose median E over the second half of the run exceeds this factor times the
 #: methods' median (and 0.1) wanders: it is clipped rather than setting the scale.
 WANDER_FACTOR = 10.0
+#: A method (not clipped) whose median E over the second half of the run exceeds this factor
+#: times the best method's is drawn thin, lighter and behind the others.
+_BEHIND_FACTOR = 5.0
 
 
 def _figure(figsize):
@@ -90,21 +96,37 @@ def _clip_note(clipped):
     return f"\n({names} wanders far: drawn faded and clipped at the frame; the others set the scale)"
 
 
-def _style(name, clipped):
-    """A clipped method drawn thin and faded, under the others."""
-    return {"lw": 0.6, "alpha": 0.45, "zorder": 1} if name in clipped else {"lw": 1.0, "zorder": 2}
+def _behind(E_curves, clipped):
+    """Methods, not in ``clipped``, whose median E over the second half of the run exceeds
+    :data:`_BEHIND_FACTOR` times the best method's: drawn behind the others (:func:`_style`)."""
+    late = {name: float(np.nanmedian(E[len(E) // 2:])) if len(E) else np.inf for name, E in E_curves.items()}
+    finite = [v for v in late.values() if np.isfinite(v) and v > 0]
+    if not finite:
+        return set()
+    best = min(finite)
+    return {name for name, v in late.items() if name not in clipped and np.isfinite(v) and v > _BEHIND_FACTOR * best}
+
+
+def _style(name, clipped, behind=()):
+    """A clipped method drawn thin and faded, under the others; a method far above the best (``behind``) thin and
+    lighter, under the well-behaved ones, so that a noisy trace does not cover them."""
+    if name in clipped:
+        return {"lw": 0.6, "alpha": 0.45, "zorder": 1}
+    if name in behind:
+        return {"lw": 0.6, "alpha": 0.55, "zorder": 1.5}
+    return {"lw": 1.0, "zorder": 2}
 
 
 def _label(name, clipped):
     return method_label(name) + (" (clipped)" if name in clipped else "")
 
 
-def _E_panel(ax, curves, clipped):
+def _E_panel(ax, curves, clipped, behind=()):
     """E against time on a log scale, one line per method; limits from the unclipped ones."""
     kept = []
     for name, (t, E) in curves.items():
         E = np.maximum(np.asarray(E, dtype=float), 1e-12)
-        ax.semilogy(t, E, label=_label(name, clipped), **_style(name, clipped))
+        ax.semilogy(t, E, label=_label(name, clipped), **_style(name, clipped, behind))
         if name not in clipped:
             kept.append(E)
     if kept:
@@ -140,7 +162,7 @@ def _S_limits(histories, S_true, clipped, i, j, bands=None):
     return lo - pad, hi + pad
 
 
-def _S_panels(fig, spec, times, histories, S_true, t_true, clipped, bands=None):
+def _S_panels(fig, spec, times, histories, S_true, t_true, clipped, bands=None, behind=()):
     """The entries of S_hat in an n x n block of ``spec`` (3 x 3 in the plane); returns the axes."""
     n = next(iter(histories.values())).shape[-1]
     axes = spec.subgridspec(n, n, hspace=0.35, wspace=0.3).subplots(sharex=True, squeeze=False)
@@ -148,7 +170,8 @@ def _S_panels(fig, spec, times, histories, S_true, t_true, clipped, bands=None):
         for j in range(n):
             ax = axes[i, j]
             for name, h in histories.items():
-                line, = ax.plot(times[name], h[:, i, j], label=_label(name, clipped), **_style(name, clipped))
+                line, = ax.plot(times[name], h[:, i, j], label=_label(name, clipped),
+                                **_style(name, clipped, behind))
                 if bands is not None and bands.get(name) is not None:
                     centre, sd = h[-1, i, j], bands[name][i][j]
                     ax.axhspan(centre - sd, centre + sd, color=line.get_color(), alpha=0.25, lw=0,
@@ -188,14 +211,16 @@ def plot_comparison(runs, truth, path, title):
     curves = {name: (t, E) for name, (t, E, _) in drawn.items()}
     histories = {name: S for name, (_, _, S) in drawn.items()}
     clipped = wandering_methods({name: np.asarray(E) for name, (_, E, _) in runs.items()})
+    behind = _behind({name: np.asarray(E) for name, (_, E, _) in runs.items()}, clipped)
     fig = _figure((15, 6.2))
     outer = fig.add_gridspec(1, 2, width_ratios=[1.0, 1.55], wspace=0.18)
     ax = fig.add_subplot(outer[0])
-    _E_panel(ax, curves, clipped)
+    _E_panel(ax, curves, clipped, behind)
     ax.set_title("E against time (log scale)", fontsize=10)
     t_true = max(curves.values(), key=lambda c: len(c[0]))[0]
     S_true = None if truth is None else truth.S_at(t_true)
-    _S_panels(fig, outer[1], {n: c[0] for n, c in curves.items()}, histories, S_true, t_true, clipped)
+    _S_panels(fig, outer[1], {n: c[0] for n, c in curves.items()}, histories, S_true, t_true, clipped,
+              behind=behind)
     handles, labels = ax.get_legend_handles_labels()
     if S_true is not None:
         from matplotlib.lines import Line2D
@@ -229,7 +254,7 @@ def plot_error_histories(curves, path, title):
     clipped = wandering_methods({name: E for name, (_, E) in curves.items()})
     fig = _figure((9, 4.5))
     ax = fig.add_subplot()
-    _E_panel(ax, curves, clipped)
+    _E_panel(ax, curves, clipped, _behind({name: E for name, (_, E) in curves.items()}, clipped))
     ax.set_title(title + _clip_note(clipped), fontsize=10)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     _save(fig, path, dpi=110)
@@ -254,12 +279,14 @@ def plot_S_entries(results, truth, path, title):
     S_true = None if truth is None else truth.S_at(t_true)
     if truth is not None:
         from fmscal.analysis._metrics import error_history
-        clipped = wandering_methods({r.observer: error_history(r.S_hat_history[::_thin(len(r.t))],
-                                                               truth.S_at(times[r.observer])) for r in results})
+        errors = {r.observer: error_history(r.S_hat_history[::_thin(len(r.t))], truth.S_at(times[r.observer]))
+                  for r in results}
+        clipped = wandering_methods(errors)
+        behind = _behind(errors, clipped)
     else:
-        clipped = set()
+        clipped, behind = set(), set()
     fig = _figure((11, 7.5))
-    axes = _S_panels(fig, fig.add_gridspec(1, 1)[0], times, histories, S_true, t_true, clipped)
+    axes = _S_panels(fig, fig.add_gridspec(1, 1)[0], times, histories, S_true, t_true, clipped, behind=behind)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(len(labels), 6),
                fontsize=9, frameon=False)

@@ -252,7 +252,7 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
         One row per case and observer variant, in case order whatever ran
         it: ``case``, ``scenario``, ``seed``, ``noise_scale``, ``settings``
         (a label, ``"default"`` or ``"lam=10"``) and the columns of
-        :func:`analysis._comparison.compare`.
+        :func:`analysis.compare`.
     """
     seeds = seed_list(seeds)
     scenarios = [case_scenario(s).name for s in scenarios]

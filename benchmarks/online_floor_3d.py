@@ -1,8 +1,8 @@
 """The online methods in 3D against the floor, seed by seed: ``python benchmarks/online_floor_3d.py [SEEDS]``.
 
 For each seed of a 20 s ``spatial-arm`` log (default seeds 0-8), the adaptive observer's and the EKF's E (the
-median over the run's last tenth, :func:`fmscal.analysis._metrics.tail_median`) over the floor's E, the floor
-fitted on the samples that median has seen (:func:`fmscal.analysis._metrics.tail_seen`) and on the whole log.
+median over the run's last tenth, :func:`fmscal.analysis.tail_median`) over the floor's E, the floor
+fitted on the samples that median has seen (:func:`fmscal.analysis.tail_seen`) and on the whole log.
 The tests assert seeds 0-2 (``tests/test_spatial_adaptive.py``, ``tests/test_spatial_ekf.py``); this prints
 the seeds beside them, as docs/comparison.md quotes them. About a minute on 2 cores.
 """

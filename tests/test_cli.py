@@ -101,3 +101,38 @@ def test_ablation_quick_gives_one_row_per_change(capsys):
     assert [r["step"] for r in rows] == [0, 1, 2, 3]
     assert all(r["ratio"] > 0.5 for r in rows)                    # nothing beats the floor by far
     assert rows[0]["ratio"] > 10 * rows[-1]["ratio"]              # the paper's law is far from it
+
+
+def test_version_is_the_installed_distributions(capsys):
+    from importlib.metadata import version
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"fmscal {version('fmscal')}"
+
+
+def test_simulate_help_lists_every_scenario_on_its_own_line(capsys):
+    assert main(["simulate", "--help"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    for name, sc in {**plant.SCENARIOS, **plant.SPATIAL_SCENARIOS}.items():
+        (line,) = [k for k in lines if k.split()[:1] == [name]]
+        assert sc.description.split()[0] in line
+
+
+def test_reproduce_replaces_its_own_folder_but_not_one_the_user_named(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    for _ in range(2):                  # README's quick start, run twice
+        assert main(["reproduce", "--quick", "0.01", "--jobs", "1"]) == 0
+    assert (tmp_path / "reproduce" / "summary.md").stat().st_size > 0
+    assert main(["reproduce", "--quick", "0.01", "--jobs", "1", "--out", "reproduce"]) == 2
+    assert "add --overwrite" in capsys.readouterr().err
+
+
+def test_reproduce_says_why_the_floor_does_not_converge_where_S_changes():
+    from fmscal.analysis._reproduce import summary_markdown
+    row = {"E_100": 1e-3, "E_end": 1e-3, "E_median_last_10s": 1e-3, "convergence_time": 1.0, "diverged": False,
+           "converged": True, "wall_time": 0.1, "S_hat_100": np.eye(3).tolist(), "S_changes": []}
+    rows = [{**row, "scenario": sc, "observer": obs} for sc in ("paper", "time-varying")
+            for obs in ("adaptive", "max-likelihood")]
+    rows[-1].update(E_end=1.18, converged=False, S_changes=[100.0, 200.0])
+    text = summary_markdown(rows, 0, 1.0)
+    assert "does not converge on time-varying" in text and "at 100 and 200 s" in text and "1.18" in text
+    assert "on paper" not in text

@@ -22,7 +22,7 @@ def _is_png(path):
 
 def test_importing_the_plots_leaves_the_backend_alone():
     code = ("import matplotlib; matplotlib.use('svg'); "
-            "import fmscal.analysis._plots, fmscal.analysis.cli._main, fmscal.analysis._reproduce; "
+            "import fmscal.analysis._plots, fmscal.analysis.cli, fmscal.analysis._reproduce; "
             "print(matplotlib.get_backend())")          # (python-control imports pyplot; that alone switches nothing)
     env = {**os.environ, "MPLBACKEND": "svg"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
@@ -63,3 +63,14 @@ def test_a_wandering_method_is_clipped_and_named(tmp_path):
     runs = {name: (t, e, np.tile(np.eye(3), (len(t), 1, 1))) for name, e in E.items()}
     assert plot_comparison(runs, None, tmp_path / "c.png", "test") == {"adaptive-paper"}
     assert _is_png(tmp_path / "c.png")
+
+
+def test_a_method_far_above_the_best_is_drawn_behind_the_others():
+    from fmscal.analysis._plots import _behind, _style
+    t = np.linspace(0, 10, 500)
+    E = {"ekf": 1e-3 + 0 * t, "high-gain": 3e-3 + 0 * t, "high-gain-ref4": 3e-2 * (1.5 + np.sin(40 * t))}
+    behind = _behind(E, clipped=set())
+    assert behind == {"high-gain-ref4"}
+    assert _style("high-gain-ref4", set(), behind)["zorder"] < _style("ekf", set(), behind)["zorder"]
+    assert _style("high-gain-ref4", set(), behind)["lw"] < _style("ekf", set(), behind)["lw"]
+    assert _behind(E, clipped={"high-gain-ref4"}) == set()       # clipped already: drawn faded, not twice

@@ -120,10 +120,12 @@ def test_a_flipped_quaternion_is_the_same_attitude(short_log):
     np.testing.assert_allclose(runs[1][0], runs[0][0], rtol=0, atol=1e-12)
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
 @pytest.mark.parametrize("compiled", [True, False])
 def test_a_diverging_run_is_an_error_not_an_answer(compiled):
     """The normalised gradient at a rate far beyond the data's drives S_hat out of the divergence bound: the
-    run stops there, diverged and not converged, on either path at the same step."""
+    run stops there, diverged and not converged, on either path at the same step, and says so in its result,
+    not in numpy's overflow warnings."""
     log = ARM.with_(duration=2.0).generate(0)[0]
     result = AdaptiveObserver(MODEL, offset=True, gain="gradient", gamma=GAMMA_DIVERGING).run(log, compiled=compiled)
     assert result.diverged and not result.converged and result.S_std is None

@@ -22,8 +22,9 @@ def add_calibrate(sub):
                                    "reports the directions of S held poses cannot determine, never converged). "
                                    "Prints S_hat with its one-sigma uncertainty, whether the run converged, "
                                    "warnings about excitation and model consistency, and E with --truth.")
-    p.add_argument("log", metavar="LOG.csv|TABLE.csv")
-    p.add_argument("--mass", type=float, required=True, metavar="KG")
+    p.add_argument("log", metavar="LOG.csv|TABLE.csv",
+                   help="a planar or spatial log, or a pose table (the header tells which)")
+    p.add_argument("--mass", type=float, required=True, metavar="KG", help="the payload's mass, kg")
     p.add_argument("--inertia", type=float, nargs="+", metavar="I",
                    help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
                         "tensor about the centre of mass in sensor axes (a pose table needs it only with --save)")
@@ -37,13 +38,19 @@ def add_calibrate(sub):
                    help="spatial logs and tables: the reading's sign, reaction (default, the wrench the mount "
                         "applies to the payload) or load (the wrench the tool applies to the sensor, as ATI, "
                         "Robotiq, Bota and OnRobot report); recorded in the saved calibration")
+    from fmscal.plant import SPATIAL_SCENARIOS       # the methods that run on a spatial log: on a spatial payload's
+    spatial_methods = method_names(calibrates=True, model=next(iter(SPATIAL_SCENARIOS.values())).payload)
     p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
-                   help=f"method for a planar log (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at "
-                        "the information floor; its noise model is estimated from the log unless given)")
+                   help=f"the method (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at the information "
+                        "floor; its noise model is estimated from the log unless given). A planar log takes every "
+                        "one; a spatial log takes " + ", ".join(spatial_methods) + "; a pose table none (held "
+                        "poses have one fit, least squares)")
     p.add_argument("--pose-noise", type=float, nargs=2, metavar=("SD_RAD", "SD_M"),
-                   help="pose noise standard deviations (default: estimated from the log)")
+                   help="planar logs only: pose noise standard deviations, rad and m (default: estimated from "
+                        "the log; a spatial log's is always estimated)")
     p.add_argument("--wrench-noise", type=float, nargs=3, metavar=("SD_M", "SD_FX", "SD_FY"),
-                   help="raw-reading noise standard deviations, N m and N (default: estimated from the log)")
+                   help="planar logs only: raw-reading noise standard deviations, N m and N (default: estimated "
+                        "from the log; a spatial log's is always estimated)")
     p.add_argument("--offset", action=argparse.BooleanOptionalAction, default=True,
                    help="estimate the sensor's offset b in w = S (w_hat - b) with S (default: yes; "
                         "--no-offset for an offset-free sensor, as in the paper)")
@@ -190,9 +197,11 @@ def add_apply(sub):
                                    "w = S (-w_hat - b) for a calibration recorded with --reading load, "
                                    "for every row of READINGS.csv (columns t,M,fx,fy, or t,tx,ty,tz,fx,fy,fz "
                                    "for a spatial calibration, or a full log); writes the same columns.")
-    p.add_argument("calibration", metavar="CAL.json")
-    p.add_argument("readings", metavar="READINGS.csv")
-    p.add_argument("--out", required=True, metavar="WRENCH.csv")
+    p.add_argument("calibration", metavar="CAL.json", help="a calibration saved by fmscal calibrate --save")
+    p.add_argument("readings", metavar="READINGS.csv",
+                   help="the raw readings: t,M,fx,fy (planar), t,tx,ty,tz,fx,fy,fz (spatial), or a full log")
+    p.add_argument("--out", required=True, metavar="WRENCH.csv",
+                   help="the calibrated wrenches, the same columns as the readings")
     p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
     p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
     p.add_argument("--inertia", type=float, nargs="+", metavar="I", help="planar I_G, or the six spatial entries")

@@ -42,7 +42,8 @@ def add_scenarios_and_observers(p, default_observers):
     from fmscal.observers import METHODS
     from fmscal.plant import SCENARIOS
     p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
-                   help="one or more of: " + ", ".join(SCENARIOS) + " (compare also takes the spatial ones)")
+                   help="one or more of: " + ", ".join(SCENARIOS) + ", or the spatial ones (fmscal simulate --help "
+                        "lists them all); a method that does not run in 3D is reported not applicable there")
     p.add_argument("--observer", nargs="+", default=list(default_observers), metavar="NAME",
                    help="one or more of: " + ", ".join(METHODS) + f" (default: {' '.join(default_observers)})")
 

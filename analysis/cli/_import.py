@@ -23,11 +23,12 @@ def add_import(sub):
                                    "the header stamps, t = 0 at the first wrench sample; "
                                    "each pose goes to the nearest wrench sample. Writes the log, the sidecar "
                                    "LOG.import.json of what was imported, and prints the import report.")
-    p.add_argument("bag", metavar="BAG")
+    p.add_argument("bag", metavar="BAG", help="a ROS 2 bag's folder, its .mcap or .db3 file, or a ROS 1 .bag")
     p.add_argument("--wrench-topic", required=True, metavar="TOPIC", help="the sensor's WrenchStamped topic")
     p.add_argument("--pose-topic", required=True, metavar="TOPIC",
                    help="the payload's PoseStamped, TransformStamped or Odometry topic")
-    p.add_argument("--out", required=True, metavar="LOG.csv")
+    p.add_argument("--out", required=True, metavar="LOG.csv",
+                   help="the log to write; the sidecar LOG.import.json goes beside it")
     p.add_argument("--pose-offset", type=float, nargs="+", default=None, metavar="D",
                    help="planar DX DY: the tracked marker frame's origin relative to the payload's centre of mass, "
                         "body frame, m; with --spatial DX DY DZ: the tracked frame's origin from the sensor point, "

@@ -43,32 +43,53 @@ def one_line(message):
     return message if len(message) <= MAX_MESSAGE else message[:MAX_MESSAGE] + "..."
 #: Largest high-gain parameter check-gains accepts, rad/s (a million times the default's 20).
 MAX_LAM = 1e7
+#: The folder ``fmscal reproduce`` writes without ``--out`` (in the current folder); each run replaces its files.
+REPRODUCE_DIR = "reproduce"
 
 
 def _add_simulate(sub):
     from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
     every = {**SCENARIOS, **SPATIAL_SCENARIOS}
+    import textwrap
+    # the scenarios one per line, each with its own description (the epilog is printed as written)
+    width = max(map(len, every)) + 2
+
+    def listed(scenarios):
+        return "\n".join(textwrap.fill(sc.description, 79, initial_indent=f"  {name:<{width}}",
+                                        subsequent_indent=" " * (width + 2)) for name, sc in scenarios.items())
     p = sub.add_parser("simulate", help="simulate a scenario and write LOG.csv and LOG.truth.json",
-                       description="Simulate a named scenario. Writes the log (planar t,theta,x,y,M,fx,fy; "
-                                   "spatial t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) and the sidecar "
-                                   "LOG.truth.json. Scenarios: " +
-                                   "; ".join(f"{k}: {v.description}" for k, v in every.items()))
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description=textwrap.fill(
+                           "Simulate a named scenario. Writes the log (planar t,theta,x,y,M,fx,fy; spatial "
+                           "t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) and the sidecar LOG.truth.json (the true S, "
+                           "payload, noise and offset).", 79),
+                       epilog=f"planar scenarios (a 3-axis reading, the paper's case):\n{listed(SCENARIOS)}\n\n"
+                              f"spatial scenarios (a 6-axis reading, a payload moving in 3D under gravity):\n"
+                              f"{listed(SPATIAL_SCENARIOS)}")
     p.add_argument("--scenario", default="paper", choices=sorted(every), metavar="NAME",
-                   help="one of: " + ", ".join(every))
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, help="s (default: the scenario's)")
+                   help="the scenario, planar or spatial (listed below; default paper)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the noise, the initial estimate and any random S (default 0); the same seed "
+                        "gives the same log")
+    p.add_argument("--duration", type=float, help="run length, s (default: the scenario's)")
     p.add_argument("--dt", type=float, help="sample time, s (default: the scenario's, 0.001)")
     p.add_argument("--noise-free", action="store_true", help="no measurement noise")
     p.add_argument("--pose-rate", type=float, metavar="HZ", help="pose measurements per second")
     p.add_argument("--drop-rate", type=float, metavar="FRAC", help="fraction of pose frames dropped")
-    p.add_argument("--mass", type=float, metavar="KG", help="payload mass (default: the scenario's)")
-    p.add_argument("--inertia", type=float, metavar="KGM2", help="payload I_G (default: the scenario's)")
-    p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"), help="offset, m (default: the scenario's)")
+    p.add_argument("--mass", type=float, metavar="KG",
+                   help="planar scenarios: payload mass, kg (default: the scenario's)")
+    p.add_argument("--inertia", type=float, metavar="KGM2",
+                   help="planar scenarios: payload I_G, kg m^2 (default: the scenario's)")
+    p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"),
+                   help="planar scenarios: rho, from the centre of mass to the sensor, body frame, m (default: the "
+                        "scenario's)")
     p.add_argument("--offset", type=float, nargs=3, metavar=("B_M", "B_FX", "B_FY"),
-                   help="sensor offset b in w = S (w_hat - b), N m and N (default: the scenario's)")
+                   help="planar scenarios: sensor offset b in w = S (w_hat - b), N m and N (default: the scenario's; "
+                        "a spatial scenario draws its own)")
     p.add_argument("--latency", type=float, metavar="S",
                    help="delay of the pose stream behind the sensor stream, s (default: the scenario's)")
-    p.add_argument("--out", required=True, metavar="LOG.csv")
+    p.add_argument("--out", required=True, metavar="LOG.csv",
+                   help="the log to write; its sidecar goes beside it as LOG.truth.json")
     p.add_argument("--overwrite", action="store_true", help="replace an existing LOG.csv and LOG.truth.json")
     p.set_defaults(func=cmd_simulate)
 
@@ -138,7 +159,7 @@ def _add_check_gains(sub):
                         "eq. (14) as printed; with --lam, the high-gain observer with poles at -LAM")
     p.add_argument("--lam", type=float, default=None,
                    help="high-gain parameter in rad/s for the high-gain configurations")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print the report as JSON instead")
     p.set_defaults(func=cmd_check_gains)
 
 
@@ -169,10 +190,13 @@ def cmd_check_gains(args):
 
 def _add_reproduce(sub):
     p = sub.add_parser("reproduce", help="the paper's section 4: Figs. 2-4 and claimed vs measured E",
-                       description="Run the paper, noisy and time-varying scenarios for every observer; "
-                                   "write PNG figures and summary.md to --out.")
-    p.add_argument("--out", default="reproduce", metavar="DIR")
-    p.add_argument("--seed", type=int, default=0)
+                       description="Run the paper, noisy and time-varying scenarios (planar) for every observer; "
+                                   "write PNG figures and summary.md to --out, and print the summary.")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help=f"the folder to write (default: {REPRODUCE_DIR}/ in the current folder, whose figures and "
+                        "summary.md each run replaces; a DIR given here that holds them already is refused "
+                        "without --overwrite)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every scenario's noise and initial S_hat (default 0)")
     p.add_argument("--quick", type=float, default=1.0, metavar="FRACTION",
                    help="run this fraction of each scenario's length (default 1: the paper's)")
     p.add_argument("--overwrite", action="store_true", help="replace figures and summary.md already in DIR")
@@ -186,10 +210,14 @@ def cmd_reproduce(args):
         raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
     check_seeds(seed=args.seed)
     check_jobs(args.jobs)
-    check_output_dir(args.out, output_names(), overwrite=args.overwrite)
-    with claim_folder(args.out):                # one run's alone: a second one at once is refused
-        reproduce(args.out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
-    print((Path(args.out) / "summary.md").read_text())
+    # the default folder is the command's own: a second run replaces what the first wrote there (README's quick
+    # start runs again); a folder the user named keeps its files unless --overwrite
+    own = args.out is None
+    out = REPRODUCE_DIR if own else args.out
+    check_output_dir(out, output_names(), overwrite=args.overwrite or own)
+    with claim_folder(out), exclusive(not (args.overwrite or own)):   # one run's alone: a second one at once is refused
+        reproduce(out, seed=args.seed, duration_scale=args.quick, n_jobs=args.jobs)
+    print((Path(out) / "summary.md").read_text())
 
 
 def _add_ablation(sub):
@@ -198,7 +226,8 @@ def _add_ablation(sub):
                                    "default added in turn: median E over seeds (E the median over the last 10 % "
                                    "of each run) against the maximum-likelihood floor on the same logs, and the "
                                    "cost per step.")
-    p.add_argument("--scenario", nargs="+", default=["paper", "noisy"], metavar="NAME")
+    p.add_argument("--scenario", nargs="+", default=["paper", "noisy"], metavar="NAME",
+                   help="one or more planar scenarios (fmscal simulate --help lists them; default paper noisy)")
     p.add_argument("--seeds", type=int, default=3, metavar="N", help="seeds 0 .. N-1 (default 3)")
     p.add_argument("--duration", type=float, default=100.0, metavar="S", help="run length in s (default 100)")
     p.add_argument("--quick", action="store_true", help="one seed of 20 s: the same rows, for a check")
@@ -230,6 +259,9 @@ def _add_compare(sub):
                        description="Run every observer on the same simulated logs (same data, same "
                                    "initial S_hat) over scenarios and seeds; print the table of E, "
                                    "convergence time and cost. Scenarios: " + ", ".join(SCENARIOS))
+    from fmscal.plant import SPATIAL_SCENARIOS
+    p.epilog = ("The spatial scenarios too: " + ", ".join(SPATIAL_SCENARIOS) + " (a method that does not run in 3D, "
+                "as the paper's observer, is reported not applicable there).")
     add_scenarios_and_observers(p, METHODS)
     p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0 .. N-1 (default 1)")
     p.add_argument("--duration", type=float, metavar="S", help="run length in s (default: each scenario's)")
@@ -305,9 +337,16 @@ def build_parser():
     argparse.ArgumentParser
         The parser :func:`main` uses; ``fmscal --help`` prints it.
     """
+    from importlib.metadata import PackageNotFoundError, version
     parser = _Parser(
         prog="fmscal",
         description="Calibrate a force-moment sensor from motion, and compare the observers that do it.")
+    try:
+        installed = version("fmscal")           # the installed distribution's, as pip reports it
+    except PackageNotFoundError:                # the folders imported without an installation
+        installed = "unknown (not installed)"
+    parser.add_argument("--version", action="version", version=f"%(prog)s {installed}",
+                        help="print the installed version of fmscal and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in _COMMANDS:
         add(sub)

@@ -34,7 +34,8 @@ def add_identify_payload(sub):
                                    "poses suffice) and its inertia (motion needed) from a spatial log or a pose "
                                    "table (the spatial header without t, one row per held pose), with "
                                    "one-sigma uncertainties, and say what the data did not determine.")
-    p.add_argument("log", metavar="LOG.csv|TABLE.csv")
+    p.add_argument("log", metavar="LOG.csv|TABLE.csv",
+                   help="a spatial log, an attitude-only log, or a pose table (the header tells which)")
     p.add_argument("--calibration", metavar="CAL.json", help="a spatial calibration (default: S = I)")
     p.add_argument("--gravity", nargs="+", metavar="GX GY GZ|estimate",
                    help="gravity in the pose frame, m/s^2 (default 0 0 -9.81); 'estimate': its direction is "

@@ -77,7 +77,7 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
     ``phi_g`` per group of :meth:`fmscal.plant.Model.parameter_groups`
     (planar: ``phi_1`` of eq. (4), ``phi_2`` of eq. (5)). The changes from
     the paper's observer (:class:`observers.PaperAdaptiveObserver`), each
-    switched by a setting so that :func:`analysis._ablation.ablation`
+    switched by a setting so that :func:`analysis._ablation`
     measures them one by one:
 
     1. **Discrete observer, poles at -lam** (eqs. 6, 7, 14): the exact
@@ -103,10 +103,10 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
        prior worth a thousandth of a sample; no noise model is needed (the
        innovations are weighted alike). (Planar ``phi_2`` could also be
        fitted in complex form, ``X + iY = zeta . (s_2 + i s_3)`` with a 3x3
-       Hermitian ``P``: the same fit, which earlier releases used. Measured
-       on a 60 s ``paper`` log, the real 6x6 form costs 1.08-1.16x the
-       complex one per step (1.12-1.25x with the offset), for one code path
-       for every model; its estimates differ by rounding, 1e-13.)
+       Hermitian ``P``: the same fit, which earlier releases used. The real
+       6x6 form costs a little more per step, for one code path for every
+       model; the two estimates differ by rounding. The step's cost:
+       ``fmscal bench``, docs/speed.md.)
     4. **Forgetting on evidence of change** (``track=True``; the paper's
        law has a constant gain and so never stops adapting): a change test
        per parameter set on the a priori errors, free of the noise's level

@@ -24,8 +24,9 @@ poses it is the last measured attitude turned by the observer's own turn
 since that pose (``chi - chi_pose``), so that the observer's attitude error
 at the pose does not enter the drives. What is left, the observer's rate
 error over the gap, is not in the filters: it shrinks with faster poles,
-hence the spatial default ``lam`` of :data:`SPATIAL_LAM` (on 200 Hz poses at
-5 rad/s the fit is several times the floor, at 20 rad/s within 1.4x).
+hence the spatial default ``lam`` of :data:`SPATIAL_LAM` (what the default
+reaches against the floor: docs/observers.md, ``tests/test_spatial_adaptive.py``,
+``benchmarks/online_floor_3d.py``).
 
 The outputs are the measured positions of ``C`` (``m p_C``, three double
 integrators exactly as the planar X, Y channels) and the attitude. The

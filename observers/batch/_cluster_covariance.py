@@ -18,8 +18,9 @@ the blocks, ``N`` the rows, ``K`` (in (U3)) the parameters determined.
 Why: the sandwich over ``G`` blocks estimates the variance from ``G``
 scores, so it falls short by about ``(G - 1) / G`` and is itself noisy with
 ``G - 1`` degrees of freedom; with 1 s blocks a 5 s log has five, and its
-z-scores (error over the reported uncertainty) had an rms of 1.8 to 2.0 on
-``spatial-arm``. Blocks of five correlation times (U2) miss at most a tenth
+z-scores (error over the reported uncertainty) run well above 1 (what they are
+over seeds: ``tests/test_spatial_floor.py``, docs/guide/spatial.md). Blocks
+of five correlation times (U2) miss at most a tenth
 of the variance across their borders (``tau / (2 L)`` for an exponential
 correlation); white residuals get blocks of the smoothing window, 25 in 5 s.
 """

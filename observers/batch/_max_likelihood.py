@@ -247,7 +247,8 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
     passes : int
         Filter passes, at least 1. The first takes the process noise at
         ``S0``, each further one at the previous estimate; two are enough
-        (the second changes ``E`` by a few per cent, a third by far less).
+        (a third moves the noise model, and so the estimate, far less than
+        the second did).
         Only the last pass carries the errors-in-variables moments (the
         others only set the next pass's noise model), at about twice the
         cost of each of the others.

@@ -305,7 +305,9 @@ class Observer:
         n, d = len(U), self.n_w * self.n_cols
         calibration, x = np.empty((n, d)), np.empty((n, self.model.nx))
         diverged = False
-        with progress_bar(n, self.name) as bar:           # shown on a long log in a terminal only
+        # a step that overflows is a diverging run, which _healthy stops at and the result reports (diverged, not
+        # converged): numpy's overflow warnings would only repeat it, and the compiled path gives none
+        with progress_bar(n, self.name) as bar, np.errstate(over="ignore", invalid="ignore"):
             for k in range(n):
                 if k == 0:
                     self._start(U[0])

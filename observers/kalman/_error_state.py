@@ -56,23 +56,19 @@ s_jl)``). ``Delta`` itself is derived, with no factor: for an error ``dS``
 of ``S_hat`` and the noise ``n`` independent and Gaussian, ``E[(dS n)(dS
 n)^T] = Delta``, what a second-order filter adds. What fails in 3D is the
 term it is added to. Over the first seconds the torque readings are barely
-excited, the errors in variables pull their gains towards zero (seed 1 of
-``spatial-arm`` after 1 s: the gain of the torque about z at 0.15 with ``Q``
-at the true ``S``, 0.0 with ``Q`` at the estimate, against 1.0), and
-``Q``'s row of that torque falls with the gain squared: the filter takes the yaw for
-noise-free, its ``P`` of ``S`` falls below its error (the spread of the
-z-scores of ``S`` 2.4 after 2 s on seeds 1 and 2 with ``Delta`` as derived)
-and, ``S`` being constant, that error stays. The factor 4 on ``Delta``
-(issue 23's empirical setting) drowned part of it. With the noise at
-``S0`` the filter is the floor's linear filter, online: on 20 s of
-``spatial-arm`` (seeds 0-8) its estimate ends 0.08-0.17 of the floor's
-standard deviations from the floor's (RMS over the entries), against
-0.28-0.78 with ``4 Delta``, and with ``Q`` at the true ``S``
-the same (0.11, 0.10 on seeds 1, 2). An ``S0`` off by a gain scales ``Q``
-and so ``S_std``, not the estimate: ``S0 = 0.8 I`` ends as near the floor
-(0.1 of its standard deviations) with ``S_std`` 0.81 times the floor's
-(start from the sensor's factory calibration, within a few per cent of
-``S``: then the noise model is off by as much).
+excited, the errors in variables pull their gains in ``S_hat`` towards
+zero, and ``Q``'s row of that torque falls with the gain squared: the
+filter takes the yaw for noise-free, its ``P`` of ``S`` falls below its
+error (the z-scores of ``S`` spread well above 1) and, ``S`` being
+constant, that error stays. The factor 4 on ``Delta`` (issue 23's empirical
+setting) drowned part of it. With the noise at ``S0`` the filter is the
+floor's linear filter, online: its estimate ends a small fraction of the
+floor's standard deviations from the floor's, as with ``Q`` at the true
+``S``. An ``S0`` off by a gain scales ``Q`` and so ``S_std`` by that gain,
+not the estimate (start from the sensor's factory calibration: the noise
+model is then off by as much as it is). The figures, seed by seed:
+docs/observers.md, ``tests/test_spatial_ekf.py``,
+``benchmarks/online_floor_3d.py``.
 
 Errors in variables (as in the plane, :mod:`observers.kalman._eiv`, with the
 floor's seeded copy, :mod:`observers.batch._linearised_floor`). The step's
@@ -88,7 +84,7 @@ filter's own ``P`` of ``s`` for ``J^-1``::
     s_c = s + g P_ss (B s) = s - g P_ss b_n,      P_c = T P_ss T^T,  T = I + g P_ss B
 
 (``g <= 1`` keeps the correction within a tenth of ``|s|`` while ``P`` is
-still the prior, :func:`observers.kalman._filter.correction_limit`); the filter runs
+still the prior, :func:`observers.kalman.correction_limit`); the filter runs
 on its own estimate, ``eiv=False`` reports it as it is.
 """
 
@@ -237,8 +233,8 @@ def _readable(model, offset):
     """:func:`error_step`'s ``jacobians`` and ``predict`` and :func:`injection` (dense), for the readable path.
 
     Evaluated by casadi's virtual machine, not built as C: the readable path
-    is for reading and checking, and building these in C took 20 s and more
-    on a fresh machine (the compiled run builds its own whole step).
+    is for reading and checking, and building these in C too would lengthen a
+    fresh machine's first run (the compiled run builds its own whole step).
     """
     jacobians, predict, _ = error_step(model, offset)
     return jacobians, predict, injection(model, offset)[0]

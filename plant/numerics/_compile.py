@@ -1,8 +1,8 @@
 """Compile casadi functions to C once, and call them through numpy buffers.
 
-casadi's own virtual machine evaluates a function at about a microsecond per
-hundred operations; the same function generated as C and built by the system
-C compiler runs several times faster. :func:`compile_function` does that
+casadi's own virtual machine interprets a function one operation at a time;
+the same function generated as C and built by the system C compiler runs
+faster (how much: ``fmscal bench``, docs/speed.md). :func:`compile_function` does that
 (``-O3`` for this machine's processor, without fast-math or fused
 multiply-adds), caching the shared library by the hash of its source and the
 processor (``FMSCAL_CACHE`` or ``~/.cache/fmscal``; processes that need the
@@ -36,14 +36,13 @@ __all__ = ["compile_function", "compile_functions", "compiler", "BufferedCall", 
 
 # no -ffast-math and no fused multiply-adds (-ffp-contract=off): the C code rounds each operation as numpy does
 _FLAGS = ("-O3", "-ffp-contract=off", "-fPIC", "-shared")
-# this machine's instruction set (1.2-1.4x on the larger steps); dropped where the compiler refuses it
+# this machine's instruction set (faster code on the larger steps); dropped where the compiler refuses it
 _NATIVE = ("-march=native",)
-# generated C beyond this many characters is built at -O1: -O3 spends minutes of a fresh machine on megabytes
-# of straight-line code for a few per cent of run time (measured on the spatial EKF's 4 MB step: 33 s to
-# build at -O3, 15 s at -O1, its whole run 5 % slower)
+# generated C beyond this many characters is built at -O1: on megabytes of straight-line code (the spatial EKF's
+# step) -O3 costs a fresh machine a much longer build for little run time (the figures: docs/speed.md)
 _LARGE_SOURCE = 1_000_000
 # a loop that keeps only its last state (ChunkedSteps(keep_states=False)) writes out this many steps one after
-# another, and repeats that block (casadi mapaccum) for longer loops: 1000 steps written out took seconds to build
+# another, and repeats that block (casadi mapaccum) for longer loops: a long loop written out is slow to build
 _UNROLLED = 10
 _loaded = {}                               # source hash -> casadi.Function, this process
 _warned = []

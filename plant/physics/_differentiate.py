@@ -123,9 +123,9 @@ def _smoothed(log, window):
 def _savgol(values, k, derivative, dt):
     """``scipy.signal.savgol_filter(values, k, ORDER, derivative, delta=dt, axis=0, mode="interp")``, its interior
     convolved by overlap-add (faster than the direct convolution for a window of hundreds of samples; equal to
-    rounding on a pose's values, below 1e-13 of the largest value to the second derivative on 60 s at 1 kHz,
-    tested) and its ends, where the window runs off the log, from the polynomial fitted to the first and last
-    ``k`` samples as ``mode="interp"`` does. The rounding scales with the largest value of the input."""
+    it to rounding, ``tests/test_inverse_dynamics_fit.py``) and its ends, where the window runs off the log, from
+    the polynomial fitted to the first and last ``k`` samples as ``mode="interp"`` does. The rounding scales with
+    the largest value of the input."""
     coefficients = savgol_coeffs(k, ORDER, deriv=derivative, delta=dt, use="conv")
     out = oaconvolve(values, coefficients[:, None], mode="same", axes=0)
     h = k // 2

@@ -7,7 +7,7 @@ Usage (from anywhere; the files land beside this script)::
 
 The inputs are small logs and tables (each well under 300 KB), written by
 the toolkit's own writers (``fmscal simulate``, :meth:`fmscal.plant.Log.write`,
-:func:`fmscal.plant.pose_table.write_pose_table`; the joint-angle table as
+:func:`fmscal.plant.io._pose_table.write_pose_table`; the joint-angle table as
 the tests write one), every draw seeded:
 
 - ``planar.csv``: the paper's scenario, 10 s at 100 Hz, the poses 30 ms late;
@@ -52,7 +52,7 @@ EXPECTED = HERE / "expected"
 
 #: The payload of the planar paper scenario (``fmscal simulate --scenario paper``).
 PLANAR = ["--mass", "2.5", "--inertia", "0.75", "--rho", "0.2", "0.25"]
-#: The spatial scenarios' tool (:data:`fmscal.plant.spatial_scenarios.TOOL`).
+#: The spatial scenarios' tool (:data:`fmscal.plant.scenarios._spatial.TOOL`).
 TOOL = ["--mass", "1.2", "--rho", "0.01", "-0.005", "0.06"]
 TOOL_INERTIA = ["--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4", "1.5e-4"]
 #: The pose stream's delay behind the sensor in the planar log and in the late spatial log, s.
@@ -159,9 +159,9 @@ def write_inputs(folder):
 
     from fmscal.analysis.cli import main
     from fmscal.plant import SPATIAL_SCENARIOS
-    from fmscal.plant.kinematics import RobotKinematics
-    from fmscal.plant.pose_table import simulate_table, write_pose_table
-    from fmscal.plant.spatial_scenarios import TOOL as TOOL_PAYLOAD
+    from fmscal.plant.io._kinematics import RobotKinematics
+    from fmscal.plant.io._pose_table import simulate_table, write_pose_table
+    from fmscal.plant.scenarios._spatial import TOOL as TOOL_PAYLOAD
     # planar: the paper's scenario, 10 s at 100 Hz (1001 samples), the poses three samples late
     assert main(["simulate", "--scenario", "paper", "--seed", "0", "--duration", "10", "--dt", "0.01",
                  "--latency", repr(PLANAR_LATENCY), "--out", str(folder / "planar.csv"), "--overwrite"]) == 0
