@@ -5,10 +5,9 @@ The tutorials are the repository's notebooks, copied here and executed at build 
 short settings the test suite uses (``FMSCAL_QUICK=1``).
 """
 
-import importlib
 import os
-import pkgutil
 import shutil
+import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -42,25 +41,12 @@ source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-n
 exclude_patterns = ["_build", "**.ipynb_checkpoints", "Thumbs.db", ".DS_Store"]
 templates_path = ["_templates"]
 
-# API reference: one page per public name, generated from the numpydoc docstrings.
+# API reference: docs/api/{plant,observers,analysis}.rst written from the packages' __all__ (docs/_api.py),
+# then one page per public class or function, generated from its numpydoc docstring.
+sys.path.insert(0, str(HERE))
+from _api import write_pages  # noqa: E402
 
-
-def _long_values(packages=("fmscal.plant", "fmscal.observers", "fmscal.analysis"), limit=120):
-    """Public constants whose value is too long to print on their page (a dict of scenarios)."""
-    names = set()
-    for package in packages:
-        pkg = importlib.import_module(package)
-        modules = [pkg] + [importlib.import_module(f"{package}.{m.name}")
-                           for m in pkgutil.iter_modules(pkg.__path__) if not m.name.startswith("_")]
-        for module in modules:
-            for name in getattr(module, "__all__", ()):
-                value = getattr(module, name)
-                if not callable(value) and len(repr(value)) > limit:
-                    names.add(f"{module.__name__}.{name}")
-    return names
-
-
-autosummary_context = {"long_values": _long_values()}
+write_pages(HERE / "api")
 autosummary_generate = True
 autosummary_imported_members = False
 autodoc_default_options = {"member-order": "bysource"}

@@ -110,7 +110,7 @@ def test_the_registry_is_the_only_list_of_names_the_cli_accepts(monkeypatch, tmp
 
 
 def test_no_module_keeps_its_own_list_of_method_names():
-    """Names appear as data only in observers/registry.py (docstrings and help texts aside)."""
+    """Names appear as data only in observers/_registry.py (docstrings and help texts aside)."""
     import ast
     import pathlib
     root = pathlib.Path(__file__).resolve().parents[1]

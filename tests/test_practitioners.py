@@ -1,4 +1,4 @@
-"""The practitioners' estimators reimplemented for comparison (observers/practitioners.py, issue 28)."""
+"""The practitioners' estimators reimplemented for comparison (observers/payload/_practitioners.py, issue 28)."""
 
 import numpy as np
 import pytest

@@ -15,6 +15,6 @@ from ._base import (Observer, RecursiveObserver, Estimate, RunData, log_inputs, 
 
 __all__ = ["settled", "moved", "informed", "divergence_bound", "ObserverResult", "initial_calibration",
            "split_calibration", "calibration_uncertainty", "offset_from_c", "offset_std", "check_sample",
-           "pack_input", "StateLayout", "position_increment", "velocity_increment", "move", "progress_bar",
+           "pack_input", "position_increment", "velocity_increment", "move", "progress_bar",
            "double_pole_gains", "check_gains", "GainReport", "sampled_poles", "Observer", "RecursiveObserver",
            "Estimate", "RunData", "log_inputs"]

@@ -6,7 +6,7 @@ process noise ``Q`` of the tuning rule, once. The readable path calls it
 each step and hands ``x_next``, ``F`` and ``Q`` to filterpy's
 ``ExtendedKalmanFilter``; the fast path inlines it in :func:`whole_step`:
 the predict, the pose update in Joseph form, the random-walk level
-(:func:`observers.kalman.level_update`) and the errors-in-variables
+(:func:`observers.kalman._filter.level_update`) and the errors-in-variables
 filter beside it (:func:`observers.eiv._compensation`), one function run in
 compiled chunks (:class:`plant.numerics.ChunkedSteps`). The two paths run the
 same arithmetic in another order; they agree to rounding (``tests/test_ekf.py``).
@@ -31,8 +31,8 @@ _CHUNK = 1000
 
 def params_layout(model):
     """Per-log parameters of :func:`whole_step`: the pose noise variances (``R``), the reading's noise
-    variances, those the errors-in-variables filter holds (:attr:`observers.kalman.EivCompensation.state`
-    without its step), the level's settings (:attr:`observers.kalman.NoiseLevel.settings`) and
+    variances, those the errors-in-variables filter holds (:attr:`observers.kalman._filter.EivCompensation.state`
+    without its step), the level's settings (:attr:`observers.kalman._filter.NoiseLevel.settings`) and
     whether it adapts (1 or 0)."""
     return StateLayout(("R", model.n_pose), ("var_w", model.n_w), ("eiv_q", model.n_pose + model.n_w),
                        ("level", 7), ("adapt", 1))

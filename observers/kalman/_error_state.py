@@ -88,7 +88,7 @@ filter's own ``P`` of ``s`` for ``J^-1``::
     s_c = s + g P_ss (B s) = s - g P_ss b_n,      P_c = T P_ss T^T,  T = I + g P_ss B
 
 (``g <= 1`` keeps the correction within a tenth of ``|s|`` while ``P`` is
-still the prior, :func:`observers.kalman.correction_limit`); the filter runs
+still the prior, :func:`observers.kalman._filter.correction_limit`); the filter runs
 on its own estimate, ``eiv=False`` reports it as it is.
 """
 
@@ -400,7 +400,7 @@ def whole_error_step(model, n):
     samples, :func:`observers.core.log_inputs`; ``dt``, ``p``
     (:func:`error_params_layout`) and the copy's standard normal draws at
     the step's two samples one row per step); its per-step outputs are
-    :func:`observers.kalman.output_layout`'s.
+    :func:`observers.kalman._filter.output_layout`'s.
     """
     def build():
         size = model.input_layout.size
@@ -421,7 +421,7 @@ def whole_error_step(model, n):
 
 @dataclass
 class NominalRun(FilterRun):
-    """The error-state EKF's running state: :class:`observers.kalman.FilterRun` and the nominal.
+    """The error-state EKF's running state: :class:`observers.kalman._filter.FilterRun` and the nominal.
 
     ``kf.x`` is the error state ``e`` (zero between steps) and ``kf.P`` its
     covariance (d x d).
