@@ -257,7 +257,7 @@ def _truth(truth, size, case):
     if isinstance(truth, (str, os.PathLike)):
         source, truth = str(truth), read_truth(truth)
     elif isinstance(truth, Truth):
-        source = "the truth"
+        source = f"truth (scenario {truth.scenario!r})"
     else:
         raise FmscalError(f"truth must be a plant.Truth or its file; got {type(truth).__name__}")
     if truth.schedule.size != size:
