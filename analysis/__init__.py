@@ -1,14 +1,17 @@
 """Workflows on logs and scenarios, the paper's metric, plots, and the ``fmscal`` command line.
 
 Everything the command line does is a call here, and the command line prints what it returns:
-compare methods on identical data (:func:`compare`, :func:`summarise`), sweep them over seeds
-and settings (:func:`sweep`), reproduce the paper's section 4 (:func:`reproduce`), ablate the
-adaptive observer (:func:`ablation`), measure the speed (:func:`run_bench`), and score an
+calibrate a sensor from a log, a pose table or joint angles (:func:`calibrate`, the files read by
+:func:`read_data`), compare methods on identical data (:func:`compare`, :func:`summarise`), sweep
+them over seeds and settings (:func:`sweep`), reproduce the paper's section 4 (:func:`reproduce`),
+ablate the adaptive observer (:func:`ablation`), measure the speed (:func:`run_bench`), and score an
 estimate with eq. (16) (:func:`calibration_error`). The command line is :mod:`fmscal.analysis.cli`.
 """
 
 from ._metrics import (CONVERGENCE_THRESHOLD, block_errors, calibration_error, convergence_time, error_history,
                        tail_median, tail_seen)
+from ._calibrate import (DEFAULT_MAX_LATENCY, DEFAULT_METHOD, TABLE_METHOD, DivergedError, OptionError, calibrate,
+                         read_data)
 from ._comparison import compare, summarise, summary_markdown
 from ._sweep import sweep
 from ._reproduce import reproduce
@@ -18,6 +21,6 @@ from ._bench import BenchSettings, run_bench
 from ._plots import plot_S_entries, plot_calibration, plot_comparison, plot_error_histories
 
 __all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "tail_seen", "convergence_time",
-           "CONVERGENCE_THRESHOLD", "compare", "summarise", "summary_markdown", "sweep", "reproduce", "ablation",
-           "sensitivity", "tolerable_error", "BenchSettings", "run_bench", "plot_S_entries", "plot_calibration",
-           "plot_comparison", "plot_error_histories"]
+           "CONVERGENCE_THRESHOLD", "calibrate", "read_data", "DivergedError", "OptionError", "compare", "summarise",
+           "summary_markdown", "sweep", "reproduce", "ablation", "sensitivity", "tolerable_error", "BenchSettings",
+           "run_bench", "plot_S_entries", "plot_calibration", "plot_comparison", "plot_error_histories"]

@@ -1,21 +1,35 @@
-"""Calibrate a recorded log: one method, the fit diagnostics, and how far to trust the answer."""
+"""Calibrate recorded data: one call for every case, the fit diagnostics, and how far to trust the answer.
 
-from dataclasses import dataclass, field
+:func:`calibrate` does what ``fmscal calibrate`` does, on a planar log, a
+spatial log, a pose table, an attitude-only log's held segments, or a log or
+table of joint angles turned into poses (:func:`read_data` reads any of
+them), and returns one :class:`fmscal.plant.Calibration`: the estimate with
+its diagnostics, ready to ``save``.
+"""
+
+import copy
+import os
+from pathlib import Path
 
 import numpy as np
 
-from fmscal.observers import FLOOR_METHOD, LeastSquares, ObserverResult, get_method, method_names
-from fmscal.observers.diagnostics._faults import offset_drift, saturation
-from fmscal.observers.diagnostics._health import consistency_check
-from fmscal.observers.batch._latency import estimate_latency
-from fmscal.plant import Calibration, NoiseSpec, SingularCalibrationError, estimate_noise
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._units import COUNTS, diagnose_units
+from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
+from fmscal.observers.batch import describe_direction, estimate_latency
+from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE
+from fmscal.observers.diagnostics import consistency_check, offset_drift, saturation
+from fmscal.observers.payload import PayloadEstimate, other_convention
+from fmscal.observers.payload import calibrate_table as fit_table
+from fmscal.plant import (Calibration, FmscalError, Log, NoiseSpec, Payload, PlanarModel, SingularCalibrationError,
+                          SpatialModel, SpatialPayload, Truth, estimate_noise, read_log, read_truth)
+from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, diagnose_units, held_table,
+                             is_attitude_log, is_pose_table, not_a_file, read_attitude_log, read_joint_data,
+                             read_pose_table, reading_sign)
+from fmscal.plant.physics import GRAVITY
 
-from fmscal.analysis._metrics import calibration_error
+from ._metrics import block_errors, calibration_error
 
-__all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "CalibrationReport", "calibrate",
-           "DivergedError"]
+__all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "TABLE_METHOD", "calibrate", "read_data", "DivergedError",
+           "OptionError"]
 
 #: The default: the maximum-likelihood estimate, at the information floor by construction, on
 #: full-rate and multi-rate logs, with offset and latency; its noise model is estimated from the
@@ -23,6 +37,8 @@ __all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "CalibrationReport", "calibr
 DEFAULT_METHOD = FLOOR_METHOD
 #: Largest pose-stream delay searched when the latency is estimated, s.
 DEFAULT_MAX_LATENCY = 0.1
+#: The one fit of held poses (a pose table): least squares on the weight's wrench.
+TABLE_METHOD = "static-least-squares"
 #: A method's estimate disagrees with the least-squares fit of the same log when an entry differs by more
 #: than this many (combined) standard deviations ...
 AGREEMENT_SIGMAS = 6.0
@@ -34,123 +50,295 @@ class DivergedError(FmscalError):
     """The estimate diverged: there is no calibration to report."""
 
 
-@dataclass
-class CalibrationReport:
-    """What :func:`calibrate` returns: the calibration, and how far to trust it.
-
-    Attributes
-    ----------
-    calibration : plant.Calibration
-        ``S``, its one-sigma ``S_std`` (None where the method gives none),
-        the offset ``b`` and ``b_std`` (None without the offset), the
-        method, the payload and the latency; ready to ``save``.
-    result : observers.ObserverResult
-        The method's full run (histories, info).
-    converged : bool
-        The method's ``converged`` flag (:class:`observers.ObserverResult`),
-        and: the log's units look right, a least-squares fit of it finds it
-        exciting every entry and matching the model, the log is consistent with one
-        constant ``S`` (:func:`observers.diagnostics.consistency_check`), no channel of the
-        reading saturates (:func:`observers.diagnostics.saturation`), the offset keeps one
-        level (:func:`observers.diagnostics.offset_drift`), and the
-        method's estimate agrees with a least-squares fit of the same log
-        (within :data:`AGREEMENT_SIGMAS` standard deviations or an E of
-        :data:`AGREEMENT_E`). Each failure adds a warning that names it.
-    noise : plant.NoiseSpec
-        The noise model used.
-    noise_estimated : list of str
-        Which parts of it came from the log (``"wrench"``, ``"pose"``).
-    latency_estimated : bool
-        The latency was estimated (True) or given.
-    warnings : list of str
-        The units diagnosis, excitation and model consistency (from a
-        least-squares fit of the same log), saturation and a moving offset,
-        and the method's own warnings, one line each.
-    units : list of str
-        What :func:`plant.io.diagnose_units` found wrong with the log's
-        units (degrees, millimetres, counts) that this method cannot absorb
-        (an offline fit is linear in ``S`` and takes readings in counts);
-        empty when they look right. Any of them makes ``converged`` false.
-    fit : dict
-        The least-squares fit's diagnostics (:class:`observers.batch.FitReport`
-        without its warnings).
-    E : float or None
-        E of eq. (16) against a known truth, where one was given.
-    """
-
-    calibration: Calibration
-    result: ObserverResult
-    converged: bool
-    noise: NoiseSpec
-    noise_estimated: list
-    latency_estimated: bool
-    warnings: list = field(default_factory=list)
-    units: list = field(default_factory=list)
-    fit: dict = field(default_factory=dict)
-    E: float = None
-
-    def to_dict(self):
-        """The report as plain JSON-ready values (``fmscal calibrate --json``).
-
-        Returns
-        -------
-        dict
-            ``observer``, ``S``, ``S_std``, ``b``, ``b_std``, ``latency``,
-            ``latency_estimated``, ``converged``, ``noise``,
-            ``noise_estimated``, ``warnings``, ``fit`` and, with a truth, ``E``.
-        """
-        cal = self.calibration.to_dict()
-        out = {"observer": self.calibration.method, "S": cal["S"], "S_std": cal["S_std"], "b": cal["b"],
-               "b_std": cal["b_std"], "latency": float(self.calibration.latency),
-               "latency_estimated": self.latency_estimated, "converged": bool(self.converged),
-               "noise": self.noise.to_dict(), "noise_estimated": list(self.noise_estimated),
-               "warnings": list(self.warnings), "fit": self.fit}
-        if self.E is not None:
-            out["E"] = float(self.E)
-        return out
-
-
-def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise=None, truth=None,
-              offset=True, latency=None, max_latency=DEFAULT_MAX_LATENCY):
-    """Estimate ``S`` (and the sensor's offset) from a log, with diagnostics.
-
-    Every method runs on the log with its pose stream moved back by the
-    latency (given, or estimated by least squares over candidate delays,
-    :func:`observers.batch.estimate_latency`).
+class OptionError(FmscalError):
+    """An option refused, named in the message as the caller names it.
 
     Parameters
     ----------
-    log : plant.Log
-    payload : plant.Payload
-    method : str
-        A method the registry offers for calibration
-        (``observers.method_names(calibrates=True)``).
-    pose_noise : (float, float), optional
-        Standard deviations of the angle (rad) and of the positions (m).
-    wrench_noise : (float, float, float), optional
-        Standard deviations of the raw reading ``[M, f_x, f_y]`` (N m, N).
-        Noise not given is estimated from the log and reported.
-    truth : plant.Truth, optional
-        For E of eq. (16).
-    offset : bool
-        Estimate the sensor's offset ``b`` in ``w = S (w_hat - b)`` with
-        ``S`` (the default: a real sensor reads non-zero under no load, and
-        an offset left out biases ``S_hat`` far more than estimating three
-        more numbers costs).
-    latency : float, optional
-        Delay of the pose stream behind the sensor stream, s. None: estimated.
-    max_latency : float
-        Largest delay searched when it is estimated, s.
+    option : str
+        The keyword argument (``"pose_noise"``, ``"offset=False"``).
+    template : str
+        The message with ``{}`` where the option's name goes; ``str(err)``
+        names the keyword; a command line puts its own flag there
+        (``err.template.format("--pose-noise")``).
+    """
+
+    def __init__(self, option, template):
+        super().__init__(template.format(option))
+        self.option, self.template = option, template
+
+
+def read_data(path, urdf=None, frame=None):
+    """Read any file :func:`calibrate` takes, the case told by its header.
+
+    Parameters
+    ----------
+    path : str or Path
+        A planar log (``t,theta,x,y,M,fx,fy``), a spatial log
+        (``t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz``), a pose table (the
+        spatial header without ``t``: one row per held pose), an
+        attitude-only log (no ``x,y,z``), or, with ``urdf``, a log or table
+        whose pose columns are the robot's joint angles.
+    urdf : str or Path, optional
+        The robot's URDF: the pose columns are joint angles (rad), turned
+        into poses of ``frame`` by forward kinematics
+        (:class:`fmscal.plant.io.RobotKinematics`; pinocchio).
+    frame : str, optional
+        The sensor's frame in the URDF (with ``urdf``).
 
     Returns
     -------
-    CalibrationReport
+    plant.Log or plant.io.PoseTable or plant.io.AttitudeLog
+
+    Raises
+    ------
+    FmscalError
+        The file's problems (one line), or one of ``urdf`` and ``frame`` without the other.
+    """
+    if (urdf is None) != (frame is None):
+        raise OptionError("urdf and frame", "{} go together: the robot's URDF and the sensor's frame in it")
+    if not isinstance(path, (str, os.PathLike)):
+        raise LogError(f"a log must be given as a file name; got {type(path).__name__}")
+    problem = not_a_file(Path(path))
+    if problem is not None:
+        what = "no such file" if problem == "no such file" else f"is {problem}, not a log file"
+        raise LogError(f"{str(path)[:80]}: {what}")
+    if urdf is not None:
+        return read_joint_data(path, RobotKinematics(urdf, frame))
+    if is_pose_table(path):
+        return read_pose_table(path)
+    if is_attitude_log(path):
+        return read_attitude_log(path)
+    return read_log(path)
+
+
+def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency=None, max_latency=None,
+              offset=True, pose_noise=None, wrench_noise=None, truth=None):
+    """Estimate ``S`` and the sensor's offset from recorded data, with diagnostics: ``fmscal calibrate`` in Python.
+
+    The case comes from ``data``:
+
+    - a **planar log**: every method runs on the log with its pose stream
+      moved back by the latency (given, or estimated by least squares over
+      candidate delays, :func:`fmscal.observers.batch.estimate_latency`);
+      the noise model not given is estimated from the log;
+    - a **spatial log**: the same in 3D (the maximum-likelihood floor by
+      default, or least squares, or an online method that runs in 3D), the
+      reading's sign turned first for ``reading="load"``;
+    - **held poses** (a pose table, an attitude-only log's held segments):
+      ``S`` and the offset from the weight's wrench at each pose
+      (:func:`fmscal.observers.payload.calibrate_table`). Held poses never
+      determine ``S`` in full: the directions of the reading they leave
+      undetermined are named and ``converged`` is False.
+
+    An option the case does not take is refused in one line.
+
+    Parameters
+    ----------
+    data : plant.Log, plant.io.PoseTable, plant.io.AttitudeLog, str or Path
+        What was recorded; a path is read by :func:`read_data`.
+    payload : plant.Payload, plant.SpatialPayload, plant.Model, observers.payload.PayloadEstimate or (float, array_like)
+        The payload's mass properties: a planar log takes a
+        :class:`~fmscal.plant.Payload` (or a :class:`~fmscal.plant.PlanarModel`), a
+        spatial log a :class:`~fmscal.plant.SpatialPayload` (or a
+        :class:`~fmscal.plant.SpatialModel`, which brings its gravity). Held poses
+        use only the mass and the centre of mass: a ``SpatialPayload``, or
+        the pair ``(mass, rho)`` (kg, and m in the sensor frame; the result then has no
+        payload and cannot be saved). A :class:`~fmscal.observers.payload.PayloadEstimate`
+        (``identify_payload``'s, or one read by ``PayloadEstimate.load``) stands for its payload
+        in the tracked frame's axes, and brings the gravity it estimated.
+    method : str, optional
+        A method offered for calibration in the case
+        (``observers.method_names(calibrates=True, model=...)``); default
+        :data:`DEFAULT_METHOD`. Held poses have one fit (:data:`TABLE_METHOD`).
+    reading : {"reaction", "load"}, optional
+        Spatial logs and held poses: the reading's sign, the wrench the mount
+        applies to the payload (the default) or the wrench the tool applies
+        to the sensor (as ATI, Robotiq, Bota and OnRobot report); recorded
+        in the calibration. ``data`` itself is never changed.
+    gravity : array_like, shape (3,), optional
+        Spatial logs and held poses: gravity in the pose frame, m/s^2
+        (default ``(0, 0, -9.81)``).
+    latency : float, optional
+        Logs: delay of the pose stream behind the sensor stream, s, at least
+        0. None: estimated.
+    max_latency : float, optional
+        Logs: the largest delay searched when it is estimated, s (default
+        :data:`DEFAULT_MAX_LATENCY`).
+    offset : bool
+        Estimate the sensor's offset ``b`` in ``w = S (w_hat - b)`` with
+        ``S`` (the default: a real sensor reads non-zero under no load, and an
+        offset left out biases ``S_hat`` far more than estimating a few more
+        numbers costs). Only planar logs take False: in 3D it is always estimated.
+    pose_noise : (float, float), optional
+        Planar logs: standard deviations of the angle (rad) and of the positions (m).
+    wrench_noise : (float, float, float), optional
+        Planar logs: standard deviations of the raw reading ``[M, f_x, f_y]``
+        (N m, N). Noise not given is estimated from the log and reported.
+    truth : plant.Truth or str or Path, optional
+        Logs: the truth (or its sidecar file, ``fmscal simulate``'s), for E of eq. (16).
+
+    Returns
+    -------
+    plant.Calibration
+        ``S_hat``, ``S_std``, ``b``, ``b_std``, ``cov`` (where the method
+        gives one), ``latency`` and ``latency_estimated``, ``reading``,
+        ``gravity``, ``method``, ``payload``, ``noise``, ``converged``,
+        ``warnings``, ``undetermined`` (in words) and
+        ``undetermined_directions``, ``E`` with a truth, ``notes`` and the
+        method's full ``run``; ``save(path)`` writes it, ``to_json()`` is
+        ``fmscal calibrate --json``'s report.
+
+        ``converged``, on a planar log: the method's ``converged`` flag
+        (:class:`fmscal.observers.ObserverResult`), and the log's units look right
+        (``units`` empty), a least-squares fit of it finds it exciting every entry and
+        matching the model, the log is consistent with one constant ``S``
+        (:func:`fmscal.observers.diagnostics.consistency_check`), no channel
+        of the reading saturates (:func:`fmscal.observers.diagnostics.saturation`), the
+        offset keeps one level (:func:`fmscal.observers.diagnostics.offset_drift`), and the
+        method's estimate agrees with the least-squares fit (within
+        :data:`AGREEMENT_SIGMAS` standard deviations or an E of
+        :data:`AGREEMENT_E`). On a spatial log: the method's flag, no
+        saturation, and a positive force gain (``trace S_ff > 0``: else the
+        reading follows the other sign convention). Held poses: never. Each
+        failure adds a warning that names it.
 
     Raises
     ------
     DivergedError
         The method's estimate diverged.
+    FmscalError
+        Bad input, an option the case does not take, or an estimate of
+        ``S`` that is singular (one line each).
     """
+    if isinstance(data, (str, os.PathLike)):
+        data = read_data(data)
+    if isinstance(data, AttitudeLog):
+        table, _, note = held_table(data)
+        return _calibrate_table(table, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                                wrench_noise, truth, [note], "attitude-only log, its held segments")
+    if isinstance(data, PoseTable):
+        return _calibrate_table(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                                wrench_noise, truth, [], "pose table")
+    if not isinstance(data, Log):
+        raise FmscalError(f"data must be a plant.Log, a pose table, an attitude-only log or a file name; "
+                          f"got {type(data).__name__}")
+    if latency is not None and not (_number(latency) and latency >= 0):
+        raise OptionError("latency", f"{{}} must be a non-negative number of seconds; got {latency}")
+    if max_latency is not None and not (_number(max_latency) and max_latency > 0):
+        raise OptionError("max_latency", f"{{}} must be positive; got {max_latency}")
+    if data.kind == "spatial":
+        return _calibrate_spatial(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                                  wrench_noise, truth)
+    if data.kind == "planar":
+        return _calibrate_planar(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                                 wrench_noise, truth)
+    raise FmscalError(f"{data.name}: a {data.kind} log; calibrate takes a planar or a spatial one")
+
+
+def _number(value):
+    return isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and bool(np.isfinite(value))
+
+
+def _noise(values, size, name):
+    """``values`` as ``size`` non-negative standard deviations, or None."""
+    if values is None:
+        return None
+    values = tuple(values) if np.ndim(values) == 1 else ()
+    if len(values) != size or not all(_number(v) and v >= 0 for v in values):
+        raise OptionError(name, f"{{}} must be {size} non-negative standard deviations; got {values or 'a scalar'}")
+    return values
+
+
+def _truth(truth, size, case):
+    """``truth`` (a Truth, its file, or None) of a log of ``size`` reading channels, or a one-line refusal."""
+    if truth is None:
+        return None
+    if isinstance(truth, (str, os.PathLike)):
+        source, truth = str(truth), read_truth(truth)
+    elif isinstance(truth, Truth):
+        source = f"truth (scenario {truth.scenario!r})"
+    else:
+        raise FmscalError(f"truth must be a plant.Truth or its file; got {type(truth).__name__}")
+    if truth.schedule.size != size:
+        raise FmscalError(f"{source} is the truth of a {'planar' if size == 6 else 'spatial'} log; this log is {case}")
+    return truth
+
+
+def _refuse(case, given):
+    """One line for the first option in ``given`` (``(present, name, why)``) that ``case`` does not take."""
+    for present, name, why in given:
+        if present:
+            raise OptionError(name, f"{{}} is not taken on {case} ({why})")
+
+
+def _gravity(gravity):
+    """``gravity`` (m/s^2, the pose frame's) as three floats, or the default."""
+    g = GRAVITY if gravity is None else gravity
+    if np.shape(g) != (3,) or not (all(_number(v) for v in g) and 0 < np.linalg.norm(g) < 1e3):
+        raise OptionError("gravity", "{} must be three finite numbers in m/s^2 (the pose frame's gravity); got "
+                          f"{np.asarray(g).tolist() if np.size(g) < 10 else np.shape(g)}")
+    return tuple(float(v) for v in g)
+
+
+def _estimate_payload(estimate):
+    """A :class:`PayloadEstimate` as ``(mass, rho, SpatialPayload or None, gravity or None)``, tracked-frame axes."""
+    tracked = estimate.tracked()
+    if not tracked.payload_determined:
+        raise FmscalError("the payload estimate does not determine the mass and the centre of mass: no payload "
+                          "to calibrate with")
+    spatial = None if tracked.inertia is None else SpatialPayload(tracked.mass, tuple(tracked.rho),
+                                                                  tuple(tracked.inertia))
+    return tracked.mass, np.asarray(tracked.rho, dtype=float), spatial, tracked.gravity
+
+
+def _spatial_model(payload, gravity, what):
+    """The :class:`SpatialModel` of a spatial log's ``payload`` and ``gravity``, or a one-line refusal."""
+    if isinstance(payload, PayloadEstimate):
+        _, _, spatial, estimated = _estimate_payload(payload)
+        if spatial is None:
+            raise FmscalError(f"{what} needs the payload's inertia, which the payload estimate does not hold; "
+                              "give a plant.SpatialPayload")
+        gravity = _merge_gravity(gravity, estimated)
+        payload = spatial
+    if isinstance(payload, SpatialModel):
+        if gravity is not None and _gravity(gravity) != payload.gravity:
+            raise FmscalError("gravity is the model's: give the plant.SpatialModel with that gravity, or a "
+                              "plant.SpatialPayload and gravity")
+        return payload
+    if not isinstance(payload, SpatialPayload):
+        raise FmscalError(f"{what} takes a plant.SpatialPayload (or a plant.SpatialModel); got "
+                          f"{type(payload).__name__}")
+    return SpatialModel(payload, _gravity(gravity))
+
+
+def _merge_gravity(given, estimated):
+    """The gravity given, else the one a payload estimate brings; both: they must agree."""
+    if estimated is None:
+        return given
+    estimated = tuple(float(v) for v in estimated)
+    if given is not None and not np.allclose(_gravity(given), estimated, rtol=1e-6, atol=1e-9):
+        raise FmscalError("gravity contradicts the gravity the payload estimate holds; give one of them")
+    return estimated
+
+
+def _calibrate_planar(log, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                      wrench_noise, truth):
+    """:func:`calibrate` on a planar log."""
+    if isinstance(payload, PlanarModel):
+        payload = payload.payload
+    if not isinstance(payload, Payload):
+        raise FmscalError(f"a planar log takes a plant.Payload (or a plant.PlanarModel); got {type(payload).__name__}")
+    if gravity is not None:
+        raise OptionError("gravity", "{} is for spatial logs; a planar log moves in a plane with no gravity in it")
+    if reading is not None:
+        raise OptionError("reading", "{} is taken on a spatial log or a pose table; a planar log's sign is the "
+                          "toolkit's")
+    pose_noise = _noise(pose_noise, 2, "pose_noise")
+    wrench_noise = _noise(wrench_noise, 3, "wrench_noise")
+    method = DEFAULT_METHOD if method is None else method
+    max_latency = DEFAULT_MAX_LATENCY if max_latency is None else max_latency
+    truth = _truth(truth, 3, "planar")
     offered = method_names(calibrates=True)
     if method not in offered:
         raise FmscalError(f"unknown method {method!r}; expected one of {', '.join(offered)}")
@@ -197,21 +385,128 @@ def calibrate(log, payload, method=DEFAULT_METHOD, pose_noise=None, wrench_noise
     disagreement = _disagreement(result, ls_result)
     if disagreement:
         warnings.append(disagreement)
+    E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
+    converged = (bool(result.converged) and not units and not ls_result.warnings and consistent
+                 and not faults and not disagreement)
+    why = None if converged else ("the log's units look wrong (" + units[0].split(":")[0] + ")" if units
+                                  else "the run did not converge")
+    return _calibration(result, method, dict(
+        payload=payload, method=result.observer, latency=float(latency), latency_estimated=latency_estimated,
+        noise=noise, noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=units,
+        fit={k: v for k, v in reference.report.items() if k != "warnings"}, E=E, notes=list(log.notes),
+        kind="planar", run=result, why_unconverged=why))
+
+
+def _calibration(result, method, fields):
+    """The :class:`Calibration` of a run, or a one-line error for a singular ``S``."""
     try:
-        calibration = Calibration(S=result.S_hat, payload=payload, method=result.observer, S_std=result.S_std,
-                                  b=result.b, b_std=result.b_std, latency=float(latency))
+        return Calibration(S=result.S_hat, S_std=result.S_std, b=result.b, b_std=result.b_std, cov=result.cov,
+                           **fields)
     except SingularCalibrationError as err:
         raise FmscalError(f"the {method} estimate of S is singular ({str(err).split('(')[-1].split(')')[0]}): the "
                           "log does not excite every entry of S, or holds an outlier (a reading far from the "
                           "rest)") from None
-    E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
-    converged = (bool(result.converged) and not units and not ls_result.warnings and consistent
-                 and not faults and not disagreement)
-    return CalibrationReport(calibration=calibration, result=result, converged=converged,
-                             noise=noise, noise_estimated=noise_estimated, latency_estimated=latency_estimated,
-                             warnings=warnings, units=units,
-                             fit={k: v for k, v in reference.report.items() if k != "warnings"},
-                             E=E)
+
+
+def _calibrate_spatial(log, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                       wrench_noise, truth):
+    """:func:`calibrate` on a spatial log."""
+    model = _spatial_model(payload, gravity, "a spatial log")
+    if method is not None:
+        get_method(method)                              # an unknown name: FmscalError naming the methods
+        offered = method_names(calibrates=True, model=model)
+        if method not in offered:
+            raise OptionError("method", f"{{}} {method} does not run on a spatial log yet; a spatial log takes "
+                              f"{', '.join(offered)} (default {FLOOR_METHOD})")
+    _refuse("a spatial log", [(pose_noise is not None, "pose_noise", "the noise is estimated from the log"),
+                              (wrench_noise is not None, "wrench_noise", "the noise is estimated from the log"),
+                              (not offset, "offset=False", "the offset is always estimated in 3D")])
+    name = method or FLOOR_METHOD
+    reading = "reaction" if reading is None else reading
+    sign = reading_sign(reading)
+    truth = _truth(truth, 6, "spatial")
+    signed = copy.copy(log)                               # the caller's log keeps its reading
+    signed.w_hat = sign * log.w_hat                       # the toolkit's sign: S and b are of sigma w_hat
+    latency_estimated = latency is None
+    if latency_estimated:
+        latency, _ = estimate_latency(signed, model, max_latency or DEFAULT_MAX_LATENCY, offset=True)
+    aligned = signed.shift_poses(latency)
+    result = make_observer(name, model, settings={"offset": True}).run(aligned)
+    if result.diverged:                  # a diverging estimate is an error, never an answer
+        raise DivergedError(f"{name} diverged on {log.name}"
+                            + (f": {result.warnings[-1]}" if result.warnings else "") + "; no calibration")
+    saturated = saturation(signed)
+    warnings = [*saturated, *result.warnings]
+    if not result.converged and not result.warnings:
+        warnings.append(_not_settled(result.observer))
+    flipped = bool(np.trace(result.S_hat[3:, 3:]) < 0)      # a negative force gain: the other sign convention
+    if flipped:
+        warnings.append(other_convention(log.name, None, reading))
+    converged = bool(result.converged and not saturated and not flipped)
+    why = None if converged else ("the reading saturates" if saturated else "the reading follows the other sign "
+                                  "convention" if flipped else "the run did not converge (see the warnings)")
+    directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
+    E_all = block_errors(result.S_hat, truth.S_at(aligned.t[-1])) if truth is not None else None
+    return _calibration(result, name, dict(
+        payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
+        reading=reading, gravity=model.gravity, converged=converged, warnings=warnings,
+        undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
+        E=None if E_all is None else E_all[0], E_blocks=None if E_all is None else tuple(E_all[1:]),
+        notes=list(log.notes), kind="spatial", run=result, why_unconverged=why))
+
+
+def _not_settled(method):
+    """Why a run with every direction determined did not converge: the log was too short to pin ``S`` down."""
+    return (f"{method}: S_hat did not settle within {SETTLE_TOLERANCE:.0%} over the last {SETTLE_FRACTION:.0%} of "
+            f"the log, or its uncertainty is above {EVIDENCE_TOLERANCE:.0%} of it (each reading component in its "
+            f"own scale): record a longer log, or one that turns the payload faster")
+
+
+def _calibrate_table(table, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                     wrench_noise, truth, notes, what):
+    """:func:`calibrate` on held poses."""
+    _refuse("a pose table", [
+        (method not in (None, TABLE_METHOD), "method", "held poses have one fit, least squares"),
+        (latency is not None, "latency", "held poses have no time"),
+        (max_latency is not None, "max_latency", "held poses have no time"),
+        (truth is not None, "truth", "a pose table has no truth sidecar"),
+        (pose_noise is not None, "pose_noise", "held poses are taken as exact"),
+        (wrench_noise is not None, "wrench_noise", "the noise is estimated from the residuals"),
+        (not offset, "offset=False", "the offset is always estimated in 3D")])
+    mass, rho, spatial, estimated = _table_payload(payload)
+    gravity = _gravity(_merge_gravity(gravity, estimated))
+    reading = "reaction" if reading is None else reading
+    fit = fit_table(table, mass, rho, gravity, reading)
+    directions = [np.asarray(d, dtype=float) for d in fit.undetermined]
+    return Calibration(S=fit.S_hat, payload=spatial, method=TABLE_METHOD, S_std=fit.S_std, b=fit.b, b_std=fit.b_std,
+                       latency=None, latency_estimated=False, reading=reading, gravity=gravity, converged=False,
+                       warnings=list(fit.warnings), undetermined=[describe_direction(d, held=True) for d in directions],
+                       undetermined_directions=directions, kind="table", poses=len(table), notes=notes, run=fit,
+                       why_unconverged="held poses never determine S in full (see the warnings)")
+
+
+def _table_payload(payload):
+    """``(mass, rho, SpatialPayload or None, gravity or None)`` of what held poses take as the payload."""
+    if isinstance(payload, PayloadEstimate):
+        return _estimate_payload(payload)
+    if isinstance(payload, SpatialModel):
+        return payload.payload.mass, np.array(payload.payload.rho), payload.payload, payload.gravity
+    if isinstance(payload, SpatialPayload):
+        return payload.mass, np.array(payload.rho), payload, None
+    if isinstance(payload, (Payload, PlanarModel)):
+        raise FmscalError("a pose table takes a plant.SpatialPayload, or the mass and the centre of mass X Y Z "
+                          "(the sensor frame); got a planar payload")
+    try:
+        mass, rho = payload
+        rho = np.asarray(rho, dtype=float)
+        mass = float(mass)
+    except (TypeError, ValueError):
+        raise FmscalError(f"a pose table takes a plant.SpatialPayload or (mass, rho); got {type(payload).__name__}") \
+            from None
+    if rho.shape != (3,):
+        raise FmscalError(f"a pose table takes rho X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
+                          f"got {rho.size}")
+    return mass, rho, None, None
 
 
 def _disagreement(result, reference):

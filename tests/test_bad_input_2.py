@@ -489,5 +489,5 @@ def test_a_singular_estimate_is_named_for_its_cause_not_as_a_bad_matrix(folder, 
     log = plant.read_log(folder / "log.csv")
     with pytest.raises(FmscalError, match=r"the least-squares estimate of S is singular \(condition number inf\): "
                                           r"the log does not excite every entry of S, or holds an outlier") as err:
-        calibrate(log, plant.read_truth(folder / "log.truth.json").payload, "least-squares", latency=0.0)
+        calibrate(log, plant.read_truth(folder / "log.truth.json").payload, method="least-squares", latency=0.0)
     assert not isinstance(err.value, plant.SingularCalibrationError)

@@ -29,7 +29,7 @@ def rig(tmp_path_factory):
 def E_csv(rig):
     """E of the least-squares calibration of the CSV log (the pose latency given)."""
     folder, _, truth, _ = rig
-    return calibrate(read_log(folder / "rig.csv"), truth.payload, "least-squares", truth=truth, latency=0.02).E
+    return calibrate(read_log(folder / "rig.csv"), truth.payload, method="least-squares", truth=truth, latency=0.02).E
 
 
 def _bag(folder, storage, pose_type, log, **kw):
@@ -49,7 +49,7 @@ def test_bag_calibrates_as_its_csv(rig, E_csv, storage, pose_type):
     csv = read_log(folder / "rig.csv")
     assert len(imported) == len(csv) and imported.has_pose.sum() == csv.has_pose.sum()
     np.testing.assert_allclose(imported.w_hat, csv.w_hat, rtol=0, atol=1e-12)
-    E_bag = calibrate(imported, truth.payload, "least-squares", truth=truth, latency=0.02).E
+    E_bag = calibrate(imported, truth.payload, method="least-squares", truth=truth, latency=0.02).E
     assert 1e-4 < E_csv < 0.05                       # the CSV calibrates at all (and not suspiciously well)
     assert abs(E_bag - E_csv) <= 1e-3 * E_csv
 
@@ -98,7 +98,7 @@ def test_dropped_wrench_messages_resampled_with_a_warning(rig, E_csv, tmp_path):
     assert 75 < missing < 225 and report["wrench"]["dropped"] == missing
     assert report["resampled"] is not None and any("resampled" in w for w in report["warnings"])
     assert len(imported) == len(log)
-    E_bag = calibrate(imported, truth.payload, "least-squares", truth=truth, latency=0.02).E
+    E_bag = calibrate(imported, truth.payload, method="least-squares", truth=truth, latency=0.02).E
     assert 0.5 * E_csv < E_bag < 1.25 * E_csv                # resampling over 1 % of samples costs little
 
 

@@ -95,8 +95,8 @@ def test_a_50_hz_log_with_dropped_frames_calibrates_close_to_full_rate():
     full, truth, _ = plant.get_scenario("paper").with_(duration=60).generate(3)
     slow, _, _ = plant.get_scenario("vision-50hz").with_(duration=60).generate(3)
     assert slow.pose_rate() < 50
-    S_full = calibrate(full, PAPER_PAYLOAD, latency=0.0).calibration.S
-    S_slow = calibrate(slow, PAPER_PAYLOAD, latency=0.0).calibration.S
+    S_full = calibrate(full, PAPER_PAYLOAD, latency=0.0).S
+    S_slow = calibrate(slow, PAPER_PAYLOAD, latency=0.0).S
     assert calibration_error(np.array(S_slow), truth.S_at(60)) < 0.02
     assert calibration_error(np.array(S_slow), np.array(S_full)) < 0.02
 

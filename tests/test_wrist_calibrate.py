@@ -101,7 +101,10 @@ def test_a_table_is_saved_only_forced_with_its_sign_and_applied(held, capsys):
     code, out, err = _run(capsys, [*args, *INERTIA, "--force"])
     assert code == 0 and f"saved the calibration to {cal}" in out
     saved = json.loads(cal.read_text())
-    assert saved["forced"] and saved["reading"] == "load" and saved["S_std"] is None and saved["latency"] is None
+    # format /2: no entry of S determined by held poses (null each), and the directions they leave, named
+    assert saved["forced"] and saved["reading"] == "load" and saved["latency"] is None
+    assert saved["S_std"] == [[None] * 6] * 6 and saved["converged"] is False and saved["kind"] == "table"
+    assert len(saved["undetermined"]) == len(saved["undetermined_directions"]) == 3
     readings = folder / "readings.csv"
     rows = np.column_stack([np.arange(len(table)) * 0.1, table.w_hat])
     np.savetxt(readings, rows, delimiter=",", header="t,tx,ty,tz,fx,fy,fz", comments="", fmt="%.17g")

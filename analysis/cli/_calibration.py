@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.analysis.cli._common import CliError, positive, strict
+from fmscal.analysis.cli._common import CliError, positive
 from fmscal.analysis.cli._files import atomic_write_text, check_outputs
+from fmscal.analysis.cli._spatial import spatial_payload
 
 
 def add_calibrate(sub):
@@ -24,11 +25,14 @@ def add_calibrate(sub):
                                    "warnings about excitation and model consistency, and E with --truth.")
     p.add_argument("log", metavar="LOG.csv|TABLE.csv",
                    help="a planar or spatial log, or a pose table (the header tells which)")
-    p.add_argument("--mass", type=float, required=True, metavar="KG", help="the payload's mass, kg")
+    p.add_argument("--payload", metavar="PAYLOAD.json",
+                   help="the payload as fmscal identify-payload --save wrote it (the tracked frame's axes, and the "
+                        "gravity it estimated), instead of --mass, --rho and --inertia")
+    p.add_argument("--mass", type=float, metavar="KG", help="the payload's mass, kg (or --payload)")
     p.add_argument("--inertia", type=float, nargs="+", metavar="I",
                    help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
                         "tensor about the centre of mass in sensor axes (a pose table needs it only with --save)")
-    p.add_argument("--rho", type=float, nargs="+", required=True, metavar="R",
+    p.add_argument("--rho", type=float, nargs="+", metavar="R",
                    help="the centre of mass from the sensor, m: planar RX RY (body frame, from G to the sensor "
                         "as in the paper), spatial X Y Z (the centre of mass in the sensor frame); negative "
                         "values as written")
@@ -77,25 +81,12 @@ def add_calibrate(sub):
 
 
 def cmd_calibrate(args):
+    """``fmscal calibrate``: :func:`fmscal.analysis.calibrate` on the file, its report printed, saved on request."""
     from dataclasses import replace
 
-    from fmscal.plant import Payload, file_sha256, read_log, read_truth
-    from fmscal.plant.io._log import _as_path, log_kind
-    from fmscal.plant.io._pose_table import PoseTable, is_attitude_log, is_pose_table
-    from fmscal.analysis._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, calibrate
-    from fmscal.analysis.cli._spatial import calibrate_spatial, calibrate_table, joint_data
-    from fmscal.analysis._plots import plot_calibration
-    positive(args.mass, "--mass")
-    for value in args.rho:
-        if not np.isfinite(value):
-            raise CliError(f"--rho must be finite numbers in m; got {args.rho}")
-    for option, values in (("--pose-noise", args.pose_noise), ("--wrench-noise", args.wrench_noise)):
-        if values is not None and not all(np.isfinite(v) and v >= 0 for v in values):
-            raise CliError(f"{option} must be non-negative standard deviations; got {values}")
-    if args.latency is not None and not (np.isfinite(args.latency) and args.latency >= 0):
-        raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
-    if args.max_latency is not None:
-        positive(args.max_latency, "--max-latency")
+    from fmscal.analysis import OptionError, calibrate, read_data
+    from fmscal.plant import file_sha256, read_truth
+    from fmscal.plant.io import AttitudeLog, PoseTable
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
     if args.plot and not args.plot.endswith(".png"):
@@ -103,72 +94,123 @@ def cmd_calibrate(args):
     if args.force and not args.save:
         raise CliError("--force applies to --save; give --save CAL.json too")
     check_outputs([(args.save, "--save"), (args.plot, "--plot")],
-                  [(args.log, "the log"), (args.truth, "the --truth file")], overwrite=args.overwrite)
-    path = _as_path(args.log, "log")
-    data = joint_data(args, path)
-    if isinstance(data, PoseTable):
-        return calibrate_table(args, path, table=data)
-    if data is not None:
-        return calibrate_spatial(args, log=data)
-    if is_pose_table(path) or is_attitude_log(path):
-        return calibrate_table(args, path)
-    if log_kind(args.log) == "spatial":
-        return calibrate_spatial(args)
-    inertia = args.inertia or []
-    if len(args.rho) != 2 or len(inertia) != 1:
-        raise CliError(f"a planar log takes --rho RX RY (2 numbers, m) and --inertia I_G (1 number, kg m^2); got "
-                       f"{len(args.rho)} and {len(inertia)} (three and six are for a spatial log)")
-    if args.gravity is not None:
-        raise CliError("--gravity is for spatial logs; a planar log moves in a plane with no gravity in it")
-    if args.reading is not None:
-        raise CliError("--reading is taken on a spatial log or a pose table; a planar log's sign is the toolkit's")
-    args.observer = args.observer or DEFAULT_METHOD
-    if args.max_latency is None:
-        args.max_latency = DEFAULT_MAX_LATENCY
-    payload = Payload(args.mass, positive(args.inertia[0], "--inertia"), tuple(args.rho))
-    log = read_log(args.log)
-    for note in log.notes:
+                  [(args.log, "the log"), (args.truth, "the --truth file"), (args.payload, "the --payload file")],
+                  overwrite=args.overwrite)
+    try:
+        data = read_data(args.log, args.urdf, args.frame)
+        table = isinstance(data, (PoseTable, AttitudeLog))
+        if table and args.plot is not None:
+            raise CliError("--plot is not taken on a pose table (a figure of S against time needs a log)")
+        payload = _payload(args, data, table)
+        truth = read_truth(args.truth) if args.truth and not table else args.truth
+        cal = calibrate(data, payload, method=args.observer, reading=args.reading, gravity=args.gravity,
+                        latency=args.latency, max_latency=args.max_latency, offset=args.offset,
+                        pose_noise=args.pose_noise, wrench_noise=args.wrench_noise, truth=truth)
+    except OptionError as err:                    # the library's keyword, as this command's flag
+        raise CliError(err.template.format(_FLAGS.get(err.option, err.option))) from None
+    for note in cal.notes:
         print(f"fmscal calibrate: note: {note}", file=sys.stderr)
-    log_sha256 = file_sha256(args.log) if args.save else ""
-    truth = read_truth(args.truth) if args.truth else None
-    if truth is not None and truth.schedule.size != 3:
-        raise CliError(f"{args.truth} is the truth of a spatial log; this log is planar")
-    report = calibrate(log, payload, args.observer, args.pose_noise, args.wrench_noise, truth,
-                       offset=args.offset, latency=args.latency, max_latency=args.max_latency)
-    for warning in report.warnings:
+    for warning in cal.warnings:
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
     if args.plot:                 # before saving: a failing plot leaves no calibration behind
-        plot_calibration(report.result, log.shift_poses(report.calibration.latency), args.plot,
-                         f"{Path(args.log).name}: entries of S_hat ({report.calibration.method}) and the pose residual",
-                         truth)
-    refusal = _not_savable(report)
+        _plot(args, data, cal, truth)
+    refusal = None if cal.converged else cal.why_unconverged
     saved = bool(args.save) and (refusal is None or args.force)
     if saved:
-        replace(report.calibration, log_name=Path(args.log).name, log_sha256=log_sha256,
+        replace(cal, log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
                 forced=refusal is not None).save(args.save)
-    result, out = report.result, report.to_dict()
-    out["saved"] = saved
     if args.json:
-        print(json.dumps(strict(out), allow_nan=False))
+        print(cal.to_json(saved=saved))
     else:
-        _print_calibration(args, log, out, result)
+        _print_calibration(args, data, cal, saved)
     if args.save and refusal is not None and not args.force:
         raise CliError(f"did not save {args.save}: {refusal}; add --force to save it anyway (marked as forced)")
 
 
-def _not_savable(report):
-    """Why the calibration of ``report`` (a ``CalibrationReport``) should not be saved, or None."""
-    if report.units:
-        return "the log's units look wrong (" + report.units[0].split(":")[0] + ")"
-    if not report.converged:
-        return "the run did not converge"
-    return None
+#: The command line's flag for each keyword of :func:`fmscal.analysis.calibrate` it refuses.
+_FLAGS = {"method": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
+          "wrench_noise": "--wrench-noise", "latency": "--latency", "max_latency": "--max-latency", "truth": "--truth",
+          "gravity": "--gravity", "reading": "--reading", "urdf and frame": "--urdf and --frame"}
 
 
-def _print_calibration(args, log, out, result):
+def _payload(args, data, table):
+    """The payload: ``--payload PAYLOAD.json``, or ``--mass``, ``--rho`` and ``--inertia`` in ``data``'s case."""
+    from fmscal.observers.payload import PayloadEstimate
+    from fmscal.plant import Payload
+    flags = [name for name, value in (("--mass", args.mass), ("--rho", args.rho), ("--inertia", args.inertia))
+             if value is not None]
+    if args.payload is not None:
+        if flags:
+            raise CliError(f"--payload takes the place of --mass, --rho and --inertia; got {' and '.join(flags)} "
+                           "too: give one or the other")
+        estimate = PayloadEstimate.load(args.payload)
+        if args.save and table and estimate.inertia is None:
+            raise CliError(f"--save records the payload in the calibration file: {args.payload} holds no inertia "
+                           "(held poses do not give it); give --mass, --rho and --inertia instead")
+        return estimate
+    if args.mass is None or args.rho is None:
+        raise CliError("give the payload: --mass and --rho (and --inertia), or --payload PAYLOAD.json")
+    positive(args.mass, "--mass")
+    for value in args.rho:
+        if not np.isfinite(value):
+            raise CliError(f"--rho must be finite numbers in m; got {args.rho}")
+    if table:
+        if len(args.rho) != 3:
+            raise CliError(f"a pose table takes --rho X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
+                           f"got {len(args.rho)}")
+        if args.inertia is None:
+            if args.save:
+                raise CliError("--save records the payload in the calibration file: give --inertia IXX IYY IZZ IXY "
+                               "IXZ IYZ too (held poses do not use it)")
+            return args.mass, tuple(args.rho)
+        return spatial_payload(args.mass, args.rho, args.inertia)
+    if data.kind == "spatial":
+        return spatial_payload(args.mass, args.rho, args.inertia)
+    inertia = args.inertia or []
+    if len(args.rho) != 2 or len(inertia) != 1:
+        raise CliError(f"a planar log takes --rho RX RY (2 numbers, m) and --inertia I_G (1 number, kg m^2); got "
+                       f"{len(args.rho)} and {len(inertia)} (three and six are for a spatial log)")
+    return Payload(args.mass, positive(args.inertia[0], "--inertia"), tuple(args.rho))
+
+
+def _plot(args, log, cal, truth):
+    """``--plot``: each entry of ``S_hat`` against time with its band, and the pose residual, on the aligned log."""
+    import copy
+
+    from fmscal.analysis._plots import plot_calibration
+    from fmscal.plant import SpatialModel
+    from fmscal.plant.io import reading_sign
+    title = f"{Path(args.log).name}: entries of S_hat ({cal.method}) and the pose residual"
+    if cal.kind == "planar":
+        plot_calibration(cal.run, log.shift_poses(cal.latency), args.plot, title, truth)
+        return
+    signed = copy.copy(log)                       # the reading in the toolkit's sign, as it was calibrated
+    signed.w_hat = reading_sign(cal.reading) * log.w_hat
+    plot_calibration(cal.run, signed.shift_poses(cal.latency), args.plot, title, truth,
+                     SpatialModel(cal.payload, cal.gravity))
+
+
+def _print_calibration(args, data, cal, saved):
     """The human-readable report of ``fmscal calibrate``."""
-    print(f"{Path(args.log).name}: {len(log)} samples, {log.duration:g} s, "
-          f"{int(log.has_pose.sum())} pose measurements; method {out['observer']}")
+    out = json.loads(cal.to_json(saved=saved))
+    for key in ("S_std", "b_std"):                # infinite (not determined) as inf, not JSON's null
+        out[key] = None if getattr(cal, key) is None else getattr(cal, key).tolist()
+    name = Path(args.log).name
+    if cal.kind != "planar":
+        from fmscal.analysis.cli._spatial import print_spatial
+        if cal.kind == "table":
+            from fmscal.plant.io import AttitudeLog
+            what = ("attitude-only log, its held segments" if isinstance(data, AttitudeLog)
+                    else "table of joint angles" if args.urdf else "pose table")
+            summary = (f"{name}: {what}, {cal.poses} held poses; method {cal.method} (S = I where the poses say "
+                       "nothing)")
+        else:
+            summary = (f"{name}: spatial, {len(data)} samples, {data.duration:g} s, "
+                       f"{int(data.has_pose.sum())} pose measurements; method {cal.method}")
+        print_spatial(args, summary, out)
+        return
+    print(f"{name}: {len(data)} samples, {data.duration:g} s, "
+          f"{int(data.has_pose.sum())} pose measurements; method {out['observer']}")
     if out["noise_estimated"]:
         n = out["noise"]
         print(f"noise estimated from the log ({' and '.join(out['noise_estimated'])}): wrench sd "
@@ -184,7 +226,7 @@ def _print_calibration(args, log, out, result):
         cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(len(b))]
         print("offset b [N m, N, N]: " + "   ".join(cells))
     print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
-    print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {result.t[-1]:g} s)")
+    print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {cal.run.t[-1]:g} s)")
     if "E" in out:
         print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")
     if out["saved"]:
@@ -217,7 +259,6 @@ def cmd_apply(args):
     payload = None
     if all(given):
         if len(args.rho) == 3:
-            from fmscal.analysis.cli._spatial import spatial_payload
             payload = spatial_payload(args.mass, args.rho, args.inertia)
         elif len(args.rho) != 2 or len(args.inertia) != 1:
             raise CliError(f"--rho and --inertia take 2 and 1 numbers (planar) or 3 and 6 (spatial); got "

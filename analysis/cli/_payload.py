@@ -21,7 +21,8 @@ import numpy as np
 from fmscal.plant.physics._rigid_body import _inertia_matrix
 
 from fmscal.analysis.cli._common import CliError, strict
-from fmscal.analysis.cli._spatial import _NAMES, _spatial_truth, joint_data
+from fmscal.analysis.cli._files import check_outputs
+from fmscal.analysis.cli._spatial import _NAMES, _spatial_truth
 
 __all__ = ["add_identify_payload", "cmd_identify_payload"]
 
@@ -54,6 +55,10 @@ def add_identify_payload(sub):
     p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report the errors")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.add_argument("--save", metavar="PAYLOAD.json",
+                   help="write the payload (the tracked frame's axes, and gravity where estimated) for fmscal "
+                        "calibrate --payload; only where the mass and the centre of mass are determined")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --save file")
     p.set_defaults(func=cmd_identify_payload)
 
 
@@ -100,32 +105,35 @@ def _calibration_S(args):
 
 def cmd_identify_payload(args):
     """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log or a pose table."""
-    from fmscal.plant.io._log import _as_path
-    from fmscal.plant.io._pose_table import (held_table, is_attitude_log, is_pose_table, read_attitude_log,
-                                             read_pose_table)
+    from fmscal.analysis import OptionError, read_data
+    from fmscal.plant.io import AttitudeLog, PoseTable, held_table
+    if args.save is not None and not args.save.endswith(".json"):
+        raise CliError(f"--save must end in .json; got {args.save}")
+    check_outputs([(args.save, "--save")], [(args.log, "the log"), (args.calibration, "the --calibration file"),
+                                            (args.truth, "the --truth file")], overwrite=args.overwrite)
     gravity, estimate_gravity = _gravity(args)
     S = _calibration_S(args)
-    path = _as_path(args.log, "log")
-    data = joint_data(args, path)
-    if data is not None:
-        from fmscal.plant.io._pose_table import PoseTable
-        if isinstance(data, PoseTable):
-            return _identify_table(args, path, data, S, gravity, estimate_gravity)
-        return _identify_log(args, path, data, S, gravity, estimate_gravity)
-    if is_pose_table(path):
-        return _identify_table(args, path, read_pose_table(path), S, gravity, estimate_gravity)
-    if is_attitude_log(path):
-        table, _, why = held_table(read_attitude_log(path))
+    try:
+        data = read_data(args.log, args.urdf, args.frame)
+    except OptionError as err:
+        raise CliError(err.template.format("--urdf and --frame")) from None
+    if isinstance(data, AttitudeLog):
+        data, _, why = held_table(data)
         print(f"fmscal identify-payload: note: {why}", file=sys.stderr)
-        return _identify_table(args, path, table, S, gravity, estimate_gravity)
-    from fmscal.plant import read_log
-    return _identify_log(args, path, read_log(path), S, gravity, estimate_gravity)
+    if isinstance(data, PoseTable):
+        fit = _identify_table(args, data, S, gravity, estimate_gravity)
+    else:
+        fit = _identify_log(args, data, S, gravity, estimate_gravity)
+    if args.save is not None:
+        fit.save(args.save)               # refused in one line where the payload is not determined
+        if not args.json:
+            print(f"saved the payload to {args.save} (for fmscal calibrate --payload)")
 
 
-def _identify_log(args, path, log, S, gravity, estimate_gravity):
+def _identify_log(args, log, S, gravity, estimate_gravity):
     from fmscal.observers.payload._payload_fit import INERTIA_NAMES, identify_payload
     if log.kind != "spatial":
-        raise CliError(f"{path.name} is a planar log; identify-payload takes a spatial log "
+        raise CliError(f"{log.name} is a planar log; identify-payload takes a spatial log "
                        "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) or a pose table")
     truth = _spatial_truth(args.truth)
     fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
@@ -144,8 +152,8 @@ def _identify_log(args, path, log, S, gravity, estimate_gravity):
             out["b_error"] = (fit.b - truth.offset).tolist()
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
-        return
-    print(f"{path.name}: {len(log)} samples, {log.duration:g} s; S "
+        return fit
+    print(f"{log.name}: {len(log)} samples, {log.duration:g} s; S "
           f"{'from ' + args.calibration if args.calibration else '= I'}; reading {args.reading}")
     _print_mass(fit)
     if fit.inertia is None:
@@ -163,6 +171,7 @@ def _identify_log(args, path, log, S, gravity, estimate_gravity):
               + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm"
               + ("" if out["inertia_error"] is None else ", inertia " + " ".join(
                   f"{n} {v:+.2g}" for n, v in zip(INERTIA_NAMES, out["inertia_error"])) + " kg m^2"))
+    return fit
 
 
 def _print_mass(fit):
@@ -212,7 +221,7 @@ def _print_calibrate_flags(fit, table=False):
     print(f"for fmscal calibrate (the tracked frame's axes): {flags}")
 
 
-def _identify_table(args, path, table, S, gravity, estimate_gravity):
+def _identify_table(args, table, S, gravity, estimate_gravity):
     from fmscal.observers.payload._static_fit import fit_static
     if args.truth:
         raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
@@ -222,9 +231,9 @@ def _identify_table(args, path, table, S, gravity, estimate_gravity):
         print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
     if args.json:
         print(json.dumps(strict(fit.to_dict()), allow_nan=False))
-        return
+        return fit
     source = "from " + args.calibration if args.calibration else "= I"
-    print(f"{path.name}: {len(table)} held poses; S {source}; reading {args.reading}")
+    print(f"{table.name}: {len(table)} held poses; S {source}; reading {args.reading}")
     _print_mass(fit)
     print("inertia: not determined by held poses (it needs angular acceleration)")
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
@@ -232,6 +241,7 @@ def _identify_table(args, path, table, S, gravity, estimate_gravity):
     _print_calibrate_flags(fit, table=True)
     _print_coverage(fit)
     print(f"converged: {'yes' if fit.converged else 'no'}")
+    return fit
 
 
 def _print_coverage(fit, undetermined=()):

@@ -477,7 +477,7 @@ class Observer:
             observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,
             diverged=bool(est.diverged), converged=converged, info=est.info, b=b, b_std=b_std,
-            warnings=list(est.warnings))
+            warnings=list(est.warnings), cov=None if est.diverged or est.cov is None else np.asarray(est.cov))
 
 
 class RecursiveObserver(Observer):

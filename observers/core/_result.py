@@ -63,6 +63,10 @@ class ObserverResult:
         Its one-sigma uncertainty, where the method has one.
     warnings : list of str
         What the method noticed about the log or its own run, one line each.
+    cov : ndarray, shape (k, k), or None
+        Covariance of the final estimate's entries ``[S | c]`` flat in row
+        order (``k = n_w (n_w + 1)``; ``n_w^2``, ``S`` alone, without the
+        offset), where the method has one and did not diverge.
     """
 
     observer: str
@@ -78,6 +82,7 @@ class ObserverResult:
     b: np.ndarray = None
     b_std: np.ndarray = None
     warnings: list = field(default_factory=list)
+    cov: np.ndarray = None
 
 
 def initial_calibration(S0, offset):

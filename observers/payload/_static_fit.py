@@ -82,7 +82,7 @@ class StaticFit(_Rotations):
     b, b_std : ndarray, shape (6,)
         The sensor's offset in ``w = S (sigma w_hat - b)``, reading order, N m and N.
     gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
-        Where asked, as a log's fit gives them (:class:`fmscal.observers.payload.PayloadFit`).
+        Where asked, as a log's fit gives them (:class:`fmscal.observers.payload.PayloadEstimate`).
     reading : str
         The reading's sign convention the fit used (:data:`fmscal.plant.io._calibration.READINGS`).
     cone_deg : float

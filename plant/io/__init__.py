@@ -13,6 +13,7 @@ from ._pose_table import (PoseTable, read_pose_table, write_pose_table, is_pose_
     read_attitude_log, is_attitude_log, held_table, simulate_attitude_log, TABLE_COLUMNS, ATTITUDE_COLUMNS,
     MIN_POSES, HOLD_RATE, HOLD_WINDOW, MIN_HOLD)
 from ._tf_chain import (chain_poses)
+from ._kinematics import (RobotKinematics, joint_columns, read_joint_data)
 from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, POSE_TYPES, JOINT_TYPE, TF_TYPE,
     MAX_WRENCH_GAP, MAX_TILT_DEG, MAX_OUT_OF_PLANE)
 
@@ -21,5 +22,6 @@ __all__ = ["atomic_write", "atomic_write_text", "atomic_write_many", "exclusive"
            "unit_quaternions", "estimate_noise", "implied_scale", "diagnose_units", "UnitFinding", "Calibration",
            "CalibrationFileError", "file_sha256", "reading_sign", "PoseTable", "read_pose_table",
            "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog", "read_attitude_log",
-           "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses", "BagError", "import_bag",
+           "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses", "RobotKinematics", "joint_columns",
+           "read_joint_data", "BagError", "import_bag",
            "read_bag", "format_report"]

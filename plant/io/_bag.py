@@ -112,7 +112,7 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
     spatial : bool
         Keep the whole pose and all six wrench components: a spatial log
         (``t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz``) of a 6-axis sensor.
-    kinematics : plant.io._kinematics.RobotKinematics, optional
+    kinematics : plant.io.RobotKinematics, optional
         The pose topic is the arm's ``sensor_msgs/JointState``: each message's
         joints (by name) give the sensor frame's pose by forward kinematics
         (a spatial log; the pose offset is then zero).

@@ -1,4 +1,5 @@
-"""A calibration as a file: what ``fmscal calibrate --save`` writes and ``fmscal apply`` uses.
+"""A calibration from the estimate to the file: what ``fmscal.analysis.calibrate`` returns, ``fmscal calibrate
+--save`` writes and ``fmscal apply`` uses.
 
 The calibrated wrench is ``w = S (sigma w_hat - b)`` (eq. 3 with the
 sensor's offset ``b``, ``b = 0`` where it was not estimated, and the
@@ -6,29 +7,47 @@ reading's sign ``sigma``). ``sigma = +1`` for a sensor that reports the
 toolkit's wrench, the one the mount applies to the payload (``reading``
 ``"reaction"``, the default), and ``-1`` for one that reports the wrench
 the tool applies to the sensor (``"load"``: ATI, Robotiq, Bota, OnRobot);
-``b`` is in the sign-corrected reading ``sigma w_hat``. The file is JSON::
+``b`` is in the sign-corrected reading ``sigma w_hat``.
 
-    {"format": "fmscal-calibration/1", "S": [[...] x3], "S_std": [[...] x3] or null,
-     "b": [M, fx, fy] or null, "b_std": [...] or null, "payload": {"mass", "inertia", "rho"},
-     "method": "least-squares", "log": {"name": "run.csv", "sha256": "..."},
-     "latency": s or null, "date": "2026-11-22T10:00:00+00:00", "forced": false,
-     "reading": "reaction"}
+One type, :class:`Calibration`, carries a calibration from the estimate
+(with its diagnostics: ``converged``, ``warnings``, the directions left
+undetermined, the method's run) to the file (:meth:`Calibration.save`) and
+back (:meth:`Calibration.load`); what only the estimate has (the run, ``E``
+against a truth, the least-squares fit's diagnostics) is not written.
 
-A spatial calibration has the same keys with ``S`` 6x6, ``b`` in the
-reading's order ``tx .. fz``, and the payload's ``rho`` (3 numbers) and
-``inertia`` (its 6 entries ``Ixx Iyy Izz Ixy Ixz Iyz``).
+The file is JSON, format ``fmscal-calibration/2``::
 
-``forced`` is true when the calibration was saved although its run had not
-converged (``fmscal calibrate --save --force``); files without it are read as
-not forced, and files without ``reading`` as ``"reaction"`` (the only
-convention before it was recorded).
+    {"format": "fmscal-calibration/2", "kind": "planar" | "spatial" | "table",
+     "S": [[...] x n], "S_std": [[...] x n] or null, "b": [...] or null, "b_std": [...] or null,
+     "cov": [[...]] or null, "payload": {"mass", "inertia", "rho"}, "method": "max-likelihood",
+     "log": {"name": "run.csv", "sha256": "..."}, "latency": s or null, "latency_std": s or null,
+     "latency_estimated": false, "gravity": [gx, gy, gz] or null, "noise": {...} or null,
+     "date": "2026-11-22T10:00:00+00:00", "forced": false, "reading": "reaction",
+     "converged": true, "warnings": [...], "undetermined": [...], "undetermined_directions": [[...]]}
+
+``n`` is 3 (planar: ``b`` is ``[M, f_x, f_y]``, the payload's ``rho`` 2
+numbers and ``inertia`` 1) or 6 (spatial and tables: ``b`` in the reading's
+order ``tx .. fz``, ``rho`` 3 numbers and ``inertia`` its 6 entries ``Ixx Iyy
+Izz Ixy Ixz Iyz``). A ``null`` entry of ``S_std`` or ``b_std`` is one the data
+did not determine (infinite in memory). ``cov`` is the covariance of the
+estimated entries ``[S | c]`` flat in row order (``c = -S b``; ``S`` alone
+without the offset), where the method gives one. ``latency`` is signed (s,
+positive: the poses arrive late). ``undetermined`` names the directions of the
+reading the data left undetermined, in words; ``undetermined_directions``
+holds them as unit vectors of the augmented reading ``[w_hat, 1]``.
+
+Files of format ``fmscal-calibration/1`` (the keys up to ``reading``) still
+read: the keys added by ``/2`` are then unknown (``converged`` None). In
+either format, files without ``forced`` are read as not forced, and files
+without ``reading`` as ``"reaction"`` (the only convention before it was
+recorded).
 """
 
 import datetime
 import hashlib
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -37,12 +56,17 @@ from fmscal.plant.numerics._errors import FmscalError
 from fmscal.plant.io._files import atomic_write_text, not_a_file
 from fmscal.plant.physics._payload import Payload
 from fmscal.plant.physics._rigid_body import SpatialPayload
-from fmscal.plant.physics._sensor import check_calibration
+from fmscal.plant.physics._sensor import NoiseSpec, check_calibration
 
-__all__ = ["Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "FORMAT", "READINGS"]
+__all__ = ["Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "FORMAT", "FORMATS", "READINGS",
+           "KINDS"]
 
-#: The format tag every calibration file carries.
-FORMAT = "fmscal-calibration/1"
+#: The format tag a calibration file is written with.
+FORMAT = "fmscal-calibration/2"
+#: The format tags a calibration file is read with (the older first).
+FORMATS = ("fmscal-calibration/1", FORMAT)
+#: The cases a calibration comes from: a planar log, a spatial log, held poses (a pose table).
+KINDS = ("planar", "spatial", "table")
 #: A calibration file is a few kB; anything above this is refused unread.
 _MAX_FILE_BYTES = 1 << 20
 #: The two sign conventions of a sensor's reading: the wrench on the payload (the toolkit's), or on the sensor.
@@ -86,32 +110,50 @@ def reading_sign(reading):
     return 1.0 if reading == "reaction" else -1.0
 
 
-def _matrix(value, shape, name, source):
+def _matrix(value, shape, name, source, undetermined=False):
+    """``value`` as a float array of ``shape``, finite (``undetermined``: +inf allowed, and NaN read as +inf)."""
     try:
-        arr = np.asarray(value, dtype=float)
+        arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
         raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}; got {_short(value)}") from None
-    if arr.shape != shape or not np.all(np.isfinite(arr)):
+    if undetermined:
+        arr[np.isnan(arr)] = np.inf                          # null in a file: not determined
+    ok = np.isfinite(arr) | (undetermined & (arr == np.inf))
+    if arr.shape != shape or not np.all(ok):
         raise CalibrationFileError(f"{source}: {name} must be finite numbers of shape {shape}; "
                                    f"got shape {arr.shape}")
     return arr
 
 
+def _listed(value):
+    """An array as nested lists for JSON, None for None, a non-finite entry as None."""
+    if value is None:
+        return None
+    return [_listed(v) for v in value] if np.ndim(value) else (float(value) if np.isfinite(value) else None)
+
+
 @dataclass(frozen=True)
 class Calibration:
-    """A sensor calibration: ``w = S (sigma w_hat - b)`` (module docstring).
+    """A sensor calibration, ``w = S (sigma w_hat - b)``, from its estimate to its file (module docstring).
+
+    :func:`fmscal.analysis.calibrate` returns one with every field it
+    knows; :meth:`load` gives one back from a file (the fields marked *not
+    saved* then take their defaults).
 
     Parameters
     ----------
     S : array_like, shape (n, n)
         Calibration matrix, non-singular: 3x3 (planar) or 6x6 (spatial).
-    payload : plant.Payload or plant.SpatialPayload
+        Also :attr:`S_hat`.
+    payload : plant.Payload or plant.SpatialPayload or None
         The mass properties the calibration was estimated with (the one of
-        its case).
+        its case); None only for held poses calibrated from the mass and the
+        centre of mass alone (such a calibration cannot be saved).
     method : str
-        The estimator (``least-squares``, ``ekf``, ...).
+        The estimator (``max-likelihood``, ``least-squares``, ...).
     S_std : array_like, shape (n, n), optional
-        One-sigma uncertainty of each entry.
+        One-sigma uncertainty of each entry; ``inf`` where the data did not
+        determine it; None where the method gives none.
     b, b_std : array_like, shape (n,), optional
         Offset in the raw reading's order and units (planar ``[M, f_x,
         f_y]``, spatial ``[tx .. fz]``; N m, N) and its uncertainty; None:
@@ -120,7 +162,8 @@ class Calibration:
     log_name, log_sha256 : str
         The log it came from, and a hash of the log file's contents.
     latency : float, optional
-        Delay of the pose stream behind the sensor stream that was used, s.
+        Delay of the pose stream behind the sensor stream that was used, s
+        (signed); None for held poses.
     date : str, optional
         ISO 8601; default now (UTC).
     forced : bool
@@ -129,6 +172,51 @@ class Calibration:
     reading : {"reaction", "load"}
         The reading's sign convention (:data:`READINGS`): ``"load"`` turns
         each reading's sign before ``S`` and ``b`` apply.
+    latency_std : float, optional
+        One-sigma uncertainty of the latency, s, where known.
+    latency_estimated : bool
+        The latency was estimated from the log (True) or given.
+    gravity : array_like, shape (3,), optional
+        Gravity in the pose frame used, m/s^2 (spatial logs and tables).
+    noise : plant.NoiseSpec, optional
+        The noise model the method used (planar logs).
+    cov : array_like, shape (k, k), optional
+        Covariance of the estimated entries ``[S | c]`` flat in row order
+        (``k = n (n + 1)``; ``n^2``, ``S`` alone, without the offset),
+        where the method gives one.
+    converged : bool or None
+        The run converged by the rule of :func:`fmscal.analysis.calibrate`;
+        None where unknown (a file of format ``/1``).
+    warnings : list of str
+        What the estimate found, one line each.
+    undetermined : list of str
+        The directions of the reading the data left undetermined, in words.
+    undetermined_directions : list of array_like, shape (n + 1,)
+        The same as unit vectors of the augmented reading ``[w_hat, 1]``.
+    kind : {"planar", "spatial", "table"}, optional
+        The case (:data:`KINDS`); default from the size of ``S``.
+    noise_estimated : list of str
+        *Not saved.* Which parts of ``noise`` came from the log (``"wrench"``, ``"pose"``).
+    E : float, optional
+        *Not saved.* E of eq. (16) against a known truth.
+    E_blocks : (float, float), optional
+        *Not saved.* E of the torque and of the force block (spatial, with a truth).
+    poses : int, optional
+        *Not saved.* The number of held poses (a table).
+    fit : dict, optional
+        *Not saved.* A least-squares fit's diagnostics of the same log (planar).
+    units : list of str
+        *Not saved.* What :func:`plant.io.diagnose_units` found wrong with
+        the log's units that the method cannot absorb; empty when they look right.
+    notes : list of str
+        *Not saved.* What was done to the data on reading it (:attr:`plant.Log.notes`).
+    run : object, optional
+        *Not saved.* The method's full run: an :class:`observers.ObserverResult`
+        (histories, info), or the table's fit.
+    why_unconverged : str, optional
+        *Not saved.* Why ``converged`` is False, in a few words (the units,
+        saturation, the other sign convention, held poses, or the run); None
+        when it converged or is unknown.
     """
 
     S: np.ndarray
@@ -143,25 +231,78 @@ class Calibration:
     date: str = None
     forced: bool = False
     reading: str = "reaction"
+    latency_std: float = None
+    latency_estimated: bool = False
+    gravity: np.ndarray = None
+    noise: NoiseSpec = None
+    cov: np.ndarray = None
+    converged: bool = None
+    warnings: list = field(default_factory=list)
+    undetermined: list = field(default_factory=list)
+    undetermined_directions: list = field(default_factory=list)
+    kind: str = None
+    noise_estimated: list = field(default_factory=list, compare=False)
+    E: float = field(default=None, compare=False)
+    E_blocks: tuple = field(default=None, compare=False)
+    poses: int = field(default=None, compare=False)
+    fit: dict = field(default=None, compare=False, repr=False)
+    units: list = field(default_factory=list, compare=False)
+    notes: list = field(default_factory=list, compare=False)
+    run: object = field(default=None, compare=False, repr=False)
+    why_unconverged: str = field(default=None, compare=False)
 
     def __post_init__(self):
         set_ = object.__setattr__
         n = 6 if np.shape(self.S) == (6, 6) else 3
         set_(self, "S", check_calibration(self.S, "S", size=n))
         kind = SpatialPayload if n == 6 else Payload
-        if not isinstance(self.payload, kind):
+        if not isinstance(self.payload, kind) and not (self.payload is None and n == 6):
             raise TypeError(f"payload must be a plant.{kind.__name__} for a {n}x{n} S; "
                             f"got {type(self.payload).__name__}")
-        for name, shape in (("S_std", (n, n)), ("b", (n,)), ("b_std", (n,))):
+        for name, shape, undetermined in (("S_std", (n, n), True), ("b", (n,), False), ("b_std", (n,), True)):
             value = getattr(self, name)
             if value is not None:
-                set_(self, name, _matrix(value, shape, name, "calibration"))
-        if not isinstance(self.forced, (bool, np.bool_)):
-            raise TypeError(f"forced must be True or False; got {self.forced!r}")
-        set_(self, "forced", bool(self.forced))
+                set_(self, name, _matrix(value, shape, name, "calibration", undetermined))
+        if self.cov is not None:
+            k = np.shape(self.cov)[0] if np.ndim(self.cov) == 2 else 0
+            if k not in (n * n, n * (n + 1)):
+                raise FmscalError(f"cov must be the covariance of [S | c] ({n * (n + 1)} entries square, or "
+                                  f"{n * n} without the offset); got shape {np.shape(self.cov)}")
+            set_(self, "cov", _matrix(self.cov, (k, k), "cov", "calibration", undetermined=True))
+        if self.gravity is not None:
+            set_(self, "gravity", _matrix(self.gravity, (3,), "gravity", "calibration"))
+        for name in ("latency", "latency_std"):
+            value = getattr(self, name)
+            if value is not None:
+                if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value):
+                    raise FmscalError(f"{name} must be a finite number of seconds or None; got {_short(value)}")
+                set_(self, name, float(value))
+        if self.latency_std is not None and self.latency_std < 0:
+            raise FmscalError(f"latency_std must be at least 0; got {self.latency_std}")
+        if self.noise is not None and not isinstance(self.noise, NoiseSpec):
+            raise TypeError(f"noise must be a plant.NoiseSpec or None; got {type(self.noise).__name__}")
+        for name in ("forced", "latency_estimated"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"{name} must be True or False; got {getattr(self, name)!r}")
+            set_(self, name, bool(getattr(self, name)))
+        if self.converged is not None:
+            set_(self, "converged", bool(self.converged))
+        for name in ("warnings", "undetermined", "noise_estimated", "units", "notes"):
+            set_(self, name, [str(v) for v in getattr(self, name)])
+        set_(self, "undetermined_directions",
+             [_matrix(d, (n + 1,), "undetermined_directions", "calibration") for d in self.undetermined_directions])
         reading_sign(self.reading)
+        if self.kind is None:
+            set_(self, "kind", "planar" if n == 3 else "spatial")
+        if self.kind not in KINDS or (self.kind == "planar") != (n == 3):
+            raise FmscalError(f"kind must be one of {', '.join(KINDS)} (planar: a 3x3 S); got {_short(self.kind)}")
         if self.date is None:
             set_(self, "date", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+
+    @property
+    def S_hat(self):
+        """The estimate of ``S``: :attr:`S`, shape (n, n)."""
+        return self.S
 
     @property
     def size(self):
@@ -195,25 +336,79 @@ class Calibration:
         return (reading_sign(self.reading) * w_hat - self.offset) @ self.S.T
 
     def to_dict(self):
-        """The JSON document (module docstring)."""
-        def listed(a):
-            return None if a is None else np.asarray(a).tolist()
-        return {"format": FORMAT, "S": listed(self.S), "S_std": listed(self.S_std), "b": listed(self.b),
-                "b_std": listed(self.b_std), "payload": self.payload.to_dict(), "method": self.method,
+        """The file's JSON document, format ``/2`` (module docstring); without the fields not saved."""
+        return {"format": FORMAT, "kind": self.kind, "S": _listed(self.S), "S_std": _listed(self.S_std),
+                "b": _listed(self.b), "b_std": _listed(self.b_std), "cov": _listed(self.cov),
+                "payload": None if self.payload is None else self.payload.to_dict(), "method": self.method,
                 "log": {"name": self.log_name, "sha256": self.log_sha256}, "latency": self.latency,
-                "date": self.date, "forced": self.forced, "reading": self.reading}
+                "latency_std": self.latency_std, "latency_estimated": self.latency_estimated,
+                "gravity": _listed(self.gravity), "noise": None if self.noise is None else self.noise.to_dict(),
+                "date": self.date, "forced": self.forced, "reading": self.reading, "converged": self.converged,
+                "warnings": list(self.warnings), "undetermined": list(self.undetermined),
+                "undetermined_directions": [_listed(d) for d in self.undetermined_directions]}
+
+    def to_json(self, saved=False):
+        """The report ``fmscal calibrate --json`` prints: one line of strict JSON (NaN and infinity as null).
+
+        Its keys depend on the case (:attr:`kind`): every case has
+        ``observer`` (the method), ``S``, ``S_std``, ``b``, ``b_std``,
+        ``latency``, ``latency_estimated``, ``converged``, ``warnings`` and
+        ``saved``; a planar log adds ``noise``, ``noise_estimated``, ``fit``
+        and, with a truth, ``E``; a spatial log adds ``kind``,
+        ``undetermined`` (:attr:`undetermined_directions`, as vectors),
+        ``reading`` and, with a truth, ``E``, ``E_torque`` and ``E_force``;
+        a table adds ``kind``, ``poses``, ``undetermined`` and ``reading``.
+
+        Parameters
+        ----------
+        saved : bool
+            Whether the caller wrote the calibration to a file (the
+            report's ``saved``).
+
+        Returns
+        -------
+        str
+        """
+        head = {"observer": self.method}
+        if self.kind != "planar":
+            head["kind"] = self.kind
+        if self.kind == "table":
+            head["poses"] = self.poses
+        out = {**head, "S": self.S, "S_std": self.S_std, "b": self.b, "b_std": self.b_std,
+               "latency": self.latency, "latency_estimated": self.latency_estimated, "converged": self.converged}
+        if self.kind == "planar":
+            out.update(noise=None if self.noise is None else self.noise.to_dict(),
+                       noise_estimated=list(self.noise_estimated), warnings=list(self.warnings), fit=self.fit)
+            if self.E is not None:
+                out["E"] = self.E
+        else:
+            out.update(undetermined=list(self.undetermined_directions), warnings=list(self.warnings),
+                       reading=self.reading)
+            if self.E is not None:
+                out["E"] = self.E
+                out["E_torque"], out["E_force"] = self.E_blocks
+        out["saved"] = bool(saved)
+        return json.dumps(_strict(out), allow_nan=False)
 
     def save(self, path):
-        """Write the calibration as JSON, atomically (a temporary file, then a rename).
+        """Write the calibration as JSON, format ``/2``, atomically (a temporary file, then a rename).
 
         A failure (a full disk, a crash) leaves any previous file at ``path``
         intact: never a truncated calibration.
+
+        Raises
+        ------
+        FmscalError
+            No payload to record (held poses calibrated without the inertia).
         """
+        if self.payload is None:
+            raise FmscalError("a calibration file records the payload: calibrate with the payload's inertia too "
+                              "(a plant.SpatialPayload; held poses do not use it)")
         atomic_write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
 
     @classmethod
     def load(cls, path, payload=None):
-        """Read a calibration file, refusing one that is malformed or made for another payload.
+        """Read a calibration file (format ``/1`` or ``/2``), refusing one malformed or made for another payload.
 
         Parameters
         ----------
@@ -252,9 +447,10 @@ class Calibration:
             raise CalibrationFileError(f"{source}: not a JSON calibration file ({err})") from None
         except RecursionError:
             raise CalibrationFileError(f"{source}: not a calibration file (JSON nested too deeply)") from None
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
+        if not isinstance(data, dict) or data.get("format") not in FORMATS:
             got = data.get("format") if isinstance(data, dict) else type(data).__name__
-            raise CalibrationFileError(f"{source}: not an fmscal calibration (format {got!r}; expected {FORMAT!r})")
+            raise CalibrationFileError(f"{source}: not an fmscal calibration (format {_short(got)}; expected "
+                                       f"{' or '.join(map(repr, FORMATS))})")
         missing = [k for k in ("S", "payload", "method") if k not in data]
         if missing:
             raise CalibrationFileError(f"{source}: missing key(s) {', '.join(missing)}")
@@ -267,10 +463,11 @@ class Calibration:
             raise CalibrationFileError(f"{source}: made for another payload ({_describe(file_payload)}), "
                                        f"not {_describe(payload)}")
         S = _matrix(data["S"], (n, n), "S", source)
+        second = data["format"] == FORMAT
         optional = {}
         for name, shape in (("S_std", (n, n)), ("b", (n,)), ("b_std", (n,))):
             if data.get(name) is not None:
-                optional[name] = _matrix(data[name], shape, name, source)
+                optional[name] = _matrix(data[name], shape, name, source, undetermined=second and name != "b")
         latency = data.get("latency")
         if latency is not None and not (isinstance(latency, (int, float)) and np.isfinite(latency)):
             raise CalibrationFileError(f"{source}: latency must be a number of seconds or null; got {latency!r}")
@@ -287,12 +484,81 @@ class Calibration:
         for key in ("method", "date"):
             if data.get(key) is not None and not isinstance(data[key], str):
                 raise CalibrationFileError(f"{source}: {key} must be a string; got {_short(data[key])}")
+        if second:
+            optional.update(_second_format(data, n, source))
+        elif n == 6 and data["method"] == "static-least-squares":      # /1 did not say: held poses' one fit
+            optional["kind"] = "table"
         try:
             return cls(S=S, payload=file_payload, method=data["method"], log_name=log.get("name", ""),
                        log_sha256=log.get("sha256", ""), latency=latency, date=data.get("date"),
                        forced=forced, reading=reading, **optional)
-        except ValueError as err:
-            raise CalibrationFileError(f"{source}: {err}") from None
+        except (ValueError, TypeError) as err:
+            raise CalibrationFileError(f"{source}: {str(err).splitlines()[0]}") from None
+
+
+def _second_format(data, n, source):
+    """The keys format ``/2`` added, checked: a dict of :class:`Calibration`'s arguments."""
+    out = {}
+    kind = data.get("kind")
+    if kind is not None:
+        if kind not in KINDS or (kind == "planar") != (n == 3):
+            raise CalibrationFileError(f"{source}: kind must be one of {', '.join(KINDS)} (planar: a 3x3 S); "
+                                       f"got {_short(kind)}")
+        out["kind"] = kind
+    latency_std = data.get("latency_std")
+    if latency_std is not None:
+        if isinstance(latency_std, bool) or not isinstance(latency_std, (int, float)) or not latency_std >= 0 \
+                or not np.isfinite(latency_std):
+            raise CalibrationFileError(f"{source}: latency_std must be a non-negative number of seconds or null; "
+                                       f"got {_short(latency_std)}")
+        out["latency_std"] = latency_std
+    for key in ("latency_estimated", "converged"):
+        value = data.get(key)
+        if value is not None and not isinstance(value, bool):
+            raise CalibrationFileError(f"{source}: {key} must be true, false or null; got {_short(value)}")
+    out["latency_estimated"] = bool(data.get("latency_estimated") or False)
+    out["converged"] = data.get("converged")
+    if data.get("gravity") is not None:
+        out["gravity"] = _matrix(data["gravity"], (3,), "gravity", source)
+    if data.get("cov") is not None:
+        k = len(data["cov"]) if isinstance(data["cov"], list) else 0
+        if k not in (n * n, n * (n + 1)):
+            raise CalibrationFileError(f"{source}: cov must be {n * (n + 1)} (or {n * n}) rows square; got {k} rows")
+        out["cov"] = _matrix(data["cov"], (k, k), "cov", source, undetermined=True)
+    if data.get("noise") is not None:
+        try:
+            out["noise"] = NoiseSpec.from_dict(data["noise"])
+        except (KeyError, TypeError, ValueError, FmscalError) as err:
+            raise CalibrationFileError(f"{source}: noise must hold wrench_sd, angle_sd and position_sd "
+                                       f"({str(err).splitlines()[0] if str(err) else type(err).__name__})") from None
+    for key in ("warnings", "undetermined"):
+        value = data.get(key, [])
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise CalibrationFileError(f"{source}: {key} must be a list of strings; got {_short(value)}")
+        out[key] = value
+    directions = data.get("undetermined_directions", [])
+    if not isinstance(directions, list):
+        raise CalibrationFileError(f"{source}: undetermined_directions must be a list of vectors; "
+                                   f"got {_short(directions)}")
+    out["undetermined_directions"] = [_matrix(d, (n + 1,), "undetermined_directions", source) for d in directions]
+    return out
+
+
+def _strict(value):
+    """A JSON-ready copy: arrays as lists, NaN and infinity as None, numpy scalars plain."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 def _short(value, limit=60):
