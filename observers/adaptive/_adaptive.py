@@ -167,7 +167,8 @@ class AdaptiveObserver(RecursiveObserver):
     Raises
     ------
     FmscalError
-        A model that is not linear in its channels (the spatial one), or a
+        A model that is not linear in its channels and has no unit-quaternion
+        attitude (with one it runs as :class:`SpatialAdaptiveObserver`), or a
         bad setting.
 
     Examples

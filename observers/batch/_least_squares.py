@@ -64,7 +64,8 @@ class LeastSquares(Observer):
     ----------
     model : plant.Model or plant.Payload
         The problem, a model linear in its channels (a payload stands for
-        the planar model of it).
+        the planar model of it); on a model whose attitude is a unit
+        quaternion the method runs as :class:`SpatialLeastSquares`.
     window : float
         Window length in s over which the raw reading is integrated twice.
     offset : bool
