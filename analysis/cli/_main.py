@@ -74,9 +74,9 @@ def _add_simulate(sub):
 
 
 def cmd_simulate(args):
-    from fmscal.analysis._comparison import case_scenario
+    from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
     check_seeds(seed=args.seed)
-    sc = case_scenario(args.scenario)
+    sc = {**SCENARIOS, **SPATIAL_SCENARIOS}[args.scenario]            # --scenario's choices: both tables' names
     for option, value in (("--mass", args.mass), ("--inertia", args.inertia), ("--rho", args.rho),
                           ("--offset", args.offset)):
         if value is not None and option[2:] not in sc.payload_settings:      # the scenario's own declaration
