@@ -5,8 +5,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from fmscal.observers import FLOOR_METHOD, METHODS, get_method, method_label
-from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, SpatialModel, SpatialScenario, get_scenario
-from fmscal.plant.physics._model import as_model
+from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
 from fmscal.plant.numerics._checks import as_positive_scalar
 from fmscal.plant.numerics._errors import FmscalError
 
@@ -56,12 +55,8 @@ def simulate_case(scenario, seed, duration=None, noise_scale=1.0):
     noise_scale = float(noise_scale)
     if not (np.isfinite(noise_scale) and noise_scale >= 0):
         raise FmscalError(f"noise_scale must be a non-negative number; got {noise_scale}")
-    if noise_scale != 1.0 and isinstance(sc, SpatialScenario):
-        sc = sc.with_(torque_sd=sc.torque_sd * noise_scale, force_sd=sc.force_sd * noise_scale,
-                      angle_sd=sc.angle_sd * noise_scale, position_sd=sc.position_sd * noise_scale)
-    elif noise_scale != 1.0:
-        sc = sc.with_(wrench_noise=sc.wrench_noise * noise_scale, angle_sd=sc.angle_sd * noise_scale,
-                      position_sd=sc.position_sd * noise_scale)
+    if noise_scale != 1.0:
+        sc = sc.with_noise_scaled(noise_scale)
     log, truth, _ = sc.generate(int(seed))
     return sc, log, truth, truth.told_noise_spec()
 
@@ -74,20 +69,16 @@ def case_scenario(name):
     FmscalError
         No such scenario; the message lists both cases' names.
     """
-    if isinstance(name, str) and name in SPATIAL_SCENARIOS:
-        return SPATIAL_SCENARIOS[name]
     try:
-        return get_scenario(name)
-    except FmscalError:
+        return {**SCENARIOS, **SPATIAL_SCENARIOS}[name]
+    except KeyError:
         raise FmscalError(f"unknown scenario {name!r}; expected one of {', '.join([*SCENARIOS, *SPATIAL_SCENARIOS])}"
                           ) from None
 
 
 def case_model(scenario):
-    """The model the methods run on for a scenario: its payload's, with its gravity in 3D."""
-    if isinstance(scenario, SpatialScenario):
-        return SpatialModel(scenario.payload, scenario.gravity)
-    return as_model(scenario.payload)
+    """The model the methods run on for a scenario: its payload's, with its gravity in 3D (``scenario.model()``)."""
+    return scenario.model()
 
 
 def _aligned(log, truth, settings):

@@ -19,6 +19,7 @@ import numpy as np
 from fmscal.observers import method_label
 from fmscal.plant.io._files import atomic_write
 from fmscal.plant.physics._model import PlanarModel
+from fmscal.plant.physics._payload import PAPER_PAYLOAD
 
 __all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "thinned",
            "wandering_methods"]
@@ -348,11 +349,6 @@ def plot_calibration(result, log, path, title, truth=None, model=None):
 def _pose_residuals(result, log, model, n):
     """``[(name, unit, values (M, k))]``: the measured pose less the one the fit shows, at the pose samples."""
     has = log.has_pose[:n]
-    if model is None or model.name == "planar":
-        fitted = result.x_hat_history[:, list(PlanarModel.q_index)]      # the pose the fit shows (planar)
-        residual = (log.pose[:n][has] - fitted[has]) * 1e3
-        return [(name, unit, residual[:, [k]]) for k, name, unit in
-                zip(range(3), ("theta", "X", "Y"), ("mrad", "mm", "mm"))]
-    from fmscal.observers.batch._linearised_floor import configuration_residuals
-    residual = configuration_residuals(model, result.x_hat_history[:n][has], log.pose[:n][has]) * 1e3
-    return [("x, y, z", "mm", residual[:, 0:3]), ("about the sensor axes", "mrad", residual[:, 3:6])]
+    model = PlanarModel(PAPER_PAYLOAD) if model is None else model      # the planar default (no payload is read)
+    residual = model.pose_residuals(result.x_hat_history[:n][has], log.pose[:n][has]) * 1e3
+    return [(name, unit, residual[:, list(columns)]) for name, unit, columns in model.residual_panels]

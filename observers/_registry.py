@@ -12,15 +12,18 @@ from dataclasses import dataclass
 
 from fmscal.plant.numerics._checks import as_bool, as_number
 from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.physics._model import as_model
 
-from fmscal.observers.adaptive._adaptive import AdaptiveObserver
+from fmscal.observers.adaptive._adaptive import AdaptiveObserver, SpatialAdaptiveObserver
 from fmscal.observers.adaptive._paper import PaperAdaptiveObserver
 from fmscal.observers.kalman._ekf import AugmentedEKF
+from fmscal.observers.kalman._error_state import ErrorStateEKF
 from fmscal.observers.batch._floor import MaximumLikelihood
 from fmscal.observers.adaptive._highgain import HighGainObserver
-from fmscal.observers.batch._least_squares import LeastSquares
+from fmscal.observers.batch._least_squares import LeastSquares, SpatialLeastSquares
 
-__all__ = ["Method", "METHODS", "FLOOR_METHOD", "get_method", "make_observer", "method_names", "method_label"]
+__all__ = ["Method", "METHODS", "FLOOR_METHOD", "ENGINES", "engine_class", "get_method", "make_observer",
+           "method_names", "method_label"]
 
 
 @dataclass(frozen=True)
@@ -64,11 +67,6 @@ class Method:
     calibrates: bool
     summary: str
     paper_claim: float = None
-
-    @property
-    def models(self):
-        """The cases the method is defined for (:attr:`observers.Observer.models`); empty: any model."""
-        return self.cls.models
 
     def build(self, model, noise=None, settings=None):
         """The method for ``model``, with its documented defaults and ``settings`` on top.
@@ -164,6 +162,48 @@ METHODS = {m.name: m for m in (
            online=False, role="reference", calibrates=True,
            summary="maximum-likelihood estimate from the whole log: what the data allow"),
 )}
+
+#: Which class runs a method on a model, by what the model declares (:class:`fmscal.plant.Model`): a row
+#: ``(method's class, declaration, value): engine`` says that on a model whose ``declaration`` is ``value``
+#: the method runs as ``engine`` (a subclass of it); a method on a model no row matches runs as its own class.
+#: Building a method's class (``AugmentedEKF(model)``, :meth:`Method.build`) builds its engine
+#: (:meth:`observers.Observer.__new__`), and :meth:`observers.Observer.refusal` is the engine's. This table
+#: and :func:`engine_class` are where the toolkit tells its cases apart: no method tests a model's name or class.
+ENGINES = {
+    # the filter pieces need linear channels; without them the EKF runs on an error state (Model.integrate)
+    (AugmentedEKF, "linear_channels", False): ErrorStateEKF,
+    # a body in 3D (a unit-quaternion attitude): the law on its momenta about the centre of mass
+    (AdaptiveObserver, "attitude", "quaternion"): SpatialAdaptiveObserver,
+    # a body in 3D: least squares on smoothed inverse dynamics, linear in [S | c]
+    (LeastSquares, "attitude", "quaternion"): SpatialLeastSquares,
+}
+
+
+def engine_class(cls, model):
+    """The class that runs the method ``cls`` on ``model``: the engine of the first row of :data:`ENGINES`
+    for ``cls`` whose declaration the model makes, else ``cls`` itself.
+
+    Parameters
+    ----------
+    cls : type
+        A method's class (an :class:`observers.Observer` subclass).
+    model : plant.Model or plant.Payload
+        A payload stands for its case's model.
+
+    Returns
+    -------
+    type
+        ``cls`` or a subclass of it.
+
+    Raises
+    ------
+    FmscalError
+        ``model`` is neither a model nor a payload.
+    """
+    model = as_model(model, cls.__name__)
+    return next((engine for (method, declaration, value), engine in ENGINES.items()
+                 if method is cls and getattr(model, declaration) == value), cls)
+
 
 #: The method whose E on a log is the floor every table divides by (``E / floor``).
 FLOOR_METHOD = "max-likelihood"

@@ -76,11 +76,14 @@ def cmd_import(args):
         if args.pose_offset is not None:
             raise CliError("--pose-offset is not taken with --urdf: name the sensor's own frame with --frame")
         kinematics, args.spatial = RobotKinematics(args.urdf, args.frame), True
-    n = 3 if args.spatial else 2
+    from fmscal.plant.physics._model import PlanarModel, SpatialModel
+    # what --spatial (which --urdf and --parent set) makes of the import: the model of the log it writes, whose
+    # pose's position columns are --pose-offset's entries, and how a message names the choice
+    model, flag = {False: (PlanarModel, ""), True: (SpatialModel, " with --spatial")}[bool(args.spatial)]
+    n = len(model.position_names)
     offset = tuple(args.pose_offset) if args.pose_offset is not None else (0.0,) * n
     if len(offset) != n or not all(np.isfinite(v) for v in offset):
-        raise CliError(f"--pose-offset must be {n} finite numbers in m{' with --spatial' if args.spatial else ''}; "
-                       f"got {list(offset)}")
+        raise CliError(f"--pose-offset must be {n} finite numbers in m{flag}; got {list(offset)}")
     log, report = import_bag(bag, args.wrench_topic, args.pose_topic, offset, args.start, args.end,
                              spatial=args.spatial, kinematics=kinematics, tf_frames=tf_frames)
     text = json.dumps(strict({"log": out.name, "samples": len(log), "duration_s": log.duration,

@@ -95,17 +95,14 @@ def _add_simulate(sub):
 
 
 def cmd_simulate(args):
-    from fmscal.plant import get_scenario
-    from fmscal.plant import SPATIAL_SCENARIOS
+    from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
     check_seeds(seed=args.seed)
-    spatial = args.scenario in SPATIAL_SCENARIOS
-    sc = SPATIAL_SCENARIOS[args.scenario] if spatial else get_scenario(args.scenario)
-    if spatial:
-        for option, value in (("--mass", args.mass), ("--inertia", args.inertia), ("--rho", args.rho),
-                              ("--offset", args.offset)):
-            if value is not None:
-                raise CliError(f"{option} is for the planar scenarios; {args.scenario} has its own tool and a "
-                               "random offset (the sidecar records them)")
+    sc = {**SCENARIOS, **SPATIAL_SCENARIOS}[args.scenario]            # --scenario's choices: both tables' names
+    for option, value in (("--mass", args.mass), ("--inertia", args.inertia), ("--rho", args.rho),
+                          ("--offset", args.offset)):
+        if value is not None and option[2:] not in sc.payload_settings:      # the scenario's own declaration
+            raise CliError(f"{option} is for the planar scenarios; {args.scenario} has its own tool and a "
+                           "random offset (the sidecar records them)")
     changes = {}
     if args.duration is not None:
         changes["duration"] = positive(args.duration, "--duration")

@@ -55,7 +55,7 @@ from fmscal.observers.adaptive._highgain import discrete_gain
 from fmscal.observers.core._discretise import position_increment, velocity_increment
 from fmscal.observers.core._state import StateLayout
 
-__all__ = ["AdaptiveObserver", "DEFAULT_LAM", "GAINS"]
+__all__ = ["AdaptiveObserver", "SpatialAdaptiveObserver", "DEFAULT_LAM", "GAINS"]
 
 #: Default pole of each channel's observer (double), rad/s: the filter ``1/(s + lam)^2``.
 DEFAULT_LAM = 5.0
@@ -67,7 +67,7 @@ _DRIFT_WINDOWS = 20   # the drift statistic averages the windowed score over thi
 _T_STEP = 0.05         # s, time constant of the forgetting while the step test fires
 
 
-class AdaptiveObserver(SpatialLaw, RecursiveObserver):
+class AdaptiveObserver(RecursiveObserver):
     """Adaptive observer of eqs. (6)-(8) with filtered regressors and a least-squares gain.
 
     Module docstring for the equations. It runs on any model linear in its
@@ -139,9 +139,9 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
     lam : float or None
         Pole of each channel (double), rad/s: the bandwidth of the filter
         ``1/(s + lam)^2`` on the regressor (change 1, 2). None: the
-        model's default, :data:`DEFAULT_LAM` (5) on a model linear in its
-        channels, :data:`observers.adaptive._spatial.SPATIAL_LAM` (20) on the
-        spatial model.
+        engine's :attr:`default_lam`, :data:`DEFAULT_LAM` (5) on a model
+        linear in its channels, :data:`observers.adaptive._spatial.SPATIAL_LAM`
+        (20) on the spatial model (:class:`SpatialAdaptiveObserver`).
     gain : {"least-squares", "gradient"}
         Change 3 on or off.
     gamma : float
@@ -167,7 +167,8 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
     Raises
     ------
     FmscalError
-        A model that is not linear in its channels (the spatial one), or a
+        A model that is not linear in its channels and has no unit-quaternion
+        attitude (with one it runs as :class:`SpatialAdaptiveObserver`), or a
         bad setting.
 
     Examples
@@ -179,13 +180,15 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
     """
 
     name = "adaptive"
+    #: The pole of each channel (double) where ``lam`` is None, rad/s.
+    default_lam = DEFAULT_LAM
 
     @classmethod
-    def refusal(cls, model):
-        """None on a model linear in its channels and on the spatial model (its own law,
-        :mod:`observers.adaptive._spatial`); else why not, in one line."""
-        if model.linear_channels or model.name == "spatial":
-            return super().refusal(model)
+    def _refusal(cls, model):
+        """None on a model linear in its channels; else why not, in one line (on the spatial model the
+        method runs as :class:`SpatialAdaptiveObserver`, :data:`fmscal.observers._registry.ENGINES`)."""
+        if model.linear_channels:
+            return super()._refusal(model)
         return (f"{cls.__name__} needs a model linear in its channels or the spatial model; "
                 f"it does not run on a {model.name} model")
 
@@ -196,7 +199,7 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         if refusal is not None:                  # before the layouts below read the model's channels
             raise FmscalError(refusal)
         if lam is None:
-            lam = DEFAULT_LAM if model.linear_channels else SPATIAL_LAM
+            lam = self.default_lam
         self.lam = as_positive_scalar(lam, "lam")
         if gain not in GAINS:
             raise FmscalError(f"gain must be one of {', '.join(GAINS)}; got {gain!r}")
@@ -221,22 +224,19 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         rows = model.channel_regressor_rows(np.zeros(model.nq), np.ones(self.n_cols))
         return [(list(channels), len(rows[channels[0]])) for channels in model.parameter_groups()]
 
+    def _filter_parts(self):
+        """The packed state's parts between ``scale`` and the covariances: ``ups<c>``, channel ``c``'s
+        sensitivity filter ``Upsilon`` (position row, velocity row: 2 x k of its group)."""
+        return [(f"ups{c}", 2 * k) for channels, k in self._structure for c in channels]
+
     def _layout(self):
         # called once by RecursiveObserver.__init__: the groups' structure is read from the model here.
         # since: time from the last pose to sample n; scale: each parameter group's prior information;
-        # ups<c>: channel c's sensitivity filter Upsilon (position row, velocity row: 2 x k of its group);
-        # spatial: the motion about C and its filters (SpatialLaw._spatial_parts) in their place;
-        # P<g>: group g's covariance (k x k, change 3; its upper triangle, row order);
-        # test<g>: the averages of its change test (_change_test)
-        self._spatial = not self.model.linear_channels
-        if self._spatial:
-            self._K = np.linalg.inv(self.payload.I_c)
-        self._structure = self._spatial_structure() if self._spatial else self._groups()
+        # the filters (_filter_parts); P<g>: group g's covariance (k x k, change 3; its upper triangle,
+        # row order); test<g>: the averages of its change test (_change_test)
+        self._structure = self._groups()
         parts = [("x", self.model.nx), ("S", self.n_w * self.n_cols), ("since", 1), ("scale", len(self._structure))]
-        if self._spatial:
-            parts += self._spatial_parts()
-        else:
-            parts += [(f"ups{c}", 2 * k) for channels, k in self._structure for c in channels]
+        parts += self._filter_parts()
         parts += [(f"P{g}", k * (k + 1) // 2) for g, (_, k) in enumerate(self._structure)]     # upper triangle
         parts += [(f"test{g}", 4 * k + 2) for g, (_, k) in enumerate(self._structure)]
         return StateLayout(*parts)
@@ -246,13 +246,6 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         pose, w_hat = np.atleast_1d(u.pose), np.atleast_1d(u.w_hat)
         # the size H = C Upsilon will have, |psi| / lam^2 (the filter's DC gain), sets the prior
         w = self._augmented(ops(w_hat), w_hat)
-        if self._spatial:
-            parts, info = self._spatial_initial(pose, w)
-            for g, (_, k) in enumerate(self._structure):
-                parts[f"P{g}"] = np.array(mx.upper(np.eye(k) / (_PRIOR * info[g])))
-                parts[f"test{g}"] = np.r_[np.zeros(3 * k), np.full(k, info[g]), 0.0, 0.0]
-            return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info,
-                                   **parts)
         psi = [np.array(row, dtype=float) for row in model.channel_regressor_rows(pose, w)]
         parts, info = {}, []
         for g, (channels, k) in enumerate(self._structure):
@@ -429,8 +422,6 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
         model, n = self.model, self.n_cols
         st = self.state.unpack(z, scalars=False)
         now, nxt = model.input_layout.unpack(u_prev, scalars=False), model.input_layout.unpack(u, scalars=False)
-        if self._spatial:
-            return self._spatial_transition(o, st, now, nxt, dt)
         x, S, pose, has = st.x, st.S, now.pose, now.has_pose[0]
         since, scale = st.since[0], st.scale
         w = self._augmented(o, now.w_hat)
@@ -471,3 +462,58 @@ class AdaptiveObserver(SpatialLaw, RecursiveObserver):
             entries[vi[c]] = x_pred[c][1] + l2 * e[c] + dot(new[1], d_phi)
         S_next = mx.flat(o, model.params_from_phi([phi + o.vcat(d) for phi, d in zip(phis, d_phis)], n))
         return self.state.pack(o, x=o.vcat(entries), S=S_next, since=(1 - has_next) * h, scale=scale, **parts)
+
+
+class SpatialAdaptiveObserver(SpatialLaw, AdaptiveObserver):
+    """:class:`AdaptiveObserver` on the spatial model: its law on the momenta about the centre of mass.
+
+    Built by ``AdaptiveObserver(model, ...)`` (registry name ``adaptive``)
+    when the model's attitude is a unit quaternion (the registry's engine for
+    that declaration, :data:`fmscal.observers._registry.ENGINES`); it takes the
+    same settings. The motion it follows and its filters are
+    :class:`observers.adaptive.SpatialLaw`'s
+    (:mod:`observers.adaptive._spatial`); the adaptation (recursive least
+    squares per parameter group, the change test, the forgetting) is
+    :class:`AdaptiveObserver`'s, shared. Its default pole is
+    :data:`observers.adaptive._spatial.SPATIAL_LAM`.
+    """
+
+    default_lam = SPATIAL_LAM
+
+    @classmethod
+    def _refusal(cls, model):
+        """The base class's limits (:meth:`observers.Observer._refusal`): the law is written for a body in 3D."""
+        return super(AdaptiveObserver, cls)._refusal(model)
+
+    def _layout(self):
+        # the world-frame inverse inertia the law reads, then AdaptiveObserver's layout with the law's
+        # two groups and its filters (SpatialLaw._spatial_parts) in place of the channels' ups<c>
+        self._K = np.linalg.inv(self.payload.I_c)
+        return super()._layout()
+
+    def _groups(self):
+        """The law's two groups (:meth:`observers.adaptive.SpatialLaw._spatial_structure`)."""
+        return self._spatial_structure()
+
+    def _filter_parts(self):
+        """The motion about ``C`` and the law's four filters (:meth:`observers.adaptive.SpatialLaw._spatial_parts`)."""
+        return self._spatial_parts()
+
+    def _initial_state(self, S0, u):
+        model = self.model
+        pose, w_hat = np.atleast_1d(u.pose), np.atleast_1d(u.w_hat)
+        # the size H = C Upsilon will have sets the prior (SpatialLaw._spatial_initial)
+        w = self._augmented(ops(w_hat), w_hat)
+        parts, info = self._spatial_initial(pose, w)
+        for g, (_, k) in enumerate(self._structure):
+            parts[f"P{g}"] = np.array(mx.upper(np.eye(k) / (_PRIOR * info[g])))
+            parts[f"test{g}"] = np.r_[np.zeros(3 * k), np.full(k, info[g]), 0.0, 0.0]
+        return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info, **parts)
+
+    def _transition(self, z, u_prev, u, dt):
+        """One step of the law (:meth:`observers.adaptive.SpatialLaw._spatial_transition`)."""
+        o = ops(z, u)
+        model = self.model
+        st = self.state.unpack(z, scalars=False)
+        now, nxt = model.input_layout.unpack(u_prev, scalars=False), model.input_layout.unpack(u, scalars=False)
+        return self._spatial_transition(o, st, now, nxt, dt)

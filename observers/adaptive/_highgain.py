@@ -147,7 +147,7 @@ class HighGainObserver(RecursiveObserver):
     (3, 3)
     """
 
-    models = ("planar",)        # [4] is planar by definition
+    paper_equations_only = True        # [4] is planar by definition
 
     def __init__(self, model, lam=DEFAULT_HIGH_GAIN, gamma=1.0, normalisation="matrix",
                  t_decay=20.0, floor=0.1, name="high-gain", offset=False):

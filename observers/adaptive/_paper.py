@@ -109,7 +109,7 @@ class PaperAdaptiveObserver(RecursiveObserver):
     """
 
     name = "adaptive-paper"
-    models = ("planar",)        # eqs. (4)-(8): the paper's planar structure
+    paper_equations_only = True        # eqs. (4)-(8): the paper's planar structure
 
     def __init__(self, model, K1=None, K2=None, delta=PAPER_DELTA, offset=False):
         self.K1 = as_finite_array(PAPER_K1 if K1 is None else K1, (2, 1), "K1")

@@ -164,11 +164,12 @@ def regressor_rows(R, w):
 
 
 class SpatialLaw:
-    """The spatial branch of :class:`fmscal.observers.AdaptiveObserver` (module docstring).
+    """The spatial law of :class:`fmscal.observers.AdaptiveObserver` (module docstring).
 
-    Mixed into the observer: it reads the observer's settings (``lam``,
-    ``track``, ...), its shared adaptation (``_adapt``) and the packed
-    state's layout.
+    Mixed into :class:`observers.adaptive._adaptive.SpatialAdaptiveObserver`,
+    the class ``AdaptiveObserver(model)`` builds on a model whose attitude is
+    a unit quaternion: it reads the observer's settings (``lam``, ``track``,
+    ...), its shared adaptation (``_adapt``) and the packed state's layout.
     """
 
     def _spatial_structure(self):

@@ -157,8 +157,7 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=None, 
     -------
     InverseDynamicsFit
     """
-    if not isinstance(payload, SpatialPayload):
-        raise FmscalError(f"fit_inverse_dynamics takes a SpatialPayload; got {type(payload).__name__}")
+    SpatialPayload.check(payload, "fit_inverse_dynamics")
     gravity = as_finite_array(gravity, (3,), "gravity")
     if block is not None:
         block = as_positive_scalar(block, "block")

@@ -31,14 +31,8 @@ def _cost(log, model, samples, offset, window):
     the pose channels of (residual rms / pose noise)^2 after least squares; in space the sum over the
     wrench components of the share the inverse-dynamics fit leaves unexplained."""
     shifted = log.shift_poses(samples * log.dt)
-    if model.name == "spatial":
-        from fmscal.observers.batch._inverse_dynamics import fit_inverse_dynamics     # here: it imports the payload fit
-        return float(np.sum(fit_inverse_dynamics(shifted, model.payload, gravity=model.gravity).unexplained))
-    fit = LeastSquares(model, window=window, offset=offset)
-    fit.run(shifted)
-    rms = np.asarray(fit.report["residual_rms"])
-    sd = np.maximum(np.asarray(fit.report["pose_noise_estimate"]), 1e-12)
-    return float(np.sum((rms / sd) ** 2))
+    engine = LeastSquares.engine(model)                  # the spatial fit always estimates the offset
+    return engine(model, window=window, offset=offset or engine.offset_required).latency_cost(shifted)
 
 
 def estimate_latency(log, model, max_latency=0.1, offset=False, window=0.5):

@@ -27,7 +27,7 @@ from fmscal.plant.io._noise import estimate_noise
 from fmscal.observers.core._base import Estimate, Observer
 from fmscal.observers.core._discretise import position_increment, velocity_increment
 
-__all__ = ["LeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
+__all__ = ["LeastSquares", "SpatialLeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
 
 #: Above this condition number of the (scaled) information matrix, the log is said not to
 #: excite all nine entries of S.
@@ -64,7 +64,8 @@ class LeastSquares(Observer):
     ----------
     model : plant.Model or plant.Payload
         The problem, a model linear in its channels (a payload stands for
-        the planar model of it).
+        the planar model of it); on a model whose attitude is a unit
+        quaternion the method runs as :class:`SpatialLeastSquares`.
     window : float
         Window length in s over which the raw reading is integrated twice.
     offset : bool
@@ -81,38 +82,33 @@ class LeastSquares(Observer):
 
     name = "least-squares"
     online = False
+    #: The engine estimates the offset always (``offset=False`` is refused).
+    offset_required = False
 
     def __init__(self, model, window=0.5, offset=False):
         super().__init__(model, offset=offset)
-        if self.model.name == "spatial" and not self.offset:
+        if self.offset_required and not self.offset:
             raise FmscalError("least squares on a spatial model always estimates the offset (smoothed inverse "
                               "dynamics, fmscal.observers.batch._inverse_dynamics); pass offset=True")
         self.window = as_positive_scalar(window, "window")
         self.report = FitReport()
 
     @classmethod
-    def refusal(cls, model):
-        """Least squares fits models linear in their channels, and the spatial one (smoothed inverse dynamics)."""
-        if not model.linear_channels and model.name != "spatial":
+    def _refusal(cls, model):
+        """Least squares fits models linear in their channels, and the spatial one (smoothed inverse dynamics,
+        :class:`SpatialLeastSquares`, :data:`fmscal.observers._registry.ENGINES`)."""
+        if not model.linear_channels:
             return f"LeastSquares fits models linear in their channels, or the spatial one; got a {model.name} model"
-        return super().refusal(model)
+        return super()._refusal(model)
 
-    def _estimate_spatial(self, log):
-        """The spatial reference: smoothed inverse dynamics and least squares, one batch fit.
-
-        Every row of the calibration history holds the whole log's fit (a
-        batch fit has no running estimate); the motion is the smoothed poses'
-        (:func:`fmscal.plant.physics.smoothed_state`); the checks pass
-        when the log determines every direction of the reading
-        (``result.info["undetermined"]``, the warnings say what to record).
-        """
-        from fmscal.plant.physics._differentiate import smoothed_state
-        from fmscal.observers.batch._inverse_dynamics import fit_inverse_dynamics
-        fit = fit_inverse_dynamics(log, self.model.payload, self.model.gravity)
-        calibration = np.tile(fit.S_aug.ravel(), (len(log), 1))
-        info = {"undetermined": [d.tolist() for d in fit.undetermined], "residual_rms": fit.residual_rms.tolist()}
-        return Estimate(calibration, smoothed_state(log), cov=fit.cov, checks_passed=fit.converged,
-                        info=info, warnings=list(fit.warnings))
+    def latency_cost(self, log):
+        """The fit's misfit on ``log``, which the latency search (:func:`fmscal.observers.batch.estimate_latency`)
+        minimises over the poses' delay: ``sum_c (r_c / sigma_c)^2`` over the pose channels ``c``, ``r_c``
+        the fit's residual rms and ``sigma_c`` the pose noise estimated from the log (floored at 1e-12)."""
+        self.run(log)
+        rms = np.asarray(self.report["residual_rms"])
+        sd = np.maximum(np.asarray(self.report["pose_noise_estimate"]), 1e-12)
+        return float(np.sum((rms / sd) ** 2))
 
     def _double_integrals(self, log):
         """Double integrals of each channel's regressor from the log's start.
@@ -186,11 +182,8 @@ class LeastSquares(Observer):
         ``result.warnings`` its warnings).
 
         On a spatial model the fit is smoothed inverse dynamics
-        (:func:`fmscal.observers.batch.fit_inverse_dynamics`,
-        :meth:`_estimate_spatial`).
+        (:class:`SpatialLeastSquares`).
         """
-        if self.model.name == "spatial":
-            return self._estimate_spatial(log)
         Z = self._double_integrals(log)
         windows = self._windows(log)
         if len(windows) < 2 and log.duration >= 2 * self.window:      # long enough: the poses too sparse
@@ -267,7 +260,7 @@ class LeastSquares(Observer):
         FmscalError
             The model is not planar (this reads eqs. (4), (5) directly).
         """
-        if self.model.name != "planar":
+        if not self.model.paper_equations:
             raise FmscalError(f"offset_bias reads eqs. (4), (5) of the planar model; got a {self.model.name} model")
         S = np.asarray(S, dtype=float)
         c = -S @ np.asarray(b, dtype=float)
@@ -377,3 +370,47 @@ def _phi_to_S_map(model, sizes, n):
         e[k] = 1.0
         T[:, k] = np.ravel(model.params_from_phi(np.split(e, ends), n))
     return T
+
+
+class SpatialLeastSquares(LeastSquares):
+    """:class:`LeastSquares` on the spatial model: smoothed inverse dynamics and least squares, one batch fit.
+
+    Built by ``LeastSquares(model, ...)`` (registry name ``least-squares``)
+    when the model's attitude is a unit quaternion (the registry's engine for
+    that declaration, :data:`fmscal.observers._registry.ENGINES`), with the
+    same settings; it always estimates the offset (``offset=True``). The fit
+    is :func:`fmscal.observers.batch.fit_inverse_dynamics` on the model's
+    payload and gravity; ``window`` is not read.
+    """
+
+    offset_required = True
+
+    @classmethod
+    def _refusal(cls, model):
+        """The base class's limits (:meth:`observers.Observer._refusal`): the fit is written for a body in 3D."""
+        return super(LeastSquares, cls)._refusal(model)
+
+    def _fit(self, log):
+        from fmscal.observers.batch._inverse_dynamics import fit_inverse_dynamics
+        return fit_inverse_dynamics(log, self.model.payload, self.model.gravity)
+
+    def _estimate(self, log, S0):
+        """The spatial reference: smoothed inverse dynamics and least squares, one batch fit.
+
+        Every row of the calibration history holds the whole log's fit (a
+        batch fit has no running estimate); the motion is the smoothed poses'
+        (:func:`fmscal.plant.physics.smoothed_state`); the checks pass
+        when the log determines every direction of the reading
+        (``result.info["undetermined"]``, the warnings say what to record).
+        """
+        from fmscal.plant.physics._differentiate import smoothed_state
+        fit = self._fit(log)
+        calibration = np.tile(fit.S_aug.ravel(), (len(log), 1))
+        info = {"undetermined": [d.tolist() for d in fit.undetermined], "residual_rms": fit.residual_rms.tolist()}
+        return Estimate(calibration, smoothed_state(log), cov=fit.cov, checks_passed=fit.converged,
+                        info=info, warnings=list(fit.warnings))
+
+    def latency_cost(self, log):
+        """The fit's misfit on ``log`` for the latency search: the sum over the wrench components of the share
+        of each the inverse-dynamics fit leaves unexplained (:attr:`InverseDynamicsFit.unexplained`)."""
+        return float(np.sum(self._fit(log).unexplained))

@@ -160,10 +160,11 @@ class Observer:
     online : bool
         True: works sample by sample (:meth:`reset`, :meth:`step`); False:
         fits a whole log (:meth:`run` only).
-    models : tuple of str
-        The cases (:attr:`fmscal.plant.Model.name`) the method is defined
-        for; empty: any model. The paper's observer and the high-gain
-        observer of [4] are planar by definition.
+    paper_equations_only : bool
+        The method reads the paper's equations directly: it needs a model
+        with :attr:`fmscal.plant.Model.paper_equations` (the planar one).
+        The paper's observer and the high-gain observer of [4] are planar
+        by definition.
     linear_channels_only : bool
         The method needs a model linear in its channels
         (:attr:`fmscal.plant.Model.linear_channels`: the planar one).
@@ -189,12 +190,39 @@ class Observer:
     The first :meth:`step` after :meth:`reset` only takes the first sample
     (it needs a pose) and ignores ``dt``. After :meth:`run`, :meth:`step`
     continues from the end of the log.
+
+    A method's class is built on every model, and the class that runs it is
+    the engine the registry lists for what the model declares
+    (:func:`fmscal.observers._registry.engine_class`: ``AugmentedEKF(model)``
+    is an ``ErrorStateEKF`` on a model without linear channels); no method
+    tests the model's name or class.
     """
 
     name = "observer"
     online = True
-    models = ()
+    paper_equations_only = False
     linear_channels_only = False
+
+    def __new__(cls, model=None, *args, **kwargs):
+        """An instance of the class that runs this method on ``model`` (:meth:`engine`); of ``cls`` without
+        a model (a copy, an unpickled instance)."""
+        return super().__new__(cls if model is None else cls.engine(model))
+
+    @classmethod
+    def engine(cls, model):
+        """The class that runs this method on ``model``: ``cls``, or the subclass the registry lists for what
+        the model declares (:func:`fmscal.observers._registry.engine_class`).
+
+        Parameters
+        ----------
+        model : plant.Model or plant.Payload
+
+        Returns
+        -------
+        type
+        """
+        from fmscal.observers._registry import engine_class      # the registry imports every method: here, not above
+        return engine_class(cls, model)
 
     def __init__(self, model, offset=False):
         self.model = as_model(model, type(self).__name__)
@@ -211,8 +239,8 @@ class Observer:
     def refusal(cls, model):
         """Why the method does not run on ``model``, in one line; None where it does.
 
-        Read from :attr:`models` and :attr:`linear_channels_only`; a method
-        with other limits extends it.
+        The refusal of the class that runs the method on ``model``
+        (:meth:`engine`), by its :meth:`_refusal`.
 
         Parameters
         ----------
@@ -222,8 +250,14 @@ class Observer:
         -------
         str or None
         """
-        if cls.models and model.name not in cls.models:
-            return f"{cls.__name__} is defined for {' and '.join(cls.models)} models; got a {model.name} model"
+        return cls.engine(model)._refusal(model)
+
+    @classmethod
+    def _refusal(cls, model):
+        """This class's own limits on ``model``: read from :attr:`paper_equations_only` and
+        :attr:`linear_channels_only`; a class with other limits extends it. One line, or None."""
+        if cls.paper_equations_only and not model.paper_equations:
+            return f"{cls.__name__} is defined for planar models; got a {model.name} model"
         if cls.linear_channels_only and not model.linear_channels:
             return (f"{cls.__name__} needs a model linear in its channels (planar); it does not run on a "
                     f"{model.name} model yet")
@@ -287,7 +321,7 @@ class Observer:
         if self.online:
             self.reset(S0)                             # checks S0; a new run
             run = self.run_data
-            run.bound = divergence_bound(run.S0, log, self.payload)         # relative to the data's scale
+            run.bound = divergence_bound(run.S0, log, self.model)           # relative to the data's scale
             run.grace = int(round(DIVERGENCE_GRACE / log.dt))               # steps judged on finiteness only
             run.compiled = bool(compiled)
         else:

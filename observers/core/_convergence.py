@@ -4,6 +4,7 @@ import numpy as np
 
 from fmscal.plant.numerics._errors import FmscalError
 from fmscal.plant.io._units import implied_scale
+from fmscal.plant.physics._model import as_model
 
 __all__ = ["settled", "moved", "informed", "divergence_bound", "DIVERGENCE_FACTOR", "DIVERGENCE_GRACE",
            "SETTLE_FRACTION", "SETTLE_TOLERANCE", "EVIDENCE_TOLERANCE"]
@@ -113,8 +114,11 @@ def divergence_bound(S0, log=None, payload=None, factor=DIVERGENCE_FACTOR):
     log : plant.Log, optional
         Without a log (a live sensor, :meth:`observers.Observer.step`), the
         scale is that of ``S0`` and at least 1.
-    payload : plant.Payload, optional
-        Needed with ``log``.
+    payload : plant.Model or plant.Payload, optional
+        The log's model (a payload stands for its case's model); needed
+        with ``log``. The data's scale is read off eq. (1) where the model
+        has :attr:`fmscal.plant.Model.paper_equations`; on another model it
+        is 1.
     factor : float
 
     Returns
@@ -125,9 +129,11 @@ def divergence_bound(S0, log=None, payload=None, factor=DIVERGENCE_FACTOR):
     S0 = np.asarray(S0, dtype=float)
     if S0.ndim != 2 or S0.shape[0] != S0.shape[1] or not np.all(np.isfinite(S0)):
         raise FmscalError(f"S0 must be a finite square matrix; got shape {S0.shape}")
-    # the scale the poses imply is read off the planar eq. (1); other cases go by S0
-    scale = implied_scale(log, payload) if log is not None and getattr(log, "kind", "planar") == "planar" else None
-    data = max(scale) if scale is not None else (1.0 if log is None or log.kind != "planar" else 0.0)
+    # the scale the poses imply is read off the planar eq. (1); other models go by S0 (and at least 1)
+    model = None if log is None else as_model(payload, "divergence_bound")
+    paper = model is not None and model.paper_equations
+    scale = implied_scale(log, model.payload) if paper else None
+    data = max(scale) if scale is not None else (0.0 if paper else 1.0)
     size = max(float(np.max(np.abs(S0))), data)
     if size == 0:
         size = 1.0             # nothing to go by: S of order one, as for N m and N

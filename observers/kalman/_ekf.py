@@ -14,7 +14,6 @@ from fmscal.plant.io._noise import estimate_noise
 from fmscal.plant.numerics._checks import as_bool, as_positive_scalar
 from fmscal.plant.numerics._compile import BufferedCall, compile_function
 from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import as_model
 
 from fmscal.observers.core._base import Estimate, Observer, log_inputs
 from fmscal.observers.kalman._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
@@ -194,13 +193,6 @@ class AugmentedEKF(Observer):
     """
 
     name = "ekf"
-
-    def __new__(cls, model=None, *args, **kwargs):
-        """On a model without linear channels (the spatial one) the filter is the error-state form."""
-        if cls is AugmentedEKF and model is not None and not as_model(model, cls.__name__).linear_channels:
-            from fmscal.observers.kalman._error_state import ErrorStateEKF      # it builds on this module
-            cls = ErrorStateEKF
-        return super().__new__(cls)
 
     def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
                  adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START,

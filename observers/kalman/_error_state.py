@@ -448,7 +448,8 @@ class ErrorStateEKF(AugmentedEKF):
     """:class:`observers.AugmentedEKF` on a model whose attitude is a unit quaternion (module docstring).
 
     Built by ``AugmentedEKF(model, ...)`` (registry name ``ekf``) when the
-    model has no linear channels; it takes the same settings. The state is
+    model has no linear channels (the registry's engine for that declaration,
+    :data:`fmscal.observers._registry.ENGINES`); it takes the same settings. The state is
     the nominal motion ``[p, q, v, omega]`` and ``[S | c]`` with the error
     state ``[dp, dphi, dv, domega, ds]`` (``dphi`` a turn about the sensor's
     axes) in filterpy's ``x``; after each pose the correction is injected into

@@ -75,6 +75,19 @@ class Model:
     #: the measured poses, which the floor (:mod:`fmscal.observers.batch._max_likelihood`), least
     #: squares and the EKF's filter pieces need.
     linear_channels = False
+    #: How the configuration holds the attitude: ``None`` (none: positions only), ``"angle"`` (one angle,
+    #: moving additively) or ``"quaternion"`` (a unit quaternion, moved by a rotation vector). With
+    #: :attr:`linear_channels` it says which engine runs a method on the model
+    #: (:data:`fmscal.observers._registry.ENGINES`): no method tests the model's name or class.
+    attitude = None
+    #: True where the model is the paper's planar problem, eq. (1) with the parameters ``phi_1``, ``phi_2``
+    #: of eqs. (4), (5) (:mod:`fmscal.plant.physics._dynamics`), which the methods written on the printed
+    #: equations (the paper's observer, the high-gain observer of [4], ``LeastSquares.offset_bias``) and the
+    #: scale the poses imply (:func:`fmscal.plant.io._units.implied_scale`) read directly.
+    paper_equations = False
+    #: How a figure shows :meth:`pose_residuals`: one ``(name, unit, columns)`` per panel, the unit
+    #: ``"mrad"`` for a turn (rad) and ``"mm"`` for a move (m), each column of the residual shown times 1e3.
+    residual_panels = ()
 
     def __init__(self, payload):
         self.payload = payload
@@ -280,6 +293,27 @@ class Model:
         """
         return ops(pose).vcat([pose[i] for i in range(self.nq)])
 
+    def pose_residuals(self, states, poses):
+        """The measured poses less the poses the states show, in the configuration's tangent space.
+
+        Row ``k`` is ``difference(configuration(x_k), pose_configuration(pose_k))`` (:meth:`difference`):
+        what moves the state's configuration onto the measured one.
+
+        Parameters
+        ----------
+        states : ndarray, shape (M, nx)
+        poses : ndarray, shape (M, n_pose)
+            Measured poses in the log's columns.
+
+        Returns
+        -------
+        ndarray, shape (M, nv)
+        """
+        rows = [np.asarray(self.difference(self.configuration(np.asarray(x, dtype=float)),
+                                           self.pose_configuration(np.asarray(p, dtype=float))), dtype=float).ravel()
+                for x, p in zip(states, poses)]
+        return np.array(rows).reshape(len(rows), self.nv)
+
     def channel(self, k):
         """The velocity channel (``0 .. nv-1``) state entry ``k`` belongs to, for a model with
         :attr:`linear_channels` (entry ``q_index[c]`` or ``v_index[c]`` is channel ``c``)."""
@@ -483,6 +517,9 @@ class PlanarModel(Model):
     pose_names = ("theta", "x", "y")
     angle_names, position_names = ("theta",), ("x", "y")
     linear_channels = True
+    attitude = "angle"
+    paper_equations = True
+    residual_panels = (("theta", "mrad", (0,)), ("X", "mm", (1,)), ("Y", "mm", (2,)))
     nq = nv = 3
     state = StateLayout(("theta", 1), ("theta_dot", 1), ("X", 1), ("X_dot", 1), ("Y", 1), ("Y_dot", 1))
     q_index, v_index = (0, 2, 4), (1, 3, 5)
@@ -508,6 +545,10 @@ class PlanarModel(Model):
     def difference(self, q0, q1):
         """The move ``dq`` taking ``q0`` to ``q1``: ``q1 - q0``."""
         return q1 - q0
+
+    def pose_residuals(self, states, poses):
+        """:meth:`Model.pose_residuals` in one product: ``pose - [theta, X, Y]`` of each state, shape (M, 3)."""
+        return np.asarray(poses, dtype=float) - np.asarray(states, dtype=float)[:, list(self.q_index)]
 
     def input_matrix(self, x):
         """``A(x) = G(theta)`` of eq. (1), shape (3, 3): ``[theta'', X'', Y''] = G w``."""
@@ -571,6 +612,8 @@ class SpatialModel(Model):
     wrench_names = ("tx", "ty", "tz", "fx", "fy", "fz")
     pose_names = ("qw", "qx", "qy", "qz", "x", "y", "z")
     position_names = ("x", "y", "z")
+    attitude = "quaternion"
+    residual_panels = (("x, y, z", "mm", (0, 1, 2)), ("about the sensor axes", "mrad", (3, 4, 5)))
     nq, nv = rigid_body.NQ, rigid_body.NV
     state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))
     q_index, v_index = tuple(range(7)), tuple(range(7, 13))

@@ -121,6 +121,13 @@ class SpatialPayload:
         entries = (I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2])
         object.__setattr__(self, "inertia", tuple(float(e) for e in entries))
 
+    @classmethod
+    def check(cls, payload, who):
+        """``payload`` if it is a :class:`SpatialPayload`, else a one-line :class:`FmscalError` naming ``who``."""
+        if not isinstance(payload, cls):
+            raise FmscalError(f"{who} takes a SpatialPayload; got {type(payload).__name__}")
+        return payload
+
     @property
     def I_c(self):
         """The inertia tensor about the centre of mass, ``B`` axes, shape (3, 3)."""

@@ -13,6 +13,7 @@ import numpy as np
 from fmscal.plant.physics._excitation import Multisine, PaperWrench
 from fmscal.plant.io._log import MIN_SAMPLES, Log, Truth
 from fmscal.plant.physics._payload import PAPER_PAYLOAD, Payload
+from fmscal.plant.physics._model import PlanarModel
 from fmscal.plant.physics._sensor import CalibrationSchedule, NoiseSpec
 from fmscal.plant.physics._simulate import integrate
 from fmscal.plant.numerics._errors import FmscalError
@@ -145,6 +146,20 @@ class Scenario:
     drift: float = 0.2
     offset: tuple = None
     latency: float = 0.0
+
+    #: The settings of the payload and the sensor a user may change (``fmscal simulate``'s ``--mass``,
+    #: ``--inertia``, ``--rho``, ``--offset``): the payload's mass, ``I_G`` and ``rho``, and the offset.
+    payload_settings = ("mass", "inertia", "rho", "offset")
+
+    def model(self):
+        """The model the methods run on for this scenario: :class:`plant.PlanarModel` of its payload."""
+        return PlanarModel(self.payload)
+
+    def with_noise_scaled(self, factor):
+        """A copy with every noise standard deviation times ``factor``: ``wrench_noise``, ``angle_sd``,
+        ``position_sd``."""
+        return self.with_(wrench_noise=self.wrench_noise * factor, angle_sd=self.angle_sd * factor,
+                          position_sd=self.position_sd * factor)
 
     def check_size(self):
         """Raise :class:`FmscalError` for fewer than ``MIN_SAMPLES`` or more than :data:`MAX_SAMPLES` samples."""

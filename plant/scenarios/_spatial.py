@@ -32,6 +32,7 @@ from scipy.spatial.transform import Rotation
 from fmscal.plant.numerics._errors import FmscalError
 from fmscal.plant.io._log import MIN_SAMPLES, Log, Truth
 from fmscal.plant.physics._rigid_body import GRAVITY, SpatialPayload, prescribed_motion, quaternion_multiply
+from fmscal.plant.physics._model import SpatialModel
 from fmscal.plant.scenarios._planar import pose_frames
 from fmscal.plant.physics._sensor import CalibrationSchedule, NoiseSpec
 
@@ -153,6 +154,21 @@ class SpatialScenario:
     gravity: tuple = GRAVITY
     drift: float = 0.0
     targets: tuple = None
+
+    #: The settings of the payload and the sensor a user may change (:attr:`plant.Scenario.payload_settings`):
+    #: none, the scenario has its own tool and a random offset.
+    payload_settings = ()
+
+    def model(self):
+        """The model the methods run on for this scenario: :class:`plant.SpatialModel` of its payload, under
+        its gravity."""
+        return SpatialModel(self.payload, self.gravity)
+
+    def with_noise_scaled(self, factor):
+        """A copy with every noise standard deviation times ``factor``: ``torque_sd``, ``force_sd``,
+        ``angle_sd``, ``position_sd``."""
+        return self.with_(torque_sd=self.torque_sd * factor, force_sd=self.force_sd * factor,
+                          angle_sd=self.angle_sd * factor, position_sd=self.position_sd * factor)
 
     def with_(self, **changes):
         """A copy with some settings changed (duration, dt, ...)."""
