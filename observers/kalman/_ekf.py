@@ -194,12 +194,23 @@ class AugmentedEKF(Observer):
     """
 
     name = "ekf"
+    #: The subclass that runs on a model without linear channels: the error-state form, which builds on
+    #: this class and so names itself (``class ErrorStateEKF(AugmentedEKF, nonlinear_form=True)``) rather
+    #: than being imported here. ``observers.kalman``'s ``__init__`` imports it, so it is set whenever
+    #: this module is importable.
+    _nonlinear_form = None
+
+    def __init_subclass__(cls, nonlinear_form=False, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if nonlinear_form:
+            AugmentedEKF._nonlinear_form = cls
 
     def __new__(cls, model=None, *args, **kwargs):
         """On a model without linear channels (the spatial one) the filter is the error-state form."""
         if cls is AugmentedEKF and model is not None and not as_model(model, cls.__name__).linear_channels:
-            from fmscal.observers.kalman._error_state import ErrorStateEKF      # it builds on this module
-            cls = ErrorStateEKF
+            if AugmentedEKF._nonlinear_form is None:
+                raise RuntimeError("the error-state EKF is not registered: import fmscal.observers.kalman")
+            cls = AugmentedEKF._nonlinear_form
         return super().__new__(cls)
 
     def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,

@@ -81,7 +81,7 @@ the process noise of the same step; the estimate is attenuated by
 ``J^-1 B s``. Beside the filter runs a copy of its motion error driven by a
 seeded draw of the reading's and the pose's noise (a motion-only filter
 ``P_m``, the copy ``eps``, its regressor ``Mn`` and ``b_n = sum Mn^T V^-1
-nu``, :func:`observers.batch.copy_predict`), whose mean is
+nu``, :func:`observers.kalman.copy_predict`), whose mean is
 ``-B s``. The reported estimate is compensated to first order, with the
 filter's own ``P`` of ``s`` for ``J^-1``::
 
@@ -108,7 +108,7 @@ from fmscal.observers.kalman._ekf_step import output_layout
 from fmscal.observers.kalman._filter import cholesky_solve, pack_lower, unpack_lower
 from fmscal.observers.core import _matrix as mx
 from fmscal.observers.kalman._filter import bias_matrix, correction_limit
-from fmscal.observers.batch._linearised_floor import _error_variances, beta_from_copy, copy_predict
+from fmscal.observers.kalman._eiv import beta_from_copy, copy_predict, error_variances
 from fmscal.observers.kalman._noise_level import level_update
 
 __all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
@@ -448,7 +448,7 @@ class NominalRun(FilterRun):
     S_Q: np.ndarray = None
 
 
-class ErrorStateEKF(AugmentedEKF):
+class ErrorStateEKF(AugmentedEKF, nonlinear_form=True):
     """:class:`observers.AugmentedEKF` on a model whose attitude is a unit quaternion (module docstring).
 
     Built by ``AugmentedEKF(model, ...)`` (registry name ``ekf``) when the
@@ -575,7 +575,7 @@ class ErrorStateEKF(AugmentedEKF):
         u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
         noise, S_var, var_w = self._prior(u.w_hat)
         kf = _CalibrationEKF(self.dim_x, model.nv)           # x_next = 0: the error stays zero over a predict
-        R = _error_variances(model, noise)
+        R = error_variances(model, noise)
         kf.P = np.diag(np.concatenate([R, np.full(model.nv, self.v0_sd ** 2), S_var]))
         kf.R = np.diag(R)
         s = self._initial_S(self.run_data.S0)
