@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
 from fmscal.plant.io._calibration import reading_sign
@@ -43,6 +44,10 @@ from fmscal.plant.physics._rigid_body import (GRAVITY, INERTIA_NAMES, SpatialPay
 from fmscal.plant.physics._sensor import check_calibration
 
 from fmscal.observers.batch._cluster_covariance import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
+from fmscal.observers.payload._coverage import cone_deg, in_words, next_poses, weak_directions
+from fmscal.observers.payload._rotations import _Rotations
+from fmscal.observers.payload._static_fit import (_OFFSET_NAMES, TILT_RATIO, Refit, _angle_deg, _axis, _exp, _Model,
+                                                  _start, _tangent_basis, gravity_up, other_convention, rotation_check)
 
 __all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED", "HOLD", "REFERENCES"]
 
@@ -51,40 +56,6 @@ __all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETE
 #: this fraction of its size: above it, the noise of the differentiated poses biases the fit by as much
 #: (errors in variables: on spatial-weak and spatial-static the inertia comes out low by several sigma).
 DETERMINED = 0.02
-
-
-@dataclass(kw_only=True)
-class _Rotations:
-    """Gravity's direction and the sensor's mounting where a fit estimated them (None otherwise).
-
-    Attributes
-    ----------
-    gravity : ndarray, shape (3,), or None
-        Gravity in the pose frame, m/s^2.
-    gravity_std_deg : float or None
-        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
-    mounting : ndarray, shape (3, 3), or None
-        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors).
-    mounting_deg, mounting_std_deg : float or None
-        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
-    mounting_axis : ndarray, shape (3,), or None
-        The mounting's unit axis (tracked-frame axes).
-    """
-
-    gravity: np.ndarray = None
-    gravity_std_deg: float = None
-    mounting: np.ndarray = None
-    mounting_deg: float = None
-    mounting_std_deg: float = None
-    mounting_axis: np.ndarray = None
-
-    def rotations_dict(self):
-        """The six fields as JSON-ready numbers and lists (None where not estimated)."""
-        return {"gravity": None if self.gravity is None else [float(v) for v in self.gravity],
-                "gravity_std_deg": self.gravity_std_deg,
-                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
-                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
-                "mounting_axis": None if self.mounting_axis is None else [float(v) for v in self.mounting_axis]}
 
 
 @dataclass
@@ -215,7 +186,6 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
         blocks, length = time_blocks(residual.reshape(n, 6), *times)
         theta, cov, residual = weighted_fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
         if np.isfinite(cov[0, 0]) and theta[0] < 0:
-            from fmscal.observers.payload._static_fit import other_convention
             raise FmscalError(other_convention(log.name, theta[0], reading))
         fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
         _blocks_used(fit, blocks, length)
@@ -248,7 +218,6 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     assumed, a log whose reading changes much between samples opens the
     check less often); the warning is :func:`fmscal.observers.payload.rotation_check`'s.
     """
-    from fmscal.observers.payload._static_fit import TILT_RATIO, Refit, rotation_check
     force = y[:, 3:]
     noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
@@ -320,8 +289,6 @@ def _coverage(fit, q, t, info):
     covariance there is the model-based ``s^2 F^-1``; the reported
     uncertainties are the cluster-robust ones.
     """
-    from fmscal.observers.payload._coverage import cone_deg, in_words, next_poses, weak_directions
-    from fmscal.observers.payload._static_fit import _OFFSET_NAMES, _Model
     g_size, d0, M0, estimate_gravity, estimate_mounting = info.frame
     model = _Model(None, None, g_size, d0, M0, estimate_gravity, estimate_mounting)
     theta = info.theta
@@ -366,10 +333,6 @@ def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gr
     cluster-robust sandwich over the full Jacobian (the linear parameters and
     the angles together), so the angles' uncertainty enters the payload's.
     """
-    from scipy.optimize import least_squares
-
-    from fmscal.observers.payload._static_fit import (_angle_deg, _axis, _exp, _start, _tangent_basis, gravity_up,
-                                                      other_convention)
     q, omega, alpha, p_ddot = motion
     g = np.asarray(gravity, dtype=float)
     R = np.moveaxis(rotation_matrix(q.T), -1, 0)
