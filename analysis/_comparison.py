@@ -5,6 +5,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from fmscal.observers import FLOOR_METHOD, METHODS, get_method, method_label
+from fmscal.observers.diagnostics import has_evidence
 from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, SpatialModel, SpatialScenario, get_scenario
 from fmscal.plant.physics._model import as_model
 from fmscal.plant.numerics._checks import as_positive_scalar
@@ -186,10 +187,12 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
         return _row_without_figures(name, log, floor, history, refused=reason or str(err))
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     bad = result.diverged
+    # the run settled (result.converged); the log must also have pinned S down (Observer, Notes)
+    converged = bool(result.converged) and has_evidence(result, log, observer.model, observer.offset)
     row = {"observer": name, "duration": float(log.duration),
            "E": np.nan if bad else tail_median(E), "E_end": np.nan if bad else float(E[-1]),
            "E_over_floor": np.nan, "floor_E": np.nan if floor is None else float(floor),
-           "convergence_time": np.nan, "diverged": bool(bad), "converged": bool(result.converged),
+           "convergence_time": np.nan, "diverged": bool(bad), "converged": converged,
            "applicable": True, "refused": ""}
     if floor is not None and not bad:
         row["E_over_floor"] = row["E"] / floor if floor > 0 else np.nan        # NaN > 0 is False

@@ -6,6 +6,7 @@ import numpy as np
 from tqdm import tqdm
 
 from fmscal.observers import FLOOR_METHOD, METHODS, make_observer, method_label, method_names
+from fmscal.observers.diagnostics import has_evidence
 from fmscal.plant import get_scenario
 from fmscal.plant.io._files import atomic_write_text
 
@@ -62,7 +63,8 @@ def _run_one(name, method, seed, duration_scale):
            "E_end": float(E[-1]) if ok else None,
            "E_median_last_10s": float(np.median(E[max(0, k100 - int(10 / log.dt)):k100 + 1])) if ok else None,
            "convergence_time": convergence_time(r.t, E) if ok else None,
-           "diverged": r.diverged, "converged": r.converged,
+           "diverged": r.diverged,
+           "converged": bool(r.converged) and has_evidence(r, log, obs.model, obs.offset),   # Observer, Notes
            "wall_time": r.wall_time, "S_hat_100": r.S_hat_history[k100].tolist()}
     return row, thinned(r.t, E, r.S_hat_history)
 

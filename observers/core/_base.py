@@ -11,7 +11,7 @@ bound, the previous sample, the noise model used, the build time) lives in a
 as pinocchio's ``model.createData()``. The base class does
 what they share, once: input validation, timing, the offset ``b`` from
 ``[S | c]``, the uncertainties from a covariance, the ``converged`` and
-``diverged`` flags. A method writes only what is its own:
+``diverged`` flags (``converged`` from the run alone: :class:`Observer`, Notes). A method writes only what is its own:
 
 * an online method implements :meth:`Observer._start` (the first sample),
   :meth:`Observer._advance` (one step) and :meth:`Observer._current` (its
@@ -37,8 +37,7 @@ from fmscal.plant.numerics._compile import ChunkedSteps, build_once, compiler
 from fmscal.plant.numerics._errors import FmscalError
 from fmscal.plant.physics._sensor import check_calibration
 
-from fmscal.observers.core._convergence import (DIVERGENCE_GRACE, EVIDENCE_TOLERANCE, divergence_bound, informed,
-                                                moved, settled)
+from fmscal.observers.core._convergence import DIVERGENCE_GRACE, divergence_bound, informed, moved, settled
 from fmscal.observers.core._progress import EVERY, progress_bar
 from fmscal.observers.core._result import (ObserverResult, calibration_uncertainty, initial_calibration,
                                           split_calibration)
@@ -113,9 +112,6 @@ class RunData:
         first sample.
     build_time : float
         Seconds spent building a compiled step (not the run's cost).
-    evidence_time : float
-        Seconds of the least-squares check that gives a method without an
-        uncertainty its evidence (not the run's cost).
     """
 
     S0: np.ndarray
@@ -126,7 +122,6 @@ class RunData:
     noise: object = None
     state: object = None
     build_time: float = 0.0
-    evidence_time: float = 0.0
 
 
 def log_inputs(log):
@@ -189,6 +184,24 @@ class Observer:
     The first :meth:`step` after :meth:`reset` only takes the first sample
     (it needs a pose) and ignores ``dt``. After :meth:`run`, :meth:`step`
     continues from the end of the log.
+
+    Convergence: :meth:`run` judges ``converged`` from the run alone, at the cost of the
+    run: not diverged, the method's own checks of the log passed, ``S_hat``
+    settled over the last :data:`observers.core.SETTLE_FRACTION` of the run
+    (:func:`observers.settled`) after leaving ``S0`` (an online method,
+    :func:`observers.core.moved`), and, where the method reports an
+    uncertainty ``S_std``, that uncertainty finite, non-zero and at most
+    :data:`observers.core.EVIDENCE_TOLERANCE` of ``S_hat``
+    (``||S_std||_2 <= tol ||S_hat||_2``, :func:`observers.core.informed`).
+
+    A method without an uncertainty of its own (the adaptive and high-gain
+    observers) can show only that it settled: an estimate also stands still
+    where the log never excited it. Whether the log pinned ``S`` down is a
+    question about the log, which :meth:`run` does not ask (answering it fits
+    least squares to the log: work a bare run was not asked for); the
+    workflow that decides convergence asks it,
+    ``result.converged and observers.diagnostics.has_evidence(result, log, model, offset)``
+    (the ``fmscal calibrate`` workflow and :func:`fmscal.analysis.compare` do).
     """
 
     name = "observer"
@@ -294,7 +307,7 @@ class Observer:
             self.run_data = run = self._new_run(None, compiled=compiled)
         estimate = self._estimate(log, run.S0)
         result = self._result(log, estimate)
-        result.wall_time = time.perf_counter() - start - run.build_time - run.evidence_time
+        result.wall_time = time.perf_counter() - start - run.build_time
         if run.build_time:
             result.info["build_time"] = run.build_time
         return result
@@ -446,17 +459,6 @@ class Observer:
         """``[S0 | 0]`` flat in row order (:func:`observers.core.initial_calibration`)."""
         return initial_calibration(S0, self.offset)
 
-    def _evidence(self, log, S_hat, S_std):
-        """The log pinned ``S`` down: the method's own ``S_std``, or else a least-squares fit's of
-        the log, at most :data:`observers.core._convergence.EVIDENCE_TOLERANCE` of ``S_hat`` (2-norms)."""
-        if S_std is not None:
-            return informed(S_hat, S_std)
-        from fmscal.observers.diagnostics._evidence import log_uncertainty  # least squares is an Observer
-        start = time.perf_counter()
-        value = log_uncertainty(log, self.model, self.offset, enough=EVIDENCE_TOLERANCE)
-        self.run_data.evidence_time = time.perf_counter() - start      # a check of the log: not the method's cost
-        return value <= EVIDENCE_TOLERANCE
-
     def _result(self, log, est):
         """The :class:`ObserverResult` of an estimate: offset, uncertainties and flags, for every method."""
         S_hist, _ = split_calibration(est.calibration, self.n_cols, self.offset)
@@ -465,12 +467,14 @@ class Observer:
         if est.diverged:
             b = None
         honest = S_std is None or bool(np.all(np.isfinite(S_std)) and np.all(S_std > 0))
-        # settling and evidence are judged in the reading's own scale where the model has one (3D: N m and N)
+        # settling and the method's own uncertainty are judged in the reading's own scale where the model has
+        # one (3D: N m and N); a method without an uncertainty is judged on settling alone (class docstring)
         scale = self.model.reading_scale(log)
         judged = S_hist if scale is None else S_hist * scale[None, None, :] / scale[None, :, None]
         judged_std = S_std if (scale is None or S_std is None) else S_std * scale[None, :] / scale[:, None]
         converged = bool(not est.diverged and est.checks_passed and honest and settled(judged)
-                         and (not self.online or moved(judged)) and self._evidence(log, judged[-1], judged_std))
+                         and (not self.online or moved(judged))
+                         and (judged_std is None or informed(judged[-1], judged_std)))
         return ObserverResult(
             observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,

@@ -18,8 +18,9 @@ SETTLE_FRACTION = 0.2
 #: ... and asks that ``S_hat`` stay within this relative 2-norm distance of its final value.
 SETTLE_TOLERANCE = 0.05
 #: ``converged`` needs the one-sigma uncertainty of ``S`` (``||S_std||_2 / ||S_hat||_2``: the
-#: method's own, or a least-squares fit's of the log, :func:`observers.diagnostics.log_uncertainty`)
-#: at most this: the log held information in every direction of ``S``.
+#: method's own in :meth:`observers.Observer.run`; a least-squares fit's of the log for a method
+#: without one, :func:`observers.diagnostics.has_evidence`) at most this: the log held information
+#: in every direction of ``S``.
 EVIDENCE_TOLERANCE = 0.05
 
 
