@@ -14,10 +14,11 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from fmscal.observers import AdaptiveObserver, PaperAdaptiveObserver
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError
 
-from fmscal.analysis._comparison import floor_error, seed_list, simulate_case, tail_error
+from fmscal.observers import AdaptiveObserver, PaperAdaptiveObserver
+
+from ._comparison import floor_error, seed_list, simulate_case, tail_error
 
 __all__ = ["ABLATION_STEPS", "QUICK_SETTINGS", "ablation", "ablation_markdown", "tail_error"]
 

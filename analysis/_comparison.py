@@ -4,14 +4,14 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, SpatialModel, SpatialScenario, get_scenario
+from fmscal.plant.numerics import FmscalError, as_positive_scalar
+from fmscal.plant.physics import as_model
+
 from fmscal.observers import FLOOR_METHOD, METHODS, get_method, method_label
 from fmscal.observers.diagnostics import has_evidence
-from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, SpatialModel, SpatialScenario, get_scenario
-from fmscal.plant.physics._model import as_model
-from fmscal.plant.numerics._checks import as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
 
-from fmscal.analysis._metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
+from ._metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
 
 __all__ = ["case_scenario", "case_model",
            "simulate_case", "tail_error", "floor_error", "run_observer", "run_case", "seed_list", "compare",

@@ -13,9 +13,13 @@ clipped.
 
 import numpy as np
 
+from fmscal.plant.io import atomic_write
+from fmscal.plant.physics import PlanarModel
+
 from fmscal.observers import method_label
-from fmscal.plant.io._files import atomic_write
-from fmscal.plant.physics._model import PlanarModel
+from fmscal.observers.batch import configuration_residuals
+
+from ._metrics import error_history
 
 __all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "thinned",
            "wandering_methods"]
@@ -253,7 +257,6 @@ def plot_S_entries(results, truth, path, title):
     t_true = max(times.values(), key=len)
     S_true = None if truth is None else truth.S_at(t_true)
     if truth is not None:
-        from fmscal.analysis._metrics import error_history
         clipped = wandering_methods({r.observer: error_history(r.S_hat_history[::_thin(len(r.t))],
                                                                truth.S_at(times[r.observer])) for r in results})
     else:
@@ -326,6 +329,5 @@ def _pose_residuals(result, log, model, n):
         residual = (log.pose[:n][has] - fitted[has]) * 1e3
         return [(name, unit, residual[:, [k]]) for k, name, unit in
                 zip(range(3), ("theta", "X", "Y"), ("mrad", "mm", "mm"))]
-    from fmscal.observers.batch._linearised_floor import configuration_residuals
     residual = configuration_residuals(model, result.x_hat_history[:n][has], log.pose[:n][has]) * 1e3
     return [("x, y, z", "mm", residual[:, 0:3]), ("about the sensor axes", "mrad", residual[:, 3:6])]

@@ -5,14 +5,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from fmscal.plant import get_scenario
+from fmscal.plant.io import atomic_write_text
+
 from fmscal.observers import FLOOR_METHOD, METHODS, make_observer, method_label, method_names
 from fmscal.observers.diagnostics import has_evidence
-from fmscal.plant import get_scenario
-from fmscal.plant.io._files import atomic_write_text
 
-from fmscal.analysis._metrics import convergence_time, error_history
-from fmscal.analysis._plots import plot_comparison, thinned
-from fmscal.analysis._sweep import run_local
+from ._metrics import convergence_time, error_history
+from ._plots import plot_comparison, thinned
+from ._sweep import run_local
 
 __all__ = ["reproduce", "output_names", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 

@@ -12,10 +12,11 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from fmscal.observers import get_method, make_observer, method_names
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError
 
-from fmscal.analysis._comparison import case_model, case_scenario, floor_error, run_observer, seed_list, simulate_case
+from fmscal.observers import get_method, make_observer, method_names
+
+from ._comparison import case_model, case_scenario, floor_error, run_observer, seed_list, simulate_case
 
 __all__ = ["sweep", "run_local", "worker_count", "expand_settings", "settings_label", "TIMING_COLUMNS",
            "SWEEP_OBSERVERS",

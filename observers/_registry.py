@@ -10,15 +10,11 @@ import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from fmscal.plant.numerics._checks import as_bool, as_number
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError, as_bool, as_number
 
-from fmscal.observers.adaptive._adaptive import AdaptiveObserver
-from fmscal.observers.adaptive._paper import PaperAdaptiveObserver
-from fmscal.observers.kalman._ekf import AugmentedEKF
-from fmscal.observers.batch._floor import MaximumLikelihood
-from fmscal.observers.adaptive._highgain import HighGainObserver
-from fmscal.observers.batch._least_squares import LeastSquares
+from fmscal.observers.adaptive import AdaptiveObserver, HighGainObserver, PaperAdaptiveObserver
+from fmscal.observers.batch import LeastSquares, MaximumLikelihood
+from fmscal.observers.kalman import AugmentedEKF
 
 __all__ = ["Method", "METHODS", "FLOOR_METHOD", "get_method", "make_observer", "method_names", "method_label"]
 

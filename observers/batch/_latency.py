@@ -14,11 +14,11 @@ golden-section search on whole samples around the best grid point.
 import numpy as np
 
 from fmscal.plant import Log
-from fmscal.plant.numerics._checks import as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import as_model
+from fmscal.plant.numerics import FmscalError, as_positive_scalar
+from fmscal.plant.physics import as_model
 
-from fmscal.observers.batch._least_squares import LeastSquares
+from ._inverse_dynamics import fit_inverse_dynamics
+from ._least_squares import LeastSquares
 
 __all__ = ["estimate_latency"]
 
@@ -32,7 +32,6 @@ def _cost(log, model, samples, offset, window):
     wrench components of the share the inverse-dynamics fit leaves unexplained."""
     shifted = log.shift_poses(samples * log.dt)
     if model.name == "spatial":
-        from fmscal.observers.batch._inverse_dynamics import fit_inverse_dynamics     # here: it imports the payload fit
         return float(np.sum(fit_inverse_dynamics(shifted, model.payload, gravity=model.gravity).unexplained))
     fit = LeastSquares(model, window=window, offset=offset)
     fit.run(shifted)

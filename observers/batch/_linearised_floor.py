@@ -69,19 +69,14 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import ChunkedSteps, build_once
-from fmscal.plant.physics._differentiate import smoothed_state
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import ChunkedSteps, StateLayout, build_once, ops
+from fmscal.plant.physics import smoothed_state
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.core._discretise import move
-from fmscal.observers.batch._inverse_dynamics import UNDETERMINED_STD, describe_direction
-from fmscal.observers.kalman._filter import (V0_SD, bias_matrix, cholesky, cholesky_apply,
-                                             correction_limit, information_factor, pack_lower, solve_information,
-                                             unpack_lower)
-from fmscal.observers.kalman._eiv import beta_from_copy, copy_predict, error_variances, regressor_step
-from fmscal.observers.core._progress import progress_bar
+from fmscal.observers.core import matrix as mx, move, progress_bar
+from fmscal.observers.kalman import (V0_SD, beta_from_copy, bias_matrix, cholesky, cholesky_apply, copy_predict,
+                                     correction_limit, error_variances, information_factor, pack_lower, regressor_step,
+                                     solve_information, unpack_lower)
+from ._inverse_dynamics import UNDETERMINED_STD, describe_direction
 
 __all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout"]
 

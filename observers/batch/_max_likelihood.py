@@ -91,21 +91,15 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant import Log
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import ChunkedSteps
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import Model, as_model
-from fmscal.plant.io._noise import estimate_noise
-from fmscal.plant.physics._sensor import NoiseSpec, check_calibration
+from fmscal.plant.io import estimate_noise
+from fmscal.plant.numerics import ChunkedSteps, FmscalError, ops
+from fmscal.plant.physics import Model, NoiseSpec, as_model, check_calibration
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.kalman._filter import V0_SD  # noqa: F401  (re-exported: the prior's settings live in kalman)
-from fmscal.observers.kalman._filter import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit,
-                                             filter_layout, filter_step, information_factor, initial_state,
-                                             input_layout, params_layout, solve_information, unpack_lower)
-from fmscal.observers.core._progress import progress_bar
-from fmscal.observers.core._result import calibration_uncertainty, initial_calibration
-from fmscal.observers.batch._linearised_floor import fit_linearised
+from fmscal.observers.core import calibration_uncertainty, initial_calibration, matrix as mx, progress_bar
+from fmscal.observers.kalman import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit, filter_layout,
+                                     filter_step, information_factor, initial_state, input_layout, params_layout,
+                                     solve_information, unpack_lower)
+from ._linearised_floor import fit_linearised
 
 __all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "log_steps"]
 

@@ -31,17 +31,13 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant import Log
-from fmscal.plant.physics._model import as_model
-from fmscal.plant.numerics._checks import as_bool
-from fmscal.plant.numerics._compile import ChunkedSteps, build_once, compiler
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._sensor import check_calibration
+from fmscal.plant.numerics import ChunkedSteps, FmscalError, as_bool, build_once, compiler
+from fmscal.plant.physics import as_model, check_calibration
 
-from fmscal.observers.core._convergence import DIVERGENCE_GRACE, divergence_bound, informed, moved, settled
-from fmscal.observers.core._progress import EVERY, progress_bar
-from fmscal.observers.core._result import (ObserverResult, calibration_uncertainty, initial_calibration,
-                                          split_calibration)
-from fmscal.observers.core._samples import check_sample, pack_input
+from ._convergence import DIVERGENCE_GRACE, divergence_bound, informed, moved, settled
+from ._progress import EVERY, progress_bar
+from ._result import ObserverResult, calibration_uncertainty, initial_calibration, split_calibration
+from ._samples import check_sample, pack_input
 
 __all__ = ["Observer", "RecursiveObserver", "Estimate", "RunData", "log_inputs", "MAX_S0"]
 

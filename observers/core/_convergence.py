@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._units import implied_scale
+from fmscal.plant.io import implied_scale
+from fmscal.plant.numerics import FmscalError
 
 __all__ = ["settled", "moved", "informed", "divergence_bound", "DIVERGENCE_FACTOR", "DIVERGENCE_GRACE",
            "SETTLE_FRACTION", "SETTLE_TOLERANCE", "EVIDENCE_TOLERANCE"]

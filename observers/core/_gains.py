@@ -3,7 +3,7 @@
 import numpy as np
 
 from fmscal.plant import A_1, A_2, C_1, C_2
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.numerics import as_finite_array, as_positive_scalar
 
 __all__ = ["double_pole_gains", "check_gains", "GainReport", "sampled_poles"]
 

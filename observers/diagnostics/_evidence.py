@@ -13,12 +13,11 @@ log.
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import as_model
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import as_model
 
-from fmscal.observers.core._convergence import EVIDENCE_TOLERANCE, informed
-
-from fmscal.observers.batch._least_squares import EXCITATION_COND_LIMIT, LeastSquares
+from fmscal.observers.batch import EXCITATION_COND_LIMIT, LeastSquares
+from fmscal.observers.core import EVIDENCE_TOLERANCE, informed
 
 __all__ = ["has_evidence", "log_uncertainty", "EVIDENCE_PREFIX"]
 

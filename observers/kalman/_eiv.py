@@ -39,15 +39,11 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import BufferedCall, compile_function
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import BufferedCall, StateLayout, compile_function, ops
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.core._discretise import position_increment, velocity_increment
-from fmscal.observers.kalman._filter import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit,
-                                             filter_layout, filter_step, information_factor, initial_state,
-                                             input_layout, pack_lower, unpack_lower)
+from fmscal.observers.core import matrix as mx, position_increment, velocity_increment
+from ._filter import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit, filter_layout, filter_step,
+                      information_factor, initial_state, input_layout, pack_lower, unpack_lower)
 
 __all__ = ["EivCompensation", "compensation_layout", "regressor_step", "copy_predict", "error_variances",
            "beta_from_copy"]

@@ -9,19 +9,15 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from fmscal.plant import NoiseSpec
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.io._noise import estimate_noise
-from fmscal.plant.numerics._checks import as_bool, as_positive_scalar
-from fmscal.plant.numerics._compile import BufferedCall, compile_function
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import as_model
+from fmscal.plant.io import estimate_noise
+from fmscal.plant.numerics import BufferedCall, FmscalError, as_bool, as_positive_scalar, compile_function, ops
+from fmscal.plant.physics import as_model
 
-from fmscal.observers.core._base import Estimate, Observer, log_inputs
-from fmscal.observers.kalman._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
-from fmscal.observers.kalman._eiv import EivCompensation
-from fmscal.observers.kalman._filter import pack_lower, unpack_lower
-from fmscal.observers.kalman._noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
-from fmscal.observers.core._progress import progress_bar
+from fmscal.observers.core import Estimate, Observer, log_inputs, progress_bar
+from ._eiv import EivCompensation
+from ._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
+from ._filter import pack_lower, unpack_lower
+from ._noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
 
 __all__ = ["AugmentedEKF", "FilterRun"]
 

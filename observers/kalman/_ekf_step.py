@@ -16,13 +16,11 @@ from functools import lru_cache
 
 import casadi as ca
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import ChunkedSteps
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import ChunkedSteps, StateLayout, ops
 
-from fmscal.observers.kalman._eiv import _compensation
-from fmscal.observers.kalman._filter import filter_layout, pack_lower, spd_inverse, unpack_lower
-from fmscal.observers.kalman._noise_level import level_update
+from ._eiv import _compensation
+from ._filter import filter_layout, pack_lower, spd_inverse, unpack_lower
+from ._noise_level import level_update
 
 __all__ = ["model_step", "whole_step", "state_layout", "output_layout", "params_layout"]
 

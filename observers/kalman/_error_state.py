@@ -98,18 +98,14 @@ from functools import cached_property, lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import BufferedCall, ChunkedSteps, build_once
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import BufferedCall, ChunkedSteps, StateLayout, build_once, ops
 
-from fmscal.observers.core._discretise import move
-from fmscal.observers.kalman._ekf import AugmentedEKF, FilterRun, _CalibrationEKF
-from fmscal.observers.kalman._ekf_step import output_layout
-from fmscal.observers.kalman._filter import cholesky_solve, pack_lower, unpack_lower
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.kalman._filter import bias_matrix, correction_limit
-from fmscal.observers.kalman._eiv import beta_from_copy, copy_predict, error_variances
-from fmscal.observers.kalman._noise_level import level_update
+from fmscal.observers.core import matrix as mx, move
+from ._eiv import beta_from_copy, copy_predict, error_variances
+from ._ekf import AugmentedEKF, FilterRun, _CalibrationEKF
+from ._ekf_step import output_layout
+from ._filter import bias_matrix, cholesky_solve, correction_limit, pack_lower, unpack_lower
+from ._noise_level import level_update
 
 __all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
            "error_params_layout", "copy_layout", "eiv_copy"]

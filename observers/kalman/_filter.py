@@ -38,12 +38,9 @@ solves ``(J - B) s = r``. The derivation is in the module docstring of
 
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import FmscalError, StateLayout, ops
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.core._discretise import position_increment, velocity_increment
+from fmscal.observers.core import matrix as mx, position_increment, velocity_increment
 
 __all__ = ["filter_layout", "input_layout", "params_layout", "initial_state", "filter_step", "bias_matrix",
            "information_factor", "correction_limit", "pack_lower", "unpack_lower", "cholesky", "cholesky_apply",

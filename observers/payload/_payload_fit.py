@@ -35,19 +35,16 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.io._calibration import reading_sign
-from fmscal.plant.physics._differentiate import edge, spatial_motion
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._rigid_body import (GRAVITY, INERTIA_NAMES, SpatialPayload, regressor,
-                                             rotation_matrix, skew)
-from fmscal.plant.physics._sensor import check_calibration
+from fmscal.plant.io import reading_sign
+from fmscal.plant.numerics import FmscalError, as_finite_array, as_positive_scalar
+from fmscal.plant.physics import (GRAVITY, INERTIA_NAMES, SpatialPayload, check_calibration, edge, regressor,
+                                  rotation_matrix, skew, spatial_motion)
 
-from fmscal.observers.batch._cluster_covariance import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
-from fmscal.observers.payload._coverage import cone_deg, in_words, next_poses, weak_directions
-from fmscal.observers.payload._rotations import _Rotations
-from fmscal.observers.payload._static_fit import (_OFFSET_NAMES, TILT_RATIO, Refit, _angle_deg, _axis, _exp, _Model,
-                                                  _start, _tangent_basis, gravity_up, other_convention, rotation_check)
+from fmscal.observers.batch import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
+from ._coverage import cone_deg, in_words, next_poses, weak_directions
+from ._rotations import _Rotations
+from ._static_fit import (TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start, _tangent_basis,
+                          gravity_up, other_convention, rotation_check)
 
 __all__ = ["PayloadFit", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED", "HOLD", "REFERENCES"]
 

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.io._bag import WRENCH_TYPE, BagError, _numbers
-from fmscal.plant.physics._rigid_body import rotation_matrix
+from fmscal.plant.physics import rotation_matrix
+from ._bag import WRENCH_TYPE, BagError, _numbers
 
 __all__ = ["write_bag", "write_tf_bag"]
 

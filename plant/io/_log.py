@@ -45,13 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError, LogError
-from fmscal.plant.io._files import atomic_write_text, not_a_file
-from fmscal.plant.physics._model import PlanarModel, SpatialModel, model_for_columns
-from fmscal.plant.physics._payload import Payload
-from fmscal.plant.physics._rigid_body import QUATERNION_TOLERANCE, SpatialPayload, unit_quaternions
-from fmscal.plant.physics._sensor import CalibrationSchedule, NoiseSpec, check_calibration
+from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar
+from fmscal.plant.physics import (QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload, PlanarModel,
+                                  SpatialModel, SpatialPayload, check_calibration, model_for_columns, unit_quaternions)
+from ._files import atomic_write_text, not_a_file
 
 __all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
            "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE", "unit_quaternions"]

@@ -30,17 +30,11 @@ import copy
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.physics import _dynamics as dynamics
-
-from fmscal.plant.physics import _rigid_body as rigid_body
-from fmscal.plant.numerics._backend import is_symbolic, ops
-from fmscal.plant.numerics._checks import as_finite_array
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.numerics._layout import StateLayout
-from fmscal.plant.physics._payload import Payload
-from fmscal.plant.physics._rigid_body import SpatialPayload
-from fmscal.plant.physics._sensor import NoiseSpec
-from fmscal.plant.physics import _simulate as simulate
+from fmscal.plant.numerics import FmscalError, StateLayout, as_finite_array, is_symbolic, ops
+from . import _dynamics as dynamics, _rigid_body as rigid_body, _simulate as simulate
+from ._payload import Payload
+from ._rigid_body import SpatialPayload
+from ._sensor import NoiseSpec
 
 __all__ = ["Model", "PlanarModel", "SpatialModel", "as_model", "model_for_columns"]
 

@@ -36,9 +36,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._backend import is_symbolic, ops
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError, LogError
+from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar, is_symbolic, ops
 
 __all__ = ["regressor", "INERTIA_NAMES",
     "SpatialPayload", "PayloadSymbols", "GRAVITY",
