@@ -11,7 +11,6 @@ counted).
 """
 
 import numpy as np
-import pandas as pd
 from tqdm import tqdm
 
 from fmscal.plant.numerics import FmscalError
@@ -85,6 +84,7 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_
                             "E": tail_error(result, truth), "E_floor": E_floor,
                             "diverged": bool(result.diverged),
                             "us_per_step": 1e6 * result.wall_time / len(log)})
+    import pandas as pd  # heavy (a sixth of the CLI's start): imported where a table is built
     raw = pd.DataFrame(records)
     rows = []
     for (scenario, step), g in raw.groupby(["scenario", "step"], sort=False):

@@ -88,7 +88,7 @@ class BenchSettings:
 
 def machine_description():
     """CPU model, cores, Python and library versions, and the C compiler used."""
-    import casadi
+    import casadi               # their versions, for the report (filterpy is otherwise imported only when timed)
     import filterpy
     cpu = platform.processor() or platform.machine()
     try:
@@ -134,7 +134,7 @@ def _observer_speeds(s):
 
 def _bare_filterpy_us(n):
     """filterpy's ExtendedKalmanFilter predict + update, 15 states, 3 measurements, nothing else."""
-    from filterpy.kalman import ExtendedKalmanFilter
+    from filterpy.kalman import ExtendedKalmanFilter     # the bare filter timed, only here
     rng = np.random.default_rng(0)
     kf = ExtendedKalmanFilter(dim_x=15, dim_z=3)
     kf.F = np.eye(15) + 1e-3 * rng.standard_normal((15, 15))

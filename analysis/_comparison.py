@@ -1,7 +1,6 @@
 """Run observers side by side on identical data and tabulate E, convergence and cost."""
 
 import numpy as np
-import pandas as pd
 from tqdm import tqdm
 
 from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, SpatialModel, SpatialScenario, get_scenario
@@ -325,6 +324,7 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
             out, h = out
             curves.update({(scenario, name): v for name, v in h.items()})
         rows += out
+    import pandas as pd  # heavy (a sixth of the CLI's start): imported where a table is built
     table = pd.DataFrame(rows)
     return (table, curves) if histories else table
 
@@ -365,6 +365,7 @@ def summarise(table):
         reasons = [r for r in g["refused"] if isinstance(r, str) and r] if "refused" in g else []
         row["refused_runs"], row["refused"] = len(reasons), (reasons[0] if reasons else "")
         out.append(row)
+    import pandas as pd  # heavy (a sixth of the CLI's start): imported where a table is built
     return pd.DataFrame(out)
 
 

@@ -31,13 +31,13 @@ WANDER_FACTOR = 10.0
 
 
 def _figure(figsize):
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure          # heavy: only a figure needs it, not the CLI's start
     return Figure(figsize=figsize)
 
 
 def _save(fig, path, dpi=100):
     """Write the figure as PNG, atomically (a failed write leaves no half file)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg        # heavy (as in _figure)
     FigureCanvasAgg(fig)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png"))
 
@@ -202,7 +202,7 @@ def plot_comparison(runs, truth, path, title):
     _S_panels(fig, outer[1], {n: c[0] for n, c in curves.items()}, histories, S_true, t_true, clipped)
     handles, labels = ax.get_legend_handles_labels()
     if S_true is not None:
-        from matplotlib.lines import Line2D
+        from matplotlib.lines import Line2D     # heavy (as in _figure)
         handles.append(Line2D([], [], color="k", ls="--", lw=1))
         labels.append("true S")
     fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(len(labels), 6),

@@ -254,7 +254,7 @@ def _numbers(value, name, n):
 def _open_reader(path):
     """An open ``rosbags`` AnyReader on ``path``, or a one-line BagError."""
     try:
-        from rosbags.highlevel import AnyReader
+        from rosbags.highlevel import AnyReader          # optional (the ros extra): only bags need it
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
         raise BagError("reading ROS bags needs rosbags: pip install 'fmscal[ros]'") from None

@@ -74,7 +74,7 @@ class RobotKinematics:
 
     def __init__(self, urdf, frame):
         try:
-            import pinocchio as pin
+            import pinocchio as pin         # optional (the robot extra): only --urdf needs it
         except ImportError:
             raise FmscalError("--urdf needs pinocchio: pip install \"fmscal[robot]\"") from None
         self._pin = pin

@@ -449,7 +449,7 @@ def _wrong_field_count(data, n):
 
 def _read_csv(path, required, empty_rule):
     """A CSV with the ``required`` columns, every cell a number or empty; one-line errors."""
-    import pandas as pd
+    import pandas as pd     # heavy: only reading a CSV needs it, not importing fmscal.plant
 
     data = path.read_bytes()
     nul = data.find(b"\0")
