@@ -15,8 +15,10 @@ scan, so nothing is imported to check it):
 and may be imported by any module in ``P`` or in a package inside ``P`` (``analysis.cli`` uses
 ``analysis._comparison``), as Python's own convention has it.
 
-Also: at most 10 public modules (no dotted part starting with ``_``, packages' ``__init__`` not counted),
-at most 40 names in ``fmscal.observers.__all__``, and importing the packages loads no optional dependency.
+Also: no import cycle among the modules (import-linter's layers see only the subpackages, not a cycle
+between two modules of one), at most 10 public modules (no dotted part starting with ``_``, packages'
+``__init__`` not counted), at most 40 names in ``fmscal.observers.__all__``, and importing the packages
+loads no optional dependency.
 """
 
 import ast
@@ -25,6 +27,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import grimp
 import pytest
 
 import fmscal.observers
@@ -211,3 +214,63 @@ def test_the_optional_check_sees_a_loaded_one():
             f"print(sorted(m for m in sys.modules if m.split('.')[0] in {OPTIONAL!r} and '.' not in m))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "['pinocchio']"
+
+
+def cycles(imports):
+    """The import cycles of a graph: its strongly connected components of more than one module (Tarjan).
+
+    Parameters
+    ----------
+    imports : dict of str to iterable of str
+        Each module's directly imported modules.
+
+    Returns
+    -------
+    list of list of str
+    """
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+    for root in imports:
+        if root in index:
+            continue
+        work = [(root, iter(imports.get(root, ())))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, children = work[-1]
+            w = next(children, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(imports.get(w, ()))))
+                elif w in on_stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                component = []
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    component.append(w)
+                    if w == v:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+def test_no_import_cycle():
+    """Every import grimp sees (a function's too, so the five allowlisted files' as well)."""
+    graph = grimp.build_graph(*PACKAGES.values())
+    found = cycles({m: graph.find_modules_directly_imported_by(m) for m in graph.modules})
+    assert found == []
+
+
+def test_the_cycle_check_finds_a_cycle():
+    assert cycles({"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}) == [["a", "b", "c"]]
+    assert cycles({"a": ["b"], "b": []}) == []
