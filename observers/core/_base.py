@@ -197,7 +197,7 @@ class Observer:
     least squares to the log: work a bare run was not asked for); the
     workflow that decides convergence asks it,
     ``result.converged and observers.diagnostics.has_evidence(result, log, model, offset)``
-    (the ``fmscal calibrate`` workflow and :func:`fmscal.analysis.compare` do).
+    (the workflows in :mod:`fmscal.analysis` do: calibrate, compare, sweep, reproduce).
     """
 
     name = "observer"
