@@ -11,13 +11,13 @@ counted).
 """
 
 import numpy as np
-import pandas as pd
 from tqdm import tqdm
 
-from fmscal.observers import AdaptiveObserver, PaperAdaptiveObserver
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError
 
-from fmscal.analysis._comparison import floor_error, seed_list, simulate_case, tail_error
+from fmscal.observers import AdaptiveObserver, PaperAdaptiveObserver
+
+from ._comparison import floor_error, seed_list, simulate_case, tail_error
 
 __all__ = ["ABLATION_STEPS", "QUICK_SETTINGS", "ablation", "ablation_markdown", "tail_error"]
 
@@ -84,6 +84,7 @@ def ablation(scenarios=("paper", "noisy"), seeds=3, duration=100.0, floor=floor_
                             "E": tail_error(result, truth), "E_floor": E_floor,
                             "diverged": bool(result.diverged),
                             "us_per_step": 1e6 * result.wall_time / len(log)})
+    import pandas as pd  # heavy (a sixth of the CLI's start): imported where a table is built
     raw = pd.DataFrame(records)
     rows = []
     for (scenario, step), g in raw.groupby(["scenario", "step"], sort=False):

@@ -28,13 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmscal.observers import FLOOR_METHOD, METHODS, AugmentedEKF, RecursiveObserver, make_observer, method_names
-from fmscal.plant import PAPER_PAYLOAD, compiler, get_scenario, integrate
-from fmscal.plant.physics._excitation import PaperWrench
+from fmscal.plant import PAPER_PAYLOAD, SPATIAL_SCENARIOS, SpatialModel, compiler, get_scenario, integrate
+from fmscal.plant.physics import PaperWrench
 
-from fmscal.analysis._comparison import run_case
-from fmscal.analysis._reproduce import REPRODUCED_OBSERVERS, REPRODUCED_SCENARIOS, reproduce
-from fmscal.analysis._sweep import SWEEP_OBSERVERS, sweep
+from fmscal.observers import FLOOR_METHOD, METHODS, AugmentedEKF, RecursiveObserver, make_observer, method_names
+
+from ._comparison import run_case
+from ._reproduce import REPRODUCED_OBSERVERS, REPRODUCED_SCENARIOS, reproduce
+from ._sweep import SWEEP_OBSERVERS, sweep
 
 __all__ = ["BenchSettings", "run_bench", "bench_markdown", "machine_description", "TARGETS"]
 
@@ -87,7 +88,7 @@ class BenchSettings:
 
 def machine_description():
     """CPU model, cores, Python and library versions, and the C compiler used."""
-    import casadi
+    import casadi               # their versions, for the report (filterpy is otherwise imported only when timed)
     import filterpy
     cpu = platform.processor() or platform.machine()
     try:
@@ -133,7 +134,7 @@ def _observer_speeds(s):
 
 def _bare_filterpy_us(n):
     """filterpy's ExtendedKalmanFilter predict + update, 15 states, 3 measurements, nothing else."""
-    from filterpy.kalman import ExtendedKalmanFilter
+    from filterpy.kalman import ExtendedKalmanFilter     # the bare filter timed, only here
     rng = np.random.default_rng(0)
     kf = ExtendedKalmanFilter(dim_x=15, dim_z=3)
     kf.F = np.eye(15) + 1e-3 * rng.standard_normal((15, 15))
@@ -351,7 +352,6 @@ def _spatial_steps(s):
     first run that builds the step: ``step_us``, the run's own cost (:attr:`observers.ObserverResult.wall_time`:
     without the build and without the least-squares fit of the log that gives ``converged`` its evidence,
     :func:`observers.diagnostics.log_uncertainty`), and ``run_us``, the whole ``run`` with both."""
-    from fmscal.plant import SPATIAL_SCENARIOS, SpatialModel
     scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=s.spatial_s)
     log, truth, _ = scenario.generate(0)
     model = SpatialModel(scenario.payload, scenario.gravity)
@@ -367,7 +367,6 @@ def _spatial_steps(s):
 
 def _spatial_speeds(s):
     """Whole fits of a ``spatial-arm`` log by every method that calibrates in 3D, the best of 2 each, s."""
-    from fmscal.plant import SPATIAL_SCENARIOS, SpatialModel
     scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=s.spatial_s)
     log, _, _ = scenario.generate(0)
     model = SpatialModel(scenario.payload, scenario.gravity)

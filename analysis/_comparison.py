@@ -1,15 +1,15 @@
 """Run observers side by side on identical data and tabulate E, convergence and cost."""
 
 import numpy as np
-import pandas as pd
 from tqdm import tqdm
 
-from fmscal.observers import FLOOR_METHOD, METHODS, get_method, method_label
 from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
-from fmscal.plant.numerics._checks import as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError, as_positive_scalar
 
-from fmscal.analysis._metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
+from fmscal.observers import FLOOR_METHOD, METHODS, get_method, method_label
+from fmscal.observers.diagnostics import has_evidence
+
+from ._metrics import TAIL_FRACTION, convergence_time, error_history, tail_median
 
 __all__ = ["case_scenario", "case_model",
            "simulate_case", "tail_error", "floor_error", "run_observer", "run_case", "seed_list", "compare",
@@ -177,10 +177,12 @@ def run_observer(name, log, truth, payload, told_noise=None, settings=None, hist
         return _row_without_figures(name, log, floor, history, refused=reason or str(err))
     E = error_history(result.S_hat_history, truth.S_at(result.t))
     bad = result.diverged
+    # the run settled (result.converged); the log must also have pinned S down (Observer, Notes)
+    converged = bool(result.converged) and has_evidence(result, log, observer.model, observer.offset)
     row = {"observer": name, "duration": float(log.duration),
            "E": np.nan if bad else tail_median(E), "E_end": np.nan if bad else float(E[-1]),
            "E_over_floor": np.nan, "floor_E": np.nan if floor is None else float(floor),
-           "convergence_time": np.nan, "diverged": bool(bad), "converged": bool(result.converged),
+           "convergence_time": np.nan, "diverged": bool(bad), "converged": converged,
            "applicable": True, "refused": ""}
     if floor is not None and not bad:
         row["E_over_floor"] = row["E"] / floor if floor > 0 else np.nan        # NaN > 0 is False
@@ -313,6 +315,7 @@ def compare(scenarios=("paper",), seeds=1, observers=tuple(METHODS), duration=No
             out, h = out
             curves.update({(scenario, name): v for name, v in h.items()})
         rows += out
+    import pandas as pd  # heavy (a sixth of the CLI's start): imported where a table is built
     table = pd.DataFrame(rows)
     return (table, curves) if histories else table
 
@@ -353,6 +356,7 @@ def summarise(table):
         reasons = [r for r in g["refused"] if isinstance(r, str) and r] if "refused" in g else []
         row["refused_runs"], row["refused"] = len(reasons), (reasons[0] if reasons else "")
         out.append(row)
+    import pandas as pd  # heavy (a sixth of the CLI's start): imported where a table is built
     return pd.DataFrame(out)
 
 

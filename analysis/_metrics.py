@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array
+from fmscal.plant.numerics import as_finite_array
 
 __all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "tail_seen", "convergence_time",
            "CONVERGENCE_THRESHOLD", "CONVERGENCE_HOLD", "TAIL_FRACTION"]

@@ -16,10 +16,12 @@ that its noisy trace does not hide theirs.
 
 import numpy as np
 
+from fmscal.plant.io import atomic_write
+from fmscal.plant.physics import PAPER_PAYLOAD, PlanarModel
+
 from fmscal.observers import method_label
-from fmscal.plant.io._files import atomic_write
-from fmscal.plant.physics._model import PlanarModel
-from fmscal.plant.physics._payload import PAPER_PAYLOAD
+
+from ._metrics import error_history
 
 __all__ = ["plot_S_entries", "plot_error_histories", "plot_comparison", "plot_calibration", "thinned",
            "wandering_methods"]
@@ -34,13 +36,13 @@ _BEHIND_FACTOR = 5.0
 
 
 def _figure(figsize):
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure          # heavy: only a figure needs it, not the CLI's start
     return Figure(figsize=figsize)
 
 
 def _save(fig, path, dpi=100):
     """Write the figure as PNG, atomically (a failed write leaves no half file)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg        # heavy (as in _figure)
     FigureCanvasAgg(fig)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png"))
 
@@ -224,7 +226,7 @@ def plot_comparison(runs, truth, path, title):
               behind=behind)
     handles, labels = ax.get_legend_handles_labels()
     if S_true is not None:
-        from matplotlib.lines import Line2D
+        from matplotlib.lines import Line2D     # heavy (as in _figure)
         handles.append(Line2D([], [], color="k", ls="--", lw=1))
         labels.append("true S")
     fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(len(labels), 6),
@@ -279,7 +281,6 @@ def plot_S_entries(results, truth, path, title):
     t_true = max(times.values(), key=len)
     S_true = None if truth is None else truth.S_at(t_true)
     if truth is not None:
-        from fmscal.analysis._metrics import error_history
         errors = {r.observer: error_history(r.S_hat_history[::_thin(len(r.t))], truth.S_at(times[r.observer]))
                   for r in results}
         clipped = wandering_methods(errors)

@@ -5,13 +5,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from fmscal.observers import FLOOR_METHOD, METHODS, make_observer, method_label, method_names
 from fmscal.plant import get_scenario
-from fmscal.plant.io._files import atomic_write_text
+from fmscal.plant.io import atomic_write_text
 
-from fmscal.analysis._metrics import convergence_time, error_history
-from fmscal.analysis._plots import plot_comparison, thinned
-from fmscal.analysis._sweep import run_local
+from fmscal.observers import FLOOR_METHOD, METHODS, make_observer, method_label, method_names
+from fmscal.observers.diagnostics import has_evidence
+
+from ._metrics import convergence_time, error_history
+from ._plots import plot_comparison, thinned
+from ._sweep import run_local
 
 __all__ = ["reproduce", "output_names", "PAPER_CLAIMS", "REPRODUCED_OBSERVERS", "REPRODUCED_SCENARIOS"]
 
@@ -62,7 +64,8 @@ def _run_one(name, method, seed, duration_scale):
            "E_end": float(E[-1]) if ok else None,
            "E_median_last_10s": float(np.median(E[max(0, k100 - int(10 / log.dt)):k100 + 1])) if ok else None,
            "convergence_time": convergence_time(r.t, E) if ok else None,
-           "diverged": r.diverged, "converged": r.converged,
+           "diverged": r.diverged,
+           "converged": bool(r.converged) and has_evidence(r, log, obs.model, obs.offset),   # Observer, Notes
            "wall_time": r.wall_time, "S_hat_100": r.S_hat_history[k100].tolist(),
            # where the true S changed within the run (Table 1's steps): a constant-S fit cannot follow it
            "S_changes": [float(t0) for t0 in truth.schedule.starts[1:] if t0 <= log.t[-1]]}

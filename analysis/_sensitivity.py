@@ -25,10 +25,11 @@ import numpy as np
 import pandas as pd
 
 from fmscal.plant import Payload, get_scenario
+from fmscal.plant.numerics import FmscalError
 
 from fmscal.observers import make_observer
-from fmscal.analysis._metrics import calibration_error
-from fmscal.plant.numerics._errors import FmscalError
+
+from ._metrics import calibration_error
 
 __all__ = ["PARAMETERS", "perturbed", "distortion", "derived_error", "sensitivity", "tolerable_error"]
 

@@ -9,13 +9,13 @@ table is the same either way, timing columns aside (:data:`TIMING_COLUMNS`).
 import itertools
 
 import numpy as np
-import pandas as pd
 from tqdm import tqdm
 
-from fmscal.observers import get_method, make_observer, method_names
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError
 
-from fmscal.analysis._comparison import case_model, case_scenario, floor_error, run_observer, seed_list, simulate_case
+from fmscal.observers import get_method, make_observer, method_names
+
+from ._comparison import case_model, case_scenario, floor_error, run_observer, seed_list, simulate_case
 
 __all__ = ["sweep", "run_local", "worker_count", "expand_settings", "settings_label", "TIMING_COLUMNS",
            "SWEEP_OBSERVERS",
@@ -132,7 +132,7 @@ def run_local(func, items, n_jobs, bar):
     (:func:`worker_count`). ``bar`` (a tqdm bar) advances by one per item.
     ``func`` must be a module-level function, so that it pickles.
     """
-    from joblib import Parallel, delayed
+    from joblib import Parallel, delayed          # only a sweep on local cores needs it
     items = list(items)
     n_jobs = worker_count(n_jobs, len(items))
     if n_jobs == 1:                     # no worker processes: simplest to debug
@@ -146,7 +146,7 @@ def run_local(func, items, n_jobs, bar):
 
 
 def _run_dask(cases, client, bar):
-    from dask.distributed import as_completed
+    from dask.distributed import as_completed     # optional (the distributed extra)
     futures = client.map(_run_case, cases, pure=False)
     for future in as_completed(futures):
         bar.update()
@@ -195,7 +195,7 @@ def _probe(address, timeout):
 def _client(scheduler, timeout=DEFAULT_SCHEDULER_TIMEOUT):
     if isinstance(scheduler, str):
         try:
-            from dask.distributed import Client
+            from dask.distributed import Client   # optional (the distributed extra)
         except ImportError:
             raise FmscalError('a Dask scheduler needs the distributed extra: pip install "fmscal[distributed]"') \
                 from None
@@ -275,4 +275,5 @@ def sweep(scenarios=("paper",), seeds=1, noise_scales=(1.0,), observers=SWEEP_OB
     finally:
         if owned:
             client.close()
+    import pandas as pd  # heavy (a sixth of the CLI's start): imported where a table is built
     return pd.DataFrame([row for i in sorted(results) for row in results[i]])

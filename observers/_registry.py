@@ -10,17 +10,12 @@ import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from fmscal.plant.numerics._checks import as_bool, as_number
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import as_model
+from fmscal.plant.numerics import FmscalError, as_bool, as_number
 
-from fmscal.observers.adaptive._adaptive import AdaptiveObserver, SpatialAdaptiveObserver
-from fmscal.observers.adaptive._paper import PaperAdaptiveObserver
-from fmscal.observers.kalman._ekf import AugmentedEKF
-from fmscal.observers.kalman._error_state import ErrorStateEKF
-from fmscal.observers.batch._floor import MaximumLikelihood
-from fmscal.observers.adaptive._highgain import HighGainObserver
-from fmscal.observers.batch._least_squares import LeastSquares, SpatialLeastSquares
+from fmscal.observers.core import ENGINES as _ENGINE_TABLE
+from fmscal.observers.adaptive import AdaptiveObserver, HighGainObserver, PaperAdaptiveObserver, SpatialAdaptiveObserver
+from fmscal.observers.batch import LeastSquares, MaximumLikelihood, SpatialLeastSquares
+from fmscal.observers.kalman import AugmentedEKF, ErrorStateEKF
 
 __all__ = ["Method", "METHODS", "FLOOR_METHOD", "ENGINES", "engine_class", "get_method", "make_observer",
            "method_names", "method_label"]
@@ -169,14 +164,15 @@ METHODS = {m.name: m for m in (
 #: Building a method's class (``AugmentedEKF(model)``, :meth:`Method.build`) builds its engine
 #: (:meth:`observers.Observer.__new__`), and :meth:`observers.Observer.refusal` is the engine's. This table
 #: and :func:`engine_class` are where the toolkit tells its cases apart: no method tests a model's name or class.
-ENGINES = {
+ENGINES = _ENGINE_TABLE
+ENGINES.update({
     # the filter pieces need linear channels; without them the EKF runs on an error state (Model.integrate)
     (AugmentedEKF, "linear_channels", False): ErrorStateEKF,
     # a body in 3D (a unit-quaternion attitude): the law on its momenta about the centre of mass
     (AdaptiveObserver, "attitude", "quaternion"): SpatialAdaptiveObserver,
     # a body in 3D: least squares on smoothed inverse dynamics, linear in [S | c]
     (LeastSquares, "attitude", "quaternion"): SpatialLeastSquares,
-}
+})
 
 
 def engine_class(cls, model):
@@ -200,9 +196,7 @@ def engine_class(cls, model):
     FmscalError
         ``model`` is neither a model nor a payload.
     """
-    model = as_model(model, cls.__name__)
-    return next((engine for (method, declaration, value), engine in ENGINES.items()
-                 if method is cls and getattr(model, declaration) == value), cls)
+    return cls.engine(model)
 
 
 #: The method whose E on a log is the floor every table divides by (``E / floor``).

@@ -12,7 +12,8 @@ from fmscal.analysis._comparison import compare, summarise, summary_markdown
 from fmscal.analysis._sweep import sweep
 from fmscal.observers import AdaptiveObserver, HighGainObserver
 from fmscal.observers.core._convergence import informed, moved
-from fmscal.observers.diagnostics._evidence import log_uncertainty
+from fmscal.observers import LeastSquares
+from fmscal.observers.diagnostics import has_evidence, log_uncertainty
 
 
 @pytest.fixture(scope="module")
@@ -25,16 +26,47 @@ def paper():
 @pytest.mark.parametrize("make, samples", [(HighGainObserver, 100), (HighGainObserver, 500),
                                            (AdaptiveObserver, 12)])
 def test_a_short_run_has_not_converged(paper, make, samples):
-    """Each said converged=True before (E 2.7-6.8): the estimate stood still, or settled on too little data."""
+    """Each said converged=True before issue 24 (E 2.7-6.8): the estimate stood still, or settled on too little
+    data. The run judges settling only (Observer, Notes); the evidence that the log is too short is the
+    workflow's, :func:`has_evidence`, and the workflow's convergence is the two together."""
     payload, log, truth = paper
-    result = make(payload).run(log.head(samples), truth.S0)
-    assert not result.diverged and not result.converged
+    short = log.head(samples)
+    observer = make(payload)
+    result = observer.run(short, truth.S0)
+    assert not result.diverged
+    assert not has_evidence(result, short, observer.model, observer.offset)
+    assert not (result.converged and has_evidence(result, short, observer.model, observer.offset))
 
 
 @pytest.mark.parametrize("make", [HighGainObserver, AdaptiveObserver])
 def test_the_same_observers_converge_on_the_whole_log(paper, make):
     payload, log, truth = paper
-    assert make(payload).run(log, truth.S0).converged
+    observer = make(payload)
+    result = observer.run(log, truth.S0)
+    assert result.converged and has_evidence(result, log, observer.model, observer.offset)
+
+
+@pytest.mark.parametrize("make", [HighGainObserver, AdaptiveObserver])
+def test_a_bare_run_fits_no_least_squares(paper, make, monkeypatch):
+    """The run does only the method's work: the least-squares evidence is the workflow's to ask for."""
+    payload, log, truth = paper
+    calls = []
+    real_run = LeastSquares.run
+    monkeypatch.setattr(LeastSquares, "run", lambda self, *a, **k: calls.append(1) or real_run(self, *a, **k))
+    observer = make(payload)
+    result = observer.run(log, truth.S0)
+    assert calls == [] and result.converged                             # settled, judged without a fit
+    assert has_evidence(result, log, observer.model, observer.offset) and calls   # the evidence fits
+
+
+def test_a_method_with_its_own_uncertainty_is_judged_on_it(paper):
+    """Least squares reports S_std: has_evidence reads it (no second fit), as the run already did."""
+    payload, log, _ = paper
+    result = LeastSquares(payload).run(log)
+    assert result.converged and has_evidence(result, log, payload)
+    vague = type(result)(**{**result.__dict__, "S_std": np.full_like(result.S_hat, 1.0)})
+    assert not has_evidence(vague, log, payload)                        # sigma of 1 on every entry: not pinned
+    assert not has_evidence(type(result)(**{**result.__dict__, "diverged": True}), log, payload)
 
 
 def test_evidence_grows_with_the_log(paper):

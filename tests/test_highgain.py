@@ -7,6 +7,7 @@ import pytest
 from fmscal import plant
 from fmscal.analysis import calibration_error
 from fmscal.observers import HighGainObserver, check_gains, double_pole_gains
+from fmscal.observers.diagnostics import has_evidence
 from fmscal.observers.core._gains import sampled_poles
 from fmscal.observers.adaptive._highgain import discrete_gain
 
@@ -39,7 +40,8 @@ def test_doubling_lam_doubles_the_bandwidth_of_the_error_dynamics():
 def test_converges_on_noise_free_data():
     log, truth, _ = plant.get_scenario("paper").with_(duration=30).generate(0, noise_free=True)
     result = HighGainObserver(plant.PAPER_PAYLOAD).run(log, truth.S0)
-    assert not result.diverged and result.converged
+    assert not result.diverged and result.converged                 # settled (the run's own judgement)
+    assert has_evidence(result, log, plant.PAPER_PAYLOAD)           # and the log pinned S down (the workflow's)
     assert calibration_error(truth.S0, plant.PAPER_S) > 1.0
     assert calibration_error(result.S_hat, plant.PAPER_S) < 1e-4
 

@@ -6,7 +6,8 @@ import pytest
 from fmscal import plant
 from fmscal.analysis import calibration_error
 from fmscal.observers import LeastSquares
-from fmscal.observers.batch._max_likelihood import POSE_SD_FLOOR, V0_SD, MaximumLikelihoodFit, fit_max_likelihood
+from fmscal.observers.batch._max_likelihood import MaximumLikelihoodFit, fit_max_likelihood
+from fmscal.observers.kalman import POSE_SD_FLOOR, V0_SD
 from fmscal.plant.numerics._errors import FmscalError
 
 

@@ -15,6 +15,7 @@ from fmscal import plant
 from fmscal.observers import (AdaptiveObserver, AugmentedEKF, HighGainObserver, LeastSquares, MaximumLikelihood,
                               PaperAdaptiveObserver, get_method)
 from fmscal.plant.numerics._errors import FmscalError
+from fmscal.observers.diagnostics import has_evidence
 
 from rail import RailModel, RailPayload
 
@@ -118,6 +119,7 @@ def test_the_adaptive_default_recovers_S_and_b_as_closely_as_the_floor(rail_log_
     floor = MaximumLikelihood(MODEL, offset=True).run(rail_log_at_rest)
     assert adaptive.S_hat.shape == (1, 1) and adaptive.b.shape == (1,) and adaptive.S_std is None
     assert adaptive.x_hat_history.shape == (len(rail_log_at_rest), 2) and not adaptive.diverged and adaptive.converged
+    assert has_evidence(adaptive, rail_log_at_rest, MODEL, offset=True)     # the workflow's half of converged
     assert abs(adaptive.S_hat[0, 0] - S_TRUE) <= 1.3 * abs(floor.S_hat[0, 0] - S_TRUE) + floor.S_std[0, 0]
     assert abs(adaptive.b[0] - B_TRUE) <= 1.3 * abs(floor.b[0] - B_TRUE) + floor.b_std[0]
     assert abs(adaptive.S_hat[0, 0] - 1.0) > 0.1                # it left the identity it starts from

@@ -2,7 +2,12 @@
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant import SCENARIOS
+from fmscal.plant.numerics import FmscalError
+
+from fmscal.observers import METHODS
+
+from .._comparison import case_scenario
 
 __all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes", "check_seeds",
            "MAX_SEEDS"]
@@ -39,8 +44,6 @@ def positive(value, name):
 
 def add_scenarios_and_observers(p, default_observers):
     """``--scenario`` and ``--observer`` (several names each), as compare and sweep take them."""
-    from fmscal.observers import METHODS
-    from fmscal.plant import SCENARIOS
     p.add_argument("--scenario", nargs="+", default=["paper"], metavar="NAME",
                    help="one or more of: " + ", ".join(SCENARIOS) + ", or the spatial ones (fmscal simulate --help "
                         "lists them all); a method that does not run in 3D is reported not applicable there")
@@ -50,7 +53,6 @@ def add_scenarios_and_observers(p, default_observers):
 
 def check_sizes(scenarios, duration=None):
     """Refuse, before any work, a run whose simulated logs would exceed :data:`plant.scenarios._planar.MAX_SAMPLES`."""
-    from fmscal.analysis._comparison import case_scenario
     for name in scenarios:
         sc = case_scenario(name)
         (sc.with_(duration=duration) if duration is not None else sc).check_size()

@@ -12,10 +12,10 @@ the command worked (:mod:`plant.io._files`).
 import os
 from pathlib import Path
 
-from fmscal.plant.io._files import (atomic_write, atomic_write_many, atomic_write_text, claim_folder, exclusive,
-                                    not_a_file, not_an_output)
+from fmscal.plant.io import (atomic_write, atomic_write_many, atomic_write_text, claim_folder, exclusive, not_a_file,
+                             not_an_output)
 
-from fmscal.analysis.cli._common import CliError
+from ._common import CliError
 
 __all__ = ["check_outputs", "check_output_dir", "same_file", "atomic_write", "atomic_write_many",
            "atomic_write_text", "claim_folder", "exclusive"]

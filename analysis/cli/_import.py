@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.io._files import atomic_write_many
+from fmscal.plant.io import RobotKinematics, atomic_write_many, format_report, import_bag
 
-from fmscal.analysis.cli._common import CliError, strict
-from fmscal.analysis.cli._files import check_outputs
+from ._common import CliError, strict
+from ._files import check_outputs
 
 
 def add_import(sub):
@@ -52,7 +52,6 @@ def add_import(sub):
 
 
 def cmd_import(args):
-    from fmscal.plant.io._bag import format_report, import_bag
     out = Path(args.out)
     if out.suffix != ".csv":
         raise CliError(f"--out must end in .csv; got {out}")
@@ -72,7 +71,6 @@ def cmd_import(args):
             raise CliError("--pose-offset is not taken with --parent: name the sensor's own frame with --frame")
         tf_frames, args.spatial = (args.parent, args.frame), True
     if args.urdf is not None:
-        from fmscal.plant.io._kinematics import RobotKinematics
         if args.pose_offset is not None:
             raise CliError("--pose-offset is not taken with --urdf: name the sensor's own frame with --frame")
         kinematics, args.spatial = RobotKinematics(args.urdf, args.frame), True

@@ -15,14 +15,23 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.analysis.cli._calibration import add_apply, add_calibrate
-from fmscal.analysis.cli._payload import add_identify_payload
-from fmscal.analysis.cli._import import add_import
-from fmscal.analysis.cli._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds,
-                                         check_sizes, positive, strict)
-from fmscal.analysis.cli._files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir,
-                                        check_outputs, claim_folder, exclusive)
-from fmscal.analysis.cli._scale import add_bench, add_sweep
+from fmscal.plant import PAPER_PAYLOAD, SCENARIOS, SPATIAL_SCENARIOS, FmscalError, Payload, get_scenario
+
+from fmscal.observers import (METHODS, HighGainObserver, PaperAdaptiveObserver, RecursiveObserver, check_gains,
+                              get_method, make_observer)
+
+from .._ablation import QUICK_SETTINGS, ablation, ablation_markdown
+from .._comparison import case_scenario, compare, summarise, summary_markdown
+from .._plots import plot_comparison
+from .._reproduce import output_names, reproduce
+from ._calibration import add_apply, add_calibrate
+from ._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
+                      strict)
+from ._files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs, claim_folder,
+                     exclusive)
+from ._import import add_import
+from ._payload import add_identify_payload
+from ._scale import add_bench, add_sweep
 
 __all__ = ["main", "build_parser", "MAX_LAM"]
 
@@ -48,7 +57,6 @@ REPRODUCE_DIR = "reproduce"
 
 
 def _add_simulate(sub):
-    from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
     every = {**SCENARIOS, **SPATIAL_SCENARIOS}
     import textwrap
     # the scenarios one per line, each with its own description (the epilog is printed as written)
@@ -95,7 +103,6 @@ def _add_simulate(sub):
 
 
 def cmd_simulate(args):
-    from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
     check_seeds(seed=args.seed)
     sc = {**SCENARIOS, **SPATIAL_SCENARIOS}[args.scenario]            # --scenario's choices: both tables' names
     for option, value in (("--mass", args.mass), ("--inertia", args.inertia), ("--rho", args.rho),
@@ -123,7 +130,6 @@ def cmd_simulate(args):
             raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
         changes["latency"] = args.latency
     if args.mass is not None or args.inertia is not None or args.rho is not None:
-        from fmscal.plant import Payload
         p = sc.payload
         changes["payload"] = Payload(positive(args.mass, "--mass") if args.mass is not None else p.mass,
                                      positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
@@ -149,7 +155,6 @@ def _add_check_gains(sub):
                        description="Check observer gains with python-control: poles of A - K C, "
                                    "observability of (A, C), the Lyapunov P, and whether assumption 2 "
                                    "of Theorem 1 holds with P = I.")
-    from fmscal.observers import METHODS, RecursiveObserver
     configs = [name for name, m in METHODS.items() if issubclass(m.cls, RecursiveObserver)]
     p.add_argument("--config", choices=["paper", *configs], default="paper",
                    help="the gains of one observer: " + ", ".join(configs) + "; paper is adaptive-paper, "
@@ -161,8 +166,6 @@ def _add_check_gains(sub):
 
 
 def cmd_check_gains(args):
-    from fmscal.observers import HighGainObserver, PaperAdaptiveObserver, check_gains, make_observer
-    from fmscal.plant import PAPER_PAYLOAD
     if args.config == "paper":
         obs = PaperAdaptiveObserver(PAPER_PAYLOAD)
     else:
@@ -202,7 +205,6 @@ def _add_reproduce(sub):
 
 
 def cmd_reproduce(args):
-    from fmscal.analysis._reproduce import output_names, reproduce
     if not 0 < args.quick <= 1:
         raise CliError(f"--quick must be in (0, 1]; got {args.quick}")
     check_seeds(seed=args.seed)
@@ -233,8 +235,6 @@ def _add_ablation(sub):
 
 
 def cmd_ablation(args):
-    from fmscal.plant import get_scenario
-    from fmscal.analysis._ablation import QUICK_SETTINGS, ablation, ablation_markdown
     for name in args.scenario:
         get_scenario(name)                      # FmscalError naming the choices
     check_seeds(seeds=args.seeds)               # --quick or not: a bad --seeds is not ignored
@@ -250,8 +250,6 @@ def cmd_ablation(args):
 
 
 def _add_compare(sub):
-    from fmscal.observers import METHODS
-    from fmscal.plant import SCENARIOS
     p = sub.add_parser("compare", help="run the observers side by side on identical data",
                        description="Run every observer on the same simulated logs (same data, same "
                                    "initial S_hat) over scenarios and seeds; print the table of E, "
@@ -269,8 +267,6 @@ def _add_compare(sub):
 
 
 def cmd_compare(args):
-    from fmscal.observers import get_method
-    from fmscal.analysis._comparison import case_scenario, compare, summarise, summary_markdown
     for name in args.scenario:
         case_scenario(name)                     # FmscalError naming the choices
     for name in args.observer:
@@ -299,8 +295,6 @@ def cmd_compare(args):
 
 def _write_comparison(out, duration, table, curves, text):
     """compare --out: a figure per scenario, summary.md and runs.csv in ``out``."""
-    from fmscal.analysis._comparison import case_scenario
-    from fmscal.analysis._plots import plot_comparison
     for scenario in dict.fromkeys(table["scenario"]):
         sc = case_scenario(scenario)
         truth = sc.with_(duration=duration or sc.duration).generate(0)[1]     # seed 0's S(t)
@@ -356,7 +350,6 @@ _COMMANDS = [_add_simulate, add_calibrate, add_apply, add_identify_payload, _add
 
 def main(argv=None):
     """Entry point of ``fmscal``; returns the exit status."""
-    from fmscal.plant import FmscalError
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

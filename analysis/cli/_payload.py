@@ -18,7 +18,7 @@ import sys
 
 import numpy as np
 
-from fmscal.plant.physics._rigid_body import _inertia_matrix
+from fmscal.plant.physics import inertia_matrix
 
 from fmscal.analysis.cli._common import CliError, strict
 from fmscal.analysis.cli._files import check_outputs
@@ -211,7 +211,7 @@ def _print_calibrate_flags(fit, table=False):
     flags = f"--mass {fit.mass:.6g} --rho {' '.join(f'{v:.6g}' for v in M @ np.asarray(fit.rho))}"
     known = None if table else fit.inertia                  # held poses never give the inertia
     if known is not None:
-        inertia = M @ _inertia_matrix(known) @ M.T
+        inertia = M @ inertia_matrix(known) @ M.T
         entries = (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2])
         flags += f" --inertia {' '.join(f'{v:.6g}' for v in entries)}"
     if fit.gravity is not None:

@@ -2,14 +2,20 @@
 
 import json
 
-from fmscal.analysis.cli._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds,
-                                         check_sizes, positive, strict)
-from fmscal.analysis.cli._files import atomic_write, atomic_write_text, check_outputs
+from fmscal.plant import PAPER_PAYLOAD
+from fmscal.plant.numerics import FmscalError
+
+from fmscal.observers import make_observer, method_names
+
+from .._bench import BenchSettings, bench_markdown, run_bench
+from .._comparison import summarise, summary_markdown
+from .._sweep import DEFAULT_SCHEDULER_TIMEOUT, sweep
+from ._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
+                      strict)
+from ._files import atomic_write, atomic_write_text, check_outputs
 
 
 def add_sweep(sub):
-    from fmscal.observers import method_names
-    from fmscal.analysis._sweep import DEFAULT_SCHEDULER_TIMEOUT
     p = sub.add_parser("sweep", help="Monte Carlo: seeds x scenarios x noise levels x observer settings",
                        description="Run observers over the product of scenarios, seeds, noise levels and "
                                    "settings, on local cores (joblib) or a Dask cluster (--scheduler); "
@@ -56,9 +62,6 @@ def _parse_value(text):
 def _defaults(observer):
     """The constructor's default of each parameter of ``observer`` (empty for an unknown name)."""
     import inspect
-    from fmscal.plant import PAPER_PAYLOAD
-    from fmscal.plant.numerics._errors import FmscalError
-    from fmscal.observers import make_observer
     try:
         obs = make_observer(observer, PAPER_PAYLOAD)
     except FmscalError:       # an unknown observer: sweep names it
@@ -96,8 +99,6 @@ def parse_settings(items):
 
 
 def cmd_sweep(args):
-    from fmscal.analysis._comparison import summarise, summary_markdown
-    from fmscal.analysis._sweep import sweep
     check_seeds(seeds=args.seeds)
     check_jobs(args.jobs)
     if args.duration is not None:
@@ -135,7 +136,6 @@ def add_bench(sub):
 
 
 def cmd_bench(args):
-    from fmscal.analysis._bench import BenchSettings, bench_markdown, run_bench
     check_outputs([(args.out, "--out")], overwrite=args.overwrite)
     report = run_bench(BenchSettings.quick() if args.quick else BenchSettings(), progress=not args.json)
     text = bench_markdown(report)

@@ -42,18 +42,13 @@ with ``L_h`` placing the eigenvalues of ``(I - L_h C) Phi(h)`` at
 
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._checks import as_bool, as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import as_model
+from fmscal.plant.numerics import FmscalError, as_bool, as_positive_scalar, ops
+from fmscal.plant.physics import as_model
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.adaptive._spatial import SPATIAL_LAM, SpatialLaw
-from fmscal.observers.core._base import RecursiveObserver
-from fmscal.observers.core._gains import double_pole_gains
-from fmscal.observers.adaptive._highgain import discrete_gain
-from fmscal.observers.core._discretise import position_increment, velocity_increment
-from fmscal.observers.core._state import StateLayout
+from fmscal.observers.core import (RecursiveObserver, StateLayout, double_pole_gains, matrix as mx, position_increment,
+                                   velocity_increment)
+from ._highgain import discrete_gain
+from ._spatial import SPATIAL_LAM, SpatialLaw
 
 __all__ = ["AdaptiveObserver", "SpatialAdaptiveObserver", "DEFAULT_LAM", "GAINS"]
 

@@ -38,15 +38,10 @@ continuous double pole at ``-lam``.
 import numpy as np
 
 from fmscal.plant import S_from_phi, phi_1, phi_2, regressors
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._checks import as_positive_scalar
+from fmscal.plant.numerics import FmscalError, as_positive_scalar, ops
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.core._base import RecursiveObserver
-from fmscal.observers.core._gains import double_pole_gains
-from fmscal.observers.core._discretise import position_increment, velocity_increment
-from fmscal.observers.core._state import INPUT, StateLayout
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.observers.core import (INPUT, RecursiveObserver, StateLayout, double_pole_gains, matrix as mx,
+                                   position_increment, velocity_increment)
 
 __all__ = ["HighGainObserver", "DEFAULT_HIGH_GAIN", "REF4_HIGH_GAIN"]
 

@@ -18,12 +18,9 @@ matrix form, with ``G(theta)`` the matrix of eq. (1) (:func:`plant.input_matrix`
 import numpy as np
 
 from fmscal.plant import input_matrix
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.numerics import as_finite_array, as_positive_scalar, ops
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.core._base import RecursiveObserver
-from fmscal.observers.core._state import INPUT, StateLayout
+from fmscal.observers.core import INPUT, RecursiveObserver, StateLayout, matrix as mx
 
 __all__ = ["PaperAdaptiveObserver", "PAPER_K1", "PAPER_K2", "PAPER_DELTA", "injection_matrix", "output_error"]
 

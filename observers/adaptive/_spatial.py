@@ -61,10 +61,10 @@ No pose is differentiated and nothing models the noise.
 
 import numpy as np
 
-from fmscal.plant.physics import _rigid_body as rigid_body
+from fmscal.plant.physics import rotation_matrix, skew
 
-from fmscal.observers.core._discretise import position_increment, velocity_increment
-from fmscal.observers.adaptive._highgain import discrete_gain
+from fmscal.observers.core import position_increment, velocity_increment
+from ._highgain import discrete_gain
 
 __all__ = ["phi_from_params", "params_from_phi", "regressor_rows", "SpatialLaw", "SPATIAL_LAM", "WARM_UP"]
 
@@ -125,7 +125,7 @@ def phi_from_params(s, n, rho):
     -------
     list of two lists of 3 n entries
     """
-    r = rigid_body.skew(rho)
+    r = skew(rho)
     S_t = [[s[i * n + j] for j in range(n)] for i in range(3)]
     S_f = [[s[(3 + i) * n + j] for j in range(n)] for i in range(3)]
     T = [[S_t[i][j] - sum(r[i, a] * S_f[a][j] for a in range(3)) for j in range(n)] for i in range(3)]
@@ -140,7 +140,7 @@ def params_from_phi(phis, n, rho):
     -------
     list of 6 n entries
     """
-    r = rigid_body.skew(rho)
+    r = skew(rho)
     T = [[phis[0][i * n + j] for j in range(n)] for i in range(3)]
     S_f = [[phis[1][i * n + j] for j in range(n)] for i in range(3)]
     S_t = [[T[i][j] + sum(r[i, a] * S_f[a][j] for a in range(3)) for j in range(n)] for i in range(3)]
@@ -201,7 +201,7 @@ class SpatialLaw:
         p = self.payload
         pose = np.asarray(pose, dtype=float)
         q = pose[:4] / np.linalg.norm(pose[:4])
-        R = rigid_body.rotation_matrix(q)
+        R = rotation_matrix(q)
         k = 3 * self.n_cols
         psi = np.array(regressor_rows(_rows(R), list(w)))
         base = max(float(np.sum(psi * psi)) / k, 1e-12) / self.lam ** 4
@@ -218,7 +218,7 @@ class SpatialLaw:
         ``omega = I_c^-1 R^T H``, ``p = y / m - R rho``, ``v = l / m - R (omega x rho)``.
         """
         p = self.payload
-        R = _rows(rigid_body.rotation_matrix(q))
+        R = _rows(rotation_matrix(q))
         omega = _mat_vec(self._K, _mat_t_vec(R, H))
         arm = _mat_vec(R, list(p.rho))
         turn = _mat_vec(R, _cross(omega, list(p.rho)))
@@ -240,15 +240,15 @@ class SpatialLaw:
         H, y, lin, chi, chi_ref, q_ref = st.H, st.y, st.l, st.chi, st.chi_ref, st.q_ref
         w0, w1 = self._augmented(o, now.w_hat), self._augmented(o, nxt.w_hat)
         w0, w1 = [w0[j] for j in range(n)], [w1[j] for j in range(n)]
-        R_ref = _rows(rigid_body.rotation_matrix(q_ref))
+        R_ref = _rows(rotation_matrix(q_ref))
         # the attitude in the drives: the measured one where a pose arrives (q_ref), else the last measured one
         # turned by the observer's own turn since it (chi - chi_pose), not by its error at that pose
         q0 = self._turned(o, q_ref, R_ref, [(1 - has) * (chi[i] - st.chi_pose[i]) for i in range(3)])
-        R0 = _rows(rigid_body.rotation_matrix(q0))
+        R0 = _rows(rotation_matrix(q0))
         M0 = _sandwich(R0, K)                                        # I_W^-1 at n
         spin0 = _mat_vec(M0, [H[i] for i in range(3)])               # omega in the world frame
         # at n+1: measured, else turned by omega over the step (first order)
-        R_next = _rows(rigid_body.rotation_matrix(nxt.pose[0:4]))
+        R_next = _rows(rotation_matrix(nxt.pose[0:4]))
         turned = [[R0[i][j] + dt * (spin0[(i + 1) % 3] * R0[(i + 2) % 3][j] - spin0[(i + 2) % 3] * R0[(i + 1) % 3][j])
                    for j in range(3)] for i in range(3)]
         R1 = [[has_next * R_next[i][j] + (1 - has_next) * turned[i][j] for j in range(3)] for i in range(3)]

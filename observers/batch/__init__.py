@@ -6,15 +6,15 @@ from ._cluster_covariance import (weighted_fit, pseudo_inverse, sandwich, small_
     block_length, time_blocks, few_blocks, MIN_BLOCKS)
 from ._inverse_dynamics import (InverseDynamicsFit, fit_inverse_dynamics, fit_readings, describe_direction,
     UNDETERMINED_STD, READING_NAMES)
-from ._least_squares import (LeastSquares, FitReport, EXCITATION_COND_LIMIT, CONSISTENCY_RATIO_LIMIT)
+from ._least_squares import (LeastSquares, SpatialLeastSquares, FitReport, phi_to_S_map, EXCITATION_COND_LIMIT,
+                             CONSISTENCY_RATIO_LIMIT)
 from ._latency import (estimate_latency)
-from ._max_likelihood import (MaximumLikelihoodFit, fit_max_likelihood, log_steps, solve_information)
-from ._linearised_floor import (fit_linearised, undetermined_directions, configuration_residuals, error_layout,
-    copy_predict, beta_from_copy)
+from ._max_likelihood import (MaximumLikelihoodFit, fit_max_likelihood, log_steps)
+from ._linearised_floor import (fit_linearised, undetermined_directions, configuration_residuals, error_layout)
 from ._floor import (MaximumLikelihood)
 
 __all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "small_sample_factor", "correlation_time", "block_length",
            "time_blocks", "few_blocks", "InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings",
-           "describe_direction", "LeastSquares", "FitReport", "estimate_latency", "MaximumLikelihoodFit",
-           "fit_max_likelihood", "log_steps", "solve_information", "fit_linearised", "undetermined_directions",
-           "configuration_residuals", "error_layout", "copy_predict", "beta_from_copy", "MaximumLikelihood"]
+           "describe_direction", "LeastSquares", "SpatialLeastSquares", "FitReport", "phi_to_S_map", "estimate_latency",
+           "MaximumLikelihoodFit", "fit_max_likelihood", "log_steps", "fit_linearised", "undetermined_directions",
+           "configuration_residuals", "error_layout", "MaximumLikelihood"]

@@ -1,7 +1,7 @@
 """The information floor as a method: the maximum-likelihood estimate behind the Observer contract."""
 
-from fmscal.observers.core._base import Estimate, Observer
-from fmscal.observers.batch._max_likelihood import fit_max_likelihood
+from fmscal.observers.core import Estimate, Observer
+from ._max_likelihood import fit_max_likelihood
 
 __all__ = ["MaximumLikelihood"]
 

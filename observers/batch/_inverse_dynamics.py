@@ -25,13 +25,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.physics._differentiate import edge, spatial_motion
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._noise import estimate_noise
-from fmscal.plant.physics._rigid_body import GRAVITY, SpatialPayload, regressor
+from fmscal.plant.io import estimate_noise
+from fmscal.plant.numerics import FmscalError, as_finite_array, as_positive_scalar
+from fmscal.plant.physics import GRAVITY, SpatialPayload, edge, regressor, spatial_motion
 
-from fmscal.observers.batch._cluster_covariance import block_length, few_blocks, small_sample_factor
+from ._cluster_covariance import block_length, few_blocks, small_sample_factor
 
 __all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "UNDETERMINED_STD",
            "READING_NAMES"]

@@ -14,11 +14,10 @@ golden-section search on whole samples around the best grid point.
 import numpy as np
 
 from fmscal.plant import Log
-from fmscal.plant.numerics._checks import as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import as_model
+from fmscal.plant.numerics import FmscalError, as_positive_scalar
+from fmscal.plant.physics import as_model
 
-from fmscal.observers.batch._least_squares import LeastSquares
+from ._least_squares import LeastSquares
 
 __all__ = ["estimate_latency"]
 

@@ -20,14 +20,15 @@ twice-integrated wrench noise stays near the pose noise.
 import numpy as np
 
 from fmscal.plant import S_from_phi, phi_1
-from fmscal.plant.numerics._checks import as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._noise import estimate_noise
+from fmscal.plant.io import estimate_noise
+from fmscal.plant.numerics import FmscalError, as_positive_scalar
+from fmscal.plant.physics import smoothed_state
 
-from fmscal.observers.core._base import Estimate, Observer
-from fmscal.observers.core._discretise import position_increment, velocity_increment
+from fmscal.observers.core import Estimate, Observer, position_increment, velocity_increment
+from ._inverse_dynamics import fit_inverse_dynamics
 
-__all__ = ["LeastSquares", "SpatialLeastSquares", "FitReport", "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT"]
+__all__ = ["LeastSquares", "SpatialLeastSquares", "FitReport", "phi_to_S_map", "EXCITATION_COND_LIMIT",
+           "CONSISTENCY_RATIO_LIMIT"]
 
 #: Above this condition number of the (scaled) information matrix, the log is said not to
 #: excite all nine entries of S.
@@ -219,7 +220,7 @@ class LeastSquares(Observer):
             histories.append(_running_fits(per_window, len(log)))
         n, m = self.n_cols, self.n_w * self.n_cols
         S_aug = self.model.params_from_phi(phis, n)
-        T = _phi_to_S_map(self.model, [len(phi) for phi in phis], n)
+        T = phi_to_S_map(self.model, [len(phi) for phi in phis], n)
         cov_phi, k = np.zeros((m, m)), 0
         for cov in covs:                              # the groups share no unknown: block diagonal
             cov_phi[k:k + len(cov), k:k + len(cov)] = cov
@@ -356,7 +357,7 @@ def _running_fits(per_window, n):
     return out
 
 
-def _phi_to_S_map(model, sizes, n):
+def phi_to_S_map(model, sizes, n):
     """The matrix ``T`` with ``vec([S | c]) = T [phi_1, phi_2, ...]`` (row order): the model's
     :meth:`fmscal.plant.Model.params_from_phi` (planar: eqs. (4), (5) inverted), column by column.
 
@@ -391,7 +392,6 @@ class SpatialLeastSquares(LeastSquares):
         return super(LeastSquares, cls)._refusal(model)
 
     def _fit(self, log):
-        from fmscal.observers.batch._inverse_dynamics import fit_inverse_dynamics
         return fit_inverse_dynamics(log, self.model.payload, self.model.gravity)
 
     def _estimate(self, log, S0):
@@ -403,7 +403,6 @@ class SpatialLeastSquares(LeastSquares):
         when the log determines every direction of the reading
         (``result.info["undetermined"]``, the warnings say what to record).
         """
-        from fmscal.plant.physics._differentiate import smoothed_state
         fit = self._fit(log)
         calibration = np.tile(fit.S_aug.ravel(), (len(log), 1))
         info = {"undetermined": [d.tolist() for d in fit.undetermined], "residual_rms": fit.residual_rms.tolist()}

@@ -69,19 +69,16 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._compile import ChunkedSteps, build_once
-from fmscal.plant.physics._differentiate import smoothed_state
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import ChunkedSteps, StateLayout, build_once, ops
+from fmscal.plant.physics import smoothed_state
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.core._discretise import move, position_increment, velocity_increment
-from fmscal.observers.batch._inverse_dynamics import UNDETERMINED_STD, describe_direction
-from fmscal.observers.kalman._filter import (POSE_SD_FLOOR, V0_SD, bias_matrix, cholesky, cholesky_apply,
-                                             correction_limit, information_factor, pack_lower, unpack_lower)
-from fmscal.observers.core._progress import progress_bar
+from fmscal.observers.core import matrix as mx, move, progress_bar
+from fmscal.observers.kalman import (V0_SD, beta_from_copy, bias_matrix, cholesky, cholesky_apply, copy_predict,
+                                     correction_limit, error_variances, information_factor, pack_lower, regressor_step,
+                                     solve_information, unpack_lower)
+from ._inverse_dynamics import UNDETERMINED_STD, describe_direction
 
-__all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout", "copy_predict",
-           "beta_from_copy"]
+__all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout"]
 
 _CHUNK = 1000            # the history's resolution, samples
 _CALL = 100              # samples per compiled call (casadi builds a longer accumulation of this step slowly)
@@ -130,49 +127,6 @@ def _one_step(model, x0, x1, w0, w1, delta, h):
     return model.state_difference(x1, move(model, start, model.acceleration(start, w0), model.acceleration(x1, w1), h))
 
 
-def _regressor_step(model, x0, x1, w0, w1, h):
-    """``U_k`` (12 x n_w len(w)): what ``s`` adds to the error state over a step (module docstring)."""
-    R0, R1 = model.regressor(x0, w0), model.regressor(x1, w1)
-    return ca.vertcat(position_increment(h, R0, R1), velocity_increment(h, R0, R1))
-
-
-def copy_predict(model, x0, x1, S, n0, n1, h, Phi, eps, Mn):
-    """The errors-in-variables copy over one step (module docstring), on casadi symbols.
-
-    A seeded draw ``n`` of the reading's noise moves the truth by ``-A S n``
-    against the model (the filter's error ``eps``) and enters the regressor
-    as ``A (I (x) n^T)`` (the sensitivity ``Mn``)::
-
-        eps- = Phi eps - [h^2 (2 A_k S n_k + A_k+1 S n_k+1) / 6; h (A_k S n_k + A_k+1 S n_k+1) / 2]
-        Mn-  = Phi Mn + U_k(n)
-
-    Parameters
-    ----------
-    model : plant.Model
-    x0, x1 : casadi.SX, shape (nx,)
-        The motion at the step's ends.
-    S : casadi.SX, shape (n_w, n_w)
-        The calibration that carries the noise (without the offset column).
-    n0, n1 : casadi.SX, shape (n_w,)
-        The draw of the reading's noise at the step's ends.
-    h : casadi.SX
-        The step, s.
-    Phi : casadi.SX, shape (ne, ne)
-        The error state's transition.
-    eps : casadi.SX, shape (ne,)
-    Mn : casadi.SX, shape (ne, n_w n_w)
-
-    Returns
-    -------
-    eps_pred : casadi.SX, shape (ne,)
-    Mn_pred : casadi.SX, shape (ne, n_w n_w)
-    """
-    an0 = ca.mtimes(model.input_matrix(x0), ca.mtimes(S, n0))
-    an1 = ca.mtimes(model.input_matrix(x1), ca.mtimes(S, n1))
-    drive = ca.vertcat(position_increment(h, an0, an1), velocity_increment(h, an0, an1))
-    return ca.mtimes(Phi, eps) - drive, ca.mtimes(Phi, Mn) + _regressor_step(model, x0, x1, n0, n1, h)
-
-
 def _augment(w, n_w, n):
     return ca.vertcat(w, 1.0) if n == n_w + 1 else w
 
@@ -199,7 +153,7 @@ def _step(model, n, eiv, history):
     step_map = _one_step(model, uu.x0, uu.x1, wt0, wt1, delta, h)
     zero = ca.DM.zeros(ne)
     Phi = ca.substitute(ca.jacobian(step_map, delta), delta, zero)
-    U = _regressor_step(model, uu.x0, uu.x1, wa0, wa1, h)
+    U = regressor_step(model, uu.x0, uu.x1, wa0, wa1, h)
     c = ca.substitute(step_map, delta, zero) - ca.mtimes(U, pp.s)
     # the reading's noise as process noise: [h^2, h] [h^2, h]^T (x) A S Sigma S^T A^T
     A0 = model.input_matrix(uu.x0)
@@ -246,7 +200,6 @@ def _step(model, n, eiv, history):
 
 
 def _ops():
-    from fmscal.plant.numerics._backend import ops
     return ops(ca.SX.sym("o"))
 
 
@@ -305,11 +258,6 @@ def _pose_residuals(model, log, nominal):
     return y
 
 
-def _error_variances(model, noise):
-    """The pose noise in the error state: position ``dp`` then attitude ``dphi`` (a turn about the sensor axes)."""
-    return np.maximum(np.r_[np.full(3, noise.position_sd), np.full(3, noise.angle_sd)], POSE_SD_FLOOR) ** 2
-
-
 def _initial_state(model, n, eiv, y0, var):
     L = error_layout(model, n, eiv)
     ne = 2 * model.nv
@@ -335,18 +283,7 @@ def _history_estimate(J, r, B, s0, m, n_w, n):
 
 
 def _np_ops():
-    from fmscal.plant.numerics._backend import ops
     return ops(np.zeros(1))
-
-
-def beta_from_copy(bn, s_bar, var_w, n_w, n):
-    """``beta`` (packed lower, as :func:`fmscal.observers.kalman.bias_matrix` reads it) from the copy's
-    ``sum D_n^T V^-1 nu``, whose mean is ``-B s_bar``: ``(B s)_il = Sigma_l (beta S)_il``."""
-    S_bar = s_bar.reshape(n_w, n)[:, :n_w]
-    beta_S = -bn.reshape(n_w, n_w) / np.maximum(var_w, 1e-300)[None, :]
-    beta = beta_S @ np.linalg.inv(S_bar)
-    beta = (beta + beta.T) / 2
-    return pack_lower(beta, n_w)
 
 
 def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=0.2):
@@ -377,13 +314,12 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
         ``eiv_bias``, ``undetermined``, ``warnings`` (the fields of
         :class:`fmscal.observers.batch.MaximumLikelihoodFit`).
     """
-    from fmscal.observers.batch._max_likelihood import solve_information
     n_w, N = model.n_w, len(log)
     n = n_w + int(bool(offset))
     m = n_w * n
     nominal = smoothed_state(log, window)
     y = _pose_residuals(model, log, nominal)
-    var = _error_variances(model, noise)
+    var = error_variances(model, noise)
     var_w = np.square(noise.wrench_sd)
     s_bar = np.c_[S0, np.zeros(n_w)].ravel() if offset else np.asarray(S0, dtype=float).ravel()
     s0 = s_bar.copy()

@@ -91,22 +91,17 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant import Log
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import ChunkedSteps
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import Model, as_model
-from fmscal.plant.io._noise import estimate_noise
-from fmscal.plant.physics._sensor import NoiseSpec, check_calibration
+from fmscal.plant.io import estimate_noise
+from fmscal.plant.numerics import ChunkedSteps, FmscalError, ops
+from fmscal.plant.physics import Model, NoiseSpec, as_model, check_calibration
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.kalman._filter import V0_SD  # noqa: F401  (re-exported: the prior's settings live in kalman)
-from fmscal.observers.kalman._filter import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit,
-                                             filter_layout, filter_step, information_factor, initial_state,
-                                             input_layout, params_layout, unpack_lower)
-from fmscal.observers.core._progress import progress_bar
-from fmscal.observers.core._result import calibration_uncertainty, initial_calibration
+from fmscal.observers.core import calibration_uncertainty, initial_calibration, matrix as mx, progress_bar
+from fmscal.observers.kalman import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit, filter_layout,
+                                     filter_step, information_factor, initial_state, input_layout, params_layout,
+                                     solve_information, unpack_lower)
+from ._linearised_floor import fit_linearised
 
-__all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "log_steps", "solve_information"]
+__all__ = ["MaximumLikelihoodFit", "fit_max_likelihood", "log_steps"]
 
 _CHUNK = 1000            # samples per compiled call
 _HISTORY_RADIUS = 10.0   # history only: |S_hat - S0| <= this times (|S0| + 1), Frobenius norms
@@ -290,7 +285,6 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
     if noise_estimated:
         noise = estimate_noise(log)
     if not model.linear_channels:
-        from fmscal.observers.batch._linearised_floor import fit_linearised
         fit = fit_linearised(log, model, noise, offset, int(passes), S0, compiled)
         return MaximumLikelihoodFit(noise=noise, noise_estimated=noise_estimated, passes=int(passes), model=model,
                                     wall_time=time.perf_counter() - start, **fit)
@@ -364,7 +358,7 @@ def _solve_information(z, model, n, var_w, name):
     """``s_hat = (J - B)^-1 r`` and its covariance from the final state (numpy, no prior).
 
     ``J`` is the information, ``B`` the errors-in-variables bias
-    (:func:`fmscal.observers.kalman.bias_matrix`); :func:`solve_information`.
+    (:func:`fmscal.observers.kalman.bias_matrix`); :func:`fmscal.observers.kalman.solve_information`.
     """
     L = filter_layout(model, n)
     o = ops(z)
@@ -372,58 +366,6 @@ def _solve_information(z, model, n, var_w, name):
     B = bias_matrix(o, z[L.slices["beta"]], var_w, model.n_w, n)
     S_aug, cov = solve_information(J, z[L.slices["r"]], B, model, n, name)
     return S_aug, cov, J, B
-
-
-def solve_information(J, r, B, model, n, name, singular="raise"):
-    """``s_hat`` solving ``(J - B) s = r``, and its covariance ``(J - B)^-1 J (J - B)^-1``.
-
-    Parameters
-    ----------
-    J : ndarray, shape (m, m)
-        The information about ``s = vec([S | c])`` (row order).
-    r : ndarray, shape (m,)
-    B : ndarray, shape (m, m)
-        The errors-in-variables bias (zeros for none).
-    model : plant.Model
-    n : int
-        Columns of ``[S | c]``.
-    name : str
-        The log's name, for the message.
-    singular : {"raise", "truncate"}
-        On a singular information (scaled condition number above 1e12):
-        raise, or solve on the determined directions only (the others left
-        at zero and at an infinite variance, reported by the caller).
-
-    Returns
-    -------
-    S_aug : ndarray, shape (n_w, n)
-    cov : ndarray, shape (m, m)
-
-    Raises
-    ------
-    FmscalError
-        The information is singular and ``singular="raise"``: the log does
-        not excite every entry.
-    """
-    n_w = model.n_w
-    d = np.sqrt(np.maximum(np.diag(J), 1e-300))
-    scaled = J / np.outer(d, d)                         # unit diagonal: a unit-free condition number
-    Jc = (J - B) / np.outer(d, d)
-    finite = bool(np.all(np.isfinite(J)) and np.all(np.isfinite(Jc)))
-    if not finite or np.linalg.cond(scaled) > 1e12 or np.linalg.cond(Jc) > 1e12:
-        if singular == "raise" or not finite:
-            entries = {1: "S", 3: "all nine entries of S"}.get(n_w, f"all {n_w * n_w} entries of S")
-            what = entries if n == n_w else f"{entries} and the offset"
-            raise FmscalError(f"{name}: the log does not excite {what}; the information matrix is singular")
-        lam, u = np.linalg.eigh((Jc + Jc.T) / 2)
-        kept = lam > 1e-12 * lam.max()
-        Jc_inv = (u[:, kept] / lam[kept]) @ u[:, kept].T
-    else:
-        Jc_inv = np.linalg.inv(Jc)
-    s = (Jc_inv @ (r / d)) / d
-    cov = (Jc_inv @ scaled @ Jc_inv.T) / np.outer(d, d)
-    cov = (cov + cov.T) / 2
-    return s.reshape(n_w, n), cov
 
 
 # --- the two paths ----------------------------------------------------------------------------

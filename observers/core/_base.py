@@ -11,7 +11,7 @@ bound, the previous sample, the noise model used, the build time) lives in a
 as pinocchio's ``model.createData()``. The base class does
 what they share, once: input validation, timing, the offset ``b`` from
 ``[S | c]``, the uncertainties from a covariance, the ``converged`` and
-``diverged`` flags. A method writes only what is its own:
+``diverged`` flags (``converged`` from the run alone: :class:`Observer`, Notes). A method writes only what is its own:
 
 * an online method implements :meth:`Observer._start` (the first sample),
   :meth:`Observer._advance` (one step) and :meth:`Observer._current` (its
@@ -31,20 +31,15 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant import Log
-from fmscal.plant.physics._model import as_model
-from fmscal.plant.numerics._checks import as_bool
-from fmscal.plant.numerics._compile import ChunkedSteps, build_once, compiler
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._sensor import check_calibration
+from fmscal.plant.numerics import ChunkedSteps, FmscalError, as_bool, build_once, compiler
+from fmscal.plant.physics import as_model, check_calibration
 
-from fmscal.observers.core._convergence import (DIVERGENCE_GRACE, EVIDENCE_TOLERANCE, divergence_bound, informed,
-                                                moved, settled)
-from fmscal.observers.core._progress import EVERY, progress_bar
-from fmscal.observers.core._result import (ObserverResult, calibration_uncertainty, initial_calibration,
-                                          split_calibration)
-from fmscal.observers.core._samples import check_sample, pack_input
+from ._convergence import DIVERGENCE_GRACE, divergence_bound, informed, moved, settled
+from ._progress import EVERY, progress_bar
+from ._result import ObserverResult, calibration_uncertainty, initial_calibration, split_calibration
+from ._samples import check_sample, pack_input
 
-__all__ = ["Observer", "RecursiveObserver", "Estimate", "RunData", "log_inputs", "MAX_S0"]
+__all__ = ["Observer", "RecursiveObserver", "Estimate", "RunData", "log_inputs", "MAX_S0", "ENGINES"]
 
 #: Largest magnitude of an entry of an initial estimate ``S0``: the readings' scale (log values up to
 #: 1e9, :data:`plant.io._log.MAX_MAGNITUDE`) times it stays far from overflow in every observer.
@@ -113,9 +108,6 @@ class RunData:
         first sample.
     build_time : float
         Seconds spent building a compiled step (not the run's cost).
-    evidence_time : float
-        Seconds of the least-squares check that gives a method without an
-        uncertainty its evidence (not the run's cost).
     """
 
     S0: np.ndarray
@@ -126,7 +118,6 @@ class RunData:
     noise: object = None
     state: object = None
     build_time: float = 0.0
-    evidence_time: float = 0.0
 
 
 def log_inputs(log):
@@ -136,6 +127,13 @@ def log_inputs(log):
     planar: ``[has_pose, theta, X, Y, M, f_x, f_y]``).
     """
     return np.column_stack([log.has_pose, np.nan_to_num(log.pose), log.w_hat])
+
+
+#: The engines, ``{(method class, model declaration, value): engine class}``: on a model whose
+#: ``declaration`` attribute equals ``value``, the method runs as the engine class (a subclass of it).
+#: Empty here; :mod:`fmscal.observers._registry`, the one table where the toolkit tells its cases
+#: apart, fills it when :mod:`fmscal.observers` is imported.
+ENGINES = {}
 
 
 class Observer:
@@ -196,6 +194,24 @@ class Observer:
     (:func:`fmscal.observers._registry.engine_class`: ``AugmentedEKF(model)``
     is an ``ErrorStateEKF`` on a model without linear channels); no method
     tests the model's name or class.
+
+    Convergence: :meth:`run` judges ``converged`` from the run alone, at the cost of the
+    run: not diverged, the method's own checks of the log passed, ``S_hat``
+    settled over the last :data:`observers.core.SETTLE_FRACTION` of the run
+    (:func:`observers.settled`) after leaving ``S0`` (an online method,
+    :func:`observers.core.moved`), and, where the method reports an
+    uncertainty ``S_std``, that uncertainty finite, non-zero and at most
+    :data:`observers.core.EVIDENCE_TOLERANCE` of ``S_hat``
+    (``||S_std||_2 <= tol ||S_hat||_2``, :func:`observers.core.informed`).
+
+    A method without an uncertainty of its own (the adaptive and high-gain
+    observers) can show only that it settled: an estimate also stands still
+    where the log never excited it. Whether the log pinned ``S`` down is a
+    question about the log, which :meth:`run` does not ask (answering it fits
+    least squares to the log: work a bare run was not asked for); the
+    workflow that decides convergence asks it,
+    ``result.converged and observers.diagnostics.has_evidence(result, log, model, offset)``
+    (the workflows in :mod:`fmscal.analysis` do: calibrate, compare, sweep, reproduce).
     """
 
     name = "observer"
@@ -221,8 +237,9 @@ class Observer:
         -------
         type
         """
-        from fmscal.observers._registry import engine_class      # the registry imports every method: here, not above
-        return engine_class(cls, model)
+        model = as_model(model, cls.__name__)
+        return next((engine for (method, declaration, value), engine in ENGINES.items()
+                     if method is cls and getattr(model, declaration) == value), cls)
 
     def __init__(self, model, offset=False):
         self.model = as_model(model, type(self).__name__)
@@ -328,7 +345,7 @@ class Observer:
             self.run_data = run = self._new_run(None, compiled=compiled)
         estimate = self._estimate(log, run.S0)
         result = self._result(log, estimate)
-        result.wall_time = time.perf_counter() - start - run.build_time - run.evidence_time
+        result.wall_time = time.perf_counter() - start - run.build_time
         if run.build_time:
             result.info["build_time"] = run.build_time
         return result
@@ -482,17 +499,6 @@ class Observer:
         """``[S0 | 0]`` flat in row order (:func:`observers.core.initial_calibration`)."""
         return initial_calibration(S0, self.offset)
 
-    def _evidence(self, log, S_hat, S_std):
-        """The log pinned ``S`` down: the method's own ``S_std``, or else a least-squares fit's of
-        the log, at most :data:`observers.core._convergence.EVIDENCE_TOLERANCE` of ``S_hat`` (2-norms)."""
-        if S_std is not None:
-            return informed(S_hat, S_std)
-        from fmscal.observers.diagnostics._evidence import log_uncertainty  # least squares is an Observer
-        start = time.perf_counter()
-        value = log_uncertainty(log, self.model, self.offset, enough=EVIDENCE_TOLERANCE)
-        self.run_data.evidence_time = time.perf_counter() - start      # a check of the log: not the method's cost
-        return value <= EVIDENCE_TOLERANCE
-
     def _result(self, log, est):
         """The :class:`ObserverResult` of an estimate: offset, uncertainties and flags, for every method."""
         S_hist, _ = split_calibration(est.calibration, self.n_cols, self.offset)
@@ -501,12 +507,14 @@ class Observer:
         if est.diverged:
             b = None
         honest = S_std is None or bool(np.all(np.isfinite(S_std)) and np.all(S_std > 0))
-        # settling and evidence are judged in the reading's own scale where the model has one (3D: N m and N)
+        # settling and the method's own uncertainty are judged in the reading's own scale where the model has
+        # one (3D: N m and N); a method without an uncertainty is judged on settling alone (class docstring)
         scale = self.model.reading_scale(log)
         judged = S_hist if scale is None else S_hist * scale[None, None, :] / scale[None, :, None]
         judged_std = S_std if (scale is None or S_std is None) else S_std * scale[None, :] / scale[:, None]
         converged = bool(not est.diverged and est.checks_passed and honest and settled(judged)
-                         and (not self.online or moved(judged)) and self._evidence(log, judged[-1], judged_std))
+                         and (not self.online or moved(judged))
+                         and (judged_std is None or informed(judged[-1], judged_std)))
         return ObserverResult(
             observer=self.name, t=log.t[:len(S_hist)].copy(), S_hat=S_hist[-1].copy(),
             S_hat_history=S_hist, x_hat_history=np.asarray(est.x), S_std=S_std,

@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._units import implied_scale
-from fmscal.plant.physics._model import as_model
+from fmscal.plant.io import implied_scale
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import as_model
 
 __all__ = ["settled", "moved", "informed", "divergence_bound", "DIVERGENCE_FACTOR", "DIVERGENCE_GRACE",
            "SETTLE_FRACTION", "SETTLE_TOLERANCE", "EVIDENCE_TOLERANCE"]
@@ -19,8 +19,9 @@ SETTLE_FRACTION = 0.2
 #: ... and asks that ``S_hat`` stay within this relative 2-norm distance of its final value.
 SETTLE_TOLERANCE = 0.05
 #: ``converged`` needs the one-sigma uncertainty of ``S`` (``||S_std||_2 / ||S_hat||_2``: the
-#: method's own, or a least-squares fit's of the log, :func:`observers.diagnostics.log_uncertainty`)
-#: at most this: the log held information in every direction of ``S``.
+#: method's own in :meth:`observers.Observer.run`; a least-squares fit's of the log for a method
+#: without one, :func:`observers.diagnostics.has_evidence`) at most this: the log held information
+#: in every direction of ``S``.
 EVIDENCE_TOLERANCE = 0.05
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 
 from fmscal.plant import A_1, A_2, C_1, C_2
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
+from fmscal.plant.numerics import as_finite_array, as_positive_scalar
 
 __all__ = ["double_pole_gains", "check_gains", "GainReport", "sampled_poles"]
 
@@ -123,6 +123,6 @@ def sampled_poles(K1, dt):
     """
     K1 = as_finite_array(K1, (2, 1), "K1")
     dt = as_positive_scalar(dt, "dt")
-    import control
+    import control              # slow to import (as above)
     closed = control.ss(A_1 - K1 @ C_1, np.zeros((2, 1)), C_1, 0)
     return np.sort_complex(control.sample_system(closed, dt).poles())

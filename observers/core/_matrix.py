@@ -7,7 +7,7 @@ these helpers hide the one difference that matters there: numpy vectors are
 
 import numpy as np
 
-from fmscal.plant.numerics._backend import is_symbolic
+from fmscal.plant.numerics import is_symbolic
 
 
 def as_matrix(o, flat, n=3, cols=None):

@@ -40,20 +40,19 @@ class ObserverResult:
         :func:`observers.core.divergence_bound`), or at any time the
         estimate became non-finite; the run stopped at the last healthy step.
     converged : bool
-        Not diverged, the estimate settled over the last 20 % of the run
+        From the run alone (:class:`observers.Observer`, Notes): not
+        diverged, the estimate settled over the last 20 % of the run
         (:func:`observers.settled`) after moving (an online
-        method's left ``S0``, :func:`observers.core.moved`), the log
-        pinned ``S`` down (its uncertainty, the method's own or else a
-        least-squares fit's, within
-        :data:`observers.core._convergence.EVIDENCE_TOLERANCE`;
-        :meth:`observers.Observer._evidence`), its uncertainty (where it
-        has one) finite and non-zero, and the method's own checks of the log
-        passed (least squares: excitation and consistency).
+        method's left ``S0``, :func:`observers.core.moved`), the method's own
+        checks of the log passed (least squares: excitation and consistency),
+        and, where the method has an uncertainty, it is finite, non-zero and
+        within :data:`observers.core._convergence.EVIDENCE_TOLERANCE` of
+        ``S_hat``. A method without one (adaptive, high-gain) is judged on
+        settling only; whether its log pinned ``S`` down is
+        :func:`observers.diagnostics.has_evidence`, which the workflows ask.
     wall_time : float
         Seconds of computation, without the one-off build of a compiled step
-        (its symbolic graph, C generation and loading; ``info["build_time"]``)
-        and without the least-squares fit that gives a method without an
-        uncertainty its evidence (:mod:`observers.diagnostics._evidence`).
+        (its symbolic graph, C generation and loading; ``info["build_time"]``).
     info : dict
         Method-specific extras (noise estimates, fit diagnostics, ...).
     b : ndarray, shape (n_w,), or None

@@ -2,9 +2,8 @@
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array, as_number
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._model import Model, PlanarModel
+from fmscal.plant.numerics import FmscalError, as_finite_array, as_number
+from fmscal.plant.physics import Model, PlanarModel
 
 __all__ = ["check_sample", "pack_input"]
 

@@ -1,6 +1,6 @@
 """The input every recursive observer's step reads, named by :class:`fmscal.plant.numerics.StateLayout`."""
 
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import StateLayout
 
 __all__ = ["StateLayout", "INPUT"]
 

@@ -2,9 +2,10 @@
 (faults), and how much a log says about ``S`` (evidence).
 """
 
-from ._evidence import (log_uncertainty, EVIDENCE_PREFIX)
+from ._evidence import (has_evidence, log_uncertainty, EVIDENCE_PREFIX)
 from ._health import (Consistency, consistency_check, DEFAULT_SIGNIFICANCE, DEFAULT_WINDOWS)
 from ._faults import (saturation, offset_drift, OffsetDrift, SATURATION_SHARE, SATURATION_RATIO, DRIFT_SIGNIFICANCE,
     DRIFT_PARTS, DRIFT_LAGS)
 
-__all__ = ["log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift", "OffsetDrift"]
+__all__ = ["has_evidence", "log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift",
+           "OffsetDrift"]

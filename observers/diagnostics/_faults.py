@@ -18,7 +18,7 @@ import numpy as np
 from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
-from fmscal.observers.batch._least_squares import LeastSquares, _phi_to_S_map
+from fmscal.observers.batch import LeastSquares, phi_to_S_map
 
 __all__ = ["saturation", "offset_drift", "OffsetDrift", "SATURATION_SHARE", "SATURATION_RATIO",
            "DRIFT_SIGNIFICANCE", "DRIFT_PARTS", "DRIFT_LAGS"]
@@ -158,7 +158,7 @@ def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, sig
     fit = LeastSquares(payload, window, offset=True)
     Z = fit._double_integrals(log)
     windows = fit._windows(log)
-    T_inv = np.linalg.inv(_phi_to_S_map(fit.model, [4, 8], 4))
+    T_inv = np.linalg.inv(phi_to_S_map(fit.model, [4, 8], 4))
     phi = T_inv @ np.column_stack([S_hat, c]).ravel()
     # each channel's prediction is Z phi_g; d phi / d b through c = -S b (entries 3, 7, 11 of [S | c])
     groups = ((0, slice(0, 4)), (1, slice(4, 12)), (2, slice(4, 12)))

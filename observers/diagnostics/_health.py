@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError
 
-from fmscal.observers.batch._least_squares import LeastSquares
+from fmscal.observers.batch import LeastSquares
 
 __all__ = ["Consistency", "consistency_check", "DEFAULT_SIGNIFICANCE", "DEFAULT_WINDOWS"]
 

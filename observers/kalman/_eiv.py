@@ -39,16 +39,14 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import BufferedCall, compile_function
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import BufferedCall, StateLayout, compile_function, ops
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.kalman._filter import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit,
-                                             filter_layout, filter_step, information_factor, initial_state,
-                                             input_layout, unpack_lower)
+from fmscal.observers.core import matrix as mx, position_increment, velocity_increment
+from ._filter import (POSE_SD_FLOOR, bias_matrix, cholesky_apply, correction_limit, filter_layout, filter_step,
+                      information_factor, initial_state, input_layout, pack_lower, unpack_lower)
 
-__all__ = ["EivCompensation", "compensation_layout"]
+__all__ = ["EivCompensation", "compensation_layout", "regressor_step", "copy_predict", "error_variances",
+           "beta_from_copy"]
 
 
 def compensation_layout(model):
@@ -231,3 +229,66 @@ class EivCompensation:
             return np.eye(self.model.n_w * self.n)
         z_in, q_in = self.state
         return compensation_matrix(self.model, z_in, q_in[self._settings.slices["var_w"]], self._s, self.n)
+
+
+# --- the errors-in-variables copy of the error-state filter (spatial), shared by the spatial EKF
+# (observers.kalman.ErrorStateEKF) and the linearised floor (observers.batch.fit_linearised), which runs
+# this filter over a whole log: the batch method builds on the filter, so the pieces live here.
+
+def regressor_step(model, x0, x1, w0, w1, h):
+    """``U_k`` (12 x n_w len(w)): what ``s`` adds to the error state over a step (the linearised floor's
+    module docstring, :func:`observers.batch.fit_linearised`)."""
+    R0, R1 = model.regressor(x0, w0), model.regressor(x1, w1)
+    return ca.vertcat(position_increment(h, R0, R1), velocity_increment(h, R0, R1))
+
+
+def copy_predict(model, x0, x1, S, n0, n1, h, Phi, eps, Mn):
+    """The errors-in-variables copy over one step (the linearised floor's module docstring), on casadi symbols.
+
+    A seeded draw ``n`` of the reading's noise moves the truth by ``-A S n``
+    against the model (the filter's error ``eps``) and enters the regressor
+    as ``A (I (x) n^T)`` (the sensitivity ``Mn``)::
+
+        eps- = Phi eps - [h^2 (2 A_k S n_k + A_k+1 S n_k+1) / 6; h (A_k S n_k + A_k+1 S n_k+1) / 2]
+        Mn-  = Phi Mn + U_k(n)
+
+    Parameters
+    ----------
+    model : plant.Model
+    x0, x1 : casadi.SX, shape (nx,)
+        The motion at the step's ends.
+    S : casadi.SX, shape (n_w, n_w)
+        The calibration that carries the noise (without the offset column).
+    n0, n1 : casadi.SX, shape (n_w,)
+        The draw of the reading's noise at the step's ends.
+    h : casadi.SX
+        The step, s.
+    Phi : casadi.SX, shape (ne, ne)
+        The error state's transition.
+    eps : casadi.SX, shape (ne,)
+    Mn : casadi.SX, shape (ne, n_w n_w)
+
+    Returns
+    -------
+    eps_pred : casadi.SX, shape (ne,)
+    Mn_pred : casadi.SX, shape (ne, n_w n_w)
+    """
+    an0 = ca.mtimes(model.input_matrix(x0), ca.mtimes(S, n0))
+    an1 = ca.mtimes(model.input_matrix(x1), ca.mtimes(S, n1))
+    drive = ca.vertcat(position_increment(h, an0, an1), velocity_increment(h, an0, an1))
+    return ca.mtimes(Phi, eps) - drive, ca.mtimes(Phi, Mn) + regressor_step(model, x0, x1, n0, n1, h)
+
+
+def error_variances(model, noise):
+    """The pose noise in the error state: position ``dp`` then attitude ``dphi`` (a turn about the sensor axes)."""
+    return np.maximum(np.r_[np.full(3, noise.position_sd), np.full(3, noise.angle_sd)], POSE_SD_FLOOR) ** 2
+
+
+def beta_from_copy(bn, s_bar, var_w, n_w, n):
+    """``beta`` (packed lower, as :func:`fmscal.observers.kalman.bias_matrix` reads it) from the copy's
+    ``sum D_n^T V^-1 nu``, whose mean is ``-B s_bar``: ``(B s)_il = Sigma_l (beta S)_il``."""
+    S_bar = s_bar.reshape(n_w, n)[:, :n_w]
+    beta_S = -bn.reshape(n_w, n_w) / np.maximum(var_w, 1e-300)[None, :]
+    beta = beta_S @ np.linalg.inv(S_bar)
+    beta = (beta + beta.T) / 2
+    return pack_lower(beta, n_w)

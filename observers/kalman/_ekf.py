@@ -9,18 +9,14 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from fmscal.plant import NoiseSpec
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.io._noise import estimate_noise
-from fmscal.plant.numerics._checks import as_bool, as_positive_scalar
-from fmscal.plant.numerics._compile import BufferedCall, compile_function
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.io import estimate_noise
+from fmscal.plant.numerics import BufferedCall, FmscalError, as_bool, as_positive_scalar, compile_function, ops
 
-from fmscal.observers.core._base import Estimate, Observer, log_inputs
-from fmscal.observers.kalman._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
-from fmscal.observers.kalman._eiv import EivCompensation
-from fmscal.observers.kalman._filter import pack_lower, unpack_lower
-from fmscal.observers.kalman._noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
-from fmscal.observers.core._progress import progress_bar
+from fmscal.observers.core import Estimate, Observer, log_inputs, progress_bar
+from ._eiv import EivCompensation
+from ._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
+from ._filter import pack_lower, unpack_lower
+from ._noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
 
 __all__ = ["AugmentedEKF", "FilterRun"]
 
@@ -75,11 +71,11 @@ class AugmentedEKF(Observer):
     (:func:`plant.rk4_step`, the raw reading linear over the step), and the
     measurement is ``[theta, X, Y]``. casadi derives the transition Jacobian
     ``F``, the noise Jacobians and ``H`` from the plant's single definition
-    (:func:`observers.kalman._filter.model_step`). The update is in Joseph form, so
+    (:func:`observers.kalman.model_step`). The update is in Joseph form, so
     ``P`` stays symmetric positive definite. Two paths run the same filter:
     :meth:`run` by default generates the whole step (predict, update, the
     adjustable random walk and the errors-in-variables filter below) with
-    casadi and runs it in compiled chunks (:func:`observers.kalman._filter.whole_step`);
+    casadi and runs it in compiled chunks (:func:`observers.kalman.whole_step`);
     ``run(compiled=False)``, and :meth:`step` sample by sample, hand the
     compiled ``x_next``, ``F`` and ``Q`` to filterpy's
     ``ExtendedKalmanFilter``, which does the predict and the update. They agree
@@ -109,7 +105,7 @@ class AugmentedEKF(Observer):
     constant ``S``) until the normalized innovation squared of the poses
     says that ``S`` moved; then it starts at ``q_S_start`` and rises
     towards ``q_S_max``, and falls back to 0 once the innovations are
-    consistent again (:class:`observers.kalman._filter.NoiseLevel`,
+    consistent again (:class:`observers.kalman.NoiseLevel`,
     ``adapt_q``). ``P_0`` is the pose noise on the positions, ``v0_sd^2``
     on the velocities and ``S0_sd^2`` on the calibration entries.
 
@@ -123,7 +119,7 @@ class AugmentedEKF(Observer):
     limited to a tenth of ``|S_hat|`` over the first samples, while ``J``
     is still rank-deficient), from the information
     ``J`` and its noise-made part ``B`` that a separate-bias filter run
-    beside the EKF accumulates (:class:`observers.kalman._filter.EivCompensation`, the
+    beside the EKF accumulates (:class:`observers.kalman.EivCompensation`, the
     same step as the floor's); the filter itself runs on its own estimate.
     ``eiv=False`` reports the filter's estimate as it is.
 
@@ -188,7 +184,7 @@ class AugmentedEKF(Observer):
 
     Attributes
     ----------
-    level : observers.kalman._filter.NoiseLevel or None
+    level : observers.kalman.NoiseLevel or None
         The adjustable random-walk intensity (None with ``adapt_q=False``).
     """
 
@@ -318,7 +314,7 @@ class AugmentedEKF(Observer):
         return estimate
 
     def _estimate_compiled(self, log):
-        """The whole log through :func:`observers.kalman._filter.whole_step`; the filter left where it ended.
+        """The whole log through :func:`observers.kalman.whole_step`; the filter left where it ended.
 
         Returns
         -------
@@ -352,7 +348,7 @@ class AugmentedEKF(Observer):
         return []
 
     def _whole_step(self):
-        """The whole step compiled in chunks (:func:`observers.kalman._filter.whole_step`)."""
+        """The whole step compiled in chunks (:func:`observers.kalman.whole_step`)."""
         return whole_step(self.model, self.n_cols, self.eiv is not None)
 
     def _level_settings(self):
@@ -371,7 +367,7 @@ class AugmentedEKF(Observer):
                                               level=level, adapt=adapt)
 
     def _packed(self):
-        """The running filter as the compiled step's state (:func:`observers.kalman._filter.state_layout`)."""
+        """The running filter as the compiled step's state (:func:`observers.kalman.state_layout`)."""
         f = self.run_data.state
         kf, level = f.kf, self.level
         parts = dict(x=kf.x[:, 0], P=pack_lower(kf.P, self.dim_x), q=f.q_history[-1],
@@ -491,7 +487,7 @@ class AugmentedEKF(Observer):
 
 @lru_cache(maxsize=8)
 def _compiled_model(model, offset):
-    """The model's Jacobians and ``x_next, F, Q`` (:func:`observers.kalman._filter.model_step`), compiled."""
+    """The model's Jacobians and ``x_next, F, Q`` (:func:`observers.kalman.model_step`), compiled."""
     jacobians, predict, _ = model_step(model, offset)
     return compile_function(jacobians), compile_function(predict)
 

@@ -6,7 +6,7 @@ process noise ``Q`` of the tuning rule, once. The readable path calls it
 each step and hands ``x_next``, ``F`` and ``Q`` to filterpy's
 ``ExtendedKalmanFilter``; the fast path inlines it in :func:`whole_step`:
 the predict, the pose update in Joseph form, the random-walk level
-(:func:`observers.kalman._filter.level_update`) and the errors-in-variables
+(:func:`observers.kalman.level_update`) and the errors-in-variables
 filter beside it (:func:`observers.eiv._compensation`), one function run in
 compiled chunks (:class:`plant.numerics.ChunkedSteps`). The two paths run the
 same arithmetic in another order; they agree to rounding (``tests/test_ekf.py``).
@@ -16,13 +16,11 @@ from functools import lru_cache
 
 import casadi as ca
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import ChunkedSteps
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import ChunkedSteps, StateLayout, ops
 
-from fmscal.observers.kalman._eiv import _compensation
-from fmscal.observers.kalman._filter import filter_layout, pack_lower, spd_inverse, unpack_lower
-from fmscal.observers.kalman._noise_level import level_update
+from ._eiv import _compensation
+from ._filter import filter_layout, pack_lower, spd_inverse, unpack_lower
+from ._noise_level import level_update
 
 __all__ = ["model_step", "whole_step", "state_layout", "output_layout", "params_layout"]
 
@@ -31,8 +29,8 @@ _CHUNK = 1000
 
 def params_layout(model):
     """Per-log parameters of :func:`whole_step`: the pose noise variances (``R``), the reading's noise
-    variances, those the errors-in-variables filter holds (:attr:`observers.kalman._filter.EivCompensation.state`
-    without its step), the level's settings (:attr:`observers.kalman._filter.NoiseLevel.settings`) and
+    variances, those the errors-in-variables filter holds (:attr:`observers.kalman.EivCompensation.state`
+    without its step), the level's settings (:attr:`observers.kalman.NoiseLevel.settings`) and
     whether it adapts (1 or 0)."""
     return StateLayout(("R", model.n_pose), ("var_w", model.n_w), ("eiv_q", model.n_pose + model.n_w),
                        ("level", 7), ("adapt", 1))

@@ -77,7 +77,7 @@ the process noise of the same step; the estimate is attenuated by
 ``J^-1 B s``. Beside the filter runs a copy of its motion error driven by a
 seeded draw of the reading's and the pose's noise (a motion-only filter
 ``P_m``, the copy ``eps``, its regressor ``Mn`` and ``b_n = sum Mn^T V^-1
-nu``, :func:`observers.batch.copy_predict`), whose mean is
+nu``, :func:`observers.kalman.copy_predict`), whose mean is
 ``-B s``. The reported estimate is compensated to first order, with the
 filter's own ``P`` of ``s`` for ``J^-1``::
 
@@ -94,18 +94,14 @@ from functools import cached_property, lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._compile import BufferedCall, ChunkedSteps, build_once
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import BufferedCall, ChunkedSteps, StateLayout, build_once, ops
 
-from fmscal.observers.core._discretise import move
-from fmscal.observers.kalman._ekf import AugmentedEKF, FilterRun, _CalibrationEKF
-from fmscal.observers.kalman._ekf_step import output_layout
-from fmscal.observers.kalman._filter import cholesky_solve, pack_lower, unpack_lower
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.kalman._filter import bias_matrix, correction_limit
-from fmscal.observers.batch._linearised_floor import _error_variances, beta_from_copy, copy_predict
-from fmscal.observers.kalman._noise_level import level_update
+from fmscal.observers.core import matrix as mx, move
+from ._eiv import beta_from_copy, copy_predict, error_variances
+from ._ekf import AugmentedEKF, FilterRun, _CalibrationEKF
+from ._ekf_step import output_layout
+from ._filter import bias_matrix, cholesky_solve, correction_limit, pack_lower, unpack_lower
+from ._noise_level import level_update
 
 __all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
            "error_params_layout", "copy_layout", "eiv_copy"]
@@ -396,7 +392,7 @@ def whole_error_step(model, n):
     samples, :func:`observers.core.log_inputs`; ``dt``, ``p``
     (:func:`error_params_layout`) and the copy's standard normal draws at
     the step's two samples one row per step); its per-step outputs are
-    :func:`observers.kalman._filter.output_layout`'s.
+    :func:`observers.kalman.output_layout`'s.
     """
     def build():
         size = model.input_layout.size
@@ -417,7 +413,7 @@ def whole_error_step(model, n):
 
 @dataclass
 class NominalRun(FilterRun):
-    """The error-state EKF's running state: :class:`observers.kalman._filter.FilterRun` and the nominal.
+    """The error-state EKF's running state: :class:`observers.kalman.FilterRun` and the nominal.
 
     ``kf.x`` is the error state ``e`` (zero between steps) and ``kf.P`` its
     covariance (d x d).
@@ -572,7 +568,7 @@ class ErrorStateEKF(AugmentedEKF):
         u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
         noise, S_var, var_w = self._prior(u.w_hat)
         kf = _CalibrationEKF(self.dim_x, model.nv)           # x_next = 0: the error stays zero over a predict
-        R = _error_variances(model, noise)
+        R = error_variances(model, noise)
         kf.P = np.diag(np.concatenate([R, np.full(model.nv, self.v0_sd ** 2), S_var]))
         kf.R = np.diag(R)
         s = self._initial_S(self.run_data.S0)

@@ -38,16 +38,13 @@ solves ``(J - B) s = r``. The derivation is in the module docstring of
 
 import numpy as np
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.numerics._layout import StateLayout
+from fmscal.plant.numerics import FmscalError, StateLayout, ops
 
-from fmscal.observers.core import _matrix as mx
-from fmscal.observers.core._discretise import position_increment, velocity_increment
+from fmscal.observers.core import matrix as mx, position_increment, velocity_increment
 
 __all__ = ["filter_layout", "input_layout", "params_layout", "initial_state", "filter_step", "bias_matrix",
            "information_factor", "correction_limit", "pack_lower", "unpack_lower", "cholesky", "cholesky_apply",
-           "cholesky_solve", "spd_inverse", "V0_SD", "POSE_SD_FLOOR"]
+           "cholesky_solve", "spd_inverse", "solve_information", "V0_SD", "POSE_SD_FLOOR"]
 
 #: Prior standard deviation of the initial velocities (rad/s, m/s); the first pose is the
 #: prior of the initial position. A few samples of poses outweigh it.
@@ -367,3 +364,55 @@ def bias_matrix(o, beta, var_w, n_w, n):
             rows.append([beta[idx(a, i)] * var_w[l] if (l2 == l and l < n_w) else 0.0
                          for a in range(n_w) for l2 in range(n)])
     return o.matrix(rows)
+
+
+def solve_information(J, r, B, model, n, name, singular="raise"):
+    """``s_hat`` solving ``(J - B) s = r``, and its covariance ``(J - B)^-1 J (J - B)^-1``.
+
+    Parameters
+    ----------
+    J : ndarray, shape (m, m)
+        The information about ``s = vec([S | c])`` (row order).
+    r : ndarray, shape (m,)
+    B : ndarray, shape (m, m)
+        The errors-in-variables bias (zeros for none).
+    model : plant.Model
+    n : int
+        Columns of ``[S | c]``.
+    name : str
+        The log's name, for the message.
+    singular : {"raise", "truncate"}
+        On a singular information (scaled condition number above 1e12):
+        raise, or solve on the determined directions only (the others left
+        at zero and at an infinite variance, reported by the caller).
+
+    Returns
+    -------
+    S_aug : ndarray, shape (n_w, n)
+    cov : ndarray, shape (m, m)
+
+    Raises
+    ------
+    FmscalError
+        The information is singular and ``singular="raise"``: the log does
+        not excite every entry.
+    """
+    n_w = model.n_w
+    d = np.sqrt(np.maximum(np.diag(J), 1e-300))
+    scaled = J / np.outer(d, d)                         # unit diagonal: a unit-free condition number
+    Jc = (J - B) / np.outer(d, d)
+    finite = bool(np.all(np.isfinite(J)) and np.all(np.isfinite(Jc)))
+    if not finite or np.linalg.cond(scaled) > 1e12 or np.linalg.cond(Jc) > 1e12:
+        if singular == "raise" or not finite:
+            entries = {1: "S", 3: "all nine entries of S"}.get(n_w, f"all {n_w * n_w} entries of S")
+            what = entries if n == n_w else f"{entries} and the offset"
+            raise FmscalError(f"{name}: the log does not excite {what}; the information matrix is singular")
+        lam, u = np.linalg.eigh((Jc + Jc.T) / 2)
+        kept = lam > 1e-12 * lam.max()
+        Jc_inv = (u[:, kept] / lam[kept]) @ u[:, kept].T
+    else:
+        Jc_inv = np.linalg.inv(Jc)
+    s = (Jc_inv @ (r / d)) / d
+    cov = (Jc_inv @ scaled @ Jc_inv.T) / np.outer(d, d)
+    cov = (cov + cov.T) / 2
+    return s.reshape(n_w, n), cov

@@ -17,8 +17,7 @@ innovations say that something did.
 
 from scipy.stats import chi2, norm
 
-from fmscal.plant.numerics._backend import ops
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError, ops
 
 __all__ = ["NoiseLevel", "NIS_DOF", "DEFAULT_TOLERANCE", "DEFAULT_Q_START", "level_update"]
 

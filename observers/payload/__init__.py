@@ -4,15 +4,15 @@ mounting, the reading's sign), coverage and the next poses, and the practitioner
 
 from ._coverage import (cone_deg, covariance, weak_directions, describe, in_words, relative_std, next_poses,
     rotation, DETERMINED_REL, DETERMINED_RHO, TURNS)
-from ._payload_fit import (PayloadEstimate, PayloadFileError, identify_payload, regressor, INERTIA_NAMES, DETERMINED,
-    HOLD, REFERENCES, PAYLOAD_FORMAT)
+from ._estimate import (PayloadEstimate, PayloadFileError, PAYLOAD_FORMAT)
+from ._payload_fit import (identify_payload, DETERMINED, HOLD, REFERENCES)
 from ._static_fit import (StaticFit, fit_static, calibrate_table, other_convention, tilt_warning, mounting_warning,
     rotation_warning, both_rotations_warning, rotation_check, Refit, gravity_up, TILT_RATIO, TILT_SIGMAS,
     MIN_CONE_DEG)
 from ._practitioners import (ReferenceFit, plain_fit, calib_force, CALIB_FORCE_G)
 
 __all__ = ["cone_deg", "covariance", "weak_directions", "describe", "in_words", "relative_std", "next_poses",
-           "rotation", "PayloadEstimate", "PayloadFileError", "identify_payload", "regressor", "StaticFit",
+           "rotation", "PayloadEstimate", "PayloadFileError", "identify_payload", "StaticFit",
            "fit_static", "calibrate_table",
            "other_convention", "tilt_warning", "mounting_warning", "rotation_warning", "both_rotations_warning",
            "rotation_check", "Refit", "gravity_up", "ReferenceFit", "plain_fit", "calib_force"]

@@ -21,7 +21,7 @@ the weighted residuals' variance per degree of freedom.
 
 import numpy as np
 
-from fmscal.plant.physics._rigid_body import skew
+from fmscal.plant.physics import skew
 
 __all__ = ["cone_deg", "covariance", "weak_directions", "describe", "in_words", "relative_std", "next_poses",
            "rotation", "DETERMINED_REL", "DETERMINED_RHO", "TURNS"]

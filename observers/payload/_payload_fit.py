@@ -29,269 +29,29 @@ poses to record next (:mod:`fmscal.observers.payload._coverage`), and names the 
 residuals far above the noise.
 """
 
-import datetime
-import json
-import os
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import least_squares
 
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.io._calibration import reading_sign
-from fmscal.plant.io._files import atomic_write_text, not_a_file
-from fmscal.plant.physics._differentiate import edge, spatial_motion
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._rigid_body import (GRAVITY, INERTIA_NAMES, SpatialPayload, _inertia_matrix, regressor,
-                                             rotation_matrix, skew)
-from fmscal.plant.physics._sensor import check_calibration
+from fmscal.plant.io import reading_sign
+from fmscal.plant.numerics import FmscalError, as_finite_array, as_positive_scalar
+from fmscal.plant.physics import (GRAVITY, INERTIA_NAMES, SpatialPayload, check_calibration, edge, regressor,
+                                  rotation_matrix, skew, spatial_motion)
 
-from fmscal.observers.batch._cluster_covariance import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
+from fmscal.observers.batch import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
+from ._coverage import cone_deg, in_words, next_poses, weak_directions
+from ._estimate import PayloadEstimate
+from ._static_fit import (TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start, _tangent_basis,
+                          gravity_up, other_convention, rotation_check)
 
-__all__ = ["PayloadEstimate", "PayloadFileError", "identify_payload", "regressor", "INERTIA_NAMES", "DETERMINED",
-           "HOLD", "REFERENCES", "PAYLOAD_FORMAT"]
+__all__ = ["identify_payload", "DETERMINED", "HOLD", "REFERENCES"]
 
-#: The format tag of a saved payload estimate (:meth:`PayloadEstimate.save`).
-PAYLOAD_FORMAT = "fmscal-payload/1"
-#: A payload file is a few kB; anything above this is refused unread.
-_MAX_FILE_BYTES = 1 << 20
 
-#: The six entries of an inertia tensor, as URDF and MuJoCo's ``fullinertia`` write them.
 #: A group (mass, centre of mass, inertia) counts as determined when its one-sigma uncertainty is below
 #: this fraction of its size: above it, the noise of the differentiated poses biases the fit by as much
 #: (errors in variables: on spatial-weak and spatial-static the inertia comes out low by several sigma).
 DETERMINED = 0.02
-
-
-@dataclass(kw_only=True)
-class _Rotations:
-    """Gravity's direction and the sensor's mounting where a fit estimated them (None otherwise).
-
-    Attributes
-    ----------
-    gravity : ndarray, shape (3,), or None
-        Gravity in the pose frame, m/s^2.
-    gravity_std_deg : float or None
-        One-sigma uncertainty of its direction about each of the two axes across it (their rms), degrees.
-    mounting : ndarray, shape (3, 3), or None
-        The sensor's axes on the tracked frame (sensor vectors to tracked-frame vectors).
-    mounting_deg, mounting_std_deg : float or None
-        The mounting's angle, and the one-sigma uncertainty of its rotation about each axis (their rms), degrees.
-    mounting_axis : ndarray, shape (3,), or None
-        The mounting's unit axis (tracked-frame axes).
-    """
-
-    gravity: np.ndarray = None
-    gravity_std_deg: float = None
-    mounting: np.ndarray = None
-    mounting_deg: float = None
-    mounting_std_deg: float = None
-    mounting_axis: np.ndarray = None
-
-    def tracked(self):
-        """The payload in the axes of the frame the poses track: what ``calibrate`` takes (a :class:`PayloadEstimate`).
-
-        ``calibrate`` estimates ``S`` in full, which absorbs the sensor's
-        mounting ``M`` (sensor axes to the tracked frame's), so it works in
-        the tracked frame's axes: the centre of mass ``M rho``, the inertia
-        ``M I M^T`` and their uncertainties turned with them (the variances
-        of a rotated vector's components: ``(M * M) var``, the correlations
-        dropped), the mounting then the identity (None) and gravity as
-        estimated. Without an estimated mounting, the same values.
-
-        Returns
-        -------
-        PayloadEstimate
-        """
-        M = np.eye(3) if self.mounting is None else np.asarray(self.mounting, dtype=float)
-        inertia = getattr(self, "inertia", None)
-        inertia_std = getattr(self, "inertia_std", None)
-        if inertia is not None:
-            I_c = M @ _inertia_matrix(inertia) @ M.T
-            inertia = np.array([I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]])
-        if inertia_std is not None and self.mounting is not None:
-            inertia_std = None                 # turning a tensor's uncertainty needs its covariance: not kept
-        turn = lambda std: np.sqrt((M * M) @ np.square(np.asarray(std, dtype=float)))  # noqa: E731
-        return PayloadEstimate(mass=float(self.mass), mass_std=float(self.mass_std),
-                               rho=M @ np.asarray(self.rho, dtype=float), rho_std=turn(self.rho_std),
-                               inertia=inertia, inertia_std=inertia_std, b=self.b, b_std=self.b_std,
-                               residual_rms=self.residual_rms, warnings=list(self.warnings),
-                               converged=bool(self.converged), payload_determined=bool(self.payload_determined),
-                               cone_deg=self.cone_deg, undetermined=list(self.undetermined),
-                               next_poses=list(self.next_poses), gravity=self.gravity,
-                               gravity_std_deg=self.gravity_std_deg)
-
-    def save(self, path):
-        """Write the payload, in the tracked frame's axes (:meth:`tracked`), as JSON for ``fmscal calibrate --payload``.
-
-        The file, format ``fmscal-payload/1`` (:data:`PAYLOAD_FORMAT`)::
-
-            {"format": "fmscal-payload/1", "axes": "tracked", "mass": kg, "mass_std": kg,
-             "rho": [x, y, z], "rho_std": [...], "inertia": [Ixx, Iyy, Izz, Ixy, Ixz, Iyz] or null,
-             "inertia_std": [...] or null, "gravity": [gx, gy, gz] or null, "converged": bool,
-             "warnings": [...], "date": "..."}
-
-        ``rho`` in m, the inertia about the centre of mass in kg m^2 (null:
-        not determined, as from held poses), gravity in the pose frame in
-        m/s^2 where it was estimated (null: the default was used). Written
-        atomically.
-
-        Raises
-        ------
-        FmscalError
-            The mass and the centre of mass are not determined (``payload_determined`` False).
-        """
-        if not self.payload_determined:
-            raise FmscalError("the mass and the centre of mass are not determined: no payload to save "
-                              "(record more poses: see the next poses)")
-        t = self.tracked()
-
-        def listed(v):
-            return None if v is None else [float(x) for x in np.ravel(v)]
-        document = {"format": PAYLOAD_FORMAT, "axes": "tracked", "mass": t.mass, "mass_std": t.mass_std,
-                    "rho": listed(t.rho), "rho_std": listed(t.rho_std), "inertia": listed(t.inertia),
-                    "inertia_std": listed(t.inertia_std), "gravity": listed(t.gravity),
-                    "converged": bool(t.converged), "warnings": list(t.warnings),
-                    "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
-        atomic_write_text(path, json.dumps(document, indent=1, allow_nan=False) + "\n")
-
-    def rotations_dict(self):
-        """The six fields as JSON-ready numbers and lists (None where not estimated)."""
-        return {"gravity": None if self.gravity is None else [float(v) for v in self.gravity],
-                "gravity_std_deg": self.gravity_std_deg,
-                "mounting": None if self.mounting is None else np.asarray(self.mounting).tolist(),
-                "mounting_deg": self.mounting_deg, "mounting_std_deg": self.mounting_std_deg,
-                "mounting_axis": None if self.mounting_axis is None else [float(v) for v in self.mounting_axis]}
-
-
-@dataclass
-class PayloadEstimate(_Rotations):
-    """The payload's mass properties and the sensor's offset, with one-sigma uncertainties.
-
-    Attributes
-    ----------
-    mass, mass_std : float
-        kg.
-    rho, rho_std : ndarray, shape (3,)
-        Centre of mass in the sensor frame, m.
-    inertia, inertia_std : ndarray, shape (6,), or None
-        Inertia about the centre of mass, sensor axes (:data:`INERTIA_NAMES`),
-        kg m^2; None where the log does not determine it.
-    b, b_std : ndarray, shape (6,)
-        The sensor's offset in ``w = S (w_hat - b)``, reading order, N m and N.
-    residual_rms : ndarray, shape (6,)
-        Of the fit, per channel of the corrected reading, N m and N.
-    warnings : list of str
-        What the log did not determine, in words a user acts on.
-    converged : bool
-        Every group (mass, centre of mass, inertia, offset) determined.
-    payload_determined : bool
-        The mass and the centre of mass each determined (within :data:`DETERMINED`).
-    block : float or None
-        Length of the blocks of time of the cluster-robust covariance, s
-        (:func:`fmscal.observers.batch.block_length`).
-    cone_deg : float or None
-        Half-angle of the cone of gravity directions the log holds in the sensor frame, degrees.
-    undetermined : list of str
-        The parameters the log determines poorly or not at all, in words.
-    next_poses : list of str
-        The held poses to record next, best first, as a table's (:mod:`fmscal.observers.payload._coverage`).
-    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
-        Gravity's direction and the sensor's mounting, where estimated
-        (:meth:`rotations_dict`): gravity in the pose frame (m/s^2), its
-        direction's uncertainty, the sensor's axes on the tracked frame
-        (3x3), its angle, uncertainty (degrees) and unit axis; None otherwise.
-    """
-
-    mass: float
-    mass_std: float
-    rho: np.ndarray
-    rho_std: np.ndarray
-    inertia: np.ndarray
-    inertia_std: np.ndarray
-    b: np.ndarray
-    b_std: np.ndarray
-    residual_rms: np.ndarray
-    warnings: list = field(default_factory=list)
-    converged: bool = False
-    payload_determined: bool = False
-    block: float = None
-    cone_deg: float = None
-    undetermined: list = field(default_factory=list)
-    next_poses: list = field(default_factory=list)
-
-    def to_dict(self):
-        """The fields as JSON-ready numbers and lists (None where undetermined)."""
-        def listed(v):
-            return None if v is None else [float(x) for x in np.ravel(v)]
-        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
-                "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
-                "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
-                "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
-                "converged": bool(self.converged), **self.rotations_dict(),
-                "cone_deg": None if self.cone_deg is None else float(self.cone_deg),
-                "undetermined": list(self.undetermined), "next_poses": list(self.next_poses)}
-
-    @classmethod
-    def load(cls, path):
-        """Read a payload file written by :meth:`save` (``fmscal identify-payload --save``).
-
-        Returns
-        -------
-        PayloadEstimate
-            In the tracked frame's axes (no mounting), ``payload_determined``
-            True; the offset and the residuals, not saved, None.
-
-        Raises
-        ------
-        PayloadFileError
-            A missing file, not JSON, another format, or a value of the wrong shape (one line).
-        """
-        if not isinstance(path, (str, os.PathLike)):
-            raise PayloadFileError(f"a payload path must be a file name; got {type(path).__name__}")
-        path = Path(path)
-        problem = not_a_file(path)
-        if problem is not None:
-            raise PayloadFileError(f"{path}: {'no such file' if problem == 'no such file' else 'is ' + problem}")
-        if path.stat().st_size > _MAX_FILE_BYTES:
-            raise PayloadFileError(f"{path.name}: too large for a payload file; not an fmscal payload")
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as err:
-            raise PayloadFileError(f"{path.name}: not a JSON payload file ({str(err)[:80]})") from None
-        if not isinstance(data, dict) or data.get("format") != PAYLOAD_FORMAT:
-            got = data.get("format") if isinstance(data, dict) else type(data).__name__
-            raise PayloadFileError(f"{path.name}: not an fmscal payload (format {str(got)[:60]!r}; expected "
-                                   f"{PAYLOAD_FORMAT!r})")
-
-        def numbers(key, shape, optional=False):
-            value = data.get(key)
-            if value is None and optional:
-                return None
-            try:
-                arr = np.array(value, dtype=float)
-            except (TypeError, ValueError):
-                arr = np.array(np.nan)
-            if arr.shape != shape or not np.all(np.isfinite(arr)):
-                raise PayloadFileError(f"{path.name}: {key} must be {int(np.prod(shape)) or 1} finite number(s)"
-                                       + (" or null" if optional else ""))
-            return arr
-        mass = float(numbers("mass", ()))
-        if not mass > 0:
-            raise PayloadFileError(f"{path.name}: mass must be positive; got {mass}")
-        warnings = data.get("warnings", [])
-        if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
-            raise PayloadFileError(f"{path.name}: warnings must be a list of strings")
-        return cls(mass=mass, mass_std=float(numbers("mass_std", ())), rho=numbers("rho", (3,)),
-                   rho_std=numbers("rho_std", (3,)), inertia=numbers("inertia", (6,), True),
-                   inertia_std=numbers("inertia_std", (6,), True), b=None, b_std=None, residual_rms=None,
-                   warnings=warnings, converged=bool(data.get("converged", False)), payload_determined=True,
-                   gravity=numbers("gravity", (3,), True))
-
-
-class PayloadFileError(FmscalError):
-    """A payload file that cannot be used: the message names the problem."""
 
 
 def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, reading="reaction", estimate_gravity=False,
@@ -353,7 +113,6 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
         blocks, length = time_blocks(residual.reshape(n, 6), *times)
         theta, cov, residual = weighted_fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
         if np.isfinite(cov[0, 0]) and theta[0] < 0:
-            from fmscal.observers.payload._static_fit import other_convention
             raise FmscalError(other_convention(log.name, theta[0], reading))
         fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
         _blocks_used(fit, blocks, length)
@@ -386,7 +145,6 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     assumed, a log whose reading changes much between samples opens the
     check less often); the warning is :func:`fmscal.observers.payload.rotation_check`'s.
     """
-    from fmscal.observers.payload._static_fit import TILT_RATIO, Refit, rotation_check
     force = y[:, 3:]
     noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
@@ -458,8 +216,6 @@ def _coverage(fit, q, t, info):
     covariance there is the model-based ``s^2 F^-1``; the reported
     uncertainties are the cluster-robust ones.
     """
-    from fmscal.observers.payload._coverage import cone_deg, in_words, next_poses, weak_directions
-    from fmscal.observers.payload._static_fit import _OFFSET_NAMES, _Model
     g_size, d0, M0, estimate_gravity, estimate_mounting = info.frame
     model = _Model(None, None, g_size, d0, M0, estimate_gravity, estimate_mounting)
     theta = info.theta
@@ -504,10 +260,6 @@ def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gr
     cluster-robust sandwich over the full Jacobian (the linear parameters and
     the angles together), so the angles' uncertainty enters the payload's.
     """
-    from scipy.optimize import least_squares
-
-    from fmscal.observers.payload._static_fit import (_angle_deg, _axis, _exp, _start, _tangent_basis, gravity_up,
-                                                      other_convention)
     q, omega, alpha, p_ddot = motion
     g = np.asarray(gravity, dtype=float)
     R = np.moveaxis(rotation_matrix(q.T), -1, 0)

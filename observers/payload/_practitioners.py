@@ -31,10 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.io._calibration import reading_sign
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._rigid_body import rotation_matrix, skew
+from fmscal.plant.io import reading_sign
+from fmscal.plant.numerics import FmscalError, as_finite_array, as_positive_scalar
+from fmscal.plant.physics import rotation_matrix, skew
 
 __all__ = ["ReferenceFit", "plain_fit", "calib_force", "CALIB_FORCE_G"]
 

@@ -41,19 +41,14 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
-from fmscal.plant.numerics._checks import as_finite_array
-from fmscal.plant.io._calibration import reading_sign
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._pose_table import PoseTable
-from fmscal.plant.physics._rigid_body import GRAVITY, rotation_matrix, skew
-from fmscal.plant.physics._sensor import check_calibration
+from fmscal.plant.io import PoseTable, reading_sign
+from fmscal.plant.numerics import FmscalError, as_finite_array
+from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
-from fmscal.observers.payload._coverage import (_OFFSET_NAMES, DETERMINED_REL, DETERMINED_RHO, covariance, in_words,
-                                                next_poses)
-from fmscal.observers.payload._coverage import cone_deg as _cone
-from fmscal.observers.payload._coverage import rotation as _exp
-from fmscal.observers.batch._inverse_dynamics import InverseDynamicsFit
-from fmscal.observers.payload._payload_fit import _Rotations
+from fmscal.observers.batch import InverseDynamicsFit, fit_readings
+from ._coverage import (DETERMINED_REL, DETERMINED_RHO, _OFFSET_NAMES, cone_deg as _cone, covariance, in_words,
+                        next_poses, rotation as _exp)
+from ._estimate import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
@@ -640,8 +635,6 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
         1]``, each component scaled by the wrench's spread) and their
         warnings; ``converged`` False.
     """
-    from fmscal.observers.batch._inverse_dynamics import fit_readings
-    from fmscal.plant.physics._rigid_body import regressor
     if not isinstance(table, PoseTable):
         raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
     sign = reading_sign(reading)

@@ -3,9 +3,9 @@ the noise and units a log shows.
 """
 
 from ._files import (atomic_write, atomic_write_text, atomic_write_many, exclusive, claim_folder, not_a_file,
-    OutputExistsError, LOCK_NAME)
+    OutputExistsError, not_an_output, LOCK_NAME)
 from ._log import (Log, LogError, Truth, read_log, read_readings, read_truth, log_kind, COLUMNS, SPATIAL_COLUMNS,
-    READING_COLUMNS, QUATERNION_TOLERANCE, unit_quaternions)
+    READING_COLUMNS, QUATERNION_TOLERANCE, unit_quaternions, MIN_SAMPLES)
 from ._noise import (estimate_noise)
 from ._units import (implied_scale, diagnose_units, UnitFinding, COUNTS)
 from ._calibration import (Calibration, CalibrationFileError, file_sha256, reading_sign, FORMAT, READINGS)
@@ -18,10 +18,9 @@ from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, P
     MAX_WRENCH_GAP, MAX_TILT_DEG, MAX_OUT_OF_PLANE)
 
 __all__ = ["atomic_write", "atomic_write_text", "atomic_write_many", "exclusive", "claim_folder", "not_a_file",
-           "OutputExistsError", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind",
-           "unit_quaternions", "estimate_noise", "implied_scale", "diagnose_units", "UnitFinding", "Calibration",
-           "CalibrationFileError", "file_sha256", "reading_sign", "PoseTable", "read_pose_table",
-           "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog", "read_attitude_log",
-           "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses", "RobotKinematics", "joint_columns",
-           "read_joint_data", "BagError", "import_bag",
-           "read_bag", "format_report"]
+           "OutputExistsError", "not_an_output", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",
+           "log_kind", "unit_quaternions", "estimate_noise", "implied_scale", "diagnose_units", "UnitFinding",
+           "Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "PoseTable", "read_pose_table",
+           "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog", "read_attitude_log", "is_attitude_log",
+           "held_table", "simulate_attitude_log", "chain_poses", "RobotKinematics", "joint_columns", "read_joint_data",
+           "BagError", "import_bag", "read_bag", "format_report"]

@@ -39,10 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.io._files import not_a_file
-from fmscal.plant.io._log import Log, LogError
-from fmscal.plant.physics._model import SpatialModel
-from fmscal.plant.physics._rigid_body import rotation_matrix
+from fmscal.plant.physics import SpatialModel, rotation_matrix
+from ._files import not_a_file
+from ._log import Log, LogError
+from ._tf_chain import chain_poses
 
 __all__ = ["BagError", "import_bag", "read_bag", "format_report",
            "WRENCH_TYPE", "POSE_TYPES", "JOINT_TYPE", "TF_TYPE", "MAX_WRENCH_GAP", "MAX_TILT_DEG", "MAX_OUT_OF_PLANE"]
@@ -254,7 +254,7 @@ def _numbers(value, name, n):
 def _open_reader(path):
     """An open ``rosbags`` AnyReader on ``path``, or a one-line BagError."""
     try:
-        from rosbags.highlevel import AnyReader
+        from rosbags.highlevel import AnyReader          # optional (the ros extra): only bags need it
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
         raise BagError("reading ROS bags needs rosbags: pip install 'fmscal[ros]'") from None
@@ -330,7 +330,6 @@ def _read_messages(path, wrench_topic, pose_topic, kinematics=None, tf_frames=No
     finally:
         reader.close()
     if tf_frames is not None:
-        from fmscal.plant.io._tf_chain import chain_poses
         return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
                 chain_poses([m for _, m in out[pose_topic]], [m for _, m in out.get(static, [])], *tf_frames,
                             path.name))

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.io._bag import WRENCH_TYPE, BagError, _numbers
-from fmscal.plant.physics._rigid_body import rotation_matrix
+from fmscal.plant.physics import rotation_matrix
+from ._bag import WRENCH_TYPE, BagError, _numbers
 
 __all__ = ["write_bag", "write_tf_bag"]
 
@@ -78,7 +78,7 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     pathlib.Path
         The bag written.
     """
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import Stores, get_typestore      # optional (the ros extra): only bags need it
 
     path = Path(path)
     if path.exists():
@@ -155,10 +155,10 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     received = [int(ns) + 1_000_000 + int(rng.uniform(0, receive_jitter) * 1e9) for _, ns, _ in messages]
     order = np.argsort(received, kind="stable")
     if storage == "ros1":
-        from rosbags.rosbag1 import Writer
+        from rosbags.rosbag1 import Writer                 # optional (the ros extra)
         writer, serialize = Writer(path), ts.serialize_ros1
     else:
-        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.rosbag2 import StoragePlugin, Writer  # optional (the ros extra)
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
         writer, serialize = Writer(path, version=9, storage_plugin=plugin), ts.serialize_cdr
     with writer:
@@ -210,8 +210,8 @@ def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wre
     BagError
         The path exists, or the arrays' shapes do not match ``t``.
     """
-    from rosbags.rosbag2 import Writer
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.rosbag2 import Writer                     # optional (the ros extra)
+    from rosbags.typesys import Stores, get_typestore      # optional (the ros extra): only bags need it
 
     path = Path(path)
     if path.exists():

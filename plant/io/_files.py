@@ -21,10 +21,10 @@ import stat
 import tempfile
 from pathlib import Path
 
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError
 
 __all__ = ["atomic_write", "atomic_write_text", "atomic_write_many", "exclusive", "claim_folder", "not_a_file",
-           "OutputExistsError", "LOCK_NAME"]
+           "not_an_output", "OutputExistsError", "LOCK_NAME"]
 
 #: The file that marks a folder of outputs as claimed by one run (:func:`claim_folder`).
 LOCK_NAME = ".fmscal.lock"

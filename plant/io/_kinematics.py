@@ -19,8 +19,9 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._log import _as_path, _echo
+from fmscal.plant.numerics import FmscalError
+from ._log import Log, LogError, _as_path, _echo, _read_csv
+from ._pose_table import PoseTable
 
 __all__ = ["RobotKinematics", "joint_columns", "read_joint_data"]
 
@@ -73,7 +74,7 @@ class RobotKinematics:
 
     def __init__(self, urdf, frame):
         try:
-            import pinocchio as pin
+            import pinocchio as pin         # optional (the robot extra): only --urdf needs it
         except ImportError:
             raise FmscalError("--urdf needs pinocchio: pip install \"fmscal[robot]\"") from None
         self._pin = pin
@@ -173,8 +174,6 @@ def read_joint_data(path, kinematics):
     plant.LogError, FmscalError
         The file's problems, or joint columns that do not match the URDF.
     """
-    from fmscal.plant.io._log import Log, LogError, _read_csv
-    from fmscal.plant.io._pose_table import PoseTable
     path = _as_path(path, "log")
     with open(path, "rb") as f:
         header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")

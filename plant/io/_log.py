@@ -45,13 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._files import atomic_write_text, not_a_file
-from fmscal.plant.physics._model import PlanarModel, SpatialModel, model_for_columns
-from fmscal.plant.physics._payload import Payload
-from fmscal.plant.physics._rigid_body import SpatialPayload
-from fmscal.plant.physics._sensor import CalibrationSchedule, NoiseSpec, check_calibration
+from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar
+from fmscal.plant.physics import (QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload, PlanarModel,
+                                  SpatialModel, SpatialPayload, check_calibration, model_for_columns, unit_quaternions)
+from ._files import atomic_write_text, not_a_file
 
 __all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
            "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE", "unit_quaternions"]
@@ -61,44 +58,11 @@ COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
 #: Column names of a spatial log, in order.
 SPATIAL_COLUMNS = ("t", *SpatialModel.pose_names, *SpatialModel.wrench_names)
 _WRENCH = PlanarModel.wrench_names
-#: Largest departure of a logged quaternion's norm from 1 that is taken for rounding (and normalised).
-QUATERNION_TOLERANCE = 1e-3
 _CASES = {(len(m.pose_names), len(m.wrench_names)): m for m in (PlanarModel, SpatialModel)}
 _SAMPLING_TOLERANCE = 0.01        # relative spread of the time step accepted as even
 MIN_SAMPLES = 10
 #: Largest magnitude accepted in any column (s, rad, m, N m, N; or sensor counts).
 MAX_MAGNITUDE = 1e9
-
-
-class LogError(FmscalError):
-    """A log that cannot be used: the message names the problem."""
-
-
-def unit_quaternions(q, name, rows=None, hint=""):
-    """Quaternions within :data:`QUATERNION_TOLERANCE` of unit norm, normalised; else a one-line :class:`LogError`.
-
-    Parameters
-    ----------
-    q : ndarray, shape (N, 4)
-    name : str
-        The data's name, for the message.
-    rows : ndarray of int, shape (N,), optional
-        Each quaternion's row (from 0) in the data; default ``0 .. N-1``.
-    hint : str
-        Appended to the message inside its parenthesis.
-
-    Returns
-    -------
-    ndarray, shape (N, 4)
-    """
-    norm = np.linalg.norm(q, axis=1)
-    off = np.abs(norm - 1) > QUATERNION_TOLERANCE
-    if off.any():
-        k = int(np.argmax(off))
-        row = (k if rows is None else int(rows[k])) + 1
-        raise LogError(f"{name}: the quaternion qw,qx,qy,qz at row {row} has norm {norm[k]:.6g}; "
-                       f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g}{hint})")
-    return q / norm[:, None]
 
 
 class Log:
@@ -485,7 +449,7 @@ def _wrong_field_count(data, n):
 
 def _read_csv(path, required, empty_rule):
     """A CSV with the ``required`` columns, every cell a number or empty; one-line errors."""
-    import pandas as pd
+    import pandas as pd     # heavy: only reading a CSV needs it, not importing fmscal.plant
 
     data = path.read_bytes()
     nul = data.find(b"\0")

@@ -4,7 +4,7 @@ from math import comb
 
 import numpy as np
 
-from fmscal.plant.physics._sensor import NoiseSpec
+from fmscal.plant.physics import NoiseSpec
 
 __all__ = ["estimate_noise"]
 

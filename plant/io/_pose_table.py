@@ -26,11 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._files import atomic_write_text
-from fmscal.plant.io._log import LogError, _as_path, _echo, _read_csv, unit_quaternions
-from fmscal.plant.physics._rigid_body import GRAVITY, SpatialPayload, rotation_matrix
+from fmscal.plant.numerics import FmscalError, as_finite_array
+from fmscal.plant.physics import GRAVITY, SpatialPayload, rotation_matrix
+from ._files import atomic_write_text
+from ._log import LogError, _as_path, _echo, _read_csv, unit_quaternions
 
 __all__ = ["PoseTable", "read_pose_table", "write_pose_table", "is_pose_table", "simulate_table",
            "AttitudeLog", "read_attitude_log", "is_attitude_log", "held_table", "simulate_attitude_log",

@@ -16,7 +16,7 @@ position, by spherical interpolation in attitude), within their span.
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError
 
 __all__ = ["chain_poses"]
 

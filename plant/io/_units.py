@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fmscal.plant.physics._dynamics import input_matrix
+from fmscal.plant.physics import input_matrix
 
 __all__ = ["implied_scale", "diagnose_units", "UnitFinding", "COUNTS"]
 

@@ -2,12 +2,12 @@
 compiled casadi steps, packed-state layouts and the toolkit's error type.
 """
 
-from ._errors import (FmscalError)
+from ._errors import (FmscalError, LogError)
 from ._backend import (is_symbolic, ops)
 from ._checks import (as_finite_array, as_positive_scalar, as_bool, as_number, MAX_SCALAR)
 from ._compile import (compile_function, compile_functions, compiler, BufferedCall, ChunkedSteps, build_once)
 from ._layout import (StateLayout)
 
-__all__ = ["FmscalError", "is_symbolic", "ops", "as_finite_array", "as_positive_scalar", "as_bool", "as_number",
-           "compile_function", "compile_functions", "compiler", "BufferedCall", "ChunkedSteps", "build_once",
-           "StateLayout"]
+__all__ = ["FmscalError", "LogError", "is_symbolic", "ops", "as_finite_array", "as_positive_scalar", "as_bool",
+           "as_number", "compile_function", "compile_functions", "compiler", "BufferedCall", "ChunkedSteps",
+           "build_once", "StateLayout"]

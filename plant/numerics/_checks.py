@@ -4,7 +4,7 @@ import numbers
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
+from ._errors import FmscalError
 
 __all__ = ["as_finite_array", "as_positive_scalar", "as_bool", "as_number", "MAX_SCALAR"]
 

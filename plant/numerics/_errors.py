@@ -6,11 +6,20 @@ the public boundary) raises :class:`FmscalError` or a subclass of it. The
 exception is a bug in the toolkit and keeps its traceback.
 """
 
-__all__ = ["FmscalError"]
+__all__ = ["FmscalError", "LogError"]
 
 
 class FmscalError(ValueError):
     """A problem with what the user gave the toolkit: one line, naming the value.
 
     A subclass of :class:`ValueError`, so ``except ValueError`` still catches it.
+    """
+
+
+class LogError(FmscalError):
+    """A log that cannot be used: the message names the problem.
+
+    Defined here, beside :class:`FmscalError`, because the physics checks a
+    pose's quaternion (:func:`fmscal.plant.physics.unit_quaternions`) as the
+    log reader does, and the physics sits below the files.
     """

@@ -6,8 +6,9 @@ from ._payload import (Payload, PAPER_PAYLOAD)
 from ._sensor import (CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration)
 from ._dynamics import (input_matrix, acceleration, state_derivative, A_1, C_1, B_1, A_2, C_2, B_2, regressors,
     phi_1, phi_2, S_from_phi)
-from ._rigid_body import (regressor, INERTIA_NAMES, SpatialPayload, PayloadSymbols, GRAVITY, quaternion_multiply,
-    quaternion_conjugate, rotation_matrix, sensor_wrench, body_acceleration, prescribed_motion, skew)
+from ._rigid_body import (regressor, inertia_matrix, INERTIA_NAMES, SpatialPayload, PayloadSymbols, GRAVITY,
+                          quaternion_multiply, quaternion_conjugate, rotation_matrix, unit_quaternions,
+                          QUATERNION_TOLERANCE, sensor_wrench, body_acceleration, prescribed_motion, skew)
 from ._simulate import (integrate, rk4_step)
 from ._excitation import (Excitation, PaperWrench, Multisine, SampledWrench)
 from ._differentiate import (spatial_motion, smoothed_state, edge, ORDER)
@@ -15,7 +16,8 @@ from ._model import (Model, PlanarModel, SpatialModel, as_model, model_for_colum
 
 __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
            "input_matrix", "acceleration", "state_derivative", "regressors", "phi_1", "phi_2", "S_from_phi",
-           "regressor", "SpatialPayload", "PayloadSymbols", "quaternion_multiply", "quaternion_conjugate",
-           "rotation_matrix", "sensor_wrench", "body_acceleration", "prescribed_motion", "skew", "integrate",
-           "rk4_step", "Excitation", "PaperWrench", "Multisine", "SampledWrench", "spatial_motion",
-           "smoothed_state", "edge", "Model", "PlanarModel", "SpatialModel", "as_model", "model_for_columns"]
+           "regressor", "inertia_matrix", "SpatialPayload", "PayloadSymbols", "quaternion_multiply",
+           "quaternion_conjugate", "rotation_matrix", "unit_quaternions", "sensor_wrench", "body_acceleration",
+           "prescribed_motion", "skew", "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine",
+           "SampledWrench", "spatial_motion", "smoothed_state", "edge", "Model", "PlanarModel", "SpatialModel",
+           "as_model", "model_for_columns"]

@@ -16,8 +16,8 @@ against the motion's period and long against the pose interval.
 import numpy as np
 from scipy.signal import oaconvolve, savgol_coeffs, savgol_filter
 
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.physics._rigid_body import quaternion_multiply
+from fmscal.plant.numerics import FmscalError
+from ._rigid_body import quaternion_multiply
 
 __all__ = ["spatial_motion", "smoothed_state", "edge", "ORDER"]
 #: Degree of the local polynomial (a quintic keeps the smoothing bias of a 0.2 s window below 0.1 % at 0.5 Hz).

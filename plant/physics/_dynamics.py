@@ -11,7 +11,7 @@ State order throughout the toolkit: ``x = [theta, theta', X, X', Y, Y']``.
 
 import numpy as np
 
-from fmscal.plant.numerics._backend import is_symbolic, ops
+from fmscal.plant.numerics import is_symbolic, ops
 
 __all__ = [
     "input_matrix",

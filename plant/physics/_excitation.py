@@ -2,8 +2,7 @@
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError, as_finite_array
 
 __all__ = ["Excitation", "PaperWrench", "Multisine", "SampledWrench"]
 

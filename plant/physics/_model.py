@@ -30,15 +30,11 @@ import copy
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.physics import _dynamics as dynamics
-
-from fmscal.plant.physics import _rigid_body as rigid_body
-from fmscal.plant.numerics._backend import is_symbolic, ops
-from fmscal.plant.numerics._checks import as_finite_array
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.numerics._layout import StateLayout
-from fmscal.plant.physics._payload import Payload
-from fmscal.plant.physics._rigid_body import SpatialPayload
+from fmscal.plant.numerics import FmscalError, StateLayout, as_finite_array, is_symbolic, ops
+from . import _dynamics as dynamics, _rigid_body as rigid_body, _simulate as simulate
+from ._payload import Payload
+from ._rigid_body import SpatialPayload
+from ._sensor import NoiseSpec
 
 __all__ = ["Model", "PlanarModel", "SpatialModel", "as_model", "model_for_columns"]
 
@@ -83,7 +79,7 @@ class Model:
     #: True where the model is the paper's planar problem, eq. (1) with the parameters ``phi_1``, ``phi_2``
     #: of eqs. (4), (5) (:mod:`fmscal.plant.physics._dynamics`), which the methods written on the printed
     #: equations (the paper's observer, the high-gain observer of [4], ``LeastSquares.offset_bias``) and the
-    #: scale the poses imply (:func:`fmscal.plant.io._units.implied_scale`) read directly.
+    #: scale the poses imply (:func:`fmscal.plant.io.implied_scale`) read directly.
     paper_equations = False
     #: How a figure shows :meth:`pose_residuals`: one ``(name, unit, columns)`` per panel, the unit
     #: ``"mrad"`` for a turn (rad) and ``"mm"`` for a move (m), each column of the residual shown times 1e3.
@@ -216,7 +212,6 @@ class Model:
         FmscalError
             It holds another number of reading components.
         """
-        from fmscal.plant.physics._sensor import NoiseSpec  # no cycle: sensor imports nothing of the model's
         if not isinstance(noise, NoiseSpec):
             raise TypeError(f"{name} must be a plant.NoiseSpec or None; got {type(noise).__name__}")
         if len(noise.wrench_sd) != self.n_w:
@@ -564,8 +559,7 @@ class PlanarModel(Model):
 
     def rk4_step(self, x, w0, w_mid, w1, dt):
         """RK4 on eq. (1): :func:`fmscal.plant.rk4_step` (the simulator's own step)."""
-        from fmscal.plant.physics._simulate import rk4_step
-        return rk4_step(x, w0, w_mid, w1, dt, self.payload)
+        return simulate.rk4_step(x, w0, w_mid, w1, dt, self.payload)
 
     def parameter_groups(self):
         """``phi_1`` drives ``theta`` alone, ``phi_2`` drives ``X`` and ``Y`` (eqs. 4, 5): two groups."""
@@ -699,14 +693,13 @@ class SpatialModel(Model):
 
     def check_pose(self, pose, name="pose"):
         """One pose as 7 finite numbers whose quaternion is of unit norm (within
-        :data:`fmscal.plant.io._log.QUATERNION_TOLERANCE`), or a one-line :class:`FmscalError`.
+        :data:`fmscal.plant.physics.QUATERNION_TOLERANCE`), or a one-line :class:`FmscalError`.
 
         The pose is returned as it is: :meth:`difference` reads a quaternion's
         direction only, and :meth:`rest_state` normalises it.
         """
-        from fmscal.plant.io._log import unit_quaternions         # log imports this module
         pose = super().check_pose(pose, name)
-        unit_quaternions(pose[None, :4], name)
+        rigid_body.unit_quaternions(pose[None, :4], name)
         return pose
 
     def rest_state(self, pose):

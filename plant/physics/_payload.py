@@ -4,8 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError, as_finite_array, as_positive_scalar
 
 __all__ = ["Payload", "PAPER_PAYLOAD"]
 

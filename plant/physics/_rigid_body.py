@@ -36,13 +36,11 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._backend import is_symbolic, ops
-from fmscal.plant.numerics._checks import as_finite_array, as_positive_scalar
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar, is_symbolic, ops
 
 __all__ = ["regressor", "INERTIA_NAMES",
     "SpatialPayload", "PayloadSymbols", "GRAVITY",
-    "quaternion_multiply", "quaternion_conjugate", "rotation_matrix",
+    "quaternion_multiply", "quaternion_conjugate", "rotation_matrix", "unit_quaternions", "QUATERNION_TOLERANCE",
     "sensor_wrench", "body_acceleration", "state_derivative", "rk4_step", "prescribed_motion", "skew",
     "NQ", "NV", "NX",
 ]
@@ -55,9 +53,11 @@ NQ = 7
 NV = 6
 #: Motion state size, ``NQ + NV``.
 NX = NQ + NV
+#: Largest departure of a logged quaternion's norm from 1 that is taken for rounding (and normalised).
+QUATERNION_TOLERANCE = 1e-3
 
 
-def _inertia_matrix(entries):
+def inertia_matrix(entries):
     """The symmetric tensor from ``Ixx Iyy Izz Ixy Ixz Iyz`` (the tensor's own entries)."""
     ixx, iyy, izz, ixy, ixz, iyz = entries
     return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
@@ -106,7 +106,7 @@ class SpatialPayload:
             shape = "x".join(str(s) for s in np.shape(self.inertia)) or "scalar"
             raise FmscalError(f"inertia has the wrong shape; expected 6 entries "
                               f"(Ixx Iyy Izz Ixy Ixz Iyz) or 3x3 instead of {shape}")
-        I_c = _inertia_matrix(inertia) if inertia.shape == (6,) else inertia
+        I_c = inertia_matrix(inertia) if inertia.shape == (6,) else inertia
         if not np.all(np.isfinite(I_c)):
             raise FmscalError(f"inertia must be finite; got {inertia.tolist()}")
         if not np.allclose(I_c, I_c.T, rtol=0, atol=1e-12 * max(1.0, np.abs(I_c).max())):
@@ -131,7 +131,7 @@ class SpatialPayload:
     @property
     def I_c(self):
         """The inertia tensor about the centre of mass, ``B`` axes, shape (3, 3)."""
-        return _inertia_matrix(self.inertia)
+        return inertia_matrix(self.inertia)
 
     @property
     def I_c_inv(self):
@@ -247,6 +247,33 @@ class PayloadSymbols:
 def _rho(payload):
     """The centre of mass ``rho``: numbers as an array, or a :class:`PayloadSymbols`' expression."""
     return payload.rho if isinstance(payload.rho, ca.SX) else np.array(payload.rho)
+
+
+def unit_quaternions(q, name, rows=None, hint=""):
+    """Quaternions within :data:`QUATERNION_TOLERANCE` of unit norm, normalised; else a one-line :class:`LogError`.
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 4)
+    name : str
+        The data's name, for the message.
+    rows : ndarray of int, shape (N,), optional
+        Each quaternion's row (from 0) in the data; default ``0 .. N-1``.
+    hint : str
+        Appended to the message inside its parenthesis.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+    """
+    norm = np.linalg.norm(q, axis=1)
+    off = np.abs(norm - 1) > QUATERNION_TOLERANCE
+    if off.any():
+        k = int(np.argmax(off))
+        row = (k if rows is None else int(rows[k])) + 1
+        raise LogError(f"{name}: the quaternion qw,qx,qy,qz at row {row} has norm {norm[k]:.6g}; "
+                       f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g}{hint})")
+    return q / norm[:, None]
 
 
 def quaternion_multiply(p, q):

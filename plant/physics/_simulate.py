@@ -5,10 +5,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from fmscal.plant.numerics._checks import as_finite_array
-from fmscal.plant.numerics._compile import ChunkedSteps
-from fmscal.plant.physics._dynamics import state_derivative
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.numerics import ChunkedSteps, FmscalError, as_finite_array
+from ._dynamics import state_derivative
 
 __all__ = ["integrate", "rk4_step"]
 

@@ -10,13 +10,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fmscal.plant.physics._excitation import Multisine, PaperWrench
-from fmscal.plant.io._log import MIN_SAMPLES, Log, Truth
-from fmscal.plant.physics._payload import PAPER_PAYLOAD, Payload
-from fmscal.plant.physics._model import PlanarModel
-from fmscal.plant.physics._sensor import CalibrationSchedule, NoiseSpec
-from fmscal.plant.physics._simulate import integrate
-from fmscal.plant.numerics._errors import FmscalError
+from fmscal.plant.io import MIN_SAMPLES, Log, Truth
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import (PAPER_PAYLOAD, PlanarModel, CalibrationSchedule, Multisine, NoiseSpec, PaperWrench,
+                                  Payload, integrate)
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "PAPER_S", "TABLE_1", "draw_S", "MAX_SAMPLES"]
 

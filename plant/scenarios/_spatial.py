@@ -29,12 +29,11 @@ import casadi as ca
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._log import MIN_SAMPLES, Log, Truth
-from fmscal.plant.physics._rigid_body import GRAVITY, SpatialPayload, prescribed_motion, quaternion_multiply
-from fmscal.plant.physics._model import SpatialModel
-from fmscal.plant.scenarios._planar import pose_frames
-from fmscal.plant.physics._sensor import CalibrationSchedule, NoiseSpec
+from fmscal.plant.io import MIN_SAMPLES, Log, Truth
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import (GRAVITY, SpatialModel, CalibrationSchedule, NoiseSpec, SpatialPayload,
+                                  prescribed_motion, quaternion_multiply)
+from ._planar import pose_frames
 
 __all__ = ["SpatialScenario", "SPATIAL_SCENARIOS", "TOOL", "draw_spatial_S"]
 
