@@ -35,16 +35,8 @@ import fmscal.observers
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = {"plant": "fmscal.plant", "observers": "fmscal.observers", "analysis": "fmscal.analysis"}
 
-# Files another engineer is rewriting (the library's calibrate for every log): their imports are theirs to
-# fix; this list is emptied when that work is merged. Each entry: the file, and why it is here.
-ALLOWED = {
-    "analysis/_calibrate.py": "being rewritten (calibrate for every log): private imports of diagnostics, "
-                              "batch, numerics and io",
-    "analysis/cli/_calibration.py": "being rewritten: function-level imports, io._log._as_path",
-    "analysis/cli/_spatial.py": "being rewritten: function-level imports of private modules",
-    "analysis/cli/_payload.py": "being rewritten: physics._rigid_body._inertia_matrix, function-level imports",
-    "plant/io/_calibration.py": "being rewritten: absolute imports of io's and physics' private modules",
-}
+# Files excused from the rules, each with why: none.
+ALLOWED = {}
 
 MAX_PUBLIC_MODULES = 10
 MAX_OBSERVERS_ALL = 40

@@ -7,14 +7,20 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.analysis.cli._common import CliError, positive
-from fmscal.analysis.cli._files import atomic_write_text, check_outputs
-from fmscal.analysis.cli._spatial import spatial_payload
+from fmscal.plant import Calibration, Payload, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
+from fmscal.plant.io import AttitudeLog, PoseTable, reading_sign
+
+from fmscal.observers import method_names
+from fmscal.observers.payload import PayloadEstimate
+
+from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, read_data
+from .._plots import plot_calibration
+from ._common import CliError, positive
+from ._files import atomic_write_text, check_outputs
+from ._spatial import print_spatial, spatial_payload
 
 
 def add_calibrate(sub):
-    from fmscal.observers import method_names
-    from fmscal.analysis._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD
     p = sub.add_parser("calibrate", help="estimate S from a recorded log",
                        description="Estimate the calibration matrix S from a log and the payload's mass "
                                    "properties: planar (t,theta,x,y,M,fx,fy; rad, m, N m, N) or spatial "
@@ -42,7 +48,6 @@ def add_calibrate(sub):
                    help="spatial logs and tables: the reading's sign, reaction (default, the wrench the mount "
                         "applies to the payload) or load (the wrench the tool applies to the sensor, as ATI, "
                         "Robotiq, Bota and OnRobot report); recorded in the saved calibration")
-    from fmscal.plant import SPATIAL_SCENARIOS       # the methods that run on a spatial log: on a spatial payload's
     spatial_methods = method_names(calibrates=True, model=next(iter(SPATIAL_SCENARIOS.values())).payload)
     p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
                    help=f"the method (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at the information "
@@ -84,9 +89,6 @@ def cmd_calibrate(args):
     """``fmscal calibrate``: :func:`fmscal.analysis.calibrate` on the file, its report printed, saved on request."""
     from dataclasses import replace
 
-    from fmscal.analysis import OptionError, calibrate, read_data
-    from fmscal.plant import file_sha256, read_truth
-    from fmscal.plant.io import AttitudeLog, PoseTable
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
     if args.plot and not args.plot.endswith(".png"):
@@ -135,8 +137,6 @@ _FLAGS = {"method": "--observer", "offset=False": "--no-offset", "pose_noise": "
 
 def _payload(args, data, table):
     """The payload: ``--payload PAYLOAD.json``, or ``--mass``, ``--rho`` and ``--inertia`` in ``data``'s case."""
-    from fmscal.observers.payload import PayloadEstimate
-    from fmscal.plant import Payload
     flags = [name for name, value in (("--mass", args.mass), ("--rho", args.rho), ("--inertia", args.inertia))
              if value is not None]
     if args.payload is not None:
@@ -177,9 +177,6 @@ def _plot(args, log, cal, truth):
     """``--plot``: each entry of ``S_hat`` against time with its band, and the pose residual, on the aligned log."""
     import copy
 
-    from fmscal.analysis._plots import plot_calibration
-    from fmscal.plant import SpatialModel
-    from fmscal.plant.io import reading_sign
     title = f"{Path(args.log).name}: entries of S_hat ({cal.method}) and the pose residual"
     if cal.kind == "planar":
         plot_calibration(cal.run, log.shift_poses(cal.latency), args.plot, title, truth)
@@ -197,9 +194,7 @@ def _print_calibration(args, data, cal, saved):
         out[key] = None if getattr(cal, key) is None else getattr(cal, key).tolist()
     name = Path(args.log).name
     if cal.kind != "planar":
-        from fmscal.analysis.cli._spatial import print_spatial
         if cal.kind == "table":
-            from fmscal.plant.io import AttitudeLog
             what = ("attitude-only log, its held segments" if isinstance(data, AttitudeLog)
                     else "table of joint angles" if args.urdf else "pose table")
             summary = (f"{name}: {what}, {cal.poses} held poses; method {cal.method} (S = I where the poses say "
@@ -252,7 +247,6 @@ def add_apply(sub):
 
 
 def cmd_apply(args):
-    from fmscal.plant import Calibration, Payload, read_readings
     given = [v is not None for v in (args.mass, args.inertia, args.rho)]
     if any(given) and not all(given):
         raise CliError("give all of --mass, --inertia and --rho to check the payload, or none")

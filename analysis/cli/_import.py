@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant.io import RobotKinematics, atomic_write_many, format_report, import_bag
+from fmscal.plant.physics import PlanarModel, SpatialModel
 
 from ._common import CliError, strict
 from ._files import check_outputs
@@ -74,7 +75,6 @@ def cmd_import(args):
         if args.pose_offset is not None:
             raise CliError("--pose-offset is not taken with --urdf: name the sensor's own frame with --frame")
         kinematics, args.spatial = RobotKinematics(args.urdf, args.frame), True
-    from fmscal.plant.physics._model import PlanarModel, SpatialModel
     # what --spatial (which --urdf and --parent set) makes of the import: the model of the log it writes, whose
     # pose's position columns are --pose-offset's entries, and how a message names the choice
     model, flag = {False: (PlanarModel, ""), True: (SpatialModel, " with --spatial")}[bool(args.spatial)]

@@ -254,7 +254,6 @@ def _add_compare(sub):
                        description="Run every observer on the same simulated logs (same data, same "
                                    "initial S_hat) over scenarios and seeds; print the table of E, "
                                    "convergence time and cost. Scenarios: " + ", ".join(SCENARIOS))
-    from fmscal.plant import SPATIAL_SCENARIOS
     p.epilog = ("The spatial scenarios too: " + ", ".join(SPATIAL_SCENARIOS) + " (a method that does not run in 3D, "
                 "as the paper's observer, is reported not applicable there).")
     add_scenarios_and_observers(p, METHODS)

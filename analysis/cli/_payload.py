@@ -18,11 +18,16 @@ import sys
 
 import numpy as np
 
-from fmscal.plant.physics import inertia_matrix
+from fmscal.plant import Calibration
+from fmscal.plant.io import AttitudeLog, PoseTable, held_table
+from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, inertia_matrix
 
-from fmscal.analysis.cli._common import CliError, strict
-from fmscal.analysis.cli._files import check_outputs
-from fmscal.analysis.cli._spatial import _NAMES, _spatial_truth
+from fmscal.observers.payload import fit_static, identify_payload
+
+from .._calibrate import OptionError, read_data
+from ._common import CliError, strict
+from ._files import check_outputs
+from ._spatial import _NAMES, _spatial_truth
 
 __all__ = ["add_identify_payload", "cmd_identify_payload"]
 
@@ -64,7 +69,6 @@ def add_identify_payload(sub):
 
 def _gravity(args):
     """``(gravity, estimate)`` from ``--gravity``: three numbers, or ``estimate`` (the default's size, 9.81)."""
-    from fmscal.plant.physics._rigid_body import GRAVITY
     given = args.gravity
     if given is None:
         return GRAVITY, False
@@ -86,7 +90,6 @@ def _calibration_S(args):
     The reading's sign is the one the file recorded; ``--reading`` may repeat
     it, not contradict it (the sign is the sensor's, and ``S`` was fitted to it).
     """
-    from fmscal.plant import Calibration
     path = args.calibration
     if not path:
         args.reading = args.reading or "reaction"
@@ -105,8 +108,6 @@ def _calibration_S(args):
 
 def cmd_identify_payload(args):
     """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log or a pose table."""
-    from fmscal.analysis import OptionError, read_data
-    from fmscal.plant.io import AttitudeLog, PoseTable, held_table
     if args.save is not None and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
     check_outputs([(args.save, "--save")], [(args.log, "the log"), (args.calibration, "the --calibration file"),
@@ -131,7 +132,6 @@ def cmd_identify_payload(args):
 
 
 def _identify_log(args, log, S, gravity, estimate_gravity):
-    from fmscal.observers.payload._payload_fit import INERTIA_NAMES, identify_payload
     if log.kind != "spatial":
         raise CliError(f"{log.name} is a planar log; identify-payload takes a spatial log "
                        "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) or a pose table")
@@ -222,7 +222,6 @@ def _print_calibrate_flags(fit, table=False):
 
 
 def _identify_table(args, table, S, gravity, estimate_gravity):
-    from fmscal.observers.payload._static_fit import fit_static
     if args.truth:
         raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
     fit = fit_static(table, S=S, gravity=gravity, estimate_gravity=estimate_gravity,

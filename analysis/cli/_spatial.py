@@ -8,7 +8,9 @@ take); this module prints its report (:func:`print_spatial`).
 
 import numpy as np
 
-from fmscal.analysis.cli._common import CliError, positive
+from fmscal.plant import SpatialPayload, read_truth
+
+from ._common import CliError, positive
 
 __all__ = ["spatial_payload", "print_spatial"]
 _NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
@@ -16,7 +18,6 @@ _NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 
 def spatial_payload(mass, rho, inertia):
     """The payload from ``--mass``, ``--rho X Y Z`` and ``--inertia IXX IYY IZZ IXY IXZ IYZ``, or a one-line error."""
-    from fmscal.plant import SpatialPayload
     if rho is None or inertia is None or len(rho) != 3 or len(inertia) != 6:
         raise CliError(f"a spatial log takes --rho X Y Z (3 numbers, m) and --inertia IXX IYY IZZ IXY IXZ IYZ "
                        f"(6 numbers, kg m^2, about the centre of mass, sensor axes); got {len(rho or ())} and "
@@ -26,7 +27,6 @@ def spatial_payload(mass, rho, inertia):
 
 def _spatial_truth(path):
     """The truth sidecar at ``path`` (None without one), refused if it is a planar log's."""
-    from fmscal.plant import read_truth
     truth = read_truth(path) if path else None
     if truth is not None and truth.schedule.size != 6:
         raise CliError(f"{path} is the truth of a planar log; this log is spatial")

@@ -52,11 +52,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics._errors import FmscalError
-from fmscal.plant.io._files import atomic_write_text, not_a_file
-from fmscal.plant.physics._payload import Payload
-from fmscal.plant.physics._rigid_body import SpatialPayload
-from fmscal.plant.physics._sensor import NoiseSpec, check_calibration
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import NoiseSpec, Payload, SpatialPayload, check_calibration
+
+from ._files import atomic_write_text, not_a_file
 
 __all__ = ["Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "FORMAT", "FORMATS", "READINGS",
            "KINDS"]
