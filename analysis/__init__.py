@@ -14,9 +14,9 @@ from ._calibrate import (DEFAULT_MAX_LATENCY, DEFAULT_METHOD, TABLE_METHOD, Dive
                          read_data)
 from ._comparison import compare, summarise, summary_markdown
 from ._sweep import sweep
-from ._reproduce import reproduce
+from ._reproduce import PAPER_CLAIMS, reproduce
 from ._ablation import ablation
-from ._sensitivity import sensitivity, tolerable_error
+from ._sensitivity import PARAMETERS, sensitivity, tolerable_error
 from ._bench import BenchSettings, run_bench
 from ._plots import plot_S_entries, plot_calibration, plot_comparison, plot_error_histories
 
