@@ -71,13 +71,13 @@ def test_default_tracks_the_table_1_steps():
 
 def test_gain_checks_give_the_poles_of_reading_md():
     report = check_gains(PAPER_K1, PAPER_K2)
-    np.testing.assert_allclose(sorted(report["angular"]["poles"].real), [-23.96, -1.04], atol=0.01)
-    trans = np.sort_complex(report["translational"]["poles"])
+    np.testing.assert_allclose(sorted(report.angular.poles.real), [-23.96, -1.04], atol=0.01)
+    trans = np.sort_complex(report.translational.poles)
     np.testing.assert_allclose(trans, [-14.73, -2.09 - 1.84j, -2.09 + 1.84j, -1.10], atol=0.01)
-    assert report["angular"]["observable"] and report["translational"]["observable"]
-    np.testing.assert_allclose(report["angular"]["sym_eigs"], [-29.8, 4.83], atol=0.05)
-    assert not report["angular"]["assumption_2_holds"]
-    assert not report["translational"]["assumption_2_holds"]
+    assert report.angular.observable and report.translational.observable
+    np.testing.assert_allclose(report.angular.sym_eigs, [-29.8, 4.83], atol=0.05)
+    assert not report.angular.assumption_2_holds
+    assert not report.translational.assumption_2_holds
     assert "does NOT hold" in str(report)
 
 

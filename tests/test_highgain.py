@@ -17,8 +17,8 @@ def test_poles_sit_at_minus_lam_and_scale_with_it(lam):
     obs = HighGainObserver(plant.PAPER_PAYLOAD, lam=lam)
     report = check_gains(obs.K1, obs.K2)          # python-control: poles of A - K C, obsv
     for sub in ("angular", "translational"):
-        np.testing.assert_allclose(report[sub]["poles"].real, -lam, rtol=1e-6)
-        assert report[sub]["observable"] and report[sub]["stable"]
+        np.testing.assert_allclose(getattr(report, sub).poles.real, -lam, rtol=1e-6)
+        assert getattr(report, sub).observable and getattr(report, sub).stable
     # the sampled error recursion (I - L C) Phi has the sampled images of those poles
     dt = 1e-3
     l1, l2 = discrete_gain(np, lam, dt)

@@ -178,11 +178,7 @@ def cmd_check_gains(args):
         obs = HighGainObserver(PAPER_PAYLOAD, lam=positive(args.lam, "--lam"))
     report = check_gains(obs.K1, obs.K2)
     if args.json:
-        print(json.dumps({k: {"poles": [[complex(p).real, complex(p).imag] for p in v["poles"]],
-                              "observable": v["observable"], "stable": v["stable"],
-                              "sym_eigs": v["sym_eigs"].tolist(),
-                              "assumption_2_holds": v["assumption_2_holds"]}
-                          for k, v in report.items()}, indent=2))
+        print(json.dumps(report.to_json(), indent=2))
     else:
         print(f"gains of the {obs.name} configuration")
         print(report)

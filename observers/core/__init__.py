@@ -10,14 +10,14 @@ from ._samples import (check_sample, pack_input)
 from ._state import (StateLayout, INPUT)
 from ._discretise import (position_increment, velocity_increment, move)
 from ._progress import (progress_bar, MIN_SAMPLES, EVERY)
-from ._gains import (double_pole_gains, check_gains, GainReport, sampled_poles)
+from ._gains import (double_pole_gains, check_gains, GainReport, SubsystemGains, sampled_poles)
 from ._base import (Observer, RecursiveObserver, Estimate, RunData, log_inputs, MAX_S0, ENGINES)
 # The small matrix helpers every method's step uses (``mx.col``, ``mx.flat``, ...), by their module's public
 # name for the other subpackages (``from fmscal.observers.core import matrix as mx``); not in __all__: plumbing.
 from . import _matrix as matrix
 
 __all__ = ["settled", "moved", "informed", "divergence_bound", "ObserverResult", "initial_calibration",
-           "split_calibration", "calibration_uncertainty", "offset_from_c", "offset_std", "check_sample",
-           "pack_input", "position_increment", "velocity_increment", "move", "progress_bar",
-           "double_pole_gains", "check_gains", "GainReport", "sampled_poles", "Observer", "RecursiveObserver",
-           "Estimate", "RunData", "log_inputs"]
+           "split_calibration", "calibration_uncertainty", "offset_from_c", "offset_std", "check_sample", "pack_input",
+           "position_increment", "velocity_increment", "move", "progress_bar", "double_pole_gains", "check_gains",
+           "GainReport", "SubsystemGains", "sampled_poles", "Observer", "RecursiveObserver", "Estimate", "RunData",
+           "log_inputs"]

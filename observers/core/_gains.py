@@ -1,11 +1,13 @@
 """Gain checks on python-control: poles of A - K C, observability, Lyapunov P."""
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from fmscal.plant import A_1, A_2, C_1, C_2
 from fmscal.plant.numerics import as_finite_array, as_positive_scalar
 
-__all__ = ["double_pole_gains", "check_gains", "GainReport", "sampled_poles"]
+__all__ = ["double_pole_gains", "check_gains", "GainReport", "SubsystemGains", "sampled_poles"]
 
 
 def double_pole_gains(lam):
@@ -34,23 +36,74 @@ def double_pole_gains(lam):
     return K1, K2
 
 
-class GainReport(dict):
-    """The result of :func:`check_gains`: a dict with a readable ``str``."""
+@dataclass(frozen=True)
+class SubsystemGains:
+    """The gains of one subsystem (eq. (6): the angle; eq. (7): the position), as :func:`check_gains` finds them.
+
+    Attributes
+    ----------
+    poles : ndarray
+        The poles of ``A - K C``, sorted by real then imaginary part.
+    n : int
+        The subsystem's state size.
+    obsv_rank : int
+        The rank of ``obsv(A, C)``.
+    observable, stable : bool
+        Full rank; every pole in the open left half-plane.
+    sym_eigs : ndarray
+        The eigenvalues of the symmetric part of ``A - K C``.
+    assumption_2_holds : bool
+        Theorem 1's assumption 2 with ``P = I``: every ``sym_eigs`` negative (``V_1 = e'e/2`` decreasing).
+    P : ndarray or None
+        The Lyapunov ``P`` of ``(A-KC)' P + P (A-KC) = -I`` (None where ``A - K C`` is not stable).
+    """
+
+    poles: np.ndarray
+    n: int
+    obsv_rank: int
+    observable: bool
+    stable: bool
+    sym_eigs: np.ndarray
+    assumption_2_holds: bool
+    P: np.ndarray = None
+
+    def to_json(self):
+        """The subsystem as JSON-ready values (``fmscal check-gains --json``): poles as ``[re, im]`` pairs."""
+        return {"poles": [[complex(p).real, complex(p).imag] for p in self.poles], "observable": self.observable,
+                "stable": self.stable, "sym_eigs": self.sym_eigs.tolist(),
+                "assumption_2_holds": self.assumption_2_holds}
+
+
+@dataclass(frozen=True)
+class GainReport:
+    """What :func:`check_gains` returns: the angular subsystem (eq. (6)) and the translational one (eq. (7)).
+
+    Attributes
+    ----------
+    angular, translational : SubsystemGains
+    """
+
+    angular: SubsystemGains
+    translational: SubsystemGains
+
+    def to_json(self):
+        """Both subsystems as JSON-ready values (``fmscal check-gains --json``)."""
+        return {"angular": self.angular.to_json(), "translational": self.translational.to_json()}
 
     def __str__(self):
         lines = []
         for key in ("angular", "translational"):
-            r = self[key]
+            r = getattr(self, key)
             lines.append(f"{key} subsystem, eq. ({'6' if key == 'angular' else '7'}):")
-            lines.append(f"  poles of A - K C: {_fmt(r['poles'])}")
-            lines.append(f"  observable (rank of obsv(A, C) = {r['obsv_rank']} of {r['n']}): "
-                         f"{'yes' if r['observable'] else 'no'}")
-            lines.append(f"  stable: {'yes' if r['stable'] else 'no'}")
-            lines.append(f"  eigenvalues of the symmetric part of A - K C: {_fmt(r['sym_eigs'])}")
+            lines.append(f"  poles of A - K C: {_fmt(r.poles)}")
+            lines.append(f"  observable (rank of obsv(A, C) = {r.obsv_rank} of {r.n}): "
+                         f"{'yes' if r.observable else 'no'}")
+            lines.append(f"  stable: {'yes' if r.stable else 'no'}")
+            lines.append(f"  eigenvalues of the symmetric part of A - K C: {_fmt(r.sym_eigs)}")
             lines.append(f"  assumption 2 of Theorem 1 with P = I (V_1 = e'e/2 decreasing): "
-                         f"{'holds' if r['assumption_2_holds'] else 'does NOT hold'}")
-            if r["P"] is not None:
-                eigenvalues = _fmt(np.linalg.eigvalsh(r["P"]))
+                         f"{'holds' if r.assumption_2_holds else 'does NOT hold'}")
+            if r.P is not None:
+                eigenvalues = _fmt(np.linalg.eigvalsh(r.P))
                 lines.append(f"  Lyapunov P of (A-KC)' P + P (A-KC) = -I: eigenvalues {eigenvalues}")
         return "\n".join(lines)
 
@@ -69,9 +122,8 @@ def _check(A, C, K):
     stable = bool(np.all(poles.real < 0))
     sym_eigs = np.linalg.eigvalsh(F + F.T) / 2
     P = control.lyap(F.T, np.eye(len(A))) if stable else None
-    return {"poles": poles, "n": len(A), "obsv_rank": rank, "observable": rank == len(A),
-            "stable": stable, "sym_eigs": sym_eigs,
-            "assumption_2_holds": bool(np.all(sym_eigs < 0)), "P": P}
+    return SubsystemGains(poles=poles, n=len(A), obsv_rank=rank, observable=rank == len(A), stable=stable,
+                          sym_eigs=sym_eigs, assumption_2_holds=bool(np.all(sym_eigs < 0)), P=P)
 
 
 def check_gains(K1, K2):
