@@ -50,6 +50,13 @@ class Method:
         One line on what it is.
     paper_claim : float or None
         E at 100 s that the paper claims for this method (section 4), where it claims one.
+
+    Examples
+    --------
+    >>> from fmscal.observers import METHODS, Method
+    >>> method = METHODS["ekf"]
+    >>> isinstance(method, Method), method.online, method.label
+    (True, True, 'ekf (after [3])')
     """
 
     name: str
@@ -210,6 +217,16 @@ def get_method(name):
     ------
     FmscalError
         No such method; the message lists the names.
+
+    Examples
+    --------
+    >>> from fmscal.observers import get_method
+    >>> get_method("max-likelihood").cls.__name__
+    'MaximumLikelihood'
+    >>> get_method("kalman")
+    Traceback (most recent call last):
+        ...
+    fmscal.plant...FmscalError: unknown observer 'kalman'; expected one of adaptive, ...
     """
     try:
         return METHODS[name]
@@ -233,6 +250,16 @@ def make_observer(name, model, noise=None, settings=None):
     Returns
     -------
     observers.Observer
+
+    Examples
+    --------
+    >>> from fmscal.plant import PAPER_PAYLOAD, SPATIAL_SCENARIOS
+    >>> from fmscal.observers import make_observer
+    >>> type(make_observer("ekf", PAPER_PAYLOAD)).__name__             # the method, with its documented defaults
+    'AugmentedEKF'
+    >>> model = SPATIAL_SCENARIOS["spatial-arm"].model()
+    >>> type(make_observer("ekf", model)).__name__                     # the engine the model's declarations pick
+    'ErrorStateEKF'
     """
     return get_method(name).build(model, noise, settings)
 
@@ -252,6 +279,14 @@ def method_names(role=None, online=None, calibrates=None, model=None):
     Returns
     -------
     tuple of str
+
+    Examples
+    --------
+    >>> from fmscal.observers import method_names
+    >>> method_names(calibrates=True)[:2]
+    ('adaptive', 'high-gain')
+    >>> "max-likelihood" in method_names(calibrates=True)
+    True
     """
     roles = (role,) if isinstance(role, str) else role
     return tuple(m.name for m in METHODS.values()
@@ -261,6 +296,13 @@ def method_names(role=None, online=None, calibrates=None, model=None):
 
 
 def method_label(name):
-    """How tables and figures show a method: its :attr:`Method.label` (``name`` itself if unregistered)."""
+    """How tables and figures show a method: its :attr:`Method.label` (``name`` itself if unregistered).
+
+    Examples
+    --------
+    >>> from fmscal.observers import method_label
+    >>> method_label("max-likelihood")
+    'max-likelihood (the floor)'
+    """
     method = METHODS.get(name)
     return name if method is None else method.label

@@ -79,6 +79,17 @@ class LeastSquares(Observer):
     ----------
     report : FitReport
         Diagnostics of the last :meth:`run`.
+
+    Examples
+    --------
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
+    >>> log, truth, _ = get_scenario("paper").with_(duration=2.0).generate(0)
+    >>> from fmscal.observers import LeastSquares
+    >>> result = LeastSquares(PAPER_PAYLOAD, offset=True).run(log)     # S, its uncertainty and the offset b
+    >>> result.S_hat.shape, result.b.shape
+    ((3, 3), (3,))
+    >>> result.converged in (True, False)              # with its own checks: excitation and consistency
+    True
     """
 
     name = "least-squares"

@@ -38,6 +38,14 @@ def settled(S_history, fraction=SETTLE_FRACTION, tolerance=SETTLE_TOLERANCE):
     Returns
     -------
     bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from fmscal.observers import settled
+    >>> still = np.tile(np.eye(3), (100, 1, 1))
+    >>> settled(still), settled(still * np.linspace(0.5, 1.0, 100)[:, None, None])
+    (True, False)
     """
     n = len(S_history)
     tail = S_history[int(n * (1 - fraction)):]

@@ -27,6 +27,15 @@ def double_pole_gains(lam):
         For the angular observer, eq. (6).
     K2 : ndarray, shape (4, 2)
         For the translational observer, eq. (7), decoupled in X and Y.
+
+    Examples
+    --------
+    >>> from fmscal.observers import check_gains, double_pole_gains
+    >>> K1, K2 = double_pole_gains(5.0)
+    >>> K1.ravel().tolist()
+    [10.0, 25.0]
+    >>> check_gains(K1, K2).angular.poles.real.round(6).tolist()
+    [-5.0, -5.0]
     """
     lam = as_positive_scalar(lam, "lam")
     K1 = np.array([[2 * lam], [lam ** 2]])
@@ -146,10 +155,12 @@ def check_gains(K1, K2):
 
     Examples
     --------
-    >>> from fmscal.observers.adaptive._adaptive import PAPER_K1, PAPER_K2
-    >>> report = check_gains(PAPER_K1, PAPER_K2)
-    >>> bool(report["angular"]["assumption_2_holds"])
-    False
+    >>> from fmscal.plant import PAPER_PAYLOAD
+    >>> from fmscal.observers import PaperAdaptiveObserver, check_gains
+    >>> paper = PaperAdaptiveObserver(PAPER_PAYLOAD)
+    >>> report = check_gains(paper.K1, paper.K2)          # the paper's eq. (14) gains
+    >>> report.angular.stable, report.angular.assumption_2_holds
+    (True, False)
     """
     K1 = as_finite_array(K1, (2, 1), "K1")
     K2 = as_finite_array(K2, (4, 2), "K2")

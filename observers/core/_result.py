@@ -66,6 +66,17 @@ class ObserverResult:
         Covariance of the final estimate's entries ``[S | c]`` flat in row
         order (``k = n_w (n_w + 1)``; ``n_w^2``, ``S`` alone, without the
         offset), where the method has one and did not diverge.
+
+    Examples
+    --------
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
+    >>> log, truth, _ = get_scenario("paper").with_(duration=2.0).generate(0)
+    >>> from fmscal.observers import LeastSquares
+    >>> result = LeastSquares(PAPER_PAYLOAD, offset=True).run(log)
+    >>> result.observer, result.S_hat.shape, result.S_std.shape, result.b.shape
+    ('least-squares', (3, 3), (3, 3), (3,))
+    >>> len(result.S_hat_history) == len(log)
+    True
     """
 
     observer: str

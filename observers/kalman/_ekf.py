@@ -186,6 +186,17 @@ class AugmentedEKF(Observer):
     ----------
     level : observers.kalman.NoiseLevel or None
         The adjustable random-walk intensity (None with ``adapt_q=False``).
+
+    Examples
+    --------
+    >>> from fmscal.plant import PAPER_PAYLOAD, get_scenario
+    >>> log, truth, _ = get_scenario("paper").with_(duration=2.0).generate(0)
+    >>> from fmscal.plant import NoiseSpec
+    >>> from fmscal.observers import AugmentedEKF
+    >>> ekf = AugmentedEKF(PAPER_PAYLOAD, noise=NoiseSpec((0.05, 0.5, 0.5), 1e-3, 1e-4))
+    >>> result = ekf.run(log)
+    >>> result.S_hat.shape, result.S_std.shape, result.diverged
+    ((3, 3), (3, 3), False)
     """
 
     name = "ekf"

@@ -31,7 +31,7 @@ class StateLayout:
     >>> layout.size
     16
     >>> z = layout.pack(None, x=np.zeros(6), S=np.eye(3).ravel(), t=0.5)
-    >>> layout.unpack(z).t
+    >>> float(layout.unpack(z).t)
     0.5
     """
 
