@@ -206,3 +206,11 @@ def test_a_log_turned_about_one_axis_names_its_narrow_cone_and_a_pose_that_helps
     after = identify_payload(_about_x(Rotation.from_matrix(R).as_euler("ZYX")).generate(0)[0])
     assert _worst(after) < 0.5 * _worst(before), (words, _worst(before), _worst(after))
     assert after.cone_deg > 90.0 and before.to_dict()["next_poses"] == before.next_poses
+
+
+@pytest.mark.parametrize("flag", ["estimate_gravity", "estimate_mounting"])
+def test_a_flag_given_as_text_is_refused_before_any_work(flag):
+    # "no" is a true Python value: refused at the boundary, before any fitting
+    log, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=2.0).generate(0)[:2]
+    with pytest.raises(FmscalError, match=f"^{flag} must be True or False; got 'no'"):
+        identify_payload(log, **{flag: "no"})

@@ -250,3 +250,13 @@ def test_a_weak_direction_of_one_parameter_reads_in_the_singular():
     assert describe(names, np.array([0.0, 0.0, 0.0, 1.0])).startswith("the centre of mass along z is not determined")
     assert describe(names, np.array([0.7, 0.0, 0.7, 0.0])).startswith(
         "the mass and the centre of mass along y are not separated")
+
+
+@pytest.mark.parametrize("flag", ["estimate_gravity", "estimate_mounting"])
+@pytest.mark.parametrize("text", ["False", "no", 0])
+def test_a_flag_given_as_text_or_a_number_is_refused_not_taken_as_true(flag, text):
+    # "False" is a true Python value: taken as given, it would fit gravity or the mounting unasked
+    table = simulate_table(TOOL, n=12, seed=0, offset=OFFSET)
+    with pytest.raises(FmscalError, match=f"^{flag} must be True or False; got"):
+        fit_static(table, **{flag: text})
+    assert fit_static(table, **{flag: False}).converged         # a boolean is taken

@@ -35,7 +35,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fmscal.plant.io import reading_sign
-from fmscal.plant.numerics import FmscalError, as_finite_array, as_positive_scalar
+from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array, as_positive_scalar
 from fmscal.plant.physics import (GRAVITY, INERTIA_NAMES, SpatialPayload, check_calibration, edge, regressor,
                                   rotation_matrix, skew, spatial_motion)
 
@@ -92,6 +92,8 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
         The log does not determine the mass, or its mass comes out negative
         (the reading follows the other sign convention: the message names the flag).
     """
+    estimate_gravity = as_bool(estimate_gravity, "estimate_gravity")       # text ("False") is refused, not true
+    estimate_mounting = as_bool(estimate_mounting, "estimate_mounting")
     sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     gravity = as_finite_array(gravity, (3,), "gravity")

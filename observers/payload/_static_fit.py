@@ -42,7 +42,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fmscal.plant.io import PoseTable, reading_sign
-from fmscal.plant.numerics import FmscalError, as_finite_array
+from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
 from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
 from fmscal.observers.batch import InverseDynamicsFit, fit_readings
@@ -281,6 +281,8 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     """
     if not isinstance(table, PoseTable):
         raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
+    estimate_gravity = as_bool(estimate_gravity, "estimate_gravity")       # text ("False") is refused, not true
+    estimate_mounting = as_bool(estimate_mounting, "estimate_mounting")
     sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     g = as_finite_array(gravity, (3,), "gravity")
