@@ -224,3 +224,16 @@ def test_sampled_wrench_interpolates():
 def test_log_rejects_wrong_shapes():
     with pytest.raises(LogError, match="expected t"):
         Log(np.arange(20.0), np.zeros((20, 2)), np.zeros((20, 3)))
+
+
+def test_rows_before_the_first_pose_are_dropped_with_a_note():
+    # a recording starts with readings before the tracker's first pose: the log starts at that pose
+    log, _, _ = get_scenario("paper").with_(duration=2.0).generate(0)
+    pose = log.pose.copy()
+    pose[:5] = np.nan
+    trimmed = Log(log.t, pose, log.w_hat, name="late.csv")
+    assert len(trimmed) == len(log) - 5 and trimmed.t[0] == log.t[5] and trimmed.has_pose[0]
+    np.testing.assert_array_equal(trimmed.w_hat, log.w_hat[5:])
+    assert trimmed.notes == [f"late.csv: the first 5 row(s) come before the first pose (at t = {log.t[5]:g} s) "
+                             "and were dropped: the log starts at its first pose"]
+    assert Log(log.t, log.pose, log.w_hat).notes == []          # a log that starts with a pose keeps every row

@@ -97,7 +97,8 @@ class Log:
     has_pose : ndarray of bool, shape (N,)
         True where the pose was measured.
     notes : list of str
-        What was done to the data on reading it: a ``theta`` wrapped into
+        What was done to the data on reading it: rows before the first pose
+        dropped (a recording starts with readings), a ``theta`` wrapped into
         (-pi, pi] or [0, 2 pi) (as vision systems and quaternion-to-yaw conversions give
         it) is unwrapped, a quaternion sequence that flips sign is made
         continuous, and said so here.
@@ -164,11 +165,13 @@ class Log:
         if self.has_pose.sum() < MIN_SAMPLES:
             raise LogError(f"{self.name}: too few pose measurements to calibrate; "
                            f"need at least {MIN_SAMPLES}, got {int(self.has_pose.sum())}")
-        if not self.has_pose[0]:
-            first = int(np.argmax(self.has_pose))
-            raise LogError(f"{self.name}: the first row has no pose; the log must start with a pose "
-                           f"measurement (the first one is at row {first + 1}); drop the rows before it")
         self.notes = []
+        if not self.has_pose[0]:          # a recording starts with readings before its first pose: they are dropped
+            first = int(np.argmax(self.has_pose))
+            self.t, self.pose, self.w_hat, self.has_pose = (a[first:] for a in (self.t, self.pose, self.w_hat,
+                                                                               self.has_pose))
+            self.notes.append(f"{self.name}: the first {first} row(s) come before the first pose (at t = "
+                              f"{self.t[0]:g} s) and were dropped: the log starts at its first pose")
         if self.kind == "planar":
             self._unwrap_theta()
         elif self.kind == "spatial":
