@@ -47,7 +47,7 @@ import numpy as np
 
 from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar
 from fmscal.plant.physics import (QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload, PlanarModel,
-                                  SpatialModel, SpatialPayload, check_calibration, model_for_columns, unit_quaternions)
+                                  SpatialModel, SpatialPayload, check_calibration, unit_quaternions)
 from ._files import atomic_write_text, not_a_file
 
 __all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
@@ -348,14 +348,17 @@ def log_kind(path):
 
 
 def _looks_spatial(path):
-    """True when the file's header names the spatial columns (the planar format otherwise, and its errors)."""
+    """True when the file's header names any column only the spatial format has (the planar format otherwise).
+
+    A header with a spatial column missing is still spatial, so that its error names the missing spatial
+    column rather than the planar format's.
+    """
     with open(path, "rb") as f:
         first = f.readline(4096).decode("utf-8", errors="replace").removeprefix("\ufeff")
-    header = [h.strip() for h in first.split(",")]
-    try:
-        return model_for_columns(header) == "spatial"
-    except FmscalError:
-        return False
+    header = {h.strip() for h in first.split(",")}
+    spatial = {*SpatialModel.pose_names, *SpatialModel.wrench_names}
+    planar = {*PlanarModel.pose_names, *PlanarModel.wrench_names}
+    return bool(header & (spatial - planar))
 
 
 #: Columns of a file of raw readings (``fmscal apply``); a full log has them too.
@@ -465,6 +468,13 @@ def _read_csv(path, required, empty_rule):
                        "save the CSV as UTF-8 (the columns are plain ASCII)") from None
     text = text.removeprefix("\ufeff")       # a byte-order mark some spreadsheets write
     first = text.split("\n", 1)[0].strip()
+    if first.startswith("#"):
+        raise LogError(f"{path.name}: line 1 is a comment ({_echo(first[:40])}); the column header must be the "
+                       "first line: delete the comment lines")
+    for name, delimiter in (("semicolons", ";"), ("tabs", "\t")):
+        if "," not in first and first.count(delimiter) >= len(required) - 1:
+            raise LogError(f"{path.name}: the columns are separated by {name}; fmscal reads comma-separated "
+                           f"files (save it with ',' between the cells)")
     header = [h.strip() for h in first.split(",")]
     if len(header) > 2 * len(COLUMNS) + 10 or len(first) > 1000:
         raise LogError(f"{path.name}: the first line is not a CSV header ({len(header)} cells, {len(first)} "

@@ -1,0 +1,58 @@
+"""A log the reader cannot take is refused in one line that names the real cause (issue 37).
+
+A spatial log missing one of its columns names that column (not the planar format's); a file
+separated by semicolons or tabs, or one that opens with a comment line, says so, instead of
+listing every column as missing.
+"""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fmscal.analysis.cli import main
+from fmscal.plant import LogError, SPATIAL_SCENARIOS, read_log
+
+
+@pytest.fixture(scope="module")
+def arm(tmp_path_factory):
+    """A 2 s spatial log written as ``fmscal simulate`` writes one."""
+    folder = tmp_path_factory.mktemp("messages")
+    log, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=2.0).generate(0)[:2]
+    log.write(folder / "arm.csv")
+    return folder, pd.read_csv(folder / "arm.csv")
+
+
+@pytest.mark.parametrize("dropped", ["fz", "qw", "tz"])
+def test_a_missing_spatial_column_is_named(arm, dropped):
+    folder, frame = arm
+    frame.drop(columns=[dropped]).to_csv(folder / f"no_{dropped}.csv", index=False)
+    with pytest.raises(LogError, match=f"^no_{dropped}.csv: missing column\\(s\\) {dropped}; expected the header "
+                                       "t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz "):
+        read_log(folder / f"no_{dropped}.csv")
+
+
+@pytest.mark.parametrize("sep, name", [(";", "semicolons"), ("\t", "tabs")])
+def test_a_file_separated_by_semicolons_or_tabs_says_so(arm, sep, name):
+    folder, frame = arm
+    frame.to_csv(folder / "other.csv", index=False, sep=sep)
+    with pytest.raises(LogError, match=f"^other.csv: the columns are separated by {name}; fmscal reads "
+                                       "comma-separated files"):
+        read_log(folder / "other.csv")
+
+
+def test_a_comment_line_first_says_so_and_the_cli_answers_in_one_line(arm, capsys):
+    folder, _ = arm
+    (folder / "commented.csv").write_text("# recorded on the rig\n" + (folder / "arm.csv").read_text())
+    with pytest.raises(LogError, match="^commented.csv: line 1 is a comment"):
+        read_log(folder / "commented.csv")
+    assert main(["identify-payload", str(folder / "commented.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["fmscal identify-payload: error: commented.csv: line 1 is a comment (# recorded on the rig); "
+                   "the column header must be the first line: delete the comment lines"]
+
+
+def test_the_log_itself_still_reads(arm):
+    folder, frame = arm
+    log = read_log(folder / "arm.csv")
+    assert log.kind == "spatial" and len(log) == len(frame)
+    np.testing.assert_allclose(log.w_hat[:, 5], frame["fz"].to_numpy())
