@@ -213,3 +213,22 @@ def test_bad_arguments_are_fmscal_errors(rig):
         read_bag(bag, WRENCH, POSE, start=5, end=2)
     with pytest.raises(FmscalError, match="window"):
         read_bag(bag, WRENCH, POSE, start=50, end=60)
+
+
+@pytest.mark.parametrize("back_ms", [1, 5, 9])
+def test_a_clock_that_steps_back_a_few_ms_is_counted_and_warned(back_ms):
+    # issue 37: a wrench clock stepping back 1-9 ms sorted silently into "1 duplicate stamps"
+    from fmscal.plant.io._bag import _stream, _warnings
+    step = 1_000_000                                            # 1 kHz, in ns
+    t0 = 1_700_000_000_000_000_000
+    stamps = [t0 + k * step for k in range(1000)]
+    stamps = stamps[:500] + [s - back_ms * step for s in stamps[500:]]     # the clock steps back at message 501
+    messages = [(s, [0.0] * 6) for s in stamps]
+    _, _, _, info = _stream(messages, "wrench", "rig.bag")
+    assert info["overlapping_stamps"] == back_ms and info["first_overlap_ns"] == t0 + 500 * step - back_ms * step
+    reordered = stamps[:500] + [stamps[501], stamps[500]] + stamps[502:]    # transport reordering alone: no overlap
+    assert _stream([(s, [0.0] * 6) for s in sorted(set(reordered))], "wrench", "rig.bag")[3]["overlapping_stamps"] == 0
+    report = {"spatial": True, "resampled": None, "poses_merged": 0, "wrench": info,
+              "pose": {"overlapping_stamps": 0}}
+    (warning,) = _warnings(report)
+    assert warning.startswith(f"the wrench stamps overlap: {back_ms} fall within half a step of another")

@@ -401,8 +401,12 @@ def _stream(messages, role, name):
     order = np.argsort(stamps, kind="stable")
     stamps, values = stamps[order], values[order]
     unique = np.concatenate([[True], np.diff(stamps) > 0])
+    # messages reordered in transport sort back into an even stream; a clock that stepped back leaves stamps
+    # that overlap the ones before the step once sorted: closer than half a step to a neighbour, or the same
+    close = np.flatnonzero(np.diff(stamps) < 0.5 * nominal)
     info = {"messages": int(len(stamps)), "duplicate_stamps": int((~unique).sum()),
-            "out_of_order": int(np.sum(np.diff(order) < 0))}
+            "out_of_order": int(np.sum(np.diff(order) < 0)), "overlapping_stamps": int(len(close)),
+            "first_overlap_ns": int(stamps[close[0] + 1]) if len(close) else None}
     stamps, values = stamps[unique], values[unique]
     if not np.all(np.isfinite(values)):
         raise BagError(f"{name}: a {role} message holds a NaN or infinite value "
@@ -487,6 +491,13 @@ def _warnings(r):
                    f"{r['resampled']['steps_max_s']:.4g} s, {100 * r['resampled']['spread']:.3g} % off the "
                    f"median, more than the log format's {100 * _SAMPLING_TOLERANCE:g} %): resampled to an even "
                    f"step of {r['resampled']['step_s']:.4g} s by linear interpolation")
+    for role in ("wrench", "pose"):
+        stream = r.get(role, {})
+        if stream.get("overlapping_stamps"):
+            out.append(f"the {role} stamps overlap: {stream['overlapping_stamps']} fall within half a step of "
+                       f"another (the first at {_utc(stream['first_overlap_ns'])}): a clock that stepped back, "
+                       f"or a message stamped twice; the samples were sorted by stamp, and those after the step "
+                       f"may be shifted against the other stream")
     if r["poses_merged"]:
         out.append(f"{r['poses_merged']} pose(s) fell on a wrench sample already holding a nearer pose and "
                    "were left out (poses faster than the sensor?)")
