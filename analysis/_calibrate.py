@@ -200,9 +200,17 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         method's estimate agrees with the least-squares fit (within
         :data:`AGREEMENT_SIGMAS` standard deviations or an E of
         :data:`AGREEMENT_E`). On a spatial log: the method's flag, no
-        saturation, and a positive force gain (``trace S_ff > 0``: else the
-        reading follows the other sign convention). Held poses: never. Each
-        failure adds a warning that names it.
+        saturation, the log pins ``S`` down for a method that gives no
+        ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
+        run judged settling alone), and a positive force gain (``trace S_ff >
+        0``: else the reading follows the other sign convention). Held poses:
+        never. Each failure adds a warning that names it.
+
+        A log's steps are chosen by what its model declares
+        (:class:`fmscal.plant.Model`: the options it takes, ``under_gravity``,
+        ``signed_reading``, ``given_noise``, ``optional_offset``, and its
+        ``calibration_checks``, each documented in this module), not by the
+        case's name or class.
 
     Raises
     ------
