@@ -338,8 +338,12 @@ def _log_payload_model(cls, payload, gravity):
     where ``cls`` is :attr:`~fmscal.plant.Model.under_gravity` (a model given brings its own).
     """
     what = f"a {cls.name} log"
+    refusal = (f"{what} takes a plant.{cls.payload_type.__name__} (or a plant.{cls.__name__}); got "
+               f"{type(payload).__name__}")
     given = payload
-    if isinstance(payload, PayloadEstimate):
+    if isinstance(payload, PayloadEstimate):       # a payload weighed under gravity, in the tracked frame's axes
+        if not cls.under_gravity:
+            raise FmscalError(refusal)
         _, _, estimated_payload, estimated = _estimate_payload(payload)
         if estimated_payload is None:
             raise FmscalError(f"{what} needs the payload's inertia, which the payload estimate does not hold; "
@@ -351,8 +355,7 @@ def _log_payload_model(cls, payload, gravity):
     except FmscalError:
         model = None
     if model is None or (model.pose_names, model.wrench_names) != (cls.pose_names, cls.wrench_names):
-        raise FmscalError(f"{what} takes a plant.{cls.payload_type.__name__} (or a plant.{cls.__name__}); got "
-                          f"{type(payload).__name__}")
+        raise FmscalError(refusal)
     if not cls.under_gravity:
         if gravity is not None:
             raise OptionError("gravity", "{} is for spatial logs; a planar log moves in a plane with no gravity in "
