@@ -9,6 +9,7 @@ its diagnostics, ready to ``save``.
 
 import copy
 import os
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,17 +17,17 @@ import numpy as np
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import describe_direction, estimate_latency
 from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE
-from fmscal.observers.diagnostics import consistency_check, offset_drift, saturation
+from fmscal.observers.diagnostics import consistency_check, has_evidence, offset_drift, saturation
 from fmscal.observers.payload import PayloadEstimate, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
-from fmscal.plant import (Calibration, FmscalError, Log, NoiseSpec, Payload, PlanarModel, SingularCalibrationError,
-                          SpatialModel, SpatialPayload, Truth, estimate_noise, read_log, read_truth)
+from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
+                          Truth, estimate_noise, read_log, read_truth)
 from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, diagnose_units, held_table,
                              is_attitude_log, is_pose_table, not_a_file, read_attitude_log, read_joint_data,
                              read_pose_table, reading_sign)
-from fmscal.plant.physics import GRAVITY
+from fmscal.plant.physics import GRAVITY, MODELS, as_model
 
-from ._metrics import block_errors, calibration_error
+from ._metrics import calibration_error
 
 __all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "TABLE_METHOD", "calibrate", "read_data", "DivergedError",
            "OptionError"]
@@ -199,9 +200,17 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         method's estimate agrees with the least-squares fit (within
         :data:`AGREEMENT_SIGMAS` standard deviations or an E of
         :data:`AGREEMENT_E`). On a spatial log: the method's flag, no
-        saturation, and a positive force gain (``trace S_ff > 0``: else the
-        reading follows the other sign convention). Held poses: never. Each
-        failure adds a warning that names it.
+        saturation, the log pins ``S`` down for a method that gives no
+        ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
+        run judged settling alone), and a positive force gain (``trace S_ff >
+        0``: else the reading follows the other sign convention). Held poses:
+        never. Each failure adds a warning that names it.
+
+        A log's steps are chosen by what its model declares
+        (:class:`fmscal.plant.Model`: the options it takes, ``under_gravity``,
+        ``signed_reading``, ``given_noise``, ``optional_offset``, and its
+        ``calibration_checks``, each documented in this module), not by the
+        case's name or class.
 
     Raises
     ------
@@ -227,13 +236,8 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         raise OptionError("latency", f"{{}} must be a non-negative number of seconds; got {latency}")
     if max_latency is not None and not (_number(max_latency) and max_latency > 0):
         raise OptionError("max_latency", f"{{}} must be positive; got {max_latency}")
-    if data.kind == "spatial":
-        return _calibrate_spatial(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                                  wrench_noise, truth)
-    if data.kind == "planar":
-        return _calibrate_planar(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                                 wrench_noise, truth)
-    raise FmscalError(f"{data.name}: a {data.kind} log; calibrate takes a planar or a spatial one")
+    return _calibrate_log(data, log_model_class(data), payload, method, reading, gravity, latency, max_latency, offset,
+                          pose_noise, wrench_noise, truth)
 
 
 def _number(value):
@@ -250,8 +254,8 @@ def _noise(values, size, name):
     return values
 
 
-def _truth(truth, size, case):
-    """``truth`` (a Truth, its file, or None) of a log of ``size`` reading channels, or a one-line refusal."""
+def _truth(truth, model):
+    """``truth`` (a Truth, its file, or None) of a log of ``model``, or a one-line refusal."""
     if truth is None:
         return None
     if isinstance(truth, (str, os.PathLike)):
@@ -260,8 +264,9 @@ def _truth(truth, size, case):
         source = f"truth (scenario {truth.scenario!r})"
     else:
         raise FmscalError(f"truth must be a plant.Truth or its file; got {type(truth).__name__}")
-    if truth.schedule.size != size:
-        raise FmscalError(f"{source} is the truth of a {'planar' if size == 6 else 'spatial'} log; this log is {case}")
+    if truth.schedule.size != model.n_w:
+        other = next((m.name for m in MODELS if len(m.wrench_names) == truth.schedule.size), "another")
+        raise FmscalError(f"{source} is the truth of a {other} log; this log is {model.name}")
     return truth
 
 
@@ -292,26 +297,6 @@ def _estimate_payload(estimate):
     return tracked.mass, np.asarray(tracked.rho, dtype=float), spatial, tracked.gravity
 
 
-def _spatial_model(payload, gravity, what):
-    """The :class:`SpatialModel` of a spatial log's ``payload`` and ``gravity``, or a one-line refusal."""
-    if isinstance(payload, PayloadEstimate):
-        _, _, spatial, estimated = _estimate_payload(payload)
-        if spatial is None:
-            raise FmscalError(f"{what} needs the payload's inertia, which the payload estimate does not hold; "
-                              "give a plant.SpatialPayload")
-        gravity = _merge_gravity(gravity, estimated)
-        payload = spatial
-    if isinstance(payload, SpatialModel):
-        if gravity is not None and _gravity(gravity) != payload.gravity:
-            raise FmscalError("gravity is the model's: give the plant.SpatialModel with that gravity, or a "
-                              "plant.SpatialPayload and gravity")
-        return payload
-    if not isinstance(payload, SpatialPayload):
-        raise FmscalError(f"{what} takes a plant.SpatialPayload (or a plant.SpatialModel); got "
-                          f"{type(payload).__name__}")
-    return SpatialModel(payload, _gravity(gravity))
-
-
 def _merge_gravity(given, estimated):
     """The gravity given, else the one a payload estimate brings; both: they must agree."""
     if estimated is None:
@@ -322,79 +307,260 @@ def _merge_gravity(given, estimated):
     return estimated
 
 
-def _calibrate_planar(log, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                      wrench_noise, truth):
-    """:func:`calibrate` on a planar log."""
-    if isinstance(payload, PlanarModel):
-        payload = payload.payload
-    if not isinstance(payload, Payload):
-        raise FmscalError(f"a planar log takes a plant.Payload (or a plant.PlanarModel); got {type(payload).__name__}")
-    if gravity is not None:
-        raise OptionError("gravity", "{} is for spatial logs; a planar log moves in a plane with no gravity in it")
-    if reading is not None:
+def log_model_class(log):
+    """The class of the model whose columns ``log``'s are (:data:`fmscal.plant.physics.MODELS`), or a refusal.
+
+    Parameters
+    ----------
+    log : plant.Log
+
+    Returns
+    -------
+    type
+        A :class:`fmscal.plant.Model` subclass.
+
+    Raises
+    ------
+    FmscalError
+        No model declares the log's columns.
+    """
+    for cls in MODELS:
+        if ("t", *cls.pose_names, *cls.wrench_names) == tuple(log.columns):
+            return cls
+    raise FmscalError(f"{log.name}: a {log.kind} log; calibrate takes a planar or a spatial one")
+
+
+def _log_payload_model(cls, payload, gravity):
+    """The model a log of the model class ``cls`` is calibrated on, or a one-line refusal.
+
+    ``payload`` (a model, a payload, or a :class:`PayloadEstimate` standing for its payload) is taken
+    through :func:`fmscal.plant.physics.as_model` and must declare ``cls``'s columns; ``gravity`` is taken
+    where ``cls`` is :attr:`~fmscal.plant.Model.under_gravity` (a model given brings its own).
+    """
+    what = f"a {cls.name} log"
+    refusal = (f"{what} takes a plant.{cls.payload_type.__name__} (or a plant.{cls.__name__}); got "
+               f"{type(payload).__name__}")
+    given = payload
+    if isinstance(payload, PayloadEstimate):       # a payload weighed under gravity, in the tracked frame's axes
+        if not cls.under_gravity:
+            raise FmscalError(refusal)
+        _, _, estimated_payload, estimated = _estimate_payload(payload)
+        if estimated_payload is None:
+            raise FmscalError(f"{what} needs the payload's inertia, which the payload estimate does not hold; "
+                              f"give a plant.{cls.payload_type.__name__}")
+        gravity = _merge_gravity(gravity, estimated)
+        given = estimated_payload
+    try:
+        model = as_model(given)
+    except FmscalError:
+        model = None
+    if model is None or (model.pose_names, model.wrench_names) != (cls.pose_names, cls.wrench_names):
+        raise FmscalError(refusal)
+    if not cls.under_gravity:
+        if gravity is not None:
+            raise OptionError("gravity", "{} is for spatial logs; a planar log moves in a plane with no gravity in "
+                              "it")
+        return model
+    if isinstance(given, Model):
+        if gravity is not None and _gravity(gravity) != model.gravity:
+            raise FmscalError(f"gravity is the model's: give the plant.{cls.__name__} with that gravity, or a "
+                              f"plant.{cls.payload_type.__name__} and gravity")
+        return model
+    return cls(model.payload, _gravity(gravity))
+
+
+def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                   wrench_noise, truth):
+    """:func:`calibrate` on a log of the model class ``cls``: one workflow, each step as the model declares.
+
+    The options the model does not take are refused (``signed_reading``, ``given_noise``,
+    ``optional_offset``, ``under_gravity``); the reading is turned into the toolkit's sign; the noise
+    model given is completed from the log (``given_noise``); the latency is estimated if not given; the
+    method runs on the log with its poses moved back by it; then the model's ``calibration_checks`` run
+    in their order (:data:`_CHECKS`), and ``converged`` is the run's flag and every check passed.
+    """
+    model = _log_payload_model(cls, payload, gravity)
+    case = f"a {cls.name} log"
+    if reading is not None and not model.signed_reading:
         raise OptionError("reading", "{} is taken on a spatial log or a pose table; a planar log's sign is the "
                           "toolkit's")
+    name = DEFAULT_METHOD if method is None else method
+    get_method(name)                                    # an unknown name: FmscalError naming the methods
+    offered = method_names(calibrates=True, model=model)
+    if name not in offered:
+        raise OptionError("method", f"{{}} {name} does not run on {case} yet; {case} takes {', '.join(offered)} "
+                          f"(default {DEFAULT_METHOD})")
+    _refuse(case, [
+        (pose_noise is not None and not model.given_noise, "pose_noise", "the noise is estimated from the log"),
+        (wrench_noise is not None and not model.given_noise, "wrench_noise", "the noise is estimated from the log"),
+        (not offset and not model.optional_offset, "offset=False", "the offset is always estimated in 3D")])
     pose_noise = _noise(pose_noise, 2, "pose_noise")
-    wrench_noise = _noise(wrench_noise, 3, "wrench_noise")
-    method = DEFAULT_METHOD if method is None else method
+    wrench_noise = _noise(wrench_noise, model.n_w, "wrench_noise")
     max_latency = DEFAULT_MAX_LATENCY if max_latency is None else max_latency
-    truth = _truth(truth, 3, "planar")
-    offered = method_names(calibrates=True)
-    if method not in offered:
-        raise FmscalError(f"unknown method {method!r}; expected one of {', '.join(offered)}")
+    truth = _truth(truth, model)
+    reading = "reaction" if reading is None else reading
+    signed = copy.copy(log)                               # the caller's log keeps its reading
+    signed.w_hat = reading_sign(reading) * log.w_hat      # the toolkit's sign: S and b are of sigma w_hat
+    noise, noise_estimated = None, []
+    if model.given_noise:
+        noise, noise_estimated = _noise_model(log, model, pose_noise, wrench_noise)
+    latency_estimated = latency is None
+    if latency_estimated:
+        latency, _ = estimate_latency(signed, model, max_latency, offset=offset)
+    aligned = signed.shift_poses(latency)
+    reference = LeastSquares(model, offset=offset) if "reference" in model.calibration_checks else None
+    ls_result = None if reference is None else reference.run(aligned)
+    if reference is not None and name == reference.name:
+        result = ls_result
+    else:
+        result = make_observer(name, model, noise, {"offset": offset}).run(aligned)
+    if result.diverged:                  # a diverging estimate is an error, never an answer
+        raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
+                            + (f": {result.warnings[-1]}" if result.warnings else "")
+                            + "; no calibration (check the mass properties, units and excitation)")
+    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading)
+    warnings, why = [], None
+    converged = bool(result.converged)
+    for check in model.calibration_checks:
+        found, passed, reason = _CHECKS[check](run, warnings)
+        warnings += found
+        converged = converged and passed
+        why = why or (None if passed else reason)
+    if not converged:
+        why = why or "the run did not converge (see the warnings)"
+    E, E_blocks = _errors(truth, result, model, log)
+    directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
+    return _calibration(result, name, dict(
+        payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
+        reading=reading, gravity=model.gravity if model.under_gravity else None, noise=noise,
+        noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
+        fit=None if reference is None else {k: v for k, v in reference.report.items() if k != "warnings"},
+        undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
+        E=E, E_blocks=E_blocks, notes=list(log.notes), kind=cls.name, run=result,
+        why_unconverged=None if converged else why))
+
+
+def _noise_model(log, model, pose_noise, wrench_noise):
+    """The noise model of a log of a model that takes one given: what is not given estimated from the log.
+
+    Returns ``(NoiseSpec, names of the parts estimated)``; refuses a log whose pose does not move.
+    """
     estimated = estimate_noise(log)
     noise = NoiseSpec(tuple(wrench_noise) if wrench_noise is not None else estimated.wrench_sd,
                       pose_noise[0] if pose_noise is not None else estimated.angle_sd,
                       pose_noise[1] if pose_noise is not None else estimated.position_sd)
     noise_estimated = [name for name, given in (("wrench", wrench_noise), ("pose", pose_noise)) if given is None]
     spread = np.ptp(log.pose[log.has_pose], axis=0)
-    if np.all(spread <= 10 * np.array([noise.angle_sd, noise.position_sd, noise.position_sd])):
-        raise FmscalError(f"{log.name}: the pose does not move (theta, x and y each stay within 10 noise standard "
+    if np.all(spread <= 10 * model.pose_sd(noise)):
+        names = ", ".join(model.pose_names[:-1]) + " and " + model.pose_names[-1]
+        raise FmscalError(f"{log.name}: the pose does not move ({names} each stay within 10 noise standard "
                           "deviations): a payload at rest does not excite S; record it moving")
-    latency_estimated = latency is None
-    if latency_estimated:
-        latency, _ = estimate_latency(log, payload, max_latency, offset=offset)
-    aligned = log.shift_poses(latency)
-    reference = LeastSquares(payload, offset=offset)
-    ls_result = reference.run(aligned)
-    if method == reference.name:
-        result = ls_result
-    else:
-        result = get_method(method).build(payload, noise, {"offset": offset}).run(aligned)
-    if result.diverged:
-        raise DivergedError(f"the {method} estimate diverged at t = {result.t[-1]:.3f} s; "
-                            "no calibration (check the mass properties, units and excitation)")
-    findings = diagnose_units(log, payload)
-    diagnosed = [f.message for f in findings]
-    units = [f.message for f in findings if f.kind != COUNTS or get_method(method).online]
-    warnings = diagnosed + list(ls_result.warnings)
-    warnings += [w for w in result.warnings if w not in warnings]
+    return noise, noise_estimated
+
+
+def _errors(truth, result, model, log):
+    """E of eq. (16) against the truth at the log's end, and on each of the model's ``reading_blocks``."""
+    if truth is None:
+        return None, None
+    S = truth.S_at(log.t[-1])
+    E = calibration_error(result.S_hat, S)
+    if not model.reading_blocks:
+        return E, None
+    D = np.eye(model.n_w) - np.asarray(result.S_hat, dtype=float) @ np.linalg.inv(S)
+    return E, tuple(float(np.linalg.norm(D[np.ix_(c, c)], 2)) for _, c in model.reading_blocks)
+
+
+@dataclass
+class _Run:
+    """What a calibration's checks read: the log as recorded, in the toolkit's sign and aligned, the model,
+    the method's result and the least-squares reference (None where the model declares no ``"reference"``)."""
+
+    log: Log
+    signed: Log
+    aligned: Log
+    model: Model
+    method: str
+    result: object
+    reference: object
+    offset: bool
+    reading: str
+    units: list = field(default_factory=list)
+
+
+def _check_units(run, warnings):
+    """``"units"``: the log's units look right (:func:`fmscal.plant.io.diagnose_units`); a reading in counts
+    does not stop a batch method (it fits any scale), only an online one."""
+    findings = diagnose_units(run.log, run.model.payload)
+    online = get_method(run.method).online
+    run.units = [f.message for f in findings if f.kind != COUNTS or online]
+    why = "the log's units look wrong (" + run.units[0].split(":")[0] + ")" if run.units else None
+    return [f.message for f in findings], not run.units, why
+
+
+def _check_reference(run, warnings):
+    """``"reference"``: a least-squares fit of the log finds it exciting every entry and matching the model."""
+    return list(run.reference.warnings), not run.reference.warnings, None
+
+
+def _check_run(run, warnings):
+    """``"run"``: the method's own warnings (those not said already)."""
+    return [w for w in run.result.warnings if w not in warnings], True, None
+
+
+def _check_consistency(run, warnings):
+    """``"consistency"``: one constant ``S`` explains the log
+    (:func:`fmscal.observers.diagnostics.consistency_check`)."""
     try:
-        consistency = consistency_check(aligned, payload, offset=offset)
-        consistent = consistency.consistent
-        if not consistent:
-            warnings.append(consistency.warning)
+        consistency = consistency_check(run.aligned, run.model, offset=run.offset)
     except FmscalError as err:            # a half too short to fit: nothing says S stayed constant
-        consistent = False
-        warnings.append(f"the log is too short to check that one constant S explains it ({err})")
-    faults = saturation(log)
-    drift = offset_drift(aligned, payload, ls_result.S_hat, ls_result.b)
-    if drift.warning:
-        faults.append(drift.warning)
-    warnings += faults
-    disagreement = _disagreement(result, ls_result)
-    if disagreement:
-        warnings.append(disagreement)
-    E = calibration_error(result.S_hat, truth.S_at(log.t[-1])) if truth is not None else None
-    converged = (bool(result.converged) and not units and not ls_result.warnings and consistent
-                 and not faults and not disagreement)
-    why = None if converged else ("the log's units look wrong (" + units[0].split(":")[0] + ")" if units
-                                  else "the run did not converge")
-    return _calibration(result, method, dict(
-        payload=payload, method=result.observer, latency=float(latency), latency_estimated=latency_estimated,
-        noise=noise, noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=units,
-        fit={k: v for k, v in reference.report.items() if k != "warnings"}, E=E, notes=list(log.notes),
-        kind="planar", run=result, why_unconverged=why))
+        return [f"the log is too short to check that one constant S explains it ({err})"], False, None
+    return ([] if consistency.consistent else [consistency.warning]), consistency.consistent, None
+
+
+def _check_saturation(run, warnings):
+    """``"saturation"``: no channel of the reading saturates (:func:`fmscal.observers.diagnostics.saturation`)."""
+    saturated = saturation(run.signed)
+    return saturated, not saturated, "the reading saturates"
+
+
+def _check_offset_drift(run, warnings):
+    """``"offset_drift"``: the offset keeps one level under the reference fit
+    (:func:`fmscal.observers.diagnostics.offset_drift`)."""
+    drift = offset_drift(run.aligned, run.model.payload, run.reference.S_hat, run.reference.b)
+    return ([drift.warning] if drift.warning else []), not drift.warning, None
+
+
+def _check_disagreement(run, warnings):
+    """``"disagreement"``: the method's estimate agrees with the reference fit (:data:`AGREEMENT_SIGMAS`,
+    :data:`AGREEMENT_E`)."""
+    disagreement = _disagreement(run.result, run.reference)
+    return ([disagreement] if disagreement else []), not disagreement, None
+
+
+def _check_evidence(run, warnings):
+    """``"evidence"``: the log pinned ``S`` down (:func:`fmscal.observers.diagnostics.has_evidence`, asked for a
+    method that gives no ``S_std``: the run alone judged its ``converged``); a run that did not settle without
+    saying why is told why."""
+    result = run.result
+    evident = result.S_std is not None or has_evidence(result, run.aligned, run.model, offset=run.offset)
+    found = [] if (result.converged and evident) or result.warnings else [_not_settled(result.observer)]
+    return found, evident, None
+
+
+def _check_flipped_gain(run, warnings):
+    """``"flipped_gain"``: a positive force gain (the trace of ``S`` on the ``force_channels``); a negative one
+    is a reading in the other sign convention."""
+    channels = list(run.model.force_channels)
+    flipped = bool(np.trace(run.result.S_hat[np.ix_(channels, channels)]) < 0)
+    found = [other_convention(run.log.name, None, run.reading)] if flipped else []
+    return found, not flipped, "the reading follows the other sign convention"
+
+
+#: The checks a model may declare in :attr:`fmscal.plant.Model.calibration_checks`: each takes the run and
+#: the warnings so far and gives ``(its warnings, passed, why it failed or None)``.
+_CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
+           "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
+           "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain}
 
 
 def _calibration(result, method, fields):
@@ -406,53 +572,6 @@ def _calibration(result, method, fields):
         raise FmscalError(f"the {method} estimate of S is singular ({str(err).split('(')[-1].split(')')[0]}): the "
                           "log does not excite every entry of S, or holds an outlier (a reading far from the "
                           "rest)") from None
-
-
-def _calibrate_spatial(log, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                       wrench_noise, truth):
-    """:func:`calibrate` on a spatial log."""
-    model = _spatial_model(payload, gravity, "a spatial log")
-    if method is not None:
-        get_method(method)                              # an unknown name: FmscalError naming the methods
-        offered = method_names(calibrates=True, model=model)
-        if method not in offered:
-            raise OptionError("method", f"{{}} {method} does not run on a spatial log yet; a spatial log takes "
-                              f"{', '.join(offered)} (default {FLOOR_METHOD})")
-    _refuse("a spatial log", [(pose_noise is not None, "pose_noise", "the noise is estimated from the log"),
-                              (wrench_noise is not None, "wrench_noise", "the noise is estimated from the log"),
-                              (not offset, "offset=False", "the offset is always estimated in 3D")])
-    name = method or FLOOR_METHOD
-    reading = "reaction" if reading is None else reading
-    sign = reading_sign(reading)
-    truth = _truth(truth, 6, "spatial")
-    signed = copy.copy(log)                               # the caller's log keeps its reading
-    signed.w_hat = sign * log.w_hat                       # the toolkit's sign: S and b are of sigma w_hat
-    latency_estimated = latency is None
-    if latency_estimated:
-        latency, _ = estimate_latency(signed, model, max_latency or DEFAULT_MAX_LATENCY, offset=True)
-    aligned = signed.shift_poses(latency)
-    result = make_observer(name, model, settings={"offset": True}).run(aligned)
-    if result.diverged:                  # a diverging estimate is an error, never an answer
-        raise DivergedError(f"{name} diverged on {log.name}"
-                            + (f": {result.warnings[-1]}" if result.warnings else "") + "; no calibration")
-    saturated = saturation(signed)
-    warnings = [*saturated, *result.warnings]
-    if not result.converged and not result.warnings:
-        warnings.append(_not_settled(result.observer))
-    flipped = bool(np.trace(result.S_hat[3:, 3:]) < 0)      # a negative force gain: the other sign convention
-    if flipped:
-        warnings.append(other_convention(log.name, None, reading))
-    converged = bool(result.converged and not saturated and not flipped)
-    why = None if converged else ("the reading saturates" if saturated else "the reading follows the other sign "
-                                  "convention" if flipped else "the run did not converge (see the warnings)")
-    directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
-    E_all = block_errors(result.S_hat, truth.S_at(aligned.t[-1])) if truth is not None else None
-    return _calibration(result, name, dict(
-        payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
-        reading=reading, gravity=model.gravity, converged=converged, warnings=warnings,
-        undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
-        E=None if E_all is None else E_all[0], E_blocks=None if E_all is None else tuple(E_all[1:]),
-        notes=list(log.notes), kind="spatial", run=result, why_unconverged=why))
 
 
 def _not_settled(method):
@@ -486,16 +605,24 @@ def _calibrate_table(table, payload, method, reading, gravity, latency, max_late
 
 
 def _table_payload(payload):
-    """``(mass, rho, SpatialPayload or None, gravity or None)`` of what held poses take as the payload."""
+    """``(mass, rho, SpatialPayload or None, gravity or None)`` of what held poses take as the payload.
+
+    A model or a payload is taken through :func:`fmscal.plant.physics.as_model`: held poses weigh the
+    payload, so its model must stand :attr:`~fmscal.plant.Model.under_gravity` (a model given brings its
+    gravity).
+    """
     if isinstance(payload, PayloadEstimate):
         return _estimate_payload(payload)
-    if isinstance(payload, SpatialModel):
-        return payload.payload.mass, np.array(payload.payload.rho), payload.payload, payload.gravity
-    if isinstance(payload, SpatialPayload):
-        return payload.mass, np.array(payload.rho), payload, None
-    if isinstance(payload, (Payload, PlanarModel)):
-        raise FmscalError("a pose table takes a plant.SpatialPayload, or the mass and the centre of mass X Y Z "
-                          "(the sensor frame); got a planar payload")
+    try:
+        model = as_model(payload)
+    except FmscalError:
+        model = None
+    if model is not None:
+        if not model.under_gravity:
+            raise FmscalError("a pose table takes a plant.SpatialPayload, or the mass and the centre of mass X Y Z "
+                              "(the sensor frame); got a planar payload")
+        held = model.payload
+        return held.mass, np.array(held.rho), held, model.gravity if isinstance(payload, Model) else None
     try:
         mass, rho = payload
         rho = np.asarray(rho, dtype=float)

@@ -24,7 +24,8 @@ from fmscal.analysis import DivergedError, OptionError, calibrate, read_data
 from fmscal.analysis.cli import main
 from fmscal.observers import LeastSquares
 from fmscal.observers.payload import PayloadEstimate
-from fmscal.plant import Calibration, CalibrationFileError, FmscalError, Log, Payload, SpatialPayload, read_truth
+from fmscal.plant import (SPATIAL_SCENARIOS, Calibration, CalibrationFileError, FmscalError, Log, Payload,
+                          SpatialPayload, read_truth)
 from fmscal.plant.io import AttitudeLog, PoseTable, simulate_attitude_log
 
 DATA = Path(__file__).parent / "data"
@@ -240,6 +241,26 @@ def test_a_diverging_estimate_is_an_error_never_an_answer(inputs, monkeypatch):
 
 
 # --- the file: format /2 round trip, /1 still read -------------------------------------------------------------
+
+def test_an_adaptive_run_on_a_spatial_log_too_short_to_pin_S_down_is_not_converged(inputs):
+    """The adaptive observer gives no S_std, and its run judges settling alone: on the golden spatial log (12 s)
+    it settles. The workflow asks has_evidence: a least-squares fit of 12 s leaves S too uncertain, so the
+    calibration has not converged, and says why."""
+    cal = calibrate("spatial.csv", TOOL, method="adaptive", latency=0.0)
+    assert cal.S_std is None and cal.run.converged                # the run alone would have said converged
+    assert not cal.converged and cal.warnings and "record a longer log" in cal.warnings[-1]
+    assert cal.why_unconverged == "the run did not converge (see the warnings)"
+
+
+def test_an_adaptive_run_on_a_long_spatial_log_converges():
+    """The same motion (the golden log's scenario, 50 Hz) for 160 s pins S down: converged, no warning."""
+    arm = SPATIAL_SCENARIOS["spatial-arm"]
+    quiet = arm.with_(dt=0.02, torque_sd=arm.torque_sd / 10, force_sd=arm.force_sd / 10, duration=160.0)
+    log, truth, _ = quiet.generate(2)
+    cal = calibrate(log, arm.payload, method="adaptive", latency=0.0, truth=truth)
+    assert cal.S_std is None and cal.converged and cal.warnings == []
+    assert 0.0 < cal.E < 0.1
+
 
 def test_a_spatial_calibration_round_trips_through_format_2(inputs):
     cal = calibrate(read_data("spatial.csv"), TOOL, truth="spatial.truth.json")

@@ -1,23 +1,26 @@
 """``fmscal calibrate`` and ``fmscal apply``: a calibration from a log, and applied to readings."""
 
 import argparse
+import copy
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant import Calibration, Payload, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
+from fmscal.plant import Calibration, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
 from fmscal.plant.io import AttitudeLog, PoseTable, reading_sign
+from fmscal.plant.physics import MODELS
 
 from fmscal.observers import method_names
 from fmscal.observers.payload import PayloadEstimate
 
-from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, read_data
-from .._plots import plot_calibration
-from ._common import CliError, positive
+from .. import _plots
+from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, log_model_class, read_data
+from ._common import CliError, flag_payload, positive
 from ._files import atomic_write_text, check_outputs
-from ._spatial import print_spatial, spatial_payload
+from ._spatial import print_spatial
 
 
 def add_calibrate(sub):
@@ -87,8 +90,6 @@ def add_calibrate(sub):
 
 def cmd_calibrate(args):
     """``fmscal calibrate``: :func:`fmscal.analysis.calibrate` on the file, its report printed, saved on request."""
-    from dataclasses import replace
-
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
     if args.plot and not args.plot.endswith(".png"):
@@ -163,28 +164,18 @@ def _payload(args, data, table):
                 raise CliError("--save records the payload in the calibration file: give --inertia IXX IYY IZZ IXY "
                                "IXZ IYZ too (held poses do not use it)")
             return args.mass, tuple(args.rho)
-        return spatial_payload(args.mass, args.rho, args.inertia)
-    if data.kind == "spatial":
-        return spatial_payload(args.mass, args.rho, args.inertia)
-    inertia = args.inertia or []
-    if len(args.rho) != 2 or len(inertia) != 1:
-        raise CliError(f"a planar log takes --rho RX RY (2 numbers, m) and --inertia I_G (1 number, kg m^2); got "
-                       f"{len(args.rho)} and {len(inertia)} (three and six are for a spatial log)")
-    return Payload(args.mass, positive(args.inertia[0], "--inertia"), tuple(args.rho))
+        return flag_payload(SpatialModel, args.mass, args.rho, args.inertia)     # held poses: a 3D payload
+    return flag_payload(log_model_class(data), args.mass, args.rho, args.inertia)
 
 
 def _plot(args, log, cal, truth):
     """``--plot``: each entry of ``S_hat`` against time with its band, and the pose residual, on the aligned log."""
-    import copy
-
     title = f"{Path(args.log).name}: entries of S_hat ({cal.method}) and the pose residual"
-    if cal.kind == "planar":
-        plot_calibration(cal.run, log.shift_poses(cal.latency), args.plot, title, truth)
-        return
     signed = copy.copy(log)                       # the reading in the toolkit's sign, as it was calibrated
     signed.w_hat = reading_sign(cal.reading) * log.w_hat
-    plot_calibration(cal.run, signed.shift_poses(cal.latency), args.plot, title, truth,
-                     SpatialModel(cal.payload, cal.gravity))
+    cls = log_model_class(log)
+    model = cls(cal.payload, cal.gravity) if cls.under_gravity else cls(cal.payload)
+    _plots.plot_calibration(cal.run, signed.shift_poses(cal.latency), args.plot, title, truth, model)
 
 
 def _print_calibration(args, data, cal, saved):
@@ -193,16 +184,15 @@ def _print_calibration(args, data, cal, saved):
     for key in ("S_std", "b_std"):                # infinite (not determined) as inf, not JSON's null
         out[key] = None if getattr(cal, key) is None else getattr(cal, key).tolist()
     name = Path(args.log).name
-    if cal.kind != "planar":
-        if cal.kind == "table":
-            what = ("attitude-only log, its held segments" if isinstance(data, AttitudeLog)
-                    else "table of joint angles" if args.urdf else "pose table")
-            summary = (f"{name}: {what}, {cal.poses} held poses; method {cal.method} (S = I where the poses say "
-                       "nothing)")
-        else:
-            summary = (f"{name}: spatial, {len(data)} samples, {data.duration:g} s, "
-                       f"{int(data.has_pose.sum())} pose measurements; method {cal.method}")
-        print_spatial(args, summary, out)
+    if isinstance(data, (PoseTable, AttitudeLog)):
+        what = ("attitude-only log, its held segments" if isinstance(data, AttitudeLog)
+                else "table of joint angles" if args.urdf else "pose table")
+        print_spatial(args, f"{name}: {what}, {cal.poses} held poses; method {cal.method} (S = I where the poses "
+                      "say nothing)", out)
+        return
+    if "noise" not in out:            # a log whose method estimated its own noise model: the report by channel
+        print_spatial(args, f"{name}: {cal.kind}, {len(data)} samples, {data.duration:g} s, "
+                      f"{int(data.has_pose.sum())} pose measurements; method {cal.method}", out)
         return
     print(f"{name}: {len(data)} samples, {data.duration:g} s, "
           f"{int(data.has_pose.sum())} pose measurements; method {out['observer']}")
@@ -252,13 +242,13 @@ def cmd_apply(args):
         raise CliError("give all of --mass, --inertia and --rho to check the payload, or none")
     payload = None
     if all(given):
-        if len(args.rho) == 3:
-            payload = spatial_payload(args.mass, args.rho, args.inertia)
-        elif len(args.rho) != 2 or len(args.inertia) != 1:
-            raise CliError(f"--rho and --inertia take 2 and 1 numbers (planar) or 3 and 6 (spatial); got "
-                           f"{len(args.rho)} and {len(args.inertia)}")
-        else:
-            payload = Payload(positive(args.mass, "--mass"), positive(args.inertia[0], "--inertia"), tuple(args.rho))
+        sizes = (len(args.rho), len(args.inertia))
+        cls = next((m for m in MODELS if (len(m.rho_names), len(m.inertia_names)) == sizes), None)
+        if cls is None:
+            raise CliError("--rho and --inertia take " + " or ".join(
+                f"{len(m.rho_names)} and {len(m.inertia_names)} ({m.name})" for m in MODELS)
+                + f"; got {sizes[0]} and {sizes[1]}")
+        payload = flag_payload(cls, args.mass, args.rho, args.inertia)
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
     check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],
@@ -268,15 +258,16 @@ def cmd_apply(args):
         print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
               file=sys.stderr)
     t, w_hat = read_readings(args.readings)
+    model = next(m for m in MODELS if len(m.wrench_names) == calibration.size)      # a calibration is of one
     if w_hat.shape[1] != calibration.size:
         raise CliError(f"{Path(args.readings).name} holds {w_hat.shape[1]} reading columns; the calibration is "
-                       f"{calibration.size}x{calibration.size} ({'spatial' if calibration.size == 6 else 'planar'})")
+                       f"{calibration.size}x{calibration.size} ({model.name})")
     w = calibration.apply(w_hat)                            # the sign of a load reading turned first
     bad = ~np.isfinite(w).all(axis=1)
     if bad.any():
         raise CliError(f"the calibration gives a wrench that is not finite (overflow) at row {np.argmax(bad) + 1} of "
                        f"{Path(args.readings).name}; its S or b is far outside any sensor's range: nothing written")
-    header = "t,tx,ty,tz,fx,fy,fz" if calibration.size == 6 else "t,M,fx,fy"
+    header = ",".join(("t", *model.wrench_names))
     lines = [header] + [",".join(repr(float(v)) for v in (ti, *wi)) for ti, wi in zip(t, w)]
     atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}: {len(t)} calibrated wrenches (calibration of {calibration.log_name or 'unknown log'}, "

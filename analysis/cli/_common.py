@@ -4,13 +4,14 @@ import numpy as np
 
 from fmscal.plant import SCENARIOS
 from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import MODELS
 
 from fmscal.observers import METHODS
 
 from .._comparison import case_scenario
 
-__all__ = ["CliError", "positive", "strict", "add_scenarios_and_observers", "check_sizes", "check_seeds",
-           "MAX_SEEDS"]
+__all__ = ["CliError", "flag_payload", "positive", "strict", "add_scenarios_and_observers", "check_sizes",
+           "check_seeds", "MAX_SEEDS"]
 
 #: Most seeds a compare or sweep runs (each seed simulates every scenario).
 MAX_SEEDS = 100_000
@@ -33,6 +34,28 @@ def strict(value):
     if isinstance(value, (float, np.floating)):
         return float(value) if np.isfinite(value) else None
     return value
+
+
+def flag_payload(model, mass, rho, inertia):
+    """The payload of the model class ``model`` from ``--mass``, ``--rho`` and ``--inertia``, or a one-line error.
+
+    ``rho`` and ``inertia`` must hold the numbers the model declares (:attr:`fmscal.plant.Model.rho_names`,
+    :attr:`~fmscal.plant.Model.inertia_names`); the payload class checks their values, its message turned
+    into the flag's.
+    """
+    rho, inertia = list(rho or ()), list(inertia or ())
+    if (len(rho), len(inertia)) != (len(model.rho_names), len(model.inertia_names)):
+        others = " and ".join(f"{len(m.rho_names)} and {len(m.inertia_names)} are for a {m.name} log"
+                              for m in MODELS if m is not model)
+        raise CliError(f"a {model.name} log takes --rho {' '.join(model.rho_names)} ({len(model.rho_names)} "
+                       f"numbers, m) and --inertia {' '.join(model.inertia_names)} ({len(model.inertia_names)} "
+                       f"number{'s' if len(model.inertia_names) > 1 else ''}, kg m^2, about the centre of mass); "
+                       f"got {len(rho)} and {len(inertia)}" + (f" ({others})" if others else ""))
+    positive(mass, "--mass")
+    try:
+        return model.payload_from(mass, rho, inertia)
+    except FmscalError as err:                      # "inertia must be ...": the flag's name
+        raise CliError(f"--{err}") from None
 
 
 def positive(value, name):

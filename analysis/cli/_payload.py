@@ -20,7 +20,7 @@ import numpy as np
 
 from fmscal.plant import Calibration
 from fmscal.plant.io import AttitudeLog, PoseTable, held_table
-from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, inertia_matrix
+from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, SpatialModel, inertia_matrix
 
 from fmscal.observers.payload import fit_static, identify_payload
 
@@ -30,6 +30,9 @@ from ._files import check_outputs
 from ._spatial import _NAMES, _spatial_truth
 
 __all__ = ["add_identify_payload", "cmd_identify_payload"]
+#: identify-payload weighs a payload under gravity in 3D: its logs' columns, and its calibration's reading.
+_COLUMNS = ("t", *SpatialModel.pose_names, *SpatialModel.wrench_names)
+_N_W = len(SpatialModel.wrench_names)
 
 
 def add_identify_payload(sub):
@@ -95,8 +98,9 @@ def _calibration_S(args):
         args.reading = args.reading or "reaction"
         return None
     calibration = Calibration.load(path)
-    if calibration.size != 6:
-        raise CliError(f"{path} is a planar calibration (3x3); identify-payload takes a spatial one")
+    if calibration.size != _N_W:
+        raise CliError(f"{path} is a {calibration.kind} calibration ({calibration.size}x{calibration.size}); "
+                       "identify-payload takes a spatial one")
     if calibration.forced:
         print(f"fmscal identify-payload: warning: {path} was saved with --force", file=sys.stderr)
     if args.reading is not None and args.reading != calibration.reading:
@@ -132,9 +136,9 @@ def cmd_identify_payload(args):
 
 
 def _identify_log(args, log, S, gravity, estimate_gravity):
-    if log.kind != "spatial":
-        raise CliError(f"{log.name} is a planar log; identify-payload takes a spatial log "
-                       "(t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) or a pose table")
+    if tuple(log.columns) != _COLUMNS:
+        raise CliError(f"{log.name} is a {log.kind} log; identify-payload takes a spatial log "
+                       f"({','.join(_COLUMNS)}) or a pose table")
     truth = _spatial_truth(args.truth)
     fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
                            estimate_mounting=args.mounting == "estimate")

@@ -8,28 +8,22 @@ take); this module prints its report (:func:`print_spatial`).
 
 import numpy as np
 
-from fmscal.plant import SpatialPayload, read_truth
+from fmscal.plant import SpatialModel, read_truth
+from fmscal.plant.physics import MODELS
 
-from ._common import CliError, positive
+from ._common import CliError
 
-__all__ = ["spatial_payload", "print_spatial"]
-_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
-
-
-def spatial_payload(mass, rho, inertia):
-    """The payload from ``--mass``, ``--rho X Y Z`` and ``--inertia IXX IYY IZZ IXY IXZ IYZ``, or a one-line error."""
-    if rho is None or inertia is None or len(rho) != 3 or len(inertia) != 6:
-        raise CliError(f"a spatial log takes --rho X Y Z (3 numbers, m) and --inertia IXX IYY IZZ IXY IXZ IYZ "
-                       f"(6 numbers, kg m^2, about the centre of mass, sensor axes); got {len(rho or ())} and "
-                       f"{len(inertia or ())}")
-    return SpatialPayload(positive(mass, "--mass"), tuple(rho), tuple(inertia))
+__all__ = ["print_spatial"]
+#: The spatial model's reading: what identify-payload's truth and the report's rows and columns are of.
+_NAMES = SpatialModel.wrench_names
 
 
 def _spatial_truth(path):
-    """The truth sidecar at ``path`` (None without one), refused if it is a planar log's."""
+    """The truth sidecar at ``path`` (None without one), refused if it is not a spatial log's (its reading's size)."""
     truth = read_truth(path) if path else None
-    if truth is not None and truth.schedule.size != 6:
-        raise CliError(f"{path} is the truth of a planar log; this log is spatial")
+    if truth is not None and truth.schedule.size != len(_NAMES):
+        other = next((m.name for m in MODELS if len(m.wrench_names) == truth.schedule.size), "another")
+        raise CliError(f"{path} is the truth of a {other} log; this log is spatial")
     return truth
 
 

@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import NoiseSpec, Payload, SpatialPayload, check_calibration
+from fmscal.plant.physics import MODELS, NoiseSpec, Payload, check_calibration
 
 from ._files import atomic_write_text, not_a_file
 
@@ -252,10 +252,11 @@ class Calibration:
 
     def __post_init__(self):
         set_ = object.__setattr__
-        n = 6 if np.shape(self.S) == (6, 6) else 3
+        model = _case(self.S)                        # the model whose reading S calibrates
+        n = len(model.wrench_names)
         set_(self, "S", check_calibration(self.S, "S", size=n))
-        kind = SpatialPayload if n == 6 else Payload
-        if not isinstance(self.payload, kind) and not (self.payload is None and n == 6):
+        kind = model.payload_type                    # held poses (under gravity) need no payload
+        if not isinstance(self.payload, kind) and not (self.payload is None and model.under_gravity):
             raise TypeError(f"payload must be a plant.{kind.__name__} for a {n}x{n} S; "
                             f"got {type(self.payload).__name__}")
         for name, shape, undetermined in (("S_std", (n, n), True), ("b", (n,), False), ("b_std", (n,), True)):
@@ -292,8 +293,8 @@ class Calibration:
              [_matrix(d, (n + 1,), "undetermined_directions", "calibration") for d in self.undetermined_directions])
         reading_sign(self.reading)
         if self.kind is None:
-            set_(self, "kind", "planar" if n == 3 else "spatial")
-        if self.kind not in KINDS or (self.kind == "planar") != (n == 3):
+            set_(self, "kind", model.name)
+        if not _kind_of(self.kind, model):
             raise FmscalError(f"kind must be one of {', '.join(KINDS)} (planar: a 3x3 S); got {_short(self.kind)}")
         if self.date is None:
             set_(self, "date", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
@@ -426,7 +427,7 @@ class Calibration:
             of the wrong shape or not finite, a singular ``S``, or another
             payload.
         """
-        if payload is not None and not isinstance(payload, (Payload, SpatialPayload)):
+        if payload is not None and not isinstance(payload, tuple(m.payload_type for m in MODELS)):
             raise TypeError(f"payload must be a plant.Payload, a SpatialPayload or None; got {type(payload).__name__}")
         if not isinstance(path, (str, os.PathLike)):
             raise CalibrationFileError(f"a calibration path must be a file name; got {type(path).__name__}")
@@ -453,9 +454,10 @@ class Calibration:
         missing = [k for k in ("S", "payload", "method") if k not in data]
         if missing:
             raise CalibrationFileError(f"{source}: missing key(s) {', '.join(missing)}")
-        n = 6 if np.shape(data["S"]) == (6, 6) else 3
+        model = _case(data["S"])
+        n = len(model.wrench_names)
         try:
-            file_payload = (SpatialPayload if n == 6 else Payload).from_dict(data["payload"])
+            file_payload = model.payload_type.from_dict(data["payload"])
         except (KeyError, TypeError, ValueError) as err:
             raise CalibrationFileError(f"{source}: payload must hold mass, inertia and rho ({err})") from None
         if payload is not None and (type(payload) is not type(file_payload) or not file_payload.isclose(payload)):
@@ -484,8 +486,8 @@ class Calibration:
             if data.get(key) is not None and not isinstance(data[key], str):
                 raise CalibrationFileError(f"{source}: {key} must be a string; got {_short(data[key])}")
         if second:
-            optional.update(_second_format(data, n, source))
-        elif n == 6 and data["method"] == "static-least-squares":      # /1 did not say: held poses' one fit
+            optional.update(_second_format(data, model, source))
+        elif model.under_gravity and data["method"] == "static-least-squares":    # /1 did not say: held poses' fit
             optional["kind"] = "table"
         try:
             return cls(S=S, payload=file_payload, method=data["method"], log_name=log.get("name", ""),
@@ -495,12 +497,26 @@ class Calibration:
             raise CalibrationFileError(f"{source}: {str(err).splitlines()[0]}") from None
 
 
-def _second_format(data, n, source):
+def _case(S):
+    """The model class (:data:`fmscal.plant.physics.MODELS`) whose reading an ``S`` of this shape calibrates;
+    the first where none does (``check_calibration`` then refuses the shape)."""
+    shape = np.shape(S)
+    return next((m for m in MODELS if shape == (len(m.wrench_names),) * 2), MODELS[0])
+
+
+def _kind_of(kind, model):
+    """Whether ``kind`` (:data:`KINDS`) names a calibration of ``model``'s reading: a log of the model, or held
+    poses where the model stands under gravity (they weigh the payload)."""
+    return kind in KINDS and (kind == model.name or (model.under_gravity and kind == KINDS[-1]))
+
+
+def _second_format(data, model, source):
     """The keys format ``/2`` added, checked: a dict of :class:`Calibration`'s arguments."""
+    n = len(model.wrench_names)
     out = {}
     kind = data.get("kind")
     if kind is not None:
-        if kind not in KINDS or (kind == "planar") != (n == 3):
+        if not _kind_of(kind, model):
             raise CalibrationFileError(f"{source}: kind must be one of {', '.join(KINDS)} (planar: a 3x3 S); "
                                        f"got {_short(kind)}")
         out["kind"] = kind
@@ -567,8 +583,8 @@ def _short(value, limit=60):
 
 
 def _describe(payload):
+    """The payload in words: its mass, centre of mass and inertia, named as its model declares them."""
+    model = next(m for m in MODELS if isinstance(payload, m.payload_type))
     rho = ", ".join(f"{r:g}" for r in payload.rho)
-    if isinstance(payload, SpatialPayload):
-        inertia = ", ".join(f"{i:g}" for i in payload.inertia)
-        return f"m = {payload.mass:g} kg, rho = ({rho}) m, inertia = ({inertia}) kg m^2"
-    return f"m = {payload.mass:g} kg, I_G = {payload.inertia:g} kg m^2, rho = ({rho}) m"
+    inertia = ", ".join(f"{n} = {i:g}" for n, i in zip(model.inertia_names, np.atleast_1d(payload.inertia)))
+    return f"m = {payload.mass:g} kg, rho = ({rho}) m, {inertia} kg m^2"

@@ -12,7 +12,7 @@ from ._rigid_body import (regressor, inertia_matrix, INERTIA_NAMES, SpatialPaylo
 from ._simulate import (integrate, rk4_step)
 from ._excitation import (Excitation, PaperWrench, Multisine, SampledWrench)
 from ._differentiate import (spatial_motion, smoothed_state, edge, ORDER)
-from ._model import (Model, PlanarModel, SpatialModel, as_model, model_for_columns)
+from ._model import (Model, PlanarModel, SpatialModel, MODELS, as_model, model_for_columns)
 
 __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
            "input_matrix", "acceleration", "state_derivative", "regressors", "phi_1", "phi_2", "S_from_phi",
@@ -20,4 +20,4 @@ __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationEr
            "quaternion_conjugate", "rotation_matrix", "unit_quaternions", "sensor_wrench", "body_acceleration",
            "prescribed_motion", "skew", "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine",
            "SampledWrench", "spatial_motion", "smoothed_state", "edge", "Model", "PlanarModel", "SpatialModel",
-           "as_model", "model_for_columns"]
+           "MODELS", "as_model", "model_for_columns"]

@@ -36,7 +36,7 @@ from ._payload import Payload
 from ._rigid_body import SpatialPayload
 from ._sensor import NoiseSpec
 
-__all__ = ["Model", "PlanarModel", "SpatialModel", "as_model", "model_for_columns"]
+__all__ = ["Model", "PlanarModel", "SpatialModel", "MODELS", "as_model", "model_for_columns"]
 
 
 class Model:
@@ -85,8 +85,43 @@ class Model:
     #: ``"mrad"`` for a turn (rad) and ``"mm"`` for a move (m), each column of the residual shown times 1e3.
     residual_panels = ()
 
+    # --- what a calibration of a log of this model takes and checks (fmscal.analysis.calibrate) -----
+    #: The payload's class: what the model is built on, ``cls(payload)`` (and ``cls(payload, gravity)``
+    #: where :attr:`under_gravity`).
+    payload_type = None
+    #: The numbers the payload's centre of mass and inertia take, by name (:meth:`payload_from`'s ``rho`` and
+    #: ``inertia``, a command line's ``--rho`` and ``--inertia``).
+    rho_names = inertia_names = ()
+    #: The model takes the gravity in the pose frame (``cls(payload, gravity)``, attribute ``gravity``).
+    under_gravity = False
+    #: The reading's sign is a convention the caller states (``"reaction"`` or ``"load"``,
+    #: :func:`fmscal.plant.io.reading_sign`); False: the toolkit's own sign, never turned.
+    signed_reading = False
+    #: A calibration may leave the sensor's offset out (``offset=False``); False: it is always estimated.
+    optional_offset = False
+    #: A calibration takes a noise model given by the caller (the pose's and the reading's standard
+    #: deviations, :class:`NoiseSpec`), and estimates what is not given; False: the method estimates it.
+    given_noise = False
+    #: The reading's force channels (indices into :attr:`wrench_names`): a negative trace of ``S`` on them
+    #: is a reading in the other sign convention.
+    force_channels = ()
+    #: Blocks of the reading with one unit each, ``(name, channels)``: E of eq. (16) is reported on each
+    #: too (``I - S_hat S^-1`` restricted to the block's rows and columns); none where E is reported whole.
+    reading_blocks = ()
+    #: The checks a calibration of a log of this model makes after the run, in the order their warnings
+    #: are reported (``"run"``: the method's own warnings); :func:`fmscal.analysis.calibrate` documents
+    #: each. ``converged`` is the run's flag and every check passed.
+    calibration_checks = ()
+
     def __init__(self, payload):
         self.payload = payload
+
+    @classmethod
+    def payload_from(cls, mass, rho, inertia):
+        """The payload of ``mass`` (kg), ``rho`` (m) and ``inertia`` (kg m^2), in the order of
+        :attr:`rho_names` and :attr:`inertia_names`; the payload class checks them (one-line
+        :class:`FmscalError` naming ``mass``, ``rho`` or ``inertia``)."""
+        raise NotImplementedError
 
     def __repr__(self):
         return f"{type(self).__name__}({self.payload!r})"
@@ -515,6 +550,12 @@ class PlanarModel(Model):
     attitude = "angle"
     paper_equations = True
     residual_panels = (("theta", "mrad", (0,)), ("X", "mm", (1,)), ("Y", "mm", (2,)))
+    payload_type = Payload
+    rho_names, inertia_names = ("RX", "RY"), ("I_G",)
+    optional_offset = True
+    given_noise = True
+    force_channels = (1, 2)
+    calibration_checks = ("units", "reference", "run", "consistency", "saturation", "offset_drift", "disagreement")
     nq = nv = 3
     state = StateLayout(("theta", 1), ("theta_dot", 1), ("X", 1), ("X_dot", 1), ("Y", 1), ("Y_dot", 1))
     q_index, v_index = (0, 2, 4), (1, 3, 5)
@@ -523,6 +564,11 @@ class PlanarModel(Model):
         if not isinstance(payload, Payload):
             raise FmscalError(f"PlanarModel takes a plant.Payload; got {type(payload).__name__}")
         super().__init__(payload)
+
+    @classmethod
+    def payload_from(cls, mass, rho, inertia):
+        """The :class:`Payload` of ``mass`` (kg), ``rho`` ``(RX, RY)`` (m) and ``inertia`` ``(I_G,)`` (kg m^2)."""
+        return Payload(mass, inertia[0], tuple(rho))
 
     def measure(self, x):
         """The pose ``[theta, X, Y]`` the state shows (the measurement map, ``C_1``, ``C_2`` of eqs. 4, 5)."""
@@ -608,6 +654,13 @@ class SpatialModel(Model):
     position_names = ("x", "y", "z")
     attitude = "quaternion"
     residual_panels = (("x, y, z", "mm", (0, 1, 2)), ("about the sensor axes", "mrad", (3, 4, 5)))
+    payload_type = SpatialPayload
+    rho_names, inertia_names = ("X", "Y", "Z"), ("IXX", "IYY", "IZZ", "IXY", "IXZ", "IYZ")
+    under_gravity = True
+    signed_reading = True
+    force_channels = (3, 4, 5)
+    reading_blocks = (("torque", (0, 1, 2)), ("force", (3, 4, 5)))
+    calibration_checks = ("saturation", "run", "evidence", "flipped_gain")
     nq, nv = rigid_body.NQ, rigid_body.NV
     state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))
     q_index, v_index = tuple(range(7)), tuple(range(7, 13))
@@ -617,6 +670,12 @@ class SpatialModel(Model):
             raise FmscalError(f"SpatialModel takes a plant.SpatialPayload; got {type(payload).__name__}")
         super().__init__(payload)
         self.gravity = tuple(float(g) for g in as_finite_array(gravity, (3,), "gravity"))
+
+    @classmethod
+    def payload_from(cls, mass, rho, inertia):
+        """The :class:`SpatialPayload` of ``mass`` (kg), ``rho`` ``(X, Y, Z)`` (m, sensor frame) and ``inertia``
+        ``(IXX, IYY, IZZ, IXY, IXZ, IYZ)`` (kg m^2, about the centre of mass, sensor axes)."""
+        return SpatialPayload(mass, tuple(rho), tuple(inertia))
 
     def _key(self):
         return type(self), self.payload, self.gravity
@@ -781,6 +840,11 @@ class SpatialModel(Model):
     def state_derivative(self, x, w):
         """``x'`` under Newton-Euler (:func:`fmscal.plant.physics._rigid_body.state_derivative`)."""
         return rigid_body.state_derivative(x, w, self.payload, self.gravity)
+
+
+#: The toolkit's models, one a case: what a log's columns, a calibration's size or a payload's flags are
+#: looked up in (by their declarations: :attr:`Model.wrench_names`, :attr:`Model.pose_names`, ...).
+MODELS = (PlanarModel, SpatialModel)
 
 
 def as_model(model, who="a method"):
