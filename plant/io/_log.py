@@ -348,17 +348,17 @@ def log_kind(path):
 
 
 def _looks_spatial(path):
-    """True when the file's header names any column only the spatial format has (the planar format otherwise).
+    """True when the file's header shares more columns with the spatial format than with the planar one.
 
-    A header with a spatial column missing is still spatial, so that its error names the missing spatial
-    column rather than the planar format's.
+    A spatial header with a column missing is still spatial, so that its error names the missing spatial
+    column; a planar header with a misnamed column stays planar (a tie is planar, the default format).
     """
     with open(path, "rb") as f:
         first = f.readline(4096).decode("utf-8", errors="replace").removeprefix("\ufeff")
     header = {h.strip() for h in first.split(",")}
     spatial = {*SpatialModel.pose_names, *SpatialModel.wrench_names}
     planar = {*PlanarModel.pose_names, *PlanarModel.wrench_names}
-    return bool(header & (spatial - planar))
+    return len(header & spatial) > len(header & planar)
 
 
 #: Columns of a file of raw readings (``fmscal apply``); a full log has them too.
