@@ -1,4 +1,12 @@
-"""The plain reference in 3D: smoothed inverse dynamics, then least squares for ``[S | c]``.
+"""The plain reference: smoothed inverse dynamics, then least squares for ``[S | c]``.
+
+The spatial model's least squares, and on request the planar one's
+(:class:`fmscal.observers.batch.InverseDynamicsLeastSquares`): what follows
+is written for the body in 3D; on a model whose configuration moves
+additively the wrench each sample needed is its dynamics inverted,
+``w = A(x)^-1 (a - d(x))`` (eq. (1): ``G(theta)^-1 [theta'', X'', Y'']``),
+on the poses smoothed and differentiated by the same filter
+(:func:`smoothed_channels`), and the fit of ``[S | c]`` is the same.
 
 What a practitioner would write first. The poses are smoothed and
 differentiated (:func:`fmscal.plant.physics.spatial_motion`); with the

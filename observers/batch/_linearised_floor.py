@@ -1,4 +1,4 @@
-"""The floor of a model whose channels are not linear (the spatial case): linearised about the smoothed motion.
+"""The floor linearised about the smoothed motion: the spatial floor, and on request any model's.
 
 In the plane the accelerations are linear in ``[S | c]`` once the angle in
 ``G(theta)`` is read from the measured poses, and the floor
@@ -62,6 +62,27 @@ What the log determines: the information ``J`` along each direction of the
 augmented reading ``[tx .. fz, 1]`` (:func:`undetermined_directions`), as
 the reference fit reports it; an undetermined direction leaves ``converged``
 False.
+
+**On a model with linear channels** (the planar one, with
+``fit_max_likelihood(..., linearised=True)``). Nothing above is spatial: the
+nominal motion is :func:`fmscal.observers.batch.nominal_motion` (each
+additive configuration column smoothed and differentiated), the error state
+is ``[dq, dnu]`` of the model's own ``state_integrate``, the pose residual
+``difference(x_bar, pose)``. Linearising is exact there in the state (the
+step is linear in ``delta`` but for ``G(theta)``, whose angle error the
+error state carries to first order), and the fit agrees with the exact
+filter of :mod:`fmscal.observers.batch._max_likelihood` up to what the two
+take differently:
+
+* the angle in ``G(theta)``: the exact filter reads the measured, noisy
+  angle (interpolated between frames on a multi-rate log), this one the
+  smoothed nominal plus the filter's first-order correction; the
+  information ``J`` differs by the order of the angle's noise (relative);
+* the errors-in-variables moments: closed form there, the seeded copy here
+  (its scatter, a few per cent of ``B``).
+
+With an almost exact angle both vanish but the copy's scatter
+(``tests/test_general_batch.py`` states the bounds).
 """
 
 from functools import lru_cache
