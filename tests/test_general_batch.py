@@ -20,8 +20,8 @@ import pytest
 
 from fmscal import plant
 from fmscal.observers import LeastSquares, MaximumLikelihood, make_observer
-from fmscal.observers.batch import (InverseDynamicsLeastSquares, LEAST_SQUARES_ENGINES, fit_inverse_dynamics,
-                                    fit_max_likelihood)
+from fmscal.observers.batch import (InverseDynamicsLeastSquares, LEAST_SQUARES_ENGINES, describe_direction,
+                                    fit_inverse_dynamics, fit_max_likelihood)
 from fmscal.plant import PAPER_PAYLOAD, PlanarModel, SpatialModel
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
@@ -151,3 +151,10 @@ def test_the_inverse_dynamics_fit_refuses_a_log_of_another_case():
     log, _, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=2.0).generate(0)
     with pytest.raises(FmscalError, match="set up for planar logs"):
         fit_inverse_dynamics(log, PLANAR)
+
+
+def test_an_undetermined_direction_is_named_in_the_models_own_reading():
+    planar = describe_direction(np.array([0.0, 0.8, -0.6, 0.0]), names=(*PLANAR.wrench_names, "1"))
+    assert "reading 0.80 fx -0.60 fy:" in planar and "gravity" not in planar and "tz" not in planar
+    spatial = describe_direction(np.r_[0.0, 0.0, 0.0, 0.8, -0.6, 0.0, 0.0])
+    assert "reading 0.80 fx -0.60 fy:" in spatial and "gravity" in spatial

@@ -55,7 +55,8 @@ UNDETERMINED_STD = 0.05
 
 @dataclass
 class InverseDynamicsFit:
-    """``[S | c]`` of a spatial log by smoothed inverse dynamics and least squares.
+    """``[S | c]`` of a log by smoothed inverse dynamics and least squares (shapes for the spatial
+    reading, ``n_w = 6``; ``n_w`` and ``n_w + 1`` on another model).
 
     Attributes
     ----------
@@ -97,7 +98,7 @@ class InverseDynamicsFit:
 
     @property
     def S_aug(self):
-        """``[S | c]``, shape (6, 7), of ``w = S w_hat + c``, the fitted matrix (``c = -S b``)."""
+        """``[S | c]``, shape (n_w, n_w + 1), of ``w = S w_hat + c``, the fitted matrix (``c = -S b``)."""
         return np.c_[self.S_hat, self.c]
 
 

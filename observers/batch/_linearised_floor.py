@@ -96,7 +96,7 @@ from fmscal.observers.core import matrix as mx, move, progress_bar
 from fmscal.observers.kalman import (POSE_SD_FLOOR, V0_SD, beta_from_copy, bias_matrix, cholesky, cholesky_apply,
                                      copy_predict, correction_limit, error_variances, information_factor, pack_lower,
                                      regressor_step, solve_information, unpack_lower)
-from ._inverse_dynamics import UNDETERMINED_STD, describe_direction, nominal_motion
+from ._inverse_dynamics import READING_NAMES, UNDETERMINED_STD, describe_direction, nominal_motion
 
 __all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout"]
 
@@ -415,13 +415,14 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
     S_history[-1] = S_aug.ravel()
     deltas = np.vstack([np.r_[y[0], np.zeros(model.nv)], np.vstack(motion)])
     x_history = np.asarray(_mapped(model, "integrate", N)(nominal.T, deltas.T)).T
-    undetermined = undetermined_directions(cov, S_aug, log) if n == n_w + 1 else []
+    names = (*model.wrench_names, "1")
+    undetermined = undetermined_directions(cov, S_aug, log, names) if n == n_w + 1 else []
     return dict(S_aug=S_aug, cov_aug=cov, S_history=S_history.reshape(N, n_w, n), x_history=x_history,
                 information=J, eiv_bias=B, undetermined=undetermined,
-                warnings=[describe_direction(d) for d in undetermined])
+                warnings=[describe_direction(d, names=names) for d in undetermined])
 
 
-def undetermined_directions(cov, S_aug, log):
+def undetermined_directions(cov, S_aug, log, names=READING_NAMES):
     """Directions of the augmented reading along which the log leaves ``S`` undetermined.
 
     A unit direction ``d`` of the reading, each component scaled by its
@@ -436,20 +437,25 @@ def undetermined_directions(cov, S_aug, log):
 
     Parameters
     ----------
-    cov : ndarray, shape (42, 42)
+    cov : ndarray, shape (n_w (n_w + 1), n_w (n_w + 1))
         Covariance of ``vec([S | c])``, row order (infinite or huge entries
         along a direction the information did not hold).
-    S_aug : ndarray, shape (6, 7)
+    S_aug : ndarray, shape (n_w, n_w + 1)
     log : plant.Log
         The log (the reading's spread).
+    names : tuple of str
+        The augmented reading's components: the force components (names
+        starting with ``f``) give the constant's scale, as in
+        :func:`fmscal.observers.batch.fit_readings`. Default the spatial reading's.
 
     Returns
     -------
-    list of ndarray, shape (7,)
+    list of ndarray, shape (n_w + 1,)
     """
     n_w, n = S_aug.shape
     spread = np.r_[np.std(log.w_hat, axis=0), 1.0]
-    scale = np.r_[spread[:n_w], spread[n_w // 2:n_w].mean()]
+    force = [j for j, name in enumerate(names[:n_w]) if name.startswith("f")] or list(range(n_w))
+    scale = np.r_[spread[:n_w], spread[force].mean()]
     blocks = [cov[n * i:n * (i + 1), n * i:n * (i + 1)] * np.outer(spread, spread) for i in range(n_w)]
     _, vectors = np.linalg.eigh(sum(blocks))
     out = []
