@@ -14,7 +14,7 @@ from fmscal.plant.numerics import FmscalError, as_bool, as_number
 
 from fmscal.observers.core import ENGINES as _ENGINE_TABLE
 from fmscal.observers.adaptive import AdaptiveObserver, HighGainObserver, PaperAdaptiveObserver, SpatialAdaptiveObserver
-from fmscal.observers.batch import LeastSquares, MaximumLikelihood, SpatialLeastSquares
+from fmscal.observers.batch import InverseDynamicsLeastSquares, LeastSquares, MaximumLikelihood
 from fmscal.observers.kalman import AugmentedEKF, ErrorStateEKF
 
 __all__ = ["Method", "METHODS", "FLOOR_METHOD", "ENGINES", "engine_class", "get_method", "make_observer",
@@ -177,8 +177,10 @@ ENGINES.update({
     (AugmentedEKF, "linear_channels", False): ErrorStateEKF,
     # a body in 3D (a unit-quaternion attitude): the law on its momenta about the centre of mass
     (AdaptiveObserver, "attitude", "quaternion"): SpatialAdaptiveObserver,
-    # a body in 3D: least squares on smoothed inverse dynamics, linear in [S | c]
-    (LeastSquares, "attitude", "quaternion"): SpatialLeastSquares,
+    # a body in 3D: least squares on smoothed inverse dynamics, linear in [S | c] (on another model on request:
+    # LeastSquares(model, engine="inverse-dynamics")); the floor needs no row: fit_max_likelihood linearises
+    # a model without linear channels (MaximumLikelihood(model, linearised=True) on any model)
+    (LeastSquares, "attitude", "quaternion"): InverseDynamicsLeastSquares,
 })
 
 

@@ -1,13 +1,14 @@
-"""Whole-log estimates: least squares, the maximum-likelihood floor (and its linearised form in 3D), the
-smoothed inverse-dynamics fit, cluster-robust covariances and the pose stream's latency.
+"""Whole-log estimates: least squares (one entry, two engines: double-integrated windows and smoothed inverse
+dynamics), the maximum-likelihood floor (one entry: the exact filter on a model linear in its channels, the
+filter linearised about the smoothed motion on any model), cluster-robust covariances and the pose stream's latency.
 """
 
 from ._cluster_covariance import (weighted_fit, pseudo_inverse, sandwich, small_sample_factor, correlation_time,
     block_length, time_blocks, few_blocks, MIN_BLOCKS)
 from ._inverse_dynamics import (InverseDynamicsFit, fit_inverse_dynamics, fit_readings, describe_direction,
-    UNDETERMINED_STD, READING_NAMES)
-from ._least_squares import (LeastSquares, SpatialLeastSquares, FitReport, phi_to_S_map, EXCITATION_COND_LIMIT,
-                             CONSISTENCY_RATIO_LIMIT)
+    UNDETERMINED_STD, READING_NAMES, nominal_motion, smoothed_channels)
+from ._least_squares import (LeastSquares, InverseDynamicsLeastSquares, SpatialLeastSquares, FitReport, phi_to_S_map,
+                             EXCITATION_COND_LIMIT, CONSISTENCY_RATIO_LIMIT, LEAST_SQUARES_ENGINES)
 from ._latency import (estimate_latency)
 from ._max_likelihood import (MaximumLikelihoodFit, fit_max_likelihood, log_steps)
 from ._linearised_floor import (fit_linearised, undetermined_directions, configuration_residuals, error_layout)
@@ -15,6 +16,7 @@ from ._floor import (MaximumLikelihood)
 
 __all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "small_sample_factor", "correlation_time", "block_length",
            "time_blocks", "few_blocks", "InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings",
-           "describe_direction", "LeastSquares", "SpatialLeastSquares", "FitReport", "phi_to_S_map", "estimate_latency",
+           "describe_direction", "nominal_motion", "smoothed_channels", "LeastSquares", "InverseDynamicsLeastSquares",
+           "SpatialLeastSquares", "LEAST_SQUARES_ENGINES", "FitReport", "phi_to_S_map", "estimate_latency",
            "MaximumLikelihoodFit", "fit_max_likelihood", "log_steps", "fit_linearised", "undetermined_directions",
            "configuration_residuals", "error_layout", "MaximumLikelihood"]

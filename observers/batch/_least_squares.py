@@ -22,13 +22,13 @@ import numpy as np
 from fmscal.plant import S_from_phi, phi_1
 from fmscal.plant.io import estimate_noise
 from fmscal.plant.numerics import FmscalError, as_positive_scalar
-from fmscal.plant.physics import smoothed_state
+from fmscal.plant.physics import as_model
 
 from fmscal.observers.core import Estimate, Observer, position_increment, velocity_increment
-from ._inverse_dynamics import fit_inverse_dynamics
+from ._inverse_dynamics import fit_inverse_dynamics, nominal_motion
 
-__all__ = ["LeastSquares", "SpatialLeastSquares", "FitReport", "phi_to_S_map", "EXCITATION_COND_LIMIT",
-           "CONSISTENCY_RATIO_LIMIT"]
+__all__ = ["LeastSquares", "InverseDynamicsLeastSquares", "SpatialLeastSquares", "FitReport", "phi_to_S_map",
+           "EXCITATION_COND_LIMIT", "CONSISTENCY_RATIO_LIMIT", "LEAST_SQUARES_ENGINES"]
 
 #: Above this condition number of the (scaled) information matrix, the log is said not to
 #: excite all nine entries of S.
@@ -51,9 +51,28 @@ class FitReport(dict):
 
 
 class LeastSquares(Observer):
-    """Offline weighted least squares for ``S`` over double-integrated windows.
+    """Offline least squares for ``S``: the one least-squares entry, two engines.
 
-    Module docstring for the model. Angular and translational parameters are
+    ``LeastSquares(model, ...)`` builds the engine that fits ``model``:
+
+    - ``"windows"`` (this class): weighted least squares over
+      double-integrated windows, for a model linear in its channels (the
+      planar one; the default there);
+    - ``"inverse-dynamics"`` (:class:`InverseDynamicsLeastSquares`):
+      smoothed inverse dynamics and least squares on the augmented reading
+      (:func:`fmscal.observers.batch.fit_inverse_dynamics`), for the
+      spatial model (the default there, by the registry's row
+      ``(LeastSquares, "attitude", "quaternion")``,
+      :data:`fmscal.observers._registry.ENGINES`) and for the planar one on
+      request (``engine="inverse-dynamics"``); it always estimates the
+      offset.
+
+    On a planar log the two agree within what their different smoothing
+    allows (``tests/test_general_batch.py``: E within a factor of three
+    either way on seeds of the paper scenario, the median ``S_std`` within
+    a factor of 1.5).
+
+    The windows engine. Module docstring for the model. Angular and translational parameters are
     fitted separately (they share no unknown); ``S_hat`` follows from
     :func:`plant.S_from_phi`, and its covariance from the residual variance of
     each channel, mapped linearly. The covariance is the cluster-robust
@@ -64,16 +83,20 @@ class LeastSquares(Observer):
     Parameters
     ----------
     model : plant.Model or plant.Payload
-        The problem, a model linear in its channels (a payload stands for
-        the planar model of it); on a model whose attitude is a unit
-        quaternion the method runs as :class:`SpatialLeastSquares`.
+        The problem (a payload stands for its case's model).
     window : float
-        Window length in s over which the raw reading is integrated twice.
+        Window length in s over which the raw reading is integrated twice
+        (the windows engine; the inverse-dynamics engine does not read it).
     offset : bool
         Also estimate the sensor's offset ``b`` in ``w = S (w_hat - b)``:
         the model ``w = S w_hat + c`` stays linear (``c = -S b``, the
         reading augmented by a constant 1). ``b`` and its one-sigma
-        uncertainty are in ``result.b``, ``result.b_std``.
+        uncertainty are in ``result.b``, ``result.b_std``. The
+        inverse-dynamics engine requires it.
+    engine : {None, "windows", "inverse-dynamics"}
+        None (default): the engine the registry lists for what the model
+        declares (:meth:`observers.Observer.engine`); a name: that engine
+        (:data:`LEAST_SQUARES_ENGINES`), refused on a model it does not fit.
 
     Attributes
     ----------
@@ -97,11 +120,25 @@ class LeastSquares(Observer):
     #: The engine estimates the offset always (``offset=False`` is refused).
     offset_required = False
 
-    def __init__(self, model, window=0.5, offset=False):
+    def __new__(cls, model=None, *args, **kwargs):
+        """The engine ``engine`` names (the 4th argument or the keyword), else the registry's for ``model``
+        (:meth:`observers.Observer.__new__`)."""
+        engine = kwargs.get("engine", args[2] if len(args) > 2 else None)
+        if model is None or engine is None:
+            return super().__new__(cls, model)
+        return Observer.__new__(_engine_named(engine))
+
+    def __init__(self, model, window=0.5, offset=False, engine=None):
+        if engine is not None:
+            _engine_named(engine)
+            refusal = type(self)._refusal(as_model(model, type(self).__name__))
+            if refusal is not None:
+                raise FmscalError(refusal)
         super().__init__(model, offset=offset)
+        self.engine_name = next(name for name, cls in LEAST_SQUARES_ENGINES.items() if cls is type(self))
         if self.offset_required and not self.offset:
-            raise FmscalError("least squares on a spatial model always estimates the offset (smoothed inverse "
-                              "dynamics, fmscal.observers.batch._inverse_dynamics); pass offset=True")
+            raise FmscalError("least squares by smoothed inverse dynamics always estimates the offset "
+                              "(fmscal.observers.batch.fit_inverse_dynamics); pass offset=True")
         self.window = as_positive_scalar(window, "window")
         self.report = FitReport()
 
@@ -193,8 +230,8 @@ class LeastSquares(Observer):
         nothing (``result.info["fit"]`` holds the :class:`FitReport`, and
         ``result.warnings`` its warnings).
 
-        On a spatial model the fit is smoothed inverse dynamics
-        (:class:`SpatialLeastSquares`).
+        The inverse-dynamics engine has its own
+        (:meth:`InverseDynamicsLeastSquares._estimate`).
         """
         Z = self._double_integrals(log)
         windows = self._windows(log)
@@ -384,43 +421,66 @@ def phi_to_S_map(model, sizes, n):
     return T
 
 
-class SpatialLeastSquares(LeastSquares):
-    """:class:`LeastSquares` on the spatial model: smoothed inverse dynamics and least squares, one batch fit.
+class InverseDynamicsLeastSquares(LeastSquares):
+    """:class:`LeastSquares` by smoothed inverse dynamics: one batch fit of ``w_k = S w_hat_k + c``.
 
     Built by ``LeastSquares(model, ...)`` (registry name ``least-squares``)
     when the model's attitude is a unit quaternion (the registry's engine for
-    that declaration, :data:`fmscal.observers._registry.ENGINES`), with the
-    same settings; it always estimates the offset (``offset=True``). The fit
-    is :func:`fmscal.observers.batch.fit_inverse_dynamics` on the model's
-    payload and gravity; ``window`` is not read.
+    that declaration, :data:`fmscal.observers._registry.ENGINES`), or on any
+    model whose dynamics invert (``input_matrix`` square: the planar one)
+    with ``engine="inverse-dynamics"``; the same settings, and it always
+    estimates the offset (``offset=True``). The fit is
+    :func:`fmscal.observers.batch.fit_inverse_dynamics` on the model
+    (Newton-Euler in 3D with the model's payload and gravity, eq. (1)
+    inverted in the plane); ``window`` is not read.
     """
 
     offset_required = True
 
     @classmethod
     def _refusal(cls, model):
-        """The base class's limits (:meth:`observers.Observer._refusal`): the fit is written for a body in 3D."""
+        """The base class's limits (:meth:`observers.Observer._refusal`), and dynamics that invert: as many
+        wrench components as accelerations."""
+        if model.n_w != model.nv:
+            return (f"least squares by inverse dynamics inverts the model's input matrix; a {model.name} model has "
+                    f"{model.n_w} wrench components and {model.nv} accelerations")
         return super(LeastSquares, cls)._refusal(model)
 
     def _fit(self, log):
-        return fit_inverse_dynamics(log, self.model.payload, self.model.gravity)
+        return fit_inverse_dynamics(log, self.model)
 
     def _estimate(self, log, S0):
-        """The spatial reference: smoothed inverse dynamics and least squares, one batch fit.
+        """Smoothed inverse dynamics and least squares, one batch fit.
 
         Every row of the calibration history holds the whole log's fit (a
         batch fit has no running estimate); the motion is the smoothed poses'
-        (:func:`fmscal.plant.physics.smoothed_state`); the checks pass
+        (:func:`fmscal.observers.batch.nominal_motion`); the checks pass
         when the log determines every direction of the reading
         (``result.info["undetermined"]``, the warnings say what to record).
         """
         fit = self._fit(log)
         calibration = np.tile(fit.S_aug.ravel(), (len(log), 1))
         info = {"undetermined": [d.tolist() for d in fit.undetermined], "residual_rms": fit.residual_rms.tolist()}
-        return Estimate(calibration, smoothed_state(log), cov=fit.cov, checks_passed=fit.converged,
+        return Estimate(calibration, nominal_motion(log, self.model), cov=fit.cov, checks_passed=fit.converged,
                         info=info, warnings=list(fit.warnings))
 
     def latency_cost(self, log):
         """The fit's misfit on ``log`` for the latency search: the sum over the wrench components of the share
         of each the inverse-dynamics fit leaves unexplained (:attr:`InverseDynamicsFit.unexplained`)."""
         return float(np.sum(self._fit(log).unexplained))
+
+
+#: The name the registry and the tables knew the inverse-dynamics engine by (the spatial model's engine).
+SpatialLeastSquares = InverseDynamicsLeastSquares
+
+#: The least-squares engines by the name ``LeastSquares(model, engine=...)`` takes.
+LEAST_SQUARES_ENGINES = {"windows": LeastSquares, "inverse-dynamics": InverseDynamicsLeastSquares}
+
+
+def _engine_named(engine):
+    """The engine class :data:`LEAST_SQUARES_ENGINES` names, or a one-line :class:`FmscalError`."""
+    try:
+        return LEAST_SQUARES_ENGINES[engine]
+    except (KeyError, TypeError):
+        raise FmscalError(f"least squares: no engine {engine!r}; expected None or one of "
+                          f"{', '.join(LEAST_SQUARES_ENGINES)}") from None

@@ -1,4 +1,4 @@
-"""The floor of a model whose channels are not linear (the spatial case): linearised about the smoothed motion.
+"""The floor linearised about the smoothed motion: the spatial floor, and on request any model's.
 
 In the plane the accelerations are linear in ``[S | c]`` once the angle in
 ``G(theta)`` is read from the measured poses, and the floor
@@ -62,6 +62,27 @@ What the log determines: the information ``J`` along each direction of the
 augmented reading ``[tx .. fz, 1]`` (:func:`undetermined_directions`), as
 the reference fit reports it; an undetermined direction leaves ``converged``
 False.
+
+**On a model with linear channels** (the planar one, with
+``fit_max_likelihood(..., linearised=True)``). Nothing above is spatial: the
+nominal motion is :func:`fmscal.observers.batch.nominal_motion` (each
+additive configuration column smoothed and differentiated), the error state
+is ``[dq, dnu]`` of the model's own ``state_integrate``, the pose residual
+``difference(x_bar, pose)``. Linearising is exact there in the state (the
+step is linear in ``delta`` but for ``G(theta)``, whose angle error the
+error state carries to first order), and the fit agrees with the exact
+filter of :mod:`fmscal.observers.batch._max_likelihood` up to what the two
+take differently:
+
+* the angle in ``G(theta)``: the exact filter reads the measured, noisy
+  angle (interpolated between frames on a multi-rate log), this one the
+  smoothed nominal plus the filter's first-order correction; the
+  information ``J`` differs by the order of the angle's noise (relative);
+* the errors-in-variables moments: closed form there, the seeded copy here
+  (its scatter, a few per cent of ``B``).
+
+With an almost exact angle both vanish but the copy's scatter
+(``tests/test_general_batch.py`` states the bounds).
 """
 
 from functools import lru_cache
@@ -70,13 +91,12 @@ import casadi as ca
 import numpy as np
 
 from fmscal.plant.numerics import ChunkedSteps, StateLayout, build_once, ops
-from fmscal.plant.physics import smoothed_state
 
 from fmscal.observers.core import matrix as mx, move, progress_bar
-from fmscal.observers.kalman import (V0_SD, beta_from_copy, bias_matrix, cholesky, cholesky_apply, copy_predict,
-                                     correction_limit, error_variances, information_factor, pack_lower, regressor_step,
-                                     solve_information, unpack_lower)
-from ._inverse_dynamics import UNDETERMINED_STD, describe_direction
+from fmscal.observers.kalman import (POSE_SD_FLOOR, V0_SD, beta_from_copy, bias_matrix, cholesky, cholesky_apply,
+                                     copy_predict, correction_limit, error_variances, information_factor, pack_lower,
+                                     regressor_step, solve_information, unpack_lower)
+from ._inverse_dynamics import READING_NAMES, UNDETERMINED_STD, describe_direction, nominal_motion
 
 __all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout"]
 
@@ -217,15 +237,15 @@ def _chunked(model, n, eiv, history):
 
 @lru_cache(maxsize=4)
 def _mapped(model, what, N):
-    """``model.difference`` or ``model.integrate`` (configuration and velocity) over ``N`` samples at once."""
-    nq, nv = model.nq, model.nv
+    """``model.difference`` (a state's configuration to a measured pose) or ``model.state_integrate`` over ``N``
+    samples at once, on the model's own layouts (any model: the configuration need not lead the state)."""
     x = ca.SX.sym("x", model.nx)
-    if what == "difference":
-        y = ca.SX.sym("y", nq)
-        out = model.difference(x[0:nq], y)
-    else:
-        y = ca.SX.sym("y", 2 * nv)
-        out = ca.vertcat(model.integrate(x[0:nq], y[0:nv]), x[nq:] + y[nv:])
+    if what == "difference":                    # y: a measured pose, in the log's columns
+        y = ca.SX.sym("y", model.n_pose)
+        out = model.difference(model.configuration(x), model.pose_configuration(y))
+    else:                                       # y: an error state [dq, dnu]
+        y = ca.SX.sym("y", 2 * model.nv)
+        out = model.state_integrate(x, y)
     return ca.Function(f"{what}_{model.name}", [x, y], [out]).map(N)
 
 
@@ -237,17 +257,16 @@ def configuration_residuals(model, states, poses):
     model : plant.Model
     states : ndarray, shape (M, nx)
     poses : ndarray, shape (M, n_pose)
-        Measured poses in the log's columns (spatial: ``qw qx qy qz x y z``).
+        Measured poses in the log's columns (spatial: ``qw qx qy qz x y z``; planar ``theta x y``).
 
     Returns
     -------
     ndarray, shape (M, nv)
-        Spatial: ``[dp (m, world), dphi (rad, a turn about the sensor's axes)]``.
+        Spatial: ``[dp (m, world), dphi (rad, a turn about the sensor's axes)]``; planar ``[dtheta, dX, dY]``.
     """
     if not len(states):
         return np.zeros((0, model.nv))
-    config = np.column_stack([poses[:, model.n_pose - 3:], poses[:, :model.n_pose - 3]])   # [p, q]
-    return np.asarray(_mapped(model, "difference", len(states))(np.asarray(states).T, config.T)).T
+    return np.asarray(_mapped(model, "difference", len(states))(np.asarray(states).T, np.asarray(poses).T)).T
 
 
 def _pose_residuals(model, log, nominal):
@@ -256,6 +275,18 @@ def _pose_residuals(model, log, nominal):
     y = np.zeros((len(log), model.nv))
     y[rows] = configuration_residuals(model, nominal[rows], log.pose[rows])
     return y
+
+
+def _error_variances(model, noise):
+    """The pose noise's variances in the error state's configuration part ``dq`` (``nv``).
+
+    A unit-quaternion attitude: :func:`fmscal.observers.kalman.error_variances` (``[dp, dphi]``); a
+    configuration that moves additively (the pose is the configuration): each pose column's variance
+    (:meth:`fmscal.plant.Model.pose_sd`), as the planar floor takes them. Floored at :data:`POSE_SD_FLOOR`.
+    """
+    if model.attitude == "quaternion":
+        return error_variances(model, noise)
+    return np.maximum(model.pose_sd(noise), POSE_SD_FLOOR) ** 2
 
 
 def _initial_state(model, n, eiv, y0, var):
@@ -287,10 +318,17 @@ def _np_ops():
 
 
 def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=0.2):
-    """The maximum-likelihood ``[S | c]`` of a model without linear channels (module docstring).
+    """The maximum-likelihood ``[S | c]`` linearised about the smoothed motion (module docstring).
 
-    Called by :func:`fmscal.observers.batch.fit_max_likelihood` for
-    such a model (the spatial one); its arguments are checked there.
+    Called by :func:`fmscal.observers.batch.fit_max_likelihood` for a
+    model without linear channels (the spatial one), or for any model with
+    ``linearised=True``; its arguments are checked there. Written on the
+    model's pieces alone (``state_integrate``, ``difference``,
+    ``acceleration``, ``input_matrix``, ``regressor``), it runs on the
+    planar model too, where it agrees with the exact planar filter up to
+    what the two take differently (the angle in ``G(theta)``, the
+    errors-in-variables moments: module docstring, "On a model with linear
+    channels").
 
     Parameters
     ----------
@@ -305,7 +343,8 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
         True: the step compiled to C; False: casadi's virtual machine, one
         sample at a time (slow; for checks).
     window : float
-        The smoothing window of the nominal motion, s.
+        The smoothing window of the nominal motion, s
+        (:func:`fmscal.observers.batch.nominal_motion`).
 
     Returns
     -------
@@ -317,9 +356,9 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
     n_w, N = model.n_w, len(log)
     n = n_w + int(bool(offset))
     m = n_w * n
-    nominal = smoothed_state(log, window)
+    nominal = nominal_motion(log, model, window)
     y = _pose_residuals(model, log, nominal)
-    var = error_variances(model, noise)
+    var = _error_variances(model, noise)
     var_w = np.square(noise.wrench_sd)
     s_bar = np.c_[S0, np.zeros(n_w)].ravel() if offset else np.asarray(S0, dtype=float).ravel()
     s0 = s_bar.copy()
@@ -376,13 +415,14 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
     S_history[-1] = S_aug.ravel()
     deltas = np.vstack([np.r_[y[0], np.zeros(model.nv)], np.vstack(motion)])
     x_history = np.asarray(_mapped(model, "integrate", N)(nominal.T, deltas.T)).T
-    undetermined = undetermined_directions(cov, S_aug, log) if n == n_w + 1 else []
+    names = (*model.wrench_names, "1")
+    undetermined = undetermined_directions(cov, S_aug, log, names) if n == n_w + 1 else []
     return dict(S_aug=S_aug, cov_aug=cov, S_history=S_history.reshape(N, n_w, n), x_history=x_history,
                 information=J, eiv_bias=B, undetermined=undetermined,
-                warnings=[describe_direction(d) for d in undetermined])
+                warnings=[describe_direction(d, names=names) for d in undetermined])
 
 
-def undetermined_directions(cov, S_aug, log):
+def undetermined_directions(cov, S_aug, log, names=READING_NAMES):
     """Directions of the augmented reading along which the log leaves ``S`` undetermined.
 
     A unit direction ``d`` of the reading, each component scaled by its
@@ -397,20 +437,25 @@ def undetermined_directions(cov, S_aug, log):
 
     Parameters
     ----------
-    cov : ndarray, shape (42, 42)
+    cov : ndarray, shape (n_w (n_w + 1), n_w (n_w + 1))
         Covariance of ``vec([S | c])``, row order (infinite or huge entries
         along a direction the information did not hold).
-    S_aug : ndarray, shape (6, 7)
+    S_aug : ndarray, shape (n_w, n_w + 1)
     log : plant.Log
         The log (the reading's spread).
+    names : tuple of str
+        The augmented reading's components: the force components (names
+        starting with ``f``) give the constant's scale, as in
+        :func:`fmscal.observers.batch.fit_readings`. Default the spatial reading's.
 
     Returns
     -------
-    list of ndarray, shape (7,)
+    list of ndarray, shape (n_w + 1,)
     """
     n_w, n = S_aug.shape
     spread = np.r_[np.std(log.w_hat, axis=0), 1.0]
-    scale = np.r_[spread[:n_w], spread[n_w // 2:n_w].mean()]
+    force = [j for j, name in enumerate(names[:n_w]) if name.startswith("f")] or list(range(n_w))
+    scale = np.r_[spread[:n_w], spread[force].mean()]
     blocks = [cov[n * i:n * (i + 1), n * i:n * (i + 1)] * np.outer(spread, spread) for i in range(n_w)]
     _, vectors = np.linalg.eigh(sum(blocks))
     out = []

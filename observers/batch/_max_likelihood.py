@@ -214,7 +214,7 @@ def log_steps(log, model):
                             log.w_hat[:-1], log.w_hat[1:]])
 
 
-def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, compiled=True):
+def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, compiled=True, linearised=None):
     """The maximum-likelihood estimate of ``S`` (and the offset) from a whole log.
 
     Module docstring for the model and the filter: a Kalman filter on the
@@ -254,6 +254,15 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
         True (default): the step compiled by casadi; False: the same step in
         numpy, sample by sample (slow; for checks). Results agree to
         rounding (module docstring).
+    linearised : bool, optional
+        Which engine: None (default) as the model declares, the exact filter
+        of this module on a model with
+        :attr:`fmscal.plant.Model.linear_channels` and
+        :func:`fmscal.observers.batch.fit_linearised` (linearised about the
+        smoothed motion) on one without; True: the linearised engine on any
+        model (on the planar one it agrees with the exact filter within
+        what the two take differently: :mod:`fmscal.observers.batch._linearised_floor`);
+        False: the exact filter, refused on a model without linear channels.
 
     Returns
     -------
@@ -267,8 +276,9 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
         :class:`plant.NoiseSpec`.
     FmscalError
         No model, a log of another case, ``passes`` not a positive integer,
-        ``S0`` not a finite ``n_w x n_w`` matrix, or a log that does not
-        excite every entry of ``[S | c]`` (singular information).
+        ``S0`` not a finite ``n_w x n_w`` matrix, ``linearised=False`` on a
+        model without linear channels, or a log that does not excite every
+        entry of ``[S | c]`` (singular information).
     """
     model = as_model(model, "fit_max_likelihood")
     if not isinstance(log, Log):
@@ -278,13 +288,20 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
         model.check_noise(noise)
     if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
         raise FmscalError(f"passes must be a positive integer; got {passes!r}")
+    if linearised is None:
+        linearised = not model.linear_channels
+    elif not isinstance(linearised, (bool, np.bool_)):
+        raise FmscalError(f"linearised must be None, True or False; got {linearised!r}")
+    elif not linearised and not model.linear_channels:
+        raise FmscalError(f"the exact maximum-likelihood filter needs a model linear in its channels; a "
+                          f"{model.name} model is linearised (linearised=None or True)")
     start = time.perf_counter()
     n_w = model.n_w
     S0 = np.eye(n_w) if S0 is None else check_calibration(S0, "S0", max_cond=np.inf, size=n_w)
     noise_estimated = noise is None
     if noise_estimated:
         noise = estimate_noise(log)
-    if not model.linear_channels:
+    if linearised:
         fit = fit_linearised(log, model, noise, offset, int(passes), S0, compiled)
         return MaximumLikelihoodFit(noise=noise, noise_estimated=noise_estimated, passes=int(passes), model=model,
                                     wall_time=time.perf_counter() - start, **fit)
