@@ -217,8 +217,9 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     DivergedError
         The method's estimate diverged.
     FmscalError
-        Bad input, an option the case does not take, or an estimate of
-        ``S`` that is singular (one line each).
+        Bad input (among it a reading channel that never changes), an option
+        the case does not take, or an estimate of ``S`` that is singular (one
+        line each).
     """
     if isinstance(data, (str, os.PathLike)):
         data = read_data(data)
@@ -381,6 +382,11 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     """
     model = _log_payload_model(cls, payload, gravity)
     case = f"a {cls.name} log"
+    constant = [name for name, column in zip(model.wrench_names, log.w_hat.T) if np.ptp(column) == 0]
+    if constant:                        # no real channel reads one value to the last bit: nothing to fit
+        raise FmscalError(f"{log.name}: column(s) {', '.join(constant)} of the reading never change (every row "
+                          f"{log.w_hat[0, model.wrench_names.index(constant[0])]:g}): a channel not connected or "
+                          "a column written empty; check the recording")
     if reading is not None and not model.signed_reading:
         raise OptionError("reading", "{} is taken on a spatial log or a pose table; a planar log's sign is the "
                           "toolkit's")

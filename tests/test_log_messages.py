@@ -56,3 +56,22 @@ def test_the_log_itself_still_reads(arm):
     log = read_log(folder / "arm.csv")
     assert log.kind == "spatial" and len(log) == len(frame)
     np.testing.assert_allclose(log.w_hat[:, 5], frame["fz"].to_numpy())
+
+
+@pytest.mark.parametrize("method", ["least-squares", "high-gain", "ekf", "adaptive", "max-likelihood"])
+def test_readings_that_never_change_are_refused_in_one_line_by_every_method(tmp_path, capsys, method):
+    # issue 37: all-zero readings traced back (SVD did not converge) in four methods
+    from fmscal.plant import PAPER_PAYLOAD, get_scenario
+    log, _, _ = get_scenario("paper").with_(duration=5.0).generate(0)
+    log.w_hat[:] = 0.0
+    log.write(tmp_path / "zero.csv")
+    argv = ["calibrate", str(tmp_path / "zero.csv"), "--mass", "2.5", "--inertia", "0.75", "--rho", "0.2", "0.25",
+            "--observer", method]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "fmscal calibrate: error: zero.csv: column(s) M, fx, fy of the reading never change (every row 0): a "
+        "channel not connected or a column written empty; check the recording"]
+    from fmscal.analysis import calibrate
+    from fmscal.plant import FmscalError
+    with pytest.raises(FmscalError, match="^zero.csv: column\\(s\\) M, fx, fy of the reading never change"):
+        calibrate(read_log(tmp_path / "zero.csv"), PAPER_PAYLOAD, method=method)
