@@ -216,13 +216,13 @@ def test_no_runtime_warning_reaches_stderr(folder, capsys):
     assert proc.returncode == 2, proc.stderr
     assert "RuntimeWarning" not in proc.stderr and "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "does not excite" in lines[0]        # the default (the floor) refuses it
+    assert len(lines) == 1 and "never change" in lines[0]           # refused before any method runs (issue 37)
     proc = subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", str(folder / "zero.csv"), *PAYLOAD,
                            "--observer", "ekf", "--json"], capture_output=True, text=True,
                           env={**os.environ, "PYTHONWARNINGS": "default"})
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 2 and proc.stdout == "", proc.stderr  # the EKF's prior is no answer either: refused
     assert "RuntimeWarning" not in proc.stderr and "Traceback" not in proc.stderr
-    assert json.loads(proc.stdout)["converged"] is False             # the EKF's prior is not an answer
+    assert len(proc.stderr.strip().splitlines()) == 1
 
 
 def test_set_reads_booleans_strictly_and_numbers_as_numbers():

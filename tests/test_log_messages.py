@@ -75,3 +75,24 @@ def test_readings_that_never_change_are_refused_in_one_line_by_every_method(tmp_
     from fmscal.plant import FmscalError
     with pytest.raises(FmscalError, match="^zero.csv: column\\(s\\) M, fx, fy of the reading never change"):
         calibrate(read_log(tmp_path / "zero.csv"), PAPER_PAYLOAD, method=method)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d["S"][0].__setitem__(0, "1.0"), "S must be numbers of shape (3, 3); got [['1.0'"),
+    (lambda d: d["S"][0].__setitem__(0, True), "S must be numbers of shape (3, 3); got [[True"),
+    (lambda d: d.__setitem__("b", ["0", 0, 0]), "b must be numbers of shape (3,); got ['0', 0, 0]"),
+    (lambda d: d.__setitem__("payload", None), "payload must be an object with mass, inertia and rho; got None"),
+    (lambda d: d.__setitem__("S", [[1.0] * 6] * 5), "S must be finite numbers of shape (3, 3); got shape (5, 6)"),
+])
+def test_a_calibration_file_takes_json_numbers_only(tmp_path, edit, message):
+    # issue 37: "1.0" and true were read as numbers; a null payload gave a raw TypeError text
+    import json
+    from fmscal.plant import PAPER_PAYLOAD, PAPER_S, Calibration, FmscalError
+    Calibration(S=PAPER_S, payload=PAPER_PAYLOAD, method="least-squares", b=np.zeros(3)).save(tmp_path / "c.json")
+    data = json.loads((tmp_path / "c.json").read_text())
+    Calibration.load(tmp_path / "c.json")                          # the file as written reads
+    edit(data)
+    (tmp_path / "x.json").write_text(json.dumps(data))
+    with pytest.raises(FmscalError) as err:
+        Calibration.load(tmp_path / "x.json")
+    assert str(err.value).startswith(f"x.json: {message}")

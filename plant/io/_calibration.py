@@ -110,7 +110,14 @@ def reading_sign(reading):
 
 
 def _matrix(value, shape, name, source, undetermined=False):
-    """``value`` as a float array of ``shape``, finite (``undetermined``: +inf allowed, and NaN read as +inf)."""
+    """``value`` as a float array of ``shape``, finite (``undetermined``: +inf allowed, and NaN read as +inf).
+
+    JSON numbers only: text (``"1.0"``) and ``true``/``false`` are refused, as ``null`` is where the
+    entry must be determined.
+    """
+    if not _json_numbers(value, undetermined):
+        raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}"
+                                   f"{' (null: not determined)' if undetermined else ''}; got {_short(value)}")
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -122,6 +129,20 @@ def _matrix(value, shape, name, source, undetermined=False):
         raise CalibrationFileError(f"{source}: {name} must be finite numbers of shape {shape}; "
                                    f"got shape {arr.shape}")
     return arr
+
+
+def _json_numbers(value, allow_null):
+    """True when ``value`` holds numbers only (and ``None``/``null`` where ``allow_null``): no text, no booleans.
+
+    Nested lists or tuples as a JSON file gives them, or a numeric array as a Python caller does.
+    """
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "fiu" or (value.dtype == object and _json_numbers(value.tolist(), allow_null))
+    if isinstance(value, (list, tuple)):
+        return all(_json_numbers(v, allow_null) for v in value)
+    if value is None:
+        return allow_null
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
 def _listed(value):
@@ -456,6 +477,9 @@ class Calibration:
             raise CalibrationFileError(f"{source}: missing key(s) {', '.join(missing)}")
         model = _case(data["S"])
         n = len(model.wrench_names)
+        if not isinstance(data["payload"], dict):
+            raise CalibrationFileError(f"{source}: payload must be an object with mass, inertia and rho; "
+                                       f"got {_short(data['payload'])}")
         try:
             file_payload = model.payload_type.from_dict(data["payload"])
         except (KeyError, TypeError, ValueError) as err:
