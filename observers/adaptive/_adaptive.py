@@ -1,7 +1,9 @@
 """An adaptive observer at the information floor: eqs. (6)-(8) with filtered regressors and a least-squares gain.
 
 The observer keeps the paper's structure, written for any model linear in its
-channels (:attr:`fmscal.plant.Model.linear_channels`): each velocity channel
+channels (:attr:`fmscal.plant.Model.linear_channels`; on a unit-quaternion
+attitude the same class runs the law of :mod:`observers.adaptive._spatial` on
+the momenta about the centre of mass): each velocity channel
 ``c`` is a double integrator of its position (a configuration entry, which the
 pose measures) driven by ``a_c = psi_c(q, w_hat) . phi_g``, ``phi_g`` the
 parameters of the channel's group (:meth:`fmscal.plant.Model.parameter_groups`,
@@ -70,7 +72,13 @@ class AdaptiveObserver(RecursiveObserver):
     the tests' rail) and takes every size and layout from it: the motion
     state (``nx``), one channel per velocity (``nv``), one parameter set
     ``phi_g`` per group of :meth:`fmscal.plant.Model.parameter_groups`
-    (planar: ``phi_1`` of eq. (4), ``phi_2`` of eq. (5)). The changes from
+    (planar: ``phi_1`` of eq. (4), ``phi_2`` of eq. (5)). On a model whose
+    attitude is a unit quaternion (:attr:`fmscal.plant.Model.attitude`, a
+    body in 3D) the same class runs the law on the momenta about the centre
+    of mass (:mod:`observers.adaptive._spatial`), from the pieces
+    :class:`fmscal.plant.SpatialModel` declares for it (``momentum_*``,
+    ``world_*``, ``turn``): two parameter groups, the torque about ``C`` and
+    the force, with the same adaptation (changes 3-5). The changes from
     the paper's observer (:class:`observers.PaperAdaptiveObserver`), each
     switched by a setting so that :func:`analysis._ablation`
     measures them one by one:
@@ -136,7 +144,8 @@ class AdaptiveObserver(RecursiveObserver):
         ``1/(s + lam)^2`` on the regressor (change 1, 2). None: the
         engine's :attr:`default_lam`, :data:`DEFAULT_LAM` (5) on a model
         linear in its channels, :data:`observers.adaptive._spatial.SPATIAL_LAM`
-        (20) on the spatial model (:class:`SpatialAdaptiveObserver`).
+        (20) on a unit-quaternion attitude (the name the registry builds
+        there, :class:`SpatialAdaptiveObserver`, carries only this default).
     gain : {"least-squares", "gradient"}
         Change 3 on or off.
     gamma : float
@@ -163,8 +172,7 @@ class AdaptiveObserver(RecursiveObserver):
     ------
     FmscalError
         A model that is not linear in its channels and has no unit-quaternion
-        attitude (with one it runs as :class:`SpatialAdaptiveObserver`), or a
-        bad setting.
+        attitude, or a bad setting.
 
     Examples
     --------

@@ -1,13 +1,17 @@
 """The adaptive observer's law in 3D: the momenta about the centre of mass, each driven linearly by ``[S | c]``.
 
 :class:`fmscal.observers.AdaptiveObserver` runs this on a
-:class:`fmscal.plant.SpatialModel`; the adaptation (recursive least squares
+:class:`fmscal.plant.SpatialModel` (``AdaptiveObserver._momenta_step``), on the
+model's own pieces, written once for numbers and casadi symbols
+(:meth:`fmscal.plant.SpatialModel.momentum_regressor`, ``momentum_drives``,
+``momentum_phi_from_params``, ``world_inverse_inertia``, ``turn``, ...); this
+module holds its description and its settings. The adaptation (recursive least squares
 per parameter group, the change test, the forgetting) is the planar one's,
 shared. What differs is the motion the observer follows. The spatial model is
 not linear in its channels (the attitude is a quaternion, Newton-Euler at the
 sensor point has gyroscopic terms), but about the centre of mass ``C``
 (``p_C = p + R rho``) the two momenta are driven linearly by the wrench, in
-the world frame:
+the world frame (eq. (M) of the model's pieces, :class:`fmscal.plant.SpatialModel`):
 
     d/dt (m v_C) = R f + m g                                  (linear momentum)
     d/dt H       = R tau_C,   tau_C = tau_O - rho x f          (angular momentum, H = R I_c omega)
