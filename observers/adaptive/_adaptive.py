@@ -457,6 +457,35 @@ class AdaptiveObserver(RecursiveObserver):
             d_phis.append(d_phi)
         return d_phis, parts
 
+    @staticmethod
+    def _filter_predict(o, U_p, U_v, G_p, G_v, dt, M=None):
+        """The sensitivity filter's prediction over a step (change 2; module docstring's ``Upsilon^-``).
+
+        For a double integrator ``p' = M v``, ``v' = psi . phi`` with ``psi`` linear over the step::
+
+            U_p^- = U_p + M (h U_v + G_p)        U_v^- = U_v + G_v
+
+        (``M`` None: the identity, ``U_p + h U_v + G_p``), ``G_p``, ``G_v`` the position and velocity
+        increments of ``psi`` (:mod:`observers.core._discretise`). Rows of numbers or symbols, or
+        ``3 x k`` matrices with ``M`` (3D: ``M = I_W^-1``, :mod:`observers.adaptive._spatial`).
+
+        Returns
+        -------
+        U_p, U_v : the predicted filter
+        """
+        pos = U_p + dt * U_v + G_p if M is None else U_p + o.dot(M, dt * U_v + G_p)
+        return pos, U_v + G_v
+
+    @staticmethod
+    def _filter_correct(o, U_p, U_v, l1, l2, gain=None):
+        """The sensitivity filter's correction at a pose, ``Upsilon_n+1 = (I - L_h C) Upsilon^-`` (change 1, 2)::
+
+            U_p = (1 - l_1) U_p^-                U_v = U_v^- - l_2 M^-1 U_p^-
+
+        ``gain`` is ``l_2 M^-1`` where ``M`` is not the identity (3D: ``l_2 I_W``); None: ``l_2``.
+        """
+        return (1 - l1) * U_p, U_v - (l2 * U_p if gain is None else o.dot(gain, U_p))
+
     def _transition(self, z, u_prev, u, dt):
         """One step (module docstring), the class docstring's changes 1-5: on the channels the model declares
         (:meth:`_channels_step`), or on the momenta about the centre of mass (:meth:`_momenta_step`)."""
@@ -480,19 +509,18 @@ class AdaptiveObserver(RecursiveObserver):
         q0 = o.vcat([has * pose[c] + (1 - has) * x[qi[c]] for c in range(model.nq)])
         q1 = o.vcat([x[qi[c]] + dt * x[vi[c]] for c in range(model.nq)])
         psi0, psi1 = model.channel_regressor_rows(q0, w), model.channel_regressor_rows(q1, w_next)
-        dot = lambda a, b: sum(a[j] * b[j] for j in range(len(a)))
+        dot = lambda a, b: sum(a[j] * b[j] for j in range(a.shape[0]))
         group_of = {c: g for g, (channels, _) in enumerate(self._structure) for c in channels}
         # eqs. (6), (7): x_hat propagated with A(q) S_hat w_hat (planar: G(theta) S_hat w_hat = B_1 phi_1,
         # B_2 phi_2); each channel's filter Upsilon^- and its C Upsilon^- (zero without a pose)
         x_pred, ups_pred, rows = [], [], []
         for c in range(model.nv):
             phi, up, k = phis[group_of[c]], getattr(st, f"ups{c}"), len(psi0[c])
-            g_p = [position_increment(dt, psi0[c][j], psi1[c][j]) for j in range(k)]
-            g_v = [velocity_increment(dt, psi0[c][j], psi1[c][j]) for j in range(k)]
+            g_p = position_increment(dt, o.vcat(psi0[c]), o.vcat(psi1[c]))
+            g_v = velocity_increment(dt, o.vcat(psi0[c]), o.vcat(psi1[c]))
             x_pred.append([x[qi[c]] + dt * x[vi[c]] + dot(g_p, phi), x[vi[c]] + dot(g_v, phi)])
-            ups_pred.append([[up[j] + dt * up[k + j] + g_p[j] for j in range(k)],
-                             [up[k + j] + g_v[j] for j in range(k)]])
-            rows.append([has_next * v for v in ups_pred[c][0]])
+            ups_pred.append(self._filter_predict(o, up[0:k], up[k:2 * k], g_p, g_v, dt))
+            rows.append([has_next * ups_pred[c][0][j] for j in range(k)])
         # a priori position errors at n+1 (true minus estimate), zero without a pose
         e = [has_next * (pose_next[c] - x_pred[c][0]) for c in range(model.nv)]
         h = since + dt                            # 5. time since the previous pose
@@ -502,14 +530,13 @@ class AdaptiveObserver(RecursiveObserver):
         l1, l2 = has_next * l1, has_next * l2
         entries = [None] * model.nx
         for c in range(model.nv):
-            up, d_phi = ups_pred[c], d_phis[group_of[c]]
-            new = [[(1 - l1) * v for v in up[0]], [up[1][j] - l2 * up[0][j] for j in range(len(up[0]))]]
-            parts[f"ups{c}"] = o.vcat(new[0] + new[1])
+            d_phi = d_phis[group_of[c]]
+            new = self._filter_correct(o, *ups_pred[c], l1, l2)
+            parts[f"ups{c}"] = o.vcat(new)
             entries[qi[c]] = x_pred[c][0] + l1 * e[c] + dot(new[0], d_phi)
             entries[vi[c]] = x_pred[c][1] + l2 * e[c] + dot(new[1], d_phi)
         S_next = mx.flat(o, model.params_from_phi([phi + o.vcat(d) for phi, d in zip(phis, d_phis)], n))
         return self.state.pack(o, x=o.vcat(entries), S=S_next, since=(1 - has_next) * h, scale=scale, **parts)
-
 
     def _momenta_step(self, o, st, now, nxt, dt):
         """One step on the momenta about the centre of mass, a body in 3D (:mod:`observers.adaptive._spatial`),
@@ -539,10 +566,8 @@ class AdaptiveObserver(RecursiveObserver):
         psi0, psi1 = model.momentum_regressor(R0, w0), model.momentum_regressor(R1, w1)
         G_p, G_v = position_increment(dt, psi0, psi1), velocity_increment(dt, psi0, psi1)
         U_y, U_l, U_d, U_H = (mx.as_matrix(o, getattr(st, f"ups_{name}"), 3, k) for name in ("y", "l", "d", "H"))
-        U_y = U_y + dt * U_l + G_p
-        U_l = U_l + G_v
-        U_d = U_d + o.dot(M0, dt * U_H + G_p)
-        U_H = U_H + G_v
+        U_y, U_l = self._filter_predict(o, U_y, U_l, G_p, G_v, dt)             # p' = v: m p_C, m v_C
+        U_d, U_H = self._filter_predict(o, U_d, U_H, G_p, G_v, dt, M0)         # p' = I_W^-1 v: chi, H
         # a priori errors at n+1, zero without a pose: the unwrapped attitude's (the measured turn from the last
         # pose, in the world frame, added to chi_ref), m p_C's
         q_meas = has_next * nxt.pose[0:4] + (1 - has_next) * q_ref                 # no pose: no turn
@@ -562,8 +587,8 @@ class AdaptiveObserver(RecursiveObserver):
         l1, l2 = discrete_gain(o, self.lam, h)
         l1, l2 = has_next * l1, has_next * l2
         l2_IW = l2 * model.world_inertia(R1)
-        U_d_new, U_H_new = (1 - l1) * U_d, U_H - o.dot(l2_IW, U_d)
-        U_y_new, U_l_new = (1 - l1) * U_y, U_l - l2 * U_y
+        U_d_new, U_H_new = self._filter_correct(o, U_d, U_H, l1, l2, l2_IW)
+        U_y_new, U_l_new = self._filter_correct(o, U_y, U_l, l1, l2)
         chi_new = chi_pred + l1 * e_d + o.dot(U_d_new, d_t)
         H_new = H_pred + o.dot(l2_IW, e_d) + o.dot(U_H_new, d_t)
         y_new = y_pred + l1 * e_y + o.dot(U_y_new, d_f)
