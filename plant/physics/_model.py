@@ -784,9 +784,9 @@ class SpatialModel(Model):
 
     # --- the momenta about the centre of mass (what a law linear in [S | c] reads in 3D) ------------------
     # About the centre of mass C (p_C = p + R rho) the two momenta are driven linearly by the wrench, in the
-    # world frame (:mod:`fmscal.observers.adaptive._spatial`):
+    # world frame (what the adaptive observer's law in 3D reads, fmscal.observers.AdaptiveObserver):
     #     d/dt (m v_C) = R f + m g,    d/dt H = R tau_C,    tau_C = tau_O - rho x f,    H = R I_c omega     (M)
-    # Each method below is written once for numbers and casadi symbols (the payload as numbers).
+    # Each method below is written once for numbers and casadi symbols; rho is taken as numbers.
     def momentum_groups(self):
         """The momenta's channels that share a parameter set: ``H`` (0-2, driven by ``phi_t``) and ``m v_C``
         (3-5, driven by ``phi_f``), as :meth:`Model.parameter_groups` for linear channels.
@@ -811,7 +811,7 @@ class SpatialModel(Model):
         n : int
             Columns of ``[S | c]``: 6, or 7 with the offset.
         rho : array_like, shape (3,)
-            The centre of mass in the sensor frame, m.
+            The centre of mass in the sensor frame, m (numbers).
 
         Returns
         -------
