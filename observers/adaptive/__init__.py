@@ -3,9 +3,9 @@ high-gain observer of Parsa and Aghili.
 """
 
 from ._highgain import (HighGainObserver, DEFAULT_HIGH_GAIN, REF4_HIGH_GAIN)
-from ._spatial import (phi_from_params, params_from_phi, regressor_rows, SpatialLaw, SPATIAL_LAM, WARM_UP)
+from ._spatial import (SPATIAL_LAM, WARM_UP)
 from ._adaptive import (AdaptiveObserver, SpatialAdaptiveObserver, DEFAULT_LAM, GAINS)
 from ._paper import (PaperAdaptiveObserver, PAPER_K1, PAPER_K2, PAPER_DELTA, injection_matrix, output_error)
 
-__all__ = ["HighGainObserver", "phi_from_params", "params_from_phi", "regressor_rows", "SpatialLaw",
-           "AdaptiveObserver", "SpatialAdaptiveObserver", "PaperAdaptiveObserver", "injection_matrix", "output_error"]
+__all__ = ["HighGainObserver", "AdaptiveObserver", "SpatialAdaptiveObserver", "PaperAdaptiveObserver",
+           "injection_matrix", "output_error"]

@@ -1,7 +1,9 @@
 """An adaptive observer at the information floor: eqs. (6)-(8) with filtered regressors and a least-squares gain.
 
 The observer keeps the paper's structure, written for any model linear in its
-channels (:attr:`fmscal.plant.Model.linear_channels`): each velocity channel
+channels (:attr:`fmscal.plant.Model.linear_channels`; on a unit-quaternion
+attitude the same class runs the law of :mod:`observers.adaptive._spatial` on
+the momenta about the centre of mass): each velocity channel
 ``c`` is a double integrator of its position (a configuration entry, which the
 pose measures) driven by ``a_c = psi_c(q, w_hat) . phi_g``, ``phi_g`` the
 parameters of the channel's group (:meth:`fmscal.plant.Model.parameter_groups`,
@@ -43,12 +45,12 @@ with ``L_h`` placing the eigenvalues of ``(I - L_h C) Phi(h)`` at
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError, as_bool, as_positive_scalar, ops
-from fmscal.plant.physics import as_model
+from fmscal.plant.physics import as_model, rotation_matrix
 
 from fmscal.observers.core import (RecursiveObserver, StateLayout, double_pole_gains, matrix as mx, position_increment,
                                    velocity_increment)
 from ._highgain import discrete_gain
-from ._spatial import SPATIAL_LAM, SpatialLaw
+from ._spatial import SPATIAL_LAM, WARM_UP
 
 __all__ = ["AdaptiveObserver", "SpatialAdaptiveObserver", "DEFAULT_LAM", "GAINS"]
 
@@ -70,7 +72,13 @@ class AdaptiveObserver(RecursiveObserver):
     the tests' rail) and takes every size and layout from it: the motion
     state (``nx``), one channel per velocity (``nv``), one parameter set
     ``phi_g`` per group of :meth:`fmscal.plant.Model.parameter_groups`
-    (planar: ``phi_1`` of eq. (4), ``phi_2`` of eq. (5)). The changes from
+    (planar: ``phi_1`` of eq. (4), ``phi_2`` of eq. (5)). On a model whose
+    attitude is a unit quaternion (:attr:`fmscal.plant.Model.attitude`, a
+    body in 3D) the same class runs the law on the momenta about the centre
+    of mass (:mod:`observers.adaptive._spatial`), from the pieces
+    :class:`fmscal.plant.SpatialModel` declares for it (``momentum_*``,
+    ``world_*``, ``turn``): two parameter groups, the torque about ``C`` and
+    the force, with the same adaptation (changes 3-5). The changes from
     the paper's observer (:class:`observers.PaperAdaptiveObserver`), each
     switched by a setting so that :func:`analysis._ablation`
     measures them one by one:
@@ -136,7 +144,8 @@ class AdaptiveObserver(RecursiveObserver):
         ``1/(s + lam)^2`` on the regressor (change 1, 2). None: the
         engine's :attr:`default_lam`, :data:`DEFAULT_LAM` (5) on a model
         linear in its channels, :data:`observers.adaptive._spatial.SPATIAL_LAM`
-        (20) on the spatial model (:class:`SpatialAdaptiveObserver`).
+        (20) on a unit-quaternion attitude (the name the registry builds
+        there, :class:`SpatialAdaptiveObserver`, carries only this default).
     gain : {"least-squares", "gradient"}
         Change 3 on or off.
     gamma : float
@@ -163,8 +172,7 @@ class AdaptiveObserver(RecursiveObserver):
     ------
     FmscalError
         A model that is not linear in its channels and has no unit-quaternion
-        attitude (with one it runs as :class:`SpatialAdaptiveObserver`), or a
-        bad setting.
+        attitude, or a bad setting.
 
     Examples
     --------
@@ -180,9 +188,9 @@ class AdaptiveObserver(RecursiveObserver):
 
     @classmethod
     def _refusal(cls, model):
-        """None on a model linear in its channels; else why not, in one line (on the spatial model the
-        method runs as :class:`SpatialAdaptiveObserver`, :data:`fmscal.observers._registry.ENGINES`)."""
-        if model.linear_channels:
+        """None on a model linear in its channels or with a unit-quaternion attitude (the law on the momenta
+        about the centre of mass); else why not, in one line."""
+        if model.linear_channels or model.attitude == "quaternion":
             return super()._refusal(model)
         return (f"{cls.__name__} needs a model linear in its channels or the spatial model; "
                 f"it does not run on a {model.name} model")
@@ -214,14 +222,30 @@ class AdaptiveObserver(RecursiveObserver):
 
     # --- the structure, from the model ------------------------------------------------------
     def _groups(self):
-        """Each parameter group of the model: its channels and its parameter count ``k``."""
+        """Each parameter group of the model: its channels and its parameter count ``k``.
+
+        Linear channels: :meth:`fmscal.plant.Model.parameter_groups`; a body in 3D: the momenta's two groups
+        of ``3 n`` (:meth:`fmscal.plant.SpatialModel.momentum_groups`, the torque about ``C`` and the force).
+        """
         model = self.model
+        if not model.linear_channels:
+            return [(list(channels), 3 * self.n_cols) for channels in model.momentum_groups()]
         rows = model.channel_regressor_rows(np.zeros(model.nq), np.ones(self.n_cols))
         return [(list(channels), len(rows[channels[0]])) for channels in model.parameter_groups()]
 
     def _filter_parts(self):
-        """The packed state's parts between ``scale`` and the covariances: ``ups<c>``, channel ``c``'s
-        sensitivity filter ``Upsilon`` (position row, velocity row: 2 x k of its group)."""
+        """The packed state's parts between ``scale`` and the covariances.
+
+        Linear channels: ``ups<c>``, channel ``c``'s sensitivity filter ``Upsilon`` (position row, velocity
+        row: 2 x k of its group). A body in 3D: the motion about ``C`` and the law's four filters
+        (:mod:`observers.adaptive._spatial`); ``chi`` is the observer's turn (the integral of its world rate),
+        ``chi_ref`` the measured turn at the last pose (``q_ref``), ``chi_pose`` the observer's turn just
+        after that pose's correction.
+        """
+        if not self.model.linear_channels:
+            k = 3 * self.n_cols
+            return [("age", 1), ("y", 3), ("l", 3), ("chi", 3), ("chi_ref", 3), ("chi_pose", 3), ("q_ref", 4),
+                    ("H", 3), ("ups_y", 3 * k), ("ups_l", 3 * k), ("ups_d", 3 * k), ("ups_H", 3 * k)]
         return [(f"ups{c}", 2 * k) for channels, k in self._structure for c in channels]
 
     def _layout(self):
@@ -241,16 +265,38 @@ class AdaptiveObserver(RecursiveObserver):
         pose, w_hat = np.atleast_1d(u.pose), np.atleast_1d(u.w_hat)
         # the size H = C Upsilon will have, |psi| / lam^2 (the filter's DC gain), sets the prior
         w = self._augmented(ops(w_hat), w_hat)
-        psi = [np.array(row, dtype=float) for row in model.channel_regressor_rows(pose, w)]
-        parts, info = {}, []
-        for g, (channels, k) in enumerate(self._structure):
-            info.append(max(sum(psi[c] @ psi[c] for c in channels) / k, 1e-12) / self.lam ** 4)
-            parts.update({f"ups{c}": np.zeros(2 * k) for c in channels})
+        parts, info = (self._channels_start if model.linear_channels else self._momenta_start)(pose, w)
+        for g, (_, k) in enumerate(self._structure):
             parts[f"P{g}"] = np.array(mx.upper(np.eye(k) / (_PRIOR * info[g])))
             parts[f"test{g}"] = np.zeros(4 * k + 2)
             parts[f"test{g}"][3 * k:4 * k] = info[g]
         return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info,
                                **parts)
+
+    def _channels_start(self, pose, w):
+        """Linear channels at rest at the first pose: the filters, and each group's prior information
+        ``|psi|^2 / k / lam^4`` (the size of ``H = C Upsilon``)."""
+        psi = [np.array(row, dtype=float) for row in self.model.channel_regressor_rows(pose, w)]
+        parts, info = {}, []
+        for channels, k in self._structure:
+            info.append(max(sum(psi[c] @ psi[c] for c in channels) / k, 1e-12) / self.lam ** 4)
+            parts.update({f"ups{c}": np.zeros(2 * k) for c in channels})
+        return parts, info
+
+    def _momenta_start(self, pose, w):
+        """The motion about ``C`` at rest at the first pose, and each group's prior information
+        ``|Psi|^2 / k / lam^4``; the attitude's rows carry ``I_W^-1`` too (``trace(I_c^-2) / 3``)."""
+        model = self.model
+        q = pose[:4] / np.linalg.norm(pose[:4])
+        psi = model.momentum_regressor(rotation_matrix(q), w)
+        k = 3 * self.n_cols
+        base = max(float(np.sum(psi * psi)) / k, 1e-12) / self.lam ** 4
+        K = self.payload.I_c_inv
+        info = [base * float(np.trace(K @ K)) / 3, base]
+        parts = {"age": 0.0, "y": model.centre_of_mass_momentum(np.r_[q, pose[4:]]), "l": np.zeros(3),
+                 "chi": np.zeros(3), "chi_ref": np.zeros(3), "chi_pose": np.zeros(3), "q_ref": q, "H": np.zeros(3),
+                 **{name: np.zeros(3 * k) for name in ("ups_y", "ups_l", "ups_d", "ups_H")}}
+        return parts, info
 
     # --- the adaptation -------------------------------------------------------
     @staticmethod
@@ -411,12 +457,47 @@ class AdaptiveObserver(RecursiveObserver):
             d_phis.append(d_phi)
         return d_phis, parts
 
+    @staticmethod
+    def _filter_predict(o, U_p, U_v, G_p, G_v, dt, M=None):
+        """The sensitivity filter's prediction over a step (change 2; module docstring's ``Upsilon^-``).
+
+        For a double integrator ``p' = M v``, ``v' = psi . phi`` with ``psi`` linear over the step::
+
+            U_p^- = U_p + M (h U_v + G_p)        U_v^- = U_v + G_v
+
+        (``M`` None: the identity, ``U_p + h U_v + G_p``), ``G_p``, ``G_v`` the position and velocity
+        increments of ``psi`` (:mod:`observers.core._discretise`). Rows of numbers or symbols, or
+        ``3 x k`` matrices with ``M`` (3D: ``M = I_W^-1``, :mod:`observers.adaptive._spatial`).
+
+        Returns
+        -------
+        U_p, U_v : the predicted filter
+        """
+        pos = U_p + dt * U_v + G_p if M is None else U_p + o.dot(M, dt * U_v + G_p)
+        return pos, U_v + G_v
+
+    @staticmethod
+    def _filter_correct(o, U_p, U_v, l1, l2, gain=None):
+        """The sensitivity filter's correction at a pose, ``Upsilon_n+1 = (I - L_h C) Upsilon^-`` (change 1, 2)::
+
+            U_p = (1 - l_1) U_p^-                U_v = U_v^- - l_2 M^-1 U_p^-
+
+        ``gain`` is ``l_2 M^-1`` where ``M`` is not the identity (3D: ``l_2 I_W``); None: ``l_2``.
+        """
+        return (1 - l1) * U_p, U_v - (l2 * U_p if gain is None else o.dot(gain, U_p))
+
     def _transition(self, z, u_prev, u, dt):
-        """One step (module docstring), the class docstring's changes 1-5, channel by channel from the model."""
+        """One step (module docstring), the class docstring's changes 1-5: on the channels the model declares
+        (:meth:`_channels_step`), or on the momenta about the centre of mass (:meth:`_momenta_step`)."""
         o = ops(z, u)
-        model, n = self.model, self.n_cols
+        model = self.model
         st = self.state.unpack(z, scalars=False)
         now, nxt = model.input_layout.unpack(u_prev, scalars=False), model.input_layout.unpack(u, scalars=False)
+        return (self._channels_step if model.linear_channels else self._momenta_step)(o, st, now, nxt, dt)
+
+    def _channels_step(self, o, st, now, nxt, dt):
+        """One step on linear channels, channel by channel from the model (eqs. (6)-(8))."""
+        model, n = self.model, self.n_cols
         x, S, pose, has = st.x, st.S, now.pose, now.has_pose[0]
         since, scale = st.since[0], st.scale
         w = self._augmented(o, now.w_hat)
@@ -428,19 +509,18 @@ class AdaptiveObserver(RecursiveObserver):
         q0 = o.vcat([has * pose[c] + (1 - has) * x[qi[c]] for c in range(model.nq)])
         q1 = o.vcat([x[qi[c]] + dt * x[vi[c]] for c in range(model.nq)])
         psi0, psi1 = model.channel_regressor_rows(q0, w), model.channel_regressor_rows(q1, w_next)
-        dot = lambda a, b: sum(a[j] * b[j] for j in range(len(a)))
+        dot = lambda a, b: sum(a[j] * b[j] for j in range(a.shape[0]))
         group_of = {c: g for g, (channels, _) in enumerate(self._structure) for c in channels}
         # eqs. (6), (7): x_hat propagated with A(q) S_hat w_hat (planar: G(theta) S_hat w_hat = B_1 phi_1,
         # B_2 phi_2); each channel's filter Upsilon^- and its C Upsilon^- (zero without a pose)
         x_pred, ups_pred, rows = [], [], []
         for c in range(model.nv):
             phi, up, k = phis[group_of[c]], getattr(st, f"ups{c}"), len(psi0[c])
-            g_p = [position_increment(dt, psi0[c][j], psi1[c][j]) for j in range(k)]
-            g_v = [velocity_increment(dt, psi0[c][j], psi1[c][j]) for j in range(k)]
+            g_p = position_increment(dt, o.vcat(psi0[c]), o.vcat(psi1[c]))
+            g_v = velocity_increment(dt, o.vcat(psi0[c]), o.vcat(psi1[c]))
             x_pred.append([x[qi[c]] + dt * x[vi[c]] + dot(g_p, phi), x[vi[c]] + dot(g_v, phi)])
-            ups_pred.append([[up[j] + dt * up[k + j] + g_p[j] for j in range(k)],
-                             [up[k + j] + g_v[j] for j in range(k)]])
-            rows.append([has_next * v for v in ups_pred[c][0]])
+            ups_pred.append(self._filter_predict(o, up[0:k], up[k:2 * k], g_p, g_v, dt))
+            rows.append([has_next * ups_pred[c][0][j] for j in range(k)])
         # a priori position errors at n+1 (true minus estimate), zero without a pose
         e = [has_next * (pose_next[c] - x_pred[c][0]) for c in range(model.nv)]
         h = since + dt                            # 5. time since the previous pose
@@ -450,65 +530,93 @@ class AdaptiveObserver(RecursiveObserver):
         l1, l2 = has_next * l1, has_next * l2
         entries = [None] * model.nx
         for c in range(model.nv):
-            up, d_phi = ups_pred[c], d_phis[group_of[c]]
-            new = [[(1 - l1) * v for v in up[0]], [up[1][j] - l2 * up[0][j] for j in range(len(up[0]))]]
-            parts[f"ups{c}"] = o.vcat(new[0] + new[1])
+            d_phi = d_phis[group_of[c]]
+            new = self._filter_correct(o, *ups_pred[c], l1, l2)
+            parts[f"ups{c}"] = o.vcat(new)
             entries[qi[c]] = x_pred[c][0] + l1 * e[c] + dot(new[0], d_phi)
             entries[vi[c]] = x_pred[c][1] + l2 * e[c] + dot(new[1], d_phi)
         S_next = mx.flat(o, model.params_from_phi([phi + o.vcat(d) for phi, d in zip(phis, d_phis)], n))
         return self.state.pack(o, x=o.vcat(entries), S=S_next, since=(1 - has_next) * h, scale=scale, **parts)
 
+    def _momenta_step(self, o, st, now, nxt, dt):
+        """One step on the momenta about the centre of mass, a body in 3D (:mod:`observers.adaptive._spatial`),
+        from the model's pieces (:class:`fmscal.plant.SpatialModel`: ``momentum_*``, ``world_*``, ``turn``)."""
+        model, n, rho = self.model, self.n_cols, self.payload.rho
+        k = 3 * n
+        has, has_next = now.has_pose[0], nxt.has_pose[0]
+        H, y, lin, chi, chi_ref, q_ref = st.H, st.y, st.l, st.chi, st.chi_ref, st.q_ref
+        w0, w1 = self._augmented(o, now.w_hat), self._augmented(o, nxt.w_hat)
+        R_ref = rotation_matrix(q_ref)
+        # the attitude in the drives: the measured one where a pose arrives (q_ref), else the last measured one
+        # turned by the observer's own turn since it (chi - chi_pose), not by its error at that pose
+        R0 = rotation_matrix(model.turn(q_ref, R_ref, (1 - has) * (chi - st.chi_pose)))
+        M0 = model.world_inverse_inertia(R0)                           # I_W^-1 at n
+        spin0 = o.dot(M0, H)                                           # omega in the world frame
+        # at n+1: measured, else turned by omega over the step (first order)
+        R_next = rotation_matrix(nxt.pose[0:4])
+        R1 = has_next * R_next + (1 - has_next) * model.turned_rotation(R0, spin0, dt)
+        # the drives, linear over the step: eq. (M) at both ends, [torque about C, force plus m g]
+        phis = model.momentum_phi_from_params(st.S, n, rho)
+        (t0, f0), (t1, f1) = model.momentum_drives(R0, w0, phis), model.momentum_drives(R1, w1, phis)
+        y_pred = y + dt * lin + position_increment(dt, f0, f1)
+        l_pred = lin + velocity_increment(dt, f0, f1)
+        H_pred = H + velocity_increment(dt, t0, t1)
+        chi_pred = chi + model.turn_over_step(spin0, model.world_rate(R1, H_pred), dt)
+        # the filters' prediction (3 x k each)
+        psi0, psi1 = model.momentum_regressor(R0, w0), model.momentum_regressor(R1, w1)
+        G_p, G_v = position_increment(dt, psi0, psi1), velocity_increment(dt, psi0, psi1)
+        U_y, U_l, U_d, U_H = (mx.as_matrix(o, getattr(st, f"ups_{name}"), 3, k) for name in ("y", "l", "d", "H"))
+        U_y, U_l = self._filter_predict(o, U_y, U_l, G_p, G_v, dt)             # p' = v: m p_C, m v_C
+        U_d, U_H = self._filter_predict(o, U_d, U_H, G_p, G_v, dt, M0)         # p' = I_W^-1 v: chi, H
+        # a priori errors at n+1, zero without a pose: the unwrapped attitude's (the measured turn from the last
+        # pose, in the world frame, added to chi_ref), m p_C's
+        q_meas = has_next * nxt.pose[0:4] + (1 - has_next) * q_ref                 # no pose: no turn
+        body = model.difference(o.vcat([0.0, 0.0, 0.0, q_ref]), o.vcat([0.0, 0.0, 0.0, q_meas]))[3:6]
+        chi_meas = chi_ref + o.dot(R_ref, body)
+        e_d = has_next * (chi_meas - chi_pred)
+        e_y = has_next * (model.centre_of_mass_momentum(nxt.pose) - y_pred)
+        # the fit starts once the observer's own transient from rest has decayed (WARM_UP poles' time constants)
+        age = st.age[0] + dt
+        fit = has_next * (age >= WARM_UP / self.lam)
+        rows = [[fit * U[i, j] for j in range(k)] for U in (U_d, U_y) for i in range(3)]
+        h = st.since[0] + dt
+        d_phis, parts = self._adapt(o, st, rows, [fit * e[i] for e in (e_d, e_y) for i in range(3)], fit * h,
+                                    st.scale)
+        d_t, d_f = (o.vcat(d) for d in d_phis)
+        # the correction: the filters, then the motion with the filters' share of the parameters' step
+        l1, l2 = discrete_gain(o, self.lam, h)
+        l1, l2 = has_next * l1, has_next * l2
+        l2_IW = l2 * model.world_inertia(R1)
+        U_d_new, U_H_new = self._filter_correct(o, U_d, U_H, l1, l2, l2_IW)
+        U_y_new, U_l_new = self._filter_correct(o, U_y, U_l, l1, l2)
+        chi_new = chi_pred + l1 * e_d + o.dot(U_d_new, d_t)
+        H_new = H_pred + o.dot(l2_IW, e_d) + o.dot(U_H_new, d_t)
+        y_new = y_pred + l1 * e_y + o.dot(U_y_new, d_f)
+        l_new = l_pred + l2 * e_y + o.dot(U_l_new, d_f)
+        # the last pose becomes the reference (sign-continuous), and the observer's attitude is it turned
+        sign = o.if_else(sum(q_meas[i] * q_ref[i] for i in range(4)) < 0, -1.0, 1.0)
+        q_ref_new = has_next * sign * q_meas + (1 - has_next) * q_ref
+        chi_ref_new = has_next * chi_meas + (1 - has_next) * chi_ref
+        R_ref_new = has_next * R_next + (1 - has_next) * R_ref
+        q_new = model.turn(q_ref_new, R_ref_new, chi_new - chi_ref_new)
+        chi_pose_new = has_next * chi_new + (1 - has_next) * st.chi_pose
+        S_next = model.momentum_params_from_phi([phi + o.vcat(d) for phi, d in zip(phis, d_phis)], n, rho)
+        return self.state.pack(o, x=model.state_from_momenta(y_new, l_new, q_new, H_new), S=S_next,
+                               since=(1 - has_next) * h, scale=st.scale, age=age, y=y_new, l=l_new, chi=chi_new,
+                               chi_ref=chi_ref_new, chi_pose=chi_pose_new, q_ref=q_ref_new, H=H_new,
+                               ups_y=mx.flat(o, U_y_new), ups_l=mx.flat(o, U_l_new), ups_d=mx.flat(o, U_d_new),
+                               ups_H=mx.flat(o, U_H_new), **parts)
 
-class SpatialAdaptiveObserver(SpatialLaw, AdaptiveObserver):
-    """:class:`AdaptiveObserver` on the spatial model: its law on the momenta about the centre of mass.
+
+class SpatialAdaptiveObserver(AdaptiveObserver):
+    """:class:`AdaptiveObserver` on a body in 3D, under its own name: the same class but for its default pole.
 
     Built by ``AdaptiveObserver(model, ...)`` (registry name ``adaptive``)
     when the model's attitude is a unit quaternion (the registry's engine for
     that declaration, :data:`fmscal.observers._registry.ENGINES`); it takes the
-    same settings. The motion it follows and its filters are
-    :class:`observers.adaptive.SpatialLaw`'s
-    (:mod:`observers.adaptive._spatial`); the adaptation (recursive least
-    squares per parameter group, the change test, the forgetting) is
-    :class:`AdaptiveObserver`'s, shared. Its default pole is
-    :data:`observers.adaptive._spatial.SPATIAL_LAM`.
+    same settings and has no law of its own: :class:`AdaptiveObserver` runs
+    the law on the momenta about the centre of mass from the model's pieces.
+    Its default pole is :data:`observers.adaptive._spatial.SPATIAL_LAM`.
     """
 
     default_lam = SPATIAL_LAM
-
-    @classmethod
-    def _refusal(cls, model):
-        """The base class's limits (:meth:`observers.Observer._refusal`): the law is written for a body in 3D."""
-        return super(AdaptiveObserver, cls)._refusal(model)
-
-    def _layout(self):
-        # the world-frame inverse inertia the law reads, then AdaptiveObserver's layout with the law's
-        # two groups and its filters (SpatialLaw._spatial_parts) in place of the channels' ups<c>
-        self._K = np.linalg.inv(self.payload.I_c)
-        return super()._layout()
-
-    def _groups(self):
-        """The law's two groups (:meth:`observers.adaptive.SpatialLaw._spatial_structure`)."""
-        return self._spatial_structure()
-
-    def _filter_parts(self):
-        """The motion about ``C`` and the law's four filters (:meth:`observers.adaptive.SpatialLaw._spatial_parts`)."""
-        return self._spatial_parts()
-
-    def _initial_state(self, S0, u):
-        model = self.model
-        pose, w_hat = np.atleast_1d(u.pose), np.atleast_1d(u.w_hat)
-        # the size H = C Upsilon will have sets the prior (SpatialLaw._spatial_initial)
-        w = self._augmented(ops(w_hat), w_hat)
-        parts, info = self._spatial_initial(pose, w)
-        for g, (_, k) in enumerate(self._structure):
-            parts[f"P{g}"] = np.array(mx.upper(np.eye(k) / (_PRIOR * info[g])))
-            parts[f"test{g}"] = np.r_[np.zeros(3 * k), np.full(k, info[g]), 0.0, 0.0]
-        return self.state.pack(None, x=model.rest_state(pose), S=self._initial_S(S0), since=0.0, scale=info, **parts)
-
-    def _transition(self, z, u_prev, u, dt):
-        """One step of the law (:meth:`observers.adaptive.SpatialLaw._spatial_transition`)."""
-        o = ops(z, u)
-        model = self.model
-        st = self.state.unpack(z, scalars=False)
-        now, nxt = model.input_layout.unpack(u_prev, scalars=False), model.input_layout.unpack(u, scalars=False)
-        return self._spatial_transition(o, st, now, nxt, dt)

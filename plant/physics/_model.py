@@ -841,6 +841,189 @@ class SpatialModel(Model):
         """``x'`` under Newton-Euler (:func:`fmscal.plant.physics._rigid_body.state_derivative`)."""
         return rigid_body.state_derivative(x, w, self.payload, self.gravity)
 
+    # --- the momenta about the centre of mass (what a law linear in [S | c] reads in 3D) ------------------
+    # About the centre of mass C (p_C = p + R rho) the two momenta are driven linearly by the wrench, in the
+    # world frame (what the adaptive observer's law in 3D reads, fmscal.observers.AdaptiveObserver):
+    #     d/dt (m v_C) = R f + m g,    d/dt H = R tau_C,    tau_C = tau_O - rho x f,    H = R I_c omega     (M)
+    # Each method below is written once for numbers and casadi symbols; rho is taken as numbers.
+    def momentum_groups(self):
+        """The momenta's channels that share a parameter set: ``H`` (0-2, driven by ``phi_t``) and ``m v_C``
+        (3-5, driven by ``phi_f``), as :meth:`Model.parameter_groups` for linear channels.
+
+        Returns
+        -------
+        list of two lists of int
+        """
+        return [[0, 1, 2], [3, 4, 5]]
+
+    @staticmethod
+    def momentum_phi_from_params(s, n, rho):
+        """The two groups' parameters from ``vec([S | c])`` (row order): ``[phi_t, phi_f]`` of eq. (M).
+
+        ``phi_f = vec(S_f)`` (rows 3-5 of ``[S | c]``), ``phi_t = vec(S_t - [rho]x S_f)`` (the rows of the
+        torque about ``C``, ``tau_C = tau_O - rho x f``), row order; linear, inverse of
+        :meth:`momentum_params_from_phi`.
+
+        Parameters
+        ----------
+        s : ndarray or casadi.SX, shape (6 n,)
+        n : int
+            Columns of ``[S | c]``: 6, or 7 with the offset.
+        rho : array_like, shape (3,)
+            The centre of mass in the sensor frame, m (numbers).
+
+        Returns
+        -------
+        list of two ndarray or casadi.SX, each shape (3 n,)
+        """
+        o = ops(s)
+        S = _as_rows(o, s, 6, n)
+        S_t, S_f = S[0:3, :], S[3:6, :]
+        return [_flat(o, S_t - o.dot(_constant(o, rigid_body.skew(rho)), S_f)), _flat(o, S_f)]
+
+    @staticmethod
+    def momentum_params_from_phi(phis, n, rho):
+        """``vec([S | c])`` (row order) from ``[phi_t, phi_f]``: ``S_t = T + [rho]x S_f``, eq. (M) inverted
+        (:meth:`momentum_phi_from_params`).
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (6 n,)
+        """
+        o = ops(*phis)
+        T, S_f = _as_rows(o, phis[0], 3, n), _as_rows(o, phis[1], 3, n)
+        return o.vcat([_flat(o, T + o.dot(_constant(o, rigid_body.skew(rho)), S_f)), _flat(o, S_f)])
+
+    def momentum_regressor(self, R, w_aug):
+        """``Psi = R (x) w^T`` (3 x 3 n): the drive of either momentum of eq. (M), ``Psi phi`` = ``R (Phi w)``
+        for the 3 x n block ``Phi`` whose rows ``phi`` holds; entry ``(i, j n + l)`` is ``R_ij w_l``.
+
+        Parameters
+        ----------
+        R : ndarray or casadi.SX, shape (3, 3)
+            The attitude, ``B`` to ``W``.
+        w_aug : ndarray or casadi.SX, shape (n,)
+            The reading, with a trailing 1 for the offset column.
+
+        Returns
+        -------
+        ndarray or casadi.SX, shape (3, 3 n)
+        """
+        n = w_aug.shape[0]
+        return ops(R, w_aug).matrix([[R[i, j] * w_aug[v] for j in range(3) for v in range(n)] for i in range(3)])
+
+    def momentum_drives(self, R, w_aug, phis):
+        """The momenta's rates of eq. (M) at one sample: ``[R (T w), R (S_f w) + m g]``, each shape (3,).
+
+        Parameters
+        ----------
+        R : ndarray or casadi.SX, shape (3, 3)
+        w_aug : ndarray or casadi.SX, shape (n,)
+        phis : list of two vectors of 3 n
+            ``[phi_t, phi_f]`` (:meth:`momentum_phi_from_params`).
+        """
+        o = ops(R, w_aug, *phis)
+        n = w_aug.shape[0]
+        torque, force = (o.dot(R, o.dot(_as_rows(o, phi, 3, n), w_aug)) for phi in phis)
+        return [torque, force + self.payload.mass * _constant(o, self.gravity)]
+
+    def world_inverse_inertia(self, R):
+        """``I_W^-1 = R I_c^-1 R^T``, shape (3, 3), symmetric: ``omega_W = I_W^-1 H`` (eq. (M)); numbers or
+        symbols."""
+        return _sandwich(ops(R), R, self.payload.I_c_inv)
+
+    def world_inertia(self, R):
+        """``I_W = R I_c R^T``, shape (3, 3), symmetric; numbers or symbols."""
+        return _sandwich(ops(R), R, self.payload.I_c)
+
+    def world_rate(self, R, H):
+        """``omega_W = R (I_c^-1 (R^T H))``, shape (3,): the world-frame angular velocity of the angular
+        momentum ``H`` about ``C`` (eq. (M)) at the attitude ``R``; numbers or symbols."""
+        o = ops(R, H)
+        return o.dot(R, o.dot(_constant(o, self.payload.I_c_inv), o.dot(R.T, H)))
+
+    @staticmethod
+    def turned_rotation(R, rate, h):
+        """``R + h [rate]x R``: the rotation ``R`` turned at the world-frame angular velocity ``rate`` over a step
+        ``h``, to first order (the exponential's first two terms); numbers or symbols."""
+        o = ops(R, rate, h)
+        return o.matrix([[R[i, j] + h * (rate[(i + 1) % 3] * R[(i + 2) % 3, j] - rate[(i + 2) % 3] * R[(i + 1) % 3, j])
+                          for j in range(3)] for i in range(3)])
+
+    @staticmethod
+    def turn_over_step(spin0, spin1, h):
+        """The rotation vector of a world-frame angular velocity linear over a step ``h`` from ``spin0`` to
+        ``spin1``, to third order (Magnus): ``h (spin0 + spin1) / 2 - h^2 / 12 spin0 x spin1``; numbers or
+        symbols."""
+        o = ops(spin0, spin1, h)
+        return h / 2 * (spin0 + spin1) - h * h / 12 * _cross(o, spin0, spin1)
+
+    def centre_of_mass_momentum(self, pose):
+        """``m p_C = m (p + R rho)`` of a measured pose ``[q, p]`` (log order), shape (3,); numbers or symbols."""
+        o = ops(pose)
+        R = rigid_body.rotation_matrix(pose[0:4])
+        return self.payload.mass * (pose[4:7] + o.dot(R, _constant(o, self.payload.rho)))
+
+    def state_from_momenta(self, y, lin, q, H):
+        """The motion state ``[p, q, v, omega]`` from the motion about ``C`` (eq. (M) read back).
+
+        ``omega = I_c^-1 R^T H``, ``p = y / m - R rho``, ``v = l / m - R (omega x rho)``.
+
+        Parameters
+        ----------
+        y, lin : vectors of 3
+            ``m p_C`` and ``m v_C``, world frame.
+        q : vector of 4
+            The attitude, a unit quaternion.
+        H : vector of 3
+            The angular momentum about ``C``, world frame.
+        """
+        o = ops(y, lin, q, H)
+        m, rho = self.payload.mass, _constant(o, self.payload.rho)
+        R = rigid_body.rotation_matrix(q)
+        omega = o.dot(_constant(o, self.payload.I_c_inv), o.dot(R.T, H))
+        return o.vcat([y / m - o.dot(R, rho), q, lin / m - o.dot(R, _cross(o, omega, rho)), omega])
+
+    def turn(self, q, R, v):
+        """``exp(v / 2) (x) q``: the attitude ``q`` (rotation ``R``) turned by the rotation vector ``v`` (world
+        frame), as ``q`` turned by ``R^T v`` about its own axes (:meth:`integrate`); numbers or symbols."""
+        o = ops(q, R, v)
+        return self.integrate(o.vcat([0.0, 0.0, 0.0, q]), o.vcat([0.0, 0.0, 0.0, o.dot(R.T, v)]))[3:7]
+
+
+def _cross(o, a, b):
+    """``a x b`` for 3-vectors of numbers or casadi symbols."""
+    return o.vcat([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _sandwich(o, R, K):
+    """``R K R^T`` for a rotation ``R`` and a constant symmetric ``K``: its upper triangle, mirrored."""
+    RK = o.dot(R, _constant(o, K))
+    upper = {(i, j): sum(RK[i, b] * R[j, b] for b in range(3)) for i in range(3) for j in range(i, 3)}
+    return o.matrix([[upper[min(i, j), max(i, j)] for j in range(3)] for i in range(3)])
+
+
+def _as_rows(o, flat, rows, cols):
+    """A ``rows x cols`` matrix from its entries in row order (numbers or symbols)."""
+    if is_symbolic(flat):
+        return o.matrix([[flat[cols * i + j] for j in range(cols)] for i in range(rows)])
+    return np.asarray(flat, dtype=float).reshape(rows, cols)
+
+
+def _flat(o, M):
+    """A matrix's entries in row order, as a flat vector (numbers or symbols)."""
+    if is_symbolic(M):
+        return o.vcat([M[i, j] for i in range(M.shape[0]) for j in range(M.shape[1])])
+    return np.ravel(M)
+
+
+def _constant(o, value):
+    """A constant (numbers, or a casadi expression as it is) in the back end of ``o``."""
+    if isinstance(value, ca.SX):
+        return value
+    value = np.asarray(value, dtype=float)
+    return ca.DM(value) if o is ops(ca.SX()) else value
+
 
 #: The toolkit's models, one a case: what a log's columns, a calibration's size or a payload's flags are
 #: looked up in (by their declarations: :attr:`Model.wrench_names`, :attr:`Model.pose_names`, ...).
