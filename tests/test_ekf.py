@@ -76,7 +76,7 @@ def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
 
 def test_the_whole_step_runs_on_casadis_virtual_machine_too(monkeypatch):
     """Without a C compiler the whole step runs on casadi's virtual machine, with the same numbers."""
-    from fmscal.observers.kalman._filter import _ekf_step as ekf_step
+    from fmscal.observers.kalman import _ekf_step as ekf_step
     monkeypatch.setenv("FMSCAL_COMPILER", "none")
     ekf_step.whole_step.cache_clear()
     try:
