@@ -16,6 +16,7 @@ from fmscal.observers.core import Estimate, Observer, log_inputs, progress_bar
 from ._eiv import EivCompensation
 from ._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
 from ._filter import pack_lower, unpack_lower
+from ._kalman import predict, update
 from ._noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
 
 __all__ = ["AugmentedEKF", "FilterRun"]
@@ -23,18 +24,30 @@ __all__ = ["AugmentedEKF", "FilterRun"]
 
 
 class _CalibrationEKF(ExtendedKalmanFilter):
-    """filterpy's EKF with the state transition of eq. (1) compiled by casadi.
+    """filterpy's EKF whose predict and update are :mod:`observers.kalman._kalman`'s (eqs. K1-K7).
 
-    ``predict_x`` is overridden to take ``x_next``; ``x_next``, ``F`` and
-    ``Q`` are set before every predict, from the same compiled call.
+    The compiled whole step calls the same two functions, so the two paths
+    run one filter. ``x_next``, ``F`` and ``Q`` are set before every
+    :meth:`predict` (the model's step, from one compiled call); ``x`` and
+    ``P`` hold filterpy's state, ``R`` its pose noise, and an update leaves
+    filterpy's ``y`` (the innovation), ``K`` and ``nis`` (eq. K7).
     """
 
     def __init__(self, dim_x, dim_z):
         super().__init__(dim_x=dim_x, dim_z=dim_z)
-        self.x_next = np.zeros(dim_x)
+        self.x_next = np.zeros((dim_x, 1))
+        self.nis = 0.0
 
-    def predict_x(self, u=0):
-        self.x = self.x_next.reshape(-1, 1)
+    def predict(self, u=0):
+        """Eqs. (K1, K2): ``x = x_next``, ``P = F P F^T + Q``."""
+        self.x, self.P = predict(np.reshape(self.x_next, (-1, 1)), self.P, self.F, self.Q)
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+
+    def update(self, y, pose):
+        """Eqs. (K3-K7) with the innovation ``y`` (length ``dim_z``), ``H`` selecting the state's entries ``pose``."""
+        self.y = np.reshape(y, (-1, 1))
+        self.x, self.P, self.nis = update(ops(self.P), self.x, self.P, self.y, self.R, list(pose))
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
 
 
 @dataclass
@@ -220,8 +233,8 @@ class AugmentedEKF(Observer):
         model = self.model
         #: The filter's state size: the model's motion states and the entries of ``[S | c]``.
         self.dim_x = model.nx + self.n_w * self.n_cols
-        self._H = np.zeros((model.n_pose, self.dim_x))
-        self._H[np.arange(model.n_pose), list(model.q_index)] = 1.0       # the pose is the configuration
+        #: The state's entries the measurement matrix ``H`` selects: the pose is the configuration.
+        self.pose_index = list(model.q_index)
         self._jacobians, self._predict = (BufferedCall(f) for f in _compiled_model(model, self.offset))
         self.eiv = EivCompensation(model, self.n_cols) if eiv else None
 
@@ -278,14 +291,10 @@ class AugmentedEKF(Observer):
         f, F, Q = call.outputs
         return f.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
 
-    def H(self, xs=None):
-        """Measurement Jacobian: the pose is the configuration (planar ``[theta, X, Y]``, states 0, 2, 4);
-        shape (n_pose, d)."""
-        return self._H
-
-    def hx(self, xs):
-        """The measured pose of a state column, shape (n_pose, 1) (:meth:`fmscal.plant.Model.measure`)."""
-        return np.asarray(self.model.measure(np.ravel(xs)[:self.model.nx])).reshape(-1, 1)
+    def innovation(self, pose):
+        """The pose less the pose the predicted state shows, ``z - h(x-)`` (an angle's difference: additive),
+        shape (n_pose,)."""
+        return np.asarray(pose, dtype=float) - self.run_data.state.kf.x[self.pose_index, 0]
 
     # --- Observer ---------------------------------------------------------------
     def reset(self, S0=None):
@@ -434,14 +443,13 @@ class AugmentedEKF(Observer):
         """The random walk's intensity now, 1/s."""
         return self.level.q if self.level is not None else self.q_S
 
-    def _pose_update(self, z):
-        """filterpy's update with the pose measurement ``z`` (column), then the level at its NIS."""
+    def _pose_update(self, y):
+        """The update with the innovation ``y`` (eqs. K3-K7, :mod:`observers.kalman._kalman`), then the level at
+        its NIS."""
         f = self.run_data.state
-        kf = f.kf
-        kf.update(z, self.H, self.hx)
+        f.kf.update(y, self.pose_index)
         if self.level is not None:
-            y = kf.y[:, 0]
-            self.level.update(float(y @ kf.SI @ y), f.since_pose)      # NIS of this pose
+            self.level.update(float(f.kf.nis), f.since_pose)      # NIS of this pose
         f.since_pose = 0.0
 
     def _advance(self, u_prev, u, dt):
@@ -456,7 +464,7 @@ class AugmentedEKF(Observer):
         kf.predict()
         f.since_pose += dt
         if has_pose:
-            self._pose_update(np.reshape(pose, (-1, 1)))
+            self._pose_update(self.innovation(pose))
         f.q_history.append(self._q_now())
         s = kf.x[model.nx:, 0]
         if self.eiv is None:

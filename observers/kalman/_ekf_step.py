@@ -5,7 +5,8 @@
 process noise ``Q`` of the tuning rule, once. The readable path calls it
 each step and hands ``x_next``, ``F`` and ``Q`` to filterpy's
 ``ExtendedKalmanFilter``; the fast path inlines it in :func:`whole_step`:
-the predict, the pose update in Joseph form, the random-walk level
+the predict and the pose update in Joseph form (:mod:`observers.kalman._kalman`, the functions the
+readable path calls too), the random-walk level
 (:func:`observers.kalman.level_update`) and the errors-in-variables
 filter beside it (:func:`observers.eiv._compensation`), one function run in
 compiled chunks (:class:`plant.numerics.ChunkedSteps`). The two paths run the
@@ -19,7 +20,8 @@ import casadi as ca
 from fmscal.plant.numerics import ChunkedSteps, StateLayout, ops
 
 from ._eiv import _compensation
-from ._filter import filter_layout, pack_lower, spd_inverse, unpack_lower
+from ._filter import filter_layout, pack_lower, unpack_lower
+from ._kalman import predict, update
 from ._noise_level import level_update
 
 __all__ = ["model_step", "whole_step", "state_layout", "output_layout", "params_layout"]
@@ -116,7 +118,7 @@ def _step(model, z, u_prev, u, dt, p, n, eiv):
     step (s), ``p`` the parameters (:func:`params_layout`). Returns ``z`` after the
     sample and the outputs (:func:`output_layout`).
     """
-    nx, n_w, n_y = model.nx, model.n_w, model.n_pose
+    nx, n_w = model.nx, model.n_w
     d = nx + n_w * n
     L = state_layout(model, n, eiv)
     st, pp = L.unpack(z), params_layout(model).unpack(p, scalars=False)
@@ -125,20 +127,13 @@ def _step(model, z, u_prev, u, dt, p, n, eiv):
     o = ops(z)
     pose = list(model.q_index)                            # the pose is the configuration (H selects it)
     P = unpack_lower(o, st.P, d)
-    # predict (filterpy's predict: x = x_next, P = F P F^T + Q); only the lower triangle is kept
-    x_pred, F, Q = model_step(model, n == n_w + 1)[2](st.x, a.w_hat, b.w_hat, dt, pp.var_w, ca.vec(P[nx:, nx:]),
+    # predict, eqs. (K1, K2) (observers.kalman._kalman)
+    x_next, F, Q = model_step(model, n == n_w + 1)[2](st.x, a.w_hat, b.w_hat, dt, pp.var_w, ca.vec(P[nx:, nx:]),
                                                       st.q * dt)
-    P_pred = unpack_lower(o, pack_lower(F @ (P @ F.T) + Q, d), d)    # F (P F^T): P F^T's lower rows are P_pred's
-    # update with the pose (filterpy's update, Joseph form); no pose: K = 0 leaves both as they are
-    PHT = P_pred[:, pose]
-    R = ca.diag(pp.R)
-    y = b.pose - x_pred[pose]
-    SI = spd_inverse(o, P_pred[pose, pose] + R, n_y)     # S^-1 (filterpy's SI)
-    K = has * (PHT @ SI)
-    nis = ca.dot(y, SI @ y)
-    x_new = x_pred + K @ y
-    A = P_pred - K @ PHT.T                                # (I - K H) P
-    P_new = A - (A[:, pose] - K @ R) @ K.T                 # (I - K H) P (I - K H)^T + K R K^T
+    x_pred, P_pred = predict(x_next, P, F, Q)
+    # update with the pose, eqs. (K3-K7); no pose: K = 0 leaves both as they are
+    y = b.pose - x_pred[pose]                             # the pose is the configuration (an angle: additive)
+    x_new, P_new, nis = update(o, x_pred, P_pred, y, ca.diag(pp.R), pose, has)
     P_packed = pack_lower(P_new, d)
     # the random-walk level, at each pose
     q, eps_bar = level_update(st.q, st.eps_bar, nis, st.since + dt, tuple(pp.level[i] for i in range(7)))

@@ -101,6 +101,7 @@ from ._eiv import beta_from_copy, copy_predict, error_variances
 from ._ekf import AugmentedEKF, FilterRun, _CalibrationEKF
 from ._ekf_step import output_layout
 from ._filter import bias_matrix, cholesky_solve, correction_limit, pack_lower, unpack_lower
+from ._kalman import predict, reset, update
 from ._noise_level import level_update
 
 __all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
@@ -348,22 +349,16 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     o = ops(z)
     P = unpack_lower(o, st.P, d)
     dynamics = model.with_payload_symbols(getattr(pp, "payload", None))     # the payload and gravity, read from p
-    # predict: the nominal moves, the error stays zero, P- = F P F^T + Q (the lower triangle kept)
+    # predict, eqs. (K1, K2) (observers.kalman._kalman): the nominal moves, the error stays zero
     xs_pred, F, Q, _, _ = _error_step(dynamics, offset, st.xs, a.w_hat, b.w_hat, dt, pp.var_w, pp.S_Q, st.q * dt)
-    P_pred = unpack_lower(o, pack_lower(F @ (P @ F.T) + Q, d), d)
-    # update with the pose in the error state (H = [I 0]); no pose: the pose the nominal shows, K = 0
+    e_pred, P_pred = predict(ca.DM.zeros(d), P, F, Q)
+    # update with the pose in the error state (H = [I 0]), eqs. (K3-K7); no pose: the pose the nominal shows, K = 0
     pose = has * b.pose + (1 - has) * model.measure(xs_pred[0:nx])
     inject = injection(model, offset)[1]
     y = inject(xs_pred, pose, ca.DM.zeros(d))[0]
-    PHT = P_pred[:, 0:nv]
-    R = ca.diag(pp.R)
-    X = cholesky_solve(o, P_pred[0:nv, 0:nv] + R, ca.horzcat(PHT.T, y), nv)     # V^-1 [H P-, y]
-    K = has * X[:, 0:d].T
-    nis = ca.dot(y, X[:, d])
-    A = P_pred - K @ PHT.T                                   # (I - K H) P-
-    P_upd = A - (A[:, 0:nv] - K @ R) @ K.T                   # (I - K H) P- (I - K H)^T + K R K^T
-    _, xs_new, G = inject(xs_pred, pose, K @ y)
-    P_new = G @ P_upd @ G.T
+    e, P_upd, nis = update(o, e_pred, P_pred, y, ca.diag(pp.R), list(range(nv)), has)
+    _, xs_new, G = inject(xs_pred, pose, e)
+    P_new = reset(P_upd, G)                                  # eq. (K8)
     P_packed = pack_lower(P_new, d)
     q, eps_bar = level_update(st.q, st.eps_bar, nis, st.since + dt, tuple(pp.level[i] for i in range(7)), nv)
     adapt = has * pp.adapt > 0.5
@@ -470,7 +465,8 @@ class ErrorStateEKF(AugmentedEKF):
     def _build(self, eiv):
         model = self.model
         _, m, self._ne, self.dim_x = _sizes(model, self.offset)
-        self._H = np.eye(model.nv, self.dim_x)
+        #: The error state's entries ``H`` selects: the pose is ``[dp, dphi]``, the first ``nv``.
+        self.pose_index = list(range(model.nv))
         self.eiv = None                  # the planar compensation (observers.kalman._eiv); here the copy below
         #: Whether the reported estimate is compensated for the errors in variables (module docstring).
         self.eiv_on = bool(eiv)
@@ -554,13 +550,9 @@ class ErrorStateEKF(AugmentedEKF):
         y, xs_new, G = call.outputs
         return y.copy(), xs_new.copy(), G.reshape(d, d).T.copy()
 
-    def H(self, e=None):
-        """Measurement Jacobian in the error state: ``[I_nv 0]`` (the pose is ``[dp, dphi]``); shape (nv, d)."""
-        return self._H
-
-    def hx(self, e):
-        """The pose error a state error shows: ``e[:nv]``, shape (nv, 1)."""
-        return np.reshape(e, (-1, 1))[:self.model.nv]
+    def innovation(self, pose):
+        """The pose in the error state, ``difference(q(x-), pose)`` (:meth:`inject`), shape (nv,)."""
+        return self.inject(self.run_data.state.xs, pose, np.zeros(self.dim_x))[0]
 
     # --- Observer ---------------------------------------------------------------------------------
     def _start(self, u):
@@ -594,10 +586,9 @@ class ErrorStateEKF(AugmentedEKF):
         f.since_pose += dt
         x_pred = f.xs[:nx].copy()
         if has_pose:
-            y = self.inject(f.xs, pose, np.zeros(self.dim_x))[0]
-            self._pose_update(y.reshape(-1, 1))
+            self._pose_update(self.innovation(pose))
             _, f.xs, G = self.inject(f.xs, pose, kf.x[:, 0])
-            kf.P = G @ kf.P @ G.T
+            kf.P = reset(kf.P, G)                               # eq. (K8)
             kf.x = np.zeros((self.dim_x, 1))
         f.q_history.append(self._q_now())
         # the errors-in-variables copy (module docstring), the compensated estimate
