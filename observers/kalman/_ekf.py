@@ -194,6 +194,13 @@ class AugmentedEKF(Observer):
         Relative error of the noise standard deviations that the adaptation
         tolerates without raising the intensity (0.25: 25 %); a larger value
         reacts to larger changes only.
+    noise_at : {"estimate", "start"}, optional
+        The ``S`` at which ``Q`` carries the reading's noise into the wrench:
+        the running estimate with its uncertainty (``W = S_hat Sigma S_hat^T
+        + Delta``, eq. Q2) or the run's ``S0`` (``W = S0 Sigma S0^T``, eq.
+        Q1; :mod:`observers.kalman._error_state`). Default: ``"estimate"`` on
+        a model linear in its channels, ``"start"`` otherwise (the spatial
+        model: the module docstring says why).
 
     Attributes
     ----------
@@ -205,8 +212,13 @@ class AugmentedEKF(Observer):
 
     def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
                  adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START,
-                 eiv=True):
+                 eiv=True, noise_at=None):
         super().__init__(model, offset=offset)
+        if noise_at not in (None, "estimate", "start"):
+            raise FmscalError(f"noise_at must be 'estimate', 'start' or None; got {noise_at!r}")
+        #: Where ``Q`` takes the ``S`` that carries the reading's noise into the wrench: ``"estimate"`` (the
+        #: running estimate and its uncertainty, eq. Q2) or ``"start"`` (the run's ``S0``, eq. Q1).
+        self.noise_at = noise_at or ("estimate" if self.model.linear_channels else "start")
         self.noise = None if noise is None else self.model.check_noise(noise)
         self.adapt_q = as_bool(adapt_q, "adapt_q")
         self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=True)

@@ -97,10 +97,11 @@ import numpy as np
 from fmscal.plant.numerics import BufferedCall, ChunkedSteps, StateLayout, build_once, ops
 
 from fmscal.observers.core import matrix as mx, move
-from ._eiv import beta_from_copy, copy_predict, error_variances
-from ._ekf import AugmentedEKF, FilterRun, _CalibrationEKF
+from ._eiv import EivCompensation, _compensation, beta_from_copy, copy_predict, error_variances
+from ._ekf import AugmentedEKF, FilterRun, _CalibrationEKF, _nominal_noise
 from ._ekf_step import output_layout
-from ._filter import bias_matrix, cholesky_solve, correction_limit, pack_lower, unpack_lower
+from ._filter import (bias_matrix, cholesky_solve, correction_limit, filter_layout, initial_state, pack_lower,
+                      unpack_lower)
 from ._kalman import predict, reset, update
 from ._noise_level import level_update
 
@@ -146,10 +147,12 @@ def error_step(model, offset):
         ``J0``, ``J1`` (d x n_w) its Jacobians with respect to the raw
         readings at the step's start and end.
     predict : casadi.Function
-        ``(xs, w0, w1, dt, var_w, S_Q, q_dt) -> (xs_next, F, Q)``; ``S_Q``
-        the ``S`` (n_w x n_w, flat, row order) at which the reading's noise
-        is carried into the wrench (the run's start ``S0``), ``q_dt`` the
-        random walk's ``q dt``. Dense outputs.
+        ``(xs, w0, w1, dt, var_w, S_Q, P_S, at_estimate, q_dt) -> (xs_next, F, Q)``;
+        ``S_Q`` the ``S`` (n_w x n_w, flat, row order) at which the reading's
+        noise is carried into the wrench with ``at_estimate`` 0 (the run's start
+        ``S0``), ``P_S`` the covariance of ``[S | c]`` (m x m, flat) that
+        ``at_estimate`` 1 adds to the running estimate (:func:`wrench_noise`),
+        ``q_dt`` the random walk's ``q dt``. Dense outputs.
     predict_sparse : casadi.Function
         The same with ``F`` and ``Q`` sparse, for :func:`whole_error_step` to inline.
     """
@@ -160,19 +163,46 @@ def error_step(model, offset):
     dt = ca.SX.sym("dt")
     var_w = ca.SX.sym("var_w", n_w)
     S_Q_flat = ca.SX.sym("S_Q", n_w * n_w)
+    P_S_flat = ca.SX.sym("P_S", m * m)
+    at_estimate = ca.SX.sym("at_estimate")
     q_dt = ca.SX.sym("q_dt")
-    xs_next, F, Q, J0, J1 = _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt)
-    inputs = [xs, w0, w1, dt, var_w, S_Q_flat, q_dt]
+    W = wrench_noise(xs[nx:], P_S_flat, var_w, S_Q_flat, at_estimate, n_w, n)
+    xs_next, F, Q, J0, J1 = _error_step(model, offset, xs, w0, w1, dt, W, q_dt)
+    inputs = [xs, w0, w1, dt, var_w, S_Q_flat, P_S_flat, at_estimate, q_dt]
     jacobians = ca.Function("ekf_error_jacobians", [xs, w0, w1, dt], [xs_next, ca.densify(F), J0, J1])
     predict = ca.Function("ekf_error_predict", inputs, [xs_next, ca.densify(F), ca.densify(Q)])
     sparse = ca.Function("ekf_error_predict_sparse", inputs, [xs_next, F, Q])
     return jacobians, predict, sparse
 
 
-def _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt):
+def wrench_noise(s, P_S_flat, var_w, S_Q_flat, at_estimate, n_w, n):
+    """The covariance ``W`` of the true wrench's noise ``S n`` (module docstring, tuning rule), on casadi symbols.
+
+    At the run's start (``at_estimate`` 0): ``W = S_Q Sigma S_Q^T`` (eq. Q1).
+    At the running estimate (``at_estimate`` 1): ``W = S_hat Sigma S_hat^T +
+    Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il, s_jl)`` (eq. Q2), ``cov``
+    from ``P_S``, the covariance of ``s = vec([S | c])`` (row order).
+
+    Returns
+    -------
+    casadi.SX, shape (n_w, n_w)
+    """
+    m = n_w * n
+    Sigma = ca.diag(var_w)
+    S_Q = ca.reshape(S_Q_flat, n_w, n_w).T                                     # row order
+    S_hat = ca.reshape(s, n, n_w).T[:, 0:n_w]
+    P_S = ca.reshape(P_S_flat, m, m)                                          # symmetric: either order
+    Delta = ca.vertcat(*[ca.horzcat(*[sum(var_w[l] * P_S[n * i + l, n * j + l] for l in range(n_w))
+                                      for j in range(n_w)]) for i in range(n_w)])
+    W_start = S_Q @ Sigma @ S_Q.T                                             # (Q1)
+    W_estimate = S_hat @ Sigma @ S_hat.T + Delta                              # (Q2)
+    return at_estimate * W_estimate + (1 - at_estimate) * W_start
+
+
+def _error_step(model, offset, xs, w0, w1, dt, W, q_dt):
     """:func:`error_step`'s expressions on the given casadi symbols: ``xs_next``, ``F`` (sparse), ``Q``
-    (sparse), ``J0``, ``J1``. The whole compiled step (:func:`_step`) writes them on its own inputs, the
-    payload among them."""
+    (sparse), ``J0``, ``J1``; ``W`` the covariance of the true wrench's noise (:func:`wrench_noise`). The
+    whole compiled step (:func:`_step`) writes them on its own inputs, the payload among them."""
     n_w, nx = model.n_w, model.nx
     n, m, ne, d = _sizes(model, offset)
     e = ca.SX.sym("e", d)                                   # the error state at the step's start
@@ -189,9 +219,8 @@ def _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt):
     F = at_nominal(ca.jacobian(error, e))
     J0, J1, J_d = (ca.densify(at_nominal(ca.jacobian(error, v))) for v in (d0, d1, dw))
     xs_next = ca.vertcat(x_next, s)
-    S_Q = ca.reshape(S_Q_flat, n_w, n_w).T                  # row order
-    # the true wrench's noise S n, S taken at the run's start S_Q (module docstring: not the running estimate)
-    Q = J_d @ S_Q @ ca.diag(var_w) @ S_Q.T @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
+    # the true wrench's noise S n carried through the step, and the random walk on s (module docstring)
+    Q = J_d @ W @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
     return xs_next, F, Q, J0, J1
 
 
@@ -321,24 +350,32 @@ def eiv_copy(model, offset):
 def error_state_layout(model, n):
     """The packed state of :func:`whole_error_step`: the nominal ``xs = [x, s]`` (``nx + n_w n``), ``P``
     (packed lower, ``d = 2 nv + n_w n``), the level's ``q`` and NIS average, the time since the last pose,
-    the errors-in-variables copy (:func:`copy_layout`)."""
+    the errors-in-variables copy (:func:`copy_layout`) and, on a model linear in its channels, the
+    separate-bias filter of the compensation (:func:`observers.kalman.filter_layout`)."""
     m, d = model.n_w * n, 2 * model.nv + model.n_w * n
+    separate = [("eiv", filter_layout(model, n).size)] if model.linear_channels else []
     return StateLayout(("xs", model.nx + m), ("P", d * (d + 1) // 2), ("q", 1), ("eps_bar", 1), ("since", 1),
-                       ("copy", copy_layout(model).size))
+                       ("copy", copy_layout(model).size), *separate)
 
 
 def error_params_layout(model):
     """Per-log parameters of :func:`whole_error_step`: the pose noise variances in the error state (``R``,
     ``nv``), the reading's noise variances, the ``S`` at which ``Q`` carries them (``S_Q``, the run's ``S0``,
-    row order), the level's settings, whether it adapts and whether the estimate is compensated for the errors
-    in variables (1 or 0 each), and the payload and the gravity (:meth:`fmscal.plant.Model.payload_vector`,
-    where the model's step reads them at run time)."""
-    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("S_Q", model.n_w ** 2), ("level", 7), ("adapt", 1),
-                       ("eiv", 1), *model.payload_parts())
+    row order) and whether it carries them at the running estimate instead (``at_estimate``,
+    :func:`wrench_noise`), the level's settings, whether it adapts and whether the estimate is compensated for
+    the errors in variables (1 or 0 each), on a model linear in its channels the separate-bias filter's
+    settings but the step (``eiv_q``: :func:`observers.kalman.compensation_layout`), and the payload and the
+    gravity (:meth:`fmscal.plant.Model.payload_vector`, where the model's step reads them at run time)."""
+    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("S_Q", model.n_w ** 2), ("at_estimate", 1),
+                       ("level", 7), ("adapt", 1), ("eiv", 1),
+                       *([("eiv_q", model.n_pose + model.n_w)] if model.linear_channels else []),
+                       *model.payload_parts())
 
 
-def _step(model, z, u_prev, u, dt, p, draw, n):
-    """One sample of the whole error-state filter (module docstring), on casadi symbols."""
+def _step(model, z, u_prev, u, dt, p, draw, n, separate=False):
+    """One sample of the whole error-state filter (module docstring), on casadi symbols; ``separate``: the
+    errors-in-variables compensation by the separate-bias filter (a model linear in its channels) instead of
+    the copy."""
     nv, n_w, nx = model.nv, model.n_w, model.nx
     offset = n == n_w + 1
     _, m, ne, d = _sizes(model, offset)
@@ -350,7 +387,8 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     P = unpack_lower(o, st.P, d)
     dynamics = model.with_payload_symbols(getattr(pp, "payload", None))     # the payload and gravity, read from p
     # predict, eqs. (K1, K2) (observers.kalman._kalman): the nominal moves, the error stays zero
-    xs_pred, F, Q, _, _ = _error_step(dynamics, offset, st.xs, a.w_hat, b.w_hat, dt, pp.var_w, pp.S_Q, st.q * dt)
+    W = wrench_noise(st.xs[nx:], ca.vec(P[ne:, ne:]), pp.var_w, pp.S_Q, pp.at_estimate, n_w, n)
+    xs_pred, F, Q, _, _ = _error_step(dynamics, offset, st.xs, a.w_hat, b.w_hat, dt, W, st.q * dt)
     e_pred, P_pred = predict(ca.DM.zeros(d), P, F, Q)
     # update with the pose in the error state (H = [I 0]), eqs. (K3-K7); no pose: the pose the nominal shows, K = 0
     pose = has * b.pose + (1 - has) * model.measure(xs_pred[0:nx])
@@ -366,20 +404,25 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     since = (1 - has) * (st.since + dt)
     P_min = ca.mmin(ca.diag(P_new))
     P_sum = 2 * ca.sum1(P_packed) - ca.sum1(ca.diag(P_new))
-    # the errors-in-variables copy and the compensated estimate
-    compensate = eiv_copy(model, offset)[1]
-    c = _copy_step(dynamics, offset, st.copy, F, Q, st.xs[0:nx], xs_pred[0:nx], st.xs[nx:], draw, has, pp.R,
-                   pp.var_w, dt)
-    s_c = compensate(P_new[ne:, ne:], xs_new[nx:], copy_layout(model).unpack(c, scalars=False).bn)
+    parts = dict(xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since, copy=st.copy)
+    if separate:    # the separate-bias filter beside the filter (observers.kalman._eiv), its configuration
+        u_eiv = ca.vertcat(has, model.configuration(st.xs[0:nx]), model.configuration(xs_new[0:nx]), b.pose,
+                           a.w_hat, b.w_hat)
+        parts["eiv"], s_c = _compensation(model, st.eiv, u_eiv, ca.vertcat(dt, pp.eiv_q), xs_new[nx:], n)
+    else:           # the errors-in-variables copy and the compensated estimate
+        compensate = eiv_copy(model, offset)[1]
+        parts["copy"] = _copy_step(dynamics, offset, st.copy, F, Q, st.xs[0:nx], xs_pred[0:nx], st.xs[nx:], draw,
+                                   has, pp.R, pp.var_w, dt)
+        s_c = compensate(P_new[ne:, ne:], xs_new[nx:], copy_layout(model).unpack(parts["copy"], scalars=False).bn)
     s_out = pp.eiv * s_c + (1 - pp.eiv) * xs_new[nx:]
     out = output_layout(model, n).pack(o, x=xs_new[0:nx], s=s_out, q=q, P_sum=P_sum, P_min=P_min)
-    return L.pack(o, xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since, copy=c), out
+    return L.pack(o, **parts), out
 
 
-_WHOLE = {}             # (model.compiled_key(), n) -> ChunkedSteps
+_WHOLE = {}             # (model.compiled_key(), n, separate) -> ChunkedSteps
 
 
-def whole_error_step(model, n):
+def whole_error_step(model, n, separate=False):
     """:func:`_step` run in compiled chunks (:class:`plant.numerics.ChunkedSteps`), built once for every
     payload and gravity of a model class (they are inputs, in ``p``).
 
@@ -387,7 +430,8 @@ def whole_error_step(model, n):
     samples, :func:`observers.core.log_inputs`; ``dt``, ``p``
     (:func:`error_params_layout`) and the copy's standard normal draws at
     the step's two samples one row per step); its per-step outputs are
-    :func:`observers.kalman.output_layout`'s.
+    :func:`observers.kalman.output_layout`'s. ``separate``: the compensation by the separate-bias filter
+    (:func:`_step`; a model linear in its channels, with ``eiv``).
     """
     def build():
         size = model.input_layout.size
@@ -396,12 +440,13 @@ def whole_error_step(model, n):
         dt = ca.SX.sym("dt")
         p = ca.SX.sym("p", error_params_layout(model).size)
         draw = ca.SX.sym("draw", 2 * (model.n_w + model.nv))
-        z_next, out = _step(model, z, u_prev, u, dt, p, draw, n)
-        step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p, draw],
+        z_next, out = _step(model, z, u_prev, u, dt, p, draw, n, separate)
+        step = ca.Function(f"ekf_error_{model.name}{n}{'_separate' if separate else ''}_step",
+                           [z, u_prev, u, dt, p, draw],
                            [ca.densify(z_next), ca.densify(out)])
         return ChunkedSteps(step, _CHUNK)
 
-    return build_once(_WHOLE, (model.compiled_key(), n), build, 8)
+    return build_once(_WHOLE, (model.compiled_key(), n, bool(separate)), build, 8)
 
 
 # --- the filter -----------------------------------------------------------------------------------
@@ -467,9 +512,11 @@ class ErrorStateEKF(AugmentedEKF):
         _, m, self._ne, self.dim_x = _sizes(model, self.offset)
         #: The error state's entries ``H`` selects: the pose is ``[dp, dphi]``, the first ``nv``.
         self.pose_index = list(range(model.nv))
-        self.eiv = None                  # the planar compensation (observers.kalman._eiv); here the copy below
         #: Whether the reported estimate is compensated for the errors in variables (module docstring).
         self.eiv_on = bool(eiv)
+        # a model linear in its channels: the separate-bias filter's compensation (observers.kalman._eiv, its
+        # expected bias); otherwise the seeded copy (module docstring), which needs no linear channels
+        self.eiv = EivCompensation(model, self.n_cols) if self.eiv_on and model.linear_channels else None
 
     @cached_property
     def _calls(self):
@@ -522,10 +569,12 @@ class ErrorStateEKF(AugmentedEKF):
         """
         f, d = self.run_data.state, self.dim_x
         call = self._calls["predict"]
-        xs_in, w0_in, w1_in, dt_in, var_in, S_in, q_in = call.inputs
+        xs_in, w0_in, w1_in, dt_in, var_in, S_in, P_in, at_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
         var_in[:] = f.var_w
         S_in[:] = np.ravel(f.S_Q if S_Q is None else S_Q)
+        P_in[:] = np.ravel(f.kf.P[self._ne:, self._ne:])                      # symmetric: either order
+        at_in[0] = float(self.noise_at == "estimate")
         q_in[0] = self._q_now() * dt
         call()
         xs_next, F, Q = call.outputs
@@ -568,6 +617,8 @@ class ErrorStateEKF(AugmentedEKF):
         copy = np.zeros(copy_layout(model).size)
         copy[copy_layout(model).slices["Pm"]] = pack_lower(kf.P[:ne, :ne], ne)
         rng = np.random.default_rng(_SEED)
+        if self.eiv is not None:
+            self.eiv.reset(u.pose, model.pose_sd(noise), np.sqrt(var_w))
         self.run_data.state = NominalRun(kf=kf, var_w=var_w, s_out=s.copy(), since_pose=0.0,
                                          q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]),
                                          copy=copy, rng=rng, draw=rng.standard_normal(model.n_w + model.nv),
@@ -591,12 +642,17 @@ class ErrorStateEKF(AugmentedEKF):
             kf.P = reset(kf.P, G)                               # eq. (K8)
             kf.x = np.zeros((self.dim_x, 1))
         f.q_history.append(self._q_now())
+        s = f.xs[nx:]
+        if self.eiv is not None:     # the separate-bias filter's compensation, with the filter's configuration
+            model = self.model
+            f.s_out = self.eiv.step(has_pose, (model.configuration(xs_start[:nx]), model.configuration(f.xs[:nx])),
+                                    pose, (u_prev[layout.slices["w_hat"]], w_hat), dt, s)
+            return
         # the errors-in-variables copy (module docstring), the compensated estimate
         draw = f.rng.standard_normal(self.model.n_w + self.model.nv)
         f.copy = self._call(self._calls["copy_step"], f.copy, kf.F, kf.Q, xs_start[:nx], x_pred, xs_start[nx:],
                             np.r_[f.draw, draw], float(has_pose), np.diag(kf.R), f.var_w, dt)
         f.draw = draw
-        s = f.xs[nx:]
         f.s_out = (self._call(self._calls["compensate"], kf.P[self._ne:, self._ne:], s, self._bn()) if self.eiv_on
                    else s.copy())
 
@@ -622,6 +678,9 @@ class ErrorStateEKF(AugmentedEKF):
         P = f.kf.P[self._ne:, self._ne:]
         if not self.eiv_on:
             return P.copy()
+        if self.eiv is not None:
+            T = self.eiv.T
+            return T @ P @ T.T
         n_w, n = self.n_w, self.n_cols
         s = f.xs[self.model.nx:]
         o = ops(P)
@@ -633,14 +692,22 @@ class ErrorStateEKF(AugmentedEKF):
 
     # --- the compiled path (:meth:`AugmentedEKF._estimate_compiled`) ------------------------------
     def _whole_step(self):
-        return whole_error_step(self.model, self.n_cols)
+        return whole_error_step(self.model, self.n_cols, self.eiv is not None)
 
     def _params(self):
         f = self.run_data.state
         level, adapt = self._level_settings()
         return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, S_Q=f.S_Q.ravel(),
-                                                    level=level, adapt=adapt, eiv=float(self.eiv_on),
+                                                    at_estimate=float(self.noise_at == "estimate"), level=level,
+                                                    adapt=adapt, eiv=float(self.eiv_on), **self._eiv_settings(),
                                                     **self.model.payload_values())
+
+    def _eiv_settings(self):
+        """The separate-bias filter's settings but the step, where the model is linear in its channels."""
+        if not self.model.linear_channels:
+            return {}
+        size = self.model.n_pose + self.n_w
+        return {"eiv_q": self.eiv.state[1][1:] if self.eiv is not None else np.ones(size)}
 
     def _extra_inputs(self, n_steps):
         """The copy's draws at each step's two samples, continuing the run's stream (as :meth:`_advance` draws)."""
@@ -653,7 +720,19 @@ class ErrorStateEKF(AugmentedEKF):
         f = self.run_data.state
         return error_state_layout(self.model, self.n_cols).pack(
             None, xs=f.xs, P=pack_lower(f.kf.P, self.dim_x), q=f.q_history[-1],
-            eps_bar=self.level.eps_bar if self.level is not None else 0.0, since=f.since_pose, copy=f.copy)
+            eps_bar=self.level.eps_bar if self.level is not None else 0.0, since=f.since_pose, copy=f.copy,
+            **self._eiv_state())
+
+    def _eiv_state(self):
+        """The separate-bias filter's packed state, where the model is linear in its channels (its initial
+        state without the compensation: the compiled step carries it unused)."""
+        if not self.model.linear_channels:
+            return {}
+        if self.eiv is not None:
+            return {"eiv": self.eiv.state[0]}
+        f, model = self.run_data.state, self.model
+        var = np.maximum(model.pose_sd(self.run_data.noise or self.noise or _nominal_noise(model)), 1e-6) ** 2
+        return {"eiv": initial_state(model, model.configuration(f.xs[:model.nx]), var, self.n_cols)}
 
     def _unpacked(self, z, s_out):
         f = self.run_data.state
@@ -666,4 +745,7 @@ class ErrorStateEKF(AugmentedEKF):
         if self.level is not None:
             self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
         f.q_history = [float(st.q)]
+        if self.eiv is not None:
+            self.eiv.state[0][:] = st.eiv
+            self.eiv.set_last(st.xs[self.model.nx:])
         f.s_out = np.array(s_out, dtype=float)
