@@ -15,7 +15,7 @@ from fmscal.plant.numerics import FmscalError, as_bool, as_number
 from fmscal.observers.core import ENGINES as _ENGINE_TABLE
 from fmscal.observers.adaptive import AdaptiveObserver, HighGainObserver, PaperAdaptiveObserver, SpatialAdaptiveObserver
 from fmscal.observers.batch import LeastSquares, MaximumLikelihood, SpatialLeastSquares
-from fmscal.observers.kalman import AugmentedEKF, ErrorStateEKF
+from fmscal.observers.kalman import AugmentedEKF
 
 __all__ = ["Method", "METHODS", "FLOOR_METHOD", "ENGINES", "engine_class", "get_method", "make_observer",
            "method_names", "method_label"]
@@ -166,8 +166,6 @@ METHODS = {m.name: m for m in (
 #: and :func:`engine_class` are where the toolkit tells its cases apart: no method tests a model's name or class.
 ENGINES = _ENGINE_TABLE
 ENGINES.update({
-    # the filter pieces need linear channels; without them the EKF runs on an error state (Model.integrate)
-    (AugmentedEKF, "linear_channels", False): ErrorStateEKF,
     # a body in 3D (a unit-quaternion attitude): the law on its momenta about the centre of mass
     (AdaptiveObserver, "attitude", "quaternion"): SpatialAdaptiveObserver,
     # a body in 3D: least squares on smoothed inverse dynamics, linear in [S | c]

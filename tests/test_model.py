@@ -151,7 +151,7 @@ def test_the_spatial_floor_and_ekf_are_built_once_for_every_payload_and_gravity(
     payload or gravity finds the same step, and the step built afresh for it is the same function (no number
     of the payload in it), where each payload once built its own (10-17 s on a fresh machine). The steps are
     kept as casadi functions here, not compiled."""
-    from fmscal.observers.kalman._filter import _error_state as ekf_error_state
+    from fmscal.observers.kalman import _error_state as ekf_error_state
     from fmscal.observers.batch import _linearised_floor as linearised_floor
     for module in (ekf_error_state, linearised_floor):
         monkeypatch.setattr(module, "ChunkedSteps", lambda step, chunk, **kwargs: step)

@@ -231,9 +231,9 @@ class EivCompensation:
         return compensation_matrix(self.model, z_in, q_in[self._settings.slices["var_w"]], self._s, self.n)
 
 
-# --- the errors-in-variables copy of the error-state filter (spatial), shared by the spatial EKF
-# (observers.kalman.ErrorStateEKF) and the linearised floor (observers.batch.fit_linearised), which runs
-# this filter over a whole log: the batch method builds on the filter, so the pieces live here.
+# --- the errors-in-variables copy of the error-state filter (spatial), shared by the EKF on a model without
+# linear channels (observers.kalman.AugmentedEKF) and the linearised floor (observers.batch.fit_linearised),
+# which runs this filter over a whole log: the batch method builds on the filter, so the pieces live here.
 
 def regressor_step(model, x0, x1, w0, w1, h):
     """``U_k`` (12 x n_w len(w)): what ``s`` adds to the error state over a step (the linearised floor's

@@ -3,10 +3,8 @@
 Both EKF paths call these: the readable one on numpy arrays, through
 filterpy's ``ExtendedKalmanFilter`` object (:class:`observers.kalman.AugmentedEKF`,
 ``compiled=False``, and :meth:`~observers.Observer.step`), and the compiled
-whole step on casadi symbols (:func:`observers.kalman.whole_step`,
-:func:`observers.kalman.whole_error_step`). They hold for the planar filter
-(the state ``[x, s]``, ``H`` selecting the configuration) and for the
-error-state filter (the error ``e``, ``H = [I_nv 0]``), one equation a line::
+whole step on casadi symbols (:func:`observers.kalman.whole_error_step`), for
+every model (the error state ``e``, ``H = [I_nv 0]``), one equation a line::
 
     x-  = f(x)                                     (K1, predict)
     P-  = F P F^T + Q                              (K2, its lower triangle mirrored)
