@@ -13,6 +13,8 @@ def test_the_nominal_step_is_the_plants_motion():
     the planar model: the motion of eq. (1) under ``w = S w_hat``, against :func:`plant.rk4_step` within a
     bound that falls with the step's square (3e-6 at 10 ms, 3e-8 at 1 ms on these numbers); ``s`` unchanged."""
     ekf = AugmentedEKF(plant.PAPER_PAYLOAD)
+    assert type(ekf) is AugmentedEKF and ekf.dim_x == 15 and ekf.noise_at == "estimate"
+    assert AugmentedEKF(plant.PAPER_PAYLOAD, offset=True).dim_x == 18
     rng = np.random.default_rng(0)
     xs, w0, w1 = rng.normal(size=15), rng.normal(size=3), rng.normal(size=3)
     S = xs[6:].reshape(3, 3)
@@ -261,6 +263,7 @@ def test_a_fixed_random_walk_trades_accuracy_for_forgetting():
     ({"nis_tolerance": -0.1}, "nis_tolerance must be non-negative"),
     ({"S0_sd": 0.0}, "S0_sd must be positive"),
     ({"q_S": "a"}, "q_S must be a number"),
+    ({"noise_at": "end"}, "noise_at must be 'estimate', 'start' or None"),
 ])
 def test_ekf_refuses_bad_settings(kwargs, match):
     with pytest.raises(ValueError, match=match):

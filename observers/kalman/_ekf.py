@@ -234,6 +234,8 @@ class AugmentedEKF(Observer):
     ----------
     level : observers.kalman.NoiseLevel or None
         The adjustable random-walk intensity (None with ``adapt_q=False``).
+    dim_x : int
+        The error state's size, ``2 nv + n_w n`` (planar 15, 18 with the offset; spatial 48, 54).
     """
 
     name = "ekf"
@@ -265,13 +267,14 @@ class AugmentedEKF(Observer):
         self.reset()
 
     def _innovation_size(self):
-        """The pose innovation in the error state, ``[dp, dphi]``: ``nv`` entries."""
+        """The pose innovation in the error state (spatial ``[dp, dphi]``, planar ``[dtheta, dX, dY]``): ``nv``
+        entries."""
         return self.model.nv
 
     def _build(self, eiv):
         model = self.model
         _, m, self._ne, self.dim_x = _sizes(model, self.offset)
-        #: The error state's entries ``H`` selects: the pose is ``[dp, dphi]``, the first ``nv``.
+        #: The error state's entries ``H`` selects: the pose's error, the first ``nv``.
         self.pose_index = list(range(model.nv))
         #: Whether the reported estimate is compensated for the errors in variables (module docstring).
         self.eiv_on = bool(eiv)
