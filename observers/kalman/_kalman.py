@@ -26,8 +26,8 @@ cannot branch).
 ``P-`` is made symmetric by mirroring its lower triangle, on both paths:
 the Joseph form (K6) keeps ``P`` positive definite for any ``K`` only if
 ``P-`` is symmetric, and an asymmetry left at rounding grows from step to
-step through (K6) as it is written here (by 1e-4 of ``S`` over 2 s of the
-``paper`` log); the compiled path forms only the lower triangle.
+step through (K6) as it is written here; the compiled path forms only the
+lower triangle.
 
 Columns throughout: ``x`` and ``y`` of shape (d, 1) and (k, 1) on numpy.
 """
