@@ -171,10 +171,10 @@ def _ekf_speeds(s):
     buffered = _best(lambda: [ekf.predict_matrices(xs, w0, w1, log.dt) for _ in range(calls)], 2)
     trigger = _best(lambda: [ekf._predict() for _ in range(calls)], 2)     # the compiled call alone
     fun = ekf._predict.fun
-    var_w, P_S, q_dt = np.ones(3), np.eye(9).ravel(), 1e-8
+    var_w, S_Q, P_S, at_estimate, q_dt = np.ones(3), np.eye(3).ravel(), np.eye(9).ravel(), 1.0, 1e-8
 
-    def ordinary():
-        res = fun(xs, w0, w1, log.dt, var_w, P_S, q_dt)
+    def ordinary():       # the EKF's predict: (xs, w0, w1, dt, var_w, S_Q, P_S, at_estimate, q_dt)
+        res = fun(xs, w0, w1, log.dt, var_w, S_Q, P_S, at_estimate, q_dt)
         return [np.asarray(o) for o in res]
 
     plain = _best(lambda: [ordinary() for _ in range(calls // 10)], 2)

@@ -15,7 +15,7 @@ from fmscal.plant.numerics import FmscalError, as_bool, as_number
 from fmscal.observers.core import ENGINES as _ENGINE_TABLE
 from fmscal.observers.adaptive import AdaptiveObserver, HighGainObserver, PaperAdaptiveObserver, SpatialAdaptiveObserver
 from fmscal.observers.batch import InverseDynamicsLeastSquares, LeastSquares, MaximumLikelihood
-from fmscal.observers.kalman import AugmentedEKF, ErrorStateEKF
+from fmscal.observers.kalman import AugmentedEKF
 
 __all__ = ["Method", "METHODS", "FLOOR_METHOD", "ENGINES", "engine_class", "get_method", "make_observer",
            "method_names", "method_label"]
@@ -168,13 +168,11 @@ METHODS = {m.name: m for m in (
 #: Which class runs a method on a model, by what the model declares (:class:`fmscal.plant.Model`): a row
 #: ``(method's class, declaration, value): engine`` says that on a model whose ``declaration`` is ``value``
 #: the method runs as ``engine`` (a subclass of it); a method on a model no row matches runs as its own class.
-#: Building a method's class (``AugmentedEKF(model)``, :meth:`Method.build`) builds its engine
+#: Building a method's class (``LeastSquares(model)``, :meth:`Method.build`) builds its engine
 #: (:meth:`observers.Observer.__new__`), and :meth:`observers.Observer.refusal` is the engine's. This table
 #: and :func:`engine_class` are where the toolkit tells its cases apart: no method tests a model's name or class.
 ENGINES = _ENGINE_TABLE
 ENGINES.update({
-    # the filter pieces need linear channels; without them the EKF runs on an error state (Model.integrate)
-    (AugmentedEKF, "linear_channels", False): ErrorStateEKF,
     # a body in 3D (a unit-quaternion attitude): the law on its momenta about the centre of mass
     (AdaptiveObserver, "attitude", "quaternion"): SpatialAdaptiveObserver,
     # a body in 3D: least squares on smoothed inverse dynamics, linear in [S | c] (on another model on request:
@@ -260,8 +258,8 @@ def make_observer(name, model, noise=None, settings=None):
     >>> type(make_observer("ekf", PAPER_PAYLOAD)).__name__             # the method, with its documented defaults
     'AugmentedEKF'
     >>> model = SPATIAL_SCENARIOS["spatial-arm"].model()
-    >>> type(make_observer("ekf", model)).__name__                     # the engine the model's declarations pick
-    'ErrorStateEKF'
+    >>> type(make_observer("least-squares", model)).__name__           # the engine the model's declarations pick
+    'InverseDynamicsLeastSquares'
     """
     return get_method(name).build(model, noise, settings)
 

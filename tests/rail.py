@@ -40,6 +40,13 @@ class RailModel(Model):
     def rest_state(self, pose):
         return np.array([float(np.ravel(pose)[0]), 0.0])
 
+    def integrate(self, q, dq):
+        """A position moves additively (the EKF's error state, :class:`fmscal.observers.AugmentedEKF`)."""
+        return q + dq
+
+    def difference(self, q0, q1):
+        return q1 - q0
+
     def input_matrix(self, x):
         return ops(x).matrix([[1.0 / self.payload.mass]])
 

@@ -55,7 +55,6 @@ from fmscal.observers import AdaptiveObserver, AugmentedEKF, LeastSquares, Maxim
 from fmscal.observers._registry import ENGINES, engine_class
 from fmscal.observers.adaptive._adaptive import SpatialAdaptiveObserver
 from fmscal.observers.batch._least_squares import SpatialLeastSquares
-from fmscal.observers.kalman._error_state import ErrorStateEKF
 from fmscal.plant.physics._model import Model, PlanarModel, SpatialModel
 from fmscal.plant.scenarios._spatial import TOOL
 
@@ -280,7 +279,7 @@ class _Angle(PlanarModel):
 
 @pytest.mark.parametrize("model", [SpatialModel(TOOL), _Arm(TOOL)])
 def test_a_model_with_a_quaternion_attitude_gets_the_spatial_engines(model):
-    assert type(AugmentedEKF(model)) is ErrorStateEKF
+    assert type(AugmentedEKF(model)) is AugmentedEKF          # one EKF: an error state on every model
     assert type(AdaptiveObserver(model)) is SpatialAdaptiveObserver
     assert type(LeastSquares(model, offset=True)) is SpatialLeastSquares
     assert type(MaximumLikelihood(model)) is MaximumLikelihood

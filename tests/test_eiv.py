@@ -65,7 +65,9 @@ def test_the_ekf_reports_the_compensated_filter(noisy_20s):
     log = log.head(5000)
     ekf = AugmentedEKF(sc.payload, noise=truth.noise)
     result = ekf.run(log, truth.S0)
-    s, P, T = ekf.run_data.state.kf.x[6:, 0], ekf.run_data.state.kf.P[6:, 6:], ekf.eiv.T
+    # the nominal s (filterpy's x is the error state, zero between steps) and its block of P
+    s, P, T = ekf.run_data.state.xs[6:], ekf.run_data.state.kf.P[6:, 6:], ekf.eiv.T
+    assert not ekf.run_data.state.kf.x.any()
     np.testing.assert_allclose(result.S_hat.ravel(), T @ s, rtol=1e-12)
     np.testing.assert_allclose(result.S_std.ravel(), np.sqrt(np.diag(T @ P @ T.T)), rtol=1e-12)
     plain = AugmentedEKF(sc.payload, noise=truth.noise, eiv=False)

@@ -8,7 +8,6 @@ import pytest
 
 from fmscal.analysis._metrics import calibration_error, error_history, tail_median, tail_seen
 from fmscal.observers import AugmentedEKF, make_observer
-from fmscal.observers.kalman._error_state import ErrorStateEKF
 from fmscal.observers.batch._max_likelihood import fit_max_likelihood
 from fmscal.plant import Log, SpatialModel
 from fmscal.plant.physics._rigid_body import SpatialPayload
@@ -55,8 +54,8 @@ def three_arms():
 
 def test_the_ekf_takes_a_spatial_model_as_its_error_state_form():
     ekf = AugmentedEKF(MODEL, offset=True)
-    assert isinstance(ekf, ErrorStateEKF) and ekf.name == "ekf" and ekf.dim_x == 12 + 42
-    assert type(AugmentedEKF(ARM.payload)) is ErrorStateEKF          # a spatial payload stands for its model
+    assert type(ekf) is AugmentedEKF and ekf.name == "ekf" and ekf.dim_x == 12 + 42 and ekf.noise_at == "start"
+    assert AugmentedEKF(ARM.payload).model == MODEL                  # a spatial payload stands for its model
     assert AugmentedEKF(MODEL).dim_x == 12 + 36
 
 

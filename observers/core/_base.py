@@ -201,8 +201,8 @@ class Observer:
 
     A method's class is built on every model, and the class that runs it is
     the engine the registry lists for what the model declares
-    (:func:`fmscal.observers._registry.engine_class`: ``AugmentedEKF(model)``
-    is an ``ErrorStateEKF`` on a model without linear channels); no method
+    (:func:`fmscal.observers._registry.engine_class`: ``AdaptiveObserver(model)``
+    is a ``SpatialAdaptiveObserver`` on a model with a quaternion attitude); no method
     tests the model's name or class.
 
     Convergence: :meth:`run` judges ``converged`` from the run alone, at the cost of the

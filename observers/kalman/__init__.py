@@ -1,5 +1,6 @@
-"""The augmented EKF after Aghili (filterpy and compiled), its error-state form for a quaternion attitude,
-the separate-bias filter pieces, the noise level and the errors-in-variables compensation.
+"""The augmented EKF after Aghili, one filter on an error state for every model (filterpy and compiled, one
+predict and one update for both), the separate-bias filter pieces, the noise level and the errors-in-variables
+compensation.
 """
 
 from ._filter import (filter_layout, input_layout, params_layout, initial_state, filter_step, bias_matrix,
@@ -8,15 +9,15 @@ from ._filter import (filter_layout, input_layout, params_layout, initial_state,
 from ._noise_level import (NoiseLevel, NIS_DOF, DEFAULT_TOLERANCE, DEFAULT_Q_START, level_update)
 from ._eiv import (EivCompensation, compensation_layout, regressor_step, copy_predict, error_variances,
     beta_from_copy)
-from ._ekf_step import (model_step, whole_step, state_layout, output_layout)
+from ._kalman import (predict, update, reset, symmetric)
+from ._error_state import (error_step, wrench_noise, injection, whole_error_step, error_state_layout,
+    error_params_layout, output_layout, copy_layout, eiv_copy)
 from ._ekf import (AugmentedEKF, FilterRun)
-from ._error_state import (ErrorStateEKF, NominalRun, error_step, injection, whole_error_step, error_state_layout,
-    error_params_layout, copy_layout, eiv_copy)
 
 __all__ = ["filter_layout", "input_layout", "params_layout", "initial_state", "filter_step", "bias_matrix",
            "information_factor", "correction_limit", "pack_lower", "unpack_lower", "cholesky", "cholesky_apply",
            "cholesky_solve", "spd_inverse", "solve_information", "NoiseLevel", "level_update", "EivCompensation",
-           "compensation_layout", "regressor_step", "copy_predict", "error_variances", "beta_from_copy", "model_step",
-           "whole_step", "state_layout", "output_layout", "AugmentedEKF", "FilterRun", "ErrorStateEKF", "NominalRun",
-           "error_step", "injection", "whole_error_step", "error_state_layout", "error_params_layout", "copy_layout",
-           "eiv_copy"]
+           "compensation_layout", "regressor_step", "copy_predict", "error_variances", "beta_from_copy",
+           "predict", "update", "reset", "symmetric",
+           "output_layout", "AugmentedEKF", "FilterRun", "error_step", "wrench_noise", "injection", "whole_error_step",
+           "error_state_layout", "error_params_layout", "copy_layout", "eiv_copy"]

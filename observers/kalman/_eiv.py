@@ -231,9 +231,9 @@ class EivCompensation:
         return compensation_matrix(self.model, z_in, q_in[self._settings.slices["var_w"]], self._s, self.n)
 
 
-# --- the errors-in-variables copy of the error-state filter (spatial), shared by the spatial EKF
-# (observers.kalman.ErrorStateEKF) and the linearised floor (observers.batch.fit_linearised), which runs
-# this filter over a whole log: the batch method builds on the filter, so the pieces live here.
+# --- the errors-in-variables copy of the error-state filter (spatial), shared by the EKF on a model without
+# linear channels (observers.kalman.AugmentedEKF) and the linearised floor (observers.batch.fit_linearised),
+# which runs this filter over a whole log: the batch method builds on the filter, so the pieces live here.
 
 def regressor_step(model, x0, x1, w0, w1, h):
     """``U_k`` (12 x n_w len(w)): what ``s`` adds to the error state over a step (the linearised floor's
@@ -280,8 +280,23 @@ def copy_predict(model, x0, x1, S, n0, n1, h, Phi, eps, Mn):
 
 
 def error_variances(model, noise):
-    """The pose noise in the error state: position ``dp`` then attitude ``dphi`` (a turn about the sensor axes)."""
-    return np.maximum(np.r_[np.full(3, noise.position_sd), np.full(3, noise.angle_sd)], POSE_SD_FLOOR) ** 2
+    """The pose noise in the error state (``nv``): ``position_sd^2`` on each entry of the configuration's
+    difference (:meth:`fmscal.plant.Model.difference`) that the pose's position columns alone move,
+    ``angle_sd^2`` on the others (spatial ``[dp, dphi]``: position then a turn about the sensor axes; planar
+    ``[dtheta, dX, dY]``); each at least :data:`POSE_SD_FLOOR` squared."""
+    position = _position_entries(model)
+    sd = np.where(position, noise.position_sd, noise.angle_sd)
+    return np.maximum(sd, POSE_SD_FLOOR) ** 2
+
+
+@lru_cache(maxsize=8)
+def _position_entries(model):
+    """Whether each entry of the configuration's difference depends on the pose's position columns only
+    (the structure of its Jacobian with respect to the measured pose), shape (nv,) of bool."""
+    p0, p1 = ca.SX.sym("p0", model.n_pose), ca.SX.sym("p1", model.n_pose)
+    J = ca.jacobian(model.difference(model.pose_configuration(p0), model.pose_configuration(p1)), p1).sparsity()
+    is_position = [name in model.position_names for name in model.pose_names]
+    return np.array([all(is_position[j] for j in range(model.n_pose) if J.has_nz(i, j)) for i in range(model.nv)])
 
 
 def beta_from_copy(bn, s_bar, var_w, n_w, n):

@@ -3,19 +3,21 @@
 import math
 import time
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from fmscal.plant import NoiseSpec
 from fmscal.plant.io import estimate_noise
-from fmscal.plant.numerics import BufferedCall, FmscalError, as_bool, as_positive_scalar, compile_function, ops
+from fmscal.plant.numerics import BufferedCall, FmscalError, as_bool, as_positive_scalar, ops
 
 from fmscal.observers.core import Estimate, Observer, log_inputs, progress_bar
-from ._eiv import EivCompensation
-from ._ekf_step import model_step, output_layout, params_layout, state_layout, whole_step
-from ._filter import pack_lower, unpack_lower
+from ._eiv import EivCompensation, beta_from_copy, error_variances
+from ._error_state import (_SEED, _readable, _sizes, copy_layout, eiv_copy, error_params_layout, error_state_layout,
+                           output_layout, whole_error_step)
+from ._filter import bias_matrix, correction_limit, initial_state, pack_lower, unpack_lower
+from ._kalman import predict, reset, update
 from ._noise_level import DEFAULT_Q_START, DEFAULT_TOLERANCE, NoiseLevel
 
 __all__ = ["AugmentedEKF", "FilterRun"]
@@ -23,18 +25,30 @@ __all__ = ["AugmentedEKF", "FilterRun"]
 
 
 class _CalibrationEKF(ExtendedKalmanFilter):
-    """filterpy's EKF with the state transition of eq. (1) compiled by casadi.
+    """filterpy's EKF whose predict and update are :mod:`observers.kalman._kalman`'s (eqs. K1-K7).
 
-    ``predict_x`` is overridden to take ``x_next``; ``x_next``, ``F`` and
-    ``Q`` are set before every predict, from the same compiled call.
+    The compiled whole step calls the same two functions, so the two paths
+    run one filter. ``x_next``, ``F`` and ``Q`` are set before every
+    :meth:`predict` (the model's step, from one compiled call); ``x`` and
+    ``P`` hold filterpy's state, ``R`` its pose noise, and an update leaves
+    filterpy's ``y`` (the innovation), ``K`` and ``nis`` (eq. K7).
     """
 
     def __init__(self, dim_x, dim_z):
         super().__init__(dim_x=dim_x, dim_z=dim_z)
-        self.x_next = np.zeros(dim_x)
+        self.x_next = np.zeros((dim_x, 1))
+        self.nis = 0.0
 
-    def predict_x(self, u=0):
-        self.x = self.x_next.reshape(-1, 1)
+    def predict(self, u=0):
+        """Eqs. (K1, K2): ``x = x_next``, ``P = F P F^T + Q``."""
+        self.x, self.P = predict(np.reshape(self.x_next, (-1, 1)), self.P, self.F, self.Q)
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+
+    def update(self, y, pose):
+        """Eqs. (K3-K7) with the innovation ``y`` (length ``dim_z``), ``H`` selecting the state's entries ``pose``."""
+        self.y = np.reshape(y, (-1, 1))
+        self.x, self.P, self.nis = update(ops(self.P), self.x, self.P, self.y, self.R, list(pose))
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
 
 
 @dataclass
@@ -53,6 +67,19 @@ class FilterRun:
         Seconds since the last pose.
     q_history : list of float
         The random walk's intensity after each sample, 1/s.
+    xs : ndarray, shape (nx + n_w n,)
+        The nominal ``[x, s]``: the motion (planar ``[theta, theta', X, X', Y, Y']``, spatial
+        ``[p, q, v, omega]``) and ``vec([S | c])``, row order. ``kf.x`` is the error state ``e``
+        (zero between steps) and ``kf.P`` its covariance (d x d).
+    copy : ndarray, shape (copy_layout(model).size,)
+        The errors-in-variables copy (:func:`observers.kalman.copy_layout`; unused where the model is
+        linear in its channels).
+    rng : numpy.random.Generator
+        The copy's draws, seeded at the run's start.
+    draw : ndarray, shape (n_w + nv,)
+        The copy's standard normal draw at the last sample (reading, pose).
+    S_Q : ndarray, shape (n_w, n_w)
+        The ``S`` at which ``Q`` carries the reading's noise with ``noise_at="start"``: the run's ``S0``.
     """
 
     kf: object
@@ -60,30 +87,40 @@ class FilterRun:
     s_out: np.ndarray
     since_pose: float
     q_history: list
+    xs: np.ndarray = None
+    copy: np.ndarray = None
+    rng: object = None
+    draw: np.ndarray = None
+    S_Q: np.ndarray = None
 
 
 class AugmentedEKF(Observer):
-    """Extended Kalman filter on the motion and the calibration, planar ``[theta, ..., Y', s_11, ..., s_33]``.
+    """Extended Kalman filter on the motion and the calibration, on an error state: one filter for every model.
 
-    A reconstruction of [3] for the planar case (and for any model linear in
-    its channels, the tests' rail among them): the calibration entries are
-    states (random walks), the motion follows eq. (1) with ``w = S w_hat``
-    (:func:`plant.rk4_step`, the raw reading linear over the step), and the
-    measurement is ``[theta, X, Y]``. casadi derives the transition Jacobian
-    ``F``, the noise Jacobians and ``H`` from the plant's single definition
-    (:func:`observers.kalman.model_step`). The update is in Joseph form, so
-    ``P`` stays symmetric positive definite. Two paths run the same filter:
+    A reconstruction of [3]: the calibration entries are states (random
+    walks), the motion follows the model's dynamics (eq. (1) in the plane)
+    with ``w = S w_hat``, and the measurement is the pose. The filter holds a
+    nominal ``[x, s]`` and, in filterpy's ``x``, the error state ``e = [dq,
+    dnu, ds]`` (:mod:`observers.kalman._error_state`): in the plane the
+    attitude is an angle, its error the angle's difference and the injection
+    an addition; in 3D a unit quaternion, its error a turn. casadi derives
+    ``F``, the noise Jacobians and the reset from the model's single
+    definition. Predict and update (eqs. K1-K8, the update in Joseph form so
+    that ``P`` stays symmetric positive definite) are written once
+    (:mod:`observers.kalman._kalman`), and two paths call them:
     :meth:`run` by default generates the whole step (predict, update, the
-    adjustable random walk and the errors-in-variables filter below) with
-    casadi and runs it in compiled chunks (:func:`observers.kalman.whole_step`);
-    ``run(compiled=False)``, and :meth:`step` sample by sample, hand the
-    compiled ``x_next``, ``F`` and ``Q`` to filterpy's
-    ``ExtendedKalmanFilter``, which does the predict and the update. They agree
-    to rounding (``tests/test_ekf.py``).
+    adjustable random walk and the errors-in-variables compensation below)
+    with casadi and runs it in compiled chunks
+    (:func:`observers.kalman.whole_error_step`); ``run(compiled=False)``, and
+    :meth:`step` sample by sample, hand the compiled ``F`` and ``Q`` to
+    filterpy's ``ExtendedKalmanFilter``, whose ``predict`` and ``update`` are
+    the same two functions. They agree to rounding (``tests/test_ekf.py``,
+    ``tests/test_spatial_ekf.py``).
 
-    Tuning rule: ``R = diag(angle_sd^2, position_sd^2, position_sd^2)`` from
-    the pose noise; ``Q`` is the raw reading's noise carried through the
-    dynamics, ``Q = J diag(wrench_sd^2) J^T`` with ``J = J_0 + J_1`` the
+    Tuning rule: ``R`` the pose noise in the error state (planar
+    ``diag(angle_sd^2, position_sd^2, position_sd^2)``); ``Q`` is the raw
+    reading's noise carried through the dynamics, ``Q = J diag(wrench_sd^2)
+    J^T`` with ``J = J_0 + J_1`` the
     sum of the step's Jacobians with respect to the raw readings at its two
     ends. Each reading's noise enters two consecutive steps (through ``J_1``
     of one and ``J_0`` of the next), so the process noise of eq. (1) is
@@ -94,7 +131,9 @@ class AugmentedEKF(Observer):
     ``sqrt(2)`` too small. The true wrench's noise is ``S n`` with ``S``
     itself uncertain: its covariance is ``E[S Sigma S^T] = S_hat Sigma
     S_hat^T + Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il, s_jl)`` from the
-    calibration block of ``P``, carried through the step as the wrench is
+    calibration block of ``P`` (``noise_at="estimate"``, the default on a
+    model linear in its channels; in 3D ``S0 Sigma S0^T``, ``"start"``:
+    :mod:`observers.kalman._error_state` says why), carried through the step as the wrench is
     (``J_d Delta J_d^T``, ``J_d`` the step's Jacobian with respect to the true
     wrench at both ends). ``Delta`` matters only while ``S`` is still
     uncertain (the first seconds); without it the filter, evaluating the
@@ -119,8 +158,10 @@ class AugmentedEKF(Observer):
     limited to a tenth of ``|S_hat|`` over the first samples, while ``J``
     is still rank-deficient), from the information
     ``J`` and its noise-made part ``B`` that a separate-bias filter run
-    beside the EKF accumulates (:class:`observers.kalman.EivCompensation`, the
-    same step as the floor's); the filter itself runs on its own estimate.
+    beside the EKF accumulates on a model linear in its channels
+    (:class:`observers.kalman.EivCompensation`, the same step as the floor's;
+    in 3D the floor's seeded copy, :mod:`observers.kalman._error_state`); the
+    filter itself runs on its own estimate.
     ``eiv=False`` reports the filter's estimate as it is.
 
     With a fixed random walk the filter must choose between averaging (a
@@ -139,10 +180,10 @@ class AugmentedEKF(Observer):
 
     Parameters
     ----------
-    model : plant.Model or plant.Payload
-        The problem (a model linear in its channels:
-        :attr:`fmscal.plant.Model.linear_channels`); a payload stands for the
-        planar model of it. Every size of the filter comes from the model.
+    model : plant.Model, plant.Payload or plant.SpatialPayload
+        The problem (a model with ``integrate`` and ``difference``: the
+        planar, the spatial); a payload stands for its case's model. Every
+        size of the filter comes from the model.
     noise : plant.NoiseSpec, optional
         Noise standard deviations in the units of the log. None: estimated
         from the log (:func:`plant.io._noise.estimate_noise`) and reported in
@@ -181,11 +222,20 @@ class AugmentedEKF(Observer):
         Relative error of the noise standard deviations that the adaptation
         tolerates without raising the intensity (0.25: 25 %); a larger value
         reacts to larger changes only.
+    noise_at : {"estimate", "start"}, optional
+        The ``S`` at which ``Q`` carries the reading's noise into the wrench:
+        the running estimate with its uncertainty (``W = S_hat Sigma S_hat^T
+        + Delta``, eq. Q2) or the run's ``S0`` (``W = S0 Sigma S0^T``, eq.
+        Q1; :mod:`observers.kalman._error_state`). Default: ``"estimate"`` on
+        a model linear in its channels, ``"start"`` otherwise (the spatial
+        model: the module docstring says why).
 
     Attributes
     ----------
     level : observers.kalman.NoiseLevel or None
         The adjustable random-walk intensity (None with ``adapt_q=False``).
+    dim_x : int
+        The error state's size, ``2 nv + n_w n`` (planar 15, 18 with the offset; spatial 48, 54).
 
     Examples
     --------
@@ -203,8 +253,13 @@ class AugmentedEKF(Observer):
 
     def __init__(self, model, noise=None, q_S=0.0, S0_sd=3.0, v0_sd=1.0, offset=False, c0_sd=None,
                  adapt_q=True, q_S_max=1e-4, nis_tolerance=DEFAULT_TOLERANCE, q_S_start=DEFAULT_Q_START,
-                 eiv=True):
+                 eiv=True, noise_at=None):
         super().__init__(model, offset=offset)
+        if noise_at not in (None, "estimate", "start"):
+            raise FmscalError(f"noise_at must be 'estimate', 'start' or None; got {noise_at!r}")
+        #: Where ``Q`` takes the ``S`` that carries the reading's noise into the wrench: ``"estimate"`` (the
+        #: running estimate and its uncertainty, eq. Q2) or ``"start"`` (the run's ``S0``, eq. Q1).
+        self.noise_at = noise_at or ("estimate" if self.model.linear_channels else "start")
         self.noise = None if noise is None else self.model.check_noise(noise)
         self.adapt_q = as_bool(adapt_q, "adapt_q")
         self.q_S = as_positive_scalar(q_S, "q_S", allow_zero=True)
@@ -223,82 +278,111 @@ class AugmentedEKF(Observer):
         self.reset()
 
     def _innovation_size(self):
-        """Entries of a pose innovation (the NIS's degrees of freedom): the pose's."""
-        return self.model.n_pose
+        """The pose innovation in the error state (spatial ``[dp, dphi]``, planar ``[dtheta, dX, dY]``): ``nv``
+        entries."""
+        return self.model.nv
 
     def _build(self, eiv):
-        """The model's part of the filter: its size, ``H``, the compiled step, the compensation."""
         model = self.model
-        #: The filter's state size: the model's motion states and the entries of ``[S | c]``.
-        self.dim_x = model.nx + self.n_w * self.n_cols
-        self._H = np.zeros((model.n_pose, self.dim_x))
-        self._H[np.arange(model.n_pose), list(model.q_index)] = 1.0       # the pose is the configuration
-        self._jacobians, self._predict = (BufferedCall(f) for f in _compiled_model(model, self.offset))
-        self.eiv = EivCompensation(model, self.n_cols) if eiv else None
+        _, m, self._ne, self.dim_x = _sizes(model, self.offset)
+        #: The error state's entries ``H`` selects: the pose's error, the first ``nv``.
+        self.pose_index = list(range(model.nv))
+        #: Whether the reported estimate is compensated for the errors in variables (module docstring).
+        self.eiv_on = bool(eiv)
+        # a model linear in its channels: the separate-bias filter's compensation (observers.kalman._eiv, its
+        # expected bias); otherwise the seeded copy (module docstring), which needs no linear channels
+        self.eiv = EivCompensation(model, self.n_cols) if self.eiv_on and model.linear_channels else None
 
-    # --- the model, from the plant ------------------------------------------
+    @cached_property
+    def _calls(self):
+        """The readable path's calls (``jacobians``, ``predict``, ``inject``, the copy's ``copy_step`` and
+        ``compensate``; :func:`_readable`, :func:`eiv_copy`), made on first use: the compiled run needs none."""
+        names = ("jacobians", "predict", "inject", "copy_step", "compensate")
+        functions = (*_readable(self.model, self.offset), *eiv_copy(self.model, self.offset))
+        return dict(zip(names, (BufferedCall(f) for f in functions)))
+
+    @property
+    def _predict(self):
+        """The readable path's predict call through its buffers (:meth:`predict_matrices`; ``fmscal bench``
+        times it alone)."""
+        return self._calls["predict"]
+
     def transition(self, xs, w0, w1, dt):
-        """The discrete step and its Jacobians (the compiled casadi call).
-
-        Returns
-        -------
-        x_next : ndarray, shape (d,)
-        F : ndarray, shape (d, d)
-        J0, J1 : ndarray, shape (d, n_w)
-            Jacobians with respect to the raw readings at the step's start
-            and end. ``d`` = :attr:`dim_x` (planar: 15, or 18 with the offset).
-        """
-        call, d, n_w = self._jacobians, self.dim_x, self.n_w
-        for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
-            buffer[:] = value
-        call()
-        f, F, J0, J1 = call.outputs                           # casadi stores column-major
-        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(n_w, d).T.copy(), J1.reshape(n_w, d).T.copy()
-
-    def predict_matrices(self, xs, w0, w1, dt, P_S=None):
-        """``x_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
+        """The nominal step and the error state's Jacobians (the compiled casadi call).
 
         Parameters
         ----------
-        xs : ndarray, shape (d,)
-            The state at the step's start.
+        xs : ndarray, shape (nx + n_w n,)
+            The nominal ``[x, s]``.
         w0, w1 : ndarray, shape (n_w,)
             The raw readings at the step's start and end.
         dt : float
             The step, s.
-        P_S : ndarray, shape (n_w n, n_w n), optional
-            Covariance of the calibration entries (``Delta`` of the tuning
-            rule); default the running filter's.
 
         Returns
         -------
-        x_next : ndarray, shape (d,)
+        xs_next : ndarray, shape (nx + n_w n,)
+        F : ndarray, shape (d, d)
+        J0, J1 : ndarray, shape (d, n_w)
+            Jacobians of the error state with respect to the raw readings at
+            the step's start and end.
+        """
+        call, d, n_w = self._calls["jacobians"], self.dim_x, self.n_w
+        for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
+            buffer[:] = value
+        call()
+        f, F, J0, J1 = call.outputs
+        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(n_w, d).T.copy(), J1.reshape(n_w, d).T.copy()
+
+    def predict_matrices(self, xs, w0, w1, dt, S_Q=None):
+        """``xs_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
+
+        Parameters as :meth:`transition`; ``S_Q`` (``n_w`` square) the ``S``
+        at which ``Q`` carries the reading's noise (default the running
+        filter's: the run's ``S0``).
+
+        Returns
+        -------
+        xs_next : ndarray, shape (nx + n_w n,)
         F, Q : ndarray, shape (d, d)
             Views of the call's buffers, overwritten by the next call.
         """
-        f = self.run_data.state
-        d = self.dim_x
-        call = self._predict
-        xs_in, w0_in, w1_in, dt_in, var_in, P_in, q_in = call.inputs
+        f, d = self.run_data.state, self.dim_x
+        call = self._calls["predict"]
+        xs_in, w0_in, w1_in, dt_in, var_in, S_in, P_in, at_in, q_in = call.inputs
         xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
         var_in[:] = f.var_w
-        m, nx = self.n_w * self.n_cols, self.model.nx
-        P_in.reshape(m, m)[:] = f.kf.P[nx:, nx:] if P_S is None else np.reshape(P_S, (m, m))   # symmetric
-        q_in[0] = (self.level.q if self.level is not None else self.q_S) * dt
+        S_in[:] = np.ravel(f.S_Q if S_Q is None else S_Q)
+        P_in[:] = np.ravel(f.kf.P[self._ne:, self._ne:])                      # symmetric: either order
+        at_in[0] = float(self.noise_at == "estimate")
+        q_in[0] = self._q_now() * dt
         call()
-        f, F, Q = call.outputs
-        return f.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
+        xs_next, F, Q = call.outputs
+        return xs_next.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
 
-    def H(self, xs=None):
-        """Measurement Jacobian: the pose is the configuration (planar ``[theta, X, Y]``, states 0, 2, 4);
-        shape (n_pose, d)."""
-        return self._H
+    def inject(self, xs, pose, e):
+        """The pose in the error state, and the injection of ``e`` (:func:`injection`).
 
-    def hx(self, xs):
-        """The measured pose of a state column, shape (n_pose, 1) (:meth:`fmscal.plant.Model.measure`)."""
-        return np.asarray(self.model.measure(np.ravel(xs)[:self.model.nx])).reshape(-1, 1)
+        Returns
+        -------
+        y : ndarray, shape (nv,)
+            ``difference(q(x), pose)``: ``[dp (m, world), dphi (rad, sensor axes)]``.
+        xs_new : ndarray, shape (nx + n_w n,)
+            ``xs (+) e``.
+        G : ndarray, shape (d, d)
+            The reset of ``P`` (``P <- G P G^T``).
+        """
+        call, d = self._calls["inject"], self.dim_x
+        for buffer, value in zip(call.inputs, (xs, pose, e)):
+            buffer[:] = value
+        call()
+        y, xs_new, G = call.outputs
+        return y.copy(), xs_new.copy(), G.reshape(d, d).T.copy()
 
-    # --- Observer ---------------------------------------------------------------
+    def innovation(self, pose):
+        """The pose in the error state, ``difference(q(x-), pose)`` (:meth:`inject`), shape (nv,)."""
+        return self.inject(self.run_data.state.xs, pose, np.zeros(self.dim_x))[0]
+
     def reset(self, S0=None):
         """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
         super().reset(S0)
@@ -325,7 +409,7 @@ class AugmentedEKF(Observer):
         return estimate
 
     def _estimate_compiled(self, log):
-        """The whole log through :func:`observers.kalman.whole_step`; the filter left where it ended.
+        """The whole log through :func:`observers.kalman.whole_error_step`; the filter left where it ended.
 
         Returns
         -------
@@ -355,12 +439,14 @@ class AugmentedEKF(Observer):
         return Estimate(calibration, x, cov=self._covariance(), diverged=len(Y) < n_steps), q
 
     def _extra_inputs(self, n_steps):
-        """Per-step inputs of the compiled step beyond the samples, the step and the parameters: none here."""
-        return []
+        """The copy's draws at each step's two samples, continuing the run's stream (as :meth:`_advance` draws)."""
+        f = self.run_data.state
+        rows = np.vstack([f.draw, f.rng.standard_normal((n_steps, self.model.n_w + self.model.nv))])
+        f.draw = rows[-1]                    # where the run ends (a stopped run is not continued)
+        return [np.hstack([rows[:-1], rows[1:]])]
 
     def _whole_step(self):
-        """The whole step compiled in chunks (:func:`observers.kalman.whole_step`)."""
-        return whole_step(self.model, self.n_cols, self.eiv is not None)
+        return whole_error_step(self.model, self.n_cols, self.eiv is not None)
 
     def _level_settings(self):
         """The random-walk level's settings for a compiled step, and whether it adapts (1 or 0)."""
@@ -368,38 +454,52 @@ class AugmentedEKF(Observer):
         return level, float(self.level is not None)
 
     def _params(self):
-        """The per-log parameters of the compiled step (:func:`observers.kalman._ekf_step.params_layout`), after
-        :meth:`_start`."""
         f = self.run_data.state
         level, adapt = self._level_settings()
+        return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, S_Q=f.S_Q.ravel(),
+                                                    at_estimate=float(self.noise_at == "estimate"), level=level,
+                                                    adapt=adapt, eiv=float(self.eiv_on), **self._eiv_settings(),
+                                                    **self.model.payload_values())
+
+    def _eiv_settings(self):
+        """The separate-bias filter's settings but the step, where the model is linear in its channels."""
+        if not self.model.linear_channels:
+            return {}
         size = self.model.n_pose + self.n_w
-        eiv_q = self.eiv.state[1][1:] if self.eiv is not None else np.ones(size)     # the settings but the step
-        return params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, eiv_q=eiv_q,
-                                              level=level, adapt=adapt)
+        return {"eiv_q": self.eiv.state[1][1:] if self.eiv is not None else np.ones(size)}
 
     def _packed(self):
-        """The running filter as the compiled step's state (:func:`observers.kalman.state_layout`)."""
         f = self.run_data.state
-        kf, level = f.kf, self.level
-        parts = dict(x=kf.x[:, 0], P=pack_lower(kf.P, self.dim_x), q=f.q_history[-1],
-                     eps_bar=level.eps_bar if level is not None else 0.0, since=f.since_pose)
+        return error_state_layout(self.model, self.n_cols).pack(
+            None, xs=f.xs, P=pack_lower(f.kf.P, self.dim_x), q=f.q_history[-1],
+            eps_bar=self.level.eps_bar if self.level is not None else 0.0, since=f.since_pose, copy=f.copy,
+            **self._eiv_state())
+
+    def _eiv_state(self):
+        """The separate-bias filter's packed state, where the model is linear in its channels (its initial
+        state without the compensation: the compiled step carries it unused)."""
+        if not self.model.linear_channels:
+            return {}
         if self.eiv is not None:
-            parts["eiv"] = self.eiv.state[0]
-        return state_layout(self.model, self.n_cols, self.eiv is not None).pack(None, **parts)
+            return {"eiv": self.eiv.state[0]}
+        f, model = self.run_data.state, self.model
+        var = np.maximum(model.pose_sd(self.run_data.noise or self.noise or _nominal_noise(model)), 1e-6) ** 2
+        return {"eiv": initial_state(model, model.configuration(f.xs[:model.nx]), var, self.n_cols)}
 
     def _unpacked(self, z, s_out):
-        """Set the running filter from the compiled step's state ``z``, its reported estimate ``s_out``."""
         f = self.run_data.state
-        st = state_layout(self.model, self.n_cols, self.eiv is not None).unpack(z)
-        f.kf.x = st.x.reshape(-1, 1).copy()
+        st = error_state_layout(self.model, self.n_cols).unpack(z)
+        f.xs = st.xs.copy()
+        f.copy = st.copy.copy()
         f.kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
+        f.kf.x = np.zeros((self.dim_x, 1))
         f.since_pose = float(st.since)
         if self.level is not None:
             self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
         f.q_history = [float(st.q)]
         if self.eiv is not None:
             self.eiv.state[0][:] = st.eiv
-            self.eiv.set_last(st.x[self.model.nx:])
+            self.eiv.set_last(st.xs[self.model.nx:])
         f.s_out = np.array(s_out, dtype=float)
 
     def _healthy_outputs(self, Y, k0):
@@ -411,21 +511,22 @@ class AugmentedEKF(Observer):
     def _start(self, u):
         model = self.model
         u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
-        pose, w_hat = u.pose, u.w_hat
-        noise, S_var, var_w = self._prior(w_hat)
-        kf = _CalibrationEKF(self.dim_x, model.n_pose)
-        kf.x = np.concatenate([model.rest_state(pose), self._initial_S(self.run_data.S0)]).reshape(-1, 1)
-        pose_sd = model.pose_sd(noise)
-        pose_var = np.maximum(pose_sd, 1e-6) ** 2
-        motion_var = np.zeros(model.nx)
-        motion_var[list(model.q_index)] = pose_var                  # the first pose, to its noise
-        motion_var[list(model.v_index)] = self.v0_sd ** 2           # the velocities, to v0_sd
-        kf.P = np.diag(np.concatenate([motion_var, S_var]))
-        kf.R = np.diag(pose_var)
-        self.run_data.state = FilterRun(kf=kf, var_w=var_w, s_out=kf.x[model.nx:, 0].copy(), since_pose=0.0,
-                                        q_history=[self._q_now()])
+        noise, S_var, var_w = self._prior(u.w_hat)
+        kf = _CalibrationEKF(self.dim_x, model.nv)           # x_next = 0: the error stays zero over a predict
+        R = error_variances(model, noise)
+        kf.P = np.diag(np.concatenate([R, np.full(model.nv, self.v0_sd ** 2), S_var]))
+        kf.R = np.diag(R)
+        s = self._initial_S(self.run_data.S0)
+        ne = self._ne
+        copy = np.zeros(copy_layout(model).size)
+        copy[copy_layout(model).slices["Pm"]] = pack_lower(kf.P[:ne, :ne], ne)
+        rng = np.random.default_rng(_SEED)
         if self.eiv is not None:
-            self.eiv.reset(pose, pose_sd, np.sqrt(var_w))
+            self.eiv.reset(u.pose, model.pose_sd(noise), np.sqrt(var_w))
+        self.run_data.state = FilterRun(kf=kf, var_w=var_w, s_out=s.copy(), since_pose=0.0,
+                                         q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]),
+                                         copy=copy, rng=rng, draw=rng.standard_normal(model.n_w + model.nv),
+                                         S_Q=s.reshape(model.n_w, -1)[:, :model.n_w].copy())
 
     def _prior(self, w_hat):
         """The noise model of the run, the prior variances of ``[S | c]`` (flat, row order) and the reading's
@@ -445,47 +546,79 @@ class AugmentedEKF(Observer):
         """The random walk's intensity now, 1/s."""
         return self.level.q if self.level is not None else self.q_S
 
-    def _pose_update(self, z):
-        """filterpy's update with the pose measurement ``z`` (column), then the level at its NIS."""
+    def _pose_update(self, y):
+        """The update with the innovation ``y`` (eqs. K3-K7, :mod:`observers.kalman._kalman`), then the level at
+        its NIS."""
         f = self.run_data.state
-        kf = f.kf
-        kf.update(z, self.H, self.hx)
+        f.kf.update(y, self.pose_index)
         if self.level is not None:
-            y = kf.y[:, 0]
-            self.level.update(float(y @ kf.SI @ y), f.since_pose)      # NIS of this pose
+            self.level.update(float(f.kf.nis), f.since_pose)      # NIS of this pose
         f.since_pose = 0.0
 
     def _advance(self, u_prev, u, dt):
-        """Predict over ``dt`` with the raw readings at both ends, update with the pose."""
+        """Predict the nominal and ``P`` over ``dt``; with a pose, update, inject and reset."""
         f = self.run_data.state
-        kf, model = f.kf, self.model
-        layout = model.input_layout
+        kf, layout = f.kf, self.model.input_layout
         has_pose, pose, w_hat = u[0], u[layout.slices["pose"]], u[layout.slices["w_hat"]]
-        w_prev = u_prev[layout.slices["w_hat"]]
-        q_prev = model.configuration(kf.x[:model.nx, 0])
-        kf.x_next, kf.F, kf.Q = self.predict_matrices(kf.x[:, 0], w_prev, w_hat, dt)
+        nx = self.model.nx
+        xs_start = f.xs
+        f.xs, F, Q = self.predict_matrices(f.xs, u_prev[layout.slices["w_hat"]], w_hat, dt)
+        kf.F, kf.Q = F.copy(), Q.copy()
         kf.predict()
         f.since_pose += dt
+        x_pred = f.xs[:nx].copy()
         if has_pose:
-            self._pose_update(np.reshape(pose, (-1, 1)))
+            self._pose_update(self.innovation(pose))
+            _, f.xs, G = self.inject(f.xs, pose, kf.x[:, 0])
+            kf.P = reset(kf.P, G)                               # eq. (K8)
+            kf.x = np.zeros((self.dim_x, 1))
         f.q_history.append(self._q_now())
-        s = kf.x[model.nx:, 0]
-        if self.eiv is None:
-            f.s_out = s.copy()
-        else:      # the errors-in-variables compensation (observers.kalman._eiv), with the filter's configuration
-            q_now = model.configuration(kf.x[:model.nx, 0])
-            f.s_out = self.eiv.step(has_pose, (q_prev, q_now), pose, (w_prev, w_hat), dt, s)
+        s = f.xs[nx:]
+        if self.eiv is not None:     # the separate-bias filter's compensation, with the filter's configuration
+            model = self.model
+            f.s_out = self.eiv.step(has_pose, (model.configuration(xs_start[:nx]), model.configuration(f.xs[:nx])),
+                                    pose, (u_prev[layout.slices["w_hat"]], w_hat), dt, s)
+            return
+        # the errors-in-variables copy (module docstring), the compensated estimate
+        draw = f.rng.standard_normal(self.model.n_w + self.model.nv)
+        f.copy = self._call(self._calls["copy_step"], f.copy, kf.F, kf.Q, xs_start[:nx], x_pred, xs_start[nx:],
+                            np.r_[f.draw, draw], float(has_pose), np.diag(kf.R), f.var_w, dt)
+        f.draw = draw
+        f.s_out = (self._call(self._calls["compensate"], kf.P[self._ne:, self._ne:], s, self._bn()) if self.eiv_on
+                   else s.copy())
+
+    @staticmethod
+    def _call(call, *values):
+        """A compiled call through its buffers (matrices column-major); its first output, copied."""
+        for buffer, value in zip(call.inputs, values):
+            buffer[:] = np.ravel(value, order="F")
+        call()
+        return call.outputs[0].copy()
+
+    def _bn(self):
+        """The copy's ``b_n`` (module docstring)."""
+        return self.run_data.state.copy[copy_layout(self.model).slices["bn"]]
 
     def _current(self):
         f = self.run_data.state
-        return f.kf.x[0:self.model.nx, 0], f.s_out
+        return f.xs[:self.model.nx], f.s_out
 
     def _covariance(self):
+        """``P`` of ``[S | c]``, compensated (``T P T^T``, module docstring) unless ``eiv=False``."""
         f = self.run_data.state
-        P = f.kf.P[self.model.nx:, self.model.nx:]
-        if self.eiv is None:
+        P = f.kf.P[self._ne:, self._ne:]
+        if not self.eiv_on:
             return P.copy()
-        T = self.eiv.T
+        if self.eiv is not None:
+            T = self.eiv.T
+            return T @ P @ T.T
+        n_w, n = self.n_w, self.n_cols
+        s = f.xs[self.model.nx:]
+        o = ops(P)
+        B = bias_matrix(o, beta_from_copy(self._bn(), s, f.var_w, n_w, n), f.var_w, n_w, n)
+        A = P @ B
+        s_col = s.reshape(-1, 1)
+        T = np.eye(len(s)) + correction_limit(o, s_col, A @ s_col, len(s)) * A
         return T @ P @ T.T
 
     def _healthy(self, x, calibration, k=None):
@@ -495,12 +628,6 @@ class AugmentedEKF(Observer):
         # a NaN or inf anywhere makes the sum non-finite: one reduction
         return super()._healthy(x, calibration, k) and math.isfinite(float(P.sum())) and bool(P.diagonal().min() > 0)
 
-
-@lru_cache(maxsize=8)
-def _compiled_model(model, offset):
-    """The model's Jacobians and ``x_next, F, Q`` (:func:`observers.kalman.model_step`), compiled."""
-    jacobians, predict, _ = model_step(model, offset)
-    return compile_function(jacobians), compile_function(predict)
 
 
 def _nominal_noise(model):

@@ -1,58 +1,67 @@
-"""The EKF on a model whose attitude is a unit quaternion: the error-state (multiplicative) form.
+"""The EKF's step on an error state, for every model (:class:`observers.AugmentedEKF`), as casadi functions.
 
-:class:`observers.AugmentedEKF` on a model without linear channels (the
-spatial one, :class:`fmscal.plant.SpatialModel`) is an :class:`ErrorStateEKF`:
-the same filter, tuning rule, random-walk level and health checks, with the
-model-specific step written here. A unit quaternion is not a vector: adding
-a Kalman correction to it leaves the unit sphere, and its covariance (4x4
-for 3 degrees of freedom) is singular. The filter therefore holds
+One filter for the planar and the spatial model: the model's pieces
+(``integrate``, ``difference``, ``acceleration``) are all it takes. A unit
+quaternion is not a vector: adding a Kalman correction to it leaves the unit
+sphere, and its covariance (4x4 for 3 degrees of freedom) is singular; an
+angle is, and its error is the angle's difference. The filter holds
 
-- a **nominal** state: the motion ``x = [p, q, v, omega]`` (13 numbers,
-  :attr:`fmscal.plant.SpatialModel.state`) and ``s = vec([S | c])`` (row
-  order), propagated by the model;
-- an **error state** ``e = [dp, dphi, dv, domega, ds]`` (``d = 12 + n_w n``),
-  ``x_true = x (+) e`` (:meth:`fmscal.plant.Model.state_integrate`: ``dphi``
-  a turn about the sensor's axes, ``q (x) exp(dphi / 2)``), ``s_true = s +
-  ds``. filterpy's ``x`` is ``e`` and ``P`` its covariance; ``e`` is zero
-  between steps.
+- a **nominal** state: the motion ``x`` (:attr:`fmscal.plant.Model.state`;
+  spatial ``[p, q, v, omega]``, planar ``[theta, theta', X, X', Y, Y']``)
+  and ``s = vec([S | c])`` (row order), propagated by the model;
+- an **error state** ``e = [dq, dnu, ds]`` (``d = 2 nv + n_w n``), ``x_true
+  = x (+) e`` (:meth:`fmscal.plant.Model.state_integrate`; spatial ``[dp,
+  dphi, dv, domega]``, ``dphi`` a turn about the sensor's axes, ``q (x)
+  exp(dphi / 2)``; planar ``[dtheta, dX, dY, dtheta', dX', dY']``, an
+  addition), ``s_true = s + ds``. filterpy's ``x`` is ``e`` and ``P`` its
+  covariance; ``e`` is zero between steps.
 
-One step (one equation a line)::
+One step, eqs. (K1-K8) of :mod:`observers.kalman._kalman` with the model's
+pieces (one equation a line)::
 
     x-   = f(x, s, w_hat_k, w_hat_k+1)                 nominal (below)
     F    = d e_k+1 / d e_k,   J_i = d e_k+1 / d w_hat_i  (casadi, at e = 0)
     P-   = F P F^T + Q
     y    = difference(q(x-), pose)   = [dp, dphi]       (the pose in the error state)
-    V    = H P- H^T + R,   K = P- H^T V^-1,   H = [I_6 0]
+    V    = H P- H^T + R,   K = P- H^T V^-1,   H = [I_nv 0]
     e    = K y
     P    = (I - K H) P- (I - K H)^T + K R K^T           (Joseph form)
     x, s = x- (+) e[:12],  s + e[12:]                    (injection)
     P    = G P G^T,   G = d e+ / d e at e               (the reset; I but for
-                                                        I - [dphi / 2]x on the turn)
+                                                        I - [dphi / 2]x on a turn)
     e    = 0
 
 The nominal step ``f`` is the discretisation every method shares
 (:func:`observers.core.move`: the acceleration linear over the step,
 the configuration moved on the manifold), with the acceleration at the
 step's end taken at the state that the start's acceleration reaches (Heun's
-predictor); the acceleration is the model's Newton-Euler
-(:meth:`fmscal.plant.SpatialModel.acceleration`, ``a = A(x) w + d(x)``) of
+predictor); the acceleration is the model's (:meth:`fmscal.plant.Model.acceleration`,
+``a = A(x) w + d(x)``; in 3D Newton-Euler, in the plane eq. (1)) of
 the true wrench ``w = [S | c] [w_hat; 1]``. ``F``, the reading Jacobians
 and ``G`` are casadi's automatic derivatives of that one map and of the
 model's ``integrate`` and ``difference``: nothing is differentiated by hand.
 
-Tuning rule. ``R = diag(position_sd^2 (x3), angle_sd^2 (x3))`` in the error
-state; ``Q = J_d S_Q Sigma S_Q^T J_d^T`` with ``J_d`` the step's Jacobian
-with respect to a perturbation of the true wrench at both ends (one
-reading's whole effect, once a step: ``[h^2 / 2, h] A`` to first order),
-``Sigma`` the reading's noise and ``S_Q`` the ``S`` the run starts from
+Tuning rule. ``R`` the pose noise in the error state
+(:func:`observers.kalman.error_variances`: spatial ``diag(position_sd^2 (x3),
+angle_sd^2 (x3))``, planar ``diag(angle_sd^2, position_sd^2 (x2))``);
+``Q = J_d W J_d^T`` with ``J_d`` the step's Jacobian with respect to a
+perturbation of the true wrench at both ends (one reading's whole effect,
+once a step: ``[h^2 / 2, h] A`` to first order) and ``W`` the covariance of
+the true wrench's noise ``S n`` (:func:`wrench_noise`), either::
+
+    W = S_Q Sigma S_Q^T                                          (Q1, noise_at="start")
+    W = S_hat Sigma S_hat^T + Delta,  Delta_ij = sum_l Sigma_l cov(s_il, s_jl)   (Q2, "estimate")
+
+``Sigma`` the reading's noise, ``S_Q`` the ``S`` the run starts from
 (``run(log, S0)``, ``reset(S0)``; the identity by default: a sensor's
 nominal calibration), as the floor's first pass takes it
-(:mod:`observers.batch._linearised_floor`); ``q dt`` on each calibration entry,
-the random walk that the NIS of the poses raises (``adapt_q``).
+(:mod:`observers.batch._linearised_floor`), ``cov`` from the calibration block
+of ``P``; plus ``q dt`` on each calibration entry, the random walk that the
+NIS of the poses raises (``adapt_q``). (Q2) is the default on a model linear
+in its channels (the plane, where a run starts from an ``S0`` far from ``S``
+and (Q1) would mistune the filter by as much), (Q1) otherwise.
 
-Why not the running estimate, as in the plane (:class:`observers.AugmentedEKF`:
-``W = S_hat Sigma S_hat^T + Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il,
-s_jl)``). ``Delta`` itself is derived, with no factor: for an error ``dS``
+Why not the running estimate in 3D. ``Delta`` itself is derived, with no factor: for an error ``dS``
 of ``S_hat`` and the noise ``n`` independent and Gaussian, ``E[(dS n)(dS
 n)^T] = Delta``, what a second-order filter adds. What fails in 3D is the
 term it is added to. Over the first seconds the torque readings are barely
@@ -70,8 +79,10 @@ model is then off by as much as it is). The figures, seed by seed:
 docs/observers.md, ``tests/test_spatial_ekf.py``,
 ``benchmarks/online_floor_3d.py``.
 
-Errors in variables (as in the plane, :mod:`observers.kalman._eiv`, with the
-floor's seeded copy, :mod:`observers.batch._linearised_floor`). The step's
+Errors in variables (:mod:`observers.kalman._eiv`). On a model linear in its
+channels the separate-bias filter runs beside the filter and gives ``J`` and
+``B`` (:class:`observers.kalman.EivCompensation`, ``separate`` below). Otherwise
+the floor's seeded copy (:mod:`observers.batch._linearised_floor`). The step's
 Jacobian with respect to ``s`` holds the noisy reading, whose noise is also
 the process noise of the same step; the estimate is attenuated by
 ``J^-1 B s``. Beside the filter runs a copy of its motion error driven by a
@@ -88,23 +99,20 @@ still the prior, :func:`observers.kalman.correction_limit`); the filter runs
 on its own estimate, ``eiv=False`` reports it as it is.
 """
 
-from dataclasses import dataclass
-from functools import cached_property, lru_cache
+from functools import lru_cache
 
 import casadi as ca
-import numpy as np
 
-from fmscal.plant.numerics import BufferedCall, ChunkedSteps, StateLayout, build_once, ops
+from fmscal.plant.numerics import ChunkedSteps, StateLayout, build_once, ops
 
 from fmscal.observers.core import matrix as mx, move
-from ._eiv import beta_from_copy, copy_predict, error_variances
-from ._ekf import AugmentedEKF, FilterRun, _CalibrationEKF
-from ._ekf_step import output_layout
-from ._filter import bias_matrix, cholesky_solve, correction_limit, pack_lower, unpack_lower
+from ._eiv import _compensation, copy_predict
+from ._filter import cholesky_solve, correction_limit, filter_layout, pack_lower, unpack_lower
+from ._kalman import predict, reset, update
 from ._noise_level import level_update
 
-__all__ = ["ErrorStateEKF", "NominalRun", "error_step", "injection", "whole_error_step", "error_state_layout",
-           "error_params_layout", "copy_layout", "eiv_copy"]
+__all__ = ["error_step", "wrench_noise", "injection", "whole_error_step", "error_state_layout",
+           "error_params_layout", "output_layout", "copy_layout", "eiv_copy"]
 
 _CHUNK = 1000
 _SEED = 20261124          # the errors-in-variables copy's draw: fixed, so that a run is repeatable
@@ -145,10 +153,12 @@ def error_step(model, offset):
         ``J0``, ``J1`` (d x n_w) its Jacobians with respect to the raw
         readings at the step's start and end.
     predict : casadi.Function
-        ``(xs, w0, w1, dt, var_w, S_Q, q_dt) -> (xs_next, F, Q)``; ``S_Q``
-        the ``S`` (n_w x n_w, flat, row order) at which the reading's noise
-        is carried into the wrench (the run's start ``S0``), ``q_dt`` the
-        random walk's ``q dt``. Dense outputs.
+        ``(xs, w0, w1, dt, var_w, S_Q, P_S, at_estimate, q_dt) -> (xs_next, F, Q)``;
+        ``S_Q`` the ``S`` (n_w x n_w, flat, row order) at which the reading's
+        noise is carried into the wrench with ``at_estimate`` 0 (the run's start
+        ``S0``), ``P_S`` the covariance of ``[S | c]`` (m x m, flat) that
+        ``at_estimate`` 1 adds to the running estimate (:func:`wrench_noise`),
+        ``q_dt`` the random walk's ``q dt``. Dense outputs.
     predict_sparse : casadi.Function
         The same with ``F`` and ``Q`` sparse, for :func:`whole_error_step` to inline.
     """
@@ -159,19 +169,46 @@ def error_step(model, offset):
     dt = ca.SX.sym("dt")
     var_w = ca.SX.sym("var_w", n_w)
     S_Q_flat = ca.SX.sym("S_Q", n_w * n_w)
+    P_S_flat = ca.SX.sym("P_S", m * m)
+    at_estimate = ca.SX.sym("at_estimate")
     q_dt = ca.SX.sym("q_dt")
-    xs_next, F, Q, J0, J1 = _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt)
-    inputs = [xs, w0, w1, dt, var_w, S_Q_flat, q_dt]
+    W = wrench_noise(xs[nx:], P_S_flat, var_w, S_Q_flat, at_estimate, n_w, n)
+    xs_next, F, Q, J0, J1 = _error_step(model, offset, xs, w0, w1, dt, W, q_dt)
+    inputs = [xs, w0, w1, dt, var_w, S_Q_flat, P_S_flat, at_estimate, q_dt]
     jacobians = ca.Function("ekf_error_jacobians", [xs, w0, w1, dt], [xs_next, ca.densify(F), J0, J1])
     predict = ca.Function("ekf_error_predict", inputs, [xs_next, ca.densify(F), ca.densify(Q)])
     sparse = ca.Function("ekf_error_predict_sparse", inputs, [xs_next, F, Q])
     return jacobians, predict, sparse
 
 
-def _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt):
+def wrench_noise(s, P_S_flat, var_w, S_Q_flat, at_estimate, n_w, n):
+    """The covariance ``W`` of the true wrench's noise ``S n`` (module docstring, tuning rule), on casadi symbols.
+
+    At the run's start (``at_estimate`` 0): ``W = S_Q Sigma S_Q^T`` (eq. Q1).
+    At the running estimate (``at_estimate`` 1): ``W = S_hat Sigma S_hat^T +
+    Delta``, ``Delta_ij = sum_l Sigma_l cov(s_il, s_jl)`` (eq. Q2), ``cov``
+    from ``P_S``, the covariance of ``s = vec([S | c])`` (row order).
+
+    Returns
+    -------
+    casadi.SX, shape (n_w, n_w)
+    """
+    m = n_w * n
+    Sigma = ca.diag(var_w)
+    S_Q = ca.reshape(S_Q_flat, n_w, n_w).T                                     # row order
+    S_hat = ca.reshape(s, n, n_w).T[:, 0:n_w]
+    P_S = ca.reshape(P_S_flat, m, m)                                          # symmetric: either order
+    Delta = ca.vertcat(*[ca.horzcat(*[sum(var_w[l] * P_S[n * i + l, n * j + l] for l in range(n_w))
+                                      for j in range(n_w)]) for i in range(n_w)])
+    W_start = S_Q @ Sigma @ S_Q.T                                             # (Q1)
+    W_estimate = S_hat @ Sigma @ S_hat.T + Delta                              # (Q2)
+    return at_estimate * W_estimate + (1 - at_estimate) * W_start
+
+
+def _error_step(model, offset, xs, w0, w1, dt, W, q_dt):
     """:func:`error_step`'s expressions on the given casadi symbols: ``xs_next``, ``F`` (sparse), ``Q``
-    (sparse), ``J0``, ``J1``. The whole compiled step (:func:`_step`) writes them on its own inputs, the
-    payload among them."""
+    (sparse), ``J0``, ``J1``; ``W`` the covariance of the true wrench's noise (:func:`wrench_noise`). The
+    whole compiled step (:func:`_step`) writes them on its own inputs, the payload among them."""
     n_w, nx = model.n_w, model.nx
     n, m, ne, d = _sizes(model, offset)
     e = ca.SX.sym("e", d)                                   # the error state at the step's start
@@ -188,9 +225,8 @@ def _error_step(model, offset, xs, w0, w1, dt, var_w, S_Q_flat, q_dt):
     F = at_nominal(ca.jacobian(error, e))
     J0, J1, J_d = (ca.densify(at_nominal(ca.jacobian(error, v))) for v in (d0, d1, dw))
     xs_next = ca.vertcat(x_next, s)
-    S_Q = ca.reshape(S_Q_flat, n_w, n_w).T                  # row order
-    # the true wrench's noise S n, S taken at the run's start S_Q (module docstring: not the running estimate)
-    Q = J_d @ S_Q @ ca.diag(var_w) @ S_Q.T @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
+    # the true wrench's noise S n carried through the step, and the random walk on s (module docstring)
+    Q = J_d @ W @ J_d.T + ca.diag(ca.vertcat(ca.DM.zeros(ne), q_dt * ca.DM.ones(m)))
     return xs_next, F, Q, J0, J1
 
 
@@ -317,27 +353,42 @@ def eiv_copy(model, offset):
 
 # --- the whole step, compiled ----------------------------------------------------------------------
 
+def output_layout(model, n):
+    """The per-step outputs of :func:`whole_error_step`: the motion ``x`` (nx), the reported ``[S | c]``
+    (``n_w n``, row order), the intensity ``q`` after the step (1/s), and ``sum(P)``, ``min(diag(P))`` for the
+    health test."""
+    return StateLayout(("x", model.nx), ("s", model.n_w * n), ("q", 1), ("P_sum", 1), ("P_min", 1))
+
+
 def error_state_layout(model, n):
     """The packed state of :func:`whole_error_step`: the nominal ``xs = [x, s]`` (``nx + n_w n``), ``P``
     (packed lower, ``d = 2 nv + n_w n``), the level's ``q`` and NIS average, the time since the last pose,
-    the errors-in-variables copy (:func:`copy_layout`)."""
+    the errors-in-variables copy (:func:`copy_layout`) and, on a model linear in its channels, the
+    separate-bias filter of the compensation (:func:`observers.kalman.filter_layout`)."""
     m, d = model.n_w * n, 2 * model.nv + model.n_w * n
+    separate = [("eiv", filter_layout(model, n).size)] if model.linear_channels else []
     return StateLayout(("xs", model.nx + m), ("P", d * (d + 1) // 2), ("q", 1), ("eps_bar", 1), ("since", 1),
-                       ("copy", copy_layout(model).size))
+                       ("copy", copy_layout(model).size), *separate)
 
 
 def error_params_layout(model):
     """Per-log parameters of :func:`whole_error_step`: the pose noise variances in the error state (``R``,
     ``nv``), the reading's noise variances, the ``S`` at which ``Q`` carries them (``S_Q``, the run's ``S0``,
-    row order), the level's settings, whether it adapts and whether the estimate is compensated for the errors
-    in variables (1 or 0 each), and the payload and the gravity (:meth:`fmscal.plant.Model.payload_vector`,
-    where the model's step reads them at run time)."""
-    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("S_Q", model.n_w ** 2), ("level", 7), ("adapt", 1),
-                       ("eiv", 1), *model.payload_parts())
+    row order) and whether it carries them at the running estimate instead (``at_estimate``,
+    :func:`wrench_noise`), the level's settings, whether it adapts and whether the estimate is compensated for
+    the errors in variables (1 or 0 each), on a model linear in its channels the separate-bias filter's
+    settings but the step (``eiv_q``: :func:`observers.kalman.compensation_layout`), and the payload and the
+    gravity (:meth:`fmscal.plant.Model.payload_vector`, where the model's step reads them at run time)."""
+    return StateLayout(("R", model.nv), ("var_w", model.n_w), ("S_Q", model.n_w ** 2), ("at_estimate", 1),
+                       ("level", 7), ("adapt", 1), ("eiv", 1),
+                       *([("eiv_q", model.n_pose + model.n_w)] if model.linear_channels else []),
+                       *model.payload_parts())
 
 
-def _step(model, z, u_prev, u, dt, p, draw, n):
-    """One sample of the whole error-state filter (module docstring), on casadi symbols."""
+def _step(model, z, u_prev, u, dt, p, draw, n, separate=False):
+    """One sample of the whole error-state filter (module docstring), on casadi symbols; ``separate``: the
+    errors-in-variables compensation by the separate-bias filter (a model linear in its channels) instead of
+    the copy."""
     nv, n_w, nx = model.nv, model.n_w, model.nx
     offset = n == n_w + 1
     _, m, ne, d = _sizes(model, offset)
@@ -348,22 +399,17 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     o = ops(z)
     P = unpack_lower(o, st.P, d)
     dynamics = model.with_payload_symbols(getattr(pp, "payload", None))     # the payload and gravity, read from p
-    # predict: the nominal moves, the error stays zero, P- = F P F^T + Q (the lower triangle kept)
-    xs_pred, F, Q, _, _ = _error_step(dynamics, offset, st.xs, a.w_hat, b.w_hat, dt, pp.var_w, pp.S_Q, st.q * dt)
-    P_pred = unpack_lower(o, pack_lower(F @ (P @ F.T) + Q, d), d)
-    # update with the pose in the error state (H = [I 0]); no pose: the pose the nominal shows, K = 0
+    # predict, eqs. (K1, K2) (observers.kalman._kalman): the nominal moves, the error stays zero
+    W = wrench_noise(st.xs[nx:], ca.vec(P[ne:, ne:]), pp.var_w, pp.S_Q, pp.at_estimate, n_w, n)
+    xs_pred, F, Q, _, _ = _error_step(dynamics, offset, st.xs, a.w_hat, b.w_hat, dt, W, st.q * dt)
+    e_pred, P_pred = predict(ca.DM.zeros(d), P, F, Q)
+    # update with the pose in the error state (H = [I 0]), eqs. (K3-K7); no pose: the pose the nominal shows, K = 0
     pose = has * b.pose + (1 - has) * model.measure(xs_pred[0:nx])
     inject = injection(model, offset)[1]
     y = inject(xs_pred, pose, ca.DM.zeros(d))[0]
-    PHT = P_pred[:, 0:nv]
-    R = ca.diag(pp.R)
-    X = cholesky_solve(o, P_pred[0:nv, 0:nv] + R, ca.horzcat(PHT.T, y), nv)     # V^-1 [H P-, y]
-    K = has * X[:, 0:d].T
-    nis = ca.dot(y, X[:, d])
-    A = P_pred - K @ PHT.T                                   # (I - K H) P-
-    P_upd = A - (A[:, 0:nv] - K @ R) @ K.T                   # (I - K H) P- (I - K H)^T + K R K^T
-    _, xs_new, G = inject(xs_pred, pose, K @ y)
-    P_new = G @ P_upd @ G.T
+    e, P_upd, nis = update(o, e_pred, P_pred, y, ca.diag(pp.R), list(range(nv)), has)
+    _, xs_new, G = inject(xs_pred, pose, e)
+    P_new = reset(P_upd, G)                                  # eq. (K8)
     P_packed = pack_lower(P_new, d)
     q, eps_bar = level_update(st.q, st.eps_bar, nis, st.since + dt, tuple(pp.level[i] for i in range(7)), nv)
     adapt = has * pp.adapt > 0.5
@@ -371,20 +417,27 @@ def _step(model, z, u_prev, u, dt, p, draw, n):
     since = (1 - has) * (st.since + dt)
     P_min = ca.mmin(ca.diag(P_new))
     P_sum = 2 * ca.sum1(P_packed) - ca.sum1(ca.diag(P_new))
-    # the errors-in-variables copy and the compensated estimate
-    compensate = eiv_copy(model, offset)[1]
-    c = _copy_step(dynamics, offset, st.copy, F, Q, st.xs[0:nx], xs_pred[0:nx], st.xs[nx:], draw, has, pp.R,
-                   pp.var_w, dt)
-    s_c = compensate(P_new[ne:, ne:], xs_new[nx:], copy_layout(model).unpack(c, scalars=False).bn)
+    parts = dict(xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since, copy=st.copy)
+    if model.linear_channels:       # the separate-bias filter's state, carried unused without the compensation
+        parts["eiv"] = st.eiv
+    if separate:    # the separate-bias filter beside the filter (observers.kalman._eiv), its configuration
+        u_eiv = ca.vertcat(has, model.configuration(st.xs[0:nx]), model.configuration(xs_new[0:nx]), b.pose,
+                           a.w_hat, b.w_hat)
+        parts["eiv"], s_c = _compensation(model, st.eiv, u_eiv, ca.vertcat(dt, pp.eiv_q), xs_new[nx:], n)
+    else:           # the errors-in-variables copy and the compensated estimate
+        compensate = eiv_copy(model, offset)[1]
+        parts["copy"] = _copy_step(dynamics, offset, st.copy, F, Q, st.xs[0:nx], xs_pred[0:nx], st.xs[nx:], draw,
+                                   has, pp.R, pp.var_w, dt)
+        s_c = compensate(P_new[ne:, ne:], xs_new[nx:], copy_layout(model).unpack(parts["copy"], scalars=False).bn)
     s_out = pp.eiv * s_c + (1 - pp.eiv) * xs_new[nx:]
     out = output_layout(model, n).pack(o, x=xs_new[0:nx], s=s_out, q=q, P_sum=P_sum, P_min=P_min)
-    return L.pack(o, xs=xs_new, P=P_packed, q=q, eps_bar=eps_bar, since=since, copy=c), out
+    return L.pack(o, **parts), out
 
 
-_WHOLE = {}             # (model.compiled_key(), n) -> ChunkedSteps
+_WHOLE = {}             # (model.compiled_key(), n, separate) -> ChunkedSteps
 
 
-def whole_error_step(model, n):
+def whole_error_step(model, n, separate=False):
     """:func:`_step` run in compiled chunks (:class:`plant.numerics.ChunkedSteps`), built once for every
     payload and gravity of a model class (they are inputs, in ``p``).
 
@@ -392,7 +445,8 @@ def whole_error_step(model, n):
     samples, :func:`observers.core.log_inputs`; ``dt``, ``p``
     (:func:`error_params_layout`) and the copy's standard normal draws at
     the step's two samples one row per step); its per-step outputs are
-    :func:`observers.kalman.output_layout`'s.
+    :func:`observers.kalman.output_layout`'s. ``separate``: the compensation by the separate-bias filter
+    (:func:`_step`; a model linear in its channels, with ``eiv``).
     """
     def build():
         size = model.input_layout.size
@@ -401,278 +455,10 @@ def whole_error_step(model, n):
         dt = ca.SX.sym("dt")
         p = ca.SX.sym("p", error_params_layout(model).size)
         draw = ca.SX.sym("draw", 2 * (model.n_w + model.nv))
-        z_next, out = _step(model, z, u_prev, u, dt, p, draw, n)
-        step = ca.Function(f"ekf_error_{model.name}{n}_step", [z, u_prev, u, dt, p, draw],
+        z_next, out = _step(model, z, u_prev, u, dt, p, draw, n, separate)
+        step = ca.Function(f"ekf_error_{model.name}{n}{'_separate' if separate else ''}_step",
+                           [z, u_prev, u, dt, p, draw],
                            [ca.densify(z_next), ca.densify(out)])
         return ChunkedSteps(step, _CHUNK)
 
-    return build_once(_WHOLE, (model.compiled_key(), n), build, 8)
-
-
-# --- the filter -----------------------------------------------------------------------------------
-
-@dataclass
-class NominalRun(FilterRun):
-    """The error-state EKF's running state: :class:`observers.kalman.FilterRun` and the nominal.
-
-    ``kf.x`` is the error state ``e`` (zero between steps) and ``kf.P`` its
-    covariance (d x d).
-
-    Attributes
-    ----------
-    xs : ndarray, shape (nx + n_w n,)
-        The nominal ``[x, s]``: the motion (spatial ``[p, q, v, omega]``) and
-        ``vec([S | c])``, row order.
-    copy : ndarray, shape (copy_layout(model).size,)
-        The errors-in-variables copy (:func:`copy_layout`).
-    rng : numpy.random.Generator
-        The copy's draws, seeded at the run's start.
-    draw : ndarray, shape (n_w + nv,)
-        The copy's standard normal draw at the last sample (reading, pose).
-    S_Q : ndarray, shape (n_w, n_w)
-        The ``S`` at which ``Q`` carries the reading's noise: the run's ``S0``.
-    """
-
-    xs: np.ndarray = None
-    copy: np.ndarray = None
-    rng: object = None
-    draw: np.ndarray = None
-    S_Q: np.ndarray = None
-
-
-class ErrorStateEKF(AugmentedEKF):
-    """:class:`observers.AugmentedEKF` on a model whose attitude is a unit quaternion (module docstring).
-
-    Built by ``AugmentedEKF(model, ...)`` (registry name ``ekf``) when the
-    model has no linear channels (the registry's engine for that declaration,
-    :data:`fmscal.observers._registry.ENGINES`); it takes the same settings. The state is
-    the nominal motion ``[p, q, v, omega]`` and ``[S | c]`` with the error
-    state ``[dp, dphi, dv, domega, ds]`` (``dphi`` a turn about the sensor's
-    axes) in filterpy's ``x``; after each pose the correction is injected into
-    the nominal (the quaternion by :meth:`fmscal.plant.SpatialModel.integrate`)
-    and the error reset to zero. ``R`` is ``position_sd^2`` on ``dp`` and
-    ``angle_sd^2`` on ``dphi``; ``Q`` carries the reading's noise at the run's
-    ``S0``, not at the running estimate as in the plane (module docstring);
-    ``P_0`` the pose noise on ``[dp, dphi]``,
-    ``v0_sd^2`` on ``[dv, domega]`` (m/s, rad/s), ``S0_sd^2`` on ``S`` and
-    ``c0_sd^2`` on ``c``.
-
-    Attributes
-    ----------
-    dim_x : int
-        The error state's size: ``2 nv + n_w n`` (spatial: 48, or 54 with the offset).
-    """
-
-    def _innovation_size(self):
-        """The pose innovation in the error state, ``[dp, dphi]``: ``nv`` entries."""
-        return self.model.nv
-
-    def _build(self, eiv):
-        model = self.model
-        _, m, self._ne, self.dim_x = _sizes(model, self.offset)
-        self._H = np.eye(model.nv, self.dim_x)
-        self.eiv = None                  # the planar compensation (observers.kalman._eiv); here the copy below
-        #: Whether the reported estimate is compensated for the errors in variables (module docstring).
-        self.eiv_on = bool(eiv)
-
-    @cached_property
-    def _calls(self):
-        """The readable path's calls (``jacobians``, ``predict``, ``inject``, the copy's ``copy_step`` and
-        ``compensate``; :func:`_readable`, :func:`eiv_copy`), made on first use: the compiled run needs none."""
-        names = ("jacobians", "predict", "inject", "copy_step", "compensate")
-        functions = (*_readable(self.model, self.offset), *eiv_copy(self.model, self.offset))
-        return dict(zip(names, (BufferedCall(f) for f in functions)))
-
-    # --- the model, from the plant --------------------------------------------------------------
-    def transition(self, xs, w0, w1, dt):
-        """The nominal step and the error state's Jacobians (the compiled casadi call).
-
-        Parameters
-        ----------
-        xs : ndarray, shape (nx + n_w n,)
-            The nominal ``[x, s]``.
-        w0, w1 : ndarray, shape (n_w,)
-            The raw readings at the step's start and end.
-        dt : float
-            The step, s.
-
-        Returns
-        -------
-        xs_next : ndarray, shape (nx + n_w n,)
-        F : ndarray, shape (d, d)
-        J0, J1 : ndarray, shape (d, n_w)
-            Jacobians of the error state with respect to the raw readings at
-            the step's start and end.
-        """
-        call, d, n_w = self._calls["jacobians"], self.dim_x, self.n_w
-        for buffer, value in zip(call.inputs, (xs, w0, w1, dt)):
-            buffer[:] = value
-        call()
-        f, F, J0, J1 = call.outputs
-        return f.copy(), F.reshape(d, d).T.copy(), J0.reshape(n_w, d).T.copy(), J1.reshape(n_w, d).T.copy()
-
-    def predict_matrices(self, xs, w0, w1, dt, S_Q=None):
-        """``xs_next``, ``F`` and ``Q`` of the tuning rule, in one compiled call.
-
-        Parameters as :meth:`transition`; ``S_Q`` (``n_w`` square) the ``S``
-        at which ``Q`` carries the reading's noise (default the running
-        filter's: the run's ``S0``).
-
-        Returns
-        -------
-        xs_next : ndarray, shape (nx + n_w n,)
-        F, Q : ndarray, shape (d, d)
-            Views of the call's buffers, overwritten by the next call.
-        """
-        f, d = self.run_data.state, self.dim_x
-        call = self._calls["predict"]
-        xs_in, w0_in, w1_in, dt_in, var_in, S_in, q_in = call.inputs
-        xs_in[:], w0_in[:], w1_in[:], dt_in[0] = xs, w0, w1, dt
-        var_in[:] = f.var_w
-        S_in[:] = np.ravel(f.S_Q if S_Q is None else S_Q)
-        q_in[0] = self._q_now() * dt
-        call()
-        xs_next, F, Q = call.outputs
-        return xs_next.copy(), F.reshape(d, d).T, Q.reshape(d, d).T
-
-    def inject(self, xs, pose, e):
-        """The pose in the error state, and the injection of ``e`` (:func:`injection`).
-
-        Returns
-        -------
-        y : ndarray, shape (nv,)
-            ``difference(q(x), pose)``: ``[dp (m, world), dphi (rad, sensor axes)]``.
-        xs_new : ndarray, shape (nx + n_w n,)
-            ``xs (+) e``.
-        G : ndarray, shape (d, d)
-            The reset of ``P`` (``P <- G P G^T``).
-        """
-        call, d = self._calls["inject"], self.dim_x
-        for buffer, value in zip(call.inputs, (xs, pose, e)):
-            buffer[:] = value
-        call()
-        y, xs_new, G = call.outputs
-        return y.copy(), xs_new.copy(), G.reshape(d, d).T.copy()
-
-    def H(self, e=None):
-        """Measurement Jacobian in the error state: ``[I_nv 0]`` (the pose is ``[dp, dphi]``); shape (nv, d)."""
-        return self._H
-
-    def hx(self, e):
-        """The pose error a state error shows: ``e[:nv]``, shape (nv, 1)."""
-        return np.reshape(e, (-1, 1))[:self.model.nv]
-
-    # --- Observer ---------------------------------------------------------------------------------
-    def _start(self, u):
-        model = self.model
-        u = model.input_layout.unpack(np.asarray(u, dtype=float), scalars=False)
-        noise, S_var, var_w = self._prior(u.w_hat)
-        kf = _CalibrationEKF(self.dim_x, model.nv)           # x_next = 0: the error stays zero over a predict
-        R = error_variances(model, noise)
-        kf.P = np.diag(np.concatenate([R, np.full(model.nv, self.v0_sd ** 2), S_var]))
-        kf.R = np.diag(R)
-        s = self._initial_S(self.run_data.S0)
-        ne = self._ne
-        copy = np.zeros(copy_layout(model).size)
-        copy[copy_layout(model).slices["Pm"]] = pack_lower(kf.P[:ne, :ne], ne)
-        rng = np.random.default_rng(_SEED)
-        self.run_data.state = NominalRun(kf=kf, var_w=var_w, s_out=s.copy(), since_pose=0.0,
-                                         q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]),
-                                         copy=copy, rng=rng, draw=rng.standard_normal(model.n_w + model.nv),
-                                         S_Q=s.reshape(model.n_w, -1)[:, :model.n_w].copy())
-
-    def _advance(self, u_prev, u, dt):
-        """Predict the nominal and ``P`` over ``dt``; with a pose, update, inject and reset."""
-        f = self.run_data.state
-        kf, layout = f.kf, self.model.input_layout
-        has_pose, pose, w_hat = u[0], u[layout.slices["pose"]], u[layout.slices["w_hat"]]
-        nx = self.model.nx
-        xs_start = f.xs
-        f.xs, F, Q = self.predict_matrices(f.xs, u_prev[layout.slices["w_hat"]], w_hat, dt)
-        kf.F, kf.Q = F.copy(), Q.copy()
-        kf.predict()
-        f.since_pose += dt
-        x_pred = f.xs[:nx].copy()
-        if has_pose:
-            y = self.inject(f.xs, pose, np.zeros(self.dim_x))[0]
-            self._pose_update(y.reshape(-1, 1))
-            _, f.xs, G = self.inject(f.xs, pose, kf.x[:, 0])
-            kf.P = G @ kf.P @ G.T
-            kf.x = np.zeros((self.dim_x, 1))
-        f.q_history.append(self._q_now())
-        # the errors-in-variables copy (module docstring), the compensated estimate
-        draw = f.rng.standard_normal(self.model.n_w + self.model.nv)
-        f.copy = self._call(self._calls["copy_step"], f.copy, kf.F, kf.Q, xs_start[:nx], x_pred, xs_start[nx:],
-                            np.r_[f.draw, draw], float(has_pose), np.diag(kf.R), f.var_w, dt)
-        f.draw = draw
-        s = f.xs[nx:]
-        f.s_out = (self._call(self._calls["compensate"], kf.P[self._ne:, self._ne:], s, self._bn()) if self.eiv_on
-                   else s.copy())
-
-    @staticmethod
-    def _call(call, *values):
-        """A compiled call through its buffers (matrices column-major); its first output, copied."""
-        for buffer, value in zip(call.inputs, values):
-            buffer[:] = np.ravel(value, order="F")
-        call()
-        return call.outputs[0].copy()
-
-    def _bn(self):
-        """The copy's ``b_n`` (module docstring)."""
-        return self.run_data.state.copy[copy_layout(self.model).slices["bn"]]
-
-    def _current(self):
-        f = self.run_data.state
-        return f.xs[:self.model.nx], f.s_out
-
-    def _covariance(self):
-        """``P`` of ``[S | c]``, compensated (``T P T^T``, module docstring) unless ``eiv=False``."""
-        f = self.run_data.state
-        P = f.kf.P[self._ne:, self._ne:]
-        if not self.eiv_on:
-            return P.copy()
-        n_w, n = self.n_w, self.n_cols
-        s = f.xs[self.model.nx:]
-        o = ops(P)
-        B = bias_matrix(o, beta_from_copy(self._bn(), s, f.var_w, n_w, n), f.var_w, n_w, n)
-        A = P @ B
-        s_col = s.reshape(-1, 1)
-        T = np.eye(len(s)) + correction_limit(o, s_col, A @ s_col, len(s)) * A
-        return T @ P @ T.T
-
-    # --- the compiled path (:meth:`AugmentedEKF._estimate_compiled`) ------------------------------
-    def _whole_step(self):
-        return whole_error_step(self.model, self.n_cols)
-
-    def _params(self):
-        f = self.run_data.state
-        level, adapt = self._level_settings()
-        return error_params_layout(self.model).pack(None, R=np.diag(f.kf.R), var_w=f.var_w, S_Q=f.S_Q.ravel(),
-                                                    level=level, adapt=adapt, eiv=float(self.eiv_on),
-                                                    **self.model.payload_values())
-
-    def _extra_inputs(self, n_steps):
-        """The copy's draws at each step's two samples, continuing the run's stream (as :meth:`_advance` draws)."""
-        f = self.run_data.state
-        rows = np.vstack([f.draw, f.rng.standard_normal((n_steps, self.model.n_w + self.model.nv))])
-        f.draw = rows[-1]                    # where the run ends (a stopped run is not continued)
-        return [np.hstack([rows[:-1], rows[1:]])]
-
-    def _packed(self):
-        f = self.run_data.state
-        return error_state_layout(self.model, self.n_cols).pack(
-            None, xs=f.xs, P=pack_lower(f.kf.P, self.dim_x), q=f.q_history[-1],
-            eps_bar=self.level.eps_bar if self.level is not None else 0.0, since=f.since_pose, copy=f.copy)
-
-    def _unpacked(self, z, s_out):
-        f = self.run_data.state
-        st = error_state_layout(self.model, self.n_cols).unpack(z)
-        f.xs = st.xs.copy()
-        f.copy = st.copy.copy()
-        f.kf.P = np.asarray(unpack_lower(ops(z), st.P, self.dim_x))
-        f.kf.x = np.zeros((self.dim_x, 1))
-        f.since_pose = float(st.since)
-        if self.level is not None:
-            self.level.q, self.level.eps_bar = float(st.q), float(st.eps_bar)
-        f.q_history = [float(st.q)]
-        f.s_out = np.array(s_out, dtype=float)
+    return build_once(_WHOLE, (model.compiled_key(), n, bool(separate)), build, 8)
