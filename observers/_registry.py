@@ -258,8 +258,8 @@ def make_observer(name, model, noise=None, settings=None):
     >>> type(make_observer("ekf", PAPER_PAYLOAD)).__name__             # the method, with its documented defaults
     'AugmentedEKF'
     >>> model = SPATIAL_SCENARIOS["spatial-arm"].model()
-    >>> type(make_observer("least-squares", model)).__name__           # the engine the model's declarations pick
-    'InverseDynamicsLeastSquares'
+    >>> type(make_observer("adaptive", model)).__name__                # the engine the model's declarations pick
+    'SpatialAdaptiveObserver'
     """
     return get_method(name).build(model, noise, settings)
 
