@@ -144,7 +144,7 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         spatial log a :class:`~fmscal.plant.SpatialPayload` (or a
         :class:`~fmscal.plant.SpatialModel`, which brings its gravity). Held poses
         use only the mass and the centre of mass: a ``SpatialPayload``, or
-        the pair ``(mass, rho)`` (kg, and m in the sensor frame; the result then has no
+        the pair ``(mass, com)`` (kg, and m in the sensor frame; the result then has no
         payload and cannot be saved). A :class:`~fmscal.observers.payload.PayloadEstimate`
         (``identify_payload``'s, or one read by ``PayloadEstimate.load``) stands for its payload
         in the tracked frame's axes, and brings the gravity it estimated.
@@ -288,14 +288,14 @@ def _gravity(gravity):
 
 
 def _estimate_payload(estimate):
-    """A :class:`PayloadEstimate` as ``(mass, rho, SpatialPayload or None, gravity or None)``, tracked-frame axes."""
+    """A :class:`PayloadEstimate` as ``(mass, com, SpatialPayload or None, gravity or None)``, tracked-frame axes."""
     tracked = estimate.tracked()
     if not tracked.payload_determined:
         raise FmscalError("the payload estimate does not determine the mass and the centre of mass: no payload "
                           "to calibrate with")
-    spatial = None if tracked.inertia is None else SpatialPayload(tracked.mass, tuple(tracked.rho),
-                                                                  tuple(tracked.inertia))
-    return tracked.mass, np.asarray(tracked.rho, dtype=float), spatial, tracked.gravity
+    spatial = None if tracked.inertia is None else SpatialPayload(tracked.mass, tuple(tracked.inertia),
+                                                                  tuple(tracked.com))
+    return tracked.mass, np.asarray(tracked.com, dtype=float), spatial, tracked.gravity
 
 
 def _merge_gravity(given, estimated):
@@ -598,10 +598,10 @@ def _calibrate_table(table, payload, method, reading, gravity, latency, max_late
         (pose_noise is not None, "pose_noise", "held poses are taken as exact"),
         (wrench_noise is not None, "wrench_noise", "the noise is estimated from the residuals"),
         (not offset, "offset=False", "the offset is always estimated in 3D")])
-    mass, rho, spatial, estimated = _table_payload(payload)
+    mass, com, spatial, estimated = _table_payload(payload)
     gravity = _gravity(_merge_gravity(gravity, estimated))
     reading = "reaction" if reading is None else reading
-    fit = fit_table(table, mass, rho, gravity, reading)
+    fit = fit_table(table, mass, com, gravity, reading)
     directions = [np.asarray(d, dtype=float) for d in fit.undetermined]
     return Calibration(S=fit.S_hat, payload=spatial, method=TABLE_METHOD, S_std=fit.S_std, b=fit.b, b_std=fit.b_std,
                        latency=None, latency_estimated=False, reading=reading, gravity=gravity, converged=False,
@@ -611,7 +611,7 @@ def _calibrate_table(table, payload, method, reading, gravity, latency, max_late
 
 
 def _table_payload(payload):
-    """``(mass, rho, SpatialPayload or None, gravity or None)`` of what held poses take as the payload.
+    """``(mass, com, SpatialPayload or None, gravity or None)`` of what held poses take as the payload.
 
     A model or a payload is taken through :func:`fmscal.plant.physics.as_model`: held poses weigh the
     payload, so its model must stand :attr:`~fmscal.plant.Model.under_gravity` (a model given brings its
@@ -628,18 +628,18 @@ def _table_payload(payload):
             raise FmscalError("a pose table takes a plant.SpatialPayload, or the mass and the centre of mass X Y Z "
                               "(the sensor frame); got a planar payload")
         held = model.payload
-        return held.mass, np.array(held.rho), held, model.gravity if isinstance(payload, Model) else None
+        return held.mass, np.array(held.com), held, model.gravity if isinstance(payload, Model) else None
     try:
-        mass, rho = payload
-        rho = np.asarray(rho, dtype=float)
+        mass, com = payload
+        com = np.asarray(com, dtype=float)
         mass = float(mass)
     except (TypeError, ValueError):
-        raise FmscalError(f"a pose table takes a plant.SpatialPayload or (mass, rho); got {type(payload).__name__}") \
+        raise FmscalError(f"a pose table takes a plant.SpatialPayload or (mass, com); got {type(payload).__name__}") \
             from None
-    if rho.shape != (3,):
-        raise FmscalError(f"a pose table takes rho X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
-                          f"got {rho.size}")
-    return mass, rho, None, None
+    if com.shape != (3,):
+        raise FmscalError(f"a pose table takes com X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
+                          f"got {com.size}")
+    return mass, com, None, None
 
 
 def _disagreement(result, reference):

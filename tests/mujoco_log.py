@@ -25,7 +25,7 @@ SUBSTEPS = 10
 def mujoco_model(payload, gravity, dt):
     """A MuJoCo model of ``payload`` on a free joint, six motors at the sensor point ``O``."""
     import mujoco
-    inertial = (f'<inertial pos="{" ".join(map(str, payload.rho))}" mass="{payload.mass}" '
+    inertial = (f'<inertial pos="{" ".join(map(str, payload.com))}" mass="{payload.mass}" '
                 f'fullinertia="{" ".join(map(str, payload.inertia))}"/>')
     motors = "".join(f'<motor site="O" ctrllimited="false" gear="{" ".join(str(int(i == j)) for i in range(6))}"/>'
                      for j in range(6))

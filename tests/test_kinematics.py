@@ -62,7 +62,7 @@ def test_a_table_of_joint_angles_gives_the_payload(ur5, tmp_path, capsys):
         assert main(["identify-payload", str(path), "--urdf", str(_ur5()), "--frame", "tool0", "--json"]) == 0
         fit = json.loads(capsys.readouterr().out)
         assert abs(fit["mass"] - TOOL.mass) < 0.01 * TOOL.mass
-        assert np.abs(np.array(fit["rho"]) - TOOL.rho).max() < 2e-3 and fit["converged"]
+        assert np.abs(np.array(fit["com"]) - TOOL.com).max() < 2e-3 and fit["converged"]
 
 
 def test_a_frame_the_urdf_lacks_and_joints_that_do_not_match_are_one_line(tmp_path, capsys):
@@ -115,7 +115,7 @@ def test_joint_columns_beyond_the_urdfs_and_a_missing_urdf_are_one_line(tmp_path
     path = tmp_path / "seven.csv"
     path.write_text("q1,q2,q3,q4,q5,q6,q7,tx,ty,tz,fx,fy,fz\n" + "0.1,0.2,0.3,0.4,0.5,0.6,0,0,0,0,0,0,1\n" * 5)
     for command in ("identify-payload", "calibrate"):
-        extra = ["--mass", "1.2", "--rho", "0", "0", "0.05"] if command == "calibrate" else []
+        extra = ["--mass", "1.2", "--com", "0", "0", "0.05"] if command == "calibrate" else []
         assert main([command, str(path), "--urdf", str(_ur5()), "--frame", "tool0", *extra]) == 2
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and "7 joint columns" in err and "6 joints" in err, err
@@ -134,7 +134,7 @@ def test_calibrate_takes_a_table_of_joint_angles(ur5, tmp_path, capsys):
     path = tmp_path / "joints.csv"
     path.write_text("q1,q2,q3,q4,q5,q6,tx,ty,tz,fx,fy,fz\n"
                     + "\n".join(",".join(f"{v:.17g}" for v in row) for row in np.hstack([joints, table.w_hat])) + "\n")
-    payload = ["--mass", repr(TOOL.mass), "--rho", *map(repr, TOOL.rho)]
+    payload = ["--mass", repr(TOOL.mass), "--com", *map(repr, TOOL.com)]
     assert main(["calibrate", str(path), "--urdf", str(_ur5()), "--frame", "tool0", *payload, "--json"]) == 0
     captured = capsys.readouterr()
     report = json.loads(captured.out)

@@ -5,7 +5,7 @@ golden inputs (``tests/data/golden``); the reading's sign is turned on a copy;
 each option a case does not take is refused in one line, in Python and on
 the command line; the calibration file round-trips in format ``/2`` and
 files of format ``/1`` (written by the code before it) still read; and a
-payload saved by ``identify-payload --save`` stands for ``--mass --rho --inertia``.
+payload saved by ``identify-payload --save`` stands for ``--mass --com --inertia``.
 """
 
 import contextlib
@@ -31,9 +31,9 @@ from fmscal.plant.io import AttitudeLog, PoseTable, simulate_attitude_log
 DATA = Path(__file__).parent / "data"
 GOLDEN = DATA / "golden"
 V1 = DATA / "calibration-v1"
-TOOL = SpatialPayload(1.2, (0.01, -0.005, 0.06), (4e-3, 5e-3, 2.5e-3, 2e-4, -1e-4, 1.5e-4))
+TOOL = SpatialPayload(1.2, (4e-3, 5e-3, 2.5e-3, 2e-4, -1e-4, 1.5e-4), (0.01, -0.005, 0.06))
 PLANAR = Payload(2.5, 0.75, (0.2, 0.25))
-TOOL_FLAGS = ["--mass", "1.2", "--rho", "0.01", "-0.005", "0.06"]
+TOOL_FLAGS = ["--mass", "1.2", "--com", "0.01", "-0.005", "0.06"]
 INERTIA_FLAGS = ["--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4", "1.5e-4"]
 PLANAR_FLAGS = ["--mass", "2.5", "--inertia", "0.75", "--rho", "0.2", "0.25"]
 
@@ -79,7 +79,7 @@ LIBRARY_CASES = {
     "planar-calibrate-floor-latency-estimated": ("planar.csv", PLANAR, {"truth": "planar.truth.json"}),
     "planar-calibrate-least-squares-latency-given": (
         "planar.csv", PLANAR, {"truth": "planar.truth.json", "method": "least-squares", "latency": 0.03}),
-    "table-calibrate-load-reading": ("held.csv", (TOOL.mass, TOOL.rho), {"reading": "load"}),
+    "table-calibrate-load-reading": ("held.csv", (TOOL.mass, TOOL.com), {"reading": "load"}),
 }
 
 
@@ -98,7 +98,7 @@ def test_the_library_reports_what_the_command_line_pinned(case, inputs):
 
 def test_a_file_name_and_joint_angles_through_a_urdf_are_read_alike(inputs):
     case = "joints-urdf-calibrate"
-    cal = calibrate(read_data("joints.csv", urdf=MAKE.ur5_urdf(), frame="tool0"), (TOOL.mass, TOOL.rho))
+    cal = calibrate(read_data("joints.csv", urdf=MAKE.ur5_urdf(), frame="tool0"), (TOOL.mass, TOOL.com))
     assert GOLDEN_TEST.mismatches(_expected(case), json.loads(cal.to_json())) == []
     assert cal.kind == "table" and cal.payload is None and not cal.converged and len(cal.undetermined) == 3
     by_name = calibrate("spatial.csv", TOOL, method="least-squares", latency=0.0)
@@ -152,12 +152,12 @@ def test_a_load_reading_is_the_reaction_of_the_negated_log_and_the_callers_log_k
 def test_a_table_in_the_load_sign_is_the_negated_table_in_the_reaction_sign(inputs):
     table = read_data("held.csv")
     before = table.w_hat.copy()
-    load = calibrate(table, (TOOL.mass, TOOL.rho), reading="load")
+    load = calibrate(table, (TOOL.mass, TOOL.com), reading="load")
     np.testing.assert_array_equal(table.w_hat, before)
-    reaction = calibrate(PoseTable(table.q, -table.w_hat, name=table.name), (TOOL.mass, TOOL.rho))
+    reaction = calibrate(PoseTable(table.q, -table.w_hat, name=table.name), (TOOL.mass, TOOL.com))
     np.testing.assert_allclose(load.S_hat, reaction.S_hat, rtol=1e-12, atol=1e-14)
     with pytest.raises(FmscalError, match="other sign convention; pass --reading load"):
-        calibrate(table, (TOOL.mass, TOOL.rho))                        # held.csv reads the load
+        calibrate(table, (TOOL.mass, TOOL.com))                        # held.csv reads the load
 
 
 # --- refusals: one line in Python, exit 2 on the command line ------------------------------------------------
@@ -221,7 +221,7 @@ def test_an_option_the_case_does_not_take_is_refused_in_one_line(name, payload, 
     ("spatial.csv", PLANAR, "a spatial log takes a plant.SpatialPayload"),
     ("planar.csv", TOOL, "a planar log takes a plant.Payload"),
     ("held.csv", PLANAR, "a pose table takes a plant.SpatialPayload"),
-    ("held.csv", (1.2, (0.01, 0.0)), "a pose table takes rho X Y Z"),
+    ("held.csv", (1.2, (0.01, 0.0)), "a pose table takes com X Y Z"),
 ])
 def test_a_payload_of_the_other_case_is_refused_in_one_line(name, payload, message, inputs):
     with pytest.raises(FmscalError, match=message) as err:
@@ -297,7 +297,7 @@ def test_a_planar_calibration_keeps_its_noise_model_and_a_table_its_undetermined
 
 
 def test_a_table_without_the_inertia_cannot_be_saved(inputs):
-    cal = calibrate(read_data("held.csv"), (TOOL.mass, TOOL.rho), reading="load")
+    cal = calibrate(read_data("held.csv"), (TOOL.mass, TOOL.com), reading="load")
     with pytest.raises(FmscalError, match="records the payload"):
         cal.save("cal.json")
     assert not Path("cal.json").exists()
@@ -319,6 +319,33 @@ def test_a_format_1_file_written_by_the_code_before_still_reads(name, payload, k
         (1.0 if reading == "reaction" else -1.0) * w_hat - np.array(document["b"])), rtol=1e-12)
 
 
+def test_a_spatial_payload_written_as_rho_before_still_reads_as_com(tmp_path):
+    """Files written before the spatial centre of mass was named ``com`` hold it as ``rho``: they still read, and
+    a file written now holds ``com`` (the planar ``rho``, the paper's, stays)."""
+    for name in ("spatial-v1.json", "table-v1.json"):
+        document = json.loads((V1 / name).read_text())
+        assert "rho" in document["payload"] and "com" not in document["payload"]
+        cal = Calibration.load(V1 / name)
+        assert cal.payload.com == tuple(document["payload"]["rho"]) and cal.payload.isclose(TOOL)
+        cal.save(tmp_path / name)
+        saved = json.loads((tmp_path / name).read_text())["payload"]
+        assert saved["com"] == document["payload"]["rho"] and "rho" not in saved
+        assert Calibration.load(tmp_path / name, TOOL).payload == cal.payload
+    planar = json.loads((V1 / "planar-v1.json").read_text())["payload"]
+    assert Calibration.load(V1 / "planar-v1.json").payload.to_dict() == planar
+
+
+def test_a_payload_file_written_with_rho_before_still_reads(inputs):
+    assert _cli(["identify-payload", "table.csv", "--save", "payload.json"])[0] == 0
+    saved = json.loads(Path("payload.json").read_text())
+    assert {"com", "com_std"} <= set(saved) and not {"rho", "rho_std"} & set(saved)
+    legacy = {("rho" + k[3:] if k.startswith("com") else k): v for k, v in saved.items()}
+    Path("legacy.json").write_text(json.dumps(legacy))
+    old, new = PayloadEstimate.load("legacy.json"), PayloadEstimate.load("payload.json")
+    np.testing.assert_array_equal(old.com, new.com)
+    np.testing.assert_array_equal(old.com_std, new.com_std)
+
+
 def test_a_file_of_an_unknown_format_is_refused_in_one_line(tmp_path):
     document = json.loads((V1 / "spatial-v1.json").read_text())
     (tmp_path / "cal.json").write_text(json.dumps({**document, "format": "fmscal-calibration/3"}))
@@ -331,15 +358,15 @@ def test_a_file_of_an_unknown_format_is_refused_in_one_line(tmp_path):
 
 # --- the payload from identify-payload --save ------------------------------------------------------------------
 
-def test_a_payload_saved_by_identify_payload_stands_for_mass_and_rho(inputs):
+def test_a_payload_saved_by_identify_payload_stands_for_mass_and_com(inputs):
     code, _, _ = _cli(["identify-payload", "table.csv", "--save", "payload.json"])
     assert code == 0
     saved = json.loads(Path("payload.json").read_text())
     assert saved["format"] == "fmscal-payload/1" and saved["inertia"] is None and saved["gravity"] is None
     assert abs(saved["mass"] - TOOL.mass) < 5 * saved["mass_std"] and saved["mass_std"] > 0
     code, by_file, _ = _cli(["calibrate", "held.csv", "--payload", "payload.json", "--reading", "load", "--json"])
-    mass, rho = repr(saved["mass"]), [repr(v) for v in saved["rho"]]
-    code_flags, by_flags, _ = _cli(["calibrate", "held.csv", "--mass", mass, "--rho", *rho, "--reading", "load",
+    mass, com = repr(saved["mass"]), [repr(v) for v in saved["com"]]
+    code_flags, by_flags, _ = _cli(["calibrate", "held.csv", "--mass", mass, "--com", *com, "--reading", "load",
                                     "--json"])
     assert code == code_flags == 0 and json.loads(by_file) == json.loads(by_flags)
     # the library takes the estimate itself
@@ -350,24 +377,24 @@ def test_a_payload_saved_by_identify_payload_stands_for_mass_and_rho(inputs):
 
 def test_payload_and_the_mass_flags_are_refused_together(inputs):
     assert _cli(["identify-payload", "table.csv", "--save", "payload.json"])[0] == 0
-    for flags in (["--mass", "1.2"], ["--rho", "0", "0", "0.06"], INERTIA_FLAGS):
+    for flags in (["--mass", "1.2"], ["--com", "0", "0", "0.06"], INERTIA_FLAGS):
         code, out, err = _cli(["calibrate", "held.csv", "--payload", "payload.json", *flags])
         assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
-        assert "--payload takes the place of --mass, --rho and --inertia" in err
+        assert "--payload takes the place of --mass, --com and --inertia" in err
     code, _, err = _cli(["calibrate", "held.csv"])
     assert code == 2 and "give the payload" in err
 
 
 def test_a_saved_payload_is_in_the_tracked_frames_axes(inputs):
-    """The sensor bolted askew: the file holds M rho and the estimated gravity, as the 'for fmscal calibrate' line."""
+    """The sensor bolted askew: the file holds M com and the estimated gravity, as the 'for fmscal calibrate' line."""
     code, out, _ = _cli(["identify-payload", "tilted.csv", "--gravity", "estimate", "--mounting", "estimate", "--json",
                          "--save", "payload.json"])
     fit = json.loads(out)
     saved = json.loads(Path("payload.json").read_text())
     M = np.array(fit["mounting"])
     assert code == 0 and fit["mounting_deg"] > 1                           # a turn the file must apply
-    np.testing.assert_allclose(saved["rho"], M @ np.array(fit["rho"]), rtol=1e-12)
-    assert not np.allclose(saved["rho"], fit["rho"], rtol=1e-3)
+    np.testing.assert_allclose(saved["com"], M @ np.array(fit["com"]), rtol=1e-12)
+    assert not np.allclose(saved["com"], fit["com"], rtol=1e-3)
     np.testing.assert_allclose(saved["gravity"], fit["gravity"], rtol=1e-12)
     estimate = PayloadEstimate.load("payload.json")
     assert estimate.mounting is None and estimate.payload_determined
@@ -378,7 +405,7 @@ def test_a_saved_payload_is_in_the_tracked_frames_axes(inputs):
 
 
 def test_a_payload_that_is_not_determined_is_not_saved(tmp_path):
-    estimate = PayloadEstimate(mass=1.0, mass_std=1.0, rho=np.zeros(3), rho_std=np.ones(3), inertia=None,
+    estimate = PayloadEstimate(mass=1.0, mass_std=1.0, com=np.zeros(3), com_std=np.ones(3), inertia=None,
                                inertia_std=None, b=np.zeros(6), b_std=np.ones(6), residual_rms=np.ones(6))
     with pytest.raises(FmscalError, match="not determined: no payload to save"):
         estimate.save(tmp_path / "p.json")

@@ -10,7 +10,7 @@ from fmscal.plant.physics._rigid_body import PayloadSymbols, SpatialPayload
 
 from rail import RailModel, RailPayload
 
-TOOL = SpatialPayload(1.7, [0.02, -0.03, 0.08], [0.012, 0.015, 0.009, 0.001, -0.0005, 0.0008])
+TOOL = SpatialPayload(1.7, [0.012, 0.015, 0.009, 0.001, -0.0005, 0.0008], [0.02, -0.03, 0.08])
 
 
 MODELS = [PlanarModel(PAPER_PAYLOAD), SpatialModel(TOOL), RailModel(RailPayload(2.0))]
@@ -133,7 +133,7 @@ def test_the_payload_read_at_run_time_gives_the_numbers_dynamics():
     symbolic = model.with_payload_symbols(values)
     f = ca.Function("f", [x, w, values], [symbolic.acceleration(x, w), symbolic.input_matrix(x), symbolic.drift(x)])
     rng = np.random.default_rng(5)
-    other = SpatialPayload(0.6, [0.0, 0.04, -0.02], [2e-3, 3e-3, 4e-3, 0.0, 2e-4, 0.0])
+    other = SpatialPayload(0.6, [2e-3, 3e-3, 4e-3, 0.0, 2e-4, 0.0], [0.0, 0.04, -0.02])
     for numbers in (model, SpatialModel(other, gravity=(0.8, -0.3, -9.7))):
         for _ in range(5):
             xk, wk = _state(numbers, rng), rng.normal(size=6)
@@ -158,7 +158,7 @@ def test_the_spatial_floor_and_ekf_are_built_once_for_every_payload_and_gravity(
     monkeypatch.setattr(linearised_floor, "_CHUNKED", {})
     monkeypatch.setattr(ekf_error_state, "_WHOLE", {})
     a = SpatialModel(TOOL)
-    b = SpatialModel(SpatialPayload(0.6, [0.0, 0.04, -0.02], [2e-3, 3e-3, 4e-3, 0.0, 2e-4, 0.0]),
+    b = SpatialModel(SpatialPayload(0.6, [2e-3, 3e-3, 4e-3, 0.0, 2e-4, 0.0], [0.0, 0.04, -0.02]),
                      gravity=(0.8, 0, -9.7))
     floor, ekf = linearised_floor._chunked(a, 7, True, True), ekf_error_state.whole_error_step(a, 7)
     assert linearised_floor._chunked(b, 7, True, True) is floor and ekf_error_state.whole_error_step(b, 7) is ekf

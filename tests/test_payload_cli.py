@@ -12,7 +12,7 @@ from fmscal.plant.io._pose_table import simulate_table, write_pose_table
 from fmscal.plant.scenarios._spatial import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
-KEYS = {"mass", "mass_std", "rho", "rho_std", "inertia", "inertia_std", "b", "b_std", "gravity", "mounting",
+KEYS = {"mass", "mass_std", "com", "com_std", "inertia", "inertia_std", "b", "b_std", "gravity", "mounting",
         "mounting_deg", "warnings", "converged", "cone_deg", "undetermined", "next_poses"}
 
 
@@ -31,7 +31,7 @@ def test_a_table_in_the_load_convention_names_the_flag_then_fits(tmp_path, capsy
     code, out, err = _run(capsys, ["identify-payload", str(path), "--reading", "load", "--json"])
     fit = json.loads(out)
     assert code == 0 and KEYS <= set(fit) and fit["inertia"] is None and fit["converged"]
-    assert abs(fit["mass"] - TOOL.mass) < 0.012 and np.abs(np.array(fit["rho"]) - TOOL.rho).max() < 2e-3
+    assert abs(fit["mass"] - TOOL.mass) < 0.012 and np.abs(np.array(fit["com"]) - TOOL.com).max() < 2e-3
     assert fit["gravity"] is None and fit["mounting"] is None and fit["next_poses"]
 
 
@@ -51,8 +51,8 @@ def test_a_tilted_base_and_a_bolted_askew_sensor_in_one_table(tmp_path, capsys):
     assert code == 0 and "gravity in the pose frame" in out and "mounting" in out and "next pose:" in out
     line = next(x for x in out.splitlines() if x.startswith("for fmscal calibrate (the tracked frame's axes): "))
     numbers = _flags(line)                      # a table's calibrate takes no inertia
-    assert "--inertia" not in line and set(numbers) == {"--mass", "--rho", "--gravity"}
-    np.testing.assert_allclose(numbers["--rho"], mount @ TOOL.rho, atol=3e-4)
+    assert "--inertia" not in line and set(numbers) == {"--mass", "--com", "--gravity"}
+    np.testing.assert_allclose(numbers["--com"], mount @ TOOL.com, atol=3e-4)
 
 
 def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsys):
@@ -69,7 +69,7 @@ def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsy
     same = json.loads(out_r)                                        # the same data in the toolkit's convention
     assert code == code_r == 0 and fit["reading"] == "load" and KEYS <= set(fit)
     assert fit["mass"] == pytest.approx(same["mass"], rel=1e-9) and fit["mass"] > 1.0
-    np.testing.assert_allclose(fit["rho"], same["rho"], rtol=1e-9)
+    np.testing.assert_allclose(fit["com"], same["com"], rtol=1e-9)
     # a log with positions takes --gravity estimate and --mounting estimate too (their accuracy: test_payload_fit;
     # here S = I is assumed of a sensor with 2 % crosstalk, which a rotation partly absorbs)
     code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "estimate",
@@ -81,12 +81,12 @@ def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsy
     code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "estimate",
                                    "--mounting", "estimate"])
     assert code == 0 and "gravity in the pose frame" in out and "mounting (sensor axes on the tracked frame)" in out
-    # the payload as calibrate takes it: in the tracked frame's axes (M rho), with the gravity found; this log
+    # the payload as calibrate takes it: in the tracked frame's axes (M com), with the gravity found; this log
     # (S = I on 2 % crosstalk) leaves the inertia, which is said (the inertia's turn: the next test)
     line = next(x for x in out.splitlines() if x.startswith("for fmscal calibrate (the tracked frame's axes): "))
     assert fit["inertia"] is None and "(and --inertia, which this log did not determine, in the same axes)" in line
     numbers = _flags(line)
-    np.testing.assert_allclose(numbers["--rho"], np.array(fit["mounting"]) @ fit["rho"], rtol=1e-5, atol=1e-8)
+    np.testing.assert_allclose(numbers["--com"], np.array(fit["mounting"]) @ fit["com"], rtol=1e-5, atol=1e-8)
     np.testing.assert_allclose(numbers["--gravity"], fit["gravity"], rtol=1e-5)
     assert numbers["--mass"] == pytest.approx([fit["mass"]], rel=1e-5) and "--inertia" not in numbers
     assert "for fmscal calibrate" not in _run(capsys, ["identify-payload", str(tmp_path / "arm.csv")])[1]
@@ -97,24 +97,24 @@ def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsy
 def _flags(line):
     """``{flag: [numbers]}`` of a printed ``for fmscal calibrate`` line."""
     words = line.split(": ", 1)[1].split()
-    counts = {"--mass": 1, "--rho": 3, "--inertia": 6, "--gravity": 3}
+    counts = {"--mass": 1, "--com": 3, "--inertia": 6, "--gravity": 3}
     return {w: [float(v) for v in words[i + 1:i + 1 + counts[w]]] for i, w in enumerate(words) if w in counts
             and i + counts[w] < len(words) and not words[i + 1].startswith("(")}
 
 
 def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys):
-    """With the mounting estimated, the centre of mass and the inertia that calibrate takes are ``M rho`` and
+    """With the mounting estimated, the centre of mass and the inertia that calibrate takes are ``M com`` and
     ``M I M^T`` (calibrate's S absorbs the mounting, so it works in the tracked frame's axes)."""
     from types import SimpleNamespace
 
     from fmscal.analysis.cli._payload import _print_calibrate_flags
     from fmscal.observers.payload._static_fit import _exp
     M = _exp(np.radians(30.0) * np.array([0.0, 0.0, 1.0]))
-    fit = SimpleNamespace(mass=2.0, rho=[0.1, 0.0, 0.05], inertia=[0.01, 0.02, 0.03, 0.0, 0.0, 0.0], gravity=None,
+    fit = SimpleNamespace(mass=2.0, com=[0.1, 0.0, 0.05], inertia=[0.01, 0.02, 0.03, 0.0, 0.0, 0.0], gravity=None,
                           mounting=M, payload_determined=True)
     _print_calibrate_flags(fit)
     numbers = _flags(capsys.readouterr().out.strip())
-    np.testing.assert_allclose(numbers["--rho"], [0.1 * np.cos(np.pi / 6), 0.1 * np.sin(np.pi / 6), 0.05], atol=1e-6)
+    np.testing.assert_allclose(numbers["--com"], [0.1 * np.cos(np.pi / 6), 0.1 * np.sin(np.pi / 6), 0.05], atol=1e-6)
     I = M @ np.diag([0.01, 0.02, 0.03]) @ M.T
     np.testing.assert_allclose(numbers["--inertia"], [I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]],
                                atol=1e-7)

@@ -16,13 +16,13 @@ def test_arm_gives_mass_within_1_percent_and_centre_of_mass_within_2_mm(seed):
     fit = identify_payload(log, S=truth.S_at(0.0))
     p = truth.payload
     assert abs(fit.mass - p.mass) < 0.01 * p.mass
-    assert np.abs(fit.rho - np.array(p.rho)).max() < 2e-3
+    assert np.abs(fit.com - np.array(p.com)).max() < 2e-3
     assert np.abs(fit.inertia - np.array(p.inertia)).max() < 0.02 * np.mean(p.inertia[:3])      # products too
     assert np.abs(fit.b - truth.offset).max() < 0.02 * np.abs(truth.offset).max()
     # the uncertainties are of the error's size (not a thousand times too small or too large)
-    z = np.abs(np.r_[fit.mass - p.mass, fit.rho - p.rho] / np.r_[fit.mass_std, fit.rho_std])
+    z = np.abs(np.r_[fit.mass - p.mass, fit.com - p.com] / np.r_[fit.mass_std, fit.com_std])
     assert z.max() < 5 and 1e-5 < fit.mass_std / p.mass < 1e-2
-    assert np.all((1e-7 < fit.rho_std) & (fit.rho_std < 1e-4))          # m: neither nil nor above the error allowed
+    assert np.all((1e-7 < fit.com_std) & (fit.com_std < 1e-4))          # m: neither nil nor above the error allowed
     assert fit.converged and not fit.warnings
 
 
@@ -30,7 +30,7 @@ def test_static_poses_give_mass_and_centre_of_mass_but_not_the_inertia():
     log, truth, _ = SPATIAL_SCENARIOS["spatial-static"].generate(0)
     fit = identify_payload(log, S=truth.S_at(0.0))
     assert abs(fit.mass - truth.payload.mass) < 0.01 * truth.payload.mass
-    assert np.abs(fit.rho - np.array(truth.payload.rho)).max() < 2e-3
+    assert np.abs(fit.com - np.array(truth.payload.com)).max() < 2e-3
     assert fit.inertia is None and fit.inertia_std is None and not fit.converged
     assert any("inertia is not determined" in w and "angular acceleration" in w for w in fit.warnings)
     assert fit.to_dict()["inertia"] is None
@@ -139,7 +139,7 @@ def test_the_mass_and_centre_of_mass_uncertainties_of_a_log_hold_over_twenty_see
     z = []
     for log, truth in twenty_logs:
         fit, p = identify_payload(log.between(0.0, duration), S=truth.S_at(0.0)), truth.payload
-        z.append(np.r_[(fit.mass - p.mass) / fit.mass_std, (fit.rho - np.array(p.rho)) / fit.rho_std])
+        z.append(np.r_[(fit.mass - p.mass) / fit.mass_std, (fit.com - np.array(p.com)) / fit.com_std])
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert 0.7 < rms < 1.4, rms
 
@@ -179,7 +179,7 @@ def _worst(fit):
     """The largest of the mass's, the centre of mass's and the offset's uncertainties over what counts as
     determined: 1 % of the mass, 1 mm, a thousandth of the weight's force (N; a tenth of it in N m)."""
     weight = fit.mass * 9.81 * 1e-3 * np.r_[np.full(3, 0.1), np.ones(3)]
-    return max(fit.mass_std / (0.01 * fit.mass), np.max(fit.rho_std) / 1e-3, np.max(fit.b_std / weight))
+    return max(fit.mass_std / (0.01 * fit.mass), np.max(fit.com_std) / 1e-3, np.max(fit.b_std / weight))
 
 
 def test_a_log_turned_about_one_axis_names_its_narrow_cone_and_a_pose_that_helps():

@@ -43,11 +43,11 @@ def test_a_tilted_base_is_recovered_within_a_fifth_of_a_degree(tilted):
     error = _degrees(fit.gravity, G_TILTED)
     assert error < 0.2 and np.linalg.norm(fit.gravity) == pytest.approx(9.81, rel=1e-12)
     assert 1e-4 < fit.gravity_std_deg < 0.1 and error < 4 * fit.gravity_std_deg
-    assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass and np.abs(fit.rho - TOOL.rho).max() < 2e-3
+    assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass and np.abs(fit.com - TOOL.com).max() < 2e-3
     assert fit.mounting is None and fit.converged
     # gravity taken along -z instead: the payload comes out wrong by far more than the fit with it estimated
     upright = identify_payload(tilted)
-    assert np.abs(upright.rho - TOOL.rho).max() > 10 * np.abs(fit.rho - TOOL.rho).max()
+    assert np.abs(upright.com - TOOL.com).max() > 10 * np.abs(fit.com - TOOL.com).max()
 
 
 def test_a_mounting_rotation_is_recovered_within_a_fifth_of_a_degree(askew):
@@ -57,7 +57,7 @@ def test_a_mounting_rotation_is_recovered_within_a_fifth_of_a_degree(askew):
     assert _degrees(fit.mounting_axis, AXIS) < 3.0
     assert 1e-4 < fit.mounting_std_deg < 0.1 and error < 4 * np.sqrt(3) * fit.mounting_std_deg
     np.testing.assert_allclose(fit.mounting @ fit.mounting.T, np.eye(3), atol=1e-12)
-    assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass and np.abs(fit.rho - TOOL.rho).max() < 2e-3
+    assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass and np.abs(fit.com - TOOL.com).max() < 2e-3
 
 
 def test_gravity_and_mounting_together(askew):

@@ -26,7 +26,7 @@ def test_the_plain_fit_is_exact_where_its_assumptions_hold():
         table = simulate_table(TOOL, n=12, seed=0, offset=OFFSET, wrench_sd=EXACT, reading=reading)
         fit = plain_fit(table.q, table.w_hat, reading=reading)
         assert fit.mass == pytest.approx(TOOL.mass, abs=1e-9) and fit.mounting is None
-        np.testing.assert_allclose(fit.rho, TOOL.rho, atol=1e-9)
+        np.testing.assert_allclose(fit.com, TOOL.com, atol=1e-9)
         np.testing.assert_allclose(fit.b, OFFSET, atol=1e-9)
         assert fit.force_rms < 1e-9
 
@@ -39,7 +39,7 @@ def test_calib_force_recovers_the_mounting_from_any_mass_guess():
                            mounting=MOUNT, wrench_sd=EXACT)
     for m0 in (1.2e-3, 1.2e3):
         fit = calib_force(table.q, table.w_hat, m0=m0)
-        assert fit.mass == pytest.approx(TOOL.mass, abs=1e-9) and fit.rho is None
+        assert fit.mass == pytest.approx(TOOL.mass, abs=1e-9) and fit.com is None
         np.testing.assert_allclose(fit.mounting, MOUNT, atol=1e-9)
         np.testing.assert_allclose(fit.b[3:], OFFSET[3:], atol=1e-9)
         assert np.isnan(fit.b[:3]).all() and fit.force_rms < 1e-9
@@ -54,7 +54,7 @@ def test_a_tilted_base_goes_unnoticed_into_their_estimates():
     table = simulate_table(TOOL, n=24, seed=1, offset=OFFSET, reading="load", gravity=TILT @ [0, 0, -CALIB_FORCE_G],
                            wrench_sd=EXACT)
     plain = plain_fit(table.q, table.w_hat, reading="load", g=CALIB_FORCE_G)
-    assert 3e-3 < np.abs(plain.rho - TOOL.rho).max() < 7e-3 and 0.4 < np.abs(plain.b - OFFSET).max() < 1.0
+    assert 3e-3 < np.abs(plain.com - TOOL.com).max() < 7e-3 and 0.4 < np.abs(plain.b - OFFSET).max() < 1.0
     bagge = calib_force(table.q, table.w_hat)
     assert 5.0 < _degrees(bagge.mounting) < 9.0 and abs(bagge.mass - TOOL.mass) < 1e-3
     assert 0.2 < np.abs(bagge.b[3:] - OFFSET[3:]).max() < 0.5

@@ -21,7 +21,7 @@ pin = pytest.importorskip("pinocchio")          # the [test] extra installs it; 
 mujoco = pytest.importorskip("mujoco")
 
 #: A tool on a wrist sensor: 1.7 kg, centre of mass 8 cm out, a full inertia tensor.
-TOOL = SpatialPayload(1.7, [0.02, -0.03, 0.08], [0.012, 0.015, 0.009, 0.001, -0.0005, 0.0008])
+TOOL = SpatialPayload(1.7, [0.012, 0.015, 0.009, 0.001, -0.0005, 0.0008], [0.02, -0.03, 0.08])
 
 
 def _random_states(n, seed):
@@ -35,7 +35,7 @@ def _random_states(n, seed):
 def test_inverse_dynamics_matches_pinocchio_rnea():
     model = pin.Model()
     joint = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "payload")
-    model.appendBodyToJoint(joint, pin.Inertia(TOOL.mass, np.array(TOOL.rho), TOOL.I_c), pin.SE3.Identity())
+    model.appendBodyToJoint(joint, pin.Inertia(TOOL.mass, np.array(TOOL.com), TOOL.I_c), pin.SE3.Identity())
     model.gravity.linear = np.array(GRAVITY)
     data = model.createData()
     worst = 0.0
@@ -111,9 +111,9 @@ def test_simulator_matches_mujoco_over_20_s_of_spatial_arm():
 ])
 def test_an_impossible_inertia_is_one_error(inertia, message):
     with pytest.raises(FmscalError, match=message):
-        SpatialPayload(1.0, [0, 0, 0.1], inertia)
+        SpatialPayload(1.0, inertia, [0, 0, 0.1])
 
 
-def test_rho_needs_three_numbers():
-    with pytest.raises(FmscalError, match="expected 3 instead of 2"):
-        SpatialPayload(1.0, [0, 0.1], [1, 1, 1, 0, 0, 0])
+def test_com_needs_three_numbers():
+    with pytest.raises(FmscalError, match="com has the wrong shape; expected 3 instead of 2"):
+        SpatialPayload(1.0, [1, 1, 1, 0, 0, 0], [0, 0.1])

@@ -71,11 +71,11 @@ def test_the_parameter_groups_are_the_torque_about_c_and_the_force():
     """``[phi_t, phi_f]`` from ``[S | c]`` and back is the identity; ``phi_t`` is the torque about ``C``."""
     rng = np.random.default_rng(3)
     s = rng.normal(size=42)
-    phis = phi_from_params(s, 7, ARM.payload.rho)
-    np.testing.assert_allclose(params_from_phi(phis, 7, ARM.payload.rho), s, rtol=0, atol=1e-14)
+    phis = phi_from_params(s, 7, ARM.payload.com)
+    np.testing.assert_allclose(params_from_phi(phis, 7, ARM.payload.com), s, rtol=0, atol=1e-14)
     S = s.reshape(6, 7)
     w = rng.normal(size=7)
-    tau_C = S[:3] @ w - np.cross(ARM.payload.rho, S[3:] @ w)
+    tau_C = S[:3] @ w - np.cross(ARM.payload.com, S[3:] @ w)
     np.testing.assert_allclose(np.reshape(phis[0], (3, 7)) @ w, tau_C, rtol=0, atol=1e-12)
 
 

@@ -8,7 +8,7 @@ import pytest
 from fmscal.analysis.cli import main
 from fmscal.plant import read_truth
 
-TOOL = ["--mass", "1.2", "--rho", "0.01", "-0.005", "0.06", "--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4",
+TOOL = ["--mass", "1.2", "--com", "0.01", "-0.005", "0.06", "--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4",
         "1.5e-4"]
 
 
@@ -39,6 +39,13 @@ def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
     assert main(["apply", str(arm / "cal.json"), str(arm / "arm.csv"), "--out", str(arm / "w.csv"), *TOOL]) == 0
     header = (arm / "w.csv").read_text().splitlines()[0]
     assert header == "t,tx,ty,tz,fx,fy,fz"
+    # the saved payload holds the centre of mass as com; apply checks it with --com, and a --rho names --com
+    assert json.loads((arm / "cal.json").read_text())["payload"]["com"] == [0.01, -0.005, 0.06]
+    as_rho = ["--rho" if a == "--com" else a for a in TOOL]
+    assert main(["apply", str(arm / "cal.json"), str(arm / "arm.csv"), "--out", str(arm / "w2.csv"), *as_rho]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--com X Y Z and --inertia IXX IYY IZZ IXY IXZ IYZ are for a spatial log" in err
+    assert len(err.splitlines()) == 1 and not (arm / "w2.csv").exists()
 
 
 def test_the_reference_fit_and_a_figure_of_a_spatial_calibration(arm, capsys):
@@ -56,7 +63,7 @@ def test_identify_payload_with_the_saved_calibration(arm, capsys):
     assert main(["identify-payload", str(arm / "arm.csv"), "--calibration", str(arm / "cal0.json"), "--json"]) == 0
     out = _json(capsys)
     assert abs(out["mass"] - 1.2) < 0.012
-    assert np.abs(np.array(out["rho"]) - [0.01, -0.005, 0.06]).max() < 2e-3
+    assert np.abs(np.array(out["com"]) - [0.01, -0.005, 0.06]).max() < 2e-3
     assert out["inertia"] is not None and out["converged"]
     # with the truth: the errors of every group, the inertia's six entries among them (URDF order)
     assert main(["identify-payload", str(arm / "arm.csv"), "--calibration", str(arm / "cal0.json"), "--json",
@@ -66,7 +73,7 @@ def test_identify_payload_with_the_saved_calibration(arm, capsys):
     I_true = [truth.I_c[0, 0], truth.I_c[1, 1], truth.I_c[2, 2], truth.I_c[0, 1], truth.I_c[0, 2], truth.I_c[1, 2]]
     np.testing.assert_allclose(errors["inertia_error"], np.array(out["inertia"]) - I_true, rtol=1e-12, atol=1e-15)
     assert np.all(np.abs(errors["inertia_error"]) < 4 * np.array(out["inertia_std"]) + 1e-6)
-    assert abs(errors["mass_error"]) < 0.012 and len(errors["rho_error"]) == 3
+    assert abs(errors["mass_error"]) < 0.012 and len(errors["com_error"]) == 3
 
 
 def test_static_poses_are_not_saved_as_a_calibration(tmp_path, capsys):
@@ -78,11 +85,13 @@ def test_static_poses_are_not_saved_as_a_calibration(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--mass", "1.2", "--rho", "0.2", "0.25", "--inertia", "0.75"], "a spatial log takes --rho X Y Z"),
+    (["--mass", "1.2", "--com", "0.2", "0.25", "--inertia", "0.75"], "a spatial log takes --com X Y Z (3 numbers"),
+    (["--mass", "1.2", "--rho", "0.01", "-0.005", "0.06", "--inertia", "4e-3", "5e-3", "2.5e-3", "0", "0", "0"],
+     "a spatial log takes --com X Y Z (m, the centre of mass in the sensor frame); --rho is the planar payload's"),
     ([*TOOL, "--observer", "high-gain"], "--observer high-gain does not run on a spatial log yet"),
     ([*TOOL, "--no-offset"], "--no-offset is not taken on a spatial log"),
     ([*TOOL, "--gravity", "0", "0", "inf"], "--gravity must be three finite numbers"),
-    (["--mass", "1.2", "--rho", "0", "0", "0.06", "--inertia", "1", "1", "3", "0", "0", "0"], "triangle inequality"),
+    (["--mass", "1.2", "--com", "0", "0", "0.06", "--inertia", "1", "1", "3", "0", "0", "0"], "triangle inequality"),
 ])
 def test_a_wrong_flag_on_a_spatial_log_is_one_line(arm, capsys, args, message):
     assert main(["calibrate", str(arm / "arm.csv"), *[a.format(d=arm) for a in args]]) == 2
@@ -94,7 +103,9 @@ def test_spatial_flags_on_a_planar_log_are_one_line(tmp_path, capsys):
     log = tmp_path / "paper.csv"
     assert main(["simulate", "--duration", "2", "--out", str(log)]) == 0
     assert main(["calibrate", str(log), *TOOL]) == 2
-    assert "a planar log takes --rho RX RY" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    assert "a planar log takes --rho RX RY (m, the sensor's position from the centre of mass" in err
+    assert "--com is the spatial payload's" in err and len(err.splitlines()) == 1
     assert main(["identify-payload", str(log)]) == 2
     assert "identify-payload takes a spatial log" in capsys.readouterr().err
 

@@ -105,7 +105,7 @@ def test_compiled_run_matches_filterpy(short_log):
     ulp = 2.0 ** -52 * np.random.default_rng(0).choice([-1.0, 1.0], log.w_hat.shape)
     # the compiled step reads the payload and the gravity at run time (one build for all), filterpy's path
     # builds them in: a second payload and a tilted gravity, run on the step the first one built, agree too
-    other = SpatialModel(SpatialPayload(0.9, [0.03, 0.01, 0.04], [3e-3, 4e-3, 2e-3, 1e-4, 0.0, -2e-4]),
+    other = SpatialModel(SpatialPayload(0.9, [3e-3, 4e-3, 2e-3, 1e-4, 0.0, -2e-4], [0.03, 0.01, 0.04]),
                          gravity=(0.5, -0.2, -9.79))
     for model in (MODEL, other):
         ekf = AugmentedEKF(model, noise=truth.noise, offset=True)

@@ -150,7 +150,7 @@ def test_a_log_written_by_mujoco_calibrates_at_the_floor(mujoco_arm, tmp_path, c
     assert scenario.position_sd < drift < 1e-3
     log.write(tmp_path / "mujoco.csv")
     p = scenario.payload
-    args = ["calibrate", str(tmp_path / "mujoco.csv"), "--mass", str(p.mass), "--rho", *map(str, p.rho),
+    args = ["calibrate", str(tmp_path / "mujoco.csv"), "--mass", str(p.mass), "--com", *map(str, p.com),
             "--inertia", *map(str, p.inertia), "--json"]
     capsys.readouterr()
     assert main(args) == 0

@@ -21,8 +21,8 @@ def _state(rng):
 def _momenta(x):
     """``m p_C``, ``m v_C`` and ``H`` of a state ``[p, q, v, omega]``, from the payload's definitions."""
     p, R, v, omega = x[0:3], rotation_matrix(x[3:7]), x[7:10], x[10:13]
-    m, rho, I_c = ARM.payload.mass, np.asarray(ARM.payload.rho), ARM.payload.I_c
-    return m * (p + R @ rho), m * (v + R @ np.cross(omega, rho)), R @ I_c @ omega
+    m, com, I_c = ARM.payload.mass, np.asarray(ARM.payload.com), ARM.payload.I_c
+    return m * (p + R @ com), m * (v + R @ np.cross(omega, com)), R @ I_c @ omega
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -38,7 +38,7 @@ def test_the_drives_are_the_momenta_rates_under_newton_euler(seed):
     h = 1e-4
     ahead, back = (MODEL.rk4_step(x, w, w, w, s * h) for s in (1.0, -1.0))
     rates = [(a - b) / (2 * h) for a, b in zip(_momenta(ahead)[1:], _momenta(back)[1:])]
-    phis = MODEL.momentum_phi_from_params(S_aug.ravel(), 7, ARM.payload.rho)
+    phis = MODEL.momentum_phi_from_params(S_aug.ravel(), 7, ARM.payload.com)
     torque, force = MODEL.momentum_drives(rotation_matrix(x[3:7]), w_aug, phis)
     np.testing.assert_allclose(force, rates[0], rtol=0, atol=1e-6 * (1 + np.abs(rates[0]).max()))
     np.testing.assert_allclose(torque, rates[1], rtol=0, atol=1e-6 * (1 + np.abs(rates[1]).max()))
@@ -87,8 +87,8 @@ def test_casadi_gives_the_numbers_numpy_does():
     R_sym = rotation_matrix(sym["q"])
 
     def pieces(model, s, w, q, R, H, y, lin):
-        phis = model.momentum_phi_from_params(s, 7, ARM.payload.rho)
-        return [*phis, model.momentum_params_from_phi(phis, 7, ARM.payload.rho), model.momentum_regressor(R, w),
+        phis = model.momentum_phi_from_params(s, 7, ARM.payload.com)
+        return [*phis, model.momentum_params_from_phi(phis, 7, ARM.payload.com), model.momentum_regressor(R, w),
                 *model.momentum_drives(R, w, phis), model.world_inverse_inertia(R), model.world_inertia(R),
                 model.world_rate(R, H), model.turn(q, R, 1e-2 * H), model.turned_rotation(R, H, 1e-2),
                 model.turn_over_step(H, y, 1e-2), model.state_from_momenta(y, lin, q, H)]

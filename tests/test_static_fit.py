@@ -31,9 +31,9 @@ def test_mass_centre_of_mass_and_offset_with_honest_uncertainties(twenty_seeds):
     z = []
     for fit in twenty_seeds:
         assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass
-        assert np.abs(fit.rho - TOOL.rho).max() < 2e-3
+        assert np.abs(fit.com - TOOL.com).max() < 2e-3
         assert fit.converged and fit.gravity is None and fit.mounting is None
-        z.append(np.r_[(fit.mass - TOOL.mass) / fit.mass_std, (fit.rho - TOOL.rho) / fit.rho_std,
+        z.append(np.r_[(fit.mass - TOOL.mass) / fit.mass_std, (fit.com - TOOL.com) / fit.com_std,
                        (fit.b - OFFSET) / fit.b_std])
     rms = float(np.sqrt(np.mean(np.square(z))))            # not np.std: a bias would hide in the mean it removes
     assert 0.7 < rms < 1.4, rms                             # 1.13 measured
@@ -68,7 +68,7 @@ def test_a_mounting_rotation_is_recovered_within_a_fifth_of_a_degree(seed):
     fit = fit_static(table, estimate_mounting=True)
     assert _angle(fit.mounting.T @ MOUNT) < 0.2
     assert fit.mounting_deg == pytest.approx(7.0, abs=0.2) and 0 < fit.mounting_std_deg < 0.2
-    assert np.abs(fit.rho - TOOL.rho).max() < 2e-3
+    assert np.abs(fit.com - TOOL.com).max() < 2e-3
     assert not any("estimate" in w for w in fit.warnings)
     square = fit_static(table)
     told = [w for w in square.warnings if "--mounting estimate" in w]
@@ -99,7 +99,7 @@ def test_the_first_suggested_pose_reduces_the_largest_uncertainty():
     R = _exp(np.radians(angle) * np.eye(3)["xyz".index(axis)])
     q_new = _quaternion(_rotation(table.q[k - 1]) @ R)
     after = fit_static(simulate_table(TOOL, n=7, seed=4, offset=OFFSET, q=np.vstack([table.q, q_new])))
-    worst = lambda f: max(f.mass_std / (0.01 * f.mass), np.max(f.rho_std) / 1e-3)      # noqa: E731
+    worst = lambda f: max(f.mass_std / (0.01 * f.mass), np.max(f.com_std) / 1e-3)      # noqa: E731
     assert worst(after) < 0.8 * worst(before), (words, worst(before), worst(after))
 
 
@@ -151,7 +151,7 @@ def test_an_attitude_only_log_uses_its_held_segments_and_its_uncertainty_covers_
         assert 10 <= len(table) <= 14 and 0.3 < used < 0.5 and "held segments" in why
         fit = fit_static(table)
         assert abs(fit.mass - TOOL.mass) < 3 * fit.mass_std and fit.mass_std < 0.01 * TOOL.mass
-        assert np.abs(fit.rho - TOOL.rho).max() < 2e-3
+        assert np.abs(fit.com - TOOL.com).max() < 2e-3
 
 
 def test_an_attitude_log_without_enough_holds_is_one_line():
@@ -227,7 +227,7 @@ def test_poses_that_do_not_tilt_gravity_are_refused_in_one_line(q):
     q = q / np.linalg.norm(q, axis=1)[:, None]
     table = simulate_table(TOOL, q=q, n=len(q), seed=1, offset=OFFSET)
     for fit in (fit_static, lambda t: fit_static(t, estimate_mounting=True),
-                lambda t: calibrate_table(t, TOOL.mass, TOOL.rho)):
+                lambda t: calibrate_table(t, TOOL.mass, TOOL.com)):
         with pytest.raises(FmscalError, match=r"do not tilt gravity in the sensor frame \(all within 0\.\d degrees.*"
                                               "cannot be separated; hold the tool in at least four attitudes"):
             fit(table)
@@ -246,7 +246,7 @@ def test_poses_tilted_two_degrees_are_fitted_not_refused():
 
 def test_a_weak_direction_of_one_parameter_reads_in_the_singular():
     from fmscal.observers.payload._coverage import describe
-    names = ("m", "rho_x", "rho_y", "rho_z")
+    names = ("m", "com_x", "com_y", "com_z")
     assert describe(names, np.array([0.0, 0.0, 0.0, 1.0])).startswith("the centre of mass along z is not determined")
     assert describe(names, np.array([0.7, 0.0, 0.7, 0.0])).startswith(
         "the mass and the centre of mass along y are not separated")

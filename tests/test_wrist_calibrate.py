@@ -14,7 +14,7 @@ from fmscal.plant.scenarios._spatial import TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 S_TRUE = np.eye(6) + 0.03 * np.random.default_rng(7).normal(size=(6, 6))
-PAYLOAD = ["--mass", repr(TOOL.mass), "--rho", *map(repr, TOOL.rho)]
+PAYLOAD = ["--mass", repr(TOOL.mass), "--com", *map(repr, TOOL.com)]
 INERTIA = ["--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4", "1.5e-4"]
 SD = np.array([0.005] * 3 + [0.05] * 3)
 
@@ -26,11 +26,11 @@ def _run(capsys, args):
 
 
 def _weight(table):
-    """The wrench each held pose needs, ``[rho x f; f]`` with ``f = -m R^T g``."""
+    """The wrench each held pose needs, ``[com x f; f]`` with ``f = -m R^T g``."""
     from fmscal.plant.physics._rigid_body import GRAVITY, rotation_matrix
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     f = TOOL.mass * np.einsum("nkj,k->nj", R, -np.asarray(GRAVITY))
-    return np.hstack([np.cross(TOOL.rho, f), f])
+    return np.hstack([np.cross(TOOL.com, f), f])
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_the_offset_uncertainty_of_a_table_holds_over_twenty_seeds():
     z = []
     for seed in range(20):
         table = simulate_table(TOOL, n=16, seed=100 + seed, S=S_TRUE, offset=OFFSET)
-        fit = calibrate_table(table, TOOL.mass, TOOL.rho)
+        fit = calibrate_table(table, TOOL.mass, TOOL.com)
         z.append((fit.b - OFFSET) / fit.b_std)
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert 0.7 < rms < 1.4, rms
@@ -78,7 +78,7 @@ def test_poses_about_one_axis_leave_a_force_direction_too():
     def turn(angle):
         return np.r_[np.cos(angle / 2), np.sin(angle / 2), 0.0, 0.0]
     table = simulate_table(TOOL, seed=3, offset=OFFSET, q=[turn(a) for a in np.linspace(0, 2 * np.pi, 13)[:-1]])
-    fit = calibrate_table(table, TOOL.mass, TOOL.rho)
+    fit = calibrate_table(table, TOOL.mass, TOOL.com)
     assert len(fit.undetermined) == 4 and not fit.converged
     force = [w for w in fit.warnings if "the force hardly changes there" in w]
     assert len(force) == 1 and "fx" in force[0] and "tilt it about another axis" in force[0]
@@ -127,8 +127,11 @@ def test_options_a_table_does_not_take_are_one_line(held, capsys, extra, message
 
 def test_a_table_with_a_planar_centre_of_mass_is_one_line(held, capsys):
     folder, _ = held
-    code, _, err = _run(capsys, ["calibrate", str(folder / "held.csv"), "--mass", "1.2", "--rho", "0.1", "0.2"])
-    assert code == 2 and "--rho X Y Z" in err and len(err.strip().splitlines()) == 1
+    code, _, err = _run(capsys, ["calibrate", str(folder / "held.csv"), "--mass", "1.2", "--com", "0.1", "0.2"])
+    assert code == 2 and "a pose table takes --com X Y Z" in err and len(err.strip().splitlines()) == 1
+    code, _, err = _run(capsys, ["calibrate", str(folder / "held.csv"), "--mass", "1.2", "--rho", "0.1", "0.2", "0.3"])
+    assert code == 2 and "a pose table takes --com X Y Z" in err and "--rho is the planar payload's" in err
+    assert len(err.strip().splitlines()) == 1
 
 
 @pytest.fixture(scope="module")
@@ -185,7 +188,7 @@ def test_reading_on_a_planar_log_is_one_line(tmp_path, capsys):
 
 
 def test_the_calibration_file_records_the_sign_and_older_files_read_as_reaction(tmp_path):
-    payload = SpatialPayload(TOOL.mass, TOOL.rho, TOOL.inertia)
+    payload = SpatialPayload(TOOL.mass, TOOL.inertia, TOOL.com)
     cal = Calibration(S=S_TRUE, payload=payload, method="least-squares", b=OFFSET, reading="load")
     w_hat = np.array([[0.1, -0.2, 0.3, 1.0, 2.0, -3.0]])
     np.testing.assert_allclose(cal.apply(w_hat), (-w_hat - OFFSET) @ S_TRUE.T, rtol=1e-12)
@@ -222,7 +225,7 @@ def test_one_attitude_held_six_times_is_refused_in_one_line(tmp_path, capsys):
     cannot be told from the weight: one line, exit 2 (a table, and an attitude-only log's held segments)."""
     table = simulate_table(TOOL, n=6, seed=1, offset=OFFSET, q=[[1.0, 0.0, 0.0, 0.0]] * 6)
     with pytest.raises(FmscalError, match="do not tilt gravity in the sensor frame"):
-        calibrate_table(table, TOOL.mass, TOOL.rho)
+        calibrate_table(table, TOOL.mass, TOOL.com)
     write_pose_table(table, tmp_path / "same.csv")
     write_attitude_log_about_the_vertical(tmp_path / "yaw.csv")
     for name in ("same.csv", "yaw.csv"):
@@ -243,6 +246,6 @@ def write_attitude_log_about_the_vertical(path, holds=6):
     heading = np.radians(40.0) * (k + np.clip((u - 2.0) / 1.5, 0.0, 1.0))      # 2 s held, 1.5 s turning
     q = np.column_stack([np.cos(heading / 2), 0 * t, 0 * t, np.sin(heading / 2)])
     f = np.array([0.0, 0.0, TOOL.mass * 9.81])
-    w = np.r_[np.cross(TOOL.rho, f), f] + OFFSET + rng.normal(size=(len(t), 6)) * SD
+    w = np.r_[np.cross(TOOL.com, f), f] + OFFSET + rng.normal(size=(len(t), 6)) * SD
     np.savetxt(path, np.column_stack([t, q, w]), delimiter=",", header=",".join(ATTITUDE_COLUMNS), comments="",
                fmt="%.17g")

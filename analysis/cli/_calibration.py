@@ -18,7 +18,7 @@ from fmscal.observers.payload import PayloadEstimate
 
 from .. import _plots
 from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, log_model_class, read_data
-from ._common import CliError, flag_payload, positive
+from ._common import CliError, flag_payload, position_flag, positive
 from ._files import atomic_write_text, check_outputs
 from ._spatial import print_spatial
 
@@ -36,15 +36,17 @@ def add_calibrate(sub):
                    help="a planar or spatial log, or a pose table (the header tells which)")
     p.add_argument("--payload", metavar="PAYLOAD.json",
                    help="the payload as fmscal identify-payload --save wrote it (the tracked frame's axes, and the "
-                        "gravity it estimated), instead of --mass, --rho and --inertia")
+                        "gravity it estimated), instead of --mass, --com and --inertia")
     p.add_argument("--mass", type=float, metavar="KG", help="the payload's mass, kg (or --payload)")
     p.add_argument("--inertia", type=float, nargs="+", metavar="I",
                    help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
                         "tensor about the centre of mass in sensor axes (a pose table needs it only with --save)")
     p.add_argument("--rho", type=float, nargs="+", metavar="R",
-                   help="the centre of mass from the sensor, m: planar RX RY (body frame, from G to the sensor "
-                        "as in the paper), spatial X Y Z (the centre of mass in the sensor frame); negative "
-                        "values as written")
+                   help="planar logs: RX RY, the paper's rho: the sensor's position from the centre of mass G, "
+                        "body frame, m; negative values as written")
+    p.add_argument("--com", type=float, nargs="+", metavar="C",
+                   help="spatial logs and pose tables: X Y Z, the centre of mass in the sensor frame, m (seen "
+                        "from the sensor: the opposite of a planar rho); negative values as written")
     p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
                    help="spatial logs: gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
     p.add_argument("--reading", choices=("reaction", "load"), default=None,
@@ -137,35 +139,38 @@ _FLAGS = {"method": "--observer", "offset=False": "--no-offset", "pose_noise": "
 
 
 def _payload(args, data, table):
-    """The payload: ``--payload PAYLOAD.json``, or ``--mass``, ``--rho`` and ``--inertia`` in ``data``'s case."""
-    flags = [name for name, value in (("--mass", args.mass), ("--rho", args.rho), ("--inertia", args.inertia))
-             if value is not None]
+    """The payload: ``--payload PAYLOAD.json``, or ``--mass``, ``--inertia`` and ``--rho`` (planar) or ``--com``
+    (spatial, tables) in ``data``'s case."""
+    flags = [name for name, value in (("--mass", args.mass), ("--rho", args.rho), ("--com", args.com),
+                                      ("--inertia", args.inertia)) if value is not None]
     if args.payload is not None:
         if flags:
-            raise CliError(f"--payload takes the place of --mass, --rho and --inertia; got {' and '.join(flags)} "
+            raise CliError(f"--payload takes the place of --mass, --com and --inertia; got {' and '.join(flags)} "
                            "too: give one or the other")
         estimate = PayloadEstimate.load(args.payload)
         if args.save and table and estimate.inertia is None:
             raise CliError(f"--save records the payload in the calibration file: {args.payload} holds no inertia "
-                           "(held poses do not give it); give --mass, --rho and --inertia instead")
+                           "(held poses do not give it); give --mass, --com and --inertia instead")
         return estimate
-    if args.mass is None or args.rho is None:
-        raise CliError("give the payload: --mass and --rho (and --inertia), or --payload PAYLOAD.json")
+    model = SpatialModel if table else log_model_class(data)          # held poses: a 3D payload
+    position = position_flag(model, args.rho, args.com, "a pose table" if table else None)
+    flag = f"--{model.payload_position}"
+    if args.mass is None or position is None:
+        raise CliError(f"give the payload: --mass and {flag} (and --inertia), or --payload PAYLOAD.json")
     positive(args.mass, "--mass")
-    for value in args.rho:
+    for value in position:
         if not np.isfinite(value):
-            raise CliError(f"--rho must be finite numbers in m; got {args.rho}")
+            raise CliError(f"{flag} must be finite numbers in m; got {position}")
     if table:
-        if len(args.rho) != 3:
-            raise CliError(f"a pose table takes --rho X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
-                           f"got {len(args.rho)}")
+        if len(position) != 3:
+            raise CliError(f"a pose table takes --com X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
+                           f"got {len(position)}")
         if args.inertia is None:
             if args.save:
                 raise CliError("--save records the payload in the calibration file: give --inertia IXX IYY IZZ IXY "
                                "IXZ IYZ too (held poses do not use it)")
-            return args.mass, tuple(args.rho)
-        return flag_payload(SpatialModel, args.mass, args.rho, args.inertia)     # held poses: a 3D payload
-    return flag_payload(log_model_class(data), args.mass, args.rho, args.inertia)
+            return args.mass, tuple(position)
+    return flag_payload(model, args.mass, args.inertia, position)
 
 
 def _plot(args, log, cal, truth):
@@ -232,23 +237,26 @@ def add_apply(sub):
     p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
     p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
     p.add_argument("--inertia", type=float, nargs="+", metavar="I", help="planar I_G, or the six spatial entries")
-    p.add_argument("--rho", type=float, nargs="+", metavar="R", help="planar RX RY, or spatial X Y Z")
+    p.add_argument("--rho", type=float, nargs="+", metavar="R",
+                   help="planar: RX RY, the sensor's position from the centre of mass (body frame, m)")
+    p.add_argument("--com", type=float, nargs="+", metavar="C",
+                   help="spatial: X Y Z, the centre of mass in the sensor frame (m)")
     p.set_defaults(func=cmd_apply)
 
 
 def cmd_apply(args):
-    given = [v is not None for v in (args.mass, args.inertia, args.rho)]
+    if args.rho is not None and args.com is not None:
+        raise CliError("give --rho (a planar payload) or --com (a spatial one), not both")
+    position = args.rho if args.com is None else args.com
+    given = [v is not None for v in (args.mass, args.inertia, position)]
     if any(given) and not all(given):
-        raise CliError("give all of --mass, --inertia and --rho to check the payload, or none")
+        raise CliError("give all of --mass, --inertia and --rho (planar) or --com (spatial) to check the payload, "
+                       "or none")
     payload = None
     if all(given):
-        sizes = (len(args.rho), len(args.inertia))
-        cls = next((m for m in MODELS if (len(m.rho_names), len(m.inertia_names)) == sizes), None)
-        if cls is None:
-            raise CliError("--rho and --inertia take " + " or ".join(
-                f"{len(m.rho_names)} and {len(m.inertia_names)} ({m.name})" for m in MODELS)
-                + f"; got {sizes[0]} and {sizes[1]}")
-        payload = flag_payload(cls, args.mass, args.rho, args.inertia)
+        name = "rho" if args.com is None else "com"
+        cls = next(m for m in MODELS if m.payload_position == name)
+        payload = flag_payload(cls, args.mass, args.inertia, position)
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
     check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],

@@ -36,24 +36,51 @@ def strict(value):
     return value
 
 
-def flag_payload(model, mass, rho, inertia):
-    """The payload of the model class ``model`` from ``--mass``, ``--rho`` and ``--inertia``, or a one-line error.
+#: What each payload's position vector is, in words (the models' :attr:`~fmscal.plant.Model.payload_position`).
+POSITION_WORDS = {"rho": "the sensor's position from the centre of mass, body frame",
+                  "com": "the centre of mass in the sensor frame"}
 
-    ``rho`` and ``inertia`` must hold the numbers the model declares (:attr:`fmscal.plant.Model.rho_names`,
-    :attr:`~fmscal.plant.Model.inertia_names`); the payload class checks their values, its message turned
-    into the flag's.
+
+def position_flag(model, rho, com, what=None):
+    """The payload's position vector from ``--rho`` or ``--com``: the one ``model`` declares, else a one-line error.
+
+    ``--rho RX RY`` is the planar payload's (the paper's ``rho``, the sensor from the centre of mass), ``--com
+    X Y Z`` the spatial one's (the centre of mass from the sensor, the opposite vector): a log given the
+    other case's flag is told its own. ``what`` names the input (default: ``a <case> log``). None where
+    neither is given.
     """
-    rho, inertia = list(rho or ()), list(inertia or ())
-    if (len(rho), len(inertia)) != (len(model.rho_names), len(model.inertia_names)):
-        others = " and ".join(f"{len(m.rho_names)} and {len(m.inertia_names)} are for a {m.name} log"
-                              for m in MODELS if m is not model)
-        raise CliError(f"a {model.name} log takes --rho {' '.join(model.rho_names)} ({len(model.rho_names)} "
-                       f"numbers, m) and --inertia {' '.join(model.inertia_names)} ({len(model.inertia_names)} "
-                       f"number{'s' if len(model.inertia_names) > 1 else ''}, kg m^2, about the centre of mass); "
-                       f"got {len(rho)} and {len(inertia)}" + (f" ({others})" if others else ""))
+    given = {"rho": rho, "com": com}
+    name = model.payload_position
+    wrong = next((n for n, v in given.items() if n != name and v is not None), None)
+    if wrong is not None:
+        names = " ".join(model.payload_position_names)
+        other = next(m for m in MODELS if m.payload_position == wrong)
+        raise CliError(f"{what or 'a ' + model.name + ' log'} takes --{name} {names} (m, {POSITION_WORDS[name]}); "
+                       f"--{wrong} is the {other.name} payload's ({POSITION_WORDS[wrong]})")
+    return given[name]
+
+
+def flag_payload(model, mass, inertia, position):
+    """The payload of the model class ``model`` from ``--mass``, ``--inertia`` and ``--rho`` or ``--com``.
+
+    ``inertia`` and ``position`` (the vector :attr:`fmscal.plant.Model.payload_position` names, its flag)
+    must hold the numbers the model declares (:attr:`~fmscal.plant.Model.inertia_names`,
+    :attr:`~fmscal.plant.Model.payload_position_names`); the payload class checks their values, its
+    message turned into the flag's. Else a one-line :class:`CliError`.
+    """
+    position, inertia = list(position or ()), list(inertia or ())
+    flag, names = f"--{model.payload_position}", model.payload_position_names
+    if (len(position), len(inertia)) != (len(names), len(model.inertia_names)):
+        others = " and ".join(f"--{m.payload_position} {' '.join(m.payload_position_names)} and --inertia "
+                              f"{' '.join(m.inertia_names)} are for a {m.name} log" for m in MODELS if m is not model)
+        raise CliError(f"a {model.name} log takes {flag} {' '.join(names)} ({len(names)} numbers, m) and "
+                       f"--inertia {' '.join(model.inertia_names)} "
+                       f"({len(model.inertia_names)} number{'s' if len(model.inertia_names) > 1 else ''}, kg m^2, "
+                       f"about the centre of mass); got {len(position)} and {len(inertia)}"
+                       + (f" ({others})" if others else ""))
     positive(mass, "--mass")
     try:
-        return model.payload_from(mass, rho, inertia)
+        return model.payload_from(mass, inertia, position)
     except FmscalError as err:                      # "inertia must be ...": the flag's name
         raise CliError(f"--{err}") from None
 

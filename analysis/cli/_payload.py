@@ -148,7 +148,7 @@ def _identify_log(args, log, S, gravity, estimate_gravity):
     if truth is not None:
         p = truth.payload
         out["mass_error"] = fit.mass - p.mass
-        out["rho_error"] = (fit.rho - np.array(p.rho)).tolist()
+        out["com_error"] = (fit.com - np.array(p.com)).tolist()
         # the tensor's six entries (URDF order), in the sensor axes as the fit gives them
         out["inertia_error"] = None if fit.inertia is None else (np.asarray(fit.inertia) - np.array(
             [p.I_c[0, 0], p.I_c[1, 1], p.I_c[2, 2], p.I_c[0, 1], p.I_c[0, 2], p.I_c[1, 2]])).tolist()
@@ -172,7 +172,7 @@ def _identify_log(args, log, S, gravity, estimate_gravity):
     print(f"converged: {'yes' if fit.converged else 'no'}")
     if truth is not None:
         print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
-              + " ".join(f"{v * 1e3:+.3f}" for v in out["rho_error"]) + " mm"
+              + " ".join(f"{v * 1e3:+.3f}" for v in out["com_error"]) + " mm"
               + ("" if out["inertia_error"] is None else ", inertia " + " ".join(
                   f"{n} {v:+.2g}" for n, v in zip(INERTIA_NAMES, out["inertia_error"])) + " kg m^2"))
     return fit
@@ -180,7 +180,7 @@ def _identify_log(args, log, S, gravity, estimate_gravity):
 
 def _print_mass(fit):
     print(f"mass: {fit.mass:.5g} +- {fit.mass_std:.2g} kg")
-    print("centre of mass [mm]: " + "  ".join(f"{v * 1e3:+.3f} +- {s * 1e3:.2g}" for v, s in zip(fit.rho, fit.rho_std)))
+    print("centre of mass [mm]: " + "  ".join(f"{v * 1e3:+.3f} +- {s * 1e3:.2g}" for v, s in zip(fit.com, fit.com_std)))
 
 
 def _print_rotations(fit):
@@ -199,7 +199,7 @@ def _print_calibrate_flags(fit, table=False):
 
     ``calibrate`` estimates ``S`` in full, which absorbs the mounting, so it
     works in the axes of the frame the poses track: the centre of mass
-    ``M rho`` and the inertia ``M I M^T`` there (``M`` the mounting, sensor
+    ``M com`` and the inertia ``M I M^T`` there (``M`` the mounting, sensor
     axes to the tracked frame's), and the estimated gravity. Given in the
     sensor's own axes they would be wrong by the mounting's turn, and ``S``
     would absorb that too. Only where the fit determined the mass and the
@@ -212,7 +212,7 @@ def _print_calibrate_flags(fit, table=False):
         print("for fmscal calibrate: no payload to pass on, the mass and the centre of mass are not determined")
         return
     M = np.eye(3) if fit.mounting is None else np.asarray(fit.mounting)
-    flags = f"--mass {fit.mass:.6g} --rho {' '.join(f'{v:.6g}' for v in M @ np.asarray(fit.rho))}"
+    flags = f"--mass {fit.mass:.6g} --com {' '.join(f'{v:.6g}' for v in M @ np.asarray(fit.com))}"
     known = None if table else fit.inertia                  # held poses never give the inertia
     if known is not None:
         inertia = M @ inertia_matrix(known) @ M.T

@@ -541,7 +541,7 @@ class AdaptiveObserver(RecursiveObserver):
     def _momenta_step(self, o, st, now, nxt, dt):
         """One step on the momenta about the centre of mass, a body in 3D (:mod:`observers.adaptive._spatial`),
         from the model's pieces (:class:`fmscal.plant.SpatialModel`: ``momentum_*``, ``world_*``, ``turn``)."""
-        model, n, rho = self.model, self.n_cols, self.payload.rho
+        model, n, com = self.model, self.n_cols, self.payload.com
         k = 3 * n
         has, has_next = now.has_pose[0], nxt.has_pose[0]
         H, y, lin, chi, chi_ref, q_ref = st.H, st.y, st.l, st.chi, st.chi_ref, st.q_ref
@@ -556,7 +556,7 @@ class AdaptiveObserver(RecursiveObserver):
         R_next = rotation_matrix(nxt.pose[0:4])
         R1 = has_next * R_next + (1 - has_next) * model.turned_rotation(R0, spin0, dt)
         # the drives, linear over the step: eq. (M) at both ends, [torque about C, force plus m g]
-        phis = model.momentum_phi_from_params(st.S, n, rho)
+        phis = model.momentum_phi_from_params(st.S, n, com)
         (t0, f0), (t1, f1) = model.momentum_drives(R0, w0, phis), model.momentum_drives(R1, w1, phis)
         y_pred = y + dt * lin + position_increment(dt, f0, f1)
         l_pred = lin + velocity_increment(dt, f0, f1)
@@ -600,7 +600,7 @@ class AdaptiveObserver(RecursiveObserver):
         R_ref_new = has_next * R_next + (1 - has_next) * R_ref
         q_new = model.turn(q_ref_new, R_ref_new, chi_new - chi_ref_new)
         chi_pose_new = has_next * chi_new + (1 - has_next) * st.chi_pose
-        S_next = model.momentum_params_from_phi([phi + o.vcat(d) for phi, d in zip(phis, d_phis)], n, rho)
+        S_next = model.momentum_params_from_phi([phi + o.vcat(d) for phi, d in zip(phis, d_phis)], n, com)
         return self.state.pack(o, x=model.state_from_momenta(y_new, l_new, q_new, H_new), S=S_next,
                                since=(1 - has_next) * h, scale=st.scale, age=age, y=y_new, l=l_new, chi=chi_new,
                                chi_ref=chi_ref_new, chi_pose=chi_pose_new, q_ref=q_ref_new, H=H_new,

@@ -10,17 +10,17 @@ per parameter group, the change test, the forgetting) is the planar one's,
 shared. What differs is the motion the observer follows. The spatial model is
 not linear in its channels (the attitude is a quaternion, Newton-Euler at the
 sensor point has gyroscopic terms), but about the centre of mass ``C``
-(``p_C = p + R rho``) the two momenta are driven linearly by the wrench, in
+(``p_C = p + R com``) the two momenta are driven linearly by the wrench, in
 the world frame (eq. (M) of the model's pieces, :class:`fmscal.plant.SpatialModel`):
 
     d/dt (m v_C) = R f + m g                                  (linear momentum)
-    d/dt H       = R tau_C,   tau_C = tau_O - rho x f          (angular momentum, H = R I_c omega)
+    d/dt H       = R tau_C,   tau_C = tau_O - com x f          (angular momentum, H = R I_c omega)
 
 Both right-hand sides are ``Psi(R, w_hat) phi + const``: with the reading
 augmented ``w = [w_hat; 1]`` (``n`` entries) and ``Psi = R (x) w^T`` (3 x 3n,
 the same for both), the force rows ``phi_f = vec(S_f)`` (``S_f`` rows 3-5 of
 ``[S | c]``) drive the linear momentum and the rows of the torque about ``C``,
-``phi_t = vec(S_t - [rho]x S_f)`` (:func:`phi_from_params`), drive ``H``: two
+``phi_t = vec(S_t - [com]x S_f)`` (:func:`phi_from_params`), drive ``H``: two
 parameter groups of ``3n`` each (21 with the offset), as ``phi_1``, ``phi_2``
 in the plane. ``R`` is the measured attitude where a pose arrives (the
 pose is the configuration, as the measured angle in the plane); between
@@ -76,12 +76,12 @@ SPATIAL_LAM = 20.0
 WARM_UP = 10.0
 
 
-def phi_from_params(s, n, rho):
+def phi_from_params(s, n, com):
     """The two groups' parameters from ``vec([S | c])``: ``[phi_t, phi_f]`` (module docstring).
 
     The model's :meth:`fmscal.plant.SpatialModel.momentum_phi_from_params`:
-    ``phi_f = vec(S_f)`` (rows 3-5), ``phi_t = vec(S_t - [rho]x S_f)`` (the
-    torque about ``C``, ``tau_C = tau_O - rho x f``), row order.
+    ``phi_f = vec(S_f)`` (rows 3-5), ``phi_t = vec(S_t - [com]x S_f)`` (the
+    torque about ``C``, ``tau_C = tau_O - com x f``), row order.
 
     Parameters
     ----------
@@ -89,22 +89,22 @@ def phi_from_params(s, n, rho):
         ``[S | c]`` flat in row order.
     n : int
         Columns: 6, or 7 with the offset.
-    rho : array_like, shape (3,)
+    com : array_like, shape (3,)
         The centre of mass in the sensor frame, m.
 
     Returns
     -------
     list of two vectors of 3 n entries
     """
-    return SpatialModel.momentum_phi_from_params(s, n, rho)
+    return SpatialModel.momentum_phi_from_params(s, n, com)
 
 
-def params_from_phi(phis, n, rho):
-    """``vec([S | c])`` (row order) from ``[phi_t, phi_f]``: ``S_t = T + [rho]x S_f``; inverse of
+def params_from_phi(phis, n, com):
+    """``vec([S | c])`` (row order) from ``[phi_t, phi_f]``: ``S_t = T + [com]x S_f``; inverse of
     :func:`phi_from_params` (:meth:`fmscal.plant.SpatialModel.momentum_params_from_phi`).
 
     Returns
     -------
     vector of 6 n entries
     """
-    return SpatialModel.momentum_params_from_phi(phis, n, rho)
+    return SpatialModel.momentum_params_from_phi(phis, n, com)

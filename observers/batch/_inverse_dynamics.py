@@ -22,7 +22,7 @@ What the log determines. Every row of ``[S | c]`` is read off the same
 regressor, the augmented reading, so the information about ``S`` lies in
 the second-moment matrix of ``[w_hat; 1]``: a direction of the reading
 along which the log does not vary leaves ``S`` undetermined on it, for every
-row at once. Static poses make every wrench ``[rho x f; f]`` (3 dimensions
+row at once. Static poses make every wrench ``[com x f; f]`` (3 dimensions
 of 6), so three directions of the reading stay undetermined: mostly torque
 directions, which only angular acceleration (``I alpha + omega x I omega``)
 can excite. :attr:`InverseDynamicsFit.undetermined` lists them, and the

@@ -3,7 +3,7 @@ mounting, the reading's sign), coverage and the next poses, and the practitioner
 """
 
 from ._coverage import (cone_deg, covariance, weak_directions, describe, in_words, relative_std, next_poses,
-    rotation, DETERMINED_REL, DETERMINED_RHO, TURNS)
+    rotation, DETERMINED_REL, DETERMINED_COM, TURNS)
 from ._estimate import (PayloadEstimate, PayloadFileError, PAYLOAD_FORMAT)
 from ._payload_fit import (identify_payload, DETERMINED, HOLD, REFERENCES)
 from ._static_fit import (StaticFit, fit_static, calibrate_table, other_convention, tilt_warning, mounting_warning,

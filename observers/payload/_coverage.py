@@ -24,19 +24,19 @@ import numpy as np
 from fmscal.plant.physics import skew
 
 __all__ = ["cone_deg", "covariance", "weak_directions", "describe", "in_words", "relative_std", "next_poses",
-           "rotation", "DETERMINED_REL", "DETERMINED_RHO", "TURNS"]
+           "rotation", "DETERMINED_REL", "DETERMINED_COM", "TURNS"]
 
 #: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
 DETERMINED_REL = 0.01
 #: The centre of mass counts as determined when each coordinate's one-sigma uncertainty is below this, m.
-DETERMINED_RHO = 1e-3
+DETERMINED_COM = 1e-3
 #: The turns about a sensor axis the next poses are drawn from, degrees.
 TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
 _AXES = ("x", "y", "z")
 _OFFSET_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz")
 _INERTIA = ("Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
 _PRETTY = {"m": "the mass", **{f"c_{n}": f"the offset's {n}" for n in _OFFSET_NAMES},
-           **{f"rho_{a}": f"the centre of mass along {a}" for a in _AXES},
+           **{f"com_{a}": f"the centre of mass along {a}" for a in _AXES},
            **{f"I_{n}": f"the inertia's {n}" for n in _INERTIA},
            "gravity_1": "gravity's direction", "gravity_2": "gravity's direction",
            **{f"mount_{a}": f"the mounting about {a}" for a in _AXES}}
@@ -154,7 +154,7 @@ def describe(names, direction, size=np.inf, source="these poses", up_to=False):
     Parameters
     ----------
     names : sequence of str
-        The parameters (``m``, ``rho_x``, ``I_Ixx``, ``c_fz``, ``gravity_1``, ``mount_x``, ...).
+        The parameters (``m``, ``com_x``, ``I_Ixx``, ``c_fz``, ``gravity_1``, ``mount_x``, ...).
     direction : ndarray, shape (p,)
         The direction; its components above 0.2 are named.
     size : float
@@ -228,7 +228,7 @@ def relative_std(cov, theta):
     Parameters
     ----------
     cov : ndarray, shape (p, p)
-        Over ``(m, rho (3), c (6), angles)``, the layout of a table's fit.
+        Over ``(m, com (3), c (6), angles)``, the layout of a table's fit.
     theta : ndarray, shape (p,)
 
     Returns
@@ -240,11 +240,11 @@ def relative_std(cov, theta):
 
 
 def _scale(theta):
-    """What counts as determined for ``(m, rho, c, angles)``: 1 % of the mass, 1 mm, a thousandth of the
+    """What counts as determined for ``(m, com, c, angles)``: 1 % of the mass, 1 mm, a thousandth of the
     weight's force (a tenth of that in N m for the torque), 0.2 degrees."""
     scale = np.ones(len(theta))
     scale[0] = DETERMINED_REL * abs(theta[0])
-    scale[1:4] = DETERMINED_RHO
+    scale[1:4] = DETERMINED_COM
     scale[4:10] = max(abs(theta[0]) * 9.81, 1e-9) * 1e-3 * np.r_[np.full(3, 0.1), np.ones(3)]
     scale[10:] = np.radians(0.2)
     return scale
@@ -275,7 +275,7 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
     model : fmscal.observers.static_fit._Model
         Its ``jacobian(theta, R)`` gives a held pose's rows.
     theta : ndarray, shape (p,)
-        ``(m, rho, c, angles)``.
+        ``(m, com, c, angles)``.
     information : ndarray, shape (p, p)
         The fit's weighted information over ``theta``.
     weights : ndarray, shape (6,)

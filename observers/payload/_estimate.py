@@ -55,7 +55,7 @@ class _Rotations:
 
         ``calibrate`` estimates ``S`` in full, which absorbs the sensor's
         mounting ``M`` (sensor axes to the tracked frame's), so it works in
-        the tracked frame's axes: the centre of mass ``M rho``, the inertia
+        the tracked frame's axes: the centre of mass ``M com``, the inertia
         ``M I M^T`` and their uncertainties turned with them (the variances
         of a rotated vector's components: ``(M * M) var``, the correlations
         dropped), the mounting then the identity (None) and gravity as
@@ -75,7 +75,7 @@ class _Rotations:
             inertia_std = None                 # turning a tensor's uncertainty needs its covariance: not kept
         turn = lambda std: np.sqrt((M * M) @ np.square(np.asarray(std, dtype=float)))  # noqa: E731
         return PayloadEstimate(mass=float(self.mass), mass_std=float(self.mass_std),
-                               rho=M @ np.asarray(self.rho, dtype=float), rho_std=turn(self.rho_std),
+                               com=M @ np.asarray(self.com, dtype=float), com_std=turn(self.com_std),
                                inertia=inertia, inertia_std=inertia_std, b=self.b, b_std=self.b_std,
                                residual_rms=self.residual_rms, warnings=list(self.warnings),
                                converged=bool(self.converged), payload_determined=bool(self.payload_determined),
@@ -89,14 +89,15 @@ class _Rotations:
         The file, format ``fmscal-payload/1`` (:data:`PAYLOAD_FORMAT`)::
 
             {"format": "fmscal-payload/1", "axes": "tracked", "mass": kg, "mass_std": kg,
-             "rho": [x, y, z], "rho_std": [...], "inertia": [Ixx, Iyy, Izz, Ixy, Ixz, Iyz] or null,
+             "com": [x, y, z], "com_std": [...], "inertia": [Ixx, Iyy, Izz, Ixy, Ixz, Iyz] or null,
              "inertia_std": [...] or null, "gravity": [gx, gy, gz] or null, "converged": bool,
              "warnings": [...], "date": "..."}
 
-        ``rho`` in m, the inertia about the centre of mass in kg m^2 (null:
-        not determined, as from held poses), gravity in the pose frame in
-        m/s^2 where it was estimated (null: the default was used). Written
-        atomically.
+        ``com`` is the centre of mass in the sensor frame, m (files written
+        before name it ``rho``, ``rho_std``, and still read), the inertia
+        about the centre of mass in kg m^2 (null: not determined, as from
+        held poses), gravity in the pose frame in m/s^2 where it was
+        estimated (null: the default was used). Written atomically.
 
         Raises
         ------
@@ -111,7 +112,7 @@ class _Rotations:
         def listed(v):
             return None if v is None else [float(x) for x in np.ravel(v)]
         document = {"format": PAYLOAD_FORMAT, "axes": "tracked", "mass": t.mass, "mass_std": t.mass_std,
-                    "rho": listed(t.rho), "rho_std": listed(t.rho_std), "inertia": listed(t.inertia),
+                    "com": listed(t.com), "com_std": listed(t.com_std), "inertia": listed(t.inertia),
                     "inertia_std": listed(t.inertia_std), "gravity": listed(t.gravity),
                     "converged": bool(t.converged), "warnings": list(t.warnings),
                     "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
@@ -134,7 +135,7 @@ class PayloadEstimate(_Rotations):
     ----------
     mass, mass_std : float
         kg.
-    rho, rho_std : ndarray, shape (3,)
+    com, com_std : ndarray, shape (3,)
         Centre of mass in the sensor frame, m.
     inertia, inertia_std : ndarray, shape (6,), or None
         Inertia about the centre of mass, sensor axes (:data:`INERTIA_NAMES`),
@@ -167,8 +168,8 @@ class PayloadEstimate(_Rotations):
 
     mass: float
     mass_std: float
-    rho: np.ndarray
-    rho_std: np.ndarray
+    com: np.ndarray
+    com_std: np.ndarray
     inertia: np.ndarray
     inertia_std: np.ndarray
     b: np.ndarray
@@ -186,8 +187,8 @@ class PayloadEstimate(_Rotations):
         """The fields as JSON-ready numbers and lists (None where undetermined)."""
         def listed(v):
             return None if v is None else [float(x) for x in np.ravel(v)]
-        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
-                "rho_std": listed(self.rho_std), "inertia": listed(self.inertia),
+        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "com": listed(self.com),
+                "com_std": listed(self.com_std), "inertia": listed(self.inertia),
                 "inertia_std": listed(self.inertia_std), "b": listed(self.b), "b_std": listed(self.b_std),
                 "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
                 "converged": bool(self.converged), **self.rotations_dict(),
@@ -244,8 +245,9 @@ class PayloadEstimate(_Rotations):
         warnings = data.get("warnings", [])
         if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
             raise PayloadFileError(f"{path.name}: warnings must be a list of strings")
-        return cls(mass=mass, mass_std=float(numbers("mass_std", ())), rho=numbers("rho", (3,)),
-                   rho_std=numbers("rho_std", (3,)), inertia=numbers("inertia", (6,), True),
+        legacy = "com" not in data and "rho" in data          # files written before named the centre of mass rho
+        return cls(mass=mass, mass_std=float(numbers("mass_std", ())), com=numbers("rho" if legacy else "com", (3,)),
+                   com_std=numbers("rho_std" if legacy else "com_std", (3,)), inertia=numbers("inertia", (6,), True),
                    inertia_std=numbers("inertia_std", (6,), True), b=None, b_std=None, residual_rms=None,
                    warnings=warnings, converged=bool(data.get("converged", False)), payload_determined=True,
                    gravity=numbers("gravity", (3,), True))

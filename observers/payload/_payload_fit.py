@@ -2,7 +2,7 @@
 
 With the calibration ``S`` known (the identity, or a calibration file such
 as the factory matrix), the corrected reading ``S w_hat`` of a spatial log
-is linear in the ten inertial parameters ``pi = (m, h = m rho, I_O)`` and in
+is linear in the ten inertial parameters ``pi = (m, h = m com, I_O)`` and in
 the offset ``c = S b`` (Newton-Euler at the sensor point, in sensor axes;
 ``I_O`` the inertia about the sensor point)::
 
@@ -20,7 +20,7 @@ cluster-robust sandwich over blocks of time, so that correlated residuals
 (drift, smoothing) do not make it claim too much: the blocks five times the
 residuals' correlation time, not shorter than the smoothing window, and the
 small-sample factor of few blocks (:mod:`fmscal.observers.batch._cluster_covariance`).
-Then ``rho = h / m`` and ``I_c = I_O + m [rho]x^2`` (the parallel-axis
+Then ``com = h / m`` and ``I_c = I_O + m [com]x^2`` (the parallel-axis
 theorem), their uncertainties by the delta method.
 
 Like a pose table's fit, the log's reports what it covered and the held
@@ -207,7 +207,7 @@ def _coverage(fit, q, t, info):
     coverage`).
 
     The cone is of gravity's directions in the sensor frame over the log's
-    samples. The information is taken to the physical parameters ``(m, rho,
+    samples. The information is taken to the physical parameters ``(m, com,
     I_c, c, angles)`` (``F' = T^-T F T^-1``, ``T`` their Jacobian in ``pi``);
     the parameters the log determines worse than :data:`DETERMINED` (2 % of
     the mass, of the centre of mass's distance or 1 mm, of the inertia's mean
@@ -230,7 +230,7 @@ def _coverage(fit, q, t, info):
     T_inv = np.linalg.inv(T)
     F = T_inv.T @ info.information @ T_inv
     s2 = float(np.sum(info.residual ** 2) / max(info.residual.size - len(F), 1))
-    names = ("m", "rho_x", "rho_y", "rho_z", *(f"I_{n}" for n in INERTIA_NAMES), *(f"c_{n}" for n in _OFFSET_NAMES),
+    names = ("m", "com_x", "com_y", "com_z", *(f"I_{n}" for n in INERTIA_NAMES), *(f"c_{n}" for n in _OFFSET_NAMES),
              *model.names[10:])
     scale = np.r_[DETERMINED * values[0], np.full(3, max(DETERMINED * np.linalg.norm(values[1:4]), 1e-3)),
                   np.full(6, DETERMINED * max(np.mean(values[4:7]), 1e-9)), np.full(6, np.inf),
@@ -329,17 +329,17 @@ def _identify_rotations(name, motion, y, gravity, times, S, reading, estimate_gr
 
 
 def _physical(theta):
-    """``(m, rho, I_c entries)`` from ``pi = (m, h, I_O)``: ``rho = h / m``, ``I_c = I_O + m [rho]x^2``."""
+    """``(m, com, I_c entries)`` from ``pi = (m, h, I_O)``: ``com = h / m``, ``I_c = I_O + m [com]x^2``."""
     m, h, io = theta[0], theta[1:4], theta[4:10]
-    rho = h / m
+    com = h / m
     I_O = np.array([[io[0], io[3], io[4]], [io[3], io[1], io[5]], [io[4], io[5], io[2]]])
-    r = skew(rho)
+    r = skew(com)
     I_c = I_O + m * r @ r
-    return np.r_[m, rho, I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]]
+    return np.r_[m, com, I_c[0, 0], I_c[1, 1], I_c[2, 2], I_c[0, 1], I_c[0, 2], I_c[1, 2]]
 
 
 def _physical_jacobian(pi):
-    """``d (m, rho, I_c) / d pi`` by central differences, shape (10, 10)."""
+    """``d (m, com, I_c) / d pi`` by central differences, shape (10, 10)."""
     J = np.zeros((10, 10))
     step = 1e-7 * np.maximum(np.abs(pi), 1e-6)
     for i in range(10):
@@ -350,9 +350,9 @@ def _physical_jacobian(pi):
 
 
 def _possible(values):
-    """True when ``(m, rho, I_c)`` is a body that can exist (positive definite, triangle inequality)."""
+    """True when ``(m, com, I_c)`` is a body that can exist (positive definite, triangle inequality)."""
     try:
-        SpatialPayload(values[0], values[1:4], values[4:10])
+        SpatialPayload(values[0], values[4:10], values[1:4])
     except FmscalError:
         return False
     return True
@@ -375,11 +375,11 @@ def _report(theta, cov, S, residual_rms):
     b_std[~np.isfinite(np.diag(cov_c))] = np.inf
     warnings = []
     mass_ok = std[0] < DETERMINED * values[0]
-    rho_ok = np.all(std[1:4] < np.maximum(DETERMINED * np.linalg.norm(values[1:4]), 1e-3))
+    com_ok = np.all(std[1:4] < np.maximum(DETERMINED * np.linalg.norm(values[1:4]), 1e-3))
     inertia_scale = max(np.mean(values[4:7]), 1e-9)
     inertia_ok = bool(np.all(std[4:] < DETERMINED * inertia_scale)) and _possible(values)
     offset_ok = bool(np.all(np.isfinite(b_std)))
-    if not mass_ok or not rho_ok:
+    if not mass_ok or not com_ok:
         warnings.append("the mass and centre of mass are not determined: hold the payload at attitudes that turn "
                         "gravity through several directions in the sensor frame")
     if not inertia_ok:
@@ -388,8 +388,8 @@ def _report(theta, cov, S, residual_rms):
     if not offset_ok:
         warnings.append("the offset is not separated from the weight: turn gravity through more directions "
                         "in the sensor frame")
-    return PayloadEstimate(mass=values[0], mass_std=std[0], rho=values[1:4], rho_std=std[1:4],
+    return PayloadEstimate(mass=values[0], mass_std=std[0], com=values[1:4], com_std=std[1:4],
                       inertia=values[4:] if inertia_ok else None, inertia_std=std[4:] if inertia_ok else None,
                       b=b, b_std=b_std, residual_rms=residual_rms, warnings=warnings,
-                      converged=bool(mass_ok and rho_ok and inertia_ok and offset_ok),
-                      payload_determined=bool(mass_ok and rho_ok))
+                      converged=bool(mass_ok and com_ok and inertia_ok and offset_ok),
+                      payload_determined=bool(mass_ok and com_ok))

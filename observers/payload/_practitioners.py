@@ -8,7 +8,7 @@ not run):
   ``force_torque_sensor_calib`` and of the scripts labs write. With gravity
   along -z of the pose frame and the sensor square on the tracked frame,
   the force is ``f = m R^T (-g) + c_f`` (eq. (P1)), linear in the mass and
-  the force offset, and then the torque is ``tau = rho x f + c_tau``
+  the force offset, and then the torque is ``tau = com x f + c_tau``
   (eq. (P2)), linear in the centre of mass and the torque offset, with
   ``f`` the fitted weight.
 - :func:`calib_force`: ``calibForce`` of Robotlib.jl (``src/calibForce.jl``,
@@ -49,7 +49,7 @@ class ReferenceFit:
     ----------
     mass : float
         kg.
-    rho : ndarray, shape (3,), or None
+    com : ndarray, shape (3,), or None
         Centre of mass in the sensor frame, m (None: not estimated).
     b : ndarray, shape (6,)
         The offset in fmscal's convention (``w = S (sigma w_hat - b)``,
@@ -63,7 +63,7 @@ class ReferenceFit:
     """
 
     mass: float
-    rho: np.ndarray
+    com: np.ndarray
     b: np.ndarray
     mounting: np.ndarray
     force_rms: float
@@ -105,9 +105,9 @@ def plain_fit(q, w_hat, reading="reaction", g=9.81):
     X = np.concatenate([a[:, :, None], np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 4)
     m, *c_f = np.linalg.lstsq(X, y[:, 3:].ravel(), rcond=None)[0]                # eq. (P1)
     X = np.concatenate([-skew(m * a), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
-    sol = np.linalg.lstsq(X, y[:, :3].ravel(), rcond=None)[0]                    # eq. (P2): rho x f = -f x rho
+    sol = np.linalg.lstsq(X, y[:, :3].ravel(), rcond=None)[0]                    # eq. (P2): com x f = -f x com
     force_rms = float(np.sqrt(np.mean((y[:, 3:] - m * a - c_f) ** 2)))
-    return ReferenceFit(mass=float(m), rho=sol[:3], b=np.r_[sol[3:], c_f], mounting=None, force_rms=force_rms)
+    return ReferenceFit(mass=float(m), com=sol[:3], b=np.r_[sol[3:], c_f], mounting=None, force_rms=force_rms)
 
 
 def _nearest_rotation(A):
@@ -156,5 +156,5 @@ def calib_force(q, w_hat, reading="load", m0=0.3):
     # F = -(w_f + b_f) = f_load - b_f in the sensor's axes and Rf F + o = M f_load: Rf = M and o = M b_f
     b_f = Rf.T @ o
     residual = F @ Rf.T + o - mg * down
-    return ReferenceFit(mass=float(mg / CALIB_FORCE_G), rho=None, b=np.r_[np.full(3, np.nan), b_f], mounting=Rf,
+    return ReferenceFit(mass=float(mg / CALIB_FORCE_G), com=None, b=np.r_[np.full(3, np.nan), b_f], mounting=Rf,
                         force_rms=float(np.sqrt(np.mean(residual ** 2))))

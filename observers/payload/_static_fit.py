@@ -3,7 +3,7 @@
 A held pose does not accelerate, so the corrected reading is the weight's
 wrench at the sensor (SPATIAL facts, Newton-Euler at rest) plus the offset::
 
-    y_k = sigma S w_hat_k = [rho x f_k; f_k] + c,       f_k = m M^T R_k^T (-g)
+    y_k = sigma S w_hat_k = [com x f_k; f_k] + c,       f_k = m M^T R_k^T (-g)
 
 with ``R_k`` the tracked frame's attitude at pose ``k``, ``M`` the sensor's
 axes on it (the mounting; the identity unless estimated), ``g`` gravity in the
@@ -12,7 +12,7 @@ reports the wrench the mount applies to the payload (the toolkit's
 convention, ``reaction``) or ``-1`` for one that reports the wrench the tool
 applies to the sensor (``load``: ATI, Robotiq, Bota, OnRobot).
 
-The unknowns are ``m``, ``rho`` (3), ``c`` (6), and where asked the direction
+The unknowns are ``m``, ``com`` (3), ``c`` (6), and where asked the direction
 of gravity (two angles; its size is the standard 9.81 m/s^2 unless told) and
 the mounting ``M`` (a rotation, three angles). The fit is nonlinear least
 squares (Levenberg-Marquardt, :func:`scipy.optimize.least_squares`), started
@@ -46,7 +46,7 @@ from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
 from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
 from fmscal.observers.batch import InverseDynamicsFit, fit_readings
-from ._coverage import (DETERMINED_REL, DETERMINED_RHO, _OFFSET_NAMES, cone_deg as _cone, covariance, in_words,
+from ._coverage import (DETERMINED_REL, DETERMINED_COM, _OFFSET_NAMES, cone_deg as _cone, covariance, in_words,
                         next_poses, rotation as _exp)
 from ._estimate import _Rotations
 
@@ -72,7 +72,7 @@ class StaticFit(_Rotations):
     ----------
     mass, mass_std : float
         kg.
-    rho, rho_std : ndarray, shape (3,)
+    com, com_std : ndarray, shape (3,)
         Centre of mass in the sensor frame, m.
     b, b_std : ndarray, shape (6,)
         The sensor's offset in ``w = S (sigma w_hat - b)``, reading order, N m and N.
@@ -92,7 +92,7 @@ class StaticFit(_Rotations):
     converged : bool
         Mass, centre of mass, offset (and gravity, mounting where asked) all determined.
     payload_determined : bool
-        The mass and the centre of mass each determined (within ``DETERMINED_REL`` and ``DETERMINED_RHO`` of
+        The mass and the centre of mass each determined (within ``DETERMINED_REL`` and ``DETERMINED_COM`` of
         :mod:`fmscal.observers.payload._coverage`).
     cov : ndarray
         Covariance of the fitted parameters (:attr:`names` order).
@@ -102,8 +102,8 @@ class StaticFit(_Rotations):
 
     mass: float
     mass_std: float
-    rho: np.ndarray
-    rho_std: np.ndarray
+    com: np.ndarray
+    com_std: np.ndarray
     b: np.ndarray
     b_std: np.ndarray
     reading: str = "reaction"
@@ -121,8 +121,8 @@ class StaticFit(_Rotations):
         """The fields as JSON-ready numbers and lists (None where not estimated); the keys of ``identify-payload``."""
         def listed(v):
             return None if v is None else [float(x) for x in np.ravel(v)]
-        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "rho": listed(self.rho),
-                "rho_std": listed(self.rho_std), "inertia": None, "inertia_std": None, "b": listed(self.b),
+        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "com": listed(self.com),
+                "com_std": listed(self.com_std), "inertia": None, "inertia_std": None, "b": listed(self.b),
                 "b_std": listed(self.b_std), **self.rotations_dict(), "reading": self.reading,
                 "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
                 "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
@@ -159,28 +159,28 @@ class _Model:
         self.d0, self.M0 = d0, M0
         self.e1, self.e2 = _tangent_basis(d0)
         self.estimate_gravity, self.estimate_mounting = estimate_gravity, estimate_mounting
-        self.names = ("m", "rho_x", "rho_y", "rho_z", *(f"c_{n}" for n in _OFFSET_NAMES),
+        self.names = ("m", "com_x", "com_y", "com_z", *(f"c_{n}" for n in _OFFSET_NAMES),
                       *(("gravity_1", "gravity_2") if estimate_gravity else ()),
                       *(("mount_x", "mount_y", "mount_z") if estimate_mounting else ()))
 
     def parts(self, theta):
-        """``m, rho, c, gravity direction, M`` from the parameter vector."""
-        m, rho, c = theta[0], theta[1:4], theta[4:10]
+        """``m, com, c, gravity direction, M`` from the parameter vector."""
+        m, com, c = theta[0], theta[1:4], theta[4:10]
         k = 10
         d = self.d0
         if self.estimate_gravity:
             d = _exp(theta[k] * self.e1 + theta[k + 1] * self.e2) @ self.d0
             k += 2
         M = self.M0 @ _exp(theta[k:k + 3]) if self.estimate_mounting else self.M0
-        return m, rho, c, d, M
+        return m, com, c, d, M
 
     def predict(self, theta, R=None):
         """The corrected reading each pose would show, shape (N, 6)."""
-        m, rho, c, d, M = self.parts(theta)
+        m, com, c, d, M = self.parts(theta)
         R = self.R if R is None else R
         a = np.einsum("ji,nkj,k->ni", M, R, -self.g_size * d)              # M^T R^T (-g), sensor axes
         f = m * a
-        return np.hstack([np.cross(rho, f), f]) + c
+        return np.hstack([np.cross(com, f), f]) + c
 
     def jacobian(self, theta, R=None, step=1e-7):
         """d predict / d theta by central differences, shape (6N, p)."""
@@ -232,7 +232,7 @@ def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
     a = np.einsum("ji,nkj,k->ni", M0, R, -g_size * d0)
     force = m * a
     c_f = np.mean(f - force, axis=0)
-    # the torques: tau = rho x f + c_tau = -[f]x rho + c_tau, linear in rho and c_tau
+    # the torques: tau = com x f + c_tau = -[f]x com + c_tau, linear in com and c_tau
     X = np.concatenate([-skew(force), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
     sol = np.linalg.lstsq(X, y[:, :3].ravel(), rcond=None)[0]
     return np.r_[m, sol[:3], sol[3:], c_f], d0, M0, g_size
@@ -295,7 +295,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
                      "the mass and the offset")
     model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting)
-    m, rho, c, d, M = model.parts(theta)
+    m, com, c, d, M = model.parts(theta)
     if m <= 0:
         raise FmscalError(other_convention(table.name, m, reading))
     if estimate_gravity and d[2] > 0 and g[2] < 0:
@@ -308,7 +308,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     b_std = np.sqrt(np.maximum(np.diag(S_inv @ np.where(np.isfinite(cov[4:10, 4:10]), cov[4:10, 4:10], 0)
                                        @ S_inv.T), 0))
     b_std[~np.isfinite(np.diag(cov)[4:10])] = np.inf
-    out = StaticFit(mass=float(m), mass_std=float(std[0]), rho=rho, rho_std=std[1:4], b=b, b_std=b_std,
+    out = StaticFit(mass=float(m), mass_std=float(std[0]), com=com, com_std=std[1:4], b=b, b_std=b_std,
                     reading=reading, residual_rms=sd, cov=cov, names=model.names)
     k = 10
     if estimate_gravity:
@@ -335,7 +335,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         out.converged = False
     elif not out.undetermined and not determined:
         out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
-                            f"{DETERMINED_RHO * 1e3:g} mm: record more poses, tilted further")
+                            f"{DETERMINED_COM * 1e3:g} mm: record more poses, tilted further")
     out.next_poses = next_poses(model, theta, information, weights, s2, R, [f"pose {k + 1}" for k in range(len(R))])
     return out
 
@@ -597,18 +597,18 @@ def rotation_warning(fixed_rms, gravity, tilted=None, mounted=None):
     return mount
 
 
-def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
+def calibrate_table(table, mass, com, gravity=GRAVITY, reading="reaction"):
     """``S`` and the offset from a pose table, the payload known: what held poses can and cannot determine.
 
     At a held pose the payload needs the weight's wrench at the sensor,
-    ``w_k = [rho x f_k; f_k]`` with ``f_k = -m R_k^T g`` (Newton-Euler at
+    ``w_k = [com x f_k; f_k]`` with ``f_k = -m R_k^T g`` (Newton-Euler at
     rest, :func:`fmscal.observers.payload.regressor` with no motion),
     exact given the pose. The reading is ``sigma w_hat_k = A w_k + b`` with
     ``A = S^-1`` (eq. 3 inverted); it is fitted row by row by least squares
     on the exact regressor ``[w_k; 1]``, the rows independent
     (:func:`fmscal.observers.batch.fit_readings`): no errors
     in variables. The wrenches ``w_k`` span at most three of the six
-    directions (the torque is ``rho x f``, fixed by the force), so ``A``, and
+    directions (the torque is ``com x f``, fixed by the force), so ``A``, and
     with it ``S``, is determined on at most three: on the others the estimate
     keeps the identity, and they are reported as undetermined directions of
     the reading (where ``S_hat`` is the identity, the same directions). No
@@ -622,7 +622,7 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
     table : plant.PoseTable
     mass : float
         The payload's mass, kg.
-    rho : array_like, shape (3,)
+    com : array_like, shape (3,)
         Its centre of mass in the sensor frame, m.
     gravity : array_like, shape (3,)
         Gravity in the pose frame, m/s^2.
@@ -641,14 +641,14 @@ def calibrate_table(table, mass, rho, gravity=GRAVITY, reading="reaction"):
         raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
     sign = reading_sign(reading)
     g = as_finite_array(gravity, (3,), "gravity")
-    rho = as_finite_array(rho, (3,), "rho")
+    com = as_finite_array(com, (3,), "com")
     if not (np.isfinite(mass) and mass > 0):
         raise FmscalError(f"mass must be a positive number of kg; got {mass}")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
     _refuse_untilted(table.name, np.moveaxis(rotation_matrix(table.q.T), -1, 0), g, "S and the offset")
     still = np.zeros((len(table), 3))
-    pi = np.r_[mass, mass * rho, np.zeros(6)]                         # (m, h, I_O): the inertia plays no part
+    pi = np.r_[mass, mass * com, np.zeros(6)]                         # (m, h, I_O): the inertia plays no part
     w = regressor(table.q, still, still, still, g) @ pi                # (N, 6), exact given the poses
     # the reading on the wrench: [A | b], A = S^-1, the identity where the poses say nothing
     inverse = fit_readings(sign * table.w_hat, w, prior=np.c_[np.eye(6), np.zeros(6)], held=True)
@@ -721,7 +721,7 @@ def gravity_up(name, z, reading):
 
 
 def _determined(out, std):
-    return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_RHO)
+    return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_COM)
                 and np.all(np.isfinite(std)))
 
 

@@ -19,16 +19,18 @@ The file is JSON, format ``fmscal-calibration/2``::
 
     {"format": "fmscal-calibration/2", "kind": "planar" | "spatial" | "table",
      "S": [[...] x n], "S_std": [[...] x n] or null, "b": [...] or null, "b_std": [...] or null,
-     "cov": [[...]] or null, "payload": {"mass", "inertia", "rho"}, "method": "max-likelihood",
+     "cov": [[...]] or null, "payload": {"mass", "inertia", "rho" | "com"}, "method": "max-likelihood",
      "log": {"name": "run.csv", "sha256": "..."}, "latency": s or null, "latency_std": s or null,
      "latency_estimated": false, "gravity": [gx, gy, gz] or null, "noise": {...} or null,
      "date": "2026-11-22T10:00:00+00:00", "forced": false, "reading": "reaction",
      "converged": true, "warnings": [...], "undetermined": [...], "undetermined_directions": [[...]]}
 
 ``n`` is 3 (planar: ``b`` is ``[M, f_x, f_y]``, the payload's ``rho`` 2
-numbers and ``inertia`` 1) or 6 (spatial and tables: ``b`` in the reading's
-order ``tx .. fz``, ``rho`` 3 numbers and ``inertia`` its 6 entries ``Ixx Iyy
-Izz Ixy Ixz Iyz``). A ``null`` entry of ``S_std`` or ``b_std`` is one the data
+numbers, the sensor from the centre of mass, and ``inertia`` 1) or 6 (spatial
+and tables: ``b`` in the reading's order ``tx .. fz``, the payload's ``com`` 3
+numbers, the centre of mass from the sensor, and ``inertia`` its 6 entries
+``Ixx Iyy Izz Ixy Ixz Iyz``; files written before name ``com`` ``rho``, and
+still read). A ``null`` entry of ``S_std`` or ``b_std`` is one the data
 did not determine (infinite in memory). ``cov`` is the covariance of the
 estimated entries ``[S | c]`` flat in row order (``c = -S b``; ``S`` alone
 without the offset), where the method gives one. ``latency`` is signed (s,
@@ -478,12 +480,13 @@ class Calibration:
         model = _case(data["S"])
         n = len(model.wrench_names)
         if not isinstance(data["payload"], dict):
-            raise CalibrationFileError(f"{source}: payload must be an object with mass, inertia and rho; "
-                                       f"got {_short(data['payload'])}")
+            raise CalibrationFileError(f"{source}: payload must be an object with mass, inertia and "
+                                       f"{model.payload_position}; got {_short(data['payload'])}")
         try:
             file_payload = model.payload_type.from_dict(data["payload"])
         except (KeyError, TypeError, ValueError) as err:
-            raise CalibrationFileError(f"{source}: payload must hold mass, inertia and rho ({err})") from None
+            raise CalibrationFileError(f"{source}: payload must hold mass, inertia and {model.payload_position} "
+                                       f"({err})") from None
         if payload is not None and (type(payload) is not type(file_payload) or not file_payload.isclose(payload)):
             raise CalibrationFileError(f"{source}: made for another payload ({_describe(file_payload)}), "
                                        f"not {_describe(payload)}")
@@ -609,6 +612,7 @@ def _short(value, limit=60):
 def _describe(payload):
     """The payload in words: its mass, centre of mass and inertia, named as its model declares them."""
     model = next(m for m in MODELS if isinstance(payload, m.payload_type))
-    rho = ", ".join(f"{r:g}" for r in payload.rho)
+    name = model.payload_position
+    position = ", ".join(f"{r:g}" for r in getattr(payload, name))
     inertia = ", ".join(f"{n} = {i:g}" for n, i in zip(model.inertia_names, np.atleast_1d(payload.inertia)))
-    return f"m = {payload.mass:g} kg, rho = ({rho}) m, {inertia} kg m^2"
+    return f"m = {payload.mass:g} kg, {name} = ({position}) m, {inertia} kg m^2"

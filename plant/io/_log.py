@@ -583,7 +583,7 @@ def read_truth(path):
             schedule = CalibrationSchedule(data["S"])
         else:
             schedule = CalibrationSchedule([(t0, S) for t0, S in data["S_schedule"]])
-        known = {"scenario", "seed", "S", "S_schedule", "S0", "mass", "inertia", "rho", "noise", "told_noise",
+        known = {"scenario", "seed", "S", "S_schedule", "S0", "mass", "inertia", "rho", "com", "noise", "told_noise",
                  "offset", "latency"}
         offset = data.get("offset")
         spatial = schedule.size == 6

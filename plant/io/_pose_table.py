@@ -173,7 +173,7 @@ def simulate_table(payload, n=12, seed=0, gravity=GRAVITY, S=None, offset=None, 
     g = np.asarray(gravity, dtype=float)
     a_g = np.einsum("ji,nkj,k->ni", M, R, -g)                                # -M^T R^T g: the sensor's axes
     f = payload.mass * a_g
-    tau = np.cross(np.asarray(payload.rho), f)
+    tau = np.cross(np.asarray(payload.com), f)
     w = np.hstack([tau, f])
     S = np.eye(6) if S is None else np.asarray(S, dtype=float)
     b = np.zeros(6) if offset is None else np.asarray(offset, dtype=float)
@@ -352,7 +352,7 @@ def simulate_attitude_log(payload, poses=10, hold=2.0, move=1.5, dt=0.01, seed=0
     R = Slerp(key_t, rot)(t)
     a = np.einsum("nkj,k->nj", R.as_matrix(), -np.asarray(gravity, dtype=float))
     f = payload.mass * a
-    w = np.hstack([np.cross(np.asarray(payload.rho), f), f])
+    w = np.hstack([np.cross(np.asarray(payload.com), f), f])
     moving = np.ones(len(t), dtype=bool)
     for k in range(poses):
         moving &= ~((t >= k * (hold + move)) & (t <= k * (hold + move) + hold))

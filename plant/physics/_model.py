@@ -89,9 +89,13 @@ class Model:
     #: The payload's class: what the model is built on, ``cls(payload)`` (and ``cls(payload, gravity)``
     #: where :attr:`under_gravity`).
     payload_type = None
-    #: The numbers the payload's centre of mass and inertia take, by name (:meth:`payload_from`'s ``rho`` and
-    #: ``inertia``, a command line's ``--rho`` and ``--inertia``).
-    rho_names = inertia_names = ()
+    #: The payload's position vector: its field's name, and the command line's flag (``--rho``, ``--com``):
+    #: ``"rho"`` the planar payload's (the paper's: the sensor seen from the centre of mass), ``"com"`` the
+    #: spatial one's (the centre of mass seen from the sensor, the opposite vector).
+    payload_position = None
+    #: The numbers that vector and the inertia take, by name (:meth:`payload_from`'s ``position`` and
+    #: ``inertia``, a command line's ``--rho`` or ``--com``, and ``--inertia``).
+    payload_position_names = inertia_names = ()
     #: The model takes the gravity in the pose frame (``cls(payload, gravity)``, attribute ``gravity``).
     under_gravity = False
     #: The reading's sign is a convention the caller states (``"reaction"`` or ``"load"``,
@@ -117,10 +121,11 @@ class Model:
         self.payload = payload
 
     @classmethod
-    def payload_from(cls, mass, rho, inertia):
-        """The payload of ``mass`` (kg), ``rho`` (m) and ``inertia`` (kg m^2), in the order of
-        :attr:`rho_names` and :attr:`inertia_names`; the payload class checks them (one-line
-        :class:`FmscalError` naming ``mass``, ``rho`` or ``inertia``)."""
+    def payload_from(cls, mass, inertia, position):
+        """The payload of ``mass`` (kg), ``inertia`` (kg m^2) and ``position`` (m, the vector
+        :attr:`payload_position` names), in the order of :attr:`inertia_names` and
+        :attr:`payload_position_names`; the payload class checks them (one-line :class:`FmscalError`
+        naming ``mass``, ``inertia``, ``rho`` or ``com``)."""
         raise NotImplementedError
 
     def __repr__(self):
@@ -551,7 +556,7 @@ class PlanarModel(Model):
     paper_equations = True
     residual_panels = (("theta", "mrad", (0,)), ("X", "mm", (1,)), ("Y", "mm", (2,)))
     payload_type = Payload
-    rho_names, inertia_names = ("RX", "RY"), ("I_G",)
+    payload_position, payload_position_names, inertia_names = "rho", ("RX", "RY"), ("I_G",)
     optional_offset = True
     given_noise = True
     force_channels = (1, 2)
@@ -566,9 +571,10 @@ class PlanarModel(Model):
         super().__init__(payload)
 
     @classmethod
-    def payload_from(cls, mass, rho, inertia):
-        """The :class:`Payload` of ``mass`` (kg), ``rho`` ``(RX, RY)`` (m) and ``inertia`` ``(I_G,)`` (kg m^2)."""
-        return Payload(mass, inertia[0], tuple(rho))
+    def payload_from(cls, mass, inertia, position):
+        """The :class:`Payload` of ``mass`` (kg), ``inertia`` ``(I_G,)`` (kg m^2) and ``position``, its ``rho``
+        ``(RX, RY)`` (m, the sensor from the centre of mass)."""
+        return Payload(mass, inertia[0], tuple(position))
 
     def measure(self, x):
         """The pose ``[theta, X, Y]`` the state shows (the measurement map, ``C_1``, ``C_2`` of eqs. 4, 5)."""
@@ -655,7 +661,8 @@ class SpatialModel(Model):
     attitude = "quaternion"
     residual_panels = (("x, y, z", "mm", (0, 1, 2)), ("about the sensor axes", "mrad", (3, 4, 5)))
     payload_type = SpatialPayload
-    rho_names, inertia_names = ("X", "Y", "Z"), ("IXX", "IYY", "IZZ", "IXY", "IXZ", "IYZ")
+    payload_position, payload_position_names = "com", ("X", "Y", "Z")
+    inertia_names = ("IXX", "IYY", "IZZ", "IXY", "IXZ", "IYZ")
     under_gravity = True
     signed_reading = True
     force_channels = (3, 4, 5)
@@ -672,10 +679,10 @@ class SpatialModel(Model):
         self.gravity = tuple(float(g) for g in as_finite_array(gravity, (3,), "gravity"))
 
     @classmethod
-    def payload_from(cls, mass, rho, inertia):
-        """The :class:`SpatialPayload` of ``mass`` (kg), ``rho`` ``(X, Y, Z)`` (m, sensor frame) and ``inertia``
-        ``(IXX, IYY, IZZ, IXY, IXZ, IYZ)`` (kg m^2, about the centre of mass, sensor axes)."""
-        return SpatialPayload(mass, tuple(rho), tuple(inertia))
+    def payload_from(cls, mass, inertia, position):
+        """The :class:`SpatialPayload` of ``mass`` (kg), ``inertia`` ``(IXX, IYY, IZZ, IXY, IXZ, IYZ)`` (kg m^2,
+        about the centre of mass, sensor axes) and ``position``, its ``com`` ``(X, Y, Z)`` (m, sensor frame)."""
+        return SpatialPayload(mass, tuple(inertia), tuple(position))
 
     def _key(self):
         return type(self), self.payload, self.gravity
@@ -695,7 +702,7 @@ class SpatialModel(Model):
         Returns
         -------
         ndarray, shape (61,)
-            ``m`` (kg), ``rho`` (m), ``I_c`` and ``I_c^-1`` row by row (:meth:`SpatialPayload.as_vector`),
+            ``m`` (kg), ``com`` (m), ``I_c`` and ``I_c^-1`` row by row (:meth:`SpatialPayload.as_vector`),
             the two 3x6 blocks of ``A`` the payload alone makes, row by row (:meth:`input_matrix`), and the
             gravity (m/s^2, world frame).
         """
@@ -809,8 +816,8 @@ class SpatialModel(Model):
         From :func:`fmscal.plant.physics.body_acceleration`, with
         ``K = I_c^-1``::
 
-            alpha  = K tau_O - K [rho]x f + alpha_0
-            p_ddot = R ([rho]x K tau_O + (I/m - [rho]x K [rho]x) f) + ...
+            alpha  = K tau_O - K [com]x f + alpha_0
+            p_ddot = R ([com]x K tau_O + (I/m - [com]x K [com]x) f) + ...
         """
         R = rigid_body.rotation_matrix(x[3:7])
         if isinstance(self.payload, rigid_body.PayloadSymbols):              # read at run time
@@ -823,9 +830,9 @@ class SpatialModel(Model):
 
     def _input_blocks(self):
         """The blocks of :meth:`input_matrix` the payload alone makes, ``K = I_c^-1``:
-        ``[[rho]x K, I/m - [rho]x K [rho]x]`` and ``[K, -K [rho]x]``, each shape (3, 6)."""
+        ``[[com]x K, I/m - [com]x K [com]x]`` and ``[K, -K [com]x]``, each shape (3, 6)."""
         K = self.payload.I_c_inv
-        r = rigid_body.skew(self.payload.rho)
+        r = rigid_body.skew(self.payload.com)
         top = np.hstack([r @ K, np.eye(3) / self.payload.mass - r @ K @ r])
         bottom = np.hstack([K, -K @ r])
         return top, bottom
@@ -842,10 +849,10 @@ class SpatialModel(Model):
         return rigid_body.state_derivative(x, w, self.payload, self.gravity)
 
     # --- the momenta about the centre of mass (what a law linear in [S | c] reads in 3D) ------------------
-    # About the centre of mass C (p_C = p + R rho) the two momenta are driven linearly by the wrench, in the
+    # About the centre of mass C (p_C = p + R com) the two momenta are driven linearly by the wrench, in the
     # world frame (what the adaptive observer's law in 3D reads, fmscal.observers.AdaptiveObserver):
-    #     d/dt (m v_C) = R f + m g,    d/dt H = R tau_C,    tau_C = tau_O - rho x f,    H = R I_c omega     (M)
-    # Each method below is written once for numbers and casadi symbols; rho is taken as numbers.
+    #     d/dt (m v_C) = R f + m g,    d/dt H = R tau_C,    tau_C = tau_O - com x f,    H = R I_c omega     (M)
+    # Each method below is written once for numbers and casadi symbols; com is taken as numbers.
     def momentum_groups(self):
         """The momenta's channels that share a parameter set: ``H`` (0-2, driven by ``phi_t``) and ``m v_C``
         (3-5, driven by ``phi_f``), as :meth:`Model.parameter_groups` for linear channels.
@@ -857,11 +864,11 @@ class SpatialModel(Model):
         return [[0, 1, 2], [3, 4, 5]]
 
     @staticmethod
-    def momentum_phi_from_params(s, n, rho):
+    def momentum_phi_from_params(s, n, com):
         """The two groups' parameters from ``vec([S | c])`` (row order): ``[phi_t, phi_f]`` of eq. (M).
 
-        ``phi_f = vec(S_f)`` (rows 3-5 of ``[S | c]``), ``phi_t = vec(S_t - [rho]x S_f)`` (the rows of the
-        torque about ``C``, ``tau_C = tau_O - rho x f``), row order; linear, inverse of
+        ``phi_f = vec(S_f)`` (rows 3-5 of ``[S | c]``), ``phi_t = vec(S_t - [com]x S_f)`` (the rows of the
+        torque about ``C``, ``tau_C = tau_O - com x f``), row order; linear, inverse of
         :meth:`momentum_params_from_phi`.
 
         Parameters
@@ -869,7 +876,7 @@ class SpatialModel(Model):
         s : ndarray or casadi.SX, shape (6 n,)
         n : int
             Columns of ``[S | c]``: 6, or 7 with the offset.
-        rho : array_like, shape (3,)
+        com : array_like, shape (3,)
             The centre of mass in the sensor frame, m (numbers).
 
         Returns
@@ -879,11 +886,11 @@ class SpatialModel(Model):
         o = ops(s)
         S = _as_rows(o, s, 6, n)
         S_t, S_f = S[0:3, :], S[3:6, :]
-        return [_flat(o, S_t - o.dot(_constant(o, rigid_body.skew(rho)), S_f)), _flat(o, S_f)]
+        return [_flat(o, S_t - o.dot(_constant(o, rigid_body.skew(com)), S_f)), _flat(o, S_f)]
 
     @staticmethod
-    def momentum_params_from_phi(phis, n, rho):
-        """``vec([S | c])`` (row order) from ``[phi_t, phi_f]``: ``S_t = T + [rho]x S_f``, eq. (M) inverted
+    def momentum_params_from_phi(phis, n, com):
+        """``vec([S | c])`` (row order) from ``[phi_t, phi_f]``: ``S_t = T + [com]x S_f``, eq. (M) inverted
         (:meth:`momentum_phi_from_params`).
 
         Returns
@@ -892,7 +899,7 @@ class SpatialModel(Model):
         """
         o = ops(*phis)
         T, S_f = _as_rows(o, phis[0], 3, n), _as_rows(o, phis[1], 3, n)
-        return o.vcat([_flat(o, T + o.dot(_constant(o, rigid_body.skew(rho)), S_f)), _flat(o, S_f)])
+        return o.vcat([_flat(o, T + o.dot(_constant(o, rigid_body.skew(com)), S_f)), _flat(o, S_f)])
 
     def momentum_regressor(self, R, w_aug):
         """``Psi = R (x) w^T`` (3 x 3 n): the drive of either momentum of eq. (M), ``Psi phi`` = ``R (Phi w)``
@@ -959,15 +966,15 @@ class SpatialModel(Model):
         return h / 2 * (spin0 + spin1) - h * h / 12 * _cross(o, spin0, spin1)
 
     def centre_of_mass_momentum(self, pose):
-        """``m p_C = m (p + R rho)`` of a measured pose ``[q, p]`` (log order), shape (3,); numbers or symbols."""
+        """``m p_C = m (p + R com)`` of a measured pose ``[q, p]`` (log order), shape (3,); numbers or symbols."""
         o = ops(pose)
         R = rigid_body.rotation_matrix(pose[0:4])
-        return self.payload.mass * (pose[4:7] + o.dot(R, _constant(o, self.payload.rho)))
+        return self.payload.mass * (pose[4:7] + o.dot(R, _constant(o, self.payload.com)))
 
     def state_from_momenta(self, y, lin, q, H):
         """The motion state ``[p, q, v, omega]`` from the motion about ``C`` (eq. (M) read back).
 
-        ``omega = I_c^-1 R^T H``, ``p = y / m - R rho``, ``v = l / m - R (omega x rho)``.
+        ``omega = I_c^-1 R^T H``, ``p = y / m - R com``, ``v = l / m - R (omega x com)``.
 
         Parameters
         ----------
@@ -979,10 +986,10 @@ class SpatialModel(Model):
             The angular momentum about ``C``, world frame.
         """
         o = ops(y, lin, q, H)
-        m, rho = self.payload.mass, _constant(o, self.payload.rho)
+        m, com = self.payload.mass, _constant(o, self.payload.com)
         R = rigid_body.rotation_matrix(q)
         omega = o.dot(_constant(o, self.payload.I_c_inv), o.dot(R.T, H))
-        return o.vcat([y / m - o.dot(R, rho), q, lin / m - o.dot(R, _cross(o, omega, rho)), omega])
+        return o.vcat([y / m - o.dot(R, com), q, lin / m - o.dot(R, _cross(o, omega, com)), omega])
 
     def turn(self, q, R, v):
         """``exp(v / 2) (x) q``: the attitude ``q`` (rotation ``R``) turned by the rotation vector ``v`` (world

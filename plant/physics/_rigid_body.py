@@ -10,15 +10,15 @@ moves in 3D under gravity. Conventions (fixed by the spatial log format):
 - wrench ``w = [tau_O, f]``, torque first as the planar ``[M, f_x, f_y]``:
   the wrench the mount applies to the payload, in ``B``, the torque about
   ``O``;
-- payload: mass ``m``, centre of mass ``rho`` (``C`` in ``B``), inertia
+- payload: mass ``m``, centre of mass ``com`` (``C`` in ``B``), inertia
   ``I_c`` about ``C`` in ``B`` axes (:class:`SpatialPayload`).
 
 With ``omega``, ``alpha`` the angular velocity and acceleration in ``B`` and
 ``a_g = R^T (p_ddot - g)`` the origin's acceleration less gravity in ``B``,
 the wrench a motion needs is (inverse dynamics, :func:`sensor_wrench`)::
 
-    f     = m (a_g + alpha x rho + omega x (omega x rho))
-    tau_O = I_c alpha + omega x (I_c omega) + rho x f
+    f     = m (a_g + alpha x com + omega x (omega x com))
+    tau_O = I_c alpha + omega x (I_c omega) + com x f
 
 and the motion a wrench makes (forward dynamics, :func:`body_acceleration`)
 solves the same two lines for ``alpha`` and ``p_ddot``. Both are written
@@ -71,8 +71,6 @@ class SpatialPayload:
     ----------
     mass : float
         Mass ``m`` in kg, positive.
-    rho : array_like, shape (3,)
-        Centre of mass ``C`` in the sensor frame ``B``, in m.
     inertia : array_like, shape (6,) or (3, 3)
         Inertia tensor about ``C`` in ``B`` axes, kg m^2: either the six
         entries ``Ixx Iyy Izz Ixy Ixz Iyz`` (the tensor's own entries, as
@@ -80,6 +78,11 @@ class SpatialPayload:
         negated products of inertia) or the symmetric 3x3 matrix. It must be
         positive definite and its principal moments must satisfy the
         triangle inequality (``I_1 + I_2 >= I_3``), as every real body does.
+    com : array_like, shape (3,)
+        Centre of mass ``C`` seen from the sensor: its position in the
+        sensor frame ``B``, in m. (The planar :class:`~fmscal.plant.Payload`'s
+        ``rho`` is the opposite vector, the sensor seen from the centre of
+        mass, as the paper writes it.)
 
     Attributes
     ----------
@@ -88,19 +91,21 @@ class SpatialPayload:
 
     Examples
     --------
-    >>> p = SpatialPayload(1.2, [0.0, 0.01, 0.05], [2e-3, 2e-3, 1e-3, 0, 0, 0])
+    >>> p = SpatialPayload(1.2, [2e-3, 2e-3, 1e-3, 0, 0, 0], [0.0, 0.01, 0.05])
     >>> p.I_c.shape
     (3, 3)
+    >>> p.com
+    (0.0, 0.01, 0.05)
     """
 
     mass: float
-    rho: tuple
     inertia: tuple
+    com: tuple
 
     def __post_init__(self):
         object.__setattr__(self, "mass", as_positive_scalar(self.mass, "mass"))
-        rho = as_finite_array(self.rho, (3,), "rho")
-        object.__setattr__(self, "rho", tuple(float(r) for r in rho))
+        com = as_finite_array(self.com, (3,), "com")
+        object.__setattr__(self, "com", tuple(float(r) for r in com))
         inertia = np.array(self.inertia, dtype=float) if np.size(self.inertia) in (6, 9) else None
         if inertia is None or inertia.shape not in ((6,), (3, 3)):
             shape = "x".join(str(s) for s in np.shape(self.inertia)) or "scalar"
@@ -144,36 +149,37 @@ class SpatialPayload:
         Returns
         -------
         ndarray, shape (22,)
-            ``m`` (kg), ``rho`` (3, m), ``I_c`` (9, row by row, kg m^2) and ``I_c^-1`` (9, row by row).
+            ``m`` (kg), ``com`` (3, m), ``I_c`` (9, row by row, kg m^2) and ``I_c^-1`` (9, row by row).
         """
-        return np.r_[self.mass, self.rho, self.I_c.ravel(), self.I_c_inv.ravel()]
+        return np.r_[self.mass, self.com, self.I_c.ravel(), self.I_c_inv.ravel()]
 
     @property
     def I_O(self):
-        """The inertia tensor about the sensor point: ``I_c - m [rho]x^2`` (parallel axes), shape (3, 3)."""
-        r = skew(self.rho)
+        """The inertia tensor about the sensor point: ``I_c - m [com]x^2`` (parallel axes), shape (3, 3)."""
+        r = skew(self.com)
         return self.I_c - self.mass * r @ r
 
     @property
     def inertial_parameters(self):
-        """``pi = (m, m rho, I_O)``: the ten parameters the wrench is linear in, ``I_O`` as its six entries."""
+        """``pi = (m, m com, I_O)``: the ten parameters the wrench is linear in, ``I_O`` as its six entries."""
         I_O = self.I_O
-        return np.r_[self.mass, self.mass * np.asarray(self.rho),
+        return np.r_[self.mass, self.mass * np.asarray(self.com),
                      I_O[0, 0], I_O[1, 1], I_O[2, 2], I_O[0, 1], I_O[0, 2], I_O[1, 2]]
 
     def to_dict(self):
-        """Return ``{"mass", "rho", "inertia"}`` (inertia as the six entries) for JSON files."""
-        return {"mass": self.mass, "rho": list(self.rho), "inertia": list(self.inertia)}
+        """Return ``{"mass", "inertia", "com"}`` (inertia as the six entries) for JSON files."""
+        return {"mass": self.mass, "inertia": list(self.inertia), "com": list(self.com)}
 
     @classmethod
     def from_dict(cls, data):
-        """Build from a mapping with keys ``mass``, ``rho``, ``inertia``."""
-        return cls(data["mass"], data["rho"], data["inertia"])
+        """Build from a mapping with keys ``mass``, ``inertia``, ``com`` (or ``rho``, the name files written
+        before took for the centre of mass)."""
+        return cls(data["mass"], data["inertia"], data["rho"] if "rho" in data and "com" not in data else data["com"])
 
     def isclose(self, other, rtol=1e-9):
         """Return True if ``other`` has the same mass properties."""
         return bool(np.isclose(self.mass, other.mass, rtol=rtol)
-                    and np.allclose(self.rho, other.rho, rtol=rtol, atol=1e-12)
+                    and np.allclose(self.com, other.com, rtol=rtol, atol=1e-12)
                     and np.allclose(self.inertia, other.inertia, rtol=rtol, atol=1e-15))
 
 
@@ -228,7 +234,7 @@ class PayloadSymbols:
     Attributes
     ----------
     mass : casadi.SX
-    rho : casadi.SX, shape (3,)
+    com : casadi.SX, shape (3,)
     I_c, I_c_inv : casadi.SX, shape (3, 3)
     """
 
@@ -239,14 +245,14 @@ class PayloadSymbols:
             got = f"a casadi.SX of {values.numel()} entries" if isinstance(values, ca.SX) else type(values).__name__
             raise ValueError(f"PayloadSymbols takes a casadi.SX of {self.size} entries; got {got}")
         self.mass = values[0]
-        self.rho = values[1:4]
+        self.com = values[1:4]
         self.I_c = ca.reshape(values[4:13], 3, 3).T               # casadi reshapes column by column
         self.I_c_inv = ca.reshape(values[13:22], 3, 3).T
 
 
-def _rho(payload):
-    """The centre of mass ``rho``: numbers as an array, or a :class:`PayloadSymbols`' expression."""
-    return payload.rho if isinstance(payload.rho, ca.SX) else np.array(payload.rho)
+def _com(payload):
+    """The centre of mass ``com``: numbers as an array, or a :class:`PayloadSymbols`' expression."""
+    return payload.com if isinstance(payload.com, ca.SX) else np.array(payload.com)
 
 
 def unit_quaternions(q, name, rows=None, hint=""):
@@ -331,8 +337,8 @@ def sensor_wrench(q, omega, alpha, p_ddot, payload, gravity=GRAVITY):
     Newton-Euler at the sensor point, in sensor axes::
 
         a_g   = R^T (p_ddot - g)
-        f     = m (a_g + alpha x rho + omega x (omega x rho))
-        tau_O = I_c alpha + omega x (I_c omega) + rho x f
+        f     = m (a_g + alpha x com + omega x (omega x com))
+        tau_O = I_c alpha + omega x (I_c omega) + com x f
 
     Parameters
     ----------
@@ -354,10 +360,10 @@ def sensor_wrench(q, omega, alpha, p_ddot, payload, gravity=GRAVITY):
     o = ops(q, omega, alpha, p_ddot)
     if not is_symbolic(q, omega, alpha, p_ddot):
         q, omega, alpha, p_ddot = (np.asarray(v, dtype=float) for v in (q, omega, alpha, p_ddot))
-    rho = _rho(payload)
+    com = _com(payload)
     a_g = o.dot(rotation_matrix(q).T, p_ddot - _vector(gravity, o))
-    f = payload.mass * (a_g + _cross(alpha, rho, o) + _cross(omega, _cross(omega, rho, o), o))
-    tau_O = _mv(payload.I_c, alpha, o) + _cross(omega, _mv(payload.I_c, omega, o), o) + _cross(rho, f, o)
+    f = payload.mass * (a_g + _cross(alpha, com, o) + _cross(omega, _cross(omega, com, o), o))
+    tau_O = _mv(payload.I_c, alpha, o) + _cross(omega, _mv(payload.I_c, omega, o), o) + _cross(com, f, o)
     return o.vcat([tau_O, f])
 
 
@@ -365,10 +371,10 @@ def body_acceleration(q, omega, w, payload, gravity=GRAVITY):
     """Forward dynamics: the accelerations a wrench ``w = [tau_O, f]`` makes.
 
     The two lines of :func:`sensor_wrench` solved for the motion. The torque
-    about the centre of mass ``tau_C = tau_O - rho x f`` turns the body::
+    about the centre of mass ``tau_C = tau_O - com x f`` turns the body::
 
         alpha  = I_c^-1 (tau_C - omega x (I_c omega))
-        a_g    = f / m - alpha x rho - omega x (omega x rho)
+        a_g    = f / m - alpha x com - omega x (omega x com)
         p_ddot = R a_g + g
 
     Parameters
@@ -392,11 +398,11 @@ def body_acceleration(q, omega, w, payload, gravity=GRAVITY):
     o = ops(q, omega, w)
     if not is_symbolic(q, omega, w):
         q, omega, w = (np.asarray(v, dtype=float) for v in (q, omega, w))
-    rho = _rho(payload)
+    com = _com(payload)
     tau_O, f = w[0:3], w[3:6]
-    tau_C = tau_O - _cross(rho, f, o)
+    tau_C = tau_O - _cross(com, f, o)
     alpha = _mv(payload.I_c_inv, tau_C - _cross(omega, _mv(payload.I_c, omega, o), o), o)
-    a_g = f / payload.mass - _cross(alpha, rho, o) - _cross(omega, _cross(omega, rho, o), o)
+    a_g = f / payload.mass - _cross(alpha, com, o) - _cross(omega, _cross(omega, com, o), o)
     return alpha, o.dot(rotation_matrix(q), a_g) + _vector(gravity, o)
 
 

@@ -38,7 +38,7 @@ from ._planar import pose_frames
 __all__ = ["SpatialScenario", "SPATIAL_SCENARIOS", "TOOL", "draw_spatial_S"]
 
 #: A 1.2 kg tool on a wrist sensor: centre of mass 6 cm out along z, a full inertia tensor (kg m^2).
-TOOL = SpatialPayload(1.2, (0.01, -0.005, 0.06), (4e-3, 5e-3, 2.5e-3, 2e-4, -1e-4, 1.5e-4))
+TOOL = SpatialPayload(1.2, (4e-3, 5e-3, 2.5e-3, 2e-4, -1e-4, 1.5e-4), (0.01, -0.005, 0.06))
 _MAX_SAMPLES = 20_000_000
 
 

@@ -53,7 +53,7 @@ EXPECTED = HERE / "expected"
 #: The payload of the planar paper scenario (``fmscal simulate --scenario paper``).
 PLANAR = ["--mass", "2.5", "--inertia", "0.75", "--rho", "0.2", "0.25"]
 #: The spatial scenarios' tool (:data:`fmscal.plant.scenarios._spatial.TOOL`).
-TOOL = ["--mass", "1.2", "--rho", "0.01", "-0.005", "0.06"]
+TOOL = ["--mass", "1.2", "--com", "0.01", "-0.005", "0.06"]
 TOOL_INERTIA = ["--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4", "1.5e-4"]
 #: The pose stream's delay behind the sensor in the planar log and in the late spatial log, s.
 PLANAR_LATENCY = 0.03
