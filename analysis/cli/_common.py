@@ -3,6 +3,7 @@
 import numpy as np
 
 from fmscal.plant import SCENARIOS
+from fmscal.plant.io import json_ready as strict
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import MODELS
 
@@ -19,21 +20,6 @@ MAX_SEEDS = 100_000
 
 class CliError(FmscalError):
     """A user error: printed as one line, exit status 2."""
-
-
-def strict(value):
-    """A JSON-ready copy: NaN and infinity become None, numpy scalars plain."""
-    if isinstance(value, dict):
-        return {k: strict(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [strict(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    return value
 
 
 #: What each payload's position vector is, in words (the models' :attr:`~fmscal.plant.Model.payload_position`).

@@ -60,7 +60,7 @@ from fmscal.plant.physics import MODELS, NoiseSpec, Payload, check_calibration
 from ._files import atomic_write_text, not_a_file
 
 __all__ = ["Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "FORMAT", "FORMATS", "READINGS",
-           "KINDS"]
+           "KINDS", "json_ready"]
 
 #: The format tag a calibration file is written with.
 FORMAT = "fmscal-calibration/2"
@@ -411,7 +411,7 @@ class Calibration:
                 out["E"] = self.E
                 out["E_torque"], out["E_force"] = self.E_blocks
         out["saved"] = bool(saved)
-        return json.dumps(_strict(out), allow_nan=False)
+        return json.dumps(json_ready(out), allow_nan=False)
 
     def save(self, path):
         """Write the calibration as JSON, format ``/2``, atomically (a temporary file, then a rename).
@@ -586,14 +586,23 @@ def _second_format(data, model, source):
     return out
 
 
-def _strict(value):
-    """A JSON-ready copy: arrays as lists, NaN and infinity as None, numpy scalars plain."""
+def json_ready(value):
+    """A JSON-ready copy of ``value``: arrays as lists, NaN and infinity as None, numpy scalars plain.
+
+    What every file and every ``--json`` of the toolkit writes goes through it (strict JSON: no NaN).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> json_ready({"S": np.eye(2), "sd": [np.inf, np.float64(0.5)], "ok": np.bool_(True)})
+    {'S': [[1.0, 0.0], [0.0, 1.0]], 'sd': [None, 0.5], 'ok': True}
+    """
     if isinstance(value, np.ndarray):
         value = value.tolist()
     if isinstance(value, dict):
-        return {k: _strict(v) for k, v in value.items()}
+        return {k: json_ready(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_strict(v) for v in value]
+        return [json_ready(v) for v in value]
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
