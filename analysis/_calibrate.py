@@ -9,7 +9,7 @@ its diagnostics, ready to ``save``.
 
 import copy
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +18,7 @@ from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observ
 from fmscal.observers.batch import describe_direction, estimate_latency
 from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE
 from fmscal.observers.diagnostics import consistency_check, has_evidence, offset_drift, saturation
-from fmscal.observers.payload import PayloadEstimate, other_convention
+from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
 from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
                           Truth, estimate_noise, read_log, read_truth)
@@ -221,6 +221,22 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         the case does not take, or an estimate of ``S`` that is singular (one
         line each).
     """
+    if isinstance(payload, StaticFit):                  # a pose table's fit stands for its payload as a log's does
+        payload = payload.tracked()
+    calibration = _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
+                                  wrench_noise, truth)
+    if isinstance(payload, PayloadEstimate) and not payload.converged:
+        # the payload is the model's: a fit that did not converge (a rotation it could not settle, too few poses)
+        # leaves every S estimated with it in doubt, whatever the log says
+        calibration = replace(calibration, converged=False, warnings=[
+            *calibration.warnings, "the payload estimate did not converge (identify-payload's warnings say why): "
+            "a calibration with its mass properties is not converged either"])
+    return calibration
+
+
+def _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise, wrench_noise,
+                    truth):
+    """:func:`calibrate` on its inputs, the payload estimate's own convergence aside."""
     if isinstance(data, (str, os.PathLike)):
         data = read_data(data)
     if isinstance(data, AttitudeLog):

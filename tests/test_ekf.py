@@ -136,6 +136,8 @@ def test_compiled_run_stops_where_the_filter_diverges():
     assert fast.diverged and slow.diverged and fast.S_std is None
     for run in (fast, slow):
         assert 1201 <= len(run.t) < 1400 and np.all(np.isfinite(run.S_hat_history))
+    assert abs(len(fast.t) - len(slow.t)) <= 50                # the paths stop within 0.05 s of each other
+    _close(fast.S_hat_history[:1200], slow.S_hat_history[:1200])   # and are one filter up to the jump
     out = output_layout(ekf.model, ekf.n_cols)
     Y = np.tile(out.pack(None, x=np.zeros(6), s=np.eye(3).ravel(), q=0.0, P_sum=1.0, P_min=1e-6), (5, 1))
     assert ekf._healthy_outputs(Y, 2000) == 5

@@ -419,3 +419,29 @@ def test_a_truth_is_taken_as_an_object_or_its_file(inputs):
                         truth="planar.truth.json")
     assert by_object.E == by_file.E and 0 < by_object.E < 0.1
     assert isinstance(read_data("planar.csv"), Log)
+
+
+@pytest.mark.parametrize("payload_converged", [True, False])
+def test_a_payload_estimate_that_did_not_converge_leaves_the_calibration_unconverged(payload_converged):
+    # a review found an estimate's own verdict ignored: its mass properties are the model's, so its doubt is S's
+    from fmscal.observers.payload import PayloadEstimate
+    from fmscal.plant import read_log
+    zeros = np.zeros(3)
+    estimate = PayloadEstimate(mass=1.2, mass_std=1e-3, com=np.array([0.01, -0.005, 0.06]), com_std=zeros + 1e-4,
+                               inertia=np.array([4e-3, 5e-3, 2.5e-3, 2e-4, -1e-4, 1.5e-4]), inertia_std=None,
+                               b=np.zeros(6), b_std=np.zeros(6), residual_rms=np.zeros(6),
+                               converged=payload_converged, payload_determined=True)
+    cal = calibrate(read_log(GOLDEN / "spatial.csv"), estimate)
+    assert cal.converged is payload_converged        # the golden spatial log calibrates as converged with it
+    assert any(w.startswith("the payload estimate did not converge") for w in cal.warnings) is not payload_converged
+
+
+def test_a_pose_tables_static_fit_stands_for_its_payload():
+    from fmscal.observers.payload import fit_static
+    from fmscal.plant.io import simulate_table
+    from fmscal.plant.scenarios import TOOL
+    table = simulate_table(TOOL, n=12, seed=0)
+    fit = fit_static(table)
+    by_fit = calibrate(table, fit)
+    by_numbers = calibrate(table, (fit.tracked().mass, fit.tracked().com))
+    np.testing.assert_array_equal(by_fit.S_hat, by_numbers.S_hat)

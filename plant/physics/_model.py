@@ -560,7 +560,8 @@ class PlanarModel(Model):
     optional_offset = True
     given_noise = True
     force_channels = (1, 2)
-    calibration_checks = ("units", "reference", "run", "consistency", "saturation", "offset_drift", "disagreement")
+    calibration_checks = ("units", "reference", "run", "evidence", "consistency", "saturation", "offset_drift",
+                          "disagreement")
     nq = nv = 3
     state = StateLayout(("theta", 1), ("theta_dot", 1), ("X", 1), ("X_dot", 1), ("Y", 1), ("Y_dot", 1))
     q_index, v_index = (0, 2, 4), (1, 3, 5)
