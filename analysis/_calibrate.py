@@ -25,6 +25,7 @@ from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, Singu
 from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, diagnose_units, held_table,
                              is_attitude_log, is_pose_table, not_a_file, read_attitude_log, read_joint_data,
                              read_pose_table, reading_sign)
+from fmscal.plant.numerics import as_bool
 from fmscal.plant.physics import GRAVITY, MODELS, as_model
 
 from ._metrics import calibration_error
@@ -221,6 +222,7 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         the case does not take, or an estimate of ``S`` that is singular (one
         line each).
     """
+    offset = as_bool(offset, "offset")                  # text ("False") is refused, not taken as true
     if isinstance(payload, StaticFit):                  # a pose table's fit stands for its payload as a log's does
         payload = payload.tracked()
     calibration = _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,

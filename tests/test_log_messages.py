@@ -82,7 +82,8 @@ def test_readings_that_never_change_are_refused_in_one_line_by_every_method(tmp_
     (lambda d: d["S"][0].__setitem__(0, True), "S must be numbers of shape (3, 3); got [[True"),
     (lambda d: d.__setitem__("b", ["0", 0, 0]), "b must be numbers of shape (3,); got ['0', 0, 0]"),
     (lambda d: d.__setitem__("payload", None), "payload must be an object with mass, inertia and rho; got None"),
-    (lambda d: d.__setitem__("S", [[1.0] * 6] * 5), "S must be finite numbers of shape (3, 3); got shape (5, 6)"),
+    (lambda d: d.__setitem__("S", [[1.0] * 6] * 5),
+     "S must be square, one row per reading component (3 or 6); got shape (5, 6)"),
 ])
 def test_a_calibration_file_takes_json_numbers_only(tmp_path, edit, message):
     # issue 37: "1.0" and true were read as numbers; a null payload gave a raw TypeError text
@@ -96,3 +97,26 @@ def test_a_calibration_file_takes_json_numbers_only(tmp_path, edit, message):
     with pytest.raises(FmscalError) as err:
         Calibration.load(tmp_path / "x.json")
     assert str(err.value).startswith(f"x.json: {message}")
+
+
+def test_offset_given_as_text_is_refused_on_every_input():
+    # a review found offset="False" taken silently on a pose table (it was refused only deep in a method)
+    from fmscal.analysis import calibrate
+    from fmscal.plant import FmscalError
+    from fmscal.plant.io import simulate_table
+    from fmscal.plant.scenarios import TOOL
+    table = simulate_table(TOOL, n=12, seed=0)
+    with pytest.raises(FmscalError, match="^offset must be True or False; got 'False'$"):
+        calibrate(table, (TOOL.mass, TOOL.com), offset="False")
+
+
+@pytest.mark.parametrize("converged", [True, False, None])
+def test_apply_warns_on_a_calibration_saved_unconverged_from_python(tmp_path, capsys, converged):
+    # the command line refuses to save one without --force; Calibration.save writes what it is given
+    from fmscal.plant import PAPER_PAYLOAD, PAPER_S, Calibration, get_scenario
+    log, _, _ = get_scenario("paper").with_(duration=2.0).generate(0)
+    log.write(tmp_path / "log.csv")
+    Calibration(S=PAPER_S, payload=PAPER_PAYLOAD, method="adaptive", converged=converged).save(tmp_path / "c.json")
+    assert main(["apply", str(tmp_path / "c.json"), str(tmp_path / "log.csv"), "--out", str(tmp_path / "w.csv")]) == 0
+    warned = "records a calibration that did not converge" in capsys.readouterr().err
+    assert warned is (converged is False)

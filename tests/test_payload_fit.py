@@ -214,3 +214,10 @@ def test_a_flag_given_as_text_is_refused_before_any_work(flag):
     log, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=2.0).generate(0)[:2]
     with pytest.raises(FmscalError, match=f"^{flag} must be True or False; got 'no'"):
         identify_payload(log, **{flag: "no"})
+
+
+def test_zero_gravity_is_refused_in_one_line_as_fit_static_refuses_it():
+    # a review found a LinAlgError traceback here, where the command line and fit_static refuse it
+    log, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=2.0).generate(0)[:2]
+    with pytest.raises(FmscalError, match="^gravity must not be zero$"):
+        identify_payload(log, gravity=(0.0, 0.0, 0.0))

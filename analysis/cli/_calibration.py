@@ -265,6 +265,9 @@ def cmd_apply(args):
     if calibration.forced:
         print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
               file=sys.stderr)
+    elif calibration.converged is False:          # saved from Python (Calibration.save writes what it is given)
+        print(f"fmscal apply: warning: {args.calibration} records a calibration that did not converge",
+              file=sys.stderr)
     t, w_hat = read_readings(args.readings)
     model = next(m for m in MODELS if len(m.wrench_names) == calibration.size)      # a calibration is of one
     if w_hat.shape[1] != calibration.size:

@@ -11,7 +11,7 @@ on the poses smoothed and differentiated by the same filter
 What a practitioner would write first. The poses are smoothed and
 differentiated (:func:`fmscal.plant.physics.spatial_motion`); with the
 payload known, Newton-Euler gives the wrench each sample needed
-(``w_k = W_k pi``, :func:`fmscal.observers.payload.regressor`); and
+(``w_k = W_k pi``, :func:`fmscal.plant.physics.regressor`); and
 ``w_k = S w_hat_k + c`` is fitted row by row by least squares on the
 augmented reading ``[w_hat_k; 1]``, the covariance cluster-robust over
 blocks of time. The smoothing biases the accelerations and the

@@ -16,7 +16,7 @@ recursive observers (:mod:`fmscal.observers.adaptive._adaptive`,
 
 On a configuration that does not move additively (a unit quaternion),
 :func:`move` takes the same step on the model's manifold: the configuration
-by :meth:`fmscal.plant.Model.integrate` of the position increment, the
+by :meth:`fmscal.plant.SpatialModel.integrate` of the position increment, the
 velocity additively. The spatial floor (:mod:`fmscal.observers.batch._linearised_floor`)
 and the spatial EKF (:mod:`fmscal.observers.kalman._error_state`) step with it.
 """
@@ -67,7 +67,7 @@ def move(model, x, a0, a1, h):
         q_{k+1}  = q_k (+) (h nu_k + h^2 (2 a_k + a_{k+1}) / 6)
         nu_{k+1} = nu_k + h (a_k + a_{k+1}) / 2
 
-    ``(+)`` is :meth:`fmscal.plant.Model.integrate` (in space a turn about
+    ``(+)`` is :meth:`fmscal.plant.SpatialModel.integrate` (in space a turn about
     the sensor's axes, so that ``h omega`` turns the body as the angular
     velocity does; in the plane an addition).
 

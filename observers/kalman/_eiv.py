@@ -281,7 +281,7 @@ def copy_predict(model, x0, x1, S, n0, n1, h, Phi, eps, Mn):
 
 def error_variances(model, noise):
     """The pose noise in the error state (``nv``): ``position_sd^2`` on each entry of the configuration's
-    difference (:meth:`fmscal.plant.Model.difference`) that the pose's position columns alone move,
+    difference (:meth:`fmscal.plant.SpatialModel.difference`) that the pose's position columns alone move,
     ``angle_sd^2`` on the others (spatial ``[dp, dphi]``: position then a turn about the sensor axes; planar
     ``[dtheta, dX, dY]``); each at least :data:`POSE_SD_FLOOR` squared."""
     position = _position_entries(model)

@@ -14,7 +14,7 @@ the pose's rows added to its information::
 ``F`` the fit's weighted information over the parameters a held pose
 informs (mass, centre of mass, offset, and gravity's and the mounting's
 angles where estimated), ``J_c`` the held pose's six weighted rows
-(:class:`fmscal.observers.static_fit._Model`), ``r`` how many times they
+(:class:`fmscal.observers.payload._static_fit._Model`), ``r`` how many times they
 count (one row of a table; the samples of a held pose of a log) and ``s^2``
 the weighted residuals' variance per degree of freedom.
 """
@@ -272,7 +272,7 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
 
     Parameters
     ----------
-    model : fmscal.observers.static_fit._Model
+    model : fmscal.observers.payload._static_fit._Model
         Its ``jacobian(theta, R)`` gives a held pose's rows.
     theta : ndarray, shape (p,)
         ``(m, com, c, angles)``.

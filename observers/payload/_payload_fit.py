@@ -97,6 +97,8 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     sign = reading_sign(reading)
     S = np.eye(6) if S is None else check_calibration(S, "S", size=6)
     gravity = as_finite_array(gravity, (3,), "gravity")
+    if not np.linalg.norm(gravity) > 0:                  # as fit_static: a direction is needed to weigh anything
+        raise FmscalError("gravity must not be zero")
     block = None if block is None else as_positive_scalar(block, "block")
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
@@ -178,7 +180,7 @@ class _Information(NamedTuple):
         ``pi`` and ``c``.
     eta : ndarray
         The angles of gravity's direction and of the mounting, where estimated (the parameters of
-        :class:`fmscal.observers.static_fit._Model`).
+        :class:`fmscal.observers.payload._static_fit._Model`).
     residual : ndarray
         The weighted residuals.
     weights : ndarray, shape (6,)

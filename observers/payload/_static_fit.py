@@ -602,7 +602,7 @@ def calibrate_table(table, mass, com, gravity=GRAVITY, reading="reaction"):
 
     At a held pose the payload needs the weight's wrench at the sensor,
     ``w_k = [com x f_k; f_k]`` with ``f_k = -m R_k^T g`` (Newton-Euler at
-    rest, :func:`fmscal.observers.payload.regressor` with no motion),
+    rest, :func:`fmscal.plant.physics.regressor` with no motion),
     exact given the pose. The reading is ``sigma w_hat_k = A w_k + b`` with
     ``A = S^-1`` (eq. 3 inverted); it is fitted row by row by least squares
     on the exact regressor ``[w_k; 1]``, the rows independent

@@ -477,6 +477,10 @@ class Calibration:
         missing = [k for k in ("S", "payload", "method") if k not in data]
         if missing:
             raise CalibrationFileError(f"{source}: missing key(s) {', '.join(missing)}")
+        if not any(np.shape(data["S"]) == (len(m.wrench_names),) * 2 for m in MODELS):
+            raise CalibrationFileError(f"{source}: S must be square, one row per reading component "
+                                       f"({' or '.join(str(len(m.wrench_names)) for m in MODELS)}); got shape "
+                                       f"{np.shape(data['S'])}")
         model = _case(data["S"])
         n = len(model.wrench_names)
         if not isinstance(data["payload"], dict):
