@@ -346,6 +346,24 @@ def test_a_payload_file_written_with_rho_before_still_reads(inputs):
     np.testing.assert_array_equal(old.com_std, new.com_std)
 
 
+
+@pytest.mark.parametrize("key, value, message", [
+    ("mass", "1.2", "mass must be 1 finite number(s)"),
+    ("mass_std", True, "mass_std must be 1 finite number(s)"),
+    ("converged", "false", "converged must be true or false; got 'false'"),
+    ("axes", "sensor", "axes must be \"tracked\""),
+])
+def test_a_payload_file_takes_numbers_booleans_and_its_axes_strictly(inputs, key, value, message):
+    # a review found "converged": "false" read as true and "mass": "1.2" as a number
+    from fmscal.observers.payload import PayloadFileError
+    assert _cli(["identify-payload", "table.csv", "--save", "payload.json"])[0] == 0
+    saved = json.loads(Path("payload.json").read_text())
+    PayloadEstimate.load("payload.json")                               # as written, it reads
+    Path("edited.json").write_text(json.dumps({**saved, key: value}))
+    with pytest.raises(PayloadFileError) as err:
+        PayloadEstimate.load("edited.json")
+    assert str(err.value).startswith(f"edited.json: {message}")
+
 def test_a_file_of_an_unknown_format_is_refused_in_one_line(tmp_path):
     document = json.loads((V1 / "spatial-v1.json").read_text())
     (tmp_path / "cal.json").write_text(json.dumps({**document, "format": "fmscal-calibration/3"}))

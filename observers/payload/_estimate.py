@@ -227,10 +227,19 @@ class PayloadEstimate(_Rotations):
             raise PayloadFileError(f"{path.name}: not an fmscal payload (format {str(got)[:60]!r}; expected "
                                    f"{PAYLOAD_FORMAT!r})")
 
+        if data.get("axes", "tracked") != "tracked":
+            raise PayloadFileError(f"{path.name}: axes must be \"tracked\" (the payload in the tracked frame's "
+                                   f"axes, as identify-payload --save writes it); got {str(data.get('axes'))[:40]!r}")
+        converged = data.get("converged", False)
+        if not isinstance(converged, bool):
+            raise PayloadFileError(f"{path.name}: converged must be true or false; got {str(converged)[:40]!r}")
+
         def numbers(key, shape, optional=False):
             value = data.get(key)
             if value is None and optional:
                 return None
+            if not _json_numbers(value):                 # text ("1.2") and true are not numbers
+                value = None
             try:
                 arr = np.array(value, dtype=float)
             except (TypeError, ValueError):
@@ -249,8 +258,15 @@ class PayloadEstimate(_Rotations):
         return cls(mass=mass, mass_std=float(numbers("mass_std", ())), com=numbers("rho" if legacy else "com", (3,)),
                    com_std=numbers("rho_std" if legacy else "com_std", (3,)), inertia=numbers("inertia", (6,), True),
                    inertia_std=numbers("inertia_std", (6,), True), b=None, b_std=None, residual_rms=None,
-                   warnings=warnings, converged=bool(data.get("converged", False)), payload_determined=True,
+                   warnings=warnings, converged=converged, payload_determined=True,
                    gravity=numbers("gravity", (3,), True))
+
+
+def _json_numbers(value):
+    """True when ``value`` is a JSON number or nested lists of them (no text, no booleans, no null)."""
+    if isinstance(value, list):
+        return all(_json_numbers(v) for v in value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 class PayloadFileError(FmscalError):
