@@ -14,9 +14,6 @@ from ._max_likelihood import (MaximumLikelihoodFit, fit_max_likelihood, log_step
 from ._linearised_floor import (fit_linearised, undetermined_directions, configuration_residuals, error_layout)
 from ._floor import (MaximumLikelihood)
 
-__all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "small_sample_factor", "correlation_time", "block_length",
-           "time_blocks", "few_blocks", "InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings",
-           "describe_direction", "nominal_motion", "smoothed_channels", "LeastSquares", "InverseDynamicsLeastSquares",
-           "SpatialLeastSquares", "LEAST_SQUARES_ENGINES", "FitReport", "phi_to_S_map", "estimate_latency",
-           "MaximumLikelihoodFit", "fit_max_likelihood", "log_steps", "fit_linearised", "undetermined_directions",
-           "configuration_residuals", "error_layout", "MaximumLikelihood"]
+__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "LeastSquares",
+           "InverseDynamicsLeastSquares", "FitReport", "estimate_latency", "MaximumLikelihoodFit",
+           "fit_max_likelihood", "fit_linearised", "undetermined_directions", "MaximumLikelihood"]

@@ -16,8 +16,5 @@ from ._base import (Observer, RecursiveObserver, Estimate, RunData, log_inputs, 
 # name for the other subpackages (``from fmscal.observers.core import matrix as mx``); not in __all__: plumbing.
 from . import _matrix as matrix
 
-__all__ = ["settled", "moved", "informed", "divergence_bound", "ObserverResult", "initial_calibration",
-           "split_calibration", "calibration_uncertainty", "offset_from_c", "offset_std", "check_sample", "pack_input",
-           "position_increment", "velocity_increment", "move", "progress_bar", "double_pole_gains", "check_gains",
-           "GainReport", "SubsystemGains", "sampled_poles", "Observer", "RecursiveObserver", "Estimate", "RunData",
-           "log_inputs"]
+__all__ = ["settled", "moved", "informed", "divergence_bound", "ObserverResult", "double_pole_gains", "check_gains",
+           "GainReport", "SubsystemGains", "sampled_poles", "Observer", "RecursiveObserver", "Estimate"]

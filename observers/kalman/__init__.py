@@ -14,10 +14,4 @@ from ._error_state import (error_step, wrench_noise, injection, whole_error_step
     error_params_layout, output_layout, copy_layout, eiv_copy)
 from ._ekf import (AugmentedEKF, FilterRun)
 
-__all__ = ["filter_layout", "input_layout", "params_layout", "initial_state", "filter_step", "bias_matrix",
-           "information_factor", "correction_limit", "pack_lower", "unpack_lower", "cholesky", "cholesky_apply",
-           "cholesky_solve", "spd_inverse", "solve_information", "NoiseLevel", "level_update", "EivCompensation",
-           "compensation_layout", "regressor_step", "copy_predict", "error_variances", "beta_from_copy",
-           "predict", "update", "reset", "symmetric",
-           "output_layout", "AugmentedEKF", "FilterRun", "error_step", "wrench_noise", "injection", "whole_error_step",
-           "error_state_layout", "error_params_layout", "copy_layout", "eiv_copy"]
+__all__ = ["NoiseLevel", "EivCompensation", "predict", "update", "AugmentedEKF", "FilterRun"]

@@ -11,8 +11,6 @@ from ._static_fit import (StaticFit, fit_static, calibrate_table, other_conventi
     MIN_CONE_DEG)
 from ._practitioners import (ReferenceFit, plain_fit, calib_force, CALIB_FORCE_G)
 
-__all__ = ["cone_deg", "covariance", "weak_directions", "describe", "in_words", "relative_std", "next_poses",
-           "rotation", "PayloadEstimate", "PayloadFileError", "identify_payload", "StaticFit",
-           "fit_static", "calibrate_table",
-           "other_convention", "tilt_warning", "mounting_warning", "rotation_warning", "both_rotations_warning",
-           "rotation_check", "Refit", "gravity_up", "ReferenceFit", "plain_fit", "calib_force"]
+__all__ = ["cone_deg", "next_poses", "rotation", "PayloadEstimate", "PayloadFileError", "identify_payload",
+           "StaticFit", "fit_static", "calibrate_table", "other_convention", "ReferenceFit", "plain_fit",
+           "calib_force"]

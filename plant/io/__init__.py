@@ -18,10 +18,9 @@ from ._bag_write import write_bag, write_tf_bag
 from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, POSE_TYPES, JOINT_TYPE, TF_TYPE,
     MAX_WRENCH_GAP, MAX_TILT_DEG, MAX_OUT_OF_PLANE)
 
-__all__ = ["json_ready", "write_bag", "write_tf_bag", "atomic_write", "atomic_write_text", "atomic_write_many",
-           "exclusive", "claim_folder", "not_a_file", "OutputExistsError", "not_an_output", "Log", "LogError", "Truth",
-           "read_log", "read_readings", "read_truth", "log_kind", "unit_quaternions", "estimate_noise", "implied_scale",
-           "diagnose_units", "UnitFinding", "Calibration", "CalibrationFileError", "file_sha256", "reading_sign",
-           "PoseTable", "read_pose_table", "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog",
-           "read_attitude_log", "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses",
-           "RobotKinematics", "joint_columns", "read_joint_data", "BagError", "import_bag", "read_bag", "format_report"]
+__all__ = ["json_ready", "write_bag", "write_tf_bag", "Log", "LogError", "Truth", "read_log", "read_readings",
+           "read_truth", "log_kind", "unit_quaternions", "estimate_noise", "diagnose_units", "UnitFinding",
+           "Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "PoseTable", "read_pose_table",
+           "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog", "read_attitude_log",
+           "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses", "RobotKinematics",
+           "read_joint_data", "BagError", "import_bag", "read_bag", "format_report"]

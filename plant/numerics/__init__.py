@@ -8,6 +8,5 @@ from ._checks import (as_finite_array, as_positive_scalar, as_bool, as_number, M
 from ._compile import (compile_function, compile_functions, compiler, BufferedCall, ChunkedSteps, build_once)
 from ._layout import (StateLayout)
 
-__all__ = ["FmscalError", "LogError", "is_symbolic", "ops", "as_finite_array", "as_positive_scalar", "as_bool",
-           "as_number", "compile_function", "compile_functions", "compiler", "BufferedCall", "ChunkedSteps",
-           "build_once", "StateLayout"]
+__all__ = ["FmscalError", "is_symbolic", "ops", "as_finite_array", "as_positive_scalar", "as_bool", "as_number",
+           "compiler", "StateLayout"]

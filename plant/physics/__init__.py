@@ -16,8 +16,7 @@ from ._model import (Model, PlanarModel, SpatialModel, MODELS, as_model, model_f
 
 __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
            "input_matrix", "acceleration", "state_derivative", "regressors", "phi_1", "phi_2", "S_from_phi",
-           "regressor", "inertia_matrix", "SpatialPayload", "PayloadSymbols", "quaternion_multiply",
-           "quaternion_conjugate", "rotation_matrix", "unit_quaternions", "sensor_wrench", "body_acceleration",
-           "prescribed_motion", "skew", "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine",
-           "SampledWrench", "spatial_motion", "smoothed_state", "edge", "Model", "PlanarModel", "SpatialModel",
-           "MODELS", "as_model", "model_for_columns"]
+           "regressor", "inertia_matrix", "SpatialPayload", "quaternion_multiply", "quaternion_conjugate",
+           "rotation_matrix", "unit_quaternions", "sensor_wrench", "body_acceleration", "prescribed_motion", "skew",
+           "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine", "SampledWrench", "spatial_motion",
+           "smoothed_state", "Model", "PlanarModel", "SpatialModel", "MODELS", "as_model"]
