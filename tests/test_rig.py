@@ -190,7 +190,7 @@ def _broken(data, **changes):
     ("not json", "not a JSON calibration file"),
     ({"format": "something-else"}, "not an fmscal calibration"),
     ({"S": KeyError}, "missing key"),
-    ({"S": [[1, 0], [0, 1]]}, "S must be finite numbers of shape (3, 3)"),
+    ({"S": [[1, 0], [0, 1]]}, "S must be square, one row per reading component (3 or 6); got shape (2, 2)"),
     ({"S": [[1, 0, 0], [0, 1, 0], [0, 0, float("nan")]]}, "S must be finite numbers"),
     ({"S": [[1, 0, 0], [0, 1, 0], [0, 0, 0]]}, "singular"),
     ({"b": [1, 2]}, "b must be finite numbers of shape (3,)"),
