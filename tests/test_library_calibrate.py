@@ -146,7 +146,8 @@ def test_a_load_reading_is_the_reaction_of_the_negated_log_and_the_callers_log_k
     also_wrong = calibrate(negated, TOOL, method="least-squares", latency=0.0)
     np.testing.assert_allclose(wrong.S_hat, also_wrong.S_hat, rtol=1e-12, atol=1e-14)
     assert not wrong.converged and not also_wrong.converged
-    assert "pass --reading reaction" in wrong.warnings[-1] and "convention" in wrong.why_unconverged
+    assert 'pass reading="reaction" (on the command line --reading reaction' in wrong.warnings[-1]
+    assert "convention" in wrong.why_unconverged
 
 
 def test_a_table_in_the_load_sign_is_the_negated_table_in_the_reaction_sign(inputs):
@@ -156,7 +157,8 @@ def test_a_table_in_the_load_sign_is_the_negated_table_in_the_reaction_sign(inpu
     np.testing.assert_array_equal(table.w_hat, before)
     reaction = calibrate(PoseTable(table.q, -table.w_hat, name=table.name), (TOOL.mass, TOOL.com))
     np.testing.assert_allclose(load.S_hat, reaction.S_hat, rtol=1e-12, atol=1e-14)
-    with pytest.raises(FmscalError, match="other sign convention; pass --reading load"):
+    with pytest.raises(FmscalError,
+                       match="other sign convention; pass reading=\"load\" \\(on the command line --reading load"):
         calibrate(table, (TOOL.mass, TOOL.com))                        # held.csv reads the load
 
 

@@ -41,7 +41,8 @@ def test_mass_centre_of_mass_and_offset_with_honest_uncertainties(twenty_seeds):
 
 def test_the_load_convention_is_named_never_a_negative_mass():
     table = simulate_table(TOOL, n=12, seed=3, offset=OFFSET, reading="load")
-    with pytest.raises(FmscalError, match="mass comes out negative .* pass --reading load"):
+    with pytest.raises(FmscalError,
+                       match="mass comes out negative .* pass reading=\"load\" \\(on the command line --reading load"):
         fit_static(table)
     fit = fit_static(table, reading="load")
     assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass and fit.reading == "load"

@@ -690,8 +690,8 @@ def other_convention(name, mass, reading):
     other = "load" if reading == "reaction" else "reaction"
     what = ("the force reading falls where the weight rises (a negative gain)" if mass is None
             else f"the mass comes out negative ({mass:.4g} kg)")
-    return (f"{name}: {what}: the reading follows the other sign convention; pass --reading {other} (the wrench the "
-            f"{_who(other)})")
+    return (f"{name}: {what}: the reading follows the other sign convention; pass reading=\"{other}\" (on the "
+            f"command line --reading {other}: the wrench the {_who(other)})")
 
 
 def gravity_up(name, z, reading):
