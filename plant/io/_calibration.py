@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics import FmscalError
+from fmscal.plant.numerics import FmscalError, short_repr
 from fmscal.plant.physics import MODELS, NoiseSpec, Payload, check_calibration
 
 from ._files import atomic_write_text, not_a_file
@@ -107,7 +107,7 @@ def reading_sign(reading):
         Neither convention.
     """
     if not isinstance(reading, str) or reading not in READINGS:
-        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {_short(reading)}")
+        raise FmscalError(f"reading must be one of {', '.join(READINGS)}; got {short_repr(reading)}")
     return 1.0 if reading == "reaction" else -1.0
 
 
@@ -119,11 +119,12 @@ def _matrix(value, shape, name, source, undetermined=False):
     """
     if not _json_numbers(value, undetermined):
         raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}"
-                                   f"{' (null: not determined)' if undetermined else ''}; got {_short(value)}")
+                                   f"{' (null: not determined)' if undetermined else ''}; got {short_repr(value)}")
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}; got {_short(value)}") from None
+        raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}; "
+                                   f"got {short_repr(value)}") from None
     if undetermined:
         arr[np.isnan(arr)] = np.inf                          # null in a file: not determined
     ok = np.isfinite(arr) | (undetermined & (arr == np.inf))
@@ -298,7 +299,7 @@ class Calibration:
             value = getattr(self, name)
             if value is not None:
                 if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value):
-                    raise FmscalError(f"{name} must be a finite number of seconds or None; got {_short(value)}")
+                    raise FmscalError(f"{name} must be a finite number of seconds or None; got {short_repr(value)}")
                 set_(self, name, float(value))
         if self.latency_std is not None and self.latency_std < 0:
             raise FmscalError(f"latency_std must be at least 0; got {self.latency_std}")
@@ -318,7 +319,7 @@ class Calibration:
         if self.kind is None:
             set_(self, "kind", model.name)
         if not _kind_of(self.kind, model):
-            raise FmscalError(f"kind must be one of {', '.join(KINDS)} (planar: a 3x3 S); got {_short(self.kind)}")
+            raise FmscalError(f"kind must be one of {', '.join(KINDS)} (planar: a 3x3 S); got {short_repr(self.kind)}")
         if self.date is None:
             set_(self, "date", datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
 
@@ -472,7 +473,7 @@ class Calibration:
             raise CalibrationFileError(f"{source}: not a calibration file (JSON nested too deeply)") from None
         if not isinstance(data, dict) or data.get("format") not in FORMATS:
             got = data.get("format") if isinstance(data, dict) else type(data).__name__
-            raise CalibrationFileError(f"{source}: not an fmscal calibration (format {_short(got)}; expected "
+            raise CalibrationFileError(f"{source}: not an fmscal calibration (format {short_repr(got)}; expected "
                                        f"{' or '.join(map(repr, FORMATS))})")
         missing = [k for k in ("S", "payload", "method") if k not in data]
         if missing:
@@ -485,7 +486,7 @@ class Calibration:
         n = len(model.wrench_names)
         if not isinstance(data["payload"], dict):
             raise CalibrationFileError(f"{source}: payload must be an object with mass, inertia and "
-                                       f"{model.payload_position}; got {_short(data['payload'])}")
+                                       f"{model.payload_position}; got {short_repr(data['payload'])}")
         try:
             file_payload = model.payload_type.from_dict(data["payload"])
         except (KeyError, TypeError, ValueError) as err:
@@ -506,16 +507,17 @@ class Calibration:
         log = data.get("log") or {}
         if not isinstance(log, dict) or not all(isinstance(log.get(k, ""), str) for k in ("name", "sha256")):
             raise CalibrationFileError(f"{source}: log must be an object with a name and a sha256 (strings); "
-                                       f"got {_short(log)}")
+                                       f"got {short_repr(log)}")
         forced = data.get("forced", False)
         if not isinstance(forced, bool):
-            raise CalibrationFileError(f"{source}: forced must be true or false; got {_short(forced)}")
+            raise CalibrationFileError(f"{source}: forced must be true or false; got {short_repr(forced)}")
         reading = data.get("reading", "reaction")
         if reading not in READINGS:
-            raise CalibrationFileError(f"{source}: reading must be one of {', '.join(READINGS)}; got {_short(reading)}")
+            raise CalibrationFileError(f"{source}: reading must be one of {', '.join(READINGS)}; "
+                                       f"got {short_repr(reading)}")
         for key in ("method", "date"):
             if data.get(key) is not None and not isinstance(data[key], str):
-                raise CalibrationFileError(f"{source}: {key} must be a string; got {_short(data[key])}")
+                raise CalibrationFileError(f"{source}: {key} must be a string; got {short_repr(data[key])}")
         if second:
             optional.update(_second_format(data, model, source))
         elif model.under_gravity and data["method"] == "static-least-squares":    # /1 did not say: held poses' fit
@@ -549,19 +551,19 @@ def _second_format(data, model, source):
     if kind is not None:
         if not _kind_of(kind, model):
             raise CalibrationFileError(f"{source}: kind must be one of {', '.join(KINDS)} (planar: a 3x3 S); "
-                                       f"got {_short(kind)}")
+                                       f"got {short_repr(kind)}")
         out["kind"] = kind
     latency_std = data.get("latency_std")
     if latency_std is not None:
         if isinstance(latency_std, bool) or not isinstance(latency_std, (int, float)) or not latency_std >= 0 \
                 or not np.isfinite(latency_std):
             raise CalibrationFileError(f"{source}: latency_std must be a non-negative number of seconds or null; "
-                                       f"got {_short(latency_std)}")
+                                       f"got {short_repr(latency_std)}")
         out["latency_std"] = latency_std
     for key in ("latency_estimated", "converged"):
         value = data.get(key)
         if value is not None and not isinstance(value, bool):
-            raise CalibrationFileError(f"{source}: {key} must be true, false or null; got {_short(value)}")
+            raise CalibrationFileError(f"{source}: {key} must be true, false or null; got {short_repr(value)}")
     out["latency_estimated"] = bool(data.get("latency_estimated") or False)
     out["converged"] = data.get("converged")
     if data.get("gravity") is not None:
@@ -580,12 +582,12 @@ def _second_format(data, model, source):
     for key in ("warnings", "undetermined"):
         value = data.get(key, [])
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise CalibrationFileError(f"{source}: {key} must be a list of strings; got {_short(value)}")
+            raise CalibrationFileError(f"{source}: {key} must be a list of strings; got {short_repr(value)}")
         out[key] = value
     directions = data.get("undetermined_directions", [])
     if not isinstance(directions, list):
         raise CalibrationFileError(f"{source}: undetermined_directions must be a list of vectors; "
-                                   f"got {_short(directions)}")
+                                   f"got {short_repr(directions)}")
     out["undetermined_directions"] = [_matrix(d, (n + 1,), "undetermined_directions", source) for d in directions]
     return out
 
@@ -614,12 +616,6 @@ def json_ready(value):
     if isinstance(value, (float, np.floating)):
         return float(value) if np.isfinite(value) else None
     return value
-
-
-def _short(value, limit=60):
-    """``repr(value)`` cut to ``limit`` characters, for messages."""
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def _describe(payload):

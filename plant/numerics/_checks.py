@@ -6,7 +6,7 @@ import numpy as np
 
 from ._errors import FmscalError
 
-__all__ = ["as_finite_array", "as_positive_scalar", "as_bool", "as_number", "MAX_SCALAR"]
+__all__ = ["as_finite_array", "as_positive_scalar", "as_bool", "as_number", "MAX_SCALAR", "short_repr"]
 
 #: Largest setting (a gain, a standard deviation, ...) accepted: beyond it squares and products of
 #: settings overflow double precision, and no physical quantity in SI units comes near it.
@@ -35,7 +35,7 @@ def as_finite_array(value, shape, name):
             raise TypeError
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise FmscalError(f"{name} must be numeric; got {_short(value)}") from None
+        raise FmscalError(f"{name} must be numeric; got {short_repr(value)}") from None
     if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape)):
         expected = "x".join("N" if s == -1 else str(s) for s in shape) or "scalar"
         actual = "x".join(str(a) for a in arr.shape) or "scalar"
@@ -64,7 +64,7 @@ def as_number(value, name):
     if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "fiu":
         value = value[()]
     if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
-        raise FmscalError(f"{name} must be a number; got {_short(value)}")
+        raise FmscalError(f"{name} must be a number; got {short_repr(value)}")
     return float(value)
 
 
@@ -74,7 +74,7 @@ def as_bool(value, name):
     Text is refused: ``"false"`` would be true as a Python truth value.
     """
     if not isinstance(value, (bool, np.bool_)):
-        raise FmscalError(f"{name} must be True or False; got {_short(value)}")
+        raise FmscalError(f"{name} must be True or False; got {short_repr(value)}")
     return bool(value)
 
 
@@ -87,7 +87,13 @@ def _numbers_only(value):
     return isinstance(value, numbers.Real)
 
 
-def _short(value, limit=60):
-    """``repr(value)`` cut to ``limit`` characters, for a one-line message."""
+def short_repr(value, limit=60):
+    """``repr(value)`` cut to ``limit`` characters, for a one-line message.
+
+    Examples
+    --------
+    >>> short_repr("x" * 100, limit=5)
+    "'xxxx..."
+    """
     text = repr(value)
     return text if len(text) <= limit else text[:limit] + "..."
