@@ -458,7 +458,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
         reading=reading, gravity=model.gravity if model.under_gravity else None, noise=noise,
         noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
-        fit=None if reference is None else {k: v for k, v in reference.report.items() if k != "warnings"},
+        fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
         E=E, E_blocks=E_blocks, notes=list(log.notes), kind=cls.name, run=result,
         why_unconverged=None if converged else why))

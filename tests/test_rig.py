@@ -87,8 +87,8 @@ def test_mass_and_S_scale_together_unseen():
     wrong = LeastSquares(perturbed(PAPER_PAYLOAD, "mass", 0.1))
     S_right, S_wrong = right.run(log).S_hat, wrong.run(log).S_hat
     np.testing.assert_allclose(S_wrong, distortion("mass", 0.1, PAPER_PAYLOAD) @ S_right, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(wrong.report["residual_rms"], right.report["residual_rms"], rtol=1e-9)
-    assert not wrong.report["warnings"]           # nothing in the data says the mass is wrong
+    np.testing.assert_allclose(wrong.report.residual_rms, right.report.residual_rms, rtol=1e-9)
+    assert not wrong.report.warnings           # nothing in the data says the mass is wrong
 
 
 def test_a_50_hz_log_with_dropped_frames_calibrates_close_to_full_rate():

@@ -17,6 +17,8 @@ equations of all windows for ``phi``; windows are kept short so that the
 twice-integrated wrench noise stays near the pose noise.
 """
 
+from dataclasses import asdict, dataclass, field
+
 import numpy as np
 
 from fmscal.plant import S_from_phi, phi_1
@@ -38,16 +40,36 @@ EXCITATION_COND_LIMIT = 1e4
 CONSISTENCY_RATIO_LIMIT = 10.0
 
 
-class FitReport(dict):
-    """Diagnostics of a least-squares fit (a dict).
+@dataclass
+class FitReport:
+    """Diagnostics of a least-squares fit (None before a run).
 
-    Keys: ``information_cond`` (condition number of the information matrix,
-    columns scaled to unit diagonal), ``weakest_direction`` (the entries of
-    ``S``, 3x3, along which the data say least), ``residual_rms``
-    (``[theta, X, Y]`` after the fit), ``pose_noise_estimate`` (from the
-    log's high-frequency content), ``consistency_ratio`` (largest
-    residual over noise ratio), and ``warnings`` (list of one-line str).
+    Attributes
+    ----------
+    information_cond : float
+        Condition number of the information matrix, columns scaled to unit diagonal.
+    weakest_direction : list
+        The entries of ``S`` (n_w x n_w) along which the data say least.
+    residual_rms : list
+        The fit's residual per pose channel (planar ``[theta, X, Y]``).
+    pose_noise_estimate : list
+        The pose noise per channel, from the log's high-frequency content.
+    consistency_ratio : float
+        The largest residual over noise ratio.
+    warnings : list of str
+        One line each.
     """
+
+    information_cond: float = None
+    weakest_direction: list = None
+    residual_rms: list = None
+    pose_noise_estimate: list = None
+    consistency_ratio: float = None
+    warnings: list = field(default_factory=list)
+
+    def to_dict(self):
+        """The diagnostics as JSON-ready values (``fmscal calibrate --json``'s ``fit``, with the warnings)."""
+        return asdict(self)
 
 
 class LeastSquares(Observer):
@@ -155,8 +177,8 @@ class LeastSquares(Observer):
         minimises over the poses' delay: ``sum_c (r_c / sigma_c)^2`` over the pose channels ``c``, ``r_c``
         the fit's residual rms and ``sigma_c`` the pose noise estimated from the log (floored at 1e-12)."""
         self.run(log)
-        rms = np.asarray(self.report["residual_rms"])
-        sd = np.maximum(np.asarray(self.report["pose_noise_estimate"]), 1e-12)
+        rms = np.asarray(self.report.residual_rms)
+        sd = np.maximum(np.asarray(self.report.pose_noise_estimate), 1e-12)
         return float(np.sum((rms / sd) ** 2))
 
     def _double_integrals(self, log):
@@ -280,8 +302,8 @@ class LeastSquares(Observer):
         calibration = np.hstack(histories) @ T.T
         calibration[-1] = S_aug.ravel()
         return Estimate(calibration, self._fitted_motion(log, Z, phis, windows), cov=cov_S,
-                        checks_passed=not self.report["warnings"], info={"fit": self.report},
-                        warnings=list(self.report["warnings"]))
+                        checks_passed=not self.report.warnings, info={"fit": self.report},
+                        warnings=list(self.report.warnings))
 
     def offset_bias(self, log, S, b):
         """What an offset left out does to the fit: the predicted ``S_hat - S`` (the planar model).

@@ -60,7 +60,7 @@ def log_uncertainty(log, model, offset=False, enough=None, prefix=EVIDENCE_PREFI
         else:
             # planar: the fit's excitation check; spatial (a batch fit with no report): its undetermined directions
             poor = (bool(result.info["undetermined"]) if "undetermined" in result.info
-                    else not fit.report["information_cond"] <= EXCITATION_COND_LIMIT)
+                    else not fit.report.information_cond <= EXCITATION_COND_LIMIT)
             value = np.inf if poor or result.S_std is None else float(
                 np.linalg.norm(result.S_std, 2) / max(np.linalg.norm(result.S_hat, 2), 1e-300))
         if enough is None or value <= enough:
