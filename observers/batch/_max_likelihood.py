@@ -187,6 +187,11 @@ class MaximumLikelihoodFit:
         return self.S_aug[:, :len(self.S_aug)].copy()
 
     @property
+    def cov(self):
+        """The covariance of the entries of ``[S | c]``, row by row (``cov_aug``: the name every result uses)."""
+        return self.cov_aug
+
+    @property
     def S_std(self):
         """One-sigma uncertainty of each entry of ``S``, shape (n_w, n_w)."""
         return calibration_uncertainty(self.S_aug, self.cov_aug, self.offset)[0]
