@@ -78,6 +78,14 @@ CASES = {
     "planar-calibrate-least-squares-latency-given": [
         ["calibrate", "planar.csv", *PLANAR, "--observer", "least-squares", "--latency", repr(PLANAR_LATENCY),
          "--truth", "planar.truth.json", "--json"]],
+    # the online methods on the same log (pinned after issue 36's one EKF and one adaptive observer: the outputs
+    # of the merged classes, for the next refactor to reproduce)
+    "planar-calibrate-ekf-latency-given": [
+        ["calibrate", "planar.csv", *PLANAR, "--observer", "ekf", "--latency", repr(PLANAR_LATENCY),
+         "--truth", "planar.truth.json", "--json"]],
+    "planar-calibrate-adaptive-latency-given": [
+        ["calibrate", "planar.csv", *PLANAR, "--observer", "adaptive", "--latency", repr(PLANAR_LATENCY),
+         "--truth", "planar.truth.json", "--json"]],
     # spatial: a tool on a wrist, no latency
     "spatial-calibrate-floor-latency-estimated": [
         ["calibrate", "spatial.csv", *TOOL, *TOOL_INERTIA, "--truth", "spatial.truth.json", "--json"]],
