@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant.io import atomic_write_text, not_a_file
-from fmscal.plant.numerics import FmscalError
+from fmscal.plant.numerics import FmscalError, numbers_only
 from fmscal.plant.physics import inertia_matrix
 
 __all__ = ["PayloadEstimate", "PayloadFileError", "PAYLOAD_FORMAT"]
@@ -238,7 +238,7 @@ class PayloadEstimate(_Rotations):
             value = data.get(key)
             if value is None and optional:
                 return None
-            if not _json_numbers(value):                 # text ("1.2") and true are not numbers
+            if not numbers_only(value):                 # text ("1.2") and true are not numbers
                 value = None
             try:
                 arr = np.array(value, dtype=float)
@@ -260,13 +260,6 @@ class PayloadEstimate(_Rotations):
                    inertia_std=numbers("inertia_std", (6,), True), b=None, b_std=None, residual_rms=None,
                    warnings=warnings, converged=converged, payload_determined=True,
                    gravity=numbers("gravity", (3,), True))
-
-
-def _json_numbers(value):
-    """True when ``value`` is a JSON number or nested lists of them (no text, no booleans, no null)."""
-    if isinstance(value, list):
-        return all(_json_numbers(v) for v in value)
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 class PayloadFileError(FmscalError):

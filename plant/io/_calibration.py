@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics import FmscalError, short_repr
+from fmscal.plant.numerics import FmscalError, numbers_only, short_repr
 from fmscal.plant.physics import MODELS, NoiseSpec, Payload, check_calibration
 
 from ._files import atomic_write_text, not_a_file
@@ -117,7 +117,7 @@ def _matrix(value, shape, name, source, undetermined=False):
     JSON numbers only: text (``"1.0"``) and ``true``/``false`` are refused, as ``null`` is where the
     entry must be determined.
     """
-    if not _json_numbers(value, undetermined):
+    if not numbers_only(value, undetermined):
         raise CalibrationFileError(f"{source}: {name} must be numbers of shape {shape}"
                                    f"{' (null: not determined)' if undetermined else ''}; got {short_repr(value)}")
     try:
@@ -132,20 +132,6 @@ def _matrix(value, shape, name, source, undetermined=False):
         raise CalibrationFileError(f"{source}: {name} must be finite numbers of shape {shape}; "
                                    f"got shape {arr.shape}")
     return arr
-
-
-def _json_numbers(value, allow_null):
-    """True when ``value`` holds numbers only (and ``None``/``null`` where ``allow_null``): no text, no booleans.
-
-    Nested lists or tuples as a JSON file gives them, or a numeric array as a Python caller does.
-    """
-    if isinstance(value, np.ndarray):
-        return value.dtype.kind in "fiu" or (value.dtype == object and _json_numbers(value.tolist(), allow_null))
-    if isinstance(value, (list, tuple)):
-        return all(_json_numbers(v, allow_null) for v in value)
-    if value is None:
-        return allow_null
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
 def _listed(value):

@@ -4,7 +4,7 @@ compiled casadi steps, packed-state layouts and the toolkit's error type.
 
 from ._errors import (FmscalError, LogError)
 from ._backend import (is_symbolic, ops)
-from ._checks import (as_finite_array, as_positive_scalar, as_bool, as_number, short_repr, MAX_SCALAR)
+from ._checks import (as_finite_array, as_positive_scalar, as_bool, as_number, numbers_only, short_repr, MAX_SCALAR)
 from ._compile import (compile_function, compile_functions, compiler, BufferedCall, ChunkedSteps, build_once)
 from ._layout import (StateLayout)
 

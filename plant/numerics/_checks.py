@@ -6,7 +6,7 @@ import numpy as np
 
 from ._errors import FmscalError
 
-__all__ = ["as_finite_array", "as_positive_scalar", "as_bool", "as_number", "MAX_SCALAR", "short_repr"]
+__all__ = ["as_finite_array", "as_positive_scalar", "as_bool", "as_number", "MAX_SCALAR", "short_repr", "numbers_only"]
 
 #: Largest setting (a gain, a standard deviation, ...) accepted: beyond it squares and products of
 #: settings overflow double precision, and no physical quantity in SI units comes near it.
@@ -85,6 +85,20 @@ def _numbers_only(value):
     if isinstance(value, (list, tuple, np.ndarray)):
         return all(_numbers_only(v) for v in value)
     return isinstance(value, numbers.Real)
+
+
+def numbers_only(value, allow_null=False):
+    """True when ``value`` holds numbers only (and ``None``/``null`` where ``allow_null``): no text, no booleans.
+
+    Nested lists or tuples as a JSON file gives them, or a numeric array as a Python caller does.
+    """
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "fiu" or (value.dtype == object and numbers_only(value.tolist(), allow_null))
+    if isinstance(value, (list, tuple)):
+        return all(numbers_only(v, allow_null) for v in value)
+    if value is None:
+        return allow_null
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
 def short_repr(value, limit=60):
