@@ -144,7 +144,7 @@ def test_a_truth_of_the_other_case_is_one_line(arm, tmp_path, capsys):
 def test_planar_scenario_options_are_refused_for_a_spatial_scenario(tmp_path, capsys):
     out = str(tmp_path / "x.csv")
     assert main(["simulate", "--scenario", "spatial-weak", "--rho", "0.1", "0.2", "--out", out]) == 2
-    assert "--rho is for the planar scenarios" in capsys.readouterr().err
+    assert "takes --com X Y Z" in capsys.readouterr().err
 
 
 def test_compare_takes_a_spatial_scenario_and_writes_its_figure(tmp_path, capsys):

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant import PAPER_PAYLOAD, SCENARIOS, SPATIAL_SCENARIOS, FmscalError, Payload, get_scenario
+from fmscal.plant import PAPER_PAYLOAD, SCENARIOS, SPATIAL_SCENARIOS, FmscalError, get_scenario
+from fmscal.plant.io import write_pose_table
 
 from fmscal.observers import (METHODS, HighGainObserver, PaperAdaptiveObserver, RecursiveObserver, check_gains,
                               get_method, make_observer)
@@ -25,8 +26,8 @@ from .._comparison import case_scenario, compare, summarise, summary_markdown
 from .._plots import plot_comparison
 from .._reproduce import output_names, reproduce
 from ._calibration import add_apply, add_calibrate
-from ._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, positive,
-                      strict)
+from ._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes,
+                      flag_payload, position_flag, positive, strict)
 from ._files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs, claim_folder,
                      exclusive)
 from ._import import add_import
@@ -84,32 +85,81 @@ def _add_simulate(sub):
     p.add_argument("--noise-free", action="store_true", help="no measurement noise")
     p.add_argument("--pose-rate", type=float, metavar="HZ", help="pose measurements per second")
     p.add_argument("--drop-rate", type=float, metavar="FRAC", help="fraction of pose frames dropped")
-    p.add_argument("--mass", type=float, metavar="KG",
-                   help="planar scenarios: payload mass, kg (default: the scenario's)")
-    p.add_argument("--inertia", type=float, metavar="KGM2",
-                   help="planar scenarios: payload I_G, kg m^2 (default: the scenario's)")
-    p.add_argument("--rho", type=float, nargs=2, metavar=("RX", "RY"),
-                   help="planar scenarios: rho, from the centre of mass to the sensor, body frame, m (default: the "
-                        "scenario's)")
+    p.add_argument("--mass", type=float, metavar="KG", help="the payload's mass, kg (default: the scenario's)")
+    p.add_argument("--inertia", type=float, nargs="+", metavar="I",
+                   help="the payload's inertia about its centre of mass (default: the scenario's): planar I_G, "
+                        "kg m^2; spatial IXX IYY IZZ IXY IXZ IYZ, kg m^2, sensor axes")
+    p.add_argument("--rho", type=float, nargs="+", metavar="R",
+                   help="planar scenarios: RX RY, rho, from the centre of mass to the sensor, body frame, m (default: "
+                        "the scenario's)")
+    p.add_argument("--com", type=float, nargs="+", metavar="C",
+                   help="spatial scenarios: X Y Z, the centre of mass in the sensor frame, m (default: the "
+                        "scenario's; the opposite of a planar rho)")
     p.add_argument("--offset", type=float, nargs=3, metavar=("B_M", "B_FX", "B_FY"),
                    help="planar scenarios: sensor offset b in w = S (w_hat - b), N m and N (default: the scenario's; "
                         "a spatial scenario draws its own)")
     p.add_argument("--latency", type=float, metavar="S",
                    help="delay of the pose stream behind the sensor stream, s (default: the scenario's)")
+    p.add_argument("--poses", type=int, metavar="N",
+                   help="spatial scenarios: write a pose table instead of a log, the tool held at N random attitudes "
+                        "(the spatial header without t, one row per held pose; at least 4)")
+    p.add_argument("--hold", type=float, metavar="S",
+                   help="with --poses: seconds each pose is held, its reading averaged over them (default 1)")
     p.add_argument("--out", required=True, metavar="LOG.csv",
-                   help="the log to write; its sidecar goes beside it as LOG.truth.json")
+                   help="the log (or table) to write; its sidecar goes beside it as LOG.truth.json")
     p.add_argument("--overwrite", action="store_true", help="replace an existing LOG.csv and LOG.truth.json")
     p.set_defaults(func=cmd_simulate)
+
+
+def _simulate_payload(args, sc):
+    """The payload of ``fmscal simulate``: the scenario's, with what ``--mass``, ``--inertia`` and ``--rho``
+    (planar) or ``--com`` (spatial) give in its place; None where none is given."""
+    model = type(sc.model())                                   # the scenario's model class declares its flags
+    position = position_flag(model, args.rho, args.com, f"{args.scenario} (a {model.name} scenario)")
+    if args.mass is None and args.inertia is None and position is None:
+        return None
+    p = sc.payload
+    return flag_payload(model, args.mass if args.mass is not None else p.mass,
+                        args.inertia if args.inertia is not None else np.atleast_1d(p.inertia).tolist(),
+                        position if position is not None else list(getattr(p, model.payload_position)))
+
+
+def _simulate_table(args, sc):
+    """``fmscal simulate --poses N``: the scenario's pose table (:meth:`plant.scenarios.SpatialScenario.
+    generate_table`) and its sidecar."""
+    if not hasattr(sc, "generate_table"):
+        raise CliError(f"--poses is for the spatial scenarios (a pose table is of a 6-axis reading); {args.scenario} "
+                       "is planar")
+    timed = [flag for flag, value in (("--duration", args.duration), ("--pose-rate", args.pose_rate),
+                                      ("--drop-rate", args.drop_rate), ("--latency", args.latency))
+             if value is not None]
+    if timed:
+        raise CliError(f"{' and '.join(timed)} {'is' if len(timed) == 1 else 'are'} for a log; a pose table "
+                       "(--poses) has no time")
+    hold = 1.0 if args.hold is None else positive(args.hold, "--hold")
+    out = Path(args.out)
+    if out.suffix != ".csv":
+        raise CliError(f"--out must end in .csv; got {out}")
+    truth_path = out.with_suffix(".truth.json")
+    check_outputs([(out, "--out"), (truth_path, "--out's sidecar")], overwrite=args.overwrite)
+    table, truth = sc.generate_table(args.seed, args.poses, hold=hold, noise_free=args.noise_free)
+    atomic_write_many([(truth_path, truth.write), (out, lambda path: write_pose_table(table, path))])
+    print(f"wrote {out} ({len(table)} held poses, {hold:g} s each) and {truth_path}")
 
 
 def cmd_simulate(args):
     check_seeds(seed=args.seed)
     sc = {**SCENARIOS, **SPATIAL_SCENARIOS}[args.scenario]            # --scenario's choices: both tables' names
-    for option, value in (("--mass", args.mass), ("--inertia", args.inertia), ("--rho", args.rho),
-                          ("--offset", args.offset)):
-        if value is not None and option[2:] not in sc.payload_settings:      # the scenario's own declaration
-            raise CliError(f"{option} is for the planar scenarios; {args.scenario} has its own tool and a "
-                           "random offset (the sidecar records them)")
+    if args.offset is not None and "offset" not in sc.payload_settings:      # the scenario's own declaration
+        raise CliError(f"--offset is for the planar scenarios; {args.scenario} draws its own offset (the sidecar "
+                       "records it)")
+    if args.hold is not None and args.poses is None:
+        raise CliError("--hold applies to --poses (a pose table); give --poses N too")
+    payload = _simulate_payload(args, sc)
+    if payload is not None:
+        sc = sc.with_(payload=payload)
+    if args.poses is not None:
+        return _simulate_table(args, sc)
     changes = {}
     if args.duration is not None:
         changes["duration"] = positive(args.duration, "--duration")
@@ -129,11 +179,6 @@ def cmd_simulate(args):
         if not (np.isfinite(args.latency) and args.latency >= 0):
             raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
         changes["latency"] = args.latency
-    if args.mass is not None or args.inertia is not None or args.rho is not None:
-        p = sc.payload
-        changes["payload"] = Payload(positive(args.mass, "--mass") if args.mass is not None else p.mass,
-                                     positive(args.inertia, "--inertia") if args.inertia is not None else p.inertia,
-                                     tuple(args.rho) if args.rho is not None else p.rho)
     sc = sc.with_(**changes)
     if not sc.latency < sc.duration / 2:
         raise CliError(f"--latency must be less than half the run ({sc.duration / 2:g} s): the poses are shifted "

@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fmscal.plant.io import MIN_SAMPLES, Log, Truth
+from fmscal.plant.io import MIN_POSES, MIN_SAMPLES, Log, Truth, simulate_table
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import (GRAVITY, SpatialModel, CalibrationSchedule, NoiseSpec, SpatialPayload,
                                   prescribed_motion, quaternion_multiply)
@@ -155,8 +155,8 @@ class SpatialScenario:
     targets: tuple = None
 
     #: The settings of the payload and the sensor a user may change (:attr:`plant.Scenario.payload_settings`):
-    #: none, the scenario has its own tool and a random offset.
-    payload_settings = ()
+    #: the tool's mass, inertia and centre of mass (``payload``); the offset is drawn.
+    payload_settings = ("mass", "inertia", "com")
 
     def model(self):
         """The model the methods run on for this scenario: :class:`plant.SpatialModel` of its payload, under
@@ -264,6 +264,60 @@ class SpatialScenario:
         truth = Truth(self.name, int(seed), schedule, np.eye(6), self.payload, noise, offset=b,
                       latency=float(self.latency), settings=settings)
         return Log(t, pose, w_hat, name=f"{self.name}-seed{seed}"), truth, x_true
+
+
+    def generate_table(self, seed=0, poses=12, hold=1.0, noise_free=False):
+        """A pose table of the scenario's tool and sensor: ``poses`` held attitudes, one row each.
+
+        The table a static calibration script writes (:mod:`fmscal.plant.io._pose_table`): the tool
+        held still at random attitudes (turns of up to 180 degrees about random axes), the raw
+        reading averaged over ``hold`` s at each. At rest the wrench is the weight's alone,
+        ``w_k = [com x f_k; f_k]`` with ``f_k = -m R_k^T g``, and the reading is ``w_hat_k = S^-1 w_k
+        + b + n_k``, the noise ``n_k`` the scenario's per-sample noise averaged over the hold's
+        ``hold / dt`` samples (standard deviation ``sd / sqrt(hold / dt)``). ``S`` and ``b`` are drawn
+        as :meth:`generate` draws them.
+
+        Parameters
+        ----------
+        seed : int
+            Seeds ``S``, the offset, the attitudes and the noise, in that order.
+        poses : int
+            Rows of the table, at least :data:`fmscal.plant.io.MIN_POSES`.
+        hold : float
+            Seconds each pose is held and averaged, s (positive).
+        noise_free : bool
+            Leave out the reading's noise.
+
+        Returns
+        -------
+        table : plant.io.PoseTable
+        truth : plant.Truth
+            ``S``, the payload, the offset and the averaged reading's noise; its ``settings`` record
+            ``poses`` and ``hold``.
+
+        Raises
+        ------
+        FmscalError
+            Fewer than :data:`~fmscal.plant.io.MIN_POSES` poses, or a hold that is not a positive
+            number of seconds.
+        """
+        if isinstance(poses, bool) or not isinstance(poses, (int, np.integer)) or poses < MIN_POSES:
+            raise FmscalError(f"a pose table needs at least {MIN_POSES} poses (an integer); got {poses!r}")
+        if isinstance(hold, bool) or not (isinstance(hold, (int, float)) and np.isfinite(hold) and hold > 0):
+            raise FmscalError(f"hold must be a positive number of seconds; got {hold!r}")
+        rng = np.random.default_rng(seed)
+        S = draw_spatial_S(rng, self.crosstalk)
+        b = np.r_[rng.normal(0, self.offset_sd[0], 3), rng.normal(0, self.offset_sd[1], 3)]
+        per_sample = np.array((self.torque_sd,) * 3 + (self.force_sd,) * 3)
+        wrench_sd = np.zeros(6) if noise_free else per_sample / np.sqrt(max(hold / self.dt, 1.0))
+        table = simulate_table(self.payload, n=int(poses), seed=int(rng.integers(2 ** 32)), gravity=self.gravity,
+                               S=S, offset=b, wrench_sd=wrench_sd)
+        table.name = f"{self.name}-table-seed{seed}"
+        settings = {"poses": int(poses), "hold": float(hold), "dt": self.dt, "gravity": list(self.gravity),
+                    "description": f"{self.description} Held at {int(poses)} random attitudes, {hold:g} s each."}
+        truth = Truth(self.name, int(seed), CalibrationSchedule(S), np.eye(6), self.payload,
+                      NoiseSpec(tuple(float(v) for v in wrench_sd)), offset=b, latency=0.0, settings=settings)
+        return table, truth
 
 
 #: The spatial scenarios by name (module docstring).
