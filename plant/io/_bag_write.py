@@ -171,7 +171,7 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
 
 
 def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wrench", tf_every=1,
-                 start_time_ns=1_700_000_000_000_000_000):
+                 start_time_ns=1_700_000_000_000_000_000, storage="sqlite3"):
     """Write a robot's run as a ROS 2 bag of ``/tf``, ``/tf_static`` and a ``WrenchStamped`` topic.
 
     A robot driver publishes its transform tree: the moving links on ``/tf``
@@ -183,7 +183,7 @@ def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wre
     Parameters
     ----------
     path : str or Path
-        A new folder (a ROS 2 bag, sqlite3); never overwritten.
+        A new folder (a ROS 2 bag); never overwritten.
     t : array_like, shape (N,)
         Sample times, s, increasing.
     wrench : array_like, shape (N, 6)
@@ -199,6 +199,8 @@ def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wre
         ``/tf`` is published at every ``tf_every``-th sample (from the first).
     start_time_ns : int
         Absolute time of ``t = 0``, ns.
+    storage : str
+        ``"sqlite3"`` or ``"mcap"``.
 
     Returns
     -------
@@ -208,9 +210,9 @@ def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wre
     Raises
     ------
     BagError
-        The path exists, or the arrays' shapes do not match ``t``.
+        The path exists, the storage is neither, or the arrays' shapes do not match ``t``.
     """
-    from rosbags.rosbag2 import Writer                     # optional (the ros extra)
+    from rosbags.rosbag2 import StoragePlugin, Writer      # optional (the ros extra)
     from rosbags.typesys import Stores, get_typestore      # optional (the ros extra): only bags need it
 
     path = Path(path)
@@ -226,6 +228,8 @@ def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wre
                            f"({len(t)}, 3); got {len(R)} and {np.shape(p)}")
     if not (isinstance(tf_every, (int, np.integer)) and tf_every >= 1):
         raise BagError(f"tf_every must be a positive integer; got {tf_every!r}")
+    if storage not in ("sqlite3", "mcap"):
+        raise BagError(f"storage must be sqlite3 or mcap; got {storage!r}")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     V = T["geometry_msgs/msg/Vector3"]
@@ -242,7 +246,9 @@ def write_tf_bag(path, t, wrench, links, static=(), wrench_topic="/ft_sensor/wre
 
     TF = T["tf2_msgs/msg/TFMessage"]
     stamps = start_time_ns + np.round(t * 1e9).astype(np.int64)
-    with Writer(path, version=8) as writer:
+    writer = (Writer(path, version=8) if storage == "sqlite3"            # the format this function has always written
+              else Writer(path, version=9, storage_plugin=StoragePlugin.MCAP))
+    with writer:
         wc = writer.add_connection(wrench_topic, WRENCH_TYPE, typestore=ts)
         tc = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ts)
         if len(static):

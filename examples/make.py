@@ -1,0 +1,132 @@
+"""Write the example data the guides' commands read (seeded: the same files at every run).
+
+    python examples/make.py              # rewrite the files in examples/
+    python examples/make.py --out DIR    # write them into DIR instead (tests/test_example_data.py compares)
+
+What it writes (examples/README.md says what each is for):
+
+- ``arm.csv`` and ``arm.truth.json``: a spatial log of the ``spatial-arm`` scenario (seed 0), 12 s read at
+  25 Hz, each reading the mean of the 40 samples at 1 kHz (the noise's standard deviations over
+  sqrt(40)), every number rounded to 1e-6 (below a tenth of the noise);
+- ``table.csv`` and ``table.truth.json``: a pose table, 12 held poses of the same tool and sensor, exactly
+  what ``fmscal simulate --scenario spatial-arm --poses 12 --seed 0 --out table.csv`` writes;
+- ``joints.csv``: a table of held poses whose pose columns are the joint angles of the 6-joint arm
+  ``arm6.urdf`` (written by hand, not by this script), its sensor frame ``ft_sensor``; the tool of
+  ``spatial-arm``, ``S = I``;
+- ``arm_bag/``: a ROS 2 bag (mcap) as a wrist rig records it, the walkthrough's rig
+  (``notebooks/07_wrist_walkthrough.ipynb``): the arm's transform tree on ``/tf`` and ``/tf_static``, the
+  sensor's ``WrenchStamped`` on ``/ft_sensor/wrench`` at 25 Hz for 12 s (as ``arm.csv``'s); the sensor reports the load
+  (the negative of fmscal's reading), the base is tilted 4 degrees and the sensor turned 3 degrees on
+  the flange;
+- ``run_bag/``: a ROS 2 bag (mcap) of ``arm.csv``'s first 4 s: ``PoseStamped`` on ``/tool``, ``WrenchStamped`` on
+  ``/ft``.
+"""
+
+import argparse
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from fmscal.plant import SPATIAL_SCENARIOS, Log
+from fmscal.plant.io import RobotKinematics, simulate_table, write_bag, write_pose_table, write_tf_bag
+from fmscal.plant.scenarios import TOOL
+
+HERE = Path(__file__).resolve().parent
+#: The scenario every example's tool and motion come from.
+ARM = SPATIAL_SCENARIOS["spatial-arm"]
+#: Decimals kept in arm.csv (the noise is 4e-4 N m and 1e-2 N at its smallest: rounding adds 3e-7).
+DECIMALS = 6
+
+
+#: The examples' sample time, s, and the readings averaged into each (the noise over their square root).
+DT, AVERAGED = 0.04, 40
+
+
+def _write_csv(path, names, rows):
+    """A CSV of ``rows`` under the header ``names``, every number rounded to :data:`DECIMALS`."""
+    text = "\n".join(",".join(repr(float(v)) for v in np.round(row, DECIMALS)) for row in rows)
+    Path(path).write_text(",".join(names) + "\n" + text + "\n")
+
+
+def spatial_log(out):
+    """``arm.csv`` and ``arm.truth.json``; returns the log."""
+    scenario = ARM.with_(duration=12.0, dt=DT).with_noise_scaled(1 / np.sqrt(AVERAGED))
+    log, truth, _ = scenario.generate(seed=0)
+    _write_csv(out / "arm.csv", log.columns, np.column_stack([log.t, log.pose, log.w_hat]))
+    truth.write(out / "arm.truth.json")
+    return log
+
+
+def pose_table(out):
+    """``table.csv`` and ``table.truth.json``: ``fmscal simulate --scenario spatial-arm --poses 12 --seed 0``."""
+    table, truth = ARM.generate_table(seed=0, poses=12)
+    write_pose_table(table, out / "table.csv")
+    truth.write(out / "table.truth.json")
+
+
+def joint_table(out, urdf=HERE / "arm6.urdf"):
+    """``joints.csv``: 16 held poses of the arm, the joint angles and the averaged reading."""
+    rng = np.random.default_rng(7)
+    joints = rng.uniform(-np.pi, np.pi, (16, 6))
+    joints[:, 1] = rng.uniform(-2.0, -0.5, 16)                  # the arm up, the tool turned every way
+    kinematics = RobotKinematics(urdf, "ft_sensor")
+    q = kinematics.poses(joints)[:, :4]
+    offset = np.r_[rng.normal(0, ARM.offset_sd[0], 3), rng.normal(0, ARM.offset_sd[1], 3)]
+    table = simulate_table(TOOL, n=len(q), seed=8, gravity=ARM.gravity, offset=offset, q=q)
+    names = [f"q{i + 1}" for i in range(6)] + ["tx", "ty", "tz", "fx", "fy", "fz"]
+    _write_csv(out / "joints.csv", names, np.hstack([joints, table.w_hat]))
+
+
+def wrist_bag(out, duration=12.0, dt=DT):
+    """``arm_bag/``: the walkthrough's rig (notebooks/07_wrist_walkthrough.ipynb) at 25 Hz."""
+    tilt = Rotation.from_rotvec(np.radians(4.0) * np.array([0.8, -0.6, 0.0]))      # the base, 4 degrees
+    axis = np.array([0.2, 0.4, 0.9]) / np.linalg.norm([0.2, 0.4, 0.9])
+    mount = Rotation.from_rotvec(np.radians(3.0) * axis)        # the sensor's axes on ft_sensor, 3 degrees
+    scenario = ARM.with_(duration=duration, dt=dt, gravity=tuple(tilt.apply([0.0, 0.0, -9.81])),
+                         crosstalk=0.0).with_noise_scaled(1 / np.sqrt(AVERAGED))
+    log, _, _ = scenario.generate(seed=3)
+    t = log.t
+    sensor = Rotation.from_quat(np.roll(log.pose[:, :4], -1, axis=1))     # the sensor's attitude in base_link
+    nominal = sensor * mount.inv()                                        # the ft_sensor frame /tf_static says
+    yaw = Rotation.from_rotvec(np.outer(0.6 * np.sin(0.3 * t), [0.0, 0.0, 1.0]))
+    shoulder, to_sensor = np.array([0.0, 0.0, 0.3]), np.array([0.0, 0.0, 0.10])
+    wrist = yaw.inv() * nominal
+    wrist_p = yaw.inv().apply(log.pose[:, 4:] - nominal.apply(to_sensor) - shoulder)
+    links = [("base_link", "shoulder", yaw, np.tile(shoulder, (len(t), 1))), ("shoulder", "wrist", wrist, wrist_p)]
+    static = [("wrist", "flange", Rotation.identity(), [0.0, 0.0, 0.08]),
+              ("flange", "ft_sensor", Rotation.identity(), [0.0, 0.0, 0.02])]
+    write_tf_bag(out / "arm_bag", t, np.round(-log.w_hat, DECIMALS), links, static,
+                 wrench_topic="/ft_sensor/wrench", storage="mcap")        # the load convention
+
+
+def pose_bag(out, log):
+    """``run_bag/``: ``log`` as a ROS 2 bag (mcap), ``PoseStamped`` on ``/tool`` and ``WrenchStamped`` on ``/ft``."""
+    first = log.t <= 4.0                                                  # its first 4 s: a bag to import
+    short = Log(log.t[first], log.pose[first], log.w_hat[first], name=log.name)
+    write_bag(short, out / "run_bag", storage="mcap", wrench_topic="/ft", pose_topic="/tool")
+
+
+def make(out):
+    """Write every example into the folder ``out`` (created; its bags replaced)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for bag in ("arm_bag", "run_bag"):
+        shutil.rmtree(out / bag, ignore_errors=True)
+    log = spatial_log(out)
+    pose_table(out)
+    joint_table(out)
+    wrist_bag(out)
+    pose_bag(out, log)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default=str(HERE), help="the folder to write (default: examples/)")
+    make(parser.parse_args(argv).out)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
