@@ -8,7 +8,8 @@ at the top of a clone, and every file a command writes stays there): ``fmscal WO
 interpreter per command would cost seconds of imports each). A command succeeds with exit status 0;
 one whose comment in the guide says ``exit status 2`` (a refusal the guide shows) must give that.
 The guides' ``python`` blocks run after the page's commands, in the same folder, each in a fresh
-namespace.
+namespace. Of the pages in :data:`PAGES` (the README, the documentation's front page) only the
+commands and python blocks that read ``examples/`` run.
 
 Only exit statuses, files and keys are asserted, never printed figures: other changes move those.
 The runs take tens of seconds, so they are marked ``slow``; the fast tests check the extraction
@@ -27,8 +28,11 @@ import pytest
 from fmscal.analysis.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The guides whose commands run verbatim on the example data.
+#: The guides whose commands run verbatim on the example data, every one.
 GUIDES = ("docs/guide/spatial.md", "docs/guide/wrist-sensor.md")
+#: Pages of which the commands and python blocks that read the example data run (their others need a rig or
+#: an install: ``pip install``, ``LOG.csv``).
+PAGES = ("README.md", "docs/index.md")
 
 
 def blocks(text, language):
@@ -78,7 +82,7 @@ def test_the_commands_are_found_and_joined():
         assert len(found) >= 5 and all(words[0] == "fmscal" for words, _ in found), guide
 
 
-@pytest.mark.parametrize("guide", GUIDES)
+@pytest.mark.parametrize("guide", GUIDES + PAGES)
 def test_every_example_file_the_commands_read_exists(guide):
     named = {w for words, _ in guide_commands(guide) for w in words if w.startswith("examples/")}
     text = (ROOT / guide).read_text()
@@ -108,6 +112,23 @@ def test_the_spatial_guide_runs_as_written(clone):
     _run_guide("docs/guide/spatial.md")
     for name in ("cal.json", "wrench.csv", "run.csv"):
         assert (clone / name).stat().st_size > 0, name
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", PAGES)
+def test_what_a_page_runs_on_the_example_data_runs_as_written(clone, page):
+    text = (ROOT / page).read_text()
+    ran = 0
+    for words, expected in guide_commands(page):
+        if any(w.startswith("examples/") for w in words):
+            status, _, err = run_fmscal(words)
+            assert status == expected, f"{shlex.join(words)}: exit status {status}\n{err[-2000:]}"
+            ran += 1
+    for code in blocks(text, "python"):
+        if "examples/" in code:
+            exec(compile(code, f"{page} (python block)", "exec"), {"__name__": "__guide__"})
+            ran += 1
+    assert ran
 
 
 @pytest.mark.slow
