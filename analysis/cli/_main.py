@@ -70,8 +70,9 @@ def _add_simulate(sub):
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        description=textwrap.fill(
                            "Simulate a named scenario. Writes the log (planar t,theta,x,y,M,fx,fy; spatial "
-                           "t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz) and the sidecar LOG.truth.json (the true S, "
-                           "payload, noise and offset).", 79),
+                           "t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz), or with --poses N a spatial scenario's pose "
+                           "table (qw,qx,qy,qz,tx,ty,tz,fx,fy,fz, one row per held pose), and the sidecar "
+                           "LOG.truth.json (the true S, payload, noise and offset).", 79),
                        epilog=f"planar scenarios (a 3-axis reading, the paper's case):\n{listed(SCENARIOS)}\n\n"
                               f"spatial scenarios (a 6-axis reading, a payload moving in 3D under gravity):\n"
                               f"{listed(SPATIAL_SCENARIOS)}")
