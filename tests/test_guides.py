@@ -136,3 +136,13 @@ def test_the_wrist_guide_runs_as_written(clone):
     _run_guide("docs/guide/wrist-sensor.md")
     for name in ("arm.csv", "payload.json", "cal.json", "wrench.csv"):
         assert (clone / name).stat().st_size > 0, name
+
+
+def test_every_example_file_any_page_names_exists():
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    pages = [p for p in pages if "_build" not in p.parts]
+    named = {(p.relative_to(ROOT).as_posix(), m.rstrip(".,;:)")) for p in pages
+             for m in re.findall(r"(?<![\w/.])examples/[\w./-]*", p.read_text())}
+    assert any(page == "docs/guide/spatial.md" for page, _ in named)
+    missing = sorted((page, n) for page, n in named if not (ROOT / n).exists())
+    assert not missing, f"pages name example files that are not in examples/: {missing}"
