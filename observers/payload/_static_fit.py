@@ -41,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
-from fmscal.plant.io import PoseTable, reading_sign
+from fmscal.plant.io import PoseTable, check_table_units, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
 from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
@@ -288,6 +288,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     g = as_finite_array(gravity, (3,), "gravity")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
+    check_table_units(table, g, S=S)                    # a slipped unit named in one line, before the fit
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     # gravity's directions in the sensor frame (a mounting turns them all alike); with gravity estimated,
