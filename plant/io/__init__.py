@@ -21,8 +21,8 @@ from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, P
     MAX_WRENCH_GAP, MAX_TILT_DEG, MAX_OUT_OF_PLANE)
 
 __all__ = ["json_ready", "write_bag", "write_tf_bag", "Log", "LogError", "Truth", "read_log", "read_readings",
-           "read_truth", "log_kind", "unit_quaternions", "estimate_noise", "diagnose_units", "UnitFinding", "UnitsError", "check_gravity",
-           "check_mass", "check_spatial_log_units", "check_table_units",
+           "read_truth", "log_kind", "unit_quaternions", "estimate_noise", "diagnose_units", "UnitFinding",
+           "UnitsError", "check_gravity", "check_mass", "check_spatial_log_units", "check_table_units",
            "Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "PoseTable", "read_pose_table",
            "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog", "read_attitude_log",
            "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses", "RobotKinematics",

@@ -289,6 +289,8 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None):
     UnitsError
         The first slip found, named in one line.
     """
+    if np.shape(log.pose)[1:] != (7,) or np.shape(log.w_hat)[1:] != (6,):
+        return                                          # not a spatial log: the caller says so
     check_gravity(gravity)
     if mass is not None:
         check_mass(mass)
