@@ -6,6 +6,7 @@ checks read the data against what a wrist sensor on a robot can show, and
 name the slip before an expensive fit runs on it (a log with positions in mm
 ran for minutes and weighed 0.53 g):
 
+- a reading channel that never changes (all zero: not connected);
 - gravity's size against Earth's, :data:`EARTH_G` (``--gravity 0 0 -981`` is in cm/s^2);
 - the payload's mass against what a wrist sensor carries, :data:`MAX_WRIST_MASS`;
 - the time step against a force sensor's rate (``t`` in ms gives steps of 1 s);
@@ -43,7 +44,7 @@ import numpy as np
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import rotation_matrix
 
-__all__ = ["UnitsError", "check_gravity", "check_mass", "check_spatial_log_units", "check_table_units",
+__all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units", "check_table_units",
            "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
 
 #: Earth's gravity, m/s^2; a given ``|g|`` more than :data:`_G_TOLERANCE` from it is refused.
@@ -111,6 +112,21 @@ def check_mass(mass, what="the payload's mass"):
     if mass > MAX_WRIST_MASS:
         raise UnitsError(f"{what} is {mass:.4g} kg, beyond what a wrist sensor carries ({MAX_WRIST_MASS:g} kg): in g? "
                          f"give it in kg")
+
+
+def check_readings_change(name, w_hat, names=("tx", "ty", "tz", "fx", "fy", "fz")):
+    """Refuse readings with a channel that never changes (all zero: a channel not connected), as ``calibrate`` does.
+
+    Raises
+    ------
+    UnitsError
+    """
+    w_hat = np.asarray(w_hat, dtype=float)
+    constant = [n for n, column in zip(names, w_hat.T) if np.ptp(column) == 0]
+    if constant:
+        raise UnitsError(f"{name}: column(s) {', '.join(constant)} of the reading never change (every row "
+                         f"{w_hat[0, names.index(constant[0])]:g}): a channel not connected or a column written "
+                         "empty; check the recording")
 
 
 def _rotations(quaternions):
@@ -236,6 +252,7 @@ def check_table_units(table, gravity, mass=None, com=None, S=None):
     UnitsError
         The first slip found, named in one line.
     """
+    check_readings_change(table.name, table.w_hat)
     check_gravity(gravity)
     if mass is not None:
         check_mass(mass)
@@ -291,6 +308,7 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None):
     """
     if np.shape(log.pose)[1:] != (7,) or np.shape(log.w_hat)[1:] != (6,):
         return                                          # not a spatial log: the caller says so
+    check_readings_change(log.name, log.w_hat)
     check_gravity(gravity)
     if mass is not None:
         check_mass(mass)
