@@ -44,8 +44,8 @@ import numpy as np
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import rotation_matrix
 
-__all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units", "check_table_units",
-           "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
+__all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units",
+           "check_table_units", "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
 
 #: Earth's gravity, m/s^2; a given ``|g|`` more than :data:`_G_TOLERANCE` from it is refused.
 EARTH_G = 9.81
