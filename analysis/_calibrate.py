@@ -589,14 +589,22 @@ FAR_GAIN = 1.5
 def _check_gains(run, warnings):
     """``"gains"``: each diagonal gain of ``S`` within a factor :data:`FAR_GAIN` of 1, else a warning naming
     the likely cause: the payload's mass (force gains) or its centre of mass and inertia (torque gains), or
-    the reading's units. ``converged`` is not changed: ``S`` is what the data determine for the payload given
-    (a sensor read in other units is calibrated so); the warning says the payload or the units may be wrong."""
+    the reading's units. Only gains the log determines count: a standard deviation under a tenth of the gain
+    and a gain three of them from 1 (a method without ``S_std``: a converged run). ``converged`` is not
+    changed: ``S`` is what the data determine for the payload given (a sensor read in other units is
+    calibrated so); the warning says the payload or the units may be wrong."""
     S = np.asarray(run.result.S_hat, dtype=float)
+    if run.result.S_std is None:
+        std = np.zeros(len(S)) if run.result.converged else np.full(len(S), np.inf)
+    else:
+        std = np.diag(np.asarray(run.result.S_std, dtype=float))
     forces = list(run.model.force_channels)
     found = []
     for part, channels in (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces])):
-        gains = np.diag(S)[channels]
-        if not channels or np.all(gains <= 0) or np.all((gains >= 1 / FAR_GAIN) & (gains <= FAR_GAIN)):
+        gains, sd = np.diag(S)[channels], std[channels]
+        far = (((gains < 1 / FAR_GAIN) | (gains > FAR_GAIN)) & (sd < 0.1 * np.abs(gains))
+               & (np.abs(gains - 1) > 3 * sd))
+        if not channels or np.all(gains <= 0) or not far.any():
             continue
         names = ", ".join(run.model.wrench_names[k] for k in channels)
         listed = ", ".join(f"{g:.3g}" for g in gains)
