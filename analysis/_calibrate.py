@@ -589,8 +589,9 @@ FAR_GAIN = 1.5
 def _check_gains(run, warnings):
     """``"gains"``: each diagonal gain of ``S`` within a factor :data:`FAR_GAIN` of 1, else a warning naming
     the likely cause: the payload's mass (force gains) or its centre of mass and inertia (torque gains), or
-    the reading's units. Only gains the log determines count: a standard deviation under a tenth of the gain
-    and a gain three of them from 1 (a method without ``S_std``: a converged run). ``converged`` is not
+    the reading's units. Only gains the log determines count: a channel no undetermined direction holds (a
+    share above 0.1), a standard deviation under a tenth of the gain and a gain three of them from 1 (a
+    method without ``S_std``: a converged run). ``converged`` is not
     changed: ``S`` is what the data determine for the payload given (a sensor read in other units is
     calibrated so); the warning says the payload or the units may be wrong."""
     S = np.asarray(run.result.S_hat, dtype=float)
@@ -598,6 +599,8 @@ def _check_gains(run, warnings):
         std = np.zeros(len(S)) if run.result.converged else np.full(len(S), np.inf)
     else:
         std = np.diag(np.asarray(run.result.S_std, dtype=float))
+    for d in run.result.info.get("undetermined", []):   # a channel the undetermined directions hold: its gain is not
+        std = np.where(np.abs(np.asarray(d, dtype=float)[:len(S)]) > 0.1, np.inf, std)
     forces = list(run.model.force_channels)
     found = []
     for part, channels in (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces])):

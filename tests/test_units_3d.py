@@ -92,22 +92,46 @@ def test_gravity_in_cm_and_a_mass_in_grams_are_named(arm):
     check_spatial_log_units(arm, (0.8, -0.3, -9.7))                            # Earth's, tilted: taken
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["calibrate", "{mm}", *FLAGS], "millimetres"),
-    (["calibrate", "{log}", *FLAGS, "--gravity", "0", "0", "-981"], "cm/s^2"),
-    (["identify-payload", "{mN}"], "readings in mN"),
-    (["identify-payload", "{last}"], "scalar last"),
-])
-def test_the_command_line_gives_one_line_and_a_non_zero_exit(arm, tmp_path, capsys, argv, words):
-    files = {"log": arm, "mm": _scaled(arm, pose=1000), "mN": _scaled(arm, reading=1000),
-             "last": _reordered(arm, pose="scalar last")}
-    paths = {}
-    for key, log in files.items():
-        paths[key] = str(tmp_path / f"{key}.csv")
-        log.write(paths[key])
-    code = main([a.format(**paths) for a in argv])
+@pytest.fixture(scope="module")
+def files(arm, tmp_path_factory):
+    """The clean log and each slip of it, written once."""
+    folder = tmp_path_factory.mktemp("slips")
+    paths = {"clean": str(folder / "clean.csv")}
+    arm.write(paths["clean"])
+    for k, slip in enumerate(SLIPS):
+        paths[slip] = str(folder / f"slip{k}.csv")
+        SLIPS[slip][0](arm).write(paths[slip])
+    return paths
+
+
+@pytest.mark.parametrize("k, slip", list(enumerate(SLIPS)))
+def test_the_command_line_names_each_slip_in_one_line_with_a_non_zero_exit(files, capsys, k, slip):
+    """calibrate and identify-payload in turn, one slip each."""
+    words = SLIPS[slip][1] if slip != "readings in mN" or k % 2 == 0 else "wrist sensor carries"
+    argv = ["calibrate", files[slip], *FLAGS] if k % 2 == 0 else ["identify-payload", files[slip]]
+    code = main(argv)
     err = capsys.readouterr().err
-    assert code != 0 and words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["calibrate", "{clean}", *FLAGS, "--gravity", "0", "0", "-981"], "in cm/s^2?"),
+    (["identify-payload", "{clean}", "--gravity", "0", "0", "-981"], "in cm/s^2?"),
+    (["calibrate", "{clean}", *FLAGS[:1], "1200", *FLAGS[2:]], "in g?"),
+])
+def test_gravity_and_mass_slips_on_the_command_line(files, capsys, argv, words):
+    code = main([a.format(**files) for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_gain_warning_on_the_command_line(files, capsys):
+    """--mass 2.4 on the 1.2 kg tool: one warning naming the mass, the calibration printed (exit 0, no --save)."""
+    code = main(["calibrate", files["clean"], *FLAGS[:1], "2.4", *FLAGS[2:], "--observer", "least-squares",
+                 "--latency", "0"])
+    err = [line for line in capsys.readouterr().err.splitlines() if "gains of S" in line]
+    assert code == 0 and len(err) == 1 and err[0].startswith("fmscal calibrate: warning: the force gains of S")
+    assert "mass given is 2.4 kg" in err[0]
 
 
 def _table(**kwargs):
@@ -160,7 +184,7 @@ def test_a_force_gain_far_from_one_is_remarked_on(arm):
     right = calibrate(arm, TOOL, method="least-squares", latency=0.0)
     assert not any("gains of S" in w for w in right.warnings)
     # held attitudes leave S undetermined: its gains, far from 1 as they may come out, say nothing of the payload
-    static = SPATIAL_SCENARIOS["spatial-static"].with_(duration=24.0).generate(seed=0)[0]
+    static = SPATIAL_SCENARIOS["spatial-static"].with_(duration=12.0).generate(seed=0)[0]
     held = calibrate(static, TOOL, method="least-squares", latency=0.0)
     assert not held.converged and not any("gains of S" in w for w in held.warnings)
 
