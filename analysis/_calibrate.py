@@ -204,8 +204,11 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         saturation, the log pins ``S`` down for a method that gives no
         ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
         run judged settling alone), and a positive force gain (``trace S_ff >
-        0``: else the reading follows the other sign convention). Held poses:
-        never. Each failure adds a warning that names it.
+        0``: else the reading follows the other sign convention); a diagonal gain
+        of ``S`` the log determines further than :data:`FAR_GAIN` from 1 adds a
+        warning naming the payload's mass or the units, and leaves
+        ``converged`` as it is. Held poses: never. Each failure adds a warning
+        that names it.
 
         A log's steps are chosen by what its model declares
         (:class:`fmscal.plant.Model`: the options it takes, ``under_gravity``,
@@ -217,6 +220,10 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     ------
     DivergedError
         The method's estimate diverged.
+    plant.io.UnitsError
+        A spatial log's or held poses' unit slip or convention, named in one line
+        before any fit (the model's ``input_checks``; :func:`fmscal.plant.io.check_spatial_log_units`,
+        :func:`fmscal.plant.io.check_table_units`).
     FmscalError
         Bad input (among it a reading channel that never changes), an option
         the case does not take, or an estimate of ``S`` that is singular (one
