@@ -88,6 +88,9 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
 
     Raises
     ------
+    plant.io.UnitsError
+        A unit slip or a convention the data show, named in one line before the fit
+        (:func:`fmscal.plant.io.check_spatial_log_units`, :func:`fmscal.plant.io.check_table_units`).
     FmscalError
         The log does not determine the mass, or its mass comes out negative
         (the reading follows the other sign convention: the message names the flag).

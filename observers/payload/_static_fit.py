@@ -274,6 +274,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
 
     Raises
     ------
+    plant.io.UnitsError
+        A unit slip or a convention the data show, named in one line before the fit
+        (:func:`fmscal.plant.io.check_spatial_log_units`, :func:`fmscal.plant.io.check_table_units`).
     FmscalError
         A reading convention that is neither, or a table whose data say the
         other convention (a negative mass, or gravity pointing up with
