@@ -22,9 +22,9 @@ from fmscal.observers.payload import PayloadEstimate, StaticFit, other_conventio
 from fmscal.observers.payload import calibrate_table as fit_table
 from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
                           Truth, estimate_noise, read_log, read_truth)
-from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, diagnose_units, held_table,
-                             is_attitude_log, is_pose_table, not_a_file, read_attitude_log, read_joint_data,
-                             read_pose_table, reading_sign)
+from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, check_spatial_log_units,
+                             check_table_units, diagnose_units, held_table, is_attitude_log, is_pose_table, not_a_file,
+                             read_attitude_log, read_joint_data, read_pose_table, reading_sign)
 from fmscal.plant.numerics import as_bool
 from fmscal.plant.physics import GRAVITY, MODELS, as_model
 
@@ -204,8 +204,11 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         saturation, the log pins ``S`` down for a method that gives no
         ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
         run judged settling alone), and a positive force gain (``trace S_ff >
-        0``: else the reading follows the other sign convention). Held poses:
-        never. Each failure adds a warning that names it.
+        0``: else the reading follows the other sign convention); a diagonal gain
+        of ``S`` the log determines further than :data:`FAR_GAIN` from 1 adds a
+        warning naming the payload's mass or the units, and leaves
+        ``converged`` as it is. Held poses: never. Each failure adds a warning
+        that names it.
 
         A log's steps are chosen by what its model declares
         (:class:`fmscal.plant.Model`: the options it takes, ``under_gravity``,
@@ -217,6 +220,10 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     ------
     DivergedError
         The method's estimate diverged.
+    plant.io.UnitsError
+        A spatial log's or held poses' unit slip or convention, named in one line
+        before any fit (the model's ``input_checks``; :func:`fmscal.plant.io.check_spatial_log_units`,
+        :func:`fmscal.plant.io.check_table_units`).
     FmscalError
         Bad input (among it a reading channel that never changes), an option
         the case does not take, or an estimate of ``S`` that is singular (one
@@ -408,6 +415,8 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     if reading is not None and not model.signed_reading:
         raise OptionError("reading", "{} is taken on a spatial log or a pose table; a planar log's sign is the "
                           "toolkit's")
+    for check in model.input_checks:                    # before any fit: a slipped unit is named in one line
+        _INPUT_CHECKS[check](log, model)
     name = DEFAULT_METHOD if method is None else method
     get_method(name)                                    # an unknown name: FmscalError naming the methods
     offered = method_names(calibrates=True, model=model)
@@ -580,11 +589,62 @@ def _check_flipped_gain(run, warnings):
     return found, not flipped, "the reading follows the other sign convention"
 
 
+#: A force or torque gain of ``S`` further than this factor from 1 (either way) is remarked on.
+FAR_GAIN = 1.5
+
+
+def _check_gains(run, warnings):
+    """``"gains"``: each diagonal gain of ``S`` within a factor :data:`FAR_GAIN` of 1, else a warning naming
+    the likely cause: the payload's mass (force gains) or its centre of mass and inertia (torque gains), or
+    the reading's units. Only gains the log determines count: a channel no undetermined direction holds (a
+    share above 0.1), a standard deviation under a tenth of the gain and a gain three of them from 1 (a
+    method without ``S_std``: a converged run). ``converged`` is not
+    changed: ``S`` is what the data determine for the payload given (a sensor read in other units is
+    calibrated so); the warning says the payload or the units may be wrong."""
+    S = np.asarray(run.result.S_hat, dtype=float)
+    if run.result.S_std is None:
+        std = np.zeros(len(S)) if run.result.converged else np.full(len(S), np.inf)
+    else:
+        std = np.diag(np.asarray(run.result.S_std, dtype=float))
+    for d in run.result.info.get("undetermined", []):   # a channel the undetermined directions hold: its gain is not
+        std = np.where(np.abs(np.asarray(d, dtype=float)[:len(S)]) > 0.1, np.inf, std)
+    forces = list(run.model.force_channels)
+    found = []
+    for part, channels in (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces])):
+        gains, sd = np.diag(S)[channels], std[channels]
+        far = (((gains < 1 / FAR_GAIN) | (gains > FAR_GAIN)) & (sd < 0.1 * np.abs(gains))
+               & (np.abs(gains - 1) > 3 * sd))
+        if not channels or np.all(gains <= 0) or not far.any():
+            continue
+        names = ", ".join(run.model.wrench_names[k] for k in channels)
+        listed = ", ".join(f"{g:.3g}" for g in gains)
+        if part == "force":
+            mass = run.model.payload.mass
+            cause = (f"the payload's mass may be wrong (the mass given is {mass:.4g} kg; force gains near "
+                     f"{np.mean(gains):.3g} say the data weigh it at about {mass / np.mean(gains):.4g} kg), or the "
+                     f"readings are not in N")
+        else:
+            cause = "the payload's centre of mass or inertia may be wrong, or the torques are not in N m"
+        found.append(f"the {part} gains of S ({names}: {listed}) are far from 1: {cause}")
+    return found, True, None
+
+
+def _check_spatial_units(log, model):
+    """``"spatial_units"`` (an input check): a spatial log's units and conventions, against the model's
+    gravity and payload (:func:`fmscal.plant.io.check_spatial_log_units`): one line naming the slip."""
+    check_spatial_log_units(log, model.gravity, model.payload.mass, model.payload.com)
+
+
+#: The checks a model may declare in :attr:`fmscal.plant.Model.input_checks`: each takes the log and the model
+#: before the fit and refuses in one line.
+_INPUT_CHECKS = {"spatial_units": _check_spatial_units}
+
 #: The checks a model may declare in :attr:`fmscal.plant.Model.calibration_checks`: each takes the run and
 #: the warnings so far and gives ``(its warnings, passed, why it failed or None)``.
 _CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
            "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
-           "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain}
+           "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain,
+           "gains": _check_gains}
 
 
 def _calibration(result, method, fields):
@@ -619,6 +679,7 @@ def _calibrate_table(table, payload, method, reading, gravity, latency, max_late
     mass, com, spatial, estimated = _table_payload(payload)
     gravity = _gravity(_merge_gravity(gravity, estimated))
     reading = "reaction" if reading is None else reading
+    check_table_units(table, gravity, mass, com)          # a slipped unit named in one line
     fit = fit_table(table, mass, com, gravity, reading)
     directions = [np.asarray(d, dtype=float) for d in fit.undetermined]
     return Calibration(S=fit.S_hat, payload=spatial, method=TABLE_METHOD, S_std=fit.S_std, b=fit.b, b_std=fit.b_std,

@@ -140,6 +140,8 @@ def _identify_log(args, log, S, gravity, estimate_gravity):
         raise CliError(f"{log.name} is a {log.kind} log; identify-payload takes a spatial log "
                        f"({','.join(_COLUMNS)}) or a pose table")
     truth = _spatial_truth(args.truth)
+    for note in log.notes:                # rows before the first pose dropped: said, as calibrate says it
+        print(f"fmscal identify-payload: note: {note}", file=sys.stderr)
     fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
                            estimate_mounting=args.mounting == "estimate")
     for warning in fit.warnings:

@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
-from fmscal.plant.io import reading_sign
+from fmscal.plant.io import check_spatial_log_units, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array, as_positive_scalar
 from fmscal.plant.physics import (GRAVITY, INERTIA_NAMES, SpatialPayload, check_calibration, edge, regressor,
                                   rotation_matrix, skew, spatial_motion)
@@ -88,6 +88,9 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
 
     Raises
     ------
+    plant.io.UnitsError
+        A unit slip or a convention the data show, named in one line before the fit
+        (:func:`fmscal.plant.io.check_spatial_log_units`, :func:`fmscal.plant.io.check_table_units`).
     FmscalError
         The log does not determine the mass, or its mass comes out negative
         (the reading follows the other sign convention: the message names the flag).
@@ -100,6 +103,7 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     if not np.linalg.norm(gravity) > 0:                  # as fit_static: a direction is needed to weigh anything
         raise FmscalError("gravity must not be zero")
     block = None if block is None else as_positive_scalar(block, "block")
+    check_spatial_log_units(log, gravity, S=S)          # a slipped unit named in one line, before the fit
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]

@@ -41,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import least_squares
 
-from fmscal.plant.io import PoseTable, reading_sign
+from fmscal.plant.io import PoseTable, check_table_units, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
 from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
@@ -274,6 +274,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
 
     Raises
     ------
+    plant.io.UnitsError
+        A unit slip or a convention the data show, named in one line before the fit
+        (:func:`fmscal.plant.io.check_spatial_log_units`, :func:`fmscal.plant.io.check_table_units`).
     FmscalError
         A reading convention that is neither, or a table whose data say the
         other convention (a negative mass, or gravity pointing up with
@@ -288,6 +291,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     g = as_finite_array(gravity, (3,), "gravity")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
+    check_table_units(table, g, S=S)                    # a slipped unit named in one line, before the fit
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     # gravity's directions in the sensor frame (a mounting turns them all alike); with gravity estimated,

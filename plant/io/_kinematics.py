@@ -189,9 +189,50 @@ def read_joint_data(path, kinematics):
         row = int(np.argmax(partial | missing)) + 1
         raise LogError(f"{_echo(path.name)}: row {row} has some but not all joint values"
                        if partial.any() else f"{_echo(path.name)}: row {row} has no joint values")
+    _refuse_degrees(values[~missing], kinematics, joints, _echo(path.name))
     pose = np.full((len(values), 7), np.nan)
     pose[~missing] = kinematics.poses(values[~missing])
     w_hat = frame[list(_WRENCH)].to_numpy()
     if timed:
         return Log(frame["t"].to_numpy(), pose, w_hat, name=_echo(path.name))
     return PoseTable(pose[:, :4], w_hat, name=_echo(path.name))
+
+
+def _refuse_degrees(values, kinematics, joints, name):
+    """Refuse joint angles in degrees, told by the URDF's joint limits: a revolute joint beyond its limit in rad
+    while every revolute joint in rad, the values times pi/180, is within its own (one line naming degrees).
+
+    Parameters
+    ----------
+    values : ndarray, shape (N, n)
+        The joint values, in the URDF's order.
+    kinematics : RobotKinematics
+    joints : list of str
+        The joint columns' names, in that order.
+    name : str
+        The file's name, for the message.
+
+    Raises
+    ------
+    plant.LogError
+    """
+    model = kinematics.model
+    lower, upper = np.asarray(model.lowerPositionLimit, float), np.asarray(model.upperPositionLimit, float)
+    revolute = np.array([j.shortname().removeprefix("JointModel").startswith("R") for j in model.joints[1:]])
+    limited = revolute & np.isfinite(lower) & np.isfinite(upper) & (upper > lower)
+    if not limited.any() or not len(values):
+        return
+    v = values[:, limited]
+    lo, hi = lower[limited], upper[limited]
+    beyond = (v < lo - 1e-6) | (v > hi + 1e-6)
+    if not beyond.any():
+        return
+    radians = np.deg2rad(v)
+    if ((radians < lo - 1e-6) | (radians > hi + 1e-6)).any():
+        return
+    k = int(np.argmax(beyond.any(axis=0)))
+    column = [c for c, keep in zip(joints, limited) if keep][k]
+    worst = v[np.argmax(np.abs(v[:, k])), k]
+    raise LogError(f"{name}: the joint angles look like degrees, not radians: {column} reaches {worst:.4g}, beyond "
+                   f"the URDF's limits [{lo[k]:.3g}, {hi[k]:.3g}] rad, while every joint in degrees (times pi/180) "
+                   f"is within its limits; convert the joint columns to rad")

@@ -116,6 +116,10 @@ class Model:
     #: are reported (``"run"``: the method's own warnings); :func:`fmscal.analysis.calibrate` documents
     #: each. ``converged`` is the run's flag and every check passed.
     calibration_checks = ()
+    #: The checks of the log's units and conventions a calibration makes BEFORE the fit (a fit of a log in
+    #: the wrong units can run for minutes), each refusing in one line that names the unit;
+    #: :func:`fmscal.analysis.calibrate` documents each.
+    input_checks = ()
 
     def __init__(self, payload):
         self.payload = payload
@@ -668,7 +672,8 @@ class SpatialModel(Model):
     signed_reading = True
     force_channels = (3, 4, 5)
     reading_blocks = (("torque", (0, 1, 2)), ("force", (3, 4, 5)))
-    calibration_checks = ("saturation", "run", "evidence", "flipped_gain")
+    calibration_checks = ("saturation", "run", "evidence", "flipped_gain", "gains")
+    input_checks = ("spatial_units",)
     nq, nv = rigid_body.NQ, rigid_body.NV
     state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))
     q_index, v_index = tuple(range(7)), tuple(range(7, 13))

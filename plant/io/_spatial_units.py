@@ -1,0 +1,350 @@
+"""Unit slips in 3D, told from the data before any fit: one line naming the unit.
+
+A spatial log, a pose table or an attitude-only log's held poses fix the
+wrench the payload needs only up to the units they are written in. These
+checks read the data against what a wrist sensor on a robot can show, and
+name the slip before an expensive fit runs on it (a log with positions in mm
+ran for minutes and weighed 0.53 g):
+
+- a reading channel that never changes (all zero: not connected);
+- gravity's size against Earth's, :data:`EARTH_G` (``--gravity 0 0 -981`` is in cm/s^2);
+- the payload's mass against what a wrist sensor carries, :data:`MAX_WRIST_MASS`;
+- the time step against a force sensor's rate (``t`` in ms gives steps of 1 s);
+- the attitude's convention and the reading's block order, by the data: the
+  weight seen in the pose frame must be one constant vector (eq. U1 below);
+  the quaternion as written (scalar first, sensor to pose frame), conjugated,
+  or scalar last, and the reading's torque and force blocks as written or
+  swapped, each fitted, and the one that fits far better named;
+- the torque against the force through a lever arm (eq. U2): a lever arm
+  beyond :data:`MAX_LEVER_ARM` is torques in N mm;
+- the weight the force reading shows against ``m |g|`` (readings in mN);
+- the translational acceleration the positions imply against the force's
+  share of it (the mass the accelerations imply against the weight's,
+  positions in mm), and against :data:`MAX_ACCELERATION`.
+
+The fit of the weight in the pose frame (eq. U1): with ``R`` the attitude
+(sensor to pose frame), ``p`` the position, ``h = m rho`` and ``b`` the
+force offset, Newton's law for the centre of mass ``p + R rho`` reads, with
+``S = I`` and the reading in the reaction convention (the load convention
+turns every unknown's sign, which the check does not read)::
+
+    R f_hat = m_a p'' + R'' h + R b + c,        c = -m g          (U1)
+
+linear in ``m_a``, ``h``, ``b``, ``c``. The mass the weight shows is
+``m_g = |c| / |g|``; ``m_a`` is the mass the accelerations show: the two
+agree in SI units. The torque about the sensor point (eq. U2), quasi-static::
+
+    tau_hat = rho x f_hat + d                                      (U2)
+
+with ``d`` a constant (the torque offset, and ``rho`` times the force offset).
+"""
+
+import numpy as np
+
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import rotation_matrix
+
+__all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units",
+           "check_table_units", "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
+
+#: Earth's gravity, m/s^2; a given ``|g|`` more than :data:`_G_TOLERANCE` from it is refused.
+EARTH_G = 9.81
+_G_TOLERANCE = 0.03
+#: The largest payload a wrist sensor carries, kg (the big 6-axis sensors are rated for a few hundred N).
+MAX_WRIST_MASS = 50.0
+#: The largest lever arm from the sensor to the payload's centre of mass, m.
+MAX_LEVER_ARM = 1.0
+#: The largest rms translational acceleration a robot or a hand gives a payload, m/s^2.
+MAX_ACCELERATION = 50.0
+#: The largest time step of a force-sensor log, s (a log stamped in ms shows steps of 1).
+MAX_STEP = 0.5
+#: A ratio further than this from 1, either way, is a unit slip (the slips are factors 100 and 1000).
+_FAR = 30.0
+#: Window over which poses and readings are averaged before differentiating twice, s.
+_WINDOW = 0.05
+#: A convention or block order is named when its fit's residual is this many times smaller ...
+_BETTER = 5.0
+#: ... and the one written leaves more than this share of the force's spread unexplained, and the one named
+#: less than :data:`_GOOD` (a sensor bolted at an angle to the tracked frame fits no convention well: nothing
+#: is named).
+_POOR = 0.2
+_GOOD = 0.12
+
+_CONVENTIONS = (("as written", lambda c: c),
+                ("conjugated", lambda c: c * np.array([1.0, -1, -1, -1])),
+                ("scalar last", lambda c: c[:, [3, 0, 1, 2]]),
+                ("scalar last and conjugated", lambda c: c[:, [3, 0, 1, 2]] * np.array([1.0, -1, -1, -1])))
+
+
+class UnitsError(FmscalError):
+    """A unit slip or a convention the data say is not the one the toolkit reads: the message names it."""
+
+
+def check_gravity(gravity):
+    """Refuse a gravity whose size is not Earth's: ``|g|`` within 3 % of :data:`EARTH_G`.
+
+    Parameters
+    ----------
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+
+    Raises
+    ------
+    UnitsError
+        Naming the unit the size suggests (cm/s^2, mm/s^2, or g).
+    """
+    size = float(np.linalg.norm(np.asarray(gravity, dtype=float)))
+    if abs(size / EARTH_G - 1) <= _G_TOLERANCE:
+        return
+    units = {"cm/s^2": 100.0, "mm/s^2": 1000.0, "g (multiples of 9.81)": 1 / EARTH_G}
+    unit = next((u for u, k in units.items() if abs(size / (EARTH_G * k) - 1) < 0.1), None)
+    guess = f": in {unit}? " if unit else "; "
+    raise UnitsError(f"gravity's size is {size:.4g}, not Earth's {EARTH_G} m/s^2{guess}give gravity in m/s^2")
+
+
+def check_mass(mass, what="the payload's mass"):
+    """Refuse a mass beyond what a wrist sensor carries (:data:`MAX_WRIST_MASS`), naming grams.
+
+    Raises
+    ------
+    UnitsError
+    """
+    if mass > MAX_WRIST_MASS:
+        raise UnitsError(f"{what} is {mass:.4g} kg, beyond what a wrist sensor carries ({MAX_WRIST_MASS:g} kg): in g? "
+                         f"give it in kg")
+
+
+def check_readings_change(name, w_hat, names=("tx", "ty", "tz", "fx", "fy", "fz")):
+    """Refuse readings with a channel that never changes (all zero: a channel not connected), as ``calibrate`` does.
+
+    Raises
+    ------
+    UnitsError
+    """
+    w_hat = np.asarray(w_hat, dtype=float)
+    constant = [n for n, column in zip(names, w_hat.T) if np.ptp(column) == 0]
+    if constant:
+        raise UnitsError(f"{name}: column(s) {', '.join(constant)} of the reading never change (every row "
+                         f"{w_hat[0, names.index(constant[0])]:g}): a channel not connected or a column written "
+                         "empty; check the recording")
+
+
+def _rotations(quaternions):
+    """Rotation matrices (N, 3, 3) of quaternions (N, 4), scalar first, normalised."""
+    q = np.asarray(quaternions, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return np.moveaxis(rotation_matrix(q.T), -1, 0)
+
+
+def _weight_fit(R, f, acc=None, R_ddot=None):
+    """Eq. (U1) by least squares: ``(m_a, m_a_std, c, relative residual)``.
+
+    ``m_a`` is None without accelerations; the relative residual is the rms
+    residual over the rms spread of ``f`` about its mean.
+    """
+    n = len(R)
+    columns = [R, np.broadcast_to(np.eye(3), (n, 3, 3))]
+    if acc is not None:
+        columns = [acc[:, :, None], R_ddot, *columns]
+    X = np.concatenate(columns, axis=2).reshape(3 * n, -1)
+    y = np.einsum("nij,nj->ni", R, f).ravel()
+    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    residual = y - X @ theta
+    spread = np.sqrt(np.mean(np.var(f, axis=0)))
+    relative = float(np.sqrt(np.mean(residual ** 2)) / max(spread, 1e-300))
+    c = theta[-3:]
+    if acc is None:
+        return None, None, c, relative
+    dof = max(len(y) - X.shape[1], 1)
+    try:
+        cov = np.linalg.inv(X.T @ X) * (residual @ residual / dof)
+        std = float(np.sqrt(cov[0, 0]))
+    except np.linalg.LinAlgError:
+        std = np.inf
+    return float(theta[0]), std, c, relative
+
+
+def _lever_arm(tau, f):
+    """Eq. (U2) by least squares: the lever arm ``rho`` (m in SI units)."""
+    n = len(f)
+    fx = np.zeros((n, 3, 3))                       # rho x f = -[f]x rho
+    fx[:, 0, 1], fx[:, 0, 2], fx[:, 1, 2] = f[:, 2], -f[:, 1], f[:, 0]
+    fx[:, 1, 0], fx[:, 2, 0], fx[:, 2, 1] = -f[:, 2], f[:, 1], -f[:, 0]
+    X = np.concatenate([fx, np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
+    theta, *_ = np.linalg.lstsq(X, tau.ravel(), rcond=None)
+    return theta[:3]
+
+
+def _conventions(name, quaternions, w_hat, fits):
+    """Which attitude convention and block order the weight's fit (eq. U1) says; a refusal naming another.
+
+    ``fits(R, f)`` gives the relative residual of eq. (U1) for the rotations ``R`` and the force ``f``.
+    """
+    results = {}
+    for blocks, (tau_cols, f_cols) in (("as written", (slice(0, 3), slice(3, 6))),
+                                       ("swapped", (slice(3, 6), slice(0, 3)))):
+        for convention, turn in _CONVENTIONS:
+            results[(convention, blocks)] = fits(_rotations(turn(quaternions)), w_hat[:, f_cols])
+    written = results[("as written", "as written")]
+    (convention, blocks), best = min(results.items(), key=lambda item: item[1])
+    if (written <= _POOR or best > _GOOD or best * _BETTER > written
+            or (convention, blocks) == ("as written", "as written")):
+        return
+    fit = (f"the weight in the pose frame is one constant vector only with {{}} (the fit leaves {best:.1%} of the "
+           f"force's spread unexplained, against {written:.0%} as written)")
+    if blocks == "swapped":
+        raise UnitsError(f"{name}: the reading's torque and force blocks look swapped (fx,fy,fz,tx,ty,tz, not "
+                         f"tx,ty,tz,fx,fy,fz): " + fit.format("the blocks swapped") + "; reorder the columns")
+    if convention == "conjugated":
+        raise UnitsError(f"{name}: the quaternions look conjugated (pose frame to sensor, not sensor to pose frame): "
+                         + fit.format("them conjugated") + "; write their inverse (negate qx, qy, qz)")
+    raise UnitsError(f"{name}: the quaternions look scalar last (qx,qy,qz,qw written in the qw,qx,qy,qz columns): "
+                     + fit.format(f"them read {convention}") + "; move qw to the first column")
+
+
+def _torque_and_weight(name, w_hat, c, gravity, mass, com):
+    """The lever arm (eq. U2) and the weight ``|c|`` (eq. U1; None where eq. U1 does not fit) against the
+    payload's: N mm torques, mN readings."""
+    rho = _lever_arm(w_hat[:, 0:3], w_hat[:, 3:6])
+    arm = float(np.linalg.norm(rho))
+    known = None if com is None else float(np.linalg.norm(com))
+    if arm > MAX_LEVER_ARM or (known is not None and known > 0.01 and arm > _FAR * known):
+        told = f" (the payload's is {known * 1e3:.3g} mm)" if known is not None else ""
+        raise UnitsError(f"{name}: the torques look like N mm, not N m: torque over force gives a lever arm of "
+                         f"{arm:.3g} m{told}, beyond a wrist's {MAX_LEVER_ARM:g} m; convert tx, ty, tz to N m")
+    if c is None:
+        return
+    weighed = float(np.linalg.norm(c)) / float(np.linalg.norm(gravity))
+    if mass is None:
+        if weighed > MAX_WRIST_MASS:
+            raise UnitsError(f"{name}: the force reading weighs {weighed:.4g} kg (its weight over |g|), beyond what a "
+                             f"wrist sensor carries ({MAX_WRIST_MASS:g} kg): readings in mN? give them in N and N m")
+        return
+    ratio = weighed / mass
+    if ratio > _FAR:
+        raise UnitsError(f"{name}: the force reading shows a weight {ratio:.3g} times m |g| ({weighed:.4g} kg against "
+                         f"the payload's {mass:.4g} kg): readings in mN (1000)? give them in N and N m, or check the "
+                         f"mass")
+    if ratio < 1 / _FAR:
+        raise UnitsError(f"{name}: the force reading shows a weight {ratio:.3g} times m |g| ({weighed:.4g} kg against "
+                         f"the payload's {mass:.4g} kg): readings in kN, or the mass in g? give the readings in N and "
+                         f"the mass in kg")
+
+
+def check_table_units(table, gravity, mass=None, com=None, S=None):
+    """The unit and convention checks on held poses: gravity, mass, conventions, torques, the weight.
+
+    Parameters
+    ----------
+    table : plant.io.PoseTable
+    gravity : array_like, shape (3,)
+        m/s^2, the pose frame's.
+    mass : float, optional
+        The payload's mass, kg (where known: ``calibrate``); without it, the weight the readings show is held
+        to :data:`MAX_WRIST_MASS`.
+    com : array_like, shape (3,), optional
+        The payload's centre of mass in the sensor frame, m (where known).
+    S : array_like, shape (6, 6), optional
+        A calibration the readings go through first (default the identity).
+
+    Raises
+    ------
+    UnitsError
+        The first slip found, named in one line.
+    """
+    check_readings_change(table.name, table.w_hat)
+    check_gravity(gravity)
+    if mass is not None:
+        check_mass(mass)
+    w_hat = _calibrated(table.w_hat, S)
+    q = np.asarray(table.q, dtype=float)
+    _conventions(table.name, q, w_hat, lambda R, f: _weight_fit(R, f)[3])
+    _, _, c, relative = _weight_fit(_rotations(q), w_hat[:, 3:6])
+    _torque_and_weight(table.name, w_hat, c if relative <= _POOR else None, gravity, mass, com)
+
+
+def _calibrated(w_hat, S):
+    return np.asarray(w_hat, dtype=float) if S is None else np.asarray(w_hat, dtype=float) @ np.asarray(S).T
+
+
+def _coarse(log, window):
+    """Quaternions, positions, mean readings on a grid of step ``window`` (at least the log's), and the step."""
+    k = max(1, int(round(window / log.dt)))
+    n = len(log.t) // k
+    if n < 7 or log.has_pose.sum() < 7:
+        return None
+    t = log.t[:n * k].reshape(n, k).mean(axis=1)
+    have = log.has_pose
+    measured = log.pose[have].copy()
+    flip = np.r_[1.0, np.sign(np.sum(measured[1:, :4] * measured[:-1, :4], axis=1))]
+    measured[:, :4] *= np.cumprod(np.where(flip == 0, 1.0, flip))[:, None]          # sign-continuous
+    pose = np.column_stack([np.interp(t, log.t[have], measured[:, j]) for j in range(7)])
+    w_hat = log.w_hat[:n * k].reshape(n, k, 6).mean(axis=1)
+    return pose, w_hat, k * log.dt
+
+
+def check_spatial_log_units(log, gravity, mass=None, com=None, S=None):
+    """The unit and convention checks on a spatial log, before any fit: one line naming the first slip.
+
+    In order: gravity's size (:func:`check_gravity`), the mass given (:func:`check_mass`), the time step
+    (at most :data:`MAX_STEP`: ``t`` in ms), the attitude's convention and the reading's block order
+    (eq. U1 fitted each way), the torque's lever arm (eq. U2, :data:`MAX_LEVER_ARM`: N mm), the weight the
+    force shows against ``m |g|`` (mN), and the positions: the rms acceleration (:data:`MAX_ACCELERATION`)
+    and the mass the accelerations imply (``m_a`` of eq. U1) against the weight's (mm). Poses and readings
+    are averaged over 50 ms windows first; the cost is a few least-squares fits of a few thousand rows.
+
+    Parameters
+    ----------
+    log : plant.Log
+        A spatial log.
+    gravity : array_like, shape (3,)
+    mass, com, S
+        As :func:`check_table_units`.
+
+    Raises
+    ------
+    UnitsError
+        The first slip found, named in one line.
+    """
+    if np.shape(log.pose)[1:] != (7,) or np.shape(log.w_hat)[1:] != (6,):
+        return                                          # not a spatial log: the caller says so
+    check_readings_change(log.name, log.w_hat)
+    check_gravity(gravity)
+    if mass is not None:
+        check_mass(mass)
+    steps = np.diff(log.t)
+    step = float(np.median(steps)) if len(steps) else 0.0
+    if step > MAX_STEP:
+        unit = "milliseconds" if step < 100 else "microseconds or another unit"
+        raise UnitsError(f"{log.name}: t looks like {unit}, not seconds: its time steps are {step:.4g} s (a rate of "
+                         f"{1 / step:.3g} Hz, where a force sensor reads at tens of Hz or more); convert t to s")
+    coarse = _coarse(log, _WINDOW)
+    if coarse is None:
+        return
+    pose, w_hat, h = coarse
+    w_hat = _calibrated(w_hat, S)
+    acc = np.diff(pose[:, 4:7], n=2, axis=0) / h ** 2
+
+    def residual_of(R, f):
+        R_ddot = (R[2:] - 2 * R[1:-1] + R[:-2]) / h ** 2
+        return _weight_fit(R[1:-1], f[1:-1], acc, R_ddot)[3]
+    _conventions(log.name, pose[:, :4], w_hat, residual_of)
+    R = _rotations(pose[:, :4])
+    R_ddot = (R[2:] - 2 * R[1:-1] + R[:-2]) / h ** 2
+    m_a, m_a_std, c, relative = _weight_fit(R[1:-1], w_hat[1:-1, 3:6], acc, R_ddot)
+    fits = relative <= _POOR                       # else a mounting the fit does not hold: no weight read from it
+    _torque_and_weight(log.name, w_hat, c if fits else None, gravity, mass, com)
+    rms = float(np.sqrt(np.mean(np.sum(acc ** 2, axis=1))))
+    slower = _coarse(log, 4 * _WINDOW)
+    if slower is None:
+        return
+    acc4 = np.diff(slower[0][:, 4:7], n=2, axis=0) / slower[2] ** 2
+    if np.sqrt(np.mean(np.sum(acc4 ** 2, axis=1))) < 0.5 * rms:
+        return                  # the accelerations are the positions' noise (it falls 32-fold over a 4-fold step)
+    m_g = float(np.linalg.norm(c)) / float(np.linalg.norm(gravity))
+    told = fits and abs(m_g - abs(m_a)) > 10 * m_a_std and m_g > 0
+    if rms > MAX_ACCELERATION or (told and abs(m_a) < m_g / _FAR):
+        share = f"the accelerations weigh the payload {abs(m_a) / m_g:.2g} times its weight (1e-3 for mm)"
+        size = f"their rms acceleration is {rms:.3g} m/s^2 (a robot's stays under {MAX_ACCELERATION:g})"
+        why = "; ".join([*([size] if rms > MAX_ACCELERATION else []), *([share] if told else [])])
+        raise UnitsError(f"{log.name}: x, y, z look like millimetres, not metres: {why}; convert x, y, z to m")
