@@ -199,8 +199,9 @@ def _state(model, P0, P1, P2):
         conj = (q * np.array([1.0, -1.0, -1.0, -1.0])).T
         omega = 2 * quaternion_multiply(conj, P1[:, :4].T / norm.T)[1:].T
         alpha = 2 * quaternion_multiply(conj, P2[:, :4].T / norm.T)[1:].T
-        configuration = np.c_[P0[:, 4:], q]                              # [p, q], from the pose [q, p]
-        velocity, acceleration = np.c_[P1[:, 4:], omega], np.c_[P2[:, 4:], alpha]
+        configuration = np.concatenate([P0[:, 4:], q], axis=1)            # [p, q], from the pose [q, p]
+        velocity = np.concatenate([P1[:, 4:], omega], axis=1)
+        acceleration = np.concatenate([P2[:, 4:], alpha], axis=1)
     else:
         configuration, velocity, acceleration = P0, P1, P2
     x = np.empty((len(P0), model.nx))
@@ -261,7 +262,8 @@ class _Parts:
         w_e = W_p - (signed - self.b) @ self.S.T
         cov = self.reading_cov + np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv)
         if self.cov4 is not None:
-            u = np.c_[signed, np.ones(len(signed))] if self.m == self.n + 1 else signed - self.b
+            u = np.concatenate([signed, np.ones((len(signed), 1))], axis=1) if self.m == self.n + 1 \
+                else signed - self.b
             cov = cov + np.einsum("na,iajb,nb->nij", u, self.cov4, u)
         statistic = np.einsum("ni,ni->n", w_e, np.linalg.solve(cov, w_e[..., None])[..., 0])
         return self.out_sign * w_e, cov, statistic > self.threshold, statistic
