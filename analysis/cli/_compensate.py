@@ -43,8 +43,9 @@ def _payload(path, calibration):
     """The payload of an identify-payload file, as the calibration's model takes it."""
     estimate = PayloadEstimate.load(path)
     if estimate.inertia is None:
-        raise CliError(f"{Path(path).name} holds no inertia (held poses do not give it): the motion's wrench needs "
-                       "it; identify the payload from a moving log")
+        raise CliError(f"{Path(path).name} holds no inertia (its log did not determine it): the motion's wrench "
+                       "needs it; identify the payload from a log with more angular acceleration, or give a "
+                       "calibration that holds the tool")
     model = compensation_model(calibration)
     return type(model).payload_from(estimate.mass, estimate.inertia, estimate.com)
 
