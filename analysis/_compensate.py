@@ -64,8 +64,8 @@ from fmscal.observers.batch import smoothed_channels
 
 from ._calibrate import log_model_class
 
-__all__ = ["compensate", "Compensation", "Compensator", "DIRECTIONS", "OFFLINE_WINDOW", "CAUSAL_WINDOW",
-           "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM"]
+__all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
+           "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM"]
 
 #: The published wrench: the environment's on the tool (``w_e``, the default) or the tool's on the environment.
 DIRECTIONS = ("on_tool", "on_environment")
