@@ -38,8 +38,9 @@ The covariance of ``w_e`` per sample is the sum of three independent parts::
 order), ``J = I (x) [sigma w_hat; 1]^T`` (``I (x) (sigma w_hat - b)^T`` where ``cov`` is of ``S`` alone;
 entries the data left undetermined, infinite in ``cov``, are left out and a warning says so); and
 ``Sigma_a`` the accelerations' noise, the pose's noise through the second-derivative filter
-(``var(a_j) = var(q_j) sum(c_k^2)``, ``c`` the filter's coefficients). The differentiated velocity's noise
-and the filter's bias are not counted.
+(``var(a_j) = var(q_j) sum(c_k^2)``, ``c`` the filter's coefficients; offline, poses sparser than the
+readings are interpolated onto the readings' grid first, and the sum is taken times the number of samples
+between poses). The differentiated velocity's noise and the filter's bias are not counted.
 
 A sample is a contact where the compensated wrench is beyond its noise: its normalised squared norm
 ``d^2 = w_e^T Cov^-1 w_e`` above the chi-square quantile of ``n_w`` degrees of freedom (6 in 3D) at
@@ -370,7 +371,10 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         x, a = _smoothed_motion(aligned, model, window)
         keep = slice(edge(aligned, window), len(aligned) - edge(aligned, window))
         k = 2 * edge(aligned, window) + 1
-        c2 = savgol_coeffs(k, ORDER, deriv=2, delta=aligned.dt, use="dot")
+        # the poses interpolated onto the log's grid: a pose every r samples weighs about r times a sample's
+        # share of the filter, so the variance of the derivative is about r times the grid's sum(c^2)
+        r = float(np.median(np.diff(np.flatnonzero(aligned.has_pose)))) if aligned.has_pose.sum() > 1 else 1.0
+        c2 = savgol_coeffs(k, ORDER, deriv=2, delta=aligned.dt, use="dot") * np.sqrt(max(r, 1.0))
         t, w_hat, x, a, lag = aligned.t[keep], aligned.w_hat[keep], x[keep], a[keep], 0.0
     else:
         window = CAUSAL_WINDOW if window is None else window

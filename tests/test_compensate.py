@@ -86,6 +86,26 @@ def test_contact_found_and_flagged(arm, causal):
     np.testing.assert_allclose(other.wrench, -c.wrench)
 
 
+@pytest.mark.parametrize("causal", [False, True])
+def test_poses_at_200_hz(causal):
+    """Poses at 200 Hz with dropped frames and 5 ms of latency (spatial-mocap): offline the poses interpolated,
+    causally each window fitted to the poses it holds (Compensator sample by sample). The covariance still
+    says what the residual is, and a 15 N contact comes out within 10 % and flagged."""
+    scenario = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=3.0)
+    log, truth, _ = scenario.generate(3)
+    cal = Calibration(S=truth.S_at(0.0), payload=scenario.payload, method="truth", b=truth.offset,
+                      gravity=scenario.gravity, latency=0.005)
+    touched, _ = with_contact(log, truth.S_at(0.0), contact_wrench(), 1.0, 1.0)
+    c = compensate(cal, touched, causal=causal, noise=truth.noise, **({"window": 0.12, "delay": 0.06} if causal
+                                                                        else {}))
+    assert c.delay == pytest.approx(0.06 if causal else 0.0)
+    inside, outside = (c.t >= 1.15) & (c.t < 1.85), (c.t < 0.9) | (c.t >= 2.15)
+    ratio = np.sqrt(np.mean(c.wrench[outside] ** 2, axis=0) / np.mean(c.sd[outside] ** 2, axis=0))
+    assert np.all((ratio > 0.85) & (ratio < 1.15)), ratio
+    assert c.contact[outside].mean() < 0.005 and c.contact[inside].mean() > 0.99
+    assert np.linalg.norm(c.wrench[inside].mean(axis=0) - contact_wrench()) < 0.1 * 15
+
+
 def test_planar_model_same_code():
     """The planar model through the same code: its dynamics (eq. (1)) inverted, the residual the noise."""
     scenario = get_scenario("paper").with_(duration=5.0)
