@@ -391,7 +391,7 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         first = k - 1 - lead
         rows = slice(first, first + len(P[0]))
         x, a = _state(model, *P)
-        t, w_hat, lag = aligned.t[rows], aligned.w_hat[rows], L * aligned.dt
+        t, w_hat, lag = aligned.t[rows], aligned.w_hat[rows], round(L * aligned.dt, 12)
     W_p, A_inv = _payload_wrench(model, x, a)
     accel_var = _configuration_variance(model, noise, aligned.pose[np.argmax(aligned.has_pose)]) * np.sum(c2 ** 2)
     wrench, cov, contact, statistic = parts.finish(w_hat, W_p, A_inv, accel_var)
@@ -500,7 +500,7 @@ class Compensator:
     @property
     def delay(self):
         """The delay the causal filter adds, s: each output is the wrench of the reading this much older."""
-        return self._L * self.dt
+        return round(self._L * self.dt, 12)
 
     def push(self, t, w_hat, pose=None):
         """Take the newest sample; the contact wrench of the reading :attr:`delay` s older, or None.
