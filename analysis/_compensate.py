@@ -554,11 +554,14 @@ class Compensator:
         return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]))
 
     def _irregular(self, present):
-        """The polynomial fitted to the poses the window holds; ``(P, sum c2^2)`` or None (too few)."""
+        """The polynomial fitted to the poses the window holds; ``(P, sum c2^2)``, or None where they are too few
+        or all on one side of the time it is read at (a stale pose stream: no extrapolation)."""
         rows = np.flatnonzero(present)
         if len(rows) < self.order + 3:
             return None
         s = (rows - (self._k - 1 - self._lead)) * self.dt             # each pose's time from the evaluation time
+        if s.min() > 0 or s.max() < 0:                                 # no pose on one side: an extrapolation
+            return None
         V = np.vander(s, self.order + 1, increasing=True)
         pinv = np.linalg.pinv(V)                                      # (order + 1, n): the polynomial's coefficients
         c = np.array([pinv[0], pinv[1], 2 * pinv[2]])

@@ -69,6 +69,16 @@ def test_streaming_agrees_with_offline_causal(arm):
     assert [o.contact for o in np.array(out)[j]] == list(offline.contact[i])
 
 
+def test_stale_pose_stream_stops_the_output(arm):
+    """Poses stop: the stream answers up to the reading of the last pose, then None (no extrapolation)."""
+    scenario, log, truth, cal = arm
+    stream = Compensator(cal, log.dt, noise=truth.noise)
+    answered = np.array([stream.push(t, w, p if i < 500 else None) is not None
+                         for i, (t, w, p) in enumerate(zip(log.t[:700], log.w_hat, log.pose))])
+    assert np.flatnonzero(answered)[0] == 59 and np.flatnonzero(answered)[-1] == 529    # reading 499 at 529
+    assert not answered[530:].any()
+
+
 @pytest.mark.parametrize("causal", [False, True])
 def test_contact_found_and_flagged(arm, causal):
     """A 15 N force (and its torque about the sensor) for 2 s comes out within 10 % and is flagged."""
