@@ -179,6 +179,12 @@ def test_cli(arm, tmp_path, capsys):
                  str(tmp_path / "e.csv")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "fmscal compensate: error:" in err
+    assert main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / "log.csv"), "--out",
+                 str(tmp_path / "e.csv"), "--delay", "0.04"]) == 2
+    assert "add --causal" in capsys.readouterr().err
+    assert main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / "log.csv"), "--out",
+                 str(tmp_path / "e.csv"), "--causal", "--window", "0.08", "--delay", "0.04"]) == 0
+    assert "delay 40 ms" in capsys.readouterr().out
     json.loads((tmp_path / "cal.json").read_text())
 
 

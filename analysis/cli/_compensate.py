@@ -30,6 +30,12 @@ def add_compensate(sub):
                    help=f"differentiate the poses causally, as on a running robot (a {CAUSAL_WINDOW * 1e3:g} ms "
                         f"window read {CAUSAL_DELAY * 1e3:g} ms back: each row is the reading of its time, "
                         f"available that much later); default both ways ({OFFLINE_WINDOW * 1e3:g} ms window)")
+    p.add_argument("--window", type=float, metavar="S",
+                   help=f"the smoothing window, s (default {OFFLINE_WINDOW:g} offline, {CAUSAL_WINDOW:g} causal; "
+                        "longer for poses at a lower rate)")
+    p.add_argument("--delay", type=float, metavar="S", default=CAUSAL_DELAY,
+                   help=f"--causal: where the window is read, s before the newest sample (default {CAUSAL_DELAY:g}); "
+                        "at least the calibration's latency")
     p.add_argument("--payload", metavar="PAYLOAD.json",
                    help="the tool's mass properties from fmscal identify-payload --save, in place of the "
                         "calibration's (a tool change: S does not depend on the tool)")
@@ -63,8 +69,10 @@ def cmd_compensate(args):
               file=sys.stderr)
     payload = None if args.payload is None else _payload(args.payload, calibration)
     log = read_log(args.log)
-    result = compensate(calibration, log, causal=args.causal, payload=payload,
-                        direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0])
+    if not args.causal and args.delay != CAUSAL_DELAY:
+        raise CliError("--delay is the causal path's: add --causal")
+    result = compensate(calibration, log, causal=args.causal, payload=payload, window=args.window,
+                        delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0])
     if not np.isfinite(result.wrench).all():
         raise CliError("the compensated wrench is not finite (overflow): the calibration's S or b is far outside "
                        "any sensor's range: nothing written")
