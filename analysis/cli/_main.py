@@ -26,6 +26,7 @@ from .._comparison import case_scenario, compare, summarise, summary_markdown
 from .._plots import plot_comparison
 from .._reproduce import output_names, reproduce
 from ._calibration import add_apply, add_calibrate
+from ._compensate import add_compensate
 from ._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes,
                       flag_payload, position_flag, positive, strict)
 from ._files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs, claim_folder,
@@ -385,8 +386,8 @@ def build_parser():
     return parser
 
 
-_COMMANDS = [_add_simulate, add_calibrate, add_apply, add_identify_payload, _add_reproduce, _add_compare,
-             _add_ablation, add_sweep, add_bench, _add_check_gains, add_import]
+_COMMANDS = [_add_simulate, add_calibrate, add_apply, add_compensate, add_identify_payload, _add_reproduce,
+             _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import]
 
 
 def main(argv=None):

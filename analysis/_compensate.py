@@ -1,0 +1,569 @@
+"""Compensation: the wrench the environment applies to the tool, the payload's gravity and inertia removed.
+
+With the calibrated reading ``w_s = S (sigma w_hat - b)`` (the wrench the mount applies to the payload,
+:class:`fmscal.plant.Calibration`) and ``W_p`` the wrench the payload's motion needs at the sensor point
+under gravity, the environment's wrench on the tool, at the sensor point and in the sensor's axes, is::
+
+    w_e = W_p - w_s                                                                              (C1)
+
+(``w_s + w_e = W_p``: the mount and the environment together drive the payload). Its negative,
+``w_s - W_p``, is the wrench the tool applies to the environment, which force control often wants:
+``direction="on_environment"`` publishes it; the default, ``"on_tool"``, publishes ``w_e``.
+
+``W_p`` is the model's own dynamics inverted: a model declares ``a = A(x) w + d(x)``
+(:class:`fmscal.plant.Model`; Newton-Euler at the sensor point in 3D, eq. (1) in the plane), so::
+
+    W_p = A(x)^-1 (a - d(x))                                                                     (C2)
+
+with the state ``x`` and the accelerations ``a`` from the measured poses. The same code runs on every model.
+
+The motion comes from the poses, smoothed and differentiated by a Savitzky-Golay filter:
+
+- **offline** (``causal=False``) both ways, by the filter calibration's least squares uses
+  (:func:`fmscal.plant.physics.spatial_motion`, :func:`fmscal.observers.batch.smoothed_channels`): no delay;
+- **causal** (``causal=True``, and :class:`Compensator`, one sample at a time): a polynomial of degree
+  ``order`` fitted to the last ``window`` s of poses and read ``delay`` s before the newest sample. The
+  output at the newest sample is the wrench of the reading taken ``delay`` s earlier: the reading is delayed
+  alike, so that the reading and the motion are of one time. :attr:`Compensator.delay` states it.
+
+A unit quaternion's rates give the angular velocity and acceleration in the sensor's axes,
+``omega = 2 vec(q* (x) q')``, ``alpha = 2 vec(q* (x) q'')``.
+
+The covariance of ``w_e`` per sample is the sum of three independent parts::
+
+    Cov = S Sigma_r S^T + J cov J^T + A^-1 Sigma_a A^-T                                           (C3)
+
+``Sigma_r`` the reading's noise (``diag(wrench_sd^2)``, the calibration's noise model or the log's,
+:func:`fmscal.plant.io.estimate_noise`); ``cov`` the calibration's covariance of ``vec([S | c])`` (row
+order), ``J = I (x) [sigma w_hat; 1]^T`` (``I (x) (sigma w_hat - b)^T`` where ``cov`` is of ``S`` alone;
+entries the data left undetermined, infinite in ``cov``, are left out and a warning says so); and
+``Sigma_a`` the accelerations' noise, the pose's noise through the second-derivative filter
+(``var(a_j) = var(q_j) sum(c_k^2)``, ``c`` the filter's coefficients; offline, poses sparser than the
+readings are interpolated onto the readings' grid first, and the sum is taken times the number of samples
+between poses). The differentiated velocity's noise and the filter's bias are not counted.
+
+A sample is a contact where the compensated wrench is beyond its noise: its normalised squared norm
+``d^2 = w_e^T Cov^-1 w_e`` above the chi-square quantile of ``n_w`` degrees of freedom (6 in 3D) at
+``1 - false_alarm``                                                                          (C4)
+"""
+
+from collections import deque
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+from scipy.signal import savgol_coeffs
+from scipy.stats import chi2
+
+from fmscal.plant import Calibration, Log
+from fmscal.plant.io import estimate_noise, reading_sign
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, smoothed_state,
+                                  spatial_motion)
+from fmscal.observers.batch import smoothed_channels
+
+from ._calibrate import log_model_class
+
+__all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
+           "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM"]
+
+#: The published wrench: the environment's on the tool (``w_e``, the default) or the tool's on the environment.
+DIRECTIONS = ("on_tool", "on_environment")
+#: Offline smoothing window, s (the calibration's least squares' own).
+OFFLINE_WINDOW = 0.2
+#: The causal filter: its window, s, the delay at which it is read, s, and its degree.
+CAUSAL_WINDOW = 0.06
+CAUSAL_DELAY = 0.03
+CAUSAL_ORDER = 3
+#: The contact test's false-alarm probability per sample (C4).
+FALSE_ALARM = 1e-3
+
+
+class CompensationError(FmscalError):
+    """Input that cannot be compensated: the message names the problem."""
+
+
+@dataclass
+class Compensation:
+    """The contact wrench of a log, per sample (module docstring).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        The readings' times, s (causal: the output at ``t + delay``).
+    wrench : ndarray, shape (N, n_w)
+        The published wrench, sensor frame, at the sensor point: ``w_e`` (``direction="on_tool"``) or
+        ``-w_e``; N m and N in the reading's order.
+    cov : ndarray, shape (N, n_w, n_w)
+        Its covariance (C3).
+    contact : ndarray of bool, shape (N,)
+        A contact beyond the noise (C4).
+    statistic : ndarray, shape (N,)
+        ``d^2``, the normalised squared norm of the wrench.
+    threshold : float
+        The chi-square bound ``d^2`` is compared with.
+    names : tuple of str
+        The wrench's components (the model's).
+    delay : float
+        s: what the causal filter adds (0 offline).
+    direction : str
+        One of :data:`DIRECTIONS`.
+    warnings : list of str
+    """
+
+    t: np.ndarray
+    wrench: np.ndarray
+    cov: np.ndarray
+    contact: np.ndarray
+    statistic: np.ndarray
+    threshold: float
+    names: tuple
+    delay: float
+    direction: str
+    warnings: list = field(default_factory=list)
+
+    @property
+    def sd(self):
+        """One-sigma uncertainty of each component, shape (N, n_w)."""
+        return np.sqrt(np.maximum(np.einsum("nii->ni", self.cov), 0.0))
+
+
+# --- the pieces both paths share ------------------------------------------------------------------------------
+def _model_class(calibration):
+    """The model class whose reading ``calibration`` calibrates."""
+    return next(m for m in MODELS if len(m.wrench_names) == calibration.size)
+
+
+def compensation_model(calibration, payload=None, cls=None):
+    """The model the payload's wrench is computed on: the calibration's case, payload and gravity.
+
+    Parameters
+    ----------
+    calibration : plant.Calibration
+    payload : plant.Payload or plant.SpatialPayload, optional
+        Replaces the calibration's (``S`` does not depend on the tool: after a tool change, the new
+        tool's mass properties, e.g. from ``identify_payload``).
+    cls : type, optional
+        The model class a log's columns give; refused if the calibration is of another case.
+
+    Returns
+    -------
+    plant.Model
+    """
+    if not isinstance(calibration, Calibration):
+        raise CompensationError(f"compensate takes a plant.Calibration; got {type(calibration).__name__}")
+    own = _model_class(calibration)
+    if cls is not None and cls is not own:
+        raise CompensationError(f"the calibration is of a {own.name} reading ({calibration.size}x{calibration.size} "
+                                f"S); the log's columns are {cls.name}")
+    payload = calibration.payload if payload is None else payload
+    if payload is None:
+        raise CompensationError("the calibration holds no payload: give the tool's (payload=..., or --payload)")
+    if not isinstance(payload, own.payload_type):
+        raise CompensationError(f"a {own.name} calibration takes a plant.{own.payload_type.__name__}; "
+                                f"got {type(payload).__name__}")
+    if own.under_gravity and calibration.gravity is not None:
+        return own(payload, calibration.gravity)
+    return own(payload)
+
+
+@lru_cache(maxsize=8)
+def _dynamics(model):
+    """``x -> (A(x), d(x))``, the model's dynamics ``a = A(x) w + d(x)``, as a casadi Function."""
+    x = ca.SX.sym("x", model.nx)
+    return ca.Function(f"dynamics_{model.name}", [x], [ca.densify(ca.SX(model.input_matrix(x))),
+                                                       ca.densify(ca.SX(model.drift(x)))])
+
+
+def _payload_wrench(model, x, a):
+    """``W_p = A(x)^-1 (a - d(x))`` (C2) at each row of ``x`` (N, nx), ``a`` (N, nv); and ``A^-1``."""
+    f = _dynamics(model)
+    if len(x) == 1:
+        A, d = (np.asarray(v) for v in f(x[0]))
+        A, d = A[None], d.T
+    else:
+        A, d = (np.asarray(v) for v in f.map(len(x))(x.T))
+        A = A.reshape(model.nv, len(x), model.n_w).transpose(1, 0, 2)
+        d = d.T
+    A_inv = np.linalg.inv(A)
+    return np.einsum("nij,nj->ni", A_inv, a - d), A_inv
+
+
+def _state(model, P0, P1, P2):
+    """The state ``x`` (N, nx) and the accelerations ``a`` (N, nv) from the smoothed poses and their first two
+    derivatives (each (N, n_pose), the log's pose order). A unit quaternion's rates give ``omega``, ``alpha``
+    (module docstring); a configuration that moves additively is the pose itself."""
+    if model.attitude == "quaternion":
+        norm = np.linalg.norm(P0[:, :4], axis=1, keepdims=True)
+        q = P0[:, :4] / norm
+        conj = (q * np.array([1.0, -1.0, -1.0, -1.0])).T
+        omega = 2 * quaternion_multiply(conj, P1[:, :4].T / norm.T)[1:].T
+        alpha = 2 * quaternion_multiply(conj, P2[:, :4].T / norm.T)[1:].T
+        configuration = np.concatenate([P0[:, 4:], q], axis=1)            # [p, q], from the pose [q, p]
+        velocity = np.concatenate([P1[:, 4:], omega], axis=1)
+        acceleration = np.concatenate([P2[:, 4:], alpha], axis=1)
+    else:
+        configuration, velocity, acceleration = P0, P1, P2
+    x = np.empty((len(P0), model.nx))
+    x[:, list(model.q_index)] = configuration
+    x[:, list(model.v_index)] = velocity
+    return x, acceleration
+
+
+def _configuration_variance(model, noise, pose):
+    """The variance of each velocity-space component of the configuration a pose of noise ``noise`` measures
+    (``nv``): each pose column's noise (:meth:`fmscal.plant.Model.pose_sd`) moved into the configuration's
+    tangent space by :meth:`fmscal.plant.Model.difference` at ``pose``."""
+    sd = np.asarray(model.pose_sd(noise), dtype=float)
+    pose = np.asarray(pose, dtype=float)
+    q0 = np.asarray(model.pose_configuration(pose), dtype=float).ravel()
+    var = np.zeros(model.nv)
+    for j in range(model.n_pose):
+        moved = pose.copy()
+        moved[j] += sd[j]
+        var += np.asarray(model.difference(q0, np.asarray(model.pose_configuration(moved), dtype=float).ravel()),
+                          dtype=float).ravel() ** 2
+    return var
+
+
+class _Parts:
+    """What (C1)-(C4) need besides the motion: ``S``, ``b``, the sign, the covariances, the bound."""
+
+    def __init__(self, calibration, model, noise, direction, false_alarm):
+        if direction not in DIRECTIONS:
+            raise CompensationError(f"direction must be one of {', '.join(DIRECTIONS)}; got {direction!r}")
+        if not (isinstance(false_alarm, float) and 0 < false_alarm < 1):
+            raise CompensationError(f"false_alarm must be a probability in (0, 1); got {false_alarm!r}")
+        model.check_noise(noise)
+        n = model.n_w
+        self.n, self.names, self.direction = n, tuple(model.wrench_names), direction
+        self.S, self.b = np.asarray(calibration.S, dtype=float), calibration.offset
+        self.sign = reading_sign(calibration.reading)
+        self.out_sign = 1.0 if direction == DIRECTIONS[0] else -1.0
+        self.reading_cov = self.S @ np.diag(np.square(noise.wrench_sd)) @ self.S.T
+        self.warnings = []
+        self.cov4 = None
+        if calibration.cov is not None:
+            cov = np.array(calibration.cov, dtype=float)
+            bad = ~np.isfinite(np.diag(cov))
+            if bad.any():
+                self.warnings.append(f"the calibration left {int(bad.sum())} entries of [S | c] undetermined: the "
+                                     "covariance counts the determined ones only")
+            cov[bad, :] = 0.0
+            cov[:, bad] = 0.0
+            cov[~np.isfinite(cov)] = 0.0
+            self.m = len(cov) // n
+            self.cov4 = cov.reshape(n, self.m, n, self.m)
+        self.threshold = float(chi2.ppf(1.0 - false_alarm, n))
+
+    def finish(self, w_hat, W_p, A_inv, accel_var):
+        """(C1), (C3), (C4) for rows of readings ``w_hat`` (N, n_w) and payload wrenches ``W_p``."""
+        signed = self.sign * w_hat
+        w_e = W_p - (signed - self.b) @ self.S.T
+        cov = self.reading_cov + np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv)
+        if self.cov4 is not None:
+            u = np.concatenate([signed, np.ones((len(signed), 1))], axis=1) if self.m == self.n + 1 \
+                else signed - self.b
+            cov = cov + np.einsum("na,iajb,nb->nij", u, self.cov4, u)
+        statistic = np.einsum("ni,ni->n", w_e, np.linalg.solve(cov, w_e[..., None])[..., 0])
+        return self.out_sign * w_e, cov, statistic > self.threshold, statistic
+
+
+def _causal_coefficients(k, order, lead, dt):
+    """The causal filter's coefficients: a polynomial of degree ``order`` fitted to ``k`` samples, read ``lead``
+    samples before the newest, value and first two derivatives (each (k,), oldest sample first)."""
+    return [savgol_coeffs(k, order, deriv=d, delta=dt, pos=k - 1 - lead, use="dot") for d in range(3)]
+
+
+def _causal_settings(window, delay, order, dt, latency):
+    """The window and the delay in samples, checked: ``(k, L, lead)``, the pose window, the reading's delay and
+    how far the poses reach past the time they are read at (the pose stream's latency taken off)."""
+    for name, value in (("window", window), ("delay", delay)):
+        if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
+            raise CompensationError(f"{name} must be a non-negative number of seconds; got {value!r}")
+    if not (isinstance(order, int) and 2 <= order <= 7):
+        raise CompensationError(f"order must be an integer from 2 to 7 (a second derivative); got {order!r}")
+    k = int(round(window / dt))
+    if k < order + 3:
+        raise CompensationError(f"window {window:g} s is {k} samples at dt = {dt:g} s; the causal filter of degree "
+                                f"{order} needs at least {order + 3}")
+    L, shift = int(round(delay / dt)), int(round(latency / dt))
+    if L < shift:
+        raise CompensationError(f"delay {delay:g} s is shorter than the pose stream's latency {latency:g} s: the "
+                                "motion at the reading's time has not arrived yet; give a delay of at least the "
+                                "latency")
+    if L - shift > k - 1:
+        raise CompensationError(f"delay {delay:g} s reaches past the window {window:g} s")
+    return k, L, L - shift
+
+
+def _noise(calibration, noise, log=None):
+    """The noise model: given, the calibration's, or the log's (:func:`fmscal.plant.io.estimate_noise`)."""
+    if noise is not None:
+        if not isinstance(noise, NoiseSpec):
+            raise CompensationError(f"noise must be a plant.NoiseSpec; got {type(noise).__name__}")
+        return noise
+    if calibration.noise is not None and len(calibration.noise.wrench_sd) == calibration.size:
+        return calibration.noise
+    if log is None:
+        raise CompensationError("the calibration holds no noise model: give noise=plant.NoiseSpec(...)")
+    return estimate_noise(log)
+
+
+# --- offline ---------------------------------------------------------------------------------------------------
+def compensate(calibration, log, causal=False, *, payload=None, direction="on_tool", noise=None,
+               window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM):
+    """The contact wrench of a log: ``w_e = W_p - S (sigma w_hat - b)`` (C1), its covariance and a contact flag.
+
+    Parameters
+    ----------
+    calibration : plant.Calibration
+        ``S``, ``b``, the reading's sign, the payload, gravity, latency and (where saved) the noise model and
+        the covariance of ``[S | c]``.
+    log : plant.Log
+        A log of the calibration's case (its poses and readings); no contact needed anywhere.
+    causal : bool
+        False: the poses smoothed both ways (no delay). True: the causal filter (module docstring), the
+        result's :attr:`Compensation.delay` its delay; the same numbers as :class:`Compensator` fed the log
+        one sample at a time.
+    payload : plant.Payload or plant.SpatialPayload, optional
+        Replaces the calibration's (a tool change: ``S`` does not depend on the tool).
+    direction : {"on_tool", "on_environment"}
+        The published wrench: the environment's on the tool, ``w_e`` (default), or the tool's on the
+        environment, ``-w_e``.
+    noise : plant.NoiseSpec, optional
+        The reading's and the pose's noise; default the calibration's, else the log's.
+    window : float, optional
+        The smoothing window, s: offline default :data:`OFFLINE_WINDOW`; causal :data:`CAUSAL_WINDOW`.
+    delay : float
+        Causal: where the fitted polynomial is read, s before the newest sample (:data:`CAUSAL_DELAY`); at
+        least the calibration's latency.
+    order : int
+        Causal: the polynomial's degree.
+    false_alarm : float
+        The contact test's false-alarm probability per sample (C4).
+
+    Returns
+    -------
+    Compensation
+        Offline: every sample the smoothing window covers (its half-length dropped at each end). Causal: from
+        the first full window on, at the readings' own times.
+
+    Raises
+    ------
+    FmscalError
+        Not a calibration or a log, a log of another case, no payload, a window longer than the log, a delay
+        shorter than the latency.
+    """
+    if not isinstance(log, Log):
+        raise CompensationError(f"compensate takes a plant.Log; got {type(log).__name__}")
+    model = compensation_model(calibration, payload, log_model_class(log))
+    noise = _noise(calibration, noise, log)
+    parts = _Parts(calibration, model, noise, direction, false_alarm)
+    latency = calibration.latency or 0.0
+    aligned = log
+    if latency > 0:                      # each pose at the time it was taken; the rows after the last one dropped
+        aligned = log.shift_poses(latency)
+        aligned = aligned.head(int(np.flatnonzero(aligned.has_pose)[-1]) + 1)
+    if not causal:
+        window = OFFLINE_WINDOW if window is None else window
+        x, a = _smoothed_motion(aligned, model, window)
+        keep = slice(edge(aligned, window), len(aligned) - edge(aligned, window))
+        k = 2 * edge(aligned, window) + 1
+        # the poses interpolated onto the log's grid: a pose every r samples weighs about r times a sample's
+        # share of the filter, so the variance of the derivative is about r times the grid's sum(c^2)
+        r = float(np.median(np.diff(np.flatnonzero(aligned.has_pose)))) if aligned.has_pose.sum() > 1 else 1.0
+        c2 = savgol_coeffs(k, ORDER, deriv=2, delta=aligned.dt, use="dot") * np.sqrt(max(r, 1.0))
+        t, w_hat, x, a, lag = aligned.t[keep], aligned.w_hat[keep], x[keep], a[keep], 0.0
+    else:
+        window = CAUSAL_WINDOW if window is None else window
+        if latency < 0:
+            raise CompensationError(f"the calibration's latency is {latency:g} s (poses ahead of the sensor): "
+                                    "the causal path takes a pose stream behind it")
+        k, L, lead = _causal_settings(window, delay, order, aligned.dt, latency)
+        if not aligned.has_pose.all():
+            return _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts)
+        coefficients = _causal_coefficients(k, order, lead, aligned.dt)
+        c2 = coefficients[2]
+        P = [_causal_filter(aligned.pose, c) for c in coefficients]         # read at sample n - lead
+        # sample j of the filtered poses is read at the pose index j + k - 1 - lead; the reading there
+        first = k - 1 - lead
+        rows = slice(first, first + len(P[0]))
+        x, a = _state(model, *P)
+        t, w_hat, lag = aligned.t[rows], aligned.w_hat[rows], round(L * aligned.dt, 12)
+    W_p, A_inv = _payload_wrench(model, x, a)
+    accel_var = _configuration_variance(model, noise, aligned.pose[np.argmax(aligned.has_pose)]) * np.sum(c2 ** 2)
+    wrench, cov, contact, statistic = parts.finish(w_hat, W_p, A_inv, accel_var)
+    return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
+                        threshold=parts.threshold, names=parts.names, delay=float(lag), direction=direction,
+                        warnings=list(parts.warnings))
+
+
+def _causal_filter(values, c):
+    """``y_j = sum_i c_i values_{j + i}`` over every full window, shape (N - k + 1, ...)."""
+    k = len(c)
+    n = len(values) - k + 1
+    out = np.zeros((n,) + values.shape[1:])
+    for i in range(k):
+        out += c[i] * values[i:i + n]
+    return out
+
+
+def _smoothed_motion(log, model, window):
+    """The state and accelerations of every sample by the filter of the calibration's least squares (both
+    ways): :func:`fmscal.plant.physics.spatial_motion` for a unit quaternion, else
+    :func:`fmscal.observers.batch.smoothed_channels`."""
+    if model.attitude == "quaternion":
+        _, _, alpha, p_ddot = spatial_motion(log, window)
+        return smoothed_state(log, window), np.c_[p_ddot, alpha]
+    q, v, a = smoothed_channels(log, model, window)
+    return _state(model, q, v, a)
+
+
+def _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts):
+    """The causal path of a log with missing poses: :class:`Compensator` fed it sample by sample."""
+    stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
+                         window=window, delay=delay, order=order, false_alarm=false_alarm)
+    out = [stream.push(t, w, p) for t, w, p in zip(log.t, log.w_hat, log.pose)]
+    out = [o for o in out if o is not None]
+    if not out:
+        raise CompensationError(f"{log.name}: no window of the causal filter holds enough poses")
+    return Compensation(t=np.array([o.t for o in out]), wrench=np.array([o.wrench for o in out]),
+                        cov=np.array([o.cov for o in out]), contact=np.array([o.contact for o in out]),
+                        statistic=np.array([o.statistic for o in out]), threshold=parts.threshold,
+                        names=parts.names, delay=stream.delay, direction=direction,
+                        warnings=list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"])
+
+
+# --- streaming --------------------------------------------------------------------------------------------------
+@dataclass
+class ContactSample:
+    """One compensated sample from :class:`Compensator`.
+
+    Attributes
+    ----------
+    t : float
+        The reading's time, s (it comes out :attr:`Compensator.delay` s later).
+    wrench : ndarray, shape (n_w,)
+    cov : ndarray, shape (n_w, n_w)
+    contact : bool
+    statistic : float
+    """
+
+    t: float
+    wrench: np.ndarray
+    cov: np.ndarray
+    contact: bool
+    statistic: float
+
+
+class Compensator:
+    """The causal compensation one sample at a time: a reading and a pose in, the contact wrench out.
+
+    Each :meth:`push` takes the newest sample (time, raw reading, pose or None) and returns the contact
+    wrench of the reading taken :attr:`delay` s earlier (:class:`ContactSample`: (C1), (C3), (C4) of the
+    module), or None until the window is full or where it holds too few poses. The poses are fitted by
+    the causal filter of :func:`compensate`; fed a log, the two give the same numbers.
+
+    Parameters
+    ----------
+    calibration : plant.Calibration
+    dt : float
+        The sample time, s (the readings' rate; a pose may come with any of them).
+    payload, direction, noise, window, delay, order, false_alarm
+        As for :func:`compensate` (``noise`` default the calibration's: required where it has none).
+    """
+
+    def __init__(self, calibration, dt, *, payload=None, direction="on_tool", noise=None, window=CAUSAL_WINDOW,
+                 delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM):
+        if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+            raise CompensationError(f"dt must be a positive number of seconds; got {dt!r}")
+        self.model = compensation_model(calibration, payload)
+        noise = _noise(calibration, noise)
+        self._parts = _Parts(calibration, self.model, noise, direction, false_alarm)
+        latency = calibration.latency or 0.0
+        if latency < 0:
+            raise CompensationError(f"the calibration's latency is {latency:g} s (poses ahead of the sensor): "
+                                    "the causal path takes a pose stream behind it")
+        self.dt, self.order, self._noise = float(dt), order, noise
+        self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, latency)
+        self._coefficients = np.array(_causal_coefficients(self._k, order, self._lead, self.dt))    # (3, k)
+        # the last k poses received (None where none came): the newest, latency samples late, is the pose of
+        # the reading lead samples after the one read out, the oldest of the last L + 1 readings
+        self._poses = deque(maxlen=self._k)
+        self._readings = deque(maxlen=self._L + 1)      # (t, w_hat) of the last L + 1 samples
+        self._accel_var = None
+        self._last_q = None
+        self.warnings = list(self._parts.warnings)
+
+    @property
+    def delay(self):
+        """The delay the causal filter adds, s: each output is the wrench of the reading this much older."""
+        return round(self._L * self.dt, 12)
+
+    def push(self, t, w_hat, pose=None):
+        """Take the newest sample; the contact wrench of the reading :attr:`delay` s older, or None.
+
+        Parameters
+        ----------
+        t : float
+            s.
+        w_hat : array_like, shape (n_w,)
+            The raw reading.
+        pose : array_like, shape (n_pose,), optional
+            The pose stream's newest pose, None (or NaN) where none came with this reading.
+
+        Returns
+        -------
+        ContactSample or None
+        """
+        w_hat = np.asarray(w_hat, dtype=float)
+        if w_hat.shape != (self._parts.n,) or not np.isfinite(w_hat).all():
+            raise CompensationError(f"w_hat must be {self._parts.n} finite numbers; got {w_hat!r}")
+        if pose is not None:
+            pose = np.asarray(pose, dtype=float)
+            if pose.shape != (self.model.n_pose,):
+                raise CompensationError(f"pose must be {self.model.n_pose} numbers; got shape {pose.shape}")
+            if not np.isfinite(pose).all():
+                pose = None
+        if pose is not None and self.model.attitude == "quaternion":     # q and -q: one attitude, kept continuous
+            if self._last_q is not None and pose[:4] @ self._last_q < 0:
+                pose = pose.copy()
+                pose[:4] *= -1
+            self._last_q = pose[:4]
+        if pose is not None and self._accel_var is None:
+            self._accel_var = _configuration_variance(self.model, self._noise, pose)
+        self._readings.append((float(t), w_hat))
+        self._poses.append(pose)
+        if len(self._readings) <= self._L or len(self._poses) < self._k:
+            return None
+        t0, reading = self._readings[0]
+        present = [p is not None for p in self._poses]
+        if all(present):
+            P = self._coefficients @ np.array(self._poses)                # (3, n_pose)
+            c2_sq = float(np.sum(self._coefficients[2] ** 2))
+        else:
+            fitted = self._irregular(present)
+            if fitted is None:
+                return None
+            P, c2_sq = fitted
+        x, a = _state(self.model, P[0:1], P[1:2], P[2:3])
+        W_p, A_inv = _payload_wrench(self.model, x, a)
+        wrench, cov, contact, statistic = self._parts.finish(reading[None], W_p, A_inv, self._accel_var * c2_sq)
+        return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]))
+
+    def _irregular(self, present):
+        """The polynomial fitted to the poses the window holds; ``(P, sum c2^2)``, or None where they are too few
+        or all on one side of the time it is read at (a stale pose stream: no extrapolation)."""
+        rows = np.flatnonzero(present)
+        if len(rows) < self.order + 3:
+            return None
+        s = (rows - (self._k - 1 - self._lead)) * self.dt             # each pose's time from the evaluation time
+        if s.min() > 0 or s.max() < 0:                                 # no pose on one side: an extrapolation
+            return None
+        V = np.vander(s, self.order + 1, increasing=True)
+        pinv = np.linalg.pinv(V)                                      # (order + 1, n): the polynomial's coefficients
+        c = np.array([pinv[0], pinv[1], 2 * pinv[2]])
+        P = c @ np.array([self._poses[i] for i in rows])
+        return P, float(np.sum(c[2] ** 2))
