@@ -16,7 +16,7 @@ import numpy as np
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import describe_direction, estimate_latency
-from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE
+from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches
 from fmscal.observers.diagnostics import consistency_check, has_evidence, offset_drift, saturation
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
@@ -425,6 +425,8 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     reading = "reaction" if reading is None else reading
     signed = copy.copy(log)                               # the caller's log keeps its reading
     signed.w_hat = reading_sign(reading) * log.w_hat      # the toolkit's sign: S and b are of sigma w_hat
+    # the reading's glitches bridged once, for the latency search and every method (observers.core.bridge_glitches)
+    signed, glitches = bridge_glitches(signed, model.wrench_names)
     noise, noise_estimated = None, []
     if model.given_noise:
         noise, noise_estimated = _noise_model(log, model, pose_noise, wrench_noise)
@@ -442,7 +444,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
                             + (f": {result.warnings[-1]}" if result.warnings else "")
                             + "; no calibration (check the mass properties, units and excitation)")
-    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading)
+    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches)
     warnings, why = [], None
     converged = bool(result.converged)
     for check in model.calibration_checks:
@@ -460,8 +462,8 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
-        E=E, E_blocks=E_blocks, notes=list(log.notes), kind=cls.name, run=result,
-        why_unconverged=None if converged else why))
+        E=E, E_blocks=E_blocks, notes=list(signed.notes), kind=cls.name, run=result,
+        why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.count else None))
 
 
 def _noise_model(log, model, pose_noise, wrench_noise):
@@ -509,6 +511,7 @@ class _Run:
     offset: bool
     reading: str
     units: list = field(default_factory=list)
+    glitches: object = None
 
 
 def _check_units(run, warnings):
