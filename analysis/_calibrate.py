@@ -17,7 +17,8 @@ import numpy as np
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import describe_direction, estimate_latency
 from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches
-from fmscal.observers.diagnostics import consistency_check, has_evidence, offset_drift, saturation
+from fmscal.observers.diagnostics import consistency_check, has_evidence, misfit, offset_drift, saturation
+from fmscal.observers.diagnostics import inflate as inflate_misfit
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
 from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
@@ -204,7 +205,10 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         saturation, the log pins ``S`` down for a method that gives no
         ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
         run judged settling alone), and a positive force gain (``trace S_ff >
-        0``: else the reading follows the other sign convention). Held poses:
+        0``: else the reading follows the other sign convention), and the model
+        fits the log (:func:`fmscal.observers.diagnostics.misfit`; where it
+        does not, ``S_std`` is widened and the warning says by how much the
+        residual exceeds the noise). Held poses:
         never. Each failure adds a warning that names it.
 
         A log's steps are chosen by what its model declares
@@ -512,6 +516,7 @@ class _Run:
     reading: str
     units: list = field(default_factory=list)
     glitches: object = None
+    misfit: object = None
 
 
 def _check_units(run, warnings):
@@ -583,11 +588,35 @@ def _check_flipped_gain(run, warnings):
     return found, not flipped, "the reading follows the other sign convention"
 
 
+def _check_misfit(run, warnings):
+    """``"misfit"``: the model fits the log (:func:`fmscal.observers.diagnostics.misfit`: the reference fit's
+    residual against the noise measured from the log, and one ``S`` for slow and fast motion). Where it does
+    not, a warning in words and ``S_std`` widened (eq. (M3), :func:`fmscal.observers.diagnostics.inflate`);
+    a gross misfit is not converged. A log too short to measure it passes with nothing said."""
+    try:
+        found = misfit(run.aligned, run.model)
+    except FmscalError:
+        return [], True, None
+    run.misfit = found
+    result = run.result
+    if not found.fits and result.S_std is not None:
+        widened = inflate_misfit(result.S_std, found)
+        if result.cov is not None:
+            n_w = run.model.n_w
+            factor = np.ones(result.cov.shape[0])
+            n = factor.size // n_w
+            factor.reshape(n_w, n)[:, :n_w] = widened / np.where(result.S_std > 0, result.S_std, 1.0)
+            result.cov = result.cov * np.outer(factor, factor)
+        result.S_std = widened
+    return ([] if found.fits else [found.warning]), not found.gross, "the model does not fit the log"
+
+
 #: The checks a model may declare in :attr:`fmscal.plant.Model.calibration_checks`: each takes the run and
 #: the warnings so far and gives ``(its warnings, passed, why it failed or None)``.
 _CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
            "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
-           "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain}
+           "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain,
+           "misfit": _check_misfit}
 
 
 def _calibration(result, method, fields):
