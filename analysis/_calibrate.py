@@ -450,6 +450,9 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
                             + "; no calibration (check the mass properties, units and excitation)")
     run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches)
     warnings, why = [], None
+    if glitches.count and get_method(name).online:     # a live run of the method would take them as they came
+        warnings.append(f"{glitches.summary()}; {name} ran on the bridged log, where a live run would take the "
+                        "glitches as they came")
     converged = bool(result.converged)
     for check in model.calibration_checks:
         found, passed, reason = _CHECKS[check](run, warnings)

@@ -130,3 +130,13 @@ def test_the_misfit_says_how_far_the_residual_is_above_the_noise(arm):
     assert fits.fits and not fits.gross and 0.9 < fits.ratio.min() and fits.ratio.max() < 1.2 and fits.p_value > 0.01
     assert found.gross and 3 < found.ratio.max() < 10
     assert f"the residual is {found.ratio.max():.2g} times the noise" in found.warning
+
+
+def test_an_online_method_is_warned_of_the_glitches():
+    log, truth, _ = get_scenario("paper").with_(duration=10.0).generate(0)
+    bad, rows = spiked(log, 5, 30 * reading_noise(log.w_hat)[2], 2)
+    cal = calibrate(bad, get_scenario("paper").payload, method="ekf", latency=0.0, truth=truth)
+    clean = calibrate(log, get_scenario("paper").payload, method="ekf", latency=0.0, truth=truth)
+    assert cal.glitches["indices"] == rows.tolist()
+    assert any("rejected as glitches" in w and "a live run" in w for w in cal.warnings)
+    assert cal.E < 1.2 * clean.E

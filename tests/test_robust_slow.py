@@ -70,6 +70,16 @@ def test_the_misfit_check_passes_clean_logs(scenario):
     assert 0.9 < ratio.mean() < 1.1 and ratio.max() < 1.3
 
 
+def test_the_misfit_check_passes_mujoco_logs():
+    """Logs MuJoCo integrated (another engine's dynamics): they fit."""
+    pytest.importorskip("mujoco")
+    from mujoco_log import mujoco_log
+    short = ARM.with_(duration=10.0)
+    model = SpatialModel(short.payload)
+    found = [misfit(mujoco_log(short, seed)[0], model) for seed in range(5)]
+    assert all(f.fits for f in found) and max(f.ratio.max() for f in found) < 1.1
+
+
 def test_a_frame_turned_10_degrees_is_caught():
     """The payload in the sensor's axes, the poses of a frame turned 10 degrees: a gross misfit on at least 7 of
     8 logs of 10 s, and on 60 s logs."""
