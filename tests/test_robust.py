@@ -62,6 +62,9 @@ def test_the_rule_finds_exactly_the_spikes_and_nothing_on_a_clean_reading():
     assert np.abs(bridged - clean)[rows].max() < 0.05                   # bridged from the neighbours
     np.testing.assert_array_equal(np.delete(bridged, rows, 0), np.delete(w, rows, 0))
     assert 0.009 < reading_noise(w)[1] < 0.011
+    stepped = clean.copy()
+    stepped[7000:, 0] += 0.5                                            # a true change of the wrench: no glitch
+    assert find_glitches(t, stepped)[0].count == 0
 
 
 def test_the_threshold_is_the_bonferroni_bound_of_the_logs_size():

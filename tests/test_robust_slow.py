@@ -43,10 +43,10 @@ def test_spikes_of_5_to_50_noise_sigmas_leave_the_floor_as_on_the_clean_log():
 
 
 def test_a_clean_log_rejects_nothing():
-    """The threshold (G2) on clean simulated logs of every planar scenario but the stepped one, and the spatial
-    ones: nothing rejected (a clean 60 s log of six channels at 1 kHz among them)."""
+    """The threshold (G2) on clean simulated logs of planar scenarios (one whose S steps among them) and of the
+    spatial ones: nothing rejected (a clean 60 s log of six channels at 1 kHz among them)."""
     count = 0
-    for name in ("paper", "noisy", "real-rig", "vision-50hz", "random-S"):
+    for name in ("paper", "noisy", "real-rig", "vision-50hz", "random-S", "time-varying"):
         for seed in range(2):
             log, _, _ = get_scenario(name).generate(seed)
             count += find_glitches(log.t, log.w_hat)[0].count

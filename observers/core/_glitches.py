@@ -26,8 +26,12 @@ method with ``online = False``):
    noise (:func:`reading_noise`); the standard deviation of ``r_j`` where the
    MAD is zero (a quantised reading).
 3. **The threshold.** A sample is rejected when ``|r_kj - median(r_j)| >
-   k s_k sigma_j`` in any channel, and its largest such ratio is the largest
-   within ``h`` samples of it (a spike's neighbours are not rejected with it), with::
+   k s_k sigma_j`` in any channel, its largest such ratio is the largest
+   within ``h`` samples of it (a spike's neighbours are not rejected with
+   it), and in that channel it stands apart from both sides: the line
+   through its two neighbours on either side misses it by half its residual
+   or more, on the same side (a step in the reading, a true change of the
+   wrench, is near one of them), with::
 
        k = Phi^-1(1 - alpha / (2 N c)),   alpha = FALSE_ALARM                 (G2)
 
@@ -38,7 +42,8 @@ method with ``online = False``):
 4. **Bridged, and again.** A rejected sample's reading (every channel) is
    replaced by its prediction (G1) from its neighbours, and steps 1-3 are
    repeated on the bridged reading (a second spike next to a first shows
-   once the first is gone), at most :data:`MAX_ROUNDS` times. The batch
+   once the first is gone; every sample rejected so far is bridged again
+   from its neighbours as they now are), at most :data:`MAX_ROUNDS` times. The batch
    fits need evenly spaced samples: the bridged sample carries what its
    neighbours say, not what the glitch said.
 
@@ -214,20 +219,41 @@ def find_glitches(t, w_hat, names=None, alpha=FALSE_ALARM):
         padded = np.pad(peak, HALF_WINDOW, constant_values=-np.inf)
         local = np.lib.stride_tricks.sliding_window_view(padded, 2 * HALF_WINDOW + 1).max(axis=1)
         new = np.flatnonzero((peak > k) & (peak >= local))
+        taken = set(rejected) | set(np.flatnonzero(peak > k).tolist())    # not a side's reference
+        new = new[[_apart(bridged, r, i, int(np.argmax(z[i])), taken) for i in new]] if len(new) else new
         if not len(new):
             break
         if bridged is w:
             bridged = w.copy()
-        bridged[new] = (bridged - r)[new]
         for i in new:
             if i not in rejected:
                 rejected[int(i)] = ([names[j] for j in np.flatnonzero(z[i] > k)], float(peak[i]))
+        every = np.array(sorted(rejected))          # each rejected sample bridged again from the neighbours now
+        bridged[every] = (bridged - r)[every]
     if not rejected:
         empty.threshold, empty.noise = k, noise
         return empty, w
     indices = np.array(sorted(rejected), dtype=int)
+    for _ in range(2):                              # neighbours rejected together: bridged from each other's
+        bridged[indices] = (bridged - _residuals(bridged, start, weights))[indices]
     return Glitches(indices, np.asarray(t, dtype=float)[indices], [rejected[i][0] for i in indices],
                     np.array([rejected[i][1] for i in indices]), k, noise), bridged
+
+
+def _apart(w, r, i, j, taken):
+    """Sample ``i`` stands apart from both sides in channel ``j``: the lines through its two nearest
+    neighbours on each side (other than the samples ``taken``: rejected, or above the threshold) miss it by
+    at least half its residual ``r_ij``, on the same side (a step is near one of them)."""
+    for side in (-1, 1):
+        near = [m for m in range(i + side, i + side * (2 * HALF_WINDOW + 1), side)
+                if 0 <= m < len(w) and m not in taken][:2]
+        if len(near) < 2:
+            continue
+        a, b = near
+        off = w[i, j] - (w[a, j] + (w[a, j] - w[b, j]) * (i - a) / (a - b))
+        if off * r[i, j] <= 0 or abs(off) < 0.5 * abs(r[i, j]):
+            return False
+    return True
 
 
 def bridge_glitches(log, names=None):
