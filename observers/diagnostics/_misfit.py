@@ -38,7 +38,8 @@ data alone (:func:`misfit`):
    p-value times the rows (Bonferroni) below :data:`MISFIT_SIGNIFICANCE` is
    a misfit (or an ``S`` that depends on the speed: no calibration either
    way). Row by row, so that a log of a few dozen blocks still tests ``K =
-   n_w + 1`` numbers at a time.
+   n_w + 1`` numbers at a time. Where either half leaves a direction of the
+   reading undetermined (held poses and slow moves) there is no test.
 """
 
 import copy
@@ -142,6 +143,8 @@ def _split_statistic(w, w_hat, t, speed, wrench_sd, block):
     n_w, k = fits[0].S_aug.shape
     worst = (0.0, 0, 1.0)
     difference = fits[0].S_aug - fits[1].S_aug
+    if fits[0].undetermined or fits[1].undetermined:    # a half that leaves S undetermined: nothing to compare
+        return 0.0, 0, 1.0, np.zeros_like(difference)
     for i in range(n_w):
         rows = slice(k * i, k * (i + 1))
         d = fits[0].S_aug[i] - fits[1].S_aug[i]
