@@ -137,9 +137,10 @@ def _coefficients(n, h=HALF_WINDOW, degree=_DEGREE):
 
 def _residuals(w, start, weights):
     """Eq. (G1) for every channel, shape (n, c)."""
-    width = weights.shape[1]
-    windows = np.stack([w[start + i] for i in range(width)], axis=1)      # (n, width, c)
-    return w - np.einsum("kw,kwc->kc", weights, windows)
+    prediction = np.zeros_like(w)
+    for i in range(weights.shape[1]):                   # one offset of the window at a time: no (n, width, c) copy
+        prediction += weights[:, i, None] * w[start + i]
+    return w - prediction
 
 
 def _robust_scale(r):
