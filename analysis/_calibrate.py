@@ -16,8 +16,9 @@ import numpy as np
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import describe_direction, estimate_latency
-from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE
-from fmscal.observers.diagnostics import consistency_check, has_evidence, offset_drift, saturation
+from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches
+from fmscal.observers.diagnostics import consistency_check, has_evidence, misfit, offset_drift, saturation
+from fmscal.observers.diagnostics import inflate as inflate_misfit
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
 from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
@@ -204,11 +205,13 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         saturation, the log pins ``S`` down for a method that gives no
         ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
         run judged settling alone), and a positive force gain (``trace S_ff >
-        0``: else the reading follows the other sign convention); a diagonal gain
-        of ``S`` the log determines further than :data:`FAR_GAIN` from 1 adds a
-        warning naming the payload's mass or the units, and leaves
-        ``converged`` as it is. Held poses: never. Each failure adds a warning
-        that names it.
+        0``: else the reading follows the other sign convention), and the model
+        fits the log (:func:`fmscal.observers.diagnostics.misfit`; where it
+        does not, ``S_std`` is widened and the warning says by how much the
+        residual exceeds the noise); a diagonal gain of ``S`` the log
+        determines further than :data:`FAR_GAIN` from 1 adds a warning naming
+        the payload's mass or the units, and leaves ``converged`` as it is.
+        Held poses: never. Each failure adds a warning that names it.
 
         A log's steps are chosen by what its model declares
         (:class:`fmscal.plant.Model`: the options it takes, ``under_gravity``,
@@ -434,6 +437,8 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     reading = "reaction" if reading is None else reading
     signed = copy.copy(log)                               # the caller's log keeps its reading
     signed.w_hat = reading_sign(reading) * log.w_hat      # the toolkit's sign: S and b are of sigma w_hat
+    # the reading's glitches bridged once, for the latency search and every method (observers.core.bridge_glitches)
+    signed, glitches = bridge_glitches(signed, model.wrench_names)
     noise, noise_estimated = None, []
     if model.given_noise:
         noise, noise_estimated = _noise_model(log, model, pose_noise, wrench_noise)
@@ -451,8 +456,11 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
                             + (f": {result.warnings[-1]}" if result.warnings else "")
                             + "; no calibration (check the mass properties, units and excitation)")
-    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading)
+    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches)
     warnings, why = [], None
+    if glitches.count and get_method(name).online:     # a live run of the method would take them as they came
+        warnings.append(f"{glitches.summary()}; {name} ran on the bridged log, where a live run would take the "
+                        "glitches as they came")
     converged = bool(result.converged)
     for check in model.calibration_checks:
         found, passed, reason = _CHECKS[check](run, warnings)
@@ -469,8 +477,8 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
-        E=E, E_blocks=E_blocks, notes=list(log.notes), kind=cls.name, run=result,
-        why_unconverged=None if converged else why))
+        E=E, E_blocks=E_blocks, notes=list(signed.notes), kind=cls.name, run=result,
+        why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.count else None))
 
 
 def _noise_model(log, model, pose_noise, wrench_noise):
@@ -518,6 +526,8 @@ class _Run:
     offset: bool
     reading: str
     units: list = field(default_factory=list)
+    glitches: object = None
+    misfit: object = None
 
 
 def _check_units(run, warnings):
@@ -589,6 +599,29 @@ def _check_flipped_gain(run, warnings):
     return found, not flipped, "the reading follows the other sign convention"
 
 
+def _check_misfit(run, warnings):
+    """``"misfit"``: the model fits the log (:func:`fmscal.observers.diagnostics.misfit`: the reference fit's
+    residual against the noise measured from the log, and one ``S`` for slow and fast motion). Where it does
+    not, a warning in words and ``S_std`` widened (eq. (M3), :func:`fmscal.observers.diagnostics.inflate`);
+    a gross misfit is not converged. A log too short to measure it passes with nothing said."""
+    try:
+        found = misfit(run.aligned, run.model)
+    except FmscalError:
+        return [], True, None
+    run.misfit = found
+    result = run.result
+    if not found.fits and result.S_std is not None:
+        widened = inflate_misfit(result.S_std, found)
+        if result.cov is not None:
+            n_w = run.model.n_w
+            factor = np.ones(result.cov.shape[0])
+            n = factor.size // n_w
+            factor.reshape(n_w, n)[:, :n_w] = widened / np.where(result.S_std > 0, result.S_std, 1.0)
+            result.cov = result.cov * np.outer(factor, factor)
+        result.S_std = widened
+    return ([] if found.fits else [found.warning]), not found.gross, "the model does not fit the log"
+
+
 #: A force or torque gain of ``S`` further than this factor from 1 (either way) is remarked on.
 FAR_GAIN = 1.5
 
@@ -644,7 +677,7 @@ _INPUT_CHECKS = {"spatial_units": _check_spatial_units}
 _CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
            "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
            "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain,
-           "gains": _check_gains}
+           "misfit": _check_misfit, "gains": _check_gains}
 
 
 def _calibration(result, method, fields):

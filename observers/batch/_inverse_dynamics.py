@@ -44,7 +44,7 @@ from fmscal.plant.physics import (ORDER, GRAVITY, Model, SpatialPayload, edge, r
 from ._cluster_covariance import block_length, few_blocks, small_sample_factor
 
 __all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "UNDETERMINED_STD",
-           "READING_NAMES", "nominal_motion", "smoothed_channels"]
+           "READING_NAMES", "nominal_motion", "smoothed_channels", "needed_wrench"]
 
 #: The augmented reading's components, the directions in which the information is reported.
 READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
@@ -290,6 +290,35 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=None, 
     if warning is not None:
         fit.warnings.append(warning)
     return fit
+
+
+def needed_wrench(log, model, window=0.2):
+    """The wrench each sample needed, inside the smoothing's edges: what :func:`fit_inverse_dynamics` fits.
+
+    In 3D Newton-Euler on the smoothed poses (``w_k = W_k pi``, the model's
+    payload and gravity); on a model whose configuration moves additively its
+    dynamics inverted, ``w_k = A(x_k)^-1 (a_k - d(x_k))`` (eq. (1) in the plane).
+
+    Parameters
+    ----------
+    log : plant.Log
+        A log of the model's case.
+    model : plant.Model
+    window : float
+        Smoothing window of the pose differentiation, s.
+
+    Returns
+    -------
+    trim : slice
+        The samples inside the filter's edges.
+    w : ndarray, shape (len(trim), n_w)
+    """
+    trim = slice(edge(log, window), len(log.t) - edge(log, window))
+    if model.attitude == "quaternion":
+        q, omega, alpha, p_ddot = spatial_motion(log, window)
+        return trim, (regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], model.gravity)
+                      @ model.payload.inertial_parameters)
+    return trim, _inverse_dynamics(log, model, window)[trim]
 
 
 def _inverse_dynamics(log, model, window):

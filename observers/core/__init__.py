@@ -11,10 +11,13 @@ from ._state import (StateLayout, INPUT)
 from ._discretise import (position_increment, velocity_increment, move)
 from ._progress import (progress_bar, MIN_SAMPLES, EVERY)
 from ._gains import (double_pole_gains, check_gains, GainReport, SubsystemGains, sampled_poles)
+from ._glitches import (Glitches, find_glitches, bridge_glitches, reading_noise, glitch_threshold, HALF_WINDOW,
+    FALSE_ALARM)
 from ._base import (Observer, RecursiveObserver, Estimate, RunData, log_inputs, MAX_S0, ENGINES)
 # The small matrix helpers every method's step uses (``mx.col``, ``mx.flat``, ...), by their module's public
 # name for the other subpackages (``from fmscal.observers.core import matrix as mx``); not in __all__: plumbing.
 from . import _matrix as matrix
 
 __all__ = ["settled", "moved", "informed", "divergence_bound", "ObserverResult", "double_pole_gains", "check_gains",
-           "GainReport", "SubsystemGains", "sampled_poles", "Observer", "RecursiveObserver", "Estimate"]
+           "GainReport", "SubsystemGains", "sampled_poles", "Observer", "RecursiveObserver", "Estimate", "Glitches",
+           "find_glitches", "bridge_glitches", "reading_noise"]

@@ -34,6 +34,7 @@ from fmscal.plant import Log
 from fmscal.plant.numerics import ChunkedSteps, FmscalError, as_bool, build_once, compiler
 from fmscal.plant.physics import as_model, check_calibration
 
+from ._glitches import bridge_glitches
 from ._convergence import DIVERGENCE_GRACE, divergence_bound, informed, moved, settled
 from ._progress import EVERY, progress_bar
 from ._result import ObserverResult, calibration_uncertainty, initial_calibration, split_calibration
@@ -344,6 +345,11 @@ class Observer:
         Returns
         -------
         ObserverResult
+            An offline method's (``online = False``) fits the log with the
+            reading's glitches bridged (:mod:`fmscal.observers.core._glitches`:
+            single samples far from their neighbours, eqs. (G1), (G2)), and
+            ``info["glitches"]`` lists them (``count``, ``indices``, ``times``;
+            a log with none is fitted as it is).
 
         Raises
         ------
@@ -367,8 +373,13 @@ class Observer:
             run.compiled = bool(compiled)
         else:
             self.run_data = run = self._new_run(None, compiled=compiled)
+        glitches = None
+        if not self.online:                 # a batch fit: the reading's glitches bridged first (_glitches)
+            log, glitches = bridge_glitches(log, self.model.wrench_names)
         estimate = self._estimate(log, run.S0)
         result = self._result(log, estimate)
+        if glitches is not None:
+            result.info["glitches"] = glitches.to_dict()
         result.wall_time = time.perf_counter() - start - run.build_time
         if run.build_time:
             result.info["build_time"] = run.build_time

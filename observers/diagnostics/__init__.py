@@ -1,11 +1,12 @@
 """Checks of a log against the model: one constant ``S`` (health), saturation and a moving offset
-(faults), and how much a log says about ``S`` (evidence).
+(faults), and how much a log says about ``S`` (evidence), and whether the model fits it (misfit).
 """
 
 from ._evidence import (has_evidence, log_uncertainty, EVIDENCE_PREFIX)
 from ._health import (Consistency, consistency_check, DEFAULT_SIGNIFICANCE, DEFAULT_WINDOWS)
+from ._misfit import (Misfit, misfit, inflate, MISFIT_SIGNIFICANCE, MISFIT_RATIO, GROSS_RATIO)
 from ._faults import (saturation, offset_drift, OffsetDrift, SATURATION_SHARE, SATURATION_RATIO, DRIFT_SIGNIFICANCE,
     DRIFT_PARTS, DRIFT_LAGS)
 
 __all__ = ["has_evidence", "log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift",
-           "OffsetDrift"]
+           "OffsetDrift", "Misfit", "misfit"]

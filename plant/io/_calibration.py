@@ -222,6 +222,10 @@ class Calibration:
     run : object, optional
         *Not saved.* The method's full run: an :class:`observers.ObserverResult`
         (histories, info), or the table's fit.
+    glitches : dict, optional
+        *Not saved.* The samples of the reading a log's fit rejected as glitches
+        (``count``, ``indices``, ``times``, ``channels``, ``size``, ``threshold``:
+        :class:`fmscal.observers.core.Glitches`); None when it rejected none.
     why_unconverged : str, optional
         *Not saved.* Why ``converged`` is False, in a few words (the units,
         saturation, the other sign convention, held poses, or the run); None
@@ -259,6 +263,7 @@ class Calibration:
     notes: list = field(default_factory=list, compare=False)
     run: object = field(default=None, compare=False, repr=False)
     why_unconverged: str = field(default=None, compare=False)
+    glitches: dict = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -367,6 +372,8 @@ class Calibration:
         and, with a truth, ``E``; a spatial log adds ``kind``,
         ``undetermined`` (:attr:`undetermined_directions`, as vectors),
         ``reading`` and, with a truth, ``E``, ``E_torque`` and ``E_force``;
+        a log whose fit rejected samples as glitches adds ``glitches``
+        (:attr:`glitches`);
         a table adds ``kind``, ``poses``, ``undetermined`` and ``reading``.
 
         Parameters
@@ -397,6 +404,8 @@ class Calibration:
             if self.E is not None:
                 out["E"] = self.E
                 out["E_torque"], out["E_force"] = self.E_blocks
+        if self.glitches:                               # only a log with glitches: a clean log's report as before
+            out["glitches"] = self.glitches
         out["saved"] = bool(saved)
         return json.dumps(json_ready(out), allow_nan=False)
 
