@@ -40,8 +40,9 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import f as f_dist
 
-from fmscal.plant.io import PoseTable, reading_sign
+from fmscal.plant.io import MIN_POSES, PoseTable, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
 from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
@@ -52,7 +53,7 @@ from ._estimate import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
-           "TILT_SIGMAS", "MIN_CONE_DEG"]
+           "TILT_SIGMAS", "MIN_CONE_DEG", "ODDS", "min_poses", "sign_separated", "rotations_unresolved"]
 
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
@@ -62,6 +63,9 @@ TILT_SIGMAS = 5.0
 #: Poses whose gravity directions in the sensor frame all lie within a cone of this half-angle (degrees)
 #: do not separate the weight from the offset: refused.
 MIN_CONE_DEG = 1.0
+#: The chance below which a fit's misfit counts as beyond the noise (one in a thousand): the F and chi-square
+#: quantiles of the checks that state a probability.
+ODDS = 1e-3
 
 
 @dataclass
@@ -129,6 +133,33 @@ class StaticFit(_Rotations):
                 "warnings": list(self.warnings), "converged": bool(self.converged)}
 
 
+def min_poses(estimate_gravity=False, estimate_mounting=False):
+    """The fewest held poses that determine the static fit, with the noise measured from its residuals.
+
+    The forces carry every rotation: ``f_k = m M^T R_k^T (-g) + c_f`` holds
+    ``p_f = 4`` unknowns (the mass, the force offset), two more for gravity's
+    direction and three for the mounting; the torques ``com x f_k + c_tau``
+    add six unknowns and three numbers a pose. Each pose gives three forces,
+    and the forces' noise, measured from their ``3N - p_f`` residual degrees
+    of freedom, has a finite Student-t variance only beyond two (eq. N3)::
+
+        3 N - p_f > 2,   N >= floor(p_f / 3) + 1                              (N4)
+
+    that is 2 with gravity and the mounting as given, 3 with gravity's
+    direction or the mounting estimated, 4 with both; a pose table holds at
+    least :data:`fmscal.plant.io.MIN_POSES` (four) for the torques' six
+    unknowns and the offset. Poses that do not tilt gravity, or tilt it
+    within one plane, leave the fit undetermined at any count (the
+    fit's weak directions; :func:`sign_separated`).
+
+    Returns
+    -------
+    int
+    """
+    p_f = 4 + 2 * bool(estimate_gravity) + 3 * bool(estimate_mounting)
+    return p_f // 3 + 1
+
+
 def _angle_deg(R):
     """The angle of a rotation matrix, degrees."""
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
@@ -156,6 +187,7 @@ class _Model:
 
     def __init__(self, R, y, g_size, d0, M0, estimate_gravity, estimate_mounting):
         self.R, self.y, self.g_size = R, y, g_size
+        self.fixed_mass, self.rejected = None, None
         self.d0, self.M0 = d0, M0
         self.e1, self.e2 = _tangent_basis(d0)
         self.estimate_gravity, self.estimate_mounting = estimate_gravity, estimate_mounting
@@ -194,9 +226,10 @@ class _Model:
         return np.column_stack(cols)
 
 
-def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
+def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None, signs=(1.0, -1.0)):
     """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques.
 
+    ``signs``: the signs of the mass the mounting's fit may take (:func:`_procrustes`).
     ``acc`` (N, 3), the tracked point's acceleration in the pose frame, m/s^2,
     for samples of a log (default: held, none); its share of the force,
     ``m M^T R^T acc``, joins the linear fits, and the rotation's share is left
@@ -208,15 +241,9 @@ def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
         a0 = a0 + np.einsum("nkj,nk->nj", R, acc)
     f = y[:, 3:]
     M0, d0, g_size = np.eye(3), g / np.linalg.norm(g), float(np.linalg.norm(g))
-    if estimate_mounting:           # f = B a0 + c_f with B = m M^T: B by least squares, M^T by its polar part
-        X = np.hstack([a0, np.ones((n, 1))])
-        coef = np.linalg.lstsq(X, f, rcond=None)[0]                        # (4, 3): rows B^T, c_f
-        U, s, Vt = np.linalg.svd(coef[:3].T)
-        Mt = U @ Vt
-        if np.linalg.det(Mt) < 0:                                           # a reflection: the load convention
-            Mt = -Mt
+    if estimate_mounting:           # f = m M^T a0 + c_f: M by Kabsch, for each sign of m, the better kept
+        m, Mt = _procrustes(a0, f, signs)
         M0 = Mt.T
-        m = float(np.sum(s) / 3 * np.sign(np.trace(Mt.T @ coef[:3].T)))
     if estimate_gravity:            # f = M0^T R^T (m acc - u) + c_f with u = m g: linear in u and c_f (and m)
         X = np.concatenate([-np.einsum("ji,nkj->nik", M0, R), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
         if acc is not None:
@@ -236,6 +263,67 @@ def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
     X = np.concatenate([-skew(force), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
     sol = np.linalg.lstsq(X, y[:, :3].ravel(), rcond=None)[0]
     return np.r_[m, sol[:3], sol[3:], c_f], d0, M0, g_size
+
+
+def _procrustes(a, f, signs=(1.0, -1.0)):
+    """The scaled rotation that best maps the directions ``a`` onto the forces ``f``, each less its mean.
+
+    Minimises ``sum_k |f_k - c - m Q a_k|^2`` over ``c``, ``m`` and the
+    rotation ``Q`` (Kabsch: ``Q`` the rotation nearest the correlation
+    ``H = sum f_k a_k^T`` of the centred rows, its determinant kept at +1),
+    for ``m`` of either sign (``m < 0``: the rotation of ``-H``), and keeps the
+    sign that fits better. Defined for any number of poses, where the
+    unconstrained ``f = B a + c`` needs four to be determined and its
+    determinant's sign is noise at four.
+
+    Returns
+    -------
+    m : float
+    Q : ndarray, shape (3, 3)
+    """
+    ac, fc = a - a.mean(axis=0), f - f.mean(axis=0)
+    best = None
+    for sign in signs:
+        U, _, Vt = np.linalg.svd(sign * fc.T @ ac)
+        Q = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+        m = sign * max(float(np.sum(fc * (ac @ Q.T)) * sign), 0.0) / max(float(np.sum(ac ** 2)), 1e-300)
+        cost = float(np.sum((fc - m * ac @ Q.T) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, m, Q)
+    return best[1], best[2]
+
+
+def sign_separated(R, f, g):
+    """Whether held poses tell the reading's sign from a mounting turned half a turn: an F test.
+
+    With the mounting free, ``f_k = m M^T a_k + c`` (``a_k = R_k^T (-g)``) for
+    ``m > 0`` and for ``m < 0`` (:func:`_procrustes` with each sign) differ
+    only where the centred directions ``a_k`` leave a plane: on a plane a
+    reflection is a half turn about its normal. The sign counts as told when
+    the worse sign's sum of squares exceeds the better's by more than the F
+    distribution's ``1 - ODDS`` quantile on ``3N - 7`` and ``3N - 7`` degrees of
+    freedom (three forces a pose; the mass, the rotation and the force offset
+    fitted).
+
+    Parameters
+    ----------
+    R : ndarray, shape (N, 3, 3)
+    f : ndarray, shape (N, 3)
+        The force readings, N.
+    g : array_like, shape (3,)
+
+    Returns
+    -------
+    bool
+    """
+    a = np.einsum("nkj,k->nj", R, -np.asarray(g, dtype=float))
+    costs = []
+    for sign in (1.0, -1.0):
+        m, Q = _procrustes(a, f, (sign,))
+        ac, fc = a - a.mean(axis=0), f - f.mean(axis=0)
+        costs.append(float(np.sum((fc - m * ac @ Q.T) ** 2)))
+    dof = max(3 * len(R) - 7, 1)
+    return bool(max(costs) > min(costs) * f_dist.ppf(1 - ODDS, dof, dof))
 
 
 def _weighted(model, theta0, weights):
@@ -290,18 +378,23 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         raise FmscalError("gravity must not be zero")
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
+    if len(R) < (needed := max(min_poses(estimate_gravity, estimate_mounting), MIN_POSES)):
+        raise FmscalError(f"{table.name}: {len(R)} poses; the fit as asked needs at least {needed} (min_poses)")
     # gravity's directions in the sensor frame (a mounting turns them all alike); with gravity estimated,
     # those of the first pose's gravity: poses that all hold one attitude
     _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
                      "the mass and the offset")
     model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting)
     m, com, c, d, M = model.parts(theta)
+    if (m <= 0 or (estimate_gravity and d[2] > 0 and g[2] < 0)) and model.fixed_mass > 0:
+        raise FmscalError(rotations_unresolved(table.name, len(R), model.fixed_mass))
     if m <= 0:
         raise FmscalError(other_convention(table.name, m, reading))
     if estimate_gravity and d[2] > 0 and g[2] < 0:
         raise FmscalError(gravity_up(table.name, d[2], reading))
     s2, information = _weighted_information(model, theta, weights, y)
     cov, weak = covariance(information, s2)
+    cov, _ = _small_sample(model, theta, weights, y, cov)
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
     b = S_inv @ c
@@ -330,6 +423,11 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     both = estimate_gravity and estimate_mounting
     rotated = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
                                                                     model.predict(theta) - y)
+    if estimate_mounting and not sign_separated(R, y[:, 3:], g):
+        out.warnings.append(f"these {len(R)} poses do not tell the reading's sign from a mounting turned half a turn "
+                            "(their gravity directions in the sensor frame lie near one plane): record poses "
+                            "out of that plane")
+        out.converged = False
     if rotated is not None:                 # the model is wrong: more poses would not help
         out.warnings.append(rotated)
         out.converged = False
@@ -341,26 +439,112 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
 
 
 def _two_passes(R, y, g, estimate_gravity, estimate_mounting):
-    """The fit's start and its two passes, the second weighted by each channel's residual rms in the first.
+    """The fit's start, an unweighted pass, and passes weighted by each group's noise (torques, forces).
+
+    Each group's noise is its residuals' variance over the group's own
+    degrees of freedom, ``s_g^2 = RSS_g / nu_g`` with ``nu_g = n_g - sum of
+    the leverages of its rows`` (eq. N2, :func:`_group_noise`): the
+    small-sample correction for the parameters fitted, shared between the
+    groups as the fit uses them (the leverages of all rows sum to the
+    parameters' count). A group, not a channel: four poses leave each
+    channel one or two degrees of freedom, too few to weigh it by.
 
     Returns
     -------
     model : _Model
     theta : ndarray
-        The parameters after the weighted pass.
+        The parameters after the weighted passes.
     weights : ndarray, shape (6,)
-        Each reading channel's weight, 1 / its first-pass residual rms.
+        Each reading channel's weight, 1 / its group's noise (N m, N).
     sd : ndarray, shape (6,)
-        The first pass's residual rms per channel (N m, N).
+        The weighted fit's residual rms per channel (N m, N).
     g_size : float
         Gravity's magnitude, m/s^2.
     """
-    theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
-    model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
-    theta = _weighted(model, _extra(theta0, model), np.ones(6))
+    model, theta = _best_start(R, y, g, estimate_gravity, estimate_mounting)
+    g_size = model.g_size
+    floor = 1e-9 * max(np.abs(y).max(), 1e-300)
+    weights = np.ones(6)
+    for _ in range(2):
+        noise, _ = _group_noise(model, theta, weights, y)
+        weights = 1.0 / np.maximum(np.repeat(noise, 3), floor)
+        theta = _weighted(model, theta, weights)
     sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
-    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
-    return model, _weighted(model, theta, weights), weights, sd, g_size
+    return model, theta, weights, sd, g_size
+
+
+def _best_start(R, y, g, estimate_gravity, estimate_mounting):
+    """The unweighted fit from the linear start and, with gravity estimated, from gravity's given direction with a
+    positive mass; which one is kept follows the fit with gravity held fixed.
+
+    The sign of the mass with gravity fixed (:func:`_start` with gravity as
+    given: a linear fit, or with the mounting a rotation fitted for either
+    sign of the mass, :func:`_procrustes`) is what the data say of the
+    reading's convention; a rotation cannot turn it. Where it is positive, the
+    fit kept is the one with a positive mass and gravity on the side given
+    (the lower residuals of those); where none is, or the mass with gravity
+    fixed is negative, the one with the lower residuals. With few poses the
+    linear start of gravity's direction can fall near the opposite one, a
+    local minimum that reads as gravity pointing up: the second start finds
+    the minimum near the direction given.
+
+    Returns
+    -------
+    model : _Model
+        With ``fixed_mass`` (the mass with gravity fixed, kg) and ``rejected``
+        (where a fit with gravity up or a negative mass had residuals below the kept one's beyond chance, the
+        ratio of their sums of squares, else None) set.
+    theta : ndarray
+    """
+    fixed = _start(R, y, g, False, estimate_mounting)
+    starts = [_start(R, y, g, estimate_gravity, estimate_mounting) if estimate_gravity else fixed]
+    if estimate_gravity:
+        starts.append(_start(R, y, g, False, estimate_mounting, signs=(1.0,)))
+    found = []
+    for theta0, d0, M0, g_size in starts:
+        model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
+        theta = _weighted(model, _extra(theta0, model), np.ones(6))
+        m, _, _, d, _ = model.parts(theta)
+        physical = bool(m > 0 and d @ g > 0)
+        found.append((not physical, float(np.sum((model.predict(theta) - y) ** 2)), len(found), model, theta))
+    fixed_mass = float(fixed[0][0])
+    best = min(found, key=lambda item: item[:3] if fixed_mass > 0 else item[1:3])
+    fitted = min(found, key=lambda item: item[1:3])
+    dof = max(y.size - len(best[4]), 1)
+    ratio = best[1] / max(fitted[1], 1e-300)
+    best[3].fixed_mass = fixed_mass
+    best[3].rejected = ratio if ratio > f_dist.ppf(1 - ODDS, dof, dof) else None
+    return best[3], best[4]
+
+
+def _leverages(J):
+    """The diagonal of the hat matrix ``J (J^T J)^+ J^T``, over the directions ``J`` determines."""
+    U, sv, _ = np.linalg.svd(J, full_matrices=False)
+    keep = sv > 1e-10 * max(sv[0], 1e-300)
+    return np.sum(U[:, keep] ** 2, axis=1)
+
+
+def _group_noise(model, theta, weights, y):
+    """The noise of the torques and of the forces, each over its own degrees of freedom::
+
+        s_g^2 = sum_{rows of g} r^2 / nu_g,   nu_g = n_g - sum_{rows of g} h_ii          (N2)
+
+    ``r`` the residuals, ``h_ii`` the leverages of the fit weighted by ``weights`` (eq. N2 is the
+    unbiased variance of a linear fit, each group charged with the parameters its rows determine).
+
+    Returns
+    -------
+    noise : ndarray, shape (2,)
+        ``s_g`` of the torques (N m) and the forces (N); ``inf`` where ``nu_g`` is below a half.
+    dof : ndarray, shape (2,)
+        ``nu_g``.
+    """
+    residual = model.predict(theta) - y
+    h = _leverages(model.jacobian(theta) * np.tile(weights, len(y))[:, None]).reshape(len(y), 6)
+    rss = np.array([np.sum(residual[:, :3] ** 2), np.sum(residual[:, 3:] ** 2)])
+    dof = np.array([3 * len(y) - h[:, :3].sum(), 3 * len(y) - h[:, 3:].sum()])
+    noise = np.where(dof > 0.5, np.sqrt(rss / np.maximum(dof, 0.5)), np.inf)
+    return noise, dof
 
 
 def _weighted_information(model, theta, weights, y):
@@ -377,6 +561,40 @@ def _weighted_information(model, theta, weights, y):
     return s2, J.T @ J
 
 
+def _small_sample(model, theta, weights, y, cov):
+    """``cov`` with each parameter's variance widened to the Student-t's, ``nu / (nu - 2)`` times::
+
+        v_i = sum_g v_ig,   v_ig = [C J_g^T J_g C]_ii,   nu_i = v_i^2 / sum_g (v_ig^2 / nu_g)      (N3)
+
+    ``C`` the covariance of the weighted fit, ``J_g`` the weighted rows of group ``g`` (torques, forces) and
+    ``nu_g`` its degrees of freedom (eq. N2): each variance is estimated from the groups' noise, with ``nu_i``
+    degrees of freedom (Welch-Satterthwaite), so the error over the estimated sigma is Student-t, whose variance
+    is ``nu / (nu - 2)``: the one-sigma reported is the error's standard deviation. Where ``nu_i <= 2`` that is
+    infinite: the parameter is not determined.
+
+    Returns
+    -------
+    cov : ndarray, shape (p, p)
+    dof : ndarray, shape (p,)
+        ``nu_i``.
+    """
+    _, dof_g = _group_noise(model, theta, weights, y)
+    J = (model.jacobian(theta) * np.tile(weights, len(y))[:, None]).reshape(len(y), 6, -1)
+    C = np.where(np.isfinite(cov), cov, 0.0)
+    v = np.stack([np.einsum("ij,ji->i", C @ (Jg.T @ Jg), C)
+                  for Jg in (J[:, :3].reshape(-1, J.shape[2]), J[:, 3:].reshape(-1, J.shape[2]))], axis=1)
+    total = v.sum(axis=1)
+    dof = total ** 2 / np.maximum(np.sum(v ** 2 / np.maximum(dof_g, 1e-300), axis=1), 1e-300)
+    factor = np.where(dof > 2, dof / np.maximum(dof - 2, 1e-300), np.inf)
+    factor[~np.isfinite(np.diag(cov))] = np.inf
+    root = np.sqrt(factor)
+    with np.errstate(invalid="ignore"):
+        out = cov * np.outer(root, root)
+    out[~np.isfinite(root), :] = np.inf
+    out[:, ~np.isfinite(root)] = np.inf
+    return out, dof
+
+
 def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
     """The warning of :func:`rotation_check` when the table needs gravity's direction or the mounting
     estimated, else None.
@@ -389,6 +607,7 @@ def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
         model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free)
         s2, information = _weighted_information(model, theta, weights, y)
         cov, weak = covariance(information, s2)
+        cov, _ = _small_sample(model, theta, weights, y, cov)
         if weak:
             return None
         std = np.sqrt(np.maximum(np.diag(cov), 0))
@@ -692,6 +911,28 @@ def other_convention(name, mass, reading):
             else f"the mass comes out negative ({mass:.4g} kg)")
     return (f"{name}: {what}: the reading follows the other sign convention; pass reading=\"{other}\" (on the "
             f"command line --reading {other}: the wrench the {_who(other)})")
+
+
+def rotations_unresolved(name, poses, fixed_mass):
+    """The one line for a fit with gravity or the mounting estimated that finds gravity up or a negative mass,
+    where the fit with gravity held fixed gives a positive mass: the reading's sign is not the cause.
+
+    Parameters
+    ----------
+    name : str
+    poses : int
+        The poses fitted.
+    fixed_mass : float
+        The mass with gravity held fixed, kg (positive).
+
+    Returns
+    -------
+    str
+    """
+    return (f"{name}: with the rotations estimated the fit finds gravity pointing up or a negative mass, though with "
+            f"gravity held as given the mass is positive ({fixed_mass:.4g} kg), so the reading's sign is not the "
+            f"cause: {poses} poses do not resolve gravity's direction and the mounting; record more poses, tilted "
+            "about two axes, or give --gravity")
 
 
 def gravity_up(name, z, reading):
