@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import f as f_dist
+from scipy.stats import chi2, f as f_dist
 
 from fmscal.plant.io import MIN_POSES, PoseTable, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
@@ -293,17 +293,18 @@ def _procrustes(a, f, signs=(1.0, -1.0)):
     return best[1], best[2]
 
 
-def sign_separated(R, f, g):
-    """Whether held poses tell the reading's sign from a mounting turned half a turn: an F test.
+def sign_separated(R, f, g, noise):
+    """Whether held poses tell the reading's sign from a mounting turned half a turn: a chi-square test.
 
     With the mounting free, ``f_k = m M^T a_k + c`` (``a_k = R_k^T (-g)``) for
     ``m > 0`` and for ``m < 0`` (:func:`_procrustes` with each sign) differ
     only where the centred directions ``a_k`` leave a plane: on a plane a
     reflection is a half turn about its normal. The sign counts as told when
-    the worse sign's sum of squares exceeds the better's by more than the F
-    distribution's ``1 - ODDS`` quantile on ``3N - 7`` and ``3N - 7`` degrees of
-    freedom (three forces a pose; the mass, the rotation and the force offset
-    fitted).
+    the two fits' sums of squares differ by more than the chi-square
+    distribution's ``1 - ODDS`` quantile on three degrees of freedom (the
+    rotation's), in units of the forces' noise variance::
+
+        |SS_+ - SS_-| / s_f^2 > chi2_{1 - ODDS}(3)                           (N5)
 
     Parameters
     ----------
@@ -311,19 +312,20 @@ def sign_separated(R, f, g):
     f : ndarray, shape (N, 3)
         The force readings, N.
     g : array_like, shape (3,)
+    noise : float
+        The forces' noise ``s_f``, N (eq. N2, of the fit as asked).
 
     Returns
     -------
     bool
     """
     a = np.einsum("nkj,k->nj", R, -np.asarray(g, dtype=float))
+    ac, fc = a - a.mean(axis=0), f - f.mean(axis=0)
     costs = []
     for sign in (1.0, -1.0):
         m, Q = _procrustes(a, f, (sign,))
-        ac, fc = a - a.mean(axis=0), f - f.mean(axis=0)
         costs.append(float(np.sum((fc - m * ac @ Q.T) ** 2)))
-    dof = max(3 * len(R) - 7, 1)
-    return bool(max(costs) > min(costs) * f_dist.ppf(1 - ODDS, dof, dof))
+    return bool(abs(costs[0] - costs[1]) > chi2.ppf(1 - ODDS, 3) * noise ** 2)
 
 
 def _weighted(model, theta0, weights):
@@ -423,7 +425,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     both = estimate_gravity and estimate_mounting
     rotated = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
                                                                     model.predict(theta) - y)
-    if estimate_mounting and not sign_separated(R, y[:, 3:], g):
+    if estimate_mounting and not sign_separated(R, y[:, 3:], g, _group_noise(model, theta, weights, y)[0][1]):
         out.warnings.append(f"these {len(R)} poses do not tell the reading's sign from a mounting turned half a turn "
                             "(their gravity directions in the sensor frame lie near one plane): record poses "
                             "out of that plane")
