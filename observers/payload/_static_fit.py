@@ -46,14 +46,16 @@ from fmscal.plant.io import MIN_POSES, PoseTable, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
 from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
-from fmscal.observers.batch import InverseDynamicsFit, fit_readings
+from fmscal.observers.batch import (MIN_BLOCKS, InverseDynamicsFit, correlation_time, fit_readings, pseudo_inverse,
+                                   sandwich)
 from ._coverage import (DETERMINED_REL, DETERMINED_COM, _OFFSET_NAMES, cone_deg as _cone, covariance, in_words,
                         next_poses, rotation as _exp)
 from ._estimate import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
-           "TILT_SIGMAS", "MIN_CONE_DEG", "ODDS", "min_poses", "sign_separated", "rotations_unresolved"]
+           "TILT_SIGMAS", "MIN_CONE_DEG", "ODDS", "min_poses", "sign_separated", "rotations_unresolved",
+           "gains_warning"]
 
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
@@ -397,6 +399,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     s2, information = _weighted_information(model, theta, weights, y)
     cov, weak = covariance(information, s2)
     cov, _ = _small_sample(model, theta, weights, y, cov)
+    cov = _in_sequence(model, theta, weights, y, cov)
+    gains = _gain_spread(model, theta, y)
+    cov = _with_gains(cov, gains, theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
     b = S_inv @ c
@@ -430,10 +435,13 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
                             "(their gravity directions in the sensor frame lie near one plane): record poses "
                             "out of that plane")
         out.converged = False
+    if gains is not None:
+        out.warnings.append(gains_warning(gains, S is None or np.allclose(S, np.eye(6))))
+        out.converged = False
     if rotated is not None:                 # the model is wrong: more poses would not help
         out.warnings.append(rotated)
         out.converged = False
-    elif not out.undetermined and not determined:
+    elif not out.undetermined and not determined and gains is None:     # more poses would not mend the gains
         out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
                             f"{DETERMINED_COM * 1e3:g} mm: record more poses, tilted further")
     out.next_poses = next_poses(model, theta, information, weights, s2, R, [f"pose {k + 1}" for k in range(len(R))])
@@ -561,6 +569,114 @@ def _weighted_information(model, theta, weights, y):
     s2 = float(np.sum(residual ** 2) / max(residual.size - len(theta), 1))
     J = model.jacobian(theta) * np.tile(weights, len(y))[:, None]
     return s2, J.T @ J
+
+
+def _in_sequence(model, theta, weights, y, cov):
+    """``cov`` widened where the cluster-robust covariance over blocks of consecutive rows exceeds it.
+
+    Rows recorded in sequence (a joint recording's quasi-static rows, an
+    attitude-only log's held segments) share slow errors, which the fit's
+    own covariance, taking them as independent, does not see. The rows'
+    blocks are five of the residuals' correlation lengths, in rows (eq. U2
+    of :mod:`fmscal.observers.batch`; one row where they are white),
+    and :func:`fmscal.observers.batch.sandwich` gives the covariance over
+    them. Where there are at least :data:`fmscal.observers.batch.MIN_BLOCKS`
+    blocks, each parameter's variance is the larger of the two (the
+    correlations kept, the rows and columns scaled)::
+
+        cov_i = cov * d d^T,   d_i = max(1, sqrt(sandwich_ii / cov_ii))     (N6)
+    """
+    n = len(y)
+    residual = (model.predict(theta) - y) * weights
+    if n < 2 * MIN_BLOCKS or not np.all(np.isfinite(np.diag(cov))):
+        return cov
+    tau = correlation_time(residual)
+    blocks = np.repeat((np.arange(n) // max(5.0 * tau, 1.0)).astype(int), 6)
+    if blocks.max() + 1 < MIN_BLOCKS:             # too few blocks for the sandwich: the rows count 1 / tau each
+        return cov * max(tau, 1.0)
+    J = model.jacobian(theta) * np.tile(weights, n)[:, None]
+    inverse, columns = pseudo_inverse(J)
+    robust = sandwich(J, residual.ravel(), blocks, inverse, columns)
+    d = np.sqrt(np.maximum(np.diag(robust) / np.maximum(np.diag(cov), 1e-300), 1.0))
+    return cov * np.outer(d, d)
+
+
+#: The force gains count as disagreeing when a gain for each force axis lowers the residuals beyond chance
+#: (:data:`ODDS`); the mass's variance then takes the spread of the three axes' masses.
+def _gain_spread(model, theta, y):
+    """The three force axes' own masses where they disagree beyond chance, else None.
+
+    At the fitted rotations, each force axis ``j`` is fitted alone,
+    ``f_kj = m_j a_kj + c_j`` (``a_k = M^T R_k^T (-g)``), against one mass
+    for the three: the F test on ``2`` and ``3N - 6`` degrees of freedom, at
+    :data:`ODDS`::
+
+        F = ((SS_1 - SS_3) / 2) / (SS_3 / (3N - 6))                          (N7)
+
+    Returns
+    -------
+    ndarray, shape (3,), or None
+        ``m_x, m_y, m_z``, kg.
+    """
+    n = len(y)
+    if 3 * n <= 8:
+        return None
+    m, _, c, d, M = model.parts(theta)
+    a = np.einsum("ji,nkj,k->ni", M, model.R, -model.g_size * d)
+    f = y[:, 3:]
+    masses, ss3 = np.zeros(3), 0.0
+    for j in range(3):
+        X = np.c_[a[:, j], np.ones(n)]
+        coef, *_ = np.linalg.lstsq(X, f[:, j], rcond=None)
+        masses[j] = coef[0]
+        ss3 += float(np.sum((f[:, j] - X @ coef) ** 2))
+    X = np.zeros((3 * n, 4))
+    X[:, 0] = a.ravel()
+    X[:, 1:] = np.tile(np.eye(3), (n, 1))
+    coef, *_ = np.linalg.lstsq(X, f.ravel(), rcond=None)
+    ss1 = float(np.sum((f.ravel() - X @ coef) ** 2))
+    dof = 3 * n - 6
+    if ss3 <= 0 or (ss1 - ss3) / 2 / (ss3 / dof) <= f_dist.ppf(1 - ODDS, 2, dof):
+        return None
+    return masses
+
+
+def _with_gains(cov, masses, theta):
+    """``cov`` with the gains' spread added: the mass's variance by the standard error of the three axes' masses
+    (eq. N8), the centre of mass's by the same share of it (its torques divided by the force), the rest kept::
+
+        var(m) += sum_j (m_j - mean m)^2 / 6,   var(com_i) += com_i^2 var_added(m) / m^2           (N8)
+    """
+    if masses is None:
+        return cov
+    added = float(np.sum((masses - masses.mean()) ** 2) / 6)
+    out = cov.copy()
+    out[0, 0] += added
+    share = added / max(theta[0] ** 2, 1e-300)
+    for i in range(1, 4):
+        out[i, i] += share * theta[i] ** 2
+    return out
+
+
+def gains_warning(masses, identity):
+    """The one line for force axes whose gains disagree (eq. N7).
+
+    Parameters
+    ----------
+    masses : ndarray, shape (3,)
+        The mass each force axis gives alone, kg.
+    identity : bool
+        The fit took ``S = I``.
+
+    Returns
+    -------
+    str
+    """
+    spread = float((masses.max() - masses.min()) / masses.mean())
+    told = ("S = I may be wrong: calibrate S (fmscal calibrate) and pass --calibration" if identity
+            else "the calibration given may be wrong, or the payload's mass changed")
+    return (f"the force gains seem to differ by {spread:.1%} between axes (each axis alone weighs "
+            + ", ".join(f"{v:.4g}" for v in masses) + f" kg); {told}; the mass's uncertainty includes that spread")
 
 
 def _small_sample(model, theta, weights, y, cov):
