@@ -74,3 +74,25 @@ def test_quasi_static_rows_with_slowly_correlated_noise_z_scores():
     200 rows correlated over 10: 0.82)."""
     rms = float(np.sqrt(np.mean(np.square([_z(fit_static(_sequence(120, seed, 6.0))) for seed in range(20)]))))
     assert 0.8 < rms < 1.25, rms
+
+
+def test_an_offset_drifting_in_an_attitude_log_is_named_and_a_steady_one_is_not():
+    """An attitude-only log whose force offset drifts 0.004 N/s (0.14 N over its 35 s): the held segments' residuals
+    trend along the rows, named with the drift found (measured 0.11 to 0.13 N), not converged."""
+    from fmscal.plant.io._pose_table import held_table, simulate_attitude_log
+    drifting = fit_static(held_table(simulate_attitude_log(TOOL, seed=0, offset=OFFSET,
+                                                           drift=[0, 0, 0, 0.004, 0.002, -0.004]))[0])
+    told = [w for w in drifting.warnings if "the offset drifts by up to" in w]
+    assert len(told) == 1 and not drifting.converged, drifting.warnings
+    assert 0.07 < float(told[0].split("up to ")[1].split(" N")[0]) < 0.2
+    steady = fit_static(held_table(simulate_attitude_log(TOOL, seed=0, offset=OFFSET))[0])
+    assert steady.converged and not steady.warnings
+
+
+def test_a_narrow_cone_of_attitudes_is_named():
+    """Attitudes within about 19 degrees of one another: the line names the cone, not converged; a table turned
+    all round gets none."""
+    fit = fit_static(simulate_table(TOOL, n=24, seed=2, offset=OFFSET, spread=np.radians(19.0)))
+    assert 5.0 < fit.cone_deg < 30.0 and not fit.converged
+    assert any(f"a cone of only {fit.cone_deg:.0f} degrees" in w for w in fit.warnings), fit.warnings
+    assert not any("cone of only" in w for w in fit_static(simulate_table(TOOL, n=24, seed=2, offset=OFFSET)).warnings)

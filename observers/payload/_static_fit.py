@@ -55,7 +55,7 @@ from ._estimate import _Rotations
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
            "TILT_SIGMAS", "MIN_CONE_DEG", "ODDS", "min_poses", "sign_separated", "rotations_unresolved",
-           "gains_warning"]
+           "gains_warning", "NARROW_CONE_DEG"]
 
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
@@ -65,6 +65,9 @@ TILT_SIGMAS = 5.0
 #: Poses whose gravity directions in the sensor frame all lie within a cone of this half-angle (degrees)
 #: do not separate the weight from the offset: refused.
 MIN_CONE_DEG = 1.0
+#: Poses whose gravity directions lie within a cone of this half-angle (degrees) are warned: the weight is told from
+#: the offset by small differences, which a gain error or a drifting offset moves.
+NARROW_CONE_DEG = 30.0
 #: The chance below which a fit's misfit counts as beyond the noise (one in a thousand): the F and chi-square
 #: quantiles of the checks that state a probability.
 ODDS = 1e-3
@@ -438,6 +441,15 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     if gains is not None:
         out.warnings.append(gains_warning(gains, S is None or np.allclose(S, np.eye(6))))
         out.converged = False
+    elif (drift := _drift(model, theta, weights, y)) is not None:
+        out.warnings.append(drift)
+        out.converged = False
+    if MIN_CONE_DEG <= out.cone_deg < NARROW_CONE_DEG and not out.undetermined:
+        out.warnings.append(f"the poses' gravity directions span a cone of only {out.cone_deg:.0f} degrees in the "
+                            "sensor frame: the weight is told from the offset by small differences, which a gain "
+                            f"error or a drifting offset moves; tilt the tool further ({NARROW_CONE_DEG:.0f} degrees "
+                            "or more, about two axes)")
+        out.converged = False
     if rotated is not None:                 # the model is wrong: more poses would not help
         out.warnings.append(rotated)
         out.converged = False
@@ -656,6 +668,32 @@ def _with_gains(cov, masses, theta):
     for i in range(1, 4):
         out[i, i] += share * theta[i] ** 2
     return out
+
+
+def _drift(model, theta, weights, y):
+    """The one line for residuals that trend along the rows (an offset drifting while they were recorded), else None.
+
+    Each channel's weighted residuals are regressed on the centred row index
+    ``x``; their trends' squared sizes, in units of the noise, sum to a
+    chi-square on six degrees of freedom where there is no trend::
+
+        X = sum_j (sum_k r_kj x_k)^2 / sum_k x_k^2 > chi2_{1 - ODDS}(6)     (N9)
+
+    Rows in an order that is not time's (a table of poses taken in any order)
+    trend only by chance.
+    """
+    n = len(y)
+    if n < 8:
+        return None
+    x = np.arange(n) - (n - 1) / 2
+    raw = model.predict(theta) - y
+    trend = (raw * weights).T @ x / np.sum(x ** 2)
+    if float(np.sum(trend ** 2) * np.sum(x ** 2)) <= chi2.ppf(1 - ODDS, 6):
+        return None
+    force = np.abs(raw[:, 3:].T @ x / np.sum(x ** 2)) * (n - 1)
+    torque = np.abs(raw[:, :3].T @ x / np.sum(x ** 2)) * (n - 1)
+    return (f"the residuals trend along the rows: taken in time order, the offset drifts by up to {force.max():.2g} N "
+            f"and {torque.max():.2g} N m over the recording; re-zero the sensor and let it warm up, or record faster")
 
 
 def gains_warning(masses, identity):
