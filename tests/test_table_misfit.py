@@ -96,3 +96,13 @@ def test_a_narrow_cone_of_attitudes_is_named():
     assert 5.0 < fit.cone_deg < 30.0 and not fit.converged
     assert any(f"a cone of only {fit.cone_deg:.0f} degrees" in w for w in fit.warnings), fit.warnings
     assert not any("cone of only" in w for w in fit_static(simulate_table(TOOL, n=24, seed=2, offset=OFFSET)).warnings)
+
+
+def test_spatial_weak_with_s_identity_is_warned_not_converged():
+    """spatial-weak (a few degrees of turn, a sensor with cross-talk, S = I taken): 8 sigma off before with no line;
+    now the narrow cone is named and the fit is not converged."""
+    from fmscal.observers.payload import identify_payload
+    from fmscal.plant import SPATIAL_SCENARIOS
+    log = SPATIAL_SCENARIOS["spatial-weak"].with_(duration=10.0).generate(0)[0]
+    fit = identify_payload(log)
+    assert not fit.converged and any("cone of only" in w for w in fit.warnings), fit.warnings

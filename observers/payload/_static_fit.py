@@ -55,7 +55,7 @@ from ._estimate import _Rotations
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
            "TILT_SIGMAS", "MIN_CONE_DEG", "ODDS", "min_poses", "sign_separated", "rotations_unresolved",
-           "gains_warning", "NARROW_CONE_DEG"]
+           "gains_warning", "NARROW_CONE_DEG", "cone_warning"]
 
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
@@ -444,11 +444,8 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     elif (drift := _drift(model, theta, weights, y)) is not None:
         out.warnings.append(drift)
         out.converged = False
-    if MIN_CONE_DEG <= out.cone_deg < NARROW_CONE_DEG and not out.undetermined:
-        out.warnings.append(f"the poses' gravity directions span a cone of only {out.cone_deg:.0f} degrees in the "
-                            "sensor frame: the weight is told from the offset by small differences, which a gain "
-                            f"error or a drifting offset moves; tilt the tool further ({NARROW_CONE_DEG:.0f} degrees "
-                            "or more, about two axes)")
+    if not out.undetermined and (line := cone_warning(out.cone_deg)) is not None:
+        out.warnings.append(line)
         out.converged = False
     if rotated is not None:                 # the model is wrong: more poses would not help
         out.warnings.append(rotated)
@@ -668,6 +665,25 @@ def _with_gains(cov, masses, theta):
     for i in range(1, 4):
         out[i, i] += share * theta[i] ** 2
     return out
+
+
+def cone_warning(cone):
+    """The one line for gravity directions within a cone narrower than :data:`NARROW_CONE_DEG`, else None.
+
+    Parameters
+    ----------
+    cone : float
+        The cone's half-angle in the sensor frame, degrees.
+
+    Returns
+    -------
+    str or None
+    """
+    if not MIN_CONE_DEG <= cone < NARROW_CONE_DEG:
+        return None
+    return (f"the gravity directions span a cone of only {cone:.0f} degrees in the sensor frame: the weight is told "
+            "from the offset by small differences, which a gain error or a drifting offset moves; tilt the tool "
+            f"further ({NARROW_CONE_DEG:.0f} degrees or more, about two axes)")
 
 
 def _drift(model, theta, weights, y):
