@@ -16,10 +16,15 @@ The unknowns are ``m``, ``com`` (3), ``c`` (6), and where asked the direction
 of gravity (two angles; its size is the standard 9.81 m/s^2 unless told) and
 the mounting ``M`` (a rotation, three angles). The fit is nonlinear least
 squares (Levenberg-Marquardt, :func:`scipy.optimize.least_squares`), started
-from linear fits of the forces and then the torques, each channel weighted by
-its residual spread; the rows are independent (each an average over a held
-pose), so the covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the weighted
-residual variance over its degrees of freedom.
+from linear fits of the forces and then the torques, the torques and the
+forces each weighted by their noise over their own degrees of freedom (eq.
+N2); the rows are independent (each an average over a held pose), so the
+covariance is ``(J^T W J)^-1``, each variance widened to the Student-t's
+(eq. N3). Where the model does not fit, the covariance widens: for rows in
+sequence, to the block sandwich's (N6); for force axes whose gains
+disagree, by their masses' spread (N7, N8), with a warning; an offset
+drifting along the rows (N9) and a narrow cone of attitudes are warned.
+The fewest poses each estimated rotation needs: :func:`min_poses` (N4).
 
 What the table covers: the gravity directions it holds in the sensor frame
 (the half-angle of the cone around their mean), the parameters it leaves
