@@ -106,3 +106,17 @@ def test_spatial_weak_with_s_identity_is_warned_not_converged():
     log = SPATIAL_SCENARIOS["spatial-weak"].with_(duration=10.0).generate(0)[0]
     fit = identify_payload(log)
     assert not fit.converged and any("cone of only" in w for w in fit.warnings), fit.warnings
+
+
+def test_an_attitude_log_read_7_percent_high_on_one_axis_names_the_residual_against_its_noise():
+    """The held segments' own scatter is the noise: with fx read 7 % high the line gives the residual as a multiple
+    of it (measured 29) and the gains' spread (6.9 %)."""
+    from fmscal.plant.io._pose_table import held_table, simulate_attitude_log
+    log = simulate_attitude_log(TOOL, seed=0, offset=OFFSET)
+    log.w_hat[:, 3] *= 1.07
+    table = held_table(log)[0]
+    assert table.noise is not None and table.noise.shape == (len(table), 6)
+    fit = fit_static(table)
+    told = [w for w in fit.warnings if "times the noise; the force gains seem to differ by" in w]
+    assert len(told) == 1 and not fit.converged, fit.warnings
+    assert 10 < float(told[0].split("the residual is ")[1].split(" times")[0]) < 60

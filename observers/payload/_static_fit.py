@@ -443,8 +443,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
                             "(their gravity directions in the sensor frame lie near one plane): record poses "
                             "out of that plane")
         out.converged = False
+    ratio = _noise_ratio(table, y, model.predict(theta) - y)
     if gains is not None:
-        out.warnings.append(gains_warning(gains, S is None or np.allclose(S, np.eye(6))))
+        out.warnings.append(gains_warning(gains, S is None or np.allclose(S, np.eye(6)), ratio))
         out.converged = False
     elif (drift := _drift(model, theta, weights, y)) is not None:
         out.warnings.append(drift)
@@ -717,7 +718,25 @@ def _drift(model, theta, weights, y):
             f"and {torque.max():.2g} N m over the recording; re-zero the sensor and let it warm up, or record faster")
 
 
-def gains_warning(masses, identity):
+def _noise_ratio(table, y, residual):
+    """The force residuals' rms over the reading's noise measured from the data, or None where it is not.
+
+    The noise is the rows' own standard errors where the table has them (an
+    attitude-only log's held segments), else, for at least ``2 MIN_BLOCKS``
+    rows, the forces' row-to-row scatter ``rms(diff) / sqrt 2`` (rows in
+    sequence: a joint recording's high-frequency noise; a table of poses in
+    any order scatters far more, and no ratio is claimed from it).
+    """
+    if table.noise is not None:
+        noise = float(np.sqrt(np.mean(np.square(table.noise[:, 3:]))))
+    elif len(y) >= 2 * MIN_BLOCKS:
+        noise = float(np.sqrt(np.mean(np.diff(y[:, 3:], axis=0) ** 2) / 2))
+    else:
+        return None
+    return float(np.sqrt(np.mean(residual[:, 3:] ** 2))) / max(noise, 1e-300)
+
+
+def gains_warning(masses, identity, ratio=None):
     """The one line for force axes whose gains disagree (eq. N7).
 
     Parameters
@@ -726,6 +745,8 @@ def gains_warning(masses, identity):
         The mass each force axis gives alone, kg.
     identity : bool
         The fit took ``S = I``.
+    ratio : float, optional
+        The force residuals over the reading's noise, where measured (:func:`_noise_ratio`).
 
     Returns
     -------
@@ -734,7 +755,8 @@ def gains_warning(masses, identity):
     spread = float((masses.max() - masses.min()) / masses.mean())
     told = ("S = I may be wrong: calibrate S (fmscal calibrate) and pass --calibration" if identity
             else "the calibration given may be wrong, or the payload's mass changed")
-    return (f"the force gains seem to differ by {spread:.1%} between axes (each axis alone weighs "
+    times = "" if ratio is None else f"the residual is {ratio:.0f} times the noise; "
+    return (times + f"the force gains seem to differ by {spread:.1%} between axes (each axis alone weighs "
             + ", ".join(f"{v:.4g}" for v in masses) + f" kg); {told}; the mass's uncertainty includes that spread")
 
 
