@@ -43,7 +43,7 @@ from fmscal.observers.batch import few_blocks, pseudo_inverse, sandwich, time_bl
 from ._coverage import cone_deg, in_words, next_poses, weak_directions
 from ._estimate import PayloadEstimate
 from ._static_fit import (TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start, _tangent_basis,
-                          cone_warning, gravity_up, other_convention, rotation_check)
+                          cone_warning, gravity_up, other_convention, rotation_check, rotations_unresolved)
 
 __all__ = ["identify_payload", "DETERMINED", "HOLD", "REFERENCES"]
 
@@ -108,8 +108,16 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     times = (log.t[trim], window, block)
     motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
     if estimate_gravity or estimate_mounting:
-        fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
-                                               estimate_mounting)
+        try:
+            fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
+                                                   estimate_mounting)
+        except FmscalError as err:      # gravity up or a negative mass: the sign only where gravity fixed says so
+            if estimate_mounting or "the reading follows the other sign convention" not in str(err):
+                raise
+            fixed_mass = float(np.linalg.lstsq(_design(W), y.ravel(), rcond=None)[0][0])
+            if not fixed_mass > 0:
+                raise
+            raise FmscalError(rotations_unresolved(log.name, len(y), fixed_mass, "samples")) from None
     else:
         X = _design(W)
         theta, _, residual = weighted_fit(X, y.ravel(), np.ones(6 * n))

@@ -1112,7 +1112,7 @@ def other_convention(name, mass, reading):
             f"command line --reading {other}: the wrench the {_who(other)})")
 
 
-def rotations_unresolved(name, poses, fixed_mass):
+def rotations_unresolved(name, poses, fixed_mass, data="poses"):
     """The one line for a fit with gravity or the mounting estimated that finds gravity up or a negative mass,
     where the fit with gravity held fixed gives a positive mass: the reading's sign is not the cause.
 
@@ -1120,9 +1120,11 @@ def rotations_unresolved(name, poses, fixed_mass):
     ----------
     name : str
     poses : int
-        The poses fitted.
+        The poses (or samples) fitted.
     fixed_mass : float
         The mass with gravity held fixed, kg (positive).
+    data : str
+        What ``poses`` counts.
 
     Returns
     -------
@@ -1130,7 +1132,7 @@ def rotations_unresolved(name, poses, fixed_mass):
     """
     return (f"{name}: with the rotations estimated the fit finds gravity pointing up or a negative mass, though with "
             f"gravity held as given the mass is positive ({fixed_mass:.4g} kg), so the reading's sign is not the "
-            f"cause: {poses} poses do not resolve gravity's direction and the mounting; record more poses, tilted "
+            f"cause: {poses} {data} do not resolve gravity's direction and the mounting; record more poses, tilted "
             "about two axes, or give --gravity")
 
 
