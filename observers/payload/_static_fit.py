@@ -197,7 +197,7 @@ class _Model:
 
     def __init__(self, R, y, g_size, d0, M0, estimate_gravity, estimate_mounting):
         self.R, self.y, self.g_size = R, y, g_size
-        self.fixed_mass, self.rejected = None, None
+        self.fixed_mass = None
         self.d0, self.M0 = d0, M0
         self.e1, self.e2 = _tangent_basis(d0)
         self.estimate_gravity, self.estimate_mounting = estimate_gravity, estimate_mounting
@@ -516,9 +516,7 @@ def _best_start(R, y, g, estimate_gravity, estimate_mounting):
     Returns
     -------
     model : _Model
-        With ``fixed_mass`` (the mass with gravity fixed, kg) and ``rejected``
-        (where a fit with gravity up or a negative mass had residuals below the kept one's beyond chance, the
-        ratio of their sums of squares, else None) set.
+        With ``fixed_mass`` (the mass with gravity fixed, kg) set.
     theta : ndarray
     """
     fixed = _start(R, y, g, False, estimate_mounting)
@@ -534,11 +532,7 @@ def _best_start(R, y, g, estimate_gravity, estimate_mounting):
         found.append((not physical, float(np.sum((model.predict(theta) - y) ** 2)), len(found), model, theta))
     fixed_mass = float(fixed[0][0])
     best = min(found, key=lambda item: item[:3] if fixed_mass > 0 else item[1:3])
-    fitted = min(found, key=lambda item: item[1:3])
-    dof = max(y.size - len(best[4]), 1)
-    ratio = best[1] / max(fitted[1], 1e-300)
     best[3].fixed_mass = fixed_mass
-    best[3].rejected = ratio if ratio > f_dist.ppf(1 - ODDS, dof, dof) else None
     return best[3], best[4]
 
 
