@@ -8,9 +8,9 @@ from ._estimate import (PayloadEstimate, PayloadFileError, PAYLOAD_FORMAT)
 from ._payload_fit import (identify_payload, DETERMINED, HOLD, REFERENCES)
 from ._static_fit import (StaticFit, fit_static, calibrate_table, other_convention, tilt_warning, mounting_warning,
     rotation_warning, both_rotations_warning, rotation_check, Refit, gravity_up, TILT_RATIO, TILT_SIGMAS,
-    MIN_CONE_DEG)
+    MIN_CONE_DEG, ODDS, min_poses, sign_separated, rotations_unresolved, cone_warning, NARROW_CONE_DEG)
 from ._practitioners import (ReferenceFit, plain_fit, calib_force, CALIB_FORCE_G)
 
 __all__ = ["cone_deg", "next_poses", "rotation", "PayloadEstimate", "PayloadFileError", "identify_payload",
-           "StaticFit", "fit_static", "calibrate_table", "other_convention", "ReferenceFit", "plain_fit",
+           "StaticFit", "fit_static", "calibrate_table", "other_convention", "min_poses", "ReferenceFit", "plain_fit",
            "calib_force"]

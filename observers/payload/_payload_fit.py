@@ -43,7 +43,7 @@ from fmscal.observers.batch import few_blocks, pseudo_inverse, sandwich, time_bl
 from ._coverage import cone_deg, in_words, next_poses, weak_directions
 from ._estimate import PayloadEstimate
 from ._static_fit import (TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start, _tangent_basis,
-                          gravity_up, other_convention, rotation_check)
+                          cone_warning, gravity_up, other_convention, rotation_check, rotations_unresolved)
 
 __all__ = ["identify_payload", "DETERMINED", "HOLD", "REFERENCES"]
 
@@ -112,8 +112,16 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     times = (log.t[trim], window, block)
     motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
     if estimate_gravity or estimate_mounting:
-        fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
-                                               estimate_mounting)
+        try:
+            fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
+                                                   estimate_mounting)
+        except FmscalError as err:      # gravity up or a negative mass: the sign only where gravity fixed says so
+            if estimate_mounting or "the reading follows the other sign convention" not in str(err):
+                raise
+            fixed_mass = float(np.linalg.lstsq(_design(W), y.ravel(), rcond=None)[0][0])
+            if not fixed_mass > 0:
+                raise
+            raise FmscalError(rotations_unresolved(log.name, len(y), fixed_mass, "samples")) from None
     else:
         X = _design(W)
         theta, _, residual = weighted_fit(X, y.ravel(), np.ones(6 * n))
@@ -131,7 +139,31 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     _coverage(fit, motion[0], log.t[trim], information)
     if not (estimate_gravity and estimate_mounting):
         _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting)
+    _check_misfit(fit, y, S is None or np.allclose(S, np.eye(6)))
     return fit
+
+
+def _check_misfit(fit, y, identity):
+    """Warn, and clear ``converged``, where the force residuals exceed the reading's noise or the attitudes span a
+    narrow cone.
+
+    The noise is the reading's sample-to-sample scatter (``rms(diff) /
+    sqrt 2``, as :func:`_check_rotations`); residuals beyond
+    :data:`fmscal.observers.payload.TILT_RATIO` times it, where no rotation
+    was named, are a model that does not fit: ``S`` (cross-talk, gains) the
+    likely cause. The cone is :func:`fmscal.observers.payload.cone_warning`'s.
+    """
+    noise = float(np.sqrt(np.mean(np.diff(y[:, 3:], axis=0) ** 2) / 2))
+    fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
+    named = any("estimate" in w for w in fit.warnings)
+    if fixed > TILT_RATIO * noise and not named:
+        told = "S = I may be wrong: calibrate S" if identity else "the calibration given may be wrong"
+        fit.warnings.append(f"the force residuals are {fixed / max(noise, 1e-300):.0f} times the reading's noise (its "
+                            f"sample-to-sample scatter): the model does not fit; {told}")
+        fit.converged = False
+    if (line := cone_warning(fit.cone_deg)) is not None:
+        fit.warnings.append(line)
+        fit.converged = False
 
 
 def _blocks_used(fit, blocks, length):

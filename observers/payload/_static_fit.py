@@ -16,10 +16,15 @@ The unknowns are ``m``, ``com`` (3), ``c`` (6), and where asked the direction
 of gravity (two angles; its size is the standard 9.81 m/s^2 unless told) and
 the mounting ``M`` (a rotation, three angles). The fit is nonlinear least
 squares (Levenberg-Marquardt, :func:`scipy.optimize.least_squares`), started
-from linear fits of the forces and then the torques, each channel weighted by
-its residual spread; the rows are independent (each an average over a held
-pose), so the covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the weighted
-residual variance over its degrees of freedom.
+from linear fits of the forces and then the torques, the torques and the
+forces each weighted by their noise over their own degrees of freedom (eq.
+N2); the rows are independent (each an average over a held pose), so the
+covariance is ``(J^T W J)^-1``, each variance widened to the Student-t's
+(eq. N3). Where the model does not fit, the covariance widens: for rows in
+sequence, to the block sandwich's (N6); for force axes whose gains
+disagree, by their masses' spread (N7, N8), with a warning; an offset
+drifting along the rows (N9) and a narrow cone of attitudes are warned.
+The fewest poses each estimated rotation needs: :func:`min_poses` (N4).
 
 What the table covers: the gravity directions it holds in the sensor frame
 (the half-angle of the cone around their mean), the parameters it leaves
@@ -40,19 +45,22 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2, f as f_dist
 
-from fmscal.plant.io import PoseTable, check_table_units, reading_sign
+from fmscal.plant.io import MIN_POSES, PoseTable, check_table_units, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
 from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
 
-from fmscal.observers.batch import InverseDynamicsFit, fit_readings
+from fmscal.observers.batch import (MIN_BLOCKS, InverseDynamicsFit, correlation_time, fit_readings, pseudo_inverse,
+                                   sandwich)
 from ._coverage import (DETERMINED_REL, DETERMINED_COM, _OFFSET_NAMES, cone_deg as _cone, covariance, in_words,
                         next_poses, rotation as _exp)
 from ._estimate import _Rotations
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
-           "TILT_SIGMAS", "MIN_CONE_DEG"]
+           "TILT_SIGMAS", "MIN_CONE_DEG", "ODDS", "min_poses", "sign_separated", "rotations_unresolved",
+           "gains_warning", "NARROW_CONE_DEG", "cone_warning"]
 
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
@@ -62,6 +70,12 @@ TILT_SIGMAS = 5.0
 #: Poses whose gravity directions in the sensor frame all lie within a cone of this half-angle (degrees)
 #: do not separate the weight from the offset: refused.
 MIN_CONE_DEG = 1.0
+#: Poses whose gravity directions lie within a cone of this half-angle (degrees) are warned: the weight is told from
+#: the offset by small differences, which a gain error or a drifting offset moves.
+NARROW_CONE_DEG = 30.0
+#: The chance below which a fit's misfit counts as beyond the noise (one in a thousand): the F and chi-square
+#: quantiles of the checks that state a probability.
+ODDS = 1e-3
 
 
 @dataclass
@@ -129,6 +143,33 @@ class StaticFit(_Rotations):
                 "warnings": list(self.warnings), "converged": bool(self.converged)}
 
 
+def min_poses(estimate_gravity=False, estimate_mounting=False):
+    """The fewest held poses that determine the static fit, with the noise measured from its residuals.
+
+    The forces carry every rotation: ``f_k = m M^T R_k^T (-g) + c_f`` holds
+    ``p_f = 4`` unknowns (the mass, the force offset), two more for gravity's
+    direction and three for the mounting; the torques ``com x f_k + c_tau``
+    add six unknowns and three numbers a pose. Each pose gives three forces,
+    and the forces' noise, measured from their ``3N - p_f`` residual degrees
+    of freedom, has a finite Student-t variance only beyond two (eq. N3)::
+
+        3 N - p_f > 2,   N >= floor(p_f / 3) + 1                              (N4)
+
+    that is 2 with gravity and the mounting as given, 3 with gravity's
+    direction or the mounting estimated, 4 with both; a pose table holds at
+    least :data:`fmscal.plant.io.MIN_POSES` (four) for the torques' six
+    unknowns and the offset. Poses that do not tilt gravity, or tilt it
+    within one plane, leave the fit undetermined at any count (the
+    fit's weak directions; :func:`sign_separated`).
+
+    Returns
+    -------
+    int
+    """
+    p_f = 4 + 2 * bool(estimate_gravity) + 3 * bool(estimate_mounting)
+    return p_f // 3 + 1
+
+
 def _angle_deg(R):
     """The angle of a rotation matrix, degrees."""
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
@@ -156,6 +197,7 @@ class _Model:
 
     def __init__(self, R, y, g_size, d0, M0, estimate_gravity, estimate_mounting):
         self.R, self.y, self.g_size = R, y, g_size
+        self.fixed_mass = None
         self.d0, self.M0 = d0, M0
         self.e1, self.e2 = _tangent_basis(d0)
         self.estimate_gravity, self.estimate_mounting = estimate_gravity, estimate_mounting
@@ -194,9 +236,10 @@ class _Model:
         return np.column_stack(cols)
 
 
-def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
+def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None, signs=(1.0, -1.0)):
     """Linear fits for the start: the forces (``f = B a + c_f``, or ``f = -R^T u + c_f``), then the torques.
 
+    ``signs``: the signs of the mass the mounting's fit may take (:func:`_procrustes`).
     ``acc`` (N, 3), the tracked point's acceleration in the pose frame, m/s^2,
     for samples of a log (default: held, none); its share of the force,
     ``m M^T R^T acc``, joins the linear fits, and the rotation's share is left
@@ -208,15 +251,9 @@ def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
         a0 = a0 + np.einsum("nkj,nk->nj", R, acc)
     f = y[:, 3:]
     M0, d0, g_size = np.eye(3), g / np.linalg.norm(g), float(np.linalg.norm(g))
-    if estimate_mounting:           # f = B a0 + c_f with B = m M^T: B by least squares, M^T by its polar part
-        X = np.hstack([a0, np.ones((n, 1))])
-        coef = np.linalg.lstsq(X, f, rcond=None)[0]                        # (4, 3): rows B^T, c_f
-        U, s, Vt = np.linalg.svd(coef[:3].T)
-        Mt = U @ Vt
-        if np.linalg.det(Mt) < 0:                                           # a reflection: the load convention
-            Mt = -Mt
+    if estimate_mounting:           # f = m M^T a0 + c_f: M by Kabsch, for each sign of m, the better kept
+        m, Mt = _procrustes(a0, f, signs)
         M0 = Mt.T
-        m = float(np.sum(s) / 3 * np.sign(np.trace(Mt.T @ coef[:3].T)))
     if estimate_gravity:            # f = M0^T R^T (m acc - u) + c_f with u = m g: linear in u and c_f (and m)
         X = np.concatenate([-np.einsum("ji,nkj->nik", M0, R), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2)
         if acc is not None:
@@ -236,6 +273,69 @@ def _start(R, y, g, estimate_gravity, estimate_mounting, acc=None):
     X = np.concatenate([-skew(force), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(3 * n, 6)
     sol = np.linalg.lstsq(X, y[:, :3].ravel(), rcond=None)[0]
     return np.r_[m, sol[:3], sol[3:], c_f], d0, M0, g_size
+
+
+def _procrustes(a, f, signs=(1.0, -1.0)):
+    """The scaled rotation that best maps the directions ``a`` onto the forces ``f``, each less its mean.
+
+    Minimises ``sum_k |f_k - c - m Q a_k|^2`` over ``c``, ``m`` and the
+    rotation ``Q`` (Kabsch: ``Q`` the rotation nearest the correlation
+    ``H = sum f_k a_k^T`` of the centred rows, its determinant kept at +1),
+    for ``m`` of either sign (``m < 0``: the rotation of ``-H``), and keeps the
+    sign that fits better. Defined for any number of poses, where the
+    unconstrained ``f = B a + c`` needs four to be determined and its
+    determinant's sign is noise at four.
+
+    Returns
+    -------
+    m : float
+    Q : ndarray, shape (3, 3)
+    """
+    ac, fc = a - a.mean(axis=0), f - f.mean(axis=0)
+    best = None
+    for sign in signs:
+        U, _, Vt = np.linalg.svd(sign * fc.T @ ac)
+        Q = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+        m = sign * max(float(np.sum(fc * (ac @ Q.T)) * sign), 0.0) / max(float(np.sum(ac ** 2)), 1e-300)
+        cost = float(np.sum((fc - m * ac @ Q.T) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, m, Q)
+    return best[1], best[2]
+
+
+def sign_separated(R, f, g, noise):
+    """Whether held poses tell the reading's sign from a mounting turned half a turn: a chi-square test.
+
+    With the mounting free, ``f_k = m M^T a_k + c`` (``a_k = R_k^T (-g)``) for
+    ``m > 0`` and for ``m < 0`` (:func:`_procrustes` with each sign) differ
+    only where the centred directions ``a_k`` leave a plane: on a plane a
+    reflection is a half turn about its normal. The sign counts as told when
+    the two fits' sums of squares differ by more than the chi-square
+    distribution's ``1 - ODDS`` quantile on three degrees of freedom (the
+    rotation's), in units of the forces' noise variance::
+
+        |SS_+ - SS_-| / s_f^2 > chi2_{1 - ODDS}(3)                           (N5)
+
+    Parameters
+    ----------
+    R : ndarray, shape (N, 3, 3)
+    f : ndarray, shape (N, 3)
+        The force readings, N.
+    g : array_like, shape (3,)
+    noise : float
+        The forces' noise ``s_f``, N (eq. N2, of the fit as asked).
+
+    Returns
+    -------
+    bool
+    """
+    a = np.einsum("nkj,k->nj", R, -np.asarray(g, dtype=float))
+    ac, fc = a - a.mean(axis=0), f - f.mean(axis=0)
+    costs = []
+    for sign in (1.0, -1.0):
+        m, Q = _procrustes(a, f, (sign,))
+        costs.append(float(np.sum((fc - m * ac @ Q.T) ** 2)))
+    return bool(abs(costs[0] - costs[1]) > chi2.ppf(1 - ODDS, 3) * noise ** 2)
 
 
 def _weighted(model, theta0, weights):
@@ -294,18 +394,26 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     check_table_units(table, g, S=S)                    # a slipped unit named in one line, before the fit
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
+    if len(R) < (needed := max(min_poses(estimate_gravity, estimate_mounting), MIN_POSES)):
+        raise FmscalError(f"{table.name}: {len(R)} poses; the fit as asked needs at least {needed} (min_poses)")
     # gravity's directions in the sensor frame (a mounting turns them all alike); with gravity estimated,
     # those of the first pose's gravity: poses that all hold one attitude
     _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
                      "the mass and the offset")
     model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting)
     m, com, c, d, M = model.parts(theta)
+    if (m <= 0 or (estimate_gravity and d[2] > 0 and g[2] < 0)) and model.fixed_mass > 0:
+        raise FmscalError(rotations_unresolved(table.name, len(R), model.fixed_mass))
     if m <= 0:
         raise FmscalError(other_convention(table.name, m, reading))
     if estimate_gravity and d[2] > 0 and g[2] < 0:
         raise FmscalError(gravity_up(table.name, d[2], reading))
     s2, information = _weighted_information(model, theta, weights, y)
     cov, weak = covariance(information, s2)
+    cov, _ = _small_sample(model, theta, weights, y, cov)
+    cov = _in_sequence(model, theta, weights, y, cov)
+    gains = _gain_spread(model, theta, y)
+    cov = _with_gains(cov, gains, theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
     b = S_inv @ c
@@ -334,10 +442,25 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     both = estimate_gravity and estimate_mounting
     rotated = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
                                                                     model.predict(theta) - y)
+    if estimate_mounting and not sign_separated(R, y[:, 3:], g, _group_noise(model, theta, weights, y)[0][1]):
+        out.warnings.append(f"these {len(R)} poses do not tell the reading's sign from a mounting turned half a turn "
+                            "(their gravity directions in the sensor frame lie near one plane): record poses "
+                            "out of that plane")
+        out.converged = False
+    ratio = _noise_ratio(table, y, model.predict(theta) - y)
+    if gains is not None:
+        out.warnings.append(gains_warning(gains, S is None or np.allclose(S, np.eye(6)), ratio))
+        out.converged = False
+    elif (drift := _drift(model, theta, weights, y)) is not None:
+        out.warnings.append(drift)
+        out.converged = False
+    if not out.undetermined and (line := cone_warning(out.cone_deg)) is not None:
+        out.warnings.append(line)
+        out.converged = False
     if rotated is not None:                 # the model is wrong: more poses would not help
         out.warnings.append(rotated)
         out.converged = False
-    elif not out.undetermined and not determined:
+    elif not out.undetermined and not determined and gains is None:     # more poses would not mend the gains
         out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
                             f"{DETERMINED_COM * 1e3:g} mm: record more poses, tilted further")
     out.next_poses = next_poses(model, theta, information, weights, s2, R, [f"pose {k + 1}" for k in range(len(R))])
@@ -345,26 +468,106 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
 
 
 def _two_passes(R, y, g, estimate_gravity, estimate_mounting):
-    """The fit's start and its two passes, the second weighted by each channel's residual rms in the first.
+    """The fit's start, an unweighted pass, and passes weighted by each group's noise (torques, forces).
+
+    Each group's noise is its residuals' variance over the group's own
+    degrees of freedom, ``s_g^2 = RSS_g / nu_g`` with ``nu_g = n_g - sum of
+    the leverages of its rows`` (eq. N2, :func:`_group_noise`): the
+    small-sample correction for the parameters fitted, shared between the
+    groups as the fit uses them (the leverages of all rows sum to the
+    parameters' count). A group, not a channel: four poses leave each
+    channel one or two degrees of freedom, too few to weigh it by.
 
     Returns
     -------
     model : _Model
     theta : ndarray
-        The parameters after the weighted pass.
+        The parameters after the weighted passes.
     weights : ndarray, shape (6,)
-        Each reading channel's weight, 1 / its first-pass residual rms.
+        Each reading channel's weight, 1 / its group's noise (N m, N).
     sd : ndarray, shape (6,)
-        The first pass's residual rms per channel (N m, N).
+        The weighted fit's residual rms per channel (N m, N).
     g_size : float
         Gravity's magnitude, m/s^2.
     """
-    theta0, d0, M0, g_size = _start(R, y, g, estimate_gravity, estimate_mounting)
-    model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
-    theta = _weighted(model, _extra(theta0, model), np.ones(6))
+    model, theta = _best_start(R, y, g, estimate_gravity, estimate_mounting)
+    g_size = model.g_size
+    floor = 1e-9 * max(np.abs(y).max(), 1e-300)
+    weights = np.ones(6)
+    for _ in range(2):
+        noise, _ = _group_noise(model, theta, weights, y)
+        weights = 1.0 / np.maximum(np.repeat(noise, 3), floor)
+        theta = _weighted(model, theta, weights)
     sd = np.sqrt(np.mean((model.predict(theta) - y) ** 2, axis=0))
-    weights = 1.0 / np.maximum(sd, 1e-9 * max(np.abs(y).max(), 1e-300))
-    return model, _weighted(model, theta, weights), weights, sd, g_size
+    return model, theta, weights, sd, g_size
+
+
+def _best_start(R, y, g, estimate_gravity, estimate_mounting):
+    """The unweighted fit from the linear start and, with gravity estimated, from gravity's given direction with a
+    positive mass; which one is kept follows the fit with gravity held fixed.
+
+    The sign of the mass with gravity fixed (:func:`_start` with gravity as
+    given: a linear fit, or with the mounting a rotation fitted for either
+    sign of the mass, :func:`_procrustes`) is what the data say of the
+    reading's convention; a rotation cannot turn it. Where it is positive, the
+    fit kept is the one with a positive mass and gravity on the side given
+    (the lower residuals of those); where none is, or the mass with gravity
+    fixed is negative, the one with the lower residuals. With few poses the
+    linear start of gravity's direction can fall near the opposite one, a
+    local minimum that reads as gravity pointing up: the second start finds
+    the minimum near the direction given.
+
+    Returns
+    -------
+    model : _Model
+        With ``fixed_mass`` (the mass with gravity fixed, kg) set.
+    theta : ndarray
+    """
+    fixed = _start(R, y, g, False, estimate_mounting)
+    starts = [_start(R, y, g, estimate_gravity, estimate_mounting) if estimate_gravity else fixed]
+    if estimate_gravity:
+        starts.append(_start(R, y, g, False, estimate_mounting, signs=(1.0,)))
+    found = []
+    for theta0, d0, M0, g_size in starts:
+        model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
+        theta = _weighted(model, _extra(theta0, model), np.ones(6))
+        m, _, _, d, _ = model.parts(theta)
+        physical = bool(m > 0 and d @ g > 0)
+        found.append((not physical, float(np.sum((model.predict(theta) - y) ** 2)), len(found), model, theta))
+    fixed_mass = float(fixed[0][0])
+    best = min(found, key=lambda item: item[:3] if fixed_mass > 0 else item[1:3])
+    best[3].fixed_mass = fixed_mass
+    return best[3], best[4]
+
+
+def _leverages(J):
+    """The diagonal of the hat matrix ``J (J^T J)^+ J^T``, over the directions ``J`` determines."""
+    U, sv, _ = np.linalg.svd(J, full_matrices=False)
+    keep = sv > 1e-10 * max(sv[0], 1e-300)
+    return np.sum(U[:, keep] ** 2, axis=1)
+
+
+def _group_noise(model, theta, weights, y):
+    """The noise of the torques and of the forces, each over its own degrees of freedom::
+
+        s_g^2 = sum_{rows of g} r^2 / nu_g,   nu_g = n_g - sum_{rows of g} h_ii          (N2)
+
+    ``r`` the residuals, ``h_ii`` the leverages of the fit weighted by ``weights`` (eq. N2 is the
+    unbiased variance of a linear fit, each group charged with the parameters its rows determine).
+
+    Returns
+    -------
+    noise : ndarray, shape (2,)
+        ``s_g`` of the torques (N m) and the forces (N); ``inf`` where ``nu_g`` is below a half.
+    dof : ndarray, shape (2,)
+        ``nu_g``.
+    """
+    residual = model.predict(theta) - y
+    h = _leverages(model.jacobian(theta) * np.tile(weights, len(y))[:, None]).reshape(len(y), 6)
+    rss = np.array([np.sum(residual[:, :3] ** 2), np.sum(residual[:, 3:] ** 2)])
+    dof = np.array([3 * len(y) - h[:, :3].sum(), 3 * len(y) - h[:, 3:].sum()])
+    noise = np.where(dof > 0.5, np.sqrt(rss / np.maximum(dof, 0.5)), np.inf)
+    return noise, dof
 
 
 def _weighted_information(model, theta, weights, y):
@@ -381,6 +584,214 @@ def _weighted_information(model, theta, weights, y):
     return s2, J.T @ J
 
 
+def _in_sequence(model, theta, weights, y, cov):
+    """``cov`` widened where the cluster-robust covariance over blocks of consecutive rows exceeds it.
+
+    Rows recorded in sequence (a joint recording's quasi-static rows, an
+    attitude-only log's held segments) share slow errors, which the fit's
+    own covariance, taking them as independent, does not see. The rows'
+    blocks are five of the residuals' correlation lengths, in rows (eq. U2
+    of :mod:`fmscal.observers.batch`; one row where they are white),
+    and :func:`fmscal.observers.batch.sandwich` gives the covariance over
+    them. Where there are at least :data:`fmscal.observers.batch.MIN_BLOCKS`
+    blocks, each parameter's variance is the larger of the two (the
+    correlations kept, the rows and columns scaled)::
+
+        cov_i = cov * d d^T,   d_i = max(1, sqrt(sandwich_ii / cov_ii))     (N6)
+    """
+    n = len(y)
+    residual = (model.predict(theta) - y) * weights
+    if n < 2 * MIN_BLOCKS or not np.all(np.isfinite(np.diag(cov))):
+        return cov
+    tau = correlation_time(residual)
+    blocks = np.repeat((np.arange(n) // max(5.0 * tau, 1.0)).astype(int), 6)
+    if blocks.max() + 1 < MIN_BLOCKS:             # too few blocks for the sandwich: the rows count 1 / tau each
+        return cov * max(tau, 1.0)
+    J = model.jacobian(theta) * np.tile(weights, n)[:, None]
+    inverse, columns = pseudo_inverse(J)
+    robust = sandwich(J, residual.ravel(), blocks, inverse, columns)
+    d = np.sqrt(np.maximum(np.diag(robust) / np.maximum(np.diag(cov), 1e-300), 1.0))
+    return cov * np.outer(d, d)
+
+
+#: The force gains count as disagreeing when a gain for each force axis lowers the residuals beyond chance
+#: (:data:`ODDS`); the mass's variance then takes the spread of the three axes' masses.
+def _gain_spread(model, theta, y):
+    """The three force axes' own masses where they disagree beyond chance, else None.
+
+    At the fitted rotations, each force axis ``j`` is fitted alone,
+    ``f_kj = m_j a_kj + c_j`` (``a_k = M^T R_k^T (-g)``), against one mass
+    for the three: the F test on ``2`` and ``3N - 6`` degrees of freedom, at
+    :data:`ODDS`::
+
+        F = ((SS_1 - SS_3) / 2) / (SS_3 / (3N - 6))                          (N7)
+
+    Returns
+    -------
+    ndarray, shape (3,), or None
+        ``m_x, m_y, m_z``, kg.
+    """
+    n = len(y)
+    if 3 * n <= 8:
+        return None
+    m, _, c, d, M = model.parts(theta)
+    a = np.einsum("ji,nkj,k->ni", M, model.R, -model.g_size * d)
+    f = y[:, 3:]
+    masses, ss3 = np.zeros(3), 0.0
+    for j in range(3):
+        X = np.c_[a[:, j], np.ones(n)]
+        coef, *_ = np.linalg.lstsq(X, f[:, j], rcond=None)
+        masses[j] = coef[0]
+        ss3 += float(np.sum((f[:, j] - X @ coef) ** 2))
+    X = np.zeros((3 * n, 4))
+    X[:, 0] = a.ravel()
+    X[:, 1:] = np.tile(np.eye(3), (n, 1))
+    coef, *_ = np.linalg.lstsq(X, f.ravel(), rcond=None)
+    ss1 = float(np.sum((f.ravel() - X @ coef) ** 2))
+    dof = 3 * n - 6
+    if ss3 <= 0 or (ss1 - ss3) / 2 / (ss3 / dof) <= f_dist.ppf(1 - ODDS, 2, dof):
+        return None
+    return masses
+
+
+def _with_gains(cov, masses, theta):
+    """``cov`` with the gains' spread added: the mass's variance by the standard error of the three axes' masses
+    (eq. N8), the centre of mass's by the same share of it (its torques divided by the force), the rest kept::
+
+        var(m) += sum_j (m_j - mean m)^2 / 6,   var(com_i) += com_i^2 var_added(m) / m^2           (N8)
+    """
+    if masses is None:
+        return cov
+    added = float(np.sum((masses - masses.mean()) ** 2) / 6)
+    out = cov.copy()
+    out[0, 0] += added
+    share = added / max(theta[0] ** 2, 1e-300)
+    for i in range(1, 4):
+        out[i, i] += share * theta[i] ** 2
+    return out
+
+
+def cone_warning(cone):
+    """The one line for gravity directions within a cone narrower than :data:`NARROW_CONE_DEG`, else None.
+
+    Parameters
+    ----------
+    cone : float
+        The cone's half-angle in the sensor frame, degrees.
+
+    Returns
+    -------
+    str or None
+    """
+    if not MIN_CONE_DEG <= cone < NARROW_CONE_DEG:
+        return None
+    return (f"the gravity directions span a cone of only {cone:.0f} degrees in the sensor frame: the weight is told "
+            "from the offset by small differences, which a gain error or a drifting offset moves; tilt the tool "
+            f"further ({NARROW_CONE_DEG:.0f} degrees or more, about two axes)")
+
+
+def _drift(model, theta, weights, y):
+    """The one line for residuals that trend along the rows (an offset drifting while they were recorded), else None.
+
+    Each channel's weighted residuals are regressed on the centred row index
+    ``x``; their trends' squared sizes, in units of the noise, sum to a
+    chi-square on six degrees of freedom where there is no trend::
+
+        X = sum_j (sum_k r_kj x_k)^2 / sum_k x_k^2 > chi2_{1 - ODDS}(6)     (N9)
+
+    Rows in an order that is not time's (a table of poses taken in any order)
+    trend only by chance.
+    """
+    n = len(y)
+    if n < 8:
+        return None
+    x = np.arange(n) - (n - 1) / 2
+    raw = model.predict(theta) - y
+    trend = (raw * weights).T @ x / np.sum(x ** 2)
+    if float(np.sum(trend ** 2) * np.sum(x ** 2)) <= chi2.ppf(1 - ODDS, 6):
+        return None
+    force = np.abs(raw[:, 3:].T @ x / np.sum(x ** 2)) * (n - 1)
+    torque = np.abs(raw[:, :3].T @ x / np.sum(x ** 2)) * (n - 1)
+    return (f"the residuals trend along the rows: taken in time order, the offset drifts by up to {force.max():.2g} N "
+            f"and {torque.max():.2g} N m over the recording; re-zero the sensor and let it warm up, or record faster")
+
+
+def _noise_ratio(table, y, residual):
+    """The force residuals' rms over the reading's noise measured from the data, or None where it is not.
+
+    The noise is the rows' own standard errors where the table has them (an
+    attitude-only log's held segments), else, for at least ``2 MIN_BLOCKS``
+    rows, the forces' row-to-row scatter ``rms(diff) / sqrt 2`` (rows in
+    sequence: a joint recording's high-frequency noise; a table of poses in
+    any order scatters far more, and no ratio is claimed from it).
+    """
+    if table.noise is not None:
+        noise = float(np.sqrt(np.mean(np.square(table.noise[:, 3:]))))
+    elif len(y) >= 2 * MIN_BLOCKS:
+        noise = float(np.sqrt(np.mean(np.diff(y[:, 3:], axis=0) ** 2) / 2))
+    else:
+        return None
+    return float(np.sqrt(np.mean(residual[:, 3:] ** 2))) / max(noise, 1e-300)
+
+
+def gains_warning(masses, identity, ratio=None):
+    """The one line for force axes whose gains disagree (eq. N7).
+
+    Parameters
+    ----------
+    masses : ndarray, shape (3,)
+        The mass each force axis gives alone, kg.
+    identity : bool
+        The fit took ``S = I``.
+    ratio : float, optional
+        The force residuals over the reading's noise, where measured (:func:`_noise_ratio`).
+
+    Returns
+    -------
+    str
+    """
+    spread = float((masses.max() - masses.min()) / masses.mean())
+    told = ("S = I may be wrong: calibrate S (fmscal calibrate) and pass --calibration" if identity
+            else "the calibration given may be wrong, or the payload's mass changed")
+    times = "" if ratio is None else f"the residual is {ratio:.0f} times the noise; "
+    return (times + f"the force gains seem to differ by {spread:.1%} between axes (each axis alone weighs "
+            + ", ".join(f"{v:.4g}" for v in masses) + f" kg); {told}; the mass's uncertainty includes that spread")
+
+
+def _small_sample(model, theta, weights, y, cov):
+    """``cov`` with each parameter's variance widened to the Student-t's, ``nu / (nu - 2)`` times::
+
+        v_i = sum_g v_ig,   v_ig = [C J_g^T J_g C]_ii,   nu_i = v_i^2 / sum_g (v_ig^2 / nu_g)      (N3)
+
+    ``C`` the covariance of the weighted fit, ``J_g`` the weighted rows of group ``g`` (torques, forces) and
+    ``nu_g`` its degrees of freedom (eq. N2): each variance is estimated from the groups' noise, with ``nu_i``
+    degrees of freedom (Welch-Satterthwaite), so the error over the estimated sigma is Student-t, whose variance
+    is ``nu / (nu - 2)``: the one-sigma reported is the error's standard deviation. Where ``nu_i <= 2`` that is
+    infinite: the parameter is not determined.
+
+    Returns
+    -------
+    cov : ndarray, shape (p, p)
+    dof : ndarray, shape (p,)
+        ``nu_i``.
+    """
+    _, dof_g = _group_noise(model, theta, weights, y)
+    J = (model.jacobian(theta) * np.tile(weights, len(y))[:, None]).reshape(len(y), 6, -1)
+    C = np.where(np.isfinite(cov), cov, 0.0)
+    v = np.stack([np.einsum("ij,ji->i", C @ (Jg.T @ Jg), C)
+                  for Jg in (J[:, :3].reshape(-1, J.shape[2]), J[:, 3:].reshape(-1, J.shape[2]))], axis=1)
+    total = v.sum(axis=1)
+    dof = total ** 2 / np.maximum(np.sum(v ** 2 / np.maximum(dof_g, 1e-300), axis=1), 1e-300)
+    factor = np.where(dof > 2, dof / np.maximum(dof - 2, 1e-300), np.inf)
+    factor[~np.isfinite(np.diag(cov))] = np.inf
+    root = np.sqrt(factor)
+    with np.errstate(invalid="ignore"):
+        out = cov * np.outer(root, root)
+    out[~np.isfinite(root), :] = np.inf
+    out[:, ~np.isfinite(root)] = np.inf
+    return out, dof
+
+
 def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
     """The warning of :func:`rotation_check` when the table needs gravity's direction or the mounting
     estimated, else None.
@@ -393,6 +804,7 @@ def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
         model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free)
         s2, information = _weighted_information(model, theta, weights, y)
         cov, weak = covariance(information, s2)
+        cov, _ = _small_sample(model, theta, weights, y, cov)
         if weak:
             return None
         std = np.sqrt(np.maximum(np.diag(cov), 0))
@@ -696,6 +1108,30 @@ def other_convention(name, mass, reading):
             else f"the mass comes out negative ({mass:.4g} kg)")
     return (f"{name}: {what}: the reading follows the other sign convention; pass reading=\"{other}\" (on the "
             f"command line --reading {other}: the wrench the {_who(other)})")
+
+
+def rotations_unresolved(name, poses, fixed_mass, data="poses"):
+    """The one line for a fit with gravity or the mounting estimated that finds gravity up or a negative mass,
+    where the fit with gravity held fixed gives a positive mass: the reading's sign is not the cause.
+
+    Parameters
+    ----------
+    name : str
+    poses : int
+        The poses (or samples) fitted.
+    fixed_mass : float
+        The mass with gravity held fixed, kg (positive).
+    data : str
+        What ``poses`` counts.
+
+    Returns
+    -------
+    str
+    """
+    return (f"{name}: with the rotations estimated the fit finds gravity pointing up or a negative mass, though with "
+            f"gravity held as given the mass is positive ({fixed_mass:.4g} kg), so the reading's sign is not the "
+            f"cause: {poses} {data} do not resolve gravity's direction and the mounting; record more poses, tilted "
+            "about two axes, or give --gravity")
 
 
 def gravity_up(name, z, reading):

@@ -62,11 +62,16 @@ class PoseTable:
         The raw reading ``[tx, ty, tz, fx, fy, fz]`` at each pose.
     name : str
         Where the table came from.
+    noise : ndarray, shape (N, 6), optional
+        The standard error of each row's reading, where the data give it (an
+        attitude-only log's held segments: their scatter over the square root
+        of their samples); None for a table.
     """
 
     q: np.ndarray
     w_hat: np.ndarray
     name: str = "table"
+    noise: np.ndarray = None
 
     def __post_init__(self):
         self.q = as_finite_array(self.q, (-1, 4), "q")
@@ -293,7 +298,8 @@ def held_table(log, rate=HOLD_RATE, window=HOLD_WINDOW, min_hold=MIN_HOLD):
     for (a, b), keep in zip(runs, steady):
         if keep:
             q = log.q[a:b].mean(axis=0)
-            rows.append((q / np.linalg.norm(q), log.w_hat[a:b].mean(axis=0)))
+            rows.append((q / np.linalg.norm(q), log.w_hat[a:b].mean(axis=0),
+                         log.w_hat[a:b].std(axis=0, ddof=1) / np.sqrt(b - a)))
             used += b - a
     unsteady = f", {int((~steady).sum())} more whose reading was not steady" if (~steady).any() else ""
     why = (f"{len(rows)} held segments (turning slower than {rate:g} rad/s for at least {min_hold:g} s, less "
@@ -302,8 +308,8 @@ def held_table(log, rate=HOLD_RATE, window=HOLD_WINDOW, min_hold=MIN_HOLD):
     if len(rows) < MIN_POSES:
         raise LogError(f"{log.name}: {why}; a static fit needs at least {MIN_POSES} held poses: hold the tool still "
                        f"for {min_hold:g} s or more at each of several attitudes")
-    q, w = (np.array(v) for v in zip(*rows))
-    return PoseTable(q, w, name=log.name), used / len(log.t), why
+    q, w, noise = (np.array(v) for v in zip(*rows))
+    return PoseTable(q, w, name=log.name, noise=noise), used / len(log.t), why
 
 
 def simulate_attitude_log(payload, poses=10, hold=2.0, move=1.5, dt=0.01, seed=0, gravity=GRAVITY, offset=None,
