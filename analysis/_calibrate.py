@@ -16,7 +16,7 @@ import numpy as np
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import describe_direction, estimate_latency
-from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE
+from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, calibration_uncertainty
 from fmscal.observers.diagnostics import consistency_check, has_evidence, offset_drift, saturation
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
@@ -251,8 +251,9 @@ def _calibrate_data(data, payload, method, reading, gravity, latency, max_latenc
     if not isinstance(data, Log):
         raise FmscalError(f"data must be a plant.Log, a pose table, an attitude-only log or a file name; "
                           f"got {type(data).__name__}")
-    if latency is not None and not (_number(latency) and latency >= 0):
-        raise OptionError("latency", f"{{}} must be a non-negative number of seconds; got {latency}")
+    if latency is not None and not _number(latency):
+        raise OptionError("latency", f"{{}} must be a number of seconds (negative: the wrench behind the poses); "
+                          f"got {latency}")
     if max_latency is not None and not (_number(max_latency) and max_latency > 0):
         raise OptionError("max_latency", f"{{}} must be positive; got {max_latency}")
     return _calibrate_log(data, log_model_class(data), payload, method, reading, gravity, latency, max_latency, offset,
@@ -428,9 +429,10 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     noise, noise_estimated = None, []
     if model.given_noise:
         noise, noise_estimated = _noise_model(log, model, pose_noise, wrench_noise)
-    latency_estimated = latency is None
+    latency_estimated, timing = latency is None, None
     if latency_estimated:
-        latency, _ = estimate_latency(signed, model, max_latency, offset=offset)
+        timing = estimate_latency(signed, model, max_latency, offset=offset)
+        latency = timing.latency
     aligned = signed.shift_poses(latency)
     reference = LeastSquares(model, offset=offset) if "reference" in model.calibration_checks else None
     ls_result = None if reference is None else reference.run(aligned)
@@ -442,7 +444,8 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
                             + (f": {result.warnings[-1]}" if result.warnings else "")
                             + "; no calibration (check the mass properties, units and excitation)")
-    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading)
+    result = with_latency_uncertainty(result, timing)
+    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, latency=timing)
     warnings, why = [], None
     converged = bool(result.converged)
     for check in model.calibration_checks:
@@ -456,6 +459,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
     return _calibration(result, name, dict(
         payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
+        latency_std=None if timing is None or not np.isfinite(timing.std) else float(timing.std),
         reading=reading, gravity=model.gravity if model.under_gravity else None, noise=noise,
         noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
@@ -509,6 +513,7 @@ class _Run:
     offset: bool
     reading: str
     units: list = field(default_factory=list)
+    latency: object = None
 
 
 def _check_units(run, warnings):
@@ -580,11 +585,53 @@ def _check_flipped_gain(run, warnings):
     return found, not flipped, "the reading follows the other sign convention"
 
 
+def _check_latency(run, warnings):
+    """``"latency"``: the log determines the pose stream's latency and keeps one along it
+    (:class:`fmscal.observers.batch.LatencyEstimate`: a clear minimum, its standard deviation within a few
+    samples, no step mid-log); passes where the latency was given."""
+    found = run.latency
+    if found is None:
+        return [], True, None
+    why = None if found.determined else ("the latency changes along the log" if found.step is not None
+                                         else "the log does not determine the pose stream's latency")
+    return list(found.warnings), found.determined, why
+
+
+def with_latency_uncertainty(result, found):
+    """The result with the latency's uncertainty carried into its covariance, ``S_std`` and ``b_std``.
+
+    ``cov += J J^T var(latency)``, ``J = d vec([S | c]) / d latency`` (row order; ``S`` alone without the
+    offset) of the least-squares fit at the estimate (:attr:`LatencyEstimate.dS_dlatency`, eq. (L4) of
+    :mod:`fmscal.observers.batch._latency`); ``S_std`` and ``b_std`` follow from it
+    (:func:`fmscal.observers.core.calibration_uncertainty`). A method without a covariance but with
+    ``S_std`` gets ``S_std^2 += (dS/dlatency)^2 var(latency)``. Unchanged where the latency was given.
+    """
+    if found is None or found.dS_dlatency is None or result.S_std is None:
+        return result
+    var = found.std ** 2 if np.isfinite(found.std) else np.inf
+    n_w = result.S_hat.shape[0]
+    dS = np.asarray(found.dS_dlatency, dtype=float)
+    if result.cov is None:
+        return replace(result, S_std=np.sqrt(result.S_std ** 2 + dS[:, :n_w] ** 2 * var))
+    cov = np.asarray(result.cov, dtype=float)
+    offset = cov.shape[0] == n_w * (n_w + 1)
+    J = (dS if offset else dS[:, :n_w]).ravel()
+    with np.errstate(invalid="ignore"):
+        cov = cov + np.outer(J, J) * var
+    if not np.isfinite(var):
+        cov[~np.isfinite(cov)] = np.inf
+    c = -result.S_hat @ result.b if offset and result.b is not None else None
+    S_aug = np.c_[result.S_hat, c] if c is not None else result.S_hat
+    S_std, _, b_std = calibration_uncertainty(S_aug, cov, c is not None)
+    return replace(result, cov=cov, S_std=S_std, b_std=b_std if c is not None else result.b_std)
+
+
 #: The checks a model may declare in :attr:`fmscal.plant.Model.calibration_checks`: each takes the run and
 #: the warnings so far and gives ``(its warnings, passed, why it failed or None)``.
 _CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
            "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
-           "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain}
+           "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain,
+           "latency": _check_latency}
 
 
 def _calibration(result, method, fields):
