@@ -43,8 +43,8 @@ from fmscal.plant.physics import (ORDER, GRAVITY, Model, SpatialPayload, edge, r
 
 from ._cluster_covariance import block_length, few_blocks, small_sample_factor
 
-__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "needed_wrench", "fit_readings", "describe_direction", "UNDETERMINED_STD",
-           "READING_NAMES", "nominal_motion", "smoothed_channels"]
+__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "needed_wrench", "fit_readings", "describe_direction",
+           "UNDETERMINED_STD", "READING_NAMES", "nominal_motion", "smoothed_channels"]
 
 #: The augmented reading's components, the directions in which the information is reported.
 READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")

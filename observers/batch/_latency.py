@@ -175,7 +175,7 @@ def _search(log, model, K, window, start=None):
     M = len(t_w)
     rows = np.arange(K + 1, M - K - 1)                 # w(t_k + tau) inside for every |tau| <= (K + 1) dt
     if len(rows) < 10 * (model.n_w + 2):
-        raise FmscalError(f"max_latency {max_latency:g} s is too long for a {log.duration:g} s log")
+        raise FmscalError(f"max_latency {K * dt:g} s is too long for a {log.duration:g} s log")
     X = np.c_[w_hat[rows], np.ones(len(rows))]
     spread = np.r_[np.maximum(np.std(X[:, :-1], axis=0), 1e-300), 1.0]
     Xs = X / spread
