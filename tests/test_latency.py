@@ -45,7 +45,8 @@ def test_a_multi_rate_log_keeps_its_pattern_of_pose_rows():
     log, _, _ = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=2.0, latency=0.0).generate(0)
     aligned = log.shift_poses(2.4e-3)
     assert log.has_pose.sum() - aligned.has_pose.sum() == 2          # the first and the last measurement
-    np.testing.assert_array_equal(np.diff(np.flatnonzero(aligned.has_pose)), np.diff(np.flatnonzero(log.has_pose))[1:-1])
+    np.testing.assert_array_equal(np.diff(np.flatnonzero(aligned.has_pose)),
+                                  np.diff(np.flatnonzero(log.has_pose))[1:-1])
 
 
 def test_a_5_ms_late_mocap_stream_is_found_within_its_std():

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar
+from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_number, as_positive_scalar
 from fmscal.plant.physics import (QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload, PlanarModel,
                                   SpatialModel, SpatialPayload, check_calibration, unit_quaternions)
 from ._files import atomic_write_text, not_a_file
@@ -323,6 +323,14 @@ class Log:
         return Log(self.t[keep], self.pose[keep], self.w_hat[keep], self.name, model=self._model)
 
 
+def _latency(value):
+    """A sidecar's latency: a finite number of seconds, of either sign (negative: the wrench behind the poses)."""
+    latency = as_number(value, "latency")
+    if not np.isfinite(latency):
+        raise FmscalError(f"latency must be a finite number of seconds; got {value!r}")
+    return latency
+
+
 def _first_bad(values):
     return int(np.argmax(~np.isfinite(values))) + 1
 
@@ -557,7 +565,7 @@ class Truth:
     offset : ndarray, shape (n_w,), or None
         The sensor's offset ``b`` in ``w = S (w_hat - b)``, N m and N.
     latency : float
-        Delay of the pose stream behind the sensor stream, s.
+        Delay of the pose stream behind the sensor stream, s (negative: the wrench behind the poses).
     settings : dict
         The rest of the scenario, for the record (duration, dt, pose rate,
         dropped frames, outliers, description).
@@ -625,7 +633,7 @@ def read_truth(path):
             payload=(SpatialPayload if spatial else Payload).from_dict(data), noise=NoiseSpec.from_dict(data["noise"]),
             told_noise=as_positive_scalar(data.get("told_noise", 1.0), "told_noise"),
             offset=None if offset is None else as_finite_array(offset, (schedule.size,), "offset"),
-            latency=as_positive_scalar(data.get("latency") or 0.0, "latency", allow_zero=True),
+            latency=_latency(data.get("latency") or 0.0),
             settings={k: v for k, v in data.items() if k not in known})
     except json.JSONDecodeError as err:
         raise LogError(f"{path.name}: not valid JSON ({err})") from None
