@@ -254,6 +254,9 @@ def _calibrate_data(data, payload, method, reading, gravity, latency, max_latenc
     if latency is not None and not _number(latency):
         raise OptionError("latency", f"{{}} must be a number of seconds (negative: the wrench behind the poses); "
                           f"got {latency}")
+    if latency is not None and not abs(latency) < data.duration / 2:
+        raise OptionError("latency", f"{{}} must be less than half the log ({data.duration / 2:g} s) in magnitude: "
+                          f"the poses are shifted by it; got {latency:g} s")
     if max_latency is not None and not (_number(max_latency) and max_latency > 0):
         raise OptionError("max_latency", f"{{}} must be positive; got {max_latency}")
     return _calibrate_log(data, log_model_class(data), payload, method, reading, gravity, latency, max_latency, offset,
