@@ -42,7 +42,8 @@ The rule.
 6. One latency for the whole log: the scores of (L3) summed over
    :data:`SEGMENTS` consecutive parts of the log give each part's own step
    from ``tau`` and its variance; parts that disagree (chi-square of their
-   spread above its ``1 - STEP_P`` quantile) mean a latency that changes mid-log
+   spread above its ``1 - STEP_P`` quantile, the change at least ``MIN_STEP`` samples) mean a latency that
+   changes mid-log
    (a dropped or duplicated sample, a clock step). The change is placed at the
    block border that best splits the blocks' scores into two constant latencies.
 7. The smoothing window biases the needed wrench a little differently at
@@ -74,8 +75,10 @@ _COARSE = 10
 _BLOCK_WINDOWS = 1.0
 #: Consecutive parts of the log whose latencies are compared (rule 6).
 SEGMENTS = 6
-#: A latency that changes along the log is reported when the parts' chi-square has a p-value below this.
+#: A latency that changes along the log is reported when the parts' chi-square has a p-value below this ...
 STEP_P = 1e-4
+#: ... and the change between the two sides is at least this many samples (a lost or repeated sample is one).
+MIN_STEP = 0.5
 
 
 @dataclass
@@ -277,7 +280,7 @@ def _judge(estimate, dt, K):
             "cannot tell the candidate delays apart (too little motion for its noise); give the latency if it "
             "is known (--latency)")
     else:
-        estimate.step = _step(*estimate._blocks, tau)
+        estimate.step = _step(*estimate._blocks, tau, dt)
         if estimate.step is not None:
             s = estimate.step
             estimate.determined = False
@@ -288,26 +291,27 @@ def _judge(estimate, dt, K):
                 "the stamps)")
 
 
-def _step(scores, infos, t_rows, length, tau):
+def _step(scores, infos, t_rows, length, tau, dt):
     """Rule 6: where the latency changes mid-log, or None.
 
     Each block's score ``s_b`` and information ``h_b`` give a part's step from
-    ``tau`` as ``sum s_b / sum h_b`` (L2 on that part), its variance
-    ``sum (s_b - h_b d)^2 / (sum h_b)^2`` (L3).
+    ``tau`` as ``-sum s_b / sum h_b`` (L2 on that part), its variance
+    ``V / sum h_b`` with ``V = sum_parts sum_b (s_b + h_b d_part)^2 / sum_all h_b``
+    the scores' variance per unit of information about each part's own step,
+    pooled over the log (a part's few blocks alone would estimate it poorly). A change of less than :data:`MIN_STEP`
+    samples is not reported.
     """
     n_blocks = len(scores)
     if n_blocks < 2 * SEGMENTS:
         return None
     parts = np.array_split(np.arange(n_blocks), SEGMENTS)
-    d, var = [], []
-    for part in parts:
-        h = infos[part].sum()
-        if h <= 0:
-            return None
-        step = -scores[part].sum() / h
-        d.append(step)
-        var.append(max(np.sum((scores[part] + infos[part] * step) ** 2) / h ** 2, 1e-300))
-    d, var = np.array(d), np.array(var)
+    h = np.array([infos[part].sum() for part in parts])
+    if np.any(h <= 0):
+        return None
+    d = np.array([-scores[part].sum() for part in parts]) / h
+    # the scores' variance per unit of information, about each part's own latency, pooled over the parts
+    pooled = sum(np.sum((scores[part] + infos[part] * step) ** 2) for part, step in zip(parts, d)) / h.sum()
+    var = pooled / h * SEGMENTS / (SEGMENTS - 1)          # the parts' means fitted: one degree of freedom each
     mean = np.sum(d / var) / np.sum(1 / var)
     statistic = float(np.sum((d - mean) ** 2 / var))
     if chi2.sf(statistic, SEGMENTS - 1) >= STEP_P:
@@ -322,5 +326,7 @@ def _step(scores, infos, t_rows, length, tau):
     border = int(j[np.argmax(gain)])
     before = tau - left_s[border - 1] / left_h[border - 1]
     after = tau - (total_s - left_s[border - 1]) / (total_h - left_h[border - 1])
+    if abs(after - before) < MIN_STEP * dt:              # a slip of less than half a sample: not a lost sample
+        return None
     return {"t": float(t_rows[0] + border * length), "size": float(after - before), "before": float(before),
             "after": float(after)}
