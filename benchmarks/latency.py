@@ -117,7 +117,8 @@ def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-ar
 
 def _line(row):
     return (f"{row['source']:>14} {row['latency_samples']:+5.1f}  E ratio max {row['E_ratio_max']:.3f} median "
-            f"{row['E_ratio_median']:.3f}  z rms {row['z_rms']:.2f} (known latency {row['z_rms_known']:.2f})  converged {100 * row['converged']:.0f} %  "
+            f"{row['E_ratio_median']:.3f}  z rms {row['z_rms']:.2f} (known latency {row['z_rms_known']:.2f})  "
+            f"converged {100 * row['converged']:.0f} %  "
             f"latency z rms {row['latency_z_rms']:.2f}")
 
 
