@@ -37,7 +37,7 @@ __all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "TABLE_METHOD", "calibrate",
 #: full-rate and multi-rate logs, with offset and latency; its noise model is estimated from the
 #: log when not given (docs/comparison.md, "Which observer to trust").
 DEFAULT_METHOD = FLOOR_METHOD
-#: Largest pose-stream delay searched when the latency is estimated, s.
+#: Largest magnitude of the pose-stream delay searched when the latency is estimated, s (either sign).
 DEFAULT_MAX_LATENCY = 0.1
 #: The one fit of held poses (a pose table): least squares on the weight's wrench.
 TABLE_METHOD = "static-least-squares"
@@ -121,8 +121,12 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     The case comes from ``data``:
 
     - a **planar log**: every method runs on the log with its pose stream
-      moved back by the latency (given, or estimated by least squares over
-      candidate delays, :func:`fmscal.observers.batch.estimate_latency`);
+      moved back by the latency (given, or estimated to a fraction of a
+      sample with its standard deviation, of either sign,
+      :func:`fmscal.observers.batch.estimate_latency`; its variance is then
+      carried into ``S_std``, ``b_std`` and ``cov``,
+      and a latency the log does not determine, or one that steps mid-log,
+      leaves ``converged`` False);
       the noise model not given is estimated from the log;
     - a **spatial log**: the same in 3D (the maximum-likelihood floor by
       default, or least squares, or an online method that runs in 3D), the
@@ -162,11 +166,13 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         Spatial logs and held poses: gravity in the pose frame, m/s^2
         (default ``(0, 0, -9.81)``).
     latency : float, optional
-        Logs: delay of the pose stream behind the sensor stream, s, at least
-        0. None: estimated.
+        Logs: delay of the pose stream behind the sensor stream, s, any
+        fraction of a sample; negative: the wrench stream behind the poses
+        (a sensor's internal filter); less than half the log in magnitude.
+        None: estimated.
     max_latency : float, optional
-        Logs: the largest delay searched when it is estimated, s (default
-        :data:`DEFAULT_MAX_LATENCY`).
+        Logs: the largest magnitude of the delay searched when it is
+        estimated, s, either sign (default :data:`DEFAULT_MAX_LATENCY`).
     offset : bool
         Estimate the sensor's offset ``b`` in ``w = S (w_hat - b)`` with
         ``S`` (the default: a real sensor reads non-zero under no load, and an
@@ -184,7 +190,8 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     -------
     plant.Calibration
         ``S_hat``, ``S_std``, ``b``, ``b_std``, ``cov`` (where the method
-        gives one), ``latency`` and ``latency_estimated``, ``reading``,
+        gives one), ``latency``, ``latency_std`` (estimated: its standard
+        deviation, else None) and ``latency_estimated``, ``reading``,
         ``gravity``, ``method``, ``payload``, ``noise``, ``converged``,
         ``warnings``, ``undetermined`` (in words) and
         ``undetermined_directions``, ``E`` with a truth, ``notes`` and the
@@ -447,7 +454,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
                             + (f": {result.warnings[-1]}" if result.warnings else "")
                             + "; no calibration (check the mass properties, units and excitation)")
-    result = with_latency_uncertainty(result, timing)
+    result = _with_latency_uncertainty(result, timing)
     run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, latency=timing)
     warnings, why = [], None
     converged = bool(result.converged)
@@ -600,7 +607,7 @@ def _check_latency(run, warnings):
     return list(found.warnings), found.determined, why
 
 
-def with_latency_uncertainty(result, found):
+def _with_latency_uncertainty(result, found):
     """The result with the latency's uncertainty carried into its covariance, ``S_std`` and ``b_std``.
 
     ``cov += J J^T var(latency)``, ``J = d vec([S | c]) / d latency`` (row order; ``S`` alone without the
