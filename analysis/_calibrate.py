@@ -16,7 +16,8 @@ import numpy as np
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import describe_direction, estimate_latency
-from fmscal.observers.core import EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches
+from fmscal.observers.core import (EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches,
+                                   calibration_uncertainty)
 from fmscal.observers.diagnostics import consistency_check, has_evidence, misfit, offset_drift, saturation
 from fmscal.observers.diagnostics import inflate as inflate_misfit
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
@@ -38,7 +39,7 @@ __all__ = ["DEFAULT_METHOD", "DEFAULT_MAX_LATENCY", "TABLE_METHOD", "calibrate",
 #: full-rate and multi-rate logs, with offset and latency; its noise model is estimated from the
 #: log when not given (docs/comparison.md, "Which observer to trust").
 DEFAULT_METHOD = FLOOR_METHOD
-#: Largest pose-stream delay searched when the latency is estimated, s.
+#: Largest magnitude of the pose-stream delay searched when the latency is estimated, s (either sign).
 DEFAULT_MAX_LATENCY = 0.1
 #: The one fit of held poses (a pose table): least squares on the weight's wrench.
 TABLE_METHOD = "static-least-squares"
@@ -122,8 +123,12 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     The case comes from ``data``:
 
     - a **planar log**: every method runs on the log with its pose stream
-      moved back by the latency (given, or estimated by least squares over
-      candidate delays, :func:`fmscal.observers.batch.estimate_latency`);
+      moved back by the latency (given, or estimated to a fraction of a
+      sample with its standard deviation, of either sign,
+      :func:`fmscal.observers.batch.estimate_latency`; its variance is then
+      carried into ``S_std``, ``b_std`` and ``cov``,
+      and a latency the log does not determine, or one that steps mid-log,
+      leaves ``converged`` False);
       the noise model not given is estimated from the log;
     - a **spatial log**: the same in 3D (the maximum-likelihood floor by
       default, or least squares, or an online method that runs in 3D), the
@@ -163,11 +168,13 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         Spatial logs and held poses: gravity in the pose frame, m/s^2
         (default ``(0, 0, -9.81)``).
     latency : float, optional
-        Logs: delay of the pose stream behind the sensor stream, s, at least
-        0. None: estimated.
+        Logs: delay of the pose stream behind the sensor stream, s, any
+        fraction of a sample; negative: the wrench stream behind the poses
+        (a sensor's internal filter); less than half the log in magnitude.
+        None: estimated.
     max_latency : float, optional
-        Logs: the largest delay searched when it is estimated, s (default
-        :data:`DEFAULT_MAX_LATENCY`).
+        Logs: the largest magnitude of the delay searched when it is
+        estimated, s, either sign (default :data:`DEFAULT_MAX_LATENCY`).
     offset : bool
         Estimate the sensor's offset ``b`` in ``w = S (w_hat - b)`` with
         ``S`` (the default: a real sensor reads non-zero under no load, and an
@@ -185,7 +192,8 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     -------
     plant.Calibration
         ``S_hat``, ``S_std``, ``b``, ``b_std``, ``cov`` (where the method
-        gives one), ``latency`` and ``latency_estimated``, ``reading``,
+        gives one), ``latency``, ``latency_std`` (estimated: its standard
+        deviation, else None) and ``latency_estimated``, ``reading``,
         ``gravity``, ``method``, ``payload``, ``noise``, ``converged``,
         ``warnings``, ``undetermined`` (in words) and
         ``undetermined_directions``, ``E`` with a truth, ``notes`` and the
@@ -261,8 +269,12 @@ def _calibrate_data(data, payload, method, reading, gravity, latency, max_latenc
     if not isinstance(data, Log):
         raise FmscalError(f"data must be a plant.Log, a pose table, an attitude-only log or a file name; "
                           f"got {type(data).__name__}")
-    if latency is not None and not (_number(latency) and latency >= 0):
-        raise OptionError("latency", f"{{}} must be a non-negative number of seconds; got {latency}")
+    if latency is not None and not _number(latency):
+        raise OptionError("latency", f"{{}} must be a number of seconds (negative: the wrench behind the poses); "
+                          f"got {latency}")
+    if latency is not None and not abs(latency) < data.duration / 2:
+        raise OptionError("latency", f"{{}} must be less than half the log ({data.duration / 2:g} s) in magnitude: "
+                          f"the poses are shifted by it; got {latency:g} s")
     if max_latency is not None and not (_number(max_latency) and max_latency > 0):
         raise OptionError("max_latency", f"{{}} must be positive; got {max_latency}")
     return _calibrate_log(data, log_model_class(data), payload, method, reading, gravity, latency, max_latency, offset,
@@ -442,9 +454,10 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     noise, noise_estimated = None, []
     if model.given_noise:
         noise, noise_estimated = _noise_model(log, model, pose_noise, wrench_noise)
-    latency_estimated = latency is None
+    latency_estimated, timing = latency is None, None
     if latency_estimated:
-        latency, _ = estimate_latency(signed, model, max_latency, offset=offset)
+        timing = estimate_latency(signed, model, max_latency, offset=offset)
+        latency = timing.latency
     aligned = signed.shift_poses(latency)
     reference = LeastSquares(model, offset=offset) if "reference" in model.calibration_checks else None
     ls_result = None if reference is None else reference.run(aligned)
@@ -456,7 +469,9 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
                             + (f": {result.warnings[-1]}" if result.warnings else "")
                             + "; no calibration (check the mass properties, units and excitation)")
-    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches)
+    result = _with_latency_uncertainty(result, timing)
+    run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches,
+               latency=timing)
     warnings, why = [], None
     if glitches.count and get_method(name).online:     # a live run of the method would take them as they came
         warnings.append(f"{glitches.summary()}; {name} ran on the bridged log, where a live run would take the "
@@ -473,6 +488,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
     return _calibration(result, name, dict(
         payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
+        latency_std=None if timing is None or not np.isfinite(timing.std) else float(timing.std),
         reading=reading, gravity=model.gravity if model.under_gravity else None, noise=noise,
         noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
@@ -528,6 +544,7 @@ class _Run:
     units: list = field(default_factory=list)
     glitches: object = None
     misfit: object = None
+    latency: object = None
 
 
 def _check_units(run, warnings):
@@ -597,6 +614,47 @@ def _check_flipped_gain(run, warnings):
     flipped = bool(np.trace(run.result.S_hat[np.ix_(channels, channels)]) < 0)
     found = [other_convention(run.log.name, None, run.reading)] if flipped else []
     return found, not flipped, "the reading follows the other sign convention"
+
+
+def _check_latency(run, warnings):
+    """``"latency"``: the log determines the pose stream's latency and keeps one along it
+    (:class:`fmscal.observers.batch.LatencyEstimate`: a clear minimum, its standard deviation within a few
+    samples, no step mid-log); passes where the latency was given."""
+    found = run.latency
+    if found is None:
+        return [], True, None
+    why = None if found.determined else ("the latency changes along the log" if found.step is not None
+                                         else "the log does not determine the pose stream's latency")
+    return list(found.warnings), found.determined, why
+
+
+def _with_latency_uncertainty(result, found):
+    """The result with the latency's uncertainty carried into its covariance, ``S_std`` and ``b_std``.
+
+    ``cov += J J^T var(latency)``, ``J = d vec([S | c]) / d latency`` (row order; ``S`` alone without the
+    offset) of the least-squares fit at the estimate (:attr:`LatencyEstimate.dS_dlatency`, eq. (L4) of
+    :mod:`fmscal.observers.batch._latency`); ``S_std`` and ``b_std`` follow from it
+    (:func:`fmscal.observers.core.calibration_uncertainty`). A method without a covariance but with
+    ``S_std`` gets ``S_std^2 += (dS/dlatency)^2 var(latency)``. Unchanged where the latency was given.
+    """
+    if found is None or found.dS_dlatency is None or result.S_std is None:
+        return result
+    var = found.std ** 2 if np.isfinite(found.std) else np.inf
+    n_w = result.S_hat.shape[0]
+    dS = np.asarray(found.dS_dlatency, dtype=float)
+    if result.cov is None:
+        return replace(result, S_std=np.sqrt(result.S_std ** 2 + dS[:, :n_w] ** 2 * var))
+    cov = np.asarray(result.cov, dtype=float)
+    offset = cov.shape[0] == n_w * (n_w + 1)
+    J = (dS if offset else dS[:, :n_w]).ravel()
+    with np.errstate(invalid="ignore"):
+        cov = cov + np.outer(J, J) * var
+    if not np.isfinite(var):
+        cov[~np.isfinite(cov)] = np.inf
+    c = -result.S_hat @ result.b if offset and result.b is not None else None
+    S_aug = np.c_[result.S_hat, c] if c is not None else result.S_hat
+    S_std, _, b_std = calibration_uncertainty(S_aug, cov, c is not None)
+    return replace(result, cov=cov, S_std=S_std, b_std=b_std if c is not None else result.b_std)
 
 
 def _check_misfit(run, warnings):
@@ -677,7 +735,7 @@ _INPUT_CHECKS = {"spatial_units": _check_spatial_units}
 _CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
            "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
            "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain,
-           "misfit": _check_misfit, "gains": _check_gains}
+           "latency": _check_latency, "misfit": _check_misfit, "gains": _check_gains}
 
 
 def _calibration(result, method, fields):

@@ -144,7 +144,7 @@ CASES = [
     (["calibrate", "{d}/words.csv", *PAYLOAD], "not a number"),
     (["calibrate", "{d}/log.csv", "--mass", "nan", "--inertia", "0.75", "--rho", "0.2", "0.25"], "--mass"),
     ([*CAL, "--wrench-noise", "nan", "0", "0"], "--wrench-noise"),
-    ([*CAL, "--latency", "-1"], "--latency"),
+    ([*CAL, "--latency", "nan"], "--latency"),
     (["apply", "{d}/cal.json", "{d}/latin1.csv", "--out", "{d}/w.csv"], "not UTF-8"),
     (["apply", "{d}/cal_logstr.json", "{d}/log.csv", "--out", "{d}/w.csv"], "log must be an object"),
     (["apply", "{d}/cal_forced.json", "{d}/log.csv", "--out", "{d}/w.csv"], "forced must be true or false"),

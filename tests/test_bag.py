@@ -232,3 +232,5 @@ def test_a_clock_that_steps_back_a_few_ms_is_counted_and_warned(back_ms):
               "pose": {"overlapping_stamps": 0}}
     (warning,) = _warnings(report)
     assert warning.startswith(f"the wrench stamps overlap: {back_ms} fall within half a step of another")
+    assert info["step_back_ns"] == back_ms * step and info["step_back_at_ns"] == t0 + (500 - back_ms) * step
+    assert f"the clock steps back by {back_ms:g} ms at" in warning

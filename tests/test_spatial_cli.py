@@ -31,7 +31,8 @@ def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
                  "--save", str(arm / "cal.json")]) == 0
     out = _json(capsys)
     assert out["kind"] == "spatial" and out["converged"] and out["saved"] and out["observer"] == "max-likelihood"
-    assert out["latency_estimated"] and out["latency"] == 0.0 and out["undetermined"] == []
+    assert out["latency_estimated"] and abs(out["latency"]) < max(4 * out["latency_std"], 1e-5) \
+        and 0 < out["latency_std"] < 2e-4 and out["undetermined"] == []
     assert np.shape(out["S"]) == (6, 6) and np.shape(out["S_std"]) == (6, 6) and len(out["b"]) == len(out["b_std"]) == 6
     assert out["E_torque"] < 0.02 and out["E_force"] < 0.02
     truth = read_truth(arm / "arm.truth.json")

@@ -69,9 +69,11 @@ def add_calibrate(sub):
                    help="estimate the sensor's offset b in w = S (w_hat - b) with S (default: yes; "
                         "--no-offset for an offset-free sensor, as in the paper)")
     p.add_argument("--latency", type=float, metavar="S",
-                   help="delay of the pose stream behind the sensor stream, s (default: estimated)")
+                   help="delay of the pose stream behind the sensor stream, s, any fraction of a sample; negative: the "
+                        "wrench stream behind the poses (default: estimated, with its uncertainty)")
     p.add_argument("--max-latency", type=float, default=None, metavar="S",
-                   help=f"largest delay searched when estimating it (default {DEFAULT_MAX_LATENCY:g} s)")
+                   help=f"largest magnitude of the delay searched when estimating it, either sign (default "
+                        f"{DEFAULT_MAX_LATENCY:g} s)")
     p.add_argument("--urdf", metavar="ROBOT.urdf",
                    help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
                         "names; rad), in a spatial log or a table: poses of --frame by forward kinematics "
@@ -215,7 +217,9 @@ def _print_calibration(args, data, cal, saved):
         b, b_std = out["b"], out["b_std"]
         cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(len(b))]
         print("offset b [N m, N, N]: " + "   ".join(cells))
-    print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
+    print(f"pose latency: {out['latency'] * 1e3:.3g}"
+              + (f" +- {out['latency_std'] * 1e3:.2g}" if out.get("latency_std") is not None else "")
+              + f" ms ({'estimated' if out['latency_estimated'] else 'given'})")
     print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {cal.run.t[-1]:g} s)")
     if "E" in out:
         print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")

@@ -101,7 +101,8 @@ def _add_simulate(sub):
                    help="planar scenarios: sensor offset b in w = S (w_hat - b), N m and N (default: the scenario's; "
                         "a spatial scenario draws its own)")
     p.add_argument("--latency", type=float, metavar="S",
-                   help="delay of the pose stream behind the sensor stream, s (default: the scenario's)")
+                   help="delay of the pose stream behind the sensor stream, s, any fraction of a sample; negative: the "
+                        "wrench stream behind the poses (default: the scenario's)")
     p.add_argument("--poses", type=int, metavar="N",
                    help="spatial scenarios: write a pose table instead of a log, the tool held at N random attitudes "
                         "(the spatial header without t, one row per held pose; at least 4)")
@@ -178,11 +179,12 @@ def cmd_simulate(args):
             raise CliError(f"--offset must be three finite numbers (N m, N, N); got {args.offset}")
         changes["offset"] = tuple(args.offset)
     if args.latency is not None:
-        if not (np.isfinite(args.latency) and args.latency >= 0):
-            raise CliError(f"--latency must be a non-negative number of seconds; got {args.latency}")
+        if not np.isfinite(args.latency):
+            raise CliError(f"--latency must be a number of seconds (negative: the wrench behind the poses); got "
+                           f"{args.latency}")
         changes["latency"] = args.latency
     sc = sc.with_(**changes)
-    if not sc.latency < sc.duration / 2:
+    if not abs(sc.latency) < sc.duration / 2:
         raise CliError(f"--latency must be less than half the run ({sc.duration / 2:g} s): the poses are shifted "
                        f"by it; got {sc.latency:g} s")
     out = Path(args.out)

@@ -44,7 +44,9 @@ def print_spatial(args, summary, out):
     print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in zip(_NAMES, out["b"], b_std)))
     print(f"reading: {out['reading']}")
     if out["latency"] is not None:
-        print(f"pose latency: {out['latency'] * 1e3:.3g} ms ({'estimated' if out['latency_estimated'] else 'given'})")
+        print(f"pose latency: {out['latency'] * 1e3:.3g}"
+              + (f" +- {out['latency_std'] * 1e3:.2g}" if out.get("latency_std") is not None else "")
+              + f" ms ({'estimated' if out['latency_estimated'] else 'given'})")
     undetermined = len(out["undetermined"])
     print(f"converged: {'yes' if out['converged'] else 'no'}"
           + (f" ({undetermined} direction(s) of the reading not determined)" if undetermined else ""))

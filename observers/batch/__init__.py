@@ -9,11 +9,11 @@ from ._inverse_dynamics import (InverseDynamicsFit, fit_inverse_dynamics, fit_re
     UNDETERMINED_STD, READING_NAMES, nominal_motion, smoothed_channels, needed_wrench)
 from ._least_squares import (LeastSquares, InverseDynamicsLeastSquares, SpatialLeastSquares, FitReport, phi_to_S_map,
                              EXCITATION_COND_LIMIT, CONSISTENCY_RATIO_LIMIT, LEAST_SQUARES_ENGINES)
-from ._latency import (estimate_latency)
+from ._latency import (estimate_latency, LatencyEstimate)
 from ._max_likelihood import (MaximumLikelihoodFit, fit_max_likelihood, log_steps)
 from ._linearised_floor import (fit_linearised, undetermined_directions, configuration_residuals, error_layout)
 from ._floor import (MaximumLikelihood)
 
 __all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "LeastSquares",
-           "InverseDynamicsLeastSquares", "FitReport", "estimate_latency", "MaximumLikelihoodFit",
+           "InverseDynamicsLeastSquares", "FitReport", "estimate_latency", "LatencyEstimate", "MaximumLikelihoodFit",
            "fit_max_likelihood", "fit_linearised", "undetermined_directions", "MaximumLikelihood"]

@@ -43,8 +43,8 @@ from fmscal.plant.physics import (ORDER, GRAVITY, Model, SpatialPayload, edge, r
 
 from ._cluster_covariance import block_length, few_blocks, small_sample_factor
 
-__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "fit_readings", "describe_direction", "UNDETERMINED_STD",
-           "READING_NAMES", "nominal_motion", "smoothed_channels", "needed_wrench"]
+__all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "needed_wrench", "fit_readings", "describe_direction",
+           "UNDETERMINED_STD", "READING_NAMES", "nominal_motion", "smoothed_channels"]
 
 #: The augmented reading's components, the directions in which the information is reported.
 READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
@@ -293,31 +293,40 @@ def fit_inverse_dynamics(log, payload, gravity=GRAVITY, window=0.2, block=None, 
 
 
 def needed_wrench(log, model, window=0.2):
-    """The wrench each sample needed, inside the smoothing's edges: what :func:`fit_inverse_dynamics` fits.
-
-    In 3D Newton-Euler on the smoothed poses (``w_k = W_k pi``, the model's
-    payload and gravity); on a model whose configuration moves additively its
-    dynamics inverted, ``w_k = A(x_k)^-1 (a_k - d(x_k))`` (eq. (1) in the plane).
+    """The wrench each sample needed, from the smoothed and differentiated poses, as :func:`fit_inverse_dynamics`
+    computes it: Newton-Euler in 3D (``w_k = W_k pi``), the dynamics inverted on a model whose configuration
+    moves additively (``w_k = A(x_k)^-1 (a_k - d(x_k))``, eq. (1) inverted in the plane).
 
     Parameters
     ----------
     log : plant.Log
         A log of the model's case.
     model : plant.Model
+        Its payload (and, in 3D, its gravity) known.
     window : float
         Smoothing window of the pose differentiation, s.
 
     Returns
     -------
-    trim : slice
-        The samples inside the filter's edges.
-    w : ndarray, shape (len(trim), n_w)
+    rows : slice
+        The log's rows the filter's edges leave (``edge`` samples dropped at each end).
+    w : ndarray, shape (len(rows), n_w)
+        N m and N.
+
+    Raises
+    ------
+    FmscalError
+        A model whose dynamics do not invert (``input_matrix`` not square) and whose attitude is not a unit
+        quaternion, or a log shorter than the window.
     """
     trim = slice(edge(log, window), len(log.t) - edge(log, window))
     if model.attitude == "quaternion":
         q, omega, alpha, p_ddot = spatial_motion(log, window)
-        return trim, (regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], model.gravity)
-                      @ model.payload.inertial_parameters)
+        return trim, regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], model.gravity) \
+            @ model.payload.inertial_parameters
+    if model.n_w != model.nv:
+        raise FmscalError(f"the wrench a {model.name} model's motion needs is its dynamics inverted; it has "
+                          f"{model.n_w} wrench components and {model.nv} accelerations")
     return trim, _inverse_dynamics(log, model, window)[trim]
 
 

@@ -1,41 +1,126 @@
-"""The delay of the pose stream behind the sensor stream, by least squares over candidate delays.
+"""The delay of the pose stream behind the sensor stream, to a fraction of a sample, with its uncertainty.
 
 A vision system delivers each pose a roughly constant time after it was
-taken. Shifted back by the right delay, the log fits its dynamics best: the
-fit's residual is smallest there. In the plane the fit is least squares
-(eq. 1) and the residual is in units of the pose noise; in space it is the
-reference fit of smoothed inverse dynamics
-(:func:`fmscal.observers.batch.fit_inverse_dynamics`) and the
-residual is the share of each wrench component the fit leaves unexplained.
-The search is a coarse grid over ``[0, max_latency]`` followed by a
-golden-section search on whole samples around the best grid point.
+taken (a positive latency); a sensor's internal filter delays the wrench
+instead (a negative one). Shifted back by the right delay, the log fits its
+dynamics best.
+
+The fit. The wrench each sample needed, ``w(t)``, is computed once from the
+smoothed and differentiated poses (:func:`fmscal.observers.batch.needed_wrench`:
+Newton-Euler in 3D, eq. (1) inverted in the plane). Moving the poses back by
+``tau`` moves it to ``w(t + tau)``, so every candidate delay is the same
+motion read at shifted times, not a new fit of the poses. On a fixed set of
+rows ``k`` (those ``w(t_k + tau)`` covers for every ``|tau| <= max_latency``),
+``w(t_k + tau) = [S | c] [w_hat_k; 1] + e_k`` is fitted by least squares,
+and the cost is the sum over the wrench components of the share of their
+variance the fit leaves unexplained::
+
+    J(tau) = sum_c RSS_c(tau) / TSS_c(tau)                       (L1)
+
+The rule.
+
+1. ``J`` on a grid of whole samples over ``[-K, K]``, ``K = round(max_latency / dt)``, about ten
+   steps each side, then at every whole sample within a step of the grid's best.
+2. A parabola through the best whole sample ``k*`` and its two neighbours:
+   ``tau_0 = (k* + (J(k*-1) - J(k*+1)) / (2 (J(k*-1) - 2 J(k*) + J(k*+1)))) dt``,
+   the fraction clipped to one sample. No clear minimum (``k*`` at ``+-K``,
+   or the parabola not convex): the latency is undetermined.
+3. Two Gauss-Newton steps on the residual sum of squares weighted by each
+   component's residual variance ``s_c^2``: with ``g_k = (I - P) w'(t_k + tau)``
+   (the time derivative of the needed wrench, ``P`` the projection on the
+   readings ``[w_hat; 1]``), ``tau <- tau - sum_kc e_kc g_kc / s_c^2 / sum_kc g_kc^2 / s_c^2``.  (L2)
+4. Its variance, cluster-robust over blocks of time (length
+   :func:`block_length` of the residuals, eq. (U2)), with the small-sample
+   factor (eq. (U3))::
+
+       var(tau) = CR1 * sum_b (sum_{k in b, c} e_kc g_kc / s_c^2)^2 / (sum_kc g_kc^2 / s_c^2)^2   (L3)
+
+   The latency is undetermined when its standard deviation exceeds
+   :data:`UNDETERMINED_SAMPLES` samples.
+5. ``d[S | c] / d tau = (X^T X)^-1 X^T w'(t + tau)`` (``X`` the readings
+   ``[w_hat; 1]``), for the calibration to carry ``var(tau)`` into ``S_std``.   (L4)
+6. One latency for the whole log: the scores of (L3) summed over
+   :data:`SEGMENTS` consecutive parts of the log give each part's own step
+   from ``tau`` and its variance; parts that disagree (chi-square of their
+   spread above its ``1 - STEP_P`` quantile, the change at least ``MIN_STEP`` samples) mean a latency that
+   changes mid-log
+   (a dropped or duplicated sample, a clock step). The change is placed at the
+   block border that best splits the blocks' scores into two constant latencies.
+7. The smoothing window biases the needed wrench a little differently at
+   each length: the search is repeated with half the window and half the
+   difference of the two estimates is added to the standard deviation::
+
+       std^2 = std_L3^2 + ((tau_window - tau_window/2) / 2)^2                (L5)
 """
 
+from dataclasses import dataclass, field
+
 import numpy as np
+from scipy.stats import chi2
 
 from fmscal.plant import Log
 from fmscal.plant.numerics import FmscalError, as_positive_scalar
 from fmscal.plant.physics import as_model
 
-from ._least_squares import LeastSquares
+from ._cluster_covariance import block_length, small_sample_factor
+from ._inverse_dynamics import needed_wrench
 
-__all__ = ["estimate_latency"]
+__all__ = ["estimate_latency", "LatencyEstimate", "UNDETERMINED_SAMPLES"]
 
-_GRID = 11          # coarse candidates over [0, max_latency]
-_SEARCH_SPAN = 20.0  # s of log searched (the start); the fit at the answer uses all of it
+#: The latency counts as undetermined when its standard deviation is above this many samples.
+UNDETERMINED_SAMPLES = 3.0
+#: Rule 1's coarse grid: about this many steps on each side of zero.
+_COARSE = 10
+#: The blocks of eq. (L3) are this many times eq. (U2)'s length of the scores' own correlation.
+_BLOCK_WINDOWS = 1.0
+#: Consecutive parts of the log whose latencies are compared (rule 6).
+SEGMENTS = 6
+#: A latency that changes along the log is reported when the parts' chi-square has a p-value below this ...
+STEP_P = 1e-4
+#: ... and the change between the two sides is at least this many samples (a lost or repeated sample is one).
+MIN_STEP = 0.5
 
 
-def _cost(log, model, samples, offset, window):
-    """The fit's residual on the log with its poses shifted back by ``samples``: in the plane the sum over
-    the pose channels of (residual rms / pose noise)^2 after least squares; in space the sum over the
-    wrench components of the share the inverse-dynamics fit leaves unexplained."""
-    shifted = log.shift_poses(samples * log.dt)
-    engine = LeastSquares.engine(model)                  # the spatial fit always estimates the offset
-    return engine(model, window=window, offset=offset or engine.offset_required).latency_cost(shifted)
+@dataclass
+class LatencyEstimate:
+    """The pose stream's delay behind the sensor stream, estimated from a log (module docstring).
+
+    Attributes
+    ----------
+    latency : float
+        s, of either sign (positive: the poses are late), a fraction of a sample.
+    std : float
+        Its one-sigma uncertainty, s (eq. L3); infinite where the cost has no clear minimum.
+    costs : dict
+        ``{latency_s: cost}`` at every whole sample tried (eq. L1).
+    determined : bool
+        The log tells the candidate delays apart: a clear minimum, and ``std`` within
+        :data:`UNDETERMINED_SAMPLES` samples.
+    dS_dlatency : ndarray, shape (n_w, n_w + 1), or None
+        ``d[S | c] / d latency`` of the least-squares fit at the estimate (eq. L4), per s.
+    step : dict or None
+        Where the latency changes mid-log (rule 6): ``{"t": s, "size": s, "before": s, "after": s}``.
+    warnings : list of str
+        Why the latency is undetermined, or where it changes, in words.
+    """
+
+    latency: float
+    std: float
+    costs: dict
+    determined: bool = True
+    dS_dlatency: np.ndarray = None
+    step: dict = None
+    warnings: list = field(default_factory=list)
+    _blocks: tuple = field(default=None, repr=False)        # rule 6's inputs: scores, information, times, length
 
 
-def estimate_latency(log, model, max_latency=0.1, offset=False, window=0.5):
-    """Delay of the pose stream behind the sensor stream.
+def _interp(t_query, t, w):
+    """``w`` (rows at ``t``) at ``t_query``, column by column, linearly."""
+    return np.column_stack([np.interp(t_query, t, w[:, c]) for c in range(w.shape[1])])
+
+
+def estimate_latency(log, model, max_latency=0.1, offset=False, window=0.4):
+    """Delay of the pose stream behind the sensor stream, of either sign, with its standard deviation.
 
     Parameters
     ----------
@@ -45,19 +130,20 @@ def estimate_latency(log, model, max_latency=0.1, offset=False, window=0.5):
         The problem (a payload stands for its case's model; a spatial
         model carries the gravity).
     max_latency : float
-        Largest delay considered, s.
+        Largest magnitude of the delay considered, s: the search covers
+        ``[-max_latency, max_latency]``.
     offset : bool
-        Fit the sensor's offset too (as the calibration will; the spatial
-        fit always does).
+        Kept for the callers that pass it: the fit of eq. (L1) always takes
+        the constant ``c`` (the sensor's offset).
     window : float
-        Least-squares window, s (planar).
+        Smoothing window of the pose differentiation, s; the estimate is
+        repeated with half of it, and half their difference is taken as a
+        systematic uncertainty (eq. L5).
 
     Returns
     -------
-    latency : float
-        s, a whole number of samples.
-    costs : dict
-        ``{latency_s: cost}`` for every delay tried (module docstring).
+    LatencyEstimate
+        The rule is the module docstring's.
 
     Raises
     ------
@@ -71,32 +157,176 @@ def estimate_latency(log, model, max_latency=0.1, offset=False, window=0.5):
         raise TypeError(f"log must be a plant.Log; got {type(log).__name__}")
     model.check_log(log, "the latency search")
     max_latency = as_positive_scalar(max_latency, "max_latency")
-    n_search = min(len(log), int(round(_SEARCH_SPAN / log.dt)) + 1)
-    part = log.head(n_search)
-    k_max = int(round(max_latency / log.dt))
-    if k_max * log.dt >= part.duration / 4:
-        raise FmscalError(f"max_latency {max_latency:g} s is too long for a {part.duration:g} s log")
-    seen = {}
+    window = as_positive_scalar(window, "window")
+    K = int(round(max_latency / log.dt))
+    if K * log.dt >= log.duration / 4:
+        raise FmscalError(f"max_latency {max_latency:g} s is too long for a {log.duration:g} s log")
+    estimate = _search(log, model, K, window)
+    if np.isfinite(estimate.std):                                             # eq. (L5)
+        other = _search(log, model, K, window / 2, start=estimate.latency)
+        estimate.std = float(np.hypot(estimate.std, (estimate.latency - other.latency) / 2))
+    _judge(estimate, log.dt, K)
+    return estimate
 
-    def cost(k):
-        if k not in seen:
-            seen[k] = _cost(part, model, k, offset, window)
-        return seen[k]
 
-    grid = np.unique(np.round(np.linspace(0, k_max, _GRID)).astype(int))
-    best = min(grid, key=cost)
-    i = int(np.searchsorted(grid, best))
-    lo, hi = int(grid[max(i - 1, 0)]), int(grid[min(i + 1, len(grid) - 1)])
-    # golden-section search on whole samples in [lo, hi]
-    ratio = (np.sqrt(5) - 1) / 2
-    while hi - lo > 2:
-        a = int(round(hi - ratio * (hi - lo)))
-        b = int(round(lo + ratio * (hi - lo)))
-        if a == b:
-            b = a + 1
-        if cost(a) <= cost(b):
-            hi = b
-        else:
-            lo = a
-    best = min(range(lo, hi + 1), key=cost)
-    return best * log.dt, {k * log.dt: c for k, c in sorted(seen.items())}
+def _search(log, model, K, window, start=None):
+    """Rules 1 to 5 of the module docstring with one smoothing window; the estimate not yet judged."""
+    dt = log.dt
+    trim, w = needed_wrench(log, model, window)
+    t_w = log.t[trim]
+    w_hat = log.w_hat[trim]
+    M = len(t_w)
+    rows = np.arange(K + 1, M - K - 1)                 # w(t_k + tau) inside for every |tau| <= (K + 1) dt
+    if len(rows) < 10 * (model.n_w + 2):
+        raise FmscalError(f"max_latency {K * dt:g} s is too long for a {log.duration:g} s log")
+    X = np.c_[w_hat[rows], np.ones(len(rows))]
+    spread = np.r_[np.maximum(np.std(X[:, :-1], axis=0), 1e-300), 1.0]
+    Xs = X / spread
+    solve = np.linalg.inv(Xs.T @ Xs)
+
+    def fitted(wt):
+        return solve @ (Xs.T @ wt)
+
+    def residual(wt):
+        return wt - Xs @ fitted(wt)
+
+    n = len(rows)
+
+    def cost(k):                                                              # eq. (L1), at a whole sample k
+        wt = w[rows[0] + k:rows[-1] + 1 + k]
+        xw = Xs.T @ wt
+        square = np.einsum("ij,ij->j", wt, wt)
+        rss = square - np.einsum("ij,ij->j", xw, solve @ xw)
+        tss = square - n * wt.mean(axis=0) ** 2
+        return float(np.sum(rss / np.maximum(tss, 1e-300)))
+
+    costs = {}
+    if start is None:                           # rule 1: a coarse grid, then every sample about its best point
+        step = max(1, K // _COARSE)
+        for k in range(-K, K + 1, step):
+            costs[k] = cost(k)
+        coarse = min(costs, key=costs.get)
+        candidates = range(max(-K, coarse - step), min(K, coarse + step) + 1)
+    else:                                       # about a known estimate (rule 7)
+        centre = int(round(start / dt))
+        candidates = range(max(-K, centre - 1), min(K, centre + 1) + 1)
+    for k in candidates:
+        if k not in costs:
+            costs[k] = cost(k)
+    best = min(costs, key=costs.get)
+    while -K < best < K and (best - 1 not in costs or best + 1 not in costs):   # the minimum's two neighbours
+        for k in (best - 1, best + 1):
+            if k not in costs:
+                costs[k] = cost(k)
+        best = min(costs, key=costs.get)
+    clear = -K < best < K
+    frac = 0.0
+    if clear:
+        c_minus, c_0, c_plus = costs[best - 1], costs[best], costs[best + 1]
+        curvature = c_minus - 2 * c_0 + c_plus
+        clear = curvature > 0
+        if clear:
+            frac = float(np.clip((c_minus - c_plus) / (2 * curvature), -1.0, 1.0))
+    tau = (best + frac) * dt
+    w_dot = np.gradient(w, t_w, axis=0)
+    t_rows = t_w[rows]
+    for _ in range(2):                                                         # eq. (L2)
+        e = residual(_interp(t_rows + tau, t_w, w))
+        g = residual(_interp(t_rows + tau, t_w, w_dot))
+        weight = 1.0 / np.maximum(np.mean(e ** 2, axis=0), 1e-300)
+        information = float(np.sum(g ** 2 * weight))
+        if not clear or information <= 0:
+            break
+        tau = float(np.clip(tau - np.sum(e * g * weight) / information, -K * dt, K * dt))
+    e = residual(_interp(t_rows + tau, t_w, w))
+    g = residual(_interp(t_rows + tau, t_w, w_dot))
+    weight = 1.0 / np.maximum(np.mean(e ** 2, axis=0), 1e-300)
+    per_row = np.sum(e * g * weight, axis=1)                                   # each row's score
+    info_row = np.sum(g ** 2 * weight, axis=1)
+    information = float(info_row.sum())
+    length = _BLOCK_WINDOWS * block_length(per_row[:, None], dt, window)
+    blocks = ((t_rows - t_rows[0]) // length).astype(int)
+    scores = np.bincount(blocks, per_row)
+    infos = np.bincount(blocks, info_row)
+    if clear and information > 0 and blocks.max() > 0:                       # eq. (L3)
+        std = float(np.sqrt(small_sample_factor(blocks, len(rows), 1) * np.sum(scores ** 2)) / information)
+    else:
+        std = np.inf
+    # eq. (L4): d[S | c]/d tau of the least-squares fit, in the readings' units
+    theta_dot = fitted(_interp(t_rows + tau, t_w, w_dot)) / spread[:, None]
+    estimate = LatencyEstimate(latency=float(tau), std=std, costs={k * dt: c for k, c in sorted(costs.items())},
+                               dS_dlatency=theta_dot.T, determined=clear)
+    estimate._blocks = (scores, infos, t_rows, length)
+    return estimate
+
+
+def _judge(estimate, dt, K):
+    """Whether the log determines the latency (rule 2's clear minimum, :data:`UNDETERMINED_SAMPLES`) and keeps one
+    along the log (rule 6); the warnings in words."""
+    ms = 1e3
+    tau, std = estimate.latency, estimate.std
+    if not estimate.determined:
+        best = min(estimate.costs, key=estimate.costs.get)
+        estimate.std = np.inf
+        estimate.warnings.append(
+            f"the pose stream's latency is not determined: the fit has no clear minimum over the delays searched "
+            f"(+-{K * dt * ms:g} ms; best {best * ms:g} ms); the log cannot tell them apart, so S may be "
+            "off by the latency's effect; give the latency if it is known (--latency)")
+    elif std > UNDETERMINED_SAMPLES * dt:
+        estimate.determined = False
+        estimate.warnings.append(
+            f"the pose stream's latency is not determined: {tau * ms:.3g} +- {std * ms:.2g} ms, more than "
+            f"{UNDETERMINED_SAMPLES:g} samples ({UNDETERMINED_SAMPLES * dt * ms:g} ms) of uncertainty: the log "
+            "cannot tell the candidate delays apart (too little motion for its noise); give the latency if it "
+            "is known (--latency)")
+    else:
+        estimate.step = _step(*estimate._blocks, tau, dt)
+        if estimate.step is not None:
+            s = estimate.step
+            estimate.determined = False
+            estimate.warnings.append(
+                f"the latency changes along the log: {s['before'] * ms:.3g} ms before t = {s['t']:.3g} s and "
+                f"{s['after'] * ms:.3g} ms after it ({s['size'] / dt:+.2g} samples): a dropped or duplicated "
+                "sample or a clock step there; one latency cannot align the log (cut it at that time, or fix "
+                "the stamps)")
+
+
+def _step(scores, infos, t_rows, length, tau, dt):
+    """Rule 6: where the latency changes mid-log, or None.
+
+    Each block's score ``s_b`` and information ``h_b`` give a part's step from
+    ``tau`` as ``-sum s_b / sum h_b`` (L2 on that part), its variance
+    ``V / sum h_b`` with ``V = sum_parts sum_b (s_b + h_b d_part)^2 / sum_all h_b``
+    the scores' variance per unit of information about each part's own step,
+    pooled over the log (a part's few blocks alone would estimate it poorly). A change of less than :data:`MIN_STEP`
+    samples is not reported.
+    """
+    n_blocks = len(scores)
+    if n_blocks < 2 * SEGMENTS:
+        return None
+    parts = np.array_split(np.arange(n_blocks), SEGMENTS)
+    h = np.array([infos[part].sum() for part in parts])
+    if np.any(h <= 0):
+        return None
+    d = np.array([-scores[part].sum() for part in parts]) / h
+    # the scores' variance per unit of information, about each part's own latency, pooled over the parts
+    pooled = sum(np.sum((scores[part] + infos[part] * step) ** 2) for part, step in zip(parts, d)) / h.sum()
+    var = pooled / h * SEGMENTS / (SEGMENTS - 1)          # the parts' means fitted: one degree of freedom each
+    mean = np.sum(d / var) / np.sum(1 / var)
+    statistic = float(np.sum((d - mean) ** 2 / var))
+    if chi2.sf(statistic, SEGMENTS - 1) >= STEP_P:
+        return None
+    # the border that best splits the blocks into two constant latencies (the largest drop of the weighted sum of
+    # squares, sum_b s_b^2 / h_b less each side's (sum s)^2 / sum h)
+    cs, ch = np.cumsum(scores), np.cumsum(infos)
+    total_s, total_h = cs[-1], ch[-1]
+    j = np.arange(1, n_blocks)
+    left_s, left_h = cs[:-1], ch[:-1]
+    gain = left_s ** 2 / np.maximum(left_h, 1e-300) + (total_s - left_s) ** 2 / np.maximum(total_h - left_h, 1e-300)
+    border = int(j[np.argmax(gain)])
+    before = tau - left_s[border - 1] / left_h[border - 1]
+    after = tau - (total_s - left_s[border - 1]) / (total_h - left_h[border - 1])
+    if abs(after - before) < MIN_STEP * dt:              # a slip of less than half a sample: not a lost sample
+        return None
+    return {"t": float(t_rows[0] + border * length), "size": float(after - before), "before": float(before),
+            "after": float(after)}

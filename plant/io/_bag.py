@@ -392,6 +392,11 @@ def _stream(messages, role, name):
                        f"message {zero[0] + 1} as recorded; the publisher did not stamp them")
     steps = np.diff(stamps)
     nominal = np.median(steps[steps > 0]) if np.any(steps > 0) else 0
+    # the largest step back of the clock, in the order recorded: a step under half the nominal one lost
+    # (nominal - step) against an even clock
+    worst = int(np.argmin(steps))
+    step_back = {"step_back_ns": int(nominal - steps[worst]), "step_back_at_ns": int(stamps[worst + 1])} \
+        if steps[worst] < 0.5 * nominal else {"step_back_ns": 0, "step_back_at_ns": None}
     back = np.flatnonzero(steps < -_MAX_BACK_STEPS * nominal)
     if len(back):
         k = int(back[0])
@@ -406,7 +411,7 @@ def _stream(messages, role, name):
     close = np.flatnonzero(np.diff(stamps) < 0.5 * nominal)
     info = {"messages": int(len(stamps)), "duplicate_stamps": int((~unique).sum()),
             "out_of_order": int(np.sum(np.diff(order) < 0)), "overlapping_stamps": int(len(close)),
-            "first_overlap_ns": int(stamps[close[0] + 1]) if len(close) else None}
+            "first_overlap_ns": int(stamps[close[0] + 1]) if len(close) else None, **step_back}
     stamps, values = stamps[unique], values[unique]
     if not np.all(np.isfinite(values)):
         raise BagError(f"{name}: a {role} message holds a NaN or infinite value "
@@ -497,7 +502,10 @@ def _warnings(r):
             out.append(f"the {role} stamps overlap: {stream['overlapping_stamps']} fall within half a step of "
                        f"another (the first at {_utc(stream['first_overlap_ns'])}): a clock that stepped back, "
                        f"or a message stamped twice; the samples were sorted by stamp, and those after the step "
-                       f"may be shifted against the other stream")
+                       f"may be shifted against the other stream"
+                       + (f" (the clock steps back by {stream['step_back_ns'] / 1e6:.6g} ms at "
+                          f"{_utc(stream['step_back_at_ns'])}, in the order recorded)"
+                          if stream.get("step_back_ns") else ""))
     if r["poses_merged"]:
         out.append(f"{r['poses_merged']} pose(s) fell on a wrench sample already holding a nearer pose and "
                    "were left out (poses faster than the sensor?)")

@@ -392,7 +392,8 @@ class Calibration:
         if self.kind == "table":
             head["poses"] = self.poses
         out = {**head, "S": self.S, "S_std": self.S_std, "b": self.b, "b_std": self.b_std,
-               "latency": self.latency, "latency_estimated": self.latency_estimated, "converged": self.converged}
+               "latency": self.latency, "latency_std": self.latency_std, "latency_estimated": self.latency_estimated,
+               "converged": self.converged}
         if self.kind == "planar":
             out.update(noise=None if self.noise is None else self.noise.to_dict(),
                        noise_estimated=list(self.noise_estimated), warnings=list(self.warnings), fit=self.fit)

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar
+from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_number, as_positive_scalar
 from fmscal.plant.physics import (QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload, PlanarModel,
                                   SpatialModel, SpatialPayload, check_calibration, unit_quaternions)
 from ._files import atomic_write_text, not_a_file
@@ -130,6 +130,7 @@ class Log:
                            f"w_hat (N, 6) (spatial); got {self.t.shape}, {self.pose.shape}, {self.w_hat.shape}")
         self.kind = case.name
         self._model = model
+        self._case = case
         self.columns = ("t", *case.pose_names, *case.wrench_names)
         pose_names, wrench_names = case.pose_names, case.wrench_names
         if n < MIN_SAMPLES:
@@ -238,29 +239,60 @@ class Log:
 
         A vision system that delivers each pose ``latency`` s late logs the
         pose of ``t - latency`` at ``t``; this returns the log in which each
-        pose sits at the time it was taken. The shift is rounded to whole
-        samples (resolution ``dt``); rows before the first pose after the
-        shift are dropped.
+        pose sits at the time it was taken. A negative ``latency`` is a
+        wrench stream behind the poses (a sensor's internal filter): the
+        poses move forward. Each pose measurement moves by the whole samples
+        nearest ``latency`` (``k = round(latency / dt)``), to row ``r``, and
+        its value is the pose stream at ``t_r + latency`` (the stamp it was
+        taken at), interpolated between its measurements on the attitude's
+        manifold as the model declares (:meth:`fmscal.plant.Model.interpolate_pose`:
+        SLERP for a unit quaternion, linear for positions and an angle); a
+        whole number of samples moves the measurements unchanged. This keeps a
+        multi-rate log's pattern of pose rows. A pose whose time falls before
+        the first or after the last measurement is left out, and the rows
+        before the first pose and after the last one are dropped.
 
         Parameters
         ----------
         latency : float
-            s, at least 0.
+            s, of either sign, less than half the log in magnitude.
 
         Returns
         -------
         Log
+
+        Raises
+        ------
+        FmscalError
+            A latency not finite, or of half the log or more.
         """
         latency = float(latency)
-        if not (np.isfinite(latency) and 0 <= latency < self.duration / 2):
-            raise FmscalError(f"latency must be in [0, {self.duration / 2:g}) s for this log; got {latency}")
-        k = int(round(latency / self.dt))
-        if k == 0:
+        if not (np.isfinite(latency) and abs(latency) < self.duration / 2):
+            raise FmscalError(f"latency must be in (-{self.duration / 2:g}, {self.duration / 2:g}) s for this log; "
+                              f"got {latency}")
+        steps = latency / self.dt
+        k = int(round(steps))
+        whole = abs(steps - k) <= 1e-9 * max(1.0, abs(steps))
+        if whole and k == 0:
             return self
+        n = len(self)
+        rows = np.flatnonzero(self.has_pose)
+        target = rows - k
+        inside = (target >= 0) & (target < n)
+        if whole:
+            values = self.pose[rows[inside]]
+        else:
+            pose_times = self.t[rows]
+            when = self.t[np.clip(target, 0, n - 1)] + latency
+            inside &= (when >= pose_times[0]) & (when <= pose_times[-1])
+            values = self._case.interpolate_pose(when[inside], pose_times, self.pose[rows])
+        target = target[inside]
+        if len(target) == 0:
+            raise FmscalError(f"{self.name}: no pose left after shifting the poses by {latency:g} s")
         pose = np.full_like(self.pose, np.nan)
-        pose[:-k] = self.pose[k:]
-        first = int(np.argmax(~np.isnan(pose[:, 0])))
-        return Log(self.t[first:], pose[first:], self.w_hat[first:], self.name, model=self._model)
+        pose[target] = values
+        keep = slice(int(target[0]), int(target[-1]) + 1)
+        return Log(self.t[keep], pose[keep], self.w_hat[keep], self.name, model=self._model)
 
     def head(self, n):
         """The first ``n`` samples as a new Log."""
@@ -289,6 +321,14 @@ class Log:
             raise LogError(f"{self.name}: no pose measurement between t = {t_start:g} and {t_end:g} s")
         keep = keep[keep >= poses[0]]
         return Log(self.t[keep], self.pose[keep], self.w_hat[keep], self.name, model=self._model)
+
+
+def _latency(value):
+    """A sidecar's latency: a finite number of seconds, of either sign (negative: the wrench behind the poses)."""
+    latency = as_number(value, "latency")
+    if not np.isfinite(latency):
+        raise FmscalError(f"latency must be a finite number of seconds; got {value!r}")
+    return latency
 
 
 def _first_bad(values):
@@ -525,7 +565,7 @@ class Truth:
     offset : ndarray, shape (n_w,), or None
         The sensor's offset ``b`` in ``w = S (w_hat - b)``, N m and N.
     latency : float
-        Delay of the pose stream behind the sensor stream, s.
+        Delay of the pose stream behind the sensor stream, s (negative: the wrench behind the poses).
     settings : dict
         The rest of the scenario, for the record (duration, dt, pose rate,
         dropped frames, outliers, description).
@@ -593,7 +633,7 @@ def read_truth(path):
             payload=(SpatialPayload if spatial else Payload).from_dict(data), noise=NoiseSpec.from_dict(data["noise"]),
             told_noise=as_positive_scalar(data.get("told_noise", 1.0), "told_noise"),
             offset=None if offset is None else as_finite_array(offset, (schedule.size,), "offset"),
-            latency=as_positive_scalar(data.get("latency") or 0.0, "latency", allow_zero=True),
+            latency=_latency(data.get("latency") or 0.0),
             settings={k: v for k, v in data.items() if k not in known})
     except json.JSONDecodeError as err:
         raise LogError(f"{path.name}: not valid JSON ({err})") from None

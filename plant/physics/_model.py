@@ -324,6 +324,33 @@ class Model:
         return o.vcat([self.difference(self.configuration(x0), self.configuration(x1)),
                        self.velocity(x1) - self.velocity(x0)])
 
+    @classmethod
+    def interpolate_pose(cls, times, pose_times, poses):
+        """The measured pose stream at ``times``, interpolated between its measurements.
+
+        Each pose column linearly, ``p(t) = (1 - u) p_i + u p_{i+1}`` with
+        ``u = (t - t_i) / (t_{i+1} - t_i)``: positions, and an angle (a log's
+        ``theta`` is unwrapped on reading, so that the line between two
+        measurements is the shorter turn). A model whose attitude lives on
+        another manifold overrides it (:class:`SpatialModel`: SLERP). Used to
+        shift a pose stream by a fraction of a sample
+        (:meth:`fmscal.plant.Log.shift_poses`).
+
+        Parameters
+        ----------
+        times : ndarray, shape (M,)
+            s, each within ``[pose_times[0], pose_times[-1]]``.
+        pose_times : ndarray, shape (P,)
+            The measurements' times, s, increasing.
+        poses : ndarray, shape (P, n_pose)
+            The measured poses, log columns.
+
+        Returns
+        -------
+        ndarray, shape (M, n_pose)
+        """
+        return np.column_stack([np.interp(times, pose_times, poses[:, j]) for j in range(poses.shape[1])])
+
     def pose_configuration(self, pose):
         """The configuration (``nq``) a measured pose (log columns, ``n_pose``) shows; numbers or symbols.
 
@@ -565,7 +592,7 @@ class PlanarModel(Model):
     given_noise = True
     force_channels = (1, 2)
     calibration_checks = ("units", "reference", "run", "evidence", "consistency", "saturation", "offset_drift",
-                          "disagreement")
+                          "disagreement", "latency")
     nq = nv = 3
     state = StateLayout(("theta", 1), ("theta_dot", 1), ("X", 1), ("X_dot", 1), ("Y", 1), ("Y_dot", 1))
     q_index, v_index = (0, 2, 4), (1, 3, 5)
@@ -672,7 +699,7 @@ class SpatialModel(Model):
     signed_reading = True
     force_channels = (3, 4, 5)
     reading_blocks = (("torque", (0, 1, 2)), ("force", (3, 4, 5)))
-    calibration_checks = ("saturation", "run", "evidence", "flipped_gain", "misfit", "gains")
+    calibration_checks = ("saturation", "run", "evidence", "flipped_gain", "latency", "misfit", "gains")
     input_checks = ("spatial_units",)
     nq, nv = rigid_body.NQ, rigid_body.NV
     state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))
@@ -757,6 +784,36 @@ class SpatialModel(Model):
         """The pose ``[q, p]`` (log order) the state shows."""
         o = ops(x)
         return o.vcat([x[3:7], x[0:3]])
+
+    @classmethod
+    def interpolate_pose(cls, times, pose_times, poses):
+        """The measured pose stream at ``times``: the position linearly, the attitude by SLERP.
+
+        Between measurements ``i`` and ``i + 1`` (``u`` as in
+        :meth:`Model.interpolate_pose`), the unit quaternion turns at a
+        constant rate about one axis: ``q(u) = (sin((1 - u) W) q_i + sin(u W)
+        q_{i+1}) / sin W``, ``cos W = q_i . q_{i+1}`` (the sign of ``q_{i+1}``
+        taken so that the dot product is not negative: the shorter turn); for
+        ``W`` below 1e-9 rad, the normalised linear blend.
+        """
+        poses = np.asarray(poses, dtype=float)
+        out = np.empty((len(times), poses.shape[1]))
+        out[:, 4:] = Model.interpolate_pose(times, pose_times, poses[:, 4:])
+        i = np.clip(np.searchsorted(pose_times, times, side="right") - 1, 0, max(len(pose_times) - 2, 0))
+        j = np.minimum(i + 1, len(pose_times) - 1)
+        span = pose_times[j] - pose_times[i]
+        u = np.where(span > 0, (times - pose_times[i]) / np.where(span > 0, span, 1.0), 0.0)[:, None]
+        q0, q1 = poses[i, :4], poses[j, :4]
+        dot = np.sum(q0 * q1, axis=1, keepdims=True)
+        q1 = np.where(dot < 0, -q1, q1)
+        turn = np.arccos(np.clip(np.abs(dot), -1.0, 1.0))
+        small = turn < 1e-9
+        sin = np.where(small, 1.0, np.sin(turn))
+        a = np.where(small, 1 - u, np.sin((1 - u) * turn) / sin)
+        b = np.where(small, u, np.sin(u * turn) / sin)
+        q = a * q0 + b * q1
+        out[:, :4] = q / np.linalg.norm(q, axis=1, keepdims=True)
+        return out
 
     def pose_configuration(self, pose):
         """The configuration ``[p, q]`` of a measured pose ``[q, p]`` (log order); numbers or symbols."""

@@ -1,0 +1,146 @@
+"""The latency as a parameter with an uncertainty (issue 37): its cost in ``fmscal calibrate``, and its targets.
+
+Usage (from the repository's root)::
+
+    python benchmarks/latency.py --timing               # fmscal calibrate of a 60 s spatial-arm log at 1 kHz,
+                                                        # the latency estimated and given, and their ratio
+    python benchmarks/latency.py --seeds 20 --duration 20   # the targets' table (a few minutes of CPU per seed)
+
+The table: for each source of logs (``simulate``'s ``spatial-arm`` and
+``spatial-mocap``, and MuJoCo's ``spatial-arm``, ``tests/mujoco_log.py``, its
+poses delayed by :meth:`fmscal.plant.SpatialModel.interpolate_pose`) and each
+true latency (-1, 0, 0.4, 1, 2.5 and 5 samples of 1 ms), over the seeds:
+the worst and the median of E (latency estimated) over E at the known
+latency (the same interpolation, :meth:`fmscal.plant.Log.shift_poses`), the
+z-scores' rms ``(S_hat - S) / S_std`` over the entries and seeds and the share of
+seeds that converged (each also with the latency given: on short logs the floor
+itself does not always settle), and the latency's own z-scores' rms. The MuJoCo
+poses are delayed after their noise is drawn, so that a fractional delay
+averages neighbouring noise draws. Targets: E within
+1.15x, the z-scores' rms within [0.8, 1.25], 95 % converged.
+"""
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+#: The true latencies, in samples.
+LATENCIES = (-1.0, 0.0, 0.4, 1.0, 2.5, 5.0)
+TOOL = ["--mass", "1.2", "--com", "0.01", "-0.005", "0.06", "--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4",
+        "1.5e-4"]
+
+
+def timing(repeat=3):
+    """CPU seconds of ``fmscal calibrate`` of a 60 s spatial-arm log at 1 kHz (the child's user and system time,
+    which other work on a shared machine moves less than the wall time): the latency estimated, and given."""
+    with tempfile.TemporaryDirectory() as folder:
+        log = Path(folder) / "arm.csv"
+        subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "simulate", "--scenario", "spatial-arm",
+                        "--seed", "1", "--out", str(log)], check=True, capture_output=True)
+        out = {}
+        for label, extra in (("estimated", []), ("given", ["--latency", "0"])):
+            times = []
+            for _ in range(repeat):
+                start = os.times()
+                subprocess.run([sys.executable, "-m", "fmscal.analysis.cli", "calibrate", str(log), *TOOL, *extra],
+                               check=True, capture_output=True)
+                end = os.times()
+                times.append(end.children_user + end.children_system - start.children_user - start.children_system)
+            out[label] = min(times)
+    return out
+
+
+def _delayed(log, latency):
+    """A log whose pose stream is ``latency`` s late (the poses of ``t - latency`` at ``t``, interpolated)."""
+    from fmscal.plant import Log, SpatialModel
+    when = log.t - latency
+    rows = np.flatnonzero((when >= log.t[0]) & (when <= log.t[-1]))
+    pose = SpatialModel.interpolate_pose(log.t[rows] - latency, log.t, log.pose)
+    return Log(log.t[rows], pose, log.w_hat[rows], name=log.name)
+
+
+def _source(name, duration):
+    """``seed, latency -> (log, S, payload)`` of a source of logs."""
+    from fmscal.plant import SPATIAL_SCENARIOS
+    if name == "mujoco-arm":
+        from mujoco_log import mujoco_log
+        scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=duration)
+        made = {}
+
+        def make(seed, latency):
+            if seed not in made:                        # MuJoCo's run once per seed, delayed for each latency
+                made.clear()
+                made[seed] = mujoco_log(scenario, seed)
+            log, S, _ = made[seed]
+            return _delayed(log, latency), S, scenario.payload
+        return make
+    scenario = SPATIAL_SCENARIOS[name].with_(duration=duration)
+
+    def make(seed, latency):
+        log, truth, _ = scenario.with_(latency=latency).generate(seed)
+        return log, truth.S_at(log.t[-1]), scenario.payload
+    return make
+
+
+def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-arm"), latencies=LATENCIES):
+    """Rows of the targets' table (module docstring), one per source and latency."""
+    from fmscal.analysis import calibrate, calibration_error
+    rows = []
+    for name in sources:
+        make = _source(name, duration)
+        for samples in latencies:
+            latency = samples * 1e-3
+            ratios, z, z_known, converged, converged_known, z_latency = [], [], [], [], [], []
+            for seed in range(seeds):
+                log, S, payload = make(seed, latency)
+                found = calibrate(log, payload)
+                known = calibrate(log, payload, latency=latency)
+                ratios.append(calibration_error(found.S, S) / calibration_error(known.S, S))
+                z.append(((np.asarray(found.S) - S) / np.asarray(found.S_std)).ravel())
+                z_known.append(((np.asarray(known.S) - S) / np.asarray(known.S_std)).ravel())
+                converged.append(found.converged)
+                converged_known.append(known.converged)
+                if found.latency_std:
+                    z_latency.append((found.latency - latency) / found.latency_std)
+            rows.append({"source": name, "latency_samples": samples, "E_ratio_max": float(np.max(ratios)),
+                         "E_ratio_median": float(np.median(ratios)), "z_rms": float(np.sqrt(np.mean(np.square(z)))),
+                         "z_rms_known": float(np.sqrt(np.mean(np.square(z_known)))),
+                         "converged": float(np.mean(converged)), "converged_known": float(np.mean(converged_known)),
+                         "latency_z_rms": float(np.sqrt(np.mean(np.square(z_latency)))) if z_latency else np.nan})
+            print(_line(rows[-1]), flush=True)
+    return rows
+
+
+def _line(row):
+    return (f"{row['source']:>14} {row['latency_samples']:+5.1f}  E ratio max {row['E_ratio_max']:.3f} median "
+            f"{row['E_ratio_median']:.3f}  z rms {row['z_rms']:.2f} (known latency {row['z_rms_known']:.2f})  "
+            f"converged {100 * row['converged']:.0f} % (known {100 * row['converged_known']:.0f} %)  "
+            f"latency z rms {row['latency_z_rms']:.2f}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--timing", action="store_true", help="only the cost of fmscal calibrate")
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--duration", type=float, default=20.0, help="s of each log of the table")
+    parser.add_argument("--sources", nargs="+", default=["spatial-arm", "spatial-mocap", "mujoco-arm"])
+    args = parser.parse_args(argv)
+    if args.timing:
+        t = timing()
+        print(f"fmscal calibrate, 60 s spatial-arm at 1 kHz, CPU s: latency estimated {t['estimated']:.2f} s, given "
+              f"{t['given']:.2f} s, ratio {t['estimated'] / t['given']:.2f}")
+        return
+    print(f"{args.seeds} seeds of {args.duration:g} s; targets: E ratio <= 1.15, z rms in [0.8, 1.25], 95 % converged")
+    targets(args.seeds, args.duration, args.sources)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,51 @@
+"""Issue 37's latency targets, on fewer seeds than the benchmark (``python benchmarks/latency.py --seeds 20`` runs
+the full 20 per source and latency and prints the table): E within 1.15x of the E at the known latency, the
+z-scores' rms within [0.8, 1.25], every seed converged; on ``simulate``'s spatial-arm and spatial-mocap logs and
+on MuJoCo's, with true latencies of either sign and fractions of a sample."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+_SPEC = importlib.util.spec_from_file_location("latency_bench", Path(__file__).parents[1] / "benchmarks" / "latency.py")
+bench = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(bench)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("source, latencies", [("spatial-arm", (-1.0, 2.5)), ("spatial-mocap", (0.4,)),
+                                               ("mujoco-arm", (0.0, 5.0))])
+def test_the_latency_targets_hold(source, latencies):
+    """Two seeds of 10 s per source and latency. The z-scores' rms within [0.8, 1.25], or, where the method with
+    the latency given is already above that (the floor on short spatial-mocap logs, 1.37 on 15 s), within 1.05x of
+    it: the latency's estimate adds nothing."""
+    rows = bench.targets(seeds=2, duration=10.0, sources=(source,), latencies=latencies)
+    assert max(r["E_ratio_max"] for r in rows) <= 1.15
+    z_rms = np.sqrt(np.mean([r["z_rms"] ** 2 for r in rows]))
+    z_known = np.sqrt(np.mean([r["z_rms_known"] ** 2 for r in rows]))
+    assert 0.8 <= z_rms <= max(1.25, 1.05 * z_known)
+    assert all(r["converged"] == 1.0 for r in rows)
+
+
+@pytest.mark.slow
+def test_the_issues_timing_cases_are_not_saved_sigma_off():
+    """The issue's first case (spatial-mocap, seed 1, 10 s, 5 ms late): no entry of S 5 sigma off, E near the
+    known latency's; the second (MuJoCo, 1 kHz, no latency: 1 ms before, E 3.6x; here 10 s): E within 1.15x of
+    --latency 0."""
+    from fmscal.analysis import calibrate, calibration_error
+    from fmscal.plant import SPATIAL_SCENARIOS
+    sc = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=10.0)
+    log, truth, _ = sc.generate(1)
+    cal = calibrate(log, truth.payload)
+    known = calibrate(log, truth.payload, latency=0.005)
+    S = truth.S_at(log.t[-1])
+    assert np.max(np.abs((np.asarray(cal.S) - S) / np.asarray(cal.S_std))) < 5
+    assert calibration_error(cal.S, S) <= 1.15 * calibration_error(known.S, S)
+    make = bench._source("mujoco-arm", 10.0)
+    log, S, payload = make(4, 0.0)
+    cal, known = calibrate(log, payload), calibrate(log, payload, latency=0.0)
+    assert abs(cal.latency) < 0.5e-3 and cal.converged == known.converged          # the latency adds no doubt
+    assert not any("latency" in w for w in cal.warnings)
+    assert calibration_error(cal.S, S) <= 1.15 * calibration_error(known.S, S)
