@@ -157,10 +157,18 @@ def test_a_log_written_by_mujoco_calibrates_at_the_floor(mujoco_arm, tmp_path, c
     import json
     out = json.loads(capsys.readouterr().out)
     assert out["converged"] and out["observer"] == "max-likelihood" and out["undetermined"] == []
-    assert out["latency"] == 0.0
+    # no latency in the log: the estimate (a fraction of a sample, of either sign) within 3 of its std of 0,
+    # and that std well under a sample
+    assert abs(out["latency"]) < 3 * out["latency_std"] and 0 < out["latency_std"] < 0.5 * log.dt
     S_hat, S_std = np.array(out["S"]), np.array(out["S_std"])
     z = np.r_[((S_hat - S) / S_std).ravel(), (np.array(out["b"]) - b) / np.array(out["b_std"])]
     assert 0.6 < z.std() < 1.5 and np.abs(z).max() < 4.5
     own_fit = fit_max_likelihood(own, SpatialModel(p, scenario.gravity), offset=True)
     E_mujoco, E_own = np.array(block_errors(S_hat, S)), np.array(block_errors(own_fit.S_hat, S))
-    np.testing.assert_allclose(E_mujoco, E_own, rtol=0.01)     # whole, torque and force blocks; measured 3e-6
+    # the latency estimated (a fraction of a sample, the poses interpolated): within the 1.15x of the E
+    # at the known latency either way (measured 0.98 on this draw) ...
+    assert np.all((0.85 < E_mujoco / E_own) & (E_mujoco / E_own < 1.15))
+    # ... and with the latency given, the same E as fmscal's own log to 1 % (whole, torque and force blocks)
+    assert main([*args, "--latency", "0"]) == 0
+    given = np.array(json.loads(capsys.readouterr().out)["S"])
+    np.testing.assert_allclose(np.array(block_errors(given, S)), E_own, rtol=0.01)
