@@ -124,3 +124,14 @@ def test_a_method_that_refuses_a_log_is_a_row_that_says_why_not_an_abort():
     assert "| refused the log |" in text
     assert "Refused the log: least-squares on spatial-weak (1 of 1 seeds) (the reading tz, fz does not move" in text
     assert text.count("refused the log") == 1                       # the adaptive observer's row has figures
+
+
+def test_a_late_pose_streams_run_still_reports_the_checkpoint_at_its_end():
+    """real-rig's poses are 20 ms late: moved back, the log ends 20 ms short of 10 s, and E at 10 s is still
+    reported (within analysis's CHECKPOINT_SLACK), as on a log with no latency."""
+    import numpy as np
+    from fmscal.analysis import compare
+    row = compare(("real-rig",), seeds=1, observers=("least-squares",), duration=10.0, progress=False).iloc[0]
+    assert 9.9 < row["duration"] < 10.0
+    assert np.isfinite(row["E_10s"]) and 0 < row["E_10s"] < 1
+    assert "E_30s" not in row.index
