@@ -363,7 +363,7 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     parts = _Parts(calibration, model, noise, direction, false_alarm)
     latency = calibration.latency or 0.0
     aligned = log
-    if latency > 0:                      # each pose at the time it was taken; the rows after the last one dropped
+    if latency != 0:                     # each pose at the time it was taken; the rows after the last one dropped
         aligned = log.shift_poses(latency)
         aligned = aligned.head(int(np.flatnonzero(aligned.has_pose)[-1]) + 1)
     if not causal:
@@ -378,9 +378,6 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         t, w_hat, x, a, lag = aligned.t[keep], aligned.w_hat[keep], x[keep], a[keep], 0.0
     else:
         window = CAUSAL_WINDOW if window is None else window
-        if latency < 0:
-            raise CompensationError(f"the calibration's latency is {latency:g} s (poses ahead of the sensor): "
-                                    "the causal path takes a pose stream behind it")
         k, L, lead = _causal_settings(window, delay, order, aligned.dt, latency)
         if not aligned.has_pose.all():
             return _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts)
@@ -483,9 +480,6 @@ class Compensator:
         noise = _noise(calibration, noise)
         self._parts = _Parts(calibration, self.model, noise, direction, false_alarm)
         latency = calibration.latency or 0.0
-        if latency < 0:
-            raise CompensationError(f"the calibration's latency is {latency:g} s (poses ahead of the sensor): "
-                                    "the causal path takes a pose stream behind it")
         self.dt, self.order, self._noise = float(dt), order, noise
         self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, latency)
         self._coefficients = np.array(_causal_coefficients(self._k, order, self._lead, self.dt))    # (3, k)
