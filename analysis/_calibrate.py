@@ -484,6 +484,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         why = why or (None if passed else reason)
     if not converged:
         why = why or "the run did not converge (see the warnings)"
+    own, result = result, run.result     # a check may have widened the uncertainty (a copy: the method's own kept)
     E, E_blocks = _errors(truth, result, model, log)
     directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
     return _calibration(result, name, dict(
@@ -493,7 +494,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
-        E=E, E_blocks=E_blocks, notes=list(signed.notes), kind=cls.name, run=result,
+        E=E, E_blocks=E_blocks, notes=list(signed.notes), kind=cls.name, run=own,
         why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.count else None))
 
 
@@ -660,8 +661,10 @@ def _with_latency_uncertainty(result, found):
 def _check_misfit(run, warnings):
     """``"misfit"``: the model fits the log (:func:`fmscal.observers.diagnostics.misfit`: the reference fit's
     residual against the noise measured from the log, and one ``S`` for slow and fast motion). Where it does
-    not, a warning in words and ``S_std`` widened (eq. (M3), :func:`fmscal.observers.diagnostics.inflate`);
-    a gross misfit is not converged. A log too short to measure it passes with nothing said."""
+    not, a warning in words and the uncertainty widened (eq. (M3), :func:`fmscal.observers.diagnostics.inflate`):
+    ``run.result`` becomes a copy whose ``S_std``, ``cov`` (each row of ``[S | c]`` by its entries' factors, the
+    offset's column by the row's largest) and ``b_std`` say so; the method's own result is left as it was. A
+    gross misfit is not converged. A log too short to measure it passes with nothing said."""
     try:
         found = misfit(run.aligned, run.model)
     except FmscalError:
@@ -670,13 +673,19 @@ def _check_misfit(run, warnings):
     result = run.result
     if not found.fits and result.S_std is not None:
         widened = inflate_misfit(result.S_std, found)
-        if result.cov is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            factor = np.where(np.isfinite(result.S_std) & (result.S_std > 0), widened / result.S_std, 1.0)
+        if result.cov is None:
+            run.result = replace(result, S_std=widened)
+        else:
             n_w = run.model.n_w
-            factor = np.ones(result.cov.shape[0])
-            n = factor.size // n_w
-            factor.reshape(n_w, n)[:, :n_w] = widened / np.where(result.S_std > 0, result.S_std, 1.0)
-            result.cov = result.cov * np.outer(factor, factor)
-        result.S_std = widened
+            offset = result.cov.shape[0] == n_w * (n_w + 1)
+            scale = np.c_[factor, factor.max(axis=1)] if offset else factor
+            cov = np.asarray(result.cov, dtype=float) * np.outer(scale.ravel(), scale.ravel())
+            c = -result.S_hat @ result.b if offset and result.b is not None else None
+            S_std, _, b_std = calibration_uncertainty(np.c_[result.S_hat, c] if c is not None else result.S_hat,
+                                                      cov, c is not None)
+            run.result = replace(result, cov=cov, S_std=S_std, b_std=b_std if c is not None else result.b_std)
     return ([] if found.fits else [found.warning]), not found.gross, "the model does not fit the log"
 
 

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from fmscal.analysis import calibrate
 from fmscal.analysis.cli import main
 from fmscal.observers import make_observer
-from fmscal.observers.core import find_glitches, glitch_threshold, reading_noise
+from fmscal.observers.core import calibration_uncertainty, find_glitches, glitch_threshold, reading_noise
 from fmscal.observers.diagnostics import misfit
 from fmscal.plant import SPATIAL_SCENARIOS, SpatialModel, get_scenario
 
@@ -120,6 +120,12 @@ def test_a_payload_in_axes_turned_from_the_poses_frame_is_not_converged(arm):
     assert cal.E > 1.0                                                  # S absorbs the turn: far off
     assert not cal.converged
     assert any("the model does not fit the log: the residual is" in w and "slow half" in w for w in cal.warnings)
+    # the widened uncertainty is one claim: S_std and b_std are what cov says, the offset's column widened with
+    # its row; the method's own run keeps its own (narrower) S_std
+    S_std, _, b_std = calibration_uncertainty(np.c_[cal.S_hat, -cal.S_hat @ cal.b], cal.cov, True)
+    np.testing.assert_allclose(S_std, cal.S_std, rtol=1e-12)
+    np.testing.assert_allclose(b_std, cal.b_std, rtol=1e-12)
+    assert np.all(cal.run.S_std <= cal.S_std) and np.any(cal.run.S_std < cal.S_std)
     right = calibrate(log, ARM.payload, method="least-squares", latency=0.0, truth=truth)
     assert right.converged and not any("does not fit" in w for w in right.warnings)
 

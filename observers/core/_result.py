@@ -198,4 +198,10 @@ def offset_std(S, b, cov_aug):
     for i in range(k):
         for j in range(k + 1):
             J[:, (k + 1) * i + j] = -S_inv[:, i] * (b[j] if j < k else 1.0)
+    cov_aug = np.asarray(cov_aug, dtype=float)
+    if not np.isfinite(cov_aug).all():   # an undetermined part (an infinite variance): its offsets undetermined
+        cov_aug = np.where(np.isfinite(cov_aug), cov_aug, np.inf)
+        with np.errstate(invalid="ignore"):
+            var = np.diag(J @ cov_aug @ J.T)
+        return np.sqrt(np.where(np.isnan(var), np.inf, np.maximum(var, 0)))
     return np.sqrt(np.maximum(np.diag(J @ cov_aug @ J.T), 0))
