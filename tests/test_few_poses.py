@@ -37,9 +37,12 @@ def _z(fit, gravity, mount):
 
 def test_the_fewest_poses_each_rotation_needs():
     """Eq. N4: three forces a pose, their noise measured beyond two degrees of freedom."""
-    assert min_poses() == 2
-    assert min_poses(estimate_gravity=True) == 3 and min_poses(estimate_mounting=True) == 3
-    assert min_poses(estimate_gravity=True, estimate_mounting=True) == 4
+    assert min_poses() == 3 and min_poses(estimate_gravity=True) == 3
+    assert min_poses(estimate_mounting=True) == 4 and min_poses(estimate_gravity=True, estimate_mounting=True) == 4
+    for gravity in (False, True):          # the count is the fewest N with 3 N - p_f > 2 (eq. N4), both ways
+        for mounting in (False, True):
+            p_f, n = 4 + 2 * gravity + 3 * mounting, min_poses(gravity, mounting)
+            assert 3 * n - p_f > 2 >= 3 * (n - 1) - p_f
 
 
 @pytest.mark.parametrize("seed", [6, 11, 17, 28])

@@ -153,10 +153,10 @@ def min_poses(estimate_gravity=False, estimate_mounting=False):
     and the forces' noise, measured from their ``3N - p_f`` residual degrees
     of freedom, has a finite Student-t variance only beyond two (eq. N3)::
 
-        3 N - p_f > 2,   N >= floor(p_f / 3) + 1                              (N4)
+        3 N - p_f > 2,   N >= floor((p_f + 2) / 3) + 1                        (N4)
 
-    that is 2 with gravity and the mounting as given, 3 with gravity's
-    direction or the mounting estimated, 4 with both; a pose table holds at
+    that is 3 with gravity and the mounting as given or gravity's direction
+    estimated, 4 with the mounting estimated (alone or with gravity's); a pose table holds at
     least :data:`fmscal.plant.io.MIN_POSES` (four) for the torques' six
     unknowns and the offset. Poses that do not tilt gravity, or tilt it
     within one plane, leave the fit undetermined at any count (the
@@ -167,7 +167,7 @@ def min_poses(estimate_gravity=False, estimate_mounting=False):
     int
     """
     p_f = 4 + 2 * bool(estimate_gravity) + 3 * bool(estimate_mounting)
-    return p_f // 3 + 1
+    return (p_f + 2) // 3 + 1
 
 
 def _angle_deg(R):
