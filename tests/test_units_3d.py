@@ -237,6 +237,11 @@ def test_joint_angles_in_degrees_are_named_by_the_urdfs_limits(tmp_path, capsys)
         (tmp_path / f"{unit}.csv").write_text(header + "\n".join(",".join(f"{v:.10g}" for v in row)
                                                                  for row in np.hstack([values, table.w_hat])) + "\n")
     assert len(read_joint_data(tmp_path / "rad.csv", ur5)) == 16
+    unwrapped = joints.copy()                    # a wrist joint a turn beyond its limit: the same attitude, in rad
+    unwrapped[:, 5] = np.abs(unwrapped[:, 5]) + 2 * np.pi
+    (tmp_path / "turn.csv").write_text(header + "\n".join(",".join(f"{v:.10g}" for v in row)
+                                                          for row in np.hstack([unwrapped, table.w_hat])) + "\n")
+    assert len(read_joint_data(tmp_path / "turn.csv", ur5)) == 16
     with pytest.raises(LogError, match="look like degrees"):
         read_joint_data(tmp_path / "deg.csv", ur5)
     code = main(["identify-payload", str(tmp_path / "deg.csv"), "--urdf", str(_ur5()), "--frame", "tool0"])

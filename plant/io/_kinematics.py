@@ -200,7 +200,9 @@ def read_joint_data(path, kinematics):
 
 def _refuse_degrees(values, kinematics, joints, name):
     """Refuse joint angles in degrees, told by the URDF's joint limits: a revolute joint beyond its limit in rad
-    while every revolute joint in rad, the values times pi/180, is within its own (one line naming degrees).
+    while every revolute joint in rad, the values times pi/180, is within its own, and the values span more than
+    a turn or pass a limit by more than a turn (a joint unwrapped by one turn is not taken for degrees): one line
+    naming degrees.
 
     Parameters
     ----------
@@ -229,6 +231,11 @@ def _refuse_degrees(values, kinematics, joints, name):
         return
     radians = np.deg2rad(v)
     if ((radians < lo - 1e-6) | (radians > hi + 1e-6)).any():
+        return
+    # a joint unwrapped a turn beyond its limit (the same attitude) is not degrees: degrees span more than a turn
+    # in rad somewhere, or pass a limit by more than one
+    turn = 2 * np.pi
+    if not ((np.ptp(v, axis=0) > turn).any() or ((v < lo - turn) | (v > hi + turn)).any()):
         return
     k = int(np.argmax(beyond.any(axis=0)))
     column = [c for c, keep in zip(joints, limited) if keep][k]
