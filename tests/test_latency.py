@@ -64,7 +64,7 @@ def test_a_wrench_behind_the_poses_is_a_negative_latency():
     sc = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=10.0, latency=-0.001)
     log, _, _ = sc.generate(2)
     found = estimate_latency(log, sc.model())
-    assert found.determined and abs(found.latency + 0.001) < max(4 * found.std, 1e-4)
+    assert found.determined and 0 < found.std < 1e-3 and abs(found.latency + 0.001) < max(4 * found.std, 1e-4)
 
 
 def test_a_dropped_wrench_sample_is_found_and_placed():
@@ -91,6 +91,10 @@ def test_the_latency_std_widens_S_std():
     assert estimated.latency_std > 0 and given.latency_std is None
     assert np.all(np.asarray(estimated.S_std) >= np.asarray(given.S_std) - 1e-15)
     assert np.any(np.asarray(estimated.S_std) > 1.01 * np.asarray(given.S_std))
+    # by exactly the latency's share, no more: S_std^2 = S_std_given^2 + (dS/dlatency std)^2 (eq. L4)
+    found = estimate_latency(log, sc.model())
+    expected = np.sqrt(np.square(given.S_std) + np.square(found.dS_dlatency[:, :6] * found.std))
+    np.testing.assert_allclose(estimated.S_std, expected, rtol=1e-6)
 
 
 def test_a_planar_log_gets_a_fractional_latency_too():
