@@ -37,8 +37,8 @@ method with ``online = False``):
 
    ``N`` the samples and ``c`` the channels: the Bonferroni bound, so a
    clean log of Gaussian noise rejects a sample by chance with probability
-   below ``alpha`` whatever its length (``k`` about 5.5 for 5 s at 1 kHz,
-   6.1 for 60 s of six channels).
+   below ``alpha`` whatever its length (``k`` about 5.5 for 5 s of six channels
+   at 1 kHz, 5.9 for 60 s).
 4. **Bridged, and again.** A rejected sample's reading (every channel) is
    replaced by its prediction (G1) from its neighbours, and steps 1-3 are
    repeated on the bridged reading (a second spike next to a first shows

@@ -4,7 +4,7 @@ A spatial log, a pose table or an attitude-only log's held poses fix the
 wrench the payload needs only up to the units they are written in. These
 checks read the data against what a wrist sensor on a robot can show, and
 name the slip before an expensive fit runs on it (a log with positions in mm
-ran for minutes and weighed 0.53 g):
+would otherwise run for minutes and return a wrong mass):
 
 - a reading channel that never changes (all zero: not connected);
 - gravity's size against Earth's, :data:`EARTH_G` (``--gravity 0 0 -981`` is in cm/s^2);
@@ -98,8 +98,9 @@ def check_gravity(gravity):
         return
     units = {"cm/s^2": 100.0, "mm/s^2": 1000.0, "g (multiples of 9.81)": 1 / EARTH_G}
     unit = next((u for u, k in units.items() if abs(size / (EARTH_G * k) - 1) < 0.1), None)
-    guess = f": in {unit}? " if unit else "; "
-    raise UnitsError(f"gravity's size is {size:.4g}, not Earth's {EARTH_G} m/s^2{guess}give gravity in m/s^2")
+    guess = f": in {unit}? give gravity in m/s^2" if unit else f" (more than {_G_TOLERANCE:.0%} from it): give Earth's"
+    raise UnitsError(f"gravity's size is {size:.4g}, not Earth's {EARTH_G} m/s^2{guess}" + ("" if unit else
+                     " gravity in the pose frame, m/s^2"))
 
 
 def check_mass(mass, what="the payload's mass"):
