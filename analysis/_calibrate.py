@@ -194,8 +194,10 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         ``S_hat``, ``S_std``, ``b``, ``b_std``, ``cov`` (where the method
         gives one), ``latency``, ``latency_std`` (estimated: its standard
         deviation, else None) and ``latency_estimated``, ``reading``,
-        ``gravity``, ``method``, ``payload``, ``noise``, ``converged``,
-        ``warnings``, ``undetermined`` (in words) and
+        ``gravity``, ``method``, ``payload``, ``noise`` (the noise model the
+        method was given, else the log's measured by
+        :func:`fmscal.plant.estimate_noise`; the compensation's covariance
+        reads it), ``converged``, ``warnings``, ``undetermined`` (in words) and
         ``undetermined_directions``, ``E`` with a truth, ``notes`` and the
         method's full ``run``; ``save(path)`` writes it, ``to_json()`` is
         ``fmscal calibrate --json``'s report.
@@ -484,14 +486,18 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         why = why or (None if passed else reason)
     if not converged:
         why = why or "the run did not converge (see the warnings)"
+    # the noise model recorded with the calibration (compensation's covariance needs it): the one the method was
+    # given, else the log's own, measured as the methods that take none measure theirs
+    recorded = noise if noise is not None else estimate_noise(log)
     own, result = result, run.result     # a check may have widened the uncertainty (a copy: the method's own kept)
     E, E_blocks = _errors(truth, result, model, log)
     directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
     return _calibration(result, name, dict(
         payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
         latency_std=None if timing is None or not np.isfinite(timing.std) else float(timing.std),
-        reading=reading, gravity=model.gravity if model.under_gravity else None, noise=noise,
-        noise_estimated=noise_estimated, converged=converged, warnings=warnings, units=run.units,
+        reading=reading, gravity=model.gravity if model.under_gravity else None, noise=recorded,
+        noise_estimated=noise_estimated if noise is not None else ["wrench", "pose"], converged=converged,
+        warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
         E=E, E_blocks=E_blocks, notes=list(signed.notes), kind=cls.name, run=own,

@@ -232,3 +232,18 @@ def test_a_wrench_stream_behind_the_poses(causal, ratio, worse):
     stream = Compensator(cal, log.dt, noise=truth.noise)
     out = [stream.push(t, w, p) for t, w, p in zip(log.t[:200], log.w_hat[:200], log.pose[:200])]
     assert any(o is not None for o in out)
+
+
+def test_a_saved_spatial_calibration_carries_its_noise_model(arm, tmp_path):
+    """calibrate records the log's noise with a spatial calibration (the methods measure their own), so a
+    Compensator built from the saved file needs no noise given; the recorded noise is the log's to 20 %."""
+    scenario, log, truth, _ = arm
+    cal = calibrate(log, scenario.payload, method="least-squares", latency=0.0)
+    cal.save(tmp_path / "cal.json")
+    loaded = Calibration.load(tmp_path / "cal.json")
+    assert cal.noise_estimated == ["wrench", "pose"] and loaded.noise == cal.noise
+    ratio = np.asarray(loaded.noise.wrench_sd) / np.asarray(truth.noise.wrench_sd)
+    assert np.all((0.8 < ratio) & (ratio < 1.2)), ratio
+    stream = Compensator(loaded, log.dt)
+    out = [stream.push(t, w, p) for t, w, p in zip(log.t[:100], log.w_hat[:100], log.pose[:100])]
+    assert any(o is not None for o in out)
