@@ -127,3 +127,13 @@ def test_a_log_that_cannot_tell_the_delays_apart_is_not_converged():
     (said,) = found.warnings
     assert "latency is not determined" in said and "cannot tell the candidate delays apart" in said \
         and "--latency" in said
+
+
+def test_a_search_under_two_samples_says_so():
+    """A max_latency under two samples leaves rule 2's parabola nothing to stand on: the latency is undetermined
+    and the warning says the range searched is too short (not 'no clear minimum')."""
+    sc = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=4.0)
+    log, _, _ = sc.generate(0)
+    found = estimate_latency(log, sc.model(), max_latency=1.4 * log.dt)
+    assert not found.determined and any("span under two samples" in w for w in found.warnings)
+    assert estimate_latency(log, sc.model(), max_latency=10 * log.dt).determined

@@ -265,7 +265,13 @@ def _judge(estimate, dt, K):
     along the log (rule 6); the warnings in words."""
     ms = 1e3
     tau, std = estimate.latency, estimate.std
-    if not estimate.determined:
+    if not estimate.determined and K < 2:    # rule 2's parabola needs a sample each side of the best in range
+        estimate.std = np.inf
+        estimate.warnings.append(
+            f"the pose stream's latency is not determined: the delays searched (+-{K * dt * ms:g} ms) span under "
+            f"two samples of this log (dt = {dt * ms:g} ms), too few to find a minimum between them; search "
+            "further (--max-latency), or give the latency if it is known (--latency)")
+    elif not estimate.determined:
         best = min(estimate.costs, key=estimate.costs.get)
         estimate.std = np.inf
         estimate.warnings.append(
