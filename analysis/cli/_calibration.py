@@ -20,7 +20,7 @@ from .. import _plots
 from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, log_model_class, read_data
 from ._common import CliError, flag_payload, position_flag, positive
 from ._files import atomic_write_text, check_outputs
-from ._spatial import print_spatial
+from ._spatial import latency_line, print_spatial
 
 
 def add_calibrate(sub):
@@ -217,9 +217,7 @@ def _print_calibration(args, data, cal, saved):
         b, b_std = out["b"], out["b_std"]
         cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(len(b))]
         print("offset b [N m, N, N]: " + "   ".join(cells))
-    print(f"pose latency: {out['latency'] * 1e3:.3g}"
-              + (f" +- {out['latency_std'] * 1e3:.2g}" if out.get("latency_std") is not None else "")
-              + f" ms ({'estimated' if out['latency_estimated'] else 'given'})")
+    print(latency_line(out))
     print(f"converged: {'yes' if out['converged'] else 'no'} (at t = {cal.run.t[-1]:g} s)")
     if "E" in out:
         print(f"E = ||I - S_hat S^-1||_2 = {out['E']:.4g}")

@@ -13,7 +13,7 @@ from fmscal.plant.physics import MODELS
 
 from ._common import CliError
 
-__all__ = ["print_spatial"]
+__all__ = ["print_spatial", "latency_line"]
 #: The spatial model's reading: what identify-payload's truth and the report's rows and columns are of.
 _NAMES = SpatialModel.wrench_names
 
@@ -44,9 +44,7 @@ def print_spatial(args, summary, out):
     print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in zip(_NAMES, out["b"], b_std)))
     print(f"reading: {out['reading']}")
     if out["latency"] is not None:
-        print(f"pose latency: {out['latency'] * 1e3:.3g}"
-              + (f" +- {out['latency_std'] * 1e3:.2g}" if out.get("latency_std") is not None else "")
-              + f" ms ({'estimated' if out['latency_estimated'] else 'given'})")
+        print(latency_line(out))
     undetermined = len(out["undetermined"])
     print(f"converged: {'yes' if out['converged'] else 'no'}"
           + (f" ({undetermined} direction(s) of the reading not determined)" if undetermined else ""))
@@ -55,3 +53,9 @@ def print_spatial(args, summary, out):
               f"force block {out['E_force']:.4g}")
     if out["saved"]:
         print(f"saved the calibration to {args.save}")
+
+
+def latency_line(out):
+    """The report's line of the pose stream's latency: ms, with its std where estimated."""
+    std = f" +- {out['latency_std'] * 1e3:.2g}" if out.get("latency_std") is not None else ""
+    return f"pose latency: {out['latency'] * 1e3:.3g}{std} ms ({'estimated' if out['latency_estimated'] else 'given'})"
