@@ -39,3 +39,24 @@ def contact_wrench(force=15.0, direction=(0.6, 0.0, -0.8), point=(0.0, 0.0, 0.12
     """A force of ``force`` N along ``direction`` at ``point`` (m, sensor frame): ``[r x f, f]``."""
     f = force * np.asarray(direction) / np.linalg.norm(direction)
     return np.r_[np.cross(point, f), f]
+
+
+def with_drift(log, S, size=(0.05, 0.05, 0.05, 2.0, 2.0, 2.0), tau=15.0, seed=0):
+    """``log`` with a temperature-like offset drift: the calibrated reading moves by
+    ``d (1 - exp(-t / tau))`` (``d`` of each channel's ``size`` with a seeded random sign; N m and N), i.e.
+    the raw offset by ``S^-1 d (1 - exp(-t / tau))``. Returns the log and the raw offset's change per sample
+    (N, n_w)."""
+    sign = np.random.default_rng(seed).choice([-1.0, 1.0], size=len(size))
+    d = np.linalg.solve(S, sign * np.asarray(size, dtype=float))
+    change = np.outer(1.0 - np.exp(-(log.t - log.t[0]) / tau), d)
+    return Log(log.t, log.pose, log.w_hat + change, name=f"{log.name}-drift", model=log._model), change
+
+
+def with_push(log, S, wrench, start, duration):
+    """``log`` with a contact rising linearly from 0 to ``wrench`` over ``[start, start + duration)`` (then
+    released): the reading loses ``S^-1 wrench (t - start) / duration`` there. Returns the log and the
+    environment's wrench per sample (N, n_w)."""
+    ramp = np.clip((log.t - start) / duration, 0.0, 1.0) * ((log.t >= start) & (log.t < start + duration))
+    w = np.outer(ramp, np.asarray(wrench, dtype=float))
+    return Log(log.t, log.pose, log.w_hat - np.linalg.solve(S, w.T).T, name=f"{log.name}-push",
+               model=log._model), w
