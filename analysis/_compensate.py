@@ -105,7 +105,9 @@ CAUSAL_ORDER = 3
 #: The contact test's false-alarm probability per sample (C4).
 FALSE_ALARM = 1e-3
 #: The offset's random walk (D1): its default intensity per channel, per sqrt(s), in the reading's noise sd.
-DRIFT_INTENSITY = 2.0
+DRIFT_INTENSITY = 1.0
+#: Tare (D4): the span of the newest compensated samples it averages, s.
+TARE_WINDOW = 0.1
 
 
 class CompensationError(FmscalError):
@@ -349,11 +351,9 @@ class _OffsetTracker:
             self.P = 0.5 * (self.P + self.P.T)
         return w_e, total, statistic, self.b.copy(), np.sqrt(np.maximum(np.diag(self.P), 0.0))
 
-    def tare(self, signed, W_p, cov):
-        """(D4): the offset that makes the payload's wrench at this sample the whole reading."""
-        S_inv = np.linalg.inv(self.S)
-        self.b = signed - S_inv @ W_p
-        self.P = S_inv @ cov @ S_inv.T
+    def tare(self, b, P):
+        """Restart from the offset ``b`` of covariance ``P`` (D4)."""
+        self.b, self.P = np.array(b, dtype=float), np.array(P, dtype=float)
 
 
 def _tracker(parts, noise, track_offset, drift_intensity, offset_sd):
@@ -611,7 +611,8 @@ class Compensator:
         noise = _noise(calibration, noise)
         self._parts = _Parts(calibration, self.model, noise, direction, false_alarm)
         self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd)
-        self._last = None                                # the newest compensated sample, for tare
+        # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
+        self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
         latency = calibration.latency or 0.0
         self.dt, self.order, self._noise = float(dt), order, noise
         self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, latency)
@@ -679,7 +680,9 @@ class Compensator:
         W_p, A_inv = _payload_wrench(self.model, x, a)
         wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv,
                                                                       self._accel_var * c2_sq, self._tracker, [t0])
-        self._last = (reading, W_p[0], A_inv, self._accel_var * c2_sq, bool(contact[0]))
+        signed = self._parts.sign * reading
+        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]),
+                           self._parts.covariance(signed[None], A_inv, self._accel_var * c2_sq)[0], bool(contact[0])))
         offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
         return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]), offset, offset_sd)
 
@@ -688,12 +691,20 @@ class Compensator:
         """The offset ``b`` in use (the reading's units): the tracker's, a tare's or the calibration's."""
         return (self._tracker.b if self._tracker is not None else np.asarray(self._parts.b, dtype=float)).copy()
 
-    def tare(self):
-        """Re-bias at the newest compensated sample's pose (D4): ``b = sigma w_hat - S^-1 W_p(pose)``.
+    def tare(self, force=False):
+        """Re-bias at the current pose (D4): ``b = sigma w_hat - S^-1 W_p(pose)``, the mean over the newest
+        compensated samples (:data:`TARE_WINDOW`, fewer where fewer came out), its covariance that of a mean.
 
         The payload's own wrench at that pose is restored, so the output does not jump beyond the noise; a
         sensor zeroed by its hardware at an unknown pose is one more offset found this way. With
-        ``track_offset``, the tracker restarts from it, its covariance the sample's ``S^-1 Cov S^-T``.
+        ``track_offset``, the tracker restarts from it, its covariance ``S^-1 Cov S^-T / n`` over the ``n`` samples.
+
+        Parameters
+        ----------
+        force : bool
+            Tare even where one of these samples reads as a contact: for an offset itself far off (a sensor
+            zeroed by its hardware reads its payload's wrench at the zero pose as a contact everywhere else),
+            the tool known to be free.
 
         Returns
         -------
@@ -703,19 +714,19 @@ class Compensator:
         Raises
         ------
         FmscalError
-            No sample compensated yet, or a contact detected at the newest one.
+            No sample compensated yet, or a contact detected at one of them (without ``force``).
         """
-        if self._last is None:
+        if not self._last:
             raise CompensationError("tare needs a compensated sample: push readings and poses until one comes out")
-        reading, W_p, A_inv, accel_var, contact = self._last
-        if contact:
-            raise CompensationError("tare refused: a contact is detected; tare with the tool free")
-        signed = self._parts.sign * reading
-        cov = self._parts.covariance(signed[None], A_inv, accel_var)[0]
+        found, cov, contact = (np.array(v) for v in zip(*self._last))
+        if contact.any() and not force:
+            raise CompensationError("tare refused: a contact is detected; tare with the tool free, or with "
+                                    "force=True where the offset itself is off (a sensor zeroed by its hardware)")
+        S_inv = np.linalg.inv(self._parts.S)
         if self._tracker is None:
-            self._parts.b = signed - np.linalg.solve(self._parts.S, W_p)
+            self._parts.b = found.mean(axis=0)
         else:
-            self._tracker.tare(signed, W_p, cov)
+            self._tracker.tare(found.mean(axis=0), S_inv @ cov.mean(axis=0) @ S_inv.T / len(found))
         return self.offset
 
     def _irregular(self, present):

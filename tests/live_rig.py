@@ -8,6 +8,7 @@ the environment applies to the tool while the motion is imposed: the mount then 
 
 import numpy as np
 
+from fmscal.analysis import compensate
 from fmscal.plant import Log
 
 
@@ -60,3 +61,45 @@ def with_push(log, S, wrench, start, duration):
     w = np.outer(ramp, np.asarray(wrench, dtype=float))
     return Log(log.t, log.pose, log.w_hat - np.linalg.solve(S, w.T).T, name=f"{log.name}-push",
                model=log._model), w
+
+
+#: The drift scenario's contact (15 N for 2 s from 30 s) and slow push (10 N over 10 s from 40 s).
+DRIFT_CONTACT = (30.0, 2.0)
+DRIFT_PUSH = (40.0, 10.0)
+
+
+def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal):
+    """The drift scenario on ``log`` (another log of the rig, moved onto the sensor ``(S, b)``): a drift
+    (:func:`with_drift`) and a 15 N contact of 2 s; the same with a slow push of 10 N over 10 s instead. Compensated
+    with ``track_offset`` at ``intensity`` (per channel, per sqrt(s)). Returns a dict: ``residual`` (rms after
+    the first 5 s outside the contact, per channel, over the noise times S), ``coverage`` (per channel: the
+    share of samples whose true offset is within the 95 % interval), ``contact_error`` (relative, the mean over
+    the contact's samples), ``contact_flagged``, ``push_taken`` (the share of the push's wrench the offset has
+    taken at its end: ``-(S Delta b) . w / |w|^2``, ``Delta b`` the offset estimate's error) and
+    ``push_flagged`` (the share of the push's samples flagged)."""
+    base = same_rig(log, log_S, log_b, S, b)
+    drifted, change = with_drift(base, S, seed=seed)
+    wrench = contact_wrench(15.0)
+    touched, on = with_contact(drifted, S, wrench, *DRIFT_CONTACT)
+    push = contact_wrench(10.0, direction=(0.0, 0.6, -0.8))
+    pushed, _ = with_push(drifted, S, push, *DRIFT_PUSH)
+    ref = noise_rms(log_S, wrench_sd)
+    out = {}
+    c = compensate(cal, touched, causal=causal, track_offset=True, drift_intensity=intensity)
+    idx = np.searchsorted(touched.t, np.round(c.t, 9))
+    truth = b + change[idx]
+    inside = on[idx]
+    quiet = (c.t > 5.0) & ~inside & ~((c.t >= DRIFT_CONTACT[0] - 0.1) & (c.t < sum(DRIFT_CONTACT) + 0.1))
+    out["residual"] = np.sqrt(np.mean(c.wrench[quiet] ** 2, axis=0)) / ref
+    out["coverage"] = np.mean(np.abs(c.offset - truth) <= 1.959964 * c.offset_sd, axis=0)
+    out["contact_error"] = np.linalg.norm(c.wrench[inside].mean(axis=0) - wrench) / np.linalg.norm(wrench)
+    out["contact_flagged"] = c.contact[inside].mean()
+    out["false_alarm"] = c.contact[quiet].mean()
+    p = compensate(cal, pushed, causal=causal, track_offset=True, drift_intensity=intensity)
+    idx = np.searchsorted(pushed.t, np.round(p.t, 9))
+    end = int(np.searchsorted(p.t, sum(DRIFT_PUSH))) - 1
+    error = S @ (p.offset[end] - (b + change[idx[end]]))
+    out["push_taken"] = float(-error @ push / (push @ push))
+    during = (p.t >= DRIFT_PUSH[0]) & (p.t < sum(DRIFT_PUSH))
+    out["push_flagged"] = p.contact[during].mean()
+    return out
