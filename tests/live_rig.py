@@ -3,7 +3,8 @@
 A scenario draws ``S`` and ``b`` with its seed; a calibration from one seed is used on another log of the
 same sensor by moving that log's readings onto the first sensor (:func:`same_rig`). A contact is a wrench
 the environment applies to the tool while the motion is imposed: the mount then applies ``W_p - w_c``
-(:func:`with_contact`).
+(:func:`with_contact`). The drift scenario of issue 38 (:func:`drift_run`): a temperature-like offset drift
+(:func:`with_drift`), a contact, and a slow push (:func:`with_push`).
 """
 
 import numpy as np
@@ -68,7 +69,7 @@ DRIFT_CONTACT = (30.0, 2.0)
 DRIFT_PUSH = (40.0, 10.0)
 
 
-def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal):
+def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal, push=True):
     """The drift scenario on ``log`` (another log of the rig, moved onto the sensor ``(S, b)``): a drift
     (:func:`with_drift`) and a 15 N contact of 2 s; the same with a slow push of 10 N over 10 s instead. Compensated
     with ``track_offset`` at ``intensity`` (per channel, per sqrt(s)). Returns a dict: ``residual`` (rms after
@@ -76,13 +77,11 @@ def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal):
     share of samples whose true offset is within the 95 % interval), ``contact_error`` (relative, the mean over
     the contact's samples), ``contact_flagged``, ``push_taken`` (the share of the push's wrench the offset has
     taken at its end: ``-(S Delta b) . w / |w|^2``, ``Delta b`` the offset estimate's error) and
-    ``push_flagged`` (the share of the push's samples flagged)."""
+    ``push_flagged`` (the share of the push's samples flagged); those two left out where ``push`` is False."""
     base = same_rig(log, log_S, log_b, S, b)
     drifted, change = with_drift(base, S, seed=seed)
     wrench = contact_wrench(15.0)
     touched, on = with_contact(drifted, S, wrench, *DRIFT_CONTACT)
-    push = contact_wrench(10.0, direction=(0.0, 0.6, -0.8))
-    pushed, _ = with_push(drifted, S, push, *DRIFT_PUSH)
     ref = noise_rms(log_S, wrench_sd)
     out = {}
     c = compensate(cal, touched, causal=causal, track_offset=True, drift_intensity=intensity)
@@ -95,6 +94,10 @@ def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal):
     out["contact_error"] = np.linalg.norm(c.wrench[inside].mean(axis=0) - wrench) / np.linalg.norm(wrench)
     out["contact_flagged"] = c.contact[inside].mean()
     out["false_alarm"] = c.contact[quiet].mean()
+    if not push:
+        return out
+    push = contact_wrench(10.0, direction=(0.0, 0.6, -0.8))
+    pushed, _ = with_push(drifted, S, push, *DRIFT_PUSH)
     p = compensate(cal, pushed, causal=causal, track_offset=True, drift_intensity=intensity)
     idx = np.searchsorted(pushed.t, np.round(p.t, 9))
     end = int(np.searchsorted(p.t, sum(DRIFT_PUSH))) - 1

@@ -181,7 +181,7 @@ def test_drift_scenario_targets():
         other, truth2, _ = ARM.generate(seed)
         sd = np.asarray(truth2.noise.wrench_sd, dtype=float)
         r = drift_run(cal, truth.S_at(0.0), truth.offset, other, truth2.S_at(0.0), truth2.offset, sd, seed,
-                      1.0 * sd, True)
+                      1.0 * sd, True, push=False)
         assert np.all(r["residual"] > 0.9) and np.all(r["residual"] < 2.0), (seed, r)
         assert 0.93 <= r["coverage"].mean() <= 0.97, (seed, r)
         assert r["contact_error"] < 0.1 and r["contact_flagged"] > 0.99, (seed, r)
