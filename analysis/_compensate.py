@@ -45,6 +45,32 @@ between poses). The differentiated velocity's noise and the filter's bias are no
 A sample is a contact where the compensated wrench is beyond its noise: its normalised squared norm
 ``d^2 = w_e^T Cov^-1 w_e`` above the chi-square quantile of ``n_w`` degrees of freedom (6 in 3D) at
 ``1 - false_alarm``                                                                          (C4)
+
+**The offset's drift** (``track_offset=True``). The offset is a random walk, one per reading channel::
+
+    b_k = b_{k-1} + n_k,    n_k ~ N(0, diag(q^2) (t_k - t_{k-1}))                                (D1)
+
+``q`` the drift's intensity (units per sqrt(s); default :data:`DRIFT_INTENSITY` times the reading's noise
+sd). Each sample first predicts ``P <- P + diag(q^2) dt``; the compensated wrench with the predicted offset,
+``w_e = W_p - S (sigma w_hat - b)``, is then the innovation of the measurement ``-w_e = S (b_true - b) + e``,
+with the covariance ``Cov_total = Cov + S P S^T`` (Cov of (C3)), the covariance published::
+
+    d^2 = w_e^T Cov_total^-1 w_e                                                                 (D2)
+
+is the contact test (C4). Where it is within the bound (no contact), a Kalman step::
+
+    K = P S^T Cov_total^-1,   b <- b - K w_e,   P <- (I - K S) P                                  (D3)
+
+During a contact the offset is frozen (its sd grows by (D1)), so a contact is not taken for drift; a push
+slower than the tracker's time constant is, in part: the intensity sets the trade-off
+(docs/guide/compensation.md). The offset and its sd are reported per sample (after the sample's step).
+
+**Tare** (:meth:`Compensator.tare`) re-biases at the newest compensated sample's pose::
+
+    b = sigma w_hat - S^-1 W_p(pose),   P = S^-1 Cov S^-T                                          (D4)
+
+the payload's own wrench at that pose restored, so the output does not jump beyond the noise. A sensor
+zeroed by its hardware at an unknown pose reads ``-S^-1 W_p`` of that pose off; (D4) at any pose finds it.
 """
 
 from collections import deque
@@ -66,7 +92,7 @@ from fmscal.observers.batch import smoothed_channels
 from ._calibrate import log_model_class
 
 __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
-           "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM"]
+           "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY"]
 
 #: The published wrench: the environment's on the tool (``w_e``, the default) or the tool's on the environment.
 DIRECTIONS = ("on_tool", "on_environment")
@@ -78,6 +104,10 @@ CAUSAL_DELAY = 0.03
 CAUSAL_ORDER = 3
 #: The contact test's false-alarm probability per sample (C4).
 FALSE_ALARM = 1e-3
+#: The offset's random walk (D1): its default intensity per channel, per sqrt(s), in the reading's noise sd.
+DRIFT_INTENSITY = 1.0
+#: Tare (D4): the span of the newest compensated samples it averages, s.
+TARE_WINDOW = 0.1
 
 
 class CompensationError(FmscalError):
@@ -110,6 +140,9 @@ class Compensation:
     direction : str
         One of :data:`DIRECTIONS`.
     warnings : list of str
+    offset, offset_sd : ndarray, shape (N, n_w), or None
+        ``track_offset``: the offset ``b`` (the reading's units) after each sample's step (D3), and its sd;
+        None otherwise.
     """
 
     t: np.ndarray
@@ -122,6 +155,8 @@ class Compensation:
     delay: float
     direction: str
     warnings: list = field(default_factory=list)
+    offset: np.ndarray = None
+    offset_sd: np.ndarray = None
 
     @property
     def sd(self):
@@ -257,17 +292,94 @@ class _Parts:
             self.cov4 = cov.reshape(n, self.m, n, self.m)
         self.threshold = float(chi2.ppf(1.0 - false_alarm, n))
 
-    def finish(self, w_hat, W_p, A_inv, accel_var):
-        """(C1), (C3), (C4) for rows of readings ``w_hat`` (N, n_w) and payload wrenches ``W_p``."""
-        signed = self.sign * w_hat
-        w_e = W_p - (signed - self.b) @ self.S.T
+    def covariance(self, signed, A_inv, accel_var):
+        """(C3) for rows of signed readings ``signed`` (N, n_w)."""
         cov = self.reading_cov + np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv)
         if self.cov4 is not None:
             u = np.concatenate([signed, np.ones((len(signed), 1))], axis=1) if self.m == self.n + 1 \
                 else signed - self.b
             cov = cov + np.einsum("na,iajb,nb->nij", u, self.cov4, u)
+        return cov
+
+    def offset_cov(self):
+        """The calibration's covariance of ``b`` (``c = -S b``: ``S^-1 Cov(c) S^-T``), zero where it holds none."""
+        if self.cov4 is None or self.m != self.n + 1:
+            return np.zeros((self.n, self.n))
+        S_inv = np.linalg.inv(self.S)
+        return S_inv @ self.cov4[:, self.n, :, self.n] @ S_inv.T
+
+    def finish(self, w_hat, W_p, A_inv, accel_var, tracker=None, t=None):
+        """(C1), (C3), (C4) for rows of readings ``w_hat`` (N, n_w) and payload wrenches ``W_p``; with an
+        :class:`_OffsetTracker`, (D1)-(D3) sample by sample at times ``t``, and its offsets and sds."""
+        signed = self.sign * w_hat
+        cov = self.covariance(signed, A_inv, accel_var)
+        if tracker is not None:
+            steps = [tracker.step(ti, si, wi, ci) for ti, si, wi, ci in zip(t, signed, W_p, cov)]
+            w_e, cov, statistic, b, b_sd = (np.array(v) for v in zip(*steps))
+            return self.out_sign * w_e, cov, statistic > self.threshold, statistic, b, b_sd
+        w_e = W_p - (signed - self.b) @ self.S.T
         statistic = np.einsum("ni,ni->n", w_e, np.linalg.solve(cov, w_e[..., None])[..., 0])
         return self.out_sign * w_e, cov, statistic > self.threshold, statistic
+
+
+class _OffsetTracker:
+    """The offset as a random walk (D1), stepped by (D2)-(D3) on each sample; the one implementation of both
+    paths. ``intensity`` per channel, the reading's units per sqrt(s); ``P0`` the initial covariance."""
+
+    def __init__(self, parts, intensity, P0):
+        self.parts, self.S = parts, parts.S
+        self.q2 = np.square(intensity)
+        self.b = np.array(parts.b if parts.b is not None else np.zeros(parts.n), dtype=float)
+        self.P = np.array(P0, dtype=float)
+        self.t = None
+
+    def step(self, t, signed, W_p, cov):
+        """One sample: ``(w_e, Cov_total, d^2, b, sd(b))``, ``w_e`` with the predicted offset (D2)."""
+        if self.t is not None:
+            self.P = self.P + np.diag(self.q2 * max(t - self.t, 0.0))                          # (D1)
+        self.t = t
+        w_e = W_p - self.S @ (signed - self.b)
+        SP = self.S @ self.P
+        total = cov + SP @ self.S.T
+        total = 0.5 * (total + total.T)
+        solved = np.linalg.solve(total, np.c_[w_e, SP])                                        # (D2)
+        statistic = float(w_e @ solved[:, 0])
+        if statistic <= self.parts.threshold:                                                  # (D3)
+            K = solved[:, 1:].T                                                                # P S^T total^-1
+            self.b = self.b - K @ w_e
+            self.P = self.P - K @ SP
+            self.P = 0.5 * (self.P + self.P.T)
+        return w_e, total, statistic, self.b.copy(), np.sqrt(np.maximum(np.diag(self.P), 0.0))
+
+    def tare(self, b, P):
+        """Restart from the offset ``b`` of covariance ``P`` (D4)."""
+        self.b, self.P = np.array(b, dtype=float), np.array(P, dtype=float)
+
+
+def _tracker(parts, noise, track_offset, drift_intensity, offset_sd):
+    """The offset tracker of ``track_offset`` (None where off), its settings checked."""
+    if not isinstance(track_offset, bool):
+        raise CompensationError(f"track_offset must be True or False; got {track_offset!r}")
+    if not track_offset:
+        if drift_intensity is not None or offset_sd is not None:
+            raise CompensationError("drift_intensity and offset_sd are the offset tracker's: add track_offset=True")
+        return None
+    values = {}
+    for name, value, default in (("drift_intensity", drift_intensity,
+                                  DRIFT_INTENSITY * np.asarray(noise.wrench_sd, dtype=float)),
+                                 ("offset_sd", offset_sd, None)):
+        if value is None:
+            values[name] = default
+            continue
+        v = np.broadcast_to(np.asarray(value, dtype=float), (parts.n,)) if np.ndim(value) == 0 \
+            else np.asarray(value, dtype=float)
+        if v.shape != (parts.n,) or not np.isfinite(v).all() or (v < 0).any():
+            raise CompensationError(f"{name} must be one or {parts.n} non-negative numbers (per channel, the "
+                                    f"reading's units{' per sqrt(s)' if name == 'drift_intensity' else ''}); "
+                                    f"got {value!r}")
+        values[name] = v
+    P0 = parts.offset_cov() if values["offset_sd"] is None else np.diag(np.square(values["offset_sd"]))
+    return _OffsetTracker(parts, values["drift_intensity"], P0)
 
 
 def _causal_coefficients(k, order, lead, dt):
@@ -313,7 +425,8 @@ def _noise(calibration, noise, log=None):
 
 # --- offline ---------------------------------------------------------------------------------------------------
 def compensate(calibration, log, causal=False, *, payload=None, direction="on_tool", noise=None,
-               window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM):
+               window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM, track_offset=False,
+               drift_intensity=None, offset_sd=None):
     """The contact wrench of a log: ``w_e = W_p - S (sigma w_hat - b)`` (C1), its covariance and a contact flag.
 
     Parameters
@@ -343,6 +456,14 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         Causal: the polynomial's degree.
     false_alarm : float
         The contact test's false-alarm probability per sample (C4).
+    track_offset : bool
+        Follow the offset's drift (D1)-(D3): updated on the samples with no contact, frozen during one.
+    drift_intensity : float or array_like of n_w floats, optional
+        ``track_offset``: the random walk's intensity ``q`` per channel, the reading's units per sqrt(s);
+        default :data:`DRIFT_INTENSITY` times the reading's noise sd.
+    offset_sd : float or array_like of n_w floats, optional
+        ``track_offset``: the initial offset's sd (e.g. large for a sensor zeroed at an unknown pose);
+        default the calibration's covariance of ``b`` (zero where it holds none).
 
     Returns
     -------
@@ -361,6 +482,7 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     model = compensation_model(calibration, payload, log_model_class(log))
     noise = _noise(calibration, noise, log)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
+    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd)
     latency = calibration.latency or 0.0
     aligned = log
     if latency != 0:                     # each pose at the time it was taken; the rows after the last one dropped
@@ -380,7 +502,8 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         window = CAUSAL_WINDOW if window is None else window
         k, L, lead = _causal_settings(window, delay, order, aligned.dt, latency)
         if not aligned.has_pose.all():
-            return _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts)
+            return _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts,
+                              dict(track_offset=track_offset, drift_intensity=drift_intensity, offset_sd=offset_sd))
         coefficients = _causal_coefficients(k, order, lead, aligned.dt)
         c2 = coefficients[2]
         P = [_causal_filter(aligned.pose, c) for c in coefficients]         # read at sample n - lead
@@ -391,10 +514,11 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         t, w_hat, lag = aligned.t[rows], aligned.w_hat[rows], round(L * aligned.dt, 12)
     W_p, A_inv = _payload_wrench(model, x, a)
     accel_var = _configuration_variance(model, noise, aligned.pose[np.argmax(aligned.has_pose)]) * np.sum(c2 ** 2)
-    wrench, cov, contact, statistic = parts.finish(w_hat, W_p, A_inv, accel_var)
+    wrench, cov, contact, statistic, *offset = parts.finish(w_hat, W_p, A_inv, accel_var, tracker, t)
+    offset, offset_sd = offset if offset else (None, None)
     return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
                         threshold=parts.threshold, names=parts.names, delay=float(lag), direction=direction,
-                        warnings=list(parts.warnings))
+                        warnings=list(parts.warnings), offset=offset, offset_sd=offset_sd)
 
 
 def _causal_filter(values, c):
@@ -418,10 +542,10 @@ def _smoothed_motion(log, model, window):
     return _state(model, q, v, a)
 
 
-def _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts):
+def _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts, tracking):
     """The causal path of a log with missing poses: :class:`Compensator` fed it sample by sample."""
     stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
-                         window=window, delay=delay, order=order, false_alarm=false_alarm)
+                         window=window, delay=delay, order=order, false_alarm=false_alarm, **tracking)
     out = [stream.push(t, w, p) for t, w, p in zip(log.t, log.w_hat, log.pose)]
     out = [o for o in out if o is not None]
     if not out:
@@ -430,7 +554,9 @@ def _by_stream(calibration, log, model, noise, direction, window, delay, order, 
                         cov=np.array([o.cov for o in out]), contact=np.array([o.contact for o in out]),
                         statistic=np.array([o.statistic for o in out]), threshold=parts.threshold,
                         names=parts.names, delay=stream.delay, direction=direction,
-                        warnings=list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"])
+                        warnings=list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"],
+                        offset=None if out[0].offset is None else np.array([o.offset for o in out]),
+                        offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]))
 
 
 # --- streaming --------------------------------------------------------------------------------------------------
@@ -446,6 +572,8 @@ class ContactSample:
     cov : ndarray, shape (n_w, n_w)
     contact : bool
     statistic : float
+    offset, offset_sd : ndarray, shape (n_w,), or None
+        ``track_offset``: the offset after this sample's step (D3) and its sd; None otherwise.
     """
 
     t: float
@@ -453,6 +581,8 @@ class ContactSample:
     cov: np.ndarray
     contact: bool
     statistic: float
+    offset: np.ndarray = None
+    offset_sd: np.ndarray = None
 
 
 class Compensator:
@@ -468,17 +598,21 @@ class Compensator:
     calibration : plant.Calibration
     dt : float
         The sample time, s (the readings' rate; a pose may come with any of them).
-    payload, direction, noise, window, delay, order, false_alarm
+    payload, direction, noise, window, delay, order, false_alarm, track_offset, drift_intensity, offset_sd
         As for :func:`compensate` (``noise`` default the calibration's: required where it has none).
     """
 
     def __init__(self, calibration, dt, *, payload=None, direction="on_tool", noise=None, window=CAUSAL_WINDOW,
-                 delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM):
+                 delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM, track_offset=False,
+                 drift_intensity=None, offset_sd=None):
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise CompensationError(f"dt must be a positive number of seconds; got {dt!r}")
         self.model = compensation_model(calibration, payload)
         noise = _noise(calibration, noise)
         self._parts = _Parts(calibration, self.model, noise, direction, false_alarm)
+        self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd)
+        # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
+        self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
         latency = calibration.latency or 0.0
         self.dt, self.order, self._noise = float(dt), order, noise
         self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, latency)
@@ -544,8 +678,56 @@ class Compensator:
             P, c2_sq = fitted
         x, a = _state(self.model, P[0:1], P[1:2], P[2:3])
         W_p, A_inv = _payload_wrench(self.model, x, a)
-        wrench, cov, contact, statistic = self._parts.finish(reading[None], W_p, A_inv, self._accel_var * c2_sq)
-        return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]))
+        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv,
+                                                                      self._accel_var * c2_sq, self._tracker, [t0])
+        signed = self._parts.sign * reading
+        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]),
+                           self._parts.covariance(signed[None], A_inv, self._accel_var * c2_sq)[0], bool(contact[0])))
+        offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
+        return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]), offset, offset_sd)
+
+    @property
+    def offset(self):
+        """The offset ``b`` in use (the reading's units): the tracker's, a tare's or the calibration's."""
+        return (self._tracker.b if self._tracker is not None else np.asarray(self._parts.b, dtype=float)).copy()
+
+    def tare(self, force=False):
+        """Re-bias at the current pose (D4): ``b = sigma w_hat - S^-1 W_p(pose)``, the mean over the newest
+        compensated samples (:data:`TARE_WINDOW`, fewer where fewer came out), its covariance that of a mean.
+
+        The payload's own wrench at that pose is restored, so the output does not jump beyond the noise; a
+        sensor zeroed by its hardware at an unknown pose is one more offset found this way. With
+        ``track_offset``, the tracker restarts from it, its covariance ``S^-1 Cov S^-T / n`` over the ``n`` samples.
+
+        Parameters
+        ----------
+        force : bool
+            Tare even where one of these samples reads as a contact: for an offset itself far off (a sensor
+            zeroed by its hardware reads its payload's wrench at the zero pose as a contact everywhere else),
+            the tool known to be free.
+
+        Returns
+        -------
+        ndarray, shape (n_w,)
+            The new offset.
+
+        Raises
+        ------
+        FmscalError
+            No sample compensated yet, or a contact detected at one of them (without ``force``).
+        """
+        if not self._last:
+            raise CompensationError("tare needs a compensated sample: push readings and poses until one comes out")
+        found, cov, contact = (np.array(v) for v in zip(*self._last))
+        if contact.any() and not force:
+            raise CompensationError("tare refused: a contact is detected; tare with the tool free, or with "
+                                    "force=True where the offset itself is off (a sensor zeroed by its hardware)")
+        S_inv = np.linalg.inv(self._parts.S)
+        if self._tracker is None:
+            self._parts.b = found.mean(axis=0)
+        else:
+            self._tracker.tare(found.mean(axis=0), S_inv @ cov.mean(axis=0) @ S_inv.T / len(found))
+        return self.offset
 
     def _irregular(self, present):
         """The polynomial fitted to the poses the window holds; ``(P, sum c2^2)``, or None where they are too few

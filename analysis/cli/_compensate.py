@@ -9,7 +9,8 @@ import numpy as np
 from fmscal.plant import Calibration, read_log
 from fmscal.observers.payload import PayloadEstimate
 
-from .._compensate import CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, OFFLINE_WINDOW, compensate, compensation_model
+from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, OFFLINE_WINDOW, compensate,
+                           compensation_model)
 from ._common import CliError
 from ._files import atomic_write_text, check_outputs
 
@@ -41,6 +42,13 @@ def add_compensate(sub):
                         "calibration's (a tool change: S does not depend on the tool)")
     p.add_argument("--on-environment", action="store_true",
                    help="write the wrench the tool applies to the environment (-w_e) instead")
+    p.add_argument("--track-offset", action="store_true",
+                   help="follow the offset's drift: a random walk updated on the samples with no contact (frozen "
+                        "during one); adds the columns b_<channel> and b_sd_<channel>, the offset in the reading's "
+                        "units and its sd")
+    p.add_argument("--drift-intensity", metavar="Q[,Q...]",
+                   help=f"--track-offset: the random walk's intensity, the reading's units per sqrt(s), one value or "
+                        f"one per channel (default {DRIFT_INTENSITY:g} x the reading's noise sd)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CONTACT.csv (never an input)")
     p.set_defaults(func=cmd_compensate)
 
@@ -71,15 +79,28 @@ def cmd_compensate(args):
     log = read_log(args.log)
     if not args.causal and args.delay != CAUSAL_DELAY:
         raise CliError("--delay is the causal path's: add --causal")
+    intensity = None
+    if args.drift_intensity is not None:
+        if not args.track_offset:
+            raise CliError("--drift-intensity is the offset tracker's: add --track-offset")
+        try:
+            intensity = [float(v) for v in args.drift_intensity.split(",")]
+        except ValueError:
+            raise CliError(f"--drift-intensity takes numbers separated by commas; got {args.drift_intensity}") from None
+        intensity = intensity[0] if len(intensity) == 1 else intensity
     result = compensate(calibration, log, causal=args.causal, payload=payload, window=args.window,
-                        delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0])
+                        delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
+                        track_offset=args.track_offset, drift_intensity=intensity)
     if not np.isfinite(result.wrench).all():
         raise CliError("the compensated wrench is not finite (overflow): the calibration's S or b is far outside "
                        "any sensor's range: nothing written")
     text = io.StringIO()
-    text.write(",".join(("t", *result.names, "contact")) + "\n")
-    for t, w, c in zip(result.t, result.wrench, result.contact):
-        text.write(",".join(repr(float(v)) for v in (t, *w)) + f",{int(c)}\n")
+    extra = () if result.offset is None else (*(f"b_{n}" for n in result.names),
+                                              *(f"b_sd_{n}" for n in result.names))
+    text.write(",".join(("t", *result.names, "contact", *extra)) + "\n")
+    for i, (t, w, c) in enumerate(zip(result.t, result.wrench, result.contact)):
+        tail = "" if not extra else "," + ",".join(repr(float(v)) for v in (*result.offset[i], *result.offset_sd[i]))
+        text.write(",".join(repr(float(v)) for v in (t, *w)) + f",{int(c)}{tail}\n")
     atomic_write_text(args.out, text.getvalue())
     for warning in result.warnings:
         print(f"fmscal compensate: warning: {warning}", file=sys.stderr)
@@ -89,3 +110,6 @@ def cmd_compensate(args):
           f"{'causal, delay ' + format(result.delay * 1e3, '.3g') + ' ms' if args.causal else 'offline'}; "
           f"contact at {int(result.contact.sum())} samples ({100 * result.contact.mean():.2g} %)")
     print("rms " + ", ".join(f"{n} {v:.3g}" for n, v in zip(result.names, rms)))
+    if result.offset is not None:
+        print("offset at the end " + ", ".join(f"{n} {v:.4g} +- {s:.2g}" for n, v, s in
+                                               zip(result.names, result.offset[-1], result.offset_sd[-1])))
