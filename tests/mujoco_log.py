@@ -16,7 +16,7 @@ same motion, noise and sensor: the two logs differ only by the engine.
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fmscal.plant import Log
+from fmscal.plant import Log, SpatialModel
 from fmscal.plant.scenarios._spatial import draw_spatial_S
 
 SUBSTEPS = 10
@@ -35,7 +35,7 @@ def mujoco_model(payload, gravity, dt):
         f'<actuator>{motors}</actuator></mujoco>')
 
 
-def mujoco_log(scenario, seed):
+def mujoco_log(scenario, seed, latency=0.0):
     """A log of ``scenario``'s motion as MuJoCo integrates it; ``(log, S, b)``.
 
     Parameters
@@ -43,6 +43,10 @@ def mujoco_log(scenario, seed):
     scenario : plant.SpatialScenario
         A scenario with a pose at every sample, no latency and no dropped frames.
     seed : int
+    latency : float
+        s, of either sign: the pose stream this late, each pose that of ``t - latency`` interpolated
+        (:meth:`fmscal.plant.SpatialModel.interpolate_pose`) before its noise is drawn, as a late pose stream
+        is measured; the rows with no pose of their own dropped.
 
     Returns
     -------
@@ -73,7 +77,12 @@ def mujoco_log(scenario, seed):
     sd = np.r_[[scenario.torque_sd] * 3, [scenario.force_sd] * 3]
     w_hat = np.linalg.solve(S, wrench.T).T + b + rng.standard_normal((n, 6)) * sd
     pose = np.c_[qpos[:, 3:7], qpos[:, 0:3]]                                # log order: q, p
+    t = np.arange(n) * dt
+    if latency:
+        rows = np.flatnonzero((t - latency >= t[0]) & (t - latency <= t[-1]))
+        pose = SpatialModel.interpolate_pose(t[rows] - latency, t, pose)
+        t, w_hat, n = t[rows], w_hat[rows], len(rows)
     turn = Rotation.from_rotvec(rng.standard_normal((n, 3)) * scenario.angle_sd)
     pose[:, :4] = np.roll((Rotation.from_quat(np.roll(pose[:, :4], -1, axis=1)) * turn).as_quat(), 1, axis=1)
     pose[:, 4:] += rng.standard_normal((n, 3)) * scenario.position_sd
-    return Log(np.arange(n) * dt, pose, w_hat, name=f"mujoco-{scenario.name}-seed{seed}"), S, b
+    return Log(t, pose, w_hat, name=f"mujoco-{scenario.name}-seed{seed}"), S, b
