@@ -1,0 +1,234 @@
+"""The ROS 2 node (``fmscal ros2``, fmscal.analysis.ros2) on real ROS 2: the node in a subprocess, a publisher
+and a subscriber in this process, over DDS on loopback (tests/ros2_rig.py: a ROS domain per test, discovery on
+this machine only, every wait bounded, the node stopped in a ``finally``).
+
+The replayed logs are spatial-arm's at 1 kHz, compensated with a calibration holding the scenario's truth: the
+node's output is compared with ``compensate(..., causal=True)`` on the same log.
+"""
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from fmscal.analysis import Compensator, compensate
+from fmscal.analysis.cli import main
+from fmscal.analysis.ros2 import PARAMETERS, Pipeline, settings
+from fmscal.plant import SPATIAL_SCENARIOS, Calibration, SpatialModel
+from live_rig import contact_wrench, noise_rms, with_contact
+from ros2_rig import Peer, contact_array, domain_id, node_command, node_log, running_node, truth_calibration
+
+ARM = SPATIAL_SCENARIOS["spatial-arm"]
+
+
+@pytest.fixture(scope="module")
+def arm():
+    scenario = ARM.with_(duration=2.0)
+    log, truth, _ = scenario.generate(5)
+    return scenario, log, truth, truth_calibration(scenario, truth)
+
+
+@pytest.fixture
+def cal_file(arm, tmp_path):
+    path = tmp_path / "cal.json"
+    arm[3].save(path)
+    return path
+
+
+def _node(request, cal, *extra):
+    """The node of this test's domain, with the pose source and reliable inputs."""
+    return running_node(domain_id(request.node.name), f"calibration:={cal}", "pose_topic:=/ft_sensor/pose",
+                        "qos:=reliable", *extra)
+
+
+def _expected_count(reference, log, last):
+    """The outputs of the readings up to row ``last``: those compensate(causal) gives whose reading is out
+    (the causal filter's delay behind row ``last``)."""
+    return int(np.sum(reference.t <= log.t[last] - reference.delay + 1e-9))
+
+
+# --- without ROS: the pieces the node runs ----------------------------------------------------------------------
+def test_push_many_is_push_row_by_row(arm):
+    """Compensator.push_many (the node's backlog as one block) gives push's samples, with missing poses and the
+    offset tracker in play, the tare after them the same."""
+    scenario, log, truth, _ = arm
+    cal = truth_calibration(scenario, truth, cov=np.eye(42) * 1e-6)
+    log = log.head(700)
+    pose = log.pose.copy()
+    pose[300:304] = np.nan
+    one, block = Compensator(cal, log.dt, track_offset=True), Compensator(cal, log.dt, track_offset=True)
+    ref = [o for o in (one.push(t, w, None if np.isnan(p).any() else p)
+                       for t, w, p in zip(log.t, log.w_hat, pose)) if o is not None]
+    out, sizes = [], np.random.default_rng(0).integers(1, 40, size=100)
+    for start, stop in zip(np.r_[0, np.cumsum(sizes)], np.cumsum(sizes)):
+        out += block.push_many(log.t[start:stop], log.w_hat[start:stop], pose[start:stop])
+    assert len(out) == len(ref) > 600
+    assert [o.t for o in out] == [o.t for o in ref]
+    np.testing.assert_allclose([o.wrench for o in out], [o.wrench for o in ref], atol=1e-10)
+    np.testing.assert_allclose([o.cov for o in out], [o.cov for o in ref], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose([o.offset for o in out], [o.offset for o in ref], atol=1e-12)
+    np.testing.assert_allclose(block.tare(), one.tare(), atol=1e-12)
+
+
+def _settings(cal_file, **values):
+    v = {p.name: p.default for p in PARAMETERS}
+    v.update(calibration=str(cal_file), pose_topic="/p", **values)
+    return settings(v)
+
+
+def test_pipeline_interpolates_poses_at_the_readings_stamps(arm, cal_file):
+    """Poses at 500 Hz, stamped 0.4 ms off the readings' grid, SLERPed at each reading's stamp: the output is
+    the causal compensation of the log (all poses) within a fraction of the noise (rms); readings wait for the
+    poses."""
+    scenario, log, truth, cal = arm
+    log = log.head(800)
+    pipeline = Pipeline(_settings(cal_file))
+    out = []
+    for i, (t, w) in enumerate(zip(log.t, log.w_hat)):
+        if i % 2 == 0 and i >= 2:                      # the pose of row i - 2, stamped 0.4 ms after it: late
+            pipeline.add_motion(log.t[i - 2] + 0.0004, SpatialModel.interpolate_pose(
+                np.array([log.t[i - 2] + 0.0004]), log.t, log.pose)[0])
+        pipeline.add_reading(t, w)
+        out += pipeline.process()
+    reference = compensate(cal, log, causal=True)
+    t = np.array([o.sample.t for o in out])
+    common, i, j = np.intersect1d(np.round(reference.t, 9), np.round(t, 9), return_indices=True)
+    assert len(common) > 0.95 * len(reference.t)
+    difference = np.array([o.sample.wrench for o in out])[j] - reference.wrench[i]
+    error = np.sqrt(np.mean(difference ** 2, axis=0)) / noise_rms(truth.S_at(0.0), truth.noise.wrench_sd)
+    assert np.all(error < 0.3) and np.all(error > 0.01), error        # half the poses, interpolated: not equal
+    assert pipeline.backlog() <= 3
+
+
+def test_parameters_refused_in_one_line(cal_file):
+    """Not exactly one motion source, an option not among its choices: one line naming the parameter."""
+    with pytest.raises(Exception, match="exactly one motion source"):
+        _settings(cal_file, imu_topic="/imu")
+    with pytest.raises(Exception, match="parameter qos must be one of sensor_data, reliable"):
+        _settings(cal_file, qos="best")
+    with pytest.raises(Exception, match="drift_intensity is the offset tracker's"):
+        _settings(cal_file, drift_intensity=[0.1])
+
+
+# --- the node, on ROS 2 -----------------------------------------------------------------------------------------
+def _run(*args, **kw):
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=60, **kw)
+
+
+def test_a_missing_calibration_exits_with_one_line():
+    """``fmscal ros2`` without a calibration: exit status 2 and one line on stderr, no traceback."""
+    done = _run(*node_command("pose_topic:=/ft_sensor/pose")[1:])
+    assert done.returncode == 2
+    assert done.stderr.strip() == ("fmscal ros2: error: parameter calibration is required: a file saved by fmscal "
+                                   "calibrate --save (--ros-args -p calibration:=CAL.json)")
+
+
+def test_without_rclpy_one_line_names_the_install(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "rclpy", None)              # import rclpy now fails, as where it is missing
+    assert main(["ros2", "--ros-args", "-p", "calibration:=x.json"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert 'pip install "fmscal[ros2]"' in err and "source a ROS 2 install" in err
+
+
+def test_replay_every_reading_out(request, arm, tmp_path):
+    """1.5 s of the log at 1 kHz with a 15 N contact: every reading the causal filter covers comes out, with
+    its stamp and frame, as compensate(causal=True) gives it (the same numbers: the poses share the readings'
+    stamps), the contact flagged where it is; the covariance topic carries each output's, force first."""
+    scenario, log, truth, cal = arm
+    log = log.head(1500)
+    touched, on = with_contact(log, truth.S_at(0.0), contact_wrench(), 0.8, 0.4)
+    cal.save(tmp_path / "cal.json")
+    reference = compensate(cal, touched, causal=True)
+    with _node(request, tmp_path / "cal.json") as proc:
+        peer = Peer(domain_id(request.node.name))
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay(touched)
+            n = _expected_count(reference, touched, len(touched) - 1)
+            assert peer.wait_for(lambda: len(peer.contacts) >= n and len(peer.covariances) >= n, 10), \
+                (len(peer.contacts), n, node_log(proc)[-1000:])
+            time.sleep(0.1)
+        finally:
+            peer.close()
+    t, wrench = contact_array(peer.contacts, epoch)
+    assert len(t) == n and np.all(np.diff(t) > 0)
+    np.testing.assert_allclose(t, np.round(reference.t[:n], 6), atol=1e-9)
+    np.testing.assert_allclose(wrench, reference.wrench[:n], atol=1e-7)
+    assert {m.header.frame_id for m in peer.contacts} == {"ft_sensor"}
+    inside = (t > 0.85) & (t < 1.15)
+    assert np.linalg.norm(wrench[inside].mean(axis=0)[3:]) == pytest.approx(15.0, rel=0.1)
+    force_first = [3, 4, 5, 0, 1, 2]
+    cov = np.array([m.data for m in peer.covariances]).reshape(-1, 6, 6)
+    np.testing.assert_allclose(cov, reference.cov[:n][:, force_first][:, :, force_first], rtol=1e-6)
+    assert peer.covariances[0].layout.dim[0].label == "fx fy fz tx ty tz"
+
+
+def test_tare(request, arm, tmp_path):
+    """A calibration whose offset is off by 1 sd per channel: the output's mean sits at S delta; ~/tare
+    re-biases, and from then on the mean is zero within the noise (a contact threshold of 1e-6: no sample of
+    the tare's window is taken for a contact)."""
+    scenario, log, truth, cal = arm
+    S = truth.S_at(0.0)
+    delta = 1.0 * np.asarray(truth.noise.wrench_sd)
+    Calibration(**{**{k: getattr(cal, k) for k in ("S", "payload", "method", "gravity", "latency", "noise")},
+                   "b": cal.b + delta}).save(tmp_path / "cal.json")
+    noise = noise_rms(S, truth.noise.wrench_sd)
+    with _node(request, tmp_path / "cal.json", "contact_threshold:=1e-6") as proc:
+        peer = Peer(domain_id(request.node.name))
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay(log.head(700))
+            assert peer.wait_for(lambda: len(peer.contacts) >= 640, 10)
+            before = len(peer.contacts)
+            ok, message = peer.call("tare")
+            assert ok and message.startswith("tared: offset "), message
+            peer.replay(log.head(1400), start=700, epoch=epoch)
+            assert peer.wait_for(lambda: len(peer.contacts) >= 1340, 10)
+        finally:
+            peer.close()
+    t, wrench = contact_array(peer.contacts, epoch)
+    shift = S @ delta
+    assert np.all(np.abs(wrench[100:before].mean(axis=0) - shift) < 0.25 * noise), (wrench[:before].mean(0), shift)
+    after = t > 0.8
+    assert np.all(np.abs(wrench[after].mean(axis=0)) < 0.25 * noise), wrench[after].mean(axis=0) / noise
+
+
+def test_tare_refused_during_a_contact(request, arm, cal_file):
+    """A contact at the end of the replay: ~/tare refuses, and says why."""
+    scenario, log, truth, cal = arm
+    touched, _ = with_contact(log.head(600), truth.S_at(0.0), contact_wrench(), 0.3, 1.0)
+    with _node(request, cal_file) as proc:
+        peer = Peer(domain_id(request.node.name))
+        try:
+            peer.wait_for_node(proc)
+            peer.replay(touched)
+            assert peer.wait_for(lambda: len(peer.contacts) >= 541, 10), (len(peer.contacts), node_log(proc)[-1500:])
+            ok, message = peer.call("tare")
+        finally:
+            peer.close()
+    assert not ok
+    assert message == "tare refused: a contact is detected; tare with the tool free"
+
+
+def test_stale_motion_stops_the_output(request, arm, cal_file):
+    """The poses stop at row 500 of 900: the outputs stop at the last reading the poses reach, the diagnostics
+    say "motion stale" and the log warns."""
+    scenario, log, truth, cal = arm
+    log = log.head(900)
+    with _node(request, cal_file, "stale_timeout:=0.05") as proc:
+        peer = Peer(domain_id(request.node.name))
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay(log, poses=np.arange(len(log)) < 500)
+            assert peer.wait_for(lambda: any(s.message == "motion stale" for d in peer.diagnostics
+                                             for s in d.status), 3), [d.status[0].message for d in peer.diagnostics]
+            time.sleep(0.2)
+            text = node_log(proc)
+        finally:
+            peer.close()
+    t, _ = contact_array(peer.contacts, epoch)
+    assert t[-1] == pytest.approx(log.t[499], abs=1e-9) and len(t) == 500 - 29, (t[-1], len(t), t[:3], np.diff(t).max())
+    assert "motion stale: /ft_sensor/pose has no sample within 0.05 s" in text
