@@ -184,12 +184,13 @@ class Peer:
             time.sleep(0.02)
         return False
 
-    def call(self, service, timeout=WAIT):
+    def call(self, service, timeout=WAIT, proc=None):
         """Call a Trigger service of the node; ``(success, message)``."""
         client = self.clients[service]
         assert client.wait_for_service(timeout_sec=timeout), f"~/{service} not found"
         future = client.call_async(Trigger.Request())
-        assert self.wait_for(future.done, timeout), f"~/{service}: no answer in {timeout} s"
+        assert self.wait_for(future.done, timeout), \
+            f"~/{service}: no answer in {timeout} s{'' if proc is None else ': ' + node_log(proc)[-1500:]}"
         result = future.result()
         return result.success, result.message
 

@@ -109,6 +109,7 @@ class CompensatorNode:
         self._epoch = None
         self._last_warned = {}
         self._latencies = []
+        self._entered = time.monotonic()
         s = self.settings
         services = r.Group()
         depth = int(s.queue_depth)
@@ -201,6 +202,7 @@ class CompensatorNode:
         return out
 
     def _on_wrench(self, msg):
+        self._entered = time.monotonic()
         for m in self._queued(self._motion_sub):
             self._motion_message(m)
         for m in [msg, *self._queued(self._wrench_sub)]:
@@ -208,6 +210,7 @@ class CompensatorNode:
         self._process()
 
     def _on_motion(self, msg):
+        self._entered = time.monotonic()
         for m in [msg, *self._queued(self._motion_sub)]:
             self._motion_message(m)
         self._process()
@@ -288,7 +291,7 @@ class CompensatorNode:
             del self._latencies[:LATENCY_KEPT // 2]
         if self.latency_pub is not None:
             debug = self.r.Array()
-            debug.data = [since, time.monotonic() - out.arrival, float(self.pipeline.backlog())]
+            debug.data = [since, time.monotonic() - self._entered, float(self.pipeline.backlog())]
             self.latency_pub.publish(debug)
 
     def _warn(self, key, message):
@@ -306,7 +309,10 @@ class CompensatorNode:
                 response.success = False
                 first = str(err).splitlines()[0] if str(err) else ""
                 response.message = f"{name} failed: {type(err).__name__}: {first}"
-            (self.log.info if response.success else self.log.warning)(f"~/{name}: {response.message}")
+            if response.success:            # (rclpy refuses two severities from one line)
+                self.log.info(f"~/{name}: {response.message}")
+            else:
+                self.log.warning(f"~/{name}: {response.message}")
             return response
         return serve
 

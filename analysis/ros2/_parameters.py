@@ -103,7 +103,8 @@ PARAMETERS = (
     Parameter("identify_buffer", "double", 120.0, "s, the motion and readings ~/identify_payload keeps, the newest"),
     Parameter("diagnostics_period", "double", 1.0, "s between two diagnostics on /diagnostics"),
     Parameter("debug_latency", "bool", False, "publish ~/latency (std_msgs/Float64MultiArray per output: s from "
-              "the reading's stamp to the output's publication, s from its arrival, the readings waiting)"),
+              "the reading's stamp to the output's publication, s from the start of the callback that published "
+              "it, the readings waiting)"),
 )
 
 

@@ -95,6 +95,7 @@ class Pipeline:
         self._frames = {}                             # t -> (stamp, frame_id, arrival) of pushed readings
         self._saturated = set()                       # t of pushed saturated readings
         self._held = deque()                          # (t, pose, w_hat) for identify_payload
+        self._recent = deque()                        # (t, w_hat, motion) of the rows the filter still holds
         self._last_t = None
         self.motion_frame = ""
         self.identified = None
@@ -221,13 +222,11 @@ class Pipeline:
             self._note(t, w_hat, stamp, frame_id, arrival, value)
         if not rows:
             return []
-        if self.kind == "pose":
-            nan = np.full(self.model.n_pose, np.nan)
-            samples = self.compensator.push_many([r[0] for r in rows], [r[1] for r in rows],
-                                                 [nan if r[2] is None else r[2] for r in rows])
-        else:
-            samples = [self.compensator.push(t, w_hat, **{self.kind: value}) for t, w_hat, value in rows]
-        out = [o for o in (self._output(s) for s in samples if s is not None) if o is not None]
+        samples = self._feed(self.compensator, rows)
+        self._recent.extend(rows)
+        while len(self._recent) > int(round((self.settings.window + self.settings.delay) / self.dt)) + 4:
+            self._recent.popleft()
+        out = [o for o in (self._output(s) for s in samples) if o is not None]
         self._forget(rows[-1][0] - self.compensator.delay)
         return out
 
@@ -250,6 +249,23 @@ class Pipeline:
         q = SpatialModel.interpolate_pose(np.array([t]), np.array([t0, t1]),
                                           np.array([np.r_[v0[0], v0[1]], np.r_[v1[0], v1[1]]]))[0]
         return q[:4], q[4:], _linear(t, t0, v0[2], t1, v1[2])
+
+    def _feed(self, compensator, rows):
+        """Push rows ``(t, w_hat, motion)`` into ``compensator``; its samples (Nones left out)."""
+        if self.kind == "pose":
+            nan = np.full(self.model.n_pose, np.nan)
+            return compensator.push_many([r[0] for r in rows], [r[1] for r in rows],
+                                         [nan if r[2] is None else r[2] for r in rows])
+        samples = [compensator.push(t, w_hat, **{self.kind: value}) for t, w_hat, value in rows]
+        return [s for s in samples if s is not None]
+
+    def _rebuild(self, calibration=None, payload=None):
+        """A new compensator (a new calibration or payload) fed the rows the old one's filter holds, their
+        outputs (already published) dropped: the output goes on with no gap."""
+        compensator = self._build(calibration, payload)
+        if self._recent:
+            self._feed(compensator, list(self._recent))
+        self.compensator = compensator
 
     def _note(self, t, w_hat, stamp, frame_id, arrival, value):
         """A reading about to be pushed: its stamp kept for its output, saturation, the held motion."""
@@ -342,8 +358,7 @@ class Pipeline:
         payload = SpatialModel.payload_from(estimate.mass, estimate.inertia, estimate.com)
         with self.lock:
             if self.compensator is not None:
-                keep = self.calibration if b is None else replace(self.calibration, b=b)
-                self.compensator = self._build(keep, payload)
+                self._rebuild(self.calibration if b is None else replace(self.calibration, b=b), payload)
             self.payload = self.identified = payload
             self.model = compensation_model(self.calibration, payload)
         return True, (f"payload identified from {len(t)} samples ({t[-1] - t[0]:.3g} s): mass {estimate.mass:.4g} +- "
@@ -378,8 +393,8 @@ class Pipeline:
         with self.lock:
             self.calibration, self.payload, self.latency, self.model = calibration, payload, latency, model
             self.identified = None
-            if self.dt is not None:
-                self.compensator = self._build()
+            if self.compensator is not None:
+                self._rebuild()
         return True, f"reloaded {self.settings.calibration}: offset " + " ".join(f"{v:.6g}" for v in calibration.offset)
 
 
