@@ -1,0 +1,260 @@
+"""The motion's sources for compensation besides poses (issue 38, part 1): joint states with a URDF
+(fmscal.analysis.JointMotion, eq. C5), an IMU on the tool (ImuMotion, C6-C7), and the output's frame and
+point (C8).
+
+The truth is an independent Newton-Euler: pinocchio's ``rnea`` on a free-flying body carrying the payload,
+driven by the UR5 tool frame's velocity and *spatial* acceleration (rnea's own convention), so that the
+wrench the mount applies is computed without fmscal's dynamics. The readings are that wrench (``S = I``,
+``b = 0``): the compensated wrench is then fmscal's payload wrench less the truth.
+"""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fmscal.analysis import Compensator, ImuMotion, JointMotion, compensate
+from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, NoiseSpec, get_scenario
+from fmscal.plant.io import ImuLog, JointLog
+from fmscal.plant.physics import inertia_matrix, rotation_matrix
+from fmscal.plant.scenarios._spatial import TOOL
+from live_rig import contact_wrench, noise_rms, with_contact
+from test_kinematics import _ur5
+
+pin = pytest.importorskip("pinocchio")
+
+NOISE = NoiseSpec((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
+C_IMU = Rotation.from_euler("xyz", [0.3, -0.5, 1.1]).as_matrix()      # the IMU's axes in the sensor's
+R_IMU = np.array([0.03, -0.04, 0.05])                                  # the IMU's point from the sensor's, m
+
+
+def _truth_calibration(gravity=(0.0, 0.0, -9.81)):
+    return Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=gravity, latency=0.0)
+
+
+@pytest.fixture(scope="module")
+def ur5_run():
+    """1.5 s at 1 kHz of a UR5 moving every joint (rotation and translation together: |omega x v| up to
+    ~3 m/s^2), the tool frame's motion by pinocchio and the payload's wrench by rnea on a free-flyer."""
+    motion = JointMotion(_ur5(), "tool0")
+    t = np.arange(0.0, 1.5, 1e-3)
+    q0 = np.array([0.3, -1.2, 1.4, -1.6, -1.5, 0.4])
+    amp = np.array([0.8, 0.4, 0.5, 0.9, 0.8, 1.2])
+    w = 2 * np.pi * np.array([0.31, 0.23, 0.37, 0.29, 0.41, 0.35])
+    phase = w * t[:, None] + np.arange(6)
+    q, dq, ddq = q0 + amp * np.sin(phase), amp * w * np.cos(phase), -amp * w ** 2 * np.sin(phase)
+    pose, v, omega, acc, alpha = motion.kinematics.motion(q, dq, ddq)
+    spatial = motion.kinematics.motion(q, dq, ddq, classical=False)[3]
+    body = pin.Model()
+    joint = body.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "payload")
+    body.appendBodyToJoint(joint, pin.Inertia(TOOL.mass, np.array(TOOL.com), np.asarray(inertia_matrix(TOOL.inertia))),
+                           pin.SE3.Identity())
+    data = body.createData()
+    W = np.empty((len(t), 6))
+    for k in range(len(t)):
+        tau = pin.rnea(body, data, np.r_[pose[k, 4:], pose[k, 1:4], pose[k, 0]], np.r_[v[k], omega[k]],
+                       np.r_[spatial[k], alpha[k]])
+        W[k] = np.r_[tau[3:], tau[:3]]                                 # [tau; f], fmscal's order
+    return dict(motion=motion, t=t, q=q, dq=dq, ddq=ddq, pose=pose, v=v, omega=omega, acc=acc, alpha=alpha, W=W)
+
+
+def _max(c):
+    return np.abs(c.wrench).max(axis=0)
+
+
+def test_joint_states_give_the_payload_wrench_with_the_classical_acceleration(ur5_run):
+    """JointMotion (pinocchio's classical acceleration) matches the independent Newton-Euler to 1e-6 with the
+    measured rates, 1e-4 with the rates differentiated both ways, and agrees with the pose path (poses from
+    the same FK, smoothed and differentiated) to its smoothing error; the spatial acceleration in its place is
+    off by exactly m omega x v (about 3.9 N here): the test tells the two apart."""
+    run, cal = ur5_run, _truth_calibration()
+    given = compensate(cal, JointLog(run["t"], run["q"], run["W"], run["dq"], run["ddq"]), motion=run["motion"],
+                       noise=NOISE)
+    assert np.all(_max(given)[:3] < 1e-7) and np.all(_max(given)[3:] < 1e-6), _max(given)
+    differentiated = compensate(cal, JointLog(run["t"], run["q"], run["W"]), motion=run["motion"], noise=NOISE)
+    assert np.all(_max(differentiated) < 1e-4), _max(differentiated)
+    poses = compensate(cal, Log(run["t"], run["pose"], run["W"]), noise=NOISE)
+    assert np.all(_max(poses) < 2e-3) and np.all(_max(poses)[3:] > 1e-5), _max(poses)
+    np.testing.assert_allclose(poses.t, differentiated.t)
+    wrong = JointMotion(_ur5(), "tool0")
+    wrong._classical = False
+    spatial = compensate(cal, JointLog(run["t"], run["q"], run["W"], run["dq"], run["ddq"]), motion=wrong,
+                         noise=NOISE)
+    rows = np.searchsorted(run["t"], spatial.t)
+    expected = -TOOL.mass * np.cross(run["omega"], run["v"])[rows]     # m (a_spatial - a_classical)
+    np.testing.assert_allclose(spatial.wrench[:, 3:], expected, atol=1e-6)
+    assert np.linalg.norm(expected, axis=1).max() > 3.0
+
+
+def test_joint_states_streamed(ur5_run):
+    """Compensator(motion=JointMotion) one sample at a time: q alone (differentiated causally, the delay the
+    filter's 30 ms) within 2e-3 N of the truth; the measured rates used where given (1e-6); the joints in
+    another order (as a JointState's names come) matched by name; the causal offline path the same numbers."""
+    run, cal = ur5_run, _truth_calibration()
+    n = 400
+    names = run["motion"].joints
+    shuffled = JointMotion(_ur5(), "tool0", joints=names[::-1])
+    for motion, order in ((run["motion"], slice(None)), (shuffled, slice(None, None, -1))):
+        stream = Compensator(cal, 1e-3, noise=NOISE, motion=motion)
+        out = [stream.push(t, w, joints=(q[order], None, None))
+               for t, w, q in zip(run["t"][:n], run["W"][:n], run["q"][:n])]
+        out = [o for o in out if o is not None]
+        assert stream.delay == pytest.approx(0.03) and len(out) == n - 59
+        err = np.abs([o.wrench for o in out]).max(axis=0)
+        assert np.all(err < 2e-3) and err.max() > 1e-6, err
+    stream = Compensator(cal, 1e-3, noise=NOISE, motion=run["motion"])
+    out = [stream.push(t, w, joints=(q, dq, ddq)) for t, w, q, dq, ddq in
+           zip(run["t"][:n], run["W"][:n], run["q"][:n], run["dq"][:n], run["ddq"][:n])]
+    assert np.abs([o.wrench for o in out if o is not None]).max() < 1e-6
+    offline = compensate(cal, JointLog(run["t"][:n], run["q"][:n], run["W"][:n]), causal=True,
+                         motion=run["motion"], noise=NOISE)
+    assert offline.delay == pytest.approx(0.03) and len(offline.t) == n - 59
+
+
+def _imu_readings(run, rng=None, gyro_sd=0.0, accel_sd=0.0):
+    """The IMU's orientation, rate and specific force from the true motion (C6 read backwards), plus noise."""
+    R = np.array([rotation_matrix(q) for q in run["pose"][:, :4]], dtype=float)
+    a_g = run["acc"] - np.einsum("nji,j->ni", R, np.array([0.0, 0.0, -9.81]))            # R^T (p_ddot - g)
+    at_imu = a_g + np.cross(run["alpha"], R_IMU) + np.cross(run["omega"], np.cross(run["omega"], R_IMU))
+    f_i, omega_i = at_imu @ C_IMU, run["omega"] @ C_IMU                                   # C^T v
+    quaternion = Rotation.from_matrix(R @ C_IMU).as_quat(scalar_first=True)
+    if rng is not None:
+        omega_i = omega_i + rng.normal(0, gyro_sd, omega_i.shape)
+        f_i = f_i + rng.normal(0, accel_sd, f_i.shape)
+    return quaternion, omega_i, f_i, R
+
+
+def test_an_imu_gives_the_payload_wrench_without_pose_or_gravity(ur5_run):
+    """ImuMotion on the UR5's motion (IMU turned and 7 cm off the sensor's point): offline and causal within
+    1e-4 of the truth; the lever arm's sign matters (-r is off by over 0.5 N); the calibration's gravity
+    plays no part (another gravity, the same numbers); at rest with z up the IMU reads +9.81 along up."""
+    run, cal = ur5_run, _truth_calibration()
+    quaternion, omega_i, f_i, _ = _imu_readings(run)
+    log = ImuLog(run["t"], quaternion, omega_i, f_i, run["W"])
+    imu = ImuMotion(C_IMU, R_IMU)
+    offline = compensate(cal, log, motion=imu, noise=NOISE)
+    assert np.all(_max(offline) < 1e-4), _max(offline)
+    short = ImuLog(run["t"][:300], quaternion[:300], omega_i[:300], f_i[:300], run["W"][:300])
+    causal = compensate(cal, short, causal=True, motion=imu, noise=NOISE)
+    assert np.all(_max(causal) < 1e-4) and causal.delay == pytest.approx(0.03), _max(causal)
+    flipped = compensate(cal, log, motion=ImuMotion(C_IMU, -R_IMU), noise=NOISE)
+    assert _max(flipped)[3:].max() > 0.5
+    elsewhere = compensate(_truth_calibration((0.3, -2.0, -7.0)), log, motion=imu, noise=NOISE)
+    np.testing.assert_allclose(elsewhere.wrench, offline.wrench, atol=1e-9)
+    rest = np.r_[np.cross(TOOL.com, [0, 0, TOOL.mass * 9.81]), 0, 0, TOOL.mass * 9.81]   # the mount holds it up
+    still = ImuLog(np.arange(0, 0.3, 1e-3), None, np.zeros((300, 3)), np.tile([0, 0, 9.81], (300, 1)),
+                   np.tile(rest, (300, 1)))
+    assert np.abs(compensate(cal, still, motion=ImuMotion(), noise=NOISE).wrench).max() < 1e-6
+    still.specific_force *= -1                                        # the sign of a gravity vector: 2 m g off
+    fz = compensate(cal, still, motion=ImuMotion(), noise=NOISE).wrench[:, 5]
+    np.testing.assert_allclose(fz, -2 * TOOL.mass * 9.81)
+
+
+def test_an_imu_with_noise_against_the_pose_path(ur5_run):
+    """Readings and IMU with noise (gyro 3 mrad/s, accelerometer 0.05 m/s^2): the IMU path's residual is the
+    reading's noise as the pose path's is (0.9-1.15x offline), and its covariance says so (within 10 %)."""
+    run, cal = ur5_run, _truth_calibration()
+    rng = np.random.default_rng(7)
+    quaternion, omega_i, f_i, _ = _imu_readings(run, rng, 0.003, 0.05)
+    readings = run["W"] + rng.normal(0, 1, run["W"].shape) * NOISE.wrench_sd
+    ref = noise_rms(np.eye(6), NOISE.wrench_sd)
+    imu = compensate(cal, ImuLog(run["t"], quaternion, omega_i, f_i, readings), motion=ImuMotion(C_IMU, R_IMU),
+                     noise=NOISE)
+    poses = compensate(cal, Log(run["t"], run["pose"], readings), noise=NOISE)
+    for c in (imu, poses):
+        r = np.sqrt(np.mean(c.wrench ** 2, axis=0)) / ref
+        assert np.all((r > 0.9) & (r < 1.15)), r
+        sd = np.sqrt(np.mean(c.sd ** 2, axis=0)) / ref
+        assert np.all(np.abs(sd / r - 1) < 0.1), (sd, r)
+    assert imu.contact.mean() < 0.005
+
+
+@pytest.fixture(scope="module")
+def arm():
+    scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=3.0)
+    log, truth, _ = scenario.generate(3)
+    cal = Calibration(S=truth.S_at(0.0), payload=scenario.payload, method="truth", b=truth.offset,
+                      gravity=scenario.gravity, latency=0.0)
+    return log, truth, cal
+
+
+@pytest.mark.parametrize("causal", [False, True])
+def test_a_contact_at_the_tool_point_has_no_torque_there(arm, causal):
+    """A 15 N contact at the tool point r_t: with point=r_t the torque comes out at the noise (it is ~1.8 N m
+    at the sensor's point) and the force unchanged; the contact statistic does not change (the map is
+    invertible); frame='base' is R @ the sensor frame's, torque and force, with its covariance."""
+    log, truth, cal = arm
+    tip = np.array([0.02, -0.01, 0.12])
+    touched, _ = with_contact(log, truth.S_at(0.0), contact_wrench(point=tip), 1.0, 1.0)
+    at_sensor = compensate(cal, touched, causal=causal, noise=truth.noise)
+    at_tip = compensate(cal, touched, causal=causal, noise=truth.noise, point=tip)
+    inside = (at_tip.t >= 1.1) & (at_tip.t < 1.9)
+    torque_sd = noise_rms(truth.S_at(0.0), truth.noise.wrench_sd)[:3]
+    assert np.all(np.abs(at_tip.wrench[inside, :3].mean(axis=0)) < 3 * torque_sd)
+    assert np.linalg.norm(at_sensor.wrench[inside, :3].mean(axis=0)) > 1.0
+    np.testing.assert_allclose(at_tip.wrench[:, 3:], at_sensor.wrench[:, 3:])
+    np.testing.assert_allclose(at_tip.statistic, at_sensor.statistic, rtol=1e-9)
+    np.testing.assert_allclose(at_tip.wrench[:, :3],
+                               at_sensor.wrench[:, :3] - np.cross(tip, at_sensor.wrench[:, 3:]), atol=1e-12)
+    base = compensate(cal, touched, causal=causal, noise=truth.noise, frame="base")
+    rows = np.searchsorted(log.t, base.t)
+    R = np.array([rotation_matrix(q / np.linalg.norm(q)) for q in touched.pose[rows, :4]], dtype=float)
+    rotated = np.c_[np.einsum("nij,nj->ni", R, at_sensor.wrench[:, :3]),
+                    np.einsum("nij,nj->ni", R, at_sensor.wrench[:, 3:])]
+    np.testing.assert_allclose(base.wrench, rotated, atol=0.02)        # R of the smoothed poses, the noisy ones
+    np.testing.assert_allclose(np.linalg.norm(base.wrench[:, 3:], axis=1),
+                               np.linalg.norm(at_sensor.wrench[:, 3:], axis=1), rtol=1e-9)
+    np.testing.assert_allclose(np.trace(base.cov, axis1=1, axis2=2), np.trace(at_sensor.cov, axis1=1, axis2=2),
+                               rtol=1e-9)
+    assert base.frame == "base" and at_tip.point.tolist() == tip.tolist()
+
+
+def test_base_frame_from_joints_and_imu(ur5_run):
+    """The base frame from a JointMotion (the FK's attitude) and an ImuMotion (its orientation, C^T off):
+    the same wrench rotated; an IMU with no orientation refuses frame='base' in one line."""
+    run, cal = ur5_run, _truth_calibration()
+    n = 300
+    contact = contact_wrench()
+    readings = run["W"][:n] - contact
+    joints = compensate(cal, JointLog(run["t"][:n], run["q"][:n], readings, run["dq"][:n], run["ddq"][:n]),
+                        motion=run["motion"], noise=NOISE, frame="base")
+    quaternion, omega_i, f_i, R = _imu_readings(run)
+    imu = compensate(cal, ImuLog(run["t"][:n], quaternion[:n], omega_i[:n], f_i[:n], readings),
+                     motion=ImuMotion(C_IMU, R_IMU), noise=NOISE, frame="base")
+    for c in (joints, imu):
+        rows = np.searchsorted(run["t"], c.t)
+        expected = np.c_[R[rows] @ contact[:3], R[rows] @ contact[3:]]
+        np.testing.assert_allclose(c.wrench, expected, atol=1e-4)
+    none = ImuLog(run["t"][:n], None, omega_i[:n], f_i[:n], readings)
+    with pytest.raises(FmscalError, match="frame='base' needs the sensor's attitude"):
+        compensate(cal, none, motion=ImuMotion(C_IMU, R_IMU), noise=NOISE, frame="base")
+
+
+def test_refusals(ur5_run, arm):
+    run, cal = ur5_run, _truth_calibration()
+    stream = Compensator(cal, 1e-3, noise=NOISE, motion=run["motion"])
+    with pytest.raises(FmscalError, match="takes joint states .*pose= was given"):
+        stream.push(0.0, np.zeros(6), np.r_[1.0, 0, 0, 0, 0, 0, 0])
+    with pytest.raises(FmscalError, match="joints must be \\(q, dq, ddq\\)"):
+        stream.push(0.0, np.zeros(6), joints=np.zeros(6))
+    with pytest.raises(FmscalError, match="joints' q must be 6 numbers"):
+        stream.push(0.0, np.zeros(6), joints=(np.zeros(5), None, None))
+    with pytest.raises(FmscalError, match="imu= was given"):
+        Compensator(cal, 1e-3, noise=NOISE).push(0.0, np.zeros(6), imu=(None, np.zeros(3), np.zeros(3)))
+    with pytest.raises(FmscalError, match="not the URDF's 6 movable joints"):
+        JointMotion(_ur5(), "tool0", joints=("a", "b"))
+    with pytest.raises(FmscalError, match="proper rotation matrix"):
+        ImuMotion(rotation=-np.eye(3))
+    with pytest.raises(FmscalError, match="lever arm must be 3 numbers"):
+        ImuMotion(lever_arm=[0.1, 0.2])
+    with pytest.raises(FmscalError, match="takes a plant.io.JointLog"):
+        compensate(cal, arm[0], motion=run["motion"], noise=NOISE)
+    with pytest.raises(FmscalError, match="frame must be one of sensor, base"):
+        compensate(arm[2], arm[0], frame="world")
+    with pytest.raises(FmscalError, match="point must be 3 finite numbers"):
+        Compensator(cal, 1e-3, noise=NOISE, point=[0.0, np.nan, 0.1])
+    planar_log, truth, _ = get_scenario("paper").with_(duration=1.0).generate(0)
+    planar = Calibration(S=truth.S_at(0.0), payload=truth.payload, method="truth")
+    with pytest.raises(FmscalError, match="planar reading: leave frame='sensor'"):
+        compensate(planar, planar_log, noise=truth.noise, frame="base")
+    with pytest.raises(FmscalError, match="gives a motion in 3D"):
+        Compensator(planar, 1e-3, noise=truth.noise, motion=ImuMotion())
