@@ -387,8 +387,8 @@ class _Output:
         if self.needs_attitude:
             R = np.asarray(R, dtype=float)
             if not np.isfinite(R).all():
-                raise CompensationError("frame='base' needs the sensor's attitude: the IMU gave no orientation "
-                                        "for a sample; give it, or use frame='sensor'")
+                raise CompensationError("the base frame needs the sensor's attitude: the IMU gave no orientation "
+                                        "for a sample; give it, or keep the sensor frame")
             B = np.zeros((len(wrench), 6, 6))
             B[:, :3, :3] = R
             B[:, 3:, 3:] = R

@@ -48,7 +48,7 @@ from fmscal.plant.io import RobotKinematics
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import rotation_matrix
 
-__all__ = ["JointMotion", "ImuMotion", "MotionError", "quaternion_from_matrix"]
+__all__ = ["JointMotion", "ImuMotion", "MotionError", "quaternion_from_matrix", "quaternion_to_matrix"]
 
 
 class MotionError(FmscalError):
@@ -65,6 +65,11 @@ def quaternion_from_matrix(R):
     q[:, 2] = np.copysign(np.sqrt(np.maximum(0.0, 1 - m00 + m11 - m22)) / 2, R[:, 0, 2] - R[:, 2, 0])
     q[:, 3] = np.copysign(np.sqrt(np.maximum(0.0, 1 - m00 - m11 + m22)) / 2, R[:, 1, 0] - R[:, 0, 1])
     return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def quaternion_to_matrix(q):
+    """``R(q)`` of a unit quaternion ``(qw, qx, qy, qz)``, shape (3, 3)."""
+    return np.asarray(rotation_matrix(np.asarray(q, dtype=float) / np.linalg.norm(q)), dtype=float)
 
 
 def _rotations(quaternions):

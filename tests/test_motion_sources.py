@@ -13,6 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fmscal.analysis import Compensator, ImuMotion, JointMotion, compensate
+from fmscal.analysis.cli import main
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, NoiseSpec, get_scenario
 from fmscal.plant.io import ImuLog, JointLog
 from fmscal.plant.physics import inertia_matrix, rotation_matrix
@@ -225,7 +226,7 @@ def test_base_frame_from_joints_and_imu(ur5_run):
         expected = np.c_[R[rows] @ contact[:3], R[rows] @ contact[3:]]
         np.testing.assert_allclose(c.wrench, expected, atol=1e-4)
     none = ImuLog(run["t"][:n], None, omega_i[:n], f_i[:n], readings)
-    with pytest.raises(FmscalError, match="frame='base' needs the sensor's attitude"):
+    with pytest.raises(FmscalError, match="the base frame needs the sensor's attitude"):
         compensate(cal, none, motion=ImuMotion(C_IMU, R_IMU), noise=NOISE, frame="base")
 
 
@@ -258,3 +259,58 @@ def test_refusals(ur5_run, arm):
         compensate(planar, planar_log, noise=truth.noise, frame="base")
     with pytest.raises(FmscalError, match="gives a motion in 3D"):
         Compensator(planar, 1e-3, noise=truth.noise, motion=ImuMotion())
+
+
+def _write(path, header, columns):
+    np.savetxt(path, np.column_stack(columns), delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+
+
+def test_cli_joint_and_imu_logs(ur5_run, tmp_path, capsys):
+    """fmscal compensate on a log of joint angles (--urdf --frame) and on an IMU log (--imu-rotation as a
+    quaternion, --imu-lever-arm), with --output-frame base and --point: the contact comes out rotated into the
+    base and with no torque at its point; bad options are one line and exit 2."""
+    run, n = ur5_run, 400
+    tip = np.array([0.0, 0.0, 0.12])
+    contact = contact_wrench(point=tip)
+    readings = run["W"][:n] - contact
+    cal = _truth_calibration()
+    Calibration(S=cal.S, payload=cal.payload, method="truth", b=cal.b, gravity=cal.gravity, latency=0.0,
+                noise=NOISE).save(tmp_path / "cal.json")
+    wrench = ("tx", "ty", "tz", "fx", "fy", "fz")
+    _write(tmp_path / "joints.csv", ("t", *(f"q{i + 1}" for i in range(6)), *wrench),
+           (run["t"][:n], run["q"][:n], readings))
+    quaternion, omega_i, f_i, R = _imu_readings(run)
+    imu_header = ("t", "iqw", "iqx", "iqy", "iqz", "iwx", "iwy", "iwz", "iax", "iay", "iaz", *wrench)
+    _write(tmp_path / "imu.csv", imu_header, (run["t"][:n], quaternion[:n], omega_i[:n], f_i[:n], readings))
+    cal_path, out = str(tmp_path / "cal.json"), str(tmp_path / "c.csv")
+    q_imu = Rotation.from_matrix(C_IMU).as_quat(scalar_first=True)
+    runs = {"joints": ["--urdf", str(_ur5()), "--frame", "tool0"],
+            "imu": ["--imu-rotation", *map(str, q_imu), "--imu-lever-arm", *map(str, R_IMU)]}
+    for name, options in runs.items():
+        for causal in ([], ["--causal"]):
+            assert main(["compensate", cal_path, str(tmp_path / f"{name}.csv"), "--out", out, "--overwrite",
+                         "--output-frame", "base", "--point", *map(str, tip), *options, *causal]) == 0
+            said = capsys.readouterr().out
+            assert "base frame, torque about the tool point 0 0 0.12" in said and "motion from" in said
+            rows = np.loadtxt(out, delimiter=",", skiprows=1)
+            k = np.searchsorted(run["t"], rows[:, 0])
+            np.testing.assert_allclose(rows[:, 4:7], R[k] @ contact[3:], atol=2e-3)
+            assert np.abs(rows[:, 1:4]).max() < 2e-3 and rows[:, 7].all()
+    bad = [(["--urdf", str(_ur5())], "--urdf and --frame go together"),
+           (["--imu-rotation", "1", "0", "0"], "takes 4 numbers"),
+           (["--imu-rotation", "1", "0", "0", "1"], "must be a unit one")]
+    for options, message in bad:
+        assert main(["compensate", cal_path, str(tmp_path / "imu.csv"), "--out", out, "--overwrite", *options]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert main(["compensate", cal_path, str(tmp_path / "joints.csv"), "--out", out, "--overwrite",
+                 "--imu-lever-arm", "0", "0", "0.1"]) == 2
+    assert "has no IMU columns" in capsys.readouterr().err
+    blank = (tmp_path / "imu.csv").read_text().splitlines()
+    rows = [line.split(",") for line in blank[1:]]
+    (tmp_path / "blank.csv").write_text("\n".join([blank[0]] + [",".join(r[:1] + [""] * 4 + r[5:]) for r in rows])
+                                        + "\n")                     # no orientation: iqw..iqz empty
+    assert main(["compensate", cal_path, str(tmp_path / "blank.csv"), "--out", out, "--overwrite",
+                 "--output-frame", "base"]) == 2
+    err = capsys.readouterr().err
+    assert "the base frame needs the sensor's attitude" in err and err.count("\n") == 1, err
