@@ -2,10 +2,10 @@
 (fmscal.analysis.JointMotion, eq. C5), an IMU on the tool (ImuMotion, C6-C7), and the output's frame and
 point (C8).
 
-The truth is an independent Newton-Euler: pinocchio's ``rnea`` on a free-flying body carrying the payload,
-driven by the UR5 tool frame's velocity and *spatial* acceleration (rnea's own convention), so that the
-wrench the mount applies is computed without fmscal's dynamics. The readings are that wrench (``S = I``,
-``b = 0``): the compensated wrench is then fmscal's payload wrench less the truth.
+The truth is an independent Newton-Euler (tests/robot_rig.py): pinocchio's ``rnea`` on a free-flying body
+carrying the payload, driven by the UR5 tool frame's velocity and *spatial* acceleration (rnea's own
+convention), so that the wrench the mount applies is computed without fmscal's dynamics. The readings are
+that wrench (``S = I``, ``b = 0``): the compensated wrench is then fmscal's payload wrench less the truth.
 """
 
 import numpy as np
@@ -16,16 +16,16 @@ from fmscal.analysis import Compensator, ImuMotion, JointMotion, compensate
 from fmscal.analysis.cli import main
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, NoiseSpec, get_scenario
 from fmscal.plant.io import ImuLog, JointLog
-from fmscal.plant.physics import inertia_matrix, rotation_matrix
+from fmscal.plant.physics import rotation_matrix
 from fmscal.plant.scenarios._spatial import TOOL
+import robot_rig
 from live_rig import contact_wrench, noise_rms, with_contact
-from test_kinematics import _ur5
+from robot_rig import C_IMU, R_IMU
+from robot_rig import ur5_urdf as _ur5
 
-pin = pytest.importorskip("pinocchio")
+pytest.importorskip("pinocchio")
 
 NOISE = NoiseSpec((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
-C_IMU = Rotation.from_euler("xyz", [0.3, -0.5, 1.1]).as_matrix()      # the IMU's axes in the sensor's
-R_IMU = np.array([0.03, -0.04, 0.05])                                  # the IMU's point from the sensor's, m
 
 
 def _truth_calibration(gravity=(0.0, 0.0, -9.81)):
@@ -34,28 +34,8 @@ def _truth_calibration(gravity=(0.0, 0.0, -9.81)):
 
 @pytest.fixture(scope="module")
 def ur5_run():
-    """1.5 s at 1 kHz of a UR5 moving every joint (rotation and translation together: |omega x v| up to
-    ~3 m/s^2), the tool frame's motion by pinocchio and the payload's wrench by rnea on a free-flyer."""
-    motion = JointMotion(_ur5(), "tool0")
-    t = np.arange(0.0, 1.5, 1e-3)
-    q0 = np.array([0.3, -1.2, 1.4, -1.6, -1.5, 0.4])
-    amp = np.array([0.8, 0.4, 0.5, 0.9, 0.8, 1.2])
-    w = 2 * np.pi * np.array([0.31, 0.23, 0.37, 0.29, 0.41, 0.35])
-    phase = w * t[:, None] + np.arange(6)
-    q, dq, ddq = q0 + amp * np.sin(phase), amp * w * np.cos(phase), -amp * w ** 2 * np.sin(phase)
-    pose, v, omega, acc, alpha = motion.kinematics.motion(q, dq, ddq)
-    spatial = motion.kinematics.motion(q, dq, ddq, classical=False)[3]
-    body = pin.Model()
-    joint = body.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "payload")
-    body.appendBodyToJoint(joint, pin.Inertia(TOOL.mass, np.array(TOOL.com), np.asarray(inertia_matrix(TOOL.inertia))),
-                           pin.SE3.Identity())
-    data = body.createData()
-    W = np.empty((len(t), 6))
-    for k in range(len(t)):
-        tau = pin.rnea(body, data, np.r_[pose[k, 4:], pose[k, 1:4], pose[k, 0]], np.r_[v[k], omega[k]],
-                       np.r_[spatial[k], alpha[k]])
-        W[k] = np.r_[tau[3:], tau[:3]]                                 # [tau; f], fmscal's order
-    return dict(motion=motion, t=t, q=q, dq=dq, ddq=ddq, pose=pose, v=v, omega=omega, acc=acc, alpha=alpha, W=W)
+    """1.5 s at 1 kHz of a UR5 moving every joint (tests/robot_rig.py)."""
+    return robot_rig.ur5_run(1.5)
 
 
 def _max(c):
@@ -112,16 +92,7 @@ def test_joint_states_streamed(ur5_run):
 
 
 def _imu_readings(run, rng=None, gyro_sd=0.0, accel_sd=0.0):
-    """The IMU's orientation, rate and specific force from the true motion (C6 read backwards), plus noise."""
-    R = np.array([rotation_matrix(q) for q in run["pose"][:, :4]], dtype=float)
-    a_g = run["acc"] - np.einsum("nji,j->ni", R, np.array([0.0, 0.0, -9.81]))            # R^T (p_ddot - g)
-    at_imu = a_g + np.cross(run["alpha"], R_IMU) + np.cross(run["omega"], np.cross(run["omega"], R_IMU))
-    f_i, omega_i = at_imu @ C_IMU, run["omega"] @ C_IMU                                   # C^T v
-    quaternion = Rotation.from_matrix(R @ C_IMU).as_quat(scalar_first=True)
-    if rng is not None:
-        omega_i = omega_i + rng.normal(0, gyro_sd, omega_i.shape)
-        f_i = f_i + rng.normal(0, accel_sd, f_i.shape)
-    return quaternion, omega_i, f_i, R
+    return robot_rig.imu_readings(run, rng, gyro_sd, accel_sd)
 
 
 def test_an_imu_gives_the_payload_wrench_without_pose_or_gravity(ur5_run):
@@ -314,3 +285,28 @@ def test_cli_joint_and_imu_logs(ur5_run, tmp_path, capsys):
                  "--output-frame", "base"]) == 2
     err = capsys.readouterr().err
     assert "the base frame needs the sensor's attitude" in err and err.count("\n") == 1, err
+
+
+@pytest.mark.slow
+def test_targets_from_joints_and_an_imu_calibrated_on_another_log():
+    """Issue 38's targets through the joint and IMU paths: calibrated on a spatial-arm log (seed 1, 30 s), the
+    UR5's 10 s at 1 kHz read by that sensor with its noise (joint angles with 1e-5 rad of noise; an IMU of
+    2 mrad/s and 0.03 m/s^2): offline within 1.3x the reading's noise times S, causal within 2x at 30 ms, and
+    not below the noise (0.9x)."""
+    from fmscal.analysis import calibrate
+    scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=30.0)
+    log, truth, _ = scenario.generate(1)
+    cal = calibrate(log, scenario.payload, method="least-squares")
+    run = robot_rig.ur5_run(10.0, payload=scenario.payload)
+    rng = np.random.default_rng(3)
+    S, b, sd = truth.S_at(0.0), truth.offset, np.asarray(truth.noise.wrench_sd)
+    w_hat = np.linalg.solve(S, run["W"].T).T + b + rng.normal(0, 1, run["W"].shape) * sd
+    ref = noise_rms(S, sd)
+    quaternion, omega_i, f_i, _ = _imu_readings(run, rng, 0.002, 0.03)
+    sources = [(JointLog(run["t"], run["q"] + rng.normal(0, 1e-5, run["q"].shape), w_hat), run["motion"]),
+               (ImuLog(run["t"], quaternion, omega_i, f_i, w_hat), ImuMotion(C_IMU, R_IMU))]
+    for log, motion in sources:
+        for causal, bound in ((False, 1.3), (True, 2.0)):
+            c = compensate(cal, log, causal=causal, motion=motion)
+            r = np.sqrt(np.mean(c.wrench ** 2, axis=0)) / ref
+            assert np.all((r > 0.9) & (r < bound)) and c.delay <= 0.04, (type(motion).__name__, causal, r)
