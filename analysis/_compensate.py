@@ -96,6 +96,7 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
+from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_coeffs, savgol_filter
 from scipy.stats import chi2
 
@@ -725,15 +726,27 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     dt = log.dt
     k = max(7, int(round(window / dt)) // 2 * 2 + 1)
     h = k // 2
-    if len(log) < k + 1:
-        raise CompensationError(f"{log.name}: {len(log)} samples; the smoothing window {window:g} s needs more "
-                                f"than {k}")
     channels = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
-    channels = _fill(log.t, channels, log.name, motion.source)
-    smooth = [savgol_filter(channels, k, ORDER, deriv=d, delta=dt, axis=0, mode="interp") for d in range(3)]
+    present = np.flatnonzero(np.isfinite(channels).all(axis=1))
+    if len(present) < 4:
+        raise CompensationError(f"{log.name}: fewer than four samples of the {motion.source}")
+    first, last = present[0], present[-1] + 1           # the rows before the first sample and after the last dropped
+    if last - first < k + 1:
+        raise CompensationError(f"{log.name}: {last - first} samples with the {motion.source}; the smoothing window "
+                                f"{window:g} s needs more than {k}")
+    channels = np.full_like(channels, np.nan)
+    channels[first:last] = _fill(log.t[first:last], (log.joints if joint else np.c_[log.angular_velocity,
+                                                                                      log.specific_force])[first:last])
+    smooth = [savgol_filter(channels[first:last], k, ORDER, deriv=d, delta=dt, axis=0, mode="interp")
+              for d in range(3)]
+    smooth = [np.concatenate([np.full((first, v.shape[1]), np.nan), v]) for v in smooth]
     sums = [float(np.sum(savgol_coeffs(k, ORDER, deriv=d, delta=dt, use="dot") ** 2)) for d in range(3)]
-    keep = slice(h, len(log) - h)
-    var = np.var(np.diff(channels, 2, axis=0), axis=0) / 6
+    keep = slice(first + h, last - h)
+    # each channel's noise from its samples' second differences; the samples interpolated onto the readings'
+    # grid, one every r rows weighs about r times a row's share of the filter (as the pose path counts it)
+    var = np.mean(np.square(np.diff(channels[present], 2, axis=0)), axis=0) / 6
+    r = float(np.median(np.diff(present)))
+    sums = [v * max(r, 1.0) for v in sums]
     P = [v[keep] for v in smooth]
     if joint:
         dq, ddq, var_ddq = P[1], P[2], var * sums[2]
@@ -758,14 +771,13 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
                         warnings=warnings, offset=offset, offset_sd=offset_sd, frame=frame, point=output.point)
 
 
-def _fill(t, values, name, source):
-    """Rows of NaN (no sample) filled by linear interpolation in time; at least two samples needed."""
+def _fill(t, values):
+    """Rows of NaN (no sample) between the first and the last sample filled by a cubic spline through the
+    samples (twice differentiable, unlike a linear interpolation)."""
     present = np.isfinite(values).all(axis=1)
     if present.all():
         return values
-    if present.sum() < 2:
-        raise CompensationError(f"{name}: fewer than two samples of the {source}")
-    return np.column_stack([np.interp(t, t[present], values[present, j]) for j in range(values.shape[1])])
+    return CubicSpline(t[present], values[present], axis=0)(t)
 
 
 # --- streaming --------------------------------------------------------------------------------------------------
@@ -1072,16 +1084,19 @@ class Compensator:
 
 
 class _RunningNoise:
-    """A motion channel's noise variance from its second differences over consecutive samples: a white noise of
-    sd ``sigma`` on a signal smooth at the sample rate gives differences of variance ``6 sigma^2``."""
+    """A motion channel's noise variance from the second differences of its samples (the last three that came):
+    a white noise of sd ``sigma`` on a signal smooth at the sample rate gives differences of variance
+    ``6 sigma^2``."""
 
     def __init__(self, size):
         self.recent = deque(maxlen=3)
         self.sum, self.n = np.zeros(size), 0
 
     def add(self, values):
+        if values is None:
+            return
         self.recent.append(values)
-        if len(self.recent) == self.recent.maxlen and all(v is not None for v in self.recent):
+        if len(self.recent) == self.recent.maxlen:
             self.sum += np.square(self.recent[2] - 2 * self.recent[1] + self.recent[0])
             self.n += 1
 

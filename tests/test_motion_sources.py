@@ -310,3 +310,34 @@ def test_targets_from_joints_and_an_imu_calibrated_on_another_log():
             c = compensate(cal, log, causal=causal, motion=motion)
             r = np.sqrt(np.mean(c.wrench ** 2, axis=0)) / ref
             assert np.all((r > 0.9) & (r < bound)) and c.delay <= 0.04, (type(motion).__name__, causal, r)
+
+
+def test_sparse_joint_states_tare_and_tracking(ur5_run):
+    """Joint states at 200 Hz beside 1 kHz readings (None between), offline (interpolated) and streamed (each
+    window fitted to the states it holds) within 2e-3 of the truth; a sensor zeroed off by 2 N is re-biased by
+    tare on the IMU stream (the output back at the truth), and followed by the offset tracker offline."""
+    run, cal = ur5_run, _truth_calibration()
+    n = 600
+    sparse = run["q"][:n].copy()
+    sparse[np.arange(n) % 5 != 0] = np.nan
+    offline = compensate(cal, JointLog(run["t"][:n], sparse, run["W"][:n]), motion=run["motion"], noise=NOISE,
+                         window=0.1)
+    assert np.all(_max(offline) < 2e-3) and np.isfinite(offline.cov).all(), _max(offline)
+    stream = Compensator(cal, 1e-3, noise=NOISE, motion=run["motion"])
+    out = [stream.push(t, w, joints=None if np.isnan(q).any() else (q, None, None))
+           for t, w, q in zip(run["t"][:n], run["W"][:n], sparse)]
+    assert np.abs([o.wrench for o in out if o is not None]).max() < 2e-3
+    off = np.array([0, 0, 0, 0.0, 0.0, 2.0])
+    quaternion, omega_i, f_i, _ = _imu_readings(run)
+    stream = Compensator(cal, 1e-3, noise=NOISE, motion=ImuMotion(C_IMU, R_IMU))
+    samples = list(zip(run["t"][:n], run["W"][:n] + off, quaternion, omega_i, f_i))
+    out = [stream.push(t, w, imu=(qq, o, f)) for t, w, qq, o, f in samples[:300]]
+    assert out[-1].contact and out[-1].wrench[5] == pytest.approx(-2.0, abs=1e-3)
+    with pytest.raises(FmscalError, match="tare refused"):
+        stream.tare()
+    np.testing.assert_allclose(stream.tare(force=True), off, atol=1e-3)
+    out = [stream.push(t, w, imu=(qq, o, f)) for t, w, qq, o, f in samples[300:]]
+    assert np.abs([o.wrench for o in out]).max() < 1e-3 and not any(o.contact for o in out)
+    tracked = compensate(cal, ImuLog(run["t"], quaternion, omega_i, f_i, run["W"] + off * run["t"][:, None]),
+                         motion=ImuMotion(C_IMU, R_IMU), noise=NOISE, track_offset=True, offset_sd=1.0)
+    assert tracked.offset[-1] == pytest.approx(off * tracked.t[-1], abs=0.1)
