@@ -726,25 +726,22 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     dt = log.dt
     k = max(7, int(round(window / dt)) // 2 * 2 + 1)
     h = k // 2
-    channels = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
-    present = np.flatnonzero(np.isfinite(channels).all(axis=1))
+    raw = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
+    present = np.flatnonzero(np.isfinite(raw).all(axis=1))
     if len(present) < 4:
         raise CompensationError(f"{log.name}: fewer than four samples of the {motion.source}")
     first, last = present[0], present[-1] + 1           # the rows before the first sample and after the last dropped
     if last - first < k + 1:
         raise CompensationError(f"{log.name}: {last - first} samples with the {motion.source}; the smoothing window "
                                 f"{window:g} s needs more than {k}")
-    channels = np.full_like(channels, np.nan)
-    channels[first:last] = _fill(log.t[first:last], (log.joints if joint else np.c_[log.angular_velocity,
-                                                                                      log.specific_force])[first:last])
-    smooth = [savgol_filter(channels[first:last], k, ORDER, deriv=d, delta=dt, axis=0, mode="interp")
-              for d in range(3)]
+    filled = _fill(log.t[first:last], raw[first:last])
+    smooth = [savgol_filter(filled, k, ORDER, deriv=d, delta=dt, axis=0, mode="interp") for d in range(3)]
     smooth = [np.concatenate([np.full((first, v.shape[1]), np.nan), v]) for v in smooth]
     sums = [float(np.sum(savgol_coeffs(k, ORDER, deriv=d, delta=dt, use="dot") ** 2)) for d in range(3)]
     keep = slice(first + h, last - h)
     # each channel's noise from its samples' second differences; the samples interpolated onto the readings'
     # grid, one every r rows weighs about r times a row's share of the filter (as the pose path counts it)
-    var = np.mean(np.square(np.diff(channels[present], 2, axis=0)), axis=0) / 6
+    var = np.mean(np.square(np.diff(raw[present], 2, axis=0)), axis=0) / 6
     r = float(np.median(np.diff(present)))
     sums = [v * max(r, 1.0) for v in sums]
     P = [v[keep] for v in smooth]
