@@ -68,7 +68,8 @@ def test_joint_states_give_the_payload_wrench_with_the_classical_acceleration(ur
 
 def test_joint_states_streamed(ur5_run):
     """Compensator(motion=JointMotion) one sample at a time: q alone (differentiated causally, the delay the
-    filter's 30 ms) within 2e-3 N of the truth; the measured rates used where given (1e-6); the joints in
+    filter's 30 ms) within 2e-3 N of the truth; the measured rates used where given (1e-6), with no delay
+    needed where all are; the joints in
     another order (as a JointState's names come) matched by name; the causal offline path the same numbers."""
     run, cal = ur5_run, _truth_calibration()
     n = 400
@@ -82,10 +83,13 @@ def test_joint_states_streamed(ur5_run):
         assert stream.delay == pytest.approx(0.03) and len(out) == n - 59
         err = np.abs([o.wrench for o in out]).max(axis=0)
         assert np.all(err < 2e-3) and err.max() > 1e-6, err
-    stream = Compensator(cal, 1e-3, noise=NOISE, motion=run["motion"])
-    out = [stream.push(t, w, joints=(q, dq, ddq)) for t, w, q, dq, ddq in
-           zip(run["t"][:n], run["W"][:n], run["q"][:n], run["dq"][:n], run["ddq"][:n])]
-    assert np.abs([o.wrench for o in out if o is not None]).max() < 1e-6
+    for delay in (0.03, 0.0):                    # every rate measured: no delay needed
+        stream = Compensator(cal, 1e-3, noise=NOISE, motion=run["motion"], delay=delay)
+        out = [stream.push(t, w, joints=(q, dq, ddq)) for t, w, q, dq, ddq in
+               zip(run["t"][:n], run["W"][:n], run["q"][:n], run["dq"][:n], run["ddq"][:n])]
+        out = [o for o in out if o is not None]
+        assert np.abs([o.wrench for o in out]).max() < 1e-6 and stream.delay == delay
+        assert out[-1].t == pytest.approx(run["t"][n - 1 - round(delay * 1e3)])
     offline = compensate(cal, JointLog(run["t"][:n], run["q"][:n], run["W"][:n]), causal=True,
                          motion=run["motion"], noise=NOISE)
     assert offline.delay == pytest.approx(0.03) and len(offline.t) == n - 59
