@@ -29,6 +29,23 @@ The motion comes from the poses, smoothed and differentiated by a Savitzky-Golay
 A unit quaternion's rates give the angular velocity and acceleration in the sensor's axes,
 ``omega = 2 vec(q* (x) q')``, ``alpha = 2 vec(q* (x) q'')``.
 
+Two more sources of the motion (``motion=``, :mod:`fmscal.analysis._motion`): joint states with the robot's
+URDF (:class:`JointMotion`: pinocchio's frame velocity and *classical* acceleration, (C5)) and an IMU on the
+tool (:class:`ImuMotion`: its specific force moved to the sensor's point, (C6), read at ``R = I`` so that no
+pose and no gravity vector is needed, (C7)). Their channels (the joint angles; the IMU's rate and specific
+force) go through the same filters as poses, offline both ways and causally with the same stated delay; only
+the accelerations the source does not measure are differentiated. Their streams are taken as of the
+readings' times.
+
+**The output's axes and point** (``frame``, ``point``). With ``r_t`` the tool point (sensor axes, from the
+sensor's point) and ``R`` the sensor's attitude (``frame="base"``), the published wrench and its covariance
+are moved by one linear map::
+
+    M = blockdiag(R, R) [[I, -[r_t]x], [0, I]],    w -> M w,    Cov -> M Cov M^T                   (C8)
+
+(the force unchanged by the point, the torque about the tool ``tau_t = tau_s - r_t x f``). The contact test
+(C4) is the same in any axes and point (``M`` is invertible), and the offset's tracker runs in the sensor's.
+
 The covariance of ``w_e`` per sample is the sum of three independent parts::
 
     Cov = S Sigma_r S^T + J cov J^T + A^-1 Sigma_a A^-T                                           (C3)
@@ -79,20 +96,23 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy.signal import savgol_coeffs
+from scipy.interpolate import CubicSpline
+from scipy.signal import savgol_coeffs, savgol_filter
 from scipy.stats import chi2
 
 from fmscal.plant import Calibration, Log
-from fmscal.plant.io import estimate_noise, reading_sign
+from fmscal.plant.io import ImuLog, JointLog, estimate_noise, reading_sign
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, smoothed_state,
+from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, skew, smoothed_state,
                                   spatial_motion)
 from fmscal.observers.batch import smoothed_channels
 
 from ._calibrate import log_model_class
+from ._motion import ImuMotion, JointMotion, _rotations
 
 __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
-           "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY"]
+           "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY",
+           "FRAMES"]
 
 #: The published wrench: the environment's on the tool (``w_e``, the default) or the tool's on the environment.
 DIRECTIONS = ("on_tool", "on_environment")
@@ -108,6 +128,8 @@ FALSE_ALARM = 1e-3
 DRIFT_INTENSITY = 1.0
 #: Tare (D4): the span of the newest compensated samples it averages, s.
 TARE_WINDOW = 0.1
+#: The output's axes (C8): the sensor's, or the base's (the world's: the pose's, the URDF's base, the IMU's world).
+FRAMES = ("sensor", "base")
 
 
 class CompensationError(FmscalError):
@@ -123,10 +145,10 @@ class Compensation:
     t : ndarray, shape (N,)
         The readings' times, s (causal: the output at ``t + delay``).
     wrench : ndarray, shape (N, n_w)
-        The published wrench, sensor frame, at the sensor point: ``w_e`` (``direction="on_tool"``) or
-        ``-w_e``; N m and N in the reading's order.
+        The published wrench: ``w_e`` (``direction="on_tool"``) or ``-w_e``; N m and N in the reading's order;
+        in the sensor's axes at the sensor's point, or as ``frame`` and ``point`` say (C8).
     cov : ndarray, shape (N, n_w, n_w)
-        Its covariance (C3).
+        Its covariance (C3), moved with it (C8).
     contact : ndarray of bool, shape (N,)
         A contact beyond the noise (C4).
     statistic : ndarray, shape (N,)
@@ -143,6 +165,10 @@ class Compensation:
     offset, offset_sd : ndarray, shape (N, n_w), or None
         ``track_offset``: the offset ``b`` (the reading's units) after each sample's step (D3), and its sd;
         None otherwise.
+    frame : str
+        One of :data:`FRAMES`: the wrench's axes.
+    point : ndarray, shape (3,), or None
+        The point the torque is about (sensor axes, m, from the sensor's point); None: the sensor's point.
     """
 
     t: np.ndarray
@@ -157,6 +183,8 @@ class Compensation:
     warnings: list = field(default_factory=list)
     offset: np.ndarray = None
     offset_sd: np.ndarray = None
+    frame: str = "sensor"
+    point: np.ndarray = None
 
     @property
     def sd(self):
@@ -322,6 +350,59 @@ class _Parts:
         return self.out_sign * w_e, cov, statistic > self.threshold, statistic
 
 
+class _Output:
+    """The output's axes and point (C8): ``M = blockdiag(R, R) T(r_t)`` (``R`` only for ``frame="base"``), the
+    wrench ``M w`` and its covariance ``M Cov M^T``; the identity, and not applied, for the sensor's axes and
+    point."""
+
+    def __init__(self, model, frame, point):
+        if frame not in FRAMES:
+            raise CompensationError(f"frame must be one of {', '.join(FRAMES)}; got {frame!r}")
+        self.frame, self.point = frame, None
+        if point is not None:
+            try:
+                r = np.asarray(point, dtype=float)
+            except (TypeError, ValueError):
+                r = None
+            if r is None or r.shape != (3,) or not np.isfinite(r).all():
+                raise CompensationError(f"point must be 3 finite numbers (the tool point in the sensor's axes, m); "
+                                        f"got {point!r}"[:200])
+            self.point = r
+        self.identity = frame == FRAMES[0] and point is None
+        if not self.identity and model.attitude != "quaternion":
+            raise CompensationError(f"frame and point move a 6-axis wrench in 3D; the calibration is of a "
+                                    f"{model.name} reading: leave frame='sensor' and point=None")
+        self.T = np.eye(6)
+        if self.point is not None:
+            self.T[:3, 3:] = -skew(self.point)                        # tau_t = tau_s - r_t x f
+
+    @property
+    def needs_attitude(self):
+        return self.frame == FRAMES[1]
+
+    def apply(self, wrench, cov, R=None):
+        """``(M w, M Cov M^T)`` for rows ``wrench`` (N, 6), ``cov`` (N, 6, 6); ``R`` (N, 3, 3) for the base."""
+        if self.identity:
+            return wrench, cov
+        M = np.broadcast_to(self.T, (len(wrench), 6, 6))
+        if self.needs_attitude:
+            R = np.asarray(R, dtype=float)
+            if not np.isfinite(R).all():
+                raise CompensationError("the base frame needs the sensor's attitude: the IMU gave no orientation "
+                                        "for a sample; give it, or keep the sensor frame")
+            B = np.zeros((len(wrench), 6, 6))
+            B[:, :3, :3] = R
+            B[:, 3:, 3:] = R
+            M = B @ M
+        return np.einsum("nij,nj->ni", M, wrench), M @ cov @ np.swapaxes(M, 1, 2)
+
+
+def _pose_attitudes(x, model):
+    """The sensor frame's attitude ``R`` (N, 3, 3) of rows of the state ``x`` (a unit quaternion's)."""
+    q = x[:, list(model.q_index)][:, 3:7]
+    return _rotations(q / np.linalg.norm(q, axis=1, keepdims=True))
+
+
 class _OffsetTracker:
     """The offset as a random walk (D1), stepped by (D2)-(D3) on each sample; the one implementation of both
     paths. ``intensity`` per channel, the reading's units per sqrt(s); ``P0`` the initial covariance."""
@@ -426,7 +507,7 @@ def _noise(calibration, noise, log=None):
 # --- offline ---------------------------------------------------------------------------------------------------
 def compensate(calibration, log, causal=False, *, payload=None, direction="on_tool", noise=None,
                window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM, track_offset=False,
-               drift_intensity=None, offset_sd=None):
+               drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None):
     """The contact wrench of a log: ``w_e = W_p - S (sigma w_hat - b)`` (C1), its covariance and a contact flag.
 
     Parameters
@@ -434,8 +515,9 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     calibration : plant.Calibration
         ``S``, ``b``, the reading's sign, the payload, gravity, latency and (where saved) the noise model and
         the covariance of ``[S | c]``.
-    log : plant.Log
-        A log of the calibration's case (its poses and readings); no contact needed anywhere.
+    log : plant.Log, plant.io.JointLog or plant.io.ImuLog
+        A log of the calibration's case (its poses and readings; or, with ``motion``, its joint states or its
+        IMU's samples and readings); no contact needed anywhere.
     causal : bool
         False: the poses smoothed both ways (no delay). True: the causal filter (module docstring), the
         result's :attr:`Compensation.delay` its delay; the same numbers as :class:`Compensator` fed the log
@@ -464,6 +546,16 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     offset_sd : float or array_like of n_w floats, optional
         ``track_offset``: the initial offset's sd (e.g. large for a sensor zeroed at an unknown pose);
         default the calibration's covariance of ``b`` (zero where it holds none).
+    motion : JointMotion or ImuMotion, optional
+        The motion's source: None, the log's poses; a :class:`JointMotion` (C5) for a
+        :class:`fmscal.plant.io.JointLog`; an :class:`ImuMotion` (C6, C7) for a :class:`fmscal.plant.io.ImuLog`.
+        Their streams are taken as of the readings' times (the calibration's latency is its pose stream's).
+    frame : {"sensor", "base"}
+        The output's axes (C8): the sensor's, or the base's (the world of the poses, the URDF's base, the IMU's
+        world; the sensor's attitude rotates the torque and the force).
+    point : array_like of 3 floats, optional
+        The tool point the torque is taken about, in the sensor's axes from the sensor's point, m (C8); default
+        the sensor's point.
 
     Returns
     -------
@@ -477,11 +569,17 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         Not a calibration or a log, a log of another case, no payload, a window longer than the log, a delay
         shorter than the latency.
     """
+    if motion is not None:
+        return _compensate_source(calibration, log, causal, motion, payload=payload, direction=direction,
+                                  noise=noise, window=window, delay=delay, order=order, false_alarm=false_alarm,
+                                  track_offset=track_offset, drift_intensity=drift_intensity, offset_sd=offset_sd,
+                                  frame=frame, point=point)
     if not isinstance(log, Log):
         raise CompensationError(f"compensate takes a plant.Log; got {type(log).__name__}")
     model = compensation_model(calibration, payload, log_model_class(log))
     noise = _noise(calibration, noise, log)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
+    output = _Output(model, frame, point)
     tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd)
     latency = calibration.latency or 0.0
     aligned = log
@@ -503,7 +601,8 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         k, L, lead = _causal_settings(window, delay, order, aligned.dt, latency)
         if not aligned.has_pose.all():
             return _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts,
-                              dict(track_offset=track_offset, drift_intensity=drift_intensity, offset_sd=offset_sd))
+                              dict(track_offset=track_offset, drift_intensity=drift_intensity, offset_sd=offset_sd,
+                                   frame=frame, point=point))
         coefficients = _causal_coefficients(k, order, lead, aligned.dt)
         c2 = coefficients[2]
         P = [_causal_filter(aligned.pose, c) for c in coefficients]         # read at sample n - lead
@@ -516,9 +615,12 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     accel_var = _configuration_variance(model, noise, aligned.pose[np.argmax(aligned.has_pose)]) * np.sum(c2 ** 2)
     wrench, cov, contact, statistic, *offset = parts.finish(w_hat, W_p, A_inv, accel_var, tracker, t)
     offset, offset_sd = offset if offset else (None, None)
+    if not output.identity:
+        wrench, cov = output.apply(wrench, cov, _pose_attitudes(x, model) if output.needs_attitude else None)
     return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
                         threshold=parts.threshold, names=parts.names, delay=float(lag), direction=direction,
-                        warnings=list(parts.warnings), offset=offset, offset_sd=offset_sd)
+                        warnings=list(parts.warnings), offset=offset, offset_sd=offset_sd, frame=frame,
+                        point=output.point)
 
 
 def _causal_filter(values, c):
@@ -556,7 +658,123 @@ def _by_stream(calibration, log, model, noise, direction, window, delay, order, 
                         names=parts.names, delay=stream.delay, direction=direction,
                         warnings=list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"],
                         offset=None if out[0].offset is None else np.array([o.offset for o in out]),
-                        offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]))
+                        offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
+                        frame=stream.frame, point=stream.point)
+
+
+def _compensate_source(calibration, log, causal, motion, *, payload, direction, noise, window, delay, order,
+                       false_alarm, track_offset, drift_intensity, offset_sd, frame, point):
+    """:func:`compensate` with a joint or IMU source: causal, :class:`Compensator` fed the log; offline, the
+    source's channels smoothed and differentiated both ways (the filter of the pose path), then (C5)-(C7)."""
+    if not isinstance(motion, (JointMotion, ImuMotion)):
+        raise CompensationError(f"motion must be None (poses), a JointMotion or an ImuMotion; got "
+                                f"{type(motion).__name__}")
+    joint = isinstance(motion, JointMotion)
+    kind = JointLog if joint else ImuLog
+    if not isinstance(log, kind):
+        raise CompensationError(f"a {type(motion).__name__} takes a plant.io.{kind.__name__}; got "
+                                f"{type(log).__name__}")
+    if joint and log.joints.shape[1] != motion.size:
+        raise CompensationError(f"{log.name}: {log.joints.shape[1]} joint columns; the URDF has {motion.size} "
+                                "joints")
+    model = compensation_model(calibration, payload)
+    motion.check(model)
+    if len(log.w_hat[0]) != model.n_w:
+        raise CompensationError(f"{log.name}: {len(log.w_hat[0])} reading columns; the calibration's reading has "
+                                f"{model.n_w}")
+    if noise is None and (calibration.noise is None or len(calibration.noise.wrench_sd) != calibration.size):
+        noise = NoiseSpec(tuple(np.sqrt(np.var(np.diff(log.w_hat, 2, axis=0), axis=0) / 6)))
+    if causal:
+        stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
+                             window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,
+                             false_alarm=false_alarm, track_offset=track_offset, drift_intensity=drift_intensity,
+                             offset_sd=offset_sd, motion=motion, frame=frame, point=point)
+        out = []
+        for i, t in enumerate(log.t):
+            if joint:
+                q = log.joints[i]
+                sample = dict(joints=None if np.isnan(q).all() else
+                              (q, *(None if v is None or np.isnan(v[i]).all() else v[i]
+                                    for v in (log.velocities, log.accelerations))))
+            else:
+                rates = (log.angular_velocity[i], log.specific_force[i])
+                sample = dict(imu=None if np.isnan(rates[0]).all() else (log.orientation[i], *rates))
+            o = stream.push(t, log.w_hat[i], **sample)
+            if o is not None:
+                out.append(o)
+        if not out:
+            raise CompensationError(f"{log.name}: no window of the causal filter holds enough {motion.source}")
+        return Compensation(t=np.array([o.t for o in out]), wrench=np.array([o.wrench for o in out]),
+                            cov=np.array([o.cov for o in out]), contact=np.array([o.contact for o in out]),
+                            statistic=np.array([o.statistic for o in out]), threshold=stream._parts.threshold,
+                            names=stream._parts.names, delay=stream.delay, direction=direction,
+                            warnings=list(stream.warnings),
+                            offset=None if out[0].offset is None else np.array([o.offset for o in out]),
+                            offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
+                            frame=frame, point=stream.point)
+    noise = _noise(calibration, noise)
+    parts = _Parts(calibration, model, noise, direction, false_alarm)
+    output = _Output(model, frame, point)
+    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd)
+    warnings = list(parts.warnings)
+    if calibration.latency:
+        warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose stream's) is not "
+                        f"applied to the {motion.source} stream: it is taken as of the readings' times")
+    window = OFFLINE_WINDOW if window is None else window
+    if not (isinstance(window, (int, float)) and np.isfinite(window) and window > 0):
+        raise CompensationError(f"window must be a positive number of seconds; got {window!r}")
+    dt = log.dt
+    k = max(7, int(round(window / dt)) // 2 * 2 + 1)
+    h = k // 2
+    raw = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
+    present = np.flatnonzero(np.isfinite(raw).all(axis=1))
+    if len(present) < 4:
+        raise CompensationError(f"{log.name}: fewer than four samples of the {motion.source}")
+    first, last = present[0], present[-1] + 1           # the rows before the first sample and after the last dropped
+    if last - first < k + 1:
+        raise CompensationError(f"{log.name}: {last - first} samples with the {motion.source}; the smoothing window "
+                                f"{window:g} s needs more than {k}")
+    filled = _fill(log.t[first:last], raw[first:last])
+    smooth = [savgol_filter(filled, k, ORDER, deriv=d, delta=dt, axis=0, mode="interp") for d in range(3)]
+    smooth = [np.concatenate([np.full((first, v.shape[1]), np.nan), v]) for v in smooth]
+    sums = [float(np.sum(savgol_coeffs(k, ORDER, deriv=d, delta=dt, use="dot") ** 2)) for d in range(3)]
+    keep = slice(first + h, last - h)
+    # each channel's noise from its samples' second differences; the samples interpolated onto the readings'
+    # grid, one every r rows weighs about r times a row's share of the filter (as the pose path counts it)
+    var = np.mean(np.square(np.diff(raw[present], 2, axis=0)), axis=0) / 6
+    r = float(np.median(np.diff(present)))
+    sums = [v * max(r, 1.0) for v in sums]
+    P = [v[keep] for v in smooth]
+    if joint:
+        dq, ddq, var_ddq = P[1], P[2], var * sums[2]
+        if log.velocities is not None:
+            dq = np.where(np.isfinite(log.velocities[keep]), log.velocities[keep], dq)
+        if log.accelerations is not None:
+            measured = np.isfinite(log.accelerations[keep])
+            ddq = np.where(measured, log.accelerations[keep], ddq)
+            var_ddq = np.where(measured.all(axis=0), 0.0, var_ddq)
+        x, a, R = motion.state(model, P[0], dq, ddq)
+        accel_var = motion.accel_var(P[0][0], var_ddq, R[0])
+    else:
+        x, a, R = motion.state(model, P[0], P[1], log.orientation[keep])
+        accel_var = motion.accel_var(var, sums[0], sums[1])
+    t, w_hat = log.t[keep], log.w_hat[keep]
+    W_p, A_inv = _payload_wrench(model, x, a)
+    wrench, cov, contact, statistic, *offset = parts.finish(w_hat, W_p, A_inv, accel_var, tracker, t)
+    offset, offset_sd = offset if offset else (None, None)
+    wrench, cov = output.apply(wrench, cov, R)
+    return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
+                        threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
+                        warnings=warnings, offset=offset, offset_sd=offset_sd, frame=frame, point=output.point)
+
+
+def _fill(t, values):
+    """Rows of NaN (no sample) between the first and the last sample filled by a cubic spline through the
+    samples (twice differentiable, unlike a linear interpolation)."""
+    present = np.isfinite(values).all(axis=1)
+    if present.all():
+        return values
+    return CubicSpline(t[present], values[present], axis=0)(t)
 
 
 # --- streaming --------------------------------------------------------------------------------------------------
@@ -586,34 +804,54 @@ class ContactSample:
 
 
 class Compensator:
-    """The causal compensation one sample at a time: a reading and a pose in, the contact wrench out.
+    """The causal compensation one sample at a time: a reading and its motion in, the contact wrench out.
 
-    Each :meth:`push` takes the newest sample (time, raw reading, pose or None) and returns the contact
-    wrench of the reading taken :attr:`delay` s earlier (:class:`ContactSample`: (C1), (C3), (C4) of the
-    module), or None until the window is full or where it holds too few poses. The poses are fitted by
-    the causal filter of :func:`compensate`; fed a log, the two give the same numbers.
+    Each :meth:`push` takes the newest sample (time, raw reading, and a pose, joint states or an IMU's sample,
+    as ``motion`` declares, or None) and returns the contact wrench of the reading taken :attr:`delay` s
+    earlier (:class:`ContactSample`: (C1), (C3), (C4) of the module, (C8) for ``frame`` and ``point``), or
+    None until the window is full or where it holds too few motion samples. The poses (or the joint angles,
+    or the IMU's rate and specific force) are fitted by the causal filter of :func:`compensate`; fed a log,
+    the two give the same numbers.
 
     Parameters
     ----------
     calibration : plant.Calibration
     dt : float
-        The sample time, s (the readings' rate; a pose may come with any of them).
+        The sample time, s (the readings' rate; a motion sample may come with any of them).
     payload, direction, noise, window, delay, order, false_alarm, track_offset, drift_intensity, offset_sd
         As for :func:`compensate` (``noise`` default the calibration's: required where it has none).
+    motion : JointMotion or ImuMotion, optional
+        The motion's source (module :mod:`fmscal.analysis._motion`): None, poses (``push(t, w_hat, pose)``);
+        a :class:`JointMotion` (``push(t, w_hat, joints=(q, dq, ddq))``, ``dq``/``ddq`` None where not given:
+        then differentiated by the causal filter); an :class:`ImuMotion` (``push(t, w_hat, imu=(quaternion_wxyz,
+        angular_velocity, specific_force))``, the IMU's axes: only the angular acceleration is differentiated).
+        Either way the delay is the filter's, :attr:`delay`; the stream is taken as of the readings' times.
+    frame : {"sensor", "base"}
+        The output's axes (C8); "base" needs an attitude (a pose, the joints, or the IMU's orientation).
+    point : array_like of 3 floats, optional
+        The tool point, sensor axes, m: the torque about it (C8); default the sensor's point.
     """
 
     def __init__(self, calibration, dt, *, payload=None, direction="on_tool", noise=None, window=CAUSAL_WINDOW,
                  delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM, track_offset=False,
-                 drift_intensity=None, offset_sd=None):
+                 drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None):
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise CompensationError(f"dt must be a positive number of seconds; got {dt!r}")
         self.model = compensation_model(calibration, payload)
+        if motion is not None and not isinstance(motion, (JointMotion, ImuMotion)):
+            raise CompensationError(f"motion must be None (poses), a JointMotion or an ImuMotion; got "
+                                    f"{type(motion).__name__}")
+        if motion is not None:
+            motion.check(self.model)
+        self.motion = motion
+        self._output = _Output(self.model, frame, point)
+        self.frame, self.point = frame, self._output.point
         noise = _noise(calibration, noise)
         self._parts = _Parts(calibration, self.model, noise, direction, false_alarm)
         self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd)
         # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
-        latency = calibration.latency or 0.0
+        latency = (calibration.latency or 0.0) if motion is None else 0.0
         self.dt, self.order, self._noise = float(dt), order, noise
         self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, latency)
         self._coefficients = np.array(_causal_coefficients(self._k, order, self._lead, self.dt))    # (3, k)
@@ -624,13 +862,20 @@ class Compensator:
         self._accel_var = None
         self._last_q = None
         self.warnings = list(self._parts.warnings)
+        if motion is not None:
+            self._extras = deque(maxlen=self._k)           # per motion sample: (dq, ddq) or the IMU's quaternion
+            self._channel_noise = _RunningNoise(motion.size)
+            if calibration.latency:
+                self.warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose "
+                                     f"stream's) is not applied to the {motion.source} stream: it is taken as of "
+                                     "the readings' times")
 
     @property
     def delay(self):
         """The delay the causal filter adds, s: each output is the wrench of the reading this much older."""
         return round(self._L * self.dt, 12)
 
-    def push(self, t, w_hat, pose=None):
+    def push(self, t, w_hat, pose=None, *, joints=None, imu=None):
         """Take the newest sample; the contact wrench of the reading :attr:`delay` s older, or None.
 
         Parameters
@@ -640,7 +885,13 @@ class Compensator:
         w_hat : array_like, shape (n_w,)
             The raw reading.
         pose : array_like, shape (n_pose,), optional
-            The pose stream's newest pose, None (or NaN) where none came with this reading.
+            ``motion=None``: the pose stream's newest pose, None (or NaN) where none came with this reading.
+        joints : tuple (q, dq, ddq), optional
+            A :class:`JointMotion`: arrays in its ``joints`` order (rad, rad/s, rad/s^2; m for a prismatic
+            joint), ``dq``/``ddq`` None where not given; None where no joint state came.
+        imu : tuple (quaternion_wxyz, angular_velocity, specific_force), optional
+            An :class:`ImuMotion`: the IMU's orientation in its world (scalar first; None where it gives none),
+            rate (rad/s) and specific force (m/s^2) in its axes; None where no IMU sample came.
 
         Returns
         -------
@@ -649,6 +900,8 @@ class Compensator:
         w_hat = np.asarray(w_hat, dtype=float)
         if w_hat.shape != (self._parts.n,) or not np.isfinite(w_hat).all():
             raise CompensationError(f"w_hat must be {self._parts.n} finite numbers; got {w_hat!r}")
+        if self.motion is not None or joints is not None or imu is not None:
+            return self._push_source(float(t), w_hat, pose, joints, imu)
         if pose is not None:
             pose = np.asarray(pose, dtype=float)
             if pose.shape != (self.model.n_pose,):
@@ -684,7 +937,80 @@ class Compensator:
         self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]),
                            self._parts.covariance(signed[None], A_inv, self._accel_var * c2_sq)[0], bool(contact[0])))
         offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
+        if not self._output.identity:
+            wrench, cov = self._output.apply(wrench, cov, _pose_attitudes(x, self.model)
+                                             if self._output.needs_attitude else None)
         return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]), offset, offset_sd)
+
+    def _push_source(self, t, w_hat, pose, joints, imu):
+        """:meth:`push` for a joint or IMU source: its channels filtered causally, (C5)-(C7), then (C1)-(C4)."""
+        motion = self.motion
+        given = {"pose": pose, "joints": joints, "imu": imu}
+        wanted = "pose" if motion is None else "joints" if isinstance(motion, JointMotion) else "imu"
+        extra = [k for k, v in given.items() if v is not None and k != wanted]
+        if extra:
+            what = "poses (motion=None)" if motion is None else f"{motion.source} ({type(motion).__name__})"
+            raise CompensationError(f"this Compensator takes {what}: {extra[0]}= was given; give {wanted}= only")
+        sample = motion.sample(given[wanted])
+        if sample is None:
+            channels, extra_value = None, None
+        elif wanted == "joints":
+            channels, extra_value = sample[0], (sample[1], sample[2])
+        else:
+            channels, extra_value = sample
+            extra_value = extra_value if np.isfinite(extra_value).all() else None
+        self._channel_noise.add(channels)
+        self._readings.append((t, w_hat))
+        self._poses.append(channels)
+        self._extras.append(extra_value)
+        if len(self._readings) <= self._L or len(self._poses) < self._k:
+            return None
+        t0, reading = self._readings[0]
+        present = [p is not None for p in self._poses]
+        if all(present):
+            P, c = self._coefficients @ np.array(self._poses), self._coefficients
+        else:
+            fitted = self._fit(present)
+            if fitted is None:
+                return None
+            P, c = fitted
+        sums = np.sum(c ** 2, axis=1)                                   # sum c0^2, c1^2, c2^2
+        var = self._channel_noise.variance()
+        i0 = self._k - 1 - self._lead                                   # the read-out sample in the window
+        if wanted == "joints":
+            q, dq, ddq = P[0], P[1], P[2]
+            var_ddq = var * sums[2]
+            if self._extras[i0] is not None:
+                given_dq, given_ddq = self._extras[i0]
+                measured = np.isfinite(given_ddq)
+                dq = np.where(np.isfinite(given_dq), given_dq, dq)
+                ddq = np.where(measured, given_ddq, ddq)
+                var_ddq = np.where(measured, 0.0, var_ddq)
+                if np.isfinite(given_dq).all() and measured.all():
+                    q = self._poses[i0]
+            x, a, R = motion.state(self.model, q[None], dq[None], ddq[None])
+            accel_var = motion.accel_var(q, var_ddq, R[0])
+        else:
+            x, a, R = motion.state(self.model, P[0:1], P[1:2], self._orientation(i0)[None])
+            accel_var = motion.accel_var(var, sums[0], sums[1])
+        W_p, A_inv = _payload_wrench(self.model, x, a)
+        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv, accel_var,
+                                                                      self._tracker, [t0])
+        signed = self._parts.sign * reading
+        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]),
+                           self._parts.covariance(signed[None], A_inv, accel_var)[0], bool(contact[0])))
+        offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
+        wrench, cov = self._output.apply(wrench, cov, R)
+        return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]), offset, offset_sd)
+
+    def _orientation(self, i0):
+        """The IMU's orientation nearest the read-out sample ``i0`` in the window (NaN where none came)."""
+        if self._extras[i0] is not None:
+            return self._extras[i0]
+        rows = [i for i, e in enumerate(self._extras) if e is not None]
+        if not rows:
+            return np.full(4, np.nan)
+        return self._extras[min(rows, key=lambda i: abs(i - i0))]
 
     @property
     def offset(self):
@@ -812,6 +1138,15 @@ class Compensator:
     def _irregular(self, present):
         """The polynomial fitted to the poses the window holds; ``(P, sum c2^2)``, or None where they are too few
         or all on one side of the time it is read at (a stale pose stream: no extrapolation)."""
+        fitted = self._fit(present)
+        if fitted is None:
+            return None
+        P, c = fitted
+        return P, float(np.sum(c[2] ** 2))
+
+    def _fit(self, present):
+        """The polynomial fitted to the samples the window holds: ``(P, c)``, the value and first two
+        derivatives (3, n_channels) and their coefficients (3, n_present); None as for :meth:`_irregular`."""
         rows = np.flatnonzero(present)
         if len(rows) < self.order + 3:
             return None
@@ -822,4 +1157,26 @@ class Compensator:
         pinv = np.linalg.pinv(V)                                      # (order + 1, n): the polynomial's coefficients
         c = np.array([pinv[0], pinv[1], 2 * pinv[2]])
         P = c @ np.array([self._poses[i] for i in rows])
-        return P, float(np.sum(c[2] ** 2))
+        return P, c
+
+
+class _RunningNoise:
+    """A motion channel's noise variance from the second differences of its samples (the last three that came):
+    a white noise of sd ``sigma`` on a signal smooth at the sample rate gives differences of variance
+    ``6 sigma^2``."""
+
+    def __init__(self, size):
+        self.recent = deque(maxlen=3)
+        self.sum, self.n = np.zeros(size), 0
+
+    def add(self, values):
+        if values is None:
+            return
+        self.recent.append(values)
+        if len(self.recent) == self.recent.maxlen:
+            self.sum += np.square(self.recent[2] - 2 * self.recent[1] + self.recent[0])
+            self.n += 1
+
+    def variance(self):
+        return self.sum / (6 * self.n) if self.n else np.zeros_like(self.sum)
+

@@ -9,22 +9,32 @@ onto the first sensor, ``tests/live_rig.py``), prints:
 - the causal residual against the delay (the window twice the delay, read at its centre);
 - the same at 200 Hz (``spatial-mocap``: calibrated on its seed 1, compensated on seed 2, 20 s);
 - a 15 N contact of 2 s: its estimate and the share of its samples flagged;
-- :class:`fmscal.analysis.Compensator`'s cost per sample, p50 and p99.
+- :class:`fmscal.analysis.Compensator`'s cost per sample, p50 and p99;
+- the motion's other sources (``--sources`` alone: this part only): a UR5 carrying the tool for 20 s at 1 kHz
+  (``tests/robot_rig.py``: the payload's wrench by pinocchio's rnea, independent of fmscal's dynamics), its
+  readings those of the calibrated sensor plus its noise; the residual from the tool frame's poses (with the
+  scenario's pose noise), from the joint angles (1e-5 rad of noise; with and without measured joint rates,
+  1e-3 rad/s of noise) and from an IMU on the tool (gyroscope 2 mrad/s, accelerometer 0.03 m/s^2, turned and
+  7 cm off the sensor's point), offline and causal, the causal residual of the joints and the IMU against
+  the delay, and the cost per sample of each.
 
-docs/guide/compensation.md quotes it. About a minute on 2 cores.
+docs/guide/compensation.md quotes it. About a minute on 2 cores (the sources' part about half of it).
 """
 
+import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from fmscal.analysis import Compensator, calibrate, compensate  # noqa: E402
+from fmscal.analysis import Compensator, ImuMotion, calibrate, compensate  # noqa: E402
 from fmscal.analysis._compensate import CAUSAL_WINDOW  # noqa: E402
-from fmscal.plant import SPATIAL_SCENARIOS  # noqa: E402
+from fmscal.plant import SPATIAL_SCENARIOS, Log  # noqa: E402
+from fmscal.plant.io import ImuLog, JointLog  # noqa: E402
 from live_rig import contact_wrench, noise_rms, same_rig, with_contact  # noqa: E402
 
 
@@ -36,12 +46,80 @@ def row(name, values):
     print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in values) + " |", flush=True)
 
 
+def cost(stream, samples):
+    """p50 and p99 of ``stream.push`` over ``samples`` (keyword arguments per sample), the first 1,000 left out."""
+    spent = []
+    for t, w, kw in samples:
+        start = time.perf_counter()
+        stream.push(t, w, **kw)
+        spent.append(time.perf_counter() - start)
+    spent = np.array(spent[1000:]) * 1e6
+    return np.percentile(spent, 50), np.percentile(spent, 99)
+
+
+def sources(cal, truth, seed=5, duration=20.0):
+    """The residual from poses, joint angles and an IMU on one UR5 log (module docstring)."""
+    import robot_rig
+    rng = np.random.default_rng(seed)
+    run = robot_rig.ur5_run(duration, payload=cal.payload)
+    S, b, sd = truth.S_at(0.0), truth.offset, np.asarray(truth.noise.wrench_sd)
+    w_hat = np.linalg.solve(S, run["W"].T).T + b + rng.normal(0, 1, run["W"].shape) * sd
+    ref = noise_rms(S, sd)
+    turn = Rotation.from_quat(run["pose"][:, [1, 2, 3, 0]]) * Rotation.from_rotvec(
+        rng.normal(0, truth.noise.angle_sd, (len(run["t"]), 3)))
+    pose = np.c_[turn.as_quat(scalar_first=True),
+                 run["pose"][:, 4:] + rng.normal(0, truth.noise.position_sd, (len(run["t"]), 3))]
+    q = run["q"] + rng.normal(0, 1e-5, run["q"].shape)
+    dq = run["dq"] + rng.normal(0, 1e-3, run["q"].shape)
+    quaternion, omega_i, f_i, _ = robot_rig.imu_readings(run, rng, 0.002, 0.03)
+    imu = ImuMotion(robot_rig.C_IMU, robot_rig.R_IMU)
+    paths = {"poses (the scenario's pose noise)": (Log(run["t"], pose, w_hat), None),
+             "joint angles": (JointLog(run["t"], q, w_hat), run["motion"]),
+             "joint angles and rates": (JointLog(run["t"], q, w_hat, velocities=dq), run["motion"]),
+             "IMU": (ImuLog(run["t"], quaternion, omega_i, f_i, w_hat), imu)}
+    print(f"\nthe motion's sources: a UR5 for {duration:g} s at 1 kHz (tests/robot_rig.py), no contact; residual rms "
+          "/ (reading noise times S)\n")
+    print("| source, path | tx | ty | tz | fx | fy | fz |")
+    print("|---|---|---|---|---|---|---|")
+    for name, (log, motion) in paths.items():
+        row(f"{name}, offline", ratios(compensate(cal, log, motion=motion), ref))
+        causal = compensate(cal, log, causal=True, motion=motion)
+        row(f"{name}, causal ({causal.delay * 1e3:.0f} ms)", ratios(causal, ref))
+    k = int(round(8.0 / 1e-3))
+    print("\ncausal residual against the delay, the first 8 s (window twice the delay)\n")
+    print("| source, delay | tx | ty | tz | fx | fy | fz |")
+    print("|---|---|---|---|---|---|---|")
+    shorter = {"joint angles": JointLog(run["t"][:k], q[:k], w_hat[:k]),
+               "IMU": ImuLog(run["t"][:k], quaternion[:k], omega_i[:k], f_i[:k], w_hat[:k])}
+    for name, log in shorter.items():
+        for delay in (0.005, 0.01, 0.02):
+            c = compensate(cal, log, causal=True, motion=paths[name][1], window=2 * delay, delay=delay)
+            row(f"{name}, {delay * 1e3:.0f} ms", ratios(c, ref))
+    n = min(len(run["t"]), 6000)
+    print(f"\nCompensator.push per sample ({n - 1000} samples after 1,000 of warm-up), p50 and p99, us\n")
+    print("| source | p50 | p99 |")
+    print("|---|---|---|")
+    feeds = {"poses": (None, [dict(pose=p) for p in pose[:n]]),
+             "joint angles": (run["motion"], [dict(joints=(v, None, None)) for v in q[:n]]),
+             "IMU": (imu, [dict(imu=v) for v in zip(quaternion[:n], omega_i[:n], f_i[:n])])}
+    for name, (motion, kws) in feeds.items():
+        stream = Compensator(cal, 1e-3, noise=truth.noise, motion=motion)
+        p50, p99 = cost(stream, zip(run["t"][:n], w_hat[:n], kws))
+        print(f"| {name} | {p50:.0f} | {p99:.0f} |", flush=True)
+
+
 def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sources", action="store_true", help="the motion's other sources only")
+    only_sources = parser.parse_args().sources
     arm = SPATIAL_SCENARIOS["spatial-arm"]
     log, truth, _ = arm.generate(1)
     t0 = time.perf_counter()
     cal = calibrate(log, arm.payload)
     print(f"calibration: {cal.method} on {log.name} ({time.perf_counter() - t0:.0f} s), converged {cal.converged}")
+    if only_sources:
+        sources(cal, truth)
+        return
     S, b = truth.S_at(0.0), truth.offset
     logs = {}
     second, truth2, _ = arm.generate(2)
@@ -106,6 +184,7 @@ def main():
     cost = np.array(cost[1000:]) * 1e6
     print(f"\nCompensator.push, per sample (19,000 samples after 1,000 of warm-up): "
           f"p50 {np.percentile(cost, 50):.0f} us, p99 {np.percentile(cost, 99):.0f} us")
+    sources(cal, truth)
 
 
 if __name__ == "__main__":

@@ -7,10 +7,12 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant import Calibration, read_log
+from fmscal.plant.io import IMU_COLUMNS, read_imu_log, read_joint_log
 from fmscal.observers.payload import PayloadEstimate
 
-from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, OFFLINE_WINDOW, compensate,
-                           compensation_model)
+from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, FRAMES, OFFLINE_WINDOW,
+                           compensate, compensation_model)
+from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
 from ._common import CliError
 from ._files import atomic_write_text, check_outputs
 
@@ -19,12 +21,32 @@ def add_compensate(sub):
     p = sub.add_parser("compensate", help="the contact wrench: the payload's gravity and inertia removed from a log",
                        description="With a calibration saved by fmscal calibrate --save, remove from each reading "
                                    "of LOG.csv the wrench the payload's own motion needs under gravity "
-                                   "(Newton-Euler from its poses): w_e = W_p - S (w_hat - b), the wrench the "
-                                   "environment applies to the tool, at the sensor point in the sensor frame. "
+                                   "(Newton-Euler from its poses, from its joint angles with --urdf, or from an "
+                                   "IMU on the tool): w_e = W_p - S (w_hat - b), the wrench the "
+                                   "environment applies to the tool, at the sensor point in the sensor frame "
+                                   "(or as --output-frame and --point say). "
                                    "Writes t, the reading's columns and contact (1 where the wrench is beyond "
                                    "the noise: a chi-square test of its normalised norm).")
     p.add_argument("calibration", metavar="CAL.json", help="a calibration saved by fmscal calibrate --save")
-    p.add_argument("log", metavar="LOG.csv", help="a log of the same sensor (poses and raw readings)")
+    p.add_argument("log", metavar="LOG.csv",
+                   help="a log of the same sensor: poses and raw readings; with --urdf, t, the joint angles (q1..qn "
+                        "or the joints' names, rad) and the readings; or an IMU log: t," + ",".join(IMU_COLUMNS)
+                        + ", the readings (the IMU's orientation scalar first in its world, its rate in rad/s and "
+                        "specific force in m/s^2 in its axes)")
+    p.add_argument("--urdf", metavar="ROBOT.urdf", help="the log's joint angles are this robot's (pinocchio): the "
+                                                          "motion from its forward kinematics")
+    p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
+    p.add_argument("--imu-rotation", type=float, nargs="+", metavar="V",
+                   help="an IMU log: the IMU's axes in the sensor's, as a unit quaternion QW QX QY QZ or a rotation "
+                        "matrix of 9 numbers by rows (v_sensor = C v_imu); default identity")
+    p.add_argument("--imu-lever-arm", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                   help="an IMU log: the IMU's point from the sensor's point, sensor axes, m; default 0 0 0")
+    p.add_argument("--output-frame", choices=FRAMES, default=FRAMES[0],
+                   help="the written wrench's axes: the sensor's (default) or the base's (the poses' world, the "
+                        "URDF's base, the IMU's world)")
+    p.add_argument("--point", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                   help="the tool point the torque is taken about, sensor axes from the sensor's point, m "
+                        "(default the sensor's point)")
     p.add_argument("--out", required=True, metavar="CONTACT.csv",
                    help="t, the wrench's columns (t,tx,ty,tz,fx,fy,fz in 3D) and contact (0 or 1)")
     p.add_argument("--causal", action="store_true",
@@ -64,6 +86,43 @@ def _payload(path, calibration):
     return type(model).payload_from(estimate.mass, estimate.inertia, estimate.com)
 
 
+def _motion_log(args):
+    """The log and the motion's source the options and the log's header give: ``(log, motion or None)``."""
+    if (args.urdf is None) != (args.frame is None):
+        raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
+    try:
+        with open(args.log, "rb") as f:
+            header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
+                      .split(",")]
+    except OSError:
+        header = []                                  # the reader below says what is wrong with the file
+    imu = "iwx" in header
+    if not imu and (args.imu_rotation is not None or args.imu_lever_arm is not None):
+        raise CliError(f"--imu-rotation and --imu-lever-arm are an IMU log's; {Path(args.log).name} has no IMU columns "
+                       f"({','.join(IMU_COLUMNS)})")
+    if args.urdf is not None:
+        if imu:
+            raise CliError("--urdf takes a log of joint angles; this one has an IMU's columns: give one source")
+        motion = JointMotion(args.urdf, args.frame)
+        return read_joint_log(args.log, motion.kinematics), motion
+    if imu:
+        rotation = None
+        if args.imu_rotation is not None:
+            values = np.asarray(args.imu_rotation, dtype=float)
+            if len(values) == 4:
+                if abs(np.linalg.norm(values) - 1) > 1e-3:
+                    raise CliError(f"--imu-rotation: a quaternion QW QX QY QZ must be a unit one; got norm "
+                                   f"{np.linalg.norm(values):.4g}")
+                rotation = quaternion_to_matrix(values)
+            elif len(values) == 9:
+                rotation = values.reshape(3, 3)
+            else:
+                raise CliError(f"--imu-rotation takes 4 numbers (a unit quaternion QW QX QY QZ) or 9 (a rotation "
+                               f"matrix by rows); got {len(values)}")
+        return read_imu_log(args.log), ImuMotion(rotation, args.imu_lever_arm)
+    return read_log(args.log), None
+
+
 def cmd_compensate(args):
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
@@ -76,7 +135,7 @@ def cmd_compensate(args):
         print(f"fmscal compensate: warning: {args.calibration} records a calibration that did not converge",
               file=sys.stderr)
     payload = None if args.payload is None else _payload(args.payload, calibration)
-    log = read_log(args.log)
+    log, motion = _motion_log(args)
     if not args.causal and args.delay != CAUSAL_DELAY:
         raise CliError("--delay is the causal path's: add --causal")
     intensity = None
@@ -90,7 +149,8 @@ def cmd_compensate(args):
         intensity = intensity[0] if len(intensity) == 1 else intensity
     result = compensate(calibration, log, causal=args.causal, payload=payload, window=args.window,
                         delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
-                        track_offset=args.track_offset, drift_intensity=intensity)
+                        track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
+                        frame=args.output_frame, point=args.point)
     if not np.isfinite(result.wrench).all():
         raise CliError("the compensated wrench is not finite (overflow): the calibration's S or b is far outside "
                        "any sensor's range: nothing written")
@@ -106,7 +166,10 @@ def cmd_compensate(args):
         print(f"fmscal compensate: warning: {warning}", file=sys.stderr)
     rms = np.sqrt(np.mean(result.wrench ** 2, axis=0))
     what = "the tool on the environment" if args.on_environment else "the environment on the tool"
-    print(f"wrote {args.out}: {len(result.t)} wrenches of {what} (sensor frame), "
+    where = f"{args.output_frame} frame" + ("" if args.point is None else
+                                            ", torque about the tool point " + " ".join(f"{v:g}" for v in args.point))
+    source = "" if motion is None else f", motion from {motion.source}"
+    print(f"wrote {args.out}: {len(result.t)} wrenches of {what} ({where}{source}), "
           f"{'causal, delay ' + format(result.delay * 1e3, '.3g') + ' ms' if args.causal else 'offline'}; "
           f"contact at {int(result.contact.sum())} samples ({100 * result.contact.mean():.2g} %)")
     print("rms " + ", ".join(f"{n} {v:.3g}" for n, v in zip(result.names, rms)))

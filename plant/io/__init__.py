@@ -15,7 +15,8 @@ from ._pose_table import (PoseTable, read_pose_table, write_pose_table, is_pose_
     read_attitude_log, is_attitude_log, held_table, simulate_attitude_log, TABLE_COLUMNS, ATTITUDE_COLUMNS,
     MIN_POSES, HOLD_RATE, HOLD_WINDOW, MIN_HOLD)
 from ._tf_chain import (chain_poses)
-from ._kinematics import (RobotKinematics, joint_columns, read_joint_data)
+from ._kinematics import (RobotKinematics, joint_columns, read_joint_data, JointLog, read_joint_log)
+from ._imu_log import (ImuLog, read_imu_log, IMU_COLUMNS)
 from ._bag_write import write_bag, write_tf_bag
 from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, POSE_TYPES, JOINT_TYPE, TF_TYPE,
     MAX_WRENCH_GAP, MAX_TILT_DEG, MAX_OUT_OF_PLANE)
@@ -27,4 +28,5 @@ __all__ = ["json_ready", "write_bag", "write_tf_bag", "Log", "LogError", "Truth"
            "Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "PoseTable", "read_pose_table",
            "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog", "read_attitude_log",
            "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses", "RobotKinematics",
-           "read_joint_data", "BagError", "import_bag", "read_bag", "format_report"]
+           "read_joint_data", "JointLog", "read_joint_log", "ImuLog", "read_imu_log", "IMU_COLUMNS",
+           "BagError", "import_bag", "read_bag", "format_report"]

@@ -23,7 +23,7 @@ from fmscal.plant.numerics import FmscalError
 from ._log import Log, LogError, _as_path, _echo, _read_csv
 from ._pose_table import PoseTable
 
-__all__ = ["RobotKinematics", "joint_columns", "read_joint_data"]
+__all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log"]
 
 _WRENCH = ("tx", "ty", "tz", "fx", "fy", "fz")
 _OTHERS = ("t", *_WRENCH)                   # the columns of a joint log that are not joints
@@ -116,6 +116,57 @@ class RobotKinematics:
             x, y, z, w = pin.Quaternion(placement.rotation).coeffs()
             out[k] = [w, x, y, z, *placement.translation]
         return out
+
+    def motion(self, joints, velocities, accelerations, classical=True):
+        """The frame's pose, velocity and acceleration for every row of joint values and their rates.
+
+        By pinocchio: ``forwardKinematics(model, data, q, dq, ddq)``, ``updateFramePlacements``, the frame's
+        velocity ``getFrameVelocity`` and its *classical* acceleration ``getFrameClassicalAcceleration``, both
+        in the frame's own (``LOCAL``) axes::
+
+            v, omega   = the frame origin's velocity and the angular velocity, frame axes
+            a, alpha   = the origin's acceleration (d/dt of its world velocity, in frame axes) and the
+                         angular acceleration, frame axes
+
+        The spatial acceleration (``getFrameAcceleration``) differs from the classical one by ``omega x v``
+        (in its linear part): the one a body's Newton-Euler takes as ``R^T p_ddot`` is the classical.
+
+        Parameters
+        ----------
+        joints, velocities, accelerations : array_like, shape (N, n)
+            ``q`` (rad, m), ``dq`` (rad/s, m/s) and ``ddq`` (rad/s^2, m/s^2) in :attr:`joint_names` order.
+        classical : bool
+            False: the spatial acceleration's linear part in place of ``a`` (for a test that tells them apart).
+
+        Returns
+        -------
+        pose : ndarray, shape (N, 7)
+            ``[qw, qx, qy, qz, x, y, z]`` as :meth:`poses`.
+        v, omega, a, alpha : ndarray, shape (N, 3) each
+            Frame axes, SI.
+        """
+        pin = self._pin
+        q, dq, ddq = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (joints, velocities, accelerations))
+        n = len(q)
+        pose, v, omega, a, alpha = np.empty((n, 7)), *(np.empty((n, 3)) for _ in range(4))
+        accel = pin.getFrameClassicalAcceleration if classical else pin.getFrameAcceleration
+        for k in range(n):
+            pin.forwardKinematics(self.model, self._data, q[k], dq[k], ddq[k])
+            pin.updateFramePlacements(self.model, self._data)
+            placement = self._data.oMf[self.frame_id]
+            x, y, z, w = pin.Quaternion(placement.rotation).coeffs()
+            pose[k] = [w, x, y, z, *placement.translation]
+            twist = pin.getFrameVelocity(self.model, self._data, self.frame_id, pin.LOCAL)
+            acc = accel(self.model, self._data, self.frame_id, pin.LOCAL)
+            v[k], omega[k] = twist.linear, twist.angular
+            a[k], alpha[k] = acc.linear, acc.angular
+        return pose, v, omega, a, alpha
+
+    def jacobian(self, joints):
+        """The frame's Jacobian in its own axes at ``joints`` (n,): shape (6, n), rows ``[v; omega]``
+        (pinocchio's ``computeFrameJacobian``, ``LOCAL``)."""
+        return np.array(self._pin.computeFrameJacobian(self.model, self._data, np.asarray(joints, dtype=float),
+                                                       self.frame_id, self._pin.LOCAL))
 
 
 def joint_columns(header, joint_names):
@@ -243,3 +294,96 @@ def _refuse_degrees(values, kinematics, joints, name):
     raise LogError(f"{name}: the joint angles look like degrees, not radians: {column} reaches {worst:.4g}, beyond "
                    f"the URDF's limits [{lo[k]:.3g}, {hi[k]:.3g}] rad, while every joint in degrees (times pi/180) "
                    f"is within its limits; convert the joint columns to rad")
+
+
+class JointLog:
+    """A log of joint states and raw readings: the motion's source for compensation with a URDF.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        s, strictly increasing.
+    joints : array_like, shape (N, n)
+        ``q`` per sample, rad (m for a prismatic joint), in the order the motion's source takes; a row of NaN
+        where no joint state came with that reading.
+    w_hat : array_like, shape (N, n_w)
+        The raw readings.
+    velocities, accelerations : array_like, shape (N, n), optional
+        ``dq``, ``ddq`` where measured (rows of NaN where not); otherwise differentiated from ``joints``.
+    name : str
+
+    Raises
+    ------
+    plant.LogError
+        Shapes that do not agree, times not increasing, readings not finite.
+    """
+
+    def __init__(self, t, joints, w_hat, velocities=None, accelerations=None, name="joint-log"):
+        self.t = np.asarray(t, dtype=float).ravel()
+        self.joints = np.atleast_2d(np.asarray(joints, dtype=float))
+        self.w_hat = np.atleast_2d(np.asarray(w_hat, dtype=float))
+        self.name = name
+        n = len(self.t)
+        if len(self.joints) != n or len(self.w_hat) != n:
+            raise LogError(f"{name}: t, joints and w_hat need one row per sample; got {n}, {len(self.joints)}, "
+                           f"{len(self.w_hat)}")
+        self.velocities, self.accelerations = (
+            None if v is None else np.asarray(v, dtype=float).reshape(self.joints.shape)
+            for v in (velocities, accelerations))
+        _check_times(self.t, name)
+        if not np.isfinite(self.w_hat).all():
+            raise LogError(f"{name}: the readings must be finite numbers")
+
+    @property
+    def dt(self):
+        """The median sample time, s."""
+        return float(np.median(np.diff(self.t)))
+
+    def __len__(self):
+        return len(self.t)
+
+
+def _check_times(t, name):
+    """Times finite and strictly increasing, at least two of them; a one-line :class:`LogError`."""
+    if len(t) < 2 or not np.isfinite(t).all():
+        raise LogError(f"{name}: needs at least two samples with finite times")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if len(bad):
+        raise LogError(f"{name}: the times must increase; row {bad[0] + 2} (t = {t[bad[0] + 1]:g}) does not")
+
+
+def read_joint_log(path, kinematics):
+    """A log of joint angles and raw readings (``t``, the joint columns of :func:`joint_columns`,
+    ``tx,ty,tz,fx,fy,fz``) as a :class:`JointLog` in :attr:`RobotKinematics.joint_names` order.
+
+    Parameters
+    ----------
+    path : str or Path
+    kinematics : RobotKinematics
+
+    Returns
+    -------
+    JointLog
+
+    Raises
+    ------
+    plant.LogError, FmscalError
+        The file's problems, joint columns that do not match the URDF, joint angles in degrees, a row with some
+        but not all joints.
+    """
+    path = _as_path(path, "log")
+    with open(path, "rb") as f:
+        header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
+                  .split(",")]
+    if "t" not in header:
+        raise LogError(f"{_echo(path.name)}: no column t; a joint log needs t, the joints' columns and "
+                       f"{','.join(_WRENCH)}")
+    joints = joint_columns(header, kinematics.joint_names)
+    frame = _read_csv(path, ("t", *joints, *_WRENCH), "only joint cells may be empty (no joint state)")
+    values = frame[joints].to_numpy()
+    missing = np.isnan(values).all(axis=1)
+    partial = np.isnan(values).any(axis=1) & ~missing
+    if partial.any():
+        raise LogError(f"{_echo(path.name)}: row {int(np.argmax(partial)) + 1} has some but not all joint values")
+    _refuse_degrees(values[~missing], kinematics, joints, _echo(path.name))
+    return JointLog(frame["t"].to_numpy(), values, frame[list(_WRENCH)].to_numpy(), name=_echo(path.name))
