@@ -1081,7 +1081,7 @@ class Compensator:
         # one at a time until both windows are full of poses, and for a row without one
         while i < len(t) and (len(self._readings) <= self._L or len(self._poses) < self._k
                               or any(p is None for p in self._poses) or not np.isfinite(pose[i]).all()
-                              or getattr(self, "_motion", None) is not None):
+                              or self.motion is not None):
             sample = self.push(t[i], w_hat[i], pose[i])
             if sample is not None:
                 out.append(sample)
@@ -1129,6 +1129,9 @@ class Compensator:
         own = self._parts.covariance(signed, A_inv, accel_var)
         for row in range(max(0, m - self._last.maxlen), m):
             self._last.append((found[row], own[row], bool(contact[row])))
+        if not self._output.identity:
+            wrench, cov = self._output.apply(wrench, cov, _pose_attitudes(x, self.model)
+                                             if self._output.needs_attitude else None)
         self._poses.extend(pose)
         self._readings.extend(zip(t.tolist(), w_hat))
         b, b_sd = offset if offset else ([None] * m, [None] * m)

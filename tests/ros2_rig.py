@@ -22,6 +22,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from geometry_msgs.msg import PoseStamped, WrenchStamped
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from diagnostic_msgs.msg import DiagnosticArray
@@ -100,12 +101,12 @@ class Peer:
 
     def __init__(self, domain, wrench_topic="/ft_sensor/wrench", pose_topic="/ft_sensor/pose",
                  contact_topic="/ft_sensor/contact", covariance_topic="/ft_sensor/contact_covariance",
-                 node_name="fmscal_compensator"):
+                 node_name="fmscal_compensator", motion=PoseStamped):
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node("fmscal_test_peer", context=self.context)
         self.wrench_pub = self.node.create_publisher(WrenchStamped, wrench_topic, RELIABLE)
-        self.pose_pub = self.node.create_publisher(PoseStamped, pose_topic, RELIABLE)
+        self.pose_pub = self.node.create_publisher(motion, pose_topic, RELIABLE)
         self.contacts, self.covariances, self.diagnostics, self.latencies = [], [], [], []
         self.contact_sub = self.node.create_subscription(WrenchStamped, contact_topic, self.contacts.append, RELIABLE)
         self.node.create_subscription(Float64MultiArray, covariance_topic, self.covariances.append, RELIABLE)
@@ -149,27 +150,38 @@ class Peer:
         """Publish each row of ``log`` (a reading and its pose, both stamped ``epoch + t``) at the log's pace
         times ``rate``; ``poses``: a boolean per row (or all). Returns the stamps' epoch (s, now by default,
         a whole millisecond: the stamps are exact nanoseconds)."""
-        epoch = round(time.time(), 3) if epoch is None else epoch
         send = np.ones(len(log.t), bool) if poses is True else np.asarray(poses, bool)
+
+        def pose(i, stamp):
+            if not send[i]:
+                return None
+            msg = PoseStamped()
+            msg.header.stamp = stamp
+            msg.header.frame_id = "world"
+            qw, qx, qy, qz, x, y, z = (float(v) for v in log.pose[i])
+            o, p = msg.pose.orientation, msg.pose.position
+            o.w, o.x, o.y, o.z, p.x, p.y, p.z = qw, qx, qy, qz, x, y, z
+            return msg
+        return self.replay_rows(log.t, log.w_hat, pose, start, rate, epoch)
+
+    def replay_rows(self, t, w_hat, motion, start=None, rate=1.0, epoch=None):
+        """Publish a reading of each row of ``w_hat`` and the motion message ``motion(i, stamp)`` (None: no
+        motion with this reading), both stamped ``epoch + t[i]``, at the pace of ``t`` times ``rate``."""
+        epoch = round(time.time(), 3) if epoch is None else epoch
         begin = time.perf_counter()
-        for i, t in enumerate(log.t if start is None else log.t[start:], start=start or 0):
-            due = begin + (t - log.t[start or 0]) / rate
+        first = start or 0
+        for i in range(first, len(t)):
+            due = begin + (t[i] - t[first]) / rate
             while (wait := due - time.perf_counter()) > 0:
                 time.sleep(min(wait, 0.0005))
-            sec, nanosec = divmod(int(round(epoch * 1e3)) * 1_000_000 + int(round(t * 1e9)), 1_000_000_000)
-            if send[i]:
-                pose = PoseStamped()
-                pose.header.stamp.sec, pose.header.stamp.nanosec = sec, nanosec
-                pose.header.frame_id = "world"
-                qw, qx, qy, qz, x, y, z = log.pose[i]
-                pose.pose.orientation.w, pose.pose.orientation.x = float(qw), float(qx)
-                pose.pose.orientation.y, pose.pose.orientation.z = float(qy), float(qz)
-                pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = float(x), float(y), float(z)
-                self.pose_pub.publish(pose)
+            sec, nanosec = divmod(int(round(epoch * 1e3)) * 1_000_000 + int(round(t[i] * 1e9)), 1_000_000_000)
             wrench = WrenchStamped()
             wrench.header.stamp.sec, wrench.header.stamp.nanosec = sec, nanosec
+            message = motion(i, wrench.header.stamp)
+            if message is not None:
+                self.pose_pub.publish(message)
             wrench.header.frame_id = "ft_sensor"
-            tx, ty, tz, fx, fy, fz = (float(v) for v in log.w_hat[i])
+            tx, ty, tz, fx, fy, fz = (float(v) for v in w_hat[i])
             wrench.wrench.torque.x, wrench.wrench.torque.y, wrench.wrench.torque.z = tx, ty, tz
             wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = fx, fy, fz
             self.wrench_pub.publish(wrench)
@@ -211,3 +223,31 @@ def contact_array(msgs, epoch):
     w = np.array([[m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z, m.wrench.force.x, m.wrench.force.y,
                    m.wrench.force.z] for m in msgs])
     return t, w
+
+
+def joint_state(names, q, dq=None):
+    """A motion builder for :meth:`Peer.replay_rows`: JointState of ``names`` (in that order) at row ``i``."""
+    def build(i, stamp):
+        msg = JointState()
+        msg.header.stamp = stamp
+        msg.name = list(names)
+        msg.position = [float(v) for v in q[i]]
+        if dq is not None:
+            msg.velocity = [float(v) for v in dq[i]]
+        return msg
+    return build
+
+
+def imu_message(quaternion, omega, force):
+    """A motion builder for :meth:`Peer.replay_rows`: sensor_msgs/Imu (orientation scalar last, as ROS has it)."""
+    def build(i, stamp):
+        msg = Imu()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "imu"
+        w, x, y, z = (float(v) for v in quaternion[i])
+        msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = x, y, z, w
+        msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = (float(v) for v in omega[i])
+        a = msg.linear_acceleration
+        a.x, a.y, a.z = (float(v) for v in force[i])
+        return msg
+    return build

@@ -15,12 +15,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmscal.analysis import Compensator, compensate
+from fmscal.analysis import Compensator, ImuMotion, compensate
 from fmscal.analysis.cli import main
 from fmscal.analysis.ros2 import PARAMETERS, Pipeline, settings
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, SpatialModel
+from fmscal.plant import NoiseSpec
+from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
-from ros2_rig import Peer, contact_array, domain_id, node_command, node_log, running_node, truth_calibration
+from ros2_rig import (Peer, contact_array, domain_id, imu_message, joint_state, node_command, node_log, running_node,
+                      truth_calibration)
+import robot_rig
+from sensor_msgs.msg import Imu, JointState
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,15 +58,16 @@ def _expected_count(reference, log, last):
 
 
 # --- without ROS: the pieces the node runs ----------------------------------------------------------------------
-def test_push_many_is_push_row_by_row(arm):
+@pytest.mark.parametrize("frame, point", [("sensor", None), ("base", (0.0, 0.02, 0.1))])
+def test_push_many_is_push_row_by_row(arm, frame, point):
     """Compensator.push_many (the node's backlog as one block) gives push's samples, with missing poses and the
-    offset tracker in play, the tare after them the same."""
+    offset tracker in play, in the sensor's frame or the base's at a tool point; the tare after them the same."""
     scenario, log, truth, _ = arm
     cal = truth_calibration(scenario, truth, cov=np.eye(42) * 1e-6)
     log = log.head(700)
     pose = log.pose.copy()
     pose[300:304] = np.nan
-    one, block = Compensator(cal, log.dt, track_offset=True), Compensator(cal, log.dt, track_offset=True)
+    one, block = (Compensator(cal, log.dt, track_offset=True, frame=frame, point=point) for _ in range(2))
     ref = [o for o in (one.push(t, w, None if np.isnan(p).any() else p)
                        for t, w, p in zip(log.t, log.w_hat, pose)) if o is not None]
     out, sizes = [], np.random.default_rng(0).integers(1, 40, size=100)
@@ -235,6 +241,87 @@ def test_stale_motion_stops_the_output(request, arm, cal_file):
     t, _ = contact_array(peer.contacts, epoch)
     assert t[-1] == pytest.approx(log.t[499], abs=1e-9) and len(t) == 500 - 29, (t[-1], len(t), t[:3], np.diff(t).max())
     assert "motion stale: /ft_sensor/pose has no sample within 0.05 s" in text
+
+
+# --- the other motion sources: joint states with a URDF, an IMU --------------------------------------------------
+#: The motion sources' tests' noise model (tests/test_motion_sources.py's).
+NOISE = NoiseSpec((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
+
+
+@pytest.fixture(scope="module")
+def ur5():
+    """1 s at 1 kHz of a UR5 moving every joint, its readings the payload's exact wrench (tests/robot_rig.py)."""
+    return robot_rig.ur5_run(1.0)
+
+
+def _source_calibration(tmp_path):
+    path = tmp_path / "cal.json"
+    Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
+                noise=NOISE).save(path)
+    return path
+
+
+def _replay_source(request, node_args, message, build, t, w_hat):
+    """The node on a joint-state or IMU topic, fed ``w_hat`` and ``build``'s messages; the contact messages and
+    the stamps' epoch."""
+    domain = domain_id(request.node.name)
+    with running_node(domain, *node_args) as proc:
+        peer = Peer(domain, pose_topic="/motion", motion=message)
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay_rows(t, w_hat, build)
+            assert peer.wait_for(lambda: len(peer.contacts) >= len(t) - 59, 10), \
+                (len(peer.contacts), node_log(proc)[-1500:])
+        finally:
+            peer.close()
+    return peer.contacts, epoch
+
+
+def test_joint_states(request, ur5, tmp_path):
+    """JointState (names in reverse order, positions only) with the UR5's URDF: every reading out, as
+    Compensator(motion=JointMotion) gives it pushed the same joints; the readings being the payload's wrench
+    alone, the contact wrench within 2e-3 of zero (the classical acceleration)."""
+    run = ur5
+    names = run["motion"].joints[::-1]
+    contacts, epoch = _replay_source(
+        request, (f"calibration:={_source_calibration(tmp_path)}", "joint_states_topic:=/motion",
+                  f"urdf:={robot_rig.ur5_urdf()}", "frame:=tool0", "qos:=reliable"),
+        JointState, joint_state(names, run["q"][:, ::-1]), run["t"], run["W"])
+    stream = Compensator(Calibration.load(tmp_path / "cal.json"), 1e-3, motion=run["motion"])
+    expected = [o for o in (stream.push(t, w, joints=(q, None, None)) for t, w, q in zip(run["t"], run["W"], run["q"]))
+                if o is not None]
+    t, wrench = contact_array(contacts, epoch)
+    assert len(t) == len(expected) == len(run["t"]) - 59
+    np.testing.assert_allclose(t, [round(o.t, 6) for o in expected], atol=1e-9)
+    np.testing.assert_allclose(wrench, [o.wrench for o in expected], atol=1e-7)
+    assert np.abs(wrench).max() < 2e-3
+
+
+@pytest.mark.slow
+def test_imu(request, ur5, tmp_path):
+    """sensor_msgs/Imu (orientation scalar last) of an IMU turned and 7 cm off the sensor's point, imu_rotation
+    and imu_lever_arm given, the output in the base frame at a tool point: as Compensator(motion=ImuMotion,
+    frame="base", point=...) gives it; the readings being the payload's wrench alone, the contact wrench is
+    within 1e-3 of zero."""
+    run = ur5
+    quaternion, omega, force, _ = robot_rig.imu_readings(run)
+    xyzw = np.r_[robot_rig.Rotation.from_matrix(robot_rig.C_IMU).as_quat()]
+    point = [0.0, 0.02, 0.1]
+    args = (f"calibration:={_source_calibration(tmp_path)}", "imu_topic:=/motion", "qos:=reliable",
+            "imu_rotation:=[" + ",".join(repr(float(v)) for v in xyzw) + "]",
+            "imu_lever_arm:=[" + ",".join(repr(float(v)) for v in robot_rig.R_IMU) + "]",
+            "output_frame:=base", "base_frame:=world", "tool_point:=[" + ",".join(map(repr, point)) + "]")
+    contacts, epoch = _replay_source(request, args, Imu, imu_message(quaternion, omega, force), run["t"], run["W"])
+    stream = Compensator(Calibration.load(tmp_path / "cal.json"), 1e-3, motion=ImuMotion(robot_rig.C_IMU,
+                                                                                          robot_rig.R_IMU),
+                         frame="base", point=point)
+    expected = [o for o in (stream.push(t, w, imu=(q, om, f)) for t, w, q, om, f in
+                            zip(run["t"], run["W"], quaternion, omega, force)) if o is not None]
+    t, wrench = contact_array(contacts, epoch)
+    assert len(t) == len(expected) == len(run["t"]) - 59
+    assert {m.header.frame_id for m in contacts} == {"world"}
+    np.testing.assert_allclose(wrench, [o.wrench for o in expected], atol=1e-6)
+    assert np.abs(wrench).max() < 1e-3
 
 
 # --- slow: the other services, and the latency benchmark ----------------------------------------------------------

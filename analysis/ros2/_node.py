@@ -22,10 +22,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-import fmscal.analysis as analysis
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import quaternion_multiply
 
+from .._motion import ImuMotion, JointMotion
 from ._parameters import NODE_NAME, PARAMETERS, Ros2Error, settings
 from ._pipeline import STATES, Pipeline
 
@@ -174,13 +174,9 @@ class CompensatorNode:
         s = self.settings
         if s.source == "pose_topic":
             return None, "pose"
-        name = "JointMotion" if s.source == "joint_states_topic" else "ImuMotion"
-        cls = getattr(analysis, name, None)
-        if cls is None:
-            raise Ros2Error(f"{s.source} needs fmscal.analysis.{name}, which this fmscal has not: use pose_topic")
-        if name == "JointMotion":
-            return cls(s.urdf, s.frame), "joints"
-        return cls(rotation=s.imu_rotation, lever_arm=s.imu_lever_arm), "imu"
+        if s.source == "joint_states_topic":
+            return JointMotion(s.urdf, s.frame), "joints"
+        return ImuMotion(rotation=s.imu_rotation, lever_arm=s.imu_lever_arm), "imu"
 
     # --- inputs ----------------------------------------------------------------------------------------------
     def _time(self, stamp):
@@ -264,13 +260,11 @@ class CompensatorNode:
         self.pipeline.add_motion(self._time(msg.header.stamp), (q, dq, None), msg.header.frame_id)
 
     def _imu(self, msg):
-        if msg.orientation_covariance[0] == -1:
-            self._warn("imu", f"{self.settings.topic} gives no orientation (covariance -1): skipped")
-            return
         o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
+        quaternion = None if msg.orientation_covariance[0] == -1 else np.array([o.w, o.x, o.y, o.z])
         self.pipeline.add_motion(self._time(msg.header.stamp),
-                                 (np.array([o.w, o.x, o.y, o.z]), np.array([w.x, w.y, w.z]),
-                                  np.array([a.x, a.y, a.z])), msg.header.frame_id)
+                                 (quaternion, np.array([w.x, w.y, w.z]), np.array([a.x, a.y, a.z])),
+                                 msg.header.frame_id)
 
     # --- outputs ---------------------------------------------------------------------------------------------
     def _publish(self, out):

@@ -57,7 +57,9 @@ def _load(settings):
                             "wrench needs it")
         model = compensation_model(calibration)
         payload = type(model).payload_from(estimate.mass, estimate.inertia, estimate.com)
-    latency = settings.latency if settings.latency is not None else (calibration.latency or 0.0)
+    # the calibration's latency is its pose stream's: a joint-state or an IMU stream has its own (the parameter)
+    own = (calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
+    latency = settings.latency if settings.latency is not None else own
     return calibration, payload, latency
 
 
@@ -111,8 +113,6 @@ class Pipeline:
     def _warm_up(self):
         """A compensator run on a few samples at rest before any message: what it builds on its first samples
         (the dynamics' compiled function, the filter) is built now, not while the first readings queue up."""
-        if self.kind != "pose":
-            return
         dt = self.dt or 0.001
         saved, self.dt = self.dt, dt
         try:
@@ -121,11 +121,18 @@ class Pipeline:
             return
         finally:
             self.dt = saved
-        rest = np.zeros(self.model.n_pose)
-        if self.model.attitude == "quaternion":
-            rest[0] = 1.0
         n = int(round((self.settings.window + self.settings.delay) / dt)) + 4
-        warm.push_many(np.arange(n) * dt, np.zeros((n, self.n)), np.tile(rest, (n, 1)))
+        if self.kind == "pose":
+            rest = np.zeros(self.model.n_pose)
+            if self.model.attitude == "quaternion":
+                rest[0] = 1.0
+            rows = [(i * dt, np.zeros(self.n), rest) for i in range(n)]
+        elif self.kind == "joints":
+            rows = [(i * dt, np.zeros(self.n), (np.zeros(self.motion.size), None, None)) for i in range(n)]
+        else:
+            rows = [(i * dt, np.zeros(self.n), (np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([0, 0, 9.81])))
+                    for i in range(n)]
+        self._feed(warm, rows)
 
     # --- the compensator --------------------------------------------------------------------------------------
     def _build(self, calibration=None, payload=None):
@@ -142,18 +149,8 @@ class Pipeline:
                       track_offset=bool(s.track_offset))
         if s.drift_intensity is not None:
             kwargs["drift_intensity"] = s.drift_intensity[0] if len(s.drift_intensity) == 1 else s.drift_intensity
-        # the sources' options, given only where they differ from a pose stream at the sensor, in its axes
-        if self.motion is not None:
-            kwargs["motion"] = self.motion
-        if s.output_frame != "sensor":
-            kwargs["frame"] = s.output_frame
-        if s.tool_point is not None:
-            kwargs["point"] = s.tool_point
-        try:
-            compensator = Compensator(replace(calibration, **changes), self.dt, **kwargs)
-        except TypeError as err:        # an fmscal without the motion sources' options
-            raise Ros2Error(f"this fmscal's Compensator takes no {err}: joint states, an IMU, output_frame base "
-                            "and tool_point need a newer fmscal") from None
+        kwargs.update(motion=self.motion, frame=s.output_frame, point=s.tool_point)
+        compensator = Compensator(replace(calibration, **changes), self.dt, **kwargs)
         self.warnings = list(compensator.warnings)
         return compensator
 
@@ -246,7 +243,9 @@ class Pipeline:
             return self.model.interpolate_pose(np.array([t]), np.array([t0, t1]), np.array([v0, v1]))[0]
         if self.kind == "joints":
             return tuple(_linear(t, t0, a, t1, b) for a, b in zip(v0, v1))
-        q = SpatialModel.interpolate_pose(np.array([t]), np.array([t0, t1]),
+        if v0[0] is None or v1[0] is None:                  # an IMU that gives no orientation
+            return None, _linear(t, t0, v0[1], t1, v1[1]), _linear(t, t0, v0[2], t1, v1[2])
+        q = SpatialModel.interpolate_pose(np.array([t]), np.array([t0, t1]),     # SLERP, the rate linearly
                                           np.array([np.r_[v0[0], v0[1]], np.r_[v1[0], v1[1]]]))[0]
         return q[:4], q[4:], _linear(t, t0, v0[2], t1, v1[2])
 
