@@ -97,11 +97,11 @@ RELIABLE = QoSProfile(depth=2000, history=HistoryPolicy.KEEP_LAST, reliability=R
 
 class Peer:
     """This process's side: publishers of the readings and poses, subscribers of the contact wrench, its
-    covariance, the diagnostics and the node's latency, service clients; spun in a thread."""
+    covariance (``covariance``), the diagnostics and the node's latency, service clients; spun in a thread."""
 
     def __init__(self, domain, wrench_topic="/ft_sensor/wrench", pose_topic="/ft_sensor/pose",
                  contact_topic="/ft_sensor/contact", covariance_topic="/ft_sensor/contact_covariance",
-                 node_name="fmscal_compensator", motion=PoseStamped):
+                 node_name="fmscal_compensator", motion=PoseStamped, covariance=True):
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node("fmscal_test_peer", context=self.context)
@@ -109,7 +109,8 @@ class Peer:
         self.pose_pub = self.node.create_publisher(motion, pose_topic, RELIABLE)
         self.contacts, self.covariances, self.diagnostics, self.latencies = [], [], [], []
         self.contact_sub = self.node.create_subscription(WrenchStamped, contact_topic, self.contacts.append, RELIABLE)
-        self.node.create_subscription(Float64MultiArray, covariance_topic, self.covariances.append, RELIABLE)
+        if covariance:
+            self.node.create_subscription(Float64MultiArray, covariance_topic, self.covariances.append, RELIABLE)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 10)
         self.node.create_subscription(Float64MultiArray, f"/{node_name}/latency",
                                       lambda m: self.latencies.append(list(m.data)), RELIABLE)

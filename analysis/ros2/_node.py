@@ -4,15 +4,17 @@ rclpy and the message packages are imported by :func:`ros` when the node starts 
 imported): the wheels of the extra ``[ros2]``, or a system ROS 2's rclpy (Humble, Jazzy) once its setup is
 sourced.
 
-Threads. The inputs (the wrench, the motion) and the diagnostics' timer run on a
-``SingleThreadedExecutor`` in the main thread: on this project's 2-core machine, under load, rclpy's
-``MultiThreadedExecutor`` lost 1 kHz messages where the single-threaded one did not. Each input callback takes
-every message queued on both inputs (a backlog is compensated as one block,
-:meth:`fmscal.analysis.Compensator.push_many`). The services live on a second node,
-``<name>_services``, in their own mutually exclusive callback group on a ``MultiThreadedExecutor`` spun in
-another thread, and are named under the node's name (``/fmscal_compensator/tare``): an ``identify_payload``
-fit runs beside the wrench callback, not in front of it; the two share the pipeline through its lock, held
-for the short steps only (the fit runs outside it).
+Threads. The inputs (the wrench, the motion) are subscriptions of a node ``<name>_inputs`` that no executor
+spins: a thread of the node's own takes every message queued on both (:meth:`CompensatorNode.poll`, every
+:data:`POLL` s when both are empty) and compensates them as one block (:meth:`fmscal.analysis.Compensator.push_many`).
+On this project's 2-core machine, under load, rclpy's executors cost about 0.2 ms per message and its
+``MultiThreadedExecutor`` lost 1 kHz messages; taken this way none is lost and the node's own work is about
+0.5 ms per block at the median (``benchmarks/ros2_latency.py``). An rclpy without ``take_message`` falls back to
+its executor's callbacks. The parameters and the diagnostics' timer are the node's, on a
+``SingleThreadedExecutor`` in the main thread. The services live on a node ``<name>_services``, in their own
+mutually exclusive callback group on a ``MultiThreadedExecutor`` spun in another thread, and are named under the
+node's name (``/fmscal_compensator/tare``): an ``identify_payload`` fit runs beside the inputs, not in front of
+them; they share the pipeline through its lock, held for the short steps only (the fit runs outside it).
 """
 
 import array
@@ -35,6 +37,8 @@ __all__ = ["ros", "CompensatorNode", "spin", "INSTALL"]
 INSTALL = 'pip install "fmscal[ros2]" (-e ".[ros2]" in a clone), or source a ROS 2 install (Humble, Jazzy)'
 #: s between two of one warning in the log.
 WARN_EVERY = 2.0
+#: s between two looks at the inputs' queues when both were empty (:meth:`CompensatorNode.poll`).
+POLL = 0.0003
 #: The readings the node's own latency statistic keeps (diagnostics' p50 and p99).
 LATENCY_KEPT = 2000
 
@@ -121,10 +125,14 @@ class CompensatorNode:
         self.cov_pub = self.node.create_publisher(r.Array, s.covariance_topic, qos_out)
         self.diag_pub = self.node.create_publisher(r.DiagnosticArray, "/diagnostics", 10)
         self.latency_pub = self.node.create_publisher(r.Array, "~/latency", qos_out) if s.debug_latency else None
-        self._wrench_sub = self.node.create_subscription(r.WrenchStamped, s.wrench_topic, self._on_wrench, qos_in)
+        # the inputs on a node of their own, not spun by an executor: a thread takes their messages (poll)
+        self.inputs = r.Node(f"{self.node.get_name()}_inputs", namespace=self.node.get_namespace(),
+                             context=context, start_parameter_services=False)
+        self._wrench_sub = self.inputs.create_subscription(r.WrenchStamped, s.wrench_topic, self._on_wrench, qos_in)
         message, self._motion_message = {"pose": (r.PoseStamped, self._pose), "joints": (r.JointState, self._joints),
                                          "imu": (r.Imu, self._imu)}[kind]
-        self._motion_sub = self.node.create_subscription(message, s.topic, self._on_motion, qos_in)
+        self._motion_sub = self.inputs.create_subscription(message, s.topic, self._on_motion, qos_in)
+        self.error = None
         # the services on a node of their own, spun by its own executor in another thread, named under this
         # node's name: a fit never waits for the inputs' executor, nor the inputs for it
         self.services = r.Node(f"{self.node.get_name()}_services", namespace=self.node.get_namespace(),
@@ -196,6 +204,30 @@ class CompensatorNode:
             while (taken := handle.take_message(sub.msg_type, sub.raw)) is not None:
                 out.append(taken[0])
         return out
+
+    def pollable(self):
+        """Whether this rclpy lets :meth:`poll` take messages (else the inputs' node is spun by an executor)."""
+        return hasattr(getattr(self._wrench_sub, "handle", None), "take_message")
+
+    def poll(self, context):
+        """Take the inputs' messages as they come, until the context shuts down: every :data:`POLL` s, all
+        the queued ones of both inputs, compensated as one block. An exception stops the node (:attr:`error`)."""
+        try:
+            while context.ok():
+                motions, readings = self._queued(self._motion_sub), self._queued(self._wrench_sub)
+                if not (motions or readings):
+                    time.sleep(POLL)
+                    continue
+                self._entered = time.monotonic()
+                for m in motions:
+                    self._motion_message(m)
+                for m in readings:
+                    self._reading(m)
+                self._process()
+        except Exception as err:                     # said by spin, in one line for FmscalError
+            if context.ok():
+                self.error = err
+                self.r.rclpy.try_shutdown(context=context)
 
     def _on_wrench(self, msg):
         self._entered = time.monotonic()
@@ -386,16 +418,21 @@ def spin(args):
         executor.add_node(node.node)
         services = r.Executor(num_threads=2, context=context)
         services.add_node(node.services)
-        thread = threading.Thread(target=_spin_services, args=(r, services), daemon=True)
-        thread.start()
+        threading.Thread(target=_spin_services, args=(r, services), daemon=True).start()
+        if node.pollable():
+            threading.Thread(target=node.poll, args=(context,), daemon=True).start()
+        else:                                        # an rclpy without take_message: its executor takes them
+            executor.add_node(node.inputs)
         try:
             executor.spin()
         except (KeyboardInterrupt, r.Shutdown):
             pass
+        if node.error is not None:
+            raise node.error
     finally:
         if node is not None:
-            node.services.destroy_node()
-            node.node.destroy_node()
+            for n in (node.services, node.inputs, node.node):
+                n.destroy_node()
         r.rclpy.try_shutdown(context=context)
 
 

@@ -67,7 +67,8 @@ PARAMETERS = (
     Parameter("reading", "string", None, "the reading's sign convention, reaction or load; unset: the "
               "calibration's"),
     Parameter("latency", "double", None, "s, how late the motion's stamps are behind the wrench's (a motion "
-              "stamped t was taken at t - latency); unset: the calibration's"),
+              "stamped t was taken at t - latency); unset: the calibration's for pose_topic (its pose stream's), 0 "
+              "for joint states and an IMU"),
     Parameter("gravity", "double_array", None, "m/s^2, gravity in the motion's frame (3 values); unset: the "
               "calibration's"),
     Parameter("direction", "string", DIRECTIONS[0], "on_tool: the wrench the environment applies to the tool; "
