@@ -121,6 +121,17 @@ def test_parameters_refused_in_one_line(cal_file):
         _settings(cal_file, drift_intensity=[0.1])
 
 
+def test_the_guide_lists_every_parameter_with_its_type_and_default():
+    """docs/guide/robot.md's table: the node's parameters, in its order, each with its type and default."""
+    text = (ROOT / "docs" / "guide" / "robot.md").read_text()
+    table = text.split("| parameter | type | default | meaning |")[1].split("\n\n")[0]
+    rows = [[cell.strip().strip("`") for cell in line.strip("|").split("|")] for line in table.strip().splitlines()[1:]]
+    types = {"string": "string", "double": "double", "integer": "integer", "bool": "bool", "double_array": "double[]"}
+    expected = [[p.name, types[p.type], "unset" if p.default is None else '""' if p.default == "" else
+                 str(p.default).lower() if isinstance(p.default, bool) else str(p.default)] for p in PARAMETERS]
+    assert [row[:3] for row in rows] == expected
+
+
 # --- the node, on ROS 2 -----------------------------------------------------------------------------------------
 def _run(*args, **kw):
     return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=60, **kw)

@@ -6,15 +6,15 @@ sourced.
 
 Threads. The inputs (the wrench, the motion) are subscriptions of a node ``<name>_inputs`` that no executor
 spins: a thread of the node's own takes every message queued on both (:meth:`CompensatorNode.poll`, every
-:data:`POLL` s when both are empty) and compensates them as one block (:meth:`fmscal.analysis.Compensator.push_many`).
-On this project's 2-core machine, under load, rclpy's executors cost about 0.2 ms per message and its
-``MultiThreadedExecutor`` lost 1 kHz messages; taken this way none is lost and the node's own work is about
-0.5 ms per block at the median (``benchmarks/ros2_latency.py``). An rclpy without ``take_message`` falls back to
-its executor's callbacks. The parameters and the diagnostics' timer are the node's, on a
-``SingleThreadedExecutor`` in the main thread. The services live on a node ``<name>_services``, in their own
-mutually exclusive callback group on a ``MultiThreadedExecutor`` spun in another thread, and are named under the
-node's name (``/fmscal_compensator/tare``): an ``identify_payload`` fit runs beside the inputs, not in front of
-them; they share the pipeline through its lock, held for the short steps only (the fit runs outside it).
+:data:`POLL` s when both are empty) and compensates them as one block
+(:meth:`fmscal.analysis.Compensator.push_many`). An executor costs a wake-up and a pass of Python per message,
+and rclpy's ``MultiThreadedExecutor`` lost 1 kHz messages on a loaded 2-core machine where this way loses none
+(docs/guide/robot.md quotes ``benchmarks/ros2_latency.py``). An rclpy without ``take_message`` falls back to its
+executor's callbacks. The parameters and the diagnostics' timer are the node's, on a ``SingleThreadedExecutor``
+in the main thread. The services live on a node ``<name>_services``, in their own mutually exclusive callback
+group on a ``MultiThreadedExecutor`` spun in another thread, and are named under the node's name
+(``/fmscal_compensator/tare``): an ``identify_payload`` fit runs beside the inputs, not in front of them; they
+share the pipeline through its lock, held for the short steps only (the fit runs outside it).
 """
 
 import array
