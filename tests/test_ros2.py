@@ -17,7 +17,8 @@ import pytest
 
 from fmscal.analysis import Compensator, ImuMotion, compensate
 from fmscal.analysis.cli import main
-from fmscal.analysis.ros2 import PARAMETERS, Pipeline, settings
+from fmscal.analysis.ros2 import PARAMETERS, Pipeline, sensor_pose, settings
+from fmscal.plant.physics import rotation_matrix
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, SpatialModel
 from fmscal.plant import NoiseSpec
 from fmscal.plant.scenarios._spatial import TOOL
@@ -109,6 +110,42 @@ def test_pipeline_interpolates_poses_at_the_readings_stamps(arm, cal_file):
     error = np.sqrt(np.mean(difference ** 2, axis=0)) / noise_rms(truth.S_at(0.0), truth.noise.wrench_sd)
     assert np.all(error < 0.3) and np.all(error > 0.01), error        # half the poses, interpolated: not equal
     assert pipeline.backlog() <= 3
+
+
+def test_sensor_pose_from_a_tracked_frame():
+    """(R1): the sensor's axes R(q_M) R and its point p_M + R(q_M) t, against rotation matrices composed."""
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    R = robot_rig.Rotation.from_euler("xyz", [0.4, -0.2, 1.3]).as_matrix()
+    t, p = np.array([0.01, -0.02, 0.15]), np.array([0.5, 0.1, 0.3])
+    q_s, p_s = sensor_pose(q, p, (R, t))
+    np.testing.assert_allclose(rotation_matrix(q_s), rotation_matrix(q) @ R, atol=1e-12)
+    np.testing.assert_allclose(p_s, p + rotation_matrix(q) @ t, atol=1e-12)
+    assert sensor_pose(q, p) == (q, p)
+
+
+def test_saturated_readings_are_withheld(arm, cal_file):
+    """A reading at the saturation parameter's range: its output withheld and counted, the state "saturated";
+    the other readings' outputs as they were."""
+    scenario, log, truth, cal = arm
+    log = log.head(400)
+    limit = np.abs(log.w_hat).max(axis=0) * 1.01
+    w_hat = log.w_hat.copy()
+    w_hat[200, 3] = limit[3]
+    pipelines = [Pipeline(_settings(cal_file, saturation=s)) for s in (None, list(limit))]
+    outputs = []
+    for pipeline in pipelines:
+        out = []
+        for t, w, p in zip(log.t, w_hat, log.pose):
+            pipeline.add_motion(t, p)
+            pipeline.add_reading(t, w)
+            out += pipeline.process()
+        outputs.append({round(o.sample.t, 9): o.sample.wrench for o in out})
+    assert set(outputs[0]) - set(outputs[1]) == {round(log.t[200], 9)}
+    assert pipelines[1].counts["saturated"] == 1 and pipelines[1].state() == "saturated"
+    assert pipelines[0].state() == "running"
+    assert all(np.array_equal(outputs[0][k], v) for k, v in outputs[1].items())
 
 
 def test_parameters_refused_in_one_line(cal_file):

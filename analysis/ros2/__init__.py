@@ -12,7 +12,8 @@ rclpy is imported when the node starts, not with this package: the wheels of the
 
 from ._parameters import (MOTION_SOURCES, NODE_NAME, OUTPUT_FRAMES, PARAMETERS, QOS, Parameter, Ros2Error, Settings,
                           settings)
-from ._pipeline import STATES, Output, Pipeline
+from ._pipeline import STATES, Output, Pipeline, sensor_pose
 from ._node import INSTALL, spin
 
-__all__ = ["spin", "Pipeline", "settings", "PARAMETERS", "Parameter", "NODE_NAME", "STATES", "Ros2Error"]
+__all__ = ["spin", "Pipeline", "settings", "sensor_pose", "PARAMETERS", "Parameter", "NODE_NAME", "STATES",
+           "Ros2Error"]

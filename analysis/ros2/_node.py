@@ -25,11 +25,10 @@ from types import SimpleNamespace
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import quaternion_multiply
 
 from .._motion import ImuMotion, JointMotion
 from ._parameters import NODE_NAME, PARAMETERS, Ros2Error, settings
-from ._pipeline import STATES, Pipeline
+from ._pipeline import STATES, Pipeline, sensor_pose
 
 __all__ = ["ros", "CompensatorNode", "spin", "INSTALL"]
 
@@ -39,6 +38,8 @@ INSTALL = 'pip install "fmscal[ros2]" (-e ".[ros2]" in a clone), or source a ROS
 WARN_EVERY = 2.0
 #: s between two looks at the inputs' queues when both were empty (:meth:`CompensatorNode.poll`).
 POLL = 0.0003
+#: The longest wait between two looks at silent inputs, s.
+IDLE = 0.005
 #: The readings the node's own latency statistic keeps (diagnostics' p50 and p99).
 LATENCY_KEPT = 2000
 
@@ -143,10 +144,6 @@ class CompensatorNode:
             self.services.create_service(r.Trigger, f"{base}/{name}", self._service(name, work),
                                          callback_group=services)
         self.node.create_timer(s.diagnostics_period, self._diagnose)
-        self._rotation = None
-        if s.pose_to_sensor is not None:
-            R, _ = s.pose_to_sensor
-            self._rotation = _matrix_quaternion(R)
         self.log.info(f"compensating {s.wrench_topic} with the motion of {s.topic} into {s.contact_topic} "
                       f"(the wrench {'on the tool' if s.direction == 'on_tool' else 'on the environment'}, "
                       f"{s.output_frame} frame); calibration {s.calibration}")
@@ -210,14 +207,18 @@ class CompensatorNode:
         return hasattr(getattr(self._wrench_sub, "handle", None), "take_message")
 
     def poll(self, context):
-        """Take the inputs' messages as they come, until the context shuts down: every :data:`POLL` s, all
-        the queued ones of both inputs, compensated as one block. An exception stops the node (:attr:`error`)."""
+        """Take the inputs' messages as they come, until the context shuts down: all the queued ones of both
+        inputs, compensated as one block; where there were none, again after :data:`POLL` s, doubled while none
+        come up to :data:`IDLE`. An exception stops the node (:attr:`error`)."""
+        idle = POLL
         try:
             while context.ok():
                 motions, readings = self._queued(self._motion_sub), self._queued(self._wrench_sub)
                 if not (motions or readings):
-                    time.sleep(POLL)
+                    time.sleep(idle)
+                    idle = min(2 * idle, IDLE)              # a silent input looked at less often
                     continue
+                idle = POLL
                 self._entered = time.monotonic()
                 for m in motions:
                     self._motion_message(m)
@@ -265,10 +266,7 @@ class CompensatorNode:
         p, o = msg.pose.position, msg.pose.orientation
         q = np.array([o.w, o.x, o.y, o.z])
         position = np.array([p.x, p.y, p.z])
-        if self.settings.pose_to_sensor is not None:              # the sensor's pose from the tracked frame's
-            R, t = self.settings.pose_to_sensor
-            position = position + _rotate(q, t)
-            q = quaternion_multiply(q, self._rotation)
+        q, position = sensor_pose(q, position, self.settings.pose_to_sensor)
         norm = np.linalg.norm(q)
         if not (np.isfinite(norm) and abs(norm - 1) < 1e-3 and np.isfinite(position).all()):
             self._warn("pose", f"a pose whose quaternion is not of unit norm ({norm:.4g}): skipped")
@@ -371,32 +369,6 @@ class CompensatorNode:
         self.diag_pub.publish(array)
 
 
-def _rotate(q, v):
-    """``v`` rotated by the unit quaternion ``q`` (w, x, y, z)."""
-    w, x, y, z = q
-    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-    return R @ v
-
-
-def _matrix_quaternion(R):
-    """The unit quaternion (w, x, y, z) of a rotation matrix."""
-    w = np.sqrt(max(1.0 + np.trace(R), 0.0)) / 2
-    if w > 1e-6:
-        return np.array([w, (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w),
-                         (R[1, 0] - R[0, 1]) / (4 * w)])
-    i = int(np.argmax(np.diag(R)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = np.sqrt(max(1.0 + R[i, i] - R[j, j] - R[k, k], 0.0)) * 2
-    q = np.zeros(4)
-    q[0] = (R[k, j] - R[j, k]) / s
-    q[1 + i] = s / 4
-    q[1 + j] = (R[j, i] + R[i, j]) / s
-    q[1 + k] = (R[k, i] + R[i, k]) / s
-    return q
-
-
 def spin(args):
     """Run the node until it is interrupted: ``args`` the ROS arguments (``--ros-args ...``).
 
@@ -418,15 +390,22 @@ def spin(args):
         executor.add_node(node.node)
         services = r.Executor(num_threads=2, context=context)
         services.add_node(node.services)
-        threading.Thread(target=_spin_services, args=(r, services), daemon=True).start()
+        threads = [threading.Thread(target=_spin_services, args=(r, services), daemon=True)]
         if node.pollable():
-            threading.Thread(target=node.poll, args=(context,), daemon=True).start()
+            threads.append(threading.Thread(target=node.poll, args=(context,), daemon=True))
         else:                                        # an rclpy without take_message: its executor takes them
             executor.add_node(node.inputs)
+        for thread in threads:
+            thread.start()
         try:
             executor.spin()
         except (KeyboardInterrupt, r.Shutdown):
             pass
+        # the other threads stopped before their nodes are destroyed (else a C++ abort at exit)
+        r.rclpy.try_shutdown(context=context)
+        services.shutdown(timeout_sec=2.0)
+        for thread in threads:
+            thread.join(timeout=2.0)
         if node.error is not None:
             raise node.error
     finally:

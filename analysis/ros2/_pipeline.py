@@ -23,10 +23,13 @@ import numpy as np
 from fmscal.plant import Calibration, Log, SpatialModel
 from fmscal.observers.payload import PayloadEstimate, identify_payload
 
+from fmscal.plant.physics import quaternion_multiply
+
 from .._compensate import Compensator, compensation_model
+from .._motion import quaternion_from_matrix, quaternion_to_matrix
 from ._parameters import Ros2Error
 
-__all__ = ["Pipeline", "Output", "STATES", "DT_SAMPLES"]
+__all__ = ["Pipeline", "Output", "STATES", "DT_SAMPLES", "sensor_pose"]
 
 #: The node's states (diagnostics): no output yet, outputs coming, the motion stale, a reading saturated.
 STATES = ("not ready", "running", "motion stale", "saturated")
@@ -61,6 +64,32 @@ def _load(settings):
     own = (calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
     latency = settings.latency if settings.latency is not None else own
     return calibration, payload, latency
+
+
+def sensor_pose(q, position, extrinsics=None):
+    """The sensor frame's pose from a tracked frame's (a marker, a flange) and the sensor's place on it::
+
+        R_S = R(q_M) R,   p_S = p_M + R(q_M) t                                                     (R1)
+
+    Parameters
+    ----------
+    q : ndarray, shape (4,)
+        The tracked frame's attitude, a unit quaternion ``(w, x, y, z)``.
+    position : ndarray, shape (3,)
+        Its position, m.
+    extrinsics : (ndarray (3, 3), ndarray (3,)), optional
+        ``(R, t)``: the sensor's axes and point in the tracked frame's; None: the tracked frame is the sensor's.
+
+    Returns
+    -------
+    (ndarray (4,), ndarray (3,))
+        The sensor's attitude ``q_M (x) q(R)`` and position.
+    """
+    if extrinsics is None:
+        return q, position
+    R, t = extrinsics
+    return (quaternion_multiply(q, quaternion_from_matrix(np.asarray(R)[None])[0]),
+            position + quaternion_to_matrix(q) @ np.asarray(t, dtype=float))
 
 
 def _linear(t, t0, v0, t1, v1):
