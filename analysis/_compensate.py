@@ -239,6 +239,12 @@ def _dynamics(model):
                                                        ca.densify(ca.SX(model.drift(x)))])
 
 
+@lru_cache(maxsize=64)
+def _mapped(model, n):
+    """:func:`_dynamics` over ``n`` states at once (kept: a stream's blocks come in a few sizes)."""
+    return _dynamics(model).map(n)
+
+
 def _payload_wrench(model, x, a):
     """``W_p = A(x)^-1 (a - d(x))`` (C2) at each row of ``x`` (N, nx), ``a`` (N, nv); and ``A^-1``."""
     f = _dynamics(model)
@@ -246,7 +252,7 @@ def _payload_wrench(model, x, a):
         A, d = (np.asarray(v) for v in f(x[0]))
         A, d = A[None], d.T
     else:
-        A, d = (np.asarray(v) for v in f.map(len(x))(x.T))
+        A, d = (np.asarray(v) for v in _mapped(model, len(x))(x.T))
         A = A.reshape(model.nv, len(x), model.n_w).transpose(1, 0, 2)
         d = d.T
     A_inv = np.linalg.inv(A)
