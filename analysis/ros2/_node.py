@@ -38,8 +38,9 @@ INSTALL = 'pip install "fmscal[ros2]" (-e ".[ros2]" in a clone), or source a ROS
 WARN_EVERY = 2.0
 #: s between two looks at the inputs' queues when both were empty (:meth:`CompensatorNode.poll`).
 POLL = 0.0003
-#: The longest wait between two looks at silent inputs, s.
+#: s between two looks at inputs silent for :data:`SILENT` s or more.
 IDLE = 0.005
+SILENT = 0.1
 #: The readings the node's own latency statistic keeps (diagnostics' p50 and p99).
 LATENCY_KEPT = 2000
 
@@ -208,17 +209,16 @@ class CompensatorNode:
 
     def poll(self, context):
         """Take the inputs' messages as they come, until the context shuts down: all the queued ones of both
-        inputs, compensated as one block; where there were none, again after :data:`POLL` s, doubled while none
-        come up to :data:`IDLE`. An exception stops the node (:attr:`error`)."""
-        idle = POLL
+        inputs, compensated as one block; where there were none, again after :data:`POLL` s (:data:`IDLE` s once
+        the inputs have been silent for :data:`SILENT` s). An exception stops the node (:attr:`error`)."""
+        last = time.monotonic()
         try:
             while context.ok():
                 motions, readings = self._queued(self._motion_sub), self._queued(self._wrench_sub)
-                if not (motions or readings):
-                    time.sleep(idle)
-                    idle = min(2 * idle, IDLE)              # a silent input looked at less often
+                if not (motions or readings):                # inputs silent for long: looked at less often
+                    time.sleep(POLL if time.monotonic() - last < SILENT else IDLE)
                     continue
-                idle = POLL
+                last = time.monotonic()
                 self._entered = time.monotonic()
                 for m in motions:
                     self._motion_message(m)

@@ -394,14 +394,15 @@ class Pipeline:
                       + ("" if estimate.converged else "; not converged: " + "; ".join(estimate.warnings[:1])))
 
     def save(self):
-        """``(success, message)`` of ``~/save``: the calibration with the offset in use and the payload in use."""
+        """``(success, message)`` of ``~/save``: the calibration with the offset in use and the payload in use,
+        dated now."""
         path = self.settings.save_path
         if not path:
             return False, "save refused: set the parameter save_path"
         with self.lock:
             b = None if self.compensator is None else self.compensator.offset
             cal = replace(self.calibration, b=self.calibration.b if b is None else b,
-                          payload=self.payload or self.calibration.payload, latency=self.latency)
+                          payload=self.payload or self.calibration.payload, latency=self.latency, date=None)
         try:
             cal.save(path)
         except Exception as err:
