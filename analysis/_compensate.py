@@ -82,6 +82,13 @@ During a contact the offset is frozen (its sd grows by (D1)), so a contact is no
 slower than the tracker's time constant is, in part: the intensity sets the trade-off
 (docs/guide/compensation.md). The offset and its sd are reported per sample (after the sample's step).
 
+The sd is the random walk's: ``P`` counts the noise's share of the estimate's error and the share a walk of
+intensity ``q`` would add since the last samples, about equal where ``q^2 dt`` is small beside the noise. An
+offset that moves more smoothly than such a walk (a sensor warming) leaves only the first: the error's variance
+is then about half of ``P``, and the 95 % intervals cover about ``2 Phi(1.96 sqrt(2)) - 1`` (99 %) of the
+samples, conservative. A smoother over the whole log (Rauch-Tung-Striebel) narrows ``P`` and the error alike and
+does not change that; only an intensity matched to the drift does (``benchmarks/drift.py --why``).
+
 **Tare** (:meth:`Compensator.tare`) re-biases at the newest compensated sample's pose::
 
     b = sigma w_hat - S^-1 W_p(pose),   P = S^-1 Cov S^-T                                          (D4)

@@ -2,7 +2,7 @@
 
 A calibration from one 60 s ``spatial-arm`` log (seed 1, the default method), used on other logs of the same
 rig with no contact (seed 2: fmscal's simulator 60 s, MuJoCo 20 s, ``tests/mujoco_log.py``; the readings moved
-onto the first sensor, ``tests/live_rig.py``), prints:
+onto the first sensor, ``fmscal.plant.scenarios.same_rig``), prints:
 
 - the residual's rms per channel over the reading's noise times S, offline and causal (issue 38's targets:
   1.3x and 2x with a delay of at most 40 ms);
@@ -35,7 +35,8 @@ from fmscal.analysis import Compensator, ImuMotion, calibrate, compensate  # noq
 from fmscal.analysis._compensate import CAUSAL_WINDOW  # noqa: E402
 from fmscal.plant import SPATIAL_SCENARIOS, Log  # noqa: E402
 from fmscal.plant.io import ImuLog, JointLog  # noqa: E402
-from live_rig import contact_wrench, noise_rms, same_rig, with_contact  # noqa: E402
+from fmscal.plant.scenarios import contact_wrench, same_rig, with_contact  # noqa: E402
+from live_rig import noise_rms  # noqa: E402
 
 
 def ratios(c, ref):

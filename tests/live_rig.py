@@ -1,67 +1,23 @@
-"""Logs for the compensation's tests and benchmark: another log of the same rig, and a contact added.
+"""The drift scenario's measurements, for the compensation's tests and benchmarks.
 
-A scenario draws ``S`` and ``b`` with its seed; a calibration from one seed is used on another log of the
-same sensor by moving that log's readings onto the first sensor (:func:`same_rig`). A contact is a wrench
-the environment applies to the tool while the motion is imposed: the mount then applies ``W_p - w_c``
-(:func:`with_contact`). The drift scenario of issue 38 (:func:`drift_run`): a temperature-like offset drift
-(:func:`with_drift`), a contact, and a slow push (:func:`with_push`).
+The logs come from :mod:`fmscal.plant.scenarios` (``same_rig``, ``with_contact``, ``with_drift``,
+``with_push``, ``drift_contact_log``; re-exported here for the files that import them from this module):
+another log of the same rig, a contact, a temperature-like offset drift, a slow push. This module adds the
+noise the residual is measured against (:func:`noise_rms`) and the drift scenario of issue 38, run and
+measured (:func:`drift_run`).
 """
 
 import numpy as np
 
 from fmscal.analysis import compensate
-from fmscal.plant import Log
-
-
-def same_rig(log, S_log, b_log, S, b):
-    """``log``'s readings as the sensor ``(S, b)`` reads the same wrenches: ``S^-1 S_log (w_hat - b_log) + b``.
-
-    The reading's noise becomes ``S^-1 S_log n``: compensated with ``S``, it is ``S_log n``, the noise the
-    residual is measured against (:func:`noise_rms`).
-    """
-    w_hat = (log.w_hat - b_log) @ np.linalg.solve(S, S_log).T + b
-    return Log(log.t, log.pose, w_hat, name=f"{log.name}-same-rig", model=log._model)
+from fmscal.plant.scenarios import (contact_wrench, drift_contact_log, same_rig, with_contact, with_drift,  # noqa: F401
+                                    with_push)
 
 
 def noise_rms(S_log, wrench_sd):
-    """The calibrated reading's noise per channel, ``sqrt(diag(S Sigma S^T))``."""
+    """The calibrated reading's noise per channel, ``sqrt(diag(S Sigma S^T))``: a log moved onto another sensor
+    by ``same_rig`` and compensated with its ``S`` has the noise ``S_log n``."""
     return np.sqrt(np.diag(S_log @ np.diag(np.square(wrench_sd)) @ S_log.T))
-
-
-def with_contact(log, S, wrench, start, duration):
-    """``log`` with the environment's wrench ``wrench`` (sensor frame, at the sensor point) on the tool over
-    ``[start, start + duration)``: the reading loses ``S^-1 wrench`` there. Returns the log and the mask."""
-    on = (log.t >= start) & (log.t < start + duration)
-    w_hat = log.w_hat.copy()
-    w_hat[on] -= np.linalg.solve(S, np.asarray(wrench, dtype=float))
-    return Log(log.t, log.pose, w_hat, name=f"{log.name}-contact", model=log._model), on
-
-
-def contact_wrench(force=15.0, direction=(0.6, 0.0, -0.8), point=(0.0, 0.0, 0.12)):
-    """A force of ``force`` N along ``direction`` at ``point`` (m, sensor frame): ``[r x f, f]``."""
-    f = force * np.asarray(direction) / np.linalg.norm(direction)
-    return np.r_[np.cross(point, f), f]
-
-
-def with_drift(log, S, size=(0.05, 0.05, 0.05, 2.0, 2.0, 2.0), tau=15.0, seed=0):
-    """``log`` with a temperature-like offset drift: the calibrated reading moves by
-    ``d (1 - exp(-t / tau))`` (``d`` of each channel's ``size`` with a seeded random sign; N m and N), i.e.
-    the raw offset by ``S^-1 d (1 - exp(-t / tau))``. Returns the log and the raw offset's change per sample
-    (N, n_w)."""
-    sign = np.random.default_rng(seed).choice([-1.0, 1.0], size=len(size))
-    d = np.linalg.solve(S, sign * np.asarray(size, dtype=float))
-    change = np.outer(1.0 - np.exp(-(log.t - log.t[0]) / tau), d)
-    return Log(log.t, log.pose, log.w_hat + change, name=f"{log.name}-drift", model=log._model), change
-
-
-def with_push(log, S, wrench, start, duration):
-    """``log`` with a contact rising linearly from 0 to ``wrench`` over ``[start, start + duration)`` (then
-    released): the reading loses ``S^-1 wrench (t - start) / duration`` there. Returns the log and the
-    environment's wrench per sample (N, n_w)."""
-    ramp = np.clip((log.t - start) / duration, 0.0, 1.0) * ((log.t >= start) & (log.t < start + duration))
-    w = np.outer(ramp, np.asarray(wrench, dtype=float))
-    return Log(log.t, log.pose, log.w_hat - np.linalg.solve(S, w.T).T, name=f"{log.name}-push",
-               model=log._model), w
 
 
 #: The drift scenario's contact (15 N for 2 s from 30 s) and slow push (10 N over 10 s from 40 s).
@@ -71,7 +27,7 @@ DRIFT_PUSH = (40.0, 10.0)
 
 def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal, push=True):
     """The drift scenario on ``log`` (another log of the rig, moved onto the sensor ``(S, b)``): a drift
-    (:func:`with_drift`) and a 15 N contact of 2 s; the same with a slow push of 10 N over 10 s instead. Compensated
+    and a 15 N contact of 2 s (``drift_contact_log``); the same with a slow push of 10 N over 10 s instead. Compensated
     with ``track_offset`` at ``intensity`` (per channel, per sqrt(s)). Returns a dict: ``residual`` (rms after
     the first 5 s outside the contact, per channel, over the noise times S), ``coverage`` (per channel: the
     share of samples whose true offset is within the 95 % interval), ``contact_error`` (relative, the mean over
@@ -79,9 +35,9 @@ def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal, 
     taken at its end: ``-(S Delta b) . w / |w|^2``, ``Delta b`` the offset estimate's error) and
     ``push_flagged`` (the share of the push's samples flagged); those two left out where ``push`` is False."""
     base = same_rig(log, log_S, log_b, S, b)
-    drifted, change = with_drift(base, S, seed=seed)
     wrench = contact_wrench(15.0)
-    touched, on = with_contact(drifted, S, wrench, *DRIFT_CONTACT)
+    touched, change, applied = drift_contact_log(base, S, contact=wrench, contact_at=DRIFT_CONTACT, seed=seed)
+    on = applied.any(axis=1)
     ref = noise_rms(log_S, wrench_sd)
     out = {}
     c = compensate(cal, touched, causal=causal, track_offset=True, drift_intensity=intensity)
@@ -97,7 +53,7 @@ def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal, 
     if not push:
         return out
     push = contact_wrench(10.0, direction=(0.0, 0.6, -0.8))
-    pushed, _ = with_push(drifted, S, push, *DRIFT_PUSH)
+    pushed, change, _ = drift_contact_log(base, S, push=push, push_at=DRIFT_PUSH, seed=seed)
     p = compensate(cal, pushed, causal=causal, track_offset=True, drift_intensity=intensity)
     idx = np.searchsorted(pushed.t, np.round(p.t, 9))
     end = int(np.searchsorted(p.t, sum(DRIFT_PUSH))) - 1

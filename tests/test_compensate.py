@@ -14,7 +14,8 @@ from fmscal.analysis import Compensator, calibrate, compensate
 from fmscal.analysis.cli import main
 from fmscal.observers.payload import PayloadEstimate
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, SpatialPayload, get_scenario
-from live_rig import contact_wrench, noise_rms, same_rig, with_contact
+from fmscal.plant.scenarios import contact_wrench, same_rig, with_contact
+from live_rig import noise_rms
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
 

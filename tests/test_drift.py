@@ -11,7 +11,8 @@ import pytest
 from fmscal.analysis import Compensator, calibrate, compensate
 from fmscal.analysis.cli import main
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log
-from live_rig import contact_wrench, drift_run, noise_rms, with_contact
+from fmscal.plant.scenarios import DRIFT_SIZE, contact_wrench, drift_contact_log, with_contact
+from live_rig import drift_run, noise_rms
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
 
@@ -186,3 +187,26 @@ def test_drift_scenario_targets():
         assert 0.93 <= r["coverage"].mean() <= 0.97, (seed, r)
         assert r["contact_error"] < 0.1 and r["contact_flagged"] > 0.99, (seed, r)
         assert r["false_alarm"] < 0.005, (seed, r)
+
+
+def test_drift_contact_log(arm):
+    """plant.scenarios.drift_contact_log: the raw offset moves by S^-1 d (1 - exp(-t / tau)) (each channel's size
+    with a sign), the contact and the push take S^-1 of the environment's wrench off the reading, and a wrong
+    shape is a one-line refusal."""
+    log, truth, S, cal = arm
+    wrench, push = contact_wrench(15.0), contact_wrench(10.0, direction=(0.0, 0.6, -0.8))
+    out, change, applied = drift_contact_log(log, S, tau=2.0, contact=wrench, contact_at=(1.0, 0.5), push=push,
+                                             push_at=(3.0, 1.0), seed=3)
+    moved = (out.w_hat - log.w_hat) @ S.T                                # the calibrated reading's change
+    drift = change @ S.T
+    np.testing.assert_allclose(np.abs(drift[-1]), np.array(DRIFT_SIZE) * (1 - np.exp(-(log.t[-1] - log.t[0]) / 2.0)))
+    np.testing.assert_allclose(moved, drift - applied, atol=1e-9)
+    on = (log.t >= 1.0) & (log.t < 1.5)
+    np.testing.assert_allclose(applied[on], np.broadcast_to(wrench, (on.sum(), 6)))
+    np.testing.assert_allclose(applied[np.searchsorted(log.t, 3.5)], 0.5 * push, rtol=1e-2)
+    assert not applied[(log.t >= 1.5) & (log.t < 3.0)].any() and not applied[log.t >= 4.0].any()
+    with pytest.raises(FmscalError, match="the drift's size must be 6 finite numbers") as e:
+        drift_contact_log(log, S, size=(1.0, 2.0))
+    assert "\n" not in str(e.value)
+    with pytest.raises(FmscalError, match="S must be a finite 6x6 matrix"):
+        drift_contact_log(log, S[:3, :3])
