@@ -67,7 +67,9 @@ def _load(settings):
 
 
 def sensor_pose(q, position, extrinsics=None):
-    """The sensor frame's pose from a tracked frame's (a marker, a flange) and the sensor's place on it::
+    """The sensor frame's pose from a tracked frame's (a marker, a flange) and the sensor's place on it.
+
+    With ``R`` and ``t`` the sensor's axes and point in the tracked frame's::
 
         R_S = R(q_M) R,   p_S = p_M + R(q_M) t                                                     (R1)
 
