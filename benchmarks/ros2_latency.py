@@ -11,6 +11,8 @@ stamped with the time they are sent, over DDS on loopback, in a ROS domain of it
   start: the first blocks of each size, the machine's caches);
 - the same seen by this process's subscriber (now - stamp on reception: DDS's delivery back included);
 - the backlog (the readings waiting for the motion when an output is published), its p99 and largest;
+- how late this process sent each row against its 1 kHz schedule (the stamps are the schedule's times): an
+  output needs the reading ``delay`` s after its own, so a stall of the sender shows in the delay too;
 - the messages: readings sent, received by the node, outputs expected (every reading the causal filter covers)
   and received here; dropped = expected - received.
 
@@ -77,7 +79,8 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable"):
             "stamp_to_publication_s": stats(node[:, 0]), "beyond_delay_s": stats(node[:, 0] - delay),
             "beyond_delay_after_1s_s": stats(node[1000:, 0] - delay),
             "callback_to_publication_s": stats(node[:, 1]), "backlog": stats(node[:, 2]),
-            "stamp_to_subscriber_s": stats(seen), "node_counts": diagnostics,
+            "stamp_to_subscriber_s": stats(seen), "publisher_lateness_s": stats(np.array(peer.lateness)),
+            "node_counts": diagnostics,
             "warnings": [line for line in text.splitlines() if "WARN" in line][:5]}
 
 
@@ -102,7 +105,8 @@ def main(argv=None):
                       ("beyond_delay_s", "beyond the causal delay"),
                       ("beyond_delay_after_1s_s", "the same after the first second"),
                       ("callback_to_publication_s", "the node's callback to publication"),
-                      ("stamp_to_subscriber_s", "stamp to this subscriber")):
+                      ("stamp_to_subscriber_s", "stamp to this subscriber"),
+                      ("publisher_lateness_s", "this process's lateness against its 1 kHz schedule")):
         s = r[key]
         print(f"| {name} | {s['p50'] * 1e3:.2f} | {s['p99'] * 1e3:.2f} | {s['max'] * 1e3:.2f} |")
     b = r["backlog"]

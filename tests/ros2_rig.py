@@ -167,14 +167,17 @@ class Peer:
 
     def replay_rows(self, t, w_hat, motion, start=None, rate=1.0, epoch=None):
         """Publish a reading of each row of ``w_hat`` and the motion message ``motion(i, stamp)`` (None: no
-        motion with this reading), both stamped ``epoch + t[i]``, at the pace of ``t`` times ``rate``."""
+        motion with this reading), both stamped ``epoch + t[i]``, at the pace of ``t`` times ``rate``; the
+        stamps are the rows' times (their schedule), and :attr:`lateness` how late each row went out."""
         epoch = round(time.time(), 3) if epoch is None else epoch
         begin = time.perf_counter()
         first = start or 0
+        self.lateness = []                       # s each row went out after its time (this process's stalls)
         for i in range(first, len(t)):
             due = begin + (t[i] - t[first]) / rate
             while (wait := due - time.perf_counter()) > 0:
                 time.sleep(min(wait, 0.0005))
+            self.lateness.append(-wait)
             sec, nanosec = divmod(int(round(epoch * 1e3)) * 1_000_000 + int(round(t[i] * 1e9)), 1_000_000_000)
             wrench = WrenchStamped()
             wrench.header.stamp.sec, wrench.header.stamp.nanosec = sec, nanosec

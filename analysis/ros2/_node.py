@@ -18,6 +18,7 @@ share the pipeline through its lock, held for the short steps only (the fit runs
 """
 
 import array
+import gc
 import threading
 import time
 from types import SimpleNamespace
@@ -395,6 +396,10 @@ def spin(args):
             threads.append(threading.Thread(target=node.poll, args=(context,), daemon=True))
         else:                                        # an rclpy without take_message: its executor takes them
             executor.add_node(node.inputs)
+        # everything built so far (the imports, the warmed-up compensator) out of the collector's way: a full
+        # collection over it would pause the compensation for tens of milliseconds
+        gc.collect()
+        gc.freeze()
         for thread in threads:
             thread.start()
         try:
