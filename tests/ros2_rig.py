@@ -26,6 +26,8 @@ from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 
 from fmscal.plant import Calibration
 
@@ -105,6 +107,7 @@ class Peer:
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node("fmscal_test_peer", context=self.context)
+        self.node_name = node_name
         self.wrench_pub = self.node.create_publisher(WrenchStamped, wrench_topic, RELIABLE)
         self.pose_pub = self.node.create_publisher(motion, pose_topic, RELIABLE)
         self.contacts, self.covariances, self.diagnostics, self.latencies = [], [], [], []
@@ -199,6 +202,17 @@ class Peer:
                 return True
             time.sleep(0.02)
         return False
+
+    def set_parameter(self, name, value, timeout=WAIT):
+        """Set one of the node's parameters (a string) by its ``set_parameters`` service; the result."""
+        client = self.node.create_client(SetParameters, f"/{self.node_name}/set_parameters")
+        assert client.wait_for_service(timeout_sec=timeout), "set_parameters not found"
+        request = SetParameters.Request()
+        request.parameters = [Parameter(name=name, value=ParameterValue(type=ParameterType.PARAMETER_STRING,
+                                                                        string_value=value))]
+        future = client.call_async(request)
+        assert self.wait_for(future.done, timeout), "set_parameters: no answer"
+        return future.result().results[0]
 
     def call(self, service, timeout=WAIT, proc=None):
         """Call a Trigger service of the node; ``(success, message)``."""

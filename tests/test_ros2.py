@@ -407,8 +407,9 @@ def test_identify_payload(request, arm, cal_file):
 
 @pytest.mark.slow
 def test_save(request, arm, cal_file, tmp_path):
-    """~/save refuses without save_path; with it, writes the calibration with the tracked offset in use: S, the
-    payload and gravity as loaded, b the offset the diagnostics report."""
+    """~/save refuses without save_path, which cannot be set on the running node (parameters are read at
+    start: the change refused, saying so); started with it, writes the calibration with the tracked offset in
+    use: S, the payload and gravity as loaded, b the offset the diagnostics report."""
     scenario, log, truth, cal = arm
     saved = tmp_path / "saved.json"
     with _node(request, cal_file, "track_offset:=true") as proc:
@@ -416,9 +417,13 @@ def test_save(request, arm, cal_file, tmp_path):
         try:
             peer.wait_for_node(proc)
             refused = peer.call("save")
+            changed = peer.set_parameter("save_path", str(saved))
         finally:
             peer.close()
     assert refused == (False, "save refused: set the parameter save_path")
+    assert not changed.successful
+    assert changed.reason == ("fmscal_compensator reads its parameters at start: restart it to change save_path "
+                              "(~/reload reads the calibration file again)")
     second = domain_id(request.node.name) % 100 + 1
     with _node(request, cal_file, "track_offset:=true", f"save_path:={saved}", domain=second) as proc:
         peer = Peer(second)

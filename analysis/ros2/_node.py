@@ -56,7 +56,7 @@ def ros():
         from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
         from rclpy.parameter import Parameter
         from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
-        from rcl_interfaces.msg import ParameterDescriptor
+        from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
         from geometry_msgs.msg import PoseStamped, WrenchStamped
         from sensor_msgs.msg import Imu, JointState
         from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -69,7 +69,8 @@ def ros():
                            Shutdown=ExternalShutdownException, Executor=MultiThreadedExecutor,
                            Single=SingleThreadedExecutor, Parameter=Parameter,
                            QoSProfile=QoSProfile, Reliability=ReliabilityPolicy, History=HistoryPolicy,
-                           Durability=DurabilityPolicy, Descriptor=ParameterDescriptor, PoseStamped=PoseStamped,
+                           Durability=DurabilityPolicy, Descriptor=ParameterDescriptor,
+                           SetResult=SetParametersResult, PoseStamped=PoseStamped,
                            WrenchStamped=WrenchStamped, Imu=Imu, JointState=JointState, Array=Float64MultiArray,
                            Dimension=MultiArrayDimension, Trigger=Trigger, DiagnosticArray=DiagnosticArray,
                            DiagnosticStatus=DiagnosticStatus, KeyValue=KeyValue)
@@ -100,6 +101,7 @@ class CompensatorNode:
         self.node = r.Node(NODE_NAME, context=context)
         self.log = self.node.get_logger()
         self.settings = settings(self._declare())
+        self.node.add_on_set_parameters_callback(self._refuse_changes)
         motion, kind = self._motion()
         self.pipeline = Pipeline(self.settings, motion, kind)
         model = self.pipeline.model
@@ -175,6 +177,12 @@ class CompensatorNode:
                 raise Ros2Error(f"parameter {p.name} ({p.type}{', e.g. 1.0 not 1' if 'double' in p.type else ''}): "
                                 f"{message}") from None
         return values
+
+    def _refuse_changes(self, parameters):
+        """Parameters are read once, at start: a change later (``ros2 param set``) is refused, saying so."""
+        names = ", ".join(p.name for p in parameters)
+        return self.r.SetResult(successful=False, reason=f"{NODE_NAME} reads its parameters at start: restart it "
+                                f"to change {names} (~/reload reads the calibration file again)")
 
     def _motion(self):
         """The Compensator's ``motion`` and the form the pipeline takes it in."""

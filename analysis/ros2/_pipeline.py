@@ -130,6 +130,7 @@ class Pipeline:
         self._held = deque()                          # (t, pose, w_hat) for identify_payload
         self._recent = deque()                        # (t, w_hat, motion) of the rows the filter still holds
         self._last_t = None
+        self.last_arrival = -np.inf                   # time.monotonic() of the newest reading
         self.motion_frame = ""
         self.identified = None
         self.counts = dict(received=0, published=0, stale=0, saturated=0, out_of_order=0, gaps=0, motion=0)
@@ -207,6 +208,7 @@ class Pipeline:
         arrival = time.monotonic() if arrival is None else arrival
         with self.lock:
             self.counts["received"] += 1
+            self.last_arrival = arrival
             newest = self._pending[-1][0] if self._pending else self._last_t
             if newest is not None and t <= newest:
                 self.counts["out_of_order"] += 1
@@ -334,13 +336,14 @@ class Pipeline:
 
     # --- the state --------------------------------------------------------------------------------------------
     def state(self):
-        """One of :data:`STATES`."""
+        """One of :data:`STATES`: "not ready" too where no reading has come for ``stale_timeout`` s (wall time)."""
         with self.lock:
             if self._last_t is not None and self._last_t - self._saturated_at < SATURATED_HOLD:
                 return STATES[3]
             if self.stale:
                 return STATES[2]
-            return STATES[1] if self.last_sample is not None else STATES[0]
+            silent = time.monotonic() - self.last_arrival > self.settings.stale_timeout
+            return STATES[1] if self.last_sample is not None and not silent else STATES[0]
 
     def backlog(self):
         """The readings waiting for the motion."""
