@@ -7,6 +7,8 @@ node's output is compared with ``compensate(..., causal=True)`` on the same log.
 """
 
 import json
+import os
+import signal
 import subprocess
 import sys
 import time
@@ -495,3 +497,36 @@ def test_latency_benchmark_short():
     assert r["sent"] == r["received_by_node"] == 3002
     assert r["received"] == r["expected"] == 3002 - 59 and r["dropped"] == 0 and r["in_order"]
     assert 0 < r["beyond_delay_s"]["p50"] < 0.02, r["beyond_delay_s"]
+
+
+@pytest.mark.slow
+def test_remapped_names(request, arm, cal_file):
+    """-r remappings: the node renamed (its services under the new name, its two helper nodes named after it)
+    and its topics remapped, a relative pose topic among them."""
+    scenario, log, truth, cal = arm
+    domain = domain_id(request.node.name)
+    command = node_command(f"calibration:={cal_file}", "pose_topic:=pose_in", "qos:=reliable",
+                           "diagnostics_period:=0.1") + ["-r", "__node:=comp", "-r", "/ft_sensor/wrench:=/ati/raw",
+                                                         "-r", "pose_in:=/mocap/tool"]
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        peer = Peer(domain, wrench_topic="/ati/raw", pose_topic="/mocap/tool", node_name="comp")
+        try:
+            assert peer.wait_for(lambda: peer.wrench_pub.get_subscription_count() and peer.diagnostics
+                                 and peer.pose_pub.get_subscription_count(), 30)
+            peer.replay(log.head(300))
+            assert peer.wait_for(lambda: len(peer.contacts) >= 241, 10)
+            ok, message = peer.call("tare")
+            names = peer.node.get_node_names()
+        finally:
+            peer.close()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert ok, message
+    assert {"comp", "comp_inputs", "comp_services"} <= set(names) and "fmscal_compensator" not in names

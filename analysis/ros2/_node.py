@@ -130,25 +130,29 @@ class CompensatorNode:
         self.cov_pub = self.node.create_publisher(r.Array, s.covariance_topic, qos_out)
         self.diag_pub = self.node.create_publisher(r.DiagnosticArray, "/diagnostics", 10)
         self.latency_pub = self.node.create_publisher(r.Array, "~/latency", qos_out) if s.debug_latency else None
-        # the inputs on a node of their own, not spun by an executor: a thread takes their messages (poll)
-        self.inputs = r.Node(f"{self.node.get_name()}_inputs", namespace=self.node.get_namespace(),
-                             context=context, start_parameter_services=False)
-        self._wrench_sub = self.inputs.create_subscription(r.WrenchStamped, s.wrench_topic, self._on_wrench, qos_in)
+        # the inputs on a node of their own, not spun by an executor: a thread takes their messages (poll). The
+        # helper nodes take none of the command line's arguments (a node's name remapped would rename them
+        # too): their topics are this node's, resolved with its remappings
+        helper = dict(namespace=self.node.get_namespace(), context=context, start_parameter_services=False,
+                      use_global_arguments=False)
+        self.inputs = r.Node(f"{self.node.get_name()}_inputs", **helper)
+        self._wrench_sub = self.inputs.create_subscription(r.WrenchStamped, self._resolve(s.wrench_topic),
+                                                           self._on_wrench, qos_in)
         message, self._motion_message = {"pose": (r.PoseStamped, self._pose), "joints": (r.JointState, self._joints),
                                          "imu": (r.Imu, self._imu)}[kind]
-        self._motion_sub = self.inputs.create_subscription(message, s.topic, self._on_motion, qos_in)
+        self._motion_sub = self.inputs.create_subscription(message, self._resolve(s.topic), self._on_motion, qos_in)
         self.error = None
         # the services on a node of their own, spun by its own executor in another thread, named under this
         # node's name: a fit never waits for the inputs' executor, nor the inputs for it
-        self.services = r.Node(f"{self.node.get_name()}_services", namespace=self.node.get_namespace(),
-                               context=context, start_parameter_services=False)
+        self.services = r.Node(f"{self.node.get_name()}_services", **helper)
         base = self.node.get_fully_qualified_name()
         for name, work in (("tare", self.pipeline.tare), ("identify_payload", self.pipeline.identify),
                            ("save", self.pipeline.save), ("reload", self.pipeline.reload)):
             self.services.create_service(r.Trigger, f"{base}/{name}", self._service(name, work),
                                          callback_group=services)
         self.node.create_timer(s.diagnostics_period, self._diagnose)
-        self.log.info(f"compensating {s.wrench_topic} with the motion of {s.topic} into {s.contact_topic} "
+        self.log.info(f"compensating {self._wrench_sub.topic_name} with the motion of "
+                      f"{self._motion_sub.topic_name} into {self.contact_pub.topic_name} "
                       f"(the wrench {'on the tool' if s.direction == 'on_tool' else 'on the environment'}, "
                       f"{s.output_frame} frame); calibration {s.calibration}")
         for warning in self.pipeline.warnings:
@@ -177,6 +181,11 @@ class CompensatorNode:
                 raise Ros2Error(f"parameter {p.name} ({p.type}{', e.g. 1.0 not 1' if 'double' in p.type else ''}): "
                                 f"{message}") from None
         return values
+
+    def _resolve(self, topic):
+        """``topic`` as this node resolves it: its namespace and the command line's remappings applied."""
+        resolve = getattr(self.node, "resolve_topic_name", None)
+        return topic if resolve is None else resolve(topic)
 
     def _refuse_changes(self, parameters):
         """Parameters are read once, at start: a change later (``ros2 param set``) is refused, saying so."""
