@@ -4,13 +4,14 @@ motion interpolated at each reading's time, the compensation, the services' work
 The node (:mod:`._node`) turns messages into numbers and calls :class:`Pipeline`; every call here takes and
 returns plain numbers, so the matching is tested without ROS too.
 
-Matching. A motion sample stamped ``s`` was taken at ``s - latency`` (the calibration's latency, or the
-``latency`` parameter). A reading stamped ``t`` waits until the motion's newest sample reaches ``t``; the
-motion is then interpolated at ``t`` (the model's :meth:`fmscal.plant.Model.interpolate_pose`: SLERP for a
-quaternion, linear otherwise; joint states and an IMU's rates and specific force linearly) and the reading is
-pushed into :class:`fmscal.analysis.Compensator` with it. A reading the motion has not reached when a reading
-``stale_timeout`` s newer arrives is pushed with no motion: the motion is stale, and the compensator, which
-never extrapolates, stops the output until the motion covers its window again.
+Matching. A motion sample stamped ``s`` was taken at ``s - latency`` (the ``latency`` parameter; unset, the
+calibration's for a pose stream, 0 for joint states and an IMU). A reading stamped ``t`` waits until the
+motion's newest sample reaches ``t``; the motion is then interpolated at ``t`` (the model's
+:meth:`fmscal.plant.Model.interpolate_pose`: SLERP for a quaternion, linear otherwise; joint states and an IMU's
+rates and specific force linearly) and the reading is pushed into :class:`fmscal.analysis.Compensator` with it.
+A reading the motion has not reached when a reading ``stale_timeout`` s newer arrives is pushed with no motion:
+the motion is stale, and the compensator, which never extrapolates, stops the output until the motion covers
+its window again.
 """
 
 import threading
@@ -21,9 +22,8 @@ from dataclasses import replace
 import numpy as np
 
 from fmscal.plant import Calibration, Log, SpatialModel
-from fmscal.observers.payload import PayloadEstimate, identify_payload
-
 from fmscal.plant.physics import quaternion_multiply
+from fmscal.observers.payload import PayloadEstimate, identify_payload
 
 from .._compensate import Compensator, compensation_model
 from .._motion import quaternion_from_matrix, quaternion_to_matrix
