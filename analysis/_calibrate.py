@@ -462,11 +462,12 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         latency = timing.latency
     aligned = signed.shift_poses(latency)
     reference = LeastSquares(model, offset=offset) if "reference" in model.calibration_checks else None
-    ls_result = None if reference is None else reference.run(aligned)
+    # the glitches bridged above are the ones each run reports (the search is not repeated)
+    ls_result = None if reference is None else reference.run(aligned, glitches=glitches)
     if reference is not None and name == reference.name:
         result = ls_result
     else:
-        result = make_observer(name, model, noise, {"offset": offset}).run(aligned)
+        result = make_observer(name, model, noise, {"offset": offset}).run(aligned, glitches=glitches)
     if result.diverged:                  # a diverging estimate is an error, never an answer
         raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
                             + (f": {result.warnings[-1]}" if result.warnings else "")

@@ -14,7 +14,11 @@ the worst and the median of E (latency estimated) over E at the known
 latency (the same interpolation, :meth:`fmscal.plant.Log.shift_poses`), the
 z-scores' rms ``(S_hat - S) / S_std`` over the entries and seeds and the share of
 seeds that converged (each also with the latency given: on short logs the floor
-itself does not always settle), and the latency's own z-scores' rms. The MuJoCo
+itself does not always settle), and the latency's own z-scores' rms. With
+``--per-seed``, every seed's line, and E at the known latency moved by one
+standard deviation of the estimate towards it over E at the known latency:
+what a latency known only to its own uncertainty costs (``--latencies`` picks
+the latencies). The MuJoCo
 poses are delayed before their noise is drawn, as a late pose stream is
 measured (delayed after it, a fractional delay would average neighbouring
 noise draws, which no log holds). Targets: E within
@@ -78,31 +82,45 @@ def _source(name, duration):
     return make
 
 
-def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-arm"), latencies=LATENCIES):
-    """Rows of the targets' table (module docstring), one per source and latency."""
+def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-arm"), latencies=LATENCIES,
+            per_seed=False):
+    """Rows of the targets' table (module docstring), one per source and latency.
+
+    With ``per_seed``, each seed is also printed, with E at the known latency moved by one standard deviation
+    of the estimate towards it (``E_1sd``): the ratio a latency known only to its own uncertainty costs.
+    """
     from fmscal.analysis import calibrate, calibration_error
     rows = []
     for name in sources:
         make = _source(name, duration)
         for samples in latencies:
             latency = samples * 1e-3
-            ratios, z, z_known, converged, converged_known, z_latency = [], [], [], [], [], []
+            ratios, z, z_known, converged, converged_known, z_latency, ratios_1sd = [], [], [], [], [], [], []
             for seed in range(seeds):
                 log, S, payload = make(seed, latency)
                 found = calibrate(log, payload)
                 known = calibrate(log, payload, latency=latency)
-                ratios.append(calibration_error(found.S, S) / calibration_error(known.S, S))
+                E, E_known = calibration_error(found.S, S), calibration_error(known.S, S)
+                ratios.append(E / E_known)
                 z.append(((np.asarray(found.S) - S) / np.asarray(found.S_std)).ravel())
                 z_known.append(((np.asarray(known.S) - S) / np.asarray(known.S_std)).ravel())
                 converged.append(found.converged)
                 converged_known.append(known.converged)
                 if found.latency_std:
                     z_latency.append((found.latency - latency) / found.latency_std)
+                if per_seed and found.latency_std:
+                    moved = latency + np.sign(found.latency - latency) * found.latency_std
+                    ratios_1sd.append(calibration_error(calibrate(log, payload, latency=moved).S, S) / E_known)
+                    error, sd = found.latency - latency, found.latency_std
+                    print(f"{name:>14} {samples:+5.1f} seed {seed:2d}  latency error {error * 1e3:+.3f} ms "
+                          f"({error / sd:+.2f} sd of {sd * 1e3:.3f} ms)  E known {E_known:.4f} found {E:.4f} "
+                          f"ratio {E / E_known:.3f}  E_1sd ratio {ratios_1sd[-1]:.3f}", flush=True)
             rows.append({"source": name, "latency_samples": samples, "E_ratio_max": float(np.max(ratios)),
                          "E_ratio_median": float(np.median(ratios)), "z_rms": float(np.sqrt(np.mean(np.square(z)))),
                          "z_rms_known": float(np.sqrt(np.mean(np.square(z_known)))),
                          "converged": float(np.mean(converged)), "converged_known": float(np.mean(converged_known)),
-                         "latency_z_rms": float(np.sqrt(np.mean(np.square(z_latency)))) if z_latency else np.nan})
+                         "latency_z_rms": float(np.sqrt(np.mean(np.square(z_latency)))) if z_latency else np.nan,
+                         "E_1sd_ratio_max": float(np.max(ratios_1sd)) if ratios_1sd else np.nan})
             print(_line(rows[-1]), flush=True)
     return rows
 
@@ -111,7 +129,8 @@ def _line(row):
     return (f"{row['source']:>14} {row['latency_samples']:+5.1f}  E ratio max {row['E_ratio_max']:.3f} median "
             f"{row['E_ratio_median']:.3f}  z rms {row['z_rms']:.2f} (known latency {row['z_rms_known']:.2f})  "
             f"converged {100 * row['converged']:.0f} % (known {100 * row['converged_known']:.0f} %)  "
-            f"latency z rms {row['latency_z_rms']:.2f}")
+            f"latency z rms {row['latency_z_rms']:.2f}"
+            + (f"  E_1sd ratio max {row['E_1sd_ratio_max']:.3f}" if np.isfinite(row["E_1sd_ratio_max"]) else ""))
 
 
 def main(argv=None):
@@ -120,6 +139,10 @@ def main(argv=None):
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--duration", type=float, default=20.0, help="s of each log of the table")
     parser.add_argument("--sources", nargs="+", default=["spatial-arm", "spatial-mocap", "mujoco-arm"])
+    parser.add_argument("--latencies", nargs="+", type=float, default=list(LATENCIES), help="true latencies, samples")
+    parser.add_argument("--per-seed", action="store_true",
+                        help="print each seed, with E at the known latency moved by one standard deviation of the "
+                             "estimate towards it (a third calibration per seed)")
     args = parser.parse_args(argv)
     if args.timing:
         t = timing()
@@ -127,7 +150,7 @@ def main(argv=None):
               f"{t['given']:.2f} s, ratio {t['estimated'] / t['given']:.2f}")
         return
     print(f"{args.seeds} seeds of {args.duration:g} s; targets: E ratio <= 1.15, z rms in [0.8, 1.25], 95 % converged")
-    targets(args.seeds, args.duration, args.sources)
+    targets(args.seeds, args.duration, args.sources, args.latencies, args.per_seed)
 
 
 if __name__ == "__main__":

@@ -480,8 +480,8 @@ def test_a_singular_estimate_is_named_for_its_cause_not_as_a_bad_matrix(folder, 
     from fmscal.observers import LeastSquares
     real = LeastSquares.run
 
-    def zero_row(self, log, S0=None):
-        result = real(self, log, S0)
+    def zero_row(self, log, S0=None, **kwargs):
+        result = real(self, log, S0, **kwargs)
         S = result.S_hat.copy()
         S[1] = 0.0
         return replace(result, S_hat=S)

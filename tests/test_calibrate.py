@@ -150,7 +150,7 @@ def test_consistency_warning_when_angles_are_in_degrees(tmp_path, capsys):
 def test_a_diverged_run_is_an_error_not_an_answer(other_log, monkeypatch, capsys):
     path, _ = other_log
 
-    def diverging(self, log, S0=None):
+    def diverging(self, log, S0=None, **kwargs):
         return ObserverResult("ekf", log.t[:5], np.eye(3), np.tile(np.eye(3), (5, 1, 1)), np.zeros((5, 6)),
                               diverged=True)
 

@@ -235,7 +235,8 @@ def test_a_payload_of_the_other_case_is_refused_in_one_line(name, payload, messa
 
 def test_a_diverging_estimate_is_an_error_never_an_answer(inputs, monkeypatch):
     real = LeastSquares.run
-    monkeypatch.setattr(LeastSquares, "run", lambda self, log, S0=None: replace(real(self, log, S0), diverged=True))
+    monkeypatch.setattr(LeastSquares, "run",
+                        lambda self, log, S0=None, **kw: replace(real(self, log, S0, **kw), diverged=True))
     with pytest.raises(DivergedError, match="least-squares diverged on spatial.csv") as err:
         calibrate(read_data("spatial.csv"), TOOL, method="least-squares", latency=0.0)
     assert "\n" not in str(err.value)

@@ -83,6 +83,7 @@ def test_spikes_in_a_spatial_log_no_longer_steer_least_squares(arm):
     assert cal.glitches["count"] == 20 and cal.glitches["indices"] == rows.tolist()
     assert json.loads(cal.to_json())["glitches"]["times"] == pytest.approx(log.t[rows].tolist())
     assert any("20 sample(s) of the reading rejected as glitches" in note for note in cal.notes)
+    assert cal.run.info["glitches"]["indices"] == rows.tolist()        # the run reports what calibrate bridged
     assert 0.9 * clean.E < cal.E < 1.1 * clean.E
     assert np.abs((cal.S_hat - S) / cal.S_std).max() < 5
     assert cal.converged
@@ -97,6 +98,20 @@ def test_every_batch_method_bridges_the_glitches_itself(arm):
     clean = make_observer("least-squares", model, None, {"offset": True}).run(log)
     assert result.info["glitches"]["indices"] == rows.tolist() and clean.info["glitches"]["count"] == 0
     assert np.abs(result.S_hat - clean.S_hat).max() < 0.5 * clean.S_std.max()
+
+
+def test_a_run_given_the_glitches_does_not_search_again(arm):
+    """calibrate bridges once and hands the glitches to the run: the run takes them as found, not searching."""
+    log, _ = arm
+    bad, rows = spiked(log, 10, 2.0, 3, seed=2)
+    model = SpatialModel(ARM.payload)
+    glitches, _ = find_glitches(log.t, log.w_hat)                      # none on the clean reading
+    kept = make_observer("least-squares", model, None, {"offset": True}).run(bad, glitches=glitches)
+    searched = make_observer("least-squares", model, None, {"offset": True}).run(bad)
+    assert kept.info["glitches"]["count"] == 0 and searched.info["glitches"]["indices"] == rows.tolist()
+    assert np.abs(kept.S_hat - searched.S_hat).max() > 0.1 * searched.S_std.max()     # the spikes left in
+    with pytest.raises(TypeError, match="glitches must be a Glitches"):
+        make_observer("least-squares", model, None, {"offset": True}).run(log, glitches={"count": 0})
 
 
 def test_the_command_line_prints_the_glitches(tmp_path, capsys):

@@ -40,6 +40,8 @@ def test_the_tables_noise_is_the_scenarios_averaged_over_the_hold():
             ARM.generate_table(poses=bad)
     with pytest.raises(FmscalError, match="hold must be a positive"):
         ARM.generate_table(poses=6, hold=0.0)
+    with pytest.raises(FmscalError, match="at most 100000 poses"):
+        ARM.generate_table(poses=100_001)
 
 
 def test_simulate_poses_writes_a_table_that_identify_payload_reads(tmp_path, capsys):
@@ -75,6 +77,9 @@ def test_simulate_takes_a_spatial_payload_for_a_log(tmp_path):
     (["--scenario", "spatial-arm", "--offset", "1", "2", "3"], "draws its own offset"),
     (["--scenario", "paper", "--poses", "6"], "--poses is for the spatial scenarios"),
     (["--scenario", "spatial-arm", "--poses", "3"], "at least 4 poses"),
+    (["--scenario", "spatial-arm", "--poses", "1e8"], "at most 100000 poses; got 100000000"),
+    (["--scenario", "spatial-arm", "--poses", "2.5"], "--poses: must be a whole number"),
+    (["--scenario", "spatial-arm", "--duration", "1e4"], "1e+07 samples; a simulated spatial log has 10 to 2e+06"),
     (["--scenario", "spatial-arm", "--poses", "6", "--duration", "3"], "--duration is for a log"),
     (["--scenario", "spatial-arm", "--hold", "2"], "--hold applies to --poses"),
 ])

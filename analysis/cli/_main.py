@@ -59,6 +59,17 @@ MAX_LAM = 1e7
 REPRODUCE_DIR = "reproduce"
 
 
+def _count(text):
+    """argparse type of a count of poses: a whole number, also written as ``1e5``."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number; got {text!r}") from None
+    if not (np.isfinite(value) and value == int(value)):
+        raise argparse.ArgumentTypeError(f"must be a whole number; got {text!r}")
+    return int(value)
+
+
 def _add_simulate(sub):
     every = {**SCENARIOS, **SPATIAL_SCENARIOS}
     import textwrap
@@ -104,7 +115,7 @@ def _add_simulate(sub):
     p.add_argument("--latency", type=float, metavar="S",
                    help="delay of the pose stream behind the sensor stream, s, any fraction of a sample; negative: the "
                         "wrench stream behind the poses (default: the scenario's)")
-    p.add_argument("--poses", type=int, metavar="N",
+    p.add_argument("--poses", type=_count, metavar="N",
                    help="spatial scenarios: write a pose table instead of a log, the tool held at N random attitudes "
                         "(the spatial header without t, one row per held pose; at least 4)")
     p.add_argument("--hold", type=float, metavar="S",

@@ -30,7 +30,14 @@ a unit quaternion. The floor then takes the Gauss-Newton road:
    ``U_k = [h^2 (2 A_k W_k + A_k+1 W_k+1) / 6; h (A_k W_k + A_k+1 W_k+1) / 2]``
    (``W_k = I (x) [w_hat_k; 1]^T``; the turn's small-angle Jacobian over one
    step, ``1 - O(|omega| h)``, taken as 1) and ``c_k`` the one-step map at
-   ``delta = 0, s = s_bar`` less ``U_k s_bar``.
+   ``delta = 0, s = s_bar`` less ``U_k s_bar``. The acceleration at the
+   step's end is taken at ``x_bar_k+1 (+) delta_k`` (the error carried to
+   the end, which the step changes by ``O(h)``): both ends' accelerations
+   then depend on the error in ``Phi_k``. Taken at the nominal ``x_bar_k+1``,
+   half of each step's coupling of the state's error into the acceleration
+   (the attitude turning the force) would be left out, an error of the
+   first order in the nominal's own error, which the noise of the poses
+   sets: ``S_std`` would come out too small on logs of noisy attitudes.
 3. **The pose**, in the error state: ``[p_meas - p_bar, 2 log(q_bar* (x) q_meas)]
    = delta[:6] + v``, ``v`` white with the position's and the attitude's
    variances (a turn about the sensor's axes, as the scenarios draw it).
@@ -141,10 +148,14 @@ def _one_step(model, x0, x1, w0, w1, delta, h):
     """The one-step map of the module docstring: ``x_bar_k (+) delta`` moved by a step, less ``x_bar_k+1``.
 
     ``w0``, ``w1`` are the true wrench at the step's ends; the acceleration
-    at the end is the nominal's (``x1``). Returns the error state at ``k+1``.
+    at the end is taken at ``x_bar_k+1 (+) delta`` (the error carried to the
+    step's end, which it changes only by ``O(h)``), so that ``Phi_k`` holds
+    the end's acceleration's dependence on the error too. Returns the error
+    state at ``k+1``.
     """
     start = model.state_integrate(x0, delta)
-    return model.state_difference(x1, move(model, start, model.acceleration(start, w0), model.acceleration(x1, w1), h))
+    end = model.state_integrate(x1, delta)
+    return model.state_difference(x1, move(model, start, model.acceleration(start, w0), model.acceleration(end, w1), h))
 
 
 def _augment(w, n_w, n):

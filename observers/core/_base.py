@@ -34,7 +34,7 @@ from fmscal.plant import Log
 from fmscal.plant.numerics import ChunkedSteps, FmscalError, as_bool, build_once, compiler
 from fmscal.plant.physics import as_model, check_calibration
 
-from ._glitches import bridge_glitches
+from ._glitches import Glitches, bridge_glitches
 from ._convergence import DIVERGENCE_GRACE, divergence_bound, informed, moved, settled
 from ._progress import EVERY, progress_bar
 from ._result import ObserverResult, calibration_uncertainty, initial_calibration, split_calibration
@@ -326,7 +326,7 @@ class Observer:
         return RunData(S0=S0, bound=divergence_bound(S0), compiled=bool(compiled))
 
     # --- the whole log --------------------------------------------------------
-    def run(self, log, S0=None, compiled=True):
+    def run(self, log, S0=None, compiled=True, glitches=None):
         """Run over a whole log.
 
         Parameters
@@ -341,6 +341,11 @@ class Observer:
             chunks, where it has one (the recursive observers, the EKF, the
             floor); False: its readable path, step by step (numpy; the EKF's
             on filterpy). Results agree to rounding. Least squares has one path.
+        glitches : Glitches, optional
+            The reading's glitches already found and bridged in ``log`` by
+            the caller (:func:`fmscal.observers.core.bridge_glitches`): the
+            search is not repeated, and these are the ones reported in
+            ``info["glitches"]``.
 
         Returns
         -------
@@ -373,8 +378,10 @@ class Observer:
             run.compiled = bool(compiled)
         else:
             self.run_data = run = self._new_run(None, compiled=compiled)
-        glitches = None
-        if not self.online:                 # a batch fit: the reading's glitches bridged first (_glitches)
+        if glitches is not None and not isinstance(glitches, Glitches):
+            raise TypeError(f"glitches must be a Glitches (observers.core.bridge_glitches); got "
+                            f"{type(glitches).__name__}")
+        if glitches is None and not self.online:     # a batch fit: the reading's glitches bridged first (_glitches)
             log, glitches = bridge_glitches(log, self.model.wrench_names)
         estimate = self._estimate(log, run.S0)
         result = self._result(log, estimate)

@@ -27,6 +27,13 @@ Like a pose table's fit, the log's reports what it covered and the held
 poses to record next (:mod:`fmscal.observers.payload._coverage`), and names the flag
 (``--gravity estimate`` or ``--mounting estimate``) whose rotation explains
 residuals far above the noise.
+
+Where ``S`` is not the one given (``S = I`` on a sensor whose force gains
+differ), the three force axes each ask for their own mass: the fit is
+repeated with one mass per axis, their disagreement tested against the
+cluster-robust covariance (eq. P1, :func:`_axis_masses`), and where it is
+beyond chance the mass's variance takes their spread (eq. P2, as a pose
+table's N8), with a warning naming the gains.
 """
 
 from typing import NamedTuple
@@ -39,11 +46,14 @@ from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array, as_posi
 from fmscal.plant.physics import (GRAVITY, INERTIA_NAMES, SpatialPayload, check_calibration, edge, regressor,
                                   rotation_matrix, skew, spatial_motion)
 
+from scipy.stats import f as f_dist
+
 from fmscal.observers.batch import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
 from ._coverage import cone_deg, in_words, next_poses, weak_directions
 from ._estimate import PayloadEstimate
-from ._static_fit import (TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start, _tangent_basis,
-                          cone_warning, gravity_up, other_convention, rotation_check, rotations_unresolved)
+from ._static_fit import (ODDS, TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start,
+                          _tangent_basis, cone_warning, gravity_up, other_convention, rotation_check,
+                          rotations_unresolved)
 
 __all__ = ["identify_payload", "DETERMINED", "HOLD", "REFERENCES"]
 
@@ -111,6 +121,7 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     n = len(y)
     times = (log.t[trim], window, block)
     motion = tuple(v[trim] for v in (q, omega, alpha, p_ddot))
+    masses = None                                   # each force axis's own mass, where they disagree (eq. P1)
     if estimate_gravity or estimate_mounting:
         try:
             fit, information = _identify_rotations(log.name, motion, y, gravity, times, S, reading, estimate_gravity,
@@ -130,6 +141,11 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
         theta, cov, residual = weighted_fit(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks)
         if np.isfinite(cov[0, 0]) and theta[0] < 0:
             raise FmscalError(other_convention(log.name, theta[0], reading))
+        masses = _axis_masses(X, y.ravel(), np.tile(1.0 / np.maximum(sd, 1e-12), n), blocks, theta[0])
+        if masses is not None:                                                   # eq. (P2)
+            m = np.array(list(masses.values()))
+            cov = cov.copy()
+            cov[0, 0] += float(np.sum((m - m.mean()) ** 2) / (2 * len(m)))
         fit = _report(theta, cov, S, np.sqrt(np.mean(residual.reshape(n, 6) ** 2, axis=0)))
         _blocks_used(fit, blocks, length)
         Xw = X / np.tile(np.maximum(sd, 1e-12), n)[:, None]
@@ -137,29 +153,99 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
                                    1.0 / np.maximum(sd, 1e-12), (float(np.linalg.norm(gravity)),
                                    gravity / np.linalg.norm(gravity), np.eye(3), False, False))
     _coverage(fit, motion[0], log.t[trim], information)
+    named = False
     if not (estimate_gravity and estimate_mounting):
-        _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity, estimate_mounting)
-    _check_misfit(fit, y, S is None or np.allclose(S, np.eye(6)))
+        named = _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity,
+                                 estimate_mounting)
+    _check_misfit(fit, y, S is None or np.allclose(S, np.eye(6)), named, None if named else masses)
     return fit
 
 
-def _check_misfit(fit, y, identity):
-    """Warn, and clear ``converged``, where the force residuals exceed the reading's noise or the attitudes span a
-    narrow cone.
+def _axis_masses(X, y, weights, blocks, mass):
+    """Each force axis's own mass where the three disagree beyond chance, else None.
+
+    The fit is repeated with the mass's column split by force axis (``f_kj =
+    m_j a_kj + ...``, the rest of the model as it is); the two differences
+    ``d = (m_x - m_z, m_y - m_z)`` with their cluster-robust covariance ``C``
+    over the ``G`` blocks of time (eq. (U3)) give Hotelling's statistic, as
+    eq. (M2) of :mod:`fmscal.observers.diagnostics._misfit` takes it::
+
+        (G - 2) / (2 (G - 1)) d^T C^-1 d  ~  F(2, G - 2)                    (P1)
+
+    Only the axes whose own mass the log determines (a standard deviation
+    below :data:`DETERMINED` of it: an axis the motion barely loads has a mass
+    the smoothed accelerations bias) are compared, ``K`` differences from the
+    last of them (``K = 2`` above, ``F(K, G - K)``). Below
+    :data:`fmscal.observers.payload._static_fit.ODDS` the force gains
+    differ between the axes (``S`` is not the one given), and the mass's
+    variance takes their spread, as a pose table's (eq. N8)::
+
+        var(m) += sum_j (m_j - mean m)^2 / (2 (K + 1))                      (P2)
+
+    (the centre of mass and the inertia about it, computed from the mass, widen
+    with it by the delta method). No test with fewer than two such axes, or
+    ``K + 1`` blocks or fewer.
+
+    Parameters
+    ----------
+    X, y, weights, blocks
+        The fit's design, observations, weights and blocks (:func:`weighted_fit`).
+    mass : float
+        The fit's mass, kg.
+
+    Returns
+    -------
+    dict or None
+        The compared axes' masses, kg, by axis (``"x"``, ``"y"``, ``"z"``).
+    """
+    count = len(np.unique(blocks))
+    if count <= 3:
+        return None
+    axis = np.arange(len(y)) % 6
+    split = np.column_stack([X[:, 0] * (axis == j) for j in (3, 4, 5)] + [X[:, 1:]])
+    theta, cov, _ = weighted_fit(split, y, weights, blocks)
+    masses, std = theta[:3], np.sqrt(np.maximum(np.diag(cov[:3, :3]), 0))
+    kept = np.flatnonzero(np.isfinite(std) & (std < DETERMINED * abs(mass)))
+    k = len(kept) - 1
+    if k < 1 or count <= k + 1:
+        return None
+    D = np.c_[np.eye(k), -np.ones(k)]
+    d, C = D @ masses[kept], D @ cov[np.ix_(kept, kept)] @ D.T
+    if not (np.all(np.isfinite(C)) and np.linalg.det(C) > 0):
+        return None
+    statistic = (count - k) / (k * (count - 1)) * float(d @ np.linalg.solve(C, d))
+    if f_dist.sf(statistic, k, count - k) >= ODDS:
+        return None
+    return {"xyz"[j]: float(masses[j]) for j in kept}
+
+
+def _check_misfit(fit, y, identity, named=False, masses=None):
+    """Warn, and clear ``converged``, where the force residuals exceed the reading's noise, the force axes' own
+    masses disagree, or the attitudes span a narrow cone.
 
     The noise is the reading's sample-to-sample scatter (``rms(diff) /
     sqrt 2``, as :func:`_check_rotations`); residuals beyond
     :data:`fmscal.observers.payload.TILT_RATIO` times it, where no rotation
-    was named, are a model that does not fit: ``S`` (cross-talk, gains) the
-    likely cause. The cone is :func:`fmscal.observers.payload.cone_warning`'s.
+    was named (``named``), are a model that does not fit: ``S`` (cross-talk,
+    gains) the likely cause. ``masses`` (:func:`_axis_masses`): the force
+    gains differ between the axes, by the masses' spread over their mean.
+    One line names both. The cone is :func:`fmscal.observers.payload.cone_warning`'s.
     """
     noise = float(np.sqrt(np.mean(np.diff(y[:, 3:], axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
-    named = any("estimate" in w for w in fit.warnings)
+    parts = []
     if fixed > TILT_RATIO * noise and not named:
+        parts.append(f"the force residuals are {fixed / max(noise, 1e-300):.0f} times the reading's noise (its "
+                     "sample-to-sample scatter): the model does not fit")
+    if masses is not None:
+        m = np.array(list(masses.values()))
+        spread = 100 * float(np.ptp(m) / abs(np.mean(m)))
+        parts.append(f"the force gains seem to differ by {spread:.2g} % between axes (each force axis's own mass: "
+                     + ", ".join(f"{axis} {value:.4g} kg" for axis, value in masses.items())
+                     + "; the mass's uncertainty takes their spread)")
+    if parts:
         told = "S = I may be wrong: calibrate S" if identity else "the calibration given may be wrong"
-        fit.warnings.append(f"the force residuals are {fixed / max(noise, 1e-300):.0f} times the reading's noise (its "
-                            f"sample-to-sample scatter): the model does not fit; {told}")
+        fit.warnings.append("; ".join(parts) + f"; {told}")
         fit.converged = False
     if (line := cone_warning(fit.cone_deg)) is not None:
         fit.warnings.append(line)
@@ -183,13 +269,14 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     static_fit.TILT_RATIO` times the reading's noise, estimated from the
     differences of consecutive samples (``rms(diff) / sqrt 2``; white noise
     assumed, a log whose reading changes much between samples opens the
-    check less often); the warning is :func:`fmscal.observers.payload.rotation_check`'s.
+    check less often); the warning is :func:`fmscal.observers.payload.rotation_check`'s. Returns whether it
+    named a rotation.
     """
     force = y[:, 3:]
     noise = float(np.sqrt(np.mean(np.diff(force, axis=0) ** 2) / 2))
     fixed = float(np.sqrt(np.mean(np.square(fit.residual_rms[3:]))))
     if not fixed > TILT_RATIO * noise:
-        return
+        return False
 
     def refit(gravity_free, mounting_free):
         try:
@@ -203,6 +290,7 @@ def _check_rotations(fit, name, motion, y, gravity, times, S, reading, estimate_
     if warning is not None:                 # first: the model is wrong, and the other warnings may follow from it
         fit.warnings.insert(0, warning)
         fit.converged = False
+    return warning is not None
 
 
 class _Information(NamedTuple):

@@ -39,7 +39,11 @@ __all__ = ["SpatialScenario", "SPATIAL_SCENARIOS", "TOOL", "draw_spatial_S"]
 
 #: A 1.2 kg tool on a wrist sensor: centre of mass 6 cm out along z, a full inertia tensor (kg m^2).
 TOOL = SpatialPayload(1.2, (4e-3, 5e-3, 2.5e-3, 2e-4, -1e-4, 1.5e-4), (0.01, -0.005, 0.06))
-_MAX_SAMPLES = 20_000_000
+#: Most samples a simulated spatial log may have (2000 s at 1 kHz): the casadi map of the motion holds every
+#: sample at once while the log is drawn, and its memory grows with them.
+_MAX_SAMPLES = 2_000_000
+#: Most held poses a simulated pose table may have.
+MAX_POSES = 100_000
 
 
 def draw_spatial_S(rng, crosstalk=0.02):
@@ -180,7 +184,8 @@ class SpatialScenario:
         n = self.duration / self.dt + 1
         if not MIN_SAMPLES <= n <= _MAX_SAMPLES:
             raise FmscalError(f"{self.name}: {self.duration:g} s at dt = {self.dt:g} s is {n:.3g} samples; "
-                              f"a log has {MIN_SAMPLES} to {_MAX_SAMPLES:.0e}")
+                              f"a simulated spatial log has {MIN_SAMPLES} to {_MAX_SAMPLES:.0e} (shorten the "
+                              "duration or raise dt)")
 
     def motion_function(self, rng):
         """The imposed motion and the wrench it needs, ``t -> (x, w)`` (a casadi Function)."""
@@ -298,11 +303,13 @@ class SpatialScenario:
         Raises
         ------
         FmscalError
-            Fewer than :data:`~fmscal.plant.io.MIN_POSES` poses, or a hold that is not a positive
-            number of seconds.
+            Fewer than :data:`~fmscal.plant.io.MIN_POSES` poses or more than :data:`MAX_POSES`, or a
+            hold that is not a positive number of seconds.
         """
         if isinstance(poses, bool) or not isinstance(poses, (int, np.integer)) or poses < MIN_POSES:
             raise FmscalError(f"a pose table needs at least {MIN_POSES} poses (an integer); got {poses!r}")
+        if poses > MAX_POSES:
+            raise FmscalError(f"a simulated pose table has at most {MAX_POSES} poses; got {poses}")
         if isinstance(hold, bool) or not (isinstance(hold, (int, float)) and np.isfinite(hold) and hold > 0):
             raise FmscalError(f"hold must be a positive number of seconds; got {hold!r}")
         rng = np.random.default_rng(seed)
