@@ -246,6 +246,12 @@ def _dynamics(model):
                                                        ca.densify(ca.SX(model.drift(x)))])
 
 
+@lru_cache(maxsize=64)
+def _mapped(model, n):
+    """:func:`_dynamics` over ``n`` states at once (kept: a stream's blocks come in a few sizes)."""
+    return _dynamics(model).map(n)
+
+
 def _payload_wrench(model, x, a):
     """``W_p = A(x)^-1 (a - d(x))`` (C2) at each row of ``x`` (N, nx), ``a`` (N, nv); and ``A^-1``."""
     f = _dynamics(model)
@@ -253,7 +259,7 @@ def _payload_wrench(model, x, a):
         A, d = (np.asarray(v) for v in f(x[0]))
         A, d = A[None], d.T
     else:
-        A, d = (np.asarray(v) for v in f.map(len(x))(x.T))
+        A, d = (np.asarray(v) for v in _mapped(model, len(x))(x.T))
         A = A.reshape(model.nv, len(x), model.n_w).transpose(1, 0, 2)
         d = d.T
     A_inv = np.linalg.inv(A)
@@ -1061,6 +1067,89 @@ class Compensator:
         else:
             self._tracker.tare(found.mean(axis=0), S_inv @ cov.mean(axis=0) @ S_inv.T / len(found))
         return self.offset
+
+    def push_many(self, t, w_hat, pose):
+        """:meth:`push` over rows, vectorised: the same samples, for a block that came together (a backlog).
+
+        Rows whose pose windows are full are fitted together (one causal filter over the block, one call of
+        the dynamics); the others, and a motion other than poses, go through :meth:`push` one at a time.
+
+        Parameters
+        ----------
+        t : array_like, shape (M,)
+        w_hat : array_like, shape (M, n_w)
+        pose : array_like, shape (M, n_pose)
+            NaN rows where no pose came with the reading.
+
+        Returns
+        -------
+        list of ContactSample
+            The samples :meth:`push` returns, Nones left out, oldest first.
+        """
+        t = np.asarray(t, dtype=float)
+        w_hat = np.asarray(w_hat, dtype=float)
+        pose = np.asarray(pose, dtype=float)
+        out = []
+        i = 0
+        # one at a time until both windows are full of poses, and for a row without one
+        while i < len(t) and (len(self._readings) <= self._L or len(self._poses) < self._k
+                              or any(p is None for p in self._poses) or not np.isfinite(pose[i]).all()
+                              or self.motion is not None):
+            sample = self.push(t[i], w_hat[i], pose[i])
+            if sample is not None:
+                out.append(sample)
+            i += 1
+        j = i
+        while j < len(t) and np.isfinite(pose[j]).all():
+            j += 1
+        if j - i >= 2:
+            out.extend(self._push_block(t[i:j], w_hat[i:j], pose[i:j]))
+        elif j > i:
+            out.extend(s for s in [self.push(t[i], w_hat[i], pose[i])] if s is not None)
+        if j < len(t):
+            out.extend(self.push_many(t[j:], w_hat[j:], pose[j:]))
+        return out
+
+    def _push_block(self, t, w_hat, pose):
+        """:meth:`push_many`'s rows with the windows full and every pose present."""
+        if w_hat.shape != (len(t), self._parts.n) or not np.isfinite(w_hat).all():
+            raise CompensationError(f"w_hat must be rows of {self._parts.n} finite numbers; got shape {w_hat.shape}")
+        if pose.shape != (len(t), self.model.n_pose):
+            raise CompensationError(f"pose must be rows of {self.model.n_pose} numbers; got shape {pose.shape}")
+        pose = pose.copy()
+        if self.model.attitude == "quaternion":                       # q and -q: one attitude, kept continuous
+            last = self._last_q
+            for row in pose:
+                if last is not None and row[:4] @ last < 0:
+                    row[:4] *= -1
+                last = row[:4]
+            self._last_q = last
+        m, k = len(t), self._k
+        poses = np.concatenate([np.array(list(self._poses)[1:]), pose])          # (k - 1 + m, n_pose)
+        windows = np.lib.stride_tricks.sliding_window_view(poses, k, axis=0)   # (m, n_pose, k)
+        P = np.einsum("dk,mpk->dmp", self._coefficients, windows)
+        readings = list(self._readings)[1:] + list(zip(t.tolist(), w_hat))
+        t0 = np.array([r[0] for r in readings[:m]])
+        reading = np.array([r[1] for r in readings[:m]])
+        c2_sq = float(np.sum(self._coefficients[2] ** 2))
+        x, a = _state(self.model, P[0], P[1], P[2])
+        W_p, A_inv = _payload_wrench(self.model, x, a)
+        accel_var = self._accel_var * c2_sq
+        wrench, cov, contact, statistic, *offset = self._parts.finish(reading, W_p, A_inv, accel_var, self._tracker,
+                                                                      t0)
+        signed = self._parts.sign * reading
+        found = signed - np.linalg.solve(self._parts.S, W_p.T).T
+        own = self._parts.covariance(signed, A_inv, accel_var)
+        for row in range(max(0, m - self._last.maxlen), m):
+            self._last.append((found[row], own[row], bool(contact[row])))
+        if not self._output.identity:
+            wrench, cov = self._output.apply(wrench, cov, _pose_attitudes(x, self.model)
+                                             if self._output.needs_attitude else None)
+        self._poses.extend(pose)
+        self._readings.extend(zip(t.tolist(), w_hat))
+        b, b_sd = offset if offset else ([None] * m, [None] * m)
+        return [ContactSample(float(t0[r]), wrench[r], cov[r], bool(contact[r]), float(statistic[r]), b[r], b_sd[r])
+                for r in range(m)]
 
     def _irregular(self, present):
         """The polynomial fitted to the poses the window holds; ``(P, sum c2^2)``, or None where they are too few

@@ -33,6 +33,7 @@ from ._files import (atomic_write, atomic_write_many, atomic_write_text, check_o
                      exclusive)
 from ._import import add_import
 from ._payload import add_identify_payload
+from ._ros2 import add_ros2
 from ._scale import add_bench, add_sweep
 
 __all__ = ["main", "build_parser", "MAX_LAM"]
@@ -400,7 +401,7 @@ def build_parser():
 
 
 _COMMANDS = [_add_simulate, add_calibrate, add_apply, add_compensate, add_identify_payload, _add_reproduce,
-             _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import]
+             _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import, add_ros2]
 
 
 def main(argv=None):

@@ -1,0 +1,19 @@
+"""The ROS 2 node ``fmscal_compensator`` (``fmscal ros2``): the contact wrench live, on topics.
+
+It subscribes to a force-moment sensor's raw ``geometry_msgs/WrenchStamped`` and to one motion source (a
+``PoseStamped`` of the sensor frame, ``JointState`` with a URDF, or an ``Imu`` on the tool), matches them by
+their header stamps, and publishes :func:`fmscal.analysis.Compensator`'s contact wrench with the reading's
+stamp, its covariance, and diagnostics; services tare, identify the payload, save and reload the calibration.
+The guide page "On a running robot" (docs/guide/robot.md) lists the topics, parameters and services.
+
+rclpy is imported when the node starts, not with this package: the wheels of the extra ``[ros2]``
+(``pip install "fmscal[ros2]"``), or a system ROS 2's rclpy.
+"""
+
+from ._parameters import (MOTION_SOURCES, NODE_NAME, OUTPUT_FRAMES, PARAMETERS, QOS, Parameter, Ros2Error, Settings,
+                          settings)
+from ._pipeline import STATES, Output, Pipeline, sensor_pose
+from ._node import INSTALL, spin
+
+__all__ = ["spin", "Pipeline", "settings", "sensor_pose", "PARAMETERS", "Parameter", "NODE_NAME", "STATES",
+           "Ros2Error"]
