@@ -105,7 +105,7 @@ import casadi as ca
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_coeffs, savgol_filter
-from scipy.stats import chi2
+from scipy.stats import binom, chi2
 
 from fmscal.plant import Calibration, Log
 from fmscal.plant.io import ImuLog, JointLog, estimate_noise, reading_sign
@@ -135,6 +135,8 @@ FALSE_ALARM = 1e-3
 DRIFT_INTENSITY = 1.0
 #: Tare (D4): the span of the newest compensated samples it averages, s.
 TARE_WINDOW = 0.1
+#: Tare's contact test: the chance that false alarms alone refuse a tare of a free tool (a binomial tail).
+TARE_FALSE_REFUSAL = 1e-6
 #: The output's axes (C8): the sensor's, or the base's (the world's: the pose's, the URDF's base, the IMU's world).
 FRAMES = ("sensor", "base")
 
@@ -332,6 +334,7 @@ class _Parts:
             self.m = len(cov) // n
             self.cov4 = cov.reshape(n, self.m, n, self.m)
         self.threshold = float(chi2.ppf(1.0 - false_alarm, n))
+        self.false_alarm = false_alarm
 
     def covariance(self, signed, A_inv, accel_var):
         """(C3) for rows of signed readings ``signed`` (N, n_w)."""
@@ -1041,7 +1044,7 @@ class Compensator:
         Parameters
         ----------
         force : bool
-            Tare even where one of these samples reads as a contact: for an offset itself far off (a sensor
+            Tare even where these samples read as a contact: for an offset itself far off (a sensor
             zeroed by its hardware reads its payload's wrench at the zero pose as a contact everywhere else),
             the tool known to be free.
 
@@ -1053,14 +1056,18 @@ class Compensator:
         Raises
         ------
         FmscalError
-            No sample compensated yet, or a contact detected at one of them (without ``force``).
+            No sample compensated yet, or a contact detected (without ``force``): more of these samples
+            flagged (C4) than false alarms give but with probability :data:`TARE_FALSE_REFUSAL` (a binomial
+            tail at the test's false-alarm rate), so that a free tool is not refused by chance.
         """
         if not self._last:
             raise CompensationError("tare needs a compensated sample: push readings and poses until one comes out")
         found, cov, contact = (np.array(v) for v in zip(*self._last))
-        if contact.any() and not force:
-            raise CompensationError("tare refused: a contact is detected; tare with the tool free, or with "
-                                    "force=True where the offset itself is off (a sensor zeroed by its hardware)")
+        chance = binom.isf(TARE_FALSE_REFUSAL, len(contact), self._parts.false_alarm)
+        if contact.sum() > chance and not force:
+            raise CompensationError(f"tare refused: a contact is detected ({int(contact.sum())} of the last "
+                                    f"{len(contact)} samples); tare with the tool free, or with force=True where "
+                                    "the offset itself is off (a sensor zeroed by its hardware)")
         S_inv = np.linalg.inv(self._parts.S)
         if self._tracker is None:
             self._parts.b = found.mean(axis=0)

@@ -126,6 +126,23 @@ def test_tare_after_a_hardware_zero_at_an_unknown_pose(arm, track):
     assert (after[-1].offset is None) is not track
 
 
+def test_tare_of_a_free_tool_is_not_refused_by_false_alarms(arm):
+    """A free tool whose tare window holds a false alarm or two (a false-alarm rate of 2 % over 100 samples) is
+    tared: only more flagged samples than chance gives at TARE_FALSE_REFUSAL refuse it; a contact still is."""
+    log, truth, S, cal = arm
+    stream = Compensator(cal, log.dt, false_alarm=0.02)
+    flags = [out.contact for t, w, p in zip(log.t[:400], log.w_hat[:400], log.pose[:400])
+             if (out := stream.push(t, w, p)) is not None]
+    assert 0 < sum(flags[-100:]) <= 6, sum(flags[-100:])      # a flag in the window: "any" would have refused
+    b = stream.tare()
+    assert np.all(np.abs(b - cal.b) < 5 * np.asarray(truth.noise.wrench_sd) / np.sqrt(100))
+    touched, _ = with_contact(log.head(800), S, contact_wrench(), 0.6, 1.0)
+    for t, w, p in zip(touched.t[400:], touched.w_hat[400:], touched.pose[400:]):
+        stream.push(t, w, p)
+    with pytest.raises(FmscalError, match=r"tare refused: a contact is detected \(100 of the last 100"):
+        stream.tare()
+
+
 def test_refusals(arm):
     """One-line refusals: tare before any output and during a contact; the tracker's settings."""
     log, truth, S, cal = arm

@@ -256,7 +256,7 @@ def test_tare(request, arm, tmp_path):
 
 
 def test_tare_refused_during_a_contact(request, arm, cal_file):
-    """A contact at the end of the replay: ~/tare refuses, and says why."""
+    """A contact at the end of the replay: ~/tare refuses, and says why; ~/tare_force tares."""
     scenario, log, truth, cal = arm
     touched, _ = with_contact(log.head(600), truth.S_at(0.0), contact_wrench(), 0.3, 1.0)
     with _node(request, cal_file) as proc:
@@ -266,10 +266,14 @@ def test_tare_refused_during_a_contact(request, arm, cal_file):
             peer.replay(touched)
             assert peer.wait_for(lambda: len(peer.contacts) >= 541, 10), (len(peer.contacts), node_log(proc)[-1500:])
             ok, message = peer.call("tare")
+            forced, forced_message = peer.call("tare_force")
         finally:
             peer.close()
     assert not ok
-    assert message == "tare refused: a contact is detected; tare with the tool free"
+    assert message.startswith("tare refused: a contact is detected (") and "\n" not in message, message
+    assert message.endswith("; tare with the tool free, or call ~/tare_force where the offset itself is off (a "
+                            "sensor zeroed by its hardware, a drift without track_offset)"), message
+    assert forced and forced_message.startswith("tared: offset "), forced_message
 
 
 def test_stale_motion_stops_the_output(request, arm, cal_file):

@@ -146,8 +146,9 @@ class CompensatorNode:
         # node's name: a fit never waits for the inputs' executor, nor the inputs for it
         self.services = r.Node(f"{self.node.get_name()}_services", **helper)
         base = self.node.get_fully_qualified_name()
-        for name, work in (("tare", self.pipeline.tare), ("identify_payload", self.pipeline.identify),
-                           ("save", self.pipeline.save), ("reload", self.pipeline.reload)):
+        for name, work in (("tare", self.pipeline.tare), ("tare_force", self.pipeline.tare_force),
+                           ("identify_payload", self.pipeline.identify), ("save", self.pipeline.save),
+                           ("reload", self.pipeline.reload)):
             self.services.create_service(r.Trigger, f"{base}/{name}", self._service(name, work),
                                          callback_group=services)
         self.node.create_timer(s.diagnostics_period, self._diagnose)

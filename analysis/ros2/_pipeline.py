@@ -350,19 +350,26 @@ class Pipeline:
         return len(self._pending)
 
     # --- the services -----------------------------------------------------------------------------------------
-    def tare(self):
+    def tare(self, force=False):
         """``(success, message)`` of ``~/tare`` (:meth:`fmscal.analysis.Compensator.tare`)."""
         with self.lock:
             if self.compensator is None:
                 return False, "tare refused: no reading compensated yet"
             try:
-                b = self.compensator.tare()
+                b = self.compensator.tare(force=force)
             except Ros2Error as err:
                 return False, str(err)
             except Exception as err:                   # the Compensator's refusal (a contact, no sample yet)
                 first = str(err).splitlines()[0]
-                return False, (first.split(";")[0] + "; tare with the tool free") if "contact" in first else first
+                return False, ((first.split(";")[0] + "; tare with the tool free, or call ~/tare_force where the "
+                                "offset itself is off (a sensor zeroed by its hardware, a drift without "
+                                "track_offset)") if "contact" in first else first)
         return True, "tared: offset " + " ".join(f"{v:.6g}" for v in b) + " (the reading's units)"
+
+    def tare_force(self):
+        """``(success, message)`` of ``~/tare_force``: :meth:`tare` even where the samples read as a contact
+        (``Compensator.tare(force=True)``), for an offset itself far off; the tool must be free."""
+        return self.tare(force=True)
 
     def identify(self):
         """``(success, message)`` of ``~/identify_payload``: the payload fitted to the motion and readings held
