@@ -114,6 +114,30 @@ def test_pipeline_interpolates_poses_at_the_readings_stamps(arm, cal_file):
     assert pipeline.backlog() <= 3
 
 
+def test_a_slower_motion_is_given_to_the_nearest_reading_only(arm, cal_file):
+    """Poses at 200 Hz, on every fifth reading's stamp: each goes to that reading only, the readings between get
+    none, so the node's wrench and covariance are the Compensator's fed the sparse stream, exactly; poses
+    interpolated at every reading would count as independent samples (a covariance too small)."""
+    scenario, log, truth, cal = arm
+    log = log.head(600)
+    pipeline = Pipeline(_settings(cal_file, sample_time=float(log.dt)))
+    reference = Compensator(cal.__class__(**{**cal.__dict__, "latency": 0.0}), log.dt)
+    out, expected = [], []
+    for i, (t, w, pose) in enumerate(zip(log.t, log.w_hat, log.pose)):
+        if i % 5 == 0:
+            pipeline.add_motion(t, pose)
+        pipeline.add_reading(t, w)
+        out += pipeline.process()
+        if (e := reference.push(t, w, pose if i % 5 == 0 else None)) is not None:
+            expected.append(e)
+    got = {round(o.sample.t, 9): o.sample for o in out}
+    pairs = [(got[round(e.t, 9)], e) for e in expected if round(e.t, 9) in got]
+    assert len(pairs) > 0.9 * len(expected)
+    for g, e in pairs:
+        np.testing.assert_allclose(g.wrench, e.wrench, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(g.cov, e.cov, rtol=1e-9, atol=0)
+
+
 def test_sensor_pose_from_a_tracked_frame():
     """(R1): the sensor's axes R(q_M) R and its point p_M + R(q_M) t, against rotation matrices composed."""
     rng = np.random.default_rng(3)
@@ -332,18 +356,27 @@ def _replay_source(request, node_args, message, build, t, w_hat):
 
 
 def test_joint_states(request, ur5, tmp_path):
-    """JointState (names in reverse order, positions only) with the UR5's URDF: every reading out, as
-    Compensator(motion=JointMotion) gives it pushed the same joints; the readings being the payload's wrench
-    alone, the contact wrench within 2e-3 of zero (the classical acceleration)."""
+    """JointState (names in reverse order, positions only; one with a NaN position, skipped) with the UR5's URDF:
+    every reading out, as Compensator(motion=JointMotion) gives it pushed the same joints (none at that row);
+    the readings being the payload's wrench alone, the contact wrench within 2e-3 of zero (the classical
+    acceleration)."""
     run = ur5
     names = run["motion"].joints[::-1]
+    good, bad = joint_state(names, run["q"][:, ::-1]), 300
+
+    def build(i, stamp):                      # one message with a NaN position: skipped (a warning), not fatal
+        msg = good(i, stamp)
+        if i == bad:
+            msg.position = [float("nan")] + list(msg.position[1:])
+        return msg
+
     contacts, epoch = _replay_source(
         request, (f"calibration:={_source_calibration(tmp_path)}", "joint_states_topic:=/motion",
                   f"urdf:={robot_rig.ur5_urdf()}", "frame:=tool0", "qos:=reliable"),
-        JointState, joint_state(names, run["q"][:, ::-1]), run["t"], run["W"])
+        JointState, build, run["t"], run["W"])
     stream = Compensator(Calibration.load(tmp_path / "cal.json"), 1e-3, motion=run["motion"])
-    expected = [o for o in (stream.push(t, w, joints=(q, None, None)) for t, w, q in zip(run["t"], run["W"], run["q"]))
-                if o is not None]
+    expected = [o for o in (stream.push(t, w, joints=None if i == bad else (q, None, None))
+                            for i, (t, w, q) in enumerate(zip(run["t"], run["W"], run["q"]))) if o is not None]
     t, wrench = contact_array(contacts, epoch)
     assert len(t) == len(expected) == len(run["t"]) - 59
     np.testing.assert_allclose(t, [round(o.t, 6) for o in expected], atol=1e-9)

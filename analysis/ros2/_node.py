@@ -305,14 +305,28 @@ class CompensatorNode:
             return
         index = [where[n] for n in order]
         q = np.asarray(msg.position, dtype=float)[index]
+        if not np.isfinite(q).all():
+            self._warn("joints", "a joint state with a NaN or infinite position: skipped")
+            return
         dq = np.asarray(msg.velocity, dtype=float)[index] if len(msg.velocity) == len(msg.name) else None
+        if dq is not None and not np.isfinite(dq).all():
+            dq = None                                  # differentiated from the positions instead
         self.pipeline.add_motion(self._time(msg.header.stamp), (q, dq, None), msg.header.frame_id)
 
     def _imu(self, msg):
         o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
         quaternion = None if msg.orientation_covariance[0] == -1 else np.array([o.w, o.x, o.y, o.z])
-        self.pipeline.add_motion(self._time(msg.header.stamp),
-                                 (quaternion, np.array([w.x, w.y, w.z]), np.array([a.x, a.y, a.z])),
+        rate, force = np.array([w.x, w.y, w.z]), np.array([a.x, a.y, a.z])
+        if not (np.isfinite(rate).all() and np.isfinite(force).all()):
+            self._warn("imu", "an IMU sample with a NaN or infinite rate or acceleration: skipped")
+            return
+        if quaternion is not None:
+            norm = np.linalg.norm(quaternion)
+            quaternion = quaternion / norm if np.isfinite(norm) and abs(norm - 1) < 1e-3 else None
+        if quaternion is None and self.settings.output_frame == "base":
+            self._warn("imu", "an IMU sample without a unit orientation: skipped (output_frame base needs it)")
+            return
+        self.pipeline.add_motion(self._time(msg.header.stamp), (quaternion, rate, force),
                                  msg.header.frame_id)
 
     # --- outputs ---------------------------------------------------------------------------------------------

@@ -239,17 +239,20 @@ class Pipeline:
         while self._pending:
             t, w_hat, stamp, frame_id, arrival = self._pending[0]
             value = self._at(t)
+            gap = value is _GAP
             if value is _WAIT:
                 if newest - t <= timeout:
                     break
                 value = None
                 self.counts["stale"] += 1
                 self.stale = True
+            elif gap:
+                value = None
             elif value is not None:
                 self.stale = False
             self._pending.popleft()
             rows.append((t, w_hat, value))
-            self._note(t, w_hat, stamp, frame_id, arrival, value)
+            self._note(t, w_hat, stamp, frame_id, arrival, value, gap)
         if not rows:
             return []
         samples = self._feed(self.compensator, rows)
@@ -261,7 +264,13 @@ class Pipeline:
         return out
 
     def _at(self, t):
-        """The motion at ``t`` (interpolated), None where it starts after ``t``, or ``_WAIT``."""
+        """The motion at ``t`` (interpolated), None where it starts after ``t``, or ``_WAIT``; ``_GAP`` where no
+        motion sample lies within half a reading's step of ``t`` (a motion slower than the readings).
+
+        Each motion sample is given to the reading nearest it only, interpolated to that reading's stamp; the
+        readings between get none, as :meth:`fmscal.analysis.Compensator.push` takes a sparser stream. Given to
+        every reading, interpolated values would count as independent samples: the motion's noise, and with it
+        the output's covariance, would come out too small."""
         m = self._motion
         while len(m) >= 2 and m[1][0] <= t:
             m.popleft()
@@ -272,6 +281,8 @@ class Pipeline:
         (t0, v0), (t1, v1) = m[0], (m[1] if len(m) > 1 else m[0])
         if t0 == t or t1 == t0:
             return v0
+        if self.dt is not None and t - t0 >= 0.5 * self.dt and t1 - t > 0.5 * self.dt:
+            return _GAP
         if self.kind == "pose":
             return self.model.interpolate_pose(np.array([t]), np.array([t0, t1]), np.array([v0, v1]))[0]
         if self.kind == "joints":
@@ -299,8 +310,9 @@ class Pipeline:
             self._feed(compensator, list(self._recent))
         self.compensator = compensator
 
-    def _note(self, t, w_hat, stamp, frame_id, arrival, value):
-        """A reading about to be pushed: its stamp kept for its output, saturation, the held motion."""
+    def _note(self, t, w_hat, stamp, frame_id, arrival, value, gap=False):
+        """A reading about to be pushed: its stamp kept for its output, saturation, the held motion (``gap``: no
+        motion sample at this reading, the stream still running)."""
         if self._last_t is not None and t - self._last_t > 1.5 * self.dt:
             self.counts["gaps"] += 1
         self._last_t = t
@@ -308,7 +320,7 @@ class Pipeline:
             self._saturated.add(t)
             self._saturated_at = t
         self._frames[t] = (stamp, frame_id, arrival)
-        if self.kind == "pose":
+        if self.kind == "pose" and not gap:
             if value is None:
                 self._held.clear()                     # identify_payload takes the newest stretch without a gap
             else:
@@ -414,7 +426,8 @@ class Pipeline:
         with self.lock:
             b = None if self.compensator is None else self.compensator.offset
             cal = replace(self.calibration, b=self.calibration.b if b is None else b,
-                          payload=self.payload or self.calibration.payload, latency=self.latency, date=None)
+                          payload=self.payload or self.calibration.payload, date=None,
+                          latency=self.latency if self.kind == "pose" else self.calibration.latency)
         try:
             cal.save(path)
         except Exception as err:
@@ -440,3 +453,4 @@ class Pipeline:
 
 
 _WAIT = object()
+_GAP = object()
