@@ -113,6 +113,7 @@ from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, skew, smoothed_state,
                                   spatial_motion)
 from fmscal.observers.batch import smoothed_channels
+from fmscal.observers.payload import PayloadEstimate
 
 from ._calibrate import log_model_class
 from ._motion import ImuMotion, JointMotion, _rotations
@@ -213,9 +214,10 @@ def compensation_model(calibration, payload=None, cls=None):
     Parameters
     ----------
     calibration : plant.Calibration
-    payload : plant.Payload or plant.SpatialPayload, optional
+    payload : plant.Payload or plant.SpatialPayload or observers.payload.PayloadEstimate, optional
         Replaces the calibration's (``S`` does not depend on the tool: after a tool change, the new
-        tool's mass properties, e.g. from ``identify_payload``).
+        tool's mass properties, e.g. ``PayloadEstimate.load("payload.json")`` of ``identify-payload``;
+        refused where the estimate holds no inertia).
     cls : type, optional
         The model class a log's columns give; refused if the calibration is of another case.
 
@@ -232,6 +234,13 @@ def compensation_model(calibration, payload=None, cls=None):
     payload = calibration.payload if payload is None else payload
     if payload is None:
         raise CompensationError("the calibration holds no payload: give the tool's (payload=..., or --payload)")
+    if isinstance(payload, PayloadEstimate):         # in the tracked frame's axes, as calibrate takes it
+        payload = payload.tracked()
+        if payload.inertia is None:
+            raise CompensationError("the payload estimate holds no inertia (its log did not determine it): the "
+                                    "motion's wrench needs it; identify the payload from a log with more angular "
+                                    "acceleration, or give a calibration that holds the tool")
+        payload = own.payload_from(payload.mass, payload.inertia, payload.com)
     if not isinstance(payload, own.payload_type):
         raise CompensationError(f"a {own.name} calibration takes a plant.{own.payload_type.__name__}; "
                                 f"got {type(payload).__name__}")

@@ -6,6 +6,7 @@ slow ones calibrate on one log and compensate another of the same rig, fmscal's 
 """
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -175,7 +176,13 @@ def test_cli(arm, tmp_path, capsys):
                  str(tmp_path / "d.csv"), "--payload", str(tmp_path / "payload.json")]) == 0
     rows = np.loadtxt(tmp_path / "d.csv", delimiter=",", skiprows=1)
     assert rows[rows[:, 0] < 1.9, 7].mean() > 0.9           # 0.3 kg more than the tool: a wrench beyond the noise
+    library = compensate(cal, touched, payload=PayloadEstimate.load(tmp_path / "payload.json"))
+    np.testing.assert_allclose(library.wrench, rows[:, 1:7], rtol=0, atol=1e-6)       # what the CLI wrote
+    replace(estimate, inertia=None).save(tmp_path / "no_inertia.json")
     capsys.readouterr()
+    assert main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / "log.csv"), "--out",
+                 str(tmp_path / "f.csv"), "--payload", str(tmp_path / "no_inertia.json")]) == 2
+    assert "holds no inertia" in capsys.readouterr().err
     assert main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / "cal.json"), "--out",
                  str(tmp_path / "e.csv")]) == 2
     err = capsys.readouterr().err

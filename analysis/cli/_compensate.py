@@ -11,7 +11,7 @@ from fmscal.plant.io import IMU_COLUMNS, read_imu_log, read_joint_log
 from fmscal.observers.payload import PayloadEstimate
 
 from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, FRAMES, OFFLINE_WINDOW,
-                           compensate, compensation_model)
+                           compensate)
 from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
 from ._common import CliError
 from ._files import atomic_write_text, check_outputs
@@ -75,17 +75,6 @@ def add_compensate(sub):
     p.set_defaults(func=cmd_compensate)
 
 
-def _payload(path, calibration):
-    """The payload of an identify-payload file, as the calibration's model takes it."""
-    estimate = PayloadEstimate.load(path)
-    if estimate.inertia is None:
-        raise CliError(f"{Path(path).name} holds no inertia (its log did not determine it): the motion's wrench "
-                       "needs it; identify the payload from a log with more angular acceleration, or give a "
-                       "calibration that holds the tool")
-    model = compensation_model(calibration)
-    return type(model).payload_from(estimate.mass, estimate.inertia, estimate.com)
-
-
 def _motion_log(args):
     """The log and the motion's source the options and the log's header give: ``(log, motion or None)``."""
     if (args.urdf is None) != (args.frame is None):
@@ -134,7 +123,7 @@ def cmd_compensate(args):
     if calibration.forced or calibration.converged is False:
         print(f"fmscal compensate: warning: {args.calibration} records a calibration that did not converge",
               file=sys.stderr)
-    payload = None if args.payload is None else _payload(args.payload, calibration)
+    payload = None if args.payload is None else PayloadEstimate.load(args.payload)
     log, motion = _motion_log(args)
     if not args.causal and args.delay != CAUSAL_DELAY:
         raise CliError("--delay is the causal path's: add --causal")

@@ -53,13 +53,8 @@ def _load(settings):
     """The calibration (as saved), the payload replacing its own (or None), and the latency in use."""
     calibration = Calibration.load(settings.calibration)
     payload = None
-    if settings.payload:
-        estimate = PayloadEstimate.load(settings.payload)
-        if estimate.inertia is None:
-            raise Ros2Error(f"{settings.payload}: holds no inertia (its log did not determine it): the motion's "
-                            "wrench needs it")
-        model = compensation_model(calibration)
-        payload = type(model).payload_from(estimate.mass, estimate.inertia, estimate.com)
+    if settings.payload:                              # the model's payload (refused here: no inertia, another case)
+        payload = compensation_model(calibration, PayloadEstimate.load(settings.payload)).payload
     # the calibration's latency is its pose stream's: a joint-state or an IMU stream has its own (the parameter)
     own = (calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
     latency = settings.latency if settings.latency is not None else own
