@@ -18,6 +18,7 @@ cores more than it must. Printed:
 - how late the sender sent each row against its 1 kHz schedule (the stamps are the schedule's times): an
   output needs the reading ``delay`` s after its own, so a stall of the sender shows in the delay too;
 - the CPU the node used over the run (s);
+- with ``--pin``: the node on a CPU of its own (the last), this process and the sender on the others;
 - the messages: readings sent, received by the node, outputs expected (every reading the causal filter covers)
   and received here; dropped = expected - received.
 
@@ -94,8 +95,11 @@ class Listener:
         rclpy.try_shutdown(context=self.context)
 
 
-def measure(duration=10.0, seed=0, domain=None, qos="reliable"):
-    """Run the node on ``duration`` s of a 1 kHz log; the figures (module docstring) as a dict."""
+def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False):
+    """Run the node on ``duration`` s of a 1 kHz log; the figures (module docstring) as a dict. ``pin``: the
+    node on the last CPU, this process and the sender on the others (where there are two or more)."""
+    cpus = sorted(os.sched_getaffinity(0))
+    pin = pin and len(cpus) >= 2
     scenario, log, truth = scenario_log(duration, seed)
     cal = truth_calibration(scenario, truth)
     domain = domain if domain is not None else 1 + (os.getpid() % 100)
@@ -103,8 +107,12 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable"):
         path = Path(folder) / "cal.json"
         cal.save(path)
         reference = compensate(cal, log, causal=True)
+        if pin:                                     # the node inherits the last CPU; this process, the others
+            os.sched_setaffinity(0, cpus[-1:])
         with running_node(domain, f"calibration:={path}", "pose_topic:=/ft_sensor/pose", f"qos:={qos}",
                           "debug_latency:=true") as proc:
+            if pin:
+                os.sched_setaffinity(0, cpus[:-1])
             peer = Listener(domain)
             try:
                 peer.wait_for_node(proc)
@@ -128,7 +136,7 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable"):
     trigger = np.round((t + delay) / log.dt).astype(int)
     net = node[:, 0] - delay - lateness[np.minimum(trigger, len(lateness) - 1)] \
         if len(node) == len(t) else np.zeros(0)
-    return {"duration_s": duration, "node_cpu_s": node_cpu, "rate_hz": 1.0 / log.dt, "qos": qos,
+    return {"duration_s": duration, "pinned": pin, "node_cpu_s": node_cpu, "rate_hz": 1.0 / log.dt, "qos": qos,
             "causal_delay_s": delay,
             "sent": len(log.t), "sent_in_s": sent_in, "received_by_node": int(diagnostics.get("received", -1)),
             "expected": len(reference.t), "received": len(t), "dropped": len(reference.t) - len(t),
@@ -153,16 +161,20 @@ def main(argv=None):
     parser.add_argument("--duration", type=float, default=10.0, help="s of 1 kHz streams (default 10)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--qos", default="reliable", choices=("reliable", "sensor_data"))
+    parser.add_argument("--pin", action="store_true", help="the node on a CPU of its own (the last), this process "
+                        "and the sender on the others")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
-    r = measure(args.duration, args.seed, qos=args.qos)
+    r = measure(args.duration, args.seed, qos=args.qos, pin=args.pin)
     if args.json:
         print(json.dumps(r))
         return
     print(f"{r['sent']} readings and poses at {r['rate_hz']:.0f} Hz sent in {r['sent_in_s']:.2f} s ({r['qos']}); "
           f"the node received {r['received_by_node']}; outputs expected {r['expected']}, received {r['received']} "
           f"(dropped {r['dropped']}, in order: {r['in_order']})")
-    print(f"causal delay {r['causal_delay_s'] * 1e3:.1f} ms; the node used {r['node_cpu_s']:.1f} s of CPU over the "
+    pinned = "the node pinned to a CPU of its own; " if r["pinned"] else ""
+    print(f"causal delay {r['causal_delay_s'] * 1e3:.1f} ms; {pinned}the node used "
+          f"{r['node_cpu_s']:.1f} s of CPU over the "
           f"{r['duration_s']:g} s")
     print("| ms | p50 | p99 | max |")
     print("|---|---|---|---|")
