@@ -1,18 +1,24 @@
 """The ROS 2 node's delay and losses: ``python benchmarks/ros2_latency.py [--duration 10]``.
 
 The node (``fmscal ros2``, a subprocess) compensates a ``spatial-arm`` log (a calibration holding the
-scenario's truth) fed from this process at 1 kHz: a ``WrenchStamped`` and a ``PoseStamped`` each millisecond,
-stamped with the time they are sent, over DDS on loopback, in a ROS domain of its own. Printed:
+scenario's truth) fed at 1 kHz by a sender of its own (``benchmarks/ros2_sender.py``, a third process that does
+nothing else): a ``WrenchStamped`` and a ``PoseStamped`` each millisecond, stamped with the time they are due,
+over DDS on loopback, in a ROS domain of its own. This process takes the node's outputs with a blocking wait and
+no executor (``benchmarks/ros2_floor.py``'s ``Taker``), so that neither it nor the sender competes for the node's
+cores more than it must. Printed:
 
 - the delay from a reading's stamp to its output's publication, measured by the node itself (``debug_latency``:
   ``~/latency`` carries, per output, the time from the stamp to the publication, and the node's own work: from
   the start of the callback that published it), p50, p99 and the largest, and that delay beyond the causal
   filter's stated delay (the target: p99 under 2 ms beyond it), also without the first second's outputs (the
-  start: the first blocks of each size, the machine's caches);
+  start: the first blocks of each size, the machine's caches), and less the lateness of the reading the output
+  waited for (the one ``delay`` s after its own);
 - the same seen by this process's subscriber (now - stamp on reception: DDS's delivery back included);
 - the backlog (the readings waiting for the motion when an output is published), its p99 and largest;
-- how late this process sent each row against its 1 kHz schedule (the stamps are the schedule's times): an
+- how late the sender sent each row against its 1 kHz schedule (the stamps are the schedule's times): an
   output needs the reading ``delay`` s after its own, so a stall of the sender shows in the delay too;
+- the CPU the node used over the run (s);
+- with ``--pin``: the node on a CPU of its own (the last), this process and the sender on the others;
 - the messages: readings sent, received by the node, outputs expected (every reading the causal filter covers)
   and received here; dropped = expected - received.
 
@@ -33,55 +39,121 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from fmscal.analysis import compensate  # noqa: E402
-from fmscal.plant import SPATIAL_SCENARIOS  # noqa: E402
-from ros2_rig import Peer, contact_array, node_log, running_node, seconds, truth_calibration  # noqa: E402
+from ros2_floor import Taker, sender_result, start_sender, stats  # noqa: E402
+from ros2_rig import node_log, running_node, truth_calibration  # noqa: E402
+from ros2_sender import scenario_log  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from geometry_msgs.msg import WrenchStamped  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+
+RELIABLE = QoSProfile(depth=2000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
 
-def measure(duration=10.0, seed=0, domain=None, qos="reliable"):
-    """Run the node on ``duration`` s of a 1 kHz log; the figures (module docstring) as a dict."""
-    scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=duration + 0.001)
-    log, truth, _ = scenario.generate(seed)
+class Listener:
+    """This process's side: the node's contact wrench (its stamp and arrival), its latency and diagnostics,
+    taken by a :class:`ros2_floor.Taker` (no executor: this process's own load kept down)."""
+
+    def __init__(self, domain):
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("fmscal_bench_listener", context=self.context)
+        self.stamps, self.received_at, self.latencies, self.diagnostics = [], [], [], []
+        self.taker = Taker(self.node, self.context)
+        self.contact_sub = self.taker.subscribe(WrenchStamped, "/ft_sensor/contact", self._contact, RELIABLE)
+        self.taker.subscribe(Float64MultiArray, "/fmscal_compensator/latency",
+                             lambda m, at: self.latencies.append(m.data.tolist()), RELIABLE)
+        self.taker.subscribe(DiagnosticArray, "/diagnostics", lambda m, at: self.diagnostics.append(m), 10)
+        self.taker.start()
+
+    def _contact(self, msg, at):
+        self.stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        self.received_at.append(at)
+
+    def wait_for_node(self, proc, timeout=30.0):
+        """Until the node takes both inputs, publishes to this process and its diagnostics have come."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if proc.poll() is not None:
+                raise SystemExit(f"the node exited ({proc.returncode}): {node_log(proc)[-2000:]}")
+            if self.node.count_subscribers("/ft_sensor/wrench") and self.node.count_subscribers("/ft_sensor/pose") \
+                    and self.contact_sub.get_publisher_count() and self.diagnostics:
+                return
+            time.sleep(0.05)
+        raise SystemExit(f"the node was not discovered in {timeout} s: {node_log(proc)[-2000:]}")
+
+    def wait_for(self, condition, timeout):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not condition():
+            time.sleep(0.02)
+
+    def close(self):
+        self.taker.stop()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False):
+    """Run the node on ``duration`` s of a 1 kHz log; the figures (module docstring) as a dict. ``pin``: the
+    node on the last CPU, this process and the sender on the others (where there are two or more)."""
+    cpus = sorted(os.sched_getaffinity(0))
+    pin = pin and len(cpus) >= 2
+    scenario, log, truth = scenario_log(duration, seed)
     cal = truth_calibration(scenario, truth)
     domain = domain if domain is not None else 1 + (os.getpid() % 100)
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "cal.json"
         cal.save(path)
         reference = compensate(cal, log, causal=True)
+        if pin:                                     # the node inherits the last CPU; this process, the others
+            os.sched_setaffinity(0, cpus[-1:])
         with running_node(domain, f"calibration:={path}", "pose_topic:=/ft_sensor/pose", f"qos:={qos}",
                           "debug_latency:=true") as proc:
-            peer = Peer(domain, covariance=False)           # this process's own load kept down
-            received_at = []
-            peer.contact_sub.callback = lambda m: (peer.contacts.append(m), received_at.append(time.time()))
+            if pin:
+                os.sched_setaffinity(0, cpus[:-1])
+            peer = Listener(domain)
             try:
                 peer.wait_for_node(proc)
-                begin = time.perf_counter()
-                epoch = peer.replay(log)
-                sent_in = time.perf_counter() - begin
+                cpu = _cpu(proc.pid)
+                sent = sender_result(start_sender(domain, duration, seed, qos), duration + 60)
+                epoch, lateness = sent["epoch"], np.array(sent["lateness"])
+                sent_in = len(lateness) * log.dt + lateness[-1]
                 expected = len(reference.t)
-                peer.wait_for(lambda: len(peer.contacts) >= expected and len(peer.latencies) >= expected, 10)
+                peer.wait_for(lambda: len(peer.stamps) >= expected and len(peer.latencies) >= expected, 10)
+                node_cpu = _cpu(proc.pid) - cpu
                 time.sleep(0.3)
                 diagnostics = {k.key: k.value for k in peer.diagnostics[-1].status[0].values}
                 text = node_log(proc)
             finally:
                 peer.close()
-    t, _ = contact_array(peer.contacts, epoch)
+    t = np.round(np.array(peer.stamps) - epoch, 6)
     delay = reference.delay
     node = np.array(peer.latencies) if peer.latencies else np.zeros((0, 3))
-    seen = np.array(received_at) - np.array([seconds(m.header.stamp) for m in peer.contacts])
-
-    def stats(v):
-        return {"p50": float(np.percentile(v, 50)), "p99": float(np.percentile(v, 99)), "max": float(np.max(v))} \
-            if len(v) else None
-    return {"duration_s": duration, "rate_hz": 1.0 / log.dt, "qos": qos, "causal_delay_s": delay,
+    seen = np.array(peer.received_at) - np.array(peer.stamps)
+    # each output waits for the reading `delay` s after its own: that reading's lateness taken off
+    trigger = np.round((t + delay) / log.dt).astype(int)
+    net = node[:, 0] - delay - lateness[np.minimum(trigger, len(lateness) - 1)] \
+        if len(node) == len(t) else np.zeros(0)
+    return {"duration_s": duration, "pinned": pin, "node_cpu_s": node_cpu, "rate_hz": 1.0 / log.dt, "qos": qos,
+            "causal_delay_s": delay,
             "sent": len(log.t), "sent_in_s": sent_in, "received_by_node": int(diagnostics.get("received", -1)),
             "expected": len(reference.t), "received": len(t), "dropped": len(reference.t) - len(t),
             "in_order": bool(np.all(np.diff(t) > 0)),
             "stamp_to_publication_s": stats(node[:, 0]), "beyond_delay_s": stats(node[:, 0] - delay),
             "beyond_delay_after_1s_s": stats(node[1000:, 0] - delay),
+            "beyond_delay_less_lateness_s": stats(net),
             "callback_to_publication_s": stats(node[:, 1]), "backlog": stats(node[:, 2]),
-            "stamp_to_subscriber_s": stats(seen), "publisher_lateness_s": stats(np.array(peer.lateness)),
+            "stamp_to_subscriber_s": stats(seen), "publisher_lateness_s": stats(lateness),
             "node_counts": diagnostics,
             "warnings": [line for line in text.splitlines() if "WARN" in line][:5]}
+
+
+def _cpu(pid):
+    """s of CPU (user and system) process ``pid`` used so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def main(argv=None):
@@ -89,21 +161,27 @@ def main(argv=None):
     parser.add_argument("--duration", type=float, default=10.0, help="s of 1 kHz streams (default 10)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--qos", default="reliable", choices=("reliable", "sensor_data"))
+    parser.add_argument("--pin", action="store_true", help="the node on a CPU of its own (the last), this process "
+                        "and the sender on the others")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
-    r = measure(args.duration, args.seed, qos=args.qos)
+    r = measure(args.duration, args.seed, qos=args.qos, pin=args.pin)
     if args.json:
         print(json.dumps(r))
         return
     print(f"{r['sent']} readings and poses at {r['rate_hz']:.0f} Hz sent in {r['sent_in_s']:.2f} s ({r['qos']}); "
           f"the node received {r['received_by_node']}; outputs expected {r['expected']}, received {r['received']} "
           f"(dropped {r['dropped']}, in order: {r['in_order']})")
-    print(f"causal delay {r['causal_delay_s'] * 1e3:.1f} ms")
+    pinned = "the node pinned to a CPU of its own; " if r["pinned"] else ""
+    print(f"causal delay {r['causal_delay_s'] * 1e3:.1f} ms; {pinned}the node used "
+          f"{r['node_cpu_s']:.1f} s of CPU over the "
+          f"{r['duration_s']:g} s")
     print("| ms | p50 | p99 | max |")
     print("|---|---|---|---|")
     for key, name in (("stamp_to_publication_s", "stamp to publication (node)"),
                       ("beyond_delay_s", "beyond the causal delay"),
                       ("beyond_delay_after_1s_s", "the same after the first second"),
+                      ("beyond_delay_less_lateness_s", "the same less the sender's lateness"),
                       ("callback_to_publication_s", "the node's callback to publication"),
                       ("stamp_to_subscriber_s", "stamp to this subscriber"),
                       ("publisher_lateness_s", "this process's lateness against its 1 kHz schedule")):

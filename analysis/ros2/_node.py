@@ -5,8 +5,8 @@ imported): the wheels of the extra ``[ros2]``, or a system ROS 2's rclpy (Humble
 sourced.
 
 Threads. The inputs (the wrench, the motion) are subscriptions of a node ``<name>_inputs`` that no executor
-spins: a thread of the node's own takes every message queued on both (:meth:`CompensatorNode.poll`, every
-:data:`POLL` s when both are empty) and compensates them as one block
+spins: a thread of the node's own takes every message queued on both (:meth:`CompensatorNode.poll`, waiting on
+rclpy's wait set of the two when both are empty, the interpreter's lock released) and compensates them as one block
 (:meth:`fmscal.analysis.Compensator.push_many`). An executor costs a wake-up and a pass of Python per message,
 and rclpy's ``MultiThreadedExecutor`` lost 1 kHz messages on a loaded 2-core machine where this way loses none
 (docs/guide/robot.md quotes ``benchmarks/ros2_latency.py``). An rclpy without ``take_message`` falls back to its
@@ -37,7 +37,9 @@ __all__ = ["ros", "CompensatorNode", "spin", "INSTALL"]
 INSTALL = 'pip install "fmscal[ros2]" (-e ".[ros2]" in a clone), or source a ROS 2 install (Humble, Jazzy)'
 #: s between two of one warning in the log.
 WARN_EVERY = 2.0
-#: s between two looks at the inputs' queues when both were empty (:meth:`CompensatorNode.poll`).
+#: The longest wait for an input's message, s (:meth:`CompensatorNode.poll` then sees whether to stop).
+WAIT = 0.05
+#: s between two looks at the inputs' queues when both were empty, where rclpy has no wait set.
 POLL = 0.0003
 #: s between two looks at inputs silent for :data:`SILENT` s or more.
 IDLE = 0.005
@@ -65,7 +67,13 @@ def ros():
     except ImportError as err:
         raise Ros2Error(f"fmscal ros2 needs rclpy and the ROS 2 messages ({err.name or err} not found): "
                         f"{INSTALL}") from None
-    return SimpleNamespace(rclpy=rclpy, Node=rclpy.node.Node, Context=Context, Group=MutuallyExclusiveCallbackGroup,
+    try:                                       # rclpy's wait set (private; Humble and later have it)
+        from rclpy.impl.implementation_singleton import rclpy_implementation
+        WaitSet = rclpy_implementation.WaitSet
+    except (ImportError, AttributeError):
+        WaitSet = None
+    return SimpleNamespace(rclpy=rclpy, Node=rclpy.node.Node, WaitSet=WaitSet, Context=Context,
+                           Group=MutuallyExclusiveCallbackGroup,
                            Shutdown=ExternalShutdownException, Executor=MultiThreadedExecutor,
                            Single=SingleThreadedExecutor, Parameter=Parameter,
                            QoSProfile=QoSProfile, Reliability=ReliabilityPolicy, History=HistoryPolicy,
@@ -226,16 +234,42 @@ class CompensatorNode:
         """Whether this rclpy lets :meth:`poll` take messages (else the inputs' node is spun by an executor)."""
         return hasattr(getattr(self._wrench_sub, "handle", None), "take_message")
 
+    def _waiter(self, context):
+        """A function waiting until a message is queued on either input (at most :data:`WAIT` s), the
+        interpreter's lock released meanwhile: rclpy's wait set on the two subscriptions; None where this rclpy
+        has none (:meth:`poll` then looks again after :data:`POLL` s)."""
+        if self.r.WaitSet is None:
+            return None
+        try:
+            wait_set = self.r.WaitSet(2, 0, 0, 0, 0, 0, context.handle)
+            handles = (self._motion_sub.handle, self._wrench_sub.handle)
+        except Exception:
+            return None
+        timeout = int(WAIT * 1e9)
+
+        def wait():
+            with context.handle:
+                wait_set.clear_entities()
+                for handle in handles:
+                    wait_set.add_subscription(handle)
+                wait_set.wait(timeout)
+        return wait
+
     def poll(self, context):
         """Take the inputs' messages as they come, until the context shuts down: all the queued ones of both
-        inputs, compensated as one block; where there were none, again after :data:`POLL` s (:data:`IDLE` s once
-        the inputs have been silent for :data:`SILENT` s). An exception stops the node (:attr:`error`)."""
+        inputs, compensated as one block; where there were none, wait for the next (:meth:`_waiter`; without a
+        wait set, look again after :data:`POLL` s, :data:`IDLE` s once the inputs have been silent for
+        :data:`SILENT` s). An exception stops the node (:attr:`error`)."""
         last = time.monotonic()
+        wait = self._waiter(context)
         try:
             while context.ok():
                 motions, readings = self._queued(self._motion_sub), self._queued(self._wrench_sub)
-                if not (motions or readings):                # inputs silent for long: looked at less often
-                    time.sleep(POLL if time.monotonic() - last < SILENT else IDLE)
+                if not (motions or readings):
+                    if wait is not None:
+                        wait()
+                    else:                                # inputs silent for long: looked at less often
+                        time.sleep(POLL if time.monotonic() - last < SILENT else IDLE)
                     continue
                 last = time.monotonic()
                 self._entered = time.monotonic()
