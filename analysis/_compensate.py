@@ -693,6 +693,8 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     if joint and log.joints.shape[1] != motion.size:
         raise CompensationError(f"{log.name}: {log.joints.shape[1]} joint columns; the URDF has {motion.size} "
                                 "joints")
+    if joint:
+        log.check_kinematics(motion.kinematics, motion.joints)          # joint angles in degrees refused
     model = compensation_model(calibration, payload)
     motion.check(model)
     if len(log.w_hat[0]) != model.n_w:
@@ -700,6 +702,9 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
                                 f"{model.n_w}")
     if noise is None and (calibration.noise is None or len(calibration.noise.wrench_sd) != calibration.size):
         noise = NoiseSpec(tuple(np.sqrt(np.var(np.diff(log.w_hat, 2, axis=0), axis=0) / 6)))
+        if min(noise.wrench_sd) <= 0:
+            raise CompensationError(f"{log.name}: the readings' noise estimated from the log is zero (a constant "
+                                    "reading): give noise=plant.NoiseSpec(...), or a calibration holding its noise")
     if causal:
         stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
                              window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,

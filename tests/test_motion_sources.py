@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from fmscal.analysis import Compensator, ImuMotion, JointMotion, compensate
 from fmscal.analysis.cli import main
-from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, NoiseSpec, get_scenario
+from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, LogError, NoiseSpec, get_scenario
 from fmscal.plant.io import ImuLog, JointLog
 from fmscal.plant.physics import rotation_matrix
 from fmscal.plant.scenarios._spatial import TOOL
@@ -345,3 +345,51 @@ def test_sparse_joint_states_tare_and_tracking(ur5_run):
     tracked = compensate(cal, ImuLog(run["t"], quaternion, omega_i, f_i, run["W"] + off * run["t"][:, None]),
                          motion=ImuMotion(C_IMU, R_IMU), noise=NOISE, track_offset=True, offset_sd=1.0)
     assert tracked.offset[-1] == pytest.approx(off * tracked.t[-1], abs=0.1)
+
+
+def test_source_logs_are_checked_as_a_log(ur5_run, tmp_path, capsys):
+    """JointLog and ImuLog make Log's checks (even steps, magnitudes, finite) and their own (the rates' shapes,
+    a partial row, degrees against the URDF's limits, also where compensate is given a log built without the
+    URDF); a log whose readings hold no noise is refused in one line, not a LinAlgError; the CLI says one line
+    and exits 2."""
+    run, cal, n = ur5_run, _truth_calibration(), 300
+    t, q, W = run["t"][:n], run["q"][:n], run["W"][:n]
+    quaternion, omega_i, f_i, _ = _imu_readings(run)
+    uneven = t + np.where(np.arange(n) >= 100, 5e-4, 0.0)
+    with pytest.raises(LogError, match="not evenly sampled"):
+        JointLog(uneven, q, W)
+    with pytest.raises(LogError, match="not evenly sampled"):
+        ImuLog(uneven, quaternion[:n], omega_i[:n], f_i[:n], W)
+    huge = f_i[:n].copy()
+    huge[7, 1] = 1e30
+    with pytest.raises(LogError, match="column iay holds 1e\\+30 at row 8"):
+        ImuLog(t, quaternion[:n], omega_i[:n], huge, W)
+    with pytest.raises(LogError, match="column q3 holds inf at row 8"):
+        JointLog(t, np.where((np.arange(n) == 7)[:, None] & (np.arange(6) == 2), np.inf, q), W)
+    with pytest.raises(LogError, match="velocities must be shape \\(300, 6\\), as the joints; got \\(5,\\)"):
+        JointLog(t, q, W, velocities=np.zeros(5))
+    with pytest.raises(LogError, match="column dq2 holds inf"):
+        JointLog(t, q, W, velocities=np.where(np.arange(6) == 1, np.inf, run["dq"][:n]))
+    with pytest.raises(LogError, match="row 4 has some but not all joint values"):
+        JointLog(t, np.where((np.arange(n) == 3)[:, None] & (np.arange(6) == 0), np.nan, q), W)
+    with pytest.raises(LogError, match="look like degrees"):
+        JointLog(t, np.rad2deg(q), W, kinematics=run["motion"].kinematics)
+    with pytest.raises(LogError, match="look like degrees"):
+        compensate(cal, JointLog(t, np.rad2deg(q), W), motion=run["motion"], noise=NOISE)
+    with pytest.raises(FmscalError, match="noise estimated from the log is zero"):
+        compensate(cal, JointLog(t, np.tile(q[0], (n, 1)), np.tile(W[0], (n, 1))), motion=run["motion"])
+    with pytest.raises(FmscalError, match="noise estimated from the log is zero"):
+        compensate(cal, ImuLog(t, None, np.zeros((n, 3)), np.tile([0, 0, 9.81], (n, 1)), np.tile(W[0], (n, 1))),
+                   motion=ImuMotion(), causal=True)
+    Calibration(S=cal.S, payload=cal.payload, method="truth", b=cal.b, gravity=cal.gravity, latency=0.0,
+                noise=NOISE).save(tmp_path / "cal.json")
+    wrench = ("tx", "ty", "tz", "fx", "fy", "fz")
+    _write(tmp_path / "imu.csv", ("t", "iqw", "iqx", "iqy", "iqz", "iwx", "iwy", "iwz", "iax", "iay", "iaz", *wrench),
+           (uneven, quaternion[:n], omega_i[:n], f_i[:n], W))
+    _write(tmp_path / "joints.csv", ("t", *(f"q{i + 1}" for i in range(6)), *wrench), (t, np.rad2deg(q), W))
+    for name, options, message in (("imu", [], "not evenly sampled"),
+                                   ("joints", ["--urdf", str(_ur5()), "--frame", "tool0"], "look like degrees")):
+        assert main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / f"{name}.csv"), "--out",
+                     str(tmp_path / "c.csv"), *options]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err

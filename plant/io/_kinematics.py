@@ -20,7 +20,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError
-from ._log import Log, LogError, _as_path, _echo, _read_csv
+from ._log import Log, LogError, _as_path, _check_finite, _check_magnitudes, _check_steps, _echo, _read_csv
 from ._pose_table import PoseTable
 
 __all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log"]
@@ -302,37 +302,77 @@ class JointLog:
     Parameters
     ----------
     t : array_like, shape (N,)
-        s, strictly increasing.
+        s, strictly increasing and evenly sampled (as :class:`fmscal.plant.Log`'s).
     joints : array_like, shape (N, n)
         ``q`` per sample, rad (m for a prismatic joint), in the order the motion's source takes; a row of NaN
-        where no joint state came with that reading.
+        where no joint state came with that reading (all of a row's values or none).
     w_hat : array_like, shape (N, n_w)
         The raw readings.
     velocities, accelerations : array_like, shape (N, n), optional
-        ``dq``, ``ddq`` where measured (rows of NaN where not); otherwise differentiated from ``joints``.
+        ``dq``, ``ddq`` where measured (NaN where not); otherwise differentiated from ``joints``.
     name : str
+    kinematics : RobotKinematics, optional
+        Given, the joint angles are checked against its URDF's limits (:meth:`check_kinematics`).
+    joint_names : sequence of str, optional
+        The joints' names in the columns' order; default ``kinematics.joint_names``.
 
     Raises
     ------
     plant.LogError
-        Shapes that do not agree, times not increasing, readings not finite.
+        Shapes that do not agree, times not increasing or not evenly sampled, readings not finite, a value
+        beyond :data:`fmscal.plant.io._log.MAX_MAGNITUDE` or infinite, a row with some but not all joints,
+        joint angles in degrees.
     """
 
-    def __init__(self, t, joints, w_hat, velocities=None, accelerations=None, name="joint-log"):
+    def __init__(self, t, joints, w_hat, velocities=None, accelerations=None, name="joint-log", kinematics=None,
+                 joint_names=None):
         self.t = np.asarray(t, dtype=float).ravel()
         self.joints = np.atleast_2d(np.asarray(joints, dtype=float))
         self.w_hat = np.atleast_2d(np.asarray(w_hat, dtype=float))
         self.name = name
         n = len(self.t)
-        if len(self.joints) != n or len(self.w_hat) != n:
-            raise LogError(f"{name}: t, joints and w_hat need one row per sample; got {n}, {len(self.joints)}, "
-                           f"{len(self.w_hat)}")
-        self.velocities, self.accelerations = (
-            None if v is None else np.asarray(v, dtype=float).reshape(self.joints.shape)
-            for v in (velocities, accelerations))
-        _check_times(self.t, name)
-        if not np.isfinite(self.w_hat).all():
-            raise LogError(f"{name}: the readings must be finite numbers")
+        if len(self.joints) != n or len(self.w_hat) != n or self.joints.ndim != 2 or self.w_hat.ndim != 2:
+            raise LogError(f"{name}: t (N,), joints (N, n) and w_hat (N, n_w) need one row per sample; got "
+                           f"{self.t.shape}, {self.joints.shape}, {self.w_hat.shape}")
+        rates = []
+        for what, v in (("velocities", velocities), ("accelerations", accelerations)):
+            v = None if v is None else np.asarray(v, dtype=float)
+            if v is not None and v.shape != self.joints.shape:
+                raise LogError(f"{name}: {what} must be shape {self.joints.shape}, as the joints; got {v.shape}")
+            rates.append(v)
+        self.velocities, self.accelerations = rates
+        columns = [f"q{j + 1}" for j in range(self.joints.shape[1])]
+        _check_samples(name, self.t, self.w_hat, [
+            *((c, self.joints[:, j]) for j, c in enumerate(columns)),
+            *((f"d{c}", v[:, j]) for v in rates[:1] if v is not None for j, c in enumerate(columns)),
+            *((f"dd{c}", v[:, j]) for v in rates[1:] if v is not None for j, c in enumerate(columns))])
+        missing = np.isnan(self.joints).all(axis=1)
+        partial = np.isnan(self.joints).any(axis=1) & ~missing
+        if partial.any():
+            raise LogError(f"{name}: row {int(np.argmax(partial)) + 1} has some but not all joint values")
+        if kinematics is not None:
+            self.check_kinematics(kinematics, joint_names)
+
+    def check_kinematics(self, kinematics, joint_names=None):
+        """Refuse joint angles in degrees, told by the URDF's limits (:func:`_refuse_degrees`).
+
+        Parameters
+        ----------
+        kinematics : RobotKinematics
+        joint_names : sequence of str, optional
+            The joints' names in the columns' order; default ``kinematics.joint_names``.
+
+        Raises
+        ------
+        plant.LogError
+        """
+        names = tuple(kinematics.joint_names if joint_names is None else joint_names)
+        if len(names) != self.joints.shape[1] or sorted(names) != sorted(kinematics.joint_names):
+            raise LogError(f"{self.name}: {self.joints.shape[1]} joint columns; the URDF has "
+                           f"{len(kinematics.joint_names)} joints")
+        order = [names.index(j) for j in kinematics.joint_names]
+        given = ~np.isnan(self.joints).all(axis=1)
+        _refuse_degrees(self.joints[given][:, order], kinematics, [names[k] for k in order], self.name)
 
     @property
     def dt(self):
@@ -343,13 +383,18 @@ class JointLog:
         return len(self.t)
 
 
-def _check_times(t, name):
-    """Times finite and strictly increasing, at least two of them; a one-line :class:`LogError`."""
-    if len(t) < 2 or not np.isfinite(t).all():
-        raise LogError(f"{name}: needs at least two samples with finite times")
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if len(bad):
-        raise LogError(f"{name}: the times must increase; row {bad[0] + 2} (t = {t[bad[0] + 1]:g}) does not")
+def _check_samples(name, t, w_hat, others=()):
+    """A source log's times and readings as :class:`fmscal.plant.Log` checks them (one definition, its
+    ``_check_*``): at least two samples, times and readings finite, no value (``others``' ``(column, values)``
+    too, where NaN is a missing cell) beyond ``MAX_MAGNITUDE`` or infinite, times strictly increasing and evenly
+    sampled; a one-line :class:`LogError`."""
+    if len(t) < 2:
+        raise LogError(f"{name}: needs at least two samples")
+    readings = [(_WRENCH[j] if w_hat.shape[1] == len(_WRENCH) else f"w{j + 1}", w_hat[:, j])
+                for j in range(w_hat.shape[1])]
+    _check_finite(name, [("t", t), *readings])
+    _check_magnitudes(name, [("t", t), *others, *readings])
+    _check_steps(name, t)
 
 
 def read_joint_log(path, kinematics):
@@ -380,10 +425,5 @@ def read_joint_log(path, kinematics):
                        f"{','.join(_WRENCH)}")
     joints = joint_columns(header, kinematics.joint_names)
     frame = _read_csv(path, ("t", *joints, *_WRENCH), "only joint cells may be empty (no joint state)")
-    values = frame[joints].to_numpy()
-    missing = np.isnan(values).all(axis=1)
-    partial = np.isnan(values).any(axis=1) & ~missing
-    if partial.any():
-        raise LogError(f"{_echo(path.name)}: row {int(np.argmax(partial)) + 1} has some but not all joint values")
-    _refuse_degrees(values[~missing], kinematics, joints, _echo(path.name))
-    return JointLog(frame["t"].to_numpy(), values, frame[list(_WRENCH)].to_numpy(), name=_echo(path.name))
+    return JointLog(frame["t"].to_numpy(), frame[joints].to_numpy(), frame[list(_WRENCH)].to_numpy(),
+                    name=_echo(path.name), kinematics=kinematics)
