@@ -337,8 +337,10 @@ class _Parts:
         self.false_alarm = false_alarm
 
     def covariance(self, signed, A_inv, accel_var):
-        """(C3) for rows of signed readings ``signed`` (N, n_w)."""
-        cov = self.reading_cov + np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv)
+        """(C3) for rows of signed readings ``signed`` (N, n_w); ``accel_var`` (nv,) for every row, or (N, nv)."""
+        accel_var = np.asarray(accel_var, dtype=float)
+        cov = self.reading_cov + (np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv) if accel_var.ndim == 1
+                                  else np.einsum("nij,nj,nkj->nik", A_inv, accel_var, A_inv))
         if self.cov4 is not None:
             u = np.concatenate([signed, np.ones((len(signed), 1))], axis=1) if self.m == self.n + 1 \
                 else signed - self.b
@@ -775,7 +777,7 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
             ddq = np.where(measured, log.accelerations[keep], ddq)
             var_ddq = np.where(measured.all(axis=0), 0.0, var_ddq)
         x, a, R = motion.state(model, P[0], dq, ddq)
-        accel_var = motion.accel_var(P[0][0], var_ddq, R[0])
+        accel_var = motion.accel_var(P[0], var_ddq, R)                  # (N, 6): each row's Jacobian and R
     else:
         x, a, R = motion.state(model, P[0], P[1], log.orientation[keep])
         accel_var = motion.accel_var(var, sums[0], sums[1])
@@ -1010,7 +1012,7 @@ class Compensator:
                 if np.isfinite(given_dq).all() and measured.all():
                     q = self._poses[i0]
             x, a, R = motion.state(self.model, q[None], dq[None], ddq[None])
-            accel_var = motion.accel_var(q, var_ddq, R[0])
+            accel_var = motion.accel_var(q[None], var_ddq, R)[0]
         else:
             x, a, R = motion.state(self.model, P[0:1], P[1:2], self._orientation(i0)[None])
             accel_var = motion.accel_var(var, sums[0], sums[1])
@@ -1080,18 +1082,24 @@ class Compensator:
             self._tracker.tare(found.mean(axis=0), S_inv @ cov.mean(axis=0) @ S_inv.T / len(found))
         return self.offset
 
-    def push_many(self, t, w_hat, pose):
+    def push_many(self, t, w_hat, pose=None, *, joints=None, imu=None):
         """:meth:`push` over rows, vectorised: the same samples, for a block that came together (a backlog).
 
         Rows whose pose windows are full are fitted together (one causal filter over the block, one call of
-        the dynamics); the others, and a motion other than poses, go through :meth:`push` one at a time.
+        the dynamics); the others go through :meth:`push` one at a time, and so do the rows of a joint or IMU
+        source (``joints=`` or ``imu=``, as :meth:`push` takes them, one row per reading).
 
         Parameters
         ----------
         t : array_like, shape (M,)
         w_hat : array_like, shape (M, n_w)
-        pose : array_like, shape (M, n_pose)
-            NaN rows where no pose came with the reading.
+        pose : array_like, shape (M, n_pose), optional
+            ``motion=None``: NaN rows where no pose came with the reading.
+        joints : tuple (q, dq, ddq), optional
+            A :class:`JointMotion`: ``q`` (M, n) with NaN rows where no joint state came, ``dq`` and ``ddq``
+            (M, n) or None where not given (NaN rows where not given with that reading).
+        imu : tuple (quaternion_wxyz, angular_velocity, specific_force), optional
+            An :class:`ImuMotion`: (M, 4) or None, (M, 3), (M, 3); NaN rows where no IMU sample came.
 
         Returns
         -------
@@ -1100,13 +1108,14 @@ class Compensator:
         """
         t = np.asarray(t, dtype=float)
         w_hat = np.asarray(w_hat, dtype=float)
+        if self.motion is not None or joints is not None or imu is not None:
+            return self._push_many_source(t, w_hat, pose, joints, imu)
         pose = np.asarray(pose, dtype=float)
         out = []
         i = 0
         # one at a time until both windows are full of poses, and for a row without one
         while i < len(t) and (len(self._readings) <= self._L or len(self._poses) < self._k
-                              or any(p is None for p in self._poses) or not np.isfinite(pose[i]).all()
-                              or self.motion is not None):
+                              or any(p is None for p in self._poses) or not np.isfinite(pose[i]).all()):
             sample = self.push(t[i], w_hat[i], pose[i])
             if sample is not None:
                 out.append(sample)
@@ -1120,6 +1129,34 @@ class Compensator:
             out.extend(s for s in [self.push(t[i], w_hat[i], pose[i])] if s is not None)
         if j < len(t):
             out.extend(self.push_many(t[j:], w_hat[j:], pose[j:]))
+        return out
+
+    def _push_many_source(self, t, w_hat, pose, joints, imu):
+        """:meth:`push_many` for a joint or IMU source: its rows through :meth:`push`, one at a time."""
+        if pose is not None:
+            return [s for s in [self.push(t[0], w_hat[0], pose[0], joints=joints, imu=imu)] if s is not None]
+        keyword, given = ("joints", joints) if joints is not None else ("imu", imu)
+        if given is None:
+            return [s for s in (self.push(ti, wi) for ti, wi in zip(t, w_hat)) if s is not None]
+        if not (isinstance(given, (tuple, list)) and len(given) == 3):
+            raise CompensationError(f"{keyword} must be a tuple of three arrays of rows, one row per reading, as "
+                                    f"push takes them (None where not given)")
+        columns = []
+        for v in given:
+            v = None if v is None else np.asarray(v, dtype=float)
+            if v is not None and (v.ndim != 2 or len(v) != len(t)):
+                raise CompensationError(f"{keyword}: arrays of {len(t)} rows, one per reading; got shape {v.shape}")
+            columns.append(v)
+        out = []
+        for i in range(len(t)):
+            row = tuple(None if v is None or np.isnan(v[i]).all() else v[i] for v in columns)
+            if keyword == "joints":
+                row = None if row[0] is None else row
+            else:
+                row = None if row[1] is None and row[2] is None else row
+            sample = self.push(t[i], w_hat[i], **{keyword: row})
+            if sample is not None:
+                out.append(sample)
         return out
 
     def _push_block(self, t, w_hat, pose):

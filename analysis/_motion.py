@@ -189,10 +189,28 @@ class JointMotion:
         return x, a, R
 
     def accel_var(self, q, var_ddq, R):
-        """The variance of ``a = [p_ddot; alpha]`` a joint noise of ``var_ddq`` (n,) in ``ddq`` gives at ``q``."""
-        J = self.kinematics.jacobian(np.asarray(q, dtype=float)[self._to_urdf])
-        var = (J ** 2) @ np.asarray(var_ddq, dtype=float)[self._to_urdf]
-        return np.r_[(R ** 2) @ var[:3], var[3:]]
+        """The variance of ``a = [p_ddot; alpha]`` a joint noise of ``var_ddq`` in ``ddq`` gives, row by row.
+
+        ``var(a_l) = (J_v o J_v) var(ddq)``, ``var(alpha) = (J_omega o J_omega) var(ddq)`` at each row's ``J``
+        and ``var(p_ddot) = (R o R) var(a_l)`` at its ``R`` (module's Noise).
+
+        Parameters
+        ----------
+        q : array_like, shape (N, n)
+            Joint values in :attr:`joints` order.
+        var_ddq : array_like, shape (n,) or (N, n)
+        R : array_like, shape (N, 3, 3)
+            The sensor frame's attitudes.
+
+        Returns
+        -------
+        ndarray, shape (N, 6)
+        """
+        q = np.atleast_2d(np.asarray(q, dtype=float))[:, self._to_urdf]
+        var_ddq = np.broadcast_to(np.asarray(var_ddq, dtype=float), q.shape)[:, self._to_urdf]
+        J = self.kinematics.jacobian(q)                                     # (N, 6, n)
+        var = np.einsum("nij,nj->ni", J ** 2, var_ddq)
+        return np.c_[np.einsum("nij,nj->ni", np.asarray(R, dtype=float) ** 2, var[:, :3]), var[:, 3:]]
 
 
 class ImuMotion:

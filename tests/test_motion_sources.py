@@ -393,3 +393,52 @@ def test_source_logs_are_checked_as_a_log(ur5_run, tmp_path, capsys):
                      str(tmp_path / "c.csv"), *options]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1, err
+
+
+def test_push_many_with_joints_and_an_imu_is_push_row_by_row(ur5_run):
+    """push_many(joints=...) and push_many(imu=...) give push's samples row by row, bit for bit, with rows of
+    no sample (NaN) among them; a pose to a joint source is refused as push refuses it."""
+    run, cal, n = ur5_run, _truth_calibration(), 200
+    q = run["q"][:n].copy()
+    q[50:53] = np.nan                                                  # no joint state with these readings
+    dq = run["dq"][:n].copy()
+    dq[::2] = np.nan                                                   # velocities every other reading
+    quaternion, omega_i, f_i, _ = _imu_readings(run)
+    omega_i, f_i = omega_i[:n].copy(), f_i[:n].copy()
+    omega_i[70], f_i[70] = np.nan, np.nan
+    sources = ((run["motion"], "joints", (q, dq, None)),
+               (ImuMotion(C_IMU, R_IMU), "imu", (quaternion[:n], omega_i, f_i)))
+    for motion, keyword, block in sources:
+        one, many = (Compensator(cal, 1e-3, noise=NOISE, motion=motion) for _ in range(2))
+        expected = []
+        for i in range(n):
+            row = tuple(None if v is None or np.isnan(v[i]).all() else v[i] for v in block)
+            row = None if row[0 if keyword == "joints" else 1] is None else row
+            expected.append(one.push(run["t"][i], run["W"][i], **{keyword: row}))
+        expected = [e for e in expected if e is not None]
+        got = many.push_many(run["t"][:60], run["W"][:60], **{keyword: tuple(None if v is None else v[:60]
+                                                                              for v in block)})
+        got += many.push_many(run["t"][60:n], run["W"][60:n], **{keyword: tuple(None if v is None else v[60:n]
+                                                                                  for v in block)})
+        assert len(got) == len(expected) > n - 70
+        for a, b in zip(got, expected):
+            assert a.t == b.t and np.array_equal(a.wrench, b.wrench) and np.array_equal(a.cov, b.cov)
+    with pytest.raises(FmscalError, match="takes joint states .*pose= was given"):
+        Compensator(cal, 1e-3, noise=NOISE, motion=run["motion"]).push_many(run["t"][:5], run["W"][:5],
+                                                                             run["pose"][:5])
+
+
+def test_offline_joint_covariance_is_each_rows(ur5_run):
+    """The offline joint path's covariance takes each row's Jacobian and attitude: the log run backwards in time
+    (the smoothing symmetric, the noise estimate the same) gives each sample the same covariance, while its
+    acceleration part changes along the log by more than 1.5x (one row's Jacobian for the whole log fails)."""
+    run, cal = ur5_run, _truth_calibration()
+    rng = np.random.default_rng(3)
+    q = run["q"] + rng.normal(0, 1e-4, run["q"].shape)
+    forward = compensate(cal, JointLog(run["t"], q, run["W"]), motion=run["motion"], noise=NOISE)
+    t = run["t"][-1] - run["t"][::-1]
+    backward = compensate(cal, JointLog(t, q[::-1], run["W"][::-1]), motion=run["motion"], noise=NOISE)
+    np.testing.assert_allclose(backward.cov[::-1], forward.cov, rtol=1e-6, atol=1e-12)
+    reading = np.diag(NOISE.wrench_sd) ** 2
+    part = np.array([np.trace(c - reading) for c in forward.cov])
+    assert part.min() > 0 and part.max() / part.min() > 1.5, (part.min(), part.max())

@@ -164,9 +164,12 @@ class RobotKinematics:
 
     def jacobian(self, joints):
         """The frame's Jacobian in its own axes at ``joints`` (n,): shape (6, n), rows ``[v; omega]``
-        (pinocchio's ``computeFrameJacobian``, ``LOCAL``)."""
-        return np.array(self._pin.computeFrameJacobian(self.model, self._data, np.asarray(joints, dtype=float),
-                                                       self.frame_id, self._pin.LOCAL))
+        (pinocchio's ``computeFrameJacobian``, ``LOCAL``); at each row of ``joints`` (N, n): shape (N, 6, n)."""
+        joints = np.asarray(joints, dtype=float)
+        if joints.ndim == 2:
+            return np.array([self.jacobian(q) for q in joints]).reshape(len(joints), 6, joints.shape[1])
+        return np.array(self._pin.computeFrameJacobian(self.model, self._data, joints, self.frame_id,
+                                                       self._pin.LOCAL))
 
 
 def joint_columns(header, joint_names):
