@@ -108,7 +108,7 @@ from scipy.signal import savgol_coeffs, savgol_filter
 from scipy.stats import binom, chi2
 
 from fmscal.plant import Calibration, Log
-from fmscal.plant.io import ImuLog, JointLog, estimate_noise, reading_sign
+from fmscal.plant.io import ImuLog, JointLog, check_imu_units, estimate_noise, reading_sign
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, skew, smoothed_state,
                                   spatial_motion)
@@ -888,6 +888,7 @@ class Compensator:
         if motion is not None:
             self._extras = deque(maxlen=self._k)           # per motion sample: (dq, ddq) or the IMU's quaternion
             self._channel_noise = _RunningNoise(motion.size)
+            self._units_checked = False                    # an IMU's units, checked on its first full window
             if calibration.latency:
                 self.warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose "
                                      f"stream's) is not applied to the {motion.source} stream: it is taken as of "
@@ -990,6 +991,10 @@ class Compensator:
             return None
         t0, reading = self._readings[0]
         present = [p is not None for p in self._poses]
+        if wanted == "imu" and not self._units_checked and any(present):
+            rows = np.array([p for p in self._poses if p is not None])
+            check_imu_units("the IMU stream", rows[:, :3], rows[:, 3:])       # in g or deg/s: one line
+            self._units_checked = True
         if all(present):
             P, c = self._coefficients @ np.array(self._poses), self._coefficients
         else:

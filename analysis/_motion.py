@@ -130,7 +130,6 @@ class JointMotion:
     """
 
     source = "joint states"
-    _classical = True             # False: the spatial acceleration, wrong by omega x v (a test tells them apart)
 
     def __init__(self, urdf, frame, joints=None):
         self.kinematics = RobotKinematics(urdf, frame)
@@ -176,7 +175,7 @@ class JointMotion:
         sensor frame's attitude."""
         order = self._to_urdf
         pose, v, omega, acc, alpha = self.kinematics.motion(np.asarray(q)[:, order], np.asarray(dq)[:, order],
-                                                            np.asarray(ddq)[:, order], classical=self._classical)
+                                                            np.asarray(ddq)[:, order])
         R = _rotations(pose[:, :4])
         n = len(pose)
         configuration, velocity, a = np.empty((n, 7)), np.empty((n, 6)), np.empty((n, 6))

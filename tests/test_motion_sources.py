@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from fmscal.analysis import Compensator, ImuMotion, JointMotion, compensate
 from fmscal.analysis.cli import main
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, LogError, NoiseSpec, get_scenario
-from fmscal.plant.io import ImuLog, JointLog
+from fmscal.plant.io import ImuLog, JointLog, UnitsError
 from fmscal.plant.physics import rotation_matrix
 from fmscal.plant.scenarios._spatial import TOOL
 import robot_rig
@@ -45,8 +45,9 @@ def _max(c):
 def test_joint_states_give_the_payload_wrench_with_the_classical_acceleration(ur5_run):
     """JointMotion (pinocchio's classical acceleration) matches the independent Newton-Euler to 1e-6 with the
     measured rates, 1e-4 with the rates differentiated both ways, and agrees with the pose path (poses from
-    the same FK, smoothed and differentiated) to its smoothing error; the spatial acceleration in its place is
-    off by exactly m omega x v (about 3.9 N here): the test tells the two apart."""
+    the same FK, smoothed and differentiated) to its smoothing error; the spatial acceleration in its place
+    (pinocchio's, computed here) is off by m omega x v, over 3 N here (printed with ``-s``): the test tells the
+    two apart."""
     run, cal = ur5_run, _truth_calibration()
     given = compensate(cal, JointLog(run["t"], run["q"], run["W"], run["dq"], run["ddq"]), motion=run["motion"],
                        noise=NOISE)
@@ -56,14 +57,13 @@ def test_joint_states_give_the_payload_wrench_with_the_classical_acceleration(ur
     poses = compensate(cal, Log(run["t"], run["pose"], run["W"]), noise=NOISE)
     assert np.all(_max(poses) < 2e-3) and np.all(_max(poses)[3:] > 1e-5), _max(poses)
     np.testing.assert_allclose(poses.t, differentiated.t)
-    wrong = JointMotion(_ur5(), "tool0")
-    wrong._classical = False
-    spatial = compensate(cal, JointLog(run["t"], run["q"], run["W"], run["dq"], run["ddq"]), motion=wrong,
-                         noise=NOISE)
-    rows = np.searchsorted(run["t"], spatial.t)
-    expected = -TOOL.mass * np.cross(run["omega"], run["v"])[rows]     # m (a_spatial - a_classical)
-    np.testing.assert_allclose(spatial.wrench[:, 3:], expected, atol=1e-6)
-    assert np.linalg.norm(expected, axis=1).max() > 3.0
+    # the spatial acceleration (pinocchio's getFrameAcceleration, computed here) differs from the classical one
+    # JointMotion takes by omega x v: the payload's force by m omega x v, far beyond the 1e-7 N above
+    _, v, omega, spatial, _ = robot_rig.frame_motion(run["q"], run["dq"], run["ddq"])
+    np.testing.assert_allclose(spatial - run["acc"], -np.cross(omega, v), atol=1e-9)
+    off = TOOL.mass * np.linalg.norm(np.cross(omega, v), axis=1).max()
+    print(f"the spatial acceleration in place of the classical: the force off by up to {off:.2g} N")
+    assert off > 3.0
 
 
 def test_joint_states_streamed(ur5_run):
@@ -442,3 +442,41 @@ def test_offline_joint_covariance_is_each_rows(ur5_run):
     reading = np.diag(NOISE.wrench_sd) ** 2
     part = np.array([np.trace(c - reading) for c in forward.cov])
     assert part.min() > 0 and part.max() / part.min() > 1.5, (part.min(), part.max())
+
+
+def test_imu_units_are_checked(ur5_run, tmp_path, capsys):
+    """An IMU's specific force in g (or cm/s^2) and its rate in deg/s are refused in one line naming the unit
+    (the rate told from the orientations, or without them from a gyro's range); the UR5's motion in SI, with
+    noise, passes; the CLI says one line and exits 2."""
+    run, n = ur5_run, 300
+    rng = np.random.default_rng(5)
+    quaternion, omega_i, f_i, _ = robot_rig.imu_readings(run, rng, 0.003, 0.05)
+    t, W = run["t"][:n], run["W"][:n]
+    quaternion, omega_i, f_i = quaternion[:n], omega_i[:n], f_i[:n]
+    ImuLog(t, quaternion, omega_i, f_i, W)
+    ImuLog(t, None, omega_i, f_i, W)
+    for force, unit in ((f_i / 9.81, "in g"), (f_i * 100, "in cm/s\\^2")):
+        with pytest.raises(UnitsError, match=f"specific force has a median size .*{unit}"):
+            ImuLog(t, quaternion, omega_i, force, W)
+    with pytest.raises(UnitsError, match="57.3 times the rate its orientations show: in deg/s"):
+        ImuLog(t, quaternion, np.rad2deg(omega_i), f_i, W)
+    with pytest.raises(UnitsError, match="beyond what a gyro reads .*in deg/s"):
+        ImuLog(t, None, np.rad2deg(omega_i), f_i, W)
+    wrench = ("tx", "ty", "tz", "fx", "fy", "fz")
+    _truth_calibration().save(tmp_path / "cal.json")
+    _write(tmp_path / "imu.csv", ("t", "iqw", "iqx", "iqy", "iqz", "iwx", "iwy", "iwz", "iax", "iay", "iaz", *wrench),
+           (t, quaternion, omega_i, f_i / 9.81, W))
+    assert main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / "imu.csv"), "--out",
+                 str(tmp_path / "c.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "in g (multiples of 9.81)?" in err and err.count("\n") == 1, err
+
+
+def test_imu_stream_units_are_checked(ur5_run):
+    """Compensator(motion=ImuMotion) refuses a specific force in g on its first full window, in one line."""
+    run, cal = ur5_run, _truth_calibration()
+    quaternion, omega_i, f_i, _ = _imu_readings(run)
+    stream = Compensator(cal, 1e-3, noise=NOISE, motion=ImuMotion(C_IMU, R_IMU))
+    with pytest.raises(UnitsError, match="the IMU stream: the IMU's specific force .* in g"):
+        for i in range(100):
+            stream.push(run["t"][i], run["W"][i], imu=(quaternion[i], omega_i[i], f_i[i] / 9.81))

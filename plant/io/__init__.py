@@ -9,7 +9,7 @@ from ._log import (Log, LogError, Truth, read_log, read_readings, read_truth, lo
 from ._noise import (estimate_noise)
 from ._units import (implied_scale, diagnose_units, UnitFinding, COUNTS)
 from ._spatial_units import (UnitsError, check_spatial_log_units,
-    check_table_units, EARTH_G, MAX_WRIST_MASS, MAX_LEVER_ARM, MAX_ACCELERATION, MAX_STEP)
+    check_table_units, check_imu_units, EARTH_G, MAX_WRIST_MASS, MAX_LEVER_ARM, MAX_ACCELERATION, MAX_STEP)
 from ._calibration import (json_ready, Calibration, CalibrationFileError, file_sha256, reading_sign, FORMAT, READINGS)
 from ._pose_table import (PoseTable, read_pose_table, write_pose_table, is_pose_table, simulate_table, AttitudeLog,
     read_attitude_log, is_attitude_log, held_table, simulate_attitude_log, TABLE_COLUMNS, ATTITUDE_COLUMNS,
@@ -24,7 +24,7 @@ from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, P
 __all__ = ["json_ready", "write_bag", "write_tf_bag", "Log", "LogError", "Truth", "read_log", "read_readings",
            "read_truth", "log_kind", "unit_quaternions", "estimate_noise", "diagnose_units", "UnitFinding",
            "UnitsError", "check_spatial_log_units",
-           "check_table_units",
+           "check_table_units", "check_imu_units",
            "Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "PoseTable", "read_pose_table",
            "write_pose_table", "is_pose_table", "simulate_table", "AttitudeLog", "read_attitude_log",
            "is_attitude_log", "held_table", "simulate_attitude_log", "chain_poses", "RobotKinematics",

@@ -14,6 +14,7 @@ import numpy as np
 
 from ._kinematics import _check_samples
 from ._log import LogError, _as_path, _echo, _read_csv
+from ._spatial_units import check_imu_units
 
 __all__ = ["ImuLog", "read_imu_log", "IMU_COLUMNS"]
 
@@ -41,7 +42,8 @@ class ImuLog:
     plant.LogError
         Shapes that do not agree, times not increasing or not evenly sampled, readings not finite, a value
         beyond :data:`fmscal.plant.io._log.MAX_MAGNITUDE` or infinite, a row with some but not all of the rate
-        and specific force, a quaternion not a unit one.
+        and specific force, a quaternion not a unit one; ``UnitsError`` (a ``LogError``'s sibling) for a specific
+        force or a rate in other units than m/s^2 and rad/s (:func:`check_imu_units`).
     """
 
     def __init__(self, t, orientation, angular_velocity, specific_force, w_hat, name="imu-log"):
@@ -72,6 +74,7 @@ class ImuLog:
             raise LogError(f"{name}: row {row}: the IMU's orientation is not a unit quaternion (norm "
                            f"{norm.max() if norm.max() - 1 > 1 - norm.min() else norm.min():.4g}); iqw..iqz are "
                            "scalar first")
+        check_imu_units(name, self.angular_velocity, self.specific_force, self.orientation, self.dt)
 
     @property
     def dt(self):

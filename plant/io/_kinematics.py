@@ -117,7 +117,7 @@ class RobotKinematics:
             out[k] = [w, x, y, z, *placement.translation]
         return out
 
-    def motion(self, joints, velocities, accelerations, classical=True):
+    def motion(self, joints, velocities, accelerations):
         """The frame's pose, velocity and acceleration for every row of joint values and their rates.
 
         By pinocchio: ``forwardKinematics(model, data, q, dq, ddq)``, ``updateFramePlacements``, the frame's
@@ -135,8 +135,6 @@ class RobotKinematics:
         ----------
         joints, velocities, accelerations : array_like, shape (N, n)
             ``q`` (rad, m), ``dq`` (rad/s, m/s) and ``ddq`` (rad/s^2, m/s^2) in :attr:`joint_names` order.
-        classical : bool
-            False: the spatial acceleration's linear part in place of ``a`` (for a test that tells them apart).
 
         Returns
         -------
@@ -149,7 +147,6 @@ class RobotKinematics:
         q, dq, ddq = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (joints, velocities, accelerations))
         n = len(q)
         pose, v, omega, a, alpha = np.empty((n, 7)), *(np.empty((n, 3)) for _ in range(4))
-        accel = pin.getFrameClassicalAcceleration if classical else pin.getFrameAcceleration
         for k in range(n):
             pin.forwardKinematics(self.model, self._data, q[k], dq[k], ddq[k])
             pin.updateFramePlacements(self.model, self._data)
@@ -157,7 +154,7 @@ class RobotKinematics:
             x, y, z, w = pin.Quaternion(placement.rotation).coeffs()
             pose[k] = [w, x, y, z, *placement.translation]
             twist = pin.getFrameVelocity(self.model, self._data, self.frame_id, pin.LOCAL)
-            acc = accel(self.model, self._data, self.frame_id, pin.LOCAL)
+            acc = pin.getFrameClassicalAcceleration(self.model, self._data, self.frame_id, pin.LOCAL)
             v[k], omega[k] = twist.linear, twist.angular
             a[k], alpha[k] = acc.linear, acc.angular
         return pose, v, omega, a, alpha
