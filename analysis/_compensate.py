@@ -780,9 +780,11 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
         accel_var = motion.accel_var(P[0], var_ddq, R)                  # (N, 6): each row's Jacobian and R
     else:
         x, a, R = motion.state(model, P[0], P[1], log.orientation[keep])
-        accel_var = motion.accel_var(var, sums[0], sums[1])
+        M, accel_var = motion.accel_noise(var, sums[0], sums[1])
     t, w_hat = log.t[keep], log.w_hat[keep]
     W_p, A_inv = _payload_wrench(model, x, a)
+    if not joint:
+        A_inv = A_inv @ M                           # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
     wrench, cov, contact, statistic, *offset = parts.finish(w_hat, W_p, A_inv, accel_var, tracker, t)
     offset, offset_sd = offset if offset else (None, None)
     wrench, cov = output.apply(wrench, cov, R)
@@ -1020,8 +1022,10 @@ class Compensator:
             accel_var = motion.accel_var(q[None], var_ddq, R)[0]
         else:
             x, a, R = motion.state(self.model, P[0:1], P[1:2], self._orientation(i0)[None])
-            accel_var = motion.accel_var(var, sums[0], sums[1])
+            M, accel_var = motion.accel_noise(var, sums[0], sums[1])
         W_p, A_inv = _payload_wrench(self.model, x, a)
+        if wanted == "imu":
+            A_inv = A_inv @ M                       # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
         wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv, accel_var,
                                                                       self._tracker, [t0])
         signed = self._parts.sign * reading

@@ -37,9 +37,14 @@ no gravity vector and no pose is needed. The sensor frame's attitude, for an out
 (a white noise of sd ``sigma`` on a signal smooth at the sample rate gives differences of variance
 ``6 sigma^2``) and carried through the filter's coefficients: the joints' ``var(ddq_j) = var(q_j) sum(c2^2)``
 through the frame's Jacobian ``J`` (``var(a_l) = (J_v o J_v) var(ddq)``, ``o`` the entrywise product,
-``var(alpha)`` likewise with ``J_omega``); the IMU's ``var(f_s) = (C o C) var(f_i) sum(c0^2)`` and
-``var(alpha) = (C o C) var(omega_i) sum(c1^2)``. Measured ``dq``, ``ddq`` and the lever arm's terms add no
-noise here.
+``var(alpha)`` likewise with ``J_omega``), at each sample's ``q``, per component; the IMU's as a full
+covariance, ``Cov(a) = M diag(var) M^T`` with ``M = [[C, [r]x C], [0, C]]`` on ``[f_i; alpha_i]`` and
+``var = [var(f_i) sum(c0^2); var(omega_i) sum(c1^2)]`` (:meth:`ImuMotion.accel_noise`): the lever arm's
+``alpha x r`` carries the differentiated gyro's noise (``var(alpha) |r|^2`` in size). Left out: measured
+``dq`` and ``ddq`` add none, and ``omega x (omega x r)`` carries the gyro's smoothed noise, at most about
+``2 |omega| |r| sd(omega_i) sqrt(sum(c0^2))``, against ``alpha x r``'s ``|r| sd(omega_i) sqrt(sum(c1^2))``:
+a share ``2 |omega| sqrt(sum(c0^2) / sum(c1^2))`` of it, small while ``|omega|`` is well below
+``sqrt(sum(c1^2) / sum(c0^2)) / 2`` (the filter's bandwidth).
 """
 
 import numpy as np
@@ -294,7 +299,25 @@ class ImuMotion:
             R[given] = _rotations(q) @ self.rotation.T
         return x, a, R
 
-    def accel_var(self, var_channels, c0_sq, c1_sq):
-        """The variance of ``a = [f_s + g; alpha]`` (sensor axes) from the channels' noise variance (6,)."""
-        C2 = self.rotation ** 2
-        return np.r_[C2 @ var_channels[3:] * c0_sq, C2 @ var_channels[:3] * c1_sq]
+    def accel_noise(self, var_channels, c0_sq, c1_sq):
+        """The covariance of ``a = [f_s + g; alpha]`` (sensor axes) from the channels' noise variance (6,), as
+        ``Cov(a) = M diag(var) M^T``.
+
+        With ``alpha_i`` the differentiated rate in the IMU's axes, (C6) is linear in the filtered channels'
+        noise: ``alpha = C alpha_i`` and ``f_s = C f_i + [r]x C alpha_i`` (``-alpha x r = r x alpha``, ``[r]x``
+        the cross-product matrix), so ``M = [[C, [r]x C], [0, C]]`` on ``[f_i; alpha_i]`` and
+        ``var = [var(f_i) sum(c0^2); var(omega_i) sum(c1^2)]``: the lever arm's ``alpha x r`` carries the
+        differentiated gyro's noise (``var(alpha) |r|^2`` in size), correlated with ``alpha``'s own.
+
+        Returns
+        -------
+        M : ndarray, shape (6, 6)
+        var : ndarray, shape (6,)
+        """
+        C = self.rotation
+        x, y, z = self.lever_arm
+        skew = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        M = np.zeros((6, 6))
+        M[:3, :3], M[:3, 3:], M[3:, 3:] = C, skew @ C, C
+        var_channels = np.asarray(var_channels, dtype=float)
+        return M, np.r_[var_channels[3:] * c0_sq, var_channels[:3] * c1_sq]
