@@ -108,7 +108,7 @@ from scipy.signal import savgol_coeffs, savgol_filter
 from scipy.stats import binom, chi2
 
 from fmscal.plant import Calibration, Log
-from fmscal.plant.io import ImuLog, JointLog, check_imu_units, estimate_noise, reading_sign
+from fmscal.plant.io import ImuLog, JointLog, check_imu_units, difference_noise, estimate_noise, reading_sign
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, skew, smoothed_state,
                                   spatial_motion)
@@ -703,10 +703,11 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
         raise CompensationError(f"{log.name}: {len(log.w_hat[0])} reading columns; the calibration's reading has "
                                 f"{model.n_w}")
     if noise is None and (calibration.noise is None or len(calibration.noise.wrench_sd) != calibration.size):
-        noise = NoiseSpec(tuple(np.sqrt(np.var(np.diff(log.w_hat, 2, axis=0), axis=0) / 6)))
+        noise = NoiseSpec(tuple(difference_noise(log.w_hat)))               # plant.io.estimate_noise's estimate
         if min(noise.wrench_sd) <= 0:
-            raise CompensationError(f"{log.name}: the readings' noise estimated from the log is zero (a constant "
-                                    "reading): give noise=plant.NoiseSpec(...), or a calibration holding its noise")
+            raise CompensationError(f"{log.name}: the readings' noise estimated from the log is zero (a constant or "
+                                    "coarsely quantised reading): give noise=plant.NoiseSpec(...), or a calibration "
+                                    "holding its noise")
     if causal:
         stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
                              window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,
@@ -744,11 +745,9 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
         warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose stream's) is not "
                         f"applied to the {motion.source} stream: it is taken as of the readings' times")
     window = OFFLINE_WINDOW if window is None else window
-    if not (isinstance(window, (int, float)) and np.isfinite(window) and window > 0):
-        raise CompensationError(f"window must be a positive number of seconds; got {window!r}")
     dt = log.dt
-    k = max(7, int(round(window / dt)) // 2 * 2 + 1)
-    h = k // 2
+    h = edge(log, window)                                               # the pose path's window, checked
+    k = 2 * h + 1
     raw = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
     present = np.flatnonzero(np.isfinite(raw).all(axis=1))
     if len(present) < 4:
@@ -762,9 +761,9 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     smooth = [np.concatenate([np.full((first, v.shape[1]), np.nan), v]) for v in smooth]
     sums = [float(np.sum(savgol_coeffs(k, ORDER, deriv=d, delta=dt, use="dot") ** 2)) for d in range(3)]
     keep = slice(first + h, last - h)
-    # each channel's noise from its samples' second differences; the samples interpolated onto the readings'
-    # grid, one every r rows weighs about r times a row's share of the filter (as the pose path counts it)
-    var = np.mean(np.square(np.diff(raw[present], 2, axis=0)), axis=0) / 6
+    # each channel's noise by plant.io.estimate_noise's robust estimate over its samples; the samples interpolated
+    # onto the readings' grid, one every r rows weighs about r times a row's share of the filter (as the pose path)
+    var = difference_noise(raw, present) ** 2
     r = float(np.median(np.diff(present)))
     sums = [v * max(r, 1.0) for v in sums]
     P = [v[keep] for v in smooth]

@@ -33,10 +33,12 @@ attitude and the translation. Only ``alpha`` is differentiated. The model is the
 no gravity vector and no pose is needed. The sensor frame's attitude, for an output in the base frame, is
 ``R = R_i C^T`` (the IMU's world).
 
-**Noise** (the third term of (C3)). A source's channels' noise is estimated from their second differences
-(a white noise of sd ``sigma`` on a signal smooth at the sample rate gives differences of variance
-``6 sigma^2``) and carried through the filter's coefficients: the joints' ``var(ddq_j) = var(q_j) sum(c2^2)``
-through the frame's Jacobian ``J`` (``var(a_l) = (J_v o J_v) var(ddq)``, ``o`` the entrywise product,
+**Noise** (the third term of (C3)). A source's channels' noise is estimated from their differences (a white
+noise of sd ``sigma`` on a signal smooth at the sample rate gives second differences of variance
+``6 sigma^2``; offline by :func:`fmscal.plant.io.difference_noise`, ``estimate_noise``'s robust estimate,
+causally from the second differences as the samples come) and carried through the filter's coefficients: the
+joints' ``var(ddq_j) = var(q_j) sum(c2^2)`` through the frame's Jacobian ``J`` (``var(a_l) = (J_v o J_v)
+var(ddq)``, ``o`` the entrywise product,
 ``var(alpha)`` likewise with ``J_omega``), at each sample's ``q``, per component; the IMU's as a full
 covariance, ``Cov(a) = M diag(var) M^T`` with ``M = [[C, [r]x C], [0, C]]`` on ``[f_i; alpha_i]`` and
 ``var = [var(f_i) sum(c0^2); var(omega_i) sum(c1^2)]`` (:meth:`ImuMotion.accel_noise`): the lever arm's

@@ -23,7 +23,7 @@ from fmscal.plant.numerics import FmscalError
 from ._log import Log, LogError, _as_path, _check_finite, _check_magnitudes, _check_steps, _echo, _read_csv
 from ._pose_table import PoseTable
 
-__all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log"]
+__all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log", "csv_header"]
 
 _WRENCH = ("tx", "ty", "tz", "fx", "fy", "fz")
 _OTHERS = ("t", *_WRENCH)                   # the columns of a joint log that are not joints
@@ -169,6 +169,19 @@ class RobotKinematics:
                                                        self._pin.LOCAL))
 
 
+def csv_header(path):
+    """A CSV file's header line as its stripped column names (a UTF-8 byte-order mark dropped; the first 64 kB).
+
+    Raises
+    ------
+    OSError
+        The file cannot be read.
+    """
+    with open(path, "rb") as f:
+        return [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
+                .split(",")]
+
+
 def joint_columns(header, joint_names):
     """Which columns of ``header`` hold the joints, in the URDF's order: ``q1`` to ``qn``, or the joints' names.
 
@@ -226,9 +239,7 @@ def read_joint_data(path, kinematics):
         The file's problems, or joint columns that do not match the URDF.
     """
     path = _as_path(path, "log")
-    with open(path, "rb") as f:
-        header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
-                  .split(",")]
+    header = csv_header(path)
     joints = joint_columns(header, kinematics.joint_names)
     timed = "t" in header
     frame = _read_csv(path, (*(("t",) if timed else ()), *joints, *_WRENCH),
@@ -417,9 +428,7 @@ def read_joint_log(path, kinematics):
         but not all joints.
     """
     path = _as_path(path, "log")
-    with open(path, "rb") as f:
-        header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
-                  .split(",")]
+    header = csv_header(path)
     if "t" not in header:
         raise LogError(f"{_echo(path.name)}: no column t; a joint log needs t, the joints' columns and "
                        f"{','.join(_WRENCH)}")
