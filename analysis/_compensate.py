@@ -108,7 +108,7 @@ from scipy.signal import savgol_coeffs, savgol_filter
 from scipy.stats import binom, chi2
 
 from fmscal.plant import Calibration, Log
-from fmscal.plant.io import ImuLog, JointLog, estimate_noise, reading_sign
+from fmscal.plant.io import ImuLog, JointLog, check_imu_units, difference_noise, estimate_noise, reading_sign
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, skew, smoothed_state,
                                   spatial_motion)
@@ -346,8 +346,10 @@ class _Parts:
         self.false_alarm = false_alarm
 
     def covariance(self, signed, A_inv, accel_var):
-        """(C3) for rows of signed readings ``signed`` (N, n_w)."""
-        cov = self.reading_cov + np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv)
+        """(C3) for rows of signed readings ``signed`` (N, n_w); ``accel_var`` (nv,) for every row, or (N, nv)."""
+        accel_var = np.asarray(accel_var, dtype=float)
+        cov = self.reading_cov + (np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv) if accel_var.ndim == 1
+                                  else np.einsum("nij,nj,nkj->nik", A_inv, accel_var, A_inv))
         if self.cov4 is not None:
             u = np.concatenate([signed, np.ones((len(signed), 1))], axis=1) if self.m == self.n + 1 \
                 else signed - self.b
@@ -702,13 +704,19 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     if joint and log.joints.shape[1] != motion.size:
         raise CompensationError(f"{log.name}: {log.joints.shape[1]} joint columns; the URDF has {motion.size} "
                                 "joints")
+    if joint:
+        log.check_kinematics(motion.kinematics, motion.joints)          # joint angles in degrees refused
     model = compensation_model(calibration, payload)
     motion.check(model)
     if len(log.w_hat[0]) != model.n_w:
         raise CompensationError(f"{log.name}: {len(log.w_hat[0])} reading columns; the calibration's reading has "
                                 f"{model.n_w}")
     if noise is None and (calibration.noise is None or len(calibration.noise.wrench_sd) != calibration.size):
-        noise = NoiseSpec(tuple(np.sqrt(np.var(np.diff(log.w_hat, 2, axis=0), axis=0) / 6)))
+        noise = NoiseSpec(tuple(difference_noise(log.w_hat)))               # plant.io.estimate_noise's estimate
+        if min(noise.wrench_sd) <= 0:
+            raise CompensationError(f"{log.name}: the readings' noise estimated from the log is zero (a constant or "
+                                    "coarsely quantised reading): give noise=plant.NoiseSpec(...), or a calibration "
+                                    "holding its noise")
     if causal:
         stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
                              window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,
@@ -746,11 +754,9 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
         warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose stream's) is not "
                         f"applied to the {motion.source} stream: it is taken as of the readings' times")
     window = OFFLINE_WINDOW if window is None else window
-    if not (isinstance(window, (int, float)) and np.isfinite(window) and window > 0):
-        raise CompensationError(f"window must be a positive number of seconds; got {window!r}")
     dt = log.dt
-    k = max(7, int(round(window / dt)) // 2 * 2 + 1)
-    h = k // 2
+    h = edge(log, window)                                               # the pose path's window, checked
+    k = 2 * h + 1
     raw = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
     present = np.flatnonzero(np.isfinite(raw).all(axis=1))
     if len(present) < 4:
@@ -764,9 +770,9 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     smooth = [np.concatenate([np.full((first, v.shape[1]), np.nan), v]) for v in smooth]
     sums = [float(np.sum(savgol_coeffs(k, ORDER, deriv=d, delta=dt, use="dot") ** 2)) for d in range(3)]
     keep = slice(first + h, last - h)
-    # each channel's noise from its samples' second differences; the samples interpolated onto the readings'
-    # grid, one every r rows weighs about r times a row's share of the filter (as the pose path counts it)
-    var = np.mean(np.square(np.diff(raw[present], 2, axis=0)), axis=0) / 6
+    # each channel's noise by plant.io.estimate_noise's robust estimate over its samples; the samples interpolated
+    # onto the readings' grid, one every r rows weighs about r times a row's share of the filter (as the pose path)
+    var = difference_noise(raw, present) ** 2
     r = float(np.median(np.diff(present)))
     sums = [v * max(r, 1.0) for v in sums]
     P = [v[keep] for v in smooth]
@@ -779,12 +785,14 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
             ddq = np.where(measured, log.accelerations[keep], ddq)
             var_ddq = np.where(measured.all(axis=0), 0.0, var_ddq)
         x, a, R = motion.state(model, P[0], dq, ddq)
-        accel_var = motion.accel_var(P[0][0], var_ddq, R[0])
+        accel_var = motion.accel_var(P[0], var_ddq, R)                  # (N, 6): each row's Jacobian and R
     else:
         x, a, R = motion.state(model, P[0], P[1], log.orientation[keep])
-        accel_var = motion.accel_var(var, sums[0], sums[1])
+        M, accel_var = motion.accel_noise(var, sums[0], sums[1])
     t, w_hat = log.t[keep], log.w_hat[keep]
     W_p, A_inv = _payload_wrench(model, x, a)
+    if not joint:
+        A_inv = A_inv @ M                           # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
     wrench, cov, contact, statistic, *offset = parts.finish(w_hat, W_p, A_inv, accel_var, tracker, t)
     offset, offset_sd = offset if offset else (None, None)
     wrench, cov = output.apply(wrench, cov, R)
@@ -890,6 +898,7 @@ class Compensator:
         if motion is not None:
             self._extras = deque(maxlen=self._k)           # per motion sample: (dq, ddq) or the IMU's quaternion
             self._channel_noise = _RunningNoise(motion.size)
+            self._units_checked = False                    # an IMU's units, checked on its first full window
             if calibration.latency:
                 self.warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose "
                                      f"stream's) is not applied to the {motion.source} stream: it is taken as of "
@@ -992,6 +1001,10 @@ class Compensator:
             return None
         t0, reading = self._readings[0]
         present = [p is not None for p in self._poses]
+        if wanted == "imu" and not self._units_checked and any(present):
+            rows = np.array([p for p in self._poses if p is not None])
+            check_imu_units("the IMU stream", rows[:, :3], rows[:, 3:])       # in g or deg/s: one line
+            self._units_checked = True
         if all(present):
             P, c = self._coefficients @ np.array(self._poses), self._coefficients
         else:
@@ -1014,11 +1027,13 @@ class Compensator:
                 if np.isfinite(given_dq).all() and measured.all():
                     q = self._poses[i0]
             x, a, R = motion.state(self.model, q[None], dq[None], ddq[None])
-            accel_var = motion.accel_var(q, var_ddq, R[0])
+            accel_var = motion.accel_var(q[None], var_ddq, R)[0]
         else:
             x, a, R = motion.state(self.model, P[0:1], P[1:2], self._orientation(i0)[None])
-            accel_var = motion.accel_var(var, sums[0], sums[1])
+            M, accel_var = motion.accel_noise(var, sums[0], sums[1])
         W_p, A_inv = _payload_wrench(self.model, x, a)
+        if wanted == "imu":
+            A_inv = A_inv @ M                       # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
         wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv, accel_var,
                                                                       self._tracker, [t0])
         signed = self._parts.sign * reading
@@ -1084,18 +1099,24 @@ class Compensator:
             self._tracker.tare(found.mean(axis=0), S_inv @ cov.mean(axis=0) @ S_inv.T / len(found))
         return self.offset
 
-    def push_many(self, t, w_hat, pose):
+    def push_many(self, t, w_hat, pose=None, *, joints=None, imu=None):
         """:meth:`push` over rows, vectorised: the same samples, for a block that came together (a backlog).
 
         Rows whose pose windows are full are fitted together (one causal filter over the block, one call of
-        the dynamics); the others, and a motion other than poses, go through :meth:`push` one at a time.
+        the dynamics); the others go through :meth:`push` one at a time, and so do the rows of a joint or IMU
+        source (``joints=`` or ``imu=``, as :meth:`push` takes them, one row per reading).
 
         Parameters
         ----------
         t : array_like, shape (M,)
         w_hat : array_like, shape (M, n_w)
-        pose : array_like, shape (M, n_pose)
-            NaN rows where no pose came with the reading.
+        pose : array_like, shape (M, n_pose), optional
+            ``motion=None``: NaN rows where no pose came with the reading.
+        joints : tuple (q, dq, ddq), optional
+            A :class:`JointMotion`: ``q`` (M, n) with NaN rows where no joint state came, ``dq`` and ``ddq``
+            (M, n) or None where not given (NaN rows where not given with that reading).
+        imu : tuple (quaternion_wxyz, angular_velocity, specific_force), optional
+            An :class:`ImuMotion`: (M, 4) or None, (M, 3), (M, 3); NaN rows where no IMU sample came.
 
         Returns
         -------
@@ -1104,13 +1125,14 @@ class Compensator:
         """
         t = np.asarray(t, dtype=float)
         w_hat = np.asarray(w_hat, dtype=float)
+        if self.motion is not None or joints is not None or imu is not None:
+            return self._push_many_source(t, w_hat, pose, joints, imu)
         pose = np.asarray(pose, dtype=float)
         out = []
         i = 0
         # one at a time until both windows are full of poses, and for a row without one
         while i < len(t) and (len(self._readings) <= self._L or len(self._poses) < self._k
-                              or any(p is None for p in self._poses) or not np.isfinite(pose[i]).all()
-                              or self.motion is not None):
+                              or any(p is None for p in self._poses) or not np.isfinite(pose[i]).all()):
             sample = self.push(t[i], w_hat[i], pose[i])
             if sample is not None:
                 out.append(sample)
@@ -1124,6 +1146,34 @@ class Compensator:
             out.extend(s for s in [self.push(t[i], w_hat[i], pose[i])] if s is not None)
         if j < len(t):
             out.extend(self.push_many(t[j:], w_hat[j:], pose[j:]))
+        return out
+
+    def _push_many_source(self, t, w_hat, pose, joints, imu):
+        """:meth:`push_many` for a joint or IMU source: its rows through :meth:`push`, one at a time."""
+        if pose is not None:
+            return [s for s in [self.push(t[0], w_hat[0], pose[0], joints=joints, imu=imu)] if s is not None]
+        keyword, given = ("joints", joints) if joints is not None else ("imu", imu)
+        if given is None:
+            return [s for s in (self.push(ti, wi) for ti, wi in zip(t, w_hat)) if s is not None]
+        if not (isinstance(given, (tuple, list)) and len(given) == 3):
+            raise CompensationError(f"{keyword} must be a tuple of three arrays of rows, one row per reading, as "
+                                    f"push takes them (None where not given)")
+        columns = []
+        for v in given:
+            v = None if v is None else np.asarray(v, dtype=float)
+            if v is not None and (v.ndim != 2 or len(v) != len(t)):
+                raise CompensationError(f"{keyword}: arrays of {len(t)} rows, one per reading; got shape {v.shape}")
+            columns.append(v)
+        out = []
+        for i in range(len(t)):
+            row = tuple(None if v is None or np.isnan(v[i]).all() else v[i] for v in columns)
+            if keyword == "joints":
+                row = None if row[0] is None else row
+            else:
+                row = None if row[1] is None and row[2] is None else row
+            sample = self.push(t[i], w_hat[i], **{keyword: row})
+            if sample is not None:
+                out.append(sample)
         return out
 
     def _push_block(self, t, w_hat, pose):

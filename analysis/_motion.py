@@ -33,13 +33,20 @@ attitude and the translation. Only ``alpha`` is differentiated. The model is the
 no gravity vector and no pose is needed. The sensor frame's attitude, for an output in the base frame, is
 ``R = R_i C^T`` (the IMU's world).
 
-**Noise** (the third term of (C3)). A source's channels' noise is estimated from their second differences
-(a white noise of sd ``sigma`` on a signal smooth at the sample rate gives differences of variance
-``6 sigma^2``) and carried through the filter's coefficients: the joints' ``var(ddq_j) = var(q_j) sum(c2^2)``
-through the frame's Jacobian ``J`` (``var(a_l) = (J_v o J_v) var(ddq)``, ``o`` the entrywise product,
-``var(alpha)`` likewise with ``J_omega``); the IMU's ``var(f_s) = (C o C) var(f_i) sum(c0^2)`` and
-``var(alpha) = (C o C) var(omega_i) sum(c1^2)``. Measured ``dq``, ``ddq`` and the lever arm's terms add no
-noise here.
+**Noise** (the third term of (C3)). A source's channels' noise is estimated from their differences (a white
+noise of sd ``sigma`` on a signal smooth at the sample rate gives second differences of variance
+``6 sigma^2``; offline by :func:`fmscal.plant.io.difference_noise`, ``estimate_noise``'s robust estimate,
+causally from the second differences as the samples come) and carried through the filter's coefficients: the
+joints' ``var(ddq_j) = var(q_j) sum(c2^2)`` through the frame's Jacobian ``J`` (``var(a_l) = (J_v o J_v)
+var(ddq)``, ``o`` the entrywise product,
+``var(alpha)`` likewise with ``J_omega``), at each sample's ``q``, per component; the IMU's as a full
+covariance, ``Cov(a) = M diag(var) M^T`` with ``M = [[C, [r]x C], [0, C]]`` on ``[f_i; alpha_i]`` and
+``var = [var(f_i) sum(c0^2); var(omega_i) sum(c1^2)]`` (:meth:`ImuMotion.accel_noise`): the lever arm's
+``alpha x r`` carries the differentiated gyro's noise (``var(alpha) |r|^2`` in size). Left out: measured
+``dq`` and ``ddq`` add none, and ``omega x (omega x r)`` carries the gyro's smoothed noise, at most about
+``2 |omega| |r| sd(omega_i) sqrt(sum(c0^2))``, against ``alpha x r``'s ``|r| sd(omega_i) sqrt(sum(c1^2))``:
+a share ``2 |omega| sqrt(sum(c0^2) / sum(c1^2))`` of it, small while ``|omega|`` is well below
+``sqrt(sum(c1^2) / sum(c0^2)) / 2`` (the filter's bandwidth).
 """
 
 import numpy as np
@@ -130,7 +137,6 @@ class JointMotion:
     """
 
     source = "joint states"
-    _classical = True             # False: the spatial acceleration, wrong by omega x v (a test tells them apart)
 
     def __init__(self, urdf, frame, joints=None):
         self.kinematics = RobotKinematics(urdf, frame)
@@ -176,7 +182,7 @@ class JointMotion:
         sensor frame's attitude."""
         order = self._to_urdf
         pose, v, omega, acc, alpha = self.kinematics.motion(np.asarray(q)[:, order], np.asarray(dq)[:, order],
-                                                            np.asarray(ddq)[:, order], classical=self._classical)
+                                                            np.asarray(ddq)[:, order])
         R = _rotations(pose[:, :4])
         n = len(pose)
         configuration, velocity, a = np.empty((n, 7)), np.empty((n, 6)), np.empty((n, 6))
@@ -189,10 +195,28 @@ class JointMotion:
         return x, a, R
 
     def accel_var(self, q, var_ddq, R):
-        """The variance of ``a = [p_ddot; alpha]`` a joint noise of ``var_ddq`` (n,) in ``ddq`` gives at ``q``."""
-        J = self.kinematics.jacobian(np.asarray(q, dtype=float)[self._to_urdf])
-        var = (J ** 2) @ np.asarray(var_ddq, dtype=float)[self._to_urdf]
-        return np.r_[(R ** 2) @ var[:3], var[3:]]
+        """The variance of ``a = [p_ddot; alpha]`` a joint noise of ``var_ddq`` in ``ddq`` gives, row by row.
+
+        ``var(a_l) = (J_v o J_v) var(ddq)``, ``var(alpha) = (J_omega o J_omega) var(ddq)`` at each row's ``J``
+        and ``var(p_ddot) = (R o R) var(a_l)`` at its ``R`` (module's Noise).
+
+        Parameters
+        ----------
+        q : array_like, shape (N, n)
+            Joint values in :attr:`joints` order.
+        var_ddq : array_like, shape (n,) or (N, n)
+        R : array_like, shape (N, 3, 3)
+            The sensor frame's attitudes.
+
+        Returns
+        -------
+        ndarray, shape (N, 6)
+        """
+        q = np.atleast_2d(np.asarray(q, dtype=float))[:, self._to_urdf]
+        var_ddq = np.broadcast_to(np.asarray(var_ddq, dtype=float), q.shape)[:, self._to_urdf]
+        J = self.kinematics.jacobian(q)                                     # (N, 6, n)
+        var = np.einsum("nij,nj->ni", J ** 2, var_ddq)
+        return np.c_[np.einsum("nij,nj->ni", np.asarray(R, dtype=float) ** 2, var[:, :3]), var[:, 3:]]
 
 
 class ImuMotion:
@@ -277,7 +301,25 @@ class ImuMotion:
             R[given] = _rotations(q) @ self.rotation.T
         return x, a, R
 
-    def accel_var(self, var_channels, c0_sq, c1_sq):
-        """The variance of ``a = [f_s + g; alpha]`` (sensor axes) from the channels' noise variance (6,)."""
-        C2 = self.rotation ** 2
-        return np.r_[C2 @ var_channels[3:] * c0_sq, C2 @ var_channels[:3] * c1_sq]
+    def accel_noise(self, var_channels, c0_sq, c1_sq):
+        """The covariance of ``a = [f_s + g; alpha]`` (sensor axes) from the channels' noise variance (6,), as
+        ``Cov(a) = M diag(var) M^T``.
+
+        With ``alpha_i`` the differentiated rate in the IMU's axes, (C6) is linear in the filtered channels'
+        noise: ``alpha = C alpha_i`` and ``f_s = C f_i + [r]x C alpha_i`` (``-alpha x r = r x alpha``, ``[r]x``
+        the cross-product matrix), so ``M = [[C, [r]x C], [0, C]]`` on ``[f_i; alpha_i]`` and
+        ``var = [var(f_i) sum(c0^2); var(omega_i) sum(c1^2)]``: the lever arm's ``alpha x r`` carries the
+        differentiated gyro's noise (``var(alpha) |r|^2`` in size), correlated with ``alpha``'s own.
+
+        Returns
+        -------
+        M : ndarray, shape (6, 6)
+        var : ndarray, shape (6,)
+        """
+        C = self.rotation
+        x, y, z = self.lever_arm
+        skew = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        M = np.zeros((6, 6))
+        M[:3, :3], M[:3, 3:], M[3:, 3:] = C, skew @ C, C
+        var_channels = np.asarray(var_channels, dtype=float)
+        return M, np.r_[var_channels[3:] * c0_sq, var_channels[:3] * c1_sq]

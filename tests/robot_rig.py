@@ -46,7 +46,7 @@ def ur5_run(duration=1.5, dt=1e-3, payload=TOOL):
     phase = w * t[:, None] + np.arange(6)
     q, dq, ddq = q0 + amp * np.sin(phase), amp * w * np.cos(phase), -amp * w ** 2 * np.sin(phase)
     pose, v, omega, acc, alpha = motion.kinematics.motion(q, dq, ddq)
-    spatial = motion.kinematics.motion(q, dq, ddq, classical=False)[3]
+    spatial = frame_motion(q, dq, ddq)[3]
     body = pin.Model()
     joint = body.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "payload")
     inertia = pin.Inertia(payload.mass, np.array(payload.com), np.asarray(inertia_matrix(payload.inertia)))
@@ -60,14 +60,45 @@ def ur5_run(duration=1.5, dt=1e-3, payload=TOOL):
     return dict(motion=motion, t=t, q=q, dq=dq, ddq=ddq, pose=pose, v=v, omega=omega, acc=acc, alpha=alpha, W=W)
 
 
+def frame_motion(q, dq, ddq, frame="tool0", placement=None, classical=False):
+    """Straight from pinocchio, not through fmscal: a frame's attitudes ``R`` (N, 3, 3), its velocity ``v``,
+    ``omega`` and acceleration (``getFrameAcceleration``, the spatial one, or with ``classical``
+    ``getFrameClassicalAcceleration``) ``a``, ``alpha``, all in its own axes (``LOCAL``); ``placement`` (a
+    ``pin.SE3``) adds a frame at that placement on ``frame``'s parent body, relative to ``frame``."""
+    import pinocchio as pin
+    model = pin.buildModelFromUrdf(str(ur5_urdf()))
+    fid = model.getFrameId(frame)
+    if placement is not None:
+        parent = model.frames[fid]
+        fid = model.addFrame(pin.Frame("probe", parent.parentJoint, fid, parent.placement * placement,
+                                       pin.FrameType.OP_FRAME))
+    data = model.createData()
+    accel = pin.getFrameClassicalAcceleration if classical else pin.getFrameAcceleration
+    n = len(q)
+    R, v, omega, a, alpha = np.empty((n, 3, 3)), *(np.empty((n, 3)) for _ in range(4))
+    for k in range(n):
+        pin.forwardKinematics(model, data, q[k], dq[k], ddq[k])
+        pin.updateFramePlacements(model, data)
+        R[k] = data.oMf[fid].rotation
+        twist, acc = pin.getFrameVelocity(model, data, fid, pin.LOCAL), accel(model, data, fid, pin.LOCAL)
+        v[k], omega[k], a[k], alpha[k] = twist.linear, twist.angular, acc.linear, acc.angular
+    return R, v, omega, a, alpha
+
+
 def imu_readings(run, rng=None, gyro_sd=0.0, accel_sd=0.0, rotation=C_IMU, lever_arm=R_IMU):
-    """An IMU's orientation (scalar first), rate and specific force of ``run``'s motion, in its axes, at its point
-    (eq. C6 of fmscal.analysis._compensate read backwards), plus white noise; and the sensor's attitude ``R``."""
+    """An IMU's orientation (scalar first), rate and specific force of ``run``'s motion, in its axes, at its point,
+    plus white noise; and the sensor's attitude ``R``.
+
+    Independent of fmscal's eq. C6: the IMU is a frame of its own on the tool's body in pinocchio (axes
+    ``rotation`` and point ``lever_arm`` in the sensor frame's), its classical acceleration
+    (``getFrameClassicalAcceleration``, its axes) less gravity in its axes is the specific force, and its
+    ``getFrameVelocity``'s angular part the rate."""
+    import pinocchio as pin
+    placement = pin.SE3(np.asarray(rotation, float), np.asarray(lever_arm, float))
+    R_i, _, omega_i, acc_i, _ = frame_motion(run["q"], run["dq"], run["ddq"], placement=placement, classical=True)
+    f_i = acc_i - np.einsum("nji,j->ni", R_i, np.array([0.0, 0.0, -9.81]))                # R_i^T (p_ddot - g)
     R = np.array([rotation_matrix(q) for q in run["pose"][:, :4]], dtype=float)
-    a_g = run["acc"] - np.einsum("nji,j->ni", R, np.array([0.0, 0.0, -9.81]))             # R^T (p_ddot - g)
-    at_imu = a_g + np.cross(run["alpha"], lever_arm) + np.cross(run["omega"], np.cross(run["omega"], lever_arm))
-    f_i, omega_i = at_imu @ rotation, run["omega"] @ rotation                              # C^T v
-    quaternion = Rotation.from_matrix(R @ rotation).as_quat(scalar_first=True)
+    quaternion = Rotation.from_matrix(R_i).as_quat(scalar_first=True)
     if rng is not None:
         omega_i = omega_i + rng.normal(0, gyro_sd, omega_i.shape)
         f_i = f_i + rng.normal(0, accel_sd, f_i.shape)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant import Calibration, read_log
-from fmscal.plant.io import IMU_COLUMNS, read_imu_log, read_joint_log
+from fmscal.plant.io import IMU_COLUMNS, csv_header, read_imu_log, read_joint_log
 from fmscal.observers.payload import PayloadEstimate
 
 from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, FRAMES, OFFLINE_WINDOW,
@@ -80,9 +80,7 @@ def _motion_log(args):
     if (args.urdf is None) != (args.frame is None):
         raise CliError("--urdf and --frame go together: the robot's URDF and the sensor's frame in it")
     try:
-        with open(args.log, "rb") as f:
-            header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
-                      .split(",")]
+        header = csv_header(args.log)
     except OSError:
         header = []                                  # the reader below says what is wrong with the file
     imu = "iwx" in header

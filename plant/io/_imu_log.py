@@ -12,8 +12,9 @@ is then possible); the rate and force cells of a row are all given or all empty 
 
 import numpy as np
 
-from ._kinematics import _check_times
+from ._kinematics import _check_samples
 from ._log import LogError, _as_path, _echo, _read_csv
+from ._spatial_units import check_imu_units
 
 __all__ = ["ImuLog", "read_imu_log", "IMU_COLUMNS"]
 
@@ -28,7 +29,7 @@ class ImuLog:
     Parameters
     ----------
     t : array_like, shape (N,)
-        s, strictly increasing.
+        s, strictly increasing and evenly sampled (as :class:`fmscal.plant.Log`'s).
     orientation : array_like, shape (N, 4) or None
         The IMU's orientation in its world, unit quaternions scalar first; rows of NaN where none.
     angular_velocity, specific_force : array_like, shape (N, 3)
@@ -39,6 +40,10 @@ class ImuLog:
     Raises
     ------
     plant.LogError
+        Shapes that do not agree, times not increasing or not evenly sampled, readings not finite, a value
+        beyond :data:`fmscal.plant.io._log.MAX_MAGNITUDE` or infinite, a row with some but not all of the rate
+        and specific force, a quaternion not a unit one; ``UnitsError`` (a ``LogError``'s sibling) for a specific
+        force or a rate in other units than m/s^2 and rad/s (:func:`check_imu_units`).
     """
 
     def __init__(self, t, orientation, angular_velocity, specific_force, w_hat, name="imu-log"):
@@ -55,9 +60,8 @@ class ImuLog:
                 raise LogError(f"{name}: {what} must be shape ({n}, {m}); got {v.shape}")
         if len(self.w_hat) != n:
             raise LogError(f"{name}: w_hat needs one row per sample; got {len(self.w_hat)} for {n} times")
-        _check_times(self.t, name)
-        if not np.isfinite(self.w_hat).all():
-            raise LogError(f"{name}: the readings must be finite numbers")
+        _check_samples(name, self.t, self.w_hat, [(c, v) for c, v in zip(IMU_COLUMNS, np.c_[
+            self.orientation, self.angular_velocity, self.specific_force].T)])
         rates = np.c_[self.angular_velocity, self.specific_force]
         partial = np.isnan(rates).any(axis=1) & ~np.isnan(rates).all(axis=1)
         if partial.any():
@@ -70,6 +74,7 @@ class ImuLog:
             raise LogError(f"{name}: row {row}: the IMU's orientation is not a unit quaternion (norm "
                            f"{norm.max() if norm.max() - 1 > 1 - norm.min() else norm.min():.4g}); iqw..iqz are "
                            "scalar first")
+        check_imu_units(name, self.angular_velocity, self.specific_force, self.orientation, self.dt)
 
     @property
     def dt(self):

@@ -20,10 +20,10 @@ from contextlib import contextmanager
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError
-from ._log import Log, LogError, _as_path, _echo, _read_csv
+from ._log import Log, LogError, _as_path, _check_finite, _check_magnitudes, _check_steps, _echo, _read_csv
 from ._pose_table import PoseTable
 
-__all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log"]
+__all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log", "csv_header"]
 
 _WRENCH = ("tx", "ty", "tz", "fx", "fy", "fz")
 _OTHERS = ("t", *_WRENCH)                   # the columns of a joint log that are not joints
@@ -117,7 +117,7 @@ class RobotKinematics:
             out[k] = [w, x, y, z, *placement.translation]
         return out
 
-    def motion(self, joints, velocities, accelerations, classical=True):
+    def motion(self, joints, velocities, accelerations):
         """The frame's pose, velocity and acceleration for every row of joint values and their rates.
 
         By pinocchio: ``forwardKinematics(model, data, q, dq, ddq)``, ``updateFramePlacements``, the frame's
@@ -135,8 +135,6 @@ class RobotKinematics:
         ----------
         joints, velocities, accelerations : array_like, shape (N, n)
             ``q`` (rad, m), ``dq`` (rad/s, m/s) and ``ddq`` (rad/s^2, m/s^2) in :attr:`joint_names` order.
-        classical : bool
-            False: the spatial acceleration's linear part in place of ``a`` (for a test that tells them apart).
 
         Returns
         -------
@@ -149,7 +147,6 @@ class RobotKinematics:
         q, dq, ddq = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (joints, velocities, accelerations))
         n = len(q)
         pose, v, omega, a, alpha = np.empty((n, 7)), *(np.empty((n, 3)) for _ in range(4))
-        accel = pin.getFrameClassicalAcceleration if classical else pin.getFrameAcceleration
         for k in range(n):
             pin.forwardKinematics(self.model, self._data, q[k], dq[k], ddq[k])
             pin.updateFramePlacements(self.model, self._data)
@@ -157,16 +154,32 @@ class RobotKinematics:
             x, y, z, w = pin.Quaternion(placement.rotation).coeffs()
             pose[k] = [w, x, y, z, *placement.translation]
             twist = pin.getFrameVelocity(self.model, self._data, self.frame_id, pin.LOCAL)
-            acc = accel(self.model, self._data, self.frame_id, pin.LOCAL)
+            acc = pin.getFrameClassicalAcceleration(self.model, self._data, self.frame_id, pin.LOCAL)
             v[k], omega[k] = twist.linear, twist.angular
             a[k], alpha[k] = acc.linear, acc.angular
         return pose, v, omega, a, alpha
 
     def jacobian(self, joints):
         """The frame's Jacobian in its own axes at ``joints`` (n,): shape (6, n), rows ``[v; omega]``
-        (pinocchio's ``computeFrameJacobian``, ``LOCAL``)."""
-        return np.array(self._pin.computeFrameJacobian(self.model, self._data, np.asarray(joints, dtype=float),
-                                                       self.frame_id, self._pin.LOCAL))
+        (pinocchio's ``computeFrameJacobian``, ``LOCAL``); at each row of ``joints`` (N, n): shape (N, 6, n)."""
+        joints = np.asarray(joints, dtype=float)
+        if joints.ndim == 2:
+            return np.array([self.jacobian(q) for q in joints]).reshape(len(joints), 6, joints.shape[1])
+        return np.array(self._pin.computeFrameJacobian(self.model, self._data, joints, self.frame_id,
+                                                       self._pin.LOCAL))
+
+
+def csv_header(path):
+    """A CSV file's header line as its stripped column names (a UTF-8 byte-order mark dropped; the first 64 kB).
+
+    Raises
+    ------
+    OSError
+        The file cannot be read.
+    """
+    with open(path, "rb") as f:
+        return [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
+                .split(",")]
 
 
 def joint_columns(header, joint_names):
@@ -226,9 +239,7 @@ def read_joint_data(path, kinematics):
         The file's problems, or joint columns that do not match the URDF.
     """
     path = _as_path(path, "log")
-    with open(path, "rb") as f:
-        header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
-                  .split(",")]
+    header = csv_header(path)
     joints = joint_columns(header, kinematics.joint_names)
     timed = "t" in header
     frame = _read_csv(path, (*(("t",) if timed else ()), *joints, *_WRENCH),
@@ -302,37 +313,77 @@ class JointLog:
     Parameters
     ----------
     t : array_like, shape (N,)
-        s, strictly increasing.
+        s, strictly increasing and evenly sampled (as :class:`fmscal.plant.Log`'s).
     joints : array_like, shape (N, n)
         ``q`` per sample, rad (m for a prismatic joint), in the order the motion's source takes; a row of NaN
-        where no joint state came with that reading.
+        where no joint state came with that reading (all of a row's values or none).
     w_hat : array_like, shape (N, n_w)
         The raw readings.
     velocities, accelerations : array_like, shape (N, n), optional
-        ``dq``, ``ddq`` where measured (rows of NaN where not); otherwise differentiated from ``joints``.
+        ``dq``, ``ddq`` where measured (NaN where not); otherwise differentiated from ``joints``.
     name : str
+    kinematics : RobotKinematics, optional
+        Given, the joint angles are checked against its URDF's limits (:meth:`check_kinematics`).
+    joint_names : sequence of str, optional
+        The joints' names in the columns' order; default ``kinematics.joint_names``.
 
     Raises
     ------
     plant.LogError
-        Shapes that do not agree, times not increasing, readings not finite.
+        Shapes that do not agree, times not increasing or not evenly sampled, readings not finite, a value
+        beyond :data:`fmscal.plant.io._log.MAX_MAGNITUDE` or infinite, a row with some but not all joints,
+        joint angles in degrees.
     """
 
-    def __init__(self, t, joints, w_hat, velocities=None, accelerations=None, name="joint-log"):
+    def __init__(self, t, joints, w_hat, velocities=None, accelerations=None, name="joint-log", kinematics=None,
+                 joint_names=None):
         self.t = np.asarray(t, dtype=float).ravel()
         self.joints = np.atleast_2d(np.asarray(joints, dtype=float))
         self.w_hat = np.atleast_2d(np.asarray(w_hat, dtype=float))
         self.name = name
         n = len(self.t)
-        if len(self.joints) != n or len(self.w_hat) != n:
-            raise LogError(f"{name}: t, joints and w_hat need one row per sample; got {n}, {len(self.joints)}, "
-                           f"{len(self.w_hat)}")
-        self.velocities, self.accelerations = (
-            None if v is None else np.asarray(v, dtype=float).reshape(self.joints.shape)
-            for v in (velocities, accelerations))
-        _check_times(self.t, name)
-        if not np.isfinite(self.w_hat).all():
-            raise LogError(f"{name}: the readings must be finite numbers")
+        if len(self.joints) != n or len(self.w_hat) != n or self.joints.ndim != 2 or self.w_hat.ndim != 2:
+            raise LogError(f"{name}: t (N,), joints (N, n) and w_hat (N, n_w) need one row per sample; got "
+                           f"{self.t.shape}, {self.joints.shape}, {self.w_hat.shape}")
+        rates = []
+        for what, v in (("velocities", velocities), ("accelerations", accelerations)):
+            v = None if v is None else np.asarray(v, dtype=float)
+            if v is not None and v.shape != self.joints.shape:
+                raise LogError(f"{name}: {what} must be shape {self.joints.shape}, as the joints; got {v.shape}")
+            rates.append(v)
+        self.velocities, self.accelerations = rates
+        columns = [f"q{j + 1}" for j in range(self.joints.shape[1])]
+        _check_samples(name, self.t, self.w_hat, [
+            *((c, self.joints[:, j]) for j, c in enumerate(columns)),
+            *((f"d{c}", v[:, j]) for v in rates[:1] if v is not None for j, c in enumerate(columns)),
+            *((f"dd{c}", v[:, j]) for v in rates[1:] if v is not None for j, c in enumerate(columns))])
+        missing = np.isnan(self.joints).all(axis=1)
+        partial = np.isnan(self.joints).any(axis=1) & ~missing
+        if partial.any():
+            raise LogError(f"{name}: row {int(np.argmax(partial)) + 1} has some but not all joint values")
+        if kinematics is not None:
+            self.check_kinematics(kinematics, joint_names)
+
+    def check_kinematics(self, kinematics, joint_names=None):
+        """Refuse joint angles in degrees, told by the URDF's limits (:func:`_refuse_degrees`).
+
+        Parameters
+        ----------
+        kinematics : RobotKinematics
+        joint_names : sequence of str, optional
+            The joints' names in the columns' order; default ``kinematics.joint_names``.
+
+        Raises
+        ------
+        plant.LogError
+        """
+        names = tuple(kinematics.joint_names if joint_names is None else joint_names)
+        if len(names) != self.joints.shape[1] or sorted(names) != sorted(kinematics.joint_names):
+            raise LogError(f"{self.name}: {self.joints.shape[1]} joint columns; the URDF has "
+                           f"{len(kinematics.joint_names)} joints")
+        order = [names.index(j) for j in kinematics.joint_names]
+        given = ~np.isnan(self.joints).all(axis=1)
+        _refuse_degrees(self.joints[given][:, order], kinematics, [names[k] for k in order], self.name)
 
     @property
     def dt(self):
@@ -343,13 +394,18 @@ class JointLog:
         return len(self.t)
 
 
-def _check_times(t, name):
-    """Times finite and strictly increasing, at least two of them; a one-line :class:`LogError`."""
-    if len(t) < 2 or not np.isfinite(t).all():
-        raise LogError(f"{name}: needs at least two samples with finite times")
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if len(bad):
-        raise LogError(f"{name}: the times must increase; row {bad[0] + 2} (t = {t[bad[0] + 1]:g}) does not")
+def _check_samples(name, t, w_hat, others=()):
+    """A source log's times and readings as :class:`fmscal.plant.Log` checks them (one definition, its
+    ``_check_*``): at least two samples, times and readings finite, no value (``others``' ``(column, values)``
+    too, where NaN is a missing cell) beyond ``MAX_MAGNITUDE`` or infinite, times strictly increasing and evenly
+    sampled; a one-line :class:`LogError`."""
+    if len(t) < 2:
+        raise LogError(f"{name}: needs at least two samples")
+    readings = [(_WRENCH[j] if w_hat.shape[1] == len(_WRENCH) else f"w{j + 1}", w_hat[:, j])
+                for j in range(w_hat.shape[1])]
+    _check_finite(name, [("t", t), *readings])
+    _check_magnitudes(name, [("t", t), *others, *readings])
+    _check_steps(name, t)
 
 
 def read_joint_log(path, kinematics):
@@ -372,18 +428,11 @@ def read_joint_log(path, kinematics):
         but not all joints.
     """
     path = _as_path(path, "log")
-    with open(path, "rb") as f:
-        header = [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
-                  .split(",")]
+    header = csv_header(path)
     if "t" not in header:
         raise LogError(f"{_echo(path.name)}: no column t; a joint log needs t, the joints' columns and "
                        f"{','.join(_WRENCH)}")
     joints = joint_columns(header, kinematics.joint_names)
     frame = _read_csv(path, ("t", *joints, *_WRENCH), "only joint cells may be empty (no joint state)")
-    values = frame[joints].to_numpy()
-    missing = np.isnan(values).all(axis=1)
-    partial = np.isnan(values).any(axis=1) & ~missing
-    if partial.any():
-        raise LogError(f"{_echo(path.name)}: row {int(np.argmax(partial)) + 1} has some but not all joint values")
-    _refuse_degrees(values[~missing], kinematics, joints, _echo(path.name))
-    return JointLog(frame["t"].to_numpy(), values, frame[list(_WRENCH)].to_numpy(), name=_echo(path.name))
+    return JointLog(frame["t"].to_numpy(), frame[joints].to_numpy(), frame[list(_WRENCH)].to_numpy(),
+                    name=_echo(path.name), kinematics=kinematics)

@@ -135,33 +135,16 @@ class Log:
         pose_names, wrench_names = case.pose_names, case.wrench_names
         if n < MIN_SAMPLES:
             raise LogError(f"{self.name}: too few rows to calibrate; need at least {MIN_SAMPLES}, got {n}")
-        if not np.all(np.isfinite(self.t)):
-            raise LogError(f"{self.name}: column t has a missing, NaN or infinite value at row {_first_bad(self.t)}")
-        for j, col in enumerate(wrench_names):
-            if not np.all(np.isfinite(self.w_hat[:, j])):
-                raise LogError(f"{self.name}: column {col} has a missing, NaN or infinite value "
-                               f"at row {_first_bad(self.w_hat[:, j])}")
+        _check_finite(self.name, (("t", self.t), *((c, self.w_hat[:, j]) for j, c in enumerate(wrench_names))))
         partial = np.isnan(self.pose).any(axis=1) & ~np.isnan(self.pose).all(axis=1)
         if partial.any():
             raise LogError(f"{self.name}: row {np.argmax(partial) + 1} has some but not all of {','.join(pose_names)}; "
                            f"leave all {len(pose_names)} empty where there is no pose measurement")
         if np.isinf(self.pose).any():
             raise LogError(f"{self.name}: pose has an infinite value at row {_first_bad(self.pose.sum(1))}")
-        for col, values in (("t", self.t), *((c, self.pose[:, j]) for j, c in enumerate(pose_names)),
-                            *((c, self.w_hat[:, j]) for j, c in enumerate(wrench_names))):
-            big = np.abs(np.nan_to_num(values)) > MAX_MAGNITUDE
-            if big.any():
-                row = int(np.argmax(big))
-                raise LogError(f"{self.name}: column {col} holds {values[row]:.3g} at row {row + 1}; values beyond "
-                               f"{MAX_MAGNITUDE:.0e} are not measurements in s, rad, m, N m or N")
-        steps = np.diff(self.t)
-        if np.any(steps <= 0):
-            raise LogError(f"{self.name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")
-        self.dt = float(np.median(steps))
-        spread = np.max(np.abs(steps - self.dt)) / self.dt
-        if spread > _SAMPLING_TOLERANCE:
-            raise LogError(f"{self.name}: time is not evenly sampled; steps range from "
-                           f"{steps.min():.6g} to {steps.max():.6g} s (resample to one step)")
+        _check_magnitudes(self.name, (("t", self.t), *((c, self.pose[:, j]) for j, c in enumerate(pose_names)),
+                                     *((c, self.w_hat[:, j]) for j, c in enumerate(wrench_names))))
+        self.dt = _check_steps(self.name, self.t)
         self.has_pose = ~np.isnan(self.pose[:, 0])
         if self.has_pose.sum() < MIN_SAMPLES:
             raise LogError(f"{self.name}: too few pose measurements to calibrate; "
@@ -329,6 +312,45 @@ def _latency(value):
     if not np.isfinite(latency):
         raise FmscalError(f"latency must be a finite number of seconds; got {value!r}")
     return latency
+
+
+def _check_finite(name, columns):
+    """Every value of each ``(column name, values)`` finite; else a one-line :class:`LogError` naming the column
+    and the first row."""
+    for col, values in columns:
+        if not np.all(np.isfinite(values)):
+            raise LogError(f"{name}: column {col} has a missing, NaN or infinite value at row {_first_bad(values)}")
+
+
+def _check_magnitudes(name, columns):
+    """No value of each ``(column name, values)`` beyond :data:`MAX_MAGNITUDE` (NaN, a missing cell, passes; an
+    infinity does not); else a one-line :class:`LogError`."""
+    for col, values in columns:
+        big = np.abs(np.nan_to_num(values)) > MAX_MAGNITUDE
+        if big.any():
+            row = int(np.argmax(big))
+            raise LogError(f"{name}: column {col} holds {values[row]:.3g} at row {row + 1}; values beyond "
+                           f"{MAX_MAGNITUDE:.0e} are not measurements in s, rad, m, N m or N")
+
+
+def _check_steps(name, t):
+    """The time step of ``t`` (finite), strictly increasing and evenly sampled (every step within
+    ``_SAMPLING_TOLERANCE`` of the median); else a one-line :class:`LogError`.
+
+    Returns
+    -------
+    float
+        The median step, s.
+    """
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        raise LogError(f"{name}: time is not strictly increasing at row {np.argmax(steps <= 0) + 2}")
+    dt = float(np.median(steps))
+    spread = np.max(np.abs(steps - dt)) / dt
+    if spread > _SAMPLING_TOLERANCE:
+        raise LogError(f"{name}: time is not evenly sampled; steps range from "
+                       f"{steps.min():.6g} to {steps.max():.6g} s (resample to one step)")
+    return dt
 
 
 def _first_bad(values):

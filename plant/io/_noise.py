@@ -6,7 +6,7 @@ import numpy as np
 
 from fmscal.plant.physics import NoiseSpec
 
-__all__ = ["estimate_noise"]
+__all__ = ["estimate_noise", "difference_noise"]
 
 
 def estimate_noise(log):
@@ -33,15 +33,7 @@ def estimate_noise(log):
         deviation is the mean over the axes; in a spatial log the angle's
         from the quaternion's four components).
     """
-    def sd(runs):
-        estimates = []
-        for k in (2, 4, 6, 8):
-            d = np.concatenate([np.diff(r, n=k, axis=0) for r in runs if len(r) > k] or [np.empty((0,))])
-            if len(d) >= 10:
-                mad = np.median(np.abs(d - np.median(d)))
-                estimates.append(1.4826 * mad / np.sqrt(comb(2 * k, k)))
-        return float(min(estimates)) if estimates else 0.0
-
+    sd = _runs_sd
     wrench = tuple(sd([log.w_hat[:, j]]) for j in range(log.w_hat.shape[1]))
     runs = _even_runs(np.flatnonzero(log.has_pose))
     if getattr(log, "kind", "planar") == "spatial":
@@ -59,6 +51,38 @@ def estimate_noise(log):
     angle = [sd([log.pose[r, j] for r in runs]) for j, c in enumerate(names) if c in model.angle_names]
     position = [sd([log.pose[r, j] for r in runs]) for j, c in enumerate(names) if c in model.position_names]
     return NoiseSpec(wrench, float(np.mean(angle)) if angle else 0.0, float(np.mean(position)) if position else 0.0)
+
+
+def _runs_sd(runs):
+    """The noise sd of one channel's evenly spaced runs (1-D arrays): :func:`estimate_noise`'s robust estimate,
+    the smallest over k = 2, 4, 6, 8 of ``1.4826 MAD(diff_k) / sqrt(C(2k, k))``; 0.0 where too few samples."""
+    estimates = []
+    for k in (2, 4, 6, 8):
+        d = np.concatenate([np.diff(r, n=k, axis=0) for r in runs if len(r) > k] or [np.empty((0,))])
+        if len(d) >= 10:
+            mad = np.median(np.abs(d - np.median(d)))
+            estimates.append(1.4826 * mad / np.sqrt(comb(2 * k, k)))
+    return float(min(estimates)) if estimates else 0.0
+
+
+def difference_noise(values, rows=None):
+    """Each column's noise sd by :func:`estimate_noise`'s robust estimate, for an array rather than a log.
+
+    Parameters
+    ----------
+    values : array_like, shape (N, m)
+    rows : array_like of int, optional
+        The rows that hold samples (the others skipped), split into runs of even spacing as
+        :func:`estimate_noise` splits a log's poses; default every row.
+
+    Returns
+    -------
+    ndarray, shape (m,)
+        0.0 for a column with too few samples or none that changes.
+    """
+    values = np.asarray(values, dtype=float)
+    runs = [np.arange(len(values))] if rows is None else _even_runs(np.asarray(rows, dtype=int))
+    return np.array([_runs_sd([values[r, j] for r in runs]) for j in range(values.shape[1])])
 
 
 def _even_runs(rows):

@@ -45,7 +45,8 @@ from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import rotation_matrix
 
 __all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units",
-           "check_table_units", "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
+           "check_table_units", "check_imu_units", "MAX_GYRO_RATE",
+           "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
 
 #: Earth's gravity, m/s^2; a given ``|g|`` more than :data:`_G_TOLERANCE` from it is refused.
 EARTH_G = 9.81
@@ -58,6 +59,10 @@ MAX_LEVER_ARM = 1.0
 MAX_ACCELERATION = 50.0
 #: The largest time step of a force-sensor log, s (a log stamped in ms shows steps of 1).
 MAX_STEP = 0.5
+#: An IMU's specific force: its median size within this band of :data:`EARTH_G` (a slow or moderate motion).
+_IMU_FORCE_BAND = (0.5, 2.0)
+#: The largest angular rate a gyro on a robot's tool reads, rad/s (2000 deg/s, a MEMS gyro's widest range).
+MAX_GYRO_RATE = np.deg2rad(2000.0)
 #: A ratio further than this from 1, either way, is a unit slip (the slips are factors 100 and 1000).
 _FAR = 30.0
 #: Window over which poses and readings are averaged before differentiating twice, s.
@@ -128,6 +133,66 @@ def check_readings_change(name, w_hat, names=("tx", "ty", "tz", "fx", "fy", "fz"
         raise UnitsError(f"{name}: column(s) {', '.join(constant)} of the reading never change (every row "
                          f"{w_hat[0, names.index(constant[0])]:g}): a channel not connected or a column written "
                          "empty; check the recording")
+
+
+def check_imu_units(name, angular_velocity, specific_force, orientation=None, dt=None):
+    """Refuse an IMU's specific force or rate in another unit than m/s^2 and rad/s, naming the unit.
+
+    The specific force ``f = R^T (p_ddot - g)`` has ``|f|`` near ``|g|`` wherever the motion is slow
+    (:data:`EARTH_G`): its median size over the samples is within 0.5-2 g, else the size names the unit (g,
+    cm/s^2, mm/s^2). The rate is checked against the orientation's: with ``R_k`` the IMU's attitudes (scalar-first
+    quaternions, :func:`_rotations`), ``R_k^T R_(k+1) = I + [omega] dt`` to first order, so ``omega`` from
+    consecutive orientations (the skew part's vector over ``dt``); the gyro's least-squares scale against it
+    near ``180/pi`` is a gyro in deg/s. Without orientations, a rate beyond :data:`MAX_GYRO_RATE` is one.
+
+    Parameters
+    ----------
+    name : str
+        The log's name, for the message.
+    angular_velocity, specific_force : array_like, shape (N, 3)
+        rad/s and m/s^2, the IMU's axes; NaN rows where no sample.
+    orientation : array_like, shape (N, 4), optional
+        The IMU's attitudes (its axes to its world), scalar first; NaN rows where none.
+    dt : float, optional
+        The time step between rows, s (needed for the rate's check against the orientations).
+
+    Raises
+    ------
+    UnitsError
+    """
+    omega, f = np.asarray(angular_velocity, dtype=float), np.asarray(specific_force, dtype=float)
+    given = np.isfinite(omega).all(axis=1) & np.isfinite(f).all(axis=1)
+    if not given.any():
+        return
+    size = float(np.median(np.linalg.norm(f[given], axis=1))) / EARTH_G
+    lo, hi = _IMU_FORCE_BAND
+    if not lo <= size <= hi:
+        units = {"g (multiples of 9.81)": 1 / EARTH_G, "cm/s^2": 100.0, "mm/s^2": 1000.0}
+        unit = next((u for u, k in units.items() if lo <= size / k <= hi), None)
+        raise UnitsError(f"{name}: the IMU's specific force has a median size of {size * EARTH_G:.4g}, not near "
+                         f"|g| = {EARTH_G} m/s^2 (within {lo:g}-{hi:g} g)" + (f": in {unit}? give it in m/s^2"
+                                                                            if unit else ": give it in m/s^2"))
+    deg = 180 / np.pi
+    q = None if orientation is None else np.asarray(orientation, dtype=float)
+    both = None if q is None or dt is None else given[:-1] & given[1:] & np.isfinite(q).all(axis=1)[:-1] \
+        & np.isfinite(q).all(axis=1)[1:]
+    if both is not None and both.sum() >= 10:
+        rows = np.flatnonzero(both)
+        R0, R1 = _rotations(q[rows]), _rotations(q[rows + 1])
+        D = np.einsum("nji,njk->nik", R0, R1)                                    # R_k^T R_(k+1)
+        from_q = np.c_[D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0], D[:, 1, 0] - D[:, 0, 1]] / (2 * dt)
+        gyro = (omega[rows] + omega[rows + 1]) / 2
+        energy = float(np.sum(from_q ** 2))
+        if energy > len(rows) * 1e-4:                                            # it turns: rms above 0.01 rad/s
+            scale = float(np.sum(gyro * from_q)) / energy
+            if deg / 2 < scale < deg * 2:
+                raise UnitsError(f"{name}: the IMU's rate is {scale:.3g} times the rate its orientations show: in "
+                                 "deg/s? give it in rad/s")
+            return
+    top = float(np.max(np.linalg.norm(omega[given], axis=1)))
+    if top > MAX_GYRO_RATE:
+        raise UnitsError(f"{name}: the IMU's rate reaches {top:.4g}, beyond what a gyro reads "
+                         f"({MAX_GYRO_RATE:.3g} rad/s, 2000 deg/s): in deg/s? give it in rad/s")
 
 
 def _rotations(quaternions):

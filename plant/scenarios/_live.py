@@ -13,6 +13,11 @@ the payload, :mod:`fmscal.plant.scenarios`); on top of a log of free motion:
 
 and :func:`drift_contact_log` puts them together as issue 38's drift scenario does: a drift of up to 2 N and
 0.05 N m with a time constant of 15 s, and a 15 N contact of 2 s at 30 s.
+
+Every function here takes the readings in the toolkit's convention, ``reading="reaction"`` (the wrench the
+mount applies to the payload, as the scenarios write them): the contact is subtracted and the drift added
+with that sign. A log of a sensor that reads the other way (``"load"``, :func:`fmscal.plant.io.reading_sign`
+``= -1``) is turned first (``w_hat`` times that sign) and back after, as the sign applies to the reading.
 """
 
 import numpy as np
