@@ -2,8 +2,6 @@
 
 import json
 import os
-import sysconfig
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,24 +12,14 @@ from fmscal.plant.io._kinematics import RobotKinematics, joint_columns
 from fmscal.plant.io._pose_table import simulate_table
 from fmscal.plant.physics._rigid_body import rotation_matrix
 from fmscal.plant.scenarios._spatial import TOOL
+from robot_rig import ur5_urdf
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 
 
-def _ur5():
-    """The UR5's URDF as example-robot-data (a test dependency) installs it."""
-    roots = {Path(sysconfig.get_paths()[k]) for k in ("purelib", "platlib")}
-    for root in roots:
-        path = root / "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
-        if path.exists():
-            return path
-    raise AssertionError(f"example-robot-data's UR5 URDF not found under {sorted(map(str, roots))}: "
-                         "pip install -e \".[test]\"")
-
-
 @pytest.fixture(scope="module")
 def ur5():
-    return RobotKinematics(_ur5(), "tool0")
+    return RobotKinematics(ur5_urdf(), "tool0")
 
 
 def test_the_pose_is_pinocchios_frame_placement_in_the_logs_order(ur5):
@@ -59,7 +47,7 @@ def test_a_table_of_joint_angles_gives_the_payload(ur5, tmp_path, capsys):
         rows = np.hstack([joints, table.w_hat])
         path.write_text(",".join([*names, "tx", "ty", "tz", "fx", "fy", "fz"]) + "\n"
                         + "\n".join(",".join(f"{v:.17g}" for v in row) for row in rows) + "\n")
-        assert main(["identify-payload", str(path), "--urdf", str(_ur5()), "--frame", "tool0", "--json"]) == 0
+        assert main(["identify-payload", str(path), "--urdf", str(ur5_urdf()), "--frame", "tool0", "--json"]) == 0
         fit = json.loads(capsys.readouterr().out)
         assert abs(fit["mass"] - TOOL.mass) < 0.01 * TOOL.mass
         assert np.abs(np.array(fit["com"]) - TOOL.com).max() < 2e-3 and fit["converged"]
@@ -67,15 +55,15 @@ def test_a_table_of_joint_angles_gives_the_payload(ur5, tmp_path, capsys):
 
 def test_a_frame_the_urdf_lacks_and_joints_that_do_not_match_are_one_line(tmp_path, capsys):
     with pytest.raises(FmscalError, match="has no frame 'sensor'"):
-        RobotKinematics(_ur5(), "sensor")
+        RobotKinematics(ur5_urdf(), "sensor")
     with pytest.raises(FmscalError, match="do not match the URDF's 6 joints: name them q1,q2"):
         joint_columns(["t", "a", "b", "tx", "ty", "tz", "fx", "fy", "fz"], [f"j{i}" for i in range(6)])
     path = tmp_path / "five.csv"
     path.write_text("q1,q2,q3,q4,q5,tx,ty,tz,fx,fy,fz\n" + "0,0,0,0,0,0,0,0,0,0,1\n" * 5)
-    assert main(["identify-payload", str(path), "--urdf", str(_ur5()), "--frame", "tool0"]) == 2
+    assert main(["identify-payload", str(path), "--urdf", str(ur5_urdf()), "--frame", "tool0"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "do not match the URDF's 6 joints" in err
-    assert main(["identify-payload", str(path), "--urdf", str(_ur5())]) == 2
+    assert main(["identify-payload", str(path), "--urdf", str(ur5_urdf())]) == 2
     assert "--urdf and --frame go together" in capsys.readouterr().err
 
 
@@ -93,14 +81,14 @@ def test_a_bag_of_joint_states_imports_as_a_spatial_log(ur5, tmp_path, capsys):
                     joints=joints[:, order], joint_names=[ur5.joint_names[i] for i in order])
     out = tmp_path / "arm.csv"
     assert main(["import", str(bag), "--wrench-topic", "/ft_sensor/wrench", "--pose-topic", "/joint_states",
-                 "--urdf", str(_ur5()), "--frame", "tool0", "--out", str(out)]) == 0
+                 "--urdf", str(ur5_urdf()), "--frame", "tool0", "--out", str(out)]) == 0
     back = read_log(out)
     assert back.kind == "spatial" and len(back) == len(t)
     np.testing.assert_allclose(back.pose, poses, atol=1e-9)
     np.testing.assert_allclose(back.w_hat, log.w_hat, atol=1e-12)
     capsys.readouterr()
     assert main(["import", str(bag), "--wrench-topic", "/ft_sensor/wrench", "--pose-topic", "/joint_states",
-                 "--urdf", str(_ur5()), "--frame", "tool0", "--out", str(tmp_path / "again.csv"),
+                 "--urdf", str(ur5_urdf()), "--frame", "tool0", "--out", str(tmp_path / "again.csv"),
                  "--pose-offset", "0", "0", "0"]) == 2
     assert "--pose-offset is not taken with --urdf" in capsys.readouterr().err
 
@@ -116,7 +104,7 @@ def test_joint_columns_beyond_the_urdfs_and_a_missing_urdf_are_one_line(tmp_path
     path.write_text("q1,q2,q3,q4,q5,q6,q7,tx,ty,tz,fx,fy,fz\n" + "0.1,0.2,0.3,0.4,0.5,0.6,0,0,0,0,0,0,1\n" * 5)
     for command in ("identify-payload", "calibrate"):
         extra = ["--mass", "1.2", "--com", "0", "0", "0.05"] if command == "calibrate" else []
-        assert main([command, str(path), "--urdf", str(_ur5()), "--frame", "tool0", *extra]) == 2
+        assert main([command, str(path), "--urdf", str(ur5_urdf()), "--frame", "tool0", *extra]) == 2
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and "7 joint columns" in err and "6 joints" in err, err
     assert main(["identify-payload", str(path), "--urdf", str(tmp_path / "robot.urdf"), "--frame", "tool0"]) == 2
@@ -135,13 +123,13 @@ def test_calibrate_takes_a_table_of_joint_angles(ur5, tmp_path, capsys):
     path.write_text("q1,q2,q3,q4,q5,q6,tx,ty,tz,fx,fy,fz\n"
                     + "\n".join(",".join(f"{v:.17g}" for v in row) for row in np.hstack([joints, table.w_hat])) + "\n")
     payload = ["--mass", repr(TOOL.mass), "--com", *map(repr, TOOL.com)]
-    assert main(["calibrate", str(path), "--urdf", str(_ur5()), "--frame", "tool0", *payload, "--json"]) == 0
+    assert main(["calibrate", str(path), "--urdf", str(ur5_urdf()), "--frame", "tool0", *payload, "--json"]) == 0
     captured = capsys.readouterr()
     report = json.loads(captured.out)
     assert report["kind"] == "table" and report["poses"] == 16 and not report["converged"]
     b, b_std = np.array(report["b"]), np.array(report["b_std"])
     assert np.all(np.abs(b - OFFSET) < 4 * b_std) and np.all(b_std < 0.05)
-    assert main(["calibrate", str(path), "--urdf", str(_ur5()), *payload]) == 2
+    assert main(["calibrate", str(path), "--urdf", str(ur5_urdf()), *payload]) == 2
     assert "--urdf and --frame go together" in capsys.readouterr().err
 
 
