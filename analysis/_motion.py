@@ -156,6 +156,23 @@ class JointMotion:
     def __repr__(self):
         return f"JointMotion({self.kinematics.frame_id}, joints={self.joints})"
 
+    def poses(self, q):
+        """The frame's poses for rows of joint values in :attr:`joints` order (forward kinematics).
+
+        Parameters
+        ----------
+        q : array_like, shape (N, size)
+
+        Returns
+        -------
+        ndarray, shape (N, 7)
+            ``[qw, qx, qy, qz, x, y, z]`` in the URDF's base frame, as a spatial log holds them.
+        """
+        q = np.asarray(q, dtype=float)
+        if q.ndim != 2 or q.shape[1] != self.size:
+            raise MotionError(f"q must be rows of {self.size} joint values; got shape {q.shape}")
+        return self.kinematics.poses(q[:, self._to_urdf])
+
     def check(self, model):
         _check_spatial(model, "JointMotion")
 

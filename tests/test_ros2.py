@@ -384,6 +384,30 @@ def test_joint_states(request, ur5, tmp_path):
     assert np.abs(wrench).max() < 2e-3
 
 
+def test_identify_payload_from_joint_states(tmp_path):
+    """identify_payload on joint states: the held joint angles' poses by the URDF's forward kinematics, the
+    payload fitted to them and the readings (the truth's mass and centre of mass); an IMU source is refused."""
+    run = robot_rig.ur5_run(2.0)
+    values = {p.name: p.default for p in PARAMETERS}
+    values.update(calibration=str(_source_calibration(tmp_path)), joint_states_topic="/j",
+                  urdf=str(robot_rig.ur5_urdf()), frame="tool0", sample_time=1e-3)
+    pipeline = Pipeline(settings(values), motion=run["motion"], kind="joints")
+    for t, q, w in zip(run["t"], run["q"], run["W"]):
+        pipeline.add_motion(t, (q, None, None))
+        pipeline.add_reading(t, w)
+        pipeline.process()
+    ok, message = pipeline.identify()
+    assert ok, message
+    mass = float(message.split("mass ")[1].split(" ")[0])
+    com = np.array(message.split("com ")[1].split(" m")[0].split(), dtype=float)
+    assert mass == pytest.approx(TOOL.mass, rel=1e-3)
+    assert np.all(np.abs(com - np.asarray(TOOL.com)) < 1e-3), com
+    imu = Pipeline(settings({**values, "joint_states_topic": "", "urdf": "", "frame": "", "imu_topic": "/i"}),
+                   motion=ImuMotion(), kind="imu")
+    ok, message = imu.identify()
+    assert not ok and message.startswith("identify_payload needs the poses of a 6-axis sensor"), message
+
+
 @pytest.mark.slow
 def test_imu(request, ur5, tmp_path):
     """sensor_msgs/Imu (orientation scalar last) of an IMU turned and 7 cm off the sensor's point, imu_rotation

@@ -315,11 +315,11 @@ class Pipeline:
             self._saturated.add(t)
             self._saturated_at = t
         self._frames[t] = (stamp, frame_id, arrival)
-        if self.kind == "pose" and not gap:
+        if self.kind in ("pose", "joints") and not gap:
             if value is None:
                 self._held.clear()                     # identify_payload takes the newest stretch without a gap
-            else:
-                self._held.append((t, np.asarray(value, dtype=float), w_hat))
+            else:                                      # a pose, or joint angles (their pose at identify_payload)
+                self._held.append((t, np.asarray(value if self.kind == "pose" else value[0], dtype=float), w_hat))
                 while self._held and self._held[0][0] < t - self.settings.identify_buffer:
                     self._held.popleft()
 
@@ -381,8 +381,8 @@ class Pipeline:
     def identify(self):
         """``(success, message)`` of ``~/identify_payload``: the payload fitted to the motion and readings held
         since the last call; the compensation then uses it (and ``~/save`` writes it)."""
-        if self.kind != "pose" or self.model.attitude != "quaternion":
-            return False, "identify_payload needs a pose stream of a 6-axis sensor (pose_topic)"
+        if self.kind == "imu" or self.model.attitude != "quaternion":
+            return False, "identify_payload needs the poses of a 6-axis sensor (pose_topic or joint_states_topic)"
         with self.lock:
             held = list(self._held)
             self._held.clear()
@@ -391,6 +391,8 @@ class Pipeline:
             return False, f"identify_payload refused: {len(held)} samples held since the last call (at least 1 s " \
                           "of motion without a gap needed)"
         t, pose, w_hat = (np.array(v) for v in zip(*held))
+        if self.kind == "joints":
+            pose = self.motion.poses(pose)                 # the sensor frame's, in the URDF's base frame
         cal = self.calibration
         gravity = self.settings.gravity if self.settings.gravity is not None else cal.gravity
         reading = self.settings.reading or cal.reading
