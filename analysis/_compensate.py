@@ -363,11 +363,12 @@ class _Parts:
         S_inv = np.linalg.inv(self.S)
         return S_inv @ self.cov4[:, self.n, :, self.n] @ S_inv.T
 
-    def finish(self, w_hat, W_p, A_inv, accel_var, tracker=None, t=None):
+    def finish(self, w_hat, W_p, A_inv, accel_var, tracker=None, t=None, cov=None):
         """(C1), (C3), (C4) for rows of readings ``w_hat`` (N, n_w) and payload wrenches ``W_p``; with an
-        :class:`_OffsetTracker`, (D1)-(D3) sample by sample at times ``t``, and its offsets and sds."""
+        :class:`_OffsetTracker`, (D1)-(D3) sample by sample at times ``t``, and its offsets and sds. ``cov``: the
+        rows' (C3), where the caller has it already."""
         signed = self.sign * w_hat
-        cov = self.covariance(signed, A_inv, accel_var)
+        cov = self.covariance(signed, A_inv, accel_var) if cov is None else cov
         if tracker is not None:
             steps = [tracker.step(ti, si, wi, ci) for ti, si, wi, ci in zip(t, signed, W_p, cov)]
             w_e, cov, statistic, b, b_sd = (np.array(v) for v in zip(*steps))
@@ -965,11 +966,12 @@ class Compensator:
             P, c2_sq = fitted
         x, a = _state(self.model, P[0:1], P[1:2], P[2:3])
         W_p, A_inv = _payload_wrench(self.model, x, a)
-        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv,
-                                                                      self._accel_var * c2_sq, self._tracker, [t0])
         signed = self._parts.sign * reading
-        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]),
-                           self._parts.covariance(signed[None], A_inv, self._accel_var * c2_sq)[0], bool(contact[0])))
+        own = self._parts.covariance(signed[None], A_inv, self._accel_var * c2_sq)      # (C3), once
+        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv,
+                                                                      self._accel_var * c2_sq, self._tracker, [t0],
+                                                                      own)
+        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]), own[0].copy(), bool(contact[0])))
         offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
         if not self._output.identity:
             wrench, cov = self._output.apply(wrench, cov, _pose_attitudes(x, self.model)
@@ -1034,11 +1036,11 @@ class Compensator:
         W_p, A_inv = _payload_wrench(self.model, x, a)
         if wanted == "imu":
             A_inv = A_inv @ M                       # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
-        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv, accel_var,
-                                                                      self._tracker, [t0])
         signed = self._parts.sign * reading
-        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]),
-                           self._parts.covariance(signed[None], A_inv, accel_var)[0], bool(contact[0])))
+        own = self._parts.covariance(signed[None], A_inv, accel_var)                  # (C3), once
+        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv, accel_var,
+                                                                      self._tracker, [t0], own)
+        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]), own[0].copy(), bool(contact[0])))
         offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
         wrench, cov = self._output.apply(wrench, cov, R)
         return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]), offset, offset_sd)
@@ -1201,13 +1203,13 @@ class Compensator:
         x, a = _state(self.model, P[0], P[1], P[2])
         W_p, A_inv = _payload_wrench(self.model, x, a)
         accel_var = self._accel_var * c2_sq
-        wrench, cov, contact, statistic, *offset = self._parts.finish(reading, W_p, A_inv, accel_var, self._tracker,
-                                                                      t0)
         signed = self._parts.sign * reading
+        own = self._parts.covariance(signed, A_inv, accel_var)                        # (C3), once
+        wrench, cov, contact, statistic, *offset = self._parts.finish(reading, W_p, A_inv, accel_var, self._tracker,
+                                                                      t0, own)
         found = signed - np.linalg.solve(self._parts.S, W_p.T).T
-        own = self._parts.covariance(signed, A_inv, accel_var)
         for row in range(max(0, m - self._last.maxlen), m):
-            self._last.append((found[row], own[row], bool(contact[row])))
+            self._last.append((found[row], own[row].copy(), bool(contact[row])))
         if not self._output.identity:
             wrench, cov = self._output.apply(wrench, cov, _pose_attitudes(x, self.model)
                                              if self._output.needs_attitude else None)
