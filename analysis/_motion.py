@@ -80,9 +80,10 @@ def quaternion_to_matrix(q):
 
 
 def _rotations(quaternions):
-    """``R(q)`` of each row of unit quaternions (N, 4), shape (N, 3, 3)."""
-    return np.array([np.asarray(rotation_matrix(q), dtype=float) for q in np.asarray(quaternions, dtype=float)]
-                    ).reshape(-1, 3, 3)
+    """``R(q)`` of each row of unit quaternions (N, 4), shape (N, 3, 3): the one ``rotation_matrix`` over the rows
+    at once."""
+    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+    return np.moveaxis(np.asarray(rotation_matrix(q.T), dtype=float), -1, 0).reshape(-1, 3, 3)
 
 
 def _cross(a, b):

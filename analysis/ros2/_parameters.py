@@ -12,6 +12,7 @@ import numpy as np
 from fmscal.plant.numerics import FmscalError
 
 from .._compensate import CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, FALSE_ALARM
+from .._motion import quaternion_to_matrix
 
 __all__ = ["NODE_NAME", "PARAMETERS", "Parameter", "Ros2Error", "Settings", "settings", "QOS", "OUTPUT_FRAMES",
            "MOTION_SOURCES"]
@@ -144,10 +145,7 @@ def _quaternion_matrix(xyzw, name):
     norm = np.linalg.norm(xyzw)
     if abs(norm - 1) > 1e-3:
         raise Ros2Error(f"parameter {name} must be a unit quaternion x y z w; its norm is {norm:.6g}")
-    x, y, z, w = xyzw / norm
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return quaternion_to_matrix(np.r_[w, x, y, z])                  # fmscal's order, scalar first
 
 
 def settings(values):
