@@ -62,15 +62,17 @@ def node_command(*parameters, params_file=None):
 
 
 @contextmanager
-def running_node(domain, *parameters, params_file=None):
+def running_node(domain, *parameters, params_file=None, ros_args=()):
     """The node in a subprocess of domain ``domain``; stopped (SIGINT, then SIGKILL) on leaving. Yields the
-    :class:`subprocess.Popen` (its stderr piped to a file, read by :func:`node_log`)."""
+    :class:`subprocess.Popen` (its stderr piped to a file, read by :func:`node_log`). ``ros_args``: more ROS
+    arguments after the parameters (``-r`` remappings)."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                PYTHONUNBUFFERED="1")
     parameters = ("diagnostics_period:=0.1", *parameters)
     log = open(os.devnull, "w") if os.environ.get("FMSCAL_ROS_QUIET") else None
     err = tempfile.TemporaryFile(mode="w+")
-    proc = subprocess.Popen(node_command(*parameters, params_file=params_file), env=env, stdout=log or err,
+    proc = subprocess.Popen(node_command(*parameters, params_file=params_file) + list(ros_args), env=env,
+                            stdout=log or err,
                             stderr=err, text=True)
     proc.log_file = err
     try:

@@ -7,8 +7,6 @@ node's output is compared with ``compensate(..., causal=True)`` on the same log.
 """
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -566,12 +564,9 @@ def test_remapped_names(request, arm, cal_file):
     and its topics remapped, a relative pose topic among them."""
     scenario, log, truth, cal = arm
     domain = domain_id(request.node.name)
-    command = node_command(f"calibration:={cal_file}", "pose_topic:=pose_in", "qos:=reliable",
-                           "diagnostics_period:=0.1") + ["-r", "__node:=comp", "-r", "/ft_sensor/wrench:=/ati/raw",
-                                                         "-r", "pose_in:=/mocap/tool"]
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
+    remaps = ["-r", "__node:=comp", "-r", "/ft_sensor/wrench:=/ati/raw", "-r", "pose_in:=/mocap/tool"]
+    with running_node(domain, f"calibration:={cal_file}", "pose_topic:=pose_in", "qos:=reliable",
+                      ros_args=remaps):
         peer = Peer(domain, wrench_topic="/ati/raw", pose_topic="/mocap/tool", node_name="comp")
         try:
             assert peer.wait_for(lambda: peer.wrench_pub.get_subscription_count() and peer.diagnostics
@@ -582,12 +577,5 @@ def test_remapped_names(request, arm, cal_file):
             names = peer.node.get_node_names()
         finally:
             peer.close()
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=10)
     assert ok, message
     assert {"comp", "comp_inputs", "comp_services"} <= set(names) and "fmscal_compensator" not in names
