@@ -1,8 +1,8 @@
 """The rclpy node: parameters declared, topics and services wired to :class:`._pipeline.Pipeline`.
 
 rclpy and the message packages are imported by :func:`ros` when the node starts (never when fmscal is
-imported): the wheels of the extra ``[ros2]``, or a system ROS 2's rclpy (Humble, Jazzy) once its setup is
-sourced.
+imported): the wheels of the extra ``[ros2]`` (Kilted) or ``[ros2-jazzy]``, or a system ROS 2's rclpy (Humble,
+Jazzy) once its setup is sourced.
 
 Threads. The inputs (the wrench, the motion) are subscriptions of a node ``<name>_inputs`` that no executor
 spins: a thread of the node's own takes every message queued on both (:meth:`CompensatorNode.poll`, waiting on
