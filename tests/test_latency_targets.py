@@ -19,7 +19,7 @@ _SPEC.loader.exec_module(bench)
                                                ("mujoco-arm", (0.0, 5.0))])
 def test_the_latency_targets_hold(source, latencies):
     """Two seeds of 10 s per source and latency. The z-scores' rms within [0.8, 1.25], or, where the method with
-    the latency given is already above that (the floor on short spatial-mocap logs, 1.37 on 15 s), within 1.05x of
+    the latency given is already above that (the floor on short spatial-mocap logs), within 1.05x of
     it: the latency's estimate adds nothing."""
     rows = bench.targets(seeds=2, duration=10.0, sources=(source,), latencies=latencies)
     assert max(r["E_ratio_max"] for r in rows) <= 1.15
