@@ -263,6 +263,50 @@ def _mapped(model, n):
     return _dynamics(model).map(n)
 
 
+@lru_cache(maxsize=8)
+def _one_sample(model):
+    """One sample's (C2) from its smoothed pose and two derivatives, as one casadi Function: the input
+    ``[p; p'; p'']`` (3 n_pose), the output ``[x; a; A(x) (column-major); d(x)]`` (:func:`_kinematics`, then
+    :func:`_dynamics`'s expressions). Evaluated through a :class:`_SampleDynamics` buffer: a streaming sample
+    pays no conversion of casadi's matrices."""
+    p = ca.SX.sym("p", 3 * model.n_pose)
+    n = model.n_pose
+    configuration, velocity, acceleration = _kinematics(model, p[:n], p[n:2 * n], p[2 * n:])
+    x = ca.SX.zeros(model.nx)
+    x[list(model.q_index)] = configuration
+    x[list(model.v_index)] = velocity
+    A, d = ca.SX(model.input_matrix(x)), ca.SX(model.drift(x))
+    return ca.Function(f"one_sample_{model.name}", [p], [ca.densify(ca.vertcat(x, acceleration, ca.vec(A), d))])
+
+
+class _SampleDynamics:
+    """:func:`_one_sample` through casadi's low-overhead buffer (``Function.buffer``): one sample's ``x``,
+    ``a``, ``W_p`` and ``A^-1`` of (C2). One per :class:`Compensator` (the buffer's memory is its own)."""
+
+    def __init__(self, model):
+        f = _one_sample(model)
+        self.model = model
+        self._in = np.zeros(3 * model.n_pose)
+        self._out = np.zeros(f.nnz_out(0))
+        buffer, self._call = f.buffer()
+        buffer.set_arg(0, memoryview(self._in))
+        buffer.set_res(0, memoryview(self._out))
+        self._buffer = buffer                              # kept alive with the arrays it points into
+
+    def __call__(self, P):
+        """``(x (1, nx), a (1, nv), W_p (1, n_w), A^-1 (1, n_w, nv))`` from ``P`` (3, n_pose)."""
+        m = self.model
+        self._in[:] = P.ravel()
+        self._call()
+        out = self._out
+        x, a = out[:m.nx], out[m.nx:m.nx + m.nv]
+        start = m.nx + m.nv
+        A = out[start:start + m.nv * m.n_w].reshape(m.n_w, m.nv).T
+        d = out[start + m.nv * m.n_w:]
+        A_inv = np.linalg.inv(A)
+        return x[None].copy(), a[None].copy(), (A_inv @ (a - d))[None], A_inv[None]
+
+
 def _payload_wrench(model, x, a):
     """``W_p = A(x)^-1 (a - d(x))`` (C2) at each row of ``x`` (N, nx), ``a`` (N, nv); and ``A^-1``."""
     f = _dynamics(model)
@@ -277,21 +321,27 @@ def _payload_wrench(model, x, a):
     return np.einsum("nij,nj->ni", A_inv, a - d), A_inv
 
 
+def _kinematics(model, p0, p1, p2):
+    """The configuration, velocities and accelerations from the smoothed pose and its first two derivatives:
+    columns ``(n_pose, N)`` of numbers, or casadi column vectors (the log's pose order). A unit quaternion's
+    rates give ``omega``, ``alpha`` (module docstring); a configuration that moves additively is the pose
+    itself."""
+    if model.attitude != "quaternion":
+        return p0, p1, p2
+    symbolic = isinstance(p0, (ca.SX, ca.MX))
+    cat = ca.vertcat if symbolic else (lambda *rows: np.concatenate(rows, axis=0))
+    norm = (p0[0] ** 2 + p0[1] ** 2 + p0[2] ** 2 + p0[3] ** 2) ** 0.5
+    q = p0[:4] / norm
+    conj = cat(q[:1], -q[1:4])
+    omega = 2 * quaternion_multiply(conj, p1[:4] / norm)[1:]
+    alpha = 2 * quaternion_multiply(conj, p2[:4] / norm)[1:]
+    return cat(p0[4:], q), cat(p1[4:], omega), cat(p2[4:], alpha)          # [p, q], from the pose [q, p]
+
+
 def _state(model, P0, P1, P2):
     """The state ``x`` (N, nx) and the accelerations ``a`` (N, nv) from the smoothed poses and their first two
-    derivatives (each (N, n_pose), the log's pose order). A unit quaternion's rates give ``omega``, ``alpha``
-    (module docstring); a configuration that moves additively is the pose itself."""
-    if model.attitude == "quaternion":
-        norm = np.linalg.norm(P0[:, :4], axis=1, keepdims=True)
-        q = P0[:, :4] / norm
-        conj = (q * np.array([1.0, -1.0, -1.0, -1.0])).T
-        omega = 2 * quaternion_multiply(conj, P1[:, :4].T / norm.T)[1:].T
-        alpha = 2 * quaternion_multiply(conj, P2[:, :4].T / norm.T)[1:].T
-        configuration = np.concatenate([P0[:, 4:], q], axis=1)            # [p, q], from the pose [q, p]
-        velocity = np.concatenate([P1[:, 4:], omega], axis=1)
-        acceleration = np.concatenate([P2[:, 4:], alpha], axis=1)
-    else:
-        configuration, velocity, acceleration = P0, P1, P2
+    derivatives (each (N, n_pose), the log's pose order): :func:`_kinematics` row by row."""
+    configuration, velocity, acceleration = (v.T for v in _kinematics(model, P0.T, P1.T, P2.T))
     x = np.empty((len(P0), model.nx))
     x[:, list(model.q_index)] = configuration
     x[:, list(model.v_index)] = velocity
@@ -879,6 +929,7 @@ class Compensator:
             motion.check(self.model)
         self.motion = motion
         self._output = _Output(self.model, frame, point)
+        self._sample = _SampleDynamics(self.model)
         self.frame, self.point = frame, self._output.point
         noise = _noise(calibration, noise)
         self._parts = _Parts(calibration, self.model, noise, direction, false_alarm)
@@ -964,8 +1015,7 @@ class Compensator:
             if fitted is None:
                 return None
             P, c2_sq = fitted
-        x, a = _state(self.model, P[0:1], P[1:2], P[2:3])
-        W_p, A_inv = _payload_wrench(self.model, x, a)
+        x, a, W_p, A_inv = self._sample(P)
         signed = self._parts.sign * reading
         own = self._parts.covariance(signed[None], A_inv, self._accel_var * c2_sq)      # (C3), once
         wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv,
