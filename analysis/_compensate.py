@@ -263,6 +263,11 @@ def _mapped(model, n):
     return _dynamics(model).map(n)
 
 
+#: A block of at most this many rows goes through :class:`_SampleDynamics` row by row; a longer one through the
+#: mapped Function at once (fewer calls, each converting casadi's matrices).
+_ROW_BY_ROW = 16
+
+
 @lru_cache(maxsize=8)
 def _one_sample(model):
     """One sample's (C2) from its smoothed pose and two derivatives, as one casadi Function: the input
@@ -1250,8 +1255,11 @@ class Compensator:
         t0 = np.array([r[0] for r in readings[:m]])
         reading = np.array([r[1] for r in readings[:m]])
         c2_sq = float(np.sum(self._coefficients[2] ** 2))
-        x, a = _state(self.model, P[0], P[1], P[2])
-        W_p, A_inv = _payload_wrench(self.model, x, a)
+        if m <= _ROW_BY_ROW:                                   # a few rows: the sample's buffer, row by row
+            x, a, W_p, A_inv = (np.concatenate(v) for v in zip(*(self._sample(P[:, i]) for i in range(m))))
+        else:
+            x, a = _state(self.model, P[0], P[1], P[2])
+            W_p, A_inv = _payload_wrench(self.model, x, a)
         accel_var = self._accel_var * c2_sq
         signed = self._parts.sign * reading
         own = self._parts.covariance(signed, A_inv, accel_var)                        # (C3), once
