@@ -18,7 +18,8 @@ from ._reproduce import PAPER_CLAIMS, reproduce
 from ._ablation import ablation
 from ._sensitivity import PARAMETERS, sensitivity, tolerable_error
 from ._bench import BenchSettings, run_bench
-from ._compensate import Compensation, Compensator, ContactSample, compensate
+from ._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DRIFT_INTENSITY, FALSE_ALARM, Compensation, Compensator,
+                          ContactSample, compensate)
 from ._motion import ImuMotion, JointMotion
 from ._plots import plot_S_entries, plot_calibration, plot_comparison, plot_error_histories
 
@@ -26,4 +27,5 @@ __all__ = ["calibration_error", "block_errors", "error_history", "tail_median", 
            "CONVERGENCE_THRESHOLD", "calibrate", "read_data", "DivergedError", "OptionError", "compare", "summarise",
            "summary_markdown", "sweep", "reproduce", "ablation", "sensitivity", "tolerable_error", "BenchSettings",
            "run_bench", "plot_S_entries", "plot_calibration", "plot_comparison", "plot_error_histories",
-           "compensate", "Compensation", "Compensator", "ContactSample", "JointMotion", "ImuMotion"]
+           "compensate", "Compensation", "Compensator", "ContactSample", "JointMotion", "ImuMotion", "CAUSAL_WINDOW",
+           "CAUSAL_DELAY", "FALSE_ALARM", "DRIFT_INTENSITY"]

@@ -126,9 +126,11 @@ __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compen
 DIRECTIONS = ("on_tool", "on_environment")
 #: Offline smoothing window, s (the calibration's least squares' own).
 OFFLINE_WINDOW = 0.2
-#: The causal filter: its window, s, the delay at which it is read, s, and its degree.
+#: The causal filter's window, s: the poses it fits a polynomial to.
 CAUSAL_WINDOW = 0.06
+#: The causal filter's delay, s: each output is the wrench of the reading this much older than the newest.
 CAUSAL_DELAY = 0.03
+#: The causal filter's degree.
 CAUSAL_ORDER = 3
 #: The contact test's false-alarm probability per sample (C4).
 FALSE_ALARM = 1e-3

@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from fmscal.analysis import Compensator, ImuMotion, calibrate, compensate  # noqa: E402
-from fmscal.analysis._compensate import CAUSAL_WINDOW  # noqa: E402
+from fmscal.analysis import CAUSAL_WINDOW  # noqa: E402
 from fmscal.plant import SPATIAL_SCENARIOS, Log  # noqa: E402
 from fmscal.plant.io import ImuLog, JointLog  # noqa: E402
 from fmscal.plant.scenarios import contact_wrench, same_rig, with_contact  # noqa: E402
