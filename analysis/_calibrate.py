@@ -117,7 +117,7 @@ def read_data(path, urdf=None, frame=None):
 
 
 def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency=None, max_latency=None,
-              offset=True, pose_noise=None, wrench_noise=None, truth=None):
+              offset=True, pose_noise=None, wrench_noise=None, truth=None, max_mass=None):
     """Estimate ``S`` and the sensor's offset from recorded data, with diagnostics: ``fmscal calibrate`` in Python.
 
     The case comes from ``data``:
@@ -187,6 +187,9 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         (N m, N). Noise not given is estimated from the log and reported.
     truth : plant.Truth or str or Path, optional
         Logs: the truth (or its sidecar file, ``fmscal simulate``'s), for E of eq. (16).
+    max_mass : float, optional
+        Spatial logs and held poses: the heaviest payload taken, kg (default
+        :data:`fmscal.plant.io.MAX_WRIST_MASS`); a mass given beyond it is refused as a slipped unit (g).
 
     Returns
     -------
@@ -246,7 +249,7 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     if isinstance(payload, StaticFit):                  # a pose table's fit stands for its payload as a log's does
         payload = payload.tracked()
     calibration = _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                                  wrench_noise, truth)
+                                  wrench_noise, truth, max_mass)
     if isinstance(payload, PayloadEstimate) and not payload.converged:
         # the payload is the model's: a fit that did not converge (a rotation it could not settle, too few poses)
         # leaves every S estimated with it in doubt, whatever the log says
@@ -257,17 +260,17 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
 
 
 def _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise, wrench_noise,
-                    truth):
+                    truth, max_mass=None):
     """:func:`calibrate` on its inputs, the payload estimate's own convergence aside."""
     if isinstance(data, (str, os.PathLike)):
         data = read_data(data)
     if isinstance(data, AttitudeLog):
         table, _, note = held_table(data)
         return _calibrate_table(table, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                                wrench_noise, truth, [note], "attitude-only log, its held segments")
+                                wrench_noise, truth, [note], "attitude-only log, its held segments", max_mass)
     if isinstance(data, PoseTable):
         return _calibrate_table(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                                wrench_noise, truth, [], "pose table")
+                                wrench_noise, truth, [], "pose table", max_mass)
     if not isinstance(data, Log):
         raise FmscalError(f"data must be a plant.Log, a pose table, an attitude-only log or a file name; "
                           f"got {type(data).__name__}")
@@ -280,7 +283,7 @@ def _calibrate_data(data, payload, method, reading, gravity, latency, max_latenc
     if max_latency is not None and not (_number(max_latency) and max_latency > 0):
         raise OptionError("max_latency", f"{{}} must be positive; got {max_latency}")
     return _calibrate_log(data, log_model_class(data), payload, method, reading, gravity, latency, max_latency, offset,
-                          pose_noise, wrench_noise, truth)
+                          pose_noise, wrench_noise, truth, max_mass)
 
 
 def _number(value):
@@ -413,7 +416,7 @@ def _log_payload_model(cls, payload, gravity):
 
 
 def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                   wrench_noise, truth):
+                   wrench_noise, truth, max_mass=None):
     """:func:`calibrate` on a log of the model class ``cls``: one workflow, each step as the model declares.
 
     The options the model does not take are refused (``signed_reading``, ``given_noise``,
@@ -432,8 +435,10 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     if reading is not None and not model.signed_reading:
         raise OptionError("reading", "{} is taken on a spatial log or a pose table; a planar log's sign is the "
                           "toolkit's")
+    if max_mass is not None and "spatial_units" not in model.input_checks:
+        raise OptionError("max_mass", f"{{}} is taken on a spatial log or a pose table; {case} has no mass limit")
     for check in model.input_checks:                    # before any fit: a slipped unit is named in one line
-        _INPUT_CHECKS[check](log, model)
+        _INPUT_CHECKS[check](log, model, max_mass=max_mass)
     name = DEFAULT_METHOD if method is None else method
     get_method(name)                                    # an unknown name: FmscalError naming the methods
     offered = method_names(calibrates=True, model=model)
@@ -736,14 +741,15 @@ def _check_gains(run, warnings):
     return found, True, None
 
 
-def _check_spatial_units(log, model):
+def _check_spatial_units(log, model, max_mass=None):
     """``"spatial_units"`` (an input check): a spatial log's units and conventions, against the model's
-    gravity and payload (:func:`fmscal.plant.io.check_spatial_log_units`): one line naming the slip."""
-    check_spatial_log_units(log, model.gravity, model.payload.mass, model.payload.com)
+    gravity and payload, the mass held to ``max_mass`` (:func:`fmscal.plant.io.check_spatial_log_units`): one line
+    naming the slip."""
+    check_spatial_log_units(log, model.gravity, model.payload.mass, model.payload.com, max_mass=max_mass)
 
 
-#: The checks a model may declare in :attr:`fmscal.plant.Model.input_checks`: each takes the log and the model
-#: before the fit and refuses in one line.
+#: The checks a model may declare in :attr:`fmscal.plant.Model.input_checks`: each takes the log, the model and
+#: ``max_mass=`` before the fit and refuses in one line.
 _INPUT_CHECKS = {"spatial_units": _check_spatial_units}
 
 #: The checks a model may declare in :attr:`fmscal.plant.Model.calibration_checks`: each takes the run and
@@ -773,7 +779,7 @@ def _not_settled(method):
 
 
 def _calibrate_table(table, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                     wrench_noise, truth, notes, what):
+                     wrench_noise, truth, notes, what, max_mass=None):
     """:func:`calibrate` on held poses."""
     _refuse("a pose table", [
         (method not in (None, TABLE_METHOD), "method", "held poses have one fit, least squares"),
@@ -786,7 +792,7 @@ def _calibrate_table(table, payload, method, reading, gravity, latency, max_late
     mass, com, spatial, estimated = _table_payload(payload)
     gravity = _gravity(_merge_gravity(gravity, estimated))
     reading = "reaction" if reading is None else reading
-    check_table_units(table, gravity, mass, com)          # a slipped unit named in one line
+    check_table_units(table, gravity, mass, com, max_mass=max_mass)          # a slipped unit named in one line
     fit = fit_table(table, mass, com, gravity, reading)
     directions = [np.asarray(d, dtype=float) for d in fit.undetermined]
     return Calibration(S=fit.S_hat, payload=spatial, method=TABLE_METHOD, S_std=fit.S_std, b=fit.b, b_std=fit.b_std,

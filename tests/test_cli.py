@@ -136,3 +136,18 @@ def test_reproduce_says_why_the_floor_does_not_converge_where_S_changes():
     text = summary_markdown(rows, 0, 1.0)
     assert "does not converge on time-varying" in text and "at 100 and 200 s" in text and "1.18" in text
     assert "on paper" not in text
+
+
+@pytest.mark.parametrize("unbuffered", ["", "1"])
+def test_output_cut_short_by_its_reader_ends_quietly(tmp_path, monkeypatch, unbuffered):
+    """``fmscal ... | head``: the reader gone before the command writes; status 141 (128 + SIGPIPE), nothing on
+    stderr (no traceback, no "Exception ignored" at the interpreter's exit), whether the write fails at once
+    (PYTHONUNBUFFERED) or at the last flush."""
+    monkeypatch.setenv("PYTHONUNBUFFERED", unbuffered)
+    args = ["simulate", "--scenario", "paper", "--duration", "1", "--out", str(tmp_path / "log.csv")]
+    proc = subprocess.Popen([sys.executable, "-m", "fmscal.analysis.cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()                                   # before the interpreter has even imported fmscal
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141, err
+    assert err == ""

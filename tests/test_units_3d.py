@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fmscal.analysis import calibrate
+from fmscal.analysis import OptionError, calibrate
 from fmscal.analysis.cli import main
 from fmscal.observers.payload import fit_static, identify_payload
 from fmscal.plant import SpatialPayload
 from fmscal.plant.io import UnitsError, check_spatial_log_units, check_table_units, simulate_table, write_pose_table
-from fmscal.plant.scenarios import SPATIAL_SCENARIOS, TOOL
+from fmscal.plant.scenarios import SCENARIOS, SPATIAL_SCENARIOS, TOOL
 
 OFFSET = np.array([0.01, -0.02, 0.03, 0.5, -0.3, 0.2])
 FLAGS = ["--mass", "1.2", "--com", "0.01", "-0.005", "0.06", "--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4",
@@ -274,3 +274,37 @@ def test_over_seeds_no_clean_data_is_refused_and_table_slips_are_found():
             except UnitsError as err:
                 found[what] += words in str(err)
     assert min(found.values()) >= 95, found
+
+
+def test_a_payload_heavier_than_a_wrist_sensor_carries_takes_max_mass(tmp_path, capsys):
+    """A 60 kg tool (a big robot's): refused by the 50 kg limit with the way round it named; taken with
+    max_mass= (--max-mass) in fit_static, identify_payload's table path, calibrate and the command line; a bad
+    max_mass, or one on a planar log, refused in one line."""
+    heavy = SpatialPayload(mass=60.0, com=(0.01, -0.02, 0.15), inertia=TOOL.inertia)
+    table = simulate_table(heavy, n=12, seed=3, offset=OFFSET)
+    with pytest.raises(UnitsError, match=r"beyond what a wrist sensor carries \(50 kg\).*raise max_mass"):
+        fit_static(table)
+    with pytest.raises(UnitsError, match=r"payload's mass is 60 kg, beyond what a wrist sensor carries.*--max-mass"):
+        calibrate(table, heavy)
+    fit = fit_static(table, max_mass=100)
+    assert abs(fit.mass - 60.0) < 5 * fit.mass_std and fit.mass_std < 0.6
+    assert calibrate(table, heavy, max_mass=80).poses == 12
+    with pytest.raises(UnitsError, match=r"largest mass allowed \(max_mass, 55 kg\)"):
+        calibrate(table, heavy, max_mass=55)
+    for bad in (0, -1.0, float("nan"), "60", True):
+        with pytest.raises(UnitsError, match="max_mass must be a positive number of kg"):
+            fit_static(table, max_mass=bad)
+    path = tmp_path / "heavy.csv"
+    write_pose_table(table, path)
+    flags = ["--mass", "60", "--com", "0.01", "-0.02", "0.15"]
+    assert main(["identify-payload", str(path)]) != 0
+    assert "--max-mass" in capsys.readouterr().err
+    assert main(["identify-payload", str(path), "--max-mass", "100"]) == 0
+    assert main(["calibrate", str(path), *flags, "--max-mass", "100"]) == 0
+    capsys.readouterr()
+    assert main(["calibrate", str(path), *flags, "--max-mass", "-1"]) != 0
+    err = capsys.readouterr().err
+    assert "--max-mass must be positive" in err and len(err.strip().splitlines()) == 1
+    paper_log, truth, _ = SCENARIOS["paper"].with_(duration=2.0).generate(0)
+    with pytest.raises(OptionError, match="max_mass is taken on a spatial log or a pose table"):
+        calibrate(paper_log, truth.payload, max_mass=80)

@@ -54,6 +54,9 @@ def add_calibrate(sub):
                         "applies to the payload) or load (the wrench the tool applies to the sensor, as ATI, "
                         "Robotiq, Bota and OnRobot report); recorded in the saved calibration")
     spatial_methods = method_names(calibrates=True, model=next(iter(SPATIAL_SCENARIOS.values())).payload)
+    p.add_argument("--max-mass", type=float, default=None, metavar="KG",
+                   help="spatial logs and tables: the heaviest payload taken, kg (default 50, what a wrist sensor "
+                        "carries); a mass beyond it is refused as a unit slip")
     p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
                    help=f"the method (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at the information "
                         "floor; its noise model is estimated from the log unless given). A planar log takes every "
@@ -112,7 +115,8 @@ def cmd_calibrate(args):
         truth = read_truth(args.truth) if args.truth and not table else args.truth
         cal = calibrate(data, payload, method=args.observer, reading=args.reading, gravity=args.gravity,
                         latency=args.latency, max_latency=args.max_latency, offset=args.offset,
-                        pose_noise=args.pose_noise, wrench_noise=args.wrench_noise, truth=truth)
+                        pose_noise=args.pose_noise, wrench_noise=args.wrench_noise, truth=truth,
+                        max_mass=None if args.max_mass is None else positive(args.max_mass, "--max-mass"))
     except OptionError as err:                    # the library's keyword, as this command's flag
         raise CliError(err.template.format(_FLAGS.get(err.option, err.option))) from None
     for note in cal.notes:
@@ -137,7 +141,8 @@ def cmd_calibrate(args):
 #: The command line's flag for each keyword of :func:`fmscal.analysis.calibrate` it refuses.
 _FLAGS = {"method": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
           "wrench_noise": "--wrench-noise", "latency": "--latency", "max_latency": "--max-latency", "truth": "--truth",
-          "gravity": "--gravity", "reading": "--reading", "urdf and frame": "--urdf and --frame"}
+          "gravity": "--gravity", "reading": "--reading", "urdf and frame": "--urdf and --frame",
+          "max_mass": "--max-mass"}
 
 
 def _payload(args, data, table):

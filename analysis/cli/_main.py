@@ -8,6 +8,7 @@ exception is a bug in the toolkit and shows its traceback.
 import argparse
 import contextlib
 import json
+import os
 import re
 import sys
 import warnings
@@ -419,6 +420,8 @@ def main(argv=None):
                 warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             args.func(args)
+    except BrokenPipeError:                    # the reader of stdout went away (| head): stop quietly, as cat does
+        return _pipe_closed()
     except (FmscalError, OSError) as err:      # the user's input or files; any other error is a bug
         message = str(err).splitlines()[0] if str(err) else type(err).__name__
         print(f"fmscal {args.command}: error: {one_line(message)}", file=sys.stderr)
@@ -429,6 +432,22 @@ def main(argv=None):
     return 0
 
 
+def _pipe_closed():
+    """Exit status 141 (128 + SIGPIPE) for output whose reader went away; stdout pointed at the null device, so
+    that the interpreter's last flush raises nothing more."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 141
+
+
 def console():
-    """The installed ``fmscal`` script: :func:`main` on the process's arguments, its code as the exit status."""
-    sys.exit(main())
+    """The installed ``fmscal`` script: :func:`main` on the process's arguments, its code as the exit status.
+    Output cut short by its reader (``fmscal ... | head``) ends quietly with status 141."""
+    try:
+        code = main()
+        sys.stdout.flush()
+    except BrokenPipeError:
+        code = _pipe_closed()
+    sys.exit(code)

@@ -65,7 +65,7 @@ DETERMINED = 0.02
 
 
 def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, reading="reaction", estimate_gravity=False,
-                     estimate_mounting=False):
+                     estimate_mounting=False, max_mass=None):
     """Estimate the payload's mass, centre of mass, inertia and the sensor's offset, with ``S`` known.
 
     Parameters
@@ -91,6 +91,9 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     estimate_mounting : bool
         Estimate the rotation ``M`` of the sensor's axes on the tracked frame
         too (a sensor bolted at an angle): :func:`regressor` with ``mounting``.
+    max_mass : float, optional
+        The heaviest payload taken, kg (default :data:`fmscal.plant.io.MAX_WRIST_MASS`): readings that weigh
+        more are refused as a slipped unit (mN).
 
     Returns
     -------
@@ -113,7 +116,7 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
     if not np.linalg.norm(gravity) > 0:                  # as fit_static: a direction is needed to weigh anything
         raise FmscalError("gravity must not be zero")
     block = None if block is None else as_positive_scalar(block, "block")
-    check_spatial_log_units(log, gravity, S=S)          # a slipped unit named in one line, before the fit
+    check_spatial_log_units(log, gravity, S=S, max_mass=max_mass)   # a slipped unit named in one line
     q, omega, alpha, p_ddot = spatial_motion(log, window)
     trim = slice(edge(log, window), len(log.t) - edge(log, window))                   # the filter's edges
     W = regressor(q, omega, alpha, p_ddot, gravity)[trim]

@@ -349,7 +349,8 @@ def _extra(theta, model):
     return np.r_[theta, np.zeros(2 if model.estimate_gravity else 0), np.zeros(3 if model.estimate_mounting else 0)]
 
 
-def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction"):
+def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction",
+               max_mass=None):
     """Mass, centre of mass and offset from a pose table (and gravity's direction, the mounting, if asked).
 
     Parameters
@@ -367,6 +368,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         Estimate the rotation of the sensor's axes on the tracked frame.
     reading : {"reaction", "load"}
         The reading's sign (module docstring).
+    max_mass : float, optional
+        The heaviest payload taken, kg (default :data:`fmscal.plant.io.MAX_WRIST_MASS`): readings that weigh
+        more are refused as a slipped unit (mN).
 
     Returns
     -------
@@ -391,7 +395,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     g = as_finite_array(gravity, (3,), "gravity")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
-    check_table_units(table, g, S=S)                    # a slipped unit named in one line, before the fit
+    check_table_units(table, g, S=S, max_mass=max_mass)  # a slipped unit named in one line, before the fit
     y = sign * table.w_hat @ S.T
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     if len(R) < (needed := max(min_poses(estimate_gravity, estimate_mounting), MIN_POSES)):
@@ -753,7 +757,7 @@ def gains_warning(masses, identity, ratio=None):
     spread = float((masses.max() - masses.min()) / masses.mean())
     told = ("S = I may be wrong: calibrate S (fmscal calibrate) and pass --calibration" if identity
             else "the calibration given may be wrong, or the payload's mass changed")
-    times = "" if ratio is None else f"the residual is {ratio:.0f} times the noise; "
+    times = "" if ratio is None else f"the residual is {ratio:.2g} times the noise; "
     return (times + f"the force gains seem to differ by {spread:.1%} between axes (each axis alone weighs "
             + ", ".join(f"{v:.4g}" for v in masses) + f" kg); {told}; the mass's uncertainty includes that spread")
 

@@ -108,16 +108,38 @@ def check_gravity(gravity):
                      " gravity in the pose frame, m/s^2"))
 
 
-def check_mass(mass, what="the payload's mass"):
-    """Refuse a mass beyond what a wrist sensor carries (:data:`MAX_WRIST_MASS`), naming grams.
+def _max_mass(max_mass):
+    """``max_mass`` checked (None: :data:`MAX_WRIST_MASS`)."""
+    if max_mass is None:
+        return MAX_WRIST_MASS
+    if isinstance(max_mass, bool) or not isinstance(max_mass, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(max_mass) or max_mass <= 0:
+        raise UnitsError(f"max_mass must be a positive number of kg; got {max_mass!r}")
+    return float(max_mass)
+
+
+def _carried(limit):
+    """The mass limit in words."""
+    return (f"what a wrist sensor carries ({limit:g} kg)" if limit == MAX_WRIST_MASS
+            else f"the largest mass allowed (max_mass, {limit:g} kg)")
+
+
+def _heavier(limit):
+    """The end of a refusal by the mass limit: how to raise it for a payload that heavy."""
+    return f"; a payload heavier than {limit:g} kg: raise max_mass (--max-mass)" if limit == MAX_WRIST_MASS else ""
+
+
+def check_mass(mass, what="the payload's mass", max_mass=None):
+    """Refuse a mass beyond what a wrist sensor carries (``max_mass``, default :data:`MAX_WRIST_MASS`), naming
+    grams.
 
     Raises
     ------
     UnitsError
     """
-    if mass > MAX_WRIST_MASS:
-        raise UnitsError(f"{what} is {mass:.4g} kg, beyond what a wrist sensor carries ({MAX_WRIST_MASS:g} kg): in g? "
-                         f"give it in kg")
+    limit = _max_mass(max_mass)
+    if mass > limit:
+        raise UnitsError(f"{what} is {mass:.4g} kg, beyond {_carried(limit)}: in g? give it in kg" + _heavier(limit))
 
 
 def check_readings_change(name, w_hat, names=("tx", "ty", "tz", "fx", "fy", "fz")):
@@ -268,7 +290,7 @@ def _conventions(name, quaternions, w_hat, fits):
                      + fit.format(f"them read {convention}") + "; move qw to the first column")
 
 
-def _torque_and_weight(name, w_hat, c, gravity, mass, com):
+def _torque_and_weight(name, w_hat, c, gravity, mass, com, max_mass=None):
     """The lever arm (eq. U2) and the weight ``|c|`` (eq. U1; None where eq. U1 does not fit) against the
     payload's: N mm torques, mN readings."""
     rho = _lever_arm(w_hat[:, 0:3], w_hat[:, 3:6])
@@ -282,9 +304,10 @@ def _torque_and_weight(name, w_hat, c, gravity, mass, com):
         return
     weighed = float(np.linalg.norm(c)) / float(np.linalg.norm(gravity))
     if mass is None:
-        if weighed > MAX_WRIST_MASS:
-            raise UnitsError(f"{name}: the force reading weighs {weighed:.4g} kg (its weight over |g|), beyond what a "
-                             f"wrist sensor carries ({MAX_WRIST_MASS:g} kg): readings in mN? give them in N and N m")
+        limit = _max_mass(max_mass)
+        if weighed > limit:
+            raise UnitsError(f"{name}: the force reading weighs {weighed:.4g} kg (its weight over |g|), beyond "
+                             f"{_carried(limit)}: readings in mN? give them in N and N m" + _heavier(limit))
         return
     ratio = weighed / mass
     if ratio > _FAR:
@@ -297,7 +320,7 @@ def _torque_and_weight(name, w_hat, c, gravity, mass, com):
                          f"the mass in kg")
 
 
-def check_table_units(table, gravity, mass=None, com=None, S=None):
+def check_table_units(table, gravity, mass=None, com=None, S=None, max_mass=None):
     """The unit and convention checks on held poses: gravity, mass, conventions, torques, the weight.
 
     Parameters
@@ -312,6 +335,9 @@ def check_table_units(table, gravity, mass=None, com=None, S=None):
         The payload's centre of mass in the sensor frame, m (where known).
     S : array_like, shape (6, 6), optional
         A calibration the readings go through first (default the identity).
+    max_mass : float, optional
+        The heaviest payload taken, kg (default :data:`MAX_WRIST_MASS`): the mass given, or without one the
+        weight the readings show, beyond it is refused as a slipped unit.
 
     Raises
     ------
@@ -320,13 +346,14 @@ def check_table_units(table, gravity, mass=None, com=None, S=None):
     """
     check_readings_change(table.name, table.w_hat)
     check_gravity(gravity)
+    _max_mass(max_mass)
     if mass is not None:
-        check_mass(mass)
+        check_mass(mass, max_mass=max_mass)
     w_hat = _calibrated(table.w_hat, S)
     q = np.asarray(table.q, dtype=float)
     _conventions(table.name, q, w_hat, lambda R, f: _weight_fit(R, f)[3])
     _, _, c, relative = _weight_fit(_rotations(q), w_hat[:, 3:6])
-    _torque_and_weight(table.name, w_hat, c if relative <= _POOR else None, gravity, mass, com)
+    _torque_and_weight(table.name, w_hat, c if relative <= _POOR else None, gravity, mass, com, max_mass)
 
 
 def _calibrated(w_hat, S):
@@ -349,7 +376,7 @@ def _coarse(log, window):
     return pose, w_hat, k * log.dt
 
 
-def check_spatial_log_units(log, gravity, mass=None, com=None, S=None):
+def check_spatial_log_units(log, gravity, mass=None, com=None, S=None, max_mass=None):
     """The unit and convention checks on a spatial log, before any fit: one line naming the first slip.
 
     In order: gravity's size (:func:`check_gravity`), the mass given (:func:`check_mass`), the time step
@@ -364,7 +391,7 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None):
     log : plant.Log
         A spatial log.
     gravity : array_like, shape (3,)
-    mass, com, S
+    mass, com, S, max_mass
         As :func:`check_table_units`.
 
     Raises
@@ -376,8 +403,9 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None):
         return                                          # not a spatial log: the caller says so
     check_readings_change(log.name, log.w_hat)
     check_gravity(gravity)
+    _max_mass(max_mass)
     if mass is not None:
-        check_mass(mass)
+        check_mass(mass, max_mass=max_mass)
     steps = np.diff(log.t)
     step = float(np.median(steps)) if len(steps) else 0.0
     if step > MAX_STEP:
@@ -399,7 +427,7 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None):
     R_ddot = (R[2:] - 2 * R[1:-1] + R[:-2]) / h ** 2
     m_a, m_a_std, c, relative = _weight_fit(R[1:-1], w_hat[1:-1, 3:6], acc, R_ddot)
     fits = relative <= _POOR                       # else a mounting the fit does not hold: no weight read from it
-    _torque_and_weight(log.name, w_hat, c if fits else None, gravity, mass, com)
+    _torque_and_weight(log.name, w_hat, c if fits else None, gravity, mass, com, max_mass)
     rms = float(np.sqrt(np.mean(np.sum(acc ** 2, axis=1))))
     slower = _coarse(log, 4 * _WINDOW)
     if slower is None:
