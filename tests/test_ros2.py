@@ -15,14 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmscal.analysis import Compensator, ImuMotion, compensate
+from fmscal.analysis import Compensator, ImuMotion, calibrate, compensate
 from fmscal.analysis.cli import main
 from fmscal.analysis.ros2 import PARAMETERS, Pipeline, sensor_pose, settings
 from fmscal.plant.physics import rotation_matrix
-from fmscal.plant import SPATIAL_SCENARIOS, Calibration, SpatialModel
+from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, Calibration, Log, SpatialModel
 from fmscal.plant import NoiseSpec
 from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
+from geometry_msgs.msg import PoseStamped
 from ros2_rig import (Peer, contact_array, domain_id, imu_message, joint_state, node_command, node_log, running_node,
                       truth_calibration)
 import robot_rig
@@ -317,6 +318,60 @@ def test_stale_motion_stops_the_output(request, arm, cal_file):
     t, _ = contact_array(peer.contacts, epoch)
     assert t[-1] == pytest.approx(log.t[499], abs=1e-9) and len(t) == 500 - 29, (t[-1], len(t), t[:3], np.diff(t).max())
     assert "motion stale: /ft_sensor/pose has no sample within 0.05 s" in text
+
+
+# --- the planar model through the node --------------------------------------------------------------------------
+def test_planar_replay(request, tmp_path):
+    """A planar calibration (calibrate on 10 s of paper) and 1.5 s of another paper log replayed as PoseStamped
+    (yaw wrapped into (-pi, pi], as a quaternion about z with q_w >= 0) and WrenchStamped (M as torque z): theta
+    crosses pi, and the node unwraps it (U1), so every output is compensate(causal=True)'s of the log; the
+    covariance topic carries 3x3 (fx fy M), the diagnostics three channels, and ~/identify_payload refuses in
+    one line."""
+    scenario = SCENARIOS["paper"].with_(duration=10.0)
+    cal = calibrate(scenario.generate(1)[0], scenario.payload, latency=0.0)
+    assert cal.converged
+    cal.save(tmp_path / "cal.json")
+    other = scenario.generate(2)[0]
+    a = int(np.argmax(other.pose[:, 0] > np.pi)) - 700
+    log = Log(other.t[a:a + 1500] - other.t[a], other.pose[a:a + 1500], other.w_hat[a:a + 1500], name="planar")
+    assert log.pose[0, 0] < np.pi < log.pose[-1, 0]
+    reference = compensate(cal, log, causal=True)
+    yaw = np.angle(np.exp(1j * log.pose[:, 0]))                # (-pi, pi]: q_w = cos(yaw / 2) >= 0
+
+    def pose(i, stamp):
+        msg = PoseStamped()
+        msg.header.stamp, msg.header.frame_id = stamp, "world"
+        msg.pose.orientation.w, msg.pose.orientation.z = float(np.cos(yaw[i] / 2)), float(np.sin(yaw[i] / 2))
+        msg.pose.position.x, msg.pose.position.y = float(log.pose[i, 1]), float(log.pose[i, 2])
+        return msg
+    w_hat = np.zeros((len(log.t), 6))
+    w_hat[:, 2:5] = log.w_hat                                   # M fx fy: torque z, force x, force y
+    with _node(request, tmp_path / "cal.json") as proc:
+        peer = Peer(domain_id(request.node.name))
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay_rows(log.t, w_hat, pose)
+            n = _expected_count(reference, log, len(log.t) - 1)
+            assert peer.wait_for(lambda: len(peer.contacts) >= n and len(peer.covariances) >= n, 10), \
+                (len(peer.contacts), n, node_log(proc)[-1000:])
+            ok, message = peer.call("identify_payload")
+            time.sleep(0.2)
+            status = peer.diagnostics[-1].status[0]
+        finally:
+            peer.close()
+    t, wrench = contact_array(peer.contacts, epoch)
+    assert len(t) == n
+    np.testing.assert_allclose(t, np.round(reference.t[:n], 6), atol=1e-9)
+    np.testing.assert_allclose(wrench[:, 2:5], reference.wrench[:n], atol=1e-6)
+    assert np.all(wrench[:, [0, 1, 5]] == 0)
+    cov = np.array([m.data for m in peer.covariances]).reshape(-1, 3, 3)
+    np.testing.assert_allclose(cov, reference.cov[:n][:, [1, 2, 0]][:, :, [1, 2, 0]], rtol=1e-6)
+    assert peer.covariances[0].layout.dim[0].label == "fx fy M"
+    values = {k.key: k.value for k in status.values}
+    assert values["channels"] == "M fx fy" and len(values["offset"].split()) == 3 and status.message == "running"
+    assert not ok and message == ("identify_payload refused: fmscal's payload fits are a 6-axis sensor's, and this "
+                                  "calibration is of a planar reading (M fx fy); the payload in use is the "
+                                  "calibration's")
 
 
 # --- the other motion sources: joint states with a URDF, an IMU --------------------------------------------------

@@ -12,6 +12,16 @@ rates and specific force linearly) and the reading is pushed into :class:`fmscal
 A reading the motion has not reached when a reading ``stale_timeout`` s newer arrives is pushed with no motion:
 the motion is stale, and the compensator, which never extrapolates, stops the output until the motion covers
 its window again.
+
+Angles. A pose's angle columns (the model's :attr:`fmscal.plant.Model.angle_names`: the planar ``theta``, which
+the node takes from the quaternion, ``2 atan2(q_z, q_w)``, and a publisher may wrap into (-pi, pi]) are unwrapped
+against the motion's previous sample as they come::
+
+    theta_k <- theta_k - 2 pi round((theta_k - theta_{k-1}) / (2 pi))                               (U1)
+
+so that a payload turning through many revolutions is differentiated without the 2 pi steps (a turn of more
+than pi between two motion samples cannot be told from one the other way). A quaternion's sign is made
+continuous by :class:`fmscal.analysis.Compensator`.
 """
 
 import threading
@@ -125,6 +135,9 @@ class Pipeline:
         self._held = deque()                          # (t, pose, w_hat) for identify_payload
         self._recent = deque()                        # (t, w_hat, motion) of the rows the filter still holds
         self._last_t = None
+        # the pose's angle columns (U1), by what the model declares; their last values
+        self._angles = [self.model.pose_names.index(n) for n in self.model.angle_names] if kind == "pose" else []
+        self._last_angles = None
         self.last_arrival = -np.inf                   # time.monotonic() of the newest reading
         self.motion_frame = ""
         self.identified = None
@@ -195,7 +208,19 @@ class Pipeline:
             self.motion_frame = frame_id
             if self._motion and t <= self._motion[-1][0]:
                 return
+            if self._angles:
+                value = self._unwrapped(value)
             self._motion.append((t, value))
+
+    def _unwrapped(self, pose):
+        """``pose`` with its angle columns unwrapped against the previous motion sample's (U1)."""
+        pose = np.array(pose, dtype=float)
+        angles = pose[self._angles]
+        if self._last_angles is not None:
+            angles = angles - 2 * np.pi * np.round((angles - self._last_angles) / (2 * np.pi))
+            pose[self._angles] = angles
+        self._last_angles = angles
+        return pose
 
     def add_reading(self, t, w_hat, stamp=None, frame_id="", arrival=None):
         """A raw reading stamped ``t`` (s), queued; :meth:`process` compensates it once the motion covers it.
@@ -381,7 +406,11 @@ class Pipeline:
     def identify(self):
         """``(success, message)`` of ``~/identify_payload``: the payload fitted to the motion and readings held
         since the last call; the compensation then uses it (and ``~/save`` writes it)."""
-        if self.kind == "imu" or self.model.attitude != "quaternion":
+        if self.model.attitude != "quaternion":
+            return False, (f"identify_payload refused: fmscal's payload fits are a 6-axis sensor's, and this "
+                           f"calibration is of a {self.model.name} reading ({' '.join(self.model.wrench_names)}); "
+                           "the payload in use is the calibration's")
+        if self.kind == "imu":
             return False, "identify_payload needs the poses of a 6-axis sensor (pose_topic or joint_states_topic)"
         with self.lock:
             held = list(self._held)
