@@ -21,6 +21,7 @@ from fmscal.analysis.ros2 import PARAMETERS, Pipeline, sensor_pose, settings
 from fmscal.plant.physics import rotation_matrix
 from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, Calibration, Log, SpatialModel
 from fmscal.plant import NoiseSpec
+from fmscal.plant.io import simulate_attitude_log
 from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
 from geometry_msgs.msg import PoseStamped
@@ -458,7 +459,53 @@ def test_identify_payload_from_joint_states(tmp_path):
     imu = Pipeline(settings({**values, "joint_states_topic": "", "urdf": "", "frame": "", "imu_topic": "/i"}),
                    motion=ImuMotion(), kind="imu")
     ok, message = imu.identify()
-    assert not ok and message.startswith("identify_payload needs the poses of a 6-axis sensor"), message
+    assert not ok and message.startswith("identify_payload refused: 0 samples held since the last call"), message
+
+
+def _held_imu(seconds_held=1.2, poses=6, dt=0.004, seed=4):
+    """An IMU (axes C_IMU in the sensor's) on a tool held at ``poses`` attitudes and turned between them
+    (simulate_attitude_log): its orientation, body rate and specific force (no linear acceleration), the
+    sensor's readings, and their times."""
+    log = simulate_attitude_log(TOOL, poses=poses, hold=seconds_held, move=0.6, dt=dt, seed=seed,
+                                gravity=(0.0, 0.0, -9.81), wrench_sd=NOISE.wrench_sd)
+    R_s = robot_rig.Rotation.from_quat(log.q[:, [1, 2, 3, 0]])
+    R_i = R_s * robot_rig.Rotation.from_matrix(robot_rig.C_IMU)             # R_IMU = R_S C
+    omega = np.vstack([(R_i[:-1].inv() * R_i[1:]).as_rotvec() / dt, np.zeros((1, 3))])
+    force = R_i.inv().apply([0.0, 0.0, 9.81])
+    return log.t, R_i.as_quat()[:, [3, 0, 1, 2]], omega, force, log.w_hat
+
+
+def _imu_settings(tmp_path, **values):
+    v = {p.name: p.default for p in PARAMETERS}
+    xyzw = robot_rig.Rotation.from_matrix(robot_rig.C_IMU).as_quat()
+    v.update(calibration=str(_source_calibration(tmp_path)), imu_topic="/i", sample_time=4e-3,
+             imu_rotation=list(xyzw), **values)
+    return settings(v)
+
+
+def test_identify_payload_from_an_imu(tmp_path):
+    """identify_payload on an IMU: its orientation through imu_rotation gives the sensor's attitude, the held
+    segments are fitted statically: the truth's mass and centre of mass (the inertia kept); an IMU without
+    orientation is refused, saying why."""
+    t, quaternion, omega, force, w_hat = _held_imu()
+    runs = {}
+    for oriented in (True, False):
+        pipeline = Pipeline(_imu_settings(tmp_path), motion=ImuMotion(robot_rig.C_IMU), kind="imu")
+        for row in zip(t, quaternion, omega, force, w_hat):
+            pipeline.add_motion(row[0], (row[1] if oriented else None, row[2], row[3]))
+            pipeline.add_reading(row[0], row[4])
+            pipeline.process()
+        runs[oriented] = pipeline.identify(), pipeline
+    (ok, message), pipeline = runs[True]
+    assert ok, message
+    assert int(message.split("from ")[1].split(" held poses")[0]) >= 5 and "the inertia kept" in message, message
+    mass = float(message.split("mass ")[1].split(" ")[0])
+    com = np.array(message.split("com ")[1].split(" m")[0].split(), dtype=float)
+    assert abs(mass - TOOL.mass) < 0.01 * TOOL.mass, mass
+    assert np.all(np.abs(com - np.asarray(TOOL.com)) < 2e-3), com
+    assert pipeline.payload.inertia == TOOL.inertia and pipeline.payload.mass == pytest.approx(mass, rel=1e-3)
+    (ok, message), _ = runs[False]
+    assert not ok and message.startswith("identify_payload refused: the IMU gave no orientation ("), message
 
 
 @pytest.mark.slow
@@ -486,6 +533,43 @@ def test_imu(request, ur5, tmp_path):
     assert {m.header.frame_id for m in contacts} == {"world"}
     np.testing.assert_allclose(wrench, [o.wrench for o in expected], atol=1e-6)
     assert np.abs(wrench).max() < 1e-3
+
+
+@pytest.mark.slow
+def test_identify_payload_from_an_imu_over_ros(request, tmp_path):
+    """~/identify_payload on an imu_topic node (imu_rotation given), fed 10 s of a tool held at six attitudes
+    (four times faster than their stamps): the truth's mass and centre of mass; then 1 s of an IMU publishing no
+    orientation (orientation_covariance[0] == -1): refused, saying why."""
+    t, quaternion, omega, force, w_hat = _held_imu()
+    xyzw = robot_rig.Rotation.from_matrix(robot_rig.C_IMU).as_quat()
+    args = (f"calibration:={_source_calibration(tmp_path)}", "imu_topic:=/motion", "qos:=reliable",
+            "imu_rotation:=[" + ",".join(repr(float(v)) for v in xyzw) + "]")
+    oriented = imu_message(quaternion, omega, force)
+
+    def unoriented(i, stamp):
+        msg = oriented(i, stamp)
+        msg.orientation_covariance[0] = -1.0
+        return msg
+    domain = domain_id(request.node.name)
+    with running_node(domain, *args) as proc:
+        peer = Peer(domain, pose_topic="/motion", motion=Imu)
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay_rows(t, w_hat, oriented, rate=4.0)
+            assert peer.wait_for(lambda: len(peer.contacts) >= len(t) - 20, 10), (len(peer.contacts), len(t))
+            ok, message = peer.call("identify_payload", proc=proc)
+            more = t[-1] + 0.004 + np.arange(250) * 0.004
+            peer.replay_rows(more, w_hat[:250], unoriented, epoch=epoch)
+            time.sleep(0.3)
+            refused, why = peer.call("identify_payload", proc=proc)
+        finally:
+            peer.close()
+    assert ok, message
+    mass = float(message.split("mass ")[1].split(" ")[0])
+    com = np.array(message.split("com ")[1].split(" m")[0].split(), dtype=float)
+    assert abs(mass - TOOL.mass) < 0.01 * TOOL.mass, mass
+    assert np.all(np.abs(com - np.asarray(TOOL.com)) < 2e-3), com
+    assert not refused and why.startswith("identify_payload refused: the IMU gave no orientation ("), why
 
 
 # --- slow: the other services, and the latency benchmark ----------------------------------------------------------
