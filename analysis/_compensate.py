@@ -34,8 +34,11 @@ URDF (:class:`JointMotion`: pinocchio's frame velocity and *classical* accelerat
 tool (:class:`ImuMotion`: its specific force moved to the sensor's point, (C6), read at ``R = I`` so that no
 pose and no gravity vector is needed, (C7)). Their channels (the joint angles; the IMU's rate and specific
 force) go through the same filters as poses, offline both ways and causally with the same stated delay; only
-the accelerations the source does not measure are differentiated. Their streams are taken as of the
-readings' times.
+the accelerations the source does not measure are differentiated. Their streams are as of the readings'
+times unless the source's own ``latency`` says how late they are (``JointMotion(..., latency=)``,
+``ImuMotion(..., latency=)``): it is applied where the poses' is (offline the stream interpolated onto the
+readings' times, causally the filter read that much nearer its newest sample); the calibration's latency is its
+pose stream's and is not applied to them.
 
 **The output's axes and point** (``frame``, ``point``). With ``r_t`` the tool point (sensor axes, from the
 sensor's point) and ``R`` the sensor's attitude (``frame="base"``), the published wrench and its covariance
@@ -97,6 +100,7 @@ the payload's own wrench at that pose restored, so the output does not jump beyo
 zeroed by its hardware at an unknown pose reads ``-S^-1 W_p`` of that pose off; (D4) at any pose finds it.
 """
 
+import copy
 from collections import deque
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -568,7 +572,8 @@ def _causal_settings(window, delay, order, dt, latency):
                                 f"{order} needs at least {order + 3}")
     L, shift = int(round(delay / dt)), int(round(latency / dt))
     if L < shift:
-        raise CompensationError(f"delay {delay:g} s is shorter than the pose stream's latency {latency:g} s: the "
+        raise CompensationError(f"delay {delay:g} s is shorter than the pose stream's latency {latency:g} s (the "
+                                "motion stream's): the "
                                 "motion at the reading's time has not arrived yet; give a delay of at least the "
                                 "latency")
     if L - shift > k - 1:
@@ -634,7 +639,8 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     motion : JointMotion or ImuMotion, optional
         The motion's source: None, the log's poses; a :class:`JointMotion` (C5) for a
         :class:`fmscal.plant.io.JointLog`; an :class:`ImuMotion` (C6, C7) for a :class:`fmscal.plant.io.ImuLog`.
-        Their streams are taken as of the readings' times (the calibration's latency is its pose stream's).
+        Their streams are as of ``t - motion.latency`` for the reading at ``t`` (the source's own latency;
+        the calibration's is its pose stream's).
     frame : {"sensor", "base"}
         The output's axes (C8): the sensor's, or the base's (the world of the poses, the URDF's base, the IMU's
         world; the sensor's attitude rotates the torque and the force).
@@ -803,14 +809,12 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
                             offset=None if out[0].offset is None else np.array([o.offset for o in out]),
                             offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
                             frame=frame, point=stream.point)
+    log = _at_readings(log, motion.latency, joint)         # offline: the stream at the readings' times
     noise = _noise(calibration, noise)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
     output = _Output(model, frame, point)
     tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd)
-    warnings = list(parts.warnings)
-    if calibration.latency:
-        warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose stream's) is not "
-                        f"applied to the {motion.source} stream: it is taken as of the readings' times")
+    warnings = list(parts.warnings) + _latency_warnings(calibration, motion)
     window = OFFLINE_WINDOW if window is None else window
     dt = log.dt
     h = edge(log, window)                                               # the pose path's window, checked
@@ -857,6 +861,45 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
                         warnings=warnings, offset=offset, offset_sd=offset_sd, frame=frame, point=output.point)
+
+
+def _latency_warnings(calibration, motion):
+    """The warning that the calibration's latency (its pose stream's) is not the source's, where the source has
+    none given: its stream is then taken as of the readings' times."""
+    if not calibration.latency or motion.latency:
+        return []
+    return [f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose stream's) is not applied to "
+            f"the {motion.source} stream, and it has none of its own: it is taken as of the readings' times (give "
+            f"{type(motion).__name__}(..., latency=S), or --motion-latency S, where it lags them)"]
+
+
+def _at_readings(log, latency, joint):
+    """A joint or IMU log with its stream moved onto the readings' times: the sample given with the reading at
+    ``t_j`` is as of ``t_j - latency``, so row ``i`` gets the stream at ``t_i`` interpolated linearly between its
+    samples (an orientation normalised after: SLERP to second order in the turn between two samples); NaN where
+    the stream does not reach. The log itself is not changed."""
+    if latency == 0:
+        return log
+    moved = copy.copy(log)
+    taken = log.t - latency
+
+    def at(values):
+        if values is None:
+            return None
+        present = np.isfinite(values).all(axis=1)
+        out = np.full(values.shape, np.nan)
+        if present.sum() >= 2:
+            for c in range(values.shape[1]):
+                out[:, c] = np.interp(log.t, taken[present], values[present, c], left=np.nan, right=np.nan)
+        return out
+    if joint:
+        moved.joints, moved.velocities, moved.accelerations = (at(v) for v in (log.joints, log.velocities,
+                                                                               log.accelerations))
+    else:
+        moved.angular_velocity, moved.specific_force = at(log.angular_velocity), at(log.specific_force)
+        q = at(log.orientation)
+        moved.orientation = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return moved
 
 
 def _fill(t, values):
@@ -916,7 +959,8 @@ class Compensator:
         a :class:`JointMotion` (``push(t, w_hat, joints=(q, dq, ddq))``, ``dq``/``ddq`` None where not given:
         then differentiated by the causal filter); an :class:`ImuMotion` (``push(t, w_hat, imu=(quaternion_wxyz,
         angular_velocity, specific_force))``, the IMU's axes: only the angular acceleration is differentiated).
-        Either way the delay is the filter's, :attr:`delay`; the stream is taken as of the readings' times.
+        Either way the delay is the filter's, :attr:`delay`; the stream is as of ``t - motion.latency`` for
+        the reading at ``t`` (the filter read that much nearer its newest sample, in whole samples).
     frame : {"sensor", "base"}
         The output's axes (C8); "base" needs an attitude (a pose, the joints, or the IMU's orientation).
     point : array_like of 3 floats, optional
@@ -943,7 +987,7 @@ class Compensator:
         self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd)
         # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
-        latency = (calibration.latency or 0.0) if motion is None else 0.0
+        latency = (calibration.latency or 0.0) if motion is None else motion.latency
         self.dt, self.order, self._noise = float(dt), order, noise
         self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, latency)
         self._coefficients = np.array(_causal_coefficients(self._k, order, self._lead, self.dt))    # (3, k)
@@ -958,10 +1002,7 @@ class Compensator:
             self._extras = deque(maxlen=self._k)           # per motion sample: (dq, ddq) or the IMU's quaternion
             self._channel_noise = _RunningNoise(motion.size)
             self._units_checked = False                    # an IMU's units, checked on its first full window
-            if calibration.latency:
-                self.warnings.append(f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose "
-                                     f"stream's) is not applied to the {motion.source} stream: it is taken as of "
-                                     "the readings' times")
+            self.warnings += _latency_warnings(calibration, motion)
 
     @property
     def delay(self):

@@ -33,6 +33,13 @@ attitude and the translation. Only ``alpha`` is differentiated. The model is the
 no gravity vector and no pose is needed. The sensor frame's attitude, for an output in the base frame, is
 ``R = R_i C^T`` (the IMU's world).
 
+**Latency.** A source's stream may lag the readings (a joint-state topic published after the controller's
+cycle, an IMU's own filter): ``latency`` (s, either sign) says that its sample given with the reading at ``t``
+is as of ``t - latency``, as a calibration's latency says of its pose stream. It is applied where the poses'
+is: offline the stream is moved onto the readings' times by interpolation (any fraction of a sample), causally
+the filter is read ``latency`` (whole samples) nearer its newest sample, so that the motion and the reading
+are of one time; the delay the causal path states is unchanged, and must be at least the latency.
+
 **Noise** (the third term of (C3)). A source's channels' noise is estimated from their differences (a white
 noise of sd ``sigma`` on a signal smooth at the sample rate gives second differences of variance
 ``6 sigma^2``; offline by :func:`fmscal.plant.io.difference_noise`, ``estimate_noise``'s robust estimate,
@@ -113,6 +120,14 @@ def _vector(value, n, name, finite=True):
     return v
 
 
+def _latency(value):
+    """A stream's latency, s: a finite number of either sign, or a one-line error."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+            or not np.isfinite(value):
+        raise MotionError(f"latency must be a finite number of seconds (either sign); got {value!r}"[:200])
+    return float(value)
+
+
 class JointMotion:
     """The sensor frame's motion from joint states and the robot's URDF, by pinocchio (C5).
 
@@ -124,6 +139,9 @@ class JointMotion:
         The sensor frame's name in it (its origin the sensor's point, its axes the sensor's).
     joints : sequence of str, optional
         The joints' names in the order the arrays come in; default the URDF's movable joints' order.
+    latency : float
+        s, either sign: the joint states given with the reading at ``t`` are as of ``t - latency`` (module
+        docstring, Latency); default 0, as of the readings' times.
 
     Attributes
     ----------
@@ -139,7 +157,8 @@ class JointMotion:
 
     source = "joint states"
 
-    def __init__(self, urdf, frame, joints=None):
+    def __init__(self, urdf, frame, joints=None, latency=0.0):
+        self.latency = _latency(latency)
         self.kinematics = RobotKinematics(urdf, frame)
         names = self.kinematics.joint_names
         if joints is None:
@@ -155,7 +174,7 @@ class JointMotion:
         self.size = len(joints)
 
     def __repr__(self):
-        return f"JointMotion({self.kinematics.frame_id}, joints={self.joints})"
+        return f"JointMotion({self.kinematics.frame_id}, joints={self.joints}, latency={self.latency!r})"
 
     def poses(self, q):
         """The frame's poses for rows of joint values in :attr:`joints` order (forward kinematics).
@@ -246,6 +265,9 @@ class ImuMotion:
         The IMU's axes in the sensor's: ``v_sensor = rotation @ v_imu``; default identity.
     lever_arm : array_like, shape (3,), optional
         The IMU's point from the sensor's point, in the sensor's axes, m; default zero.
+    latency : float
+        s, either sign: the IMU's sample given with the reading at ``t`` is as of ``t - latency`` (module
+        docstring, Latency); default 0, as of the readings' times.
 
     Raises
     ------
@@ -256,7 +278,8 @@ class ImuMotion:
     source = "IMU"
     size = 6                         # the channels filtered: the IMU's angular velocity and specific force
 
-    def __init__(self, rotation=None, lever_arm=None):
+    def __init__(self, rotation=None, lever_arm=None, latency=0.0):
+        self.latency = _latency(latency)
         C = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
         if C.shape != (3, 3) or not np.isfinite(C).all():
             raise MotionError(f"the IMU's rotation must be a 3x3 matrix; got shape {C.shape}")
@@ -267,7 +290,8 @@ class ImuMotion:
         self.lever_arm = np.zeros(3) if lever_arm is None else _vector(lever_arm, 3, "the IMU's lever arm")
 
     def __repr__(self):
-        return f"ImuMotion(rotation={self.rotation.tolist()}, lever_arm={self.lever_arm.tolist()})"
+        return (f"ImuMotion(rotation={self.rotation.tolist()}, lever_arm={self.lever_arm.tolist()}, "
+                f"latency={self.latency!r})")
 
     def check(self, model):
         _check_spatial(model, "ImuMotion")

@@ -15,14 +15,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmscal.analysis import Compensator, ImuMotion, compensate
+from fmscal.analysis import Compensator, ImuMotion, calibrate, compensate
 from fmscal.analysis.cli import main
 from fmscal.analysis.ros2 import PARAMETERS, Pipeline, sensor_pose, settings
 from fmscal.plant.physics import rotation_matrix
-from fmscal.plant import SPATIAL_SCENARIOS, Calibration, SpatialModel
+from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, Calibration, Log, SpatialModel
 from fmscal.plant import NoiseSpec
+from fmscal.plant.io import simulate_attitude_log
 from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
+from geometry_msgs.msg import PoseStamped
 from ros2_rig import (Peer, contact_array, domain_id, imu_message, joint_state, node_command, node_log, running_node,
                       truth_calibration)
 import robot_rig
@@ -319,6 +321,60 @@ def test_stale_motion_stops_the_output(request, arm, cal_file):
     assert "motion stale: /ft_sensor/pose has no sample within 0.05 s" in text
 
 
+# --- the planar model through the node --------------------------------------------------------------------------
+def test_planar_replay(request, tmp_path):
+    """A planar calibration (calibrate on 10 s of paper) and 1.5 s of another paper log replayed as PoseStamped
+    (yaw wrapped into (-pi, pi], as a quaternion about z with q_w >= 0) and WrenchStamped (M as torque z): theta
+    crosses pi, and the node unwraps it (U1), so every output is compensate(causal=True)'s of the log; the
+    covariance topic carries 3x3 (fx fy M), the diagnostics three channels, and ~/identify_payload refuses in
+    one line."""
+    scenario = SCENARIOS["paper"].with_(duration=10.0)
+    cal = calibrate(scenario.generate(1)[0], scenario.payload, latency=0.0)
+    assert cal.converged
+    cal.save(tmp_path / "cal.json")
+    other = scenario.generate(2)[0]
+    a = int(np.argmax(other.pose[:, 0] > np.pi)) - 700
+    log = Log(other.t[a:a + 1500] - other.t[a], other.pose[a:a + 1500], other.w_hat[a:a + 1500], name="planar")
+    assert log.pose[0, 0] < np.pi < log.pose[-1, 0]
+    reference = compensate(cal, log, causal=True)
+    yaw = np.angle(np.exp(1j * log.pose[:, 0]))                # (-pi, pi]: q_w = cos(yaw / 2) >= 0
+
+    def pose(i, stamp):
+        msg = PoseStamped()
+        msg.header.stamp, msg.header.frame_id = stamp, "world"
+        msg.pose.orientation.w, msg.pose.orientation.z = float(np.cos(yaw[i] / 2)), float(np.sin(yaw[i] / 2))
+        msg.pose.position.x, msg.pose.position.y = float(log.pose[i, 1]), float(log.pose[i, 2])
+        return msg
+    w_hat = np.zeros((len(log.t), 6))
+    w_hat[:, 2:5] = log.w_hat                                   # M fx fy: torque z, force x, force y
+    with _node(request, tmp_path / "cal.json") as proc:
+        peer = Peer(domain_id(request.node.name))
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay_rows(log.t, w_hat, pose)
+            n = _expected_count(reference, log, len(log.t) - 1)
+            assert peer.wait_for(lambda: len(peer.contacts) >= n and len(peer.covariances) >= n, 10), \
+                (len(peer.contacts), n, node_log(proc)[-1000:])
+            ok, message = peer.call("identify_payload")
+            time.sleep(0.2)
+            status = peer.diagnostics[-1].status[0]
+        finally:
+            peer.close()
+    t, wrench = contact_array(peer.contacts, epoch)
+    assert len(t) == n
+    np.testing.assert_allclose(t, np.round(reference.t[:n], 6), atol=1e-9)
+    np.testing.assert_allclose(wrench[:, 2:5], reference.wrench[:n], atol=1e-6)
+    assert np.all(wrench[:, [0, 1, 5]] == 0)
+    cov = np.array([m.data for m in peer.covariances]).reshape(-1, 3, 3)
+    np.testing.assert_allclose(cov, reference.cov[:n][:, [1, 2, 0]][:, :, [1, 2, 0]], rtol=1e-6)
+    assert peer.covariances[0].layout.dim[0].label == "fx fy M"
+    values = {k.key: k.value for k in status.values}
+    assert values["channels"] == "M fx fy" and len(values["offset"].split()) == 3 and status.message == "running"
+    assert not ok and message == ("identify_payload refused: fmscal's payload fits are a 6-axis sensor's, and this "
+                                  "calibration is of a planar reading (M fx fy); the payload in use is the "
+                                  "calibration's")
+
+
 # --- the other motion sources: joint states with a URDF, an IMU --------------------------------------------------
 #: The motion sources' tests' noise model (tests/test_motion_sources.py's).
 NOISE = NoiseSpec((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
@@ -403,7 +459,53 @@ def test_identify_payload_from_joint_states(tmp_path):
     imu = Pipeline(settings({**values, "joint_states_topic": "", "urdf": "", "frame": "", "imu_topic": "/i"}),
                    motion=ImuMotion(), kind="imu")
     ok, message = imu.identify()
-    assert not ok and message.startswith("identify_payload needs the poses of a 6-axis sensor"), message
+    assert not ok and message.startswith("identify_payload refused: 0 samples held since the last call"), message
+
+
+def _held_imu(seconds_held=1.2, poses=6, dt=0.004, seed=4):
+    """An IMU (axes C_IMU in the sensor's) on a tool held at ``poses`` attitudes and turned between them
+    (simulate_attitude_log): its orientation, body rate and specific force (no linear acceleration), the
+    sensor's readings, and their times."""
+    log = simulate_attitude_log(TOOL, poses=poses, hold=seconds_held, move=0.6, dt=dt, seed=seed,
+                                gravity=(0.0, 0.0, -9.81), wrench_sd=NOISE.wrench_sd)
+    R_s = robot_rig.Rotation.from_quat(log.q[:, [1, 2, 3, 0]])
+    R_i = R_s * robot_rig.Rotation.from_matrix(robot_rig.C_IMU)             # R_IMU = R_S C
+    omega = np.vstack([(R_i[:-1].inv() * R_i[1:]).as_rotvec() / dt, np.zeros((1, 3))])
+    force = R_i.inv().apply([0.0, 0.0, 9.81])
+    return log.t, R_i.as_quat()[:, [3, 0, 1, 2]], omega, force, log.w_hat
+
+
+def _imu_settings(tmp_path, **values):
+    v = {p.name: p.default for p in PARAMETERS}
+    xyzw = robot_rig.Rotation.from_matrix(robot_rig.C_IMU).as_quat()
+    v.update(calibration=str(_source_calibration(tmp_path)), imu_topic="/i", sample_time=4e-3,
+             imu_rotation=list(xyzw), **values)
+    return settings(v)
+
+
+def test_identify_payload_from_an_imu(tmp_path):
+    """identify_payload on an IMU: its orientation through imu_rotation gives the sensor's attitude, the held
+    segments are fitted statically: the truth's mass and centre of mass (the inertia kept); an IMU without
+    orientation is refused, saying why."""
+    t, quaternion, omega, force, w_hat = _held_imu()
+    runs = {}
+    for oriented in (True, False):
+        pipeline = Pipeline(_imu_settings(tmp_path), motion=ImuMotion(robot_rig.C_IMU), kind="imu")
+        for row in zip(t, quaternion, omega, force, w_hat):
+            pipeline.add_motion(row[0], (row[1] if oriented else None, row[2], row[3]))
+            pipeline.add_reading(row[0], row[4])
+            pipeline.process()
+        runs[oriented] = pipeline.identify(), pipeline
+    (ok, message), pipeline = runs[True]
+    assert ok, message
+    assert int(message.split("from ")[1].split(" held poses")[0]) >= 5 and "the inertia kept" in message, message
+    mass = float(message.split("mass ")[1].split(" ")[0])
+    com = np.array(message.split("com ")[1].split(" m")[0].split(), dtype=float)
+    assert abs(mass - TOOL.mass) < 0.01 * TOOL.mass, mass
+    assert np.all(np.abs(com - np.asarray(TOOL.com)) < 2e-3), com
+    assert pipeline.payload.inertia == TOOL.inertia and pipeline.payload.mass == pytest.approx(mass, rel=1e-3)
+    (ok, message), _ = runs[False]
+    assert not ok and message.startswith("identify_payload refused: the IMU gave no orientation ("), message
 
 
 @pytest.mark.slow
@@ -431,6 +533,43 @@ def test_imu(request, ur5, tmp_path):
     assert {m.header.frame_id for m in contacts} == {"world"}
     np.testing.assert_allclose(wrench, [o.wrench for o in expected], atol=1e-6)
     assert np.abs(wrench).max() < 1e-3
+
+
+@pytest.mark.slow
+def test_identify_payload_from_an_imu_over_ros(request, tmp_path):
+    """~/identify_payload on an imu_topic node (imu_rotation given), fed 10 s of a tool held at six attitudes
+    (four times faster than their stamps): the truth's mass and centre of mass; then 1 s of an IMU publishing no
+    orientation (orientation_covariance[0] == -1): refused, saying why."""
+    t, quaternion, omega, force, w_hat = _held_imu()
+    xyzw = robot_rig.Rotation.from_matrix(robot_rig.C_IMU).as_quat()
+    args = (f"calibration:={_source_calibration(tmp_path)}", "imu_topic:=/motion", "qos:=reliable",
+            "imu_rotation:=[" + ",".join(repr(float(v)) for v in xyzw) + "]")
+    oriented = imu_message(quaternion, omega, force)
+
+    def unoriented(i, stamp):
+        msg = oriented(i, stamp)
+        msg.orientation_covariance[0] = -1.0
+        return msg
+    domain = domain_id(request.node.name)
+    with running_node(domain, *args) as proc:
+        peer = Peer(domain, pose_topic="/motion", motion=Imu)
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay_rows(t, w_hat, oriented, rate=4.0)
+            assert peer.wait_for(lambda: len(peer.contacts) >= len(t) - 20, 10), (len(peer.contacts), len(t))
+            ok, message = peer.call("identify_payload", proc=proc)
+            more = t[-1] + 0.004 + np.arange(250) * 0.004
+            peer.replay_rows(more, w_hat[:250], unoriented, epoch=epoch)
+            time.sleep(0.3)
+            refused, why = peer.call("identify_payload", proc=proc)
+        finally:
+            peer.close()
+    assert ok, message
+    mass = float(message.split("mass ")[1].split(" ")[0])
+    com = np.array(message.split("com ")[1].split(" m")[0].split(), dtype=float)
+    assert abs(mass - TOOL.mass) < 0.01 * TOOL.mass, mass
+    assert np.all(np.abs(com - np.asarray(TOOL.com)) < 2e-3), com
+    assert not refused and why.startswith("identify_payload refused: the IMU gave no orientation ("), why
 
 
 # --- slow: the other services, and the latency benchmark ----------------------------------------------------------

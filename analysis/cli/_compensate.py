@@ -41,6 +41,10 @@ def add_compensate(sub):
                         "matrix of 9 numbers by rows (v_sensor = C v_imu); default identity")
     p.add_argument("--imu-lever-arm", type=float, nargs=3, metavar=("X", "Y", "Z"),
                    help="an IMU log: the IMU's point from the sensor's point, sensor axes, m; default 0 0 0")
+    p.add_argument("--motion-latency", type=float, metavar="S",
+                   help="a joint-state (--urdf) or IMU log: how late its stream is behind the readings, s, either "
+                        "sign (a sample in the row of time t is as of t - S); default 0. A pose log's latency is the "
+                        "calibration's")
     p.add_argument("--output-frame", choices=FRAMES, default=FRAMES[0],
                    help="the written wrench's axes: the sensor's (default) or the base's (the poses' world, the "
                         "URDF's base, the IMU's world)")
@@ -87,10 +91,14 @@ def _motion_log(args):
     if not imu and (args.imu_rotation is not None or args.imu_lever_arm is not None):
         raise CliError(f"--imu-rotation and --imu-lever-arm are an IMU log's; {Path(args.log).name} has no IMU columns "
                        f"({','.join(IMU_COLUMNS)})")
+    latency = 0.0 if args.motion_latency is None else args.motion_latency
+    if args.motion_latency is not None and args.urdf is None and not imu:
+        raise CliError("--motion-latency is a joint-state (--urdf) or IMU log's stream's; a pose log's latency is the "
+                       "calibration's (fmscal calibrate --latency)")
     if args.urdf is not None:
         if imu:
             raise CliError("--urdf takes a log of joint angles; this one has an IMU's columns: give one source")
-        motion = JointMotion(args.urdf, args.frame)
+        motion = JointMotion(args.urdf, args.frame, latency=latency)
         return read_joint_log(args.log, motion.kinematics), motion
     if imu:
         rotation = None
@@ -106,7 +114,7 @@ def _motion_log(args):
             else:
                 raise CliError(f"--imu-rotation takes 4 numbers (a unit quaternion QW QX QY QZ) or 9 (a rotation "
                                f"matrix by rows); got {len(values)}")
-        return read_imu_log(args.log), ImuMotion(rotation, args.imu_lever_arm)
+        return read_imu_log(args.log), ImuMotion(rotation, args.imu_lever_arm, latency=latency)
     return read_log(args.log), None
 
 

@@ -59,7 +59,8 @@ PARAMETERS = (
     Parameter("contact_topic", "string", "/ft_sensor/contact", "geometry_msgs/WrenchStamped out: the contact "
               "wrench, the input's header stamp"),
     Parameter("covariance_topic", "string", "/ft_sensor/contact_covariance", "std_msgs/Float64MultiArray out: the "
-              "contact wrench's covariance, one per output, row-major, force first (fx fy fz tx ty tz)"),
+              "contact wrench's covariance, one per output, row-major, force first (fx fy fz tx ty tz; planar "
+              "fx fy M)"),
     Parameter("track_offset", "bool", False, "follow the offset's drift (a random walk updated while no contact "
               "is detected)"),
     Parameter("drift_intensity", "double_array", None, "track_offset: the random walk's intensity, the reading's "

@@ -12,6 +12,16 @@ rates and specific force linearly) and the reading is pushed into :class:`fmscal
 A reading the motion has not reached when a reading ``stale_timeout`` s newer arrives is pushed with no motion:
 the motion is stale, and the compensator, which never extrapolates, stops the output until the motion covers
 its window again.
+
+Angles. A pose's angle columns (the model's :attr:`fmscal.plant.Model.angle_names`: the planar ``theta``, which
+the node takes from the quaternion, ``2 atan2(q_z, q_w)``, and a publisher may wrap into (-pi, pi]) are unwrapped
+against the motion's previous sample as they come::
+
+    theta_k <- theta_k - 2 pi round((theta_k - theta_{k-1}) / (2 pi))                               (U1)
+
+so that a payload turning through many revolutions is differentiated without the 2 pi steps (a turn of more
+than pi between two motion samples cannot be told from one the other way). A quaternion's sign is made
+continuous by :class:`fmscal.analysis.Compensator`.
 """
 
 import threading
@@ -22,11 +32,12 @@ from dataclasses import replace
 import numpy as np
 
 from fmscal.plant import Calibration, Log, SpatialModel
+from fmscal.plant.io import AttitudeLog, held_table
 from fmscal.plant.physics import quaternion_multiply
-from fmscal.observers.payload import PayloadEstimate, identify_payload
+from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload
 
 from .._compensate import Compensator, compensation_model
-from .._motion import quaternion_from_matrix, quaternion_to_matrix
+from .._motion import _rotations, quaternion_from_matrix, quaternion_to_matrix
 from ._parameters import Ros2Error
 
 __all__ = ["Pipeline", "Output", "STATES", "DT_SAMPLES", "sensor_pose"]
@@ -123,8 +134,12 @@ class Pipeline:
         self._frames = {}                             # t -> (stamp, frame_id, arrival) of pushed readings
         self._saturated = set()                       # t of pushed saturated readings
         self._held = deque()                          # (t, pose, w_hat) for identify_payload
+        self._unoriented = 0                          # IMU samples without an orientation since the last call
         self._recent = deque()                        # (t, w_hat, motion) of the rows the filter still holds
         self._last_t = None
+        # the pose's angle columns (U1), by what the model declares; their last values
+        self._angles = [self.model.pose_names.index(n) for n in self.model.angle_names] if kind == "pose" else []
+        self._last_angles = None
         self.last_arrival = -np.inf                   # time.monotonic() of the newest reading
         self.motion_frame = ""
         self.identified = None
@@ -195,7 +210,19 @@ class Pipeline:
             self.motion_frame = frame_id
             if self._motion and t <= self._motion[-1][0]:
                 return
+            if self._angles:
+                value = self._unwrapped(value)
             self._motion.append((t, value))
+
+    def _unwrapped(self, pose):
+        """``pose`` with its angle columns unwrapped against the previous motion sample's (U1)."""
+        pose = np.array(pose, dtype=float)
+        angles = pose[self._angles]
+        if self._last_angles is not None:
+            angles = angles - 2 * np.pi * np.round((angles - self._last_angles) / (2 * np.pi))
+            pose[self._angles] = angles
+        self._last_angles = angles
+        return pose
 
     def add_reading(self, t, w_hat, stamp=None, frame_id="", arrival=None):
         """A raw reading stamped ``t`` (s), queued; :meth:`process` compensates it once the motion covers it.
@@ -319,9 +346,18 @@ class Pipeline:
             if value is None:
                 self._held.clear()                     # identify_payload takes the newest stretch without a gap
             else:                                      # a pose, or joint angles (their pose at identify_payload)
-                self._held.append((t, np.asarray(value if self.kind == "pose" else value[0], dtype=float), w_hat))
-                while self._held and self._held[0][0] < t - self.settings.identify_buffer:
-                    self._held.popleft()
+                self._hold(t, np.asarray(value if self.kind == "pose" else value[0], dtype=float), w_hat)
+        elif self.kind == "imu" and not gap and value is not None:
+            if value[0] is None:                       # an IMU without orientation: nothing to hold
+                self._unoriented += 1
+            else:                                      # the IMU's attitude (the held segments' at identify_payload)
+                self._hold(t, np.asarray(value[0], dtype=float), w_hat)
+
+    def _hold(self, t, motion, w_hat):
+        """Keep a sample for ``~/identify_payload`` (the newest ``identify_buffer`` s)."""
+        self._held.append((t, motion, w_hat))
+        while self._held and self._held[0][0] < t - self.settings.identify_buffer:
+            self._held.popleft()
 
     def _output(self, sample):
         """The :class:`Output` of a compensated sample, None where its reading was saturated."""
@@ -380,22 +416,39 @@ class Pipeline:
 
     def identify(self):
         """``(success, message)`` of ``~/identify_payload``: the payload fitted to the motion and readings held
-        since the last call; the compensation then uses it (and ``~/save`` writes it)."""
-        if self.kind == "imu" or self.model.attitude != "quaternion":
-            return False, "identify_payload needs the poses of a 6-axis sensor (pose_topic or joint_states_topic)"
+        since the last call; the compensation then uses it (and ``~/save`` writes it).
+
+        Poses (a pose stream, or joint states through the URDF): :func:`fmscal.observers.payload.identify_payload`
+        on the held stretch (mass, centre of mass and inertia). An IMU: its orientation turned into the sensor's
+        attitude, ``R_S = R_IMU C^T`` (``C`` the IMU's axes in the sensor's, ``imu_rotation``), the samples an
+        attitude-only log whose held segments (:func:`fmscal.plant.io.held_table`) are fitted statically
+        (:func:`fmscal.observers.payload.fit_static`, gravity the ``gravity`` parameter's or the calibration's, in
+        the IMU's world): the mass and centre of mass; the inertia, which no held pose shows, is kept from the
+        payload in use. An IMU that publishes no orientation (``orientation_covariance[0] == -1``) is refused."""
+        if self.model.attitude != "quaternion":
+            return False, (f"identify_payload refused: fmscal's payload fits are a 6-axis sensor's, and this "
+                           f"calibration is of a {self.model.name} reading ({' '.join(self.model.wrench_names)}); "
+                           "the payload in use is the calibration's")
         with self.lock:
             held = list(self._held)
             self._held.clear()
+            unoriented, self._unoriented = self._unoriented, 0
             b = None if self.compensator is None else self.compensator.offset
+        if self.kind == "imu" and not held and unoriented:
+            return False, (f"identify_payload refused: the IMU gave no orientation ({unoriented} samples with "
+                           "orientation_covariance[0] == -1 since the last call); the static fit needs the sensor's "
+                           "attitude at each held pose: an IMU that estimates its orientation, or pose_topic")
         if len(held) < 2 or held[-1][0] - held[0][0] < 1.0:
             return False, f"identify_payload refused: {len(held)} samples held since the last call (at least 1 s " \
                           "of motion without a gap needed)"
         t, pose, w_hat = (np.array(v) for v in zip(*held))
-        if self.kind == "joints":
-            pose = self.motion.poses(pose)                 # the sensor frame's, in the URDF's base frame
         cal = self.calibration
         gravity = self.settings.gravity if self.settings.gravity is not None else cal.gravity
         reading = self.settings.reading or cal.reading
+        if self.kind == "imu":
+            return self._identify_held(t, pose, w_hat, gravity, reading, b)
+        if self.kind == "joints":
+            pose = self.motion.poses(pose)                 # the sensor frame's, in the URDF's base frame
         try:
             log = Log(t - t[0], pose, w_hat, name="held")
             estimate = identify_payload(log, S=cal.S, gravity=gravity, reading=reading)
@@ -404,15 +457,35 @@ class Pipeline:
         if estimate.inertia is None or not estimate.payload_determined:
             return False, (f"identify_payload: the held motion does not determine the payload (mass "
                            f"{estimate.mass:.4g} +- {estimate.mass_std:.2g} kg); kept the one in use")
-        payload = SpatialModel.payload_from(estimate.mass, estimate.inertia, estimate.com)
+        self._use(SpatialModel.payload_from(estimate.mass, estimate.inertia, estimate.com), b)
+        return True, (f"payload identified from {len(t)} samples ({t[-1] - t[0]:.3g} s): mass {estimate.mass:.4g} +- "
+                      f"{estimate.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in estimate.com) + " m"
+                      + ("" if estimate.converged else "; not converged: " + "; ".join(estimate.warnings[:1])))
+
+    def _identify_held(self, t, q_imu, w_hat, gravity, reading, b):
+        """:meth:`identify` of an IMU: the held segments of its attitudes, fitted statically."""
+        q = quaternion_from_matrix(_rotations(q_imu) @ self.motion.rotation.T)        # R_S = R_IMU C^T
+        try:
+            table, used, why = held_table(AttitudeLog(t - t[0], q, w_hat, name="the held IMU samples"))
+            fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading)
+        except Exception as err:
+            return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
+        if not fit.payload_determined:
+            return False, (f"identify_payload: the held poses do not determine the payload (mass {fit.mass:.4g} +- "
+                           f"{fit.mass_std:.2g} kg, {len(table)} held poses); kept the one in use")
+        self._use(SpatialModel.payload_from(fit.mass, self.model.payload.inertia, fit.com), b)
+        return True, (f"payload identified from {len(table)} held poses ({used:.0%} of {t[-1] - t[0]:.3g} s): mass "
+                      f"{fit.mass:.4g} +- {fit.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in fit.com)
+                      + " m; the inertia kept (no held pose shows it)"
+                      + ("" if fit.converged else "; not converged: " + "; ".join(fit.warnings[:1])))
+
+    def _use(self, payload, b):
+        """The compensation goes on with ``payload`` (and the offset ``b`` it had), with no gap."""
         with self.lock:
             if self.compensator is not None:
                 self._rebuild(self.calibration if b is None else replace(self.calibration, b=b), payload)
             self.payload = self.identified = payload
             self.model = compensation_model(self.calibration, payload)
-        return True, (f"payload identified from {len(t)} samples ({t[-1] - t[0]:.3g} s): mass {estimate.mass:.4g} +- "
-                      f"{estimate.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in estimate.com) + " m"
-                      + ("" if estimate.converged else "; not converged: " + "; ".join(estimate.warnings[:1])))
 
     def save(self):
         """``(success, message)`` of ``~/save``: the calibration with the offset in use and the payload in use,
