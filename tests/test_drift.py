@@ -166,6 +166,49 @@ def test_refusals(arm):
             Compensator(cal, log.dt, **kw)
 
 
+@pytest.mark.parametrize("kappa, seed", [(0.25, 0), (2.0, 1)])
+def test_fitted_intensity_recovers_a_random_walk(arm, kappa, seed):
+    """drift_intensity="fit" (eq. D5) on a 5 s log whose raw offset walks at kappa x the reading's noise sd per
+    sqrt(s) per channel (D1 exactly): the fitted intensity within [0.8, 1.5] x kappa (the offline smoothing's
+    correlated noise adds a little), and the offset's 95 % intervals covering 90-99 % of the samples."""
+    log, truth, S, cal = arm
+    sd = np.asarray(truth.noise.wrench_sd, dtype=float)
+    rng = np.random.default_rng(seed)
+    walk = np.cumsum(rng.normal(size=(len(log.t), 6)) * np.sqrt(np.diff(log.t, prepend=log.t[0]))[:, None]
+                     * kappa * sd, axis=0)
+    moved = Log(log.t, log.pose, log.w_hat + walk, name=log.name, model=log._model)
+    c = compensate(cal, moved, track_offset=True, drift_intensity="fit")
+    scale = c.drift_intensity / sd
+    assert np.allclose(scale, scale[0]) and 0.8 * kappa < scale[0] < 1.5 * kappa, scale
+    i = np.searchsorted(log.t, np.round(c.t, 9))
+    cover = np.mean(np.abs(c.offset - truth.offset - walk[i]) <= 1.959964 * c.offset_sd)
+    assert 0.90 < cover < 0.99, cover
+    assert not c.warnings
+    given = compensate(cal, moved, track_offset=True, drift_intensity=c.drift_intensity)     # the fit, then (D3)
+    np.testing.assert_allclose(given.offset, c.offset, rtol=0, atol=1e-12)
+
+
+def test_fitted_intensity_refusals(arm, tmp_path, capsys):
+    """"fit" is offline only: causal, a Compensator and --causal refuse it in one line; another word is not an
+    intensity. The CLI prints the fitted intensity."""
+    log, truth, S, cal = arm
+    for call in (lambda: compensate(cal, log.head(500), causal=True, track_offset=True, drift_intensity="fit"),
+                 lambda: Compensator(cal, log.dt, track_offset=True, drift_intensity="fit")):
+        with pytest.raises(FmscalError, match="offline only") as e:
+            call()
+        assert "\n" not in str(e.value)
+    with pytest.raises(FmscalError, match="drift_intensity must be"):
+        compensate(cal, log.head(500), track_offset=True, drift_intensity="fitted")
+    log.head(1500).write(tmp_path / "log.csv")
+    cal.save(tmp_path / "cal.json")
+    args = ["compensate", str(tmp_path / "cal.json"), str(tmp_path / "log.csv"), "--out"]
+    assert main(args + [str(tmp_path / "c.csv"), "--track-offset", "--drift-intensity", "fit"]) == 0
+    assert "drift intensity fitted (per sqrt(s)) tx " in capsys.readouterr().out
+    assert main(args + [str(tmp_path / "e.csv"), "--causal", "--track-offset", "--drift-intensity", "fit"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "offline only" in err
+
+
 def test_cli_track_offset(arm, tmp_path, capsys):
     """--track-offset adds the offset's columns and its final value; --drift-intensity without it, or not a
     number, is one line and exit 2."""
