@@ -68,9 +68,10 @@ A sample is a contact where the compensated wrench is beyond its noise: its norm
     b_k = b_{k-1} + n_k,    n_k ~ N(0, diag(q^2) (t_k - t_{k-1}))                                (D1)
 
 ``q`` the drift's intensity (units per sqrt(s); causal default :data:`DRIFT_INTENSITY` times the reading's
-noise sd, offline default fitted to the log by (D5)). Each sample first predicts ``P <- P + diag(q^2) dt``; the compensated wrench with the predicted offset,
-``w_e = W_p - S (sigma w_hat - b)``, is then the innovation of the measurement ``-w_e = S (b_true - b) + e``,
-with the covariance ``Cov_total = Cov + S P S^T`` (Cov of (C3)), the covariance published::
+noise sd, offline default fitted to the log by (D5)). Each sample first predicts ``P <- P + diag(q^2) dt``; the
+compensated wrench with the predicted offset, ``w_e = W_p - S (sigma w_hat - b)``, is then the innovation of the
+measurement ``-w_e = S (b_true - b) + e``, with the covariance ``Cov_total = Cov + S P S^T`` (Cov of (C3)), the
+covariance published::
 
     d^2 = w_e^T Cov_total^-1 w_e                                                                 (D2)
 
@@ -87,11 +88,12 @@ intensity ``q`` would add since the last samples, about equal where ``q^2 dt`` i
 offset that moves more smoothly than such a walk (a sensor warming) leaves only the first: the error's variance
 is then about half of ``P``, and the 95 % intervals cover about ``2 Phi(1.96 sqrt(2)) - 1`` (99 %) of the
 samples, conservative. A smoother over the whole log (Rauch-Tung-Striebel) narrows ``P`` and the error alike and
-does not change that; only an intensity matched to the drift does (``benchmarks/drift.py --why``).
+does not change that; only an intensity matched to the drift does (``benchmarks/drift.py --why``): (D5) fits
+one.
 
-**The intensity fitted** (``drift_intensity="fit"``, offline only and its default). The intensity is ``q = s q_0``, ``q_0``
-the default's per-channel shape (:data:`DRIFT_INTENSITY` times the reading's noise sd) and ``s`` the scale
-maximising the innovations' likelihood of (D2)::
+**The intensity fitted** (``drift_intensity="fit"``, offline only and its default). The intensity is
+``q = s q_0``, ``q_0`` the causal default (:data:`DRIFT_INTENSITY` times the reading's noise sd, per channel)
+and ``s`` the scale maximising the innovations' likelihood of (D2)::
 
     l(s) = -1/2 sum_k [min(d_k^2(s), chi2) + log det Cov_total,k(s)]                               (D5)
 
@@ -526,7 +528,7 @@ class _OffsetTracker:
         else:
             best = grid[i]
             self.warnings.append(f"the drift intensity's fit (D5) reached its {'lower' if i == 0 else 'upper'} "
-                                 f"limit: {2.0 ** best:g} x the default taken; the likelihood still rises beyond")
+                                 f"limit: {2.0 ** best:g} x the causal default taken; the likelihood rises beyond")
         self.q2 = np.square(2.0 ** best * self.shape)
 
 
@@ -752,7 +754,8 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
                         threshold=parts.threshold, names=parts.names, delay=float(lag), direction=direction,
                         warnings=list(parts.warnings) + ([] if tracker is None else tracker.warnings),
-                        offset=offset, offset_sd=offset_sd, frame=frame, point=output.point, drift_intensity=None if tracker is None else tracker.intensity)
+                        offset=offset, offset_sd=offset_sd, frame=frame, point=output.point,
+                        drift_intensity=None if tracker is None else tracker.intensity)
 
 
 def _causal_filter(values, c):
@@ -791,7 +794,8 @@ def _by_stream(calibration, log, model, noise, direction, window, delay, order, 
                         warnings=list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"],
                         offset=None if out[0].offset is None else np.array([o.offset for o in out]),
                         offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
-                        frame=stream.frame, point=stream.point)
+                        frame=stream.frame, point=stream.point,
+                        drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
 
 
 def _compensate_source(calibration, log, causal, motion, *, payload, direction, noise, window, delay, order,
@@ -849,7 +853,8 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
                             warnings=list(stream.warnings),
                             offset=None if out[0].offset is None else np.array([o.offset for o in out]),
                             offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
-                            frame=frame, point=stream.point)
+                            frame=frame, point=stream.point,
+                            drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
     noise = _noise(calibration, noise)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
     output = _Output(model, frame, point)
@@ -903,7 +908,8 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     wrench, cov = output.apply(wrench, cov, R)
     return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
-                        warnings=warnings + ([] if tracker is None else tracker.warnings), offset=offset, offset_sd=offset_sd, frame=frame, point=output.point,
+                        warnings=warnings + ([] if tracker is None else tracker.warnings), offset=offset,
+                        offset_sd=offset_sd, frame=frame, point=output.point,
                         drift_intensity=None if tracker is None else tracker.intensity)
 
 
