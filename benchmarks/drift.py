@@ -13,8 +13,8 @@ given a temperature-like offset drift (``d (1 - exp(-t / 15 s))``, 2 N and 0.05 
 - a slow push, 10 N over 10 s from 40 s, instead of the contact: the share of it the offset has taken for
   drift at its end, and the share of its samples flagged;
 
-then the intensities the offline fit chose, what it does with the push, and the trade-off the drift's
-intensity sets (causal): the residual, coverage and push taken at several intensities.
+then the intensities the offline fit chose, and the trade-off the drift's intensity sets (the offline fit and
+causal at several intensities): the residual, the coverage, the push taken, and the coverage on the push's log.
 docs/guide/compensation.md quotes it. A few minutes on 2 cores.
 
 ``--why``: why the offline intervals at a fixed intensity cover more than 95 % (docs/guide/compensation.md,
@@ -175,7 +175,7 @@ def main():
     if args.why:
         with Pool(2) as pool:
             results = pool.map(partial(why, cal=cal, S=truth.S_at(0.0), b=truth.offset), seeds)
-        print(f"\noffline, default intensity ({DRIFT_INTENSITY:g} x the noise sd per sqrt(s)) unless said; "
+        print(f"\noffline, the causal default intensity ({DRIFT_INTENSITY:g} x the noise sd per sqrt(s)) unless said; "
               "coverage of the offset's 95 % intervals, mean (min-max) over seeds\n")
         for key in results[0]:
             v = np.array([r[key] for r in results])
@@ -209,24 +209,22 @@ def main():
               + ", ".join(f"{100 * v:.1f} %" for v in summary([r[key] for r in results])["coverage"].mean(axis=0)))
     s = summary([r[(FIT, False)] for r in results])
     scale, push_scale = (s[k] / s["sd"] for k in ("intensity", "push_intensity"))
-    print(f"\nthe offline fit (D5), x the noise sd per sqrt(s), over seeds and channels: with the contact "
-          f"{scale.mean():.3f} ({scale.min():.3f}-{scale.max():.3f}); with the slow push instead "
-          f"{push_scale.mean():.3f} ({push_scale.min():.3f}-{push_scale.max():.3f}): the push taken for drift at its "
-          f"end {100 * s['push_taken'].mean():.0f} % (max {100 * s['push_taken'].max():.0f} %), flagged "
-          f"{100 * s['push_flagged'].mean():.0f} %, the offset's coverage on that log "
-          f"{100 * s['push_coverage'].mean():.1f} % ({100 * s['push_coverage'].mean(axis=1).min():.1f}-"
-          f"{100 * s['push_coverage'].mean(axis=1).max():.1f})")
-    print("\nthe drift's intensity (causal): following a drift against taking a slow push (10 N over 10 s) for it\n")
-    print("| intensity, x noise sd / sqrt(s) | residual / noise after 5 s, worst | coverage, mean (min) | "
-          "push taken for drift at its end, mean (max), % | push flagged, % |")
-    print("|---|---|---|---|---|")
-    for m in MULTIPLES:
-        s = summary([r[(m, True)] for r in results])
-        cover = s["coverage"].mean(axis=1)
-        print(f"| {m:g} | {s['residual'].max():.2f} | {100 * cover.mean():.1f} ({100 * cover.min():.1f}) | "
+    print(f"\nthe offline fit (D5), x the noise sd per sqrt(s), mean (min-max) over seeds and channels: on the log "
+          f"with the contact {scale.mean():.3f} ({scale.min():.3f}-{scale.max():.3f}); on the log with the slow push "
+          f"instead {push_scale.mean():.3f} ({push_scale.min():.3f}-{push_scale.max():.3f})")
+    print("\nthe drift's intensity: following a drift against taking a slow push (10 N over 10 s) for it; the "
+          "offset's coverage on the log with the contact and on the log with the push\n")
+    print("| path, intensity x noise sd / sqrt(s) | residual / noise after 5 s, worst | coverage, mean (min) | "
+          "push taken for drift at its end, mean (max), % | push flagged, % | coverage on the push's log, mean (min) |")
+    print("|---|---|---|---|---|---|")
+    for name, key in ((f"offline, fitted: {scale.mean():.2f} / {push_scale.mean():.2f}", (FIT, False)),
+                      *((f"causal, {m:g}", (m, True)) for m in MULTIPLES)):
+        s = summary([r[key] for r in results])
+        cover, push_cover = s["coverage"].mean(axis=1), s["push_coverage"].mean(axis=1)
+        print(f"| {name} | {s['residual'].max():.2f} | {100 * cover.mean():.1f} ({100 * cover.min():.1f}) | "
               f"{100 * s['push_taken'].mean():.0f} ({100 * s['push_taken'].max():.0f}) | "
-              f"{100 * s['push_flagged'].mean():.0f} |", flush=True)
-
+              f"{100 * s['push_flagged'].mean():.0f} | {100 * push_cover.mean():.1f} ({100 * push_cover.min():.1f}) |",
+              flush=True)
 
 if __name__ == "__main__":
     main()
