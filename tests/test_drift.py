@@ -192,7 +192,7 @@ def test_fitted_intensity_recovers_a_random_walk(arm, kappa, seed):
 
 def test_fitted_intensity_refusals(arm, tmp_path, capsys):
     """"fit" is offline only: causal, a Compensator and --causal refuse it in one line; another word is not an
-    intensity. The CLI prints the fitted intensity."""
+    intensity. The CLI prints the fitted intensity, offline (by default too), not causally."""
     log, truth, S, cal = arm
     for call in (lambda: compensate(cal, log.head(500), causal=True, track_offset=True, drift_intensity="fit"),
                  lambda: Compensator(cal, log.dt, track_offset=True, drift_intensity="fit")):
@@ -204,8 +204,11 @@ def test_fitted_intensity_refusals(arm, tmp_path, capsys):
     log.head(1500).write(tmp_path / "log.csv")
     cal.save(tmp_path / "cal.json")
     args = ["compensate", str(tmp_path / "cal.json"), str(tmp_path / "log.csv"), "--out"]
-    assert main(args + [str(tmp_path / "c.csv"), "--track-offset", "--drift-intensity", "fit"]) == 0
-    assert "drift intensity fitted (per sqrt(s)) tx " in capsys.readouterr().out
+    for extra in ([], ["--drift-intensity", "fit"]):                      # fitted offline by default
+        assert main(args + [str(tmp_path / "c.csv"), "--track-offset", "--overwrite"] + extra) == 0
+        assert "drift intensity fitted (per sqrt(s)) tx " in capsys.readouterr().out
+    assert main(args + [str(tmp_path / "c.csv"), "--track-offset", "--overwrite", "--causal"]) == 0
+    assert "drift intensity fitted" not in capsys.readouterr().out
     assert main(args + [str(tmp_path / "e.csv"), "--causal", "--track-offset", "--drift-intensity", "fit"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "offline only" in err
