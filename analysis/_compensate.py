@@ -70,10 +70,11 @@ A sample is a contact where the compensated wrench is beyond its noise: its norm
 
     b_k = b_{k-1} + n_k,    n_k ~ N(0, diag(q^2) (t_k - t_{k-1}))                                (D1)
 
-``q`` the drift's intensity (units per sqrt(s); default :data:`DRIFT_INTENSITY` times the reading's noise
-sd). Each sample first predicts ``P <- P + diag(q^2) dt``; the compensated wrench with the predicted offset,
-``w_e = W_p - S (sigma w_hat - b)``, is then the innovation of the measurement ``-w_e = S (b_true - b) + e``,
-with the covariance ``Cov_total = Cov + S P S^T`` (Cov of (C3)), the covariance published::
+``q`` the drift's intensity (units per sqrt(s); causal default :data:`DRIFT_INTENSITY` times the reading's
+noise sd, offline default fitted to the log by (D5)). Each sample first predicts ``P <- P + diag(q^2) dt``; the
+compensated wrench with the predicted offset, ``w_e = W_p - S (sigma w_hat - b)``, is then the innovation of the
+measurement ``-w_e = S (b_true - b) + e``, with the covariance ``Cov_total = Cov + S P S^T`` (Cov of (C3)), the
+covariance published::
 
     d^2 = w_e^T Cov_total^-1 w_e                                                                 (D2)
 
@@ -90,7 +91,22 @@ intensity ``q`` would add since the last samples, about equal where ``q^2 dt`` i
 offset that moves more smoothly than such a walk (a sensor warming) leaves only the first: the error's variance
 is then about half of ``P``, and the 95 % intervals cover about ``2 Phi(1.96 sqrt(2)) - 1`` (99 %) of the
 samples, conservative. A smoother over the whole log (Rauch-Tung-Striebel) narrows ``P`` and the error alike and
-does not change that; only an intensity matched to the drift does (``benchmarks/drift.py --why``).
+does not change that; only an intensity matched to the drift does (``benchmarks/drift.py --why``): (D5) fits
+one.
+
+**The intensity fitted** (``drift_intensity="fit"``, offline only and its default). The intensity is
+``q = s q_0``, ``q_0`` the causal default (:data:`DRIFT_INTENSITY` times the reading's noise sd, per channel)
+and ``s`` the scale maximising the innovations' likelihood of (D2)::
+
+    l(s) = -1/2 sum_k [min(d_k^2(s), chi2) + log det Cov_total,k(s)]                               (D5)
+
+``d_k^2`` and ``Cov_total,k`` those of (D2) for a tracker run at ``s``, ``chi2`` the contact bound (C4). A
+sample a tracker flags counts as at the bound (a robust likelihood: a contact is not a walk's step, and a
+tracker left behind by the drift pays for each sample it flags); the samples every candidate flags (the
+contacts) are left out. The trackers of the grid :data:`DRIFT_FIT_GRID` of ``s`` run in one vectorised pass
+over the log (a maximum at its edge extends it by as many steps again that way, up to :data:`DRIFT_FIT_LIMITS`);
+``log s`` is refined by the parabola through the best three. A maximum at the limits is taken there, with a
+warning.
 
 **Tare** (:meth:`Compensator.tare`) re-biases at the newest compensated sample's pose::
 
@@ -124,7 +140,7 @@ from ._motion import ImuMotion, JointMotion, _rotations
 
 __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
            "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY",
-           "FRAMES"]
+           "FRAMES", "DRIFT_FIT_GRID", "DRIFT_FIT_LIMITS"]
 
 #: The published wrench: the environment's on the tool (``w_e``, the default) or the tool's on the environment.
 DIRECTIONS = ("on_tool", "on_environment")
@@ -140,6 +156,10 @@ CAUSAL_ORDER = 3
 FALSE_ALARM = 1e-3
 #: The offset's random walk (D1): its default intensity per channel, per sqrt(s), in the reading's noise sd.
 DRIFT_INTENSITY = 1.0
+#: ``drift_intensity="fit"`` (D5): the scales of the default intensity the likelihood is evaluated at first
+#: (equal steps in ``log s``), and the smallest and largest scale an extension of that grid goes to.
+DRIFT_FIT_GRID = tuple(2.0 ** np.arange(-2.0, 2.01, 0.5))
+DRIFT_FIT_LIMITS = (2.0 ** -8, 2.0 ** 6)
 #: Tare (D4): the span of the newest compensated samples it averages, s.
 TARE_WINDOW = 0.1
 #: Tare's contact test: the chance that false alarms alone refuse a tare of a free tool (a binomial tail).
@@ -185,6 +205,9 @@ class Compensation:
         One of :data:`FRAMES`: the wrench's axes.
     point : ndarray, shape (3,), or None
         The point the torque is about (sensor axes, m, from the sensor's point); None: the sensor's point.
+    drift_intensity : ndarray, shape (n_w,), or None
+        ``track_offset``: the random walk's intensity used, per channel, the reading's units per sqrt(s)
+        (fitted by (D5) where ``drift_intensity="fit"``); None otherwise.
     """
 
     t: np.ndarray
@@ -201,6 +224,7 @@ class Compensation:
     offset_sd: np.ndarray = None
     frame: str = "sensor"
     point: np.ndarray = None
+    drift_intensity: np.ndarray = None
 
     @property
     def sd(self):
@@ -431,6 +455,8 @@ class _Parts:
         signed = self.sign * w_hat
         cov = self.covariance(signed, A_inv, accel_var) if cov is None else cov
         if tracker is not None:
+            if tracker.q2 is None:                                                             # (D5)
+                tracker.fit(t, W_p - (signed - tracker.b) @ self.S.T, cov)
             steps = [tracker.step(ti, si, wi, ci) for ti, si, wi, ci in zip(t, signed, W_p, cov)]
             w_e, cov, statistic, b, b_sd = (np.array(v) for v in zip(*steps))
             return self.out_sign * w_e, cov, statistic > self.threshold, statistic, b, b_sd
@@ -496,9 +522,10 @@ class _OffsetTracker:
     """The offset as a random walk (D1), stepped by (D2)-(D3) on each sample; the one implementation of both
     paths. ``intensity`` per channel, the reading's units per sqrt(s); ``P0`` the initial covariance."""
 
-    def __init__(self, parts, intensity, P0):
+    def __init__(self, parts, intensity, P0, shape=None):
         self.parts, self.S = parts, parts.S
-        self.q2 = np.square(intensity)
+        self.q2 = None if intensity is None else np.square(intensity)
+        self.shape, self.warnings = shape, []
         self.b = np.array(parts.b if parts.b is not None else np.zeros(parts.n), dtype=float)
         self.P = np.array(P0, dtype=float)
         self.t = None
@@ -525,9 +552,78 @@ class _OffsetTracker:
         """Restart from the offset ``b`` of covariance ``P`` (D4)."""
         self.b, self.P = np.array(b, dtype=float), np.array(P, dtype=float)
 
+    @property
+    def intensity(self):
+        """The random walk's intensity per channel (D1), the reading's units per sqrt(s)."""
+        return None if self.q2 is None else np.sqrt(self.q2)
 
-def _tracker(parts, noise, track_offset, drift_intensity, offset_sd):
-    """The offset tracker of ``track_offset`` (None where off), its settings checked."""
+    def fit(self, t, w_e0, cov):
+        """Set the intensity to ``s`` times :attr:`shape`, ``s`` maximising (D5) over the rows ``w_e0`` (the
+        compensated wrench with this tracker's offset ``b``, (C1)), their covariances ``cov`` (C3) and times
+        ``t``; the tracker's state is left as it was. A maximum at the grid's edge adds to :attr:`warnings`."""
+        first = np.log2(DRIFT_FIT_GRID)
+        step, width, (low, high) = first[1] - first[0], len(first) - 1, np.log2(DRIFT_FIT_LIMITS)
+        bound = self.parts.threshold
+        grid, d2, logdet = np.empty(0), np.empty((len(t), 0)), np.empty((len(t), 0))
+        new = first
+        while len(new):
+            more = _likelihood_terms(t, w_e0, cov, self.S, self.P, (2.0 ** new[:, None] * self.shape) ** 2, bound)
+            grid, d2, logdet = np.r_[grid, new], np.c_[d2, more[0]], np.c_[logdet, more[1]]
+            order = np.argsort(grid)
+            grid, d2, logdet = grid[order], d2[:, order], logdet[:, order]
+            kept = ~(d2 > bound).all(axis=1)                          # the samples every candidate flags left out
+            if not kept.any():
+                self.q2 = np.square(self.shape)
+                self.warnings.append("the drift intensity's fit (D5) found no sample free of a contact: the "
+                                     f"default ({DRIFT_INTENSITY:g} x the reading's noise sd) taken")
+                return
+            ell = -0.5 * (np.minimum(d2, bound) + logdet)[kept].sum(axis=0)                     # (D5)
+            i = int(np.argmax(ell))
+            new = (grid[0] - step * np.arange(1, width + 1) if i == 0 else
+                   grid[-1] + step * np.arange(1, width + 1) if i == len(grid) - 1 else np.empty(0))
+            new = new[(new >= low - 1e-9) & (new <= high + 1e-9)]
+        if 0 < i < len(grid) - 1:
+            lo, mid, hi = ell[i - 1:i + 2]
+            curvature = lo - 2 * mid + hi
+            best = grid[i] + (0.5 * step * (lo - hi) / curvature if curvature < 0 else 0.0)
+        else:
+            best = grid[i]
+            self.warnings.append(f"the drift intensity's fit (D5) reached its {'lower' if i == 0 else 'upper'} "
+                                 f"limit: {2.0 ** best:g} x the causal default taken; the likelihood rises beyond")
+        self.q2 = np.square(2.0 ** best * self.shape)
+
+
+def _likelihood_terms(t, w_e0, cov, S, P0, q2, bound):
+    """(D1)-(D3) run for ``K`` intensities at once over rows ``w_e0`` (N, n) (the wrench with the offset
+    ``b0`` where the trackers start), their covariances ``cov`` (N, n, n) and times ``t``, from the offset's
+    covariance ``P0``; ``q2`` (K, n) the walks' ``q^2``. Returns ``d^2`` of (D2) and ``log det Cov_total``,
+    each (N, K): the terms of (D5)."""
+    K, n = q2.shape
+    Q = np.zeros((K, n, n))
+    Q[:, np.arange(n), np.arange(n)] = q2
+    P = np.array(np.broadcast_to(P0, (K, n, n)), dtype=float)
+    db = np.zeros((K, n))                                       # each tracker's b - b0
+    d2, logdet = np.empty((len(t), K)), np.empty((len(t), K))
+    dt = np.maximum(np.diff(t, prepend=t[0]), 0.0)
+    ST = S.T
+    for k in range(len(t)):
+        P += Q * dt[k]                                                                         # (D1)
+        w = w_e0[k] + db @ ST
+        SP = S @ P
+        total = cov[k] + SP @ ST
+        solved = np.linalg.solve(total, np.concatenate([w[:, :, None], SP], axis=2))          # (D2)
+        d2[k] = np.einsum("ki,ki->k", w, solved[:, :, 0])
+        logdet[k] = np.linalg.slogdet(total)[1]
+        gain = np.swapaxes(solved[:, :, 1:], 1, 2) * (d2[k] <= bound)[:, None, None]           # (D3)
+        db -= np.einsum("kij,kj->ki", gain, w)
+        P -= gain @ SP
+    return d2, logdet
+
+
+def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False):
+    """The offset tracker of ``track_offset`` (None where off), its settings checked; ``drift_intensity="fit"``
+    (``offline`` only, and its default there) leaves its intensity to (D5), fitted on the log's first pass
+    (:meth:`_Parts.finish`)."""
     if not isinstance(track_offset, bool):
         raise CompensationError(f"track_offset must be True or False; got {track_offset!r}")
     if not track_offset:
@@ -535,21 +631,28 @@ def _tracker(parts, noise, track_offset, drift_intensity, offset_sd):
             raise CompensationError("drift_intensity and offset_sd are the offset tracker's: add track_offset=True")
         return None
     values = {}
-    for name, value, default in (("drift_intensity", drift_intensity,
-                                  DRIFT_INTENSITY * np.asarray(noise.wrench_sd, dtype=float)),
+    shape = DRIFT_INTENSITY * np.asarray(noise.wrench_sd, dtype=float)
+    fit = (isinstance(drift_intensity, str) and drift_intensity == "fit") or (drift_intensity is None and offline)
+    if fit and not offline:
+        raise CompensationError("drift_intensity='fit' is fitted over a whole log (D5): offline only "
+                                "(compensate with causal=False); a stream takes a number")
+    for name, value, default in (("drift_intensity", None if fit else drift_intensity, shape),
                                  ("offset_sd", offset_sd, None)):
         if value is None:
             values[name] = default
             continue
-        v = np.broadcast_to(np.asarray(value, dtype=float), (parts.n,)) if np.ndim(value) == 0 \
-            else np.asarray(value, dtype=float)
-        if v.shape != (parts.n,) or not np.isfinite(v).all() or (v < 0).any():
+        try:
+            v = np.broadcast_to(np.asarray(value, dtype=float), (parts.n,)) if np.ndim(value) == 0 \
+                else np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            v = None
+        if v is None or v.shape != (parts.n,) or not np.isfinite(v).all() or (v < 0).any():
             raise CompensationError(f"{name} must be one or {parts.n} non-negative numbers (per channel, the "
-                                    f"reading's units{' per sqrt(s)' if name == 'drift_intensity' else ''}); "
-                                    f"got {value!r}")
+                                    f"reading's units{' per sqrt(s)' if name == 'drift_intensity' else ''}"
+                                    f"{'; or fit, offline' if name == 'drift_intensity' else ''}); got {value!r}")
         values[name] = v
     P0 = parts.offset_cov() if values["offset_sd"] is None else np.diag(np.square(values["offset_sd"]))
-    return _OffsetTracker(parts, values["drift_intensity"], P0)
+    return _OffsetTracker(parts, None if fit else values["drift_intensity"], P0, shape)
 
 
 def _causal_coefficients(k, order, lead, dt):
@@ -630,9 +733,12 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         The contact test's false-alarm probability per sample (C4).
     track_offset : bool
         Follow the offset's drift (D1)-(D3): updated on the samples with no contact, frozen during one.
-    drift_intensity : float or array_like of n_w floats, optional
-        ``track_offset``: the random walk's intensity ``q`` per channel, the reading's units per sqrt(s);
-        default :data:`DRIFT_INTENSITY` times the reading's noise sd.
+    drift_intensity : float, array_like of n_w floats or "fit", optional
+        ``track_offset``: the random walk's intensity ``q`` per channel, the reading's units per sqrt(s).
+        ``"fit"`` (offline only, and the offline default): :data:`DRIFT_INTENSITY` times the reading's noise sd
+        scaled by the maximum of the innovations' likelihood (D5), about twice the cost; causal default
+        :data:`DRIFT_INTENSITY` times the noise sd (the streaming one's). The result's
+        :attr:`Compensation.drift_intensity` holds the one used.
     offset_sd : float or array_like of n_w floats, optional
         ``track_offset``: the initial offset's sd (e.g. large for a sensor zeroed at an unknown pose);
         default the calibration's covariance of ``b`` (zero where it holds none).
@@ -671,7 +777,7 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     noise = _noise(calibration, noise, log)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
     output = _Output(model, frame, point)
-    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd)
+    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=not causal)
     latency = calibration.latency or 0.0
     aligned = log
     if latency != 0:                     # each pose at the time it was taken; the rows after the last one dropped
@@ -710,8 +816,9 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         wrench, cov = output.apply(wrench, cov, _pose_attitudes(x, model) if output.needs_attitude else None)
     return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
                         threshold=parts.threshold, names=parts.names, delay=float(lag), direction=direction,
-                        warnings=list(parts.warnings), offset=offset, offset_sd=offset_sd, frame=frame,
-                        point=output.point)
+                        warnings=list(parts.warnings) + ([] if tracker is None else tracker.warnings),
+                        offset=offset, offset_sd=offset_sd, frame=frame, point=output.point,
+                        drift_intensity=None if tracker is None else tracker.intensity)
 
 
 def _causal_filter(values, c):
@@ -750,7 +857,8 @@ def _by_stream(calibration, log, model, noise, direction, window, delay, order, 
                         warnings=list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"],
                         offset=None if out[0].offset is None else np.array([o.offset for o in out]),
                         offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
-                        frame=stream.frame, point=stream.point)
+                        frame=stream.frame, point=stream.point,
+                        drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
 
 
 def _compensate_source(calibration, log, causal, motion, *, payload, direction, noise, window, delay, order,
@@ -808,12 +916,13 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
                             warnings=list(stream.warnings),
                             offset=None if out[0].offset is None else np.array([o.offset for o in out]),
                             offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
-                            frame=frame, point=stream.point)
+                            frame=frame, point=stream.point,
+                            drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
     log = _at_readings(log, motion.latency, joint)         # offline: the stream at the readings' times
     noise = _noise(calibration, noise)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
     output = _Output(model, frame, point)
-    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd)
+    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=True)
     warnings = list(parts.warnings) + _latency_warnings(calibration, motion)
     window = OFFLINE_WINDOW if window is None else window
     dt = log.dt
@@ -860,7 +969,9 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     wrench, cov = output.apply(wrench, cov, R)
     return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
-                        warnings=warnings, offset=offset, offset_sd=offset_sd, frame=frame, point=output.point)
+                        warnings=warnings + ([] if tracker is None else tracker.warnings), offset=offset,
+                        offset_sd=offset_sd, frame=frame, point=output.point,
+                        drift_intensity=None if tracker is None else tracker.intensity)
 
 
 def _latency_warnings(calibration, motion):

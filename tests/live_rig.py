@@ -33,7 +33,10 @@ def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal, 
     share of samples whose true offset is within the 95 % interval), ``contact_error`` (relative, the mean over
     the contact's samples), ``contact_flagged``, ``push_taken`` (the share of the push's wrench the offset has
     taken at its end: ``-(S Delta b) . w / |w|^2``, ``Delta b`` the offset estimate's error) and
-    ``push_flagged`` (the share of the push's samples flagged); those two left out where ``push`` is False."""
+    ``push_flagged`` (the share of the push's samples flagged) and ``push_coverage`` (as ``coverage``, on the
+    log with the push); those left out where ``push`` is False.
+    ``intensity``, ``push_intensity``: the intensity each compensation used (``compensate``'s result; fitted where
+    ``intensity`` is ``"fit"``, or None offline)."""
     base = same_rig(log, log_S, log_b, S, b)
     wrench = contact_wrench(15.0)
     touched, change, applied = drift_contact_log(base, S, contact=wrench, contact_at=DRIFT_CONTACT, seed=seed)
@@ -50,6 +53,7 @@ def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal, 
     out["contact_error"] = np.linalg.norm(c.wrench[inside].mean(axis=0) - wrench) / np.linalg.norm(wrench)
     out["contact_flagged"] = c.contact[inside].mean()
     out["false_alarm"] = c.contact[quiet].mean()
+    out["intensity"] = c.drift_intensity
     if not push:
         return out
     push = contact_wrench(10.0, direction=(0.0, 0.6, -0.8))
@@ -61,4 +65,6 @@ def drift_run(cal, S, b, log, log_S, log_b, wrench_sd, seed, intensity, causal, 
     out["push_taken"] = float(-error @ push / (push @ push))
     during = (p.t >= DRIFT_PUSH[0]) & (p.t < sum(DRIFT_PUSH))
     out["push_flagged"] = p.contact[during].mean()
+    out["push_coverage"] = np.mean(np.abs(p.offset - (b + change[idx])) <= 1.959964 * p.offset_sd, axis=0)
+    out["push_intensity"] = p.drift_intensity
     return out

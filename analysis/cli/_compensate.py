@@ -72,9 +72,11 @@ def add_compensate(sub):
                    help="follow the offset's drift: a random walk updated on the samples with no contact (frozen "
                         "during one); adds the columns b_<channel> and b_sd_<channel>, the offset in the reading's "
                         "units and its sd")
-    p.add_argument("--drift-intensity", metavar="Q[,Q...]",
+    p.add_argument("--drift-intensity", metavar="Q[,Q...]|fit",
                    help=f"--track-offset: the random walk's intensity, the reading's units per sqrt(s), one value or "
-                        f"one per channel (default {DRIFT_INTENSITY:g} x the reading's noise sd)")
+                        f"one per channel (--causal default {DRIFT_INTENSITY:g} x the reading's noise sd); 'fit', "
+                        "offline only and its default: that scaled to the maximum of the innovations' likelihood, "
+                        "printed")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CONTACT.csv (never an input)")
     p.set_defaults(func=cmd_compensate)
 
@@ -137,11 +139,17 @@ def cmd_compensate(args):
     if args.drift_intensity is not None:
         if not args.track_offset:
             raise CliError("--drift-intensity is the offset tracker's: add --track-offset")
-        try:
-            intensity = [float(v) for v in args.drift_intensity.split(",")]
-        except ValueError:
-            raise CliError(f"--drift-intensity takes numbers separated by commas; got {args.drift_intensity}") from None
-        intensity = intensity[0] if len(intensity) == 1 else intensity
+        if args.drift_intensity.strip() == "fit":
+            if args.causal:
+                raise CliError("--drift-intensity fit is fitted over the whole log: offline only (leave out --causal)")
+            intensity = "fit"
+        else:
+            try:
+                intensity = [float(v) for v in args.drift_intensity.split(",")]
+            except ValueError:
+                raise CliError(f"--drift-intensity takes numbers separated by commas, or fit; got "
+                               f"{args.drift_intensity}") from None
+            intensity = intensity[0] if len(intensity) == 1 else intensity
     result = compensate(calibration, log, causal=args.causal, payload=payload, window=args.window,
                         delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
                         track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
@@ -168,6 +176,9 @@ def cmd_compensate(args):
           f"{'causal, delay ' + format(result.delay * 1e3, '.3g') + ' ms' if args.causal else 'offline'}; "
           f"contact at {int(result.contact.sum())} samples ({100 * result.contact.mean():.2g} %)")
     print("rms " + ", ".join(f"{n} {v:.3g}" for n, v in zip(result.names, rms)))
+    if args.track_offset and not args.causal and intensity in (None, "fit"):
+        print("drift intensity fitted (per sqrt(s)) " + ", ".join(f"{n} {v:.3g}" for n, v in
+                                                                  zip(result.names, result.drift_intensity)))
     if result.offset is not None:
         print("offset at the end " + ", ".join(f"{n} {v:.4g} +- {s:.2g}" for n, v, s in
                                                zip(result.names, result.offset[-1], result.offset_sd[-1])))
