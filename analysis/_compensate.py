@@ -341,6 +341,23 @@ class _SampleDynamics:
         A_inv = np.linalg.inv(A)
         return x[None].copy(), a[None].copy(), (A_inv @ (a - d))[None], A_inv[None]
 
+    def from_state(self, x, a):
+        """``(W_p (1, n_w), A^-1 (1, n_w, nv))`` of (C2) from one state ``x`` (1, nx) and its accelerations ``a``
+        (1, nv), for a joint or IMU source: :func:`_dynamics` through a buffer of its own (made on first use)."""
+        m = self.model
+        if not hasattr(self, "_state_call"):
+            f = _dynamics(m)
+            self._x, self._A, self._d = np.zeros(m.nx), np.zeros(m.nv * m.n_w), np.zeros(m.nv)
+            buffer, self._state_call = f.buffer()
+            buffer.set_arg(0, memoryview(self._x))
+            buffer.set_res(0, memoryview(self._A))
+            buffer.set_res(1, memoryview(self._d))
+            self._state_buffer = buffer
+        self._x[:] = np.asarray(x, dtype=float).ravel()
+        self._state_call()
+        A_inv = np.linalg.inv(self._A.reshape(m.n_w, m.nv).T)
+        return (A_inv @ (np.asarray(a, dtype=float).ravel() - self._d))[None], A_inv[None]
+
 
 def _payload_wrench(model, x, a):
     """``W_p = A(x)^-1 (a - d(x))`` (C2) at each row of ``x`` (N, nx), ``a`` (N, nv); and ``A^-1``."""
@@ -1242,7 +1259,7 @@ class Compensator:
         else:
             x, a, R = motion.state(self.model, P[0:1], P[1:2], self._orientation(i0)[None])
             M, accel_var = motion.accel_noise(var, sums[0], sums[1])
-        W_p, A_inv = _payload_wrench(self.model, x, a)
+        W_p, A_inv = self._sample.from_state(x, a)
         if wanted == "imu":
             A_inv = A_inv @ M                       # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
         signed = self._parts.sign * reading
