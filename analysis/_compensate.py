@@ -1004,8 +1004,8 @@ def _latency_warnings(calibration, motion):
 def _at_readings(log, latency, joint):
     """A joint or IMU log with its stream moved onto the readings' times: the sample given with the reading at
     ``t_j`` is as of ``t_j - latency``, so row ``i`` gets the stream at ``t_i`` interpolated linearly between its
-    samples (an orientation normalised after: SLERP to second order in the turn between two samples); NaN where
-    the stream does not reach. The log itself is not changed."""
+    samples (an orientation made sign-continuous first and normalised after: SLERP to second order in the turn
+    between two samples); NaN where the stream does not reach. The log itself is not changed."""
     if latency == 0:
         return log
     moved = copy.copy(log)
@@ -1025,9 +1025,21 @@ def _at_readings(log, latency, joint):
                                                                                log.accelerations))
     else:
         moved.angular_velocity, moved.specific_force = at(log.angular_velocity), at(log.specific_force)
-        q = at(log.orientation)
+        q = at(_sign_continuous(log.orientation))
         moved.orientation = q / np.linalg.norm(q, axis=1, keepdims=True)
     return moved
+
+
+def _sign_continuous(q):
+    """Rows of quaternions (N, 4), NaN rows kept, each sample's sign turned into its predecessor's hemisphere
+    (``q`` and ``-q`` are one attitude; an IMU may publish either): interpolated component by component, two
+    samples of opposite signs would pass near zero, not through the turn between them."""
+    q = np.array(q, dtype=float)
+    rows = np.flatnonzero(np.isfinite(q).all(axis=1))
+    if len(rows) > 1:
+        flips = np.einsum("ij,ij->i", q[rows[1:]], q[rows[:-1]]) < 0
+        q[rows[1:]] *= np.cumprod(np.where(flips, -1.0, 1.0))[:, None]
+    return q
 
 
 def _fill(t, values):

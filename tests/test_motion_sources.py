@@ -365,6 +365,22 @@ def test_a_lagging_stream_with_its_latency(ur5_run, source, tmp_path, capsys):
         assert "--motion-latency is a joint-state (--urdf) or IMU log's stream's" in err and err.count("\n") == 1
 
 
+def test_a_lagging_imu_that_flips_its_quaternion_sign(ur5_run):
+    """An IMU that publishes its orientation as q or -q (one attitude; a driver that keeps qw >= 0 flips as qw
+    crosses zero), moved onto the readings' times by a latency of half a sample: the wrench in the base frame is
+    the sign-continuous stream's, to rounding (interpolated component by component across a flip, the
+    orientation passed near zero: newtons off in the base frame)."""
+    run, cal = ur5_run, _truth_calibration()
+    quaternion, omega_i, f_i, _ = _imu_readings(run)
+    sign = np.where((np.arange(len(quaternion)) // 50) % 2 == 0, 1.0, -1.0)[:, None]
+    readings = run["W"] + np.array([0.0, 0.0, 0.0, 3.0, -2.0, 5.0])         # a contact: its axes matter
+    out = [compensate(cal, ImuLog(run["t"], q, omega_i, f_i, readings), motion=ImuMotion(C_IMU, R_IMU,
+                                                                                          latency=5e-4),
+                      noise=NOISE, frame="base") for q in (quaternion, quaternion * sign)]
+    assert np.abs(out[0].wrench[:, 3:]).max() > 1.0
+    np.testing.assert_allclose(out[1].wrench, out[0].wrench, rtol=0, atol=1e-9)
+
+
 def _head(log, rows):
     """The first ``rows`` rows of a joint or IMU log."""
     if isinstance(log, ImuLog):
