@@ -1003,22 +1003,31 @@ def _latency_warnings(calibration, motion):
 
 def _at_readings(log, latency, joint):
     """A joint or IMU log with its stream moved onto the readings' times: the sample given with the reading at
-    ``t_j`` is as of ``t_j - latency``, so row ``i`` gets the stream at ``t_i`` interpolated linearly between its
-    samples (an orientation made sign-continuous first and normalised after: SLERP to second order in the turn
-    between two samples); NaN where the stream does not reach. The log itself is not changed."""
+    ``t_j`` is as of ``t_j - latency``; it goes to the row nearest that time (``round(latency / dt)`` rows back), its
+    value there the stream's at the row's time, interpolated linearly between its samples (an orientation made
+    sign-continuous first and normalised after: SLERP to second order in the turn between two samples). A stream
+    sparser than the readings stays as sparse, its rows between samples empty as with no latency: filled, its
+    noise, estimated from its samples' differences, would vanish from the covariance. NaN where the stream does not
+    reach. The log itself is not changed."""
     if latency == 0:
         return log
     moved = copy.copy(log)
-    taken = log.t - latency
+    shift = int(np.floor(latency / log.dt + 0.5))            # the rows a sample moves by (the log evenly sampled)
+    reach = 1e-9 * log.dt
 
     def at(values):
         if values is None:
             return None
-        present = np.isfinite(values).all(axis=1)
+        present = np.flatnonzero(np.isfinite(values).all(axis=1))
         out = np.full(values.shape, np.nan)
-        if present.sum() >= 2:
-            for c in range(values.shape[1]):
-                out[:, c] = np.interp(log.t, taken[present], values[present, c], left=np.nan, right=np.nan)
+        if len(present) < 2:
+            return out
+        taken = log.t[present] - latency
+        rows = present - shift
+        rows = rows[(rows >= 0) & (rows < len(log.t))]
+        rows = rows[(log.t[rows] >= taken[0] - reach) & (log.t[rows] <= taken[-1] + reach)]
+        for c in range(values.shape[1]):
+            out[rows, c] = np.interp(log.t[rows], taken, values[present, c])
         return out
     if joint:
         moved.joints, moved.velocities, moved.accelerations = (at(v) for v in (log.joints, log.velocities,

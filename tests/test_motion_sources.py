@@ -381,6 +381,32 @@ def test_a_lagging_imu_that_flips_its_quaternion_sign(ur5_run):
     np.testing.assert_allclose(out[1].wrench, out[0].wrench, rtol=0, atol=1e-9)
 
 
+def test_a_lagging_imu_sparser_than_the_readings(ur5_run):
+    """An IMU at a quarter of the readings' rate (its other rows empty), 2 ms late: with latency=0.002 its samples
+    move onto the rows of their times and the rows between stay empty, so the covariance still counts the IMU's
+    noise: the sd per channel within 10 % of the same stream's with no lag, the z-scores' rms near 1 and the
+    contacts flagged near the bound's 0.1 % (filled in by interpolation, the stream's difference noise vanished:
+    the sd fell to the reading's, 1.3x z-scores, over 1 % flagged)."""
+    run, cal = ur5_run, _truth_calibration()
+    rng = np.random.default_rng(3)
+    quaternion, omega_i, f_i, _ = _imu_readings(run, rng, 0.01, 0.2)
+    readings = run["W"] + rng.normal(size=run["W"].shape) * NOISE.wrench_sd
+    n, lag = len(run["t"]), 2
+
+    def sparse(a, shift):
+        out, late = np.full_like(a, np.nan), np.r_[np.full((shift, a.shape[1]), np.nan), a[:n - shift]]
+        out[::4] = late[::4]
+        return out
+    out = {shift: compensate(cal, ImuLog(run["t"], *(sparse(a, shift) for a in (quaternion, omega_i, f_i)),
+                                         readings), motion=ImuMotion(C_IMU, R_IMU, latency=shift * 1e-3),
+                             noise=NOISE) for shift in (0, lag)}
+    ratio = out[lag].sd.mean(axis=0) / out[0].sd.mean(axis=0)
+    assert np.all((ratio > 0.9) & (ratio < 1.1)), ratio
+    z = np.sqrt(np.mean((out[lag].wrench / out[lag].sd) ** 2, axis=0))
+    assert np.all((z > 0.85) & (z < 1.15)), z
+    assert out[lag].contact.mean() < 0.005
+
+
 def _head(log, rows):
     """The first ``rows`` rows of a joint or IMU log."""
     if isinstance(log, ImuLog):
