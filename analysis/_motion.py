@@ -36,7 +36,8 @@ no gravity vector and no pose is needed. The sensor frame's attitude, for an out
 **Latency.** A source's stream may lag the readings (a joint-state topic published after the controller's
 cycle, an IMU's own filter): ``latency`` (s, either sign) says that its sample given with the reading at ``t``
 is as of ``t - latency``, as a calibration's latency says of its pose stream. It is applied where the poses'
-is: offline the stream is moved onto the readings' times by interpolation (any fraction of a sample), causally
+is: offline the stream is moved onto the readings' times by interpolation (any fraction of a sample; a stream
+sparser than the readings stays as sparse, each sample on the row nearest its time), causally
 the filter is read ``latency`` (whole samples) nearer its newest sample, so that the motion and the reading
 are of one time; the delay the causal path states is unchanged, and must be at least the latency.
 
