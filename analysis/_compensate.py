@@ -105,8 +105,8 @@ sample a tracker flags counts as at the bound (a robust likelihood: a contact is
 tracker left behind by the drift pays for each sample it flags); the samples every candidate flags (the
 contacts) are left out. The trackers of the grid :data:`DRIFT_FIT_GRID` of ``s`` run in one vectorised pass
 over the log (a maximum at its edge extends it by as many steps again that way, up to :data:`DRIFT_FIT_LIMITS`);
-``log s`` is refined by the parabola through the best three. A maximum at the limits is taken there, with a
-warning.
+``log s`` is refined by the parabola through the best three. A maximum at the lower limit is taken there (an
+offset that does not drift: the walk all but stopped); at the upper limit, with a warning.
 
 **Tare** (:meth:`Compensator.tare`) re-biases at the newest compensated sample's pose::
 
@@ -130,13 +130,13 @@ from scipy.stats import binom, chi2
 from fmscal.plant import Calibration, Log
 from fmscal.plant.io import ImuLog, JointLog, check_imu_units, difference_noise, estimate_noise, reading_sign
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, skew, smoothed_state,
-                                  spatial_motion)
+from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, rotation_matrices, skew,
+                                  smoothed_state, spatial_motion)
 from fmscal.observers.batch import smoothed_channels
 from fmscal.observers.payload import PayloadEstimate
 
 from ._calibrate import log_model_class
-from ._motion import ImuMotion, JointMotion, _rotations
+from ._motion import ImuMotion, JointMotion
 
 __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
            "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY",
@@ -532,7 +532,7 @@ class _Output:
 def _pose_attitudes(x, model):
     """The sensor frame's attitude ``R`` (N, 3, 3) of rows of the state ``x`` (a unit quaternion's)."""
     q = x[:, list(model.q_index)][:, 3:7]
-    return _rotations(q / np.linalg.norm(q, axis=1, keepdims=True))
+    return rotation_matrices(q, normalise=True)
 
 
 class _OffsetTracker:
@@ -605,8 +605,10 @@ class _OffsetTracker:
             best = grid[i] + (0.5 * step * (lo - hi) / curvature if curvature < 0 else 0.0)
         else:
             best = grid[i]
-            self.warnings.append(f"the drift intensity's fit (D5) reached its {'lower' if i == 0 else 'upper'} "
-                                 f"limit: {2.0 ** best:g} x the causal default taken; the likelihood rises beyond")
+            if i > 0:                       # the lower limit is a log with no drift: the answer, not a failure
+                self.warnings.append(f"the drift intensity's fit (D5) reached its upper limit: {2.0 ** best:g} x "
+                                     "the causal default taken; the likelihood rises beyond (an offset that jumps, "
+                                     "or a contact not flagged?)")
         self.q2 = np.square(2.0 ** best * self.shape)
 
 
@@ -692,12 +694,13 @@ def _causal_settings(window, delay, order, dt, latency):
                                 f"{order} needs at least {order + 3}")
     L, shift = int(round(delay / dt)), int(round(latency / dt))
     if L < shift:
-        raise CompensationError(f"delay {delay:g} s is shorter than the pose stream's latency {latency:g} s (the "
-                                "motion stream's): the "
+        raise CompensationError(f"delay {delay:g} s is shorter than the motion stream's latency {latency:g} s: the "
                                 "motion at the reading's time has not arrived yet; give a delay of at least the "
                                 "latency")
     if L - shift > k - 1:
-        raise CompensationError(f"delay {delay:g} s reaches past the window {window:g} s")
+        lag = f" less the motion stream's latency {latency:g} s" if shift else ""
+        raise CompensationError(f"delay {delay:g} s{lag} reaches past the window {window:g} s: give a window of at "
+                                f"least {(L - shift + 1) * dt:g} s")
     return k, L, L - shift
 
 
@@ -753,7 +756,7 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     drift_intensity : float, array_like of n_w floats or "fit", optional
         ``track_offset``: the random walk's intensity ``q`` per channel, the reading's units per sqrt(s).
         ``"fit"`` (offline only, and the offline default): :data:`DRIFT_INTENSITY` times the reading's noise sd
-        scaled by the maximum of the innovations' likelihood (D5), about twice the cost; causal default
+        scaled by the maximum of the innovations' likelihood (D5), two to four times the cost; causal default
         :data:`DRIFT_INTENSITY` times the noise sd (the streaming one's). The result's
         :attr:`Compensation.drift_intensity` holds the one used.
     offset_sd : float or array_like of n_w floats, optional
@@ -948,7 +951,9 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
     raw = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
     present = np.flatnonzero(np.isfinite(raw).all(axis=1))
     if len(present) < 4:
-        raise CompensationError(f"{log.name}: fewer than four samples of the {motion.source}")
+        moved = (f" once moved by its latency ({motion.latency:g} s; the log spans {log.t[-1] - log.t[0]:g} s)"
+                 if motion.latency else "")
+        raise CompensationError(f"{log.name}: fewer than four samples of the {motion.source}{moved}")
     first, last = present[0], present[-1] + 1           # the rows before the first sample and after the last dropped
     if last - first < k + 1:
         raise CompensationError(f"{log.name}: {last - first} samples with the {motion.source}; the smoothing window "

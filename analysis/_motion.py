@@ -61,7 +61,7 @@ import numpy as np
 
 from fmscal.plant.io import RobotKinematics
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import rotation_matrix
+from fmscal.plant.physics import rotation_matrices, rotation_matrix
 
 __all__ = ["JointMotion", "ImuMotion", "MotionError", "quaternion_from_matrix", "quaternion_to_matrix"]
 
@@ -85,13 +85,6 @@ def quaternion_from_matrix(R):
 def quaternion_to_matrix(q):
     """``R(q)`` of a unit quaternion ``(qw, qx, qy, qz)``, shape (3, 3)."""
     return np.asarray(rotation_matrix(np.asarray(q, dtype=float) / np.linalg.norm(q)), dtype=float)
-
-
-def _rotations(quaternions):
-    """``R(q)`` of each row of unit quaternions (N, 4), shape (N, 3, 3): the one ``rotation_matrix`` over the rows
-    at once."""
-    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
-    return np.moveaxis(np.asarray(rotation_matrix(q.T), dtype=float), -1, 0).reshape(-1, 3, 3)
 
 
 def _cross(a, b):
@@ -221,7 +214,7 @@ class JointMotion:
         order = self._to_urdf
         pose, v, omega, acc, alpha = self.kinematics.motion(np.asarray(q)[:, order], np.asarray(dq)[:, order],
                                                             np.asarray(ddq)[:, order])
-        R = _rotations(pose[:, :4])
+        R = rotation_matrices(pose[:, :4])
         n = len(pose)
         configuration, velocity, a = np.empty((n, 7)), np.empty((n, 6)), np.empty((n, 6))
         configuration[:, :3], configuration[:, 3:] = pose[:, 4:], pose[:, :4]
@@ -341,7 +334,7 @@ class ImuMotion:
         given = np.isfinite(orientation).all(axis=1)
         if given.any():
             q = orientation[given] / np.linalg.norm(orientation[given], axis=1, keepdims=True)
-            R[given] = _rotations(q) @ self.rotation.T
+            R[given] = rotation_matrices(q) @ self.rotation.T
         return x, a, R
 
     def accel_noise(self, var_channels, c0_sq, c1_sq):

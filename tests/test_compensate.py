@@ -141,7 +141,7 @@ def test_refusals(arm):
     with pytest.raises(FmscalError, match="direction must be"):
         compensate(cal, log, direction="up")
     late = Calibration(S=cal.S, payload=cal.payload, method="truth", b=cal.b, latency=0.05)
-    with pytest.raises(FmscalError, match="shorter than the pose stream's latency"):
+    with pytest.raises(FmscalError, match="shorter than the motion stream's latency"):
         compensate(late, log, causal=True)
     with pytest.raises(FmscalError, match="no noise model"):
         Compensator(cal, 1e-3)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant import Calibration, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
-from fmscal.plant.io import AttitudeLog, PoseTable, reading_sign
+from fmscal.plant.io import MAX_WRIST_MASS, AttitudeLog, PoseTable, reading_sign
 from fmscal.plant.physics import MODELS
 
 from fmscal.observers import method_names
@@ -55,8 +55,9 @@ def add_calibrate(sub):
                         "Robotiq, Bota and OnRobot report); recorded in the saved calibration")
     spatial_methods = method_names(calibrates=True, model=next(iter(SPATIAL_SCENARIOS.values())).payload)
     p.add_argument("--max-mass", type=float, default=None, metavar="KG",
-                   help="spatial logs and tables: the heaviest payload taken, kg (default 50, what a wrist sensor "
-                        "carries); a mass beyond it is refused as a unit slip")
+                   help="spatial logs and tables: the heaviest payload taken, kg (default "
+                        f"{MAX_WRIST_MASS:g}, what a wrist sensor carries); a mass beyond it is refused as a unit "
+                        "slip")
     p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
                    help=f"the method (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at the information "
                         "floor; its noise model is estimated from the log unless given). A planar log takes every "

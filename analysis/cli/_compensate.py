@@ -94,6 +94,8 @@ def _motion_log(args):
         raise CliError(f"--imu-rotation and --imu-lever-arm are an IMU log's; {Path(args.log).name} has no IMU columns "
                        f"({','.join(IMU_COLUMNS)})")
     latency = 0.0 if args.motion_latency is None else args.motion_latency
+    if not np.isfinite(latency):
+        raise CliError(f"--motion-latency must be a finite number of seconds (either sign); got {latency}")
     if args.motion_latency is not None and args.urdf is None and not imu:
         raise CliError("--motion-latency is a joint-state (--urdf) or IMU log's stream's; a pose log's latency is the "
                        "calibration's (fmscal calibrate --latency)")

@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 from fmscal.plant import Calibration
-from fmscal.plant.io import AttitudeLog, PoseTable, held_table
+from fmscal.plant.io import MAX_WRIST_MASS, AttitudeLog, PoseTable, held_table
 from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, SpatialModel, inertia_matrix
 
 from fmscal.observers.payload import fit_static, identify_payload
@@ -57,8 +57,9 @@ def add_identify_payload(sub):
                         "wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report); default: "
                         "the one --calibration recorded, else reaction")
     p.add_argument("--max-mass", type=float, default=None, metavar="KG",
-                   help="the heaviest payload taken, kg (default 50, what a wrist sensor "
-                        "carries); a mass beyond it is refused as a unit slip")
+                   help="the heaviest payload taken, kg (default "
+                        f"{MAX_WRIST_MASS:g}, what a wrist sensor carries); a mass beyond it is refused as a unit "
+                        "slip")
     p.add_argument("--urdf", metavar="ROBOT.urdf",
                    help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
                         "names; rad): poses of --frame by forward kinematics (pinocchio: pip install "

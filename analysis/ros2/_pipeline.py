@@ -33,11 +33,11 @@ import numpy as np
 
 from fmscal.plant import Calibration, Log, SpatialModel
 from fmscal.plant.io import AttitudeLog, held_table
-from fmscal.plant.physics import quaternion_multiply
+from fmscal.plant.physics import quaternion_multiply, rotation_matrices
 from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload
 
 from .._compensate import Compensator, compensation_model
-from .._motion import _rotations, quaternion_from_matrix, quaternion_to_matrix
+from .._motion import quaternion_from_matrix, quaternion_to_matrix
 from ._parameters import Ros2Error
 
 __all__ = ["Pipeline", "Output", "STATES", "DT_SAMPLES", "sensor_pose"]
@@ -464,7 +464,7 @@ class Pipeline:
 
     def _identify_held(self, t, q_imu, w_hat, gravity, reading, b):
         """:meth:`identify` of an IMU: the held segments of its attitudes, fitted statically."""
-        q = quaternion_from_matrix(_rotations(q_imu) @ self.motion.rotation.T)        # R_S = R_IMU C^T
+        q = quaternion_from_matrix(rotation_matrices(q_imu) @ self.motion.rotation.T)        # R_S = R_IMU C^T
         try:
             table, used, why = held_table(AttitudeLog(t - t[0], q, w_hat, name="the held IMU samples"))
             fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading)

@@ -757,7 +757,7 @@ def gains_warning(masses, identity, ratio=None):
     spread = float((masses.max() - masses.min()) / masses.mean())
     told = ("S = I may be wrong: calibrate S (fmscal calibrate) and pass --calibration" if identity
             else "the calibration given may be wrong, or the payload's mass changed")
-    times = "" if ratio is None else f"the residual is {ratio:.2g} times the noise; "
+    times = "" if ratio is None else f"the residual is {ratio:{'.2g' if ratio < 10 else '.0f'}} times the noise; "
     return (times + f"the force gains seem to differ by {spread:.1%} between axes (each axis alone weighs "
             + ", ".join(f"{v:.4g}" for v in masses) + f" kg); {told}; the mass's uncertainty includes that spread")
 

@@ -42,7 +42,7 @@ with ``d`` a constant (the torque offset, and ``rho`` times the force offset).
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import rotation_matrix
+from fmscal.plant.physics import rotation_matrices
 
 __all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units",
            "check_table_units", "check_imu_units", "MAX_GYRO_RATE",
@@ -163,9 +163,10 @@ def check_imu_units(name, angular_velocity, specific_force, orientation=None, dt
     The specific force ``f = R^T (p_ddot - g)`` has ``|f|`` near ``|g|`` wherever the motion is slow
     (:data:`EARTH_G`): its median size over the samples is within 0.5-2 g, else the size names the unit (g,
     cm/s^2, mm/s^2). The rate is checked against the orientation's: with ``R_k`` the IMU's attitudes (scalar-first
-    quaternions, :func:`_rotations`), ``R_k^T R_(k+1) = I + [omega] dt`` to first order, so ``omega`` from
-    consecutive orientations (the skew part's vector over ``dt``); the gyro's least-squares scale against it
-    near ``180/pi`` is a gyro in deg/s. Without orientations, a rate beyond :data:`MAX_GYRO_RATE` is one.
+    quaternions, :func:`fmscal.plant.physics.rotation_matrices`), ``R_k^T R_(k+1) = I + [omega] dt`` to first
+    order, so ``omega`` from consecutive orientations (the skew part's vector over ``dt``); the gyro's
+    least-squares scale against it near ``180/pi`` is a gyro in deg/s. Without orientations, a rate beyond
+    :data:`MAX_GYRO_RATE` is one.
 
     Parameters
     ----------
@@ -200,7 +201,7 @@ def check_imu_units(name, angular_velocity, specific_force, orientation=None, dt
         & np.isfinite(q).all(axis=1)[1:]
     if both is not None and both.sum() >= 10:
         rows = np.flatnonzero(both)
-        R0, R1 = _rotations(q[rows]), _rotations(q[rows + 1])
+        R0, R1 = rotation_matrices(q[rows], normalise=True), rotation_matrices(q[rows + 1], normalise=True)
         D = np.einsum("nji,njk->nik", R0, R1)                                    # R_k^T R_(k+1)
         from_q = np.c_[D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0], D[:, 1, 0] - D[:, 0, 1]] / (2 * dt)
         gyro = (omega[rows] + omega[rows + 1]) / 2
@@ -215,13 +216,6 @@ def check_imu_units(name, angular_velocity, specific_force, orientation=None, dt
     if top > MAX_GYRO_RATE:
         raise UnitsError(f"{name}: the IMU's rate reaches {top:.4g}, beyond what a gyro reads "
                          f"({MAX_GYRO_RATE:.3g} rad/s, 2000 deg/s): in deg/s? give it in rad/s")
-
-
-def _rotations(quaternions):
-    """Rotation matrices (N, 3, 3) of quaternions (N, 4), scalar first, normalised."""
-    q = np.asarray(quaternions, dtype=float)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return np.moveaxis(rotation_matrix(q.T), -1, 0)
 
 
 def _weight_fit(R, f, acc=None, R_ddot=None):
@@ -272,7 +266,7 @@ def _conventions(name, quaternions, w_hat, fits):
     for blocks, (tau_cols, f_cols) in (("as written", (slice(0, 3), slice(3, 6))),
                                        ("swapped", (slice(3, 6), slice(0, 3)))):
         for convention, turn in _CONVENTIONS:
-            results[(convention, blocks)] = fits(_rotations(turn(quaternions)), w_hat[:, f_cols])
+            results[(convention, blocks)] = fits(rotation_matrices(turn(quaternions), normalise=True), w_hat[:, f_cols])
     written = results[("as written", "as written")]
     (convention, blocks), best = min(results.items(), key=lambda item: item[1])
     if (written <= _POOR or best > _GOOD or best * _BETTER > written
@@ -352,7 +346,7 @@ def check_table_units(table, gravity, mass=None, com=None, S=None, max_mass=None
     w_hat = _calibrated(table.w_hat, S)
     q = np.asarray(table.q, dtype=float)
     _conventions(table.name, q, w_hat, lambda R, f: _weight_fit(R, f)[3])
-    _, _, c, relative = _weight_fit(_rotations(q), w_hat[:, 3:6])
+    _, _, c, relative = _weight_fit(rotation_matrices(q, normalise=True), w_hat[:, 3:6])
     _torque_and_weight(table.name, w_hat, c if relative <= _POOR else None, gravity, mass, com, max_mass)
 
 
@@ -423,7 +417,7 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None, max_mass=
         R_ddot = (R[2:] - 2 * R[1:-1] + R[:-2]) / h ** 2
         return _weight_fit(R[1:-1], f[1:-1], acc, R_ddot)[3]
     _conventions(log.name, pose[:, :4], w_hat, residual_of)
-    R = _rotations(pose[:, :4])
+    R = rotation_matrices(pose[:, :4], normalise=True)
     R_ddot = (R[2:] - 2 * R[1:-1] + R[:-2]) / h ** 2
     m_a, m_a_std, c, relative = _weight_fit(R[1:-1], w_hat[1:-1, 3:6], acc, R_ddot)
     fits = relative <= _POOR                       # else a mounting the fit does not hold: no weight read from it

@@ -40,7 +40,8 @@ from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_pos
 
 __all__ = ["regressor", "INERTIA_NAMES",
     "SpatialPayload", "PayloadSymbols", "GRAVITY",
-    "quaternion_multiply", "quaternion_conjugate", "rotation_matrix", "unit_quaternions", "QUATERNION_TOLERANCE",
+    "quaternion_multiply", "quaternion_conjugate", "rotation_matrix", "rotation_matrices", "unit_quaternions",
+    "QUATERNION_TOLERANCE",
     "sensor_wrench", "body_acceleration", "state_derivative", "rk4_step", "prescribed_motion", "skew",
     "NQ", "NV", "NX",
 ]
@@ -329,6 +330,26 @@ def rotation_matrix(q):
         [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
     ])
+
+
+def rotation_matrices(quaternions, normalise=False):
+    """:func:`rotation_matrix` of each row of quaternions, at once (numbers only).
+
+    Parameters
+    ----------
+    quaternions : array_like, shape (N, 4) or (4,)
+        Scalar first; unit quaternions, or any non-zero ones with ``normalise``.
+    normalise : bool
+        Divide each row by its norm first.
+
+    Returns
+    -------
+    ndarray, shape (N, 3, 3)
+    """
+    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+    if normalise:
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return np.moveaxis(np.asarray(rotation_matrix(q.T), dtype=float), -1, 0).reshape(-1, 3, 3)
 
 
 def sensor_wrench(q, omega, alpha, p_ddot, payload, gravity=GRAVITY):
