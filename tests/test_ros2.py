@@ -249,15 +249,21 @@ def test_replay_every_reading_out(request, arm, tmp_path):
     assert peer.covariances[0].layout.dim[0].label == "fx fy fz tx ty tz"
 
 
+def _offset_off(cal, truth, path):
+    """Save ``cal`` with its offset off by one noise sd per channel at ``path``; return that error."""
+    delta = 1.0 * np.asarray(truth.noise.wrench_sd)
+    fields = {k: getattr(cal, k) for k in ("S", "payload", "method", "gravity", "latency", "noise")}
+    Calibration(**fields, b=cal.b + delta).save(path)
+    return delta
+
+
 def test_tare(request, arm, tmp_path):
     """A calibration whose offset is off by 1 sd per channel: the output's mean sits at S delta; ~/tare
     re-biases, and from then on the mean is zero within the noise (a contact threshold of 1e-6: no sample of
     the tare's window is taken for a contact)."""
     scenario, log, truth, cal = arm
     S = truth.S_at(0.0)
-    delta = 1.0 * np.asarray(truth.noise.wrench_sd)
-    Calibration(**{**{k: getattr(cal, k) for k in ("S", "payload", "method", "gravity", "latency", "noise")},
-                   "b": cal.b + delta}).save(tmp_path / "cal.json")
+    delta = _offset_off(cal, truth, tmp_path / "cal.json")
     noise = noise_rms(S, truth.noise.wrench_sd)
     with _node(request, tmp_path / "cal.json", "contact_threshold:=1e-6") as proc:
         peer = Peer(domain_id(request.node.name))
@@ -655,10 +661,8 @@ def test_reload(request, arm, tmp_path):
     refused and the one in use kept."""
     scenario, log, truth, cal = arm
     S = truth.S_at(0.0)
-    delta = 1.0 * np.asarray(truth.noise.wrench_sd)
     path = tmp_path / "cal.json"
-    fields = {k: getattr(cal, k) for k in ("S", "payload", "method", "gravity", "latency", "noise")}
-    Calibration(**fields, b=cal.b + delta).save(path)
+    delta = _offset_off(cal, truth, path)
     noise = noise_rms(S, truth.noise.wrench_sd)
     with _node(request, path) as proc:
         peer = Peer(domain_id(request.node.name))
