@@ -980,7 +980,7 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
         x, a, R = motion.state(model, P[0], dq, ddq)
         accel_var = motion.accel_var(P[0], var_ddq, R)                  # (N, 6): each row's Jacobian and R
     else:
-        x, a, R = motion.state(model, P[0], P[1], log.orientation[keep])
+        x, a, R = motion.state(model, P[0], P[1], _filled_orientation(log.t, log.orientation)[keep])
         M, accel_var = motion.accel_noise(var, sums[0], sums[1])
     t, w_hat = log.t[keep], log.w_hat[keep]
     W_p, A_inv = _payload_wrench(model, x, a)
@@ -1017,7 +1017,7 @@ def _at_readings(log, latency, joint):
     if latency == 0:
         return log
     moved = copy.copy(log)
-    shift = int(np.floor(latency / log.dt + 0.5))            # the rows a sample moves by (the log evenly sampled)
+    shift = int(round(latency / log.dt))     # the rows a sample moves by (the log evenly sampled), as causally
     reach = 1e-9 * log.dt
 
     def at(values):
@@ -1054,6 +1054,20 @@ def _sign_continuous(q):
         flips = np.einsum("ij,ij->i", q[rows[1:]], q[rows[:-1]]) < 0
         q[rows[1:]] *= np.cumprod(np.where(flips, -1.0, 1.0))[:, None]
     return q
+
+
+def _filled_orientation(t, q):
+    """An IMU's orientations (N, 4) at every row: the rows without a sample (a stream sparser than the readings)
+    interpolated between their neighbours' as :func:`_at_readings` does (sign-continuous, normalised); NaN
+    before the first and after the last sample. Only the output in the base's axes reads them (C8)."""
+    q = _sign_continuous(q)
+    present = np.flatnonzero(np.isfinite(q).all(axis=1))
+    if len(present) < 2 or len(present) == len(q):
+        return q
+    missing = np.flatnonzero(~np.isfinite(q).all(axis=1))
+    for c in range(4):
+        q[missing, c] = np.interp(t[missing], t[present], q[present, c], left=np.nan, right=np.nan)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def _fill(t, values):
