@@ -88,8 +88,13 @@ def start_sender(domain, duration, seed=0, qos="reliable"):
 
 
 def sender_result(proc, timeout):
-    """The sender's JSON (``epoch``, ``sent``, ``lateness``), once it is done."""
-    out, err = proc.communicate(timeout=timeout)
+    """The sender's JSON (``epoch``, ``sent``, ``lateness``), once it is done (killed if this process is stopped
+    first)."""
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except BaseException:
+        proc.kill()
+        raise
     if proc.returncode:
         raise SystemExit(f"the sender failed: {err[-2000:]}")
     return json.loads(out.strip().splitlines()[-1])

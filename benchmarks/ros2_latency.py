@@ -29,6 +29,7 @@ node's. About ``duration + 10`` s. ``--json`` prints the figures as one JSON obj
 import argparse
 import json
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -194,4 +195,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
+    # stopped by SIGTERM (a timeout, a job killed): exit as for Ctrl-C, so that running_node stops the node
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     main()
