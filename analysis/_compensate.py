@@ -314,19 +314,29 @@ def _one_sample(model):
     return ca.Function(f"one_sample_{model.name}", [p], [ca.densify(ca.vertcat(x, acceleration, ca.vec(A), d))])
 
 
+def _buffered(f, inputs, outputs):
+    """``f`` evaluated in place through casadi's low-overhead buffer (``Function.buffer``): ``(buffer, call)``,
+    ``call()`` reading the arrays ``inputs`` and writing ``outputs`` (keep ``buffer`` alive with them)."""
+    buffer, call = f.buffer()
+    for i, a in enumerate(inputs):
+        buffer.set_arg(i, memoryview(a))
+    for i, a in enumerate(outputs):
+        buffer.set_res(i, memoryview(a))
+    return buffer, call
+
+
 class _SampleDynamics:
-    """:func:`_one_sample` through casadi's low-overhead buffer (``Function.buffer``): one sample's ``x``,
-    ``a``, ``W_p`` and ``A^-1`` of (C2). One per :class:`Compensator` (the buffer's memory is its own)."""
+    """:func:`_one_sample` (poses) and :func:`_dynamics` (a joint or IMU source's state) through casadi's
+    low-overhead buffers: one sample's ``x``, ``a``, ``W_p`` and ``A^-1`` of (C2). One per :class:`Compensator`
+    (the buffers' memory is its own)."""
 
     def __init__(self, model):
         f = _one_sample(model)
         self.model = model
-        self._in = np.zeros(3 * model.n_pose)
-        self._out = np.zeros(f.nnz_out(0))
-        buffer, self._call = f.buffer()
-        buffer.set_arg(0, memoryview(self._in))
-        buffer.set_res(0, memoryview(self._out))
-        self._buffer = buffer                              # kept alive with the arrays it points into
+        self._in, self._out = np.zeros(3 * model.n_pose), np.zeros(f.nnz_out(0))
+        self._buffer, self._call = _buffered(f, [self._in], [self._out])
+        self._x, self._A, self._d = np.zeros(model.nx), np.zeros(model.nv * model.n_w), np.zeros(model.nv)
+        self._state_buffer, self._state_call = _buffered(_dynamics(model), [self._x], [self._A, self._d])
 
     def __call__(self, P):
         """``(x (1, nx), a (1, nv), W_p (1, n_w), A^-1 (1, n_w, nv))`` from ``P`` (3, n_pose)."""
@@ -343,16 +353,8 @@ class _SampleDynamics:
 
     def from_state(self, x, a):
         """``(W_p (1, n_w), A^-1 (1, n_w, nv))`` of (C2) from one state ``x`` (1, nx) and its accelerations ``a``
-        (1, nv), for a joint or IMU source: :func:`_dynamics` through a buffer of its own (made on first use)."""
+        (1, nv), for a joint or IMU source."""
         m = self.model
-        if not hasattr(self, "_state_call"):
-            f = _dynamics(m)
-            self._x, self._A, self._d = np.zeros(m.nx), np.zeros(m.nv * m.n_w), np.zeros(m.nv)
-            buffer, self._state_call = f.buffer()
-            buffer.set_arg(0, memoryview(self._x))
-            buffer.set_res(0, memoryview(self._A))
-            buffer.set_res(1, memoryview(self._d))
-            self._state_buffer = buffer
         self._x[:] = np.asarray(x, dtype=float).ravel()
         self._state_call()
         A_inv = np.linalg.inv(self._A.reshape(m.n_w, m.nv).T)
@@ -870,13 +872,19 @@ def _by_stream(calibration, log, model, noise, direction, window, delay, order, 
     out = [o for o in out if o is not None]
     if not out:
         raise CompensationError(f"{log.name}: no window of the causal filter holds enough poses")
+    return _streamed(stream, out, direction,
+                     list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"])
+
+
+def _streamed(stream, out, direction, warnings):
+    """The :class:`Compensation` of a :class:`Compensator`'s samples ``out`` (oldest first, none None)."""
+    offset = out[0].offset is not None
     return Compensation(t=np.array([o.t for o in out]), wrench=np.array([o.wrench for o in out]),
                         cov=np.array([o.cov for o in out]), contact=np.array([o.contact for o in out]),
-                        statistic=np.array([o.statistic for o in out]), threshold=parts.threshold,
-                        names=parts.names, delay=stream.delay, direction=direction,
-                        warnings=list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"],
-                        offset=None if out[0].offset is None else np.array([o.offset for o in out]),
-                        offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
+                        statistic=np.array([o.statistic for o in out]), threshold=stream._parts.threshold,
+                        names=stream._parts.names, delay=stream.delay, direction=direction, warnings=warnings,
+                        offset=np.array([o.offset for o in out]) if offset else None,
+                        offset_sd=np.array([o.offset_sd for o in out]) if offset else None,
                         frame=stream.frame, point=stream.point,
                         drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
 
@@ -929,15 +937,7 @@ def _compensate_source(calibration, log, causal, motion, *, payload, direction, 
                 out.append(o)
         if not out:
             raise CompensationError(f"{log.name}: no window of the causal filter holds enough {motion.source}")
-        return Compensation(t=np.array([o.t for o in out]), wrench=np.array([o.wrench for o in out]),
-                            cov=np.array([o.cov for o in out]), contact=np.array([o.contact for o in out]),
-                            statistic=np.array([o.statistic for o in out]), threshold=stream._parts.threshold,
-                            names=stream._parts.names, delay=stream.delay, direction=direction,
-                            warnings=list(stream.warnings),
-                            offset=None if out[0].offset is None else np.array([o.offset for o in out]),
-                            offset_sd=None if out[0].offset is None else np.array([o.offset_sd for o in out]),
-                            frame=frame, point=stream.point,
-                            drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
+        return _streamed(stream, out, direction, list(stream.warnings))
     log = _at_readings(log, motion.latency, joint)         # offline: the stream at the readings' times
     noise = _noise(calibration, noise)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
