@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant import Calibration, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
-from fmscal.plant.io import MAX_WRIST_MASS, AttitudeLog, PoseTable, reading_sign
+from fmscal.plant.io import AttitudeLog, PoseTable, reading_sign
 from fmscal.plant.physics import MODELS
 
 from fmscal.observers import method_names
@@ -18,7 +18,7 @@ from fmscal.observers.payload import PayloadEstimate
 
 from .. import _plots
 from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, log_model_class, read_data
-from ._common import CliError, flag_payload, position_flag, positive
+from ._common import CliError, add_max_mass, flag_payload, max_mass, position_flag, positive
 from ._files import atomic_write_text, check_outputs
 from ._spatial import latency_line, print_spatial
 
@@ -54,10 +54,7 @@ def add_calibrate(sub):
                         "applies to the payload) or load (the wrench the tool applies to the sensor, as ATI, "
                         "Robotiq, Bota and OnRobot report); recorded in the saved calibration")
     spatial_methods = method_names(calibrates=True, model=next(iter(SPATIAL_SCENARIOS.values())).payload)
-    p.add_argument("--max-mass", type=float, default=None, metavar="KG",
-                   help="spatial logs and tables: the heaviest payload taken, kg (default "
-                        f"{MAX_WRIST_MASS:g}, what a wrist sensor carries); a mass beyond it is refused as a unit "
-                        "slip")
+    add_max_mass(p, "spatial logs and tables: ")
     p.add_argument("--observer", choices=method_names(calibrates=True), default=None,
                    help=f"the method (default {DEFAULT_METHOD}: the maximum-likelihood estimate, at the information "
                         "floor; its noise model is estimated from the log unless given). A planar log takes every "
@@ -117,7 +114,7 @@ def cmd_calibrate(args):
         cal = calibrate(data, payload, method=args.observer, reading=args.reading, gravity=args.gravity,
                         latency=args.latency, max_latency=args.max_latency, offset=args.offset,
                         pose_noise=args.pose_noise, wrench_noise=args.wrench_noise, truth=truth,
-                        max_mass=None if args.max_mass is None else positive(args.max_mass, "--max-mass"))
+                        max_mass=max_mass(args))
     except OptionError as err:                    # the library's keyword, as this command's flag
         raise CliError(err.template.format(_FLAGS.get(err.option, err.option))) from None
     for note in cal.notes:

@@ -3,6 +3,7 @@
 import numpy as np
 
 from fmscal.plant import SCENARIOS
+from fmscal.plant.io import MAX_WRIST_MASS
 from fmscal.plant.io import json_ready as strict
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import MODELS
@@ -69,6 +70,18 @@ def flag_payload(model, mass, inertia, position):
         return model.payload_from(mass, inertia, position)
     except FmscalError as err:                      # "inertia must be ...": the flag's name
         raise CliError(f"--{err}") from None
+
+
+def add_max_mass(p, cases=""):
+    """``--max-mass KG`` (``max_mass=`` of calibrate, identify_payload and fit_static), ``cases`` saying where."""
+    p.add_argument("--max-mass", type=float, default=None, metavar="KG",
+                   help=f"{cases}the heaviest payload taken, kg (default {MAX_WRIST_MASS:g}, what a wrist sensor "
+                        "carries); a mass beyond it is refused as a unit slip")
+
+
+def max_mass(args):
+    """``--max-mass`` checked: None, or a positive number."""
+    return None if args.max_mass is None else positive(args.max_mass, "--max-mass")
 
 
 def positive(value, name):

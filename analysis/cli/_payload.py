@@ -19,13 +19,13 @@ import sys
 import numpy as np
 
 from fmscal.plant import Calibration
-from fmscal.plant.io import MAX_WRIST_MASS, AttitudeLog, PoseTable, held_table
+from fmscal.plant.io import AttitudeLog, PoseTable, held_table
 from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, SpatialModel, inertia_matrix
 
 from fmscal.observers.payload import fit_static, identify_payload
 
 from .._calibrate import OptionError, read_data
-from ._common import CliError, positive, strict
+from ._common import CliError, add_max_mass, max_mass, strict
 from ._files import check_outputs
 from ._spatial import _NAMES, _spatial_truth
 
@@ -56,10 +56,7 @@ def add_identify_payload(sub):
                    help="the reading's sign: reaction (the wrench the mount applies to the payload) or load (the "
                         "wrench the tool applies to the sensor, as ATI, Robotiq, Bota and OnRobot report); default: "
                         "the one --calibration recorded, else reaction")
-    p.add_argument("--max-mass", type=float, default=None, metavar="KG",
-                   help="the heaviest payload taken, kg (default "
-                        f"{MAX_WRIST_MASS:g}, what a wrist sensor carries); a mass beyond it is refused as a unit "
-                        "slip")
+    add_max_mass(p)
     p.add_argument("--urdf", metavar="ROBOT.urdf",
                    help="the pose columns are the robot's joint angles (q1..qn in the URDF's order, or the joints' "
                         "names; rad): poses of --frame by forward kinematics (pinocchio: pip install "
@@ -139,10 +136,6 @@ def cmd_identify_payload(args):
             print(f"saved the payload to {args.save} (for fmscal calibrate --payload)")
 
 
-def _max_mass(args):
-    return None if args.max_mass is None else positive(args.max_mass, "--max-mass")
-
-
 def _identify_log(args, log, S, gravity, estimate_gravity):
     if tuple(log.columns) != _COLUMNS:
         raise CliError(f"{log.name} is a {log.kind} log; identify-payload takes a spatial log "
@@ -151,7 +144,7 @@ def _identify_log(args, log, S, gravity, estimate_gravity):
     for note in log.notes:                # rows before the first pose dropped: said, as calibrate says it
         print(f"fmscal identify-payload: note: {note}", file=sys.stderr)
     fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
-                           estimate_mounting=args.mounting == "estimate", max_mass=_max_mass(args))
+                           estimate_mounting=args.mounting == "estimate", max_mass=max_mass(args))
     for warning in fit.warnings:
         print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
     out = {**fit.to_dict(), "reading": args.reading}
@@ -239,7 +232,7 @@ def _identify_table(args, table, S, gravity, estimate_gravity):
     if args.truth:
         raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
     fit = fit_static(table, S=S, gravity=gravity, estimate_gravity=estimate_gravity,
-                     estimate_mounting=args.mounting == "estimate", reading=args.reading, max_mass=_max_mass(args))
+                     estimate_mounting=args.mounting == "estimate", reading=args.reading, max_mass=max_mass(args))
     for warning in fit.warnings:
         print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
     if args.json:
