@@ -13,13 +13,16 @@ from fmscal.observers.payload import PayloadEstimate
 from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, FRAMES, OFFLINE_WINDOW,
                            compensate)
 from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
+from .._setup import load_setup
 from ._common import CliError
 from ._files import atomic_write_text, check_outputs
 
 
 def add_compensate(sub):
     p = sub.add_parser("compensate", help="the contact wrench: the payload's gravity and inertia removed from a log",
-                       description="With a calibration saved by fmscal calibrate --save, remove from each reading "
+                       description="With a calibration saved by fmscal calibrate --save, or a payload file saved by "
+                                   "fmscal identify-payload --save (the sensor's own S: the identity, or "
+                                   "--calibration's), remove from each reading "
                                    "of LOG.csv the wrench the payload's own motion needs under gravity "
                                    "(Newton-Euler from its poses, from its joint angles with --urdf, or from an "
                                    "IMU on the tool): w_e = W_p - S (w_hat - b), the wrench the "
@@ -27,7 +30,10 @@ def add_compensate(sub):
                                    "(or as --output-frame and --point say). "
                                    "Writes t, the reading's columns and contact (1 where the wrench is beyond "
                                    "the noise: a chi-square test of its normalised norm).")
-    p.add_argument("calibration", metavar="CAL.json", help="a calibration saved by fmscal calibrate --save")
+    p.add_argument("setup", metavar="CAL.json|PAYLOAD.json",
+                   help="a calibration saved by fmscal calibrate --save, or a payload file saved by fmscal "
+                        "identify-payload --save (its format tells which): the tool, the offset, gravity, the "
+                        "mounting, the reading's sign and their uncertainties")
     p.add_argument("log", metavar="LOG.csv",
                    help="a log of the same sensor: poses and raw readings; with --urdf, t, the joint angles (q1..qn "
                         "or the joints' names, rad) and the readings; or an IMU log: t," + ",".join(IMU_COLUMNS)
@@ -64,8 +70,15 @@ def add_compensate(sub):
                    help=f"--causal: where the window is read, s before the newest sample (default {CAUSAL_DELAY:g}); "
                         "at least the calibration's latency")
     p.add_argument("--payload", metavar="PAYLOAD.json",
-                   help="the tool's mass properties from fmscal identify-payload --save, in place of the "
-                        "calibration's (a tool change: S does not depend on the tool)")
+                   help="with a calibration: the tool's mass properties from fmscal identify-payload --save, in "
+                        "place of the calibration's (a tool change: S does not depend on the tool)")
+    p.add_argument("--calibration", metavar="CAL.json",
+                   help="with a payload file: the sensor's calibrated S (fmscal calibrate --save, or a maker's "
+                        "matrix saved so); default the identity, a factory-calibrated sensor")
+    p.add_argument("--tool-radius", type=float, metavar="M",
+                   help="with a payload file whose inertia its poses did not determine: the tool's radius about its "
+                        "centre of mass, m, which bounds the inertia (default twice the centre of mass's distance, "
+                        "at least 0.05)")
     p.add_argument("--on-environment", action="store_true",
                    help="write the wrench the tool applies to the environment (-w_e) instead")
     p.add_argument("--track-offset", action="store_true",
@@ -125,14 +138,24 @@ def _motion_log(args):
 def cmd_compensate(args):
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
-    inputs = [(args.calibration, "the calibration"), (args.log, "the log")]
-    if args.payload is not None:
-        inputs.append((args.payload, "the --payload file"))
+    inputs = [(args.setup, "the calibration"), (args.log, "the log")]
+    for path, what in ((args.payload, "the --payload file"), (args.calibration, "the --calibration file")):
+        if path is not None:
+            inputs.append((path, what))
     check_outputs([(args.out, "--out")], inputs, overwrite=args.overwrite)
-    calibration = Calibration.load(args.calibration)
-    if calibration.forced or calibration.converged is False:
-        print(f"fmscal compensate: warning: {args.calibration} records a calibration that did not converge",
-              file=sys.stderr)
+    setup = load_setup(args.setup)
+    payload_file = isinstance(setup, PayloadEstimate)
+    if payload_file and args.payload is not None:
+        raise CliError(f"{args.setup} is a payload file: --payload replaces a calibration's payload (give the "
+                       "calibration first, or the payload file alone)")
+    if not payload_file and (args.calibration is not None or args.tool_radius is not None):
+        raise CliError(f"--calibration and --tool-radius go with a payload file; {args.setup} is a calibration")
+    calibration = None if args.calibration is None else Calibration.load(args.calibration)
+    for cal, path in ((setup, args.setup), (calibration, args.calibration)):
+        if isinstance(cal, Calibration) and (cal.forced or cal.converged is False):
+            print(f"fmscal compensate: warning: {path} records a calibration that did not converge", file=sys.stderr)
+    if payload_file and not setup.converged:
+        print(f"fmscal compensate: warning: {args.setup} records a payload that did not converge", file=sys.stderr)
     payload = None if args.payload is None else PayloadEstimate.load(args.payload)
     log, motion = _motion_log(args)
     if not args.causal and args.delay != CAUSAL_DELAY:
@@ -152,7 +175,8 @@ def cmd_compensate(args):
                 raise CliError(f"--drift-intensity takes numbers separated by commas, or fit; got "
                                f"{args.drift_intensity}") from None
             intensity = intensity[0] if len(intensity) == 1 else intensity
-    result = compensate(calibration, log, causal=args.causal, payload=payload, window=args.window,
+    result = compensate(setup, log, causal=args.causal, payload=payload, calibration=calibration,
+                        tool_radius=args.tool_radius, window=args.window,
                         delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
                         track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
                         frame=args.output_frame, point=args.point)
