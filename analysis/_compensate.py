@@ -51,6 +51,12 @@ output falls due inside the gap withheld (``gap``); a gap longer than the filter
 stepping back, restarts the window (``restart``): no output until it is full again. Each is counted by cause in
 :attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`.
 
+**Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
+table's fit holds its rows' noise, not a sample's: a :class:`Compensator` given none estimates the poses' from
+their second differences as they come (the model's :meth:`~fmscal.plant.Model.pose_sd` fitted to each column's), and
+the readings' from the first :data:`NOISE_SAMPLES` readings (:func:`fmscal.plant.io.difference_noise`), with no output
+before them.
+
 **The output's axes and point** (``frame``, ``point``). With ``r_t`` the tool point (sensor axes, from the
 sensor's point) and ``R`` the sensor's attitude (``frame="base"``), the published wrench and its covariance
 are moved by one linear map::
@@ -128,7 +134,7 @@ zeroed by its hardware at an unknown pose reads ``-S^-1 W_p`` of that pose off; 
 """
 
 from collections import Counter, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import casadi as ca
@@ -137,7 +143,7 @@ from scipy.signal import savgol_coeffs
 from scipy.stats import binom, chi2
 
 from fmscal.plant import Calibration
-from fmscal.plant.io import reading_sign
+from fmscal.plant.io import difference_noise, reading_sign
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import MODELS, NoiseSpec, regressor, rotation_matrices, sign_continuous, skew
 from fmscal.observers.payload import PayloadEstimate
@@ -179,6 +185,8 @@ DT_TOLERANCE = 0.1
 DT_INTERVALS = 8
 #: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
 POSE_NOISE_EVERY = 100
+#: A payload file's stream without the readings' noise: estimated from this many first readings, no output before.
+NOISE_SAMPLES = 500
 #: The events :attr:`Compensator.events` counts (module docstring, Stamps).
 EVENTS = ("duplicate", "gap", "restart")
 
@@ -406,7 +414,7 @@ class _Parts:
         self.S_inv = np.linalg.inv(self.S)
         self.sign = reading_sign(calibration.reading)
         self.out_sign = 1.0 if direction == DIRECTIONS[0] else -1.0
-        self.reading_cov = self.S @ np.diag(np.square(noise.wrench_sd)) @ self.S.T
+        self.set_noise(noise)
         self.warnings = []
         self.cov4 = None
         if calibration.cov is not None:
@@ -427,6 +435,10 @@ class _Parts:
         if payload_cov is not None:
             payload = model.payload
             self._J = payload_jacobian(payload.mass, payload.com)                             # (K2)
+
+    def set_noise(self, noise):
+        """The readings' share of (C3), ``S Sigma_r S^T``."""
+        self.reading_cov = self.S @ np.diag(np.square(noise.wrench_sd)) @ self.S.T
 
     def regressor(self, motion):
         """The Newton-Euler regressor ``Y`` (N, n_w, 10) of the rows' motion (K2), where a payload file's
@@ -1088,10 +1100,17 @@ class Compensator:
         self._pose_noise = None
         if noise is None and not st.pose_noise_known and not self.motion.estimates_noise:
             self._pose_noise = _RunningNoise(self.motion.channels(self.model))
+        # a payload file with no readings' noise of a sample (a table's fit holds its rows'): estimated from the
+        # first readings (module docstring, Noise), no output before
+        self._first = None
+        if noise is None and not st.pose_noise_known and st.calibration.noise is None:
+            self._first = []
+            noise = NoiseSpec((1.0,) * self.model.n_w)              # replaced once the first readings are in
         noise = _noise(st, noise)
         self._parts = _Parts(calibration, self.model, noise, direction, false_alarm, st.cov)
         self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd,
                                  inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None)
+        self._default_intensity = drift_intensity is None
         # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
         self.dt, self.order, self._noise = float(dt), order, noise
@@ -1272,6 +1291,8 @@ class Compensator:
         """:meth:`push`'s path for one checked sample: ``channels`` NaN where no motion came."""
         if not self._advance(t):
             return None
+        if self._first is not None:
+            self._learn_noise(w_hat[None])
         channels = self._continuous(channels[None])[0] if np.isfinite(channels).all() else None
         if channels is not None:
             if self._running is not None:
@@ -1284,7 +1305,7 @@ class Compensator:
         if len(self._readings) <= self._L or len(self._channels) < self._k:
             return None
         t0, reading = self._readings[0]
-        if reading is None:
+        if reading is None or self._first is not None:
             return None
         present = [c is not None for c in self._channels]
         if not self._units_checked and any(present):
@@ -1311,7 +1332,8 @@ class Compensator:
 
     def _blockable(self):
         """Both windows full of samples, none missing: the next rows may go as one block."""
-        return (self._t is not None and len(self._intervals) >= DT_INTERVALS and len(self._readings) > self._L
+        return (self._t is not None and self._first is None and len(self._intervals) >= DT_INTERVALS
+                and len(self._readings) > self._L
                 and len(self._channels) == self._k and all(w is not None for _, w in self._readings)
                 and all(c is not None for c in self._channels))
 
@@ -1360,6 +1382,25 @@ class Compensator:
         """The channels' noise variance: a pose stream's configuration's (the noise model's, at its first pose),
         or the running estimate of a joint or IMU stream's."""
         return self._var if self._running is None else self._running.variance()
+
+    def _learn_noise(self, w_hat):
+        """A payload file's stream without the readings' noise: it from the first :data:`NOISE_SAMPLES` readings
+        (:func:`fmscal.plant.io.difference_noise`, robust to a contact's steps); until then no output."""
+        self._first.extend(w_hat)
+        if len(self._first) < NOISE_SAMPLES:
+            return
+        sd = difference_noise(np.array(self._first))
+        if not (sd > 0).all():
+            raise CompensationError("the readings' noise estimated from the first readings is zero (a constant or "
+                                    "coarsely quantised reading): give noise=plant.NoiseSpec(...)")
+        self._noise = replace(self._noise, wrench_sd=tuple(float(v) for v in sd))
+        self._parts.set_noise(self._noise)
+        if self._tracker is not None and self._default_intensity and self._tracker.tracks_offset:
+            self._tracker.shape = DRIFT_INTENSITY * sd                 # (D1)'s default: the noise's sd
+            self._tracker.q2 = np.square(self._tracker.shape)
+        self.warnings.append(f"the readings' noise estimated from the first {len(self._first)} readings (sd "
+                             + " ".join(f"{v:.3g}" for v in sd) + "): the payload file holds none of a sample")
+        self._first = None
 
     def _pose_variance(self, rows):
         """A pose stream's configuration variance (:func:`fmscal.analysis._motion.configuration_variance`): the

@@ -191,7 +191,9 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
     sd = getattr(estimate, "b_std", None)
     cov[10:, 10:] = np.zeros((6, 6)) if sd is None else np.diag(np.square(np.asarray(sd, dtype=float)))
     cov = _with_fit(cov, tracked, slice(0, 16))
-    noise_sd = getattr(estimate, "noise_sd", None)
+    noise_sd = getattr(estimate, "noise_sd", None)         # a log's fit: of a sample; a table's: of a held pose
+    if getattr(estimate, "noise_of", "sample") != "sample":
+        noise_sd = None
     gravity = GRAVITY if estimate.gravity is None else estimate.gravity
     cal = Calibration(S=B @ G @ S0, payload=tool, method="payload", b=np.asarray(estimate.b, dtype=float),   # (K1)
                       reading=getattr(estimate, "reading", None) or "reaction",
