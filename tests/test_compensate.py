@@ -312,3 +312,39 @@ def test_every_path_takes_the_one_step(arm, monkeypatch, tmp_path):
         return out
     published, rows = count(node)
     assert len(published) > 200 and rows >= len(published)
+
+
+def test_the_stamps_on_the_grid(arm):
+    """Compensator places each stamp on its dt's grid (issue 46, item 5; the node's faults, issue 45): dt=1e-4 on a
+    1 kHz stream is an error at the first samples naming both; a duplicate is dropped; two lost readings are a gap
+    of empty rows, the outputs due in it withheld and counted, the others within 5 sigma; stamps stepping back, or
+    a gap beyond the window, restart the window (no output until it is full), said once and counted."""
+    scenario, log, truth, cal = arm
+    with pytest.raises(FmscalError, match=r"the stamps come 0\.001 s apart; dt is 0\.0001 s"):
+        stream = Compensator(cal, 1e-4, noise=truth.noise)
+        for t, w, p in zip(log.t[:20], log.w_hat[:20], log.pose[:20]):
+            stream.push(t, w, p)
+    rows = list(range(1200))
+    del rows[600:602]                                    # two readings lost
+    rows.insert(300, 299)                                # a repeated message
+    stream = Compensator(cal, log.dt, noise=truth.noise)
+    reference = compensate(cal, log.head(1200), True, noise=truth.noise)
+    expected = dict(zip(np.round(reference.t, 9), reference.wrench))
+    out = [o for o in (stream.push(log.t[i], log.w_hat[i], log.pose[i]) for i in rows) if o is not None]
+    assert stream.events == {"duplicate": 1, "gap": 1} and stream.withheld["gap"] == 2
+    assert len(out) == len(reference.t) - 2 - 2                  # the lost readings and the two due in the gap
+    z = np.array([(o.wrench - 0) / np.sqrt(np.diag(o.cov)) for o in out])
+    assert np.abs(z).max() < 5.0
+    same = [o for o in out if not 560 <= round(o.t / log.dt) < 660]   # the windows the gap does not touch
+    np.testing.assert_allclose([o.wrench for o in same], [expected[round(o.t, 9)] for o in same], atol=1e-9)
+    assert sum("a gap of 0.003 s" in w for w in stream.warnings) == 1
+    # stamps stepping back half a second: a restart, said; the output back once the window is full again
+    before = len(out)
+    for i in range(1200, 1700):
+        stream.push(log.t[i] - 0.5, log.w_hat[i], log.pose[i])
+    assert stream.events["restart"] == 1 and any("stepped back" in w for w in stream.warnings)
+    tail = [stream.push(log.t[i] - 0.5, log.w_hat[i], log.pose[i]) for i in range(1700, 1800)]
+    assert all(o is not None for o in tail) and before == len(out)
+    # a pause of 2 s: a restart too (beyond the window and the delay)
+    later = [stream.push(log.t[i] + 1.5, log.w_hat[i], log.pose[i]) for i in range(1800, 1900)]
+    assert stream.events["restart"] == 2 and later[:59] == [None] * 59 and None not in later[59:]   # k = 60

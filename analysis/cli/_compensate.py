@@ -90,6 +90,9 @@ def add_compensate(sub):
                         f"one per channel (--causal default {DRIFT_INTENSITY:g} x the reading's noise sd); 'fit', "
                         "offline only and its default: that scaled to the maximum of the innovations' likelihood, "
                         "printed")
+    p.add_argument("--sd", action="store_true",
+                   help="add the columns sd_<channel>: each component's one-sigma uncertainty (the covariance's "
+                        "diagonal: the reading's noise, the motion's, the calibration's or the payload's)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CONTACT.csv (never an input)")
     p.set_defaults(func=cmd_compensate)
 
@@ -184,11 +187,14 @@ def cmd_compensate(args):
         raise CliError("the compensated wrench is not finite (overflow): the calibration's S or b is far outside "
                        "any sensor's range: nothing written")
     text = io.StringIO()
-    extra = () if result.offset is None else (*(f"b_{n}" for n in result.names),
-                                              *(f"b_sd_{n}" for n in result.names))
+    sd = result.sd if args.sd else None
+    extra = (() if sd is None else tuple(f"sd_{n}" for n in result.names)) + (
+        () if result.offset is None else (*(f"b_{n}" for n in result.names), *(f"b_sd_{n}" for n in result.names)))
     text.write(",".join(("t", *result.names, "contact", *extra)) + "\n")
     for i, (t, w, c) in enumerate(zip(result.t, result.wrench, result.contact)):
-        tail = "" if not extra else "," + ",".join(repr(float(v)) for v in (*result.offset[i], *result.offset_sd[i]))
+        more = (() if sd is None else tuple(sd[i])) + (() if result.offset is None else
+                                                       (*result.offset[i], *result.offset_sd[i]))
+        tail = "" if not more else "," + ",".join(repr(float(v)) for v in more)
         text.write(",".join(repr(float(v)) for v in (t, *w)) + f",{int(c)}{tail}\n")
     atomic_write_text(args.out, text.getvalue())
     for warning in result.warnings:
