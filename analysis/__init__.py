@@ -20,12 +20,12 @@ from ._sensitivity import PARAMETERS, sensitivity, tolerable_error
 from ._bench import BenchSettings, run_bench
 from ._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DRIFT_INTENSITY, FALSE_ALARM, Compensation, Compensator,
                           ContactSample, compensate)
-from ._motion import ImuMotion, JointMotion
+from ._motion import ImuMotion, JointMotion, PoseMotion
 from ._plots import plot_S_entries, plot_calibration, plot_comparison, plot_error_histories
 
 __all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "tail_seen", "convergence_time",
            "CONVERGENCE_THRESHOLD", "calibrate", "read_data", "DivergedError", "OptionError", "compare", "summarise",
            "summary_markdown", "sweep", "reproduce", "ablation", "sensitivity", "tolerable_error", "BenchSettings",
            "run_bench", "plot_S_entries", "plot_calibration", "plot_comparison", "plot_error_histories",
-           "compensate", "Compensation", "Compensator", "ContactSample", "JointMotion", "ImuMotion", "CAUSAL_WINDOW",
-           "CAUSAL_DELAY", "FALSE_ALARM", "DRIFT_INTENSITY"]
+           "compensate", "Compensation", "Compensator", "ContactSample", "PoseMotion", "JointMotion", "ImuMotion",
+           "CAUSAL_WINDOW", "CAUSAL_DELAY", "FALSE_ALARM", "DRIFT_INTENSITY"]

@@ -29,16 +29,27 @@ The motion comes from the poses, smoothed and differentiated by a Savitzky-Golay
 A unit quaternion's rates give the angular velocity and acceleration in the sensor's axes,
 ``omega = 2 vec(q* (x) q')``, ``alpha = 2 vec(q* (x) q'')``.
 
-Two more sources of the motion (``motion=``, :mod:`fmscal.analysis._motion`): joint states with the robot's
-URDF (:class:`JointMotion`: pinocchio's frame velocity and *classical* acceleration, (C5)) and an IMU on the
-tool (:class:`ImuMotion`: its specific force moved to the sensor's point, (C6), read at ``R = I`` so that no
-pose and no gravity vector is needed, (C7)). Their channels (the joint angles; the IMU's rate and specific
-force) go through the same filters as poses, offline both ways and causally with the same stated delay; only
-the accelerations the source does not measure are differentiated. Their streams are as of the readings'
-times unless the source's own ``latency`` says how late they are (``JointMotion(..., latency=)``,
-``ImuMotion(..., latency=)``): it is applied where the poses' is (offline the stream interpolated onto the
-readings' times, causally the filter read that much nearer its newest sample); the calibration's latency is its
-pose stream's and is not applied to them.
+The motion's source is a type (``motion=``, :mod:`fmscal.analysis._motion`): the sensor frame's poses
+(:class:`PoseMotion`, the default), joint states with the robot's URDF (:class:`JointMotion`: pinocchio's frame
+velocity and *classical* acceleration, (C5)) and an IMU on the tool (:class:`ImuMotion`: its specific force moved
+to the sensor's point, (C6), read at ``R = I`` so that no pose and no gravity vector is needed, (C7)). Their
+channels (the poses; the joint angles; the IMU's rate and specific force) go through the same filters, offline
+both ways and causally with the same stated delay; only the accelerations the source does not measure are
+differentiated. A stream is as of the readings' times unless its source's ``latency`` says how late it is (a
+pose stream's default the calibration's; ``JointMotion(..., latency=)``, ``ImuMotion(..., latency=)``): offline
+the stream is moved onto the readings' times, causally the filter is read that much nearer its newest sample.
+
+**One step.** Every path (offline, causal, :class:`Compensator`'s push and push_many, and through them the ROS 2
+node) hands the rows' :class:`Motion` to one function, :func:`_step`: the payload's wrench (C2), the contact
+wrench (C1), its covariance (C3) and test (C4), the offset's tracker (D1)-(D3), the output's axes and point (C8).
+
+**Stamps.** The causal filter assumes evenly spaced samples (:class:`Compensator`'s ``dt``). Each push's stamp is
+placed on that grid: the first intervals must be ``dt`` (within :data:`DT_TOLERANCE`, else an error names both);
+a reading whose stamp repeats the last one is dropped (``duplicate``); a gap of ``g`` missing samples is filled
+with ``g`` empty rows (no reading, no motion: the fit takes the samples the window holds), the readings whose
+output falls due inside the gap withheld (``gap``); a gap longer than the filter's window and delay, or a stamp
+stepping back, restarts the window (``restart``): no output until it is full again. Each is counted by cause in
+:attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`.
 
 **The output's axes and point** (``frame``, ``point``). With ``r_t`` the tool point (sensor axes, from the
 sensor's point) and ``R`` the sensor's attitude (``frame="base"``), the published wrench and its covariance
@@ -116,31 +127,26 @@ the payload's own wrench at that pose restored, so the output does not jump beyo
 zeroed by its hardware at an unknown pose reads ``-S^-1 W_p`` of that pose off; (D4) at any pose finds it.
 """
 
-import copy
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.signal import savgol_coeffs, savgol_filter
+from scipy.signal import savgol_coeffs
 from scipy.stats import binom, chi2
 
-from fmscal.plant import Calibration, Log
-from fmscal.plant.io import ImuLog, JointLog, check_imu_units, difference_noise, estimate_noise, reading_sign
+from fmscal.plant import Calibration
+from fmscal.plant.io import reading_sign
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import (MODELS, ORDER, NoiseSpec, edge, quaternion_multiply, rotation_matrices, skew,
-                                  smoothed_state, spatial_motion)
-from fmscal.observers.batch import smoothed_channels
+from fmscal.plant.physics import MODELS, NoiseSpec, rotation_matrices, sign_continuous, skew
 from fmscal.observers.payload import PayloadEstimate
 
-from ._calibrate import log_model_class
-from ._motion import ImuMotion, JointMotion
+from ._motion import configuration_variance, kinematics, source
 
 __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
            "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY",
-           "FRAMES", "DRIFT_FIT_GRID", "DRIFT_FIT_LIMITS"]
+           "FRAMES", "DRIFT_FIT_GRID", "DRIFT_FIT_LIMITS", "DT_TOLERANCE", "EVENTS"]
 
 #: The published wrench: the environment's on the tool (``w_e``, the default) or the tool's on the environment.
 DIRECTIONS = ("on_tool", "on_environment")
@@ -166,6 +172,12 @@ TARE_WINDOW = 0.1
 TARE_FALSE_REFUSAL = 1e-6
 #: The output's axes (C8): the sensor's, or the base's (the world's: the pose's, the URDF's base, the IMU's world).
 FRAMES = ("sensor", "base")
+#: :class:`Compensator`: the median of its first :data:`DT_INTERVALS` stamps' intervals must be ``dt`` within this
+#: fraction (module docstring, Stamps).
+DT_TOLERANCE = 0.1
+DT_INTERVALS = 8
+#: The events :attr:`Compensator.events` counts (module docstring, Stamps).
+EVENTS = ("duplicate", "gap", "restart")
 
 
 class CompensationError(FmscalError):
@@ -232,7 +244,7 @@ class Compensation:
         return np.sqrt(np.maximum(np.einsum("nii->ni", self.cov), 0.0))
 
 
-# --- the pieces both paths share ------------------------------------------------------------------------------
+# --- the model and its dynamics --------------------------------------------------------------------------------
 def _model_class(calibration):
     """The model class whose reading ``calibration`` calibrates."""
     return next(m for m in MODELS if len(m.wrench_names) == calibration.size)
@@ -301,12 +313,12 @@ _ROW_BY_ROW = 16
 @lru_cache(maxsize=8)
 def _one_sample(model):
     """One sample's (C2) from its smoothed pose and two derivatives, as one casadi Function: the input
-    ``[p; p'; p'']`` (3 n_pose), the output ``[x; a; A(x) (column-major); d(x)]`` (:func:`_kinematics`, then
-    :func:`_dynamics`'s expressions). Evaluated through a :class:`_SampleDynamics` buffer: a streaming sample
-    pays no conversion of casadi's matrices."""
+    ``[p; p'; p'']`` (3 n_pose), the output ``[x; a; A(x) (column-major); d(x)]`` (:func:`fmscal.analysis._motion.
+    kinematics`, then :func:`_dynamics`'s expressions). Evaluated through a :class:`_SampleDynamics` buffer: a
+    streamed sample pays no conversion of casadi's matrices."""
     p = ca.SX.sym("p", 3 * model.n_pose)
     n = model.n_pose
-    configuration, velocity, acceleration = _kinematics(model, p[:n], p[n:2 * n], p[2 * n:])
+    configuration, velocity, acceleration = kinematics(model, p[:n], p[n:2 * n], p[2 * n:])
     x = ca.SX.zeros(model.nx)
     x[list(model.q_index)] = configuration
     x[list(model.v_index)] = velocity
@@ -326,7 +338,7 @@ def _buffered(f, inputs, outputs):
 
 
 class _SampleDynamics:
-    """:func:`_one_sample` (poses) and :func:`_dynamics` (a joint or IMU source's state) through casadi's
+    """:func:`_one_sample` (a pose) and :func:`_dynamics` (a joint or IMU source's state) through casadi's
     low-overhead buffers: one sample's ``x``, ``a``, ``W_p`` and ``A^-1`` of (C2). One per :class:`Compensator`
     (the buffers' memory is its own)."""
 
@@ -353,7 +365,7 @@ class _SampleDynamics:
 
     def from_state(self, x, a):
         """``(W_p (1, n_w), A^-1 (1, n_w, nv))`` of (C2) from one state ``x`` (1, nx) and its accelerations ``a``
-        (1, nv), for a joint or IMU source."""
+        (1, nv)."""
         m = self.model
         self._x[:] = np.asarray(x, dtype=float).ravel()
         self._state_call()
@@ -361,8 +373,12 @@ class _SampleDynamics:
         return (A_inv @ (np.asarray(a, dtype=float).ravel() - self._d))[None], A_inv[None]
 
 
-def _payload_wrench(model, x, a):
-    """``W_p = A(x)^-1 (a - d(x))`` (C2) at each row of ``x`` (N, nx), ``a`` (N, nv); and ``A^-1``."""
+def _payload_wrench(model, x, a, dynamics=None):
+    """``W_p = A(x)^-1 (a - d(x))`` (C2) at each row of ``x`` (N, nx), ``a`` (N, nv); and ``A^-1``. A few rows
+    through ``dynamics``' buffer (a :class:`_SampleDynamics`) where given, more through the mapped Function."""
+    if dynamics is not None and len(x) <= _ROW_BY_ROW:
+        W_p, A_inv = zip(*(dynamics.from_state(x[i:i + 1], a[i:i + 1]) for i in range(len(x))))
+        return np.concatenate(W_p), np.concatenate(A_inv)
     f = _dynamics(model)
     if len(x) == 1:
         A, d = (np.asarray(v) for v in f(x[0]))
@@ -375,49 +391,7 @@ def _payload_wrench(model, x, a):
     return np.einsum("nij,nj->ni", A_inv, a - d), A_inv
 
 
-def _kinematics(model, p0, p1, p2):
-    """The configuration, velocities and accelerations from the smoothed pose and its first two derivatives:
-    columns ``(n_pose, N)`` of numbers, or casadi column vectors (the log's pose order). A unit quaternion's
-    rates give ``omega``, ``alpha`` (module docstring); a configuration that moves additively is the pose
-    itself."""
-    if model.attitude != "quaternion":
-        return p0, p1, p2
-    symbolic = isinstance(p0, (ca.SX, ca.MX))
-    cat = ca.vertcat if symbolic else (lambda *rows: np.concatenate(rows, axis=0))
-    norm = (p0[0] ** 2 + p0[1] ** 2 + p0[2] ** 2 + p0[3] ** 2) ** 0.5
-    q = p0[:4] / norm
-    conj = cat(q[:1], -q[1:4])
-    omega = 2 * quaternion_multiply(conj, p1[:4] / norm)[1:]
-    alpha = 2 * quaternion_multiply(conj, p2[:4] / norm)[1:]
-    return cat(p0[4:], q), cat(p1[4:], omega), cat(p2[4:], alpha)          # [p, q], from the pose [q, p]
-
-
-def _state(model, P0, P1, P2):
-    """The state ``x`` (N, nx) and the accelerations ``a`` (N, nv) from the smoothed poses and their first two
-    derivatives (each (N, n_pose), the log's pose order): :func:`_kinematics` row by row."""
-    configuration, velocity, acceleration = (v.T for v in _kinematics(model, P0.T, P1.T, P2.T))
-    x = np.empty((len(P0), model.nx))
-    x[:, list(model.q_index)] = configuration
-    x[:, list(model.v_index)] = velocity
-    return x, acceleration
-
-
-def _configuration_variance(model, noise, pose):
-    """The variance of each velocity-space component of the configuration a pose of noise ``noise`` measures
-    (``nv``): each pose column's noise (:meth:`fmscal.plant.Model.pose_sd`) moved into the configuration's
-    tangent space by :meth:`fmscal.plant.Model.difference` at ``pose``."""
-    sd = np.asarray(model.pose_sd(noise), dtype=float)
-    pose = np.asarray(pose, dtype=float)
-    q0 = np.asarray(model.pose_configuration(pose), dtype=float).ravel()
-    var = np.zeros(model.nv)
-    for j in range(model.n_pose):
-        moved = pose.copy()
-        moved[j] += sd[j]
-        var += np.asarray(model.difference(q0, np.asarray(model.pose_configuration(moved), dtype=float).ravel()),
-                          dtype=float).ravel() ** 2
-    return var
-
-
+# --- what the step needs besides the motion --------------------------------------------------------------------
 class _Parts:
     """What (C1)-(C4) need besides the motion: ``S``, ``b``, the sign, the covariances, the bound."""
 
@@ -430,6 +404,7 @@ class _Parts:
         n = model.n_w
         self.n, self.names, self.direction = n, tuple(model.wrench_names), direction
         self.S, self.b = np.asarray(calibration.S, dtype=float), calibration.offset
+        self.S_inv = np.linalg.inv(self.S)
         self.sign = reading_sign(calibration.reading)
         self.out_sign = 1.0 if direction == DIRECTIONS[0] else -1.0
         self.reading_cov = self.S @ np.diag(np.square(noise.wrench_sd)) @ self.S.T
@@ -464,24 +439,20 @@ class _Parts:
         """The calibration's covariance of ``b`` (``c = -S b``: ``S^-1 Cov(c) S^-T``), zero where it holds none."""
         if self.cov4 is None or self.m != self.n + 1:
             return np.zeros((self.n, self.n))
-        S_inv = np.linalg.inv(self.S)
-        return S_inv @ self.cov4[:, self.n, :, self.n] @ S_inv.T
+        return self.S_inv @ self.cov4[:, self.n, :, self.n] @ self.S_inv.T
 
-    def finish(self, w_hat, W_p, A_inv, accel_var, tracker=None, t=None, cov=None):
-        """(C1), (C3), (C4) for rows of readings ``w_hat`` (N, n_w) and payload wrenches ``W_p``; with an
-        :class:`_OffsetTracker`, (D1)-(D3) sample by sample at times ``t``, and its offsets and sds. ``cov``: the
-        rows' (C3), where the caller has it already."""
-        signed = self.sign * w_hat
-        cov = self.covariance(signed, A_inv, accel_var) if cov is None else cov
-        if tracker is not None:
-            if tracker.q2 is None:                                                             # (D5)
-                tracker.fit(t, W_p - (signed - tracker.b) @ self.S.T, cov)
-            steps = [tracker.step(ti, si, wi, ci) for ti, si, wi, ci in zip(t, signed, W_p, cov)]
-            w_e, cov, statistic, b, b_sd = (np.array(v) for v in zip(*steps))
-            return self.out_sign * w_e, cov, statistic > self.threshold, statistic, b, b_sd
-        w_e = W_p - (signed - self.b) @ self.S.T
-        statistic = np.einsum("ni,ni->n", w_e, np.linalg.solve(cov, w_e[..., None])[..., 0])
-        return self.out_sign * w_e, cov, statistic > self.threshold, statistic
+    def finish(self, signed, W_p, cov, tracker=None, t=None):
+        """(C1), (C4) for rows of signed readings (N, n_w), payload wrenches ``W_p`` and their (C3) ``cov``; with an
+        :class:`_OffsetTracker`, (D1)-(D3) sample by sample at times ``t`` (the intensity fitted first where
+        (D5) asks), ``Cov_total`` the covariance. ``(w_e, cov, d^2, b, sd(b))``, the last two None without one."""
+        if tracker is None:
+            w_e = W_p - (signed - self.b) @ self.S.T
+            statistic = np.einsum("ni,ni->n", w_e, np.linalg.solve(cov, w_e[..., None])[..., 0])
+            return w_e, cov, statistic, None, None
+        if tracker.q2 is None:                                                                 # (D5)
+            tracker.fit(t, W_p - (signed - tracker.b) @ self.S.T, cov)
+        steps = [tracker.step(ti, si, wi, ci) for ti, si, wi, ci in zip(t, signed, W_p, cov)]
+        return tuple(np.array(v) for v in zip(*steps))
 
 
 class _Output:
@@ -492,7 +463,7 @@ class _Output:
     def __init__(self, model, frame, point):
         if frame not in FRAMES:
             raise CompensationError(f"frame must be one of {', '.join(FRAMES)}; got {frame!r}")
-        self.frame, self.point = frame, None
+        self.model, self.frame, self.point = model, frame, None
         if point is not None:
             try:
                 r = np.asarray(point, dtype=float)
@@ -537,6 +508,68 @@ def _pose_attitudes(x, model):
     return rotation_matrices(q, normalise=True)
 
 
+# --- the one step ------------------------------------------------------------------------------------------------
+@dataclass
+class _Rows:
+    """What :func:`_step` gives for rows of samples: the published wrench, its covariance (with the offset's,
+    (D2)), the contact flag and ``d^2``; the offset and its sd after each row (None without a tracker); the
+    payload's wrench ``W_p`` and the rows' own (C3), for tare."""
+
+    wrench: np.ndarray
+    cov: np.ndarray
+    contact: np.ndarray
+    statistic: np.ndarray
+    offset: np.ndarray
+    offset_sd: np.ndarray
+    W_p: np.ndarray
+    own: np.ndarray
+
+
+def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
+    """Compensation's one step, for rows of samples of any source: motion -> payload wrench -> parts -> output.
+
+    The payload's wrench ``W_p = A(x)^-1 (a - d(x))`` (C2) where the source has not evaluated it; the covariance
+    (C3) with the motion's noise ``A^-1 M diag(var) M^T A^-T``; the contact wrench (C1) and its test (C4), with
+    the offset's tracker (D1)-(D3) where one runs; the output's axes and point (C8). Every path calls it: the
+    offline and causal :func:`compensate`, :meth:`Compensator.push` and :meth:`Compensator.push_many` (and
+    through them the ROS 2 node).
+
+    Parameters
+    ----------
+    parts : _Parts
+    output : _Output
+    tracker : _OffsetTracker or None
+    t : array_like, shape (N,)
+        The readings' times, s.
+    w_hat : ndarray, shape (N, n_w)
+        The raw readings.
+    motion : Motion
+        Their motion (:mod:`fmscal.analysis._motion`).
+    dynamics : _SampleDynamics, optional
+        A stream's buffered dynamics, for a few rows.
+
+    Returns
+    -------
+    _Rows
+    """
+    model = output.model
+    if motion.W_p is None:
+        W_p, A_inv = _payload_wrench(model, motion.x, motion.a, dynamics)                     # (C2)
+    else:
+        W_p, A_inv = motion.W_p, motion.A_inv
+    if motion.accel_map is not None:
+        A_inv = A_inv @ motion.accel_map                 # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
+    signed = parts.sign * w_hat
+    own = parts.covariance(signed, A_inv, motion.accel_var)                                  # (C3)
+    w_e, cov, statistic, b, b_sd = parts.finish(signed, W_p, own, tracker, t)                # (C1), (C4), (D)
+    R = None
+    if output.needs_attitude:
+        R = motion.R if motion.R is not None else _pose_attitudes(motion.x, model)
+    wrench, cov = output.apply(parts.out_sign * w_e, cov, R)                                 # (C8)
+    return _Rows(wrench, cov, statistic > parts.threshold, statistic, b, b_sd, W_p, own)
+
+
+# --- the offset's drift -------------------------------------------------------------------------------------------
 class _OffsetTracker:
     """The offset as a random walk (D1), stepped by (D2)-(D3) on each sample; the one implementation of both
     paths. ``intensity`` per channel, the reading's units per sqrt(s); ``P0`` the initial covariance."""
@@ -706,20 +739,30 @@ def _causal_settings(window, delay, order, dt, latency):
     return k, L, L - shift
 
 
-def _noise(calibration, noise, log=None):
-    """The noise model: given, the calibration's, or the log's (:func:`fmscal.plant.io.estimate_noise`)."""
+def _noise(calibration, noise, estimate=None):
+    """The noise model: given, the calibration's, or the log's (``estimate()``, the source's estimate from it)."""
     if noise is not None:
         if not isinstance(noise, NoiseSpec):
             raise CompensationError(f"noise must be a plant.NoiseSpec; got {type(noise).__name__}")
         return noise
     if calibration.noise is not None and len(calibration.noise.wrench_sd) == calibration.size:
         return calibration.noise
-    if log is None:
+    if estimate is None:
         raise CompensationError("the calibration holds no noise model: give noise=plant.NoiseSpec(...)")
-    return estimate_noise(log)
+    return estimate()
 
 
-# --- offline ---------------------------------------------------------------------------------------------------
+def _latency_warnings(calibration, motion):
+    """The warning that the calibration's latency (its pose stream's) is not the source's, where the source has
+    none of its own: its stream is then taken as of the readings' times."""
+    if not calibration.latency or motion.latency:
+        return []
+    return [f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose stream's) is not applied to "
+            f"the {motion.source} stream, and it has none of its own: it is taken as of the readings' times (give "
+            f"{type(motion).__name__}(..., latency=S), or --motion-latency S, where it lags them)"]
+
+
+# --- a log ---------------------------------------------------------------------------------------------------------
 def compensate(calibration, log, causal=False, *, payload=None, direction="on_tool", noise=None,
                window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM, track_offset=False,
                drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None):
@@ -734,9 +777,8 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         A log of the calibration's case (its poses and readings; or, with ``motion``, its joint states or its
         IMU's samples and readings); no contact needed anywhere.
     causal : bool
-        False: the poses smoothed both ways (no delay). True: the causal filter (module docstring), the
-        result's :attr:`Compensation.delay` its delay; the same numbers as :class:`Compensator` fed the log
-        one sample at a time.
+        False: the motion smoothed both ways (no delay). True: the causal filter (module docstring), the
+        result's :attr:`Compensation.delay` its delay: :class:`Compensator` fed the log.
     payload : plant.Payload or plant.SpatialPayload, optional
         Replaces the calibration's (a tool change: ``S`` does not depend on the tool).
     direction : {"on_tool", "on_environment"}
@@ -748,7 +790,7 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         The smoothing window, s: offline default :data:`OFFLINE_WINDOW`; causal :data:`CAUSAL_WINDOW`.
     delay : float
         Causal: where the fitted polynomial is read, s before the newest sample (:data:`CAUSAL_DELAY`); at
-        least the calibration's latency.
+        least the motion stream's latency.
     order : int
         Causal: the polynomial's degree.
     false_alarm : float
@@ -764,11 +806,11 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     offset_sd : float or array_like of n_w floats, optional
         ``track_offset``: the initial offset's sd (e.g. large for a sensor zeroed at an unknown pose);
         default the calibration's covariance of ``b`` (zero where it holds none).
-    motion : JointMotion or ImuMotion, optional
-        The motion's source: None, the log's poses; a :class:`JointMotion` (C5) for a
-        :class:`fmscal.plant.io.JointLog`; an :class:`ImuMotion` (C6, C7) for a :class:`fmscal.plant.io.ImuLog`.
-        Their streams are as of ``t - motion.latency`` for the reading at ``t`` (the source's own latency;
-        the calibration's is its pose stream's).
+    motion : PoseMotion, JointMotion or ImuMotion, optional
+        The motion's source (:mod:`fmscal.analysis._motion`): None, the log's poses (a :class:`PoseMotion` of
+        the calibration's latency); a :class:`JointMotion` (C5) for a :class:`fmscal.plant.io.JointLog`; an
+        :class:`ImuMotion` (C6, C7) for a :class:`fmscal.plant.io.ImuLog`. Their streams are as of
+        ``t - motion.latency`` for the reading at ``t``.
     frame : {"sensor", "base"}
         The output's axes (C8): the sensor's, or the base's (the world of the poses, the URDF's base, the IMU's
         world; the sensor's attitude rotates the torque and the force).
@@ -788,92 +830,40 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         Not a calibration or a log, a log of another case, no payload, a window longer than the log, a delay
         shorter than the latency.
     """
-    if motion is not None:
-        return _compensate_source(calibration, log, causal, motion, payload=payload, direction=direction,
-                                  noise=noise, window=window, delay=delay, order=order, false_alarm=false_alarm,
-                                  track_offset=track_offset, drift_intensity=drift_intensity, offset_sd=offset_sd,
-                                  frame=frame, point=point)
-    if not isinstance(log, Log):
-        raise CompensationError(f"compensate takes a plant.Log; got {type(log).__name__}")
-    model = compensation_model(calibration, payload, log_model_class(log))
-    noise = _noise(calibration, noise, log)
+    if not isinstance(calibration, Calibration):
+        raise CompensationError(f"compensate takes a plant.Calibration; got {type(calibration).__name__}")
+    src = source(motion, calibration.latency or 0.0)
+    model = compensation_model(calibration, payload, src.check_log(log))
+    src.check(model)
+    if np.shape(log.w_hat)[1:] != (model.n_w,):
+        raise CompensationError(f"{log.name}: {np.shape(log.w_hat)[1:]} reading columns; the calibration's reading "
+                                f"has {model.n_w}")
+    noise = _noise(calibration, noise, lambda: src.log_noise(log))
+    if causal:
+        stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
+                             window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,
+                             false_alarm=false_alarm, track_offset=track_offset, drift_intensity=drift_intensity,
+                             offset_sd=offset_sd, motion=src, frame=frame, point=point)
+        given = src.of_log(log)
+        out = stream.push_many(log.t, log.w_hat, **{src.keyword: given})
+        if not out:
+            raise CompensationError(f"{log.name}: no window of the causal filter holds enough {src.source}")
+        missing = stream.missing
+        return _streamed(stream, out, direction, list(stream.warnings) + (
+            [f"missing {src.source}: each window fitted to the samples it holds"] if missing else []))
+    aligned = src.aligned(log)
     parts = _Parts(calibration, model, noise, direction, false_alarm)
     output = _Output(model, frame, point)
-    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=not causal)
-    latency = calibration.latency or 0.0
-    aligned = log
-    if latency != 0:                     # each pose at the time it was taken; the rows after the last one dropped
-        aligned = log.shift_poses(latency)
-        aligned = aligned.head(int(np.flatnonzero(aligned.has_pose)[-1]) + 1)
-    if not causal:
-        window = OFFLINE_WINDOW if window is None else window
-        x, a = _smoothed_motion(aligned, model, window)
-        keep = slice(edge(aligned, window), len(aligned) - edge(aligned, window))
-        k = 2 * edge(aligned, window) + 1
-        # the poses interpolated onto the log's grid: a pose every r samples weighs about r times a sample's
-        # share of the filter, so the variance of the derivative is about r times the grid's sum(c^2)
-        r = float(np.median(np.diff(np.flatnonzero(aligned.has_pose)))) if aligned.has_pose.sum() > 1 else 1.0
-        c2 = savgol_coeffs(k, ORDER, deriv=2, delta=aligned.dt, use="dot") * np.sqrt(max(r, 1.0))
-        t, w_hat, x, a, lag = aligned.t[keep], aligned.w_hat[keep], x[keep], a[keep], 0.0
-    else:
-        window = CAUSAL_WINDOW if window is None else window
-        k, L, lead = _causal_settings(window, delay, order, aligned.dt, latency)
-        if not aligned.has_pose.all():
-            return _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts,
-                              dict(track_offset=track_offset, drift_intensity=drift_intensity, offset_sd=offset_sd,
-                                   frame=frame, point=point))
-        coefficients = _causal_coefficients(k, order, lead, aligned.dt)
-        c2 = coefficients[2]
-        P = [_causal_filter(aligned.pose, c) for c in coefficients]         # read at sample n - lead
-        # sample j of the filtered poses is read at the pose index j + k - 1 - lead; the reading there
-        first = k - 1 - lead
-        rows = slice(first, first + len(P[0]))
-        x, a = _state(model, *P)
-        t, w_hat, lag = aligned.t[rows], aligned.w_hat[rows], round(L * aligned.dt, 12)
-    W_p, A_inv = _payload_wrench(model, x, a)
-    accel_var = _configuration_variance(model, noise, aligned.pose[np.argmax(aligned.has_pose)]) * np.sum(c2 ** 2)
-    wrench, cov, contact, statistic, *offset = parts.finish(w_hat, W_p, A_inv, accel_var, tracker, t)
-    offset, offset_sd = offset if offset else (None, None)
-    if not output.identity:
-        wrench, cov = output.apply(wrench, cov, _pose_attitudes(x, model) if output.needs_attitude else None)
-    return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
-                        threshold=parts.threshold, names=parts.names, delay=float(lag), direction=direction,
-                        warnings=list(parts.warnings) + ([] if tracker is None else tracker.warnings),
-                        offset=offset, offset_sd=offset_sd, frame=frame, point=output.point,
+    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=True)
+    keep, m = src.offline(aligned, model, noise, OFFLINE_WINDOW if window is None else window)
+    t = aligned.t[keep]
+    rows = _step(parts, output, tracker, t, aligned.w_hat[keep], m)
+    return Compensation(t=t, wrench=rows.wrench, cov=rows.cov, contact=rows.contact, statistic=rows.statistic,
+                        threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
+                        warnings=(list(parts.warnings) + _latency_warnings(calibration, src)
+                                  + ([] if tracker is None else tracker.warnings)),
+                        offset=rows.offset, offset_sd=rows.offset_sd, frame=frame, point=output.point,
                         drift_intensity=None if tracker is None else tracker.intensity)
-
-
-def _causal_filter(values, c):
-    """``y_j = sum_i c_i values_{j + i}`` over every full window, shape (N - k + 1, ...)."""
-    k = len(c)
-    n = len(values) - k + 1
-    out = np.zeros((n,) + values.shape[1:])
-    for i in range(k):
-        out += c[i] * values[i:i + n]
-    return out
-
-
-def _smoothed_motion(log, model, window):
-    """The state and accelerations of every sample by the filter of the calibration's least squares (both
-    ways): :func:`fmscal.plant.physics.spatial_motion` for a unit quaternion, else
-    :func:`fmscal.observers.batch.smoothed_channels`."""
-    if model.attitude == "quaternion":
-        _, _, alpha, p_ddot = spatial_motion(log, window)
-        return smoothed_state(log, window), np.c_[p_ddot, alpha]
-    q, v, a = smoothed_channels(log, model, window)
-    return _state(model, q, v, a)
-
-
-def _by_stream(calibration, log, model, noise, direction, window, delay, order, false_alarm, parts, tracking):
-    """The causal path of a log with missing poses: :class:`Compensator` fed it sample by sample."""
-    stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
-                         window=window, delay=delay, order=order, false_alarm=false_alarm, **tracking)
-    out = [stream.push(t, w, p) for t, w, p in zip(log.t, log.w_hat, log.pose)]
-    out = [o for o in out if o is not None]
-    if not out:
-        raise CompensationError(f"{log.name}: no window of the causal filter holds enough poses")
-    return _streamed(stream, out, direction,
-                     list(parts.warnings) + ["missing poses: each window fitted to the poses it holds"])
 
 
 def _streamed(stream, out, direction, warnings):
@@ -887,196 +877,6 @@ def _streamed(stream, out, direction, warnings):
                         offset_sd=np.array([o.offset_sd for o in out]) if offset else None,
                         frame=stream.frame, point=stream.point,
                         drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
-
-
-def _compensate_source(calibration, log, causal, motion, *, payload, direction, noise, window, delay, order,
-                       false_alarm, track_offset, drift_intensity, offset_sd, frame, point):
-    """:func:`compensate` with a joint or IMU source: causal, :class:`Compensator` fed the log; offline, the
-    source's channels smoothed and differentiated both ways (the filter of the pose path), then (C5)-(C7)."""
-    if not isinstance(motion, (JointMotion, ImuMotion)):
-        raise CompensationError(f"motion must be None (poses), a JointMotion or an ImuMotion; got "
-                                f"{type(motion).__name__}")
-    joint = isinstance(motion, JointMotion)
-    kind = JointLog if joint else ImuLog
-    if not isinstance(log, kind):
-        raise CompensationError(f"a {type(motion).__name__} takes a plant.io.{kind.__name__}; got "
-                                f"{type(log).__name__}")
-    if joint and log.joints.shape[1] != motion.size:
-        raise CompensationError(f"{log.name}: {log.joints.shape[1]} joint columns; the URDF has {motion.size} "
-                                "joints")
-    if joint:
-        log.check_kinematics(motion.kinematics, motion.joints)          # joint angles in degrees refused
-    model = compensation_model(calibration, payload)
-    motion.check(model)
-    if len(log.w_hat[0]) != model.n_w:
-        raise CompensationError(f"{log.name}: {len(log.w_hat[0])} reading columns; the calibration's reading has "
-                                f"{model.n_w}")
-    if noise is None and (calibration.noise is None or len(calibration.noise.wrench_sd) != calibration.size):
-        noise = NoiseSpec(tuple(difference_noise(log.w_hat)))               # plant.io.estimate_noise's estimate
-        if min(noise.wrench_sd) <= 0:
-            raise CompensationError(f"{log.name}: the readings' noise estimated from the log is zero (a constant or "
-                                    "coarsely quantised reading): give noise=plant.NoiseSpec(...), or a calibration "
-                                    "holding its noise")
-    if causal:
-        stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
-                             window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,
-                             false_alarm=false_alarm, track_offset=track_offset, drift_intensity=drift_intensity,
-                             offset_sd=offset_sd, motion=motion, frame=frame, point=point)
-        out = []
-        for i, t in enumerate(log.t):
-            if joint:
-                q = log.joints[i]
-                sample = dict(joints=None if np.isnan(q).all() else
-                              (q, *(None if v is None or np.isnan(v[i]).all() else v[i]
-                                    for v in (log.velocities, log.accelerations))))
-            else:
-                rates = (log.angular_velocity[i], log.specific_force[i])
-                sample = dict(imu=None if np.isnan(rates[0]).all() else (log.orientation[i], *rates))
-            o = stream.push(t, log.w_hat[i], **sample)
-            if o is not None:
-                out.append(o)
-        if not out:
-            raise CompensationError(f"{log.name}: no window of the causal filter holds enough {motion.source}")
-        return _streamed(stream, out, direction, list(stream.warnings))
-    log = _at_readings(log, motion.latency, joint)         # offline: the stream at the readings' times
-    noise = _noise(calibration, noise)
-    parts = _Parts(calibration, model, noise, direction, false_alarm)
-    output = _Output(model, frame, point)
-    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=True)
-    warnings = list(parts.warnings) + _latency_warnings(calibration, motion)
-    window = OFFLINE_WINDOW if window is None else window
-    dt = log.dt
-    h = edge(log, window)                                               # the pose path's window, checked
-    k = 2 * h + 1
-    raw = log.joints if joint else np.c_[log.angular_velocity, log.specific_force]
-    present = np.flatnonzero(np.isfinite(raw).all(axis=1))
-    if len(present) < 4:
-        moved = (f" once moved by its latency ({motion.latency:g} s; the log spans {log.t[-1] - log.t[0]:g} s)"
-                 if motion.latency else "")
-        raise CompensationError(f"{log.name}: fewer than four samples of the {motion.source}{moved}")
-    first, last = present[0], present[-1] + 1           # the rows before the first sample and after the last dropped
-    if last - first < k + 1:
-        raise CompensationError(f"{log.name}: {last - first} samples with the {motion.source}; the smoothing window "
-                                f"{window:g} s needs more than {k}")
-    filled = _fill(log.t[first:last], raw[first:last])
-    smooth = [savgol_filter(filled, k, ORDER, deriv=d, delta=dt, axis=0, mode="interp") for d in range(3)]
-    smooth = [np.concatenate([np.full((first, v.shape[1]), np.nan), v]) for v in smooth]
-    sums = [float(np.sum(savgol_coeffs(k, ORDER, deriv=d, delta=dt, use="dot") ** 2)) for d in range(3)]
-    keep = slice(first + h, last - h)
-    # each channel's noise by plant.io.estimate_noise's robust estimate over its samples; the samples interpolated
-    # onto the readings' grid, one every r rows weighs about r times a row's share of the filter (as the pose path)
-    var = difference_noise(raw, present) ** 2
-    r = float(np.median(np.diff(present)))
-    sums = [v * max(r, 1.0) for v in sums]
-    P = [v[keep] for v in smooth]
-    if joint:
-        dq, ddq, var_ddq = P[1], P[2], var * sums[2]
-        if log.velocities is not None:
-            dq = np.where(np.isfinite(log.velocities[keep]), log.velocities[keep], dq)
-        if log.accelerations is not None:
-            measured = np.isfinite(log.accelerations[keep])
-            ddq = np.where(measured, log.accelerations[keep], ddq)
-            var_ddq = np.where(measured.all(axis=0), 0.0, var_ddq)
-        x, a, R = motion.state(model, P[0], dq, ddq)
-        accel_var = motion.accel_var(P[0], var_ddq, R)                  # (N, 6): each row's Jacobian and R
-    else:
-        x, a, R = motion.state(model, P[0], P[1], _filled_orientation(log.t, log.orientation)[keep])
-        M, accel_var = motion.accel_noise(var, sums[0], sums[1])
-    t, w_hat = log.t[keep], log.w_hat[keep]
-    W_p, A_inv = _payload_wrench(model, x, a)
-    if not joint:
-        A_inv = A_inv @ M                           # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
-    wrench, cov, contact, statistic, *offset = parts.finish(w_hat, W_p, A_inv, accel_var, tracker, t)
-    offset, offset_sd = offset if offset else (None, None)
-    wrench, cov = output.apply(wrench, cov, R)
-    return Compensation(t=t, wrench=wrench, cov=cov, contact=contact, statistic=statistic,
-                        threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
-                        warnings=warnings + ([] if tracker is None else tracker.warnings), offset=offset,
-                        offset_sd=offset_sd, frame=frame, point=output.point,
-                        drift_intensity=None if tracker is None else tracker.intensity)
-
-
-def _latency_warnings(calibration, motion):
-    """The warning that the calibration's latency (its pose stream's) is not the source's, where the source has
-    none given: its stream is then taken as of the readings' times."""
-    if not calibration.latency or motion.latency:
-        return []
-    return [f"the calibration's latency ({calibration.latency * 1e3:.3g} ms, its pose stream's) is not applied to "
-            f"the {motion.source} stream, and it has none of its own: it is taken as of the readings' times (give "
-            f"{type(motion).__name__}(..., latency=S), or --motion-latency S, where it lags them)"]
-
-
-def _at_readings(log, latency, joint):
-    """A joint or IMU log with its stream moved onto the readings' times: the sample given with the reading at
-    ``t_j`` is as of ``t_j - latency``; it goes to the row nearest that time (``round(latency / dt)`` rows back), its
-    value there the stream's at the row's time, interpolated linearly between its samples (an orientation made
-    sign-continuous first and normalised after: SLERP to second order in the turn between two samples). A stream
-    sparser than the readings stays as sparse, its rows between samples empty as with no latency: filled, its
-    noise, estimated from its samples' differences, would vanish from the covariance. NaN where the stream does not
-    reach. The log itself is not changed."""
-    if latency == 0:
-        return log
-    moved = copy.copy(log)
-    shift = int(round(latency / log.dt))     # the rows a sample moves by (the log evenly sampled), as causally
-    reach = 1e-9 * log.dt
-
-    def at(values):
-        if values is None:
-            return None
-        present = np.flatnonzero(np.isfinite(values).all(axis=1))
-        out = np.full(values.shape, np.nan)
-        if len(present) < 2:
-            return out
-        taken = log.t[present] - latency
-        rows = present - shift
-        rows = rows[(rows >= 0) & (rows < len(log.t))]
-        rows = rows[(log.t[rows] >= taken[0] - reach) & (log.t[rows] <= taken[-1] + reach)]
-        for c in range(values.shape[1]):
-            out[rows, c] = np.interp(log.t[rows], taken, values[present, c])
-        return out
-    if joint:
-        moved.joints, moved.velocities, moved.accelerations = (at(v) for v in (log.joints, log.velocities,
-                                                                               log.accelerations))
-    else:
-        moved.angular_velocity, moved.specific_force = at(log.angular_velocity), at(log.specific_force)
-        q = at(_sign_continuous(log.orientation))
-        moved.orientation = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return moved
-
-
-def _sign_continuous(q):
-    """Rows of quaternions (N, 4), NaN rows kept, each sample's sign turned into its predecessor's hemisphere
-    (``q`` and ``-q`` are one attitude; an IMU may publish either): interpolated component by component, two
-    samples of opposite signs would pass near zero, not through the turn between them."""
-    q = np.array(q, dtype=float)
-    rows = np.flatnonzero(np.isfinite(q).all(axis=1))
-    if len(rows) > 1:
-        flips = np.einsum("ij,ij->i", q[rows[1:]], q[rows[:-1]]) < 0
-        q[rows[1:]] *= np.cumprod(np.where(flips, -1.0, 1.0))[:, None]
-    return q
-
-
-def _filled_orientation(t, q):
-    """An IMU's orientations (N, 4) at every row: the rows without a sample (a stream sparser than the readings)
-    interpolated between their neighbours' as :func:`_at_readings` does (sign-continuous, normalised); NaN
-    before the first and after the last sample. Only the output in the base's axes reads them (C8)."""
-    q = _sign_continuous(q)
-    present = np.flatnonzero(np.isfinite(q).all(axis=1))
-    if len(present) < 2 or len(present) == len(q):
-        return q
-    missing = np.flatnonzero(~np.isfinite(q).all(axis=1))
-    for c in range(4):
-        q[missing, c] = np.interp(t[missing], t[present], q[present, c], left=np.nan, right=np.nan)
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-def _fill(t, values):
-    """Rows of NaN (no sample) between the first and the last sample filled by a cubic spline through the
-    samples (twice differentiable, unlike a linear interpolation)."""
-    present = np.isfinite(values).all(axis=1)
-    if present.all():
-        return values
-    return CubicSpline(t[present], values[present], axis=0)(t)
 
 
 # --- streaming --------------------------------------------------------------------------------------------------
@@ -1111,9 +911,11 @@ class Compensator:
     Each :meth:`push` takes the newest sample (time, raw reading, and a pose, joint states or an IMU's sample,
     as ``motion`` declares, or None) and returns the contact wrench of the reading taken :attr:`delay` s
     earlier (:class:`ContactSample`: (C1), (C3), (C4) of the module, (C8) for ``frame`` and ``point``), or
-    None until the window is full or where it holds too few motion samples. The poses (or the joint angles,
-    or the IMU's rate and specific force) are fitted by the causal filter of :func:`compensate`; fed a log,
-    the two give the same numbers.
+    None until the window is full or where it holds too few motion samples. The motion's channels (the poses,
+    the joint angles, or the IMU's rate and specific force) are fitted by the causal filter of
+    :func:`compensate`, which feeds a log to one of these. The stamps are placed on the grid of ``dt``: a
+    duplicate dropped, a gap filled with empty rows, a stamp stepping back or a gap beyond the window restarting
+    it, each counted (module docstring, Stamps; :attr:`events`, :attr:`withheld`).
 
     Parameters
     ----------
@@ -1122,17 +924,27 @@ class Compensator:
         The sample time, s (the readings' rate; a motion sample may come with any of them).
     payload, direction, noise, window, delay, order, false_alarm, track_offset, drift_intensity, offset_sd
         As for :func:`compensate` (``noise`` default the calibration's: required where it has none).
-    motion : JointMotion or ImuMotion, optional
-        The motion's source (module :mod:`fmscal.analysis._motion`): None, poses (``push(t, w_hat, pose)``);
-        a :class:`JointMotion` (``push(t, w_hat, joints=(q, dq, ddq))``, ``dq``/``ddq`` None where not given:
-        then differentiated by the causal filter); an :class:`ImuMotion` (``push(t, w_hat, imu=(quaternion_wxyz,
-        angular_velocity, specific_force))``, the IMU's axes: only the angular acceleration is differentiated).
-        Either way the delay is the filter's, :attr:`delay`; the stream is as of ``t - motion.latency`` for
-        the reading at ``t`` (the filter read that much nearer its newest sample, in whole samples).
+    motion : PoseMotion, JointMotion or ImuMotion, optional
+        The motion's source (module :mod:`fmscal.analysis._motion`): None, poses of the calibration's latency
+        (``push(t, w_hat, pose)``); a :class:`JointMotion` (``push(t, w_hat, joints=(q, dq, ddq))``, ``dq``/``ddq``
+        None where not given: then differentiated by the causal filter); an :class:`ImuMotion` (``push(t, w_hat,
+        imu=(quaternion_wxyz, angular_velocity, specific_force))``, the IMU's axes: only the angular acceleration
+        is differentiated). Either way the delay is the filter's, :attr:`delay`; the stream is as of
+        ``t - motion.latency`` for the reading at ``t`` (the filter read that much nearer its newest sample, in
+        whole samples).
     frame : {"sensor", "base"}
         The output's axes (C8); "base" needs an attitude (a pose, the joints, or the IMU's orientation).
     point : array_like of 3 floats, optional
         The tool point, sensor axes, m: the torque about it (C8); default the sensor's point.
+
+    Attributes
+    ----------
+    events : collections.Counter
+        The stamps' events by cause (:data:`EVENTS`): a duplicate, a gap, a restart.
+    withheld : collections.Counter
+        The readings given no output, by the same causes.
+    warnings : list of str
+        The calibration's and the source's warnings, and the first event of each kind.
     """
 
     def __init__(self, calibration, dt, *, payload=None, direction="on_tool", noise=None, window=CAUSAL_WINDOW,
@@ -1141,12 +953,8 @@ class Compensator:
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise CompensationError(f"dt must be a positive number of seconds; got {dt!r}")
         self.model = compensation_model(calibration, payload)
-        if motion is not None and not isinstance(motion, (JointMotion, ImuMotion)):
-            raise CompensationError(f"motion must be None (poses), a JointMotion or an ImuMotion; got "
-                                    f"{type(motion).__name__}")
-        if motion is not None:
-            motion.check(self.model)
-        self.motion = motion
+        self.motion = source(motion, calibration.latency or 0.0)
+        self.motion.check(self.model)
         self._output = _Output(self.model, frame, point)
         self._sample = _SampleDynamics(self.model)
         self.frame, self.point = frame, self._output.point
@@ -1155,27 +963,40 @@ class Compensator:
         self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd)
         # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
-        latency = (calibration.latency or 0.0) if motion is None else motion.latency
         self.dt, self.order, self._noise = float(dt), order, noise
-        self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, latency)
+        self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, self.motion.latency)
         self._coefficients = np.array(_causal_coefficients(self._k, order, self._lead, self.dt))    # (3, k)
-        # the last k poses received (None where none came): the newest, latency samples late, is the pose of
-        # the reading lead samples after the one read out, the oldest of the last L + 1 readings
-        self._poses = deque(maxlen=self._k)
-        self._readings = deque(maxlen=self._L + 1)      # (t, w_hat) of the last L + 1 samples
-        self._accel_var = None
+        self._c_sums = np.sum(self._coefficients ** 2, axis=1)
+        # the last k motion samples' channels and extras (None where none came): the newest, latency samples
+        # late, is the motion of the reading lead samples after the one read out, the oldest of the last L + 1
+        self._channels = deque(maxlen=self._k)
+        self._extras = deque(maxlen=self._k)
+        self._readings = deque(maxlen=self._L + 1)      # (t, w_hat) of the last L + 1 samples; w_hat None: a gap
+        self._quaternion = self.motion.quaternion(self.model)
         self._last_q = None
-        self.warnings = list(self._parts.warnings)
-        if motion is not None:
-            self._extras = deque(maxlen=self._k)           # per motion sample: (dq, ddq) or the IMU's quaternion
-            self._channel_noise = _RunningNoise(motion.size)
-            self._units_checked = False                    # an IMU's units, checked on its first full window
-            self.warnings += _latency_warnings(calibration, motion)
+        self._var = None                                # a pose stream's configuration variance (its first pose)
+        self._running = _RunningNoise(self.motion.channels(self.model)) if self.motion.estimates_noise else None
+        self._units_checked = False
+        self._t, self._intervals = None, []
+        self.events, self.withheld = Counter(), Counter()
+        self.missing = False                            # a motion sample missing from a full window, once
+        self.warnings = list(self._parts.warnings) + _latency_warnings(calibration, self.motion)
 
     @property
     def delay(self):
         """The delay the causal filter adds, s: each output is the wrench of the reading this much older."""
         return round(self._L * self.dt, 12)
+
+    # --- input ---------------------------------------------------------------------------------------------------
+    def _given(self, pose, joints, imu):
+        """The motion's value from the keyword its source takes; another keyword refused."""
+        given = {"pose": pose, "joints": joints, "imu": imu}
+        wanted = self.motion.keyword
+        extra = [k for k, v in given.items() if v is not None and k != wanted]
+        if extra:
+            raise CompensationError(f"this Compensator takes {self.motion.source} ({type(self.motion).__name__}): "
+                                    f"{extra[0]}= was given; give {wanted}= only")
+        return given[wanted]
 
     def push(self, t, w_hat, pose=None, *, joints=None, imu=None):
         """Take the newest sample; the contact wrench of the reading :attr:`delay` s older, or None.
@@ -1187,7 +1008,7 @@ class Compensator:
         w_hat : array_like, shape (n_w,)
             The raw reading.
         pose : array_like, shape (n_pose,), optional
-            ``motion=None``: the pose stream's newest pose, None (or NaN) where none came with this reading.
+            Poses: the pose stream's newest pose, None (or NaN) where none came with this reading.
         joints : tuple (q, dq, ddq), optional
             A :class:`JointMotion`: arrays in its ``joints`` order (rad, rad/s, rad/s^2; m for a prismatic
             joint), ``dq``/``ddq`` None where not given; None where no joint state came.
@@ -1202,124 +1023,243 @@ class Compensator:
         w_hat = np.asarray(w_hat, dtype=float)
         if w_hat.shape != (self._parts.n,) or not np.isfinite(w_hat).all():
             raise CompensationError(f"w_hat must be {self._parts.n} finite numbers; got {w_hat!r}")
-        if self.motion is not None or joints is not None or imu is not None:
-            return self._push_source(float(t), w_hat, pose, joints, imu)
-        if pose is not None:
-            pose = np.asarray(pose, dtype=float)
-            if pose.shape != (self.model.n_pose,):
-                raise CompensationError(f"pose must be {self.model.n_pose} numbers; got shape {pose.shape}")
-            if not np.isfinite(pose).all():
-                pose = None
-        if pose is not None and self.model.attitude == "quaternion":     # q and -q: one attitude, kept continuous
-            if self._last_q is not None and pose[:4] @ self._last_q < 0:
-                pose = pose.copy()
-                pose[:4] *= -1
-            self._last_q = pose[:4]
-        if pose is not None and self._accel_var is None:
-            self._accel_var = _configuration_variance(self.model, self._noise, pose)
-        self._readings.append((float(t), w_hat))
-        self._poses.append(pose)
-        if len(self._readings) <= self._L or len(self._poses) < self._k:
-            return None
-        t0, reading = self._readings[0]
-        present = [p is not None for p in self._poses]
-        if all(present):
-            P = self._coefficients @ np.array(self._poses)                # (3, n_pose)
-            c2_sq = float(np.sum(self._coefficients[2] ** 2))
-        else:
-            fitted = self._irregular(present)
-            if fitted is None:
-                return None
-            P, c2_sq = fitted
-        x, a, W_p, A_inv = self._sample(P)
-        signed = self._parts.sign * reading
-        own = self._parts.covariance(signed[None], A_inv, self._accel_var * c2_sq)      # (C3), once
-        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv,
-                                                                      self._accel_var * c2_sq, self._tracker, [t0],
-                                                                      own)
-        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]), own[0].copy(), bool(contact[0])))
-        offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
-        if not self._output.identity:
-            wrench, cov = self._output.apply(wrench, cov, _pose_attitudes(x, self.model)
-                                             if self._output.needs_attitude else None)
-        return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]), offset, offset_sd)
+        channels, extras = self.motion.samples(self._given(pose, joints, imu), 1, self.model)
+        return self._one(float(t), w_hat, channels[0], None if extras is None else extras[0])
 
-    def _push_source(self, t, w_hat, pose, joints, imu):
-        """:meth:`push` for a joint or IMU source: its channels filtered causally, (C5)-(C7), then (C1)-(C4)."""
-        motion = self.motion
-        given = {"pose": pose, "joints": joints, "imu": imu}
-        wanted = "pose" if motion is None else "joints" if isinstance(motion, JointMotion) else "imu"
-        extra = [k for k, v in given.items() if v is not None and k != wanted]
-        if extra:
-            what = "poses (motion=None)" if motion is None else f"{motion.source} ({type(motion).__name__})"
-            raise CompensationError(f"this Compensator takes {what}: {extra[0]}= was given; give {wanted}= only")
-        sample = motion.sample(given[wanted])
-        if sample is None:
-            channels, extra_value = None, None
-        elif wanted == "joints":
-            channels, extra_value = sample[0], (sample[1], sample[2])
-        else:
-            channels, extra_value = sample
-            extra_value = extra_value if np.isfinite(extra_value).all() else None
-        self._channel_noise.add(channels)
+    def push_many(self, t, w_hat, pose=None, *, joints=None, imu=None):
+        """:meth:`push` over rows, vectorised: the same samples, for a block that came together (a backlog).
+
+        Rows whose windows are full are fitted together (one causal filter over the block, one evaluation of the
+        dynamics); the others go through :meth:`push`'s path one at a time.
+
+        Parameters
+        ----------
+        t : array_like, shape (M,)
+        w_hat : array_like, shape (M, n_w)
+        pose : array_like, shape (M, n_pose), optional
+            Poses: NaN rows where no pose came with the reading.
+        joints : tuple (q, dq, ddq), optional
+            A :class:`JointMotion`: ``q`` (M, n) with NaN rows where no joint state came, ``dq`` and ``ddq``
+            (M, n) or None where not given (NaN rows where not given with that reading).
+        imu : tuple (quaternion_wxyz, angular_velocity, specific_force), optional
+            An :class:`ImuMotion`: (M, 4) or None, (M, 3), (M, 3); NaN rows where no IMU sample came.
+
+        Returns
+        -------
+        list of ContactSample
+            The samples :meth:`push` returns, Nones left out, oldest first.
+        """
+        t = np.asarray(t, dtype=float).ravel()
+        w_hat = np.asarray(w_hat, dtype=float)
+        if w_hat.shape != (len(t), self._parts.n) or not np.isfinite(w_hat).all():
+            raise CompensationError(f"w_hat must be {len(t)} rows of {self._parts.n} finite numbers; got shape "
+                                    f"{w_hat.shape}")
+        channels, extras = self.motion.samples(self._given(pose, joints, imu), len(t), self.model)
+        present = np.isfinite(channels).all(axis=1)
+        out = []
+        i = 0
+        while i < len(t):
+            j = i
+            if self._blockable():       # the contiguous rows with a motion sample each go as one block
+                while j < len(t) and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= 0.5 * self.dt
+                                                     or j > i and abs(t[j] - t[j - 1] - self.dt) <= 0.5 * self.dt):
+                    j += 1
+            if j - i >= 2:
+                out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j]))
+                i = j
+                continue
+            sample = self._one(float(t[i]), w_hat[i], channels[i], None if extras is None else extras[i])
+            if sample is not None:
+                out.append(sample)
+            i += 1
+        return out
+
+    # --- the stamps ------------------------------------------------------------------------------------------------
+    def _advance(self, t):
+        """Place a stamp on the grid of ``dt`` (module docstring, Stamps): False where the reading is dropped."""
+        if self._t is None:
+            self._t = t
+            return True
+        step = t - self._t
+        if abs(step) <= 1e-6 * self.dt:
+            self._event("duplicate", 1, f"a reading stamped {t:.9g} s twice: the second dropped")
+            return False
+        if step < 0:
+            self._restart(f"the stamps stepped back by {-step:.6g} s (to {t:.9g} s)")
+            self._t = t
+            return True
+        if len(self._intervals) < DT_INTERVALS:
+            self._intervals.append(step)
+            if len(self._intervals) == DT_INTERVALS:
+                typical = float(np.median(self._intervals))
+                if abs(typical / self.dt - 1) > DT_TOLERANCE:
+                    raise CompensationError(f"the stamps come {typical:.6g} s apart; dt is {self.dt:g} s: give "
+                                            f"dt={typical:.6g} (the readings' sample time)")
+        n = max(1, int(round(step / self.dt)))
+        if n - 1 >= self._k + self._L:
+            self._restart(f"a gap of {step:.6g} s ({n - 1} samples) beyond the filter's window and delay")
+        elif n > 1:
+            self._gap(n - 1, step)
+        self._t = t
+        return True
+
+    def _event(self, cause, withheld, message):
+        """Count an event and the readings it withheld; the first of its kind said in :attr:`warnings`."""
+        if not self.events[cause]:
+            self.warnings.append(message + f" (further {cause}s counted in Compensator.events)")
+        self.events[cause] += 1
+        self.withheld[cause] += withheld
+        self.last_event = (cause, message)
+
+    def _gap(self, g, step):
+        """``g`` empty rows (no reading, no motion) for a gap: the readings whose output fell due in it withheld."""
+        withheld = 0
+        for _ in range(g):
+            self._readings.append((None, None))
+            self._channels.append(None)
+            self._extras.append(None)
+            if len(self._readings) > self._L and self._readings[0][1] is not None:
+                withheld += 1
+        if self._running is not None:
+            self._running.recent.clear()
+        self._event("gap", withheld, f"a gap of {step:.6g} s ({g} samples) in the stamps: filled with empty rows, "
+                                     f"{withheld} outputs withheld at its edge")
+
+    def _restart(self, why):
+        """Start the window again: no output until it is full (module docstring, Stamps)."""
+        pending = sum(1 for _, w in list(self._readings)[1:] if w is not None)
+        for d in (self._readings, self._channels, self._extras, self._last):
+            d.clear()
+        if self._running is not None:
+            self._running.recent.clear()
+        self._event("restart", pending, f"{why}: the window restarted, no output until it is full again")
+
+    # --- one sample, or a block -------------------------------------------------------------------------------
+    def _one(self, t, w_hat, channels, extra):
+        """:meth:`push`'s path for one checked sample: ``channels`` NaN where no motion came."""
+        if not self._advance(t):
+            return None
+        channels = self._continuous(channels[None])[0] if np.isfinite(channels).all() else None
+        if channels is not None:
+            if self._running is not None:
+                self._running.add(channels)
+            elif self._var is None:
+                self._var = configuration_variance(self.model, self._noise, channels)
         self._readings.append((t, w_hat))
-        self._poses.append(channels)
-        self._extras.append(extra_value)
-        if len(self._readings) <= self._L or len(self._poses) < self._k:
+        self._channels.append(channels)
+        self._extras.append(extra)
+        if len(self._readings) <= self._L or len(self._channels) < self._k:
             return None
         t0, reading = self._readings[0]
-        present = [p is not None for p in self._poses]
-        if wanted == "imu" and not self._units_checked and any(present):
-            rows = np.array([p for p in self._poses if p is not None])
-            check_imu_units("the IMU stream", rows[:, :3], rows[:, 3:])       # in g or deg/s: one line
+        if reading is None:
+            return None
+        present = [c is not None for c in self._channels]
+        if not self._units_checked and any(present):
+            self.motion.check_units(np.array([c for c in self._channels if c is not None]))
             self._units_checked = True
         if all(present):
-            P, c = self._coefficients @ np.array(self._poses), self._coefficients
+            P, sums = self._coefficients @ np.array(self._channels), self._c_sums
         else:
+            self.missing = True
             fitted = self._fit(present)
             if fitted is None:
                 return None
             P, c = fitted
-        sums = np.sum(c ** 2, axis=1)                                   # sum c0^2, c1^2, c2^2
-        var = self._channel_noise.variance()
+            sums = np.sum(c ** 2, axis=1)
         i0 = self._k - 1 - self._lead                                   # the read-out sample in the window
-        if wanted == "joints":
-            q, dq, ddq = P[0], P[1], P[2]
-            var_ddq = var * sums[2]
-            if self._extras[i0] is not None:
-                given_dq, given_ddq = self._extras[i0]
-                measured = np.isfinite(given_ddq)
-                dq = np.where(np.isfinite(given_dq), given_dq, dq)
-                ddq = np.where(measured, given_ddq, ddq)
-                var_ddq = np.where(measured, 0.0, var_ddq)
-                if np.isfinite(given_dq).all() and measured.all():
-                    q = self._poses[i0]
-            x, a, R = motion.state(self.model, q[None], dq[None], ddq[None])
-            accel_var = motion.accel_var(q[None], var_ddq, R)[0]
+        if extra is not None:                                          # a source with extras (rates, orientation)
+            extra = self.motion.read_out(self._extras_array(), np.array([i0]), i0, self._k)
+        raw = self._channels[i0]
+        motion = self.motion.motion(self.model, P[:, None, :], sums, self._variance(), extra,
+                                    None if raw is None else raw[None], self._sample)
+        rows = _step(self._parts, self._output, self._tracker, [t0], reading[None], motion, self._sample)
+        self._remember(reading[None], rows)
+        return self._sample_of(t0, rows, 0)
+
+    def _blockable(self):
+        """Both windows full of samples, none missing: the next rows may go as one block."""
+        return (self._t is not None and len(self._intervals) >= DT_INTERVALS and len(self._readings) > self._L
+                and len(self._channels) == self._k and all(w is not None for _, w in self._readings)
+                and all(c is not None for c in self._channels))
+
+    def _block(self, t, w_hat, channels, extras):
+        """:meth:`push_many`'s rows with the windows full, every sample present and the stamps ``dt`` apart."""
+        m, k, i0 = len(t), self._k, self._k - 1 - self._lead
+        channels = self._continuous(channels)
+        var = self._variance() if self._running is None else self._running.block(channels)
+        window = np.concatenate([np.array(list(self._channels)[1:]), channels])          # (k - 1 + m, n)
+        P = np.einsum("dk,mpk->dmp", self._coefficients,
+                      np.lib.stride_tricks.sliding_window_view(window, k, axis=0))       # (3, m, n)
+        readings = list(self._readings)[1:] + list(zip(t.tolist(), w_hat))
+        t0 = np.array([r[0] for r in readings[:m]])
+        reading = np.array([r[1] for r in readings[:m]])
+        rows_out = i0 + np.arange(m)
+        extra = None
+        if extras is not None:
+            extra = self.motion.read_out(np.concatenate([self._extras_array()[1:], extras]), rows_out, i0, k)
+        motion = self.motion.motion(self.model, P, self._c_sums, var, extra, window[rows_out],
+                                    self._sample if m <= _ROW_BY_ROW else None)
+        rows = _step(self._parts, self._output, self._tracker, t0, reading, motion,
+                     self._sample if m <= _ROW_BY_ROW else None)
+        self._remember(reading, rows)
+        self._channels.extend(channels)
+        if extras is not None:
+            self._extras.extend(extras)
         else:
-            x, a, R = motion.state(self.model, P[0:1], P[1:2], self._orientation(i0)[None])
-            M, accel_var = motion.accel_noise(var, sums[0], sums[1])
-        W_p, A_inv = self._sample.from_state(x, a)
-        if wanted == "imu":
-            A_inv = A_inv @ M                       # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
-        signed = self._parts.sign * reading
-        own = self._parts.covariance(signed[None], A_inv, accel_var)                  # (C3), once
-        wrench, cov, contact, statistic, *offset = self._parts.finish(reading[None], W_p, A_inv, accel_var,
-                                                                      self._tracker, [t0], own)
-        self._last.append((signed - np.linalg.solve(self._parts.S, W_p[0]), own[0].copy(), bool(contact[0])))
-        offset, offset_sd = (offset[0][0], offset[1][0]) if offset else (None, None)
-        wrench, cov = self._output.apply(wrench, cov, R)
-        return ContactSample(t0, wrench[0], cov[0], bool(contact[0]), float(statistic[0]), offset, offset_sd)
+            self._extras.extend([None] * m)
+        self._readings.extend(zip(t.tolist(), w_hat))
+        self._t = float(t[-1])
+        return [self._sample_of(float(t0[r]), rows, r) for r in range(m)]
 
-    def _orientation(self, i0):
-        """The IMU's orientation nearest the read-out sample ``i0`` in the window (NaN where none came)."""
-        if self._extras[i0] is not None:
-            return self._extras[i0]
-        rows = [i for i, e in enumerate(self._extras) if e is not None]
-        if not rows:
-            return np.full(4, np.nan)
-        return self._extras[min(rows, key=lambda i: abs(i - i0))]
+    def _continuous(self, rows):
+        """Rows of channels with their unit quaternion (where the source has one) kept sign-continuous with the
+        stream's last (q and -q: one attitude)."""
+        if self._quaternion is None:
+            return rows
+        rows = np.array(rows, dtype=float)
+        rows[:, self._quaternion] = sign_continuous(rows[:, self._quaternion], self._last_q)
+        self._last_q = rows[-1, self._quaternion].copy()
+        return rows
 
+    def _variance(self):
+        """The channels' noise variance: a pose stream's configuration's (the noise model's, at its first pose),
+        or the running estimate of a joint or IMU stream's."""
+        return self._var if self._running is None else self._running.variance()
+
+    def _extras_array(self):
+        """The window's extras as rows (NaN where none)."""
+        width = next((len(e) for e in self._extras if e is not None), 0)
+        return np.array([np.full(width, np.nan) if e is None else e for e in self._extras])
+
+    def _remember(self, reading, rows):
+        """Keep the newest outputs' ``sigma w_hat - S^-1 W_p``, their own (C3) and contact flag, for tare (D4)."""
+        found = self._parts.sign * reading - rows.W_p @ self._parts.S_inv.T
+        for r in range(max(0, len(found) - self._last.maxlen), len(found)):
+            self._last.append((found[r], rows.own[r].copy(), bool(rows.contact[r])))
+
+    @staticmethod
+    def _sample_of(t, rows, r):
+        return ContactSample(t, rows.wrench[r], rows.cov[r], bool(rows.contact[r]), float(rows.statistic[r]),
+                             None if rows.offset is None else rows.offset[r],
+                             None if rows.offset_sd is None else rows.offset_sd[r])
+
+    def _fit(self, present):
+        """The polynomial fitted to the samples the window holds: ``(P, c)``, the value and first two
+        derivatives (3, n_channels) and their coefficients (3, n_present); None where they are too few or all on
+        one side of the time it is read at (a stale stream: no extrapolation)."""
+        rows = np.flatnonzero(present)
+        if len(rows) < self.order + 3:
+            return None
+        s = (rows - (self._k - 1 - self._lead)) * self.dt             # each sample's time from the evaluation time
+        if s.min() > 0 or s.max() < 0:                                 # no sample on one side: an extrapolation
+            return None
+        V = np.vander(s, self.order + 1, increasing=True)
+        pinv = np.linalg.pinv(V)                                      # (order + 1, n): the polynomial's coefficients
+        c = np.array([pinv[0], pinv[1], 2 * pinv[2]])
+        P = c @ np.array([self._channels[i] for i in rows])
+        return P, c
+
+    # --- the offset ----------------------------------------------------------------------------------------------
     @property
     def offset(self):
         """The offset ``b`` in use (the reading's units): the tracker's, a tare's or the calibration's."""
@@ -1360,157 +1300,12 @@ class Compensator:
             raise CompensationError(f"tare refused: a contact is detected ({int(contact.sum())} of the last "
                                     f"{len(contact)} samples); tare with the tool free, or with force=True where "
                                     "the offset itself is off (a sensor zeroed by its hardware)")
-        S_inv = np.linalg.inv(self._parts.S)
+        S_inv = self._parts.S_inv
         if self._tracker is None:
             self._parts.b = found.mean(axis=0)
         else:
             self._tracker.tare(found.mean(axis=0), S_inv @ cov.mean(axis=0) @ S_inv.T / len(found))
         return self.offset
-
-    def push_many(self, t, w_hat, pose=None, *, joints=None, imu=None):
-        """:meth:`push` over rows, vectorised: the same samples, for a block that came together (a backlog).
-
-        Rows whose pose windows are full are fitted together (one causal filter over the block, one call of
-        the dynamics); the others go through :meth:`push` one at a time, and so do the rows of a joint or IMU
-        source (``joints=`` or ``imu=``, as :meth:`push` takes them, one row per reading).
-
-        Parameters
-        ----------
-        t : array_like, shape (M,)
-        w_hat : array_like, shape (M, n_w)
-        pose : array_like, shape (M, n_pose), optional
-            ``motion=None``: NaN rows where no pose came with the reading.
-        joints : tuple (q, dq, ddq), optional
-            A :class:`JointMotion`: ``q`` (M, n) with NaN rows where no joint state came, ``dq`` and ``ddq``
-            (M, n) or None where not given (NaN rows where not given with that reading).
-        imu : tuple (quaternion_wxyz, angular_velocity, specific_force), optional
-            An :class:`ImuMotion`: (M, 4) or None, (M, 3), (M, 3); NaN rows where no IMU sample came.
-
-        Returns
-        -------
-        list of ContactSample
-            The samples :meth:`push` returns, Nones left out, oldest first.
-        """
-        t = np.asarray(t, dtype=float)
-        w_hat = np.asarray(w_hat, dtype=float)
-        if self.motion is not None or joints is not None or imu is not None:
-            return self._push_many_source(t, w_hat, pose, joints, imu)
-        pose = np.asarray(pose, dtype=float)
-        out = []
-        i = 0
-        # one at a time until both windows are full of poses, and for a row without one
-        while i < len(t) and (len(self._readings) <= self._L or len(self._poses) < self._k
-                              or any(p is None for p in self._poses) or not np.isfinite(pose[i]).all()):
-            sample = self.push(t[i], w_hat[i], pose[i])
-            if sample is not None:
-                out.append(sample)
-            i += 1
-        j = i
-        while j < len(t) and np.isfinite(pose[j]).all():
-            j += 1
-        if j - i >= 2:
-            out.extend(self._push_block(t[i:j], w_hat[i:j], pose[i:j]))
-        elif j > i:
-            out.extend(s for s in [self.push(t[i], w_hat[i], pose[i])] if s is not None)
-        if j < len(t):
-            out.extend(self.push_many(t[j:], w_hat[j:], pose[j:]))
-        return out
-
-    def _push_many_source(self, t, w_hat, pose, joints, imu):
-        """:meth:`push_many` for a joint or IMU source: its rows through :meth:`push`, one at a time."""
-        if pose is not None:
-            return [s for s in [self.push(t[0], w_hat[0], pose[0], joints=joints, imu=imu)] if s is not None]
-        keyword, given = ("joints", joints) if joints is not None else ("imu", imu)
-        if given is None:
-            return [s for s in (self.push(ti, wi) for ti, wi in zip(t, w_hat)) if s is not None]
-        if not (isinstance(given, (tuple, list)) and len(given) == 3):
-            raise CompensationError(f"{keyword} must be a tuple of three arrays of rows, one row per reading, as "
-                                    f"push takes them (None where not given)")
-        columns = []
-        for v in given:
-            v = None if v is None else np.asarray(v, dtype=float)
-            if v is not None and (v.ndim != 2 or len(v) != len(t)):
-                raise CompensationError(f"{keyword}: arrays of {len(t)} rows, one per reading; got shape {v.shape}")
-            columns.append(v)
-        out = []
-        for i in range(len(t)):
-            row = tuple(None if v is None or np.isnan(v[i]).all() else v[i] for v in columns)
-            if keyword == "joints":
-                row = None if row[0] is None else row
-            else:
-                row = None if row[1] is None and row[2] is None else row
-            sample = self.push(t[i], w_hat[i], **{keyword: row})
-            if sample is not None:
-                out.append(sample)
-        return out
-
-    def _push_block(self, t, w_hat, pose):
-        """:meth:`push_many`'s rows with the windows full and every pose present."""
-        if w_hat.shape != (len(t), self._parts.n) or not np.isfinite(w_hat).all():
-            raise CompensationError(f"w_hat must be rows of {self._parts.n} finite numbers; got shape {w_hat.shape}")
-        if pose.shape != (len(t), self.model.n_pose):
-            raise CompensationError(f"pose must be rows of {self.model.n_pose} numbers; got shape {pose.shape}")
-        pose = pose.copy()
-        if self.model.attitude == "quaternion":                       # q and -q: one attitude, kept continuous
-            last = self._last_q
-            for row in pose:
-                if last is not None and row[:4] @ last < 0:
-                    row[:4] *= -1
-                last = row[:4]
-            self._last_q = last
-        m, k = len(t), self._k
-        poses = np.concatenate([np.array(list(self._poses)[1:]), pose])          # (k - 1 + m, n_pose)
-        windows = np.lib.stride_tricks.sliding_window_view(poses, k, axis=0)   # (m, n_pose, k)
-        P = np.einsum("dk,mpk->dmp", self._coefficients, windows)
-        readings = list(self._readings)[1:] + list(zip(t.tolist(), w_hat))
-        t0 = np.array([r[0] for r in readings[:m]])
-        reading = np.array([r[1] for r in readings[:m]])
-        c2_sq = float(np.sum(self._coefficients[2] ** 2))
-        if m <= _ROW_BY_ROW:                                   # a few rows: the sample's buffer, row by row
-            x, a, W_p, A_inv = (np.concatenate(v) for v in zip(*(self._sample(P[:, i]) for i in range(m))))
-        else:
-            x, a = _state(self.model, P[0], P[1], P[2])
-            W_p, A_inv = _payload_wrench(self.model, x, a)
-        accel_var = self._accel_var * c2_sq
-        signed = self._parts.sign * reading
-        own = self._parts.covariance(signed, A_inv, accel_var)                        # (C3), once
-        wrench, cov, contact, statistic, *offset = self._parts.finish(reading, W_p, A_inv, accel_var, self._tracker,
-                                                                      t0, own)
-        found = signed - np.linalg.solve(self._parts.S, W_p.T).T
-        for row in range(max(0, m - self._last.maxlen), m):
-            self._last.append((found[row], own[row].copy(), bool(contact[row])))
-        if not self._output.identity:
-            wrench, cov = self._output.apply(wrench, cov, _pose_attitudes(x, self.model)
-                                             if self._output.needs_attitude else None)
-        self._poses.extend(pose)
-        self._readings.extend(zip(t.tolist(), w_hat))
-        b, b_sd = offset if offset else ([None] * m, [None] * m)
-        return [ContactSample(float(t0[r]), wrench[r], cov[r], bool(contact[r]), float(statistic[r]), b[r], b_sd[r])
-                for r in range(m)]
-
-    def _irregular(self, present):
-        """The polynomial fitted to the poses the window holds; ``(P, sum c2^2)``, or None where they are too few
-        or all on one side of the time it is read at (a stale pose stream: no extrapolation)."""
-        fitted = self._fit(present)
-        if fitted is None:
-            return None
-        P, c = fitted
-        return P, float(np.sum(c[2] ** 2))
-
-    def _fit(self, present):
-        """The polynomial fitted to the samples the window holds: ``(P, c)``, the value and first two
-        derivatives (3, n_channels) and their coefficients (3, n_present); None as for :meth:`_irregular`."""
-        rows = np.flatnonzero(present)
-        if len(rows) < self.order + 3:
-            return None
-        s = (rows - (self._k - 1 - self._lead)) * self.dt             # each pose's time from the evaluation time
-        if s.min() > 0 or s.max() < 0:                                 # no pose on one side: an extrapolation
-            return None
-        V = np.vander(s, self.order + 1, increasing=True)
-        pinv = np.linalg.pinv(V)                                      # (order + 1, n): the polynomial's coefficients
-        c = np.array([pinv[0], pinv[1], 2 * pinv[2]])
-        P = c @ np.array([self._poses[i] for i in rows])
-        return P, c
 
 
 class _RunningNoise:
@@ -1533,3 +1328,10 @@ class _RunningNoise:
     def variance(self):
         return self.sum / (6 * self.n) if self.n else np.zeros_like(self.sum)
 
+    def block(self, rows):
+        """:meth:`add` each of ``rows`` (M, n) in turn: the variance after each, (M, n)."""
+        out = np.empty_like(rows)
+        for i, row in enumerate(rows):
+            self.add(row)
+            out[i] = self.variance()
+        return out

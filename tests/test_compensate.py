@@ -6,6 +6,7 @@ slow ones calibrate on one log and compensate another of the same rig, fmscal's 
 """
 
 import json
+from pathlib import Path
 from dataclasses import replace
 
 import numpy as np
@@ -255,3 +256,57 @@ def test_a_saved_spatial_calibration_carries_its_noise_model(arm, tmp_path):
     stream = Compensator(loaded, log.dt)
     out = [stream.push(t, w, p) for t, w, p in zip(log.t[:100], log.w_hat[:100], log.pose[:100])]
     assert any(o is not None for o in out)
+
+
+def test_every_path_takes_the_one_step(arm, monkeypatch, tmp_path):
+    """Compensation's per-sample step (C2, C1, C3, C4, the tracker, C8) exists once, ``_step``: the offline and the
+    causal compensate, Compensator.push and push_many, a joint and an IMU source, and the ROS 2 node's pipeline
+    all reach the contact wrench through it (a spy counts its calls per path; none is reached without it)."""
+    import fmscal.analysis._compensate as module
+    from fmscal.analysis import ImuMotion, JointMotion, PoseMotion
+    from fmscal.analysis.ros2 import PARAMETERS, Pipeline, settings
+    from fmscal.plant.io import ImuLog, JointLog
+    scenario, log, truth, cal = arm
+    calls = []
+    step = module._step
+    monkeypatch.setattr(module, "_step", lambda *a, **k: calls.append(len(a[3])) or step(*a, **k))
+
+    def count(run):
+        before = len(calls)
+        out = run()
+        assert len(calls) > before
+        return out, sum(calls[before:])
+    short = log.head(300)
+    offline, rows = count(lambda: compensate(cal, short))
+    assert rows == len(offline.t)                                        # every output row through the step
+    causal, rows = count(lambda: compensate(cal, short, True))
+    assert rows == len(causal.t)
+    stream = Compensator(cal, log.dt, motion=PoseMotion(), noise=truth.noise)
+    pushed, rows = count(lambda: [stream.push(t, w, p) for t, w, p in zip(short.t, short.w_hat, short.pose)])
+    assert rows == sum(o is not None for o in pushed) > 200
+    stream = Compensator(cal, log.dt, noise=truth.noise)
+    many, rows = count(lambda: stream.push_many(short.t, short.w_hat, short.pose))
+    assert rows == len(many) > 200
+    urdf = Path(__file__).parent.parent / "examples" / "arm6.urdf"
+    joints = JointMotion(urdf, "ft_sensor")
+    q = np.tile(np.linspace(0.1, 0.6, 6), (300, 1)) + 0.2 * np.sin(np.arange(300) * 1e-2)[:, None]
+    tool = replace(cal, S=np.eye(6), b=np.zeros(6), cov=None, gravity=(0.0, 0.0, -9.81))
+    count(lambda: compensate(tool, JointLog(short.t, q, short.w_hat), motion=joints, noise=truth.noise))
+    count(lambda: compensate(tool, JointLog(short.t, q, short.w_hat), True, motion=joints, noise=truth.noise))
+    rate, force = np.zeros((300, 3)), np.tile([0.0, 0.0, 9.81], (300, 1))
+    count(lambda: compensate(tool, ImuLog(short.t, None, rate, force, short.w_hat), motion=ImuMotion(),
+                             noise=truth.noise))
+    replace(cal, noise=truth.noise).save(tmp_path / "cal.json")
+    values = {p.name: p.default for p in PARAMETERS}
+    values.update(calibration=str(tmp_path / "cal.json"), pose_topic="/p")
+    pipeline = Pipeline(settings(values))
+
+    def node():
+        out = []
+        for t, w, p in zip(short.t, short.w_hat, short.pose):
+            pipeline.add_motion(t, p)
+            pipeline.add_reading(t, w)
+            out += pipeline.process()
+        return out
+    published, rows = count(node)
+    assert len(published) > 200 and rows >= len(published)

@@ -160,17 +160,18 @@ def test_saturated_readings_are_withheld(arm, cal_file):
     w_hat = log.w_hat.copy()
     w_hat[200, 3] = limit[3]
     pipelines = [Pipeline(_settings(cal_file, saturation=s)) for s in (None, list(limit))]
-    outputs = []
+    outputs, states = [], []
     for pipeline in pipelines:
         out = []
         for t, w, p in zip(log.t, w_hat, log.pose):
             pipeline.add_motion(t, p)
             pipeline.add_reading(t, w)
             out += pipeline.process()
+        states.append(pipeline.state())       # at once: "not ready" once the readings are silent (wall time)
         outputs.append({round(o.sample.t, 9): o.sample.wrench for o in out})
     assert set(outputs[0]) - set(outputs[1]) == {round(log.t[200], 9)}
-    assert pipelines[1].counts["saturated"] == 1 and pipelines[1].state() == "saturated"
-    assert pipelines[0].state() == "running"
+    assert pipelines[1].counts["saturated"] == 1 and states[1] == "saturated"
+    assert states[0] == "running"
     assert all(np.array_equal(outputs[0][k], v) for k, v in outputs[1].items())
 
 
@@ -317,13 +318,18 @@ def test_stale_motion_stops_the_output(request, arm, cal_file):
             peer.wait_for_node(proc)
             epoch = peer.replay(log, poses=np.arange(len(log)) < 500)
             assert peer.wait_for(lambda: any(s.message == "motion stale" for d in peer.diagnostics
-                                             for s in d.status), 3), [d.status[0].message for d in peer.diagnostics]
-            time.sleep(0.2)
+                                             for s in d.status), 10), [d.status[0].message for d in peer.diagnostics]
+            peer.wait_for(lambda: len(peer.contacts) >= 500 - 29, 10)        # a busy machine: later, not fewer
+            time.sleep(0.2)                                                    # none more comes
             text = node_log(proc)
         finally:
             peer.close()
     t, _ = contact_array(peer.contacts, epoch)
-    assert t[-1] == pytest.approx(log.t[499], abs=1e-9) and len(t) == 500 - 29, (t[-1], len(t), t[:3], np.diff(t).max())
+    # the last reading the poses reach is 499; a busy machine may deliver the poses late against the readings, and
+    # a reading the poses have not reached when one stale_timeout newer is there is stale by the rule: the output
+    # stops within stale_timeout of it, never after, and none is missing before
+    assert log.t[499] - 0.05 - 1e-9 <= t[-1] <= log.t[499] + 1e-9, (t[-1], len(t), t[:3])
+    assert np.diff(t).max() < 1.5 * log.dt and len(t) == np.sum(log.t <= t[-1] + 1e-9) - 29, (len(t), t[-1])
     assert "motion stale: /ft_sensor/pose has no sample within 0.05 s" in text
 
 
@@ -362,8 +368,8 @@ def test_planar_replay(request, tmp_path):
             assert peer.wait_for(lambda: len(peer.contacts) >= n and len(peer.covariances) >= n, 10), \
                 (len(peer.contacts), n, node_log(proc)[-1000:])
             ok, message = peer.call("identify_payload")
-            time.sleep(0.2)
-            status = peer.diagnostics[-1].status[0]
+            # the diagnostics while the readings came (after them the state is "not ready": silent inputs)
+            status = next((s for d in reversed(peer.diagnostics) for s in d.status if s.message == "running"), None)
         finally:
             peer.close()
     t, wrench = contact_array(peer.contacts, epoch)
@@ -374,8 +380,9 @@ def test_planar_replay(request, tmp_path):
     cov = np.array([m.data for m in peer.covariances]).reshape(-1, 3, 3)
     np.testing.assert_allclose(cov, reference.cov[:n][:, [1, 2, 0]][:, :, [1, 2, 0]], rtol=1e-6)
     assert peer.covariances[0].layout.dim[0].label == "fx fy M"
+    assert status is not None, [d.status[0].message for d in peer.diagnostics]
     values = {k.key: k.value for k in status.values}
-    assert values["channels"] == "M fx fy" and len(values["offset"].split()) == 3 and status.message == "running"
+    assert values["channels"] == "M fx fy" and len(values["offset"].split()) == 3
     assert not ok and message == ("identify_payload refused: fmscal's payload fits are a 6-axis sensor's, and this "
                                   "calibration is of a planar reading (M fx fy); the payload in use is the "
                                   "calibration's")
@@ -451,7 +458,7 @@ def test_identify_payload_from_joint_states(tmp_path):
     values = {p.name: p.default for p in PARAMETERS}
     values.update(calibration=str(_source_calibration(tmp_path)), joint_states_topic="/j",
                   urdf=str(robot_rig.ur5_urdf()), frame="tool0", sample_time=1e-3)
-    pipeline = Pipeline(settings(values), motion=run["motion"], kind="joints")
+    pipeline = Pipeline(settings(values), motion=run["motion"])
     for t, q, w in zip(run["t"], run["q"], run["W"]):
         pipeline.add_motion(t, (q, None, None))
         pipeline.add_reading(t, w)
@@ -463,7 +470,7 @@ def test_identify_payload_from_joint_states(tmp_path):
     assert mass == pytest.approx(TOOL.mass, rel=1e-3)
     assert np.all(np.abs(com - np.asarray(TOOL.com)) < 1e-3), com
     imu = Pipeline(settings({**values, "joint_states_topic": "", "urdf": "", "frame": "", "imu_topic": "/i"}),
-                   motion=ImuMotion(), kind="imu")
+                   motion=ImuMotion())
     ok, message = imu.identify()
     assert not ok and message.startswith("identify_payload refused: 0 samples held since the last call"), message
 
@@ -496,7 +503,7 @@ def test_identify_payload_from_an_imu(tmp_path):
     t, quaternion, omega, force, w_hat = _held_imu()
     runs = {}
     for oriented in (True, False):
-        pipeline = Pipeline(_imu_settings(tmp_path), motion=ImuMotion(robot_rig.C_IMU), kind="imu")
+        pipeline = Pipeline(_imu_settings(tmp_path), motion=ImuMotion(robot_rig.C_IMU))
         for row in zip(t, quaternion, omega, force, w_hat):
             pipeline.add_motion(row[0], (row[1] if oriented else None, row[2], row[3]))
             pipeline.add_reading(row[0], row[4])

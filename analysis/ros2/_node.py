@@ -27,7 +27,7 @@ import numpy as np
 
 from fmscal.plant.numerics import FmscalError
 
-from .._motion import ImuMotion, JointMotion
+from .._motion import ImuMotion, JointMotion, PoseMotion
 from ._parameters import NODE_NAME, PARAMETERS, Ros2Error, settings
 from ._pipeline import STATES, Pipeline, sensor_pose
 
@@ -110,8 +110,8 @@ class CompensatorNode:
         self.log = self.node.get_logger()
         self.settings = settings(self._declare())
         self.node.add_on_set_parameters_callback(self._refuse_changes)
-        motion, kind = self._motion()
-        self.pipeline = Pipeline(self.settings, motion, kind)
+        motion = self._motion()
+        self.pipeline = Pipeline(self.settings, motion)
         model = self.pipeline.model
         self.names = tuple(model.wrench_names)
         self.pose_names = tuple(model.pose_names)
@@ -146,8 +146,9 @@ class CompensatorNode:
         self.inputs = r.Node(f"{self.node.get_name()}_inputs", **helper)
         self._wrench_sub = self.inputs.create_subscription(r.WrenchStamped, self._resolve(s.wrench_topic),
                                                            self._on_wrench, qos_in)
-        message, self._motion_message = {"pose": (r.PoseStamped, self._pose), "joints": (r.JointState, self._joints),
-                                         "imu": (r.Imu, self._imu)}[kind]
+        message, self._motion_message = {PoseMotion: (r.PoseStamped, self._pose),
+                                         JointMotion: (r.JointState, self._joints),
+                                         ImuMotion: (r.Imu, self._imu)}[type(motion)]
         self._motion_sub = self.inputs.create_subscription(message, self._resolve(s.topic), self._on_motion, qos_in)
         self.error = None
         # the services on a node of their own, spun by its own executor in another thread, named under this
@@ -203,13 +204,13 @@ class CompensatorNode:
                                 f"to change {names} (~/reload reads the calibration file again)")
 
     def _motion(self):
-        """The Compensator's ``motion`` and the form the pipeline takes it in."""
+        """The motion's source the parameters name (its stamps are aligned by the pipeline: no latency here)."""
         s = self.settings
         if s.source == "pose_topic":
-            return None, "pose"
+            return PoseMotion()
         if s.source == "joint_states_topic":
-            return JointMotion(s.urdf, s.frame), "joints"
-        return ImuMotion(rotation=s.imu_rotation, lever_arm=s.imu_lever_arm), "imu"
+            return JointMotion(s.urdf, s.frame)
+        return ImuMotion(rotation=s.imu_rotation, lever_arm=s.imu_lever_arm)
 
     # --- inputs ----------------------------------------------------------------------------------------------
     def _time(self, stamp):

@@ -31,13 +31,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from fmscal.plant import Calibration, Log, SpatialModel
+from fmscal.plant import Calibration, SpatialModel
 from fmscal.plant.io import AttitudeLog, held_table
-from fmscal.plant.physics import quaternion_multiply, rotation_matrices
+from fmscal.plant.physics import quaternion_multiply
 from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload
 
 from .._compensate import Compensator, compensation_model
-from .._motion import quaternion_from_matrix, quaternion_to_matrix
+from .._motion import PoseMotion, quaternion_from_matrix, quaternion_to_matrix
 from ._parameters import Ros2Error
 
 __all__ = ["Pipeline", "Output", "STATES", "DT_SAMPLES", "sensor_pose"]
@@ -100,14 +100,6 @@ def sensor_pose(q, position, extrinsics=None):
             position + quaternion_to_matrix(q) @ np.asarray(t, dtype=float))
 
 
-def _linear(t, t0, v0, t1, v1):
-    """Linear interpolation of arrays (or None) at ``t`` between ``(t0, v0)`` and ``(t1, v1)``."""
-    if v0 is None or v1 is None:
-        return None
-    u = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
-    return (1 - u) * v0 + u * v1
-
-
 class Pipeline:
     """Readings and motion in, contact wrenches out (module docstring); thread-safe (one lock).
 
@@ -115,14 +107,13 @@ class Pipeline:
     ----------
     settings : Settings
         The node's parameters, checked (:func:`fmscal.analysis.ros2.settings`).
-    motion : object or None
-        The Compensator's ``motion`` (None: poses; a ``JointMotion`` or an ``ImuMotion``).
-    kind : {"pose", "joints", "imu"}
-        The motion's form, as :meth:`add_motion` receives it.
+    motion : PoseMotion, JointMotion or ImuMotion, optional
+        The motion's source (None: poses); :meth:`add_motion` takes its samples as its ``interpolate`` gives
+        them (a pose in the model's order, ``(q, dq, ddq)``, ``(q_wxyz, omega, f)``).
     """
 
-    def __init__(self, settings, motion=None, kind="pose"):
-        self.settings, self.motion, self.kind = settings, motion, kind
+    def __init__(self, settings, motion=None):
+        self.settings, self.motion = settings, PoseMotion() if motion is None else motion
         self.lock = threading.Lock()
         self.calibration, self.payload, self.latency = _load(settings)
         self.model = compensation_model(self.calibration, self.payload)
@@ -137,8 +128,8 @@ class Pipeline:
         self._unoriented = 0                          # IMU samples without an orientation since the last call
         self._recent = deque()                        # (t, w_hat, motion) of the rows the filter still holds
         self._last_t = None
-        # the pose's angle columns (U1), by what the model declares; their last values
-        self._angles = [self.model.pose_names.index(n) for n in self.model.angle_names] if kind == "pose" else []
+        # the angle columns (U1), by what the source and the model declare; their last values
+        self._angles = self.motion.angle_columns(self.model)
         self._last_angles = None
         self.last_arrival = -np.inf                   # time.monotonic() of the newest reading
         self.motion_frame = ""
@@ -164,17 +155,8 @@ class Pipeline:
         finally:
             self.dt = saved
         n = int(round((self.settings.window + self.settings.delay) / dt)) + 4
-        if self.kind == "pose":
-            rest = np.zeros(self.model.n_pose)
-            if self.model.attitude == "quaternion":
-                rest[0] = 1.0
-            rows = [(i * dt, np.zeros(self.n), rest) for i in range(n)]
-        elif self.kind == "joints":
-            rows = [(i * dt, np.zeros(self.n), (np.zeros(self.motion.size), None, None)) for i in range(n)]
-        else:
-            rows = [(i * dt, np.zeros(self.n), (np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([0, 0, 9.81])))
-                    for i in range(n)]
-        self._feed(warm, rows)
+        rest = self.motion.rest(self.model)
+        self._feed(warm, [(i * dt, np.zeros(self.n), rest) for i in range(n)])
 
     # --- the compensator --------------------------------------------------------------------------------------
     def _build(self, calibration=None, payload=None):
@@ -305,24 +287,12 @@ class Pipeline:
             return v0
         if self.dt is not None and t - t0 >= 0.5 * self.dt and t1 - t > 0.5 * self.dt:
             return _GAP
-        if self.kind == "pose":
-            return self.model.interpolate_pose(np.array([t]), np.array([t0, t1]), np.array([v0, v1]))[0]
-        if self.kind == "joints":
-            return tuple(_linear(t, t0, a, t1, b) for a, b in zip(v0, v1))
-        if v0[0] is None or v1[0] is None:                  # an IMU that gives no orientation
-            return None, _linear(t, t0, v0[1], t1, v1[1]), _linear(t, t0, v0[2], t1, v1[2])
-        q = SpatialModel.interpolate_pose(np.array([t]), np.array([t0, t1]),     # SLERP, the rate linearly
-                                          np.array([np.r_[v0[0], v0[1]], np.r_[v1[0], v1[1]]]))[0]
-        return q[:4], q[4:], _linear(t, t0, v0[2], t1, v1[2])
+        return self.motion.interpolate(self.model, t, t0, v0, t1, v1)
 
     def _feed(self, compensator, rows):
-        """Push rows ``(t, w_hat, motion)`` into ``compensator``; its samples (Nones left out)."""
-        if self.kind == "pose":
-            nan = np.full(self.model.n_pose, np.nan)
-            return compensator.push_many([r[0] for r in rows], [r[1] for r in rows],
-                                         [nan if r[2] is None else r[2] for r in rows])
-        samples = [compensator.push(t, w_hat, **{self.kind: value}) for t, w_hat, value in rows]
-        return [s for s in samples if s is not None]
+        """Push rows ``(t, w_hat, motion)`` into ``compensator`` as one block; its samples."""
+        return compensator.push_many([r[0] for r in rows], [r[1] for r in rows],
+                                     **{self.motion.keyword: self.motion.stack([r[2] for r in rows], self.model)})
 
     def _rebuild(self, calibration=None, payload=None):
         """A new compensator (a new calibration or payload) fed the rows the old one's filter holds, their
@@ -342,16 +312,17 @@ class Pipeline:
             self._saturated.add(t)
             self._saturated_at = t
         self._frames[t] = (stamp, frame_id, arrival)
-        if self.kind in ("pose", "joints") and not gap:
-            if value is None:
-                self._held.clear()                     # identify_payload takes the newest stretch without a gap
-            else:                                      # a pose, or joint angles (their pose at identify_payload)
-                self._hold(t, np.asarray(value if self.kind == "pose" else value[0], dtype=float), w_hat)
-        elif self.kind == "imu" and not gap and value is not None:
-            if value[0] is None:                       # an IMU without orientation: nothing to hold
-                self._unoriented += 1
-            else:                                      # the IMU's attitude (the held segments' at identify_payload)
-                self._hold(t, np.asarray(value[0], dtype=float), w_hat)
+        if gap:
+            return
+        if value is None:
+            if self.motion.breaks_hold:                # identify_payload takes the newest stretch without a gap
+                self._held.clear()
+            return
+        held = self.motion.held(value)                 # a pose, joint angles, or an IMU's attitude
+        if held is None:                               # an IMU without orientation: nothing to hold
+            self._unoriented += 1
+        else:
+            self._hold(t, held, w_hat)
 
     def _hold(self, t, motion, w_hat):
         """Keep a sample for ``~/identify_payload`` (the newest ``identify_buffer`` s)."""
@@ -434,24 +405,25 @@ class Pipeline:
             self._held.clear()
             unoriented, self._unoriented = self._unoriented, 0
             b = None if self.compensator is None else self.compensator.offset
-        if self.kind == "imu" and not held and unoriented:
+        if not held and unoriented:
             return False, (f"identify_payload refused: the IMU gave no orientation ({unoriented} samples with "
                            "orientation_covariance[0] == -1 since the last call); the static fit needs the sensor's "
                            "attitude at each held pose: an IMU that estimates its orientation, or pose_topic")
         if len(held) < 2 or held[-1][0] - held[0][0] < 1.0:
             return False, f"identify_payload refused: {len(held)} samples held since the last call (at least 1 s " \
                           "of motion without a gap needed)"
-        t, pose, w_hat = (np.array(v) for v in zip(*held))
+        t, motion, w_hat = (np.array(v) for v in zip(*held))
         cal = self.calibration
         gravity = self.settings.gravity if self.settings.gravity is not None else cal.gravity
         reading = self.settings.reading or cal.reading
-        if self.kind == "imu":
-            return self._identify_held(t, pose, w_hat, gravity, reading, b)
-        if self.kind == "joints":
-            pose = self.motion.poses(pose)                 # the sensor frame's, in the URDF's base frame
         try:
-            log = Log(t - t[0], pose, w_hat, name="held")
-            estimate = identify_payload(log, S=cal.S, gravity=gravity, reading=reading)
+            data = self.motion.held_log(t - t[0], motion, w_hat)   # poses; joint angles' poses; IMU attitudes
+        except Exception as err:
+            return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
+        if isinstance(data, AttitudeLog):
+            return self._identify_held(data, gravity, reading, b)
+        try:
+            estimate = identify_payload(data, S=cal.S, gravity=gravity, reading=reading)
         except Exception as err:
             return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
         if estimate.inertia is None or not estimate.payload_determined:
@@ -462,11 +434,12 @@ class Pipeline:
                       f"{estimate.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in estimate.com) + " m"
                       + ("" if estimate.converged else "; not converged: " + "; ".join(estimate.warnings[:1])))
 
-    def _identify_held(self, t, q_imu, w_hat, gravity, reading, b):
-        """:meth:`identify` of an IMU: the held segments of its attitudes, fitted statically."""
-        q = quaternion_from_matrix(rotation_matrices(q_imu) @ self.motion.rotation.T)        # R_S = R_IMU C^T
+    def _identify_held(self, log, gravity, reading, b):
+        """:meth:`identify` of an IMU: the held segments of its attitudes (``R_S = R_IMU C^T``), fitted
+        statically."""
+        t = log.t
         try:
-            table, used, why = held_table(AttitudeLog(t - t[0], q, w_hat, name="the held IMU samples"))
+            table, used, why = held_table(log)
             fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading)
         except Exception as err:
             return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
@@ -497,7 +470,7 @@ class Pipeline:
             b = None if self.compensator is None else self.compensator.offset
             cal = replace(self.calibration, b=self.calibration.b if b is None else b,
                           payload=self.payload or self.calibration.payload, date=None,
-                          latency=self.latency if self.kind == "pose" else self.calibration.latency)
+                          latency=self.latency if self.settings.source == "pose_topic" else self.calibration.latency)
         try:
             cal.save(path)
         except Exception as err:

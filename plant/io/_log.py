@@ -47,7 +47,8 @@ import numpy as np
 
 from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_number, as_positive_scalar
 from fmscal.plant.physics import (QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload, PlanarModel,
-                                  SpatialModel, SpatialPayload, check_calibration, unit_quaternions)
+                                  SpatialModel, SpatialPayload, check_calibration, sign_continuous,
+                                  unit_quaternions)
 from ._files import atomic_write_text, not_a_file
 
 __all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
@@ -166,9 +167,8 @@ class Log:
         rows = np.flatnonzero(self.has_pose)
         q = unit_quaternions(self.pose[rows, :4], self.name, rows)
         flips = np.sum(q[1:] * q[:-1], axis=1) < 0
-        sign = np.cumprod(np.r_[1.0, np.where(flips, -1.0, 1.0)])
         self.pose = self.pose.copy()
-        self.pose[rows, :4] = q * sign[:, None]
+        self.pose[rows, :4] = sign_continuous(q)
         if flips.any():
             first = self.t[rows[1:][flips][0]]
             self.notes.append(f"{self.name}: the quaternion changes sign {int(flips.sum())} time(s) between poses "

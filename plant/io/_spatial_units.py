@@ -42,7 +42,7 @@ with ``d`` a constant (the torque offset, and ``rho`` times the force offset).
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import rotation_matrices
+from fmscal.plant.physics import rotation_matrices, sign_continuous
 
 __all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units",
            "check_table_units", "check_imu_units", "MAX_GYRO_RATE",
@@ -363,8 +363,7 @@ def _coarse(log, window):
     t = log.t[:n * k].reshape(n, k).mean(axis=1)
     have = log.has_pose
     measured = log.pose[have].copy()
-    flip = np.r_[1.0, np.sign(np.sum(measured[1:, :4] * measured[:-1, :4], axis=1))]
-    measured[:, :4] *= np.cumprod(np.where(flip == 0, 1.0, flip))[:, None]          # sign-continuous
+    measured[:, :4] = sign_continuous(measured[:, :4])
     pose = np.column_stack([np.interp(t, log.t[have], measured[:, j]) for j in range(7)])
     w_hat = log.w_hat[:n * k].reshape(n, k, 6).mean(axis=1)
     return pose, w_hat, k * log.dt

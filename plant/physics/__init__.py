@@ -8,7 +8,7 @@ from ._dynamics import (input_matrix, acceleration, state_derivative, A_1, C_1, 
     phi_1, phi_2, S_from_phi)
 from ._rigid_body import (regressor, inertia_matrix, INERTIA_NAMES, SpatialPayload, PayloadSymbols, GRAVITY,
                           quaternion_multiply, quaternion_conjugate, rotation_matrix, rotation_matrices,
-                          unit_quaternions,
+                          unit_quaternions, sign_continuous,
                           QUATERNION_TOLERANCE, sensor_wrench, body_acceleration, prescribed_motion, skew)
 from ._simulate import (integrate, rk4_step)
 from ._excitation import (Excitation, PaperWrench, Multisine, SampledWrench)
@@ -18,7 +18,7 @@ from ._model import (Model, PlanarModel, SpatialModel, MODELS, as_model, model_f
 __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
            "input_matrix", "acceleration", "state_derivative", "regressors", "phi_1", "phi_2", "S_from_phi",
            "regressor", "inertia_matrix", "SpatialPayload", "quaternion_multiply", "quaternion_conjugate",
-           "rotation_matrix", "rotation_matrices", "unit_quaternions", "sensor_wrench", "body_acceleration",
-           "prescribed_motion", "skew",
+           "rotation_matrix", "rotation_matrices", "unit_quaternions", "sign_continuous", "sensor_wrench",
+           "body_acceleration", "prescribed_motion", "skew",
            "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine", "SampledWrench", "spatial_motion",
            "smoothed_state", "Model", "PlanarModel", "SpatialModel", "MODELS", "as_model"]

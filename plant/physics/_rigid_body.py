@@ -40,7 +40,8 @@ from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_pos
 
 __all__ = ["regressor", "INERTIA_NAMES",
     "SpatialPayload", "PayloadSymbols", "GRAVITY",
-    "quaternion_multiply", "quaternion_conjugate", "rotation_matrix", "rotation_matrices", "unit_quaternions",
+    "sign_continuous", "quaternion_multiply", "quaternion_conjugate", "rotation_matrix", "rotation_matrices",
+    "unit_quaternions",
     "QUATERNION_TOLERANCE",
     "sensor_wrench", "body_acceleration", "state_derivative", "rk4_step", "prescribed_motion", "skew",
     "NQ", "NV", "NX",
@@ -281,6 +282,39 @@ def unit_quaternions(q, name, rows=None, hint=""):
         raise LogError(f"{name}: the quaternion qw,qx,qy,qz at row {row} has norm {norm[k]:.6g}; "
                        f"expected a unit quaternion (norm 1 within {QUATERNION_TOLERANCE:g}{hint})")
     return q / norm[:, None]
+
+
+def sign_continuous(q, previous=None):
+    """Rows of quaternions made sign-continuous: each turned into its predecessor's hemisphere.
+
+    ``q`` and ``-q`` are one attitude; a recorded sequence may give either (an IMU, a tracker). Smoothed,
+    differenced or interpolated component by component, two rows of opposite signs would pass near zero, not
+    through the turn between them: each row whose dot product with the previous row is negative is negated
+    (and so are the rows after it, with it). Rows with a NaN are kept as they are and skipped.
+
+    Parameters
+    ----------
+    q : array_like, shape (N, 4)
+    previous : array_like, shape (4,), optional
+        The quaternion before the first row (a stream's last one); None: the first row is kept.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+        A copy.
+    """
+    q = np.array(q, dtype=float).reshape(-1, 4)
+    if len(q) == 1 and previous is not None:                         # a stream's newest: one product
+        return -q if float(q[0] @ previous) < 0 else q
+    rows = np.flatnonzero(np.isfinite(q).all(axis=1))
+    if not len(rows):
+        return q
+    before = q[rows[:-1]] if previous is None else np.vstack([np.asarray(previous, dtype=float)[None], q[rows[:-1]]])
+    after = q[rows[1:]] if previous is None else q[rows]
+    flips = np.einsum("ij,ij->i", after, before) < 0
+    sign = np.cumprod(np.where(flips, -1.0, 1.0))
+    q[rows[1:] if previous is None else rows] *= sign[:, None]
+    return q
 
 
 def quaternion_multiply(p, q):
