@@ -106,6 +106,18 @@ def test_a_file_name_and_joint_angles_through_a_urdf_are_read_alike(inputs):
                                                            latency=0.0).S_hat)
 
 
+def test_the_method_is_named_observer_as_on_the_command_line_and_method_stays_its_alias(inputs):
+    # --observer on the command line, observer= here (compare and sweep take observers=); method= still works
+    by_observer = calibrate("spatial.csv", TOOL, observer="least-squares", latency=0.0)
+    by_method = calibrate("spatial.csv", TOOL, method="least-squares", latency=0.0)
+    assert by_observer.method == by_method.method == "least-squares"
+    np.testing.assert_array_equal(by_observer.S_hat, by_method.S_hat)
+    assert calibrate("spatial.csv", TOOL, observer="least-squares", method="least-squares", latency=0.0).method == \
+        "least-squares"
+    with pytest.raises(OptionError, match="^observer 'ekf' and method 'least-squares' name one option"):
+        calibrate("spatial.csv", TOOL, observer="ekf", method="least-squares", latency=0.0)
+
+
 def test_read_data_tells_the_case_from_the_header(inputs):
     assert isinstance(read_data("held.csv"), PoseTable)
     assert read_data("spatial.csv").kind == "spatial" and read_data("planar.csv").kind == "planar"
@@ -186,12 +198,16 @@ REFUSALS = [
      "wrench_noise is not taken on a spatial log", "--wrench-noise is not taken on a spatial log"),
     ("spatial.csv", TOOL, {"offset": False}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--no-offset"],
      "offset=False is not taken on a spatial log", "--no-offset is not taken on a spatial log"),
+    ("spatial.csv", TOOL, {"observer": "high-gain"}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--observer", "high-gain"],
+     "observer high-gain does not run on a spatial log", "--observer high-gain does not run on a spatial log"),
     ("spatial.csv", TOOL, {"method": "high-gain"}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--observer", "high-gain"],
      "method high-gain does not run on a spatial log", "--observer high-gain does not run on a spatial log"),
     ("spatial.csv", TOOL, {"gravity": (0, 0, np.inf)}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--gravity", "0", "0", "inf"],
      "gravity must be three finite numbers", "--gravity must be three finite numbers"),
     ("spatial.csv", TOOL, {"truth": "planar.truth.json"}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--truth", "planar.truth.json"],
      "is the truth of a planar log; this log is spatial", "is the truth of a planar log; this log is spatial"),
+    ("held.csv", TOOL, {"observer": "least-squares"}, [*TOOL_FLAGS, "--observer", "least-squares"],
+     "observer is not taken on a pose table", "--observer is not taken on a pose table"),
     ("held.csv", TOOL, {"method": "least-squares"}, [*TOOL_FLAGS, "--observer", "least-squares"],
      "method is not taken on a pose table", "--observer is not taken on a pose table"),
     ("held.csv", TOOL, {"latency": 0.0}, [*TOOL_FLAGS, "--latency", "0"],

@@ -18,8 +18,9 @@ from fmscal.observers.payload import PayloadEstimate
 
 from .. import _plots
 from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, log_model_class, read_data
-from ._common import CliError, add_max_mass, flag_payload, max_mass, position_flag, positive
-from ._files import atomic_write_text, check_outputs
+from ._common import (INERTIA_METAVAR, CliError, add_max_mass, flag_payload, max_mass, position_flag, position_values,
+                      positive)
+from ._files import atomic_write_text, check_inputs, check_outputs
 from ._spatial import latency_line, print_spatial
 
 
@@ -38,14 +39,14 @@ def add_calibrate(sub):
                    help="the payload as fmscal identify-payload --save wrote it (the tracked frame's axes, and the "
                         "gravity it estimated), instead of --mass, --com and --inertia")
     p.add_argument("--mass", type=float, metavar="KG", help="the payload's mass, kg (or --payload)")
-    p.add_argument("--inertia", type=float, nargs="+", metavar="I",
+    p.add_argument("--inertia", type=float, nargs="+", metavar=INERTIA_METAVAR,
                    help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
                         "tensor about the centre of mass in sensor axes (a pose table needs it only with --save)")
-    p.add_argument("--rho", type=float, nargs="+", metavar="R",
-                   help="planar logs: RX RY, the paper's rho: the sensor's position from the centre of mass G, "
+    p.add_argument("--rho", type=float, **position_values("rho"),
+                   help="planar logs: the paper's rho: the sensor's position from the centre of mass G, "
                         "body frame, m; negative values as written")
-    p.add_argument("--com", type=float, nargs="+", metavar="C",
-                   help="spatial logs and pose tables: X Y Z, the centre of mass in the sensor frame, m (seen "
+    p.add_argument("--com", type=float, **position_values("com"),
+                   help="spatial logs and pose tables: the centre of mass in the sensor frame, m (seen "
                         "from the sensor: the opposite of a planar rho); negative values as written")
     p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
                    help="spatial logs: gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
@@ -95,15 +96,16 @@ def add_calibrate(sub):
 
 def cmd_calibrate(args):
     """``fmscal calibrate``: :func:`fmscal.analysis.calibrate` on the file, its report printed, saved on request."""
+    inputs = [(args.log, "the log"), (args.truth, "the --truth file"), (args.payload, "the --payload file"),
+              (args.urdf, "the --urdf file")]
+    check_inputs(inputs)
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
     if args.plot and not args.plot.endswith(".png"):
         raise CliError(f"--plot must end in .png; got {args.plot}")
     if args.force and not args.save:
         raise CliError("--force applies to --save; give --save CAL.json too")
-    check_outputs([(args.save, "--save"), (args.plot, "--plot")],
-                  [(args.log, "the log"), (args.truth, "the --truth file"), (args.payload, "the --payload file")],
-                  overwrite=args.overwrite)
+    check_outputs([(args.save, "--save"), (args.plot, "--plot")], inputs, overwrite=args.overwrite)
     try:
         data = read_data(args.log, args.urdf, args.frame)
         table = isinstance(data, (PoseTable, AttitudeLog))
@@ -111,7 +113,7 @@ def cmd_calibrate(args):
             raise CliError("--plot is not taken on a pose table (a figure of S against time needs a log)")
         payload = _payload(args, data, table)
         truth = read_truth(args.truth) if args.truth and not table else args.truth
-        cal = calibrate(data, payload, method=args.observer, reading=args.reading, gravity=args.gravity,
+        cal = calibrate(data, payload, observer=args.observer, reading=args.reading, gravity=args.gravity,
                         latency=args.latency, max_latency=args.max_latency, offset=args.offset,
                         pose_noise=args.pose_noise, wrench_noise=args.wrench_noise, truth=truth,
                         max_mass=max_mass(args))
@@ -137,7 +139,7 @@ def cmd_calibrate(args):
 
 
 #: The command line's flag for each keyword of :func:`fmscal.analysis.calibrate` it refuses.
-_FLAGS = {"method": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
+_FLAGS = {"observer": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
           "wrench_noise": "--wrench-noise", "latency": "--latency", "max_latency": "--max-latency", "truth": "--truth",
           "gravity": "--gravity", "reading": "--reading", "urdf and frame": "--urdf and --frame",
           "max_mass": "--max-mass"}
@@ -241,15 +243,18 @@ def add_apply(sub):
                    help="the calibrated wrenches, the same columns as the readings")
     p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
     p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
-    p.add_argument("--inertia", type=float, nargs="+", metavar="I", help="planar I_G, or the six spatial entries")
-    p.add_argument("--rho", type=float, nargs="+", metavar="R",
-                   help="planar: RX RY, the sensor's position from the centre of mass (body frame, m)")
-    p.add_argument("--com", type=float, nargs="+", metavar="C",
-                   help="spatial: X Y Z, the centre of mass in the sensor frame (m)")
+    p.add_argument("--inertia", type=float, nargs="+", metavar=INERTIA_METAVAR,
+                   help="planar I_G, or the six spatial entries")
+    p.add_argument("--rho", type=float, **position_values("rho"),
+                   help="planar: the sensor's position from the centre of mass (body frame, m)")
+    p.add_argument("--com", type=float, **position_values("com"),
+                   help="spatial: the centre of mass in the sensor frame (m)")
     p.set_defaults(func=cmd_apply)
 
 
 def cmd_apply(args):
+    inputs = [(args.calibration, "the calibration"), (args.readings, "the readings")]
+    check_inputs(inputs)
     if args.rho is not None and args.com is not None:
         raise CliError("give --rho (a planar payload) or --com (a spatial one), not both")
     position = args.rho if args.com is None else args.com
@@ -264,8 +269,7 @@ def cmd_apply(args):
         payload = flag_payload(cls, args.mass, args.inertia, position)
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
-    check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],
-                  overwrite=args.overwrite)
+    check_outputs([(args.out, "--out")], inputs, overwrite=args.overwrite)
     calibration = Calibration.load(args.calibration, payload)
     if calibration.forced:
         print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",

@@ -1,6 +1,7 @@
 """``fmscal compensate``: the wrench the environment applies to the tool, from a saved calibration and a log."""
 
 import io
+import re
 import sys
 from pathlib import Path
 
@@ -11,11 +12,11 @@ from fmscal.plant.io import IMU_COLUMNS, csv_header, read_imu_log, read_joint_lo
 from fmscal.observers.payload import PayloadEstimate
 
 from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, FRAMES, OFFLINE_WINDOW,
-                           compensate)
+                           CompensationError, compensate)
 from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
 from .._setup import load_setup
-from ._common import CliError
-from ._files import atomic_write_text, check_outputs
+from ._common import CliError, Words
+from ._files import atomic_write_text, check_inputs, check_outputs
 
 
 def add_compensate(sub):
@@ -42,7 +43,7 @@ def add_compensate(sub):
     p.add_argument("--urdf", metavar="ROBOT.urdf", help="the log's joint angles are this robot's (pinocchio): the "
                                                           "motion from its forward kinematics")
     p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
-    p.add_argument("--imu-rotation", type=float, nargs="+", metavar="V",
+    p.add_argument("--imu-rotation", type=float, nargs="+", metavar=Words("QW QX QY QZ | R11 R12 ... R33"),
                    help="an IMU log: the IMU's axes in the sensor's, as a unit quaternion QW QX QY QZ or a rotation "
                         "matrix of 9 numbers by rows (v_sensor = C v_imu); default identity")
     p.add_argument("--imu-lever-arm", type=float, nargs=3, metavar=("X", "Y", "Z"),
@@ -138,13 +139,33 @@ def _motion_log(args):
     return read_log(args.log), None
 
 
+def _as_flags(message, args):
+    """The library's message about its ``window`` or ``delay`` keyword, naming this command's flag instead.
+
+    ``window 0.06 s is 1 samples at dt = 0.04 s; ...`` becomes ``--window 0.06 s (the default with --causal) is 1
+    samples ...``, and ``give a window of at least ...`` ``give --window of at least ...``: the user of the command
+    line is told which flag to change (a 25 Hz log needs a longer ``--window`` than the causal default). Any other
+    message is returned as it is.
+    """
+    match = re.match(r"(window|delay) ", message)
+    if match is None:
+        return message
+    keyword = match.group(1)
+    given = args.window is not None if keyword == "window" else args.delay != CAUSAL_DELAY
+    message = re.sub(r"\b(?:a |the )?(window|delay)\b", r"--\1", message)
+    if not given:
+        mode = "with --causal" if args.causal else "offline"
+        message = re.sub(r"^(--\w+ \S+ s)", rf"\1 (the default {mode})", message)
+    return message
+
+
 def cmd_compensate(args):
+    inputs = [(args.setup, "the calibration or payload file"), (args.log, "the log"),
+              (args.payload, "the --payload file"), (args.calibration, "the --calibration file"),
+              (args.urdf, "the --urdf file")]
+    check_inputs(inputs)
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
-    inputs = [(args.setup, "the calibration"), (args.log, "the log")]
-    for path, what in ((args.payload, "the --payload file"), (args.calibration, "the --calibration file")):
-        if path is not None:
-            inputs.append((path, what))
     check_outputs([(args.out, "--out")], inputs, overwrite=args.overwrite)
     setup = load_setup(args.setup)
     payload_file = isinstance(setup, PayloadEstimate)
@@ -178,11 +199,14 @@ def cmd_compensate(args):
                 raise CliError(f"--drift-intensity takes numbers separated by commas, or fit; got "
                                f"{args.drift_intensity}") from None
             intensity = intensity[0] if len(intensity) == 1 else intensity
-    result = compensate(setup, log, causal=args.causal, payload=payload, calibration=calibration,
-                        tool_radius=args.tool_radius, window=args.window,
-                        delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
-                        track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
-                        frame=args.output_frame, point=args.point)
+    try:
+        result = compensate(setup, log, causal=args.causal, payload=payload, calibration=calibration,
+                            tool_radius=args.tool_radius, window=args.window, delay=args.delay,
+                            direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
+                            track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
+                            frame=args.output_frame, point=args.point)
+    except CompensationError as err:
+        raise CliError(_as_flags(str(err), args)) from None
     if not np.isfinite(result.wrench).all():
         raise CliError("the compensated wrench is not finite (overflow): the calibration's S or b is far outside "
                        "any sensor's range: nothing written")
