@@ -51,7 +51,7 @@ MISSING = [
     (["apply", "{d}/cal.json", "{d}/none.csv", "--out", "{d}/exists.csv", "--mass", "1"], "none.csv", "the readings"),
     (["compensate", "{d}/cal.json", "{d}/imu.csv", "--out", "{d}/c.txt", "--imu-rotation", "1", "0", "0", "0"],
      "imu.csv", "the log"),
-    (["compensate", "{d}/none.json", "{d}/arm.csv", "--out", "{d}/exists.csv"], "none.json", "the calibration"),
+    (["compensate", "{d}/none.json", "{d}/arm.csv", "--out", "{d}/exists.csv"], "none.json", "the calibration or payload file"),
     (["compensate", "{d}/cal.json", "{d}/arm.csv", "--out", "{d}/c.txt", "--payload", "{d}/none.json"], "none.json",
      "the --payload file"),
     (["compensate", "{d}/cal.json", "{d}/joint_log.csv", "--out", "{d}/c.txt", "--urdf", "{d}/none.urdf"],
