@@ -30,16 +30,25 @@ the misfit's scale below absorbs it.
 
     z_j = A_j beta + A_j,K phi [j >= tau] + eps_j,   eps_j ~ N(0, I)                               (T3)
 
-``beta`` a nuisance constant over the window (the payload's and the offset's errors, sixteen numbers: the
-payload in use is not assumed right, only constant), ``K`` the columns that step at ``tau``: ``H_0`` none;
+``beta`` a nuisance constant over the window (the payload's and the offset's errors, sixteen numbers), ``K`` the
+columns that step at ``tau``: ``H_0`` none;
 ``H_I`` the inertia only (the inertia a tracker is learning, (L1)); ``H_1`` the payload, ``(m, h, I_O)``;
 ``H_c`` the inertia and a constant wrench (a contact, or an offset that jumped). Each is fitted by least squares
 on the window's normal equations (summed per block, the nuisance eliminated by its Schur complement):
-``RSS_H``. The misfit per degree of freedom of ``H_1`` and the change's time::
+``RSS_H``. The nuisance's mass and first moment are the payload in use's errors, drawn from their covariance
+(``Sigma_0``: the payload file's, (K2) of :mod:`fmscal.analysis._setup`, and at least :data:`PRIOR_MASS` of the
+mass and :data:`PRIOR_COM` m of its centre of mass)::
 
-    kappa(tau) = RSS_1(tau) / (6 n_tau - 26),    tau_hat = argmin_tau kappa(tau)                  (T4)
+    RSS_H = min sum_j |z_j - ...|^2 + beta_mh^T Sigma_0^-1 beta_mh                                 (T3')
 
-over the candidates of the last :data:`SEARCH` s (and the last significant one, kept while it is younger than
+without it, a window whose blocks before ``tau`` hold one attitude could not tell a new payload from an old one
+that was always so with an offset that jumped. The inertia and the offset's errors are free. The misfit
+per degree of freedom of ``H_1`` and the change's time::
+
+    kappa(tau) = RSS_1(tau) / (6 n_tau - 26),    tau_hat = argmax {Lambda(tau) : kappa(tau) <= kappa_max}   (T4)
+
+(``Lambda`` of (T5); where no candidate's misfit is within (T6), the least misfit's) over the candidates of the
+last :data:`SEARCH` s (and the last significant one, kept while it is younger than
 :data:`MAX_AGE` s: a part grasped at rest is found when the arm moves).
 
 **The decision.** A change is declared at ``tau_hat`` where all three hold (``kappa' = max(kappa, 1)``, the
@@ -100,10 +109,10 @@ from fmscal.plant.physics import regressor
 from fmscal.observers.payload import fit_static
 
 from ._motion import quaternion_from_matrix
-from ._setup import setup
+from ._setup import payload_jacobian, setup
 
 __all__ = ["ToolChange", "TOOL_CHANGE", "BLOCK", "PRE", "GUARD", "SEARCH", "MAX_AGE", "FALSE_ALARM_RATE",
-           "MISFIT", "REIDENTIFY_POSES", "REIDENTIFY_BUFFER"]
+           "MISFIT", "PRIOR_MASS", "PRIOR_COM", "REIDENTIFY_POSES", "REIDENTIFY_BUFFER"]
 
 #: ``tool_change``: no detection; detect and report; detect, report and re-identify from the next held attitudes.
 TOOL_CHANGE = ("off", "detect", "reidentify")
@@ -123,6 +132,9 @@ FALSE_ALARM_RATE = 1e-3
 MISFIT = 4.0
 #: A change's last blocks: at least this many since ``tau`` before it is tested, s.
 MIN_POST = 0.2
+#: The nuisance's payload errors (T3'): at least this share of the mass, and this distance of the centre of mass, m.
+PRIOR_MASS = 0.01
+PRIOR_COM = 0.002
 #: Held attitudes after a change before it is re-identified automatically (``tool_change="reidentify"``).
 REIDENTIFY_POSES = 6
 #: The blocks kept for a re-identification, s.
@@ -239,10 +251,11 @@ class _Detector:
     """(T1)-(T8) over a stream of compensated rows, a block at a time; the held attitudes kept for (T9).
 
     ``model`` the compensation's (its gravity and payload), ``dt`` the rows' sample time, ``mode`` one of
-    :data:`TOOL_CHANGE` (not "off")."""
+    :data:`TOOL_CHANGE` (not "off"), ``cov`` a payload file's covariance of ``(m, c, I_c, b)`` (K2) or None."""
 
-    def __init__(self, model, dt, mode):
-        self.model, self.mode = model, mode
+    def __init__(self, model, dt, mode, cov=None):
+        self.mode = mode
+        self._prior(model, cov)
         self.n = max(1, int(round(BLOCK / dt)))
         self.block_s = self.n * dt
         self.P, self.G = int(round(PRE / self.block_s)), int(round(GUARD / self.block_s))
@@ -253,6 +266,8 @@ class _Detector:
         self._rows = []                                    # the open block's rows
         self._held = deque(maxlen=int(round(REIDENTIFY_BUFFER / self.block_s)))   # (t, q, w_hat) per block
         self._held_count = self._held_tried = 0
+        #: The newest evaluation: (time, tau_hat's time, Lambda, kappa, Lambda_c or None where (T5) failed).
+        self.latest = None
         self._count = 0                                    # rows in the open block
         self.reset()
 
@@ -325,7 +340,8 @@ class _Detector:
         k, e = taus - lo, end - lo                          # relative indices
         w0, w1 = k - self.P - self.G, k - self.G
         Np, bp, sp = cG[e] - cG[k], cg[e] - cg[k], cs[e] - cs[k]
-        Nw, bw, sw = Np + cG[w1] - cG[w0], bp + cg[w1] - cg[w0], sp + cs[w1] - cs[w0]
+        Nw = Np + cG[w1] - cG[w0] + self._information                                         # (T3')
+        bw, sw = bp + cg[w1] - cg[w0] + self._prior_b, sp + cs[w1] - cs[w0] + self._prior_s
         d = np.sqrt(np.maximum(np.einsum("nii->ni", Nw), 1e-300))                               # Jacobi scaling
         dd = d[:, :, None] * d[:, None, :]
         Np_s, bw_s, bp_s = Np / dd, bw / d, bp / d
@@ -342,14 +358,18 @@ class _Detector:
         every = np.arange(len(taus))
         rss1, phi, M1 = fit(_STEP, every)
         kappa = rss1 / (6 * (e - k + self.P) - 26)
-        i = int(np.argmin(kappa))                                                              # (T4)
+        scales = np.maximum(kappa, 1.0)
+        ratios = (fit(_INERTIA, every)[0] - rss1) / scales                                     # (T5)
+        explained = kappa <= MISFIT
+        i = int(np.argmax(np.where(explained, ratios, -np.inf)) if explained.any() else np.argmin(kappa))   # (T4)
         at = np.array([i])
-        scale = max(float(kappa[i]), 1.0)
-        ratio = float(fit(_INERTIA, at)[0][0] - rss1[i]) / scale                               # (T5)
+        scale, ratio = float(scales[i]), float(ratios[i])
+        tau = int(taus[i])
+        self.latest = (blocks[-1][0], blocks[tau - first][0], ratio, float(kappa[i]), None)
         if ratio <= self.h:
             return
-        tau = int(taus[i])
         versus = float(fit(_CONTACT, at)[0][0] - rss1[i]) / scale                              # (T7)
+        self.latest = self.latest[:4] + (versus,)
         if not (kappa[i] <= MISFIT and versus > self.h):                                       # (T6), (T7)
             self._pinned = tau                         # significant, not yet determined: kept as a candidate
             return
@@ -364,8 +384,8 @@ class _Detector:
         post = np.array([b[4] for b in blocks[tau - self._first:]])
         u = post / np.linalg.norm(post, axis=1, keepdims=True)
         span = float(np.degrees(np.arccos(np.clip(u @ u[0], -1.0, 1.0)).max()))
-        payload = self.model.payload
-        m, h = payload.mass, payload.mass * np.asarray(payload.com, dtype=float)
+        payload = self.model.payload                   # and the changes declared since it was identified
+        m, h = payload.mass + self._mean[0], payload.mass * np.asarray(payload.com, dtype=float) + self._mean[1:4]
         mass = m + phi[0]
         com = (h + phi[1:4]) / mass
         J = np.concatenate([-com[:, None], np.eye(3)], axis=1) / mass                          # d c' / d (dm, dh)
@@ -375,6 +395,8 @@ class _Detector:
             mass_change_sd=float(np.sqrt(max(cov[0, 0], 0.0))), moment_change=phi[1:4].copy(), mass=float(mass),
             com=com, com_sd=com_sd, part_com=phi[1:4] / phi[0] if phi[0] else np.full(3, np.nan),
             statistic=ratio, threshold=self.h, misfit=kappa, versus_contact=versus, span_deg=span))
+        # until re-identified, the payload is the model's and the changes: the prior of (T3') moves to it
+        self._prior(self.model, self._cov, self._mean + phi[:4], self._more + cov[:4, :4])
         self.reset()
 
     # --- (T9) ---------------------------------------------------------------------------------------------------
@@ -419,10 +441,29 @@ class _Detector:
         self._held_tried = self._held_count
         return True
 
-    def use(self, model):
-        """Go on with a new payload's model (a re-identification): the window restarted."""
-        self.model = model
+    def use(self, model, cov=None):
+        """Go on with a new payload's model and covariance (a re-identification): the window restarted."""
+        self._prior(model, cov)
         self.reset()
+
+    def _prior(self, model, cov, mean=None, more=None):
+        """(T3')'s terms in the normal equations, for ``model``'s payload: ``Sigma_0^-1`` (16, 16), ``Sigma_0^-1 mu``
+        and ``mu^T Sigma_0^-1 mu``; ``mean`` the payload's (m, h) from the model's (a change declared and not
+        re-identified: the payload is then the model's and the change), ``more`` that change's covariance."""
+        self.model, self._cov = model, cov
+        m, com = model.payload.mass, np.asarray(model.payload.com, dtype=float)
+        sigma = np.diag(np.r_[(PRIOR_MASS * m) ** 2, np.full(3, (PRIOR_COM * m) ** 2)])
+        if cov is not None:
+            J = payload_jacobian(m, com)[:4, :4]                                               # (K2)
+            sigma = sigma + J @ np.asarray(cov, dtype=float)[:4, :4] @ J.T
+        self._more = np.zeros((4, 4)) if more is None else more
+        self._sigma = sigma + self._more
+        self._mean = np.zeros(4) if mean is None else np.asarray(mean, dtype=float)
+        inverse = np.linalg.inv(self._sigma)
+        self._information = np.zeros((16, 16))
+        self._information[:4, :4] = inverse
+        self._prior_b = np.r_[inverse @ self._mean, np.zeros(12)]
+        self._prior_s = float(self._mean @ inverse @ self._mean)
 
 
 def new_setup(old, calibration, fit):

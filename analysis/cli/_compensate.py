@@ -14,6 +14,7 @@ from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENS
                            compensate)
 from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
 from .._setup import load_setup
+from .._tool_change import TOOL_CHANGE
 from ._common import CliError
 from ._files import atomic_write_text, check_outputs
 
@@ -90,6 +91,10 @@ def add_compensate(sub):
                         f"one per channel (--causal default {DRIFT_INTENSITY:g} x the reading's noise sd); 'fit', "
                         "offline only and its default: that scaled to the maximum of the innovations' likelihood, "
                         "printed")
+    p.add_argument("--tool-change", choices=TOOL_CHANGE,
+                   help="a change of the payload (a part grasped): detect and report it, one line each and the column "
+                        "tool_change (the changes declared by each row), the default on a 6-axis log; 'reidentify' "
+                        "(--causal) goes on with the payload fitted to the held attitudes after each; 'off'")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CONTACT.csv (never an input)")
     p.set_defaults(func=cmd_compensate)
 
@@ -179,16 +184,18 @@ def cmd_compensate(args):
                         tool_radius=args.tool_radius, window=args.window,
                         delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
                         track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
-                        frame=args.output_frame, point=args.point)
+                        frame=args.output_frame, point=args.point, tool_change=args.tool_change)
     if not np.isfinite(result.wrench).all():
         raise CliError("the compensated wrench is not finite (overflow): the calibration's S or b is far outside "
                        "any sensor's range: nothing written")
     text = io.StringIO()
     extra = () if result.offset is None else (*(f"b_{n}" for n in result.names),
                                               *(f"b_sd_{n}" for n in result.names))
-    text.write(",".join(("t", *result.names, "contact", *extra)) + "\n")
+    changes = () if result.tool_change is None else ("tool_change",)
+    text.write(",".join(("t", *result.names, "contact", *extra, *changes)) + "\n")
     for i, (t, w, c) in enumerate(zip(result.t, result.wrench, result.contact)):
         tail = "" if not extra else "," + ",".join(repr(float(v)) for v in (*result.offset[i], *result.offset_sd[i]))
+        tail += "" if not changes else f",{int(result.tool_change[i])}"
         text.write(",".join(repr(float(v)) for v in (t, *w)) + f",{int(c)}{tail}\n")
     atomic_write_text(args.out, text.getvalue())
     for warning in result.warnings:
@@ -205,6 +212,10 @@ def cmd_compensate(args):
     if args.track_offset and not args.causal and intensity in (None, "fit"):
         print("drift intensity fitted (per sqrt(s)) " + ", ".join(f"{n} {v:.3g}" for n, v in
                                                                   zip(result.names, result.drift_intensity)))
+    for change in result.tool_changes:
+        print(change.describe())
+    if result.tool_change is not None and not result.tool_changes:
+        print("no tool change detected")
     if result.offset is not None:
         print("offset at the end " + ", ".join(f"{n} {v:.4g} +- {s:.2g}" for n, v, s in
                                                zip(result.names, result.offset[-1], result.offset_sd[-1])))
