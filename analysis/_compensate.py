@@ -1011,7 +1011,7 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
     rows = _step(parts, output, tracker, t, aligned.w_hat[keep], m)
     changes, counts = [], None
     if mode != TOOL_CHANGE[0]:                          # (T1)-(T8), and each change's held attitudes fitted (T9)
-        detector = _Detector(model, log.dt, mode, st.cov)
+        detector = _Detector(model, log.dt, mode, st.cov, false_alarm)
         counts = detector.add(t, aligned.w_hat[keep], m, rows)
         changes = detector.events
         for k, change in enumerate(changes):
@@ -1150,7 +1150,7 @@ class Compensator:
         self._setup, self._settings = st, dict(direction=direction, false_alarm=false_alarm, track_offset=track_offset,
                                                drift_intensity=drift_intensity, offset_sd=offset_sd)
         mode = check_mode(tool_change, self.model)
-        self._detector = None if mode == TOOL_CHANGE[0] else _Detector(self.model, float(dt), mode, st.cov)
+        self._detector = None if mode == TOOL_CHANGE[0] else _Detector(self.model, float(dt), mode, st.cov, false_alarm)
         # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
         self.dt, self.order, self._noise = float(dt), order, noise

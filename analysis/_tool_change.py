@@ -49,7 +49,11 @@ per degree of freedom of ``H_1`` and the change's time::
 
 (``Lambda`` of (T5); where no candidate's misfit is within (T6), the least misfit's) over the candidates of the
 last :data:`SEARCH` s (and the last significant one, kept while it is younger than
-:data:`MAX_AGE` s: a part grasped at rest is found when the arm moves).
+:data:`MAX_AGE` s: a part grasped at rest is found when the arm moves). The candidates are evaluated only
+while the contact test (C4) flags a block among them (more of its samples than false alarms give but with
+probability :data:`FLAGGED`), or one is kept: a change too small for (C4) to flag is
+not looked for (with the offset tracked, the tracker takes such a change for drift anyway), and free motion
+costs the blocks' means alone.
 
 **The decision.** A change is declared at ``tau_hat`` where all three hold (``kappa' = max(kappa, 1)``, the
 noise scale taken from the misfit where it exceeds the stated one, as an F test does):
@@ -101,7 +105,7 @@ from collections import deque
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.stats import binom, chi2
 
 from fmscal.plant.io import AttitudeLog, held_table
 from fmscal.plant.numerics import FmscalError
@@ -135,6 +139,8 @@ MIN_POST = 0.2
 #: The nuisance's payload errors (T3'): at least this share of the mass, and this distance of the centre of mass, m.
 PRIOR_MASS = 0.01
 PRIOR_COM = 0.002
+#: A block counts as flagged where more of its samples are flagged (C4) than false alarms give but with this chance.
+FLAGGED = 1e-6
 #: Held attitudes after a change before it is re-identified automatically (``tool_change="reidentify"``).
 REIDENTIFY_POSES = 6
 #: The blocks kept for a re-identification, s.
@@ -235,25 +241,23 @@ def check_mode(tool_change, model):
     return tool_change
 
 
-def _attitudes(motion):
-    """Rows' attitude quaternions (N, 4): the source's own attitude (an IMU's; NaN where none), else ``x``'s."""
-    if motion.R is not None:
-        R = np.asarray(motion.R, dtype=float)
-        q = np.full((len(R), 4), np.nan)
-        good = np.isfinite(R).all(axis=(1, 2))
-        if good.any():
-            q[good] = quaternion_from_matrix(R[good])
-        return q
-    return motion.x[:, 3:7] / np.linalg.norm(motion.x[:, 3:7], axis=1, keepdims=True)
+def _quaternions(R):
+    """Rows' attitude quaternions (N, 4) from a source's own attitudes ``R`` (N, 3, 3; an IMU's, NaN where none)."""
+    q = np.full((len(R), 4), np.nan)
+    good = np.isfinite(R).all(axis=(1, 2))
+    if good.any():
+        q[good] = quaternion_from_matrix(R[good])
+    return q
 
 
 class _Detector:
     """(T1)-(T8) over a stream of compensated rows, a block at a time; the held attitudes kept for (T9).
 
     ``model`` the compensation's (its gravity and payload), ``dt`` the rows' sample time, ``mode`` one of
-    :data:`TOOL_CHANGE` (not "off"), ``cov`` a payload file's covariance of ``(m, c, I_c, b)`` (K2) or None."""
+    :data:`TOOL_CHANGE` (not "off"), ``cov`` a payload file's covariance of ``(m, c, I_c, b)`` (K2) or None,
+    ``false_alarm`` the contact test's (C4)."""
 
-    def __init__(self, model, dt, mode, cov=None):
+    def __init__(self, model, dt, mode, cov=None, false_alarm=1e-3):
         self.mode = mode
         self._prior(model, cov)
         self.n = max(1, int(round(BLOCK / dt)))
@@ -269,6 +273,8 @@ class _Detector:
         #: The newest evaluation: (time, tau_hat's time, Lambda, kappa, Lambda_c or None where (T5) failed).
         self.latest = None
         self._count = 0                                    # rows in the open block
+        self._flags, self._last_flag = 0, None             # samples flagged (C4) in it; the last block flagged
+        self._flag_bound = binom.isf(FLAGGED, self.n, false_alarm)
         self.reset()
 
     def reset(self):
@@ -283,12 +289,13 @@ class _Detector:
         :class:`~fmscal.analysis._compensate._Rows`. Returns the count of changes declared after each row."""
         m = len(t)
         counts = np.empty(m, dtype=int)
-        q = _attitudes(motion)
+        R = motion.R
         i = 0
         while i < m:
             j = min(m, i + self.n - self._count)
-            self._rows.append((np.asarray(t[i:j], dtype=float), rows.w_e[i:j], rows.noise[i:j], motion.x[i:j],
-                               motion.a[i:j], q[i:j], np.asarray(w_hat[i:j], dtype=float)))
+            self._rows.append((t[i:j], rows.w_e[i:j], rows.noise[i:j], motion.x[i:j], motion.a[i:j],
+                               None if R is None else R[i:j], w_hat[i:j]))
+            self._flags += int(np.count_nonzero(rows.contact[i:j]))
             self._count += j - i
             if self._count >= self.n:
                 self._close()
@@ -298,19 +305,25 @@ class _Detector:
 
     def _close(self):
         """The open block's means (T2), kept; then an evaluation."""
-        t, r, noise, x, a, q, w_hat = (np.concatenate(v) for v in zip(*self._rows))
+        parts = list(zip(*self._rows))
+        t, r, noise, x, a, w_hat = (np.concatenate(parts[k]) for k in (0, 1, 2, 3, 4, 6))
+        R = None if parts[5][0] is None else np.concatenate(parts[5])
         self._rows, self._count = [], 0
+        if self._flags > self._flag_bound:                                     # more than false alarms give
+            self._last_flag = self._first + len(self._blocks)           # this block's absolute index
+        self._flags = 0
         n = len(t)
         model = self.model
         qx = x[:, 3:7] / np.linalg.norm(x[:, 3:7], axis=1, keepdims=True)
         Y = regressor(qx, x[:, 10:13], a[:, 3:], a[:, :3], model.gravity)                    # (T1)
         X = np.concatenate([-Y.mean(axis=0), np.eye(6)], axis=1)
         L = np.linalg.cholesky(noise.mean(axis=0) / n)                                        # (T2)
-        A = np.linalg.solve(L, X)
-        z = np.linalg.solve(L, r.mean(axis=0))
+        A = np.linalg.solve(L, np.concatenate([X, r.mean(axis=0)[:, None]], axis=1))
+        A, z = A[:, :16], A[:, 16]
         if len(self._blocks) == self._blocks.maxlen:
             self._first += 1                               # the oldest block drops out
         self._blocks.append((float(t.mean()), A.T @ A, A.T @ z, float(z @ z), Y[:, 3:, 0].mean(axis=0)))
+        q = qx if R is None else _quaternions(R)
         good = np.isfinite(q).all(axis=1)
         if good.sum() > n // 2:
             qq = q[good] * np.sign(q[good] @ q[good][0])[:, None]
@@ -323,6 +336,8 @@ class _Detector:
     def _evaluate(self):
         blocks, first = self._blocks, self._first
         end = first + len(blocks)                          # absolute index one past the newest block
+        if self._pinned is None and (self._last_flag is None or self._last_flag < end - self.S - 1):
+            return                                         # no sample flagged (C4) in the candidates' span
         lowest = first + self.P + self.G
         taus = list(range(max(lowest, end - self.S), end - self.min_post + 1))
         if self._pinned is not None and lowest <= self._pinned < (taus[0] if taus else end):
