@@ -336,9 +336,11 @@ class _Detector:
     def _evaluate(self):
         blocks, first = self._blocks, self._first
         end = first + len(blocks)                          # absolute index one past the newest block
+        lowest = first + self.P + self.G
+        if self._pinned is not None and self._pinned < lowest:
+            self._pinned = None                            # older than the blocks kept (MAX_AGE): given up
         if self._pinned is None and (self._last_flag is None or self._last_flag < end - self.S - 1):
             return                                         # no sample flagged (C4) in the candidates' span
-        lowest = first + self.P + self.G
         taus = list(range(max(lowest, end - self.S), end - self.min_post + 1))
         if self._pinned is not None and lowest <= self._pinned < (taus[0] if taus else end):
             taus.insert(0, self._pinned)
