@@ -21,6 +21,7 @@ from ._bench import BenchSettings, run_bench
 from ._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DRIFT_INTENSITY, FALSE_ALARM, Compensation, Compensator,
                           ContactSample, compensate)
 from ._motion import ImuMotion, JointMotion, PoseMotion
+from ._tool_change import TOOL_CHANGE, ToolChange
 from ._plots import plot_S_entries, plot_calibration, plot_comparison, plot_error_histories
 
 __all__ = ["calibration_error", "block_errors", "error_history", "tail_median", "tail_seen", "convergence_time",
@@ -28,4 +29,4 @@ __all__ = ["calibration_error", "block_errors", "error_history", "tail_median", 
            "summary_markdown", "sweep", "reproduce", "ablation", "sensitivity", "tolerable_error", "BenchSettings",
            "run_bench", "plot_S_entries", "plot_calibration", "plot_comparison", "plot_error_histories",
            "compensate", "Compensation", "Compensator", "ContactSample", "PoseMotion", "JointMotion", "ImuMotion",
-           "CAUSAL_WINDOW", "CAUSAL_DELAY", "FALSE_ALARM", "DRIFT_INTENSITY"]
+           "CAUSAL_WINDOW", "CAUSAL_DELAY", "FALSE_ALARM", "DRIFT_INTENSITY", "ToolChange", "TOOL_CHANGE"]

@@ -150,6 +150,7 @@ from fmscal.observers.payload import PayloadEstimate
 
 from ._motion import configuration_variance, kinematics, source
 from ._setup import Setup, payload_jacobian, setup
+from ._tool_change import GUARD, REIDENTIFY_POSES, TOOL_CHANGE, ToolChangeError, _Detector, check_mode, new_setup
 
 __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
            "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY",
@@ -231,6 +232,10 @@ class Compensation:
     drift_intensity : ndarray, shape (n_w,), or None
         ``track_offset``: the random walk's intensity used, per channel, the reading's units per sqrt(s)
         (fitted by (D5) where ``drift_intensity="fit"``); None otherwise.
+    tool_changes : list of ToolChange
+        The payload's changes declared (:mod:`fmscal.analysis._tool_change`), oldest first.
+    tool_change : ndarray of int, shape (N,), or None
+        The changes declared by each row's output (the detector's count); None where it did not run.
     """
 
     t: np.ndarray
@@ -248,6 +253,8 @@ class Compensation:
     frame: str = "sensor"
     point: np.ndarray = None
     drift_intensity: np.ndarray = None
+    tool_changes: list = field(default_factory=list)
+    tool_change: np.ndarray = None
 
     @property
     def sd(self):
@@ -451,12 +458,17 @@ class _Parts:
         omega = x[:, list(model.v_index)][:, 3:]
         return regressor(q / np.linalg.norm(q, axis=1, keepdims=True), omega, a[:, 3:], a[:, :3], model.gravity)
 
-    def covariance(self, signed, A_inv, accel_var, Y=None):
-        """(C3) for rows of signed readings ``signed`` (N, n_w); ``accel_var`` (nv,) for every row, or (N, nv); a
-        payload file's term (K2) at the rows' regressor ``Y`` (:meth:`regressor`)."""
+    def noise(self, A_inv, accel_var):
+        """The first and third terms of (C3), the share independent from sample to sample: the reading's noise
+        and the motion's; ``accel_var`` (nv,) for every row, or (N, nv)."""
         accel_var = np.asarray(accel_var, dtype=float)
-        cov = self.reading_cov + (np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv) if accel_var.ndim == 1
-                                  else np.einsum("nij,nj,nkj->nik", A_inv, accel_var, A_inv))
+        return self.reading_cov + (np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv) if accel_var.ndim == 1
+                                   else np.einsum("nij,nj,nkj->nik", A_inv, accel_var, A_inv))
+
+    def covariance(self, signed, noise, Y=None):
+        """(C3) for rows of signed readings ``signed`` (N, n_w): their :meth:`noise` and the calibration's term; a
+        payload file's term (K2) at the rows' regressor ``Y`` (:meth:`regressor`)."""
+        cov = noise
         if self.cov4 is not None:
             u = np.concatenate([signed, np.ones((len(signed), 1))], axis=1) if self.m == self.n + 1 \
                 else signed - self.b
@@ -573,7 +585,8 @@ def _pose_attitudes(x, model):
 class _Rows:
     """What :func:`_step` gives for rows of samples: the published wrench, its covariance (with the offset's,
     (D2)), the contact flag and ``d^2``; the offset and its sd after each row (None without a tracker); the
-    payload's wrench ``W_p`` and the rows' own (C3), for tare."""
+    payload's wrench ``W_p`` and the rows' own (C3), for tare; the contact wrench ``w_e`` of (C1) in the model's
+    axes and its noise (:meth:`_Parts.noise`), for the tool change's detector (:mod:`fmscal.analysis._tool_change`)."""
 
     wrench: np.ndarray
     cov: np.ndarray
@@ -583,6 +596,8 @@ class _Rows:
     offset_sd: np.ndarray
     W_p: np.ndarray
     own: np.ndarray
+    w_e: np.ndarray
+    noise: np.ndarray
 
 
 def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
@@ -621,13 +636,14 @@ def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
         A_inv = A_inv @ motion.accel_map                 # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
     signed = parts.sign * w_hat
     Y = parts.regressor(motion)
-    own = parts.covariance(signed, A_inv, motion.accel_var, Y)                               # (C3), (K2)
+    noise = parts.noise(A_inv, motion.accel_var)
+    own = parts.covariance(signed, noise, Y)                                                 # (C3), (K2)
     w_e, cov, statistic, b, b_sd = parts.finish(signed, W_p, own, tracker, t, Y)             # (C1), (C4), (D), (L1)
     R = None
     if output.needs_attitude:
         R = motion.R if motion.R is not None else _pose_attitudes(motion.x, model)
     wrench, cov = output.apply(parts.out_sign * w_e, cov, R)                                 # (C8)
-    return _Rows(wrench, cov, statistic > parts.threshold, statistic, b, b_sd, W_p, own)
+    return _Rows(wrench, cov, statistic > parts.threshold, statistic, b, b_sd, W_p, own, w_e, noise)
 
 
 # --- the offset's drift -------------------------------------------------------------------------------------------
@@ -881,7 +897,7 @@ def _latency_warnings(calibration, motion):
 def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, tool_radius=None,
                direction="on_tool", noise=None, window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER,
                false_alarm=FALSE_ALARM, track_offset=False, drift_intensity=None, offset_sd=None, motion=None,
-               frame="sensor", point=None):
+               frame="sensor", point=None, tool_change=None):
     """The contact wrench of a log: ``w_e = W_p - S (sigma w_hat - b)`` (C1), its covariance and a contact flag.
 
     Parameters
@@ -941,6 +957,11 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
     point : array_like of 3 floats, optional
         The tool point the torque is taken about, in the sensor's axes from the sensor's point, m (C8); default
         the sensor's point.
+    tool_change : {None, "off", "detect", "reidentify"}
+        A change of the payload detected and reported (:mod:`fmscal.analysis._tool_change`,
+        :attr:`Compensation.tool_changes`); None: "detect" on a 6-axis reading in 3D, "off" otherwise.
+        "reidentify" (causal only) goes on with the new payload fitted to the held attitudes after each change;
+        offline each change is reported with that fit (``ToolChange.reidentified``), to compensate again with.
 
     Returns
     -------
@@ -970,11 +991,21 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
     if causal and not hasattr(log, "dt"):
         raise CompensationError(f"{getattr(log, 'name', 'the data')}: a pose table's rows are held poses, not a "
                                 "stream: compensate it offline (causal=False)")
+    mode = check_mode(tool_change, model)
+    if mode != TOOL_CHANGE[0] and not src.moves:
+        if tool_change is not None:
+            raise CompensationError(f"{log.name}: a pose table's rows are held poses, not a stream: no tool change "
+                                    "to detect between them (leave tool_change None or 'off')")
+        mode = TOOL_CHANGE[0]
+    if mode == TOOL_CHANGE[2] and not causal:
+        raise CompensationError("tool_change='reidentify' goes on with the new payload as the stream goes: causal "
+                                "only; offline each change is reported with its held attitudes' fit "
+                                "(ToolChange.reidentified), to compensate again with (payload=...)")
     if causal:
         stream = Compensator(st, log.dt, noise=noise, direction=direction,
                              window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,
                              false_alarm=false_alarm, track_offset=track_offset, drift_intensity=drift_intensity,
-                             offset_sd=offset_sd, motion=src, frame=frame, point=point)
+                             offset_sd=offset_sd, motion=src, frame=frame, point=point, tool_change=mode)
         given = src.of_log(log)
         out = stream.push_many(log.t, log.w_hat, **{src.keyword: given})
         if not out:
@@ -990,12 +1021,25 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
     keep, m = src.offline(aligned, model, noise, OFFLINE_WINDOW if window is None else window)
     t = src.times(aligned)[keep]
     rows = _step(parts, output, tracker, t, aligned.w_hat[keep], m)
+    changes, counts = [], None
+    if mode != TOOL_CHANGE[0]:                          # (T1)-(T8), and each change's held attitudes fitted (T9)
+        detector = _Detector(model, log.dt, mode, st.cov, false_alarm)
+        counts = detector.add(t, aligned.w_hat[keep], m, rows)
+        changes = detector.events
+        for k, change in enumerate(changes):
+            until = changes[k + 1].t if k + 1 < len(changes) else np.inf
+            try:
+                change.reidentified, table = detector.reidentify(calibration, change.t + GUARD, until=until)
+                change.poses = len(table.q)
+            except ToolChangeError:
+                pass
     return Compensation(t=t, wrench=rows.wrench, cov=rows.cov, contact=rows.contact, statistic=rows.statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
                         warnings=(st.warnings + list(parts.warnings) + _latency_warnings(calibration, src)
                                   + ([] if tracker is None else tracker.warnings)),
                         offset=rows.offset, offset_sd=rows.offset_sd, frame=frame, point=output.point,
-                        drift_intensity=None if tracker is None else tracker.intensity)
+                        drift_intensity=None if tracker is None else tracker.intensity, tool_changes=changes,
+                        tool_change=counts)
 
 
 def _streamed(stream, out, direction, warnings):
@@ -1008,7 +1052,9 @@ def _streamed(stream, out, direction, warnings):
                         offset=np.array([o.offset for o in out]) if offset else None,
                         offset_sd=np.array([o.offset_sd for o in out]) if offset else None,
                         frame=stream.frame, point=stream.point,
-                        drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
+                        drift_intensity=None if stream._tracker is None else stream._tracker.intensity,
+                        tool_changes=list(stream.tool_changes),
+                        tool_change=None if stream._detector is None else np.array([o.tool_change for o in out]))
 
 
 # --- streaming --------------------------------------------------------------------------------------------------
@@ -1026,6 +1072,8 @@ class ContactSample:
     statistic : float
     offset, offset_sd : ndarray, shape (n_w,), or None
         ``track_offset``: the offset after this sample's step (D3) and its sd; None otherwise.
+    tool_change : int
+        The payload's changes declared by this output (:attr:`Compensator.tool_changes`).
     """
 
     t: float
@@ -1035,6 +1083,7 @@ class ContactSample:
     statistic: float
     offset: np.ndarray = None
     offset_sd: np.ndarray = None
+    tool_change: int = 0
 
 
 class Compensator:
@@ -1068,6 +1117,11 @@ class Compensator:
         The output's axes (C8); "base" needs an attitude (a pose, the joints, or the IMU's orientation).
     point : array_like of 3 floats, optional
         The tool point, sensor axes, m: the torque about it (C8); default the sensor's point.
+    tool_change : {None, "off", "detect", "reidentify"}
+        A change of the payload detected (:mod:`fmscal.analysis._tool_change`, :attr:`tool_changes`); None:
+        "detect" on a 6-axis reading in 3D, "off" otherwise. "reidentify": after each change, the compensation
+        goes on with the payload fitted to the next :data:`fmscal.analysis._tool_change.REIDENTIFY_POSES` held
+        attitudes (:meth:`reidentify` does it on request).
 
     Attributes
     ----------
@@ -1081,7 +1135,8 @@ class Compensator:
 
     def __init__(self, setup_, /, dt, *, calibration=None, payload=None, tool_radius=None, direction="on_tool",
                  noise=None, window=CAUSAL_WINDOW, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM,
-                 track_offset=False, drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None):
+                 track_offset=False, drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None,
+                 tool_change=None):
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise CompensationError(f"dt must be a positive number of seconds; got {dt!r}")
         st = setup_ if isinstance(setup_, Setup) else setup(setup_, payload, calibration, tool_radius)
@@ -1111,6 +1166,10 @@ class Compensator:
         self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd,
                                  inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None)
         self._default_intensity = drift_intensity is None
+        self._setup, self._settings = st, dict(direction=direction, false_alarm=false_alarm, track_offset=track_offset,
+                                               drift_intensity=drift_intensity, offset_sd=offset_sd)
+        mode = check_mode(tool_change, self.model)
+        self._detector = None if mode == TOOL_CHANGE[0] else _Detector(self.model, float(dt), mode, st.cov, false_alarm)
         # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
         self.dt, self.order, self._noise = float(dt), order, noise
@@ -1208,11 +1267,13 @@ class Compensator:
         present = np.isfinite(channels).all(axis=1)
         out = []
         i = 0
+        # a re-identification goes on with the new payload from the next block: blocks no longer than the detector's
+        cap = self._detector.n if self._detector is not None and self._detector.mode == TOOL_CHANGE[2] else len(t)
         while i < len(t):
-            j = i
+            j, last = i, min(len(t), i + cap)
             if self._blockable():       # the contiguous rows with a motion sample each go as one block
-                while j < len(t) and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= 0.5 * self.dt
-                                                     or j > i and abs(t[j] - t[j - 1] - self.dt) <= 0.5 * self.dt):
+                while j < last and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= 0.5 * self.dt
+                                                   or j > i and abs(t[j] - t[j - 1] - self.dt) <= 0.5 * self.dt):
                     j += 1
             if j - i >= 2:
                 out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j]))
@@ -1328,7 +1389,7 @@ class Compensator:
                                     None if raw is None else raw[None], self._sample)
         rows = _step(self._parts, self._output, self._tracker, [t0], reading[None], motion, self._sample)
         self._remember(reading[None], rows)
-        return self._sample_of(t0, rows, 0)
+        return self._sample_of(t0, rows, 0, self._notice(np.array([t0]), reading[None], motion, rows))
 
     def _blockable(self):
         """Both windows full of samples, none missing: the next rows may go as one block."""
@@ -1359,6 +1420,7 @@ class Compensator:
         rows = _step(self._parts, self._output, self._tracker, t0, reading, motion,
                      self._sample if m <= _ROW_BY_ROW else None)
         self._remember(reading, rows)
+        counts = self._notice(t0, reading, motion, rows)
         self._channels.extend(channels)
         if extras is not None:
             self._extras.extend(extras)
@@ -1366,7 +1428,7 @@ class Compensator:
             self._extras.extend([None] * m)
         self._readings.extend(zip(t.tolist(), w_hat))
         self._t = float(t[-1])
-        return [self._sample_of(float(t0[r]), rows, r) for r in range(m)]
+        return [self._sample_of(float(t0[r]), rows, r, counts) for r in range(m)]
 
     def _continuous(self, rows):
         """Rows of channels with their unit quaternion (where the source has one) kept sign-continuous with the
@@ -1436,10 +1498,88 @@ class Compensator:
             self._last.append((found[r], rows.own[r].copy(), bool(rows.contact[r])))
 
     @staticmethod
-    def _sample_of(t, rows, r):
+    def _sample_of(t, rows, r, counts=None):
         return ContactSample(t, rows.wrench[r], rows.cov[r], bool(rows.contact[r]), float(rows.statistic[r]),
                              None if rows.offset is None else rows.offset[r],
-                             None if rows.offset_sd is None else rows.offset_sd[r])
+                             None if rows.offset_sd is None else rows.offset_sd[r],
+                             0 if counts is None else int(counts[r]))
+
+    # --- a tool change ---------------------------------------------------------------------------------------
+    def _notice(self, t, reading, motion, rows):
+        """The tool change's detector on the rows (T1)-(T8) and, where due, a re-identification (T9); the changes
+        declared by each row (None where detection is off)."""
+        if self._detector is None:
+            return None
+        counts = self._detector.add(t, reading, motion, rows)
+        if self._detector.due():
+            try:
+                self._reidentify(poses=REIDENTIFY_POSES)
+            except ToolChangeError:
+                pass                                   # not yet: more held attitudes to come
+        return counts
+
+    @property
+    def tool_changes(self):
+        """The payload's changes declared so far (:class:`fmscal.analysis._tool_change.ToolChange`), oldest first;
+        empty where detection is off. The list itself: its length counts them."""
+        return [] if self._detector is None else self._detector.events
+
+    def reidentify(self, since=None):
+        """Re-identify the payload from the held attitudes since the last tool change (T9) and go on with it.
+
+        The blocks' mean attitudes and raw readings since ``since`` (default the last declared change's time, else
+        the oldest kept, :data:`fmscal.analysis._tool_change.REIDENTIFY_BUFFER` s) are fitted statically at their
+        held segments: the new mass and centre of mass; the inertia bounded (K3) and learned (L1); the offset
+        kept. The compensation, and the detector, go on with it from the next sample.
+
+        Parameters
+        ----------
+        since : float, optional
+            s: the held attitudes from this time on.
+
+        Returns
+        -------
+        observers.payload.StaticFit
+            The fit; the last :class:`~fmscal.analysis._tool_change.ToolChange` records it.
+
+        Raises
+        ------
+        FmscalError
+            Detection is off, too few held attitudes, or a fit that does not determine the payload (one line).
+        """
+        if self._detector is None:
+            raise ToolChangeError("re-identification works on the tool change's detector: give tool_change='detect' "
+                                  "or 'reidentify' (a 6-axis reading in 3D)")
+        return self._reidentify(since)
+
+    def _reidentify(self, since=None, poses=None):
+        detector = self._detector
+        fit, table = detector.reidentify(self._setup.calibration, since, poses)
+        self._use(new_setup(self._setup, self._setup.calibration, fit))
+        if detector.events and since is None:
+            change = detector.events[-1]
+            change.reidentified, change.poses, change.reidentified_at = fit, len(table.q), self._t
+        return fit
+
+    def _use(self, st):
+        """Go on with a new payload (T9): the model, its dynamics, (C3)'s parts and the tracker made anew; the
+        offset, its covariance and intensity, the filter's windows and the stamps kept."""
+        old_parts, old = self._parts, self._tracker
+        self._setup = st
+        self.model = compensation_model(st.calibration, st.payload)
+        self._sample = _SampleDynamics(self.model)
+        self._output = _Output(self.model, self.frame, self.point, st.axes)
+        s = self._settings
+        self._parts = _Parts(st.calibration, self.model, self._noise, s["direction"], s["false_alarm"], st.cov)
+        self._parts.b = old_parts.b
+        self._tracker = _tracker(self._parts, self._noise, s["track_offset"], s["drift_intensity"], s["offset_sd"],
+                                 inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None)
+        if old is not None and old.tracks_offset and self._tracker is not None:
+            n = self._parts.n
+            self._tracker.b, self._tracker.q2, self._tracker.t = old.b.copy(), old.q2, old.t
+            self._tracker.P[:n, :n] = old.P[:n, :n]
+        self._last.clear()
+        self._detector.use(self.model, st.cov)
 
     def _fit(self, present):
         """The polynomial fitted to the samples the window holds: ``(P, c)``, the value and first two

@@ -163,7 +163,7 @@ def test_cli(arm, tmp_path, capsys):
     assert main(["compensate", str(tmp_path / "cal.json"), str(tmp_path / "log.csv"), "--out",
                  str(tmp_path / "c.csv"), "--causal"]) == 0
     lines = (tmp_path / "c.csv").read_text().splitlines()
-    assert lines[0] == "t,tx,ty,tz,fx,fy,fz,contact"
+    assert lines[0] == "t,tx,ty,tz,fx,fy,fz,contact,tool_change"          # a 6-axis log: tool changes detected
     rows = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
     on = (rows[:, 0] > 2.1) & (rows[:, 0] < 2.9)
     assert rows[on, 7].mean() > 0.99 and np.linalg.norm(rows[on, 4:7].mean(axis=0)) == pytest.approx(15, rel=0.1)

@@ -15,6 +15,7 @@ from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENS
                            CompensationError, compensate)
 from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
 from .._setup import load_setup
+from .._tool_change import TOOL_CHANGE
 from ._common import CliError, Words
 from ._files import atomic_write_text, check_inputs, check_outputs
 
@@ -94,6 +95,10 @@ def add_compensate(sub):
     p.add_argument("--sd", action="store_true",
                    help="add the columns sd_<channel>: each component's one-sigma uncertainty (the covariance's "
                         "diagonal: the reading's noise, the motion's, the calibration's or the payload's)")
+    p.add_argument("--tool-change", choices=TOOL_CHANGE,
+                   help="a change of the payload (a part grasped): detect and report it, one line each and the column "
+                        "tool_change (the changes declared by each row), the default on a 6-axis log; 'reidentify' "
+                        "(--causal) goes on with the payload fitted to the held attitudes after each; 'off'")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CONTACT.csv (never an input)")
     p.set_defaults(func=cmd_compensate)
 
@@ -204,7 +209,7 @@ def cmd_compensate(args):
                             tool_radius=args.tool_radius, window=args.window, delay=args.delay,
                             direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
                             track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
-                            frame=args.output_frame, point=args.point)
+                            frame=args.output_frame, point=args.point, tool_change=args.tool_change)
     except CompensationError as err:
         raise CliError(_as_flags(str(err), args)) from None
     if not np.isfinite(result.wrench).all():
@@ -214,11 +219,13 @@ def cmd_compensate(args):
     sd = result.sd if args.sd else None
     extra = (() if sd is None else tuple(f"sd_{n}" for n in result.names)) + (
         () if result.offset is None else (*(f"b_{n}" for n in result.names), *(f"b_sd_{n}" for n in result.names)))
-    text.write(",".join(("t", *result.names, "contact", *extra)) + "\n")
+    changes = () if result.tool_change is None else ("tool_change",)
+    text.write(",".join(("t", *result.names, "contact", *extra, *changes)) + "\n")
     for i, (t, w, c) in enumerate(zip(result.t, result.wrench, result.contact)):
         more = (() if sd is None else tuple(sd[i])) + (() if result.offset is None else
                                                        (*result.offset[i], *result.offset_sd[i]))
         tail = "" if not more else "," + ",".join(repr(float(v)) for v in more)
+        tail += "" if not changes else f",{int(result.tool_change[i])}"
         text.write(",".join(repr(float(v)) for v in (t, *w)) + f",{int(c)}{tail}\n")
     atomic_write_text(args.out, text.getvalue())
     for warning in result.warnings:
@@ -235,6 +242,10 @@ def cmd_compensate(args):
     if args.track_offset and not args.causal and intensity in (None, "fit"):
         print("drift intensity fitted (per sqrt(s)) " + ", ".join(f"{n} {v:.3g}" for n, v in
                                                                   zip(result.names, result.drift_intensity)))
+    for change in result.tool_changes:
+        print(change.describe())
+    if result.tool_change is not None and not result.tool_changes:
+        print("no tool change detected")
     if result.offset is not None:
         print("offset at the end " + ", ".join(f"{n} {v:.4g} +- {s:.2g}" for n, v, s in
                                                zip(result.names, result.offset[-1], result.offset_sd[-1])))
