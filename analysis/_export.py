@@ -58,7 +58,7 @@ import numpy as np
 from fmscal.plant import Calibration, Log
 from fmscal.plant.io import atomic_write_text, reading_sign
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import SpatialModel, SpatialPayload, edge, regressor, skew, spatial_motion
+from fmscal.plant.physics import SpatialPayload, edge, regressor, skew, spatial_motion
 from fmscal.observers.payload import PayloadEstimate, inertia_turn
 
 from ._calibrate import read_data
@@ -215,7 +215,7 @@ def ros2_control_parameters(payload, sensor_frame, world_frame, controller="forc
         raise ExportError(f"controller must be a ROS 2 node's name (letters, digits, _); got {controller!r}")
     if sensor_name is not None and not (isinstance(sensor_name, str) and sensor_name and sensor_name.isprintable()):
         raise ExportError(f"sensor_name must be a name; got {sensor_name!r}")
-    S = _calibration_S(calibration, estimate.reading)
+    S = _calibration_S(calibration, estimate)
     sigma = reading_sign(estimate.reading)
     gains = np.ones(6) if estimate.gains is None else np.asarray(estimate.gains, dtype=float)
     D = np.ones(6) if S is None else np.diag(S)
@@ -264,10 +264,9 @@ def dynamics_left_out(payload, log, window=WINDOW):
     estimate = payload.tracked()
     if isinstance(log, (str, Path)):
         log = read_data(log)
-    if not (isinstance(log, Log) and tuple(log.columns) == ("t", *SpatialModel.pose_names,
-                                                               *SpatialModel.wrench_names)):
-        raise ExportError(f"{getattr(log, 'name', 'the log')}: the dynamics need a spatial log (t, the pose with "
-                          "its position x y z, the reading); an attitude-only log or a pose table holds no "
+    if not isinstance(log, Log):              # a spatial_motion of a log of another model refuses in one line
+        raise ExportError(f"{getattr(log, 'name', 'the log')}: the dynamics need a log of poses with their "
+                          "positions (t, qw..qz, x y z, the reading); an attitude-only log or a pose table holds no "
                           "acceleration")
     M = np.eye(3) if estimate.mounting is None else np.asarray(estimate.mounting, dtype=float)
     com = M.T @ np.asarray(estimate.com, dtype=float)
@@ -308,14 +307,17 @@ def _payload(payload):
     return estimate
 
 
-def _calibration_S(calibration, reading):
-    """``S`` of a spatial calibration (None without one), its sign the payload's."""
+def _calibration_S(calibration, estimate):
+    """``S`` of a calibration of the payload's reading (None without one), its sign the payload's."""
     if calibration is None:
         return None
     if isinstance(calibration, (str, Path)):
         calibration = Calibration.load(calibration)
-    if not isinstance(calibration, Calibration) or calibration.size != 6:
-        raise ExportError("calibration must be a spatial plant.Calibration (6x6 S) or its file")
+    channels = len(estimate.b)
+    if not isinstance(calibration, Calibration) or calibration.size != channels:
+        raise ExportError(f"calibration must be a plant.Calibration of the payload's {channels} channels "
+                          f"({channels}x{channels} S) or its file")
+    reading = estimate.reading
     if calibration.reading != reading:
         raise ExportError(f"the calibration reads the {calibration.reading}, the payload the {reading}: one sensor "
                           "has one sign")

@@ -311,7 +311,7 @@ def test_a_first_format_file_and_a_table_as_log_are_refused():
     with pytest.raises(ExportError, match="no offset, sign or mounting \\(a file of format /1\\)"):
         ros2_control_parameters(Path(__file__).parent / "data" / "payload-v1" / "log-v1.json", "ft", "base")
     table = simulate_table(TOOL, n=8, seed=0)
-    with pytest.raises(ExportError, match="the dynamics need a spatial log"):
+    with pytest.raises(ExportError, match="the dynamics need a log of poses with their positions"):
         dynamics_left_out(_estimate("reaction", None), table)
 
 
