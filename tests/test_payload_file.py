@@ -286,3 +286,11 @@ def test_a_hand_made_estimate_saves_without_covariance_or_noise(tmp_path):
     assert document["cov"] is None and document["noise_sd"] is None and document["inertia_std"] is None
     assert loaded.cov is None and loaded.noise_sd is None and loaded.reading == "reaction"
     np.testing.assert_array_equal(loaded.inertia, TOOL.inertia)
+
+
+def test_the_gains_and_a_measured_gravity_size_round_trip(tmp_path, askew):
+    """Fields a fit may fill (the reading's per-channel gains, gravity's size measured) are carried through."""
+    gains = np.array([1.01, 0.99, 1.0, 1.04, 0.97, 1.02])
+    _, loaded = _saved(tmp_path, replace(askew[1], gains=gains, gravity_std=0.002))
+    np.testing.assert_array_equal(loaded.gains, gains)
+    assert loaded.gravity_std == 0.002 and loaded.tracked().gains is not loaded.gains
