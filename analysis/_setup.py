@@ -194,7 +194,8 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
     noise_sd = getattr(estimate, "noise_sd", None)         # a log's fit: of a sample; a table's: of a held pose
     if getattr(estimate, "noise_of", "sample") != "sample":
         noise_sd = None
-    gravity = GRAVITY if estimate.gravity is None else estimate.gravity
+    gravity = getattr(estimate, "gravity_used", None)        # a file's: the estimated, else the given
+    gravity = (GRAVITY if estimate.gravity is None else estimate.gravity) if gravity is None else gravity
     cal = Calibration(S=B @ G @ S0, payload=tool, method="payload", b=np.asarray(estimate.b, dtype=float),   # (K1)
                       reading=getattr(estimate, "reading", None) or "reaction",
                       gravity=np.asarray(gravity, dtype=float), latency=0.0 if sensor is None else sensor.latency,

@@ -360,8 +360,9 @@ def test_a_payload_file_written_with_rho_before_still_reads(inputs):
     assert _cli(["identify-payload", "table.csv", "--save", "payload.json"])[0] == 0
     saved = json.loads(Path("payload.json").read_text())
     assert {"com", "com_std"} <= set(saved) and not {"rho", "rho_std"} & set(saved)
+    # rho was a name of the first format's files only
     legacy = {("rho" + k[3:] if k.startswith("com") else k): v for k, v in saved.items()}
-    Path("legacy.json").write_text(json.dumps(legacy))
+    Path("legacy.json").write_text(json.dumps({**legacy, "format": "fmscal-payload/1"}))
     old, new = PayloadEstimate.load("legacy.json"), PayloadEstimate.load("payload.json")
     np.testing.assert_array_equal(old.com, new.com)
     np.testing.assert_array_equal(old.com_std, new.com_std)
@@ -401,7 +402,8 @@ def test_a_payload_saved_by_identify_payload_stands_for_mass_and_com(inputs):
     code, _, _ = _cli(["identify-payload", "table.csv", "--save", "payload.json"])
     assert code == 0
     saved = json.loads(Path("payload.json").read_text())
-    assert saved["format"] == "fmscal-payload/1" and saved["inertia"] is None and saved["gravity"] is None
+    assert saved["format"] == "fmscal-payload/2" and saved["inertia"] is None and saved["gravity_std_deg"] is None
+    assert saved["gravity"] == [0.0, 0.0, -9.81]                     # given, not estimated: the default
     assert abs(saved["mass"] - TOOL.mass) < 5 * saved["mass_std"] and saved["mass_std"] > 0
     code, by_file, _ = _cli(["calibrate", "held.csv", "--payload", "payload.json", "--reading", "load", "--json"])
     mass, com = repr(saved["mass"]), [repr(v) for v in saved["com"]]
@@ -436,7 +438,8 @@ def test_a_saved_payload_is_in_the_tracked_frames_axes(inputs):
     assert not np.allclose(saved["com"], fit["com"], rtol=1e-3)
     np.testing.assert_allclose(saved["gravity"], fit["gravity"], rtol=1e-12)
     estimate = PayloadEstimate.load("payload.json")
-    assert estimate.mounting is None and estimate.payload_determined
+    np.testing.assert_allclose(estimate.mounting, M, rtol=0, atol=1e-15)       # kept, with com in the tracked axes
+    assert estimate.axes == "tracked" and estimate.payload_determined
     cal = calibrate(read_data("tilted.csv"), estimate)
     np.testing.assert_allclose(cal.gravity, fit["gravity"], rtol=1e-12)
     with pytest.raises(FmscalError, match="gravity contradicts"):

@@ -28,6 +28,7 @@ from .._plots import plot_comparison
 from .._reproduce import output_names, reproduce
 from ._calibration import add_apply, add_calibrate
 from ._compensate import add_compensate
+from ._export import add_export
 from ._common import (INERTIA_METAVAR, CliError, HelpFormatter, RawDescriptionHelpFormatter, add_jobs,
                       add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, flag_payload, position_flag,
                       position_values, positive, strict)
@@ -404,7 +405,7 @@ def build_parser():
 
 
 _COMMANDS = [_add_simulate, add_calibrate, add_apply, add_compensate, add_identify_payload, _add_reproduce,
-             _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import, add_ros2]
+             _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import, add_ros2, add_export]
 
 
 def main(argv=None):
