@@ -648,9 +648,11 @@ def _read_csv(path, required, empty_rule):
                        f"{_echo(','.join(header))}; keep one of each")
     missing = [c for c in required if c not in header]
     other_case = [h for h in header if h not in required and h.lower() in {c.lower() for c in missing}]
-    if missing and len(other_case) == len(missing):
+    if other_case:
+        absent = [c for c in missing if c.lower() not in {h.lower() for h in other_case}]
         raise LogError(f"{path.name}: column(s) {_echo(', '.join(other_case))} are named in another case; column "
-                       f"names are case-sensitive: write the header as {','.join(required)}")
+                       f"names are case-sensitive: write the header as {','.join(required)}"
+                       + (f" ({', '.join(absent)} missing too)" if absent else ""))
     if missing:
         raise LogError(f"{path.name}: missing column(s) {', '.join(missing)}; expected the header "
                        f"{','.join(required)} (got {_echo(','.join(header))})")
