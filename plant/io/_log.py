@@ -29,6 +29,13 @@ In both, empty pose cells on a row (all of them) mean no pose measurement at
 that sample; every other cell is a finite number. Time is strictly
 increasing and evenly sampled.
 
+A file may be compressed (gzip, bzip2 or xz, told by its first bytes and
+read as it is); the header, read by :func:`csv_header`, picks the case by the
+columns the models declare (:data:`fmscal.plant.physics.MODELS`), in any
+case, so that names in another case are named. Time that reads as Unix time
+in s (a clock's stamps: a date from 2000 to 2100) is taken from its first
+stamp, with a note; in ms, us or ns it is refused naming the unit.
+
 Every log, from a file or from the simulator, is validated in one place:
 :meth:`Log.__init__`. Its messages count **rows**, the samples from 1 (the
 header is not a row); the file's own checks, before any row is read, count
@@ -562,6 +569,7 @@ def _wrong_field_count(data, n):
     bad = np.flatnonzero((fields != n) & (ends > starts))
     bad = bad[bad > 0]                                  # the header is checked on its own
     return (int(bad[0]) + 1, int(fields[bad[0]])) if len(bad) else (0, n)
+
 
 #: Compressed files, told by their first bytes: the compression's name and the module that reads it (None: a
 #: format fmscal does not read, an archive of several files or a codec outside Python's standard library).

@@ -143,8 +143,9 @@ def check_mass(mass, what="the payload's mass", max_mass=None):
     UnitsError
     """
     limit = _max_mass(max_mass)
-    if isinstance(mass, bool) or not isinstance(mass, (int, float, np.integer, np.floating)) \
-            or not np.isfinite(mass) or mass <= 0:
+    number = not isinstance(mass, (bool, np.bool_)) and np.ndim(mass) == 0 \
+        and np.issubdtype(np.asarray(mass).dtype, np.number)
+    if not (number and np.isfinite(mass) and mass > 0):
         raise UnitsError(f"{what} must be a positive number of kg; got {mass!r}")
     if mass > limit:
         raise UnitsError(f"{what} is {mass:.4g} kg, beyond {_carried(limit)}: in g? give it in kg" + _heavier(limit))
