@@ -175,6 +175,12 @@ def test_a_held_poses_payload_is_checked_in_the_library(mass, names):
         calibrate(read_data(EXAMPLES / "table.csv"), (mass, (0.01, -0.005, 0.06)))
 
 
+def test_a_held_poses_mass_of_0_on_the_command_line(capsys):
+    assert main(["calibrate", str(EXAMPLES / "table.csv"), "--mass", "0", "--com", *COM]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--mass must be positive" in err[0]
+
+
 @pytest.mark.parametrize("data", ["arm.csv", "table.csv"])
 @pytest.mark.parametrize("scale, unit", [(1e3, "mm"), (1e2, "cm")])
 def test_a_centre_of_mass_in_mm_is_named(data, scale, unit, capsys):
