@@ -395,7 +395,7 @@ def ur5():
 def _source_calibration(tmp_path):
     path = tmp_path / "cal.json"
     Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
-                noise=NOISE).save(path)
+                noise=NOISE).save(path, overwrite=True)             # a test may ask for it twice: the same file
     return path
 
 
