@@ -24,10 +24,11 @@ from fmscal.observers.payload import PayloadEstimate, StaticFit, other_conventio
 from fmscal.observers.payload import calibrate_table as fit_table
 from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
                           Truth, estimate_noise, read_log, read_truth)
-from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, check_spatial_log_units,
+from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, check_poses_move,
+                             check_spatial_log_units,
                              check_table_units, diagnose_units, held_table, is_attitude_log, is_pose_table, not_a_file,
                              read_attitude_log, read_joint_data, read_pose_table, reading_sign)
-from fmscal.plant.numerics import as_bool
+from fmscal.plant.numerics import as_bool, as_number
 from fmscal.plant.physics import GRAVITY, MODELS, as_model
 
 from ._metrics import calibration_error
@@ -449,6 +450,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         raise FmscalError(f"{log.name}: column(s) {', '.join(constant)} of the reading never change (every row "
                           f"{log.w_hat[0, model.wrench_names.index(constant[0])]:g}): a channel not connected or "
                           "a column written empty; check the recording")
+    check_poses_move(log, model.wrench_names)         # a stalled tracker, before any fit
     if reading is not None and not model.signed_reading:
         raise OptionError("reading", "{} is taken on a spatial log or a pose table; a planar log's sign is the "
                           "toolkit's")
@@ -841,10 +843,10 @@ def _table_payload(payload):
     try:
         mass, com = payload
         com = np.asarray(com, dtype=float)
-        mass = float(mass)
     except (TypeError, ValueError):
         raise FmscalError(f"a pose table takes a plant.SpatialPayload or (mass, com); got {type(payload).__name__}") \
             from None
+    mass = as_number(mass, "the payload's mass")     # its value is checked with the units (plant.io.check_mass)
     if com.shape != (3,):
         raise FmscalError(f"a pose table takes com X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
                           f"got {com.size}")

@@ -402,7 +402,7 @@ def ur5():
 def _source_calibration(tmp_path):
     path = tmp_path / "cal.json"
     Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
-                noise=NOISE).save(path)
+                noise=NOISE).save(path, overwrite=True)             # a test may ask for it twice: the same file
     return path
 
 
@@ -678,7 +678,7 @@ def test_reload(request, arm, tmp_path):
             epoch = peer.replay(log.head(700))
             assert peer.wait_for(lambda: len(peer.contacts) >= 641, 10)
             before = len(peer.contacts)
-            cal.save(path)
+            cal.save(path, overwrite=True)
             ok, message = peer.call("reload", proc=proc)
             peer.replay(log.head(1500), start=700, epoch=epoch)
             path.write_text("{")

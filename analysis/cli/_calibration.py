@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant import Calibration, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
-from fmscal.plant.io import AttitudeLog, PoseTable, reading_sign
+from fmscal.plant.io import AttitudeLog, NotSavedError, PoseTable, reading_sign
 from fmscal.plant.physics import MODELS
 
 from fmscal.observers import method_names
@@ -125,24 +125,27 @@ def cmd_calibrate(args):
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
     if args.plot:                 # before saving: a failing plot leaves no calibration behind
         _plot(args, data, cal, truth)
-    refusal = None if cal.converged else cal.why_unconverged
-    saved = bool(args.save) and (refusal is None or args.force)
-    if saved:
-        replace(cal, log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
-                forced=refusal is not None).save(args.save)
+    saved, refused = False, None
+    if args.save:                 # the library refuses an unconverged calibration and an existing file: our flags
+        try:
+            replace(cal, log_name=Path(args.log).name, log_sha256=file_sha256(args.log)).save(
+                args.save, force=args.force, overwrite=args.overwrite)
+            saved = True
+        except NotSavedError as err:
+            refused = CliError(err.template.format(_FLAGS[err.option]))
     if args.json:
         print(cal.to_json(saved=saved))
     else:
         _print_calibration(args, data, cal, saved)
-    if args.save and refusal is not None and not args.force:
-        raise CliError(f"did not save {args.save}: {refusal}; add --force to save it anyway (marked as forced)")
+    if refused is not None:
+        raise refused
 
 
 #: The command line's flag for each keyword of :func:`fmscal.analysis.calibrate` it refuses.
 _FLAGS = {"observer": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
           "wrench_noise": "--wrench-noise", "latency": "--latency", "max_latency": "--max-latency", "truth": "--truth",
           "gravity": "--gravity", "reading": "--reading", "urdf and frame": "--urdf and --frame",
-          "max_mass": "--max-mass"}
+          "max_mass": "--max-mass", "force=True": "--force", "overwrite=True": "--overwrite"}
 
 
 def _payload(args, data, table):
@@ -272,9 +275,10 @@ def cmd_apply(args):
     check_outputs([(args.out, "--out")], inputs, overwrite=args.overwrite)
     calibration = Calibration.load(args.calibration, payload)
     if calibration.forced:
-        print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
+        print(f"fmscal apply: warning: {args.calibration} was saved with --force (force=True): its run had not "
+              "converged",
               file=sys.stderr)
-    elif calibration.converged is False:          # saved from Python (Calibration.save writes what it is given)
+    elif calibration.converged is False:          # a file written by hand, or by fmscal before save refused it
         print(f"fmscal apply: warning: {args.calibration} records a calibration that did not converge",
               file=sys.stderr)
     t, w_hat = read_readings(args.readings)
