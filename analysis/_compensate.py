@@ -873,6 +873,8 @@ def _noise(st, noise, estimate=None, moves=True):
         return noise
     calibration = st.calibration
     own = calibration.noise
+    if not moves and st.held_noise is not None:         # a table's payload file, checked on held poses
+        return st.held_noise
     if own is not None and len(own.wrench_sd) == calibration.size:
         if st.pose_noise_known or estimate is None or not moves:
             return own
@@ -1035,7 +1037,7 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
                 pass
     return Compensation(t=t, wrench=rows.wrench, cov=rows.cov, contact=rows.contact, statistic=rows.statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
-                        warnings=(st.warnings + list(parts.warnings) + _latency_warnings(calibration, src)
+                        warnings=(st.warnings_for(src.moves) + list(parts.warnings) + _latency_warnings(calibration, src)
                                   + ([] if tracker is None else tracker.warnings)),
                         offset=rows.offset, offset_sd=rows.offset_sd, frame=frame, point=output.point,
                         drift_intensity=None if tracker is None else tracker.intensity, tool_changes=changes,

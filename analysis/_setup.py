@@ -52,6 +52,8 @@ from fmscal.observers.payload import PAYLOAD_FORMAT, PayloadEstimate, StaticFit
 
 __all__ = ["Setup", "setup", "load_setup", "TOOL_RADIUS_FACTOR", "MIN_TOOL_RADIUS", "payload_jacobian"]
 
+#: How the warning on an inertia the poses did not determine (K3) begins.
+INERTIA_NOTE = "the payload's inertia was not determined"
 #: (K3): the tool's radius about its centre of mass, by default this many times the centre of mass's distance from
 #: the sensor ...
 TOOL_RADIUS_FACTOR = 2.0
@@ -87,6 +89,9 @@ class Setup:
     inertia_bounded : bool
         The payload's inertia is the bound (K3): compensation learns it from the motion (L1 of
         :mod:`fmscal.analysis._compensate`).
+    held_noise : plant.NoiseSpec or None
+        The noise of one held pose's reading (a table's payload file): the noise a pose table's rows are checked
+        against (:class:`fmscal.analysis.HeldPoses` compensation); None where the file's noise is a sample's.
     warnings : list of str
     source : str
         What it came from, for messages.
@@ -98,8 +103,14 @@ class Setup:
     axes: np.ndarray = None
     pose_noise_known: bool = True
     inertia_bounded: bool = False
+    held_noise: NoiseSpec = None
     warnings: list = field(default_factory=list)
     source: str = "the calibration"
+
+    def warnings_for(self, moves=True):
+        """The warnings for a source that moves, or (``moves`` False: held poses) without the inertia's bound,
+        which does not enter a static wrench."""
+        return [w for w in self.warnings if moves or not w.startswith(INERTIA_NOTE)]
 
 
 def payload_jacobian(mass, com):
@@ -192,7 +203,9 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
     cov[10:, 10:] = np.zeros((6, 6)) if sd is None else np.diag(np.square(np.asarray(sd, dtype=float)))
     cov = _with_fit(cov, tracked, slice(0, 16))
     noise_sd = getattr(estimate, "noise_sd", None)         # a log's fit: of a sample; a table's: of a held pose
+    held = None
     if getattr(estimate, "noise_of", "sample") != "sample":
+        held = None if noise_sd is None else NoiseSpec(tuple(float(v) for v in noise_sd))
         noise_sd = None
     gravity = getattr(estimate, "gravity_used", None)        # a file's: the estimated, else the given
     gravity = (GRAVITY if estimate.gravity is None else estimate.gravity) if gravity is None else gravity
@@ -202,7 +215,8 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
                       noise=None if noise_sd is None else NoiseSpec(tuple(float(v) for v in noise_sd)),
                       converged=bool(estimate.converged))
     return Setup(cal, cov=cov, axes=None if np.allclose(M, np.eye(3)) else M.T, pose_noise_known=False,
-                 inertia_bounded=tracked.inertia is None, warnings=warnings, source="the payload file")
+                 inertia_bounded=tracked.inertia is None, held_noise=held, warnings=warnings,
+                 source="the payload file")
 
 
 def _with_fit(cov, tracked, rows):
@@ -232,7 +246,7 @@ def _tool(t, tool_radius):
     warnings = []
     if t.inertia is None:
         inertia, cov[4:, 4:], r = _inertia_bound(t.mass, com, tool_radius)
-        warnings.append(f"the payload's inertia was not determined (held poses): it starts at {inertia[0]:.3g} "
+        warnings.append(f"{INERTIA_NOTE} (held poses): it starts at {inertia[0]:.3g} "
                         f"kg m^2 on each axis with an sd as large, the bound of a tool of radius {r:.3g} m about its "
                         "centre of mass (tool_radius), and is learned from the motion; its uncertainty is in the "
                         "covariance")

@@ -21,11 +21,16 @@ What it writes (examples/README.md says what each is for):
   sensor's ``WrenchStamped`` on ``/ft_sensor/wrench`` at 25 Hz for 12 s (as ``arm.csv``'s); the sensor reports the load
   (the negative of fmscal's reading), the base is tilted 4 degrees and the sensor turned 3 degrees on
   the flange;
+- ``tool_poses.csv``, ``tool_check.csv`` and ``tool_run.csv``: the everyday job's rig, a sensor calibrated by its
+  maker (``S = I``) on ``arm6.urdf`` with a new tool (:data:`GRIPPER`): 8 held poses to identify it, 4 other held
+  poses to check it, and a joint-state run of 6 s at 100 Hz pushed once (as ``joint_log.csv``'s), the same
+  sensor's offset throughout;
 - ``run_bag/``: a ROS 2 bag (mcap) of ``arm.csv``'s first 4 s: ``PoseStamped`` on ``/tool``, ``WrenchStamped`` on
   ``/ft``.
 """
 
 import argparse
+import dataclasses
 import shutil
 import sys
 from pathlib import Path
@@ -35,7 +40,7 @@ from scipy.spatial.transform import Rotation
 
 from fmscal.plant import SPATIAL_SCENARIOS, Log
 from fmscal.plant.io import IMU_COLUMNS, RobotKinematics, simulate_table, write_bag, write_pose_table, write_tf_bag
-from fmscal.plant.physics import rotation_matrices, sensor_wrench
+from fmscal.plant.physics import SpatialPayload, rotation_matrices, sensor_wrench
 from fmscal.plant.scenarios import TOOL
 
 HERE = Path(__file__).resolve().parent
@@ -73,7 +78,7 @@ PUSH_FORCE, PUSH_POINT, PUSH_TIMES, PUSH_RAMP = (4.0, -3.0, -6.0), (0.0, 0.0, 0.
 JOINT_SD, GYRO_SD, ACCEL_SD = 2e-6, 1e-3, 0.01
 
 
-def arm_run(truth, urdf=HERE / "arm6.urdf"):
+def arm_run(truth, urdf=HERE / "arm6.urdf", tool=TOOL, seed=11):
     """The arm's run: every joint moving, the tool of ``spatial-arm`` on arm.csv's sensor (its ``S``, offset and
     noise, ``truth``), pushed once.
 
@@ -93,13 +98,13 @@ def arm_run(truth, urdf=HERE / "arm6.urdf"):
     pose, _, w, a, alpha = RobotKinematics(urdf, "ft_sensor").motion(q, dq, ddq)
     R = rotation_matrices(pose[:, :4])
     p_ddot = np.einsum("nij,nj->ni", R, a)                          # the classical acceleration, in the base's axes
-    W = np.array([sensor_wrench(pose[k, :4], w[k], alpha[k], p_ddot[k], TOOL, ARM.gravity) for k in range(len(t))])
+    W = np.array([sensor_wrench(pose[k, :4], w[k], alpha[k], p_ddot[k], tool, ARM.gravity) for k in range(len(t))])
     up = np.clip((t - PUSH_TIMES[0]) / PUSH_RAMP, 0, 1)
     down = np.clip((PUSH_TIMES[1] + PUSH_RAMP - t) / PUSH_RAMP, 0, 1)
     push = np.outer(np.minimum(up, down) ** 2 * (3 - 2 * np.minimum(up, down)), PUSH_FORCE)     # a smoothstep
     f_e = np.einsum("nji,nj->ni", R, push)                           # in the sensor's axes
     w_e = np.c_[np.cross(PUSH_POINT, f_e), f_e]
-    rng = np.random.default_rng(11)
+    rng = np.random.default_rng(seed)
     w_hat = (truth.schedule.raw_reading(t, W - w_e) + truth.offset
              + rng.standard_normal(W.shape) * np.array(truth.noise.wrench_sd))
     return dict(t=t, q=q, dq=dq, ddq=ddq, w_hat=w_hat, push=push)
@@ -150,6 +155,39 @@ def joint_table(out, urdf=HERE / "arm6.urdf"):
     _write_csv(out / "joints.csv", names, np.hstack([joints, table.w_hat]))
 
 
+#: The everyday job's tool: a gripper of 0.8 kg (mass, inertia about its centre of mass in kg m^2, centre of mass
+#: in the sensor frame in m).
+GRIPPER = SpatialPayload(0.8, (2.2e-3, 2.6e-3, 1.1e-3, 1e-4, 0.0, -5e-5), (0.004, 0.002, 0.045))
+#: Its held poses' noise (each the mean of 0.5 s at 1 kHz of spatial-arm's sensor), N m and N; the run's readings
+#: are 100 Hz, each the mean of 10 samples at 1 kHz.
+HELD_AVERAGED, RUN_AVERAGED = 500, 10
+
+
+def everyday(out, urdf=HERE / "arm6.urdf"):
+    """``tool_poses.csv``, ``tool_check.csv``, ``tool_run.csv``: the sensor as its maker calibrated it (``S = I``,
+    an offset drawn as spatial-arm's), :data:`GRIPPER` held at 8 and then at 4 other joint angles, and moved in the
+    run of :func:`arm_run`, pushed once."""
+    rng = np.random.default_rng(21)
+    offset = np.r_[rng.normal(0, ARM.offset_sd[0], 3), rng.normal(0, ARM.offset_sd[1], 3)]
+    held_sd = np.r_[(ARM.torque_sd,) * 3, (ARM.force_sd,) * 3] / np.sqrt(HELD_AVERAGED)
+    kinematics = RobotKinematics(urdf, "ft_sensor")
+    names = [f"q{i + 1}" for i in range(6)] + ["tx", "ty", "tz", "fx", "fy", "fz"]
+    for name, n, seed in (("tool_poses.csv", 8, 22), ("tool_check.csv", 4, 23)):
+        joints = rng.uniform(-np.pi, np.pi, (n, 6))
+        joints[:, 1] = rng.uniform(-2.0, -0.5, n)              # the arm up, the tool turned every way
+        q = kinematics.poses(joints)[:, :4]
+        table = simulate_table(GRIPPER, n=n, seed=seed, gravity=ARM.gravity, offset=offset, q=q, wrench_sd=held_sd)
+        _write_csv(out / name, names, np.hstack([joints, table.w_hat]))
+    scenario = ARM.with_(crosstalk=0.0).with_noise_scaled(1 / np.sqrt(RUN_AVERAGED))
+    _, truth, _ = scenario.generate(seed=0)
+    truth = dataclasses.replace(truth, offset=offset)
+    run = arm_run(truth, urdf, tool=GRIPPER, seed=24)
+    rng = np.random.default_rng(25)
+    names = ["t", *(f"q{i + 1}" for i in range(6)), "tx", "ty", "tz", "fx", "fy", "fz"]
+    joints = run["q"] + rng.normal(0, JOINT_SD, run["q"].shape)
+    _write_csv(out / "tool_run.csv", names, np.column_stack([run["t"], joints, run["w_hat"]]))
+
+
 def wrist_bag(out, duration=12.0, dt=DT):
     """``arm_bag/``: the walkthrough's rig (notebooks/07_wrist_walkthrough.ipynb) at 25 Hz."""
     tilt = Rotation.from_rotvec(np.radians(4.0) * np.array([0.8, -0.6, 0.0]))      # the base, 4 degrees
@@ -191,6 +229,7 @@ def make(out):
     run = arm_run(truth)
     joint_log(out, run)
     imu_log(out, run)
+    everyday(out)
     wrist_bag(out)
     pose_bag(out, log)
 

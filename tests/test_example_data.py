@@ -18,7 +18,8 @@ from fmscal.analysis.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 #: What the script writes: the text files and the bags.
-TEXT = ("arm.csv", "arm.truth.json", "table.csv", "table.truth.json", "joints.csv", "joint_log.csv", "imu_log.csv")
+TEXT = ("arm.csv", "arm.truth.json", "table.csv", "table.truth.json", "joints.csv", "joint_log.csv", "imu_log.csv",
+        "tool_poses.csv", "tool_check.csv", "tool_run.csv")
 BAGS = ("arm_bag", "run_bag")
 
 

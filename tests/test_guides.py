@@ -162,10 +162,11 @@ WRITES = {"docs/guide/calibrating.md": ("rig.csv", "cal.json", "wrench.csv", "ar
           "docs/guide/ros-bags.md": ("real_rig.csv", "imported.csv", "imported.import.json"),
           "docs/guide/log-format.md": ("logs/paper.csv", "logs/tv.csv", "logs/50hz.csv", "logs/rig.csv"),
           "docs/guide/spatial.md": ("arm_cal.json", "arm_wrench.csv", "run.csv", "sim.csv", "held.csv"),
-          "docs/guide/wrist-sensor.md": ("wrist.csv", "payload.json", "wrist_cal.json", "wrist_wrench.csv"),
+          "docs/guide/wrist-sensor.md": ("gripper.json", "gripper_check.csv", "gripper_run.csv", "gripper.yaml",
+                                         "wrist.csv", "payload.json", "wrist_cal.json", "wrist_wrench.csv"),
           "docs/guide/compensation.md": ("arm_cal.json", "contact.csv", "causal.csv", "tool.json", "new_tool.csv",
                                          "joints_contact.csv", "imu_contact.csv", "base_contact.csv",
-                                         "tracked_fit.csv")}
+                                         "tracked_fit.csv", "gripper_check.csv", "gripper_run.csv", "changes.csv")}
 
 
 def test_what_the_guides_write_is_named_in_them():

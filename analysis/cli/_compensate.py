@@ -14,6 +14,7 @@ from fmscal.observers.payload import PayloadEstimate
 from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, FRAMES, OFFLINE_WINDOW,
                            CompensationError, compensate)
 from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
+from .._calibrate import read_data
 from .._setup import load_setup
 from .._tool_change import TOOL_CHANGE
 from ._common import CliError, Words
@@ -124,6 +125,8 @@ def _motion_log(args):
     if args.urdf is not None:
         if imu:
             raise CliError("--urdf takes a log of joint angles; this one has an IMU's columns: give one source")
+        if header and "t" not in header:             # held poses by their joint angles: a pose table
+            return read_data(args.log, urdf=args.urdf, frame=args.frame), None
         motion = JointMotion(args.urdf, args.frame, latency=latency)
         return read_joint_log(args.log, motion.kinematics), motion
     if imu:
