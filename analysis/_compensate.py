@@ -1037,7 +1037,8 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
                 pass
     return Compensation(t=t, wrench=rows.wrench, cov=rows.cov, contact=rows.contact, statistic=rows.statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
-                        warnings=(st.warnings_for(src.moves) + list(parts.warnings) + _latency_warnings(calibration, src)
+                        warnings=(st.warnings_for(src.moves) + list(parts.warnings)
+                                  + _latency_warnings(calibration, src)
                                   + ([] if tracker is None else tracker.warnings)),
                         offset=rows.offset, offset_sd=rows.offset_sd, frame=frame, point=output.point,
                         drift_intensity=None if tracker is None else tracker.intensity, tool_changes=changes,
