@@ -79,16 +79,46 @@ def _runs(same):
     return starts + 1, ends - starts                    # pair k compares samples k and k + 1
 
 
-def _bridge(w, a, length, h):
-    """The cubic of step 2 over the held samples ``a .. a + L - 1`` and its leverages ``l_k``."""
-    m = max(h, length)
-    around = np.r_[np.arange(max(a - m, 0), a), np.arange(a + length, min(a + length + m, len(w)))]
+def _weights(offsets, length):
+    """The cubic of step 2 as weights: ``(W, l)``, ``W`` (L, len(offsets)) taking the samples at ``offsets``
+    from the run's first held sample to the bridge over its ``L`` held samples, ``l`` their leverages."""
     scale = max(length, 1.0)
-    A = np.vander((around - a) / scale, _DEGREE + 1, increasing=True)
+    A = np.vander(offsets / scale, _DEGREE + 1, increasing=True)
     X = np.vander(np.arange(length) / scale, _DEGREE + 1, increasing=True)
     inverse = np.linalg.pinv(A.T @ A)
-    coef = inverse @ A.T @ w[around]
-    return X @ coef, np.einsum("ki,ij,kj->k", X, inverse, X)
+    return X @ inverse @ A.T, np.einsum("ki,ij,kj->k", X, inverse, X)
+
+
+def _around(a, length, h, n):
+    """The samples a bridge of the held samples ``a .. a + L - 1`` is fitted to: ``max(h, L)`` each side."""
+    m = max(h, length)
+    return np.r_[np.arange(max(a - m, 0), a), np.arange(a + length, min(a + length + m, n))]
+
+
+def _bridge(w, a, length, h):
+    """The cubic of step 2 over the held samples ``a .. a + L - 1`` and its leverages ``l_k``."""
+    around = _around(a, length, h, len(w))
+    W, leverage = _weights(around - a, length)
+    return W @ w[around], leverage
+
+
+def _departures(w, starts, lengths, noise, q, h):
+    """The departure of eq. (F2) of every run, the runs of one length in the log's interior at once."""
+    n = len(w)
+    out = np.empty(len(starts))
+    for length in np.unique(lengths):
+        m = max(h, length)
+        these = np.flatnonzero(lengths == length)
+        inner = these[(starts[these] >= m) & (starts[these] + length + m <= n)]
+        if len(inner):
+            offsets = np.r_[np.arange(-m, 0), np.arange(length, length + m)]
+            W, leverage = _weights(offsets, length)
+            bridges = np.einsum("kj,rjc->rkc", W, w[starts[inner, None] + offsets])
+            out[inner] = departure(w[starts[inner] - 1][:, None, :], bridges, leverage, noise, q)
+        for r in np.setdiff1d(these, inner):            # at an end: fewer samples on one side
+            bridge, leverage = _bridge(w, starts[r], length, h)
+            out[r] = departure(w[starts[r] - 1], bridge, leverage, noise, q)
+    return out
 
 
 def _bridge_error(w, length, noise, blocked, h):
@@ -122,11 +152,12 @@ def run_chance(length, noise, q):
 
 
 def departure(v, bridge, leverage, noise, q):
-    """The largest ``(|b_k'j - v_j| - q_j / 2) / (u_j sqrt(1 + l_k'))`` of eq. (F2)."""
+    """The largest ``(|b_k'j - v_j| - q_j / 2) / (u_j sqrt(1 + l_k'))`` of eq. (F2): ``v`` (..., 1, c) or
+    (c,), ``bridge`` (..., L, c); one value per run."""
     u = np.sqrt(noise ** 2 + q ** 2 / 12.0)
     s = u * np.sqrt(1.0 + leverage)[:, None]
     out = (np.abs(bridge - v) - q / 2) / np.where(s > 0, s, np.inf)
-    return float(out.max())
+    return out.max(axis=(-2, -1))
 
 
 def find_frozen(t, w, noise, alpha, h):
@@ -138,8 +169,9 @@ def find_frozen(t, w, noise, alpha, h):
         The samples' times, s.
     w : ndarray, shape (N, c)
         The reading.
-    noise : ndarray, shape (c,)
-        Its noise per channel (:func:`fmscal.observers.core.reading_noise`).
+    noise : callable
+        ``noise(w)``, its noise per channel, shape (c,) (:func:`fmscal.observers.core.reading_noise`):
+        called only on a reading with a repeat.
     alpha : float
         The false-alarm probability of eq. (F2) (the glitches' ``FALSE_ALARM``).
     h : int
@@ -155,21 +187,17 @@ def find_frozen(t, w, noise, alpha, h):
         ``w`` with the held samples bridged (the same array when no run is frozen).
     """
     n = len(w)
-    noise = np.asarray(noise, dtype=float)
     starts, lengths = _runs(np.all(w[1:] == w[:-1], axis=1))
     if not len(starts):
         return [], w
+    noise = np.asarray(noise(w), dtype=float)
     q = resolution(w)
     k = float(ndtri(1.0 - alpha / (2.0 * n * w.shape[1])))          # eq. (G2)'s threshold
-    frozen = []
-    for a, L in zip(starts, lengths):
-        chance = run_chance(L, noise, q)
-        if np.log(n) + chance < np.log(alpha):
-            frozen.append((int(a), int(L), chance))
-            continue
-        bridge, leverage = _bridge(w, a, L, h)
-        if departure(w[a - 1], bridge, leverage, noise, q) > k:
-            frozen.append((int(a), int(L), chance))
+    chance = lengths * run_chance(1, noise, q)
+    rare = np.log(n) + chance < np.log(alpha)
+    moved = np.zeros(len(starts), dtype=bool)
+    moved[~rare] = _departures(w, starts[~rare], lengths[~rare], noise, q, h) > k
+    frozen = [(int(starts[i]), int(lengths[i]), float(chance[i])) for i in np.flatnonzero(rare | moved)]
     if not frozen:
         return [], w
     blocked = np.zeros(n, dtype=bool)

@@ -254,7 +254,7 @@ def find_glitches(t, w_hat, names=None, alpha=FALSE_ALARM):
     k = glitch_threshold(n, c, alpha)
     rejected = {}
     # the frozen runs first (_frozen, eqs. (F1)-(F3)): bridged, the spikes are sought on the bridged reading
-    frozen, w = find_frozen(t, w, reading_noise(w), alpha, HALF_WINDOW)
+    frozen, w = find_frozen(t, w, reading_noise, alpha, HALF_WINDOW)
     empty.frozen = frozen
     bridged = w
     noise = None
