@@ -114,3 +114,28 @@ def test_a_coarse_reading_still_shows_a_long_freeze():
     glitches, _ = find_glitches(bad.t, bad.w_hat)
     run, = glitches.frozen                          # a neighbour may repeat it by chance: the run may be longer
     assert run["start"] <= 4000 and run["start"] + run["length"] >= 4100 and run["length"] <= 104
+
+
+def test_the_command_line_prints_the_frozen_runs(tmp_path, capsys):
+    """A planar log through ``fmscal calibrate --json``: a bridged run in the note and the report, a run of 2 s
+    in a warning with converged False."""
+    from fmscal.analysis.cli import main
+    from fmscal.plant import get_scenario
+    log, _, _ = get_scenario("paper").with_(duration=10.0).generate(0)
+    payload = get_scenario("paper").payload
+    for name, runs in (("short", [(3000, 40)]), ("long", [(4000, 2000)])):
+        frozen(log, runs).write(tmp_path / f"{name}.csv")
+        args = ["calibrate", str(tmp_path / f"{name}.csv"), "--mass", repr(payload.mass), "--inertia",
+                repr(payload.inertia), "--rho", *map(repr, payload.rho), "--observer", "least-squares",
+                "--latency", "0", "--json"]
+        main(args)
+        out, err = capsys.readouterr()
+        report = json.loads(out)
+        run, = report["glitches"]["frozen"]["runs"]
+        assert (run["start"], run["length"]) == runs[0]
+        assert "1 frozen stretch(es) of the reading" in err
+        if name == "short":
+            assert run["bridged"] and report["converged"]
+        else:
+            assert not run["bridged"] and not report["converged"]
+            assert any("too long to bridge" in w and "2000 at t = " in w for w in report["warnings"])
