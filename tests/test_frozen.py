@@ -114,6 +114,7 @@ def test_a_coarse_reading_still_shows_a_long_freeze():
     glitches, _ = find_glitches(bad.t, bad.w_hat)
     run, = glitches.frozen                          # a neighbour may repeat it by chance: the run may be longer
     assert run["start"] <= 4000 and run["start"] + run["length"] >= 4100 and run["length"] <= 104
+    assert run["bridged"]                           # the bridge judged against the reading's scatter, eq. (F3)
 
 
 def test_the_command_line_prints_the_frozen_runs(tmp_path, capsys):

@@ -16,15 +16,16 @@ together.
    squares to the ``m = max(h, L)`` samples on each side (``h`` the
    glitches' ``HALF_WINDOW``), as a spike is bridged by eq. (G1), gives
    ``b_kj`` over the run, with the variance ``u_j^2 l_k`` of a fit (``l_k``
-   the leverage of sample ``k``).
+   the leverage of sample ``k``; ``u_j`` the reading's scatter, eq. (F2)).
 3. **The chance of a repeat.** A channel of resolution ``q_j`` (the
    smallest step between consecutive samples) finer than its noise
    ``sigma_j`` (eq. (G1)'s scale) repeats its last value with at most the
    chance that the difference of two noise draws, ``N(0, 2 sigma_j^2)``,
-   falls within one step of zero (the wrench's own change only lowers it);
-   a coarser channel may repeat for long, and tells nothing. The channels'
-   noise is independent from channel to channel and sample to sample, so a
-   run of ``L`` held samples is that common by chance::
+   falls in a cell of width ``q_j`` about zero (the wrench's own change
+   only lowers it); a coarser channel may repeat for long, and tells
+   nothing. The noise taken as independent from channel to channel and
+   sample to sample, a run of ``L`` held samples is that common by
+   chance::
 
        p_j = min(1, q_j / (2 sqrt(pi) sigma_j)),
        log Pr(run) = L sum_j log p_j                                             (F1)
@@ -49,10 +50,10 @@ together.
    of ``L`` samples spread over the log misses their readings by::
 
        B_L = mean over the stretches, samples and channels of
-             ((bridge_kj - w_hat_kj) / sigma_j)^2                              (F3)
+             ((bridge_kj - w_hat_kj) / u_j)^2                                  (F3)
 
-   A bridge no worse than a reading misses by the noise alone, ``B_L <=
-   2``; a run with ``B_L > 2``, or with fewer than ``h`` samples on a side
+   A bridge no worse than a reading misses by the reading's scatter alone,
+   ``B_L <= 2``; a run with ``B_L > 2``, or with fewer than ``h`` samples on a side
    (at an end of the log: an extrapolation), is too long to bridge. It is
    bridged all the same where it has two sides (the fits need evenly
    spaced samples), and the calibration is not converged, with a warning
@@ -121,7 +122,7 @@ def _departures(w, starts, lengths, noise, q, h):
     return out
 
 
-def _bridge_error(w, length, noise, blocked, h):
+def _bridge_error(w, length, u, blocked, h):
     """``B_L`` of eq. (F3): the bridge of ``length`` samples laid over :data:`FROZEN_TRIALS` clean stretches."""
     m = max(h, length)
     lo, hi = m, len(w) - length - m
@@ -131,7 +132,7 @@ def _bridge_error(w, length, noise, blocked, h):
     starts = [s for s in starts if not blocked[max(s - m, 0):s + length + m].any()]
     if not starts:
         return np.inf
-    scale = np.where(noise > 0, noise, np.inf)
+    scale = np.where(u > 0, u, np.inf)
     misses = [np.mean(((_bridge(w, s, length, h)[0] - w[s:s + length]) / scale) ** 2) for s in starts]
     return float(np.mean(misses))
 
@@ -207,7 +208,7 @@ def find_frozen(t, w, noise, alpha, h):
     runs = []
     for a, L, chance in frozen:
         inside = a >= h and a + L + h <= n
-        ok = inside and _bridge_error(w, L, noise, blocked, h) <= _BRIDGE_LIMIT
+        ok = inside and _bridge_error(w, L, np.sqrt(noise ** 2 + q ** 2 / 12.0), blocked, h) <= _BRIDGE_LIMIT
         if a + L < n:                                   # a run to the log's end is left as it came
             bridged[a:a + L] = _bridge(bridged, a, L, h)[0]
         runs.append({"start": int(a), "time": float(t[a]), "length": int(L),
