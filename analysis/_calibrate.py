@@ -500,10 +500,16 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches,
                latency=timing)
     warnings, why = [], None
-    if glitches.count and get_method(name).online:     # a live run of the method would take them as they came
+    if glitches.found and get_method(name).online:     # a live run of the method would take them as they came
         warnings.append(f"{glitches.summary()}; {name} ran on the bridged log, where a live run would take the "
                         "glitches as they came")
     converged = bool(result.converged)
+    if glitches.unbridged:             # a frozen stretch longer than a bridge holds (observers.core, eq. (F3))
+        why = (f"{glitches.frozen_summary(glitches.unbridged)} too long to bridge from the samples around "
+               "them (or at the log's end): the reading there is not known; check the sensor's driver and "
+               "connection, or calibrate on a log without them")
+        warnings.append(why)
+        converged = False
     for check in model.calibration_checks:
         found, passed, reason = _CHECKS[check](run, warnings)
         warnings += found
@@ -526,7 +532,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
         E=E, E_blocks=E_blocks, notes=list(signed.notes), kind=cls.name, run=own,
-        why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.count else None))
+        why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.found else None))
 
 
 def _noise_model(log, model, pose_noise, wrench_noise):

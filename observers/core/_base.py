@@ -352,9 +352,11 @@ class Observer:
         ObserverResult
             An offline method's (``online = False``) fits the log with the
             reading's glitches bridged (:mod:`fmscal.observers.core._glitches`:
-            single samples far from their neighbours, eqs. (G1), (G2)), and
-            ``info["glitches"]`` lists them (``count``, ``indices``, ``times``;
-            a log with none is fitted as it is).
+            single samples far from their neighbours, eqs. (G1), (G2); and
+            runs of the reading held at its last value, eqs. (F1)-(F3) of
+            :mod:`fmscal.observers.core._frozen`), and ``info["glitches"]``
+            lists them (``count``, ``indices``, ``times``, and ``frozen`` where
+            there are any; a log with none is fitted as it is).
 
         Raises
         ------

@@ -47,6 +47,12 @@ method with ``online = False``):
    fits need evenly spaced samples: the bridged sample carries what its
    neighbours say, not what the glitch said.
 
+Before the spikes, the reading's *frozen* runs (every channel repeated,
+sample after sample, where the wrench around them moves beyond what the
+reading's resolution and noise allow: a driver holding its last value) are
+found and bridged by the rule of :mod:`fmscal.observers.core._frozen`
+(eqs. (F1)-(F3)); :attr:`Glitches.frozen` lists them.
+
 A log with nothing rejected is returned as it was: its fit does not move.
 What the rule cannot tell from a glitch is a true event shorter than a few
 samples (an impact): such a log is not a calibration log.
@@ -57,6 +63,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.special import ndtri
+
+from ._frozen import find_frozen
 
 __all__ = ["Glitches", "find_glitches", "bridge_glitches", "reading_noise", "HALF_WINDOW", "FALSE_ALARM",
            "MAX_ROUNDS", "glitch_threshold"]
@@ -90,6 +98,11 @@ class Glitches:
         ``k`` of eq. (G2).
     noise : ndarray, shape (c,)
         The reading's white noise per channel measured from the log (:func:`reading_noise`).
+    frozen : list of dict
+        The reading's frozen runs (:mod:`fmscal.observers.core._frozen`, eqs. (F1)-(F3)): per run
+        ``start`` (its first held row), ``time`` (s), ``length`` (the held samples), ``chance``
+        (``log10`` of its chance, eq. (F1)) and ``bridged`` (False: too long to bridge, eq. (F3)); empty
+        when none is.
     """
 
     indices: np.ndarray
@@ -98,23 +111,57 @@ class Glitches:
     size: np.ndarray = None
     threshold: float = float("nan")
     noise: np.ndarray = None
+    frozen: list = field(default_factory=list)
 
     @property
     def count(self):
-        """The samples rejected."""
+        """The samples rejected as spikes (eq. (G2)); the frozen runs' are :attr:`frozen_count`."""
         return int(len(self.indices))
 
+    @property
+    def frozen_count(self):
+        """The held samples of the frozen runs (eq. (F2))."""
+        return int(sum(run["length"] for run in self.frozen))
+
+    @property
+    def found(self):
+        """Anything rejected: a spike or a frozen run."""
+        return bool(self.count or self.frozen)
+
+    @property
+    def unbridged(self):
+        """The frozen runs too long to bridge (eq. (F3))."""
+        return [run for run in self.frozen if not run["bridged"]]
+
+    def frozen_summary(self, runs=None, limit=5):
+        """One line naming the frozen runs ``runs`` (default all): where, and how many samples each."""
+        runs = self.frozen if runs is None else runs
+        shown = ", ".join(f"{run['length']} at t = {run['time']:.3f} s" for run in runs[:limit])
+        more = ", ..." if len(runs) > limit else ""
+        return (f"{len(runs)} frozen stretch(es) of the reading (every channel repeating its last value beyond "
+                f"what its resolution and noise allow, eq. (F2); held samples {shown}{more})")
+
     def summary(self, limit=5):
-        """One line: how many samples were rejected and where (the first ``limit`` times)."""
-        shown = ", ".join(f"{t:.3f}" for t in self.times[:limit]) + (", ..." if self.count > limit else "")
-        return (f"{self.count} sample(s) of the reading rejected as glitches (a residual above {self.threshold:.2g} "
-                f"robust standard deviations of its neighbours'; bridged from them) at t = {shown} s")
+        """One line: how many samples were rejected and where (the first ``limit`` times), and the frozen
+        runs."""
+        parts = []
+        if self.count:
+            shown = ", ".join(f"{t:.3f}" for t in self.times[:limit]) + (", ..." if self.count > limit else "")
+            parts.append(f"{self.count} sample(s) of the reading rejected as glitches (a residual above "
+                         f"{self.threshold:.2g} robust standard deviations of its neighbours'; bridged from them) "
+                         f"at t = {shown} s")
+        if self.frozen:
+            parts.append(f"{self.frozen_summary(limit=limit)}, bridged from the samples around them")
+        return "; ".join(parts)
 
     def to_dict(self):
         """The JSON form: count, indices, times, channels, sizes (robust standard deviations), threshold."""
-        return {"count": self.count, "indices": [int(i) for i in self.indices],
-                "times": [float(t) for t in self.times], "channels": [list(c) for c in self.channels],
-                "size": [float(s) for s in self.size], "threshold": float(self.threshold)}
+        out = {"count": self.count, "indices": [int(i) for i in self.indices],
+               "times": [float(t) for t in self.times], "channels": [list(c) for c in self.channels],
+               "size": [float(s) for s in self.size], "threshold": float(self.threshold)}
+        if self.frozen:                             # only a log with frozen runs: a clean log's report as before
+            out["frozen"] = {"count": self.frozen_count, "runs": [dict(run) for run in self.frozen]}
+        return out
 
 
 def _coefficients(n, h=HALF_WINDOW, degree=_DEGREE):
@@ -194,7 +241,8 @@ def find_glitches(t, w_hat, names=None, alpha=FALSE_ALARM):
     -------
     glitches : Glitches
     bridged : ndarray, shape (N, c)
-        ``w_hat`` with the rejected samples replaced by their predictions (the same array when none is).
+        ``w_hat`` with the rejected samples replaced by their predictions and the frozen runs bridged (the
+        same array when none is).
     """
     w = np.asarray(w_hat, dtype=float)
     n, c = w.shape
@@ -205,6 +253,9 @@ def find_glitches(t, w_hat, names=None, alpha=FALSE_ALARM):
     start, weights = _coefficients(n)
     k = glitch_threshold(n, c, alpha)
     rejected = {}
+    # the frozen runs first (_frozen, eqs. (F1)-(F3)): bridged, the spikes are sought on the bridged reading
+    frozen, w = find_frozen(t, w, reading_noise, alpha, HALF_WINDOW)
+    empty.frozen = frozen
     bridged = w
     noise = None
     # the residual's standard deviation per unit of white noise: larger at the ends, where (G1) extrapolates
@@ -238,7 +289,7 @@ def find_glitches(t, w_hat, names=None, alpha=FALSE_ALARM):
     for _ in range(2):                              # neighbours rejected together: bridged from each other's
         bridged[indices] = (bridged - _residuals(bridged, start, weights))[indices]
     return Glitches(indices, np.asarray(t, dtype=float)[indices], [rejected[i][0] for i in indices],
-                    np.array([rejected[i][1] for i in indices]), k, noise), bridged
+                    np.array([rejected[i][1] for i in indices]), k, noise, frozen), bridged
 
 
 def _apart(w, r, i, j, taken):
@@ -273,7 +324,7 @@ def bridge_glitches(log, names=None):
     glitches : Glitches
     """
     glitches, w = find_glitches(log.t, log.w_hat, names)
-    if not glitches.count:
+    if not glitches.found:
         return log, glitches
     bridged = copy.copy(log)
     bridged.w_hat = w

@@ -242,7 +242,10 @@ class Calibration:
         (histories, info), or the table's fit.
     glitches : dict, optional
         *Not saved.* The samples of the reading a log's fit rejected as glitches
-        (``count``, ``indices``, ``times``, ``channels``, ``size``, ``threshold``:
+        (``count``, ``indices``, ``times``, ``channels``, ``size``, ``threshold``,
+        and ``frozen`` where the reading was held at its last value: the held
+        samples' ``count`` and the ``runs``, each with its ``start``, ``time``,
+        ``length``, ``chance`` and ``bridged``:
         :class:`fmscal.observers.core.Glitches`); None when it rejected none.
     why_unconverged : str, optional
         *Not saved.* Why ``converged`` is False, in a few words (the units,
