@@ -720,7 +720,13 @@ def _payload_std(payload, given):
     fields left None filled by the defaults), over a payload estimate's own where the payload is one."""
     if not isinstance(payload, PayloadEstimate):
         return PayloadStd() if given is None else given
-    estimated = _estimate_std(payload.tracked())
+    tracked = payload.tracked()
+    if payload.mounting is None:            # the tracked frame's axes are the estimate's: its covariance as it is
+        tracked.cov = getattr(tracked, "cov", None) if getattr(tracked, "cov", None) is not None \
+            else getattr(payload, "cov", None)
+    if getattr(tracked, "gravity_std", None) is None:
+        tracked.gravity_std = getattr(payload, "gravity_std", None)
+    estimated = _estimate_std(tracked)
     if given is None:
         return estimated
     return replace(estimated, **{name: getattr(given, name) for name in ("mass", "com", "inertia", "gravity", "cov")

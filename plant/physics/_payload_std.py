@@ -123,7 +123,7 @@ class PayloadStd:
     >>> from fmscal.plant import SpatialModel, SpatialPayload
     >>> tool = SpatialModel(SpatialPayload(1.2, (4e-3, 5e-3, 2.5e-3, 0, 0, 0), (0.01, 0.0, 0.06)))
     >>> cov = PayloadStd(mass=0.002, inertia=0.1).covariance(tool)
-    >>> tool.payload_parameter_names[:2], np.sqrt(np.diag(cov))[:2].round(4).tolist()
+    >>> tool.payload_parameter_names()[:2], np.sqrt(np.diag(cov))[:2].round(4).tolist()
     (('mass', 'X'), [0.002, 0.001])
     >>> PayloadStd.exact().covariance(tool).any()
     np.False_
