@@ -5,6 +5,7 @@ Usage (from the repository's root)::
     python benchmarks/payload_std.py                       # the targets' table: 20 seeds of 10 s, each setting
     python benchmarks/payload_std.py --seeds 40 --duration 20 --sources spatial-arm spatial-mocap paper
     python benchmarks/payload_std.py --timing              # the cost, on a 60 s spatial-arm log at 1 kHz
+    python benchmarks/payload_std.py --cases               # the issue's cases, one log: max |z| before and after
 
 The table. For each source of logs (``simulate``'s ``spatial-arm``,
 ``spatial-mocap``, and the planar ``paper``) and each setting of the
@@ -20,6 +21,11 @@ within [0.7, 1.4]), and on the torque and the force rows; the same with the
 payload taken as exact (what ``fmscal calibrate`` did before); the share of
 seeds converged; and how many named the inertia beyond its stated
 uncertainty (eq. (M4) of :mod:`fmscal.observers.diagnostics._misfit`).
+
+The cases: the issue's payload errors on one log (seed 1, 10 s ``spatial-arm``):
+the largest ``|z|`` with the payload taken as exact (as before), with the
+default standard deviations, and with each error's own size stated as its
+standard deviation (:data:`CASES`).
 
 The timing: the CPU seconds of ``fmscal calibrate`` on a 60 s ``spatial-arm``
 log (the child's user and system time, least of three), and of the payload's
@@ -133,6 +139,40 @@ def _line(row):
             f"uncertainty {row['inertia_beyond']} of {row['seeds']}")
 
 
+#: The issue's cases (seed 1, 10 s spatial-arm): a name, the payload's numbers moved (index: factor, or a shift
+#: in m), and the standard deviations that state the error's own size.
+CASES = (("mass 1 % high", {0: 1.01}, {"mass": 0.012}),
+         ("mass 5 % high", {0: 1.05}, {"mass": 0.06}),
+         ("inertia 1.2x (all entries)", {i: 1.2 for i in range(4, 10)}, {"inertia": 0.2}),
+         ("IXX 1.3x (the shape)", {4: 1.3}, {"inertia": 0.3}),
+         ("gravity 9.7 for 9.81", {10: 9.7 / 9.81}, {"gravity": 0.11}),
+         ("com x 3 mm off", {1: ("shift", 0.003)}, {"com": 0.003}))
+
+
+def cases(seed=1, duration=10.0):
+    """The issue's cases (:data:`CASES`): the largest ``|z|`` with the payload taken as exact, with the default
+    standard deviations, and with the error's own size stated as its standard deviation; converged, and whether
+    the inertia was named."""
+    from fmscal.analysis import calibrate
+    from fmscal.plant import PayloadStd
+    log, S, model = _source("spatial-arm", duration)(seed)
+    print(f"spatial-arm, seed {seed}, {duration:g} s, the latency estimated; max |z| over S's 36 entries\n")
+    print("| case | payload exact | defaults | its own size stated | converged (stated) | inertia named |")
+    print("|---|---|---|---|---|---|")
+    for name, moves, stated in CASES:
+        theta = model.payload_parameters()
+        for index, move in moves.items():
+            theta[index] = theta[index] + move[1] if isinstance(move, tuple) else theta[index] * move
+        given = model.with_payload_parameters(theta)
+        out = []
+        for std in (PayloadStd.exact(), PayloadStd(), PayloadStd(**stated)):
+            cal = calibrate(log, given, payload_std=std)
+            out.append((np.abs((np.asarray(cal.S) - S) / np.asarray(cal.S_std)).max(), cal))
+        named = any("inertia" in w for w in out[2][1].warnings + out[2][1].notes)
+        print(f"| {name} | {out[0][0]:.1f} | {out[1][0]:.1f} | {out[2][0]:.1f} | "
+              f"{'yes' if out[2][1].converged else 'no'} | {'yes' if named else 'no'} |", flush=True)
+
+
 def timing(repeat=3):
     """CPU seconds of ``fmscal calibrate`` of a 60 s spatial-arm log at 1 kHz (least of ``repeat``), and of the
     payload's sensitivity alone on that log (least of ``repeat``, this process)."""
@@ -162,6 +202,7 @@ def timing(repeat=3):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--timing", action="store_true", help="only the cost")
+    parser.add_argument("--cases", action="store_true", help="only the issue's cases (seed 1, 10 s spatial-arm)")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--duration", type=float, default=10.0, help="s of each log of the table")
     parser.add_argument("--sources", nargs="+", default=["spatial-arm", "spatial-mocap"])
@@ -172,6 +213,9 @@ def main(argv=None):
         total, own = timing()
         print(f"fmscal calibrate, 60 s spatial-arm at 1 kHz: {total:.2f} CPU s, of which the payload's sensitivity "
               f"{own:.2f} s ({100 * own / total:.0f} %)")
+        return
+    if args.cases:
+        cases()
         return
     print(f"{args.seeds} seeds of {args.duration:g} s; target: z rms in [0.7, 1.4]")
     targets(args.seeds, args.duration, args.sources, args.settings, args.per_seed)

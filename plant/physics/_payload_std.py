@@ -109,8 +109,8 @@ class PayloadStd:
         (:meth:`fmscal.plant.Model.inertia_scale`), one number for every
         entry or one per entry (default :data:`DEFAULT_INERTIA_STD`).
     gravity : float, optional
-        m/s^2, of gravity's size (models under gravity; default
-        :data:`DEFAULT_GRAVITY_STD`).
+        m/s^2, of gravity's size (models under gravity, a model with none
+        takes only 0; default :data:`DEFAULT_GRAVITY_STD`).
     cov : array_like, shape (k, k), optional
         A covariance over the model's
         :meth:`~fmscal.plant.Model.payload_parameter_names` (a payload
@@ -156,7 +156,7 @@ class PayloadStd:
 
     @classmethod
     def exact(cls):
-        """The payload taken as exact: every standard deviation zero."""
+        """The payload taken as exact: every standard deviation zero (for either model)."""
         return cls(mass=0.0, com=0.0, inertia=0.0, gravity=0.0)
 
     def covariance(self, model):
@@ -203,10 +203,11 @@ class PayloadStd:
                 raise PayloadStdError("inertia", f"must be one number or {n_in} for a {model.name} payload "
                                                  f"({', '.join(model.inertia_names)}); got {self.inertia.size}")
             blocks.append((inertia, np.diag((relative * scale) ** 2)))
-        if self.gravity is not None:
-            if not model.under_gravity:
+        if self.gravity is not None and not model.under_gravity:
+            if self.gravity > 0:                       # exact() states 0 for every model
                 raise PayloadStdError("gravity", f"is for a model under gravity; a {model.name} payload moves "
                                                  "with none")
+        elif self.gravity is not None:
             blocks.append(([k - 1], np.array([[self.gravity ** 2]])))
         for where, block in blocks:
             cov[where, :] = 0.0
