@@ -15,21 +15,22 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
-from fmscal.observers.batch import describe_direction, estimate_latency
+from fmscal.observers.batch import describe_direction, estimate_latency, payload_sensitivity
 from fmscal.observers.core import (EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches,
                                    calibration_uncertainty)
-from fmscal.observers.diagnostics import consistency_check, has_evidence, misfit, offset_drift, saturation
+from fmscal.observers.diagnostics import (consistency_check, has_evidence, inertia_note, misfit, offset_drift,
+                                          saturation)
 from fmscal.observers.diagnostics import inflate as inflate_misfit
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
-from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
-                          Truth, estimate_noise, read_log, read_truth)
+from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, PayloadStd, SingularCalibrationError,
+                          SpatialPayload, Truth, estimate_noise, read_log, read_truth)
 from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, check_poses_move,
                              check_spatial_log_units,
                              check_table_units, diagnose_units, held_table, is_attitude_log, is_pose_table, not_a_file,
                              read_attitude_log, read_joint_data, read_pose_table, reading_sign)
 from fmscal.plant.numerics import as_bool, as_number
-from fmscal.plant.physics import GRAVITY, MODELS, as_model
+from fmscal.plant.physics import GRAVITY, MODELS, PayloadStdError, as_model
 
 from ._metrics import calibration_error
 
@@ -118,7 +119,8 @@ def read_data(path, urdf=None, frame=None):
 
 
 def calibrate(data, payload, *, observer=None, reading=None, gravity=None, latency=None, max_latency=None,
-              offset=True, pose_noise=None, wrench_noise=None, truth=None, max_mass=None, method=None):
+              offset=True, pose_noise=None, wrench_noise=None, truth=None, max_mass=None, payload_std=None,
+              method=None):
     """Estimate ``S`` and the sensor's offset from recorded data, with diagnostics: ``fmscal calibrate`` in Python.
 
     The case comes from ``data``:
@@ -193,6 +195,16 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
     max_mass : float, optional
         Spatial logs and held poses: the heaviest payload taken, kg (default
         :data:`fmscal.plant.io.MAX_WRIST_MASS`); a mass given beyond it is refused as a slipped unit (g).
+    payload_std : plant.PayloadStd, optional
+        Logs: how well the payload is known (the mass's, the centre of mass's
+        and the inertia's standard deviations, and gravity's size's). What is
+        not stated takes the defaults of :mod:`fmscal.plant.physics._payload_std`
+        (a weighed mass, a CAD centre of mass and inertia, ``g`` not measured),
+        or a :class:`~fmscal.observers.payload.PayloadEstimate`'s own (its
+        covariance where it has one). Carried into ``S_std``, ``b_std`` and
+        ``cov`` (eq. (Y1) of :mod:`fmscal.observers.batch._payload_sensitivity`);
+        ``PayloadStd.exact()`` takes the payload as exact. Held poses take
+        the payload as exact (refused).
     method : str, optional
         ``observer``'s former name, still taken (an alias: give one of the two).
 
@@ -208,7 +220,12 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
         reads it), ``converged``, ``warnings``, ``undetermined`` (in words) and
         ``undetermined_directions``, ``E`` with a truth, ``notes`` and the
         method's full ``run``; ``save(path)`` writes it, ``to_json()`` is
-        ``fmscal calibrate --json``'s report.
+        ``fmscal calibrate --json``'s report. On a log, ``S_std`` is the
+        statistical part (the log's noise, the latency's uncertainty, a
+        misfit's widening: ``S_std_statistical``) and the payload's
+        (``S_std_payload``, from ``payload_cov``, the payload's covariance
+        over the model's :meth:`~fmscal.plant.Model.payload_parameter_names`)
+        in quadrature; ``cov`` holds both.
 
         ``converged``, on a planar log: the method's ``converged`` flag
         (:class:`fmscal.observers.ObserverResult`), and the log's units look right
@@ -226,7 +243,8 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
         0``: else the reading follows the other sign convention), and the model
         fits the log (:func:`fmscal.observers.diagnostics.misfit`; where it
         does not, ``S_std`` is widened and the warning says by how much the
-        residual exceeds the noise); a diagonal gain of ``S`` the log
+        residual exceeds the noise; an inertia whose shape the log's torques
+        put beyond its stated uncertainty is named); a diagonal gain of ``S`` the log
         determines further than :data:`FAR_GAIN` from 1 adds a warning naming
         the payload's mass or the units, and leaves ``converged`` as it is.
         Held poses: never. Each failure adds a warning that names it.
@@ -255,7 +273,7 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
         payload = payload.tracked()
     try:
         calibration = _calibrate_data(data, payload, _observer(observer, method), reading, gravity, latency,
-                                      max_latency, offset, pose_noise, wrench_noise, truth, max_mass)
+                                      max_latency, offset, pose_noise, wrench_noise, truth, max_mass, payload_std)
     except OptionError as err:                          # the method refused: named by the keyword the caller gave
         if err.option == "observer" and observer is None and method is not None:
             raise OptionError("method", err.template) from None
@@ -278,10 +296,15 @@ def _observer(observer, method):
 
 
 def _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise, wrench_noise,
-                    truth, max_mass=None):
+                    truth, max_mass=None, payload_std=None):
     """:func:`calibrate` on its inputs, the payload estimate's own convergence aside."""
+    if payload_std is not None and not isinstance(payload_std, PayloadStd):
+        raise OptionError("payload_std", f"{{}} must be a plant.PayloadStd or None; got {type(payload_std).__name__}")
     if isinstance(data, (str, os.PathLike)):
         data = read_data(data)
+    if isinstance(data, (AttitudeLog, PoseTable)):
+        _refuse("held poses", [(payload_std is not None, "payload_std", "their fit takes the payload as exact; S is "
+                                "never converged from held poses")])
     if isinstance(data, AttitudeLog):
         table, _, note = held_table(data)
         return _calibrate_table(table, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
@@ -301,7 +324,7 @@ def _calibrate_data(data, payload, method, reading, gravity, latency, max_latenc
     if max_latency is not None and not (_number(max_latency) and max_latency > 0):
         raise OptionError("max_latency", f"{{}} must be positive; got {max_latency}")
     return _calibrate_log(data, log_model_class(data), payload, method, reading, gravity, latency, max_latency, offset,
-                          pose_noise, wrench_noise, truth, max_mass)
+                          pose_noise, wrench_noise, truth, max_mass, payload_std)
 
 
 def _number(value):
@@ -434,16 +457,18 @@ def _log_payload_model(cls, payload, gravity):
 
 
 def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                   wrench_noise, truth, max_mass=None):
+                   wrench_noise, truth, max_mass=None, payload_std=None):
     """:func:`calibrate` on a log of the model class ``cls``: one workflow, each step as the model declares.
 
     The options the model does not take are refused (``signed_reading``, ``given_noise``,
     ``optional_offset``, ``under_gravity``); the reading is turned into the toolkit's sign; the noise
     model given is completed from the log (``given_noise``); the latency is estimated if not given; the
     method runs on the log with its poses moved back by it; then the model's ``calibration_checks`` run
-    in their order (:data:`_CHECKS`), and ``converged`` is the run's flag and every check passed.
+    in their order (:data:`_CHECKS`), and ``converged`` is the run's flag and every check passed; last, the
+    payload's uncertainty is carried into the result (:func:`_with_payload_uncertainty`).
     """
     model = _log_payload_model(cls, payload, gravity)
+    payload_cov = _payload_covariance(model, _payload_std(payload, payload_std))
     case = f"a {cls.name} log"
     constant = [name for name, column in zip(model.wrench_names, log.w_hat.T) if np.ptp(column) == 0]
     if constant:                        # no real channel reads one value to the last bit: nothing to fit
@@ -497,9 +522,17 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
                             + (f": {result.warnings[-1]}" if result.warnings else "")
                             + "; no calibration (check the mass properties, units and excitation)")
     result = _with_latency_uncertainty(result, timing)
+    try:                                # how S moves with the payload: its uncertainty's way into S_std (eq. Y1)
+        sensitivity = payload_sensitivity(aligned, model, offset=offset)
+    except FmscalError as err:
+        sensitivity, payload_problem = None, str(err)
     run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches,
-               latency=timing)
+               latency=timing, sensitivity=sensitivity, payload_cov=payload_cov)
     warnings, why = [], None
+    if sensitivity is None:
+        warnings.append(f"the payload's uncertainty could not be carried into S_std ({payload_problem}): S_std takes "
+                        "the payload as exact")
+        why = "S_std does not carry the payload's uncertainty"
     if glitches.found and get_method(name).online:     # a live run of the method would take them as they came
         warnings.append(f"{glitches.summary()}; {name} ran on the bridged log, where a live run would take the "
                         "glitches as they came")
@@ -515,8 +548,18 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         warnings += found
         converged = converged and passed
         why = why or (None if passed else reason)
+    converged = converged and sensitivity is not None
     if not converged:
-        why = why or "the run did not converge (see the warnings)"
+        why = why or _UNSETTLED
+    notes = list(signed.notes)
+    said = inertia_note(getattr(run.misfit, "inertia", None), converged)    # the shape the log sees, in words
+    if said and converged:
+        notes.append(said)
+    elif said:                          # the likely cause of a fit that did not settle: a longer log would not help
+        warnings = [w for w in warnings if w != _not_settled(name)] + [said]
+        why = "the payload's inertia's shape moves the fit (see the warnings)" if why == _UNSETTLED else why
+    statistical = run.result.S_std
+    run.result, payload_part = _with_payload_uncertainty(run.result, sensitivity, payload_cov)
     # the noise model recorded with the calibration (compensation's covariance needs it): the one the method was
     # given, else the log's own, measured as the methods that take none measure theirs
     recorded = noise if noise is not None else estimate_noise(log)
@@ -531,8 +574,9 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
-        E=E, E_blocks=E_blocks, notes=list(signed.notes), kind=cls.name, run=own,
-        why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.found else None))
+        E=E, E_blocks=E_blocks, notes=notes, kind=cls.name, run=own,
+        why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.found else None,
+        S_std_statistical=statistical, S_std_payload=payload_part, payload_cov=payload_cov))
 
 
 def _noise_model(log, model, pose_noise, wrench_noise):
@@ -583,6 +627,8 @@ class _Run:
     glitches: object = None
     misfit: object = None
     latency: object = None
+    sensitivity: object = None
+    payload_cov: object = None
 
 
 def _check_units(run, warnings):
@@ -695,15 +741,98 @@ def _with_latency_uncertainty(result, found):
     return replace(result, cov=cov, S_std=S_std, b_std=b_std if c is not None else result.b_std)
 
 
+def _payload_std(payload, given):
+    """The payload's uncertainty a log's calibration takes: ``given`` (a :class:`~fmscal.plant.PayloadStd`, its
+    fields left None filled by the defaults), over a payload estimate's own where the payload is one."""
+    if not isinstance(payload, PayloadEstimate):
+        return PayloadStd() if given is None else given
+    tracked = payload.tracked()
+    if payload.mounting is None:            # the tracked frame's axes are the estimate's: its covariance as it is
+        tracked.cov = getattr(tracked, "cov", None) if getattr(tracked, "cov", None) is not None \
+            else getattr(payload, "cov", None)
+    if getattr(tracked, "gravity_std", None) is None:
+        tracked.gravity_std = getattr(payload, "gravity_std", None)
+    estimated = _estimate_std(tracked)
+    if given is None:
+        return estimated
+    return replace(estimated, **{name: getattr(given, name) for name in ("mass", "com", "inertia", "gravity", "cov")
+                                 if getattr(given, name) is not None})
+
+
+def _estimate_std(estimate):
+    """A :class:`~fmscal.observers.payload.PayloadEstimate`'s uncertainty as a :class:`~fmscal.plant.PayloadStd`
+    over the spatial model's ``mass, X, Y, Z, IXX .. IYZ, gravity``: its covariance's block of the mass, the
+    centre of mass and the inertia where it has one (``cov``, over ``PAYLOAD_PARAMETERS``, whose first ten
+    are these), else its standard deviations; gravity's size's (``gravity_std``) where it has one. What it does
+    not state (NaN) takes the defaults."""
+    cov = np.zeros((11, 11))
+    full = getattr(estimate, "cov", None)
+    if full is not None and np.shape(full)[0] >= 10:
+        cov[:10, :10] = np.asarray(full, dtype=float)[:10, :10]
+    else:
+        inertia_std = np.full(6, np.nan) if estimate.inertia_std is None else np.ravel(estimate.inertia_std)
+        np.fill_diagonal(cov[:10, :10], np.square(np.r_[estimate.mass_std, np.ravel(estimate.com_std), inertia_std]))
+    gravity_std = getattr(estimate, "gravity_std", None)
+    cov[10, 10] = np.nan if gravity_std is None else float(gravity_std) ** 2
+    return PayloadStd(cov=cov)
+
+
+def _payload_covariance(model, std):
+    """The payload's covariance over ``model.payload_parameter_names()`` (:meth:`~fmscal.plant.PayloadStd.covariance`),
+    a field that does not fit the model refused as the option (``payload_std.com``: ``--com-std``)."""
+    try:
+        return std.covariance(model)
+    except PayloadStdError as err:
+        raise OptionError(f"payload_std.{err.field}", f"{{}} {err.message}") from None
+
+
+def _with_payload_uncertainty(result, sensitivity, payload_cov):
+    """The result with the payload's uncertainty carried in, and ``S_std``'s payload part, eq. (Y1).
+
+    ``cov += D Sigma_theta D^T`` (:meth:`fmscal.observers.batch.PayloadSensitivity.covariance`, the rows of ``D``
+    without the offset's column where the result has none); ``S_std`` and ``b_std`` follow from it
+    (:func:`fmscal.observers.core.calibration_uncertainty`). A method without a covariance but with ``S_std``
+    gets ``S_std^2 += `` the payload's part. Without a sensitivity (it could not be computed): unchanged, None.
+
+    Returns
+    -------
+    (result, ndarray shape (n_w, n_w) or None)
+    """
+    if sensitivity is None:
+        return result, None
+    n_w = result.S_hat.shape[0]
+    n = sensitivity.readings.shape[1]
+    cov_payload = sensitivity.covariance(payload_cov)
+    with np.errstate(invalid="ignore"):
+        part = np.sqrt(np.maximum(np.diag(cov_payload), 0.0)).reshape(n_w, n)[:, :n_w]
+    if result.S_std is None:
+        return result, part
+    if result.cov is None:
+        return replace(result, S_std=np.sqrt(np.square(result.S_std) + np.square(part))), part
+    cov = np.asarray(result.cov, dtype=float)
+    offset = cov.shape[0] == n_w * (n_w + 1)
+    if not offset and n == n_w + 1:                           # the result holds S alone: the offset's rows dropped
+        keep = np.ravel(np.arange(n_w * n).reshape(n_w, n)[:, :n_w])
+        cov_payload = cov_payload[np.ix_(keep, keep)]
+    with np.errstate(invalid="ignore"):
+        cov = cov + cov_payload
+    cov[np.isnan(cov)] = np.inf
+    c = -result.S_hat @ result.b if offset and result.b is not None else None
+    S_std, _, b_std = calibration_uncertainty(np.c_[result.S_hat, c] if c is not None else result.S_hat, cov,
+                                              c is not None)
+    return replace(result, cov=cov, S_std=S_std, b_std=b_std if c is not None else result.b_std), part
+
+
 def _check_misfit(run, warnings):
     """``"misfit"``: the model fits the log (:func:`fmscal.observers.diagnostics.misfit`: the reference fit's
     residual against the noise measured from the log, and one ``S`` for slow and fast motion). Where it does
     not, a warning in words and the uncertainty widened (eq. (M3), :func:`fmscal.observers.diagnostics.inflate`):
     ``run.result`` becomes a copy whose ``S_std``, ``cov`` (each row of ``[S | c]`` by its entries' factors, the
     offset's column by the row's largest) and ``b_std`` say so; the method's own result is left as it was. A
-    gross misfit is not converged. A log too short to measure it passes with nothing said."""
+    gross misfit is not converged, and so is an inertia whose shape the log puts beyond its stated uncertainty
+    (eq. (M4)). A log too short to measure it passes with nothing said."""
     try:
-        found = misfit(run.aligned, run.model)
+        found = misfit(run.aligned, run.model, sensitivity=run.sensitivity, payload_cov=run.payload_cov)
     except FmscalError:
         return [], True, None
     run.misfit = found
@@ -794,6 +923,10 @@ def _calibration(result, method, fields):
         raise FmscalError(f"the {method} estimate of S is singular ({str(err).split('(')[-1].split(')')[0]}): the "
                           "log does not excite every entry of S, or holds an outlier (a reading far from the "
                           "rest)") from None
+
+
+#: Why a calibration did not converge where no check said why.
+_UNSETTLED = "the run did not converge (see the warnings)"
 
 
 def _not_settled(method):

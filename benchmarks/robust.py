@@ -7,7 +7,8 @@ in axes turned 1, 3 and 10 degrees from the poses' frame, and the poses 8 ms lat
 Printed: E over the clean log's E, the largest ``|z|`` (error over ``S_std``) and the z-scores' rms over
 the seeds (every entry of ``S``), the share of seeds converged, and for the misfit logs the z-scores' rms
 before and after the misfit check widens ``S_std`` (eq. (M3) of :mod:`fmscal.observers.diagnostics._misfit`).
-tests/test_robust_slow.py asserts the bounds; this prints the figures. A few minutes on 2 cores.
+The payload is the simulator's, taken as exact (``PayloadStd.exact()``): ``S_std``'s statistical part is what is
+measured. tests/test_robust_slow.py asserts the bounds; this prints the figures. A few minutes on 2 cores.
 """
 
 import copy
@@ -19,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from fmscal.analysis import calibrate
 from fmscal.observers import make_observer
 from fmscal.observers.core import reading_noise
-from fmscal.plant import SPATIAL_SCENARIOS, SpatialModel
+from fmscal.plant import SPATIAL_SCENARIOS, PayloadStd, SpatialModel
 
 
 def spikes(log, rows, channels, sizes):
@@ -60,7 +61,7 @@ def main(seeds, duration):
             logs[f"turned {degrees} deg"] = turned(log, degrees)
         logs["poses 8 ms late"] = log.shift_poses(0.008)          # taken as aligned: a misfit of the timing
         for case, data in logs.items():
-            cal = calibrate(data, scenario.payload, latency=0.0, truth=truth)
+            cal = calibrate(data, scenario.payload, latency=0.0, truth=truth, payload_std=PayloadStd.exact())
             bare = make_observer("max-likelihood", model, settings={"offset": True}).run(data).S_std
             rows[case].append((cal.E, (cal.S_hat - S) / cal.S_std, (cal.S_hat - S) / bare, cal.converged))
     clean_E = np.array([r[0] for r in rows["clean"]])

@@ -35,11 +35,11 @@ def test_the_issues_timing_cases_are_not_saved_sigma_off():
     known latency's; the second (MuJoCo, 1 kHz, no latency: 1 ms before, E 3.6x; here 10 s): E within 1.15x of
     --latency 0."""
     from fmscal.analysis import calibrate, calibration_error
-    from fmscal.plant import SPATIAL_SCENARIOS
+    from fmscal.plant import SPATIAL_SCENARIOS, PayloadStd
     sc = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=10.0)
     log, truth, _ = sc.generate(1)
-    cal = calibrate(log, truth.payload)
-    known = calibrate(log, truth.payload, latency=0.005)
+    cal = calibrate(log, truth.payload, payload_std=PayloadStd.exact())
+    known = calibrate(log, truth.payload, latency=0.005, payload_std=PayloadStd.exact())
     S = truth.S_at(log.t[-1])
     assert np.max(np.abs((np.asarray(cal.S) - S) / np.asarray(cal.S_std))) < 5
     assert calibration_error(cal.S, S) <= 1.15 * calibration_error(known.S, S)

@@ -15,9 +15,11 @@ from fmscal.analysis.cli import main
 from fmscal.observers import make_observer
 from fmscal.observers.core import calibration_uncertainty, find_glitches, glitch_threshold, reading_noise
 from fmscal.observers.diagnostics import misfit
-from fmscal.plant import SPATIAL_SCENARIOS, SpatialModel, get_scenario
+from fmscal.plant import SPATIAL_SCENARIOS, PayloadStd, SpatialModel, get_scenario
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
+#: The simulator's payload is the one the logs were made with: exact (S_std its statistical part alone).
+EXACT = PayloadStd.exact()
 
 
 @pytest.fixture(scope="module")
@@ -76,9 +78,9 @@ def test_spikes_in_a_spatial_log_no_longer_steer_least_squares(arm):
     """Issue 37: 20 single-sample spikes of +5 N on fz (100 noise standard deviations)."""
     log, truth = arm
     S = truth.S_at(log.t[-1])
-    clean = calibrate(log, ARM.payload, method="least-squares", latency=0.0, truth=truth)
+    clean = calibrate(log, ARM.payload, method="least-squares", latency=0.0, truth=truth, payload_std=EXACT)
     bad, rows = spiked(log, 20, 5.0, 5)
-    cal = calibrate(bad, ARM.payload, method="least-squares", latency=0.0, truth=truth)
+    cal = calibrate(bad, ARM.payload, method="least-squares", latency=0.0, truth=truth, payload_std=EXACT)
     assert clean.glitches is None and "glitches" not in json.loads(clean.to_json())
     assert cal.glitches["count"] == 20 and cal.glitches["indices"] == rows.tolist()
     assert json.loads(cal.to_json())["glitches"]["times"] == pytest.approx(log.t[rows].tolist())

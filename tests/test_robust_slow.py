@@ -10,7 +10,7 @@ from fmscal.observers.core import find_glitches, reading_noise
 from fmscal.observers.diagnostics import misfit
 from fmscal.plant import SPATIAL_SCENARIOS, PlanarModel, SpatialModel, get_scenario
 
-from test_robust import turned
+from test_robust import EXACT, turned
 
 pytestmark = pytest.mark.slow
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
@@ -25,7 +25,7 @@ def test_spikes_of_5_to_50_noise_sigmas_leave_the_floor_as_on_the_clean_log():
     for seed in range(6):
         log, truth, _ = scenario.generate(seed)
         S = truth.S_at(log.t[-1])
-        clean = calibrate(log, scenario.payload, latency=0.0, truth=truth)
+        clean = calibrate(log, scenario.payload, latency=0.0, truth=truth, payload_std=EXACT)
         rng = np.random.default_rng(seed)
         share, size = [0.001, 0.003, 0.01][seed % 3], [5.0, 20.0, 50.0][seed // 2 % 3]
         rows = rng.choice(np.arange(len(log)), int(share * len(log)), replace=False)
@@ -33,7 +33,7 @@ def test_spikes_of_5_to_50_noise_sigmas_leave_the_floor_as_on_the_clean_log():
         bad = copy.copy(log)
         bad.w_hat = log.w_hat.copy()
         bad.w_hat[rows, channels] += rng.choice([-1.0, 1.0], len(rows)) * size * reading_noise(log.w_hat)[channels]
-        cal = calibrate(bad, scenario.payload, latency=0.0, truth=truth)
+        cal = calibrate(bad, scenario.payload, latency=0.0, truth=truth, payload_std=EXACT)
         ratios.append(cal.E / clean.E)
         assert cal.E < 1.2 * clean.E, (seed, share, size, cal.E, clean.E)
         assert np.abs((cal.S_hat - S) / cal.S_std).max() < 5 or not cal.converged
@@ -94,12 +94,12 @@ def test_forty_spikes_on_a_planar_real_rig_log():
     clean log, all 40 rejected; and the misfit measure, shared, finds the planar model fitting it."""
     scenario = get_scenario("real-rig")
     log, truth, _ = scenario.generate(0)
-    clean = calibrate(log, scenario.payload, truth=truth)
+    clean = calibrate(log, scenario.payload, truth=truth, payload_std=EXACT)
     rows = np.random.default_rng(4).choice(np.arange(len(log)), 40, replace=False)
     bad = copy.copy(log)
     bad.w_hat = log.w_hat.copy()
     bad.w_hat[rows, 1] += 20 * reading_noise(log.w_hat)[1]
-    cal = calibrate(bad, scenario.payload, truth=truth)
+    cal = calibrate(bad, scenario.payload, truth=truth, payload_std=EXACT)
     assert sorted(cal.glitches["indices"]) == sorted(rows.tolist())
     assert cal.E < 1.2 * clean.E and cal.converged
     assert np.abs((cal.S_hat - truth.S_at(log.t[-1])) / cal.S_std).max() < 5

@@ -9,9 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant import Calibration, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
+from fmscal.plant import (Calibration, PayloadStd, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings,
+                          read_truth)
 from fmscal.plant.io import AttitudeLog, NotSavedError, PoseTable, reading_sign
-from fmscal.plant.physics import MODELS
+from fmscal.plant.physics import (DEFAULT_COM_STD, DEFAULT_GRAVITY_STD, DEFAULT_INERTIA_STD, DEFAULT_MASS_STD, MODELS,
+                                  PayloadStdError)
 
 from fmscal.observers import method_names
 from fmscal.observers.payload import PayloadEstimate
@@ -21,7 +23,7 @@ from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calib
 from ._common import (INERTIA_METAVAR, CliError, add_max_mass, flag_payload, max_mass, position_flag, position_values,
                       positive)
 from ._files import atomic_write_text, check_inputs, check_outputs
-from ._spatial import latency_line, print_spatial
+from ._spatial import latency_line, print_spatial, print_std_parts
 
 
 def add_calibrate(sub):
@@ -50,6 +52,19 @@ def add_calibrate(sub):
                         "from the sensor: the opposite of a planar rho); negative values as written")
     p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
                    help="spatial logs: gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
+    p.add_argument("--mass-std", type=float, metavar="KG",
+                   help=f"logs: the mass's standard deviation, kg (default {100 * DEFAULT_MASS_STD:g} %% of the "
+                        "mass: a weighed tool; a CAD mass is off by a few %%); carried into S_std, as the three below")
+    p.add_argument("--com-std", type=float, nargs="+", metavar="M",
+                   help=f"logs: the centre of mass's standard deviation, m, one for each axis or one per axis (the "
+                        f"planar rho's alike; default {DEFAULT_COM_STD:g} m, CAD's)")
+    p.add_argument("--inertia-std", type=float, nargs="+", metavar="REL",
+                   help=f"logs: each inertia entry's standard deviation relative to its scale (I_ii; sqrt(I_ii I_jj) "
+                        f"for a product), one for every entry or one per entry (default {DEFAULT_INERTIA_STD:g}, "
+                        "CAD's)")
+    p.add_argument("--gravity-std", type=float, metavar="M/S2",
+                   help=f"spatial logs: gravity's size's standard deviation, m/s^2 (default {DEFAULT_GRAVITY_STD:g}: "
+                        "9.81 taken for the local value; 0 for a measured one)")
     p.add_argument("--reading", choices=("reaction", "load"), default=None,
                    help="spatial logs and tables: the reading's sign, reaction (default, the wrench the mount "
                         "applies to the payload) or load (the wrench the tool applies to the sensor, as ATI, "
@@ -116,7 +131,7 @@ def cmd_calibrate(args):
         cal = calibrate(data, payload, observer=args.observer, reading=args.reading, gravity=args.gravity,
                         latency=args.latency, max_latency=args.max_latency, offset=args.offset,
                         pose_noise=args.pose_noise, wrench_noise=args.wrench_noise, truth=truth,
-                        max_mass=max_mass(args))
+                        max_mass=max_mass(args), payload_std=_payload_std(args))
     except OptionError as err:                    # the library's keyword, as this command's flag
         raise CliError(err.template.format(_FLAGS.get(err.option, err.option))) from None
     for note in cal.notes:
@@ -145,7 +160,22 @@ def cmd_calibrate(args):
 _FLAGS = {"observer": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
           "wrench_noise": "--wrench-noise", "latency": "--latency", "max_latency": "--max-latency", "truth": "--truth",
           "gravity": "--gravity", "reading": "--reading", "urdf and frame": "--urdf and --frame",
-          "max_mass": "--max-mass", "force=True": "--force", "overwrite=True": "--overwrite"}
+          "max_mass": "--max-mass", "force=True": "--force", "overwrite=True": "--overwrite",
+          "payload_std": "--mass-std, --com-std, --inertia-std and --gravity-std",
+          "payload_std.mass": "--mass-std", "payload_std.com": "--com-std", "payload_std.inertia": "--inertia-std",
+          "payload_std.gravity": "--gravity-std"}
+
+
+def _payload_std(args):
+    """``--mass-std``, ``--com-std``, ``--inertia-std`` and ``--gravity-std`` as a :class:`fmscal.plant.PayloadStd`;
+    None where none is given (the defaults, or a payload file's own)."""
+    fields = {"mass": args.mass_std, "com": args.com_std, "inertia": args.inertia_std, "gravity": args.gravity_std}
+    if all(v is None for v in fields.values()):
+        return None
+    try:
+        return PayloadStd(**fields)
+    except PayloadStdError as err:
+        raise CliError(f"{_FLAGS['payload_std.' + err.field]} {err.message}") from None
 
 
 def _payload(args, data, table):
@@ -221,6 +251,7 @@ def _print_calibration(args, data, cal, saved):
     for i in range(len(S)):
         cells = [f"{S[i, j]:+.5f}" + (f" +- {S_std[i][j]:.1e}" if S_std is not None else "") for j in range(len(S))]
         print("  " + "   ".join(cells))
+    print_std_parts(out, cal.kind)
     if out["b"] is not None:
         b, b_std = out["b"], out["b_std"]
         cells = [f"{b[j]:+.5g}" + (f" +- {b_std[j]:.1e}" if b_std is not None else "") for j in range(len(b))]

@@ -13,7 +13,7 @@ from fmscal.plant.physics import MODELS
 
 from ._common import CliError
 
-__all__ = ["print_spatial", "latency_line"]
+__all__ = ["print_spatial", "latency_line", "print_std_parts"]
 #: The spatial model's reading: what identify-payload's truth and the report's rows and columns are of.
 _NAMES = SpatialModel.wrench_names
 
@@ -40,6 +40,7 @@ def print_spatial(args, summary, out):
         print("S_hat +- one sigma (rows and columns tx ty tz fx fy fz; inf: not determined):")
         for i in range(6):
             print("  " + "  ".join(f"{S[i, j]:+.4f}+-{S_std[i, j]:.0e}" for j in range(6)))
+        print_std_parts(out, out.get("kind"))
     b_std = out["b_std"] if out["b_std"] is not None else [np.nan] * 6
     print("offset b [N m, N]: " + "  ".join(f"{n} {b:+.4g} +- {s:.1e}" for n, b, s in zip(_NAMES, out["b"], b_std)))
     print(f"reading: {out['reading']}")
@@ -53,6 +54,26 @@ def print_spatial(args, summary, out):
               f"force block {out['E_force']:.4g}")
     if out["saved"]:
         print(f"saved the calibration to {args.save}")
+
+
+def print_std_parts(out, kind):
+    """The two parts of ``S_std`` (in quadrature), where the report holds them: the statistical one (the log's noise,
+    the latency, a misfit's widening) and the payload's, with the payload's standard deviations it carries."""
+    if out.get("S_std_payload") is None or out.get("S_std_statistical") is None:      # a method without S_std
+        return
+    model = next(m for m in MODELS if m.name == kind)
+    sd = out["payload_std"]
+    groups = [(("mass",), "kg"), (model.payload_position_names, "m"), (model.inertia_names, "kg m^2"),
+              (("gravity",), "m/s^2")]
+    stds = "; ".join(f"{' '.join(names)} {' '.join(f'{sd[n]:.2g}' for n in names)} {unit}" for names, unit in groups
+                     if all(n in sd for n in names))
+    print(f"S_std: its statistical part and the payload's, in quadrature; the payload's one sigma: {stds}")
+    for title, key in (("statistical part (the log's noise, the latency, a misfit)", "S_std_statistical"),
+                       ("the payload's part", "S_std_payload")):
+        values = np.array([[np.inf if v is None else v for v in row] for row in out[key]], dtype=float)
+        print(f"  S_std, {title}:")
+        for row in values:
+            print("    " + "  ".join(f"{v:.0e}" for v in row))
 
 
 def latency_line(out):

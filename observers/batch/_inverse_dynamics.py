@@ -44,7 +44,8 @@ from fmscal.plant.physics import (ORDER, GRAVITY, Model, SpatialPayload, edge, r
 from ._cluster_covariance import block_length, few_blocks, small_sample_factor
 
 __all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "needed_wrench", "fit_readings", "describe_direction",
-           "UNDETERMINED_STD", "READING_NAMES", "nominal_motion", "smoothed_channels"]
+           "UNDETERMINED_STD", "READING_NAMES", "nominal_motion", "smoothed_channels",
+           "needed_wrenches"]
 
 #: The augmented reading's components, the directions in which the information is reported.
 READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
@@ -302,7 +303,7 @@ def needed_wrench(log, model, window=0.2):
     log : plant.Log
         A log of the model's case.
     model : plant.Model
-        Its payload (and, in 3D, its gravity) known.
+        Its payload known (and, in 3D, its gravity).
     window : float
         Smoothing window of the pose differentiation, s.
 
@@ -319,24 +320,62 @@ def needed_wrench(log, model, window=0.2):
         A model whose dynamics do not invert (``input_matrix`` not square) and whose attitude is not a unit
         quaternion, or a log shorter than the window.
     """
+    trim, (w,) = needed_wrenches(log, [model], window)
+    return trim, w
+
+
+def needed_wrenches(log, models, window=0.2):
+    """:func:`needed_wrench` of one log for several models of its case (other payloads, other gravities): the
+    poses smoothed and differentiated once.
+
+    Parameters
+    ----------
+    log : plant.Log
+    models : sequence of plant.Model
+        Of one case (the first one's declarations are read).
+    window : float
+        s.
+
+    Returns
+    -------
+    rows : slice
+    w : list of ndarray, each shape (len(rows), n_w)
+        One per model, N m and N.
+    """
+    first = models[0]
     trim = slice(edge(log, window), len(log.t) - edge(log, window))
-    if model.attitude == "quaternion":
-        q, omega, alpha, p_ddot = spatial_motion(log, window)
-        return trim, regressor(q[trim], omega[trim], alpha[trim], p_ddot[trim], model.gravity) \
-            @ model.payload.inertial_parameters
-    if model.n_w != model.nv:
-        raise FmscalError(f"the wrench a {model.name} model's motion needs is its dynamics inverted; it has "
-                          f"{model.n_w} wrench components and {model.nv} accelerations")
-    return trim, _inverse_dynamics(log, model, window)[trim]
+    if first.attitude == "quaternion":
+        q, omega, alpha, p_ddot = (v[trim] for v in spatial_motion(log, window))
+        out = [None] * len(models)
+        for gravity in dict.fromkeys(m.gravity for m in models):   # one regressor per gravity: w is linear in pi
+            W = regressor(q, omega, alpha, p_ddot, gravity)
+            which = [i for i, m in enumerate(models) if m.gravity == gravity]
+            pis = np.column_stack([models[i].payload.inertial_parameters for i in which])
+            w = (W.reshape(-1, W.shape[-1]) @ pis).reshape(len(W), W.shape[1], len(which))
+            for col, i in enumerate(which):
+                out[i] = w[:, :, col]
+        return trim, out
+    if first.n_w != first.nv:
+        raise FmscalError(f"the wrench a {first.name} model's motion needs is its dynamics inverted; it has "
+                          f"{first.n_w} wrench components and {first.nv} accelerations")
+    x, a = _smoothed_motion(log, first, window)
+    return trim, [np.asarray(_inverse_map(model, len(log))(x.T, a.T)).T[trim] for model in models]
+
+
+def _smoothed_motion(log, model, window):
+    """The state ``x`` and the accelerations ``a`` at every sample of a model whose configuration moves
+    additively, from :func:`smoothed_channels`."""
+    q, v, a = smoothed_channels(log, model, window)
+    x = np.empty((len(log), model.nx))
+    x[:, list(model.q_index)] = q
+    x[:, list(model.v_index)] = v
+    return x, a
 
 
 def _inverse_dynamics(log, model, window):
     """The wrench each sample needed, ``w_k = A(x_k)^-1 (a_k - d(x_k))``, shape (N, n_w): the model's
     dynamics (eq. (1) in the plane) inverted on the smoothed motion (:func:`smoothed_channels`)."""
-    q, v, a = smoothed_channels(log, model, window)
-    x = np.empty((len(log), model.nx))
-    x[:, list(model.q_index)] = q
-    x[:, list(model.v_index)] = v
+    x, a = _smoothed_motion(log, model, window)
     return np.asarray(_inverse_map(model, len(log))(x.T, a.T)).T
 
 

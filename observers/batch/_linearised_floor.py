@@ -96,12 +96,13 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 from fmscal.plant.numerics import ChunkedSteps, StateLayout, build_once, ops
 
 from fmscal.observers.core import matrix as mx, move, progress_bar
 from fmscal.observers.kalman import (POSE_SD_FLOOR, V0_SD, beta_from_copy, bias_matrix, cholesky, cholesky_apply,
-                                     copy_predict, correction_limit, error_variances, information_factor, pack_lower,
+                                     copy_predict, correction_limit, error_variances, information_pull, pack_lower,
                                      regressor_step, solve_information, unpack_lower)
 from ._inverse_dynamics import READING_NAMES, UNDETERMINED_STD, describe_direction, nominal_motion
 
@@ -312,11 +313,13 @@ def _initial_state(model, n, eiv, y0, var):
 def _history_estimate(J, r, B, s0, m, n_w, n):
     """The estimate from the data so far (the history's rows), as the planar floor's history: a
     negligible pull towards ``s0``, the errors-in-variables correction to first order (limited while
-    the information is rank-deficient), held within :data:`_HISTORY_RADIUS` of ``s0``."""
+    the information is rank-deficient), held within :data:`_HISTORY_RADIUS` of ``s0``. The equations of
+    :func:`fmscal.observers.kalman.information_factor` and ``cholesky_apply``, solved by LAPACK (equal to
+    rounding; the scalar loops those run for casadi took a tenth of a 60 s log's fit)."""
     o = _np_ops()
-    chol = information_factor(o, J, m)
-    s_u = s0[:, None] + cholesky_apply(o, chol, (r - J @ s0)[:, None], m)
-    corr = cholesky_apply(o, chol, B @ s_u, m)
+    factor = cho_factor(J + information_pull(o, J, m) * np.eye(m), lower=True)
+    s_u = s0[:, None] + cho_solve(factor, (r - J @ s0)[:, None])
+    corr = cho_solve(factor, B @ s_u)
     s = np.ravel(s_u + corr * correction_limit(o, s_u, corr, m))
     entries = [n * i + j for i in range(n_w) for j in range(n_w)]
     size = np.linalg.norm((s - s0)[entries])

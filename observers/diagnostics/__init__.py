@@ -4,9 +4,10 @@
 
 from ._evidence import (has_evidence, log_uncertainty, EVIDENCE_PREFIX)
 from ._health import (Consistency, consistency_check, DEFAULT_SIGNIFICANCE, DEFAULT_WINDOWS)
-from ._misfit import (Misfit, misfit, inflate, MISFIT_SIGNIFICANCE, MISFIT_RATIO, GROSS_RATIO)
+from ._misfit import (Misfit, InertiaShape, misfit, inertia_note, inflate, MISFIT_SIGNIFICANCE, MISFIT_RATIO,
+    GROSS_RATIO)
 from ._faults import (saturation, offset_drift, OffsetDrift, SATURATION_SHARE, SATURATION_RATIO, DRIFT_SIGNIFICANCE,
     DRIFT_PARTS, DRIFT_LAGS)
 
 __all__ = ["has_evidence", "log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift",
-           "OffsetDrift", "Misfit", "misfit"]
+           "OffsetDrift", "Misfit", "InertiaShape", "misfit"]

@@ -40,21 +40,46 @@ data alone (:func:`misfit`):
    way). Row by row, so that a log of a few dozen blocks still tests ``K =
    n_w + 1`` numbers at a time. Where either half leaves a direction of the
    reading undetermined (held poses and slow moves) there is no test.
+3. **The inertia's shape.** Given the payload's sensitivity
+   (:func:`fmscal.observers.batch.payload_sensitivity`), the log's own
+   estimate of the inertia against the one given: each entry's change
+   ``delta`` over its scale (:meth:`fmscal.plant.Model.inertia_scale`), their
+   common scale taken out (no log can see it: it moves ``S`` exactly). With
+   ``C_j`` the needed wrench's change per entry (eq. (Y2)), ``R_j`` its part
+   the readings do not absorb (eq. (Y3)), ``e`` the reference fit's residual
+   and ``W`` one over each component's residual variance::
+
+       delta = -(sum_k C_k^T W R_k)^-1 sum_k C_k^T W e_k                       (M4)
+
+   ``C`` on the left, not ``R``: ``R`` holds the readings' noise through the
+   fit, as ``e`` does, and their product would bias ``delta`` by several per
+   cent on a noisy log; ``C`` comes from the poses alone. Its covariance
+   ``V`` is cluster-robust over blocks of time (eq. (U3), the scores
+   ``C_k^T W (e_k + R_k delta)``). Two chi-square tests on the entries less
+   one: the log **sees** the shape where ``delta^T V^-1 delta`` is
+   significant, and the shape is **beyond its stated uncertainty** where
+   ``delta^T (V + Sigma_I)^-1 delta`` is (``Sigma_I`` the inertia's stated
+   covariance, its common scale taken out): ``S_std`` then does not cover
+   ``S``'s error, and the model does not fit. Within it, (M1) and (M2) are
+   measured on the wrench of the inertia the log prefers: a shape the stated
+   uncertainty covers is carried by ``S_std`` (its payload part), not a misfit.
 """
 
 import copy
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
 from fmscal.plant import estimate_noise
 from fmscal.plant.numerics import FmscalError
 
-from fmscal.observers.batch import block_length, fit_readings, needed_wrench, nominal_motion
+from fmscal.observers.batch import block_length, fit_readings, needed_wrench, nominal_motion, small_sample_factor
 from fmscal.observers.core import reading_noise
 
-__all__ = ["Misfit", "misfit", "inflate", "MISFIT_SIGNIFICANCE", "MISFIT_RATIO", "GROSS_RATIO"]
+__all__ = ["Misfit", "InertiaShape", "misfit", "inertia_note", "inflate", "MISFIT_SIGNIFICANCE", "MISFIT_RATIO",
+           "GROSS_RATIO"]
 
 #: The probability, for a log the model fits, of calling it misfit by (M2).
 MISFIT_SIGNIFICANCE = 1e-3
@@ -100,6 +125,8 @@ class Misfit:
         Half the difference of the ``S`` fitted to the fast and the slow half
         of the motion, entry by entry: how far the estimate depends on which
         motion it is fitted to (:func:`inflate`).
+    inertia : InertiaShape or None
+        Eq. (M4), where the payload's sensitivity was given and the inertia has a shape (two entries or more).
     """
 
     ratio: np.ndarray
@@ -112,11 +139,66 @@ class Misfit:
     gross: bool
     warning: str = None
     S_spread: np.ndarray = None
+    inertia: object = None
 
     def to_dict(self):
         """The JSON form."""
-        return {"ratio": [float(r) for r in self.ratio], "statistic": float(self.statistic), "dof": int(self.dof),
-                "p_value": float(self.p_value), "fits": bool(self.fits), "gross": bool(self.gross)}
+        out = {"ratio": [float(r) for r in self.ratio], "statistic": float(self.statistic), "dof": int(self.dof),
+               "p_value": float(self.p_value), "fits": bool(self.fits), "gross": bool(self.gross)}
+        if self.inertia is not None:
+            out["inertia"] = self.inertia.to_dict()
+        return out
+
+
+@dataclass
+class InertiaShape:
+    """The inertia's shape as the log's torques see it, against the one given: eq. (M4).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The inertia's entries (:attr:`fmscal.plant.Model.inertia_names`).
+    delta, std : ndarray, shape (len(names),)
+        The log's estimate of each entry less the one given, over its scale
+        (:meth:`fmscal.plant.Model.inertia_scale`), their common scale taken
+        out; and its one-sigma uncertainty from the log.
+    statistic : float
+        ``delta^T V^-1 delta``.
+    dof : int
+        Its degrees of freedom: the entries less one (the common scale).
+    p_value : float
+        Of ``statistic``: below the significance, the log sees the shape.
+    p_stated : float
+        Of ``delta^T (V + Sigma_I)^-1 delta``: below the significance, the shape is beyond its stated uncertainty.
+    seen, covered : bool
+        ``p_value`` below the significance; ``p_stated`` at least the significance.
+    preferred : ndarray, shape (len(names),), or None
+        The inertia the log prefers: the entries given moved by ``delta`` times their scale (kg m^2, the
+        common scale as given); None where that is no valid inertia.
+    """
+
+    names: tuple
+    delta: np.ndarray
+    std: np.ndarray
+    statistic: float
+    dof: int
+    p_value: float
+    p_stated: float
+    seen: bool
+    covered: bool
+    preferred: np.ndarray = None
+
+    def words(self):
+        """The log's inertia in words: each entry's change in per cent of its scale, the common scale left out."""
+        return ", ".join(f"{n} {100 * d:+.0f} %" for n, d in zip(self.names, self.delta))
+
+    def to_dict(self):
+        """The JSON form."""
+        return {"names": list(self.names), "delta": [float(v) for v in self.delta],
+                "std": [float(v) for v in self.std], "statistic": float(self.statistic), "dof": int(self.dof),
+                "p_value": float(self.p_value), "p_stated": float(self.p_stated), "seen": bool(self.seen),
+                "covered": bool(self.covered),
+                "preferred": None if self.preferred is None else [float(v) for v in self.preferred]}
 
 
 def _pose_share(log, model, w, window):
@@ -168,8 +250,8 @@ def _split_statistic(w, w_hat, t, speed, wrench_sd, block):
     return worst[0], worst[1], min(1.0, n_w * worst[2]), difference
 
 
-def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE):
-    """Measure how far a log is from the model: eqs. (M1) and (M2) of the module docstring.
+def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE, sensitivity=None, payload_cov=None):
+    """Measure how far a log is from the model: eqs. (M1), (M2) and (M4) of the module docstring.
 
     Parameters
     ----------
@@ -180,7 +262,14 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE):
     window : float
         Smoothing window of the pose differentiation, s.
     significance : float
-        The p-value of (M2) below which the log is misfit.
+        The p-value of (M2) and (M4) below which the log is misfit.
+    sensitivity : observers.batch.PayloadSensitivity, optional
+        The payload's sensitivity on this log and model, with this ``window``
+        (:func:`fmscal.observers.batch.payload_sensitivity`): its needed wrench
+        is used, and with ``payload_cov`` the inertia's shape is tested (M4).
+    payload_cov : ndarray, shape (k, k), optional
+        The payload's covariance over its :meth:`~fmscal.plant.Model.payload_parameter_names`
+        (:meth:`fmscal.plant.physics.PayloadStd.covariance`).
 
     Returns
     -------
@@ -192,27 +281,128 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE):
         A log shorter than the smoothing window, or of another case.
     """
     model.check_log(log, "misfit")
-    trim, w = needed_wrench(log, model, window)
+    if sensitivity is None:
+        trim, w = needed_wrench(log, model, window)
+        wrench_sd = reading_noise(log.w_hat)
+    else:
+        trim, w, wrench_sd = sensitivity.rows, sensitivity.wrench, sensitivity.wrench_sd
     w_hat, t = log.w_hat[trim], log.t[trim]
-    wrench_sd = reading_noise(log.w_hat)
+    if len(w) < 8 * (model.n_w + 1):
+        raise FmscalError(f"{log.name}: too short to measure the model's misfit ({len(w)} samples)")
     fit = fit_readings(w, w_hat, None, wrench_sd)
     e = w - w_hat @ fit.S_hat.T - fit.c
-    noise = np.sqrt(np.square(fit.S_hat) @ np.square(wrench_sd) + np.square(_pose_share(log, model, w, window)))
+    pose_share = _pose_share(log, model, w, window)
+    inertia, preferred = None, w
+    if sensitivity is not None and payload_cov is not None:
+        inertia, correction = _inertia_shape(sensitivity, model, e, t, log.dt, window, payload_cov, significance)
+        if inertia is not None and inertia.covered:       # (M1), (M2) on the wrench of the inertia the log prefers
+            preferred = w + correction
+            fit = fit_readings(preferred, w_hat, None, wrench_sd)
+            e = preferred - w_hat @ fit.S_hat.T - fit.c
+    noise = np.sqrt(np.square(fit.S_hat) @ np.square(wrench_sd) + np.square(pose_share))
     ratio = fit.residual_rms / np.maximum(noise, 1e-300)
     v = nominal_motion(log, model, window)[trim][:, list(model.v_index)]
     speed = np.sum((v / np.maximum(np.std(v, axis=0), 1e-300)) ** 2, axis=1)
-    if len(w) < 8 * (model.n_w + 1):
-        raise FmscalError(f"{log.name}: too short to measure the model's misfit ({len(w)} samples)")
     block = block_length(e, log.dt, window)
-    statistic, dof, p_value, difference = _split_statistic(w, w_hat, t, speed, wrench_sd, block)
+    statistic, dof, p_value, difference = _split_statistic(preferred, w_hat, t, speed, wrench_sd, block)
     split = p_value < significance
     worst = int(np.argmax(ratio))
-    gross = bool(split or ratio[worst] >= GROSS_RATIO)
-    fits = bool(not split and ratio[worst] < MISFIT_RATIO)
-    warning = None if fits else _words(model, ratio, worst, statistic, dof, p_value, split)
+    beyond = inertia is not None and not inertia.covered
+    gross = bool(split or ratio[worst] >= GROSS_RATIO or beyond)
+    fits = bool(not split and ratio[worst] < MISFIT_RATIO and not beyond)
+    parts = [_inertia_words(inertia)] if beyond else []
+    if split or ratio[worst] >= MISFIT_RATIO:
+        parts.append(_words(model, ratio, worst, statistic, dof, p_value, split))
     return Misfit(ratio=ratio, residual_rms=fit.residual_rms, noise=noise, statistic=statistic, dof=dof,
-                  p_value=p_value, fits=fits, gross=gross, warning=warning,
-                  S_spread=np.abs(difference[:, :model.n_w]) / 2)
+                  p_value=p_value, fits=fits, gross=gross, warning="; ".join(parts) if parts else None,
+                  S_spread=np.abs(difference[:, :model.n_w]) / 2, inertia=inertia)
+
+
+def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significance):
+    """Eq. (M4): the inertia's shape the log prefers, its tests, and the needed wrench's change to it
+    (``(InertiaShape, correction)``; ``(None, None)`` for an inertia of one entry)."""
+    index = [sensitivity.names.index(name) for name in model.inertia_names]
+    if len(index) < 2:
+        return None, None
+    scale = model.inertia_scale()
+    u = sensitivity.values[index] / scale                       # the common scale, in each entry's own scale
+    Q = np.linalg.svd(u[None, :] / np.linalg.norm(u))[2][1:].T    # the shapes: orthogonal to it
+    C = (sensitivity.columns[:, :, index] * scale) @ Q
+    R = (sensitivity.unabsorbed(index) * scale) @ Q
+    weight = 1.0 / np.maximum(np.mean(e ** 2, axis=0), 1e-300)
+    H = np.einsum("mcj,c,mck->jk", C, weight, R)
+    H = (H + H.T) / 2
+    a = -np.linalg.solve(H, np.einsum("mcj,c,mc->j", C, weight, e))
+    scores = np.einsum("mcj,c,mc->mj", C, weight, e + R @ a)
+    blocks = ((t - t[0]) // block_length(e + R @ a, dt, window)).astype(int)
+    summed = np.zeros((blocks.max() + 1, len(a)))
+    np.add.at(summed, blocks, scores)
+    H_inv = np.linalg.inv(H)
+    V = small_sample_factor(blocks, len(e), len(a)) * H_inv @ (summed.T @ summed) @ H_inv
+    stated = Q.T @ (np.asarray(payload_cov, dtype=float)[np.ix_(index, index)] / np.outer(scale, scale)) @ Q
+    statistic = float(a @ np.linalg.solve(V, a))
+    dof = len(a)
+    if np.all(np.isfinite(stated)):
+        against_stated = float(a @ np.linalg.solve(V + stated, a))
+    else:                                                       # an inertia not determined: any shape is covered
+        against_stated = 0.0
+    p_value, p_stated = float(chi2.sf(statistic, dof)), float(chi2.sf(against_stated, dof))
+    delta = Q @ a
+    preferred = sensitivity.values.copy()
+    preferred[index] += delta * scale
+    try:
+        model.with_payload_parameters(preferred)
+        preferred = preferred[index]
+    except FmscalError:                                         # the shape the log says is no body's
+        preferred = None
+    shape = InertiaShape(names=tuple(model.inertia_names), delta=delta, std=np.sqrt(np.diag(Q @ V @ Q.T)),
+                         statistic=statistic, dof=dof, p_value=p_value, p_stated=p_stated,
+                         seen=p_value < significance, covered=p_stated >= significance, preferred=preferred)
+    return shape, C @ a
+
+
+def _inertia_words(shape):
+    """The warning of an inertia's shape beyond its stated uncertainty (M4)."""
+    return (f"the payload's inertia does not fit the log's torques: they say {shape.words()} of each entry's scale "
+            f"against the inertia given (a common scale aside, which no log can see), beyond the inertia's stated "
+            f"uncertainty (p = {shape.p_stated:.2g}), which S_std's payload part takes; check the inertia's entries, "
+            f"that it is about the centre of mass in the sensor's axes{_preferred_words(shape)}, or state its "
+            "uncertainty (--inertia-std)")
+
+
+def _preferred_words(shape):
+    """``", or try the inertia the log prefers (--inertia ...)"``, where that is a valid inertia; else empty."""
+    if shape.preferred is None:
+        return ""
+    return (f", or try the inertia the log prefers (--inertia {' '.join(f'{v:.3g}' for v in shape.preferred)}, "
+            "the common scale as given)")
+
+
+def inertia_note(shape, converged=True):
+    """What a calibration says of an inertia whose shape the log sees within its stated uncertainty (M4).
+
+    Parameters
+    ----------
+    shape : InertiaShape or None
+    converged : bool
+        Whether the calibration converged: where it did not, the inertia is named as a likely cause (its shape
+        moves the fit with the motion: the estimate does not settle, the latency seems to step).
+
+    Returns
+    -------
+    str or None
+        None where the log does not see the shape, or sees it beyond its stated uncertainty (the misfit's
+        warning says so).
+    """
+    if shape is None or not shape.seen or not shape.covered:
+        return None
+    seen = (f"the log's torques see the payload's inertia's shape: {shape.words()} of each entry's scale against "
+            f"the inertia given (a common scale aside; p = {shape.p_value:.2g})")
+    if converged:
+        return f"{seen}, within its stated uncertainty, which S_std's payload part carries"
+    return (f"{seen}: such a shape moves the fit with the motion (S_hat, and the latency found along the log), and "
+            f"may be why the calibration did not converge (S_std's payload part covers S's error)"
+            f"{_preferred_words(shape)}")
 
 
 def _words(model, ratio, worst, statistic, dof, p_value, split):

@@ -4,8 +4,8 @@ compensation.
 """
 
 from ._filter import (filter_layout, input_layout, params_layout, initial_state, filter_step, bias_matrix,
-    information_factor, correction_limit, pack_lower, unpack_lower, cholesky, cholesky_apply, cholesky_solve,
-    spd_inverse, solve_information, V0_SD, POSE_SD_FLOOR)
+    information_factor, information_pull, correction_limit, pack_lower, unpack_lower, cholesky, cholesky_apply,
+    cholesky_solve, spd_inverse, solve_information, V0_SD, POSE_SD_FLOOR)
 from ._noise_level import (NoiseLevel, NIS_DOF, DEFAULT_TOLERANCE, DEFAULT_Q_START, level_update)
 from ._eiv import (EivCompensation, compensation_layout, regressor_step, copy_predict, error_variances,
     beta_from_copy)

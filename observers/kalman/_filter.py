@@ -38,7 +38,7 @@ solves ``(J - B) s = r``. The derivation is in the module docstring of
 
 import numpy as np
 
-from fmscal.plant.numerics import FmscalError, StateLayout, ops
+from fmscal.plant.numerics import FmscalError, StateLayout, is_symbolic, ops
 
 from fmscal.observers.core import matrix as mx, position_increment, velocity_increment
 
@@ -142,9 +142,18 @@ def pack_lower(A, k):
 
 
 def unpack_lower(o, v, k):
-    """The symmetric ``k x k`` matrix from its packed lower triangle."""
+    """The symmetric ``k x k`` matrix from its packed lower triangle (numbers: one gather, the same entries)."""
     idx = lambda i, j: i * (i + 1) // 2 + j if j <= i else j * (j + 1) // 2 + i     # noqa: E731
+    if not is_symbolic(v) and np.ndim(v) == 1:
+        return np.asarray(v, dtype=float)[_lower_index(k)]
     return o.matrix([[v[idx(i, j)] for j in range(k)] for i in range(k)])
+
+
+def _lower_index(k):
+    """Where each entry of a symmetric ``k x k`` matrix sits in its packed lower triangle, shape (k, k)."""
+    i, j = np.indices((k, k))
+    low, high = np.minimum(i, j), np.maximum(i, j)
+    return high * (high + 1) // 2 + low
 
 
 def cholesky(o, A, k):
@@ -204,8 +213,13 @@ def information_factor(o, J, m):
     ``lam`` (a pull towards the start, negligible once every entry is
     excited) keeps the estimate defined from the first sample.
     """
+    return cholesky(o, J + information_pull(o, J, m) * mx.eye(o, m), m)
+
+
+def information_pull(o, J, m):
+    """``lam`` of :func:`information_factor`: ``1e-10`` of ``J``'s mean diagonal (and ``1e-12``)."""
     trace = sum(J[i, i] for i in range(m))
-    return cholesky(o, J + (_REG_REL * trace / m + _REG_ABS) * mx.eye(o, m), m)
+    return _REG_REL * trace / m + _REG_ABS
 
 
 def correction_limit(o, s, corr, m):
@@ -358,6 +372,10 @@ def bias_matrix(o, beta, var_w, n_w, n):
     (``l = n_w``, a constant 1 without noise) has none.
     """
     idx = lambda a, i: a * (a + 1) // 2 + i if i <= a else i * (i + 1) // 2 + a     # noqa: E731
+    if not is_symbolic(beta, var_w) and np.ndim(beta) == 1:       # numbers: the same products, in one Kronecker
+        weights = np.zeros(n)
+        weights[:n_w] = np.asarray(var_w, dtype=float)[:n_w]
+        return np.kron(np.asarray(beta, dtype=float)[_lower_index(n_w)].T, np.diag(weights))
     rows = []
     for i in range(n_w):
         for l in range(n):

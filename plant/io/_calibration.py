@@ -23,7 +23,9 @@ The file is JSON, format ``fmscal-calibration/2``::
      "log": {"name": "run.csv", "sha256": "..."}, "latency": s or null, "latency_std": s or null,
      "latency_estimated": false, "gravity": [gx, gy, gz] or null, "noise": {...} or null,
      "date": "2026-11-22T10:00:00+00:00", "forced": false, "reading": "reaction",
-     "converged": true, "warnings": [...], "undetermined": [...], "undetermined_directions": [[...]]}
+     "converged": true, "warnings": [...], "undetermined": [...], "undetermined_directions": [[...]],
+     "S_std_statistical": [[...] x n] or null, "S_std_payload": [[...] x n] or null,
+     "payload_cov": [[...]] or null}
 
 ``n`` is 3 (planar: ``b`` is ``[M, f_x, f_y]``, the payload's ``rho`` 2
 numbers, the sensor from the centre of mass, and ``inertia`` 1) or 6 (spatial
@@ -37,6 +39,14 @@ without the offset), where the method gives one. ``latency`` is signed (s,
 positive: the poses arrive late). ``undetermined`` names the directions of the
 reading the data left undetermined, in words; ``undetermined_directions``
 holds them as unit vectors of the augmented reading ``[w_hat, 1]``.
+``S_std`` holds two parts in quadrature: ``S_std_statistical`` (the log's
+noise, the latency's uncertainty, a misfit's widening) and ``S_std_payload``
+(the payload's stated uncertainty carried in), ``payload_cov`` the payload's
+covariance over the case's payload numbers (planar ``mass, RX, RY, I_G``;
+spatial ``mass, X, Y, Z, IXX, IYY, IZZ, IXY, IXZ, IYZ, gravity``: kg, m,
+kg m^2 and m/s^2, gravity's size); ``cov`` holds both parts. Files written
+before they were recorded read with the three None: their ``S_std`` took the
+payload as exact.
 
 Files of format ``fmscal-calibration/1`` (the keys up to ``reading``) still
 read: the keys added by ``/2`` are then unknown (``converged`` None). In
@@ -220,6 +230,13 @@ class Calibration:
         The directions of the reading the data left undetermined, in words.
     undetermined_directions : list of array_like, shape (n + 1,)
         The same as unit vectors of the augmented reading ``[w_hat, 1]``.
+    S_std_statistical, S_std_payload : array_like, shape (n, n), optional
+        ``S_std``'s two parts (in quadrature): the log's (its noise, the
+        latency's uncertainty, a misfit's widening) and the payload's
+        (its stated uncertainty carried in); None where not known.
+    payload_cov : array_like, shape (k, k), optional
+        The payload's covariance the calibration took, over the case's
+        :meth:`fmscal.plant.Model.payload_parameter_names` (module docstring).
     kind : {"planar", "spatial", "table"}, optional
         The case (:data:`KINDS`); default from the size of ``S``.
     noise_estimated : list of str
@@ -275,6 +292,9 @@ class Calibration:
     undetermined: list = field(default_factory=list)
     undetermined_directions: list = field(default_factory=list)
     kind: str = None
+    S_std_statistical: np.ndarray = None
+    S_std_payload: np.ndarray = None
+    payload_cov: np.ndarray = None
     noise_estimated: list = field(default_factory=list, compare=False)
     E: float = field(default=None, compare=False)
     E_blocks: tuple = field(default=None, compare=False)
@@ -295,10 +315,14 @@ class Calibration:
         if not isinstance(self.payload, kind) and not (self.payload is None and model.under_gravity):
             raise TypeError(f"payload must be a plant.{kind.__name__} for a {n}x{n} S; "
                             f"got {type(self.payload).__name__}")
-        for name, shape, undetermined in (("S_std", (n, n), True), ("b", (n,), False), ("b_std", (n,), True)):
+        for name, shape, undetermined in (("S_std", (n, n), True), ("b", (n,), False), ("b_std", (n,), True),
+                                          ("S_std_statistical", (n, n), True), ("S_std_payload", (n, n), True)):
             value = getattr(self, name)
             if value is not None:
                 set_(self, name, _matrix(value, shape, name, "calibration", undetermined))
+        if self.payload_cov is not None:
+            k = len(model.payload_parameter_names())
+            set_(self, "payload_cov", _matrix(self.payload_cov, (k, k), "payload_cov", "calibration", True))
         if self.cov is not None:
             k = np.shape(self.cov)[0] if np.ndim(self.cov) == 2 else 0
             if k not in (n * n, n * (n + 1)):
@@ -381,7 +405,9 @@ class Calibration:
                 "gravity": _listed(self.gravity), "noise": None if self.noise is None else self.noise.to_dict(),
                 "date": self.date, "forced": self.forced, "reading": self.reading, "converged": self.converged,
                 "warnings": list(self.warnings), "undetermined": list(self.undetermined),
-                "undetermined_directions": [_listed(d) for d in self.undetermined_directions]}
+                "undetermined_directions": [_listed(d) for d in self.undetermined_directions],
+                "S_std_statistical": _listed(self.S_std_statistical), "S_std_payload": _listed(self.S_std_payload),
+                "payload_cov": _listed(self.payload_cov)}
 
     def to_json(self, saved=False):
         """The report ``fmscal calibrate --json`` prints: one line of strict JSON (NaN and infinity as null).
@@ -389,8 +415,9 @@ class Calibration:
         Its keys depend on the case (:attr:`kind`): every case has
         ``observer`` (the method), ``S``, ``S_std``, ``b``, ``b_std``,
         ``latency``, ``latency_estimated``, ``converged``, ``warnings`` and
-        ``saved``; a planar log adds ``noise``, ``noise_estimated``, ``fit``
-        and, with a truth, ``E``; a spatial log adds ``kind``,
+        ``saved``; a log's adds ``S_std_statistical``, ``S_std_payload`` and
+        ``payload_std`` (the payload's standard deviations by name); a planar
+        log adds ``noise``, ``noise_estimated``, ``fit`` and, with a truth, ``E``; a spatial log adds ``kind``,
         ``undetermined`` (:attr:`undetermined_directions`, as vectors),
         ``reading`` and, with a truth, ``E``, ``E_torque`` and ``E_force``;
         a log whose fit rejected samples as glitches adds ``glitches``
@@ -415,6 +442,9 @@ class Calibration:
         out = {**head, "S": self.S, "S_std": self.S_std, "b": self.b, "b_std": self.b_std,
                "latency": self.latency, "latency_std": self.latency_std, "latency_estimated": self.latency_estimated,
                "converged": self.converged}
+        if self.S_std_payload is not None:             # a log's: S_std's two parts, and the payload's covariance
+            out.update(S_std_statistical=self.S_std_statistical, S_std_payload=self.S_std_payload,
+                       payload_std=_payload_std(self.payload_cov, self.kind))
         if self.kind == "planar":
             out.update(noise=None if self.noise is None else self.noise.to_dict(),
                        noise_estimated=list(self.noise_estimated), warnings=list(self.warnings), fit=self.fit)
@@ -637,7 +667,21 @@ def _second_format(data, model, source):
         raise CalibrationFileError(f"{source}: undetermined_directions must be a list of vectors; "
                                    f"got {short_repr(directions)}")
     out["undetermined_directions"] = [_matrix(d, (n + 1,), "undetermined_directions", source) for d in directions]
+    for key in ("S_std_statistical", "S_std_payload"):              # absent in files written before: None
+        if data.get(key) is not None:
+            out[key] = _matrix(data[key], (n, n), key, source, undetermined=True)
+    if data.get("payload_cov") is not None:
+        k = len(model.payload_parameter_names())
+        out["payload_cov"] = _matrix(data["payload_cov"], (k, k), "payload_cov", source, undetermined=True)
     return out
+
+
+def _payload_std(payload_cov, kind):
+    """The payload's standard deviations by name (the case's payload numbers), for a report; None without."""
+    if payload_cov is None:
+        return None
+    model = next(m for m in MODELS if _kind_of(kind, m))
+    return dict(zip(model.payload_parameter_names(), np.sqrt(np.maximum(np.diag(payload_cov), 0.0))))
 
 
 def json_ready(value):

@@ -189,6 +189,52 @@ class Model:
         """
         return self
 
+    # --- the payload's numbers, as its uncertainty is stated (fmscal.plant.physics.PayloadStd) ----------
+    @classmethod
+    def payload_parameter_names(cls):
+        """The numbers a payload's uncertainty is stated on, in order: ``"mass"`` (kg), the position vector's
+        (:attr:`payload_position_names`, m), the inertia's (:attr:`inertia_names`, kg m^2) and, for a model
+        :attr:`under_gravity`, ``"gravity"`` (its size, m/s^2).
+
+        Returns
+        -------
+        tuple of str
+        """
+        return ("mass", *cls.payload_position_names, *cls.inertia_names) + (("gravity",) if cls.under_gravity else ())
+
+    def payload_parameters(self):
+        """The values of :meth:`payload_parameter_names` for this model, shape (k,)."""
+        p = self.payload
+        gravity = [float(np.linalg.norm(self.gravity))] if self.under_gravity else []
+        return np.array([p.mass, *getattr(p, self.payload_position), *np.atleast_1d(p.inertia), *gravity], dtype=float)
+
+    def with_payload_parameters(self, values):
+        """This model with the payload (and gravity's size, its direction kept) at ``values``.
+
+        Parameters
+        ----------
+        values : array_like, shape (k,)
+            In the order of :meth:`payload_parameter_names`.
+
+        Returns
+        -------
+        Model
+            A copy; the payload class checks the values (one-line :class:`FmscalError`).
+        """
+        values = np.asarray(values, dtype=float)
+        k_pos, k_in = len(self.payload_position_names), len(self.inertia_names)
+        model = copy.copy(self)
+        model.payload = self.payload_from(values[0], values[1 + k_pos:1 + k_pos + k_in], values[1:1 + k_pos])
+        if self.under_gravity:
+            g = np.asarray(self.gravity, dtype=float)
+            model.gravity = tuple(float(v) for v in g * (values[-1] / np.linalg.norm(g)))
+        return model
+
+    def inertia_scale(self):
+        """The scale each inertia entry's relative uncertainty is of (:class:`fmscal.plant.physics.PayloadStd`),
+        kg m^2, shape (len(inertia_names),): by default each entry's own size."""
+        return np.abs(np.atleast_1d(np.asarray(self.payload.inertia, dtype=float)))
+
     # --- sizes ------------------------------------------------------------------------------------
     @property
     def n_w(self):
@@ -764,6 +810,12 @@ class SpatialModel(Model):
         model._blocks = (ca.reshape(values[k:k + 18], 6, 3).T, ca.reshape(values[k + 18:k + 36], 6, 3).T)
         model.gravity = values[k + 36:self.payload_size]
         return model
+
+    def inertia_scale(self):
+        """Each inertia entry's scale, ``Ixx Iyy Izz`` and ``sqrt(Ixx Iyy)``, ``sqrt(Ixx Izz)``, ``sqrt(Iyy Izz)``
+        for the products (kg m^2, shape (6,)): a product of inertia may be zero, its uncertainty is not."""
+        ixx, iyy, izz = self.payload.inertia[:3]
+        return np.sqrt([ixx * ixx, iyy * iyy, izz * izz, ixx * iyy, ixx * izz, iyy * izz])
 
     def reading_scale(self, log):
         """Each reading component's spread in ``log`` (N m, N), shape (6,).
