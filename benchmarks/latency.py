@@ -19,7 +19,12 @@ the worst and the median of E (latency estimated) over E at the known
 latency (the same interpolation, :meth:`fmscal.plant.Log.shift_poses`), the
 z-scores' rms ``(S_hat - S) / S_std`` over the entries and seeds and the share of
 seeds that converged (each also with the latency given: on short logs the floor
-itself does not always settle), and the latency's own z-scores' rms. With
+itself does not always settle), and the latency's own z-scores' rms; and the
+floor's own latency (eq. LF2 of ``observers/batch/_linearised_floor.py``): its
+step from the known latency over its standard deviation (rms over the seeds),
+and the largest of its step from the estimate over the estimate's standard
+deviation (rule 8 of ``observers/batch/_latency.py`` takes the fit's latency
+beyond 3; the seeds where it did are counted). With
 ``--per-seed``, every seed's line, and E at the known latency moved by one
 standard deviation of the estimate towards it over E at the known latency:
 what a latency known only to its own uncertainty costs (``--latencies`` picks
@@ -111,6 +116,7 @@ def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-ar
         for samples in latencies:
             latency = samples * 1e-3
             ratios, z, z_known, converged, converged_known, z_latency, ratios_1sd = [], [], [], [], [], [], []
+            z_fit, fit_apart, fit_taken = [], [], 0
             for seed in range(seeds):
                 log, S, payload, latency = make(seed, samples * 1e-3)
                 found = calibrate(log, payload)
@@ -123,6 +129,13 @@ def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-ar
                 converged_known.append(known.converged)
                 if found.latency_std:
                     z_latency.append((found.latency - latency) / found.latency_std)
+                step_known, step_found = known.run.info.get("latency_step"), found.run.info.get("latency_step")
+                if step_known:
+                    z_fit.append(step_known["step"] / step_known["std"])
+                if any("the fit's latency is taken" in note for note in found.notes):
+                    fit_taken += 1                 # rule 8: found's step is then from the fit's own latency
+                elif step_found and found.latency_std:
+                    fit_apart.append(abs(step_found["step"]) / found.latency_std)
                 if per_seed and found.latency_std:
                     moved = latency + np.sign(found.latency - latency) * found.latency_std
                     ratios_1sd.append(calibration_error(calibrate(log, payload, latency=moved).S, S) / E_known)
@@ -135,7 +148,9 @@ def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-ar
                          "z_rms_known": float(np.sqrt(np.mean(np.square(z_known)))),
                          "converged": float(np.mean(converged)), "converged_known": float(np.mean(converged_known)),
                          "latency_z_rms": float(np.sqrt(np.mean(np.square(z_latency)))) if z_latency else np.nan,
-                         "E_1sd_ratio_max": float(np.max(ratios_1sd)) if ratios_1sd else np.nan})
+                         "E_1sd_ratio_max": float(np.max(ratios_1sd)) if ratios_1sd else np.nan,
+                         "fit_z_rms": float(np.sqrt(np.mean(np.square(z_fit)))) if z_fit else np.nan,
+                         "fit_apart_max": float(np.max(fit_apart)) if fit_apart else np.nan, "fit_taken": fit_taken})
             print(_line(rows[-1]), flush=True)
     return rows
 
@@ -177,7 +192,8 @@ def _line(row):
     return (f"{row['source']:>14} {row['latency_samples']:+5.1f}  E ratio max {row['E_ratio_max']:.3f} median "
             f"{row['E_ratio_median']:.3f}  z rms {row['z_rms']:.2f} (known latency {row['z_rms_known']:.2f})  "
             f"converged {100 * row['converged']:.0f} % (known {100 * row['converged_known']:.0f} %)  "
-            f"latency z rms {row['latency_z_rms']:.2f}"
+            f"latency z rms {row['latency_z_rms']:.2f}  fit's own: z rms {row['fit_z_rms']:.2f}, from the estimate "
+            f"at most {row['fit_apart_max']:.2f} sd, taken on {row['fit_taken']} seeds"
             + (f"  E_1sd ratio max {row['E_1sd_ratio_max']:.3f}" if np.isfinite(row["E_1sd_ratio_max"]) else ""))
 
 

@@ -238,7 +238,7 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
     log : plant.Log
         A log of the model's case, full-rate or multi-rate (samples without
         a pose only predict). For a pose stream that lags the sensor, pass
-        ``log.shift_poses(latency)``.
+        ``log.shift_poses(latency)``, and ``noise`` measured on the log before the shift.
     model : plant.Model or plant.Payload
         The problem (a model with :attr:`fmscal.plant.Model.linear_channels`);
         a :class:`plant.Payload` stands for the planar model of it.
