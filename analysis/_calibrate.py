@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
-from fmscal.observers.batch import describe_direction, estimate_latency, payload_sensitivity
+from fmscal.observers.batch import (describe_direction, estimate_latency, fit_latency, given_latency_warnings,
+                                   payload_sensitivity)
 from fmscal.observers.core import (EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches,
                                    calibration_uncertainty)
 from fmscal.observers.diagnostics import (consistency_check, has_evidence, inertia_note, misfit, offset_drift,
@@ -131,8 +132,21 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
       :func:`fmscal.observers.batch.estimate_latency`; its variance is then
       carried into ``S_std``, ``b_std`` and ``cov``,
       and a latency the log does not determine, or one that steps mid-log,
-      leaves ``converged`` False);
-      the noise model not given is estimated from the log;
+      leaves ``converged`` False). Where the maximum-likelihood floor is
+      the method, its own likelihood checks the estimate: where it prefers
+      a latency more than :data:`fmscal.observers.batch.AGREEMENT_SIGMAS`
+      of the estimate's standard deviations away, the log is fitted again
+      at the floor's latency, and a note says so (rule 8 of
+      :mod:`fmscal.observers.batch._latency`). A latency given is checked
+      against the estimate (a warning naming both beyond
+      :data:`~fmscal.observers.batch.AGREEMENT_SIGMAS` standard deviations)
+      and ``converged`` is False where the fit at it is measurably worse:
+      the floor's own step from it beyond that many of its standard
+      deviations, for another method the estimate that far (rule 9).
+      The noise model not given is estimated from the log as recorded,
+      before its poses are moved (interpolated between measurements, a
+      fraction of a sample, their noise is smoothed, and a method measuring
+      it on them would take it for less);
     - a **spatial log**: the same in 3D (the maximum-likelihood floor by
       default, or least squares, or an online method that runs in 3D), the
       reading's sign turned first for ``reading="load"``;
@@ -176,7 +190,7 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
         Logs: delay of the pose stream behind the sensor stream, s, any
         fraction of a sample; negative: the wrench stream behind the poses
         (a sensor's internal filter); less than half the log in magnitude.
-        None: estimated.
+        None: estimated. Given, it is checked against the log's own estimate (above).
     max_latency : float, optional
         Logs: the largest magnitude of the delay searched when it is
         estimated, s, either sign (default :data:`DEFAULT_MAX_LATENCY`).
@@ -505,29 +519,27 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     noise, noise_estimated = None, []
     if model.given_noise:
         noise, noise_estimated = _noise_model(log, model, pose_noise, wrench_noise)
-    latency_estimated, timing = latency is None, None
-    if latency_estimated:
-        timing = estimate_latency(signed, model, max_latency, offset=offset)
-        latency = timing.latency
-    aligned = signed.shift_poses(latency)
+    latency_estimated = latency is None
+    # the log's own latency: the one used where none is given, else what the one given is checked against
+    timing = _latency_estimate(signed, model, max_latency, offset, latency_estimated)
+    latency = timing.latency if latency_estimated else float(latency)
+    # the noise of the poses as recorded: moved by a fraction of a sample, they are interpolated between
+    # measurements, which smooths their noise, and a method's own estimate from them would take it for less
+    told = noise if noise is not None else estimate_noise(signed)
     reference = LeastSquares(model, offset=offset) if "reference" in model.calibration_checks else None
-    # the glitches bridged above are the ones each run reports (the search is not repeated)
-    ls_result = None if reference is None else reference.run(aligned, glitches=glitches)
-    if reference is not None and name == reference.name:
-        result = ls_result
-    else:
-        result = make_observer(name, model, noise, {"offset": offset}).run(aligned, glitches=glitches)
-    if result.diverged:                  # a diverging estimate is an error, never an answer
-        raise DivergedError(f"{name} diverged on {log.name} at t = {result.t[-1]:.3f} s"
-                            + (f": {result.warnings[-1]}" if result.warnings else "")
-                            + "; no calibration (check the mass properties, units and excitation)")
-    result = _with_latency_uncertainty(result, timing)
+    aligned, ls_result, result = _run_aligned(signed, latency, model, name, told, offset, glitches, reference)
+    moved = fit_latency(timing, result.info.get("latency_step")) if latency_estimated else None
+    if moved is not None:                # the fit's own likelihood prefers another latency (rule 8): fitted there
+        timing, latency = moved, moved.latency
+        aligned, ls_result, result = _run_aligned(signed, latency, model, name, told, offset, glitches, reference)
+    result = _with_latency_uncertainty(result, timing if latency_estimated else None)
     try:                                # how S moves with the payload: its uncertainty's way into S_std (eq. Y1)
         sensitivity = payload_sensitivity(aligned, model, offset=offset)
     except FmscalError as err:
         sensitivity, payload_problem = None, str(err)
     run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches,
-               latency=timing, sensitivity=sensitivity, payload_cov=payload_cov)
+               latency=timing, latency_given=None if latency_estimated else latency,
+               sensitivity=sensitivity, payload_cov=payload_cov)
     warnings, why = [], None
     if sensitivity is None:
         warnings.append(f"the payload's uncertainty could not be carried into S_std ({payload_problem}): S_std takes "
@@ -561,22 +573,52 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     statistical = run.result.S_std
     run.result, payload_part = _with_payload_uncertainty(run.result, sensitivity, payload_cov)
     # the noise model recorded with the calibration (compensation's covariance needs it): the one the method was
-    # given, else the log's own, measured as the methods that take none measure theirs
-    recorded = noise if noise is not None else estimate_noise(log)
+    # told, the log's own where none was given (measured on the poses as recorded, the glitches bridged)
+    recorded = told
     own, result = result, run.result     # a check may have widened the uncertainty (a copy: the method's own kept)
     E, E_blocks = _errors(truth, result, model, log)
     directions = [np.asarray(d, dtype=float) for d in result.info.get("undetermined", [])]
     return _calibration(result, name, dict(
         payload=model.payload, method=name, latency=float(latency), latency_estimated=latency_estimated,
-        latency_std=None if timing is None or not np.isfinite(timing.std) else float(timing.std),
+        latency_std=None if not latency_estimated or not np.isfinite(timing.std) else float(timing.std),
         reading=reading, gravity=model.gravity if model.under_gravity else None, noise=recorded,
         noise_estimated=noise_estimated if noise is not None else ["wrench", "pose"], converged=converged,
         warnings=warnings, units=run.units,
         fit=None if reference is None else {k: v for k, v in reference.report.to_dict().items() if k != "warnings"},
         undetermined=[describe_direction(d) for d in directions], undetermined_directions=directions,
-        E=E, E_blocks=E_blocks, notes=notes, kind=cls.name, run=own,
+        E=E, E_blocks=E_blocks, notes=notes + (timing.notes if latency_estimated else []), kind=cls.name, run=own,
         why_unconverged=None if converged else why, glitches=glitches.to_dict() if glitches.found else None,
         S_std_statistical=statistical, S_std_payload=payload_part, payload_cov=payload_cov))
+
+
+def _latency_estimate(signed, model, max_latency, offset, required):
+    """The log's own latency (:func:`fmscal.observers.batch.estimate_latency`). Where a latency is given
+    (``required`` False) it is only what the one given is checked against: a log the search cannot take (too
+    short for ``max_latency``) gives None instead of an error."""
+    if required:
+        return estimate_latency(signed, model, max_latency, offset=offset)
+    try:
+        return estimate_latency(signed, model, max_latency, offset=offset)
+    except FmscalError:
+        return None
+
+
+def _run_aligned(signed, latency, model, name, noise, offset, glitches, reference):
+    """The method (and the least-squares reference, where the model declares one) on the log with its poses
+    moved back by ``latency``; ``(aligned, reference's result or None, result)``. A diverging estimate is an
+    error, never an answer."""
+    aligned = signed.shift_poses(latency)
+    # the glitches bridged before are the ones each run reports (the search is not repeated)
+    ls_result = None if reference is None else reference.run(aligned, glitches=glitches)
+    if reference is not None and name == reference.name:
+        result = ls_result
+    else:
+        result = make_observer(name, model, noise, {"offset": offset}).run(aligned, glitches=glitches)
+    if result.diverged:
+        raise DivergedError(f"{name} diverged on {signed.name} at t = {result.t[-1]:.3f} s"
+                            + (f": {result.warnings[-1]}" if result.warnings else "")
+                            + "; no calibration (check the mass properties, units and excitation)")
+    return aligned, ls_result, result
 
 
 def _noise_model(log, model, pose_noise, wrench_noise):
@@ -629,6 +671,7 @@ class _Run:
     latency: object = None
     sensitivity: object = None
     payload_cov: object = None
+    latency_given: float = None
 
 
 def _check_units(run, warnings):
@@ -703,10 +746,13 @@ def _check_flipped_gain(run, warnings):
 def _check_latency(run, warnings):
     """``"latency"``: the log determines the pose stream's latency and keeps one along it
     (:class:`fmscal.observers.batch.LatencyEstimate`: a clear minimum, its standard deviation within a few
-    samples, no step mid-log); passes where the latency was given."""
+    samples, no step mid-log). A latency given is checked against the log's estimate and the fit's own
+    (:func:`fmscal.observers.batch.given_latency_warnings`, rule 9 of :mod:`fmscal.observers.batch._latency`):
+    fails where the fit at the latency given is measurably worse."""
     found = run.latency
-    if found is None:
-        return [], True, None
+    if run.latency_given is not None:
+        found, worse = given_latency_warnings(run.latency_given, found, run.result.info.get("latency_step"))
+        return found, not worse, "the latency given does not fit the log" if worse else None
     why = None if found.determined else ("the latency changes along the log" if found.step is not None
                                          else "the log does not determine the pose stream's latency")
     return list(found.warnings), found.determined, why

@@ -5,16 +5,26 @@ Usage (from the repository's root)::
     python benchmarks/latency.py --timing               # fmscal calibrate of a 60 s spatial-arm log at 1 kHz,
                                                         # the latency estimated and given, and their ratio
     python benchmarks/latency.py --seeds 20 --duration 20   # the targets' table (a few minutes of CPU per seed)
+    python benchmarks/latency.py --held --seeds 3 --duration 60   # the wrench held over each step (MuJoCo):
+                                                        # E at the default against E over a grid of latencies
 
 The table: for each source of logs (``simulate``'s ``spatial-arm`` and
 ``spatial-mocap``, and MuJoCo's ``spatial-arm``, ``tests/mujoco_log.py``, its
-poses delayed by :meth:`fmscal.plant.SpatialModel.interpolate_pose`) and each
-true latency (-1, 0, 0.4, 1, 2.5 and 5 samples of 1 ms), over the seeds:
+poses delayed by :meth:`fmscal.plant.SpatialModel.interpolate_pose`, and
+``mujoco-held``, the same written with the wrench held over each step, whose
+poses line up half a sample later than their delay: ``tests/mujoco_log.py``
+says why) and each true latency (-1, 0, 0.4, 1, 2.5 and 5 samples of 1 ms),
+over the seeds:
 the worst and the median of E (latency estimated) over E at the known
 latency (the same interpolation, :meth:`fmscal.plant.Log.shift_poses`), the
 z-scores' rms ``(S_hat - S) / S_std`` over the entries and seeds and the share of
 seeds that converged (each also with the latency given: on short logs the floor
-itself does not always settle), and the latency's own z-scores' rms. With
+itself does not always settle), and the latency's own z-scores' rms; and the
+floor's own latency (eq. LF2 of ``observers/batch/_linearised_floor.py``): its
+step from the known latency over its standard deviation (rms over the seeds),
+and the largest of its step from the estimate over the estimate's standard
+deviation (rule 8 of ``observers/batch/_latency.py`` takes the fit's latency
+beyond 3; the seeds where it did are counted). With
 ``--per-seed``, every seed's line, and E at the known latency moved by one
 standard deviation of the estimate towards it over E at the known latency:
 what a latency known only to its own uncertainty costs (``--latencies`` picks
@@ -22,7 +32,14 @@ the latencies). The MuJoCo
 poses are delayed before their noise is drawn, as a late pose stream is
 measured (delayed after it, a fractional delay would average neighbouring
 noise draws, which no log holds). Targets: E within
-1.15x, the z-scores' rms within [0.8, 1.25], 95 % converged. The payload is the simulator's, taken as exact
+1.15x, the z-scores' rms within [0.8, 1.25], 95 % converged.
+
+``--held``: MuJoCo's logs with the wrench held over each step (issue 46's
+case: 60 s at 1 kHz), seed by seed: the latency estimated (the
+cross-correlation's, and the fit's own, eq. LF2) and E at the default over
+the smallest E over a grid of latencies given (0 to 1 ms), for the floor
+and for the EKF, and the EKF's E at the default over its E at ``dt / 2``.
+Target: the default's E within 1.15x of the grid's best. The payload is the simulator's, taken as exact
 (``PayloadStd.exact()``): ``S_std``'s statistical part is what the z-scores test.
 """
 
@@ -65,26 +82,29 @@ def timing(repeat=3):
 
 
 def _source(name, duration):
-    """``seed, latency -> (log, S, payload)`` of a source of logs."""
+    """``seed, latency -> (log, S, payload, aligned)`` of a source of logs; ``aligned`` is the latency at which
+    the log's poses line up with its readings in fmscal's models: the delay, and half a sample more where the
+    wrench is held over each step (``tests/mujoco_log.py``)."""
     from fmscal.plant import SPATIAL_SCENARIOS
-    if name == "mujoco-arm":
+    if name in ("mujoco-arm", "mujoco-held"):
         from mujoco_log import mujoco_log
         scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=duration)
+        hold = name == "mujoco-held"
 
         def make(seed, latency):
-            log, S, _ = mujoco_log(scenario, seed, latency)     # the poses delayed before their noise is drawn
-            return log, S, scenario.payload
+            log, S, _ = mujoco_log(scenario, seed, latency, hold=hold)   # the poses delayed before their noise
+            return log, S, scenario.payload, latency + hold * scenario.dt / 2
         return make
     scenario = SPATIAL_SCENARIOS[name].with_(duration=duration)
 
     def make(seed, latency):
         log, truth, _ = scenario.with_(latency=latency).generate(seed)
-        return log, truth.S_at(log.t[-1]), scenario.payload
+        return log, truth.S_at(log.t[-1]), scenario.payload, latency
     return make
 
 
-def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-arm"), latencies=LATENCIES,
-            per_seed=False):
+def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-arm", "mujoco-held"),
+            latencies=LATENCIES, per_seed=False):
     """Rows of the targets' table (module docstring), one per source and latency.
 
     With ``per_seed``, each seed is also printed, with E at the known latency moved by one standard deviation
@@ -99,8 +119,9 @@ def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-ar
         for samples in latencies:
             latency = samples * 1e-3
             ratios, z, z_known, converged, converged_known, z_latency, ratios_1sd = [], [], [], [], [], [], []
+            z_fit, fit_apart, fit_taken = [], [], 0
             for seed in range(seeds):
-                log, S, payload = make(seed, latency)
+                log, S, payload, latency = make(seed, samples * 1e-3)
                 found = calibrate(log, payload, payload_std=exact)
                 known = calibrate(log, payload, latency=latency, payload_std=exact)
                 E, E_known = calibration_error(found.S, S), calibration_error(known.S, S)
@@ -111,6 +132,13 @@ def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-ar
                 converged_known.append(known.converged)
                 if found.latency_std:
                     z_latency.append((found.latency - latency) / found.latency_std)
+                step_known, step_found = known.run.info.get("latency_step"), found.run.info.get("latency_step")
+                if step_known:
+                    z_fit.append(step_known["step"] / step_known["std"])
+                if any("the fit's latency is taken" in note for note in found.notes):
+                    fit_taken += 1                 # rule 8: found's step is then from the fit's own latency
+                elif step_found and found.latency_std:
+                    fit_apart.append(abs(step_found["step"]) / found.latency_std)
                 if per_seed and found.latency_std:
                     moved = latency + np.sign(found.latency - latency) * found.latency_std
                     ratios_1sd.append(calibration_error(calibrate(log, payload, latency=moved, payload_std=exact).S, S)
@@ -124,8 +152,43 @@ def targets(seeds, duration, sources=("spatial-arm", "spatial-mocap", "mujoco-ar
                          "z_rms_known": float(np.sqrt(np.mean(np.square(z_known)))),
                          "converged": float(np.mean(converged)), "converged_known": float(np.mean(converged_known)),
                          "latency_z_rms": float(np.sqrt(np.mean(np.square(z_latency)))) if z_latency else np.nan,
-                         "E_1sd_ratio_max": float(np.max(ratios_1sd)) if ratios_1sd else np.nan})
+                         "E_1sd_ratio_max": float(np.max(ratios_1sd)) if ratios_1sd else np.nan,
+                         "fit_z_rms": float(np.sqrt(np.mean(np.square(z_fit)))) if z_fit else np.nan,
+                         "fit_apart_max": float(np.max(fit_apart)) if fit_apart else np.nan, "fit_taken": fit_taken})
             print(_line(rows[-1]), flush=True)
+    return rows
+
+
+#: The latencies given for the held logs' grid, ms.
+GRID = (0.0, 0.25, 0.4, 0.5, 0.6, 0.75, 1.0)
+
+
+def held(seeds, duration, grid=GRID, methods=("max-likelihood", "ekf")):
+    """Rows of the ``--held`` report, one per seed and method (module docstring)."""
+    from fmscal.analysis import calibrate, calibration_error
+    make = _source("mujoco-held", duration)
+    rows = []
+    for seed in range(seeds):
+        log, S, payload, aligned = make(seed, 0.0)
+        for method in methods:
+            found = calibrate(log, payload, method=method)
+            E = calibration_error(found.S, S)
+            E_grid = {g: calibration_error(calibrate(log, payload, method=method, latency=g * 1e-3).S, S)
+                      for g in grid}
+            best = min(E_grid, key=E_grid.get)
+            step = found.run.info.get("latency_step") or {}
+            rows.append({"seed": seed, "method": method, "latency": found.latency, "latency_std": found.latency_std,
+                         "notes": list(found.notes), "fit_step": step.get("step"), "fit_std": step.get("std"),
+                         "E": E, "E_grid": E_grid, "best": best, "ratio": E / E_grid[best],
+                         "ratio_half": E / E_grid[aligned * 1e3], "converged": found.converged})
+            r = rows[-1]
+            fit = (f"  fit's own {(r['latency'] + r['fit_step']) * 1e3:.3f} +- {r['fit_std'] * 1e3:.3f} ms"
+                   if r["fit_step"] is not None else "")
+            print(f"seed {seed} {method:>14}: latency {r['latency'] * 1e3:.3f} +- {r['latency_std'] * 1e3:.3f} ms"
+                  f"{fit}  E {E:.4g} ({'converged' if r['converged'] else 'not converged'}); "
+                  f"E given " + " ".join(f"{g:g}:{e:.4g}" for g, e in E_grid.items())
+                  + f"; default / best ({best:g} ms) {r['ratio']:.3f}, / E at dt/2 {r['ratio_half']:.3f}"
+                  + "".join(f"\n    note: {note}" for note in r["notes"]), flush=True)
     return rows
 
 
@@ -133,7 +196,8 @@ def _line(row):
     return (f"{row['source']:>14} {row['latency_samples']:+5.1f}  E ratio max {row['E_ratio_max']:.3f} median "
             f"{row['E_ratio_median']:.3f}  z rms {row['z_rms']:.2f} (known latency {row['z_rms_known']:.2f})  "
             f"converged {100 * row['converged']:.0f} % (known {100 * row['converged_known']:.0f} %)  "
-            f"latency z rms {row['latency_z_rms']:.2f}"
+            f"latency z rms {row['latency_z_rms']:.2f}  fit's own: z rms {row['fit_z_rms']:.2f}, from the estimate "
+            f"at most {row['fit_apart_max']:.2f} sd, taken on {row['fit_taken']} seeds"
             + (f"  E_1sd ratio max {row['E_1sd_ratio_max']:.3f}" if np.isfinite(row["E_1sd_ratio_max"]) else ""))
 
 
@@ -142,12 +206,20 @@ def main(argv=None):
     parser.add_argument("--timing", action="store_true", help="only the cost of fmscal calibrate")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--duration", type=float, default=20.0, help="s of each log of the table")
-    parser.add_argument("--sources", nargs="+", default=["spatial-arm", "spatial-mocap", "mujoco-arm"])
+    parser.add_argument("--sources", nargs="+", default=["spatial-arm", "spatial-mocap", "mujoco-arm", "mujoco-held"])
+    parser.add_argument("--held", action="store_true",
+                        help="MuJoCo's logs with the wrench held over each step: E at the default against a grid of "
+                             "latencies, for the floor and the EKF")
     parser.add_argument("--latencies", nargs="+", type=float, default=list(LATENCIES), help="true latencies, samples")
     parser.add_argument("--per-seed", action="store_true",
                         help="print each seed, with E at the known latency moved by one standard deviation of the "
                              "estimate towards it (a third calibration per seed)")
     args = parser.parse_args(argv)
+    if args.held:
+        print(f"{args.seeds} seeds of {args.duration:g} s, the wrench held over each step; target: E at the default "
+              "within 1.15x of the grid's best")
+        held(args.seeds, args.duration)
+        return
     if args.timing:
         t = timing()
         print(f"fmscal calibrate, 60 s spatial-arm at 1 kHz, CPU s: latency estimated {t['estimated']:.2f} s, given "

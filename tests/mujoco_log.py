@@ -11,6 +11,17 @@ as a scenario makes them (``w_hat = S^-1 w + b + n``, a turn of white noise
 about the sensor's axes, white position noise), with the random draws in the
 scenario's order, so that the same seed gives fmscal's own simulation of the
 same motion, noise and sensor: the two logs differ only by the engine.
+
+With ``hold=True`` the log is written as an engine steps and logs a
+controller: MuJoCo steps at the log's sample time (RK4), each step's wrench
+held over it (a zero-order hold) and recorded with the pose at the step's
+start. The wrench held is the motion's at the step's middle, so that the
+payload keeps to the scenario's motion (the step's mean wrench to second
+order); the reading recorded is the wrench held. The wrench then drives the
+motion as the continuous one half a step later would: the log's poses are,
+to fmscal's models, half a sample late (``dt / 2``: the cross-correlation
+and the floor's own likelihood both find it,
+:mod:`fmscal.observers.batch._latency`).
 """
 
 import numpy as np
@@ -35,7 +46,7 @@ def mujoco_model(payload, gravity, dt):
         f'<actuator>{motors}</actuator></mujoco>')
 
 
-def mujoco_log(scenario, seed, latency=0.0):
+def mujoco_log(scenario, seed, latency=0.0, hold=False):
     """A log of ``scenario``'s motion as MuJoCo integrates it; ``(log, S, b)``.
 
     Parameters
@@ -47,6 +58,10 @@ def mujoco_log(scenario, seed, latency=0.0):
         s, of either sign: the pose stream this late, each pose that of ``t - latency`` interpolated
         (:meth:`fmscal.plant.SpatialModel.interpolate_pose`) before its noise is drawn, as a late pose stream
         is measured; the rows with no pose of their own dropped.
+    hold : bool
+        MuJoCo steps at the log's sample time instead, each step's wrench held over it and recorded with the pose
+        at its start: a zero-order hold, as a controller's command is applied and an engine's log is written
+        (module docstring).
 
     Returns
     -------
@@ -59,17 +74,20 @@ def mujoco_log(scenario, seed, latency=0.0):
     rng = np.random.default_rng(seed)
     motion = scenario.motion_function(rng)
     x0 = np.array(motion(0.0)[0]).ravel()
-    wrench = np.array(motion.map(n)(np.arange(n) * dt)[1]).T               # what the sensor reads, at the samples
-    fine = np.array(motion.map((n - 1) * SUBSTEPS)((np.arange((n - 1) * SUBSTEPS) + 0.5) * dt / SUBSTEPS)[1]).T
-    model = mujoco_model(scenario.payload, scenario.gravity, dt / SUBSTEPS)
+    # what the sensor reads, at the samples; held, the wrench of the step that starts there (its middle's)
+    wrench = np.array(motion.map(n)((np.arange(n) + 0.5 * hold) * dt)[1]).T
+    substeps = 1 if hold else SUBSTEPS
+    fine = wrench[:-1] if hold else np.array(
+        motion.map((n - 1) * SUBSTEPS)((np.arange((n - 1) * SUBSTEPS) + 0.5) * dt / SUBSTEPS)[1]).T
+    model = mujoco_model(scenario.payload, scenario.gravity, dt / substeps)
     data = mujoco.MjData(model)
     data.qpos[:], data.qvel[:] = x0[:7], x0[7:13]                           # free joint: v in W, omega in B
     qpos = np.empty((n, 7))
     qpos[0] = data.qpos
     ctrl = np.c_[fine[:, 3:], fine[:, :3]]                                  # motors: force first
     for k in range(n - 1):
-        for j in range(SUBSTEPS):
-            data.ctrl[:] = ctrl[k * SUBSTEPS + j]
+        for j in range(substeps):
+            data.ctrl[:] = ctrl[k * substeps + j]
             mujoco.mj_step(model, data)
         qpos[k + 1] = data.qpos
     S = draw_spatial_S(rng, scenario.crosstalk)
@@ -85,4 +103,4 @@ def mujoco_log(scenario, seed, latency=0.0):
     turn = Rotation.from_rotvec(rng.standard_normal((n, 3)) * scenario.angle_sd)
     pose[:, :4] = np.roll((Rotation.from_quat(np.roll(pose[:, :4], -1, axis=1)) * turn).as_quat(), 1, axis=1)
     pose[:, 4:] += rng.standard_normal((n, 3)) * scenario.position_sd
-    return Log(t, pose, w_hat, name=f"mujoco-{scenario.name}-seed{seed}"), S, b
+    return Log(t, pose, w_hat, name=f"mujoco-{scenario.name}{'-held' if hold else ''}-seed{seed}"), S, b

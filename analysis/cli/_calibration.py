@@ -87,7 +87,8 @@ def add_calibrate(sub):
                         "--no-offset for an offset-free sensor, as in the paper)")
     p.add_argument("--latency", type=float, metavar="S",
                    help="delay of the pose stream behind the sensor stream, s, any fraction of a sample; negative: the "
-                        "wrench stream behind the poses (default: estimated, with its uncertainty)")
+                        "wrench stream behind the poses (default: estimated, with its uncertainty; a latency given is "
+                        "checked against the log's own)")
     p.add_argument("--max-latency", type=float, default=None, metavar="S",
                    help=f"largest magnitude of the delay searched when estimating it, either sign (default "
                         f"{DEFAULT_MAX_LATENCY:g} s)")

@@ -75,5 +75,7 @@ class MaximumLikelihood(Observer):
         calibration[-1] = fit.S_aug.ravel()          # the whole log's estimate
         info = {"noise": fit.noise.to_dict(), "noise_estimated": fit.noise_estimated, "passes": fit.passes,
                 "undetermined": [d.tolist() for d in fit.undetermined]}
+        if fit.latency_step is not None:             # the further delay the fit's own likelihood prefers (eq. LF2)
+            info["latency_step"] = dict(fit.latency_step)
         return Estimate(calibration, fit.x_history, cov=fit.cov_aug, info=info, checks_passed=not fit.undetermined,
                         warnings=list(fit.warnings))

@@ -45,7 +45,7 @@ from ._cluster_covariance import block_length, few_blocks, small_sample_factor
 
 __all__ = ["InverseDynamicsFit", "fit_inverse_dynamics", "needed_wrench", "fit_readings", "describe_direction",
            "UNDETERMINED_STD", "READING_NAMES", "nominal_motion", "smoothed_channels",
-           "needed_wrenches"]
+           "needed_wrenches", "reading_rate"]
 
 #: The augmented reading's components, the directions in which the information is reported.
 READING_NAMES = ("tx", "ty", "tz", "fx", "fy", "fz", "1")
@@ -143,6 +143,29 @@ def smoothed_channels(log, model, window=0.2):
     rows = np.flatnonzero(log.has_pose)
     pose = np.column_stack([np.interp(log.t, log.t[rows], log.pose[rows, j]) for j in range(model.n_pose)])
     return tuple(savgol_filter(pose, k, ORDER, deriv=d, delta=log.dt, axis=0, mode="interp") for d in range(3))
+
+
+def reading_rate(log, window=0.2):
+    """The reading's rate of change at every sample, smoothed, shape (N, n_w).
+
+    The Savitzky-Golay derivative of ``w_hat`` (a local polynomial of degree
+    :data:`fmscal.plant.physics.ORDER`, ``mode="interp"`` at the ends) over the window
+    :func:`smoothed_channels` takes for the poses: the rate a latency moves the reading by
+    (eq. LF1 of :mod:`fmscal.observers.batch._linearised_floor`).
+
+    Parameters
+    ----------
+    log : plant.Log
+    window : float
+        s.
+
+    Returns
+    -------
+    ndarray, shape (N, n_w)
+        Reading units per s.
+    """
+    k = min(2 * edge(log, window) + 1, (len(log) - 1) // 2 * 2 + 1)
+    return savgol_filter(log.w_hat, k, min(ORDER, k - 1), deriv=1, delta=log.dt, axis=0, mode="interp")
 
 
 def nominal_motion(log, model, window=0.2):

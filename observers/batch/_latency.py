@@ -51,9 +51,36 @@ The rule.
    difference of the two estimates is added to the standard deviation::
 
        std^2 = std_L3^2 + ((tau_window - tau_window/2) / 2)^2                (L5)
+
+The fit's own latency. The rule above finds the delay at which the needed
+wrench, read off the smoothed poses, best matches the readings: a model
+continuous in time. The maximum-likelihood floor has its own: the reading
+linear between samples, the motion integrated over each step
+(:mod:`fmscal.observers.batch._linearised_floor`). Its first pass profiles its
+likelihood in a further delay ``eps`` of the poses (eq. LF1 there: the
+poses ``eps`` later move the wrench that drives them by ``-eps S w_hat'``),
+which gives the step ``eps_hat`` its likelihood prefers from the latency the
+log was aligned at, and the step's standard deviation ``s_fit`` (eq. LF2).
+On a log recorded as the two models take it, they agree: a wrench held
+over each step from the sample that records it (a zero-order hold, as an
+engine steps) drives the motion as that reading does half a step later, in
+either model, so both find ``dt / 2`` more than the stamps say.
+
+8. The estimate and the fit. Where the fit's step exceeds
+   :data:`AGREEMENT_SIGMAS` standard deviations of the estimate, the two
+   models disagree about the log, and the fit's latency ``tau + eps_hat``
+   is taken, with the fit's standard deviation (:func:`fit_latency`): the
+   calibration is the fit's, and its ``E`` is lowest where its own
+   likelihood is highest.
+9. A latency given (:func:`given_latency_warnings`) is compared with the
+   estimate: beyond :data:`AGREEMENT_SIGMAS` standard deviations, a warning
+   that names both. The fit at the latency given is measurably worse where
+   its own step from it exceeds :data:`AGREEMENT_SIGMAS` of its standard
+   deviations (or, for a method without the fit's step, where the estimate
+   is that far): ``converged`` False.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2
@@ -65,7 +92,8 @@ from fmscal.plant.physics import as_model
 from ._cluster_covariance import block_length, small_sample_factor
 from ._inverse_dynamics import needed_wrench
 
-__all__ = ["estimate_latency", "LatencyEstimate", "UNDETERMINED_SAMPLES"]
+__all__ = ["estimate_latency", "LatencyEstimate", "UNDETERMINED_SAMPLES", "AGREEMENT_SIGMAS", "fit_latency",
+           "given_latency_warnings"]
 
 #: The latency counts as undetermined when its standard deviation is above this many samples.
 UNDETERMINED_SAMPLES = 3.0
@@ -79,6 +107,8 @@ SEGMENTS = 6
 STEP_P = 1e-4
 #: ... and the change between the two sides is at least this many samples (a lost or repeated sample is one).
 MIN_STEP = 0.5
+#: Rules 8 and 9: the fit's own latency, or a latency given, this many standard deviations from the estimate.
+AGREEMENT_SIGMAS = 3.0
 
 
 @dataclass
@@ -102,6 +132,11 @@ class LatencyEstimate:
         Where the latency changes mid-log (rule 6): ``{"t": s, "size": s, "before": s, "after": s}``.
     warnings : list of str
         Why the latency is undetermined, or where it changes, in words.
+    source : str
+        ``"cross-correlation"`` (rules 1-7), or ``"fit"``: the fit's own latency, taken where the two
+        disagree (rule 8).
+    notes : list of str
+        What rule 8 did, in words.
     """
 
     latency: float
@@ -111,6 +146,8 @@ class LatencyEstimate:
     dS_dlatency: np.ndarray = None
     step: dict = None
     warnings: list = field(default_factory=list)
+    source: str = "cross-correlation"
+    notes: list = field(default_factory=list)
     _blocks: tuple = field(default=None, repr=False)        # rule 6's inputs: scores, information, times, length
 
 
@@ -336,3 +373,89 @@ def _step(scores, infos, t_rows, length, tau, dt):
         return None
     return {"t": float(t_rows[0] + border * length), "size": float(after - before), "before": float(before),
             "after": float(after)}
+
+
+def _step_of(fit_step):
+    """The fit's step and its standard deviation (eq. LF2), or None where it is missing or not finite."""
+    if not fit_step:
+        return None
+    step, std = float(fit_step.get("step", np.nan)), float(fit_step.get("std", np.nan))
+    return (step, std) if np.isfinite(step) and np.isfinite(std) and std > 0 else None
+
+
+def fit_latency(estimate, fit_step):
+    """Rule 8: the latency the fit itself prefers, where it disagrees with the estimate; else None.
+
+    Parameters
+    ----------
+    estimate : LatencyEstimate
+        The estimate the log was aligned at (rules 1-7).
+    fit_step : dict
+        ``{"step": s, "std": s}``: the further delay the fit's own likelihood prefers from it (eq. LF2 of
+        :mod:`fmscal.observers.batch._linearised_floor`; ``result.info["latency_step"]`` of the floor).
+
+    Returns
+    -------
+    LatencyEstimate or None
+        Where ``|step|`` exceeds :data:`AGREEMENT_SIGMAS` of the estimate's standard deviation (the estimate
+        determined): a copy at ``latency + step`` with the fit's standard deviation, ``source="fit"`` and a
+        note in words; None where they agree (or there is nothing to compare).
+    """
+    found = _step_of(fit_step)
+    if found is None or not estimate.determined or not np.isfinite(estimate.std):
+        return None
+    step, std = found
+    if abs(step) <= AGREEMENT_SIGMAS * estimate.std:
+        return None
+    ms = 1e3
+    moved = replace(estimate, latency=float(estimate.latency + step), std=float(std), source="fit",
+                    notes=list(estimate.notes), warnings=list(estimate.warnings))
+    moved.notes.append(
+        f"the pose stream's latency: the maximum-likelihood fit's own likelihood prefers {moved.latency * ms:.4g} "
+        f"+- {std * ms:.2g} ms, where the needed wrench's cross-correlation found {estimate.latency * ms:.4g} +- "
+        f"{estimate.std * ms:.2g} ms ({abs(step) / estimate.std:.1f} of its standard deviations away: the two "
+        "take the reading between samples differently); the fit's latency is taken")
+    return moved
+
+
+def given_latency_warnings(given, estimate, fit_step=None):
+    """Rule 9: a latency given, checked against the log's estimate and the fit's own.
+
+    Parameters
+    ----------
+    given : float
+        The latency the log was aligned at, s.
+    estimate : LatencyEstimate or None
+        The log's own estimate (rules 1-7); None where none could be made.
+    fit_step : dict, optional
+        The fit's step from ``given`` (eq. LF2), where the method gives one.
+
+    Returns
+    -------
+    warnings : list of str
+        One where the estimate is more than :data:`AGREEMENT_SIGMAS` standard deviations from ``given``
+        (both figures named), one where the fit at ``given`` is measurably worse.
+    worse : bool
+        The fit at ``given`` is measurably worse: its own step beyond :data:`AGREEMENT_SIGMAS` of its standard
+        deviations; for a method without one, the estimate beyond :data:`AGREEMENT_SIGMAS` of its own.
+    """
+    ms = 1e3
+    warnings, worse = [], False
+    if estimate is not None and estimate.determined and np.isfinite(estimate.std) and estimate.std > 0:
+        z = (given - estimate.latency) / estimate.std
+        if abs(z) > AGREEMENT_SIGMAS:
+            warnings.append(
+                f"the latency given, {given * ms:.4g} ms, is {abs(z):.1f} standard deviations from the log's own "
+                f"estimate, {estimate.latency * ms:.4g} +- {estimate.std * ms:.2g} ms: S fitted at a wrong "
+                "latency is biased; check the latency given, or leave it to be estimated")
+            worse = True
+    found = _step_of(fit_step)
+    if found is not None:                      # the fit's own step judges the fit; the estimate's warning stands
+        step, std = found
+        worse = abs(step) > AGREEMENT_SIGMAS * std
+        if worse:
+            warnings.append(
+                f"the maximum-likelihood fit is measurably worse at the latency given ({given * ms:.4g} ms) than "
+                f"at the one its own likelihood prefers, {(given + step) * ms:.4g} +- {std * ms:.2g} ms "
+                f"({abs(step) / std:.1f} standard deviations away): S fitted at the latency given is biased")
+    return warnings, worse

@@ -65,6 +65,31 @@ the same gains, gives ``sum D_n^T V^-1 nu``, whose mean is ``-B s_bar``, so
 share of the regressor (``|Sigma|^1/2`` over the reading's spread, a few
 per cent) times one standard deviation of ``s``: a thousandth of a sigma.
 
+**The latency the fit prefers.** The log is given with its poses moved
+back by a latency (:meth:`fmscal.plant.Log.shift_poses`). Were they a
+further ``eps`` late, the motion at each pose would be the one the wrench
+drove ``eps`` earlier: ``S [w_hat(t - eps); 1] = S [w_hat; 1] - eps S w_hat'``
+to first order. The passes before the last (which only set the next pass's
+noise model and linearisation) carry ``eps`` as one more parameter beside
+``s``, its column of the step's regressor that of the wrench
+``-S_bar w_hat'``::
+
+    U_eps,k = [h^2 (2 A_k u_k + A_k+1 u_k+1) / 6; h (A_k u_k + A_k+1 u_k+1) / 2],
+    u_k = -S_bar w_hat'_k                                                   (LF1)
+
+(``w_hat'`` the reading's smoothed rate,
+:func:`fmscal.observers.batch.reading_rate`). With the information ``J``
+and ``r`` about ``[s; eps]``, ``s`` profiled out::
+
+    eps_hat = (r_e - J_es J_ss^-1 r_s) / I_e,    std = I_e^-1/2,
+    I_e = J_ee - J_es J_ss^-1 J_se                                         (LF2)
+
+the Gauss-Newton step of the profile likelihood in the latency from the
+latency the log was aligned at, and its standard deviation
+(``latency_step``; :mod:`fmscal.observers.batch._latency`, rules 8 and 9,
+compares it with the cross-correlation's estimate). The blocks of ``s``
+are those the pass had without it, so its estimate is unchanged.
+
 What the log determines: the information ``J`` along each direction of the
 augmented reading ``[tx .. fz, 1]`` (:func:`undetermined_directions`), as
 the reference fit reports it; an undetermined direction leaves ``converged``
@@ -100,11 +125,11 @@ from scipy.linalg import cho_factor, cho_solve
 
 from fmscal.plant.numerics import ChunkedSteps, StateLayout, build_once, ops
 
-from fmscal.observers.core import matrix as mx, move, progress_bar
+from fmscal.observers.core import matrix as mx, move, position_increment, progress_bar, velocity_increment
 from fmscal.observers.kalman import (POSE_SD_FLOOR, V0_SD, beta_from_copy, bias_matrix, cholesky, cholesky_apply,
                                      copy_predict, correction_limit, error_variances, information_pull, pack_lower,
                                      regressor_step, solve_information, unpack_lower)
-from ._inverse_dynamics import READING_NAMES, UNDETERMINED_STD, describe_direction, nominal_motion
+from ._inverse_dynamics import READING_NAMES, UNDETERMINED_STD, describe_direction, nominal_motion, reading_rate
 
 __all__ = ["fit_linearised", "undetermined_directions", "configuration_residuals", "error_layout"]
 
@@ -115,26 +140,30 @@ _HISTORY_RADIUS = 10.0   # history only: |S_hat - S0| <= this times (|S0| + 1), 
 _COND_MAX = 1e12         # scaled information above this condition number: a direction undetermined
 
 
-def error_layout(model, n, eiv):
+def error_layout(model, n, eiv, latency=False):
     """The filter's packed state: the error state's filter, the information, and the noise copy.
 
     ``d`` (12, the error state run as if ``s = 0``), ``P`` (packed lower),
     ``M`` (12 x m, ``d x / d s``), ``J`` (m x m packed lower), ``r`` (m);
     with ``eiv``: ``eps`` (the copy's error), ``Mn`` (12 x n_w^2, the copy's
-    noise part of ``M``), ``bn`` (n_w^2, its ``sum D_n^T V^-1 nu``).
+    noise part of ``M``), ``bn`` (n_w^2, its ``sum D_n^T V^-1 nu``). With
+    ``latency``, ``M``, ``J`` and ``r`` take one more parameter after ``s``:
+    the poses' remaining latency (eq. LF1).
     """
-    ne, m, ms = 2 * model.nv, model.n_w * n, model.n_w * model.n_w
+    ne, m, ms = 2 * model.nv, model.n_w * n + int(bool(latency)), model.n_w * model.n_w
     parts = [("d", ne), ("P", ne * (ne + 1) // 2), ("M", ne * m), ("J", m * (m + 1) // 2), ("r", m)]
     if eiv:
         parts += [("eps", ne), ("Mn", ne * ms), ("bn", ms)]
     return StateLayout(*parts)
 
 
-def _input_layout(model, eiv):
+def _input_layout(model, eiv, latency=False):
     parts = [("has", 1), ("x0", model.nx), ("x1", model.nx), ("w0", model.n_w), ("w1", model.n_w),
              ("y", model.nv)]
     if eiv:
         parts += [("n0", model.n_w), ("n1", model.n_w), ("v", model.nv)]
+    if latency:                                 # the true wrench's rate at the step's ends (eq. LF1)
+        parts += [("rate0", model.n_w), ("rate1", model.n_w)]
     return StateLayout(*parts)
 
 
@@ -163,16 +192,18 @@ def _augment(w, n_w, n):
     return ca.vertcat(w, 1.0) if n == n_w + 1 else w
 
 
-def _step(model, n, eiv, history):
-    """The filter's step as a casadi Function ``(z, u, p) -> (z_next[, motion])`` (module docstring)."""
+def _step(model, n, eiv, history, latency=False):
+    """The filter's step as a casadi Function ``(z, u, p) -> (z_next[, motion])`` (module docstring); with
+    ``latency``, the remaining latency's column beside ``s`` (eq. LF1)."""
     nv, n_w = model.nv, model.n_w
-    ne, m, ms = 2 * nv, n_w * n, n_w * n_w
-    L = error_layout(model, n, eiv)
+    ne, ms = 2 * nv, n_w * n_w
+    m = n_w * n + int(bool(latency))
+    L = error_layout(model, n, eiv, latency)
     z = ca.SX.sym("z", L.size)
-    u = ca.SX.sym("u", _input_layout(model, eiv).size)
+    u = ca.SX.sym("u", _input_layout(model, eiv, latency).size)
     p = ca.SX.sym("p", _params_layout(model, n).size)
     st = L.unpack(z, scalars=False)
-    uu = _input_layout(model, eiv).unpack(u, scalars=False)
+    uu = _input_layout(model, eiv, latency).unpack(u, scalars=False)
     pp = _params_layout(model, n).unpack(p, scalars=False)
     model = model.with_payload_symbols(getattr(pp, "payload", None))   # the payload read from p, not built in
     o = _ops()
@@ -187,6 +218,10 @@ def _step(model, n, eiv, history):
     Phi = ca.substitute(ca.jacobian(step_map, delta), delta, zero)
     U = regressor_step(model, uu.x0, uu.x1, wa0, wa1, h)
     c = ca.substitute(step_map, delta, zero) - ca.mtimes(U, pp.s)
+    if latency:         # eq. (LF1): the poses a further eps late move the wrench by -eps times its rate
+        a0 = ca.mtimes(model.input_matrix(uu.x0), -uu.rate0)
+        a1 = ca.mtimes(model.input_matrix(uu.x1), -uu.rate1)
+        U = ca.horzcat(U, ca.vertcat(position_increment(h, a0, a1), velocity_increment(h, a0, a1)))
     # the reading's noise as process noise: [h^2, h] [h^2, h]^T (x) A S Sigma S^T A^T
     A0 = model.input_matrix(uu.x0)
     AWA = ca.mtimes(ca.mtimes(A0, mx.as_matrix(o, pp.W, n_w)), A0.T)
@@ -227,7 +262,7 @@ def _step(model, n, eiv, history):
     outputs = [ca.densify(ca.vertcat(*parts))]
     if history:                                # the motion at s_bar: x_bar (+) (d + M s_bar)
         outputs.append(ca.densify(d_next + ca.mtimes(M_next, pp.s)))
-    tag = f"{model.name}{n}{'_eiv' if eiv else ''}{'_history' if history else ''}"
+    tag = f"{model.name}{n}{'_eiv' if eiv else ''}{'_history' if history else ''}{'_latency' if latency else ''}"
     return ca.Function(f"linearised_floor_{tag}", [z, u, p], outputs)
 
 
@@ -235,14 +270,14 @@ def _ops():
     return ops(ca.SX.sym("o"))
 
 
-_CHUNKED = {}           # (model.compiled_key(), n, eiv, history) -> ChunkedSteps
+_CHUNKED = {}           # (model.compiled_key(), n, eiv, history, latency) -> ChunkedSteps
 
 
-def _chunked(model, n, eiv, history):
+def _chunked(model, n, eiv, history, latency=False):
     """:func:`_step` compiled in chunks of :data:`_CALL` samples, once for every payload and gravity of a
     model whose step reads them at run time (:meth:`fmscal.plant.Model.compiled_key`)."""
-    return build_once(_CHUNKED, (model.compiled_key(), n, eiv, history),
-                      lambda: ChunkedSteps(_step(model, n, eiv, history), _CALL), 8)
+    return build_once(_CHUNKED, (model.compiled_key(), n, eiv, history, latency),
+                      lambda: ChunkedSteps(_step(model, n, eiv, history, latency), _CALL), 8)
 
 
 # --- the driver -----------------------------------------------------------------------------------
@@ -301,8 +336,8 @@ def _error_variances(model, noise):
     return np.maximum(model.pose_sd(noise), POSE_SD_FLOOR) ** 2
 
 
-def _initial_state(model, n, eiv, y0, var):
-    L = error_layout(model, n, eiv)
+def _initial_state(model, n, eiv, y0, var, latency=False):
+    L = error_layout(model, n, eiv, latency)
     ne = 2 * model.nv
     z = np.zeros(L.size)
     z[L.slices["d"]][:model.nv] = y0
@@ -325,6 +360,26 @@ def _history_estimate(J, r, B, s0, m, n_w, n):
     size = np.linalg.norm((s - s0)[entries])
     radius = _HISTORY_RADIUS * (np.linalg.norm(s0[entries]) + 1.0)
     return s0 + (s - s0) / max(1.0, size / radius)
+
+
+def _latency_step(J, r, m):
+    """The remaining latency the pass's likelihood prefers, and its standard deviation (eq. LF2).
+
+    ``J``, ``r`` are the information and its right-hand side about ``[s; eps]`` (``m`` entries of ``s``
+    then ``eps``); ``s`` is profiled out by the Schur complement on the determined directions of ``J_ss``.
+    Returns ``{"step": s, "std": s}`` (std infinite where the log holds no information about it).
+    """
+    d = np.sqrt(np.maximum(np.diag(J), 1e-300))
+    Js = J / np.outer(d, d)
+    rs = r / d
+    lam, u = np.linalg.eigh(Js[:m, :m])
+    kept = lam > 1e-12 * lam.max()
+    inv = (u[:, kept] / lam[kept]) @ u[:, kept].T
+    information = float(Js[m, m] - Js[m, :m] @ inv @ Js[:m, m])
+    if not information > 1e-12:
+        return {"step": 0.0, "std": float("inf")}
+    step = float(rs[m] - Js[m, :m] @ inv @ rs[:m]) / information
+    return {"step": step / d[m], "std": 1.0 / (np.sqrt(information) * d[m])}
 
 
 def _np_ops():
@@ -381,18 +436,23 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
     draw_v = rng.standard_normal((N, model.nv)) * np.sqrt(var) * log.has_pose[:, None]
     base = [log.has_pose[1:, None].astype(float), nominal[:-1], nominal[1:], log.w_hat[:-1], log.w_hat[1:], y[1:]]
     starts = list(range(0, N - 1, _CHUNK))
+    rate_hat = reading_rate(log, window) if passes > 1 else None
+    latency_step = None
     with progress_bar(int(passes) * (N - 1), "max-likelihood") as bar:
         for k in range(int(passes)):
             last = k == passes - 1
             eiv = last
-            inputs = np.hstack(base + ([draw_n[:-1], draw_n[1:], draw_v[1:]] if eiv else []))
+            latency = not last            # eq. (LF1): the passes before the last carry the latency's column
             S_noise = s_bar.reshape(n_w, n)[:, :n_w]
+            rate = rate_hat @ S_noise.T if latency else None      # the true wrench's rate, at s_bar
+            inputs = np.hstack(base + ([draw_n[:-1], draw_n[1:], draw_v[1:]] if eiv else [])
+                               + ([rate[:-1], rate[1:]] if latency else []))
             W = S_noise @ np.diag(var_w) @ S_noise.T
             p = _params_layout(model, n).pack(None, h=log.dt, R=var, W=W.ravel(), s=s_bar, **model.payload_values())
-            L = error_layout(model, n, eiv)
-            z = _initial_state(model, n, eiv, y[0] if log.has_pose[0] else np.zeros(model.nv), var)
+            L = error_layout(model, n, eiv, latency)
+            z = _initial_state(model, n, eiv, y[0] if log.has_pose[0] else np.zeros(model.nv), var, latency)
             motion, snapshots = [], []
-            steps = _chunked(model, n, eiv, last) if compiled else _step(model, n, eiv, last)
+            steps = _chunked(model, n, eiv, last, latency) if compiled else _step(model, n, eiv, last, latency)
             for k0 in starts:
                 chunk = inputs[k0:k0 + _CHUNK]
                 if compiled:
@@ -412,8 +472,11 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
                 if last:
                     snapshots.append((min(k0 + _CHUNK, N - 1), z.copy()))
             o = _np_ops()
-            J = unpack_lower(o, z[L.slices["J"]], m)
+            J = unpack_lower(o, z[L.slices["J"]], m + int(latency))
             r = z[L.slices["r"]]
+            if latency:
+                latency_step = _latency_step(J, r, m)
+                J, r = J[:m, :m], r[:m]
             B = (bias_matrix(o, beta_from_copy(z[L.slices["bn"]], s_bar, var_w, n_w, n), var_w, n_w, n)
                  if eiv else np.zeros((m, m)))
             S_aug, cov = solve_information(J, r, B, model, n, log.name, singular="truncate")
@@ -432,7 +495,7 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
     names = (*model.wrench_names, "1")
     undetermined = undetermined_directions(cov, S_aug, log, names) if n == n_w + 1 else []
     return dict(S_aug=S_aug, cov_aug=cov, S_history=S_history.reshape(N, n_w, n), x_history=x_history,
-                information=J, eiv_bias=B, undetermined=undetermined,
+                information=J, eiv_bias=B, undetermined=undetermined, latency_step=latency_step,
                 warnings=[describe_direction(d, names=names) for d in undetermined])
 
 

@@ -155,6 +155,10 @@ class MaximumLikelihoodFit:
         empty otherwise (a planar log that does not determine ``S`` is an error).
     warnings : list of str
         What to record to determine them, one line each.
+    latency_step : dict or None
+        The linearised engine's first pass (:func:`fmscal.observers.batch.fit_linearised`, eq. LF2): the
+        further delay of the poses behind the readings that the fit's own likelihood prefers, ``{"step": s,
+        "std": s}``, relative to the log as given; None from the exact filter or with one pass.
     """
 
     S_aug: np.ndarray
@@ -170,6 +174,7 @@ class MaximumLikelihoodFit:
     wall_time: float = 0.0
     undetermined: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+    latency_step: dict = None
 
     @property
     def offset(self):
@@ -233,7 +238,7 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
     log : plant.Log
         A log of the model's case, full-rate or multi-rate (samples without
         a pose only predict). For a pose stream that lags the sensor, pass
-        ``log.shift_poses(latency)``.
+        ``log.shift_poses(latency)``, and ``noise`` measured on the log before the shift.
     model : plant.Model or plant.Payload
         The problem (a model with :attr:`fmscal.plant.Model.linear_channels`);
         a :class:`plant.Payload` stands for the planar model of it.

@@ -248,6 +248,13 @@ class Log:
         the first or after the last measurement is left out, and the rows
         before the first pose and after the last one are dropped.
 
+        Interpolated, the poses' noise is smoothed (half-way between two
+        measurements, a mean of two draws, correlated from row to row): a
+        noise model measured on the shifted log
+        (:func:`fmscal.plant.estimate_noise`) reads it smaller than it is.
+        Measure it on the log before the shift and give it to the method, as
+        :func:`fmscal.analysis.calibrate` does.
+
         Parameters
         ----------
         latency : float
