@@ -13,7 +13,7 @@ import pytest
 from fmscal.analysis import calibrate, calibration_error
 from fmscal.observers.batch import (AGREEMENT_SIGMAS, estimate_latency, fit_latency, fit_max_likelihood,
                                     given_latency_warnings)
-from fmscal.plant import SPATIAL_SCENARIOS
+from fmscal.plant import SPATIAL_SCENARIOS, PayloadStd
 from fmscal.plant.io import estimate_noise
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -63,12 +63,13 @@ def test_a_latency_given_1_ms_wrong_is_said_and_not_converged():
     0.29 at 5 ms, max |z| 7.4, without a word. Now a warning names both figures and the fit's own latency, and
     converged is False; given right (5 ms), no word of the latency and converged."""
     log, truth, _ = MOCAP.generate(1)
-    wrong = calibrate(log, truth.payload, latency=0.004)
+    exact = PayloadStd.exact()          # the simulator's payload: S_std's statistical part is what is tested
+    wrong = calibrate(log, truth.payload, latency=0.004, payload_std=exact)
     said = [w for w in wrong.warnings if "latency given" in w]
     assert len(said) == 2 and "4 ms" in said[0] and "standard deviations from the log's own estimate" in said[0]
     assert "measurably worse" in said[1]
     assert not wrong.converged and wrong.why_unconverged == "the latency given does not fit the log"
-    right = calibrate(log, truth.payload, latency=0.005)
+    right = calibrate(log, truth.payload, latency=0.005, payload_std=exact)
     assert right.converged and not any("latency" in w for w in right.warnings)
     S = truth.S_at(log.t[-1])
     assert calibration_error(wrong.S, S) > 3 * calibration_error(right.S, S)

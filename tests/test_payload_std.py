@@ -287,8 +287,8 @@ def test_a_payload_file_brings_its_standard_deviations_and_the_flags_replace_the
     estimate = PayloadEstimate(mass=1.2, mass_std=0.003, com=np.array([0.01, -0.005, 0.06]),
                                com_std=np.array([5e-4, 5e-4, 8e-4]), inertia=np.array([4e-3, 5e-3, 2.5e-3, 2e-4,
                                                                                         -1e-4, 1.5e-4]),
-                               inertia_std=np.full(6, 3e-4), b=None, b_std=None, residual_rms=None, converged=True,
-                               payload_determined=True)
+                               inertia_std=np.full(6, 3e-4), b=np.zeros(6), b_std=np.full(6, 1e-3),
+                               residual_rms=None, converged=True, payload_determined=True, reading="reaction")
     estimate.save(arm_file / "tool.json")
     log = str(arm_file / "arm.csv")
     assert main(["calibrate", log, "--payload", str(arm_file / "tool.json"), "--latency", "0", "--json"]) == 0
