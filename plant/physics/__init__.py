@@ -13,7 +13,8 @@ from ._rigid_body import (regressor, inertia_matrix, INERTIA_NAMES, SpatialPaylo
 from ._simulate import (integrate, rk4_step)
 from ._excitation import (Excitation, PaperWrench, Multisine, SampledWrench)
 from ._differentiate import (spatial_motion, smoothed_state, edge, ORDER)
-from ._model import (Model, PlanarModel, SpatialModel, MODELS, as_model, model_for_columns)
+from ._model import (Model, PlanarModel, SpatialModel, PayloadModel, MODELS, as_model, model_for_columns,
+                     find_model)
 
 __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
            "input_matrix", "acceleration", "state_derivative", "regressors", "phi_1", "phi_2", "S_from_phi",
@@ -21,4 +22,4 @@ __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationEr
            "rotation_matrix", "rotation_matrices", "unit_quaternions", "sensor_wrench", "body_acceleration",
            "prescribed_motion", "skew",
            "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine", "SampledWrench", "spatial_motion",
-           "smoothed_state", "Model", "PlanarModel", "SpatialModel", "MODELS", "as_model"]
+           "smoothed_state", "Model", "PlanarModel", "SpatialModel", "PayloadModel", "MODELS", "as_model", "find_model"]
