@@ -121,8 +121,7 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
     assert "--gravity" not in numbers
     fit.payload_determined = False                      # the fit's own verdict: nothing to pass on
     _print_calibrate_flags(fit)
-    assert capsys.readouterr().out.strip() == ("for fmscal calibrate: no payload to pass on, the mass and the centre "
-                                               "of mass are not determined")
+    assert capsys.readouterr().out.strip() == "for fmscal calibrate: no payload to pass on, it is not determined"
 
 
 def test_an_attitude_only_log_through_the_command(tmp_path, capsys):

@@ -1079,19 +1079,22 @@ class PayloadModel(Model):
     The reading corrected by the known ``S``, ``y = sigma S w_hat`` (``sigma`` the reading's sign), is the
     payload's wrench at the sensor point plus the offset ``c = S b``, each force channel read with its own
     gain ``g_j`` relative to the force gains' mean (the sensor's gains, where ``S`` is the maker's, disagree
-    by a few percent), the torque channels' gains 1::
+    by a few percent), the torque channels with one common gain ``g_tau``::
 
         diag(g) (y - c) = [tau_O; f] = W pi,     pi = (m, h = m com, I_O)                       (P0)
-        g = (1, 1, 1, 1 + e_x, 1 + e_y, 1 - e_x - e_y)
+        g = (g_tau, g_tau, g_tau, 1 + e_x, 1 + e_y, 1 - e_x - e_y),   g_tau = 1 + e_tau
 
     ``W`` the Newton-Euler regressor (:func:`fmscal.plant.physics.regressor`), linear in ``pi`` for given
     gains. The mean force gain is one: a common scale of the three is the mass's (the payload is weighed in
-    the force channels' mean units). The torque gains are taken as one: their common scale is the centre of
-    mass's, and each is seen only through the centre of mass across its axis (for a tool whose centre of
-    mass lies on its axis, the gain about that axis not at all). The compensated wrench is then
-    ``w = diag(g) S (sigma w_hat - b)``. The model fits no ``S`` (:attr:`estimates`): no method of the
-    registry runs on it; :func:`fmscal.observers.payload.identify_payload` estimates its parameters from a
-    log or from held poses.
+    the force channels' mean units). Held poses never tell the torque gains: their common scale is the
+    centre of mass's, and each is seen only through the centre of mass across its axis (for a tool whose
+    centre of mass lies on its axis, the gain about that axis not at all); they are taken as one there
+    (``e = (e_x, e_y)``). Motion ties the torques' common scale to the forces': ``h`` is in both, ``alpha x
+    h`` in the forces and ``h x a_g`` in the torques, so a log's fit estimates ``e_tau`` too (``e = (e_x,
+    e_y, e_tau)``), where the motion tells it from zero. The compensated wrench is then ``w = diag(g) S
+    (sigma w_hat - b)``. The model fits no ``S`` (:attr:`estimates`): no method of the registry runs on it;
+    :func:`fmscal.observers.payload.identify_payload` estimates its parameters from a log or from held
+    poses.
 
     Parameters
     ----------
@@ -1107,6 +1110,8 @@ class PayloadModel(Model):
     (6, ('mass', 'com'), True)
     >>> model.gains([0.02, -0.01])
     array([1.  , 1.  , 1.  , 1.02, 0.99, 0.99])
+    >>> model.gains([0.02, -0.01, 0.005])
+    array([1.005, 1.005, 1.005, 1.02 , 0.99 , 0.99 ])
     """
 
     name = "payload"
@@ -1122,8 +1127,9 @@ class PayloadModel(Model):
     reading_blocks = SpatialModel.reading_blocks
     input_checks = SpatialModel.input_checks
     estimates = ("mass", "com", "inertia", "offset", "force gains")
-    #: The free numbers of the force gains, ``e_x, e_y`` of eq. (P0), by name.
-    gain_names = ("gain_x", "gain_y")
+    #: The gains' free numbers, ``e_x, e_y`` (the force gains) and ``e_tau`` (the torques' common gain: motion
+    #: only) of eq. (P0), by name.
+    gain_names = ("gain_x", "gain_y", "gain_torque")
 
     def __init__(self, S=None, gravity=rigid_body.GRAVITY):
         super().__init__(None)                          # the payload is what the model estimates
@@ -1153,16 +1159,18 @@ class PayloadModel(Model):
         return sign * np.asarray(w_hat, dtype=float) @ self.S.T
 
     def gains(self, e):
-        """The six channel gains ``g`` of eq. (P0) from the force gains' free numbers ``e = (e_x, e_y)``.
+        """The six channel gains ``g`` of eq. (P0) from their free numbers ``e = (e_x, e_y)`` or ``(e_x, e_y,
+        e_tau)``.
 
         Returns
         -------
         ndarray, shape (6,)
-            Torque gains 1; force gains ``1 + e_x, 1 + e_y, 1 - e_x - e_y`` (their mean 1).
+            Force gains ``1 + e_x, 1 + e_y, 1 - e_x - e_y`` (their mean 1); torque gains ``1 + e_tau`` (1
+            without it).
         """
         e = np.asarray(e, dtype=float)
-        g = np.ones(self.n_w)
-        g[list(self.force_channels)] = 1.0 + self.gain_map() @ e
+        g = np.full(self.n_w, 1.0 + (e[2] if len(e) > 2 else 0.0))
+        g[list(self.force_channels)] = 1.0 + self.gain_map() @ e[:2]
         return g
 
     def gain_map(self):
