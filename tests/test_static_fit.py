@@ -98,20 +98,18 @@ def test_poses_about_one_axis_leave_gravity_and_the_offset_unseparated():
 
 def test_the_first_suggested_pose_reduces_the_largest_uncertainty():
     """A table of small tilts: the suggestion, recorded in simulation, lowers the payload's largest effect on the
-    compensated wrench (each fit held to the same tolerance; its cone widens with the pose, and the effect is
-    taken over it)."""
+    compensated wrench over the noise, as it said (measured to 61 %, predicted 62 %)."""
     table = simulate_table(TOOL, n=6, seed=4, offset=OFFSET, spread=np.radians(25.0))
-    before = fit_static(table, tolerance=(0.05, 0.005))
+    before = fit_static(table)
     words = before.next_poses[0]
     k, axis, angle = _parse(words)
     R = _exp(np.radians(angle) * np.eye(3)["xyz".index(axis)])
     q_new = _quaternion(_rotation(table.q[k - 1]) @ R)
-    after = fit_static(simulate_table(TOOL, n=7, seed=4, offset=OFFSET, q=np.vstack([table.q, q_new])),
-                       tolerance=(0.05, 0.005))
+    after = fit_static(simulate_table(TOOL, n=7, seed=4, offset=OFFSET, q=np.vstack([table.q, q_new])))
     worst = lambda f: np.max(f.effect / f.tolerance)                                  # noqa: E731
-    assert "the payload's largest effect on the compensated wrench falls to" in words, words
+    predicted = float(words.split("compensated wrench falls to ")[1].split("%")[0]) / 100
     assert worst(after) < 0.8 * worst(before), (words, worst(before), worst(after))
-    assert after.cone_deg > before.cone_deg
+    assert worst(after) / worst(before) == pytest.approx(predicted, abs=0.1)
 
 
 def _parse(words):

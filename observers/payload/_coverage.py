@@ -261,13 +261,15 @@ def _candidates(references, labels):
 
 
 def next_poses(model, theta, information, weights, s2, references, labels, attitudes, tolerance, rows=1.0, held="",
-               count=3):
+               count=3, widened=None):
     """The candidate poses that most lower the payload's effect on the compensated wrench, best first, eq. (N1).
 
     Each candidate is scored by the largest standard deviation the payload would leave in the compensated
     wrench (eq. E1 of :mod:`fmscal.observers.payload._effect`) over ``attitudes`` (the cone's) and the pose
     itself, forces and torques each over their tolerance, with the covariance the fit would have with the
-    pose's rows added (eq. N1; the model-based ``s^2 F^-1``).
+    pose's rows added (eq. N1; the model-based ``s^2 F^-1``). A pose outside the cone widens it, and the
+    payload is then promised over the wider cone: with ``widened``, the best ``3 count`` candidates are scored
+    again over the attitudes it gives for each (the cone the data would span with the pose).
 
     Parameters
     ----------
@@ -289,6 +291,8 @@ def next_poses(model, theta, information, weights, s2, references, labels, attit
         The attitudes the effect is taken over (:func:`fmscal.observers.payload._effect.cone_attitudes`).
     tolerance : ndarray, shape (2,)
         N, N m.
+    widened : callable, optional
+        ``widened(R)``: the attitudes of the cone the data would span with the pose ``R`` added (A', 3, 3).
     rows : float
         How many times a held pose's rows count.
     held : str
@@ -305,21 +309,27 @@ def next_poses(model, theta, information, weights, s2, references, labels, attit
     p = len(theta)
     J_cone = model.jacobian(theta, R=attitudes).reshape(len(attitudes), 6, p)
 
-    def score(cov, J_pose=None):
-        J = J_cone if J_pose is None else np.concatenate([J_cone, J_pose[None]])
+    def score(cov, J_pose=None, J_over=None):
+        J = J_cone if J_over is None else J_over
+        J = J if J_pose is None else np.concatenate([J, J_pose[None]])
         return float(np.max(effect_sd(J, cov, gains) / tolerance))
 
     worst_now = score(covariance(information, s2)[0])
     candidates = _candidates(references, labels)
     rows_each = model.jacobian(theta, R=np.array([Rc for _, Rc in candidates])).reshape(len(candidates), 6, p)
     scored = []
-    for (words, _), J in zip(candidates, rows_each):                    # each pose's six rows
+    for (words, Rc), J in zip(candidates, rows_each):                   # each pose's six rows
         Jw = J * weights[:, None]
         cov, _ = covariance(information + rows * Jw.T @ Jw, s2)
-        scored.append((score(cov, J), words))
+        scored.append((score(cov, J), words, cov, J, Rc))
     scored.sort(key=lambda item: item[0])
+    if widened is not None:                 # the best again, over the cone the data would span with each
+        best = scored[:3 * count]
+        over = [model.jacobian(theta, R=widened(Rc)).reshape(-1, 6, p) for _, _, _, _, Rc in best]
+        scored = sorted([(score(cov, J, J_over), words, cov, J, Rc)
+                         for (_, words, cov, J, Rc), J_over in zip(best, over)], key=lambda item: item[0])
     best = []
-    for worst, words in scored:
+    for worst, words, *_ in scored:
         if words in (w for _, w in best):
             continue
         if (np.isfinite(worst_now) and worst >= 0.99 * worst_now) or not np.isfinite(worst):

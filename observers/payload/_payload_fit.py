@@ -58,7 +58,7 @@ from ._effect import (DEFAULT_TOLERANCE, check_tolerance, circle_axis, cone_atti
                       static_effect)
 from ._estimate import PayloadEstimate
 from ._static_fit import (ODDS, TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start,
-                          _tangent_basis, cone_warning, fit_static, gains_differ, gains_of, gravity_up,
+                          _tangent_basis, _widened, cone_warning, fit_static, gains_differ, gains_of, gravity_up,
                           other_convention, rotation_check, rotations_unresolved)
 
 __all__ = ["identify_payload", "DETERMINED", "HOLD", "REFERENCES"]
@@ -409,7 +409,7 @@ def _coverage(fit, q, t, info, words, misfit=None, identity=True):
     dt = float(np.median(np.diff(t)))
     fit.next_poses = next_poses(model, static, F_t, info.weights, s2, R[refs],
                                 [f"the attitude at t = {t[k]:.1f} s" for k in refs], attitudes[len(sampled):],
-                                fit.tolerance,
+                                fit.tolerance, widened=lambda Rc: _widened(R[sampled], M, d, Rc)[len(sampled) + 1:],
                                 rows=HOLD / dt, held=f" and hold it {HOLD:g} s")
     return effect
 

@@ -488,12 +488,20 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         why, determined = rotated, False
     elif why is not None or determined:
         out.next_poses = next_poses(model, theta, information, weights, s2, R,
-                                    [f"pose {k + 1}" for k in range(len(R))], attitudes, out.tolerance)
+                                    [f"pose {k + 1}" for k in range(len(R))], attitudes, out.tolerance,
+                                    widened=lambda Rc: _widened(R, M, d, Rc))
     if why is not None:
         out.warnings.append(why)
     out.payload_determined, out.why_undetermined = bool(determined), why
     out.converged = bool(converged and determined)
     return out
+
+
+def _widened(R, M, d, candidate):
+    """The attitudes of the cone the attitudes ``R`` and ``candidate`` span (:func:`cone_attitudes`): where a next
+    pose is scored (:func:`fmscal.observers.payload.next_poses`)."""
+    both = np.concatenate([R, candidate[None]])
+    return cone_attitudes(both, M, d, _cone(np.einsum("ji,nkj,k->ni", M, both, -d)))
 
 
 def gains_of(problem, e, cov):
