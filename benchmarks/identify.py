@@ -33,10 +33,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from test_payload_identify import G, OFFSET, _cone_attitudes, _gain_log, _gain_table, _static_error  # noqa: E402
+from test_payload_identify import OFFSET, _gain_log, _gain_table, _scored  # noqa: E402
 
 from fmscal.observers.payload import identify_payload  # noqa: E402
-from fmscal.plant.physics import rotation_matrix  # noqa: E402
 from fmscal.plant.scenarios import TOOL  # noqa: E402
 
 
@@ -54,19 +53,13 @@ def run(source, size, off, seeds):
         else:
             data, truth = _gain_log(seed, gains, size)
             b, q = truth.offset, data.pose[::50, :4]
-        u = np.einsum("nkj,k->nj", rotation_matrix(q.T).transpose(2, 0, 1), -G) / 9.81
         fit = identify_payload(data)
         determined.append(fit.payload_determined)
-        zs = (fit.gains - np.r_[np.full(3, 1 / k), gains / k]) / np.where(fit.gains_std > 0, fit.gains_std, np.inf)
-        z_gains.extend(zs[[0, 3, 4, 5]] if fit.gains_std[0] > 0 else zs[3:])       # the torques' one gain, if told
+        zs, tol, eff = _scored(fit, q, gains, b, rng)
+        z_gains.extend(zs)
         z_mass.append((fit.mass - TOOL.mass / k) / fit.mass_std)
-        S = np.eye(6)
-        S[3:, 3:] = np.diag(gains)
-        error = _static_error(fit, S, b, _cone_attitudes(u, fit.cone_deg, 50, rng))
-        rms = np.sqrt(np.mean(error ** 2, axis=0))
-        group = np.array([np.sqrt(np.mean(rms[3:] ** 2)), np.sqrt(np.mean(rms[:3] ** 2))])
-        over_tol.append(group / fit.tolerance)
-        over_effect.append(group / fit.effect)
+        over_tol.append(tol)
+        over_effect.append(eff)
 
     def rms(v, axis=None):
         return np.sqrt(np.mean(np.square(v), axis=axis))
