@@ -174,6 +174,22 @@ def test_the_default_tolerance_is_one_sd_of_the_readings_noise():
     assert fit.payload_determined and np.all(fit.effect < 0.2 * fit.tolerance)
 
 
+
+def test_an_attitude_only_logs_default_tolerance_is_its_readings_noise():
+    """The held segments of an attitude-only log are rows of averages, but its raw readings are at hand: the
+    default tolerance is their noise, the scatter within the held segments (0.05 N and 0.005 N m simulated, within
+    a tenth; no attitude jitter, which would add to it), not the rows' scatter (a tenth of it: 100 samples a
+    segment), and ten held attitudes determine the payload against it (the node's ~/identify_payload on an IMU
+    goes the same way); a table of the same rows holds to its rows' scatter."""
+    from fmscal.observers.payload import fit_static
+    from fmscal.plant.io import held_table
+    log = simulate_attitude_log(TOOL, seed=3, offset=OFFSET, angle_sd=0.0)
+    fit = identify_payload(log)
+    assert fit.tolerance == pytest.approx([0.05, 0.005], rel=0.1), fit.tolerance
+    assert fit.payload_determined and fit.why_undetermined is None
+    rows = fit_static(held_table(log)[0])
+    assert np.all(rows.tolerance < 0.3 * fit.tolerance) and np.all(rows.tolerance > 0.03 * fit.tolerance)
+
 def _gain_log(seed, gains, duration):
     """A spatial-arm log (no cross-talk) read by force axes of ``gains``, its noise added after: ``w_hat = diag(1,
     1, 1, 1 / gains) w + b + n``; and its truth."""

@@ -34,7 +34,7 @@ import numpy as np
 from fmscal.plant import Calibration, Log, SpatialModel
 from fmscal.plant.io import AttitudeLog, held_table
 from fmscal.plant.physics import quaternion_multiply, rotation_matrices
-from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload
+from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload, reading_noise
 
 from .._compensate import Compensator, compensation_model
 from .._motion import quaternion_from_matrix, quaternion_to_matrix
@@ -467,7 +467,8 @@ class Pipeline:
         q = quaternion_from_matrix(rotation_matrices(q_imu) @ self.motion.rotation.T)        # R_S = R_IMU C^T
         try:
             table, used, why = held_table(AttitudeLog(t - t[0], q, w_hat, name="the held IMU samples"))
-            fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading)
+            fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading,
+                             noise=reading_noise(table.noise, self.calibration.S, used * len(t) / len(table)))
         except Exception as err:
             return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
         if not fit.payload_determined:

@@ -21,8 +21,9 @@ tol_tau`` (E3). The tolerance is the user's (``tolerance=(N, N m)``; ``--toleran
 sample-to-sample scatter (``rms(diff) / sqrt 2``, each channel, their rms over the torques and over the
 forces), a table's rows' scatter about the fit (eq. N2 of :mod:`fmscal.observers.payload._static_fit`;
 a table's rows are averages, and a reading's own noise, which the compensation of a running robot sees,
-is larger: a default that is strict there). Where the payload is not determined, :func:`judge` names the
-reason:
+is larger: a default that is strict there), or, for the held segments of an attitude-only log, whose raw
+readings are at hand, the log's reading's noise (:func:`reading_noise`). Where the payload is not
+determined, :func:`judge` names the reason:
 
 - **the cone**: the effect at the data's own attitudes is within the tolerance and beyond it elsewhere in
   the cone (attitudes the data cover thinly), or the data leave a direction not determined at all, as
@@ -49,8 +50,8 @@ from fmscal.plant.numerics import FmscalError
 
 from ._coverage import effect_sd, rotation
 
-__all__ = ["Effect", "DEFAULT_TOLERANCE", "check_tolerance", "cone_attitudes", "static_effect", "inertia_effect",
-           "judge", "circle_axis", "CIRCLE_DEG", "GRID_RINGS", "GRID_TURNS", "MISFIT_RATIO"]
+__all__ = ["Effect", "DEFAULT_TOLERANCE", "check_tolerance", "reading_noise", "cone_attitudes", "static_effect",
+           "inertia_effect", "judge", "circle_axis", "CIRCLE_DEG", "GRID_RINGS", "GRID_TURNS", "MISFIT_RATIO"]
 
 #: The default tolerance, in standard deviations of the reading's noise (eq. E4).
 DEFAULT_TOLERANCE = 1.0
@@ -98,6 +99,38 @@ def check_tolerance(tolerance, name="tolerance"):
         raise FmscalError(f"{name} must be two positive numbers, N and N m (the forces' and the torques' "
                           f"largest standard deviation the payload may add); got {str(tolerance)[:60]}")
     return values
+
+
+def reading_noise(w_hat, S=None, samples=None):
+    """The reading's noise per sample, eq. (E4), forces and torques: each channel's scatter turned by ``S`` (``S``
+    times the raw reading; its sign does not change a scatter), then their rms over the forces and over the
+    torques.
+
+    A log's consecutive readings (``samples`` None): ``rms(diff) / sqrt 2``. Held segments' rows (``samples``
+    given): ``w_hat`` is then their standard errors (:func:`fmscal.plant.io.held_table`'s ``noise``), each the
+    scatter within its segment over the square root of its samples, and the scatter is ``sqrt(mean(se^2)
+    samples)``, ``samples`` the mean count a row averages (segments of equal length: exact).
+
+    Parameters
+    ----------
+    w_hat : ndarray, shape (N, 6)
+        Consecutive raw readings, or the held rows' standard errors; reading order (torques first).
+    S : array_like, shape (6, 6), optional
+        The calibration (default: the identity).
+    samples : float, optional
+        With standard errors: the samples a row averages, on average.
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        Forces (N), torques (N m).
+    """
+    w_hat = np.asarray(w_hat, dtype=float)
+    S = np.eye(6) if S is None else np.asarray(S, dtype=float)
+    variance = np.mean(np.diff(w_hat, axis=0) ** 2, axis=0) / 2 if samples is None else \
+        np.mean(w_hat ** 2, axis=0) * float(samples)
+    channel = np.sqrt(np.maximum(np.diag(S @ np.diag(variance) @ S.T), 0.0))
+    return np.array([np.sqrt(np.mean(channel[3:] ** 2)), np.sqrt(np.mean(channel[:3] ** 2))])
 
 
 def cone_attitudes(R, M, d, cone):

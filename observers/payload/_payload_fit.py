@@ -55,7 +55,7 @@ from fmscal.plant.physics import (GRAVITY, INERTIA_NAMES, PayloadModel, SpatialP
 from fmscal.observers.batch import few_blocks, pseudo_inverse, sandwich, time_blocks
 from ._coverage import cone_deg, in_words, next_poses, weak_directions
 from ._effect import (DEFAULT_TOLERANCE, check_tolerance, circle_axis, cone_attitudes, inertia_effect, judge,
-                      static_effect)
+                      reading_noise, static_effect)
 from ._estimate import PayloadEstimate
 from ._static_fit import (ODDS, TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start,
                           _tangent_basis, _widened, cone_warning, fit_static, gains_differ, gains_of, gravity_up,
@@ -145,8 +145,10 @@ def identify_payload(data, S=None, gravity=GRAVITY, window=0.2, block=None, read
             raise FmscalError("block is taken on a log with poses (its robust covariance's blocks of time); held "
                               "poses are independent rows")
         notes = []
-        if isinstance(data, AttitudeLog):
-            data, _, note = held_table(data)
+        if isinstance(data, AttitudeLog):                   # its held segments give the reading's noise (E4)
+            n = len(data.t)
+            data, used, note = held_table(data)
+            options["noise"] = reading_noise(data.noise, S, samples=used * n / len(data))
             notes.append(note)
         fit = fit_static(data, **options)
         fit.notes = notes + fit.notes
@@ -190,7 +192,7 @@ def _identify_log(log, S=None, gravity=GRAVITY, window=0.2, block=None, reading=
             raise
         raise FmscalError(rotations_unresolved(log.name, len(y), fixed_mass, "samples")) from None
     fit.notes = list(log.notes)
-    noise = _groups(np.sqrt(np.mean(np.diff(y, axis=0) ** 2, axis=0) / 2))     # the reading's, eq. (E4)
+    noise = reading_noise(y)                                                   # the reading's, eq. (E4)
     fit.tolerance = given if given is not None else DEFAULT_TOLERANCE * noise
     words = "given" if given is not None else f"{DEFAULT_TOLERANCE:g} sd of the reading's noise"
     effect = _coverage(fit, motion[0], log.t[trim], information, words, (_groups(fit.residual_rms), noise),

@@ -350,7 +350,7 @@ def _extra(theta, model):
 
 
 def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction",
-               max_mass=None, tolerance=None):
+               max_mass=None, tolerance=None, noise=None):
     """Mass, centre of mass, offset and force gains from a pose table (and gravity's direction, the mounting, if asked).
 
     Parameters
@@ -375,7 +375,10 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         The largest standard deviation the payload may add to the compensated wrench within the poses' cone,
         N and N m (eq. E3 of :mod:`fmscal.observers.payload._effect`); default one standard deviation of the
         rows' scatter about the fit (eq. N2; a table's rows are averages, so this is stricter than a reading's
-        own noise).
+        own noise), or of ``noise`` where given.
+    noise : (float, float), optional
+        The reading's own noise, N and N m, where the raw readings behind the rows are at hand (the held segments
+        of an attitude-only log: :func:`fmscal.observers.payload._effect.reading_noise`): the default tolerance.
 
     Returns
     -------
@@ -402,6 +405,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
     given = check_tolerance(tolerance)
+    noise_given = check_tolerance(noise, "noise")
     check_table_units(table, g, S=S, max_mass=max_mass)  # a slipped unit named in one line, before the fit
     problem = PayloadModel(S, g)
     y = problem.corrected(table.w_hat, sign)
@@ -453,12 +457,14 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
     out.warnings = list(out.undetermined)
     noise = _group_noise(model, theta, weights, y)[0]                 # the rows' scatter: torques N m, forces N
-    out.tolerance = given if given is not None else DEFAULT_TOLERANCE * noise[::-1]
+    out.tolerance = given if given is not None else DEFAULT_TOLERANCE * (noise[::-1] if noise_given is None else
+                                                                         noise_given)
     attitudes = cone_attitudes(R, M, d, out.cone_deg)
     effect = static_effect(model, theta, cov, attitudes, len(R))
     out.effect = effect.cone
     determined, why, _ = judge(effect, out.tolerance, "given" if given is not None else
-                               f"{DEFAULT_TOLERANCE:g} sd of the rows' scatter about the fit", out.cone_deg,
+                               f"{DEFAULT_TOLERANCE:g} sd of the rows' scatter about the fit" if noise_given is None
+                               else f"{DEFAULT_TOLERANCE:g} sd of the reading's noise", out.cone_deg,
                                bool(weak), circle_axis(a), with_gains)
     converged = not out.undetermined
     both = estimate_gravity and estimate_mounting
