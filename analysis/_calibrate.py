@@ -31,7 +31,7 @@ from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKine
                              check_table_units, diagnose_units, held_table, is_attitude_log, is_pose_table, not_a_file,
                              read_attitude_log, read_joint_data, read_pose_table, reading_sign)
 from fmscal.plant.numerics import as_bool, as_number
-from fmscal.plant.physics import GRAVITY, MODELS, PayloadStdError, as_model
+from fmscal.plant.physics import GRAVITY, PayloadStdError, as_model, find_model
 
 from ._metrics import calibration_error
 
@@ -366,7 +366,7 @@ def _truth(truth, model):
     else:
         raise FmscalError(f"truth must be a plant.Truth or its file; got {type(truth).__name__}")
     if truth.schedule.size != model.n_w:
-        other = next((m.name for m in MODELS if len(m.wrench_names) == truth.schedule.size), "another")
+        other = getattr(find_model(n_w=truth.schedule.size), "name", "another")
         raise FmscalError(f"{source} is the truth of a {other} log; this log is {model.name}")
     return truth
 
@@ -409,7 +409,7 @@ def _merge_gravity(given, estimated):
 
 
 def log_model_class(log):
-    """The class of the model whose columns ``log``'s are (:data:`fmscal.plant.physics.MODELS`), or a refusal.
+    """The class of the model whose columns ``log``'s are (:func:`fmscal.plant.physics.find_model`), or a refusal.
 
     Parameters
     ----------
@@ -425,9 +425,9 @@ def log_model_class(log):
     FmscalError
         No model declares the log's columns.
     """
-    for cls in MODELS:
-        if ("t", *cls.pose_names, *cls.wrench_names) == tuple(log.columns):
-            return cls
+    cls = find_model(columns=log.columns)
+    if cls is not None:
+        return cls
     raise FmscalError(f"{log.name}: a {log.kind} log; calibrate takes a planar or a spatial one")
 
 

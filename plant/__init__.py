@@ -5,8 +5,8 @@ from fmscal.plant.io import (COLUMNS, READING_COLUMNS, BagError, Calibration, Ca
                              read_truth)
 from fmscal.plant.numerics import FmscalError, compiler
 from fmscal.plant.physics import (A_1, A_2, B_1, B_2, C_1, C_2, PAPER_PAYLOAD, CalibrationSchedule, Excitation, Model,
-                                  Multisine, NoiseSpec, PaperWrench, Payload, PayloadStd, PlanarModel, S_from_phi,
-                                  SampledWrench,
+                                  Multisine, NoiseSpec, PaperWrench, Payload, PayloadModel, PayloadStd, PlanarModel,
+                                  S_from_phi, SampledWrench,
                                   SingularCalibrationError, SpatialModel, SpatialPayload, acceleration, as_model,
                                   check_calibration, input_matrix, integrate, phi_1, phi_2, regressors, rk4_step,
                                   state_derivative)
@@ -20,7 +20,8 @@ __all__ = [
     "Calibration", "CalibrationFileError", "file_sha256",
     "BagError", "import_bag", "read_bag",
     "COLUMNS", "READING_COLUMNS", "Log", "LogError", "Truth", "read_log", "read_readings", "read_truth",
-    "PAPER_PAYLOAD", "Payload", "PayloadStd", "SpatialPayload", "Model", "PlanarModel", "SpatialModel", "as_model",
+    "PAPER_PAYLOAD", "Payload", "PayloadStd", "SpatialPayload", "Model", "PlanarModel", "SpatialModel", "PayloadModel",
+    "as_model",
     "SPATIAL_SCENARIOS", "SpatialScenario",
     "PAPER_S", "SCENARIOS", "TABLE_1", "Scenario", "draw_S", "get_scenario",
     "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",

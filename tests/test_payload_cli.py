@@ -81,6 +81,13 @@ def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsy
     code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "estimate",
                                    "--mounting", "estimate"])
     assert code == 0 and "gravity in the pose frame" in out and "mounting (sensor axes on the tracked frame)" in out
+    # S = I on 2 % crosstalk: the model does not fit (issue 44: the torques' residual six times their noise), so
+    # the payload is not determined at the default tolerance, and no pose is advised; a tolerance accepts it
+    assert "not determined (the model does not fit: the fit leaves" in out and "next pose:" not in out
+    assert "for fmscal calibrate: no payload to pass on, it is not determined" in out
+    code, out, err = _run(capsys, ["identify-payload", str(tmp_path / "arm.csv"), "--gravity", "estimate",
+                                   "--mounting", "estimate", "--tolerance", "0.2", "0.02"])
+    assert code == 0 and ": determined" in out, out
     # the payload as calibrate takes it: in the tracked frame's axes (M com), with the gravity found; this log
     # (S = I on 2 % crosstalk) leaves the inertia, which is said (the inertia's turn: the next test)
     line = next(x for x in out.splitlines() if x.startswith("for fmscal calibrate (the tracked frame's axes): "))
@@ -121,8 +128,7 @@ def test_the_payload_for_calibrate_is_turned_into_the_tracked_frames_axes(capsys
     assert "--gravity" not in numbers
     fit.payload_determined = False                      # the fit's own verdict: nothing to pass on
     _print_calibrate_flags(fit)
-    assert capsys.readouterr().out.strip() == ("for fmscal calibrate: no payload to pass on, the mass and the centre "
-                                               "of mass are not determined")
+    assert capsys.readouterr().out.strip() == "for fmscal calibrate: no payload to pass on, it is not determined"
 
 
 def test_an_attitude_only_log_through_the_command(tmp_path, capsys):

@@ -28,15 +28,20 @@ def twenty_seeds():
 
 
 def test_mass_centre_of_mass_and_offset_with_honest_uncertainties(twenty_seeds):
+    """Twelve poses, S = I: the z-scores' rms two-sided (the gains estimated with the payload since issue 44);
+    converged where the payload's effect is within the rows' scatter (its default tolerance, issue 44: 18 of the
+    20 measured, the other two at 1.0 and 1.04 of it, "the cone is covered thinly")."""
     z = []
     for fit in twenty_seeds:
         assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass
         assert np.abs(fit.com - TOOL.com).max() < 2e-3
-        assert fit.converged and fit.gravity is None and fit.mounting is None
+        assert fit.converged is fit.payload_determined and fit.gravity is None and fit.mounting is None
+        assert fit.payload_determined or "the cone is covered thinly" in fit.why_undetermined
         z.append(np.r_[(fit.mass - TOOL.mass) / fit.mass_std, (fit.com - TOOL.com) / fit.com_std,
-                       (fit.b - OFFSET) / fit.b_std])
+                       (fit.b - OFFSET) / fit.b_std, (fit.gains[3:] - 1) / fit.gains_std[3:]])
     rms = float(np.sqrt(np.mean(np.square(z))))            # not np.std: a bias would hide in the mean it removes
     assert 0.7 < rms < 1.4, rms                             # 1.13 measured
+    assert sum(fit.payload_determined for fit in twenty_seeds) >= 16
 
 
 def test_the_load_convention_is_named_never_a_negative_mass():
@@ -92,7 +97,8 @@ def test_poses_about_one_axis_leave_gravity_and_the_offset_unseparated():
 
 
 def test_the_first_suggested_pose_reduces_the_largest_uncertainty():
-    """A table of small tilts: the suggestion, recorded in simulation, lowers the largest uncertainty."""
+    """A table of small tilts: the suggestion, recorded in simulation, lowers the payload's largest effect on the
+    compensated wrench over the noise, as it said (measured to 61 %, predicted 62 %)."""
     table = simulate_table(TOOL, n=6, seed=4, offset=OFFSET, spread=np.radians(25.0))
     before = fit_static(table)
     words = before.next_poses[0]
@@ -100,8 +106,10 @@ def test_the_first_suggested_pose_reduces_the_largest_uncertainty():
     R = _exp(np.radians(angle) * np.eye(3)["xyz".index(axis)])
     q_new = _quaternion(_rotation(table.q[k - 1]) @ R)
     after = fit_static(simulate_table(TOOL, n=7, seed=4, offset=OFFSET, q=np.vstack([table.q, q_new])))
-    worst = lambda f: max(f.mass_std / (0.01 * f.mass), np.max(f.com_std) / 1e-3)      # noqa: E731
+    worst = lambda f: np.max(f.effect / f.tolerance)                                  # noqa: E731
+    predicted = float(words.split("compensated wrench falls to ")[1].split("%")[0]) / 100
     assert worst(after) < 0.8 * worst(before), (words, worst(before), worst(after))
+    assert worst(after) / worst(before) == pytest.approx(predicted, abs=0.1)
 
 
 def _parse(words):

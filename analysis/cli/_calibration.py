@@ -12,8 +12,8 @@ import numpy as np
 from fmscal.plant import (Calibration, PayloadStd, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings,
                           read_truth)
 from fmscal.plant.io import AttitudeLog, NotSavedError, PoseTable, reading_sign
-from fmscal.plant.physics import (DEFAULT_COM_STD, DEFAULT_GRAVITY_STD, DEFAULT_INERTIA_STD, DEFAULT_MASS_STD, MODELS,
-                                  PayloadStdError)
+from fmscal.plant.physics import (DEFAULT_COM_STD, DEFAULT_GRAVITY_STD, DEFAULT_INERTIA_STD, DEFAULT_MASS_STD,
+                                  PayloadStdError, find_model)
 
 from fmscal.observers import method_names
 from fmscal.observers.payload import PayloadEstimate
@@ -300,7 +300,7 @@ def cmd_apply(args):
     payload = None
     if all(given):
         name = "rho" if args.com is None else "com"
-        cls = next(m for m in MODELS if m.payload_position == name)
+        cls = find_model(position=name)
         payload = flag_payload(cls, args.mass, args.inertia, position)
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
@@ -314,7 +314,7 @@ def cmd_apply(args):
         print(f"fmscal apply: warning: {args.calibration} records a calibration that did not converge",
               file=sys.stderr)
     t, w_hat = read_readings(args.readings)
-    model = next(m for m in MODELS if len(m.wrench_names) == calibration.size)      # a calibration is of one
+    model = find_model(n_w=calibration.size)      # a calibration is of one
     if w_hat.shape[1] != calibration.size:
         raise CliError(f"{Path(args.readings).name} holds {w_hat.shape[1]} reading columns; the calibration is "
                        f"{calibration.size}x{calibration.size} ({model.name})")

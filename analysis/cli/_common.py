@@ -8,7 +8,7 @@ from fmscal.plant import SCENARIOS
 from fmscal.plant.io import MAX_WRIST_MASS
 from fmscal.plant.io import json_ready as strict
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import MODELS
+from fmscal.plant.physics import find_model
 
 from fmscal.observers import METHODS
 
@@ -50,7 +50,7 @@ class RawDescriptionHelpFormatter(HelpFormatter, argparse.RawDescriptionHelpForm
 
 
 #: ``--inertia``'s values: one form per model, as each declares its inertia's entries (planar ``I_G``, spatial six).
-INERTIA_METAVAR = Words(" | ".join(" ".join(m.inertia_names) for m in MODELS))
+INERTIA_METAVAR = Words(" | ".join(" ".join(m.inertia_names) for m in find_model(every=True)))
 
 
 def position_values(name):
@@ -58,7 +58,7 @@ def position_values(name):
     declares. The count is checked by :func:`flag_payload`, not by argparse, so that the other case's flag with its
     own count (``--rho`` given three numbers on a spatial log) is told the flag it wants, not ``unrecognized
     arguments``."""
-    model = next(m for m in MODELS if m.payload_position == name)
+    model = find_model(position=name)
     return {"nargs": "+", "metavar": Words(" ".join(model.payload_position_names))}
 
 
@@ -80,7 +80,7 @@ def position_flag(model, rho, com, what=None):
     wrong = next((n for n, v in given.items() if n != name and v is not None), None)
     if wrong is not None:
         names = " ".join(model.payload_position_names)
-        other = next(m for m in MODELS if m.payload_position == wrong)
+        other = find_model(position=wrong)
         raise CliError(f"{what or 'a ' + model.name + ' log'} takes --{name} {names} (m, {POSITION_WORDS[name]}); "
                        f"--{wrong} is the {other.name} payload's ({POSITION_WORDS[wrong]})")
     return given[name]
@@ -98,7 +98,8 @@ def flag_payload(model, mass, inertia, position):
     flag, names = f"--{model.payload_position}", model.payload_position_names
     if (len(position), len(inertia)) != (len(names), len(model.inertia_names)):
         others = " and ".join(f"--{m.payload_position} {' '.join(m.payload_position_names)} and --inertia "
-                              f"{' '.join(m.inertia_names)} are for a {m.name} log" for m in MODELS if m is not model)
+                              f"{' '.join(m.inertia_names)} are for a {m.name} log"
+                              for m in find_model(every=True) if m is not model)
         raise CliError(f"a {model.name} log takes {flag} {' '.join(names)} ({len(names)} numbers, m) and "
                        f"--inertia {' '.join(model.inertia_names)} "
                        f"({len(model.inertia_names)} number{'s' if len(model.inertia_names) > 1 else ''}, kg m^2, "

@@ -1,16 +1,16 @@
-"""``fmscal identify-payload``: what practitioners estimate with ``S`` known, from a spatial log or a pose table.
+"""``fmscal identify-payload``: what practitioners estimate with ``S`` known, from any data: it prints what
+:func:`fmscal.observers.payload.identify_payload` returns.
 
 A spatial log (``t,qw,...,fz``) gives the offset, the mass, the centre of
-mass and, where the motion turns the payload fast enough, the inertia
-(:func:`fmscal.observers.payload.identify_payload`), with what the log
-covered and the next poses to record, as for a table. An attitude-only
+mass, the force gains and, where the motion turns the payload fast enough, the inertia,
+with what the log covered and the next poses to record, as for a table. An attitude-only
 log (no ``x,y,z``) gives its held segments as a pose table
 (:func:`fmscal.plant.io.held_table`). A pose table (the
-same header without ``t``: one row per held pose) gives the offset, the mass
-and the centre of mass, and, where asked, gravity's direction in the pose
-frame and the sensor's mounting on the tracked frame
-(:func:`fmscal.observers.payload.fit_static`), with what the poses
-covered and the next poses to record.
+same header without ``t``: one row per held pose), or joint angles with ``--urdf``, gives the offset, the mass,
+the centre of mass and the force gains, and, where asked, gravity's direction in the pose
+frame and the sensor's mounting on the tracked frame, with what the poses
+covered and the next poses to record. The payload is saved (``--save``) where it is determined by its effect on
+the compensated wrench within the cone of attitudes the data span (``--tolerance``); else the line says why.
 """
 
 import json
@@ -18,11 +18,12 @@ import sys
 
 import numpy as np
 
-from fmscal.plant import Calibration
-from fmscal.plant.io import AttitudeLog, PoseTable, held_table
+from fmscal.plant import Calibration, Log
+from fmscal.plant.io import AttitudeLog
+from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, SpatialModel, inertia_matrix
 
-from fmscal.observers.payload import fit_static, identify_payload
+from fmscal.observers.payload import identify_payload
 
 from .._calibrate import OptionError, read_data
 from ._common import CliError, Words, add_max_mass, max_mass, strict
@@ -30,19 +31,19 @@ from ._files import check_inputs, check_outputs
 from ._spatial import _NAMES, _spatial_truth
 
 __all__ = ["add_identify_payload", "cmd_identify_payload"]
-#: identify-payload weighs a payload under gravity in 3D: its logs' columns, and its calibration's reading.
-_COLUMNS = ("t", *SpatialModel.pose_names, *SpatialModel.wrench_names)
-_N_W = len(SpatialModel.wrench_names)
 
 
 def add_identify_payload(sub):
     """Add ``fmscal identify-payload`` to the subcommands ``sub``."""
     p = sub.add_parser("identify-payload", help="estimate the payload's mass properties and the offset, S known",
                        description="With the calibration S known (the identity, or --calibration CAL.json), "
-                                   "estimate the sensor's offset, the payload's mass and centre of mass (static "
-                                   "poses suffice) and its inertia (motion needed) from a spatial log or a pose "
-                                   "table (the spatial header without t, one row per held pose), with "
-                                   "one-sigma uncertainties, and say what the data did not determine.")
+                                   "estimate the sensor's offset, the payload's mass and centre of mass and the force "
+                                   "axes' gains relative to their mean (static poses suffice) and its inertia (motion "
+                                   "needed) from a spatial log, an attitude-only log, a pose table (the spatial header "
+                                   "without t, one row per held pose) or joint angles with --urdf, with one-sigma "
+                                   "uncertainties; the payload counts as determined by what its uncertainty adds "
+                                   "to the compensated wrench within the cone of attitudes the data span "
+                                   "(--tolerance), and the data's gaps are said.")
     p.add_argument("log", metavar="LOG.csv|TABLE.csv",
                    help="a spatial log, an attitude-only log, or a pose table (the header tells which)")
     p.add_argument("--calibration", metavar="CAL.json", help="a spatial calibration (default: S = I)")
@@ -64,9 +65,14 @@ def add_identify_payload(sub):
     p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
     p.add_argument("--truth", metavar="TRUTH.json", help="a truth sidecar from fmscal simulate: report the errors")
     p.add_argument("--json", action="store_true", help="print one JSON object (strict JSON)")
+    p.add_argument("--tolerance", type=float, nargs=2, metavar=("N", "NM"),
+                   help="the largest standard deviation the payload may add to the compensated wrench within the "
+                        "cone of attitudes the data span: forces in N, torques in N m (default one standard "
+                        "deviation of the reading's noise: a log's sample-to-sample scatter, a table's rows' scatter "
+                        "about the fit)")
     p.add_argument("--save", metavar="PAYLOAD.json",
                    help="write the payload (the tracked frame's axes, and gravity where estimated) for fmscal "
-                        "calibrate --payload; only where the mass and the centre of mass are determined")
+                        "calibrate --payload; only where it is determined (within --tolerance)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --save file")
     p.set_defaults(func=cmd_identify_payload)
 
@@ -99,7 +105,7 @@ def _calibration_S(args):
         args.reading = args.reading or "reaction"
         return None
     calibration = Calibration.load(path)
-    if calibration.size != _N_W:
+    if calibration.size != len(SpatialModel.wrench_names):
         raise CliError(f"{path} is a {calibration.kind} calibration ({calibration.size}x{calibration.size}); "
                        "identify-payload takes a spatial one")
     if calibration.forced:
@@ -112,7 +118,7 @@ def _calibration_S(args):
 
 
 def cmd_identify_payload(args):
-    """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log or a pose table."""
+    """``fmscal identify-payload``: :func:`fmscal.observers.payload.identify_payload` on any data, its report."""
     inputs = [(args.log, "the log"), (args.calibration, "the --calibration file"), (args.truth, "the --truth file"),
               (args.urdf, "the --urdf file")]
     check_inputs(inputs)
@@ -125,28 +131,17 @@ def cmd_identify_payload(args):
         data = read_data(args.log, args.urdf, args.frame)
     except OptionError as err:
         raise CliError(err.template.format("--urdf and --frame")) from None
-    if isinstance(data, AttitudeLog):
-        data, _, why = held_table(data)
-        print(f"fmscal identify-payload: note: {why}", file=sys.stderr)
-    if isinstance(data, PoseTable):
-        fit = _identify_table(args, data, S, gravity, estimate_gravity)
-    else:
-        fit = _identify_log(args, data, S, gravity, estimate_gravity)
-    if args.save is not None:
-        fit.save(args.save)               # refused in one line where the payload is not determined
-        if not args.json:
-            print(f"saved the payload to {args.save} (for fmscal calibrate --payload)")
-
-
-def _identify_log(args, log, S, gravity, estimate_gravity):
-    if tuple(log.columns) != _COLUMNS:
-        raise CliError(f"{log.name} is a {log.kind} log; identify-payload takes a spatial log "
-                       f"({','.join(_COLUMNS)}) or a pose table")
+    if args.truth and not isinstance(data, Log):
+        raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
     truth = _spatial_truth(args.truth)
-    for note in log.notes:                # rows before the first pose dropped: said, as calibrate says it
+    try:
+        fit = identify_payload(data, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
+                               estimate_mounting=args.mounting == "estimate", max_mass=max_mass(args),
+                               tolerance=args.tolerance)
+    except FmscalError as err:
+        raise CliError(str(err).replace("tolerance must be", "--tolerance must be", 1)) from None
+    for note in fit.notes:                # rows dropped, a log's held segments: said, as calibrate says them
         print(f"fmscal identify-payload: note: {note}", file=sys.stderr)
-    fit = identify_payload(log, S=S, gravity=gravity, reading=args.reading, estimate_gravity=estimate_gravity,
-                           estimate_mounting=args.mounting == "estimate", max_mass=max_mass(args))
     for warning in fit.warnings:
         print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
     out = {**fit.to_dict(), "reading": args.reading}
@@ -161,26 +156,58 @@ def _identify_log(args, log, S, gravity, estimate_gravity):
             out["b_error"] = (fit.b - truth.offset).tolist()
     if args.json:
         print(json.dumps(strict(out), allow_nan=False))
-        return fit
-    print(f"{log.name}: {len(log)} samples, {log.duration:g} s; S "
-          f"{'from ' + args.calibration if args.calibration else '= I'}; reading {args.reading}")
+    else:
+        _print_report(args, data, fit, out)
+    if args.save is not None:
+        fit.save(args.save)               # refused in one line where the payload is not determined
+        if not args.json:
+            print(f"saved the payload to {args.save} (for fmscal compensate, export ros2-control, calibrate --payload)")
+
+
+def _print_report(args, data, fit, out):
+    """The human-readable report of ``identify-payload`` (``out``: its JSON, with the truth's errors if given)."""
+    source = "from " + args.calibration if args.calibration else "= I"
+    held = not isinstance(data, Log)                     # held poses: a table, joint angles, a log's held segments
+    if held:
+        what = "its held segments" if isinstance(data, AttitudeLog) else f"{len(data)} held poses"
+        print(f"{data.name}: {what}; S {source}; reading {args.reading}")
+    else:
+        print(f"{data.name}: {len(data)} samples, {data.duration:g} s; S {source}; reading {args.reading}")
     _print_mass(fit)
     if fit.inertia is None:
-        print("inertia: not determined by this log")
+        print("inertia: " + ("not determined by held poses (it needs angular acceleration)" if held
+                             else "not determined by this log"))
     else:
         print("inertia about the centre of mass [kg m^2]: " + "  ".join(
             f"{n} {v:.4g} +- {s:.1g}" for n, v, s in zip(INERTIA_NAMES, fit.inertia, fit.inertia_std)))
     print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
+    _print_gains(fit)
     _print_rotations(fit)
-    _print_calibrate_flags(fit)
-    _print_coverage(fit, fit.undetermined)
+    _print_calibrate_flags(fit, table=held)
+    _print_coverage(fit, () if held else fit.undetermined)
+    _print_effect(fit)
     print(f"converged: {'yes' if fit.converged else 'no'}")
-    if truth is not None:
+    if "mass_error" in out:
         print(f"errors against the truth: mass {out['mass_error']:+.3g} kg, centre of mass "
               + " ".join(f"{v * 1e3:+.3f}" for v in out["com_error"]) + " mm"
               + ("" if out["inertia_error"] is None else ", inertia " + " ".join(
                   f"{n} {v:+.2g}" for n, v in zip(INERTIA_NAMES, out["inertia_error"])) + " kg m^2"))
-    return fit
+
+
+def _print_gains(fit):
+    """The channels' gains relative to the force gains' mean, where estimated (eq. P0)."""
+    if fit.gains is None:
+        print("gains: not estimated (too few poses for them beside the rotations asked); taken as one")
+        return
+    print("gains (w = diag(gains) S (sigma w_hat - b); forces relative to their mean): " + "  ".join(
+        f"{n} {v:.5f} +- {s:.1g}" for n, v, s in zip(_NAMES, fit.gains, fit.gains_std)))
+
+
+def _print_effect(fit):
+    """The payload's effect on the compensated wrench against the tolerance, and the verdict (eq. E3)."""
+    print(f"the payload's effect on the compensated wrench within the cone (1 sd): {fit.effect[0]:.2g} N, "
+          f"{fit.effect[1]:.2g} N m; tolerance {fit.tolerance[0]:.2g} N, {fit.tolerance[1]:.2g} N m: "
+          + ("determined" if fit.payload_determined else "not determined (" + fit.why_undetermined + ")"))
 
 
 def _print_mass(fit):
@@ -214,7 +241,7 @@ def _print_calibrate_flags(fit, table=False):
     if fit.gravity is None and fit.mounting is None:
         return
     if not fit.payload_determined:
-        print("for fmscal calibrate: no payload to pass on, the mass and the centre of mass are not determined")
+        print("for fmscal calibrate: no payload to pass on, it is not determined")
         return
     M = np.eye(3) if fit.mounting is None else np.asarray(fit.mounting)
     flags = f"--mass {fit.mass:.6g} --com {' '.join(f'{v:.6g}' for v in M @ np.asarray(fit.com))}"
@@ -228,28 +255,6 @@ def _print_calibrate_flags(fit, table=False):
     if known is None and not table:
         flags += " (and --inertia, which this log did not determine, in the same axes)"
     print(f"for fmscal calibrate (the tracked frame's axes): {flags}")
-
-
-def _identify_table(args, table, S, gravity, estimate_gravity):
-    if args.truth:
-        raise CliError("--truth is taken with a simulated log; a pose table has no truth sidecar")
-    fit = fit_static(table, S=S, gravity=gravity, estimate_gravity=estimate_gravity,
-                     estimate_mounting=args.mounting == "estimate", reading=args.reading, max_mass=max_mass(args))
-    for warning in fit.warnings:
-        print(f"fmscal identify-payload: warning: {warning}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(strict(fit.to_dict()), allow_nan=False))
-        return fit
-    source = "from " + args.calibration if args.calibration else "= I"
-    print(f"{table.name}: {len(table)} held poses; S {source}; reading {args.reading}")
-    _print_mass(fit)
-    print("inertia: not determined by held poses (it needs angular acceleration)")
-    print("offset b [N m, N]: " + "  ".join(f"{n} {v:+.4g} +- {s:.1e}" for n, v, s in zip(_NAMES, fit.b, fit.b_std)))
-    _print_rotations(fit)
-    _print_calibrate_flags(fit, table=True)
-    _print_coverage(fit)
-    print(f"converged: {'yes' if fit.converged else 'no'}")
-    return fit
 
 
 def _print_coverage(fit, undetermined=()):

@@ -9,7 +9,7 @@ take); this module prints its report (:func:`print_spatial`).
 import numpy as np
 
 from fmscal.plant import SpatialModel, read_truth
-from fmscal.plant.physics import MODELS
+from fmscal.plant.physics import find_model
 
 from ._common import CliError
 
@@ -22,7 +22,7 @@ def _spatial_truth(path):
     """The truth sidecar at ``path`` (None without one), refused if it is not a spatial log's (its reading's size)."""
     truth = read_truth(path) if path else None
     if truth is not None and truth.schedule.size != len(_NAMES):
-        other = next((m.name for m in MODELS if len(m.wrench_names) == truth.schedule.size), "another")
+        other = getattr(find_model(n_w=truth.schedule.size), "name", "another")
         raise CliError(f"{path} is the truth of a {other} log; this log is spatial")
     return truth
 
@@ -61,7 +61,7 @@ def print_std_parts(out, kind):
     the latency, a misfit's widening) and the payload's, with the payload's standard deviations it carries."""
     if out.get("S_std_payload") is None or out.get("S_std_statistical") is None:      # a method without S_std
         return
-    model = next(m for m in MODELS if m.name == kind)
+    model = next(m for m in find_model(every=True) if m.name == kind)
     sd = out["payload_std"]
     groups = [(("mass",), "kg"), (model.payload_position_names, "m"), (model.inertia_names, "kg m^2"),
               (("gravity",), "m/s^2")]

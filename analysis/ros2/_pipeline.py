@@ -34,7 +34,7 @@ import numpy as np
 from fmscal.plant import Calibration, SpatialModel
 from fmscal.plant.io import AttitudeLog, held_table
 from fmscal.plant.physics import quaternion_multiply
-from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload
+from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload, reading_noise
 
 from .._compensate import Compensator, compensation_model
 from .._motion import PoseMotion, quaternion_from_matrix, quaternion_to_matrix
@@ -440,7 +440,8 @@ class Pipeline:
         t = log.t
         try:
             table, used, why = held_table(log)
-            fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading)
+            fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading,
+                             noise=reading_noise(table.noise, self.calibration.S, used * len(t) / len(table)))
         except Exception as err:
             return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
         if not fit.payload_determined:

@@ -296,8 +296,12 @@ class Observer:
 
     @classmethod
     def _refusal(cls, model):
-        """This class's own limits on ``model``: read from :attr:`paper_equations_only` and
-        :attr:`linear_channels_only`; a class with other limits extends it. One line, or None."""
+        """This class's own limits on ``model``: a model that estimates no ``S`` (:attr:`~fmscal.plant.Model.
+        estimates`), and :attr:`paper_equations_only` and :attr:`linear_channels_only`; a class with other limits
+        extends it. One line, or None."""
+        if "S" not in model.estimates:
+            return (f"{cls.__name__} estimates S; the {model.name} model takes S as known (its parameters: "
+                    "fmscal.observers.payload.identify_payload)")
         if cls.paper_equations_only and not model.paper_equations:
             return f"{cls.__name__} is defined for planar models; got a {model.name} model"
         if cls.linear_channels_only and not model.linear_channels:

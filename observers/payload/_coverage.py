@@ -3,8 +3,8 @@
 The cone of gravity directions the data hold in the sensor frame (the
 half-angle around their mean, :func:`cone_deg`); the parameters the data
 leave undetermined or poorly determined, in words (:func:`weak_directions`,
-:func:`describe`); and the held poses that would most reduce the largest
-scaled uncertainty (:func:`next_poses`): candidate turns of 45, 90 and 180
+:func:`describe`); and the held poses that would most lower the payload's
+effect on the compensated wrench (:func:`next_poses`): candidate turns of 45, 90 and 180
 degrees about the sensor's axes from reference attitudes (a table's poses, or
 attitudes along a log), each scored by the covariance the fit would have with
 the pose's rows added to its information::
@@ -12,8 +12,8 @@ the pose's rows added to its information::
     cov(R_c) = s^2 (F + r J_c^T J_c)^-1                                      (N1)
 
 ``F`` the fit's weighted information over the parameters a held pose
-informs (mass, centre of mass, offset, and gravity's and the mounting's
-angles where estimated), ``J_c`` the held pose's six weighted rows
+informs (mass, centre of mass, offset, gravity's and the mounting's
+angles where estimated, the force gains), ``J_c`` the held pose's six weighted rows
 (:class:`fmscal.observers.payload._static_fit._Model`), ``r`` how many times they
 count (one row of a table; the samples of a held pose of a log) and ``s^2``
 the weighted residuals' variance per degree of freedom.
@@ -23,13 +23,9 @@ import numpy as np
 
 from fmscal.plant.physics import skew
 
-__all__ = ["cone_deg", "covariance", "weak_directions", "describe", "in_words", "relative_std", "next_poses",
-           "rotation", "DETERMINED_REL", "DETERMINED_COM", "TURNS"]
+__all__ = ["cone_deg", "covariance", "weak_directions", "describe", "in_words", "effect_sd", "next_poses",
+           "rotation", "TURNS"]
 
-#: The mass counts as determined when its one-sigma uncertainty is below this fraction of it.
-DETERMINED_REL = 0.01
-#: The centre of mass counts as determined when each coordinate's one-sigma uncertainty is below this, m.
-DETERMINED_COM = 1e-3
 #: The turns about a sensor axis the next poses are drawn from, degrees.
 TURNS = (45.0, 90.0, 180.0, -45.0, -90.0)
 _AXES = ("x", "y", "z")
@@ -39,7 +35,8 @@ _PRETTY = {"m": "the mass", **{f"c_{n}": f"the offset's {n}" for n in _OFFSET_NA
            **{f"com_{a}": f"the centre of mass along {a}" for a in _AXES},
            **{f"I_{n}": f"the inertia's {n}" for n in _INERTIA},
            "gravity_1": "gravity's direction", "gravity_2": "gravity's direction",
-           **{f"mount_{a}": f"the mounting about {a}" for a in _AXES}}
+           **{f"mount_{a}": f"the mounting about {a}" for a in _AXES},
+           "gain_x": "the force gains", "gain_y": "the force gains"}
 _PREFIXES = ("the inertia's ", "the offset's ", "the centre of mass along ", "the mounting about ")
 
 
@@ -221,33 +218,29 @@ def in_words(names, found, source="these poses"):
     return lines
 
 
-def relative_std(cov, theta):
-    """Each parameter's one-sigma uncertainty on a common scale: the mass relative to it, the centre of mass
-    in mm, the offset relative to the weight's wrench, the angles in degrees.
+def effect_sd(J, cov, gains):
+    """The largest standard deviation of the forces and of the torques a covariance leaves in predicted readings,
+    eq. (E1) of :mod:`fmscal.observers.payload._effect`: ``(forces N, torques N m)``.
 
     Parameters
     ----------
+    J : ndarray, shape (K, 6, p)
+        The predicted reading's rows (reading order) at ``K`` attitudes.
     cov : ndarray, shape (p, p)
-        Over ``(m, com (3), c (6), angles)``, the layout of a table's fit.
-    theta : ndarray, shape (p,)
+        The parameters' covariance; infinite where not determined (a row that reaches it: infinite).
+    gains : ndarray, shape (6,)
+        The channels' gains (the compensated wrench is ``diag(gains)`` times the corrected reading).
 
     Returns
     -------
-    ndarray, shape (p,)
+    ndarray, shape (2,)
     """
-    std = np.sqrt(np.maximum(np.diag(cov), 0))
-    return std / _scale(theta)
-
-
-def _scale(theta):
-    """What counts as determined for ``(m, com, c, angles)``: 1 % of the mass, 1 mm, a thousandth of the
-    weight's force (a tenth of that in N m for the torque), 0.2 degrees."""
-    scale = np.ones(len(theta))
-    scale[0] = DETERMINED_REL * abs(theta[0])
-    scale[1:4] = DETERMINED_COM
-    scale[4:10] = max(abs(theta[0]) * 9.81, 1e-9) * 1e-3 * np.r_[np.full(3, 0.1), np.ones(3)]
-    scale[10:] = np.radians(0.2)
-    return scale
+    finite = np.isfinite(np.diag(cov))
+    C = np.where(np.outer(finite, finite), cov, 0.0)
+    var = np.sum((J @ C) * J, axis=2)
+    reaches = np.abs(J[:, :, ~finite]).max(axis=2) > 0 if (~finite).any() else np.zeros(var.shape, dtype=bool)
+    sd = np.where(reaches, np.inf, np.sqrt(np.maximum(var, 0.0))) * gains
+    return np.array([sd[:, 3:].max(), sd[:, :3].max()])
 
 
 def _candidates(references, labels):
@@ -267,15 +260,23 @@ def _candidates(references, labels):
     return out
 
 
-def next_poses(model, theta, information, weights, s2, references, labels, rows=1.0, held="", count=3):
-    """The candidate poses that most reduce the largest scaled uncertainty (:func:`relative_std`), best first, eq. (N1).
+def next_poses(model, theta, information, weights, s2, references, labels, attitudes, tolerance, rows=1.0, held="",
+               count=3, widened=None):
+    """The candidate poses that most lower the payload's effect on the compensated wrench, best first, eq. (N1).
+
+    Each candidate is scored by the largest standard deviation the payload would leave in the compensated
+    wrench (eq. E1 of :mod:`fmscal.observers.payload._effect`) over ``attitudes`` (the cone's) and the pose
+    itself, forces and torques each over their tolerance, with the covariance the fit would have with the
+    pose's rows added (eq. N1; the model-based ``s^2 F^-1``). A pose outside the cone widens it, and the
+    payload is then promised over the wider cone: with ``widened``, the best ``3 count`` candidates are scored
+    again over the attitudes it gives for each (the cone the data would span with the pose).
 
     Parameters
     ----------
     model : fmscal.observers.payload._static_fit._Model
-        Its ``jacobian(theta, R)`` gives a held pose's rows.
+        Its ``jacobian(theta, R)`` gives a held pose's rows, its ``channel_gains`` the gains.
     theta : ndarray, shape (p,)
-        ``(m, com, c, angles)``.
+        ``(m, com, c, angles, gains)``.
     information : ndarray, shape (p, p)
         The fit's weighted information over ``theta``.
     weights : ndarray, shape (6,)
@@ -286,6 +287,12 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
         The attitudes the turns start from.
     labels : sequence of str
         Their names in words ("pose 3", "the attitude at t = 4.0 s").
+    attitudes : ndarray, shape (A, 3, 3)
+        The attitudes the effect is taken over (:func:`fmscal.observers.payload._effect.cone_attitudes`).
+    tolerance : ndarray, shape (2,)
+        N, N m.
+    widened : callable, optional
+        ``widened(R)``: the attitudes of the cone the data would span with the pose ``R`` added (A', 3, 3).
     rows : float
         How many times a held pose's rows count.
     held : str
@@ -295,20 +302,34 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
     Returns
     -------
     list of str
-        Each with the factor by which the largest uncertainty falls; only
-        poses that lower it by more than 1 % (or make it finite where it is
-        not): empty when no single pose would.
+        Each with the factor by which the effect falls; only poses that lower it by more than 1 % (or make it
+        finite where it is not): empty when no single pose would.
     """
-    worst_now = float(np.max(relative_std(covariance(information, s2)[0], theta)))
+    gains = model.channel_gains(theta)
+    p = len(theta)
+    J_cone = model.jacobian(theta, R=attitudes).reshape(len(attitudes), 6, p)
+
+    def score(cov, J_pose=None, J_over=None):
+        J = J_cone if J_over is None else J_over
+        J = J if J_pose is None else np.concatenate([J, J_pose[None]])
+        return float(np.max(effect_sd(J, cov, gains) / tolerance))
+
+    worst_now = score(covariance(information, s2)[0])
     candidates = _candidates(references, labels)
-    rows_each = model.jacobian(theta, R=np.array([Rc for _, Rc in candidates])).reshape(len(candidates), 6, -1)
+    rows_each = model.jacobian(theta, R=np.array([Rc for _, Rc in candidates])).reshape(len(candidates), 6, p)
     scored = []
-    for (words, _), J in zip(candidates, rows_each * weights[:, None]):     # each pose's six weighted rows
-        cov, _ = covariance(information + rows * J.T @ J, s2)
-        scored.append((float(np.max(relative_std(cov, theta))), words))
+    for (words, Rc), J in zip(candidates, rows_each):                   # each pose's six rows
+        Jw = J * weights[:, None]
+        cov, _ = covariance(information + rows * Jw.T @ Jw, s2)
+        scored.append((score(cov, J), words, cov, J, Rc))
     scored.sort(key=lambda item: item[0])
+    if widened is not None:                 # the best again, over the cone the data would span with each
+        best = scored[:3 * count]
+        over = [model.jacobian(theta, R=widened(Rc)).reshape(-1, 6, p) for _, _, _, _, Rc in best]
+        scored = sorted([(score(cov, J, J_over), words, cov, J, Rc)
+                         for (_, words, cov, J, Rc), J_over in zip(best, over)], key=lambda item: item[0])
     best = []
-    for worst, words in scored:
+    for worst, words, *_ in scored:
         if words in (w for _, w in best):
             continue
         if (np.isfinite(worst_now) and worst >= 0.99 * worst_now) or not np.isfinite(worst):
@@ -316,7 +337,8 @@ def next_poses(model, theta, information, weights, s2, references, labels, rows=
         best.append((worst, words))
         if len(best) == count:
             break
-    return [f"{words}{held} (the largest uncertainty {_ratio(worst_now, worst)})" for worst, words in best]
+    return [f"{words}{held} (the payload's largest effect on the compensated wrench {_ratio(worst_now, worst)})"
+            for worst, words in best]
 
 
 def _ratio(before, after):

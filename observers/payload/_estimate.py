@@ -222,7 +222,9 @@ class _Rotations:
                                gravity_std=self.gravity_std, mounting=M, mounting_deg=self.mounting_deg,
                                mounting_std_deg=self.mounting_std_deg, mounting_axis=self.mounting_axis,
                                noise_sd=self.noise_sd, gains=self.gains, reading=self.reading,
-                               noise_of=self.noise_of, inertia_reason=self.inertia_reason, cov=cov, axes="tracked")
+                               noise_of=self.noise_of, inertia_reason=self.inertia_reason, cov=cov, axes="tracked",
+                               gains_std=self.gains_std, effect=self.effect, tolerance=self.tolerance,
+                               why_undetermined=self.why_undetermined, notes=list(self.notes))
 
     def save(self, path):
         """Write the payload, in the tracked frame's axes (:meth:`tracked`), as JSON: everything compensation needs.
@@ -264,12 +266,13 @@ class _Rotations:
         Raises
         ------
         FmscalError
-            The mass and the centre of mass are not determined (``payload_determined`` False), the offset is not,
-            or the estimate holds no offset or sign (one read from a ``/1`` file).
+            The payload is not determined (``payload_determined`` False): the message gives
+            ``why_undetermined``. The offset is not determined, or the estimate holds no offset or sign (one
+            read from a ``/1`` file).
         """
         if not self.payload_determined:
-            raise FmscalError("the mass and the centre of mass are not determined: no payload to save "
-                              "(record more poses: see the next poses)")
+            raise FmscalError("the payload is not determined: no payload to save ("
+                              + (self.why_undetermined or "see the warnings") + ")")
         t = self.tracked()
         missing = [name for name in ("b", "b_std", "reading") if getattr(t, name) is None]
         if missing:
@@ -333,7 +336,9 @@ class PayloadEstimate(_Rotations):
     converged : bool
         Every group (mass, centre of mass, inertia, offset) determined.
     payload_determined : bool
-        The mass and the centre of mass each determined (within :data:`DETERMINED`).
+        The payload (mass, centre of mass, offset, force gains) determined by its effect on the compensated
+        wrench: within ``tolerance`` over the cone of attitudes the data span (eq. E3 of
+        :mod:`fmscal.observers.payload._effect`).
     block : float or None
         Length of the blocks of time of the cluster-robust covariance, s
         (:func:`fmscal.observers.batch.block_length`).
@@ -358,6 +363,21 @@ class PayloadEstimate(_Rotations):
         measured; the sensor's axes on the tracked frame (3x3), its angle, uncertainty (degrees) and unit axis.
     noise_sd, gains, axes
         The reading's noise and per-channel gains, and the axes of the estimate (:class:`_Rotations`).
+    gains_std : ndarray, shape (6,), or None
+        The standard deviations of ``gains``: each reading channel's gain, in
+        ``w = diag(gains) S (sigma w_hat - b)`` (eq. P0 of :class:`fmscal.plant.PayloadModel`): the force gains
+        relative to their mean (their mean 1), the torque gains 1 (``gains_std`` 0 there); the reading's
+        channels, the sensor's axes. None where not estimated (too few poses for them with the rotations asked).
+    effect : ndarray, shape (2,), or None
+        The payload's largest effect on the compensated wrench within the cone, one standard deviation: forces
+        (N), torques (N m) (eq. E2).
+    tolerance : ndarray, shape (2,), or None
+        What ``effect`` is held to: forces (N), torques (N m); given, or one standard deviation of the
+        reading's noise (eq. E4).
+    why_undetermined : str or None
+        Why the payload is not determined, in one line naming the cone, the gains or the noise.
+    notes : list of str
+        What was done to the data (rows dropped, a log's held segments taken as a table).
     """
 
     mass: float
@@ -380,6 +400,11 @@ class PayloadEstimate(_Rotations):
     noise_of: str = "sample"
     inertia_reason: str = None
     cov: np.ndarray = None
+    gains_std: np.ndarray = None
+    effect: np.ndarray = None
+    tolerance: np.ndarray = None
+    why_undetermined: str = None
+    notes: list = field(default_factory=list)
 
     def to_dict(self):
         """The fields as JSON-ready numbers and lists (None where undetermined)."""
@@ -391,7 +416,10 @@ class PayloadEstimate(_Rotations):
                 "residual_rms": listed(self.residual_rms), "warnings": list(self.warnings),
                 "converged": bool(self.converged), **self.rotations_dict(),
                 "cone_deg": None if self.cone_deg is None else float(self.cone_deg),
-                "undetermined": list(self.undetermined), "next_poses": list(self.next_poses)}
+                "undetermined": list(self.undetermined), "next_poses": list(self.next_poses),
+                "gains": listed(self.gains), "gains_std": listed(self.gains_std), "effect": listed(self.effect),
+                "tolerance": listed(self.tolerance), "payload_determined": bool(self.payload_determined),
+                "why_undetermined": self.why_undetermined, "notes": list(self.notes)}
 
     @classmethod
     def load(cls, path):

@@ -3,7 +3,7 @@
 A held pose does not accelerate, so the corrected reading is the weight's
 wrench at the sensor (SPATIAL facts, Newton-Euler at rest) plus the offset::
 
-    y_k = sigma S w_hat_k = [com x f_k; f_k] + c,       f_k = m M^T R_k^T (-g)
+    y_k = sigma S w_hat_k = [com x f_k; f_k / g_f] + c,       f_k = m M^T R_k^T (-g)
 
 with ``R_k`` the tracked frame's attitude at pose ``k``, ``M`` the sensor's
 axes on it (the mounting; the identity unless estimated), ``g`` gravity in the
@@ -12,7 +12,10 @@ reports the wrench the mount applies to the payload (the toolkit's
 convention, ``reaction``) or ``-1`` for one that reports the wrench the tool
 applies to the sensor (``load``: ATI, Robotiq, Bota, OnRobot).
 
-The unknowns are ``m``, ``com`` (3), ``c`` (6), and where asked the direction
+The unknowns are ``m``, ``com`` (3), ``c`` (6), the force axes' gains ``g_f``
+relative to their mean (two numbers, eq. (P0) of :class:`fmscal.plant.PayloadModel`:
+a sensor's gains disagree by a few percent where ``S`` is the maker's; estimated where
+the poses are enough for them, :func:`min_poses`), and where asked the direction
 of gravity (two angles; its size is the standard 9.81 m/s^2 unless told) and
 the mounting ``M`` (a rotation, three angles). The fit is nonlinear least
 squares (Levenberg-Marquardt, :func:`scipy.optimize.least_squares`), started
@@ -21,17 +24,21 @@ forces each weighted by their noise over their own degrees of freedom (eq.
 N2); the rows are independent (each an average over a held pose), so the
 covariance is ``(J^T W J)^-1``, each variance widened to the Student-t's
 (eq. N3). Where the model does not fit, the covariance widens: for rows in
-sequence, to the block sandwich's (N6); for force axes whose gains
-disagree, by their masses' spread (N7, N8), with a warning; an offset
-drifting along the rows (N9) and a narrow cone of attitudes are warned.
-The fewest poses each estimated rotation needs: :func:`min_poses` (N4).
+sequence, to the block sandwich's (N6); force axes whose gains disagree
+where too few poses leave the gains unestimated (N7) are named with what
+compensation would leave; an offset drifting along the rows (N9) and a
+narrow cone of attitudes are warned. The fewest poses each estimated rotation
+and the gains need: :func:`min_poses` (N4). The payload counts as determined
+by what its uncertainty does to the compensated wrench over the cone of
+attitudes the poses span (:mod:`fmscal.observers.payload._effect`, eqs.
+E1-E4), against a tolerance tied to the rows' scatter.
 
 What the table covers: the gravity directions it holds in the sensor frame
 (the half-angle of the cone around their mean), the parameters it leaves
 undetermined (the information's weak directions, in words), and the next
-poses that would most reduce the largest relative uncertainty: candidate
-turns of 45, 90 and 180 degrees about the sensor's axes from the table's
-poses, each scored by the covariance the fit would have with it added
+poses that would most reduce the payload's effect on the compensated wrench:
+candidate turns of 45, 90 and 180 degrees about the sensor's axes from the
+table's poses, each scored by the covariance the fit would have with it added
 (:mod:`fmscal.observers.payload._coverage`, the machinery a log's fit shares).
 
 Gravity along ``-z`` and the sensor square on the tracked frame are checked:
@@ -40,7 +47,7 @@ and where one of them explains the residuals the fit says which flag to add
 (:func:`rotation_warning`).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -49,18 +56,18 @@ from scipy.stats import chi2, f as f_dist
 
 from fmscal.plant.io import MIN_POSES, PoseTable, check_table_units, reading_sign
 from fmscal.plant.numerics import FmscalError, as_bool, as_finite_array
-from fmscal.plant.physics import GRAVITY, check_calibration, regressor, rotation_matrix, skew
+from fmscal.plant.physics import GRAVITY, PayloadModel, check_calibration, regressor, rotation_matrix, skew
 
 from fmscal.observers.batch import (MIN_BLOCKS, InverseDynamicsFit, correlation_time, fit_readings, pseudo_inverse,
                                    sandwich)
-from ._coverage import (DETERMINED_REL, DETERMINED_COM, _OFFSET_NAMES, cone_deg as _cone, covariance, in_words,
-                        next_poses, rotation as _exp)
-from ._estimate import INERTIA_ROWS, _Rotations, _angle_deg, _axis, propagate_covariance
+from ._coverage import _OFFSET_NAMES, cone_deg as _cone, covariance, in_words, next_poses, rotation as _exp
+from ._effect import (DEFAULT_TOLERANCE, check_tolerance, circle_axis, cone_attitudes, judge, static_effect)
+from ._estimate import INERTIA_ROWS, PayloadEstimate, _angle_deg, _axis, propagate_covariance
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
            "TILT_SIGMAS", "MIN_CONE_DEG", "ODDS", "min_poses", "sign_separated", "rotations_unresolved",
-           "gains_warning", "NARROW_CONE_DEG", "cone_warning"]
+           "gains_warning", "NARROW_CONE_DEG", "cone_warning", "gains_of", "gains_differ"]
 
 #: With gravity's direction (or the mounting) fixed, the fit is told to estimate it when estimating it lowers
 #: the force residuals' rms by more than this factor ...
@@ -78,69 +85,45 @@ NARROW_CONE_DEG = 30.0
 ODDS = 1e-3
 
 
-@dataclass
-class StaticFit(_Rotations):
-    """The static fit of a pose table (module docstring), one-sigma uncertainties beside each value.
+@dataclass(kw_only=True)
+class StaticFit(PayloadEstimate):
+    """The static fit of a pose table (module docstring): a :class:`PayloadEstimate` with no inertia, and the fit's
+    covariance.
 
     Attributes
     ----------
-    mass, mass_std : float
-        kg.
-    com, com_std : ndarray, shape (3,)
-        Centre of mass in the sensor frame, m.
-    b, b_std : ndarray, shape (6,)
-        The sensor's offset in ``w = S (sigma w_hat - b)``, reading order, N m and N.
-    gravity, gravity_std_deg, mounting, mounting_deg, mounting_std_deg, mounting_axis
-        Where asked, as a log's fit gives them (:class:`fmscal.observers.payload.PayloadEstimate`).
+    mass, mass_std, com, com_std, b, b_std, gains, gains_std, effect, tolerance, payload_determined, ...
+        As a log's fit gives them (:class:`fmscal.observers.payload.PayloadEstimate`); ``b`` is the offset in
+        ``w = diag(gains) S (sigma w_hat - b)``, reading order, N m and N.
+    inertia, inertia_std : None
+        Held poses never determine it.
     reading : str
         The reading's sign convention the fit used (:data:`fmscal.plant.io._calibration.READINGS`).
     cone_deg : float
         Half-angle of the cone of gravity directions the table holds in the sensor frame, degrees.
     undetermined : list of str
         The parameters the table leaves undetermined, in words.
-    next_poses : list of str
-        The poses to record next, best first.
-    residual_rms : ndarray, shape (6,)
-        Of the fit, per channel, N m and N.
-    warnings : list of str
     converged : bool
-        Mass, centre of mass, offset (and gravity, mounting where asked) all determined.
-    payload_determined : bool
-        The mass and the centre of mass each determined (within ``DETERMINED_REL`` and ``DETERMINED_COM`` of
-        :mod:`fmscal.observers.payload._coverage`).
+        Mass, centre of mass, offset (and gravity, mounting where asked) all determined, and the model fits.
     cov : ndarray
         Covariance of the fitted parameters (:attr:`names` order).
     names : tuple of str
-        The fitted parameters.
+        The fitted parameters (the force gains' two free numbers last, where estimated).
     payload_cov : ndarray, shape (16, 16)
         Covariance over :data:`fmscal.observers.payload.PAYLOAD_PARAMETERS` (eq. E1 of
         :mod:`fmscal.observers.payload._estimate`), the inertia's rows and columns infinite: held poses do not
         give it.
-    noise_sd, gains
-        The noise of a row the fit weighed the corrected reading by (each group's, eq. N2), and the gains
-        (:class:`fmscal.observers.payload.PayloadEstimate`).
+    noise_sd : ndarray, shape (6,)
+        The noise of a row the fit weighed the corrected reading by (each group's, eq. N2); ``noise_of`` "pose".
     """
 
-    #: Held poses never give the inertia (:meth:`tracked` takes these as a log's fit has them).
-    inertia = inertia_std = None
-    inertia_reason = "held poses do not accelerate: the inertia needs angular acceleration (a log of motion)"
-    #: :attr:`noise_sd` is the noise of one row, a held pose's averaged reading.
-    noise_of = "pose"
-
-    mass: float
-    mass_std: float
-    com: np.ndarray
-    com_std: np.ndarray
-    b: np.ndarray
-    b_std: np.ndarray
+    inertia: np.ndarray = None
+    inertia_std: np.ndarray = None
+    residual_rms: np.ndarray = None
+    inertia_reason: str = "held poses do not accelerate: the inertia needs angular acceleration (a log of motion)"
+    noise_of: str = "pose"
     reading: str = "reaction"
     cone_deg: float = 0.0
-    undetermined: list = field(default_factory=list)
-    next_poses: list = field(default_factory=list)
-    residual_rms: np.ndarray = None
-    warnings: list = field(default_factory=list)
-    converged: bool = False
-    payload_determined: bool = False
     cov: np.ndarray = None
     names: tuple = ()
     payload_cov: np.ndarray = None
@@ -151,22 +134,15 @@ class StaticFit(_Rotations):
 
     def to_dict(self):
         """The fields as JSON-ready numbers and lists (None where not estimated); the keys of ``identify-payload``."""
-        def listed(v):
-            return None if v is None else [float(x) for x in np.ravel(v)]
-        return {"mass": float(self.mass), "mass_std": float(self.mass_std), "com": listed(self.com),
-                "com_std": listed(self.com_std), "inertia": None, "inertia_std": None, "b": listed(self.b),
-                "b_std": listed(self.b_std), **self.rotations_dict(), "reading": self.reading,
-                "cone_deg": float(self.cone_deg), "undetermined": list(self.undetermined),
-                "next_poses": list(self.next_poses), "residual_rms": listed(self.residual_rms),
-                "warnings": list(self.warnings), "converged": bool(self.converged)}
+        return {**super().to_dict(), "reading": self.reading}
 
 
-def min_poses(estimate_gravity=False, estimate_mounting=False):
+def min_poses(estimate_gravity=False, estimate_mounting=False, estimate_gains=False):
     """The fewest held poses that determine the static fit, with the noise measured from its residuals.
 
-    The forces carry every rotation: ``f_k = m M^T R_k^T (-g) + c_f`` holds
+    The forces carry every rotation: ``f_k = m M^T R_k^T (-g) / g_f + c_f`` holds
     ``p_f = 4`` unknowns (the mass, the force offset), two more for gravity's
-    direction and three for the mounting; the torques ``com x f_k + c_tau``
+    direction, three for the mounting and two for the force gains; the torques ``com x f_k + c_tau``
     add six unknowns and three numbers a pose. Each pose gives three forces,
     and the forces' noise, measured from their ``3N - p_f`` residual degrees
     of freedom, has a finite Student-t variance only beyond two (eq. N3)::
@@ -174,9 +150,11 @@ def min_poses(estimate_gravity=False, estimate_mounting=False):
         3 N - p_f > 2,   N >= floor((p_f + 2) / 3) + 1                        (N4)
 
     that is 3 with gravity and the mounting as given or gravity's direction
-    estimated, 4 with the mounting estimated (alone or with gravity's); a pose table holds at
+    estimated, 4 with the mounting estimated (alone or with gravity's); with the gains,
+    3, 4, 4 and 5; a pose table holds at
     least :data:`fmscal.plant.io.MIN_POSES` (four) for the torques' six
-    unknowns and the offset. Poses that do not tilt gravity, or tilt it
+    unknowns and the offset. :func:`fit_static` estimates the gains where the table
+    holds enough poses for them. Poses that do not tilt gravity, or tilt it
     within one plane, leave the fit undetermined at any count (the
     fit's weak directions; :func:`sign_separated`).
 
@@ -184,7 +162,7 @@ def min_poses(estimate_gravity=False, estimate_mounting=False):
     -------
     int
     """
-    p_f = 4 + 2 * bool(estimate_gravity) + 3 * bool(estimate_mounting)
+    p_f = 4 + 2 * bool(estimate_gravity) + 3 * bool(estimate_mounting) + 2 * bool(estimate_gains)
     return (p_f + 2) // 3 + 1
 
 
@@ -197,17 +175,34 @@ def _tangent_basis(d):
 
 
 class _Model:
-    """The residuals of the static fit for one table, its parameter layout and its start."""
+    """The residuals of the static fit for one table, its parameter layout and its start.
 
-    def __init__(self, R, y, g_size, d0, M0, estimate_gravity, estimate_mounting):
+    ``problem``: the :class:`fmscal.plant.PayloadModel` whose gains the fit estimates (their free numbers last
+    in the layout: the force gains' two, and with ``torque_gain`` the torques' common one, as a log's fit
+    has it), or None (the gains one).
+    """
+
+    def __init__(self, R, y, g_size, d0, M0, estimate_gravity, estimate_mounting, problem=None, torque_gain=False):
         self.R, self.y, self.g_size = R, y, g_size
         self.fixed_mass = None
         self.d0, self.M0 = d0, M0
         self.e1, self.e2 = _tangent_basis(d0)
         self.estimate_gravity, self.estimate_mounting = estimate_gravity, estimate_mounting
+        self.problem = problem
         self.names = ("m", "com_x", "com_y", "com_z", *(f"c_{n}" for n in _OFFSET_NAMES),
                       *(("gravity_1", "gravity_2") if estimate_gravity else ()),
-                      *(("mount_x", "mount_y", "mount_z") if estimate_mounting else ()))
+                      *(("mount_x", "mount_y", "mount_z") if estimate_mounting else ()),
+                      *(problem.gain_names[:3 if torque_gain else 2] if problem is not None else ()))
+
+    @property
+    def gain_index(self):
+        """The gains' numbers in the layout (empty where not estimated)."""
+        count = sum(name.startswith("gain_") for name in self.names)
+        return list(range(len(self.names) - count, len(self.names)))
+
+    def channel_gains(self, theta):
+        """The six channel gains of eq. (P0) at ``theta`` (ones where the gains are not estimated)."""
+        return np.ones(6) if self.problem is None else self.problem.gains(theta[self.gain_index])
 
     def parts(self, theta):
         """``m, com, c, gravity direction, M`` from the parameter vector."""
@@ -226,7 +221,7 @@ class _Model:
         R = self.R if R is None else R
         a = np.einsum("ji,nkj,k->ni", M, R, -self.g_size * d)              # M^T R^T (-g), sensor axes
         f = m * a
-        return np.hstack([np.cross(com, f), f]) + c
+        return np.hstack([np.cross(com, f), f]) / self.channel_gains(theta) + c          # eq. (P0) at rest
 
     def jacobian(self, theta, R=None, step=1e-7):
         """d predict / d theta by central differences, shape (6N, p)."""
@@ -349,13 +344,13 @@ def _weighted(model, theta0, weights):
 
 
 def _extra(theta, model):
-    """Zeros for the gravity and mounting angles: they start at the linear fit's values."""
-    return np.r_[theta, np.zeros(2 if model.estimate_gravity else 0), np.zeros(3 if model.estimate_mounting else 0)]
+    """Zeros for the gravity and mounting angles and the force gains: they start at the linear fit's values."""
+    return np.r_[theta, np.zeros(len(model.names) - len(theta))]
 
 
 def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction",
-               max_mass=None):
-    """Mass, centre of mass and offset from a pose table (and gravity's direction, the mounting, if asked).
+               max_mass=None, tolerance=None, noise=None):
+    """Mass, centre of mass, offset and force gains from a pose table (and gravity's direction, the mounting, if asked).
 
     Parameters
     ----------
@@ -375,10 +370,20 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     max_mass : float, optional
         The heaviest payload taken, kg (default :data:`fmscal.plant.io.MAX_WRIST_MASS`): readings that weigh
         more are refused as a slipped unit (mN).
+    tolerance : (float, float), optional
+        The largest standard deviation the payload may add to the compensated wrench within the poses' cone,
+        N and N m (eq. E3 of :mod:`fmscal.observers.payload._effect`); default one standard deviation of the
+        rows' scatter about the fit (eq. N2; a table's rows are averages, so this is stricter than a reading's
+        own noise), or of ``noise`` where given.
+    noise : (float, float), optional
+        The reading's own noise, N and N m, where the raw readings behind the rows are at hand (the held segments
+        of an attitude-only log: :func:`fmscal.observers.payload._effect.reading_noise`): the default tolerance.
 
     Returns
     -------
     StaticFit
+        ``payload_determined`` by the effect (eq. E3), ``why_undetermined`` where not; the force gains where
+        the table holds :func:`min_poses` for them with the rotations asked (else None).
 
     Raises
     ------
@@ -386,9 +391,8 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         A unit slip or a convention the data show, named in one line before the fit
         (:func:`fmscal.plant.io.check_spatial_log_units`, :func:`fmscal.plant.io.check_table_units`).
     FmscalError
-        A reading convention that is neither, or a table whose data say the
-        other convention (a negative mass, or gravity pointing up with
-        ``estimate_gravity``).
+        A reading convention that is neither, a tolerance that is not two positive numbers, or a table whose
+        data say the other convention (a negative mass, or gravity pointing up with ``estimate_gravity``).
     """
     if not isinstance(table, PoseTable):
         raise TypeError(f"table must be a plant.PoseTable; got {type(table).__name__}")
@@ -399,8 +403,11 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     g = as_finite_array(gravity, (3,), "gravity")
     if not np.linalg.norm(g) > 0:
         raise FmscalError("gravity must not be zero")
+    given = check_tolerance(tolerance)
+    noise_given = check_tolerance(noise, "noise")
     check_table_units(table, g, S=S, max_mass=max_mass)  # a slipped unit named in one line, before the fit
-    y = sign * table.w_hat @ S.T
+    problem = PayloadModel(S, g)
+    y = problem.corrected(table.w_hat, sign)
     R = np.moveaxis(rotation_matrix(table.q.T), -1, 0)
     if len(R) < (needed := max(min_poses(estimate_gravity, estimate_mounting), MIN_POSES)):
         raise FmscalError(f"{table.name}: {len(R)} poses; the fit as asked needs at least {needed} (min_poses)")
@@ -408,7 +415,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     # those of the first pose's gravity: poses that all hold one attitude
     _refuse_untilted(table.name, R, g if not estimate_gravity else R[0] @ np.array([0.0, 0.0, 1.0]),
                      "the mass and the offset")
-    model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting)
+    with_gains = len(R) >= min_poses(estimate_gravity, estimate_mounting, estimate_gains=True)
+    model, theta, weights, sd, g_size = _two_passes(R, y, g, estimate_gravity, estimate_mounting,
+                                                    problem if with_gains else None)
     m, com, c, d, M = model.parts(theta)
     if (m <= 0 or (estimate_gravity and d[2] > 0 and g[2] < 0)) and model.fixed_mass > 0:
         raise FmscalError(rotations_unresolved(table.name, len(R), model.fixed_mass))
@@ -420,8 +429,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     cov, weak = covariance(information, s2)
     cov, _ = _small_sample(model, theta, weights, y, cov)
     cov = _in_sequence(model, theta, weights, y, cov)
-    gains = _gain_spread(model, theta, y)
-    cov = _with_gains(cov, gains, theta)
+    disagree = None if with_gains else _gain_spread(model, theta, y)     # eq. (N7): the gains, not estimated
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
     b = S_inv @ c
@@ -442,42 +450,121 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         out.mounting_deg = _angle_deg(M)
         out.mounting_axis = _axis(M)
         out.mounting_std_deg = float(np.degrees(np.sqrt(np.sum(std[k:k + 3] ** 2) / 3)))
+    if model.gain_index:
+        out.gains, out.gains_std = gains_of(problem, theta[model.gain_index], cov[np.ix_(model.gain_index,
+                                                                                         model.gain_index)])
     a = np.einsum("ji,nkj,k->ni", M, R, -d)
     out.cone_deg = _cone(a)
     out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
-    determined = _determined(out, std)
-    out.payload_determined = determined
-    out.converged = not out.undetermined and determined
     out.warnings = list(out.undetermined)
+    noise = _group_noise(model, theta, weights, y)[0]                 # the rows' scatter: torques N m, forces N
+    out.tolerance = given if given is not None else DEFAULT_TOLERANCE * (noise[::-1] if noise_given is None else
+                                                                         noise_given)
+    attitudes = cone_attitudes(R, M, d, out.cone_deg)
+    effect = static_effect(model, theta, cov, attitudes, len(R))
+    out.effect = effect.cone
+    determined, why, _ = judge(effect, out.tolerance, "given" if given is not None else
+                               f"{DEFAULT_TOLERANCE:g} sd of the rows' scatter about the fit" if noise_given is None
+                               else f"{DEFAULT_TOLERANCE:g} sd of the reading's noise", out.cone_deg,
+                               bool(weak), circle_axis(a), with_gains)
+    converged = not out.undetermined
     both = estimate_gravity and estimate_mounting
     rotated = None if both or out.undetermined else _rotation_check(R, y, g, estimate_gravity, estimate_mounting,
-                                                                    model.predict(theta) - y)
-    if estimate_mounting and not sign_separated(R, y[:, 3:], g, _group_noise(model, theta, weights, y)[0][1]):
+                                                                    model.predict(theta) - y, model.problem)
+    if estimate_mounting and not sign_separated(R, y[:, 3:], g, noise[1]):
         out.warnings.append(f"these {len(R)} poses do not tell the reading's sign from a mounting turned half a turn "
                             "(their gravity directions in the sensor frame lie near one plane): record poses "
                             "out of that plane")
-        out.converged = False
-    ratio = _noise_ratio(table, y, model.predict(theta) - y)
-    if gains is not None:
-        out.warnings.append(gains_warning(gains, S is None or np.allclose(S, np.eye(6)), ratio))
-        out.converged = False
+        converged = False
+    residual = model.predict(theta) - y
+    if disagree is not None:                # too few poses for the gains: what compensation would leave is said
+        why = gains_warning(disagree, np.allclose(S, np.eye(6)), _noise_ratio(table, y, residual), residual,
+                            (len(R), min_poses(estimate_gravity, estimate_mounting, estimate_gains=True)))
+        determined = False
     elif (drift := _drift(model, theta, weights, y)) is not None:
         out.warnings.append(drift)
-        out.converged = False
+        converged = False
+    elif out.gains is not None and rotated is None and (line := gains_differ(out.gains, cov[np.ix_(model.gain_index[:2],
+                                                                                 model.gain_index[:2])],
+                                                         np.allclose(S, np.eye(6)))) is not None:
+        out.warnings.append(line)                   # estimated and taken into the compensation: said, not a fault
     if not out.undetermined and (line := cone_warning(out.cone_deg)) is not None:
         out.warnings.append(line)
-        out.converged = False
+        converged = False
     if rotated is not None:                 # the model is wrong: more poses would not help
-        out.warnings.append(rotated)
-        out.converged = False
-    elif not out.undetermined and not determined and gains is None:     # more poses would not mend the gains
-        out.warnings.append(f"the mass or the centre of mass is uncertain beyond {DETERMINED_REL:.0%} or "
-                            f"{DETERMINED_COM * 1e3:g} mm: record more poses, tilted further")
-    out.next_poses = next_poses(model, theta, information, weights, s2, R, [f"pose {k + 1}" for k in range(len(R))])
+        why, determined = rotated, False
+    elif why is not None or determined:
+        out.next_poses = next_poses(model, theta, information, weights, s2, R,
+                                    [f"pose {k + 1}" for k in range(len(R))], attitudes, out.tolerance,
+                                    widened=lambda Rc: _widened(R, M, d, Rc))
+    if why is not None:
+        out.warnings.append(why)
+    out.payload_determined, out.why_undetermined = bool(determined), why
+    out.converged = bool(converged and determined)
     return out
 
 
-def _two_passes(R, y, g, estimate_gravity, estimate_mounting):
+def _widened(R, M, d, candidate):
+    """The attitudes of the cone the attitudes ``R`` and ``candidate`` span (:func:`cone_attitudes`): where a next
+    pose is scored (:func:`fmscal.observers.payload.next_poses`)."""
+    both = np.concatenate([R, candidate[None]])
+    return cone_attitudes(both, M, d, _cone(np.einsum("ji,nkj,k->ni", M, both, -d)))
+
+
+def gains_of(problem, e, cov):
+    """The six channel gains of eq. (P0) and their standard deviations, from their free numbers ``e`` (the force
+    gains' two, and a log's torque gain) and their covariance: the force gains' ``G C_e G^T`` (``G`` the
+    :meth:`fmscal.plant.PayloadModel.gain_map`), the torques' the third number's (0 without it).
+
+    Parameters
+    ----------
+    problem : fmscal.plant.PayloadModel
+    e : ndarray, shape (2,) or (3,)
+    cov : ndarray, shape (len(e), len(e))
+
+    Returns
+    -------
+    gains, gains_std : ndarray, shape (6,)
+    """
+    G = problem.gain_map()
+    finite = np.isfinite(cov)
+    C = np.where(finite, cov, 0.0)
+    std = np.zeros(6)
+    std[3:] = np.sqrt(np.maximum(np.diag(G @ C[:2, :2] @ G.T), 0.0))
+    if not finite[:2, :2].all():
+        std[3:] = np.inf
+    if len(e) > 2:
+        std[:3] = np.sqrt(max(C[2, 2], 0.0)) if finite[2, 2] else np.inf
+    return problem.gains(e), std
+
+
+def gains_differ(gains, cov, identity):
+    """The one line for force gains, estimated with the payload, that differ between the axes beyond chance, else
+    None: the chi-square of their two free numbers on two degrees of freedom, at :data:`ODDS`.
+
+    Parameters
+    ----------
+    gains : ndarray, shape (6,)
+    cov : ndarray, shape (2, 2)
+        The covariance of the force gains' two free numbers (eq. P0).
+    identity : bool
+        The fit took ``S = I``.
+
+    Returns
+    -------
+    str or None
+    """
+    e = gains[3:5] - 1.0
+    if not np.all(np.isfinite(cov)) or np.linalg.det(cov) <= 0 or float(e @ np.linalg.solve(cov, e)) <= chi2.ppf(
+            1 - ODDS, 2):
+        return None
+    told = "S = I may be off: calibrate S for the cross-talk" if identity else "the calibration given may be off"
+    return ("the force gains differ between axes (relative to their mean: "
+            + ", ".join(f"{axis} {v:.4f}" for axis, v in zip("xyz", gains[3:]))
+            + f"); estimated with the payload, the compensation takes them; {told}")
+
+
+def _two_passes(R, y, g, estimate_gravity, estimate_mounting, problem=None):
     """The fit's start, an unweighted pass, and passes weighted by each group's noise (torques, forces).
 
     Each group's noise is its residuals' variance over the group's own
@@ -500,7 +587,7 @@ def _two_passes(R, y, g, estimate_gravity, estimate_mounting):
     g_size : float
         Gravity's magnitude, m/s^2.
     """
-    model, theta = _best_start(R, y, g, estimate_gravity, estimate_mounting)
+    model, theta = _best_start(R, y, g, estimate_gravity, estimate_mounting, problem)
     g_size = model.g_size
     floor = 1e-9 * max(np.abs(y).max(), 1e-300)
     weights = np.ones(6)
@@ -512,7 +599,7 @@ def _two_passes(R, y, g, estimate_gravity, estimate_mounting):
     return model, theta, weights, sd, g_size
 
 
-def _best_start(R, y, g, estimate_gravity, estimate_mounting):
+def _best_start(R, y, g, estimate_gravity, estimate_mounting, problem=None):
     """The unweighted fit from the linear start and, with gravity estimated, from gravity's given direction with a
     positive mass; which one is kept follows the fit with gravity held fixed.
 
@@ -521,8 +608,11 @@ def _best_start(R, y, g, estimate_gravity, estimate_mounting):
     sign of the mass, :func:`_procrustes`) is what the data say of the
     reading's convention; a rotation cannot turn it. Where it is positive, the
     fit kept is the one with a positive mass and gravity on the side given
-    (the lower residuals of those); where none is, or the mass with gravity
-    fixed is negative, the one with the lower residuals. With few poses the
+    (the lower residuals of those); where none is, the one with the lower
+    residuals; where the mass with gravity fixed is negative, one with a
+    positive mass where there is one (gravity then up: a reading of the other
+    sign and a base upside down fit alike, and :func:`gravity_up` names both),
+    else the lower residuals. With few poses the
     linear start of gravity's direction can fall near the opposite one, a
     local minimum that reads as gravity pointing up: the second start finds
     the minimum near the direction given.
@@ -539,13 +629,15 @@ def _best_start(R, y, g, estimate_gravity, estimate_mounting):
         starts.append(_start(R, y, g, False, estimate_mounting, signs=(1.0,)))
     found = []
     for theta0, d0, M0, g_size in starts:
-        model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting)
+        model = _Model(R, y, g_size, d0, M0, estimate_gravity, estimate_mounting, problem)
         theta = _weighted(model, _extra(theta0, model), np.ones(6))
         m, _, _, d, _ = model.parts(theta)
         physical = bool(m > 0 and d @ g > 0)
         found.append((not physical, float(np.sum((model.predict(theta) - y) ** 2)), len(found), model, theta))
     fixed_mass = float(fixed[0][0])
-    best = min(found, key=lambda item: item[:3] if fixed_mass > 0 else item[1:3])
+    # the mass with gravity fixed negative: a reading of the other sign or a base upside down fit alike, and the fit
+    # with a positive mass (gravity up) is kept where there is one, so that the line names both (gravity_up)
+    best = min(found, key=lambda item: item[:3] if fixed_mass > 0 else (item[4][0] <= 0, *item[1:3]))
     best[3].fixed_mass = fixed_mass
     return best[3], best[4]
 
@@ -624,8 +716,6 @@ def _in_sequence(model, theta, weights, y, cov):
     return cov * np.outer(d, d)
 
 
-#: The force gains count as disagreeing when a gain for each force axis lowers the residuals beyond chance
-#: (:data:`ODDS`); the mass's variance then takes the spread of the three axes' masses.
 def _gain_spread(model, theta, y):
     """The three force axes' own masses where they disagree beyond chance, else None.
 
@@ -662,23 +752,6 @@ def _gain_spread(model, theta, y):
     if ss3 <= 0 or (ss1 - ss3) / 2 / (ss3 / dof) <= f_dist.ppf(1 - ODDS, 2, dof):
         return None
     return masses
-
-
-def _with_gains(cov, masses, theta):
-    """``cov`` with the gains' spread added: the mass's variance by the standard error of the three axes' masses
-    (eq. N8), the centre of mass's by the same share of it (its torques divided by the force), the rest kept::
-
-        var(m) += sum_j (m_j - mean m)^2 / 6,   var(com_i) += com_i^2 var_added(m) / m^2           (N8)
-    """
-    if masses is None:
-        return cov
-    added = float(np.sum((masses - masses.mean()) ** 2) / 6)
-    out = cov.copy()
-    out[0, 0] += added
-    share = added / max(theta[0] ** 2, 1e-300)
-    for i in range(1, 4):
-        out[i, i] += share * theta[i] ** 2
-    return out
 
 
 def cone_warning(cone):
@@ -744,8 +817,9 @@ def _noise_ratio(table, y, residual):
     return float(np.sqrt(np.mean(residual[:, 3:] ** 2))) / max(noise, 1e-300)
 
 
-def gains_warning(masses, identity, ratio=None):
-    """The one line for force axes whose gains disagree (eq. N7).
+def gains_warning(masses, identity, ratio=None, residual=None, poses=None):
+    """The one line for force axes whose gains disagree (eq. N7) where the fit did not estimate them: what
+    compensation with the gains taken as one would leave.
 
     Parameters
     ----------
@@ -755,6 +829,10 @@ def gains_warning(masses, identity, ratio=None):
         The fit took ``S = I``.
     ratio : float, optional
         The force residuals over the reading's noise, where measured (:func:`_noise_ratio`).
+    residual : ndarray, shape (N, 6), optional
+        The fit's residuals: their rms, forces (N) and torques (N m), is what compensation would leave.
+    poses : (int, int), optional
+        The table's poses and the fewest that estimate the gains with the rotations asked (:func:`min_poses`).
 
     Returns
     -------
@@ -764,8 +842,13 @@ def gains_warning(masses, identity, ratio=None):
     told = ("S = I may be wrong: calibrate S (fmscal calibrate) and pass --calibration" if identity
             else "the calibration given may be wrong, or the payload's mass changed")
     times = "" if ratio is None else f"the residual is {ratio:{'.2g' if ratio < 10 else '.0f'}} times the noise; "
+    left = "" if residual is None else (
+        f"; compensation with them taken as one would leave about {np.sqrt(np.mean(residual[:, 3:] ** 2)):.2g} N "
+        f"and {np.sqrt(np.mean(residual[:, :3] ** 2)):.2g} N m (rms)")
+    more = "" if poses is None else (f"; {poses[0]} poses are too few to estimate them with the rotations asked, "
+                                     f"{poses[1]} are enough")
     return (times + f"the force gains seem to differ by {spread:.1%} between axes (each axis alone weighs "
-            + ", ".join(f"{v:.4g}" for v in masses) + f" kg); {told}; the mass's uncertainty includes that spread")
+            + ", ".join(f"{v:.4g}" for v in masses) + f" kg){left}{more}; {told}")
 
 
 def _small_sample(model, theta, weights, y, cov):
@@ -802,7 +885,7 @@ def _small_sample(model, theta, weights, y, cov):
     return out, dof
 
 
-def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
+def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual, problem=None):
     """The warning of :func:`rotation_check` when the table needs gravity's direction or the mounting
     estimated, else None.
 
@@ -811,7 +894,7 @@ def _rotation_check(R, y, g, estimate_gravity, estimate_mounting, residual):
     residuals compared with ``residual``, those of the fit as asked.
     """
     def refit(gravity_free, mounting_free):
-        model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free)
+        model, theta, weights, _, _ = _two_passes(R, y, g, gravity_free, mounting_free, problem)
         s2, information = _weighted_information(model, theta, weights, y)
         cov, weak = covariance(information, s2)
         cov, _ = _small_sample(model, theta, weights, y, cov)
@@ -1168,11 +1251,6 @@ def gravity_up(name, z, reading):
     return (f"{name}: gravity comes out pointing up in the pose frame (z = {z:+.2f}): the reading follows the other "
             f"sign convention, pass --reading {other} (the wrench the {_who(other)}); or the base hangs upside down "
             "(a robot on a ceiling), give --gravity 0 0 9.81")
-
-
-def _determined(out, std):
-    return bool(std[0] < DETERMINED_REL * out.mass and np.all(std[1:4] < DETERMINED_COM)
-                and np.all(np.isfinite(std)))
 
 
 def _refuse_untilted(name, R, g, what):

@@ -65,7 +65,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError, as_bool, numbers_only, short_repr
-from fmscal.plant.physics import MODELS, NoiseSpec, Payload, check_calibration
+from fmscal.plant.physics import MODELS, NoiseSpec, Payload, check_calibration, find_model
 
 from ._files import atomic_write_text, exclusive, not_a_file, not_an_output
 from ._log import _echo
@@ -308,7 +308,8 @@ class Calibration:
 
     def __post_init__(self):
         set_ = object.__setattr__
-        model = _case(self.S)                        # the model whose reading S calibrates
+        # the model whose reading S calibrates; a shape none calibrates: the first's, whose check refuses it
+        model = _case(self.S) or find_model(every=True)[0]
         n = len(model.wrench_names)
         set_(self, "S", check_calibration(self.S, "S", size=n))
         kind = model.payload_type                    # held poses (under gravity) need no payload
@@ -529,7 +530,7 @@ class Calibration:
             of the wrong shape or not finite, a singular ``S``, or another
             payload.
         """
-        if payload is not None and not isinstance(payload, tuple(m.payload_type for m in MODELS)):
+        if payload is not None and find_model(payload=payload) is None:
             raise TypeError(f"payload must be a plant.Payload, a SpatialPayload or None; got {type(payload).__name__}")
         if not isinstance(path, (str, os.PathLike)):
             raise CalibrationFileError(f"a calibration path must be a file name; got {type(path).__name__}")
@@ -556,10 +557,10 @@ class Calibration:
         missing = [k for k in ("S", "payload", "method") if k not in data]
         if missing:
             raise CalibrationFileError(f"{source}: missing key(s) {', '.join(missing)}")
-        if not any(np.shape(data["S"]) == (len(m.wrench_names),) * 2 for m in MODELS):
+        if _case(data["S"]) is None:
             raise CalibrationFileError(f"{source}: S must be square, one row per reading component "
-                                       f"({' or '.join(str(len(m.wrench_names)) for m in MODELS)}); got shape "
-                                       f"{np.shape(data['S'])}")
+                                       f"({' or '.join(str(len(m.wrench_names)) for m in find_model(every=True))}); "
+                                       f"got shape {np.shape(data['S'])}")
         model = _case(data["S"])
         n = len(model.wrench_names)
         if not isinstance(data["payload"], dict):
@@ -609,10 +610,10 @@ class Calibration:
 
 
 def _case(S):
-    """The model class (:data:`fmscal.plant.physics.MODELS`) whose reading an ``S`` of this shape calibrates;
-    the first where none does (``check_calibration`` then refuses the shape)."""
+    """The model class whose reading an ``S`` of this shape calibrates (:func:`fmscal.plant.physics.find_model`),
+    None where none does."""
     shape = np.shape(S)
-    return next((m for m in MODELS if shape == (len(m.wrench_names),) * 2), MODELS[0])
+    return find_model(n_w=shape[0]) if len(shape) == 2 and shape[0] == shape[1] else None
 
 
 def _kind_of(kind, model):
@@ -712,7 +713,7 @@ def json_ready(value):
 
 def _describe(payload):
     """The payload in words: its mass, centre of mass and inertia, named as its model declares them."""
-    model = next(m for m in MODELS if isinstance(payload, m.payload_type))
+    model = find_model(payload=payload)
     name = model.payload_position
     position = ", ".join(f"{r:g}" for r in getattr(payload, name))
     inertia = ", ".join(f"{n} = {i:g}" for n, i in zip(model.inertia_names, np.atleast_1d(payload.inertia)))

@@ -59,7 +59,8 @@ import numpy as np
 
 from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_number, as_positive_scalar
 from fmscal.plant.physics import (MODELS, QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload,
-                                  PlanarModel, SpatialModel, SpatialPayload, check_calibration, sign_continuous,
+                                  PlanarModel, SpatialModel, SpatialPayload, check_calibration, find_model,
+                                  sign_continuous,
                                   unit_quaternions)
 from ._files import atomic_write_text, not_a_file
 
@@ -71,7 +72,6 @@ COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
 #: Column names of a spatial log, in order.
 SPATIAL_COLUMNS = ("t", *SpatialModel.pose_names, *SpatialModel.wrench_names)
 _WRENCH = PlanarModel.wrench_names
-_CASES = {(len(m.pose_names), len(m.wrench_names)): m for m in (PlanarModel, SpatialModel)}
 _SAMPLING_TOLERANCE = 0.01        # relative spread of the time step accepted as even
 MIN_SAMPLES = 10
 #: Largest magnitude accepted in any column (s, rad, m, N m, N; or sensor counts).
@@ -137,7 +137,7 @@ class Log:
                                f"{self.w_hat.shape}")
             case = model
         else:
-            case = _CASES.get(shapes)
+            case = None if shapes is None else find_model(n_pose=shapes[0], n_w=shapes[1])
         if self.t.ndim != 1 or case is None or self.pose.shape[0] != n or self.w_hat.shape[0] != n:
             raise LogError(f"{self.name}: expected t (N,), pose (N, 3), w_hat (N, 3) (planar) or pose (N, 7), "
                            f"w_hat (N, 6) (spatial); got {self.t.shape}, {self.pose.shape}, {self.w_hat.shape}")

@@ -13,7 +13,8 @@ from ._rigid_body import (regressor, inertia_matrix, INERTIA_NAMES, SpatialPaylo
 from ._simulate import (integrate, rk4_step)
 from ._excitation import (Excitation, PaperWrench, Multisine, SampledWrench)
 from ._differentiate import (spatial_motion, smoothed_state, edge, ORDER)
-from ._model import (Model, PlanarModel, SpatialModel, MODELS, as_model, model_for_columns)
+from ._model import (Model, PlanarModel, SpatialModel, PayloadModel, MODELS, as_model, model_for_columns,
+                     find_model)
 from ._payload_std import (PayloadStd, PayloadStdError, DEFAULT_MASS_STD, DEFAULT_COM_STD, DEFAULT_INERTIA_STD,
     DEFAULT_GRAVITY_STD)
 
@@ -23,4 +24,5 @@ __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationEr
            "rotation_matrix", "rotation_matrices", "unit_quaternions", "sign_continuous", "sensor_wrench",
            "body_acceleration", "prescribed_motion", "skew",
            "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine", "SampledWrench", "spatial_motion",
-           "smoothed_state", "Model", "PlanarModel", "SpatialModel", "MODELS", "as_model", "PayloadStd"]
+           "smoothed_state", "Model", "PlanarModel", "SpatialModel", "PayloadModel", "MODELS", "as_model",
+           "PayloadStd", "find_model"]

@@ -20,9 +20,14 @@ what the problem is, as pinocchio's ``Model`` says what a robot is:
   :mod:`fmscal.plant.physics._rigid_body`, Newton-Euler) for numbers and casadi
   symbols alike.
 
-Two models: :class:`PlanarModel` (the paper's problem: ``[M, f_x, f_y]``,
+Two models estimate ``S``: :class:`PlanarModel` (the paper's problem: ``[M, f_x, f_y]``,
 pose ``theta, X, Y``) and :class:`SpatialModel` (a 6-axis sensor: ``[tau,
-f]``, pose ``q, p``, under gravity).
+f]``, pose ``q, p``, under gravity). A third takes ``S`` as known and
+estimates the payload: :class:`PayloadModel` (the everyday job of a wrist
+sensor calibrated by its maker, eq. (P0)). :func:`find_model` is the one
+place a model is looked up by what it declares: a log's columns, a
+reading's size, a payload's class or its position vector's name, and what it
+estimates.
 """
 
 import copy
@@ -34,9 +39,10 @@ from fmscal.plant.numerics import FmscalError, StateLayout, as_finite_array, is_
 from . import _dynamics as dynamics, _rigid_body as rigid_body, _simulate as simulate
 from ._payload import Payload
 from ._rigid_body import SpatialPayload
-from ._sensor import NoiseSpec
+from ._sensor import NoiseSpec, check_calibration
 
-__all__ = ["Model", "PlanarModel", "SpatialModel", "MODELS", "as_model", "model_for_columns"]
+__all__ = ["Model", "PlanarModel", "SpatialModel", "PayloadModel", "MODELS", "as_model", "model_for_columns",
+           "find_model"]
 
 
 class Model:
@@ -120,6 +126,11 @@ class Model:
     #: the wrong units can run for minutes), each refusing in one line that names the unit;
     #: :func:`fmscal.analysis.calibrate` documents each.
     input_checks = ()
+    #: What the problem estimates from a log: ``"S"`` and ``"offset"`` (a calibration's ``[S | c]``, the
+    #: methods of :mod:`fmscal.observers` run on it), or the payload's ``"mass"``, ``"com"``, ``"inertia"``,
+    #: the ``"offset"`` and the ``"force gains"`` with ``S`` known (:class:`PayloadModel`: no method of the
+    #: registry runs on it). :func:`find_model` looks a model up by it.
+    estimates = ("S", "offset")
 
     def __init__(self, payload):
         self.payload = payload
@@ -1113,6 +1124,119 @@ class SpatialModel(Model):
         return self.integrate(o.vcat([0.0, 0.0, 0.0, q]), o.vcat([0.0, 0.0, 0.0, o.dot(R.T, v)]))[3:7]
 
 
+class PayloadModel(Model):
+    """The payload with ``S`` known: a 6-axis sensor calibrated by its maker (or by ``fmscal calibrate``) and a
+    tool to weigh, the everyday job of a wrist sensor.
+
+    The reading corrected by the known ``S``, ``y = sigma S w_hat`` (``sigma`` the reading's sign), is the
+    payload's wrench at the sensor point plus the offset ``c = S b``, each force channel read with its own
+    gain ``g_j`` relative to the force gains' mean (the sensor's gains, where ``S`` is the maker's, disagree
+    by a few percent), the torque channels with one common gain ``g_tau``::
+
+        diag(g) (y - c) = [tau_O; f] = W pi,     pi = (m, h = m com, I_O)                       (P0)
+        g = (g_tau, g_tau, g_tau, 1 + e_x, 1 + e_y, 1 - e_x - e_y),   g_tau = 1 + e_tau
+
+    ``W`` the Newton-Euler regressor (:func:`fmscal.plant.physics.regressor`), linear in ``pi`` for given
+    gains. The mean force gain is one: a common scale of the three is the mass's (the payload is weighed in
+    the force channels' mean units). Held poses never tell the torque gains: their common scale is the
+    centre of mass's, and each is seen only through the centre of mass across its axis (for a tool whose
+    centre of mass lies on its axis, the gain about that axis not at all); they are taken as one there
+    (``e = (e_x, e_y)``). Motion ties the torques' common scale to the forces': ``h`` is in both, ``alpha x
+    h`` in the forces and ``h x a_g`` in the torques, so a log's fit estimates ``e_tau`` too (``e = (e_x,
+    e_y, e_tau)``), where the motion tells it from zero. The compensated wrench is then ``w = diag(g) S
+    (sigma w_hat - b)``. The model fits no ``S`` (:attr:`estimates`): no method of the registry runs on it;
+    :func:`fmscal.observers.payload.identify_payload` estimates its parameters from a log or from held
+    poses.
+
+    Parameters
+    ----------
+    S : array_like, shape (6, 6), optional
+        The known calibration (default the identity).
+    gravity : array_like, shape (3,)
+        Gravity in the pose frame, m/s^2.
+
+    Examples
+    --------
+    >>> model = PayloadModel()
+    >>> model.n_w, model.estimates[:2], model.wrench_names == SpatialModel.wrench_names
+    (6, ('mass', 'com'), True)
+    >>> model.gains([0.02, -0.01])
+    array([1.  , 1.  , 1.  , 1.02, 0.99, 0.99])
+    >>> model.gains([0.02, -0.01, 0.005])
+    array([1.005, 1.005, 1.005, 1.02 , 0.99 , 0.99 ])
+    """
+
+    name = "payload"
+    wrench_names, pose_names = SpatialModel.wrench_names, SpatialModel.pose_names
+    position_names = SpatialModel.position_names
+    attitude = "quaternion"
+    payload_type = SpatialPayload
+    payload_position, payload_position_names = SpatialModel.payload_position, SpatialModel.payload_position_names
+    inertia_names = SpatialModel.inertia_names
+    under_gravity = True
+    signed_reading = True
+    force_channels = SpatialModel.force_channels
+    reading_blocks = SpatialModel.reading_blocks
+    input_checks = SpatialModel.input_checks
+    estimates = ("mass", "com", "inertia", "offset", "force gains")
+    #: The gains' free numbers, ``e_x, e_y`` (the force gains) and ``e_tau`` (the torques' common gain: motion
+    #: only) of eq. (P0), by name.
+    gain_names = ("gain_x", "gain_y", "gain_torque")
+
+    def __init__(self, S=None, gravity=rigid_body.GRAVITY):
+        super().__init__(None)                          # the payload is what the model estimates
+        self.S = np.eye(self.n_w) if S is None else check_calibration(S, "S", size=self.n_w)
+        self.gravity = tuple(float(g) for g in as_finite_array(gravity, (3,), "gravity"))
+
+    @classmethod
+    def payload_from(cls, mass, inertia, position):
+        """:meth:`SpatialModel.payload_from`: the :class:`SpatialPayload` this model estimates."""
+        return SpatialModel.payload_from(mass, inertia, position)
+
+    def _key(self):
+        return type(self), self.S.tobytes(), self.gravity
+
+    def __repr__(self):
+        return f"PayloadModel(S={'I' if np.array_equal(self.S, np.eye(self.n_w)) else '...'}, gravity={self.gravity})"
+
+    def corrected(self, w_hat, sign=1.0):
+        """The reading corrected by the known ``S``: ``y = sigma S w_hat`` (eq. P0), shape (N, 6).
+
+        Parameters
+        ----------
+        w_hat : array_like, shape (N, 6)
+        sign : float
+            ``sigma``: +1 for a reaction reading (the toolkit's), -1 for a load reading.
+        """
+        return sign * np.asarray(w_hat, dtype=float) @ self.S.T
+
+    def gains(self, e):
+        """The six channel gains ``g`` of eq. (P0) from their free numbers ``e = (e_x, e_y)`` or ``(e_x, e_y,
+        e_tau)``.
+
+        Returns
+        -------
+        ndarray, shape (6,)
+            Force gains ``1 + e_x, 1 + e_y, 1 - e_x - e_y`` (their mean 1); torque gains ``1 + e_tau`` (1
+            without it).
+        """
+        e = np.asarray(e, dtype=float)
+        g = np.full(self.n_w, 1.0 + (e[2] if len(e) > 2 else 0.0))
+        g[list(self.force_channels)] = 1.0 + self.gain_map() @ e[:2]
+        return g
+
+    def gain_map(self):
+        """``d g_force / d e``, shape (3, 2): each force gain's derivative in ``e_x, e_y`` (the last one takes
+        minus their sum, so that the mean stays one)."""
+        return np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
+
+    def wrench_regressor(self, q, omega, alpha, p_ddot, gravity=None, mounting=None):
+        """``W`` of eq. (P0) at each sample (:func:`fmscal.plant.physics.regressor`), the model's gravity unless
+        ``gravity`` is given, shape (N, 6, 10)."""
+        g = self.gravity if gravity is None else gravity
+        return rigid_body.regressor(q, omega, alpha, p_ddot, g, mounting)
+
+
 def _cross(o, a, b):
     """``a x b`` for 3-vectors of numbers or casadi symbols."""
     return o.vcat([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
@@ -1147,9 +1271,59 @@ def _constant(o, value):
     return ca.DM(value) if o is ops(ca.SX()) else value
 
 
-#: The toolkit's models, one a case: what a log's columns, a calibration's size or a payload's flags are
-#: looked up in (by their declarations: :attr:`Model.wrench_names`, :attr:`Model.pose_names`, ...).
-MODELS = (PlanarModel, SpatialModel)
+#: The toolkit's models: the two that estimate ``S`` (one a case) and the one that takes it known. A model is
+#: looked up among them by what it declares, in one place: :func:`find_model`.
+MODELS = (PlanarModel, SpatialModel, PayloadModel)
+
+
+def find_model(*, columns=None, n_w=None, n_pose=None, payload=None, position=None, estimates="S", every=False):
+    """The model class that declares what is given: the one place a model is looked up.
+
+    Every criterion given must hold; those not given are not asked. Among :data:`MODELS`, only those whose
+    :attr:`Model.estimates` hold ``estimates``: ``"S"`` (the default) for what a calibration, a log's case or
+    a truth is of, ``"mass"`` for the payload with ``S`` known (:class:`PayloadModel`).
+
+    Parameters
+    ----------
+    columns : sequence of str, optional
+        A log's header: the model whose columns (:attr:`Model.columns`) it holds (others may come too).
+    n_w : int, optional
+        The reading's size (a calibration's ``S`` is ``n_w x n_w``; a truth's schedule is of its size).
+    n_pose : int, optional
+        Numbers in one pose.
+    payload : object, optional
+        A payload: the model whose :attr:`Model.payload_type` it is an instance of.
+    position : str, optional
+        The payload's position vector by name, ``"rho"`` or ``"com"`` (:attr:`Model.payload_position`).
+    estimates : str
+        What the model must estimate (:attr:`Model.estimates`).
+    every : bool
+        Return every model that matches, not the first.
+
+    Returns
+    -------
+    type or None, or tuple of type
+        A :class:`Model` subclass; None where none matches (the caller words its refusal). With ``every``, a
+        tuple (empty where none matches).
+
+    Examples
+    --------
+    >>> find_model(n_w=6).name, find_model(position="rho").name, find_model(n_w=6, estimates="mass").name
+    ('spatial', 'planar', 'payload')
+    >>> find_model(n_w=4) is None
+    True
+    """
+    header = None if columns is None else set(columns)
+    found = tuple(m for m in MODELS
+                  if estimates in m.estimates
+                  and (header is None or {"t", *m.pose_names, *m.wrench_names} <= header)
+                  and (n_w is None or len(m.wrench_names) == n_w)
+                  and (n_pose is None or len(m.pose_names) == n_pose)
+                  and (payload is None or isinstance(payload, m.payload_type))
+                  and (position is None or m.payload_position == position))
+    if every:
+        return found
+    return found[0] if found else None
 
 
 def as_model(model, who="a method"):
@@ -1182,7 +1356,7 @@ def as_model(model, who="a method"):
 
 
 def model_for_columns(header):
-    """Which case a log's header belongs to: ``"planar"`` or ``"spatial"``.
+    """Which case a log's header belongs to: ``"planar"`` or ``"spatial"`` (:func:`find_model`).
 
     Parameters
     ----------
@@ -1198,10 +1372,9 @@ def model_for_columns(header):
     FmscalError
         The header holds neither case's columns.
     """
-    names = set(header)
-    for model in (SpatialModel, PlanarModel):
-        if set(("t", *model.pose_names, *model.wrench_names)) <= names:
-            return model.name
+    found = find_model(columns=header)
+    if found is not None:
+        return found.name
     expected = " or ".join(f"{','.join(('t', *m.pose_names, *m.wrench_names))} ({m.name})"
-                           for m in (PlanarModel, SpatialModel))
+                           for m in find_model(every=True))
     raise FmscalError(f"a log's header is {expected}; got {','.join(header)[:200]}")
