@@ -68,7 +68,8 @@ def test_a_tables_payload_round_trips_with_everything_compensation_needs(tmp_pat
         np.testing.assert_array_equal(getattr(loaded, name), getattr(tracked, name), err_msg=name)
     np.testing.assert_allclose(loaded.mounting_deg, fit.mounting_deg, rtol=1e-9)
     np.testing.assert_allclose(loaded.mounting_axis, fit.mounting_axis, rtol=1e-9)
-    assert loaded.reading == "load" and loaded.noise_of == "pose" and loaded.gains is None
+    assert loaded.reading == "load" and loaded.noise_of == "pose"
+    np.testing.assert_array_equal(loaded.gains, fit.gains)              # the force gains, estimated with the payload
     assert loaded.gravity_given is None and loaded.gravity_std is None and loaded.axes == "tracked"
     np.testing.assert_array_equal(loaded.gravity_used, fit.gravity)
     # the offset is the reading's, not turned; the noise the fit weighed by (each group's, torques and forces)

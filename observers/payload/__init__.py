@@ -6,7 +6,8 @@ practitioners' estimators.
 
 from ._coverage import (cone_deg, covariance, weak_directions, describe, in_words, effect_sd, next_poses,
     rotation, TURNS)
-from ._effect import (Effect, DEFAULT_TOLERANCE, check_tolerance, reading_noise, cone_attitudes, static_effect,
+from ._effect import (Effect, DEFAULT_TOLERANCE, TABLE_TOLERANCE,
+    check_tolerance, reading_noise, cone_attitudes, static_effect,
     inertia_effect, judge,
     circle_axis)
 from ._estimate import (PayloadEstimate, PayloadFileError, PAYLOAD_FORMAT, PAYLOAD_FORMATS, PAYLOAD_PARAMETERS,

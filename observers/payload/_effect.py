@@ -19,10 +19,12 @@ and the payload is determined when both are within the tolerance, ``e_f <= tol_f
 tol_tau`` (E3). The tolerance is the user's (``tolerance=(N, N m)``; ``--tolerance N NM``), by default
 :data:`DEFAULT_TOLERANCE` times the reading's noise, one standard deviation (E4): a log's reading's
 sample-to-sample scatter (``rms(diff) / sqrt 2``, each channel, their rms over the torques and over the
-forces), a table's rows' scatter about the fit (eq. N2 of :mod:`fmscal.observers.payload._static_fit`;
-a table's rows are averages, and a reading's own noise, which the compensation of a running robot sees,
-is larger: a default that is strict there), or, for the held segments of an attitude-only log, whose raw
-readings are at hand, the log's reading's noise (:func:`reading_noise`). Where the payload is not
+forces), :data:`TABLE_TOLERANCE` times a table's rows' scatter about the fit (eq. N2 of
+:mod:`fmscal.observers.payload._static_fit`; a table's rows are averages, and a reading's own noise, which
+the compensation of a running robot sees, is larger: a row that averages ``n >= 4`` readings has at most
+half their sd, so that twice its scatter is at most one sd of a reading, the same promise as a log's), or,
+for the held segments of an attitude-only log, whose raw readings are at hand, the log's reading's noise
+(:func:`reading_noise`). Where the payload is not
 determined, :func:`judge` names the reason:
 
 - **the cone**: the effect at the data's own attitudes is within the tolerance and beyond it elsewhere in
@@ -50,11 +52,15 @@ from fmscal.plant.numerics import FmscalError
 
 from ._coverage import effect_sd, rotation
 
-__all__ = ["Effect", "DEFAULT_TOLERANCE", "check_tolerance", "reading_noise", "cone_attitudes", "static_effect",
+__all__ = ["Effect", "DEFAULT_TOLERANCE", "TABLE_TOLERANCE",
+           "check_tolerance", "reading_noise", "cone_attitudes", "static_effect",
            "inertia_effect", "judge", "circle_axis", "CIRCLE_DEG", "GRID_RINGS", "GRID_TURNS", "MISFIT_RATIO"]
 
 #: The default tolerance, in standard deviations of the reading's noise (eq. E4).
 DEFAULT_TOLERANCE = 1.0
+#: A table's default tolerance, in standard deviations of its rows' scatter (eq. E4): a row averages 4 readings
+#: or more, so this is at most :data:`DEFAULT_TOLERANCE` sd of a reading.
+TABLE_TOLERANCE = 2.0
 #: A log's residuals beyond this many times the reading's noise (the rms over the forces, or over the torques) are
 #: a model that does not fit (:func:`judge`).
 MISFIT_RATIO = 1.5

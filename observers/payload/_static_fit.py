@@ -61,7 +61,8 @@ from fmscal.plant.physics import GRAVITY, PayloadModel, check_calibration, regre
 from fmscal.observers.batch import (MIN_BLOCKS, InverseDynamicsFit, correlation_time, fit_readings, pseudo_inverse,
                                    sandwich)
 from ._coverage import _OFFSET_NAMES, cone_deg as _cone, covariance, in_words, next_poses, rotation as _exp
-from ._effect import (DEFAULT_TOLERANCE, check_tolerance, circle_axis, cone_attitudes, judge, static_effect)
+from ._effect import (DEFAULT_TOLERANCE, TABLE_TOLERANCE,
+                      check_tolerance, circle_axis, cone_attitudes, judge, static_effect)
 from ._estimate import INERTIA_ROWS, PayloadEstimate, _angle_deg, _axis, propagate_covariance
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
@@ -458,13 +459,13 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
     out.warnings = list(out.undetermined)
     noise = _group_noise(model, theta, weights, y)[0]                 # the rows' scatter: torques N m, forces N
-    out.tolerance = given if given is not None else DEFAULT_TOLERANCE * (noise[::-1] if noise_given is None else
-                                                                         noise_given)
+    out.tolerance = given if given is not None else (TABLE_TOLERANCE * noise[::-1] if noise_given is None else
+                                                     DEFAULT_TOLERANCE * noise_given)
     attitudes = cone_attitudes(R, M, d, out.cone_deg)
     effect = static_effect(model, theta, cov, attitudes, len(R))
     out.effect = effect.cone
     determined, why, _ = judge(effect, out.tolerance, "given" if given is not None else
-                               f"{DEFAULT_TOLERANCE:g} sd of the rows' scatter about the fit" if noise_given is None
+                               f"{TABLE_TOLERANCE:g} sd of the rows' scatter about the fit" if noise_given is None
                                else f"{DEFAULT_TOLERANCE:g} sd of the reading's noise", out.cone_deg,
                                bool(weak), circle_axis(a), with_gains)
     converged = not out.undetermined
