@@ -18,7 +18,8 @@ from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observ
 from fmscal.observers.batch import describe_direction, estimate_latency
 from fmscal.observers.core import (EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches,
                                    calibration_uncertainty)
-from fmscal.observers.diagnostics import consistency_check, has_evidence, misfit, offset_drift, saturation
+from fmscal.observers.diagnostics import (consistency_check, fit_causes, has_evidence, misfit, offset_drift,
+                                          saturation)
 from fmscal.observers.diagnostics import inflate as inflate_misfit
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
@@ -217,8 +218,11 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         :data:`AGREEMENT_E`). On a spatial log: the method's flag, no
         saturation, the log pins ``S`` down for a method that gives no
         ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
-        run judged settling alone), and a positive force gain (``trace S_ff >
-        0``: else the reading follows the other sign convention), and the model
+        run judged settling alone), the offset keeps one level and gravity is
+        along the direction given (:func:`fmscal.observers.diagnostics.fit_causes`:
+        else a warning names the moving offset or the base's tilt), a positive
+        force gain (``trace S_ff > 0``: else the reading follows the other sign
+        convention), and the model
         fits the log (:func:`fmscal.observers.diagnostics.misfit`; where it
         does not, ``S_std`` is widened and the warning says by how much the
         residual exceeds the noise); a diagonal gain of ``S`` the log
@@ -558,6 +562,7 @@ class _Run:
     glitches: object = None
     misfit: object = None
     latency: object = None
+    causes: object = None
 
 
 def _check_units(run, warnings):
@@ -601,6 +606,21 @@ def _check_offset_drift(run, warnings):
     (:func:`fmscal.observers.diagnostics.offset_drift`)."""
     drift = offset_drift(run.aligned, run.model.payload, run.reference.S_hat, run.reference.b)
     return ([drift.warning] if drift.warning else []), not drift.warning, None
+
+
+def _check_causes(run, warnings):
+    """``"causes"``: the residual of the reference fit of a log under gravity names no moving offset and no
+    gravity along another direction than the one given (:func:`fmscal.observers.diagnostics.fit_causes`, eqs.
+    (C1)-(C3)); either found is a warning naming it, and not converged: ``S`` took up what the cause left (the
+    gains check then blames no mass). A log too short to test passes with nothing said."""
+    try:
+        found = fit_causes(run.aligned, run.model)
+    except FmscalError:
+        return [], True, None
+    run.causes = found
+    why = ("the sensor's offset moves during the log" if not found.offset.constant else
+           "gravity's direction is not the one given" if found.gravity is not None and found.gravity.tilted else None)
+    return found.warnings, why is None, why
 
 
 def _check_disagreement(run, warnings):
@@ -712,7 +732,8 @@ def _check_gains(run, warnings):
     share above 0.1), a standard deviation under a tenth of the gain and a gain three of them from 1 (a
     method without ``S_std``: a converged run). ``converged`` is not
     changed: ``S`` is what the data determine for the payload given (a sensor read in other units is
-    calibrated so); the warning says the payload or the units may be wrong."""
+    calibrated so); the warning says the payload or the units may be wrong. Nothing is said where the
+    ``"causes"`` check named a moving offset or a tilted gravity: the gains are then that cause's."""
     S = np.asarray(run.result.S_hat, dtype=float)
     if run.result.S_std is None:
         std = np.zeros(len(S)) if run.result.converged else np.full(len(S), np.inf)
@@ -720,6 +741,8 @@ def _check_gains(run, warnings):
         std = np.diag(np.asarray(run.result.S_std, dtype=float))
     for d in run.result.info.get("undetermined", []):   # a channel the undetermined directions hold: its gain is not
         std = np.where(np.abs(np.asarray(d, dtype=float)[:len(S)]) > 0.1, np.inf, std)
+    if run.causes is not None and run.causes.warnings:   # a moving offset or a tilted gravity moved the gains
+        return [], True, None
     forces = list(run.model.force_channels)
     found = []
     for part, channels in (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces])):
@@ -756,6 +779,7 @@ _INPUT_CHECKS = {"spatial_units": _check_spatial_units}
 #: the warnings so far and gives ``(its warnings, passed, why it failed or None)``.
 _CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
            "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
+           "causes": _check_causes,
            "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain,
            "latency": _check_latency, "misfit": _check_misfit, "gains": _check_gains}
 

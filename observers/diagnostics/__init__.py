@@ -1,12 +1,14 @@
 """Checks of a log against the model: one constant ``S`` (health), saturation and a moving offset
-(faults), and how much a log says about ``S`` (evidence), and whether the model fits it (misfit).
+(faults), and how much a log says about ``S`` (evidence), whether the model fits it (misfit), and what
+its residual names (causes: a moving offset, gravity's direction).
 """
 
 from ._evidence import (has_evidence, log_uncertainty, EVIDENCE_PREFIX)
 from ._health import (Consistency, consistency_check, DEFAULT_SIGNIFICANCE, DEFAULT_WINDOWS)
 from ._misfit import (Misfit, misfit, inflate, MISFIT_SIGNIFICANCE, MISFIT_RATIO, GROSS_RATIO)
 from ._faults import (saturation, offset_drift, OffsetDrift, SATURATION_SHARE, SATURATION_RATIO, DRIFT_SIGNIFICANCE,
-    DRIFT_PARTS, DRIFT_LAGS)
+    DRIFT_PARTS, DRIFT_LAGS, describe_offset)
+from ._causes import (Causes, GravityTilt, fit_causes, CAUSE_SIGNIFICANCE)
 
 __all__ = ["has_evidence", "log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift",
-           "OffsetDrift", "Misfit", "misfit"]
+           "OffsetDrift", "Misfit", "misfit", "Causes", "GravityTilt", "fit_causes"]
