@@ -286,10 +286,14 @@ def _conventions(name, quaternions, w_hat, fits):
 
 def _torque_and_weight(name, w_hat, c, gravity, mass, com, max_mass=None):
     """The lever arm (eq. U2) and the weight ``|c|`` (eq. U1; None where eq. U1 does not fit) against the
-    payload's: N mm torques, mN readings."""
+    payload's: N mm torques, a centre of mass in mm, mN readings."""
     rho = _lever_arm(w_hat[:, 0:3], w_hat[:, 3:6])
     arm = float(np.linalg.norm(rho))
     known = None if com is None else float(np.linalg.norm(com))
+    if known is not None and known > MAX_LEVER_ARM and arm < known / _FAR:
+        raise UnitsError(f"{name}: the payload's centre of mass is given {known:.3g} m from the sensor, beyond a "
+                         f"wrist's {MAX_LEVER_ARM:g} m, where torque over force gives a lever arm of {arm:.3g} m: the "
+                         f"centre of mass in mm? give it in m (--com {' '.join(f'{v / 1e3:.4g}' for v in com)})")
     if arm > MAX_LEVER_ARM or (known is not None and known > 0.01 and arm > _FAR * known):
         told = f" (the payload's is {known * 1e3:.3g} mm)" if known is not None else ""
         raise UnitsError(f"{name}: the torques look like N mm, not N m: torque over force gives a lever arm of "
