@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import describe_direction, estimate_latency
@@ -563,6 +564,7 @@ class _Run:
     misfit: object = None
     latency: object = None
     causes: object = None
+    named: bool = False
 
 
 def _check_units(run, warnings):
@@ -618,6 +620,7 @@ def _check_causes(run, warnings):
     except FmscalError:
         return [], True, None
     run.causes = found
+    run.named = bool(found.warnings)
     why = ("the sensor's offset moves during the log" if not found.offset.constant else
            "gravity's direction is not the one given" if found.gravity is not None and found.gravity.tilted else None)
     return found.warnings, why is None, why
@@ -640,12 +643,51 @@ def _check_evidence(run, warnings):
     return found, evident, None
 
 
+#: A force block of ``S`` whose nearest rotation (its polar factor) turns further than this, degrees, is named a
+#: sensor turned from the frame the poses give.
+TURNED_DEG = 20.0
+
+
 def _check_flipped_gain(run, warnings):
-    """``"flipped_gain"``: a positive force gain (the trace of ``S`` on the ``force_channels``); a negative one
-    is a reading in the other sign convention."""
+    """``"flipped_gain"``: the force block of ``S`` (on the ``force_channels``) is near the identity, else one line
+    naming why, and not converged:
+
+    - a force channel along a direction the log leaves undetermined: too little rotation to tell the reading's sign
+      (no advice on ``reading``, which the next run would reverse);
+    - the polar factor ``R`` of the block (``S_ff = R P``, ``R`` orthogonal) a rotation turning more than
+      :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
+    - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
+    """
     channels = list(run.model.force_channels)
-    flipped = bool(np.trace(run.result.S_hat[np.ix_(channels, channels)]) < 0)
+    S_f = np.asarray(run.result.S_hat, dtype=float)[np.ix_(channels, channels)]
+    untold = any(np.abs(np.asarray(d, dtype=float)[channels]).max() > 0.1 for d in run.result.info.get("undetermined",
+                                                                                                        []))
+    U, _, Vt = np.linalg.svd(S_f)
+    R = U @ Vt
+    rotvec = Rotation.from_matrix(R).as_rotvec() if np.linalg.det(R) > 0 else None
+    if untold and np.trace(S_f) >= 0:      # nothing to say of the sign, nor of a turn, where the gains are unknown
+        return [], True, None
+    if untold:
+        run.named = True
+        return [f"{run.log.name}: the log holds too little rotation to tell the reading's sign (the force gains are "
+                "not determined: see the directions above); record a log that turns the payload through tens of "
+                "degrees about two axes, then judge the reading's sign convention"], False, \
+            "the log holds too little rotation to tell the reading's sign"
+    if rotvec is not None and np.degrees(np.linalg.norm(rotvec)) > TURNED_DEG:
+        run.named = True
+        angle = float(np.degrees(np.linalg.norm(rotvec)))
+        axis = rotvec / np.linalg.norm(rotvec)
+        k = int(np.argmax(np.abs(axis)))
+        about = ("xyz"[k] if abs(axis[k]) > 0.95 else "(" + ", ".join(f"{a:.2f}" for a in axis) + ")")
+        return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} from "
+                "the frame the poses give (S's force block is that turn): the sensor is mounted turned, or the poses "
+                "are of another frame; mount it as the poses assume, or record the poses of the sensor's own frame "
+                "(the reading's sign convention is not the cause)"], False, \
+            "the sensor is turned from the frame the poses give"
+    flipped = bool(np.trace(S_f) < 0)
     found = [other_convention(run.log.name, None, run.reading)] if flipped else []
+    if flipped:
+        run.named = True
     return found, not flipped, "the reading follows the other sign convention"
 
 
@@ -733,7 +775,7 @@ def _check_gains(run, warnings):
     method without ``S_std``: a converged run). ``converged`` is not
     changed: ``S`` is what the data determine for the payload given (a sensor read in other units is
     calibrated so); the warning says the payload or the units may be wrong. Nothing is said where the
-    ``"causes"`` check named a moving offset or a tilted gravity: the gains are then that cause's."""
+    ``"causes"`` or ``"flipped_gain"`` check named a cause: the gains are then that cause's."""
     S = np.asarray(run.result.S_hat, dtype=float)
     if run.result.S_std is None:
         std = np.zeros(len(S)) if run.result.converged else np.full(len(S), np.inf)
@@ -741,7 +783,7 @@ def _check_gains(run, warnings):
         std = np.diag(np.asarray(run.result.S_std, dtype=float))
     for d in run.result.info.get("undetermined", []):   # a channel the undetermined directions hold: its gain is not
         std = np.where(np.abs(np.asarray(d, dtype=float)[:len(S)]) > 0.1, np.inf, std)
-    if run.causes is not None and run.causes.warnings:   # a moving offset or a tilted gravity moved the gains
+    if run.named:                          # a cause named (an offset, gravity, the sign, a turn) moved the gains
         return [], True, None
     forces = list(run.model.force_channels)
     found = []

@@ -118,3 +118,42 @@ def test_the_independent_engines_log(kind, seed):
     else:
         assert not cal.converged
         assert ("offset of fx drifts" if kind == "ramp" else "gravity tilted") in cal.warnings[0]
+
+
+def _arm(seed=1, duration=10.0):
+    return SPATIAL_SCENARIOS["spatial-arm"].with_(duration=duration).generate(seed)[0]
+
+
+@pytest.mark.parametrize("reading", ["reaction", "load"])
+def test_too_little_rotation_names_that_not_the_sign(reading):
+    """``spatial-weak``: the force gains undetermined: the line says the log cannot tell the sign, either way
+    (it said "pass reading=load", then with load "pass reading=reaction")."""
+    weak = SPATIAL_SCENARIOS["spatial-weak"].with_(duration=10.0)
+    log, _, _ = weak.generate(1)
+    cal = calibrate(log, weak.payload, reading=reading)
+    assert not cal.converged and cal.why_unconverged == "the log holds too little rotation to tell the reading's sign"
+    assert not any("pass reading" in w or "mass may be wrong" in w for w in cal.warnings)
+
+
+@pytest.mark.parametrize("flip, named", [
+    ([0, 1, 3, 4], "turned 1"),                          # 180 degrees about z: x and y negated
+    ([1, 2, 4, 5], "turned 1"),                          # about x
+    ([0, 1, 2, 3, 4, 5], "other sign convention")])      # every channel negated: the sign
+def test_a_sensor_turned_about_an_axis_is_not_the_sign(flip, named):
+    log = _arm()
+    log.w_hat[:, flip] *= -1
+    cal = calibrate(log, ARM.payload)
+    assert not cal.converged and named in cal.warnings[0]
+    if named.startswith("turned"):
+        axis = "z" if flip == [0, 1, 3, 4] else "x"
+        assert f"degrees about the sensor's {axis}" in cal.warnings[0] and "sign convention is not the cause" in \
+            cal.warnings[0]
+        assert cal.why_unconverged == "the sensor is turned from the frame the poses give"
+    assert not any("mass may be wrong" in w for w in cal.warnings)
+
+
+def test_a_centre_of_mass_in_mm_is_named():
+    from fmscal.plant.io import UnitsError
+    payload = dataclasses.replace(ARM.payload, com=tuple(1000 * c for c in ARM.payload.com))
+    with pytest.raises(UnitsError, match=r"centre of mass in mm\? give it in m \(--com 0.01 -0.005 0.06\)"):
+        calibrate(_arm(), payload)
