@@ -157,3 +157,20 @@ def test_a_centre_of_mass_in_mm_is_named():
     payload = dataclasses.replace(ARM.payload, com=tuple(1000 * c for c in ARM.payload.com))
     with pytest.raises(UnitsError, match=r"centre of mass in mm\? give it in m \(--com 0.01 -0.005 0.06\)"):
         calibrate(_arm(), payload)
+
+
+def test_gravity_jacobian_moves_the_wrench_exactly():
+    """Eq. (G1): the needed wrench is affine in gravity, ``w(g') = w(g) + D (g' - g)``, to rounding."""
+    from fmscal.plant.physics import gravity_jacobian, regressor
+    rng = np.random.default_rng(0)
+    n = 50
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    omega, alpha, p_ddot = (rng.normal(size=(n, 3)) for _ in range(3))
+    pi = ARM.payload.inertial_parameters
+    g0, g1 = np.array(GRAVITY), np.array(_tilted(7.0)) * 1.01
+    w0 = regressor(q, omega, alpha, p_ddot, tuple(g0)) @ pi
+    w1 = regressor(q, omega, alpha, p_ddot, tuple(g1)) @ pi
+    D = gravity_jacobian(q, ARM.payload)
+    np.testing.assert_allclose(w1, w0 + D @ (g1 - g0), rtol=0, atol=1e-12)
+    assert np.abs(w1 - w0).max() > 0.1                  # the tilt moves it
