@@ -135,6 +135,17 @@ def test_too_little_rotation_names_that_not_the_sign(reading):
     assert not any("pass reading" in w or "mass may be wrong" in w for w in cal.warnings)
 
 
+@pytest.mark.parametrize("reading", ["reaction", "load"])
+def test_a_log_held_still_gives_no_advice_on_the_sign(reading):
+    """A tool held all but still (turns of a milliradian): not converged, and no ``reading=`` advice either way."""
+    still = ARM.with_(duration=10.0, angle_amplitude=(1e-3, 1e-3, 1e-3), position_amplitude=1e-3)
+    log, _, _ = still.generate(1)
+    cal = calibrate(log, still.payload, reading=reading)
+    assert not cal.converged
+    assert not any("pass reading" in w or "mass may be wrong" in w for w in cal.warnings)
+    assert any("not determined" in w for w in cal.warnings)
+
+
 @pytest.mark.parametrize("flip, named", [
     ([0, 1, 3, 4], "turned 1"),                          # 180 degrees about z: x and y negated
     ([1, 2, 4, 5], "turned 1"),                          # about x
