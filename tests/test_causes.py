@@ -185,3 +185,16 @@ def test_gravity_jacobian_moves_the_wrench_exactly():
     D = gravity_jacobian(q, ARM.payload)
     np.testing.assert_allclose(w1, w0 + D @ (g1 - g0), rtol=0, atol=1e-12)
     assert np.abs(w1 - w0).max() > 0.1                  # the tilt moves it
+
+
+@pytest.mark.parametrize("kind", ["clean", "ramp"])
+def test_a_long_log_is_taken_at_a_stride_and_still_tested(kind):
+    """60 s at 1 kHz: fitted at every 3rd sample (MAX_ROWS), its blocks of time the same; the ramp still named
+    and the clean log not."""
+    from fmscal.observers.diagnostics._causes import MAX_ROWS
+    long = SPATIAL_SCENARIOS["spatial-arm"]
+    log, _ = _case(long, kind, 0)
+    assert len(log.t) > 2 * MAX_ROWS
+    causes = fit_causes(log, SpatialModel(long.payload, GRAVITY))
+    assert causes.blocks > 250                          # 0.2 s blocks over 60 s, as without the stride
+    assert causes.offset.constant == (kind == "clean") and not causes.gravity.tilted
