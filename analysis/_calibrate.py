@@ -13,13 +13,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from fmscal.observers import FLOOR_METHOD, LeastSquares, get_method, make_observer, method_names
 from fmscal.observers.batch import (describe_direction, estimate_latency, fit_latency, given_latency_warnings,
                                    payload_sensitivity)
 from fmscal.observers.core import (EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches,
                                    calibration_uncertainty)
-from fmscal.observers.diagnostics import (consistency_check, has_evidence, inertia_note, misfit, offset_drift,
+from fmscal.observers.diagnostics import (consistency_check, fit_causes, has_evidence, inertia_note, misfit,
+                                          offset_drift,
                                           saturation)
 from fmscal.observers.diagnostics import inflate as inflate_misfit
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
@@ -253,8 +255,11 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
         :data:`AGREEMENT_E`). On a spatial log: the method's flag, no
         saturation, the log pins ``S`` down for a method that gives no
         ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
-        run judged settling alone), and a positive force gain (``trace S_ff >
-        0``: else the reading follows the other sign convention), and the model
+        run judged settling alone), the offset keeps one level and gravity is
+        along the direction given (:func:`fmscal.observers.diagnostics.fit_causes`:
+        else a warning names the moving offset or the base's tilt), a positive
+        force gain (``trace S_ff > 0``: else the reading follows the other sign
+        convention), and the model
         fits the log (:func:`fmscal.observers.diagnostics.misfit`; where it
         does not, ``S_std`` is widened and the warning says by how much the
         residual exceeds the noise; an inertia whose shape the log's torques
@@ -672,6 +677,8 @@ class _Run:
     sensitivity: object = None
     payload_cov: object = None
     latency_given: float = None
+    causes: object = None
+    named: bool = False
 
 
 def _check_units(run, warnings):
@@ -717,6 +724,22 @@ def _check_offset_drift(run, warnings):
     return ([drift.warning] if drift.warning else []), not drift.warning, None
 
 
+def _check_causes(run, warnings):
+    """``"causes"``: the residual of the reference fit of a log under gravity names no moving offset and no
+    gravity along another direction than the one given (:func:`fmscal.observers.diagnostics.fit_causes`, eqs.
+    (C1)-(C3)); either found is a warning naming it, and not converged: ``S`` took up what the cause left (the
+    gains check then blames no mass). A log too short to test passes with nothing said."""
+    try:
+        found = fit_causes(run.aligned, run.model)
+    except FmscalError:
+        return [], True, None
+    run.causes = found
+    run.named = bool(found.warnings)
+    why = ("the sensor's offset moves during the log" if not found.offset.constant else
+           "gravity's direction is not the one given" if found.gravity is not None and found.gravity.tilted else None)
+    return found.warnings, why is None, why
+
+
 def _check_disagreement(run, warnings):
     """``"disagreement"``: the method's estimate agrees with the reference fit (:data:`AGREEMENT_SIGMAS`,
     :data:`AGREEMENT_E`)."""
@@ -734,12 +757,51 @@ def _check_evidence(run, warnings):
     return found, evident, None
 
 
+#: A force block of ``S`` whose nearest rotation (its polar factor) turns further than this, degrees, is named a
+#: sensor turned from the frame the poses give.
+TURNED_DEG = 20.0
+
+
 def _check_flipped_gain(run, warnings):
-    """``"flipped_gain"``: a positive force gain (the trace of ``S`` on the ``force_channels``); a negative one
-    is a reading in the other sign convention."""
+    """``"flipped_gain"``: the force block of ``S`` (on the ``force_channels``) is near the identity, else one line
+    naming why, and not converged:
+
+    - a force channel along a direction the log leaves undetermined: too little rotation to tell the reading's sign
+      (no advice on ``reading``, which the next run would reverse);
+    - the polar factor ``R`` of the block (``S_ff = R P``, ``R`` orthogonal) a rotation turning more than
+      :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
+    - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
+    """
     channels = list(run.model.force_channels)
-    flipped = bool(np.trace(run.result.S_hat[np.ix_(channels, channels)]) < 0)
+    S_f = np.asarray(run.result.S_hat, dtype=float)[np.ix_(channels, channels)]
+    untold = any(np.abs(np.asarray(d, dtype=float)[channels]).max() > 0.1 for d in run.result.info.get("undetermined",
+                                                                                                        []))
+    U, _, Vt = np.linalg.svd(S_f)
+    R = U @ Vt
+    rotvec = Rotation.from_matrix(R).as_rotvec() if np.linalg.det(R) > 0 else None
+    if untold and np.trace(S_f) >= 0:      # nothing to say of the sign, nor of a turn, where the gains are unknown
+        return [], True, None
+    if untold:
+        run.named = True
+        return [f"{run.log.name}: the log holds too little rotation to tell the reading's sign (the force gains are "
+                "not determined: see the directions above); record a log that turns the payload through tens of "
+                "degrees about two axes, then judge the reading's sign convention"], False, \
+            "the log holds too little rotation to tell the reading's sign"
+    if rotvec is not None and np.degrees(np.linalg.norm(rotvec)) > TURNED_DEG:
+        run.named = True
+        angle = float(np.degrees(np.linalg.norm(rotvec)))
+        axis = rotvec / np.linalg.norm(rotvec)
+        k = int(np.argmax(np.abs(axis)))
+        about = ("xyz"[k] if abs(axis[k]) > 0.95 else "(" + ", ".join(f"{a:.2f}" for a in axis) + ")")
+        return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} from "
+                "the frame the poses give (S's force block is that turn): the sensor is mounted turned, or the poses "
+                "are of another frame; mount it as the poses assume, or record the poses of the sensor's own frame "
+                "(the reading's sign convention is not the cause)"], False, \
+            "the sensor is turned from the frame the poses give"
+    flipped = bool(np.trace(S_f) < 0)
     found = [other_convention(run.log.name, None, run.reading)] if flipped else []
+    if flipped:
+        run.named = True
     return found, not flipped, "the reading follows the other sign convention"
 
 
@@ -912,7 +974,8 @@ def _check_gains(run, warnings):
     share above 0.1), a standard deviation under a tenth of the gain and a gain three of them from 1 (a
     method without ``S_std``: a converged run). ``converged`` is not
     changed: ``S`` is what the data determine for the payload given (a sensor read in other units is
-    calibrated so); the warning says the payload or the units may be wrong."""
+    calibrated so); the warning says the payload or the units may be wrong. Nothing is said where the
+    ``"causes"`` or ``"flipped_gain"`` check named a cause: the gains are then that cause's."""
     S = np.asarray(run.result.S_hat, dtype=float)
     if run.result.S_std is None:
         std = np.zeros(len(S)) if run.result.converged else np.full(len(S), np.inf)
@@ -920,6 +983,8 @@ def _check_gains(run, warnings):
         std = np.diag(np.asarray(run.result.S_std, dtype=float))
     for d in run.result.info.get("undetermined", []):   # a channel the undetermined directions hold: its gain is not
         std = np.where(np.abs(np.asarray(d, dtype=float)[:len(S)]) > 0.1, np.inf, std)
+    if run.named:                          # a cause named (an offset, gravity, the sign, a turn) moved the gains
+        return [], True, None
     forces = list(run.model.force_channels)
     found = []
     for part, channels in (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces])):
@@ -956,6 +1021,7 @@ _INPUT_CHECKS = {"spatial_units": _check_spatial_units}
 #: the warnings so far and gives ``(its warnings, passed, why it failed or None)``.
 _CHECKS = {"units": _check_units, "reference": _check_reference, "run": _check_run,
            "consistency": _check_consistency, "saturation": _check_saturation, "offset_drift": _check_offset_drift,
+           "causes": _check_causes,
            "disagreement": _check_disagreement, "evidence": _check_evidence, "flipped_gain": _check_flipped_gain,
            "latency": _check_latency, "misfit": _check_misfit, "gains": _check_gains}
 

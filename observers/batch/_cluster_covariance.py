@@ -26,6 +26,7 @@ correlation); white residuals get blocks of the smoothing window, 25 in 5 s.
 """
 
 import numpy as np
+from scipy.fft import next_fast_len
 
 __all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "small_sample_factor", "correlation_time", "block_length",
            "time_blocks", "few_blocks", "MIN_BLOCKS"]
@@ -85,8 +86,9 @@ def correlation_time(residual):
     r = residual - residual.mean(axis=0)
     r = r / np.maximum(r.std(axis=0), 1e-300)
     n = len(r)
-    spectrum = np.fft.rfft(r, n=2 * n, axis=0)
-    rho = np.fft.irfft(np.abs(spectrum) ** 2, axis=0)[:n].mean(axis=1) / n
+    size = next_fast_len(2 * n, real=True)      # zero-padded past 2n - 1: the linear autocorrelation, at FFT speed
+    spectrum = np.fft.rfft(r, n=size, axis=0)
+    rho = np.fft.irfft(np.abs(spectrum) ** 2, n=size, axis=0)[:n].mean(axis=1) / n
     tau = 1.0 + 2.0 * np.cumsum(rho[1:])
     window = np.flatnonzero(np.arange(1, n) >= 5.0 * tau)
     return float(max(tau[window[0]] if len(window) else tau[-1], 1.0))

@@ -1,5 +1,6 @@
 """Checks of a log against the model: one constant ``S`` (health), saturation and a moving offset
-(faults), and how much a log says about ``S`` (evidence), and whether the model fits it (misfit).
+(faults), and how much a log says about ``S`` (evidence), whether the model fits it (misfit), and what
+its residual names (causes: a moving offset, gravity's direction).
 """
 
 from ._evidence import (has_evidence, log_uncertainty, EVIDENCE_PREFIX)
@@ -7,7 +8,8 @@ from ._health import (Consistency, consistency_check, DEFAULT_SIGNIFICANCE, DEFA
 from ._misfit import (Misfit, InertiaShape, misfit, inertia_note, inflate, MISFIT_SIGNIFICANCE, MISFIT_RATIO,
     GROSS_RATIO)
 from ._faults import (saturation, offset_drift, OffsetDrift, SATURATION_SHARE, SATURATION_RATIO, DRIFT_SIGNIFICANCE,
-    DRIFT_PARTS, DRIFT_LAGS)
+    DRIFT_PARTS, DRIFT_LAGS, describe_offset)
+from ._causes import (Causes, GravityTilt, fit_causes, CAUSE_SIGNIFICANCE)
 
 __all__ = ["has_evidence", "log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift",
-           "OffsetDrift", "Misfit", "InertiaShape", "misfit"]
+           "OffsetDrift", "Misfit", "InertiaShape", "misfit", "Causes", "GravityTilt", "fit_causes"]

@@ -216,7 +216,8 @@ def offset_drift(log, payload, S_hat, b=None, window=0.5, parts=DRIFT_PARTS, sig
     out = OffsetDrift(p_value >= significance / 2 and white[worst] >= significance / 6, float(stat), p_value,
                       est, t, white_p=float(white[worst]))
     if p_value < significance / 2:
-        out.warning = _describe(t, est, info, within / dof_w, p_value)
+        out.warning = describe_offset(t, est, info, within / dof_w, p_value, _CHANNELS, _UNITS,
+                                      "the residuals of a least-squares fit change level")
     elif not out.constant:
         out.warning = (f"the residuals of a least-squares fit are not white from window to window (as an offset "
                        f"of {_CHANNELS[worst]}: Ljung-Box p = {white[worst]:.2g} over {DRIFT_LAGS} lags): the "
@@ -237,11 +238,32 @@ def _ljung_box(z, lags):
     return float(chi2.sf(Q, lags))
 
 
-def _describe(t, est, info, scale, p_value):
-    """One line: which channel's offset moved, as a step or a ramp, and when."""
+def describe_offset(t, est, info, scale, p_value, names, units, evidence):
+    """One line: which channel's offset moved, as a step or a ramp, and when.
+
+    Parameters
+    ----------
+    t : ndarray, shape (K,)
+        The middle of each window, s.
+    est : ndarray, shape (K, n)
+        The offset change each window asks for, per channel of the reading.
+    info : ndarray, shape (K, n, n)
+        Each window's information about it (its inverse, times ``scale``, the covariance).
+    scale : float
+    p_value : float
+        Of the test that found the offset moving.
+    names, units : tuple of str
+        The reading's channels and their units.
+    evidence : str
+        What the test saw, in words ("the residuals of a least-squares fit change level").
+
+    Returns
+    -------
+    str
+    """
     sd2 = np.array([np.diag(np.linalg.inv(I)) for I in info]) * scale          # (K, 3) variances
     w = 1.0 / sd2
-    spread = [np.sum(w[:, j] * (est[:, j] - np.average(est[:, j], weights=w[:, j])) ** 2) for j in range(3)]
+    spread = [np.sum(w[:, j] * (est[:, j] - np.average(est[:, j], weights=w[:, j])) ** 2) for j in range(len(names))]
     j = int(np.argmax(spread))
     y, sw = est[:, j], np.sqrt(w[:, j])
     bounds = np.concatenate([[t[0]], 0.5 * (t[1:] + t[:-1]), [t[-1]]])      # between windows, K + 1
@@ -259,7 +281,7 @@ def _describe(t, est, info, scale, p_value):
     _, size, a, b = best
     end = None if a == b or bounds[b] - bounds[a] <= 2 * (t[1] - t[0]) else bounds[b]
     start = bounds[a] if end is not None else 0.5 * (bounds[a] + bounds[b])
-    what = (f"steps by {size:+.3g} {_UNITS[j]} at t = {start:.3g} s" if end is None else
-            f"drifts by {size:+.3g} {_UNITS[j]} from t = {start:.3g} to {end:.3g} s")
-    return (f"the sensor's offset moves during the log: the offset of {_CHANNELS[j]} {what} (the residuals of a "
-            f"least-squares fit change level, p = {p_value:.2g}); one constant offset does not describe it")
+    what = (f"steps by {size:+.3g} {units[j]} at t = {start:.3g} s" if end is None else
+            f"drifts by {size:+.3g} {units[j]} from t = {start:.3g} to {end:.3g} s")
+    return (f"the sensor's offset moves during the log: the offset of {names[j]} {what} ({evidence}, "
+            f"p = {p_value:.2g}); one constant offset does not describe it")

@@ -338,10 +338,13 @@ def _torque_and_weight(name, w_hat, c, gravity, mass, com, max_mass=None):
     arm = float(np.linalg.norm(rho))
     known = None if com is None else float(np.linalg.norm(com))
     if known is not None and known > MAX_LEVER_ARM:
-        unit = _unit_of(known / max(arm, 1e-12), {"mm": 1e3, "cm": 1e2})
+        scales = {"mm": 1e3, "cm": 1e2}
+        unit = _unit_of(known / max(arm, 1e-12), scales)
+        in_m = "" if not unit else " ".join(f"{v / scales[unit]:.4g}" for v in com)
         raise UnitsError(f"{name}: the centre of mass given is {known:.4g} m from the sensor, beyond a wrist's "
                          f"{MAX_LEVER_ARM:g} m, where torque over force puts it {arm * 1e3:.3g} mm away: "
-                         + (f"given in {unit}? give com in m" if unit else "give com in m, in the sensor frame"))
+                         + (f"the centre of mass given in {unit}? give it in m (--com {in_m})" if unit
+                            else "give com in m, in the sensor frame"))
     if arm > MAX_LEVER_ARM or (known is not None and known > 0.01 and arm > _FAR * known):
         told = f" (the payload's is {known * 1e3:.3g} mm)" if known is not None else ""
         raise UnitsError(f"{name}: the torques look like N mm, not N m: torque over force gives a lever arm of "

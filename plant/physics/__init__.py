@@ -6,7 +6,8 @@ from ._payload import (Payload, PAPER_PAYLOAD)
 from ._sensor import (CalibrationSchedule, NoiseSpec, SingularCalibrationError, check_calibration)
 from ._dynamics import (input_matrix, acceleration, state_derivative, A_1, C_1, B_1, A_2, C_2, B_2, regressors,
     phi_1, phi_2, S_from_phi)
-from ._rigid_body import (regressor, inertia_matrix, INERTIA_NAMES, SpatialPayload, PayloadSymbols, GRAVITY,
+from ._rigid_body import (regressor, gravity_jacobian, inertia_matrix, INERTIA_NAMES, SpatialPayload, PayloadSymbols,
+                          GRAVITY,
                           quaternion_multiply, quaternion_conjugate, rotation_matrix, rotation_matrices,
                           unit_quaternions, sign_continuous,
                           QUATERNION_TOLERANCE, sensor_wrench, body_acceleration, prescribed_motion, skew)
@@ -20,7 +21,8 @@ from ._payload_std import (PayloadStd, PayloadStdError, DEFAULT_MASS_STD, DEFAUL
 
 __all__ = ["Payload", "CalibrationSchedule", "NoiseSpec", "SingularCalibrationError", "check_calibration",
            "input_matrix", "acceleration", "state_derivative", "regressors", "phi_1", "phi_2", "S_from_phi",
-           "regressor", "inertia_matrix", "SpatialPayload", "quaternion_multiply", "quaternion_conjugate",
+           "regressor", "gravity_jacobian", "inertia_matrix", "SpatialPayload", "quaternion_multiply",
+           "quaternion_conjugate",
            "rotation_matrix", "rotation_matrices", "unit_quaternions", "sign_continuous", "sensor_wrench",
            "body_acceleration", "prescribed_motion", "skew",
            "integrate", "rk4_step", "Excitation", "PaperWrench", "Multisine", "SampledWrench", "spatial_motion",

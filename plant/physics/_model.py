@@ -756,7 +756,8 @@ class SpatialModel(Model):
     signed_reading = True
     force_channels = (3, 4, 5)
     reading_blocks = (("torque", (0, 1, 2)), ("force", (3, 4, 5)))
-    calibration_checks = ("saturation", "run", "evidence", "flipped_gain", "latency", "misfit", "gains")
+    calibration_checks = ("saturation", "causes", "run", "evidence", "flipped_gain", "latency", "misfit",
+                          "gains")
     input_checks = ("spatial_units",)
     nq, nv = rigid_body.NQ, rigid_body.NV
     state = StateLayout(("p", 3), ("q", 4), ("v", 3), ("omega", 3))

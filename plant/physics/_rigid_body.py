@@ -38,7 +38,7 @@ import numpy as np
 
 from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_positive_scalar, is_symbolic, ops
 
-__all__ = ["regressor", "INERTIA_NAMES",
+__all__ = ["regressor", "gravity_jacobian", "INERTIA_NAMES",
     "SpatialPayload", "PayloadSymbols", "GRAVITY",
     "sign_continuous", "quaternion_multiply", "quaternion_conjugate", "rotation_matrix", "rotation_matrices",
     "unit_quaternions",
@@ -621,3 +621,28 @@ def regressor(q, omega, alpha, p_ddot, gravity=GRAVITY, mounting=None):
     W[:, 3:, 0] = a_g                                                   # m a_g
     W[:, 3:, 1:4] = A + Om @ Om                                         # alpha x h + omega x (omega x h)
     return W
+
+
+def gravity_jacobian(q, payload):
+    """``d [tau_O; f] / d g``: how the wrench :func:`regressor` gives moves with gravity, for every sample.
+
+    The wrench depends on gravity only through ``a_g = R^T (p_ddot - g)``, in
+    ``f = m a_g + ...`` and ``tau_O = h x a_g + ...``; it is affine in ``g``, so that
+    ``w(g') = w(g) + D (g' - g)`` holds exactly, with::
+
+        D = -[[h]x; m I] R^T                                                       (G1)
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 4)
+        Attitudes of the sensor frame, unit quaternions, scalar first.
+    payload : SpatialPayload
+
+    Returns
+    -------
+    ndarray, shape (N, 6, 3)
+        ``D``, N m and N per m/s^2 of the pose frame's gravity.
+    """
+    Rt = np.swapaxes(rotation_matrices(q), 1, 2)
+    h = payload.mass * np.asarray(payload.com, dtype=float)
+    return -np.concatenate([skew(h) @ Rt, payload.mass * Rt], axis=1)

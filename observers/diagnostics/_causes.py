@@ -1,0 +1,341 @@
+"""What a fit's residual names: a moving offset, or gravity along another direction than the one given.
+
+The reference fit of a log under gravity (the wrench each sample needed,
+``w_k``, from the smoothed poses by Newton-Euler, and ``w_k = S w_hat_k + c``
+fitted by least squares, as :func:`fmscal.observers.batch.fit_readings` fits
+it) leaves a residual ``r_k``. ``S`` absorbs whatever is a linear function of
+the reading; two causes it cannot absorb leave each a pattern of its own:
+
+* **a moving offset**: ``w = S (w_hat - b - db(t))`` leaves ``r_k = -S db(t_k)``,
+  a function of time alone;
+* **gravity along another direction** (a tilted base, a pose frame whose z is not up):
+  the needed wrench is affine in gravity, ``w(g') = w(g) + D_k (g' - g)``
+  with ``D_k`` eq. (G1) of :func:`fmscal.plant.physics.gravity_jacobian`, so
+  that the residual is ``-D_k dg``, a function of the attitude.
+
+Both are fitted to the residual together, beside a change of the payload's
+inertial parameters other than its mass (``-W_k dpi``, ``W_k`` the
+Newton-Euler regressor less its mass column, which ``S`` absorbs: a payload
+given wrong leaves a residual that neither must be taken for), row ``i`` of
+the wrench::
+
+    r_ik = -D_ik dg - W_ik dpi + w_dot_ik dtau + T(t_k)^T beta_i + e_ik              (C1)
+
+``w_dot`` the needed wrench's rate (a latency wrong by ``dtau`` leaves
+``w_dot dtau``: a log whose latency is poorly estimated, as a tilt makes it,
+keeps its cause in sight), ``T(t)`` the indicators of the last ``P - 1`` of ``P`` equal parts of the
+log (:data:`fmscal.observers.diagnostics.DRIFT_PARTS`, as the planar test),
+``beta_i`` the level of row ``i``'s offset in each against the first. Every
+column is first projected off the augmented reading ``[w_hat_k; 1]``, as the
+residual is (what ``S`` and ``c`` absorb; the Frisch-Waugh-Lovell theorem),
+and each row is weighted by its residual's rms. The covariance of the
+coefficients is the cluster-robust sandwich over blocks of time (eq. (U3)
+of :mod:`fmscal.observers.batch._cluster_covariance`), the blocks five
+correlation times of the residual that (C1) leaves (eq. (U2)). Two Wald
+tests, each a Hotelling's ``T^2`` over ``G`` blocks scaled to an ``F`` as in
+eq. (M2) of :mod:`fmscal.observers.diagnostics._misfit`::
+
+    X2 = x^T C^+ x,   (G - K) / (K (G - 1)) X2 ~ F(K, G - K)                         (C2)
+
+- the offset moves: ``x = beta_i``, ``K = P - 1``, for each row, the
+  smallest p-value times the rows (Bonferroni); a row is named only where
+  its levels also spread as far as :data:`MOVING_SIZE` of its residual's
+  rms ``s_i`` (a size that matters, beside one the test alone finds on a
+  long log)::
+
+    max(0, beta_i) - min(0, beta_i) >= MOVING_SIZE s_i                             (C4)
+
+- gravity is tilted: ``x`` the two components of ``dg`` across ``g``, ``K = 2``.
+
+Each names its cause below half of :data:`CAUSE_SIGNIFICANCE`: the
+probability, for a log with one constant offset and the gravity given, of
+naming either, nominal (no test with ``G`` below :data:`BLOCKS_PER_COLUMN`
+times the columns of (C1)). The tilt the data ask
+for, and its one-sigma uncertainty::
+
+    tilt = angle(g, g + dg),   sd = sqrt(lambda_max(C_perp)) / |g + dg|           (C3)
+
+``C_perp`` the covariance of the two components across ``g``. The offset's
+change is described as the planar test describes it (a step or a ramp, the
+channel of the reading, when: :func:`describe_offset`), from the residual
+less the fitted gravity and payload terms over 0.5 s windows, taken back to
+the reading by ``-S^-1``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import f as f_dist
+
+from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import edge, gravity_jacobian, regressor, spatial_motion
+
+from fmscal.observers.batch import block_length, small_sample_factor
+from fmscal.observers.core import reading_noise
+from ._faults import DRIFT_PARTS, OffsetDrift, describe_offset
+
+__all__ = ["Causes", "GravityTilt", "fit_causes", "CAUSE_SIGNIFICANCE"]
+
+#: The probability, for a log with a constant offset under the gravity given, of naming a moving offset or a
+#: tilted gravity (each test half of it), nominal.
+CAUSE_SIGNIFICANCE = 1e-3
+#: A direction of eq. (C1)'s columns whose information, each column scaled to a unit one, is below this share of the
+#: largest is left out: what ``S`` absorbs (the payload's mass, centre of mass and uniform inertia scale, issue
+#: 46), which the errors-in-variables fit leaves near zero or below it.
+ABSORBED = 1e-3
+#: A row's offset is named moving only where its levels also spread over this share of its residual's rms (eq.
+#: (C4)): on a long log the test alone finds shifts of a tenth of the noise that the pose noise's share leaves, which
+#: move no estimate.
+MOVING_SIZE = 2.0
+#: No test on fewer blocks of time than this many times the columns of eq. (C1) (43 in 3D): the cluster-robust
+#: covariance of that many coefficients from fewer blocks is too rough for eq. (C2)'s tails (a log of 20 s or more
+#: at the usual blocks of 0.2 s).
+BLOCKS_PER_COLUMN = 2
+#: Samples fitted at most: a longer log is taken at every ``stride``-th sample (the motion smoothed on all of them
+#: first), which keeps the check's cost flat beyond 20 s at 1 kHz; its blocks of time, and so its test, unchanged.
+MAX_ROWS = 20000
+#: The windows over which the offset's change is described, s (as the planar test's).
+DESCRIBE_WINDOW = 0.5
+
+
+@dataclass
+class GravityTilt:
+    """Gravity's direction as the residual asks for it (eqs. (C1)-(C3) of :mod:`fmscal.observers.diagnostics._causes`).
+
+    Attributes
+    ----------
+    gravity : ndarray, shape (3,)
+        The pose frame's gravity the data ask for, ``g + dg``, m/s^2.
+    tilt_deg, std_deg : float
+        Its angle from the gravity given, and the one-sigma uncertainty across it, degrees (eq. (C3)).
+    statistic : float
+        ``X2`` of eq. (C2) on the two components across ``g``.
+    p_value : float
+    tilted : bool
+        ``p_value`` below half of the significance: the gravity given does not explain the data.
+    warning : str or None
+        One line naming the tilt, where ``tilted``.
+    """
+
+    gravity: np.ndarray
+    tilt_deg: float
+    std_deg: float
+    statistic: float
+    p_value: float
+    tilted: bool
+    warning: str = None
+
+    def to_dict(self):
+        """The JSON form."""
+        return {"gravity": [float(v) for v in self.gravity], "tilt_deg": float(self.tilt_deg),
+                "std_deg": float(self.std_deg), "p_value": float(self.p_value), "tilted": bool(self.tilted)}
+
+
+@dataclass
+class Causes:
+    """The outcome of :func:`fit_causes`.
+
+    Attributes
+    ----------
+    offset : OffsetDrift
+        The moving offset's test (``constant``, ``statistic`` the largest row's ``F``, ``p_value``, ``warning``;
+        ``offsets`` and ``t`` the per-window offsets of the reading it is described from).
+    gravity : GravityTilt or None
+        The tilt's test; None on a model not under gravity.
+    blocks : int
+        ``G``, the blocks of time of the covariance.
+    levels, levels_std : ndarray, shape (n_w, P - 1)
+        ``beta_i`` of eq. (C1), each row in its wrench's units (N m, N): the level of the needed wrench's
+        residual in each part of the log against the first, and its standard deviation.
+    """
+
+    offset: OffsetDrift
+    gravity: GravityTilt
+    blocks: int
+    levels: np.ndarray = None
+    levels_std: np.ndarray = None
+
+    @property
+    def warnings(self):
+        """The lines naming the causes found."""
+        return [w for w in (self.offset.warning, None if self.gravity is None else self.gravity.warning) if w]
+
+
+def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIGNIFICANCE):
+    """Fit a moving offset and a tilt of gravity to a log's reference residual, and test each: eqs. (C1)-(C3).
+
+    Parameters
+    ----------
+    log : plant.Log
+        A log of the model's case, in the toolkit's sign, its poses aligned with the reading.
+    model : plant.Model
+        With the attitude a unit quaternion (Newton-Euler in 3D); its payload and gravity as given.
+    window : float
+        Smoothing window of the pose differentiation, s.
+    parts : int
+        ``P`` of eq. (C1).
+    significance : float
+        :data:`CAUSE_SIGNIFICANCE`.
+
+    Returns
+    -------
+    Causes
+        Nothing named (``offset.constant`` True, ``gravity.tilted`` False, NaN statistics) where the log has
+        too few blocks of time to test.
+
+    Raises
+    ------
+    FmscalError
+        A model whose attitude is not a unit quaternion, a log of another case, or one shorter than the window.
+    """
+    if model.attitude != "quaternion":
+        raise FmscalError(f"fit_causes takes a model under gravity in 3D; got a {model.name} model")
+    model.check_log(log, "fit_causes")
+    first, stop = edge(log, window), len(log.t) - edge(log, window)
+    stride = max(1, -(-(stop - first) // MAX_ROWS))                          # every stride-th sample (a long log)
+    trim = slice(first, stop, stride)
+    q, omega, alpha, p_ddot = (a[trim] for a in spatial_motion(log, window))
+    pi = model.payload.inertial_parameters
+    W = regressor(q, omega, alpha, p_ddot, model.gravity)                     # (N, n_w, 10)
+    w, w_hat, t = W @ pi, log.w_hat[trim], log.t[trim]
+    n, n_w = w.shape
+    if n < 8 * (n_w + 1):
+        raise FmscalError(f"{log.name}: too short to test the offset and gravity ({n} samples)")
+    spread = np.r_[np.maximum(np.std(w_hat, axis=0), 1e-300), 1.0]
+    X = np.c_[w_hat, np.ones(n)] / spread
+    # the reference fit's "projection" X H X^T, H of the normal equations less the reading's noise (errors in
+    # variables, as fit_readings; plain least squares shrinks S on the weak directions, and the residual it leaves
+    # keeps a share of the motion that no offset or gravity makes)
+    sigma = np.diag(np.r_[reading_noise(log.w_hat), 0.0] / spread) ** 2
+    lam, u = np.linalg.eigh(X.T @ X - n * sigma)
+    kept = lam > 1e-12 * lam.max()
+    H = (u[:, kept] / lam[kept]) @ u[:, kept].T
+    theta0 = H @ (X.T @ w)
+    r = w - X @ theta0                                                        # the reference residual
+    S = (theta0 / spread[:, None]).T[:, :n_w]                                 # S of the reference fit
+    scale = np.maximum(np.sqrt(np.mean(r ** 2, axis=0)), 1e-300)
+    part = np.minimum((parts * (t - t[0]) / (t[-1] - t[0] + log.dt)).astype(int), parts - 1)
+    T = (part[:, None] == np.arange(1, parts)[None, :]).astype(float)        # (N, P - 1)
+    D = gravity_jacobian(q, model.payload)                                  # (N, n_w, 3), eq. (G1)
+    w_dot = np.gradient(w, t, axis=0)                                         # a latency's error, eq. (C1)
+    shared = 3 + W.shape[2] - 1 + 1              # dg, dpi less the mass, and dtau (eq. C1)
+    n_t = parts - 1
+    size = shared + n_w * n_t
+    A, b, designs = np.zeros((size, size)), np.zeros(size), []
+    for i in range(n_w):                                                      # eq. (C1), row by row
+        Z = np.c_[-D[:, i], -W[:, i, 1:], w_dot[:, i], T] / scale[i]
+        Y = Z - X @ (H @ (X.T @ Z))                                          # what [S | c] leaves of it
+        cols = np.r_[np.arange(shared), shared + i * n_t + np.arange(n_t)]
+        A[np.ix_(cols, cols)] += Z.T @ Y
+        b[cols] += Z.T @ (r[:, i] / scale[i])
+        designs.append((cols, Y))
+    inverse, rank = _pseudo_inverse(A)
+    theta = inverse @ b
+    e = np.column_stack([r[:, i] / scale[i] - Y @ theta[cols] for i, (cols, Y) in enumerate(designs)])
+    length = block_length(e, log.dt * stride, window)
+    blocks = ((t - t[0]) // length).astype(int)
+    starts = np.flatnonzero(np.r_[True, np.diff(blocks) != 0])
+    g = len(starts)
+    if g < BLOCKS_PER_COLUMN * size:          # the sandwich of eq. (C2) would be too rough to test on
+        return Causes(offset=OffsetDrift(True, np.nan, 1.0, np.zeros((0, n_w)), np.zeros(0)), gravity=None
+                      if not model.under_gravity else GravityTilt(np.asarray(model.gravity, dtype=float), np.nan,
+                                                                  np.nan, np.nan, 1.0, False), blocks=g)
+    scores = np.zeros((g, size))
+    for i, (cols, Y) in enumerate(designs):
+        scores[:, cols] += np.add.reduceat(Y * e[:, i:i + 1], starts, axis=0)
+    cov = small_sample_factor(blocks, n * n_w, rank) * inverse @ (scores.T @ scores) @ inverse
+    offset = _offset_test(theta, cov, g, shared, n_t, scale, significance)
+    if not offset.constant:
+        offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared)
+    gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance) if model.under_gravity else None
+    beta = theta[shared:].reshape(n_w, n_t)
+    beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
+    return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std)
+
+
+def _pseudo_inverse(A):
+    """``A^+`` on the directions it determines (scaled to a unit diagonal; eigenvalues below :data:`ABSORBED` of the
+    largest dropped: the payload's parameters that ``S`` absorbs), and its rank."""
+    d = np.sqrt(np.maximum(np.diag(A), 1e-300))
+    lam, u = np.linalg.eigh(A / np.outer(d, d))
+    keep = lam > ABSORBED * lam.max()
+    return (u[:, keep] / lam[keep]) @ u[:, keep].T / np.outer(d, d), int(keep.sum())
+
+
+def _wald(x, C, g):
+    """Eq. (C2): ``X2``, its degrees of freedom and its p-value over ``g`` blocks (1 with too few blocks)."""
+    d = np.sqrt(np.maximum(np.diag(C), 1e-300))
+    lam, u = np.linalg.eigh(C / np.outer(d, d))
+    keep = lam > 1e-10 * max(lam.max(), 1e-300)
+    y = (u[:, keep].T @ (x / d)) / np.sqrt(lam[keep])
+    statistic, k = float(y @ y), int(keep.sum())
+    if k == 0 or g <= k + 1:
+        return statistic, k, 1.0
+    return statistic, k, float(f_dist.sf((g - k) / (k * (g - 1)) * statistic, k, g - k))
+
+
+def _offset_test(theta, cov, g, shared, n_t, scale, significance):
+    """The moving offset's test: each row's ``beta_i`` of eq. (C1) by eq. (C2), Bonferroni over the rows; a row
+    counts where its levels also spread over :data:`MOVING_SIZE` of its residual's rms (eq. (C4))."""
+    n_w = len(scale)
+    rows = [shared + i * n_t + np.arange(n_t) for i in range(n_w)]
+    tests = [_wald(theta[idx], cov[np.ix_(idx, idx)], g) for idx in rows]
+    sizes = [np.ptp(np.r_[0.0, theta[idx]]) / scale[i] for i, idx in enumerate(rows)]
+    moving = [i for i in range(n_w) if n_w * tests[i][2] < significance / 2 and sizes[i] >= MOVING_SIZE]
+    statistic, k, p = min((tests[i] for i in moving), key=lambda test: test[2]) if moving else \
+        min(tests, key=lambda test: test[2])
+    p_value = min(1.0, n_w * p)
+    F = (g - k) / (k * (g - 1)) * statistic if k and g > k + 1 else np.nan
+    return OffsetDrift(not moving, float(F), p_value, np.zeros((0, n_w)), np.zeros(0))
+
+
+def _describe(offset, log, model, t, r, designs, theta, scale, S, shared):
+    """The offset's change in words: the residual less the fitted gravity and payload terms, per window, taken to
+    the reading by ``-S^-1`` (:func:`describe_offset`)."""
+    left = np.column_stack([r[:, i] - scale[i] * (Y[:, :shared] @ theta[:shared]) for i, (_, Y) in
+                            enumerate(designs)])
+    windows = ((t - t[0]) // DESCRIBE_WINDOW).astype(int)
+    starts = np.flatnonzero(np.r_[True, np.diff(windows) != 0])
+    counts = np.diff(np.r_[starts, len(t)])
+    means = np.add.reduceat(left, starts, axis=0) / counts[:, None]
+    S_inv = np.linalg.pinv(S)
+    est = -means @ S_inv.T
+    per_sample = S.T @ np.diag(1.0 / scale ** 2) @ S
+    info = counts[:, None, None] * per_sample[None]
+    middle = np.add.reduceat(t, starts) / counts
+    forces = set(model.force_channels)
+    units = tuple("N" if k in forces else "N m" for k in range(len(model.wrench_names)))
+    offset.offsets, offset.t = est, middle
+    offset.warning = describe_offset(middle, est, info, 1.0, offset.p_value, model.wrench_names, units,
+                                     "the residuals of a least-squares fit change level along the log, beyond "
+                                     "what gravity's direction and the payload explain")
+    return offset
+
+
+def _across(u):
+    """Two orthonormal directions across the unit vector ``u``, shape (3, 2)."""
+    return np.linalg.svd(np.eye(3) - np.outer(u, u))[0][:, :2]
+
+
+def _gravity_test(dg, C, g, gravity, significance):
+    """The tilt's test: the two components of ``dg`` across ``g`` by eq. (C2), its angle and sd by eq. (C3)."""
+    g0 = np.asarray(gravity, dtype=float)
+    u = g0 / np.linalg.norm(g0)
+    statistic, _, p_value = _wald(_across(u).T @ dg, _across(u).T @ C @ _across(u), g)
+    found = g0 + dg
+    size = np.linalg.norm(found)
+    tilt = float(np.degrees(np.arccos(np.clip(found @ u / size, -1.0, 1.0))))
+    # across the direction found: along it lies gravity's size, which the payload's parameters share (C3)
+    across = _across(found / size)
+    std = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(across.T @ C @ across).max(), 0.0)) / size))
+    tilted = bool(p_value < significance / 2)
+    out = GravityTilt(gravity=found, tilt_deg=tilt, std_deg=std, statistic=statistic, p_value=p_value,
+                      tilted=tilted)
+    if tilted:
+        along = "-z" if np.allclose(u, [0.0, 0.0, -1.0]) else "the direction given"
+        out.warning = (f"gravity's direction: the data ask for gravity tilted {tilt:.2g} degrees (+- {std:.1g}) from "
+                       f"the one given (along {along}; p = {p_value:.2g}): the robot's base is tilted, or the pose "
+                       f"frame's z is not up; give the gravity found (--gravity "
+                       f"{' '.join(f'{v:.4g}' for v in found)}), or estimate it with fmscal identify-payload "
+                       "--gravity estimate")
+    return out
