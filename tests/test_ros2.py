@@ -25,8 +25,8 @@ from fmscal.plant.io import simulate_attitude_log
 from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
 from geometry_msgs.msg import PoseStamped
-from ros2_rig import (Peer, contact_array, domain_id, imu_message, joint_state, node_command, node_log, running_node,
-                      truth_calibration)
+from ros2_rig import (DOMAINS, HARNESS_NOISE, Peer, contact_array, domain_id, imu_message, joint_state, node_command,
+                      node_log, running_node, tool_calibration, truth_calibration)
 import robot_rig
 from sensor_msgs.msg import Imu, JointState
 
@@ -170,7 +170,7 @@ def test_saturated_readings_are_withheld(arm, cal_file):
         states.append(pipeline.state())       # at once: "not ready" once the readings are silent (wall time)
         outputs.append({round(o.sample.t, 9): o.sample.wrench for o in out})
     assert set(outputs[0]) - set(outputs[1]) == {round(log.t[200], 9)}
-    assert pipelines[1].counts["saturated"] == 1 and states[1] == "saturated"
+    assert pipelines[1].withheld["saturated"] == 1 and states[1] == "saturated"
     assert states[0] == "running"
     assert all(np.array_equal(outputs[0][k], v) for k, v in outputs[1].items())
 
@@ -303,8 +303,11 @@ def test_tare_refused_during_a_contact(request, arm, cal_file):
     assert not ok
     assert message.startswith("tare refused: a contact is detected (") and "\n" not in message, message
     assert message.endswith("; tare with the tool free, or call ~/tare_force where the offset itself is off (a "
-                            "sensor zeroed by its hardware, a drift without track_offset)"), message
+                            "sensor zeroed by its hardware, a drift without track_offset); ~/reload undoes a wrong "
+                            "~/tare_force"), message
     assert forced and forced_message.startswith("tared: offset "), forced_message
+    absorbed = float(forced_message.split("; absorbed ")[1].split(" N")[0])
+    assert absorbed == pytest.approx(np.linalg.norm(contact_wrench()[3:]), rel=0.2), forced_message
 
 
 def test_stale_motion_stops_the_output(request, arm, cal_file):
@@ -389,8 +392,8 @@ def test_planar_replay(request, tmp_path):
 
 
 # --- the other motion sources: joint states with a URDF, an IMU --------------------------------------------------
-#: The motion sources' tests' noise model (tests/test_motion_sources.py's).
-NOISE = NoiseSpec((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
+#: The motion sources' tests' noise model (tests/test_motion_sources.py's; the harness's calibration's).
+NOISE = NoiseSpec(*HARNESS_NOISE)
 
 
 @pytest.fixture(scope="module")
@@ -400,10 +403,7 @@ def ur5():
 
 
 def _source_calibration(tmp_path):
-    path = tmp_path / "cal.json"
-    Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
-                noise=NOISE).save(path)
-    return path
+    return tool_calibration(tmp_path / "cal.json")
 
 
 def _replay_source(request, node_args, message, build, t, w_hat):
@@ -637,7 +637,7 @@ def test_save(request, arm, cal_file, tmp_path):
     assert not changed.successful
     assert changed.reason == ("fmscal_compensator reads its parameters at start: restart it to change save_path "
                               "(~/reload reads the calibration file again)")
-    second = domain_id(request.node.name) % 100 + 1
+    second = domain_id(request.node.name) % DOMAINS + 1
     with _node(request, cal_file, "track_offset:=true", f"save_path:={saved}", domain=second) as proc:
         peer = Peer(second)
         try:

@@ -61,6 +61,10 @@ PARAMETERS = (
     Parameter("covariance_topic", "string", "/ft_sensor/contact_covariance", "std_msgs/Float64MultiArray out: the "
               "contact wrench's covariance, one per output, row-major, force first (fx fy fz tx ty tz; planar "
               "fx fy M)"),
+    Parameter("flags_topic", "string", "/ft_sensor/contact_flags", "diagnostic_msgs/DiagnosticArray out: one per "
+              "reading taken, stamped as it: level OK for an output right within its covariance, WARN for one "
+              "flagged (its message names why), ERROR for a reading given no output (withheld: the cause); the "
+              "value contact, the contact test's verdict"),
     Parameter("track_offset", "bool", False, "follow the offset's drift (a random walk updated while no contact "
               "is detected)"),
     Parameter("drift_intensity", "double_array", None, "track_offset: the random walk's intensity, the reading's "
@@ -79,6 +83,9 @@ PARAMETERS = (
               "base: the motion frame's axes (base_frame)"),
     Parameter("base_frame", "string", "", "output_frame base: the output's frame_id; empty: the motion "
               "message's header.frame_id"),
+    Parameter("sensor_frame", "string", "", "the wrench's header.frame_id expected: another is logged, said in the "
+              "diagnostics and flags the outputs; empty: the calibration's sensor_frame where it records one, else "
+              "not checked"),
     Parameter("tool_point", "double_array", None, "m, the point the torque is taken about, in the sensor's axes "
               "(3 values); unset: the sensor's point"),
     Parameter("pose_to_sensor_rotation", "double_array", None, "pose_topic: the sensor's axes in the tracked "
@@ -98,6 +105,8 @@ PARAMETERS = (
               "the output's delay behind its reading"),
     Parameter("sample_time", "double", 0.0, "s, the wrench stream's period; 0: the median interval of its first "
               "stamps"),
+    Parameter("max_rate", "double", 1000.0, "Hz, the fastest readings compensated: faster ones are decimated to "
+              "every N-th stamp (N the smallest that brings them within it; said at start and in the diagnostics)"),
     Parameter("stale_timeout", "double", 0.5, "s, how far the motion's newest stamp may trail a reading's before "
               "the motion is stale (the reading is then not compensated)"),
     Parameter("saturation", "double_array", None, "the raw reading's range per channel (one value or one per "
@@ -121,6 +130,8 @@ class Settings:
     topic: str
 
     def __getattr__(self, name):
+        if name.startswith("__") or name == "values":      # (pickle's lookups on an instance not yet filled)
+            raise AttributeError(name)
         try:
             return self.values[name]
         except KeyError:
@@ -179,9 +190,10 @@ def settings(values):
                           ("reading", ("reaction", "load"))):
         if values[name] is not None and values[name] not in options:
             raise Ros2Error(f"parameter {name} must be one of {', '.join(options)}; got {values[name]!r}")
-    for name in ("window", "delay", "stale_timeout", "identify_buffer", "diagnostics_period"):
+    for name in ("window", "delay", "stale_timeout", "identify_buffer", "diagnostics_period", "max_rate"):
         if not (np.isfinite(values[name]) and values[name] > 0) and not (name == "delay" and values[name] == 0):
-            raise Ros2Error(f"parameter {name} must be a positive number of seconds; got {values[name]!r}")
+            unit = "Hz" if name == "max_rate" else "seconds"
+            raise Ros2Error(f"parameter {name} must be a positive number of {unit}; got {values[name]!r}")
     if not (np.isfinite(values["sample_time"]) and values["sample_time"] >= 0):
         raise Ros2Error(f"parameter sample_time must be 0 (from the stamps) or a period in s; got "
                         f"{values['sample_time']!r}")
