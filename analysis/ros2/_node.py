@@ -224,8 +224,9 @@ class CompensatorNode:
         self._flag_msg.status = [self._flag_status]
         self._epoch = None
         self._latencies = deque(maxlen=LATENCY_KEPT)
-        self._floor = deque(maxlen=60)                # (second, the least lag of an output in it)
+        self._held_for = None                         # (s from the newest output's reading's reception, when)
         self._pass_start, self._pass_size = None, 0
+        self._seen, self._latched = None, []           # the transient states' counts, those not said yet
         self._entered = time.monotonic()
         self._graph_checked = -np.inf
         self.error = None
@@ -451,9 +452,9 @@ class CompensatorNode:
                 try:
                     self._check_graph()
                     # in the order the middleware received them: each reading after the motion that came before it
-                    for _, kind, m in heapq.merge(motions, readings, key=lambda e: (e[0], e[1])):
+                    for received, kind, m in heapq.merge(motions, readings, key=lambda e: (e[0], e[1])):
                         if kind:
-                            self._reading(m)
+                            self._reading(m, received * 1e-9 if received > 1e18 else None)
                         else:
                             self._motion_message(m)
                     self._process()
@@ -488,9 +489,10 @@ class CompensatorNode:
             self._motion_message(m)
         self._process()
 
-    def _reading(self, msg):
+    def _reading(self, msg, received=None):
         w = np.array([getattr(getattr(msg.wrench, part), axis) for part, axis in self._fields])
-        if not self.pipeline.add_reading(self._time(msg.header.stamp), w, msg.header.stamp, msg.header.frame_id):
+        if not self.pipeline.add_reading(self._time(msg.header.stamp), w, msg.header.stamp, msg.header.frame_id,
+                                         received):
             self._warn("reading", "a wrench with a NaN or infinite component: skipped (counted as invalid)")
 
     def _process(self):
@@ -587,12 +589,7 @@ class CompensatorNode:
         now = time.time()
         since = now - (out.stamp.sec + out.stamp.nanosec * 1e-9)
         self._latencies.append(since)
-        second = int(now)
-        if self._floor and self._floor[-1][0] == second:
-            if since < self._floor[-1][1]:
-                self._floor[-1] = (second, since)
-        else:
-            self._floor.append((second, since))
+        self._held_for = (now - out.arrival, now)          # from the reading's reception to its output
         if self.latency_pub is not None:
             debug = self.r.Array()
             debug.data = [since, time.monotonic() - self._entered, float(self.pipeline.backlog())]
@@ -661,18 +658,20 @@ class CompensatorNode:
 
     def _behind(self, now):
         """Why the compensation is behind the clock, or None: a pass running for :data:`BEHIND` s, or the newest
-        output that much later than the outputs' usual lag (the least of the last minute's)."""
+        output (within the last 2 s) published that much later than its reading's reception and the causal delay
+        (the middleware's reception time: the wait in the input queue counted)."""
         started = self._pass_start
         snapshot = self.pipeline.snapshot
         waiting = snapshot.backlog + (self._pass_size if started is not None else 0)
         if started is not None and now - started > BEHIND:
             return (f"behind: a compensation pass has run {now - started:.3g} s over {self._pass_size} readings; "
                     f"{waiting} readings waiting, {snapshot.counts.get('lost', 0)} lost so far")
-        if self._latencies and self._floor:
-            late = self._latencies[-1] - min(f for _, f in self._floor)
-            if late > BEHIND and time.time() - self._floor[-1][0] < 2.0:
-                return (f"behind: the outputs come {late:.3g} s later than usual; {waiting} readings waiting, "
-                        f"{snapshot.counts.get('lost', 0)} lost so far")
+        held = self._held_for
+        if held is not None and snapshot.delay is not None and time.time() - held[1] < 2.0:
+            late = held[0] - snapshot.delay
+            if late > BEHIND:
+                return (f"behind: the outputs come {late:.3g} s after their readings and the causal delay; "
+                        f"{waiting} readings waiting, {snapshot.counts.get('lost', 0)} lost so far")
         return None
 
     def _check_name(self):
@@ -693,19 +692,17 @@ class CompensatorNode:
 
     def _state(self, snapshot, now):
         """The outputs' state (:data:`._pipeline.STATES`) of a snapshot; a restart, a stale motion or readings
-        apart from the motion since the last diagnostics said even where it is over by now (a state that lasts
-        less than a diagnostics period is not missed)."""
+        apart from the motion since the last diagnostics said even where it is over by now, one per diagnostics
+        (a state that lasts less than a diagnostics period is not missed)."""
         state = state_of(snapshot, now, self.settings.stale_timeout)
-        seen = (snapshot.events.get("restart", 0), snapshot.withheld.get("stale", 0),
-                snapshot.withheld.get("apart", 0))
-        last, self._seen = getattr(self, "_seen", seen), seen
-        if LEVELS[state] < 2:
-            if seen[1] > last[1]:
-                state = "motion stale"
-            elif seen[2] > last[2]:
-                state = "streams apart"
-            elif seen[0] > last[0] and state in ("running", "not ready"):
-                state = "restarting"
+        seen = {"motion stale": snapshot.withheld.get("stale", 0), "streams apart": snapshot.withheld.get("apart", 0),
+                "restarting": snapshot.events.get("restart", 0)}
+        last, self._seen = self._seen or seen, seen
+        for name, count in seen.items():
+            if count > last[name] and name != state and name not in self._latched:
+                self._latched.append(name)
+        if self._latched and LEVELS[state] < 2 and (state != "saturated" or LEVELS[self._latched[0]] == 2):
+            return self._latched.pop(0)
         return state
 
     def _diagnose(self):

@@ -86,6 +86,8 @@ SATURATED_HOLD = 1.0
 #: s of motion kept beyond the newest reading that needs it (a wrench stream paused, or delivered late, while the
 #: motion goes on).
 MOTION_KEPT = 10.0
+#: The readings' stamps remembered: one repeated among them is a duplicate, not a step back.
+TAKEN_KEPT = 2000
 #: s between two renewals of :attr:`Pipeline.snapshot` while readings come.
 SNAP_EVERY = 0.01
 #: ``~/identify_payload``: the shortest stretch without a gap or a contact it fits, s.
@@ -99,8 +101,8 @@ _BLOCK = 40
 
 class Output:
     """One output: the :class:`fmscal.analysis.ContactSample`, the reading's stamp (as it came: any object)
-    and frame, the reading's arrival time (``time.monotonic``) and its flags (names of :data:`FLAGS`, empty:
-    right within its covariance)."""
+    and frame, the reading's reception (s, the wall clock of ``time.time``) and its flags (names of :data:`FLAGS`,
+    empty: right within its covariance)."""
 
     __slots__ = ("sample", "stamp", "frame_id", "arrival", "flags")
 
@@ -281,6 +283,7 @@ class Pipeline:
         self._pending = deque()                        # (t, w_hat, stamp, frame_id, arrival, segment, apart)
         self._segment = 0                              # readings stamped before the newest taken start another
         self._newest_in = None                         # the newest reading's stamp taken
+        self._taken, self._taken_order = set(), deque()   # the last TAKEN_KEPT stamps taken
         self._lead = None                              # the newest motion's stamp less a reading's, at its arrival
         self._apart_from = None                        # a step back's reference lead while the streams are apart
         self._motion = deque()                         # (t taken, value)
@@ -318,6 +321,8 @@ class Pipeline:
         self._limit = None if settings.saturation is None else np.broadcast_to(settings.saturation, (self.n,))
         self.expected_sensor_frame = settings.sensor_frame or getattr(self.calibration, "sensor_frame", None) or ""
         self.snapshot, self._snapped = Snapshot(), -np.inf
+        self._base = settings.output_frame == "base"
+        self._recent_kept = 0
         self._warm_up()
 
     def _warm_up(self):
@@ -483,21 +488,31 @@ class Pipeline:
     def add_reading(self, t, w_hat, stamp=None, frame_id="", arrival=None):
         """A raw reading stamped ``t`` (s), queued; :meth:`process` compensates it once the motion covers it.
 
-        A reading stamped before the newest one taken (a step back) sends the queued ones on; where its stamp then
+        A reading repeating the stamp of one of the last :data:`TAKEN_KEPT` taken (not the newest: the compensator
+        drops that one) is dropped (``duplicate``). A reading stamped before the newest one taken (a step back) sends
+        the queued ones on; where its stamp then
         trails the motion's newest by more than the readings did before (:meth:`_apart_tolerance`), the readings'
         stamps moved and the motion's did not: the streams are apart, and each such reading is pushed with no
         motion (``apart``) until their stamps agree again. A reading with a NaN or infinite component is counted
-        (``invalid``) and dropped: returns False."""
-        arrival = time.monotonic() if arrival is None else arrival
+        (``invalid``) and dropped: returns False. ``arrival``: its reception, s of the wall clock (``time.time``;
+        default now), for the node's measure of how long its readings wait."""
+        arrival = time.time() if arrival is None else arrival
         w_hat = np.asarray(w_hat, dtype=float)
         t = float(t)
         with self.lock:
             self.counts["received"] += 1
-            self.last_arrival = arrival
+            self.last_arrival = time.monotonic()
             if not (np.isfinite(w_hat).all() and np.isfinite(t)):
                 self._withhold("invalid", stamp, frame_id)
                 return False
             self._check_frame("wrench", frame_id, self.expected_sensor_frame)
+            if t in self._taken and self._newest_in is not None and t < self._newest_in:
+                self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
+                return True
+            self._taken.add(t)
+            self._taken_order.append(t)
+            if len(self._taken_order) > TAKEN_KEPT:
+                self._taken.discard(self._taken_order.popleft())
             lead = self._motion[-1][0] - t if self._motion else None
             if self._newest_in is not None and t < self._newest_in - 1e-9:
                 self._segment += 1                     # a step back: the queued readings go on at once
@@ -564,6 +579,7 @@ class Pipeline:
                                        f"at {1 / self.dt:.0f} Hz)")
         self.compensator = self._build()
         self._held = _Held(int(round(self.settings.identify_buffer / self.dt)) + 1)
+        self._recent_kept = int(round((self.settings.window + self.settings.delay) / self.dt)) + 4
         return True
 
     def _drain(self):
@@ -688,9 +704,11 @@ class Pipeline:
         for cause in new:
             self._notice(cause, last[1] if last and last[0] == cause else f"the readings' stamps: a {cause}")
         self._recent.extend((r[0], r[1], r[2]) for r in run)
-        while len(self._recent) > int(round((self.settings.window + self.settings.delay) / self.dt)) + 4:
+        while len(self._recent) > self._recent_kept:
             self._recent.popleft()
-        out = [o for o in (self._output(sample) for sample in samples) if o is not None]
+        flags = self._flags()
+        base = (self.settings.base_frame or self.motion_frame) if self._base else None
+        out = [o for o in (self._output(sample, flags, base) for sample in samples) if o is not None]
         if self._last_t is not None:
             self._forget(self._last_t - c.delay)
         return out
@@ -717,9 +735,10 @@ class Pipeline:
             return tag, -1
         return tag, self._held.append(t, held, w_hat)
 
-    def _output(self, sample):
-        """The :class:`Output` of a compensated sample, None where its reading was saturated (or its stamp is not
-        known: counted, never published)."""
+    def _output(self, sample, flags=(), base=None):
+        """The :class:`Output` of a compensated sample (``flags`` its flags; ``base`` the frame_id of an output in
+        the base's axes), None where its reading was saturated (or its stamp is not known: counted, never
+        published)."""
         frame = self._frames.pop(sample.t, None)
         if frame is None:
             self.counts["unmatched"] += 1
@@ -734,10 +753,8 @@ class Pipeline:
             self.counts["output_gaps"] += 1
         self._last_out = sample.t
         self.contact, self.last_sample, self.restarting = sample.contact, sample, False
-        if self.settings.output_frame == "base":
-            frame_id = self.settings.base_frame or self.motion_frame
         self.counts["published"] += 1
-        return Output(sample, stamp, frame_id, arrival, self._flags())
+        return Output(sample, stamp, frame_id if base is None else base, arrival, flags)
 
     def _forget(self, before):
         """The readings older than ``before`` whose output did not come: withheld, by cause (module docstring)."""
