@@ -13,6 +13,7 @@ covariances and flags and its diagnostics without an executor (:class:`Taker`); 
 beside the node.
 """
 
+import json
 import os
 import signal
 import subprocess
@@ -414,7 +415,8 @@ def schedule(n, dt, faults, start=0):
     - ``duplicate``: ``count`` rows sent twice;
     - ``second``: a second publisher sends the log's rows from its start, stamped with its own clock ``seconds``
       behind, for ``count`` rows from ``at`` (a restarted driver beside the old one);
-    - ``kill``: the sender killed at ``at`` (the rows after it are a restarted sender's, ``seconds`` later);
+    - ``kill``: the sender killed at ``at`` (a restarted sender, :func:`send_plan` with ``start``, sends the rows
+      from ``at + seconds`` on, stamped from when it is up: the stamps jump forward, as a restarted driver's);
     - ``garbage``: ``count`` motion messages the node skips (a pose's quaternion not of unit norm, a NaN joint
       angle or IMU rate).
     """
@@ -463,32 +465,42 @@ def send_plan(plan):
                          reliability=ReliabilityPolicy.RELIABLE if plan.get("qos", "reliable") == "reliable"
                          else ReliabilityPolicy.BEST_EFFORT)
     message = SOURCES[source][1]
-    pubs = {(s, k): node.create_publisher(WrenchStamped if s == "w" else message,
-                                          plan.get("wrench_topic", "/ft_sensor/wrench") if s == "w" else MOTION_TOPIC,
-                                          profile)
-            for s in ("w", "m") for k in range(2 if any(f["kind"] == "second" for f in plan.get("faults", ())) else 1)}
+    last_second = {s: max((e[0] for e in emissions if e[4] == 1 and e[1] == s), default=None) for s in ("w", "m")}
+
+    def make_publisher(stream):
+        return node.create_publisher(WrenchStamped if stream == "w" else message,
+                                     plan.get("wrench_topic", "/ft_sensor/wrench") if stream == "w" else MOTION_TOPIC,
+                                     profile)
+    pubs = {(s, 0): make_publisher(s) for s in ("w", "m")}
     try:
         end = time.monotonic() + 60
-        while not all(p.get_subscription_count() for (s, k), p in pubs.items() if k == 0):
+        while not all(p.get_subscription_count() for p in pubs.values()):
             if time.monotonic() > end:
                 raise SystemExit("harness sender: no subscriber")
             time.sleep(0.05)
         time.sleep(plan.get("settle", 0.5))
-        epoch = plan.get("epoch") or round(time.time() + 0.05, 3)
+        epoch = round(time.time() + 0.05, 3)
+        if start:                                              # a restarted sender: its rows from now on
+            emissions = [(e[0] - start * dt, e[1], e[2], e[3] - start * dt, e[4]) for e in emissions]
         begin = epoch - time.time()                           # the schedule's times are the epoch's
-        if start:                                              # a restarted sender: the rows already due are past
-            late = time.time() - epoch
-            emissions = [e for e in emissions if e[0] >= late - 0.005]
+        sys.stdout.write(json.dumps({"epoch": epoch}) + "\n")   # said before it may be killed
+        sys.stdout.flush()
         sent = {"w": 0, "m": 0, "g": 0}
         first = emissions[0][2] if emissions else None
         gc.disable()
         lateness = []
         wrench = WrenchStamped()
         wrench.header.frame_id = plan.get("frame_id", "ft_sensor")
+        speed = plan.get("speed", 1.0)
         for due, stream, row, stamp_t, publisher in emissions:
-            while (wait := epoch + due - time.time()) > 0:
+            while (wait := epoch + due / speed - time.time()) > 0:
                 time.sleep(min(wait, 0.0005))
             lateness.append(-wait)
+            kind = "m" if stream == "g" else stream
+            if publisher == 1 and (kind, 1) not in pubs:     # a second driver starts: its publisher discovered
+                pubs[kind, 1] = make_publisher(kind)
+                while not pubs[kind, 1].get_subscription_count():
+                    time.sleep(0.001)
             sec, nanosec = divmod(int(round(epoch * 1e3)) * 1_000_000 + int(round(stamp_t * 1e9)), 1_000_000_000)
             if stream == "w":
                 wrench.header.stamp.sec, wrench.header.stamp.nanosec = sec, nanosec
@@ -509,6 +521,8 @@ def send_plan(plan):
                         msg.position = [float("nan")] + list(msg.position[1:])
                 pubs["m", publisher].publish(msg)
             sent[stream] += 1
+            if publisher == 1 and due == last_second[kind]:
+                node.destroy_publisher(pubs.pop((kind, 1)))     # the second driver gone
             if kill is not None and not start and due >= kill["at"] - dt:
                 os.kill(os.getpid(), signal.SIGKILL)           # killed, as a crashing driver is
         gc.enable()
@@ -522,7 +536,6 @@ def send_plan(plan):
 
 def start_sender(plan):
     """The harness's sender (:func:`send_plan`) as a process of its own (``python tests/ros2_rig.py PLAN.json``)."""
-    import json
     path = tempfile.NamedTemporaryFile("w", suffix=".json", delete=False)
     json.dump(plan, path)
     path.close()
@@ -533,19 +546,19 @@ def start_sender(plan):
 
 
 def sender_result(proc, timeout):
-    """The sender's JSON once it is done (None where it was killed by its plan); killed if this process is
-    stopped first."""
-    import json
+    """The sender's JSON once it is done (where its plan killed it: its epoch, and ``killed``); killed if this
+    process is stopped first."""
     try:
         out, err = proc.communicate(timeout=timeout)
     except BaseException:
         proc.kill()
         raise
-    if proc.returncode == -signal.SIGKILL:
-        return None
+    lines = [json.loads(line) for line in out.strip().splitlines() if line.startswith("{")]
+    if proc.returncode == -signal.SIGKILL:            # killed by its plan: what it said before
+        return {**lines[0], "killed": True} if lines else None
     if proc.returncode:
         raise AssertionError(f"the harness sender failed: {err[-2000:]}")
-    return json.loads(out.strip().splitlines()[-1])
+    return lines[-1]
 
 
 class CpuHog:
@@ -612,9 +625,16 @@ class Listener:
 
     def call(self, service, timeout=WAIT):
         """Call a Trigger service of the node; ``(success, message)`` (None where no answer came in time)."""
+        return self.answer(self.call_async(service, timeout), timeout)
+
+    def call_async(self, service, timeout=WAIT):
+        """A Trigger service of the node called; the future (:meth:`answer` waits for it)."""
         client = self.clients[service]
         assert client.wait_for_service(timeout_sec=timeout), f"~/{service} not found"
-        future = client.call_async(Trigger.Request())
+        return client.call_async(Trigger.Request())
+
+    def answer(self, future, timeout=WAIT):
+        """``(success, message)`` of a call (None where no answer came within ``timeout`` s)."""
         end = time.monotonic() + timeout
         while not future.done() and time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.05)
@@ -661,7 +681,6 @@ class Listener:
 
 
 if __name__ == "__main__":                       # the harness's sender: python tests/ros2_rig.py PLAN.json
-    import json
     sys.path.insert(0, str(Path(__file__).parent))
     result = send_plan(json.loads(Path(sys.argv[1]).read_text()))
     sys.stdout.write(json.dumps(result) + "\n")

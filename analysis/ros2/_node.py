@@ -64,8 +64,6 @@ SILENT = 0.1
 LATENCY_KEPT = 2000
 #: s beyond its usual lag an output may come (or a compensation pass may run) before the node is "behind".
 BEHIND = 0.25
-#: s between two looks at the input topics' publishers (in the poll thread).
-GRAPH_EVERY = 0.05
 #: The parameters rclpy declares on every node (not the node's to refuse).
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
@@ -228,7 +226,6 @@ class CompensatorNode:
         self._pass_start, self._pass_size = None, 0
         self._seen, self._latched = None, []           # the transient states' counts, those not said yet
         self._entered = time.monotonic()
-        self._graph_checked = -np.inf
         self.error = None
         self.stopping = threading.Event()
         self.worker = Worker()
@@ -359,12 +356,8 @@ class CompensatorNode:
             self.log.info(f"one publisher on each input again: outputs unflagged after {hold:g} s")
 
     def _check_graph(self):
-        """The input topics' publishers counted (at most every :data:`GRAPH_EVERY` s, in the poll thread: before
-        the messages they sent are compensated)."""
-        now = time.monotonic()
-        if now - self._graph_checked < GRAPH_EVERY:
-            return
-        self._graph_checked = now
+        """The input topics' publishers counted, each pass of the poll thread after its messages are taken and
+        before they are compensated (a message taken from a second publisher: it had matched, and is counted)."""
         counts = {}
         for sub in (self._wrench_sub, self._motion_sub):
             try:
@@ -641,6 +634,9 @@ class CompensatorNode:
             return job
         if self.stopping.is_set():
             return False, "identify_payload refused: the node is stopping"
+        t = job["held"][0]
+        self.log.info(f"~/identify_payload: fitting {len(t)} samples ({t[-1] - t[0]:.3g} s) in a process of its own; "
+                      "~/cancel stops it")
         try:
             result = self.worker.run(self.settings, job)
         except Cancelled:

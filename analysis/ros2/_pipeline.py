@@ -74,8 +74,8 @@ STATES = ("not ready", "running", "motion stale", "streams apart", "saturated", 
 #: Each state's level: 0 OK, 1 WARN, 2 ERROR (diagnostic_msgs' own).
 LEVELS = {"not ready": 1, "running": 0, "motion stale": 2, "streams apart": 2, "saturated": 1, "restarting": 1}
 #: Why a reading taken gave no output (module docstring, The ledger).
-WITHHELD = ("duplicate", "gap", "restart", "window", "stale", "apart", "motion", "saturated", "decimated",
-            "invalid", "error")
+WITHHELD = ("duplicate", "stray", "gap", "restart", "window", "stale", "apart", "motion", "saturated",
+            "decimated", "invalid", "error")
 #: The conditions that flag an output (it may be wrong beyond its covariance): another publisher on an input
 #: topic, a frame that is not the one configured.
 FLAGS = ("publishers", "frame")
@@ -280,12 +280,14 @@ class Pipeline:
         self.decimation = 1
         self.dt = None                                 # the compensator's (the readings' times the decimation)
         self.compensator = None
-        self._pending = deque()                        # (t, w_hat, stamp, frame_id, arrival, segment, apart)
+        self._pending = deque()                        # (t, w_hat, stamp, frame_id, arrival, segment, apart, epoch)
         self._segment = 0                              # readings stamped before the newest taken start another
         self._newest_in = None                         # the newest reading's stamp taken
         self._taken, self._taken_order = set(), deque()   # the last TAKEN_KEPT stamps taken
         self._lead = None                              # the newest motion's stamp less a reading's, at its arrival
         self._apart_from = None                        # a step back's reference lead while the streams are apart
+        self._stray, self._motion_stray = None, None   # a reading, a motion sample stamped back: held aside
+        self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
         self._motion = deque()                         # (t taken, value)
         self._motion_step = None                       # the motion's typical interval, s
         self._frames = {}                              # t -> (stamp, frame_id, arrival, tag, held seq) pushed
@@ -306,7 +308,7 @@ class Pipeline:
         self.motion_frame = ""
         self.identified = None
         self.counts = dict(received=0, published=0, lost=0, motion=0, motion_skipped=0, motion_duplicate=0,
-                           motion_restart=0, output_gaps=0, unmatched=0)
+                           motion_restart=0, motion_stray=0, output_gaps=0, unmatched=0)
         self.withheld = dict.fromkeys(WITHHELD, 0)
         self.conditions = {}
         self._flag_until = {}                          # a flag's condition: monotonic time it holds until
@@ -399,7 +401,10 @@ class Pipeline:
         flags the outputs while it holds and ``hold`` s after it clears (the filter's window still holds its
         samples). Returns whether it changed."""
         with self.lock:
-            return self._condition(name, message, hold)
+            changed = self._condition(name, message, hold)
+            if changed:
+                self._snap()
+            return changed
 
     def _condition(self, name, message=None, hold=0.0):
         before = self.conditions.get(name)
@@ -438,7 +443,12 @@ class Pipeline:
 
     # --- the streams ------------------------------------------------------------------------------------------
     def add_motion(self, t, value, frame_id=""):
-        """A motion sample stamped ``t`` (s): a pose (model order), ``(q, dq, ddq)`` or ``(q_wxyz, omega, f)``."""
+        """A motion sample stamped ``t`` (s): a pose (model order), ``(q, dq, ddq)`` or ``(q_wxyz, omega, f)``.
+
+        A sample stamped before the newest is held aside: where the next goes on from the newest, it was a stray
+        (``motion_stray``, dropped); where the next goes on from it, the motion's clock stepped back: its buffer
+        restarts (``motion_restart``) and a new epoch begins, which readings stamped on the old clock do not
+        share. A stamp repeated is dropped (``motion_duplicate``)."""
         t = float(t) - self.latency
         with self.lock:
             self.counts["motion"] += 1
@@ -446,24 +456,51 @@ class Pipeline:
             if self.settings.output_frame == "base" and self.settings.source == "pose_topic":
                 self._check_frame("poses", frame_id, self.settings.base_frame)
             m = self._motion
-            if m and t <= m[-1][0]:
-                if t > m[-1][0] - 1e-9:
-                    self.counts["motion_duplicate"] += 1
+            newest = m[-1][0] if m else None
+            stray, self._motion_stray = self._motion_stray, None
+            if stray is not None:
+                if newest is not None and t > newest:          # the old timeline goes on: it was a stray
+                    self.counts["motion_stray"] += 1
+                elif t > stray[0]:                              # this one goes on from it: the clock stepped back
+                    self._motion_restart(stray[0], newest)
+                    self._append_motion(*stray)
+                    newest = stray[0]
+                else:                                           # back again: the first a stray, this one held
+                    self.counts["motion_stray"] += 1
+                    self._motion_stray = (t, value)
                     return
-                self.counts["motion_restart"] += 1
-                self._notice("motion_restart", f"the motion's stamps stepped back by {m[-1][0] - t:.6g} s: its "
-                                               "buffer restarted (readings stamped before it get no motion)")
-                m.clear()
-                self._last_angles = None
-            elif m:
-                step = t - m[-1][0]
+            if newest is not None and t <= newest:
+                if t > newest - 1e-9:
+                    self.counts["motion_duplicate"] += 1
+                else:
+                    self._motion_stray = (t, value)
+                return
+            if newest is not None:
+                step = t - newest
                 self._motion_step = step if self._motion_step is None else \
                     self._motion_step + 0.05 * (min(step, 10 * self._motion_step) - self._motion_step)
-            if self._angles:
-                value = self._unwrapped(value)
-            m.append((t, value))
-            while len(m) > 2 and m[0][0] < t - MOTION_KEPT - self.settings.stale_timeout:
-                m.popleft()
+            self._append_motion(t, value)
+
+    def _append_motion(self, t, value):
+        m = self._motion
+        if self._angles:
+            value = self._unwrapped(value)
+        m.append((t, value))
+        while len(m) > 2 and m[0][0] < t - MOTION_KEPT - self.settings.stale_timeout:
+            m.popleft()
+
+    def _motion_restart(self, t, newest):
+        """The motion's clock stepped back to ``t`` from ``newest``: its buffer restarted, a new epoch; readings
+        stepped back alone before (apart) now share it."""
+        self.counts["motion_restart"] += 1
+        self._notice("motion_restart", f"the motion's stamps stepped back by {newest - t:.6g} s: its buffer "
+                                       "restarted; readings stamped on the old clock get no motion")
+        self._motion.clear()
+        self._last_angles = None
+        self._motion_epoch += 1
+        if self._apart_from is not None:               # the readings stepped back first: the motion followed
+            self._apart_from = None
+            self._reading_epoch = self._motion_epoch
 
     def skip_motion(self):
         """A motion message the node skipped (a quaternion not of unit norm, a NaN): counted."""
@@ -489,13 +526,16 @@ class Pipeline:
         """A raw reading stamped ``t`` (s), queued; :meth:`process` compensates it once the motion covers it.
 
         A reading repeating the stamp of one of the last :data:`TAKEN_KEPT` taken (not the newest: the compensator
-        drops that one) is dropped (``duplicate``). A reading stamped before the newest one taken (a step back) sends
-        the queued ones on; where its stamp then
-        trails the motion's newest by more than the readings did before (:meth:`_apart_tolerance`), the readings'
-        stamps moved and the motion's did not: the streams are apart, and each such reading is pushed with no
-        motion (``apart``) until their stamps agree again. A reading with a NaN or infinite component is counted
-        (``invalid``) and dropped: returns False. ``arrival``: its reception, s of the wall clock (``time.time``;
-        default now), for the node's measure of how long its readings wait."""
+        drops that one) is dropped (``duplicate``). A reading stamped before the newest is held aside: where the
+        next goes on from the newest, it was a stray (``stray``, dropped: an old message, a second publisher on
+        another clock); where the next goes on from it, the readings' clock stepped back: the queued readings go on
+        at once, and the compensator restarts its window. Where the motion's clock had stepped back before, the
+        readings now share its epoch; where it had not, and the readings' stamps now trail the motion's newest by
+        more than they did before (:meth:`_apart_tolerance`), the streams are apart: each such reading is pushed
+        with no motion (``apart``) until their stamps agree again. A reading of an older epoch than the motion's
+        gets no motion either. A reading with a NaN or infinite component is counted (``invalid``) and dropped:
+        returns False. ``arrival``: its reception, s of the wall clock (``time.time``; default now), for the node's
+        measure of how long its readings wait."""
         arrival = time.time() if arrival is None else arrival
         w_hat = np.asarray(w_hat, dtype=float)
         t = float(t)
@@ -509,33 +549,64 @@ class Pipeline:
             if t in self._taken and self._newest_in is not None and t < self._newest_in:
                 self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
                 return True
-            self._taken.add(t)
-            self._taken_order.append(t)
-            if len(self._taken_order) > TAKEN_KEPT:
-                self._taken.discard(self._taken_order.popleft())
-            lead = self._motion[-1][0] - t if self._motion else None
+            entry = (t, w_hat, stamp, frame_id, arrival)
+            stray, self._stray = self._stray, None
+            if stray is not None:
+                if t > self._newest_in:                     # the old timeline goes on: it was a stray
+                    self._withhold("stray", stray[2], stray[3])
+                    self._notice("stray", f"a reading stamped {stray[0]:.9g} s, before the newest, and the next "
+                                          "going on from the newest: dropped (an old message, or a second "
+                                          "publisher on another clock)")
+                elif t > stray[0]:                          # this one goes on from it: the clock stepped back
+                    self._take(stray, back=True)
+                else:                                       # back again: the first a stray, this one held
+                    self._withhold("stray", stray[2], stray[3])
+                    self._stray = entry
+                    return True
             if self._newest_in is not None and t < self._newest_in - 1e-9:
-                self._segment += 1                     # a step back: the queued readings go on at once
-                if self._apart_from is None and self._lead is not None:
-                    self._apart_from = self._lead
-            self._newest_in = t
-            apart = False
-            if self._apart_from is not None and lead is not None:
-                if lead - self._apart_from > self._apart_tolerance():
-                    apart = True
-                    if "apart" not in self.conditions:
-                        self._condition("apart", f"the readings' stamps stepped back {lead - self._apart_from:.6g} s "
-                                                 "behind the motion's: the streams no longer share a clock; no output "
-                                                 "until they do")
-                        self._notice("apart", self.conditions["apart"])
-                else:
-                    self._apart_from = None
-                    if self._condition("apart"):
-                        self._notice("apart", "the readings' stamps agree with the motion's again")
-            if not apart and lead is not None:
-                self._lead = lead
-            self._pending.append((t, w_hat, stamp, frame_id, arrival, self._segment, apart))
+                self._stray = entry                         # held aside until the next says what it is
+                return True
+            self._take(entry)
             return True
+
+    def _take(self, entry, back=False):
+        """Queue a reading (lock held); ``back``: its stamp steps back (confirmed by the next)."""
+        t = entry[0]
+        self._taken.add(t)
+        self._taken_order.append(t)
+        if len(self._taken_order) > TAKEN_KEPT:
+            self._taken.discard(self._taken_order.popleft())
+        lead = self._motion[-1][0] - t if self._motion else None
+        if back:
+            self._segment += 1                          # the queued readings go on at once
+            if self._motion_epoch > self._reading_epoch:    # the motion's clock stepped back first: the same step
+                self._reading_epoch = self._motion_epoch
+                self._apart_from = None
+            elif self._apart_from is None and self._lead is not None:
+                self._apart_from = self._lead
+        self._newest_in = t
+        apart = False
+        if self._apart_from is not None and lead is not None:
+            if lead - self._apart_from > self._apart_tolerance():
+                apart = True
+                if "apart" not in self.conditions:
+                    self._condition("apart", f"the readings' stamps stepped back {lead - self._apart_from:.6g} s "
+                                             "behind the motion's: the streams no longer share a clock; no output "
+                                             "until they do")
+                    self._notice("apart", self.conditions["apart"])
+            else:
+                self._apart_from = None
+        behind = self._reading_epoch != self._motion_epoch
+        if behind and "apart" not in self.conditions:
+            self._condition("apart", "the motion's stamps stepped back and the readings' did not: the streams no "
+                                     "longer share a clock; no output until they do")
+            self._notice("apart", self.conditions["apart"])
+        if not (apart or behind) and "apart" in self.conditions:
+            self._condition("apart")
+            self._notice("apart", "the readings' stamps agree with the motion's again")
+        if not apart and lead is not None:
+            self._lead = lead
+        self._pending.append((*entry, self._segment, apart, self._reading_epoch))
 
     def process(self):
         """Compensate every queued reading the motion covers, or has left stale; the outputs (list of
@@ -589,7 +660,8 @@ class Pipeline:
         newest, last_segment = self._pending[-1][0], self._pending[-1][5]
         rows = []
         while self._pending:
-            t, w_hat, stamp, frame_id, arrival, segment, apart = self._pending[0]
+            t, w_hat, stamp, frame_id, arrival, segment, apart, epoch = self._pending[0]
+            apart = apart or epoch != self._motion_epoch          # the motion's clock stepped back since
             if not self._kept(t):
                 self._pending.popleft()
                 self.withheld["decimated"] += 1
@@ -817,10 +889,12 @@ class Pipeline:
             counts=dict(self.counts), withheld=dict(self.withheld), conditions=dict(self.conditions),
             events={} if c is None else dict(c.events), contact=bool(self.contact),
             offset=None if c is None else c.offset, offset_sd=None if sample is None else sample.offset_sd,
-            stale=self.stale, apart=self._apart_from is not None, restarting=self.restarting,
+            stale=self.stale, apart=self._apart_from is not None or self._reading_epoch != self._motion_epoch,
+            restarting=self.restarting,
             started=sample is not None,
             saturated=self._last_t is not None and 0 <= self._last_t - self._saturated_at < SATURATED_HOLD,
-            last_arrival=self.last_arrival, backlog=len(self._pending), waiting=len(self._pending) + len(self._frames),
+            last_arrival=self.last_arrival, backlog=len(self._pending),
+            waiting=len(self._pending) + len(self._frames) + (self._stray is not None),
             dt=self.dt, delay=self.delay, decimation=self.decimation,
             motion_lag=None if self._newest_in is None or not self._motion else self._newest_in - self._motion[-1][0])
 
