@@ -24,10 +24,11 @@ from fmscal.observers.payload import PayloadEstimate, StaticFit, other_conventio
 from fmscal.observers.payload import calibrate_table as fit_table
 from fmscal.plant import (Calibration, FmscalError, Log, Model, NoiseSpec, SingularCalibrationError, SpatialPayload,
                           Truth, estimate_noise, read_log, read_truth)
-from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, check_spatial_log_units,
+from fmscal.plant.io import (COUNTS, AttitudeLog, LogError, PoseTable, RobotKinematics, check_poses_move,
+                             check_spatial_log_units,
                              check_table_units, diagnose_units, held_table, is_attitude_log, is_pose_table, not_a_file,
                              read_attitude_log, read_joint_data, read_pose_table, reading_sign)
-from fmscal.plant.numerics import as_bool
+from fmscal.plant.numerics import as_bool, as_number
 from fmscal.plant.physics import GRAVITY, MODELS, as_model
 
 from ._metrics import calibration_error
@@ -116,8 +117,8 @@ def read_data(path, urdf=None, frame=None):
     return read_log(path)
 
 
-def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency=None, max_latency=None,
-              offset=True, pose_noise=None, wrench_noise=None, truth=None, max_mass=None):
+def calibrate(data, payload, *, observer=None, reading=None, gravity=None, latency=None, max_latency=None,
+              offset=True, pose_noise=None, wrench_noise=None, truth=None, max_mass=None, method=None):
     """Estimate ``S`` and the sensor's offset from recorded data, with diagnostics: ``fmscal calibrate`` in Python.
 
     The case comes from ``data``:
@@ -155,10 +156,12 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
         payload and cannot be saved). A :class:`~fmscal.observers.payload.PayloadEstimate`
         (``identify_payload``'s, or one read by ``PayloadEstimate.load``) stands for its payload
         in the tracked frame's axes, and brings the gravity it estimated.
-    method : str, optional
-        A method offered for calibration in the case
+    observer : str, optional
+        The method, by its name: one offered for calibration in the case
         (``observers.method_names(calibrates=True, model=...)``); default
         :data:`DEFAULT_METHOD`. Held poses have one fit (:data:`TABLE_METHOD`).
+        The keyword is the command line's flag (``--observer``), as in
+        :func:`fmscal.analysis.compare` and :func:`fmscal.analysis.sweep` (``observers``).
     reading : {"reaction", "load"}, optional
         Spatial logs and held poses: the reading's sign, the wrench the mount
         applies to the payload (the default) or the wrench the tool applies
@@ -190,6 +193,8 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     max_mass : float, optional
         Spatial logs and held poses: the heaviest payload taken, kg (default
         :data:`fmscal.plant.io.MAX_WRIST_MASS`); a mass given beyond it is refused as a slipped unit (g).
+    method : str, optional
+        ``observer``'s former name, still taken (an alias: give one of the two).
 
     Returns
     -------
@@ -248,8 +253,13 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
     offset = as_bool(offset, "offset")                  # text ("False") is refused, not taken as true
     if isinstance(payload, StaticFit):                  # a pose table's fit stands for its payload as a log's does
         payload = payload.tracked()
-    calibration = _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise,
-                                  wrench_noise, truth, max_mass)
+    try:
+        calibration = _calibrate_data(data, payload, _observer(observer, method), reading, gravity, latency,
+                                      max_latency, offset, pose_noise, wrench_noise, truth, max_mass)
+    except OptionError as err:                          # the method refused: named by the keyword the caller gave
+        if err.option == "observer" and observer is None and method is not None:
+            raise OptionError("method", err.template) from None
+        raise
     if isinstance(payload, PayloadEstimate) and not payload.converged:
         # the payload is the model's: a fit that did not converge (a rotation it could not settle, too few poses)
         # leaves every S estimated with it in doubt, whatever the log says
@@ -257,6 +267,14 @@ def calibrate(data, payload, *, method=None, reading=None, gravity=None, latency
             *calibration.warnings, "the payload estimate did not converge (identify-payload's warnings say why): "
             "a calibration with its mass properties is not converged either"])
     return calibration
+
+
+def _observer(observer, method):
+    """The method's name from ``observer=`` or its alias ``method=`` (None: the default); both given must agree."""
+    if method is not None and observer is not None and method != observer:
+        raise OptionError("observer", f"{{}} {observer!r} and method {method!r} name one option (method= is "
+                          "observer='s former name): give observer only")
+    return method if observer is None else observer
 
 
 def _calibrate_data(data, payload, method, reading, gravity, latency, max_latency, offset, pose_noise, wrench_noise,
@@ -432,6 +450,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         raise FmscalError(f"{log.name}: column(s) {', '.join(constant)} of the reading never change (every row "
                           f"{log.w_hat[0, model.wrench_names.index(constant[0])]:g}): a channel not connected or "
                           "a column written empty; check the recording")
+    check_poses_move(log, model.wrench_names)         # a stalled tracker, before any fit
     if reading is not None and not model.signed_reading:
         raise OptionError("reading", "{} is taken on a spatial log or a pose table; a planar log's sign is the "
                           "toolkit's")
@@ -443,7 +462,7 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     get_method(name)                                    # an unknown name: FmscalError naming the methods
     offered = method_names(calibrates=True, model=model)
     if name not in offered:
-        raise OptionError("method", f"{{}} {name} does not run on {case} yet; {case} takes {', '.join(offered)} "
+        raise OptionError("observer", f"{{}} {name} does not run on {case} yet; {case} takes {', '.join(offered)} "
                           f"(default {DEFAULT_METHOD})")
     _refuse(case, [
         (pose_noise is not None and not model.given_noise, "pose_noise", "the noise is estimated from the log"),
@@ -782,7 +801,7 @@ def _calibrate_table(table, payload, method, reading, gravity, latency, max_late
                      wrench_noise, truth, notes, what, max_mass=None):
     """:func:`calibrate` on held poses."""
     _refuse("a pose table", [
-        (method not in (None, TABLE_METHOD), "method", "held poses have one fit, least squares"),
+        (method not in (None, TABLE_METHOD), "observer", "held poses have one fit, least squares"),
         (latency is not None, "latency", "held poses have no time"),
         (max_latency is not None, "max_latency", "held poses have no time"),
         (truth is not None, "truth", "a pose table has no truth sidecar"),
@@ -824,10 +843,10 @@ def _table_payload(payload):
     try:
         mass, com = payload
         com = np.asarray(com, dtype=float)
-        mass = float(mass)
     except (TypeError, ValueError):
         raise FmscalError(f"a pose table takes a plant.SpatialPayload or (mass, com); got {type(payload).__name__}") \
             from None
+    mass = as_number(mass, "the payload's mass")     # its value is checked with the units (plant.io.check_mass)
     if com.shape != (3,):
         raise FmscalError(f"a pose table takes com X Y Z (3 numbers, m, the centre of mass in the sensor frame); "
                           f"got {com.size}")

@@ -52,6 +52,12 @@ output falls due inside the gap withheld (``gap``); a gap longer than the filter
 stepping back, restarts the window (``restart``): no output until it is full again. Each is counted by cause in
 :attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`.
 
+**Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
+table's fit holds its rows' noise, not a sample's: a :class:`Compensator` given none estimates the poses' from
+their second differences as they come (the model's :meth:`~fmscal.plant.Model.pose_sd` fitted to each column's), and
+the readings' from the first :data:`NOISE_SAMPLES` readings (:func:`fmscal.plant.io.difference_noise`), with no output
+before them.
+
 **The output's axes and point** (``frame``, ``point``). With ``r_t`` the tool point (sensor axes, from the
 sensor's point) and ``R`` the sensor's attitude (``frame="base"``), the published wrench and its covariance
 are moved by one linear map::
@@ -129,7 +135,7 @@ zeroed by its hardware at an unknown pose reads ``-S^-1 W_p`` of that pose off; 
 """
 
 from collections import Counter, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import casadi as ca
@@ -138,12 +144,14 @@ from scipy.signal import savgol_coeffs
 from scipy.stats import binom, chi2
 
 from fmscal.plant import Calibration
-from fmscal.plant.io import reading_sign
+from fmscal.plant.io import difference_noise, reading_sign
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import MODELS, NoiseSpec, rotation_matrices, sign_continuous, skew
+from fmscal.plant.physics import MODELS, NoiseSpec, regressor, rotation_matrices, sign_continuous, skew
 from fmscal.observers.payload import PayloadEstimate
 
 from ._motion import configuration_variance, kinematics, source
+from ._setup import Setup, payload_jacobian, setup
+from ._tool_change import GUARD, REIDENTIFY_POSES, TOOL_CHANGE, ToolChangeError, _Detector, check_mode, new_setup
 
 __all__ = ["compensate", "Compensation", "Compensator", "ContactSample", "compensation_model", "DIRECTIONS",
            "OFFLINE_WINDOW", "CAUSAL_WINDOW", "CAUSAL_DELAY", "CAUSAL_ORDER", "FALSE_ALARM", "DRIFT_INTENSITY",
@@ -177,6 +185,10 @@ FRAMES = ("sensor", "base")
 #: fraction (module docstring, Stamps).
 DT_TOLERANCE = 0.1
 DT_INTERVALS = 8
+#: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
+POSE_NOISE_EVERY = 100
+#: A payload file's stream without the readings' noise: estimated from this many first readings, no output before.
+NOISE_SAMPLES = 500
 #: The events :attr:`Compensator.events` counts (module docstring, Stamps).
 EVENTS = ("duplicate", "gap", "restart")
 
@@ -221,6 +233,10 @@ class Compensation:
     drift_intensity : ndarray, shape (n_w,), or None
         ``track_offset``: the random walk's intensity used, per channel, the reading's units per sqrt(s)
         (fitted by (D5) where ``drift_intensity="fit"``); None otherwise.
+    tool_changes : list of ToolChange
+        The payload's changes declared (:mod:`fmscal.analysis._tool_change`), oldest first.
+    tool_change : ndarray of int, shape (N,), or None
+        The changes declared by each row's output (the detector's count); None where it did not run.
     """
 
     t: np.ndarray
@@ -238,6 +254,8 @@ class Compensation:
     frame: str = "sensor"
     point: np.ndarray = None
     drift_intensity: np.ndarray = None
+    tool_changes: list = field(default_factory=list)
+    tool_change: np.ndarray = None
 
     @property
     def sd(self):
@@ -259,8 +277,8 @@ def compensation_model(calibration, payload=None, cls=None):
     calibration : plant.Calibration
     payload : plant.Payload or plant.SpatialPayload or observers.payload.PayloadEstimate, optional
         Replaces the calibration's (``S`` does not depend on the tool: after a tool change, the new
-        tool's mass properties, e.g. ``PayloadEstimate.load("payload.json")`` of ``identify-payload``;
-        refused where the estimate holds no inertia).
+        tool's mass properties, e.g. ``PayloadEstimate.load("payload.json")`` of ``identify-payload``; an
+        inertia it does not hold is bounded, (K3) of :mod:`fmscal.analysis._setup`).
     cls : type, optional
         The model class a log's columns give; refused if the calibration is of another case.
 
@@ -278,12 +296,7 @@ def compensation_model(calibration, payload=None, cls=None):
     if payload is None:
         raise CompensationError("the calibration holds no payload: give the tool's (payload=..., or --payload)")
     if isinstance(payload, PayloadEstimate):         # in the tracked frame's axes, as calibrate takes it
-        payload = payload.tracked()
-        if payload.inertia is None:
-            raise CompensationError("the payload estimate holds no inertia (its log did not determine it): the "
-                                    "motion's wrench needs it; identify the payload from a log with more angular "
-                                    "acceleration, or give a calibration that holds the tool")
-        payload = own.payload_from(payload.mass, payload.inertia, payload.com)
+        payload = setup(calibration, payload).payload                      # an undetermined inertia bounded (K3)
     if not isinstance(payload, own.payload_type):
         raise CompensationError(f"a {own.name} calibration takes a plant.{own.payload_type.__name__}; "
                                 f"got {type(payload).__name__}")
@@ -394,9 +407,10 @@ def _payload_wrench(model, x, a, dynamics=None):
 
 # --- what the step needs besides the motion --------------------------------------------------------------------
 class _Parts:
-    """What (C1)-(C4) need besides the motion: ``S``, ``b``, the sign, the covariances, the bound."""
+    """What (C1)-(C4) need besides the motion: ``S``, ``b``, the sign, the covariances, the bound; a payload
+    file's covariance of ``(m, c, I_c, b)`` (``payload_cov``, (K2) of :mod:`fmscal.analysis._setup`)."""
 
-    def __init__(self, calibration, model, noise, direction, false_alarm):
+    def __init__(self, calibration, model, noise, direction, false_alarm, payload_cov=None):
         if direction not in DIRECTIONS:
             raise CompensationError(f"direction must be one of {', '.join(DIRECTIONS)}; got {direction!r}")
         if not (isinstance(false_alarm, float) and 0 < false_alarm < 1):
@@ -408,7 +422,7 @@ class _Parts:
         self.S_inv = np.linalg.inv(self.S)
         self.sign = reading_sign(calibration.reading)
         self.out_sign = 1.0 if direction == DIRECTIONS[0] else -1.0
-        self.reading_cov = self.S @ np.diag(np.square(noise.wrench_sd)) @ self.S.T
+        self.set_noise(noise)
         self.warnings = []
         self.cov4 = None
         if calibration.cov is not None:
@@ -424,36 +438,83 @@ class _Parts:
             self.cov4 = cov.reshape(n, self.m, n, self.m)
         self.threshold = float(chi2.ppf(1.0 - false_alarm, n))
         self.false_alarm = false_alarm
+        self.model, self.payload_cov = model, payload_cov
+        self.offset_tracked = self.inertia_learned = False      # their shares of (K2) a tracker's (L1)
+        if payload_cov is not None:
+            payload = model.payload
+            self._J = payload_jacobian(payload.mass, payload.com)                             # (K2)
 
-    def covariance(self, signed, A_inv, accel_var):
-        """(C3) for rows of signed readings ``signed`` (N, n_w); ``accel_var`` (nv,) for every row, or (N, nv)."""
+    def set_noise(self, noise):
+        """The readings' share of (C3), ``S Sigma_r S^T``."""
+        self.reading_cov = self.S @ np.diag(np.square(noise.wrench_sd)) @ self.S.T
+
+    def regressor(self, motion):
+        """The Newton-Euler regressor ``Y`` (N, n_w, 10) of the rows' motion (K2), where a payload file's
+        covariance is carried; None otherwise."""
+        if self.payload_cov is None:
+            return None
+        model = self.model
+        x, a = motion.x, motion.a
+        q = x[:, list(model.q_index)][:, 3:7]
+        omega = x[:, list(model.v_index)][:, 3:]
+        return regressor(q / np.linalg.norm(q, axis=1, keepdims=True), omega, a[:, 3:], a[:, :3], model.gravity)
+
+    def noise(self, A_inv, accel_var):
+        """The first and third terms of (C3), the share independent from sample to sample: the reading's noise
+        and the motion's; ``accel_var`` (nv,) for every row, or (N, nv)."""
         accel_var = np.asarray(accel_var, dtype=float)
-        cov = self.reading_cov + (np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv) if accel_var.ndim == 1
-                                  else np.einsum("nij,nj,nkj->nik", A_inv, accel_var, A_inv))
+        return self.reading_cov + (np.einsum("nij,j,nkj->nik", A_inv, accel_var, A_inv) if accel_var.ndim == 1
+                                   else np.einsum("nij,nj,nkj->nik", A_inv, accel_var, A_inv))
+
+    def covariance(self, signed, noise, Y=None):
+        """(C3) for rows of signed readings ``signed`` (N, n_w): their :meth:`noise` and the calibration's term; a
+        payload file's term (K2) at the rows' regressor ``Y`` (:meth:`regressor`)."""
+        cov = noise
         if self.cov4 is not None:
             u = np.concatenate([signed, np.ones((len(signed), 1))], axis=1) if self.m == self.n + 1 \
                 else signed - self.b
             cov = cov + np.einsum("na,iajb,nb->nij", u, self.cov4, u)
+        if self.payload_cov is not None:
+            G = np.concatenate([Y @ self._J, np.broadcast_to(self.S, (len(Y), 6, 6))], axis=2)      # (K2)
+            if self.offset_tracked:
+                G[:, :, 10:] = 0.0
+            if self.inertia_learned:
+                G[:, :, 4:10] = 0.0
+            cov = cov + G @ self.payload_cov @ np.swapaxes(G, 1, 2)
         return cov
 
+    def inertia_cov(self):
+        """A payload file's inertia's covariance (6, 6), the (L1) tracker's start; None where none is carried."""
+        return None if self.payload_cov is None else self.payload_cov[4:10, 4:10].copy()
+
     def offset_cov(self):
-        """The calibration's covariance of ``b`` (``c = -S b``: ``S^-1 Cov(c) S^-T``), zero where it holds none."""
+        """The covariance of ``b``: a payload file's (K2), or the calibration's (``c = -S b``: ``S^-1 Cov(c) S^-T``);
+        zero where neither holds one."""
+        if self.payload_cov is not None:
+            return self.payload_cov[10:, 10:].copy()
         if self.cov4 is None or self.m != self.n + 1:
             return np.zeros((self.n, self.n))
         return self.S_inv @ self.cov4[:, self.n, :, self.n] @ self.S_inv.T
 
-    def finish(self, signed, W_p, cov, tracker=None, t=None):
+    def finish(self, signed, W_p, cov, tracker=None, t=None, Y=None):
         """(C1), (C4) for rows of signed readings (N, n_w), payload wrenches ``W_p`` and their (C3) ``cov``; with an
-        :class:`_OffsetTracker`, (D1)-(D3) sample by sample at times ``t`` (the intensity fitted first where
-        (D5) asks), ``Cov_total`` the covariance. ``(w_e, cov, d^2, b, sd(b))``, the last two None without one."""
+        :class:`_OffsetTracker`, (D1)-(D3), (L1) sample by sample at times ``t`` (``Y`` the rows' regressor, the
+        intensity fitted first where (D5) asks), ``Cov_total`` the covariance. ``(w_e, cov, d^2, b, sd(b))``, the
+        last two None where the offset is not tracked."""
         if tracker is None:
             w_e = W_p - (signed - self.b) @ self.S.T
             statistic = np.einsum("ni,ni->n", w_e, np.linalg.solve(cov, w_e[..., None])[..., 0])
             return w_e, cov, statistic, None, None
+        Y_I = None if not tracker.k else Y[:, :, 4:]                  # the inertia's columns (L1)
         if tracker.q2 is None:                                                                 # (D5)
-            tracker.fit(t, W_p - (signed - tracker.b) @ self.S.T, cov)
-        steps = [tracker.step(ti, si, wi, ci) for ti, si, wi, ci in zip(t, signed, W_p, cov)]
-        return tuple(np.array(v) for v in zip(*steps))
+            w_e0 = W_p - (signed - tracker.b) @ self.S.T
+            tracker.fit(t, w_e0 if Y_I is None else w_e0 + Y_I @ tracker.dI, cov, Y_I)
+        rows = (zip(t, signed, W_p, cov) if Y_I is None else zip(t, signed, W_p, cov, Y_I))
+        steps = [tracker.step(*row) for row in rows]
+        w_e, total, statistic, b, b_sd = zip(*steps)
+        tracked = tracker.tracks_offset
+        return (np.array(w_e), np.array(total), np.array(statistic), np.array(b) if tracked else None,
+                np.array(b_sd) if tracked else None)
 
 
 class _Output:
@@ -461,7 +522,7 @@ class _Output:
     wrench ``M w`` and its covariance ``M Cov M^T``; the identity, and not applied, for the sensor's axes and
     point."""
 
-    def __init__(self, model, frame, point):
+    def __init__(self, model, frame, point, axes=None):
         if frame not in FRAMES:
             raise CompensationError(f"frame must be one of {', '.join(FRAMES)}; got {frame!r}")
         self.model, self.frame, self.point = model, frame, None
@@ -474,13 +535,18 @@ class _Output:
                 raise CompensationError(f"point must be 3 finite numbers (the tool point in the sensor's axes, m); "
                                         f"got {point!r}"[:200])
             self.point = r
-        self.identity = frame == FRAMES[0] and point is None
+        self.identity = frame == FRAMES[0] and point is None and axes is None
         if not self.identity and model.attitude != "quaternion":
             raise CompensationError(f"frame and point move a 6-axis wrench in 3D; the calibration is of a "
                                     f"{model.name} reading: leave frame='sensor' and point=None")
+        # the model's axes may be a tracked frame's with the sensor's turned on it (a payload file's mounting,
+        # K1): A = M^T turns them into the sensor's; the point is given in the sensor's axes
         self.T = np.eye(6)
-        if self.point is not None:
-            self.T[:3, 3:] = -skew(self.point)                        # tau_t = tau_s - r_t x f
+        r = self.point if axes is None or self.point is None else np.asarray(axes, dtype=float).T @ self.point
+        if r is not None:
+            self.T[:3, 3:] = -skew(r)                                 # tau_t = tau_s - r_t x f
+        if axes is not None and frame == FRAMES[0]:                   # the sensor's own axes
+            self.T = _blocks(np.asarray(axes, dtype=float)) @ self.T
 
     @property
     def needs_attitude(self):
@@ -496,11 +562,17 @@ class _Output:
             if not np.isfinite(R).all():
                 raise CompensationError("the base frame needs the sensor's attitude: the IMU gave no orientation "
                                         "for a sample; give it, or keep the sensor frame")
-            B = np.zeros((len(wrench), 6, 6))
-            B[:, :3, :3] = R
-            B[:, 3:, 3:] = R
-            M = B @ M
+            M = _blocks(R) @ M
         return np.einsum("nij,nj->ni", M, wrench), M @ cov @ np.swapaxes(M, 1, 2)
+
+
+def _blocks(R):
+    """``blockdiag(R, R)``, (6, 6) or (N, 6, 6)."""
+    R = np.asarray(R, dtype=float)
+    B = np.zeros(R.shape[:-2] + (6, 6))
+    B[..., :3, :3] = R
+    B[..., 3:, 3:] = R
+    return B
 
 
 def _pose_attitudes(x, model):
@@ -514,7 +586,8 @@ def _pose_attitudes(x, model):
 class _Rows:
     """What :func:`_step` gives for rows of samples: the published wrench, its covariance (with the offset's,
     (D2)), the contact flag and ``d^2``; the offset and its sd after each row (None without a tracker); the
-    payload's wrench ``W_p`` and the rows' own (C3), for tare."""
+    payload's wrench ``W_p`` and the rows' own (C3), for tare; the contact wrench ``w_e`` of (C1) in the model's
+    axes and its noise (:meth:`_Parts.noise`), for the tool change's detector (:mod:`fmscal.analysis._tool_change`)."""
 
     wrench: np.ndarray
     cov: np.ndarray
@@ -524,6 +597,8 @@ class _Rows:
     offset_sd: np.ndarray
     W_p: np.ndarray
     own: np.ndarray
+    w_e: np.ndarray
+    noise: np.ndarray
 
 
 def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
@@ -561,66 +636,109 @@ def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
     if motion.accel_map is not None:
         A_inv = A_inv @ motion.accel_map                 # Cov(a) = M diag(var) M^T: A^-1 Cov(a) A^-T
     signed = parts.sign * w_hat
-    own = parts.covariance(signed, A_inv, motion.accel_var)                                  # (C3)
-    w_e, cov, statistic, b, b_sd = parts.finish(signed, W_p, own, tracker, t)                # (C1), (C4), (D)
+    Y = parts.regressor(motion)
+    noise = parts.noise(A_inv, motion.accel_var)
+    own = parts.covariance(signed, noise, Y)                                                 # (C3), (K2)
+    w_e, cov, statistic, b, b_sd = parts.finish(signed, W_p, own, tracker, t, Y)             # (C1), (C4), (D), (L1)
     R = None
     if output.needs_attitude:
         R = motion.R if motion.R is not None else _pose_attitudes(motion.x, model)
     wrench, cov = output.apply(parts.out_sign * w_e, cov, R)                                 # (C8)
-    return _Rows(wrench, cov, statistic > parts.threshold, statistic, b, b_sd, W_p, own)
+    return _Rows(wrench, cov, statistic > parts.threshold, statistic, b, b_sd, W_p, own, w_e, noise)
 
 
 # --- the offset's drift -------------------------------------------------------------------------------------------
 class _OffsetTracker:
-    """The offset as a random walk (D1), stepped by (D2)-(D3) on each sample; the one implementation of both
-    paths. ``intensity`` per channel, the reading's units per sqrt(s); ``P0`` the initial covariance."""
+    """The offset as a random walk (D1) and, where a payload file's poses left it bounded (K3), the payload's
+    inertia as a constant learned from the motion (L1), stepped by (D2)-(D3) on each sample; the one
+    implementation of every path. ``intensity`` per channel, the reading's units per sqrt(s); ``P0`` the offset's
+    initial covariance; ``offset`` False: the offset is not tracked (its covariance zero, no walk);
+    ``inertia_cov`` the inertia's initial covariance (6, 6), None where it is not learned.
 
-    def __init__(self, parts, intensity, P0, shape=None):
-        self.parts, self.S = parts, parts.S
-        self.q2 = None if intensity is None else np.square(intensity)
+    The state is ``theta = [b; dI]`` (``dI`` the inertia's departure from the payload's, :data:`fmscal.plant.
+    physics.INERTIA_NAMES` order), the measurement (D2)'s with ``H = [S, Y_I]``, ``Y_I`` the inertia's columns of
+    the sample's regressor (K2)::
+
+        w_e = W_p + Y_I dI - S (sigma w_hat - b),    Cov_total = Cov + H P H^T                     (L1)
+    """
+
+    def __init__(self, parts, intensity, P0, shape=None, offset=True, inertia_cov=None):
+        n, k = parts.n, (0 if inertia_cov is None else 6)
+        self.parts, self.S, self.n, self.k, self.tracks_offset = parts, parts.S, n, k, offset
+        self.q2 = (None if intensity is None else np.square(intensity)) if offset else np.zeros(n)
         self.shape, self.warnings = shape, []
-        self.b = np.array(parts.b if parts.b is not None else np.zeros(parts.n), dtype=float)
-        self.P = np.array(P0, dtype=float)
+        self.b = np.array(parts.b if parts.b is not None else np.zeros(n), dtype=float)
+        self.dI = np.zeros(k)
+        self.P = np.zeros((n + k, n + k))
+        self.P[:n, :n] = np.asarray(P0, dtype=float) if offset else 0.0
+        if k:
+            self.P[n:, n:] = inertia_cov
         self.t = None
 
-    def step(self, t, signed, W_p, cov):
-        """One sample: ``(w_e, Cov_total, d^2, b, sd(b))``, ``w_e`` with the predicted offset (D2)."""
-        if self.t is not None:
-            self.P = self.P + np.diag(self.q2 * max(t - self.t, 0.0))                          # (D1)
+    def _H(self, Y):
+        """``H = [S, Y_I]`` (n_w, n + k)."""
+        return self.S if not self.k else np.concatenate([self.S, Y], axis=1)
+
+    def step(self, t, signed, W_p, cov, Y=None):
+        """One sample: ``(w_e, Cov_total, d^2, b, sd(b))``, ``w_e`` with the predicted offset (D2), (L1); ``Y``
+        the sample's inertia regressor where the inertia is learned."""
+        n = self.n
+        if self.t is not None and self.tracks_offset:
+            self.P[:n, :n] += np.diag(self.q2 * max(t - self.t, 0.0))                          # (D1)
         self.t = t
         w_e = W_p - self.S @ (signed - self.b)
-        SP = self.S @ self.P
-        total = cov + SP @ self.S.T
+        if self.k:
+            w_e = w_e + Y @ self.dI                                                            # (L1)
+        H = self._H(Y)
+        HP = H @ self.P
+        total = cov + HP @ H.T
         total = 0.5 * (total + total.T)
-        solved = np.linalg.solve(total, np.c_[w_e, SP])                                        # (D2)
+        solved = np.linalg.solve(total, np.c_[w_e, HP])                                        # (D2)
         statistic = float(w_e @ solved[:, 0])
         if statistic <= self.parts.threshold:                                                  # (D3)
-            K = solved[:, 1:].T                                                                # P S^T total^-1
-            self.b = self.b - K @ w_e
-            self.P = self.P - K @ SP
+            K = solved[:, 1:].T                                                                # P H^T total^-1
+            theta = np.r_[self.b, self.dI] - K @ w_e
+            self.b, self.dI = theta[:n], theta[n:]
+            self.P = self.P - K @ HP
             self.P = 0.5 * (self.P + self.P.T)
-        return w_e, total, statistic, self.b.copy(), np.sqrt(np.maximum(np.diag(self.P), 0.0))
+        if not self.tracks_offset:
+            return w_e, total, statistic, None, None
+        return w_e, total, statistic, self.b.copy(), np.sqrt(np.maximum(np.diag(self.P)[:n], 0.0))
 
     def tare(self, b, P):
-        """Restart from the offset ``b`` of covariance ``P`` (D4)."""
-        self.b, self.P = np.array(b, dtype=float), np.array(P, dtype=float)
+        """Restart from the offset ``b`` of covariance ``P`` (D4); a learned inertia kept."""
+        n = self.n
+        self.b = np.array(b, dtype=float)
+        self.P[:n, :] = 0.0
+        self.P[:, :n] = 0.0
+        self.P[:n, :n] = np.array(P, dtype=float)
 
     @property
     def intensity(self):
-        """The random walk's intensity per channel (D1), the reading's units per sqrt(s)."""
-        return None if self.q2 is None else np.sqrt(self.q2)
+        """The random walk's intensity per channel (D1), the reading's units per sqrt(s); None where the offset is
+        not tracked."""
+        return None if self.q2 is None or not self.tracks_offset else np.sqrt(self.q2)
 
-    def fit(self, t, w_e0, cov):
+    @property
+    def inertia_sd(self):
+        """The learned inertia's departure's sd (6,), None where it is not learned."""
+        return None if not self.k else np.sqrt(np.maximum(np.diag(self.P)[self.n:], 0.0))
+
+    def fit(self, t, w_e0, cov, Y=None):
         """Set the intensity to ``s`` times :attr:`shape`, ``s`` maximising (D5) over the rows ``w_e0`` (the
-        compensated wrench with this tracker's offset ``b``, (C1)), their covariances ``cov`` (C3) and times
-        ``t``; the tracker's state is left as it was. A maximum at the grid's edge adds to :attr:`warnings`."""
+        compensated wrench with this tracker's offset ``b``, (C1)), their covariances ``cov`` (C3), times ``t`` and
+        inertia regressors ``Y`` (where it is learned, (L1)); the tracker's state is left as it was. A maximum at
+        the grid's edge adds to :attr:`warnings`."""
         first = np.log2(DRIFT_FIT_GRID)
         step, width, (low, high) = first[1] - first[0], len(first) - 1, np.log2(DRIFT_FIT_LIMITS)
         bound = self.parts.threshold
         grid, d2, logdet = np.empty(0), np.empty((len(t), 0)), np.empty((len(t), 0))
         new = first
         while len(new):
-            more = _likelihood_terms(t, w_e0, cov, self.S, self.P, (2.0 ** new[:, None] * self.shape) ** 2, bound)
+            H = self.S if not self.k else np.concatenate([np.broadcast_to(self.S, (len(t), self.n, self.n)), Y], 2)
+            q2 = np.zeros((len(new), self.n + self.k))
+            q2[:, :self.n] = (2.0 ** new[:, None] * self.shape) ** 2
+            more = _likelihood_terms(t, w_e0, cov, H, self.P, q2, bound)
             grid, d2, logdet = np.r_[grid, new], np.c_[d2, more[0]], np.c_[logdet, more[1]]
             order = np.argsort(grid)
             grid, d2, logdet = grid[order], d2[:, order], logdet[:, order]
@@ -648,43 +766,47 @@ class _OffsetTracker:
         self.q2 = np.square(2.0 ** best * self.shape)
 
 
-def _likelihood_terms(t, w_e0, cov, S, P0, q2, bound):
-    """(D1)-(D3) run for ``K`` intensities at once over rows ``w_e0`` (N, n) (the wrench with the offset
-    ``b0`` where the trackers start), their covariances ``cov`` (N, n, n) and times ``t``, from the offset's
-    covariance ``P0``; ``q2`` (K, n) the walks' ``q^2``. Returns ``d^2`` of (D2) and ``log det Cov_total``,
-    each (N, K): the terms of (D5)."""
-    K, n = q2.shape
-    Q = np.zeros((K, n, n))
-    Q[:, np.arange(n), np.arange(n)] = q2
-    P = np.array(np.broadcast_to(P0, (K, n, n)), dtype=float)
-    db = np.zeros((K, n))                                       # each tracker's b - b0
+def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound):
+    """(D1)-(D3), (L1) run for ``K`` intensities at once over rows ``w_e0`` (N, n) (the wrench with the state
+    ``theta0`` the trackers start from), their covariances ``cov`` (N, n, n) and times ``t``, from the state's
+    covariance ``P0`` (p, p); ``H`` (n, p), or (N, n, p) per row; ``q2`` (K, p) the walks' ``q^2``. Returns
+    ``d^2`` of (D2) and ``log det Cov_total``, each (N, K): the terms of (D5)."""
+    K, p = q2.shape
+    Q = np.zeros((K, p, p))
+    Q[:, np.arange(p), np.arange(p)] = q2
+    P = np.array(np.broadcast_to(P0, (K, p, p)), dtype=float)
+    dtheta = np.zeros((K, p))                                   # each tracker's theta - theta0
     d2, logdet = np.empty((len(t), K)), np.empty((len(t), K))
     dt = np.maximum(np.diff(t, prepend=t[0]), 0.0)
-    ST = S.T
+    per_row = H.ndim == 3
     for k in range(len(t)):
+        Hk = H[k] if per_row else H
         P += Q * dt[k]                                                                         # (D1)
-        w = w_e0[k] + db @ ST
-        SP = S @ P
-        total = cov[k] + SP @ ST
-        solved = np.linalg.solve(total, np.concatenate([w[:, :, None], SP], axis=2))          # (D2)
+        w = w_e0[k] + dtheta @ Hk.T
+        HP = Hk @ P
+        total = cov[k] + HP @ Hk.T
+        solved = np.linalg.solve(total, np.concatenate([w[:, :, None], HP], axis=2))          # (D2)
         d2[k] = np.einsum("ki,ki->k", w, solved[:, :, 0])
         logdet[k] = np.linalg.slogdet(total)[1]
         gain = np.swapaxes(solved[:, :, 1:], 1, 2) * (d2[k] <= bound)[:, None, None]           # (D3)
-        db -= np.einsum("kij,kj->ki", gain, w)
-        P -= gain @ SP
+        dtheta -= np.einsum("kij,kj->ki", gain, w)
+        P -= gain @ HP
     return d2, logdet
 
 
-def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False):
-    """The offset tracker of ``track_offset`` (None where off), its settings checked; ``drift_intensity="fit"``
-    (``offline`` only, and its default there) leaves its intensity to (D5), fitted on the log's first pass
-    (:meth:`_Parts.finish`)."""
+def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False, inertia_cov=None):
+    """The tracker of the offset (``track_offset``) and of a bounded inertia (``inertia_cov``, (L1)); None where
+    neither; its settings checked. ``drift_intensity="fit"`` (``offline`` only, and its default there) leaves the
+    offset's intensity to (D5), fitted on the log's first pass (:meth:`_Parts.finish`)."""
     if not isinstance(track_offset, bool):
         raise CompensationError(f"track_offset must be True or False; got {track_offset!r}")
     if not track_offset:
         if drift_intensity is not None or offset_sd is not None:
             raise CompensationError("drift_intensity and offset_sd are the offset tracker's: add track_offset=True")
-        return None
+        if inertia_cov is None:
+            return None
+        parts.inertia_learned = True                     # the bounded inertia's share is the tracker's (K2)
+        return _OffsetTracker(parts, None, None, offset=False, inertia_cov=inertia_cov)
     values = {}
     shape = DRIFT_INTENSITY * np.asarray(noise.wrench_sd, dtype=float)
     fit = (isinstance(drift_intensity, str) and drift_intensity == "fit") or (drift_intensity is None and offline)
@@ -707,7 +829,9 @@ def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=Fal
                                     f"{'; or fit, offline' if name == 'drift_intensity' else ''}); got {value!r}")
         values[name] = v
     P0 = parts.offset_cov() if values["offset_sd"] is None else np.diag(np.square(values["offset_sd"]))
-    return _OffsetTracker(parts, None if fit else values["drift_intensity"], P0, shape)
+    parts.offset_tracked = True                          # a payload file's offset's share is the tracker's (K2)
+    parts.inertia_learned = inertia_cov is not None
+    return _OffsetTracker(parts, None if fit else values["drift_intensity"], P0, shape, inertia_cov=inertia_cov)
 
 
 def _causal_coefficients(k, order, lead, dt):
@@ -740,16 +864,23 @@ def _causal_settings(window, delay, order, dt, latency):
     return k, L, L - shift
 
 
-def _noise(calibration, noise, estimate=None):
-    """The noise model: given, the calibration's, or the log's (``estimate()``, the source's estimate from it)."""
+def _noise(st, noise, estimate=None, moves=True):
+    """The noise model: given, the calibration's, or the log's (``estimate()``, the source's estimate from it); a
+    payload file's holds the readings' noise only, the poses' then the log's (a stream's: estimated as it comes;
+    held poses, ``moves`` False, need none)."""
     if noise is not None:
         if not isinstance(noise, NoiseSpec):
             raise CompensationError(f"noise must be a plant.NoiseSpec; got {type(noise).__name__}")
         return noise
-    if calibration.noise is not None and len(calibration.noise.wrench_sd) == calibration.size:
-        return calibration.noise
+    calibration = st.calibration
+    own = calibration.noise
+    if own is not None and len(own.wrench_sd) == calibration.size:
+        if st.pose_noise_known or estimate is None or not moves:
+            return own
+        log = estimate()
+        return NoiseSpec(own.wrench_sd, log.angle_sd, log.position_sd)
     if estimate is None:
-        raise CompensationError("the calibration holds no noise model: give noise=plant.NoiseSpec(...)")
+        raise CompensationError(f"{st.source} holds no noise model: give noise=plant.NoiseSpec(...)")
     return estimate()
 
 
@@ -764,24 +895,33 @@ def _latency_warnings(calibration, motion):
 
 
 # --- a log ---------------------------------------------------------------------------------------------------------
-def compensate(calibration, log, causal=False, *, payload=None, direction="on_tool", noise=None,
-               window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM, track_offset=False,
-               drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None):
+def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, tool_radius=None,
+               direction="on_tool", noise=None, window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER,
+               false_alarm=FALSE_ALARM, track_offset=False, drift_intensity=None, offset_sd=None, motion=None,
+               frame="sensor", point=None, tool_change=None):
     """The contact wrench of a log: ``w_e = W_p - S (sigma w_hat - b)`` (C1), its covariance and a contact flag.
 
     Parameters
     ----------
-    calibration : plant.Calibration
-        ``S``, ``b``, the reading's sign, the payload, gravity, latency and (where saved) the noise model and
-        the covariance of ``[S | c]``.
+    setup_ : plant.Calibration or observers.payload.PayloadEstimate
+        A calibration (``fmscal calibrate --save``): ``S``, ``b``, the reading's sign, the payload, gravity,
+        latency and (where saved) the noise model and the covariance of ``[S | c]``. Or a payload estimate
+        (``fmscal identify-payload --save``, ``PayloadEstimate.load``): the sensor's own ``S`` (the identity, or
+        ``calibration``'s), the file's offset, gravity, mounting, sign, gains and noise, and the payload's
+        covariance carried into the wrench's ((K1)-(K3) of :mod:`fmscal.analysis._setup`).
     log : plant.Log, plant.io.JointLog or plant.io.ImuLog
         A log of the calibration's case (its poses and readings; or, with ``motion``, its joint states or its
         IMU's samples and readings); no contact needed anywhere.
     causal : bool
         False: the motion smoothed both ways (no delay). True: the causal filter (module docstring), the
         result's :attr:`Compensation.delay` its delay: :class:`Compensator` fed the log.
-    payload : plant.Payload or plant.SpatialPayload, optional
-        Replaces the calibration's (a tool change: ``S`` does not depend on the tool).
+    calibration : plant.Calibration, optional
+        With a payload estimate: the sensor's calibrated ``S`` (and its latency); default the identity.
+    payload : plant.Payload, plant.SpatialPayload or observers.payload.PayloadEstimate, optional
+        With a calibration: replaces its payload (a tool change: ``S`` does not depend on the tool).
+    tool_radius : float, optional
+        A payload estimate whose inertia its poses did not determine: the tool's radius about its centre of mass,
+        m, that bounds it (K3); default twice the centre of mass's distance from the sensor, at least 5 cm.
     direction : {"on_tool", "on_environment"}
         The published wrench: the environment's on the tool, ``w_e`` (default), or the tool's on the
         environment, ``-w_e``.
@@ -818,6 +958,11 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
     point : array_like of 3 floats, optional
         The tool point the torque is taken about, in the sensor's axes from the sensor's point, m (C8); default
         the sensor's point.
+    tool_change : {None, "off", "detect", "reidentify"}
+        A change of the payload detected and reported (:mod:`fmscal.analysis._tool_change`,
+        :attr:`Compensation.tool_changes`); None: "detect" on a 6-axis reading in 3D, "off" otherwise.
+        "reidentify" (causal only) goes on with the new payload fitted to the held attitudes after each change;
+        offline each change is reported with that fit (``ToolChange.reidentified``), to compensate again with.
 
     Returns
     -------
@@ -831,20 +976,37 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         Not a calibration or a log, a log of another case, no payload, a window longer than the log, a delay
         shorter than the latency.
     """
-    if not isinstance(calibration, Calibration):
-        raise CompensationError(f"compensate takes a plant.Calibration; got {type(calibration).__name__}")
-    src = source(motion, calibration.latency or 0.0)
-    model = compensation_model(calibration, payload, src.check_log(log))
+    st = setup(setup_, payload, calibration, tool_radius)
+    calibration = st.calibration
+    src = source(motion, calibration.latency or 0.0, log)
+    model = compensation_model(calibration, st.payload, src.check_log(log))
     src.check(model)
     if np.shape(log.w_hat)[1:] != (model.n_w,):
         raise CompensationError(f"{log.name}: {np.shape(log.w_hat)[1:]} reading columns; the calibration's reading "
                                 f"has {model.n_w}")
-    noise = _noise(calibration, noise, lambda: src.log_noise(log))
+    if st.axes is not None and not src.turns_with_mounting:
+        raise CompensationError(f"the payload file's sensor is mounted turned on the tracked frame: its motion "
+                                f"comes from poses or joint states, not an {src.source} (whose axes are its "
+                                "rotation's)")
+    noise = _noise(st, noise, lambda: src.log_noise(log), src.moves)
+    if causal and not hasattr(log, "dt"):
+        raise CompensationError(f"{getattr(log, 'name', 'the data')}: a pose table's rows are held poses, not a "
+                                "stream: compensate it offline (causal=False)")
+    mode = check_mode(tool_change, model)
+    if mode != TOOL_CHANGE[0] and not src.moves:
+        if tool_change is not None:
+            raise CompensationError(f"{log.name}: a pose table's rows are held poses, not a stream: no tool change "
+                                    "to detect between them (leave tool_change None or 'off')")
+        mode = TOOL_CHANGE[0]
+    if mode == TOOL_CHANGE[2] and not causal:
+        raise CompensationError("tool_change='reidentify' goes on with the new payload as the stream goes: causal "
+                                "only; offline each change is reported with its held attitudes' fit "
+                                "(ToolChange.reidentified), to compensate again with (payload=...)")
     if causal:
-        stream = Compensator(calibration, log.dt, payload=model.payload, noise=noise, direction=direction,
+        stream = Compensator(st, log.dt, noise=noise, direction=direction,
                              window=CAUSAL_WINDOW if window is None else window, delay=delay, order=order,
                              false_alarm=false_alarm, track_offset=track_offset, drift_intensity=drift_intensity,
-                             offset_sd=offset_sd, motion=src, frame=frame, point=point)
+                             offset_sd=offset_sd, motion=src, frame=frame, point=point, tool_change=mode)
         given = src.of_log(log)
         out = stream.push_many(log.t, log.w_hat, **{src.keyword: given})
         if not out:
@@ -853,18 +1015,32 @@ def compensate(calibration, log, causal=False, *, payload=None, direction="on_to
         return _streamed(stream, out, direction, list(stream.warnings) + (
             [f"missing {src.source}: each window fitted to the samples it holds"] if missing else []))
     aligned = src.aligned(log)
-    parts = _Parts(calibration, model, noise, direction, false_alarm)
-    output = _Output(model, frame, point)
-    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=True)
+    parts = _Parts(calibration, model, noise, direction, false_alarm, st.cov)
+    output = _Output(model, frame, point, st.axes)
+    tracker = _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=True,
+                       inertia_cov=parts.inertia_cov() if st.inertia_bounded else None)
     keep, m = src.offline(aligned, model, noise, OFFLINE_WINDOW if window is None else window)
-    t = aligned.t[keep]
+    t = src.times(aligned)[keep]
     rows = _step(parts, output, tracker, t, aligned.w_hat[keep], m)
+    changes, counts = [], None
+    if mode != TOOL_CHANGE[0]:                          # (T1)-(T8), and each change's held attitudes fitted (T9)
+        detector = _Detector(model, log.dt, mode, st.cov, false_alarm)
+        counts = detector.add(t, aligned.w_hat[keep], m, rows)
+        changes = detector.events
+        for k, change in enumerate(changes):
+            until = changes[k + 1].t if k + 1 < len(changes) else np.inf
+            try:
+                change.reidentified, table = detector.reidentify(calibration, change.t + GUARD, until=until)
+                change.poses = len(table.q)
+            except ToolChangeError:
+                pass
     return Compensation(t=t, wrench=rows.wrench, cov=rows.cov, contact=rows.contact, statistic=rows.statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
-                        warnings=(list(parts.warnings) + _latency_warnings(calibration, src)
+                        warnings=(st.warnings + list(parts.warnings) + _latency_warnings(calibration, src)
                                   + ([] if tracker is None else tracker.warnings)),
                         offset=rows.offset, offset_sd=rows.offset_sd, frame=frame, point=output.point,
-                        drift_intensity=None if tracker is None else tracker.intensity)
+                        drift_intensity=None if tracker is None else tracker.intensity, tool_changes=changes,
+                        tool_change=counts)
 
 
 def _streamed(stream, out, direction, warnings):
@@ -877,7 +1053,9 @@ def _streamed(stream, out, direction, warnings):
                         offset=np.array([o.offset for o in out]) if offset else None,
                         offset_sd=np.array([o.offset_sd for o in out]) if offset else None,
                         frame=stream.frame, point=stream.point,
-                        drift_intensity=None if stream._tracker is None else stream._tracker.intensity)
+                        drift_intensity=None if stream._tracker is None else stream._tracker.intensity,
+                        tool_changes=list(stream.tool_changes),
+                        tool_change=None if stream._detector is None else np.array([o.tool_change for o in out]))
 
 
 # --- streaming --------------------------------------------------------------------------------------------------
@@ -895,6 +1073,8 @@ class ContactSample:
     statistic : float
     offset, offset_sd : ndarray, shape (n_w,), or None
         ``track_offset``: the offset after this sample's step (D3) and its sd; None otherwise.
+    tool_change : int
+        The payload's changes declared by this output (:attr:`Compensator.tool_changes`).
     """
 
     t: float
@@ -904,6 +1084,7 @@ class ContactSample:
     statistic: float
     offset: np.ndarray = None
     offset_sd: np.ndarray = None
+    tool_change: int = 0
 
 
 class Compensator:
@@ -937,6 +1118,11 @@ class Compensator:
         The output's axes (C8); "base" needs an attitude (a pose, the joints, or the IMU's orientation).
     point : array_like of 3 floats, optional
         The tool point, sensor axes, m: the torque about it (C8); default the sensor's point.
+    tool_change : {None, "off", "detect", "reidentify"}
+        A change of the payload detected (:mod:`fmscal.analysis._tool_change`, :attr:`tool_changes`); None:
+        "detect" on a 6-axis reading in 3D, "off" otherwise. "reidentify": after each change, the compensation
+        goes on with the payload fitted to the next :data:`fmscal.analysis._tool_change.REIDENTIFY_POSES` held
+        attitudes (:meth:`reidentify` does it on request).
 
     Attributes
     ----------
@@ -948,20 +1134,43 @@ class Compensator:
         The calibration's and the source's warnings, and the first event of each kind.
     """
 
-    def __init__(self, calibration, dt, *, payload=None, direction="on_tool", noise=None, window=CAUSAL_WINDOW,
-                 delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM, track_offset=False,
-                 drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None):
+    def __init__(self, setup_, /, dt, *, calibration=None, payload=None, tool_radius=None, direction="on_tool",
+                 noise=None, window=CAUSAL_WINDOW, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM,
+                 track_offset=False, drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None,
+                 tool_change=None):
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise CompensationError(f"dt must be a positive number of seconds; got {dt!r}")
-        self.model = compensation_model(calibration, payload)
+        st = setup_ if isinstance(setup_, Setup) else setup(setup_, payload, calibration, tool_radius)
+        calibration = st.calibration
+        self.model = compensation_model(calibration, st.payload)
         self.motion = source(motion, calibration.latency or 0.0)
         self.motion.check(self.model)
-        self._output = _Output(self.model, frame, point)
+        if st.axes is not None and not self.motion.turns_with_mounting:
+            raise CompensationError(f"the payload file's sensor is mounted turned on the tracked frame: its motion "
+                                    f"comes from poses or joint states, not an {self.motion.source} (whose axes are "
+                                    "its rotation's)")
+        self._output = _Output(self.model, frame, point, st.axes)
         self._sample = _SampleDynamics(self.model)
         self.frame, self.point = frame, self._output.point
-        noise = _noise(calibration, noise)
-        self._parts = _Parts(calibration, self.model, noise, direction, false_alarm)
-        self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd)
+        # a payload file's stream of poses: their noise estimated as they come (the file holds the readings')
+        self._pose_noise = None
+        if noise is None and not st.pose_noise_known and not self.motion.estimates_noise:
+            self._pose_noise = _RunningNoise(self.motion.channels(self.model))
+        # a payload file with no readings' noise of a sample (a table's fit holds its rows'): estimated from the
+        # first readings (module docstring, Noise), no output before
+        self._first = None
+        if noise is None and not st.pose_noise_known and st.calibration.noise is None:
+            self._first = []
+            noise = NoiseSpec((1.0,) * self.model.n_w)              # replaced once the first readings are in
+        noise = _noise(st, noise)
+        self._parts = _Parts(calibration, self.model, noise, direction, false_alarm, st.cov)
+        self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd,
+                                 inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None)
+        self._default_intensity = drift_intensity is None
+        self._setup, self._settings = st, dict(direction=direction, false_alarm=false_alarm, track_offset=track_offset,
+                                               drift_intensity=drift_intensity, offset_sd=offset_sd)
+        mode = check_mode(tool_change, self.model)
+        self._detector = None if mode == TOOL_CHANGE[0] else _Detector(self.model, float(dt), mode, st.cov, false_alarm)
         # the newest compensated samples, for tare: (sigma w_hat - S^-1 W_p, Cov of (C3), contact)
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
         self.dt, self.order, self._noise = float(dt), order, noise
@@ -981,7 +1190,7 @@ class Compensator:
         self._t, self._intervals = None, []
         self.events, self.withheld = Counter(), Counter()
         self.missing = False                            # a motion sample missing from a full window, once
-        self.warnings = list(self._parts.warnings) + _latency_warnings(calibration, self.motion)
+        self.warnings = st.warnings + list(self._parts.warnings) + _latency_warnings(calibration, self.motion)
 
     @property
     def delay(self):
@@ -1059,11 +1268,13 @@ class Compensator:
         present = np.isfinite(channels).all(axis=1)
         out = []
         i = 0
+        # a re-identification goes on with the new payload from the next block: blocks no longer than the detector's
+        cap = self._detector.n if self._detector is not None and self._detector.mode == TOOL_CHANGE[2] else len(t)
         while i < len(t):
-            j = i
+            j, last = i, min(len(t), i + cap)
             if self._blockable():       # the contiguous rows with a motion sample each go as one block
-                while j < len(t) and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= 0.5 * self.dt
-                                                     or j > i and abs(t[j] - t[j - 1] - self.dt) <= 0.5 * self.dt):
+                while j < last and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= 0.5 * self.dt
+                                                   or j > i and abs(t[j] - t[j - 1] - self.dt) <= 0.5 * self.dt):
                     j += 1
             if j - i >= 2:
                 out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j]))
@@ -1125,8 +1336,9 @@ class Compensator:
             self._extras.append(None)
             if len(self._readings) > self._L and self._readings[0][1] is not None:
                 withheld += 1
-        if self._running is not None:
-            self._running.recent.clear()
+        for running in (self._running, self._pose_noise):
+            if running is not None:
+                running.recent.clear()
         self._event("gap", withheld, f"a gap of {step:.6g} s ({g} samples) in the stamps: filled with empty rows, "
                                      f"{withheld} outputs withheld at its edge")
 
@@ -1135,8 +1347,9 @@ class Compensator:
         pending = sum(1 for _, w in list(self._readings)[1:] if w is not None)
         for d in (self._readings, self._channels, self._extras, self._last):
             d.clear()
-        if self._running is not None:
-            self._running.recent.clear()
+        for running in (self._running, self._pose_noise):
+            if running is not None:
+                running.recent.clear()
         self._event("restart", pending, f"{why}: the window restarted, no output until it is full again")
 
     # --- one sample, or a block -------------------------------------------------------------------------------
@@ -1144,19 +1357,21 @@ class Compensator:
         """:meth:`push`'s path for one checked sample: ``channels`` NaN where no motion came."""
         if not self._advance(t):
             return None
+        if self._first is not None:
+            self._learn_noise(w_hat[None])
         channels = self._continuous(channels[None])[0] if np.isfinite(channels).all() else None
         if channels is not None:
             if self._running is not None:
                 self._running.add(channels)
-            elif self._var is None:
-                self._var = configuration_variance(self.model, self._noise, channels)
+            else:
+                self._pose_variance(channels[None])
         self._readings.append((t, w_hat))
         self._channels.append(channels)
         self._extras.append(extra)
         if len(self._readings) <= self._L or len(self._channels) < self._k:
             return None
         t0, reading = self._readings[0]
-        if reading is None:
+        if reading is None or self._first is not None:
             return None
         present = [c is not None for c in self._channels]
         if not self._units_checked and any(present):
@@ -1179,11 +1394,12 @@ class Compensator:
                                     None if raw is None else raw[None], self._sample)
         rows = _step(self._parts, self._output, self._tracker, [t0], reading[None], motion, self._sample)
         self._remember(reading[None], rows)
-        return self._sample_of(t0, rows, 0)
+        return self._sample_of(t0, rows, 0, self._notice(np.array([t0]), reading[None], motion, rows))
 
     def _blockable(self):
         """Both windows full of samples, none missing: the next rows may go as one block."""
-        return (self._t is not None and len(self._intervals) >= DT_INTERVALS and len(self._readings) > self._L
+        return (self._t is not None and self._first is None and len(self._intervals) >= DT_INTERVALS
+                and len(self._readings) > self._L
                 and len(self._channels) == self._k and all(w is not None for _, w in self._readings)
                 and all(c is not None for c in self._channels))
 
@@ -1191,6 +1407,8 @@ class Compensator:
         """:meth:`push_many`'s rows with the windows full, every sample present and the stamps ``dt`` apart."""
         m, k, i0 = len(t), self._k, self._k - 1 - self._lead
         channels = self._continuous(channels)
+        if self._running is None:
+            self._pose_variance(channels)
         var = self._variance() if self._running is None else self._running.block(channels)
         window = np.concatenate([np.array(list(self._channels)[1:]), channels])          # (k - 1 + m, n)
         P = np.einsum("dk,mpk->dmp", self._coefficients,
@@ -1207,6 +1425,7 @@ class Compensator:
         rows = _step(self._parts, self._output, self._tracker, t0, reading, motion,
                      self._sample if m <= _ROW_BY_ROW else None)
         self._remember(reading, rows)
+        counts = self._notice(t0, reading, motion, rows)
         self._channels.extend(channels)
         if extras is not None:
             self._extras.extend(extras)
@@ -1214,7 +1433,7 @@ class Compensator:
             self._extras.extend([None] * m)
         self._readings.extend(zip(t.tolist(), w_hat))
         self._t = float(t[-1])
-        return [self._sample_of(float(t0[r]), rows, r) for r in range(m)]
+        return [self._sample_of(float(t0[r]), rows, r, counts) for r in range(m)]
 
     def _continuous(self, rows):
         """Rows of channels with their unit quaternion (where the source has one) kept sign-continuous with the
@@ -1231,6 +1450,47 @@ class Compensator:
         or the running estimate of a joint or IMU stream's."""
         return self._var if self._running is None else self._running.variance()
 
+    def _learn_noise(self, w_hat):
+        """A payload file's stream without the readings' noise: it from the first :data:`NOISE_SAMPLES` readings
+        (:func:`fmscal.plant.io.difference_noise`, robust to a contact's steps); until then no output."""
+        self._first.extend(w_hat)
+        if len(self._first) < NOISE_SAMPLES:
+            return
+        sd = difference_noise(np.array(self._first))
+        if not (sd > 0).all():
+            raise CompensationError("the readings' noise estimated from the first readings is zero (a constant or "
+                                    "coarsely quantised reading): give noise=plant.NoiseSpec(...)")
+        self._noise = replace(self._noise, wrench_sd=tuple(float(v) for v in sd))
+        self._parts.set_noise(self._noise)
+        if self._tracker is not None and self._default_intensity and self._tracker.tracks_offset:
+            self._tracker.shape = DRIFT_INTENSITY * sd                 # (D1)'s default: the noise's sd
+            self._tracker.q2 = np.square(self._tracker.shape)
+        self.warnings.append(f"the readings' noise estimated from the first {len(self._first)} readings (sd "
+                             + " ".join(f"{v:.3g}" for v in sd) + "): the payload file holds none of a sample")
+        self._first = None
+
+    def _pose_variance(self, rows):
+        """A pose stream's configuration variance (:func:`fmscal.analysis._motion.configuration_variance`): the
+        noise model's, at its first pose; a payload file's stream (no pose noise given) from the poses' second
+        differences as they come (the pose's angle and position sds fitted to each column's by the model's
+        :meth:`~fmscal.plant.Model.pose_sd`), again every :data:`POSE_NOISE_EVERY` poses."""
+        if self._pose_noise is None:
+            if self._var is None:
+                self._var = configuration_variance(self.model, self._noise, rows[0])
+            return
+        for row in rows:
+            self._pose_noise.add(row)
+        n = self._pose_noise.n
+        if n and (self._var is None or n // POSE_NOISE_EVERY != (n - len(rows)) // POSE_NOISE_EVERY):
+            var = self._pose_noise.variance()
+            sds = []
+            for unit in ((1.0, 0.0), (0.0, 1.0)):                     # each column's sd per unit angle, position
+                per = np.asarray(self.model.pose_sd(NoiseSpec(self._noise.wrench_sd, *unit)), dtype=float)
+                used = per > 0
+                sds.append(float(np.sqrt(np.mean(var[used] / per[used] ** 2))) if used.any() else 0.0)
+            spec = NoiseSpec(self._noise.wrench_sd, *sds)
+            self._var = configuration_variance(self.model, spec, rows[-1])
+
     def _extras_array(self):
         """The window's extras as rows (NaN where none)."""
         width = next((len(e) for e in self._extras if e is not None), 0)
@@ -1243,10 +1503,88 @@ class Compensator:
             self._last.append((found[r], rows.own[r].copy(), bool(rows.contact[r])))
 
     @staticmethod
-    def _sample_of(t, rows, r):
+    def _sample_of(t, rows, r, counts=None):
         return ContactSample(t, rows.wrench[r], rows.cov[r], bool(rows.contact[r]), float(rows.statistic[r]),
                              None if rows.offset is None else rows.offset[r],
-                             None if rows.offset_sd is None else rows.offset_sd[r])
+                             None if rows.offset_sd is None else rows.offset_sd[r],
+                             0 if counts is None else int(counts[r]))
+
+    # --- a tool change ---------------------------------------------------------------------------------------
+    def _notice(self, t, reading, motion, rows):
+        """The tool change's detector on the rows (T1)-(T8) and, where due, a re-identification (T9); the changes
+        declared by each row (None where detection is off)."""
+        if self._detector is None:
+            return None
+        counts = self._detector.add(t, reading, motion, rows)
+        if self._detector.due():
+            try:
+                self._reidentify(poses=REIDENTIFY_POSES)
+            except ToolChangeError:
+                pass                                   # not yet: more held attitudes to come
+        return counts
+
+    @property
+    def tool_changes(self):
+        """The payload's changes declared so far (:class:`fmscal.analysis._tool_change.ToolChange`), oldest first;
+        empty where detection is off. The list itself: its length counts them."""
+        return [] if self._detector is None else self._detector.events
+
+    def reidentify(self, since=None):
+        """Re-identify the payload from the held attitudes since the last tool change (T9) and go on with it.
+
+        The blocks' mean attitudes and raw readings since ``since`` (default the last declared change's time, else
+        the oldest kept, :data:`fmscal.analysis._tool_change.REIDENTIFY_BUFFER` s) are fitted statically at their
+        held segments: the new mass and centre of mass; the inertia bounded (K3) and learned (L1); the offset
+        kept. The compensation, and the detector, go on with it from the next sample.
+
+        Parameters
+        ----------
+        since : float, optional
+            s: the held attitudes from this time on.
+
+        Returns
+        -------
+        observers.payload.StaticFit
+            The fit; the last :class:`~fmscal.analysis._tool_change.ToolChange` records it.
+
+        Raises
+        ------
+        FmscalError
+            Detection is off, too few held attitudes, or a fit that does not determine the payload (one line).
+        """
+        if self._detector is None:
+            raise ToolChangeError("re-identification works on the tool change's detector: give tool_change='detect' "
+                                  "or 'reidentify' (a 6-axis reading in 3D)")
+        return self._reidentify(since)
+
+    def _reidentify(self, since=None, poses=None):
+        detector = self._detector
+        fit, table = detector.reidentify(self._setup.calibration, since, poses)
+        self._use(new_setup(self._setup, self._setup.calibration, fit))
+        if detector.events and since is None:
+            change = detector.events[-1]
+            change.reidentified, change.poses, change.reidentified_at = fit, len(table.q), self._t
+        return fit
+
+    def _use(self, st):
+        """Go on with a new payload (T9): the model, its dynamics, (C3)'s parts and the tracker made anew; the
+        offset, its covariance and intensity, the filter's windows and the stamps kept."""
+        old_parts, old = self._parts, self._tracker
+        self._setup = st
+        self.model = compensation_model(st.calibration, st.payload)
+        self._sample = _SampleDynamics(self.model)
+        self._output = _Output(self.model, self.frame, self.point, st.axes)
+        s = self._settings
+        self._parts = _Parts(st.calibration, self.model, self._noise, s["direction"], s["false_alarm"], st.cov)
+        self._parts.b = old_parts.b
+        self._tracker = _tracker(self._parts, self._noise, s["track_offset"], s["drift_intensity"], s["offset_sd"],
+                                 inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None)
+        if old is not None and old.tracks_offset and self._tracker is not None:
+            n = self._parts.n
+            self._tracker.b, self._tracker.q2, self._tracker.t = old.b.copy(), old.q2, old.t
+            self._tracker.P[:n, :n] = old.P[:n, :n]
+        self._last.clear()
+        self._detector.use(self.model, st.cov)
 
     def _fit(self, present):
         """The polynomial fitted to the samples the window holds: ``(P, c)``, the value and first two

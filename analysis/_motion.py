@@ -87,8 +87,8 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from fmscal.plant import Log
-from fmscal.plant.io import (AttitudeLog, ImuLog, JointLog, RobotKinematics, check_imu_units, difference_noise,
-                             estimate_noise)
+from fmscal.plant.io import (AttitudeLog, ImuLog, JointLog, PoseTable, RobotKinematics, check_imu_units,
+                             difference_noise, estimate_noise)
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import (ORDER, NoiseSpec, SpatialModel, edge, quaternion_multiply, rotation_matrices,
                                   rotation_matrix, sign_continuous, smoothed_state, spatial_motion)
@@ -96,7 +96,7 @@ from fmscal.observers.batch import smoothed_channels
 
 from ._calibrate import log_model_class
 
-__all__ = ["PoseMotion", "JointMotion", "ImuMotion", "Motion", "MotionError", "kinematics",
+__all__ = ["PoseMotion", "JointMotion", "ImuMotion", "HeldPoses", "Motion", "MotionError", "kinematics",
            "configuration_variance", "quaternion_from_matrix", "quaternion_to_matrix"]
 
 
@@ -374,6 +374,8 @@ class _Source:
     keyword = ""
     #: The log it compensates offline.
     log_type = None
+    #: The samples move (False: held poses, whose motion and its noise are none).
+    moves = True
     #: Its channels' noise is estimated from their differences as they come (True), or given by the noise
     #: model (False: poses, :class:`fmscal.plant.NoiseSpec`).
     estimates_noise = True
@@ -392,6 +394,10 @@ class _Source:
     def check_units(self, rows):
         """A first window of channels (rows) in the units the source takes, or a one-line error."""
 
+    def times(self, log):
+        """The rows' times, s (a table's: its row numbers)."""
+        return log.t
+
     def log_noise(self, log):
         """The readings' noise model estimated from a log (:func:`fmscal.plant.io.difference_noise`, the robust
         estimate :func:`fmscal.plant.io.estimate_noise` takes of the readings)."""
@@ -406,6 +412,9 @@ class _Source:
         """``log`` with the stream moved onto the readings' times by :attr:`latency` (module docstring)."""
         raise NotImplementedError
 
+    #: A sensor turned on the tracked frame (a payload file's mounting) is followed through the frame's motion: poses
+    #: and joint states give the tracked frame's; an IMU gives its own axes (its rotation), so it does not.
+    turns_with_mounting = True
     #: For ``~/identify_payload``: a reading without a motion sample ends the held stretch (True), or is only
     #: skipped (False: an IMU's held segments are found by their attitudes, not by a continuous stretch).
     breaks_hold = True
@@ -921,6 +930,7 @@ class ImuMotion(_Source):
         return np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([0, 0, 9.81])
 
     breaks_hold = False
+    turns_with_mounting = False
 
     def stack(self, values, model):
         """Samples ``(quaternion, rate, specific force)`` (None where none; the quaternion None where the IMU
@@ -940,14 +950,56 @@ class ImuMotion(_Source):
         return AttitudeLog(t, q, w_hat, name="the held IMU samples")
 
 
-def source(motion, latency=0.0):
+class HeldPoses(_Source):
+    """A pose table's held attitudes (:class:`fmscal.plant.io.PoseTable`): no motion, the payload's static wrench
+    at each row; the check after identifying a tool (a few new poses: does the tool vanish to the noise?). Offline
+    only; a row's "time" is its number."""
+
+    source = "held poses"
+    keyword = "pose"
+    log_type = PoseTable
+    moves = False
+
+    def check(self, model):
+        _check_spatial(model, "a pose table")
+
+    def channels(self, model):
+        return model.n_pose
+
+    def times(self, log):
+        return np.arange(len(log.w_hat), dtype=float)
+
+    def log_noise(self, log):
+        """The rows' noise: the table's standard errors where it holds them (an attitude-only log's held
+        segments), their median per channel; a table of averaged readings holds none."""
+        if log.noise is None:
+            raise MotionError(f"{log.name}: a pose table holds no noise of its rows: give noise=plant.NoiseSpec(...), "
+                              "or a payload file (it holds the reading's noise)")
+        return NoiseSpec(tuple(float(v) for v in np.median(log.noise, axis=0)))
+
+    def aligned(self, log):
+        return log
+
+    def offline(self, log, model, noise, window):
+        """``(every row, Motion)``: each held attitude at rest, its noise none."""
+        n = len(log.w_hat)
+        configuration = np.zeros((n, 7))
+        configuration[:, 3:] = log.q
+        x = _packed(model, configuration, np.zeros((n, 6)))
+        return slice(None), Motion(x, np.zeros((n, model.nv)), np.zeros(model.nv))
+
+
+def source(motion, latency=0.0, log=None):
     """The source a compensation takes: ``motion`` itself, or a :class:`PoseMotion` of ``latency`` (the
-    calibration's) where None; a pose source without its own latency takes ``latency``."""
+    calibration's) where None (:class:`HeldPoses` for a pose table); a pose source without its own latency takes
+    ``latency``."""
+    if motion is None and isinstance(log, PoseTable):
+        return HeldPoses()
     if motion is None:
         return PoseMotion(latency)
-    if not isinstance(motion, (PoseMotion, JointMotion, ImuMotion)):
-        raise MotionError(f"motion must be None (poses), a PoseMotion, a JointMotion or an ImuMotion; got "
-                          f"{type(motion).__name__}")
+    if not isinstance(motion, (PoseMotion, JointMotion, ImuMotion, HeldPoses)):
+        raise MotionError(f"motion must be None (poses), a PoseMotion, a JointMotion, an ImuMotion or HeldPoses; "
+                          f"got {type(motion).__name__}")
     if isinstance(motion, PoseMotion) and motion.latency is None:
         return PoseMotion(latency)
     return motion

@@ -9,6 +9,12 @@ gets a page of its own in the sidebar, summary first; constants (data) are docum
 package page by their ``#:`` comment and get no page. The pages are generated, never edited: a
 name added to an ``__all__`` is documented by the next build (``docs/conf.py`` calls
 :func:`write_pages`), and ``tests/test_docs.py`` checks what they list.
+
+An autosummary list shows each name's summary, the first sentence of its docstring: autosummary
+ends it at the first period followed by a space, unless the text up to it ends with one of its
+known abbreviations. The docstrings cite equations (``E of eq. (16)``, ``Eqs. (6)-(8)``) and the
+paper's figures: :data:`SUMMARY_ABBREVIATIONS` adds those, so that a summary is not cut at
+``eq.`` (``docs/conf.py`` sets autosummary's list to it).
 """
 
 import ast
@@ -25,6 +31,10 @@ TITLES = {
 }
 #: Constants whose value is too long to print on a page (a dict of scenarios, a registry).
 LONG_VALUE = 120
+#: Where a summary's first sentence does not end: autosummary's own abbreviations
+#: (``sphinx.ext.autosummary.WELL_KNOWN_ABBREVIATIONS``), then the docstrings' citations of equations and figures.
+SUMMARY_ABBREVIATIONS = ("et al.", "e.g.", "i.e.", "vs.",
+                         " eq.", "(eq.", "Eq.", " eqs.", "(eqs.", "Eqs.", " Fig.", "(Fig.", " Figs.", "(Figs.")
 
 
 def subpackages(package):

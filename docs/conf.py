@@ -6,6 +6,7 @@ short settings the test suite uses (``FMSCAL_QUICK=1``).
 """
 
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -47,6 +48,12 @@ sys.path.insert(0, str(HERE))
 from _api import write_pages  # noqa: E402
 
 write_pages(HERE / "api")
+# A summary is the docstring's first sentence: not cut at "eq." or "Fig." (docs/_api.py, SUMMARY_ABBREVIATIONS).
+import sphinx.ext.autosummary as _autosummary  # noqa: E402
+from _api import SUMMARY_ABBREVIATIONS  # noqa: E402
+
+_autosummary.WELL_KNOWN_ABBREVIATIONS = tuple(dict.fromkeys((*_autosummary.WELL_KNOWN_ABBREVIATIONS,
+                                                             *SUMMARY_ABBREVIATIONS)))
 autosummary_generate = True
 autosummary_imported_members = False
 autodoc_default_options = {"member-order": "bysource"}
@@ -87,5 +94,24 @@ def _resolve_short_names(app, env, node, contnode):
         node["reftarget"] = target
 
 
+#: A Markdown link to a notebook where the repository holds it (``../../notebooks/NAME.ipynb``: it reads on GitHub).
+_NOTEBOOK_LINK = re.compile(r"\]\(((?:\.\./)+notebooks/[\w.-]+\.ipynb)\)")
+
+
+def _notebook_links(app, docname, source):
+    """A page's links to the repository's notebooks (``notebooks/NAME.ipynb``, as on GitHub) made links to their
+    copies here (``tutorials/notebooks/NAME.ipynb``, the executed pages): one link that works in both."""
+    page = (HERE / docname).parent
+
+    def local(match):
+        target = (page / match.group(1)).resolve()
+        if target.parent != _NB_SOURCE.resolve():
+            return match.group(0)
+        return "](" + os.path.relpath(_NB_TARGET / target.name, page) + ")"
+
+    source[0] = _NOTEBOOK_LINK.sub(local, source[0])
+
+
 def setup(app):
     app.connect("missing-reference", _resolve_short_names)
+    app.connect("source-read", _notebook_links)

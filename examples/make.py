@@ -13,6 +13,9 @@ What it writes (examples/README.md says what each is for):
 - ``joints.csv``: a table of held poses whose pose columns are the joint angles of the 6-joint arm
   ``arm6.urdf`` (written by hand, not by this script), its sensor frame ``ft_sensor``; the tool of
   ``spatial-arm``, ``S = I``;
+- ``joint_log.csv`` and ``imu_log.csv``: a run of ``arm6.urdf`` (6 s at 100 Hz, every joint moving) carrying the
+  tool on ``arm.csv``'s sensor (its ``S``, offset and reading noise), pushed once at the tool point: its joint
+  angles, and what an IMU on the tool (the URDF's frame ``imu``) measured, each with the raw readings;
 - ``arm_bag/``: a ROS 2 bag (mcap) as a wrist rig records it, the walkthrough's rig
   (``notebooks/07_wrist_walkthrough.ipynb``): the arm's transform tree on ``/tf`` and ``/tf_static``, the
   sensor's ``WrenchStamped`` on ``/ft_sensor/wrench`` at 25 Hz for 12 s (as ``arm.csv``'s); the sensor reports the load
@@ -31,7 +34,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from fmscal.plant import SPATIAL_SCENARIOS, Log
-from fmscal.plant.io import RobotKinematics, simulate_table, write_bag, write_pose_table, write_tf_bag
+from fmscal.plant.io import IMU_COLUMNS, RobotKinematics, simulate_table, write_bag, write_pose_table, write_tf_bag
+from fmscal.plant.physics import rotation_matrices, sensor_wrench
 from fmscal.plant.scenarios import TOOL
 
 HERE = Path(__file__).resolve().parent
@@ -52,12 +56,78 @@ def _write_csv(path, names, rows):
 
 
 def spatial_log(out):
-    """``arm.csv`` and ``arm.truth.json``; returns the log."""
+    """``arm.csv`` and ``arm.truth.json``; returns the log and its truth."""
     scenario = ARM.with_(duration=12.0, dt=DT).with_noise_scaled(1 / np.sqrt(AVERAGED))
     log, truth, _ = scenario.generate(seed=0)
     _write_csv(out / "arm.csv", log.columns, np.column_stack([log.t, log.pose, log.w_hat]))
     truth.write(out / "arm.truth.json")
-    return log
+    return log, truth
+
+
+#: The run of the arm ``arm6.urdf`` (joint_log.csv, imu_log.csv): its sample time and length, s.
+RUN_DT, RUN_DURATION = 0.01, 6.0
+#: The push on the tool during the run: the force in the base's axes (N) at the tool point (sensor axes from the
+#: sensor's point, m), held from ``PUSH_TIMES[0]`` to ``PUSH_TIMES[1]`` s, ramped up and down over ``PUSH_RAMP`` s.
+PUSH_FORCE, PUSH_POINT, PUSH_TIMES, PUSH_RAMP = (4.0, -3.0, -6.0), (0.0, 0.0, 0.12), (3.0, 4.0), 0.3
+#: The joint angles' noise (encoders, rad), and the IMU's: its rate's (rad/s) and its specific force's (m/s^2).
+JOINT_SD, GYRO_SD, ACCEL_SD = 2e-6, 1e-3, 0.01
+
+
+def arm_run(truth, urdf=HERE / "arm6.urdf"):
+    """The arm's run: every joint moving, the tool of ``spatial-arm`` on arm.csv's sensor (its ``S``, offset and
+    noise, ``truth``), pushed once.
+
+    Returns ``t``, the joints' ``q``, ``dq``, ``ddq`` (exact; their noise is added where they are written), the
+    raw reading ``w_hat`` and the push's force ``push`` (N, 3, base axes). The reading is ``S^-1 (W_p - w_e) +
+    b + noise``: ``W_p`` the wrench the tool's motion needs (Newton-Euler, :func:`fmscal.plant.physics.
+    sensor_wrench`, from the sensor frame's motion by pinocchio), ``w_e`` the push's wrench on the tool at the
+    sensor's point.
+    """
+    t = np.arange(int(round(RUN_DURATION / RUN_DT)) + 1) * RUN_DT
+    q0 = np.array([0.2, -1.2, 1.0, -0.6, 0.8, 0.3])
+    amplitude = np.array([0.6, 0.3, 0.4, 0.9, 0.8, 1.2])
+    omega = 2 * np.pi * np.array([0.21, 0.17, 0.25, 0.31, 0.27, 0.23])
+    phase = omega * t[:, None] + np.arange(6)
+    q = q0 + amplitude * np.sin(phase)
+    dq, ddq = amplitude * omega * np.cos(phase), -amplitude * omega ** 2 * np.sin(phase)
+    pose, _, w, a, alpha = RobotKinematics(urdf, "ft_sensor").motion(q, dq, ddq)
+    R = rotation_matrices(pose[:, :4])
+    p_ddot = np.einsum("nij,nj->ni", R, a)                          # the classical acceleration, in the base's axes
+    W = np.array([sensor_wrench(pose[k, :4], w[k], alpha[k], p_ddot[k], TOOL, ARM.gravity) for k in range(len(t))])
+    up = np.clip((t - PUSH_TIMES[0]) / PUSH_RAMP, 0, 1)
+    down = np.clip((PUSH_TIMES[1] + PUSH_RAMP - t) / PUSH_RAMP, 0, 1)
+    push = np.outer(np.minimum(up, down) ** 2 * (3 - 2 * np.minimum(up, down)), PUSH_FORCE)     # a smoothstep
+    f_e = np.einsum("nji,nj->ni", R, push)                           # in the sensor's axes
+    w_e = np.c_[np.cross(PUSH_POINT, f_e), f_e]
+    rng = np.random.default_rng(11)
+    w_hat = (truth.schedule.raw_reading(t, W - w_e) + truth.offset
+             + rng.standard_normal(W.shape) * np.array(truth.noise.wrench_sd))
+    return dict(t=t, q=q, dq=dq, ddq=ddq, w_hat=w_hat, push=push)
+
+
+def joint_log(out, run):
+    """``joint_log.csv``: the run's time, joint angles (``JOINT_SD`` of noise) and raw readings."""
+    rng = np.random.default_rng(12)
+    names = ["t", *(f"q{i + 1}" for i in range(6)), "tx", "ty", "tz", "fx", "fy", "fz"]
+    joints = run["q"] + rng.normal(0, JOINT_SD, run["q"].shape)
+    _write_csv(out / "joint_log.csv", names, np.column_stack([run["t"], joints, run["w_hat"]]))
+
+
+def imu_log(out, run, urdf=HERE / "arm6.urdf"):
+    """``imu_log.csv``: the run as an IMU on the tool saw it (arm6.urdf's frame ``imu``), with the raw readings.
+
+    The IMU's orientation is its frame's in the base; its rate and specific force ``R_i^T (p_ddot_i - g)`` are
+    its frame's angular velocity and classical acceleration less gravity, in its axes (pinocchio), plus white
+    noise (``GYRO_SD``, ``ACCEL_SD``).
+    """
+    rng = np.random.default_rng(13)
+    pose, _, w, a, _ = RobotKinematics(urdf, "imu").motion(run["q"], run["dq"], run["ddq"])
+    R = rotation_matrices(pose[:, :4])
+    f = a - np.einsum("nji,j->ni", R, ARM.gravity)
+    w = w + rng.normal(0, GYRO_SD, w.shape)
+    f = f + rng.normal(0, ACCEL_SD, f.shape)
+    names = ["t", *IMU_COLUMNS, "tx", "ty", "tz", "fx", "fy", "fz"]
+    _write_csv(out / "imu_log.csv", names, np.column_stack([run["t"], pose[:, :4], w, f, run["w_hat"]]))
 
 
 def pose_table(out):
@@ -115,9 +185,12 @@ def make(out):
     out.mkdir(parents=True, exist_ok=True)
     for bag in ("arm_bag", "run_bag"):
         shutil.rmtree(out / bag, ignore_errors=True)
-    log = spatial_log(out)
+    log, truth = spatial_log(out)
     pose_table(out)
     joint_table(out)
+    run = arm_run(truth)
+    joint_log(out, run)
+    imu_log(out, run)
     wrist_bag(out)
     pose_bag(out, log)
 

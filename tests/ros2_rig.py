@@ -351,7 +351,7 @@ def tool_calibration(path):
     from fmscal.plant.scenarios._spatial import TOOL
     wrench_sd, angle_sd, position_sd = HARNESS_NOISE
     Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
-                noise=NoiseSpec(wrench_sd, angle_sd, position_sd)).save(path)
+                noise=NoiseSpec(wrench_sd, angle_sd, position_sd)).save(path, overwrite=True)   # asked twice: the same file
     return path
 
 

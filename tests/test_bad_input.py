@@ -248,7 +248,7 @@ def test_a_failed_save_leaves_the_old_calibration_intact(folder, monkeypatch):
     new = Calibration(S=2 * truth.S_at(0), payload=truth.payload, method="ekf")
     _failing_replace(monkeypatch)
     with pytest.raises(OSError):
-        new.save(folder / "cal.json")
+        new.save(folder / "cal.json", overwrite=True)
     assert (folder / "cal.json").read_bytes() == old
     assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == []      # no temporary left
 

@@ -120,6 +120,87 @@ def test_the_pages_are_written_from_the_packages(tmp_path):
     assert "write_pages(HERE / \"api\")" in (ROOT / "docs" / "conf.py").read_text()
 
 
+def summary_cuts(doc):
+    """Where autosummary would end ``doc``'s first sentence too early: each period followed by a space and a lower-case
+    letter, a digit or a parenthesis (no sentence starts so) whose text up to it does not end with one of
+    :data:`_api.SUMMARY_ABBREVIATIONS`; as ``[text up to it]``."""
+    stanza = " ".join(inspect.cleandoc(doc or "").split("\n\n")[0].split())
+    return [stanza[:m.end(1) + 1] for m in re.finditer(r"(\S+)\.\s+(?=[a-z(0-9])", stanza)
+            if not stanza[:m.end(1) + 1].endswith(_api.SUMMARY_ABBREVIATIONS)]
+
+
+def test_no_summary_is_cut_at_an_abbreviation():
+    # The rule, both ways: cut at "eq." without the list, whole with it; autosummary is given the list.
+    assert summary_cuts("E of eq. (16) on a 6x6 S. More.") == []
+    assert summary_cuts("E of ref. (16) on a 6x6 S.") == ["E of ref."]
+    assert "SUMMARY_ABBREVIATIONS" in (ROOT / "docs" / "conf.py").read_text()
+    cut = {path: summary_cuts(obj.__doc__) for path, obj in ALL_PUBLIC.items() if not _api.is_data(obj)}
+    cut = {path: where for path, where in cut.items() if where}
+    assert not cut, f"summaries autosummary would cut at an abbreviation (add it to SUMMARY_ABBREVIATIONS): {cut}"
+
+
+#: Folders the documentation's build writes (git-ignored): a link into them is broken where the pages are read as
+#: Markdown (on GitHub).
+BUILT = ("docs/_build", "docs/tutorials/notebooks", "docs/api/generated", "docs/api/plant.rst",
+         "docs/api/observers.rst", "docs/api/analysis.rst")
+
+
+def broken_links(page, text=None):
+    """The relative links of a Markdown ``page`` (code blocks, web addresses and anchors left out) that name no file
+    of the repository: missing, or in a folder the build writes. ``text``: the page's, if not its file's."""
+    built = [(ROOT / b).resolve() for b in BUILT]
+    text = re.sub(r"^```.*?^```", "", page.read_text() if text is None else text, flags=re.S | re.M)
+    links = [m.group(1) for m in re.finditer(r"\]\(([^)\s]+)\)", text)
+             if not re.match(r"[a-z]+:", m.group(1)) and not m.group(1).startswith("#")]
+    targets = [(link, (page.parent / link.split("#")[0]).resolve()) for link in links]
+    return [link for link, t in targets if not t.exists() or any(b == t or b in t.parents for b in built)]
+
+
+def test_every_relative_link_reads_as_markdown():
+    # On GitHub a link must name a file of the repository; docs/conf.py turns the links to notebooks/ into links
+    # to their executed copies for the site. The check itself first: a link into the build's copy is broken.
+    probe = "[a](../tutorials/notebooks/08_on_a_robot.ipynb) [b](../../notebooks/08_on_a_robot.ipynb) [c](nowhere.md)"
+    assert broken_links(ROOT / "docs" / "guide" / "probe.md", probe) == ["../tutorials/notebooks/08_on_a_robot.ipynb",
+                                                                         "nowhere.md"]
+    built = [(ROOT / b).resolve() for b in BUILT]
+    pages = [ROOT / "README.md", ROOT / "examples" / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    pages = [p for p in pages if not any(b in p.parents for b in built)]
+    broken = {str(page.relative_to(ROOT)): broken_links(page) for page in pages}
+    assert len(pages) > 20 and not any(broken.values()), {k: v for k, v in broken.items() if v}
+    assert "_notebook_links" in (ROOT / "docs" / "conf.py").read_text()
+
+
+def test_the_readme_rounds_the_test_suites_times_docs_speed_gives():
+    # docs/speed.md holds the measured figures (its command beside them); README rounds them to half minutes.
+    section = (ROOT / "docs" / "speed.md").read_text().split("## The test suite")[1]
+    fast = re.search(r'-m "not slow"`.*?(\d+) tests in (\d+) s', section, flags=re.S)
+    slow = re.search(r"-m slow`: (\d+) tests in (\d+) s", section)
+    readme = (ROOT / "README.md").read_text()
+
+    def minutes(seconds):
+        return f"{round(int(seconds) / 30) / 2:g} min"
+
+    assert fast and slow and int(fast.group(1)) > int(slow.group(1)) > 10
+    assert f"(about {minutes(fast.group(2))} on 2 cores)" in readme
+    assert f"(about {minutes(slow.group(2))} more on 2 cores)" in readme
+
+
+#: The widest line a code block on the documentation's front page may have: its column, at the theme's font.
+FRONT_PAGE_WIDTH = 80
+
+
+def test_the_front_pages_code_fits_its_column():
+    text = (ROOT / "docs" / "index.md").read_text()
+    code = re.findall(r"^```\w*\n(.*?)^```", text, flags=re.S | re.M)
+    lines = [line for block in code for line in block.splitlines()]
+    assert lines and max(map(len, lines)) <= FRONT_PAGE_WIDTH, max(lines, key=len)
+
+
+def test_the_front_page_names_compensation_and_the_node():
+    text = (ROOT / "docs" / "index.md").read_text()
+    assert "guide/compensation.md" in text and "guide/robot.md" in text and "fmscal ros2" in text
+
+
 def test_data_docs_are_found_and_missing_ones_are_not():
     # The '#:' reader itself, both ways: a documented constant, a package re-export, a non-name.
     assert "Times" in data_doc("fmscal.analysis._comparison.CHECKPOINTS")

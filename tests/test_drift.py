@@ -237,7 +237,7 @@ def test_cli_track_offset(arm, tmp_path, capsys):
     assert main(args + [str(tmp_path / "c.csv"), "--causal", "--track-offset", "--drift-intensity", "0.01"]) == 0
     lines = (tmp_path / "c.csv").read_text().splitlines()
     assert lines[0] == ("t,tx,ty,tz,fx,fy,fz,contact,b_tx,b_ty,b_tz,b_fx,b_fy,b_fz,"
-                        "b_sd_tx,b_sd_ty,b_sd_tz,b_sd_fx,b_sd_fy,b_sd_fz")
+                        "b_sd_tx,b_sd_ty,b_sd_tz,b_sd_fx,b_sd_fy,b_sd_fz,tool_change")
     rows = np.loadtxt(tmp_path / "c.csv", delimiter=",", skiprows=1)
     np.testing.assert_allclose(rows[-1, 8:14], truth.offset, atol=0.05)
     assert "offset at the end" in capsys.readouterr().out

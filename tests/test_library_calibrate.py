@@ -106,6 +106,18 @@ def test_a_file_name_and_joint_angles_through_a_urdf_are_read_alike(inputs):
                                                            latency=0.0).S_hat)
 
 
+def test_the_method_is_named_observer_as_on_the_command_line_and_method_stays_its_alias(inputs):
+    # --observer on the command line, observer= here (compare and sweep take observers=); method= still works
+    by_observer = calibrate("spatial.csv", TOOL, observer="least-squares", latency=0.0)
+    by_method = calibrate("spatial.csv", TOOL, method="least-squares", latency=0.0)
+    assert by_observer.method == by_method.method == "least-squares"
+    np.testing.assert_array_equal(by_observer.S_hat, by_method.S_hat)
+    assert calibrate("spatial.csv", TOOL, observer="least-squares", method="least-squares", latency=0.0).method == \
+        "least-squares"
+    with pytest.raises(OptionError, match="^observer 'ekf' and method 'least-squares' name one option"):
+        calibrate("spatial.csv", TOOL, observer="ekf", method="least-squares", latency=0.0)
+
+
 def test_read_data_tells_the_case_from_the_header(inputs):
     assert isinstance(read_data("held.csv"), PoseTable)
     assert read_data("spatial.csv").kind == "spatial" and read_data("planar.csv").kind == "planar"
@@ -121,8 +133,8 @@ def test_an_attitude_only_log_is_calibrated_from_its_held_segments(tmp_path):
     cal = calibrate(log, TOOL)
     assert cal.kind == "table" and cal.method == "static-least-squares" and cal.poses >= 6
     assert cal.notes and "held" in cal.notes[0] and cal.converged is False
-    assert cal.payload == TOOL                       # a full payload: the calibration can be saved
-    cal.save(tmp_path / "cal.json")
+    assert cal.payload == TOOL                       # a full payload: the calibration can be saved, forced
+    cal.save(tmp_path / "cal.json", force=True)
     assert Calibration.load(tmp_path / "cal.json", TOOL).kind == "table"
 
 
@@ -186,12 +198,16 @@ REFUSALS = [
      "wrench_noise is not taken on a spatial log", "--wrench-noise is not taken on a spatial log"),
     ("spatial.csv", TOOL, {"offset": False}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--no-offset"],
      "offset=False is not taken on a spatial log", "--no-offset is not taken on a spatial log"),
+    ("spatial.csv", TOOL, {"observer": "high-gain"}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--observer", "high-gain"],
+     "observer high-gain does not run on a spatial log", "--observer high-gain does not run on a spatial log"),
     ("spatial.csv", TOOL, {"method": "high-gain"}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--observer", "high-gain"],
      "method high-gain does not run on a spatial log", "--observer high-gain does not run on a spatial log"),
     ("spatial.csv", TOOL, {"gravity": (0, 0, np.inf)}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--gravity", "0", "0", "inf"],
      "gravity must be three finite numbers", "--gravity must be three finite numbers"),
     ("spatial.csv", TOOL, {"truth": "planar.truth.json"}, [*TOOL_FLAGS, *INERTIA_FLAGS, "--truth", "planar.truth.json"],
      "is the truth of a planar log; this log is spatial", "is the truth of a planar log; this log is spatial"),
+    ("held.csv", TOOL, {"observer": "least-squares"}, [*TOOL_FLAGS, "--observer", "least-squares"],
+     "observer is not taken on a pose table", "--observer is not taken on a pose table"),
     ("held.csv", TOOL, {"method": "least-squares"}, [*TOOL_FLAGS, "--observer", "least-squares"],
      "method is not taken on a pose table", "--observer is not taken on a pose table"),
     ("held.csv", TOOL, {"latency": 0.0}, [*TOOL_FLAGS, "--latency", "0"],
@@ -293,7 +309,7 @@ def test_a_planar_calibration_keeps_its_noise_model_and_a_table_its_undetermined
     back = Calibration.load("planar.json", PLANAR)
     assert back.noise == planar.noise and back.kind == "planar" and back.converged is True and back.gravity is None
     table = calibrate(read_data("held.csv"), TOOL, reading="load")
-    replace(table, forced=True).save("table.json")
+    table.save("table.json", force=True)                # unconverged: marked forced
     back = Calibration.load("table.json", TOOL)
     assert back.kind == "table" and back.converged is False and back.latency is None and back.forced
     assert np.all(np.isinf(back.S_std)) and back.undetermined == table.undetermined
@@ -344,8 +360,9 @@ def test_a_payload_file_written_with_rho_before_still_reads(inputs):
     assert _cli(["identify-payload", "table.csv", "--save", "payload.json"])[0] == 0
     saved = json.loads(Path("payload.json").read_text())
     assert {"com", "com_std"} <= set(saved) and not {"rho", "rho_std"} & set(saved)
+    # rho was a name of the first format's files only
     legacy = {("rho" + k[3:] if k.startswith("com") else k): v for k, v in saved.items()}
-    Path("legacy.json").write_text(json.dumps(legacy))
+    Path("legacy.json").write_text(json.dumps({**legacy, "format": "fmscal-payload/1"}))
     old, new = PayloadEstimate.load("legacy.json"), PayloadEstimate.load("payload.json")
     np.testing.assert_array_equal(old.com, new.com)
     np.testing.assert_array_equal(old.com_std, new.com_std)
@@ -385,7 +402,8 @@ def test_a_payload_saved_by_identify_payload_stands_for_mass_and_com(inputs):
     code, _, _ = _cli(["identify-payload", "table.csv", "--save", "payload.json"])
     assert code == 0
     saved = json.loads(Path("payload.json").read_text())
-    assert saved["format"] == "fmscal-payload/1" and saved["inertia"] is None and saved["gravity"] is None
+    assert saved["format"] == "fmscal-payload/2" and saved["inertia"] is None and saved["gravity_std_deg"] is None
+    assert saved["gravity"] == [0.0, 0.0, -9.81]                     # given, not estimated: the default
     assert abs(saved["mass"] - TOOL.mass) < 5 * saved["mass_std"] and saved["mass_std"] > 0
     code, by_file, _ = _cli(["calibrate", "held.csv", "--payload", "payload.json", "--reading", "load", "--json"])
     mass, com = repr(saved["mass"]), [repr(v) for v in saved["com"]]
@@ -420,7 +438,8 @@ def test_a_saved_payload_is_in_the_tracked_frames_axes(inputs):
     assert not np.allclose(saved["com"], fit["com"], rtol=1e-3)
     np.testing.assert_allclose(saved["gravity"], fit["gravity"], rtol=1e-12)
     estimate = PayloadEstimate.load("payload.json")
-    assert estimate.mounting is None and estimate.payload_determined
+    np.testing.assert_allclose(estimate.mounting, M, rtol=0, atol=1e-15)       # kept, with com in the tracked axes
+    assert estimate.axes == "tracked" and estimate.payload_determined
     cal = calibrate(read_data("tilted.csv"), estimate)
     np.testing.assert_allclose(cal.gravity, fit["gravity"], rtol=1e-12)
     with pytest.raises(FmscalError, match="gravity contradicts"):

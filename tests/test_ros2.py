@@ -678,7 +678,7 @@ def test_reload(request, arm, tmp_path):
             epoch = peer.replay(log.head(700))
             assert peer.wait_for(lambda: len(peer.contacts) >= 641, 10)
             before = len(peer.contacts)
-            cal.save(path)
+            cal.save(path, overwrite=True)
             ok, message = peer.call("reload", proc=proc)
             peer.replay(log.head(1500), start=700, epoch=epoch)
             path.write_text("{")

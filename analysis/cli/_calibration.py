@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from fmscal.plant import Calibration, SPATIAL_SCENARIOS, SpatialModel, file_sha256, read_readings, read_truth
-from fmscal.plant.io import AttitudeLog, PoseTable, reading_sign
+from fmscal.plant.io import AttitudeLog, NotSavedError, PoseTable, reading_sign
 from fmscal.plant.physics import MODELS
 
 from fmscal.observers import method_names
@@ -18,8 +18,9 @@ from fmscal.observers.payload import PayloadEstimate
 
 from .. import _plots
 from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, log_model_class, read_data
-from ._common import CliError, add_max_mass, flag_payload, max_mass, position_flag, positive
-from ._files import atomic_write_text, check_outputs
+from ._common import (INERTIA_METAVAR, CliError, add_max_mass, flag_payload, max_mass, position_flag, position_values,
+                      positive)
+from ._files import atomic_write_text, check_inputs, check_outputs
 from ._spatial import latency_line, print_spatial
 
 
@@ -38,14 +39,14 @@ def add_calibrate(sub):
                    help="the payload as fmscal identify-payload --save wrote it (the tracked frame's axes, and the "
                         "gravity it estimated), instead of --mass, --com and --inertia")
     p.add_argument("--mass", type=float, metavar="KG", help="the payload's mass, kg (or --payload)")
-    p.add_argument("--inertia", type=float, nargs="+", metavar="I",
+    p.add_argument("--inertia", type=float, nargs="+", metavar=INERTIA_METAVAR,
                    help="planar: I_G about the centre of mass (kg m^2); spatial: IXX IYY IZZ IXY IXZ IYZ, the "
                         "tensor about the centre of mass in sensor axes (a pose table needs it only with --save)")
-    p.add_argument("--rho", type=float, nargs="+", metavar="R",
-                   help="planar logs: RX RY, the paper's rho: the sensor's position from the centre of mass G, "
+    p.add_argument("--rho", type=float, **position_values("rho"),
+                   help="planar logs: the paper's rho: the sensor's position from the centre of mass G, "
                         "body frame, m; negative values as written")
-    p.add_argument("--com", type=float, nargs="+", metavar="C",
-                   help="spatial logs and pose tables: X Y Z, the centre of mass in the sensor frame, m (seen "
+    p.add_argument("--com", type=float, **position_values("com"),
+                   help="spatial logs and pose tables: the centre of mass in the sensor frame, m (seen "
                         "from the sensor: the opposite of a planar rho); negative values as written")
     p.add_argument("--gravity", type=float, nargs=3, metavar=("GX", "GY", "GZ"),
                    help="spatial logs: gravity in the pose frame, m/s^2 (default 0 0 -9.81)")
@@ -95,15 +96,16 @@ def add_calibrate(sub):
 
 def cmd_calibrate(args):
     """``fmscal calibrate``: :func:`fmscal.analysis.calibrate` on the file, its report printed, saved on request."""
+    inputs = [(args.log, "the log"), (args.truth, "the --truth file"), (args.payload, "the --payload file"),
+              (args.urdf, "the --urdf file")]
+    check_inputs(inputs)
     if args.save and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
     if args.plot and not args.plot.endswith(".png"):
         raise CliError(f"--plot must end in .png; got {args.plot}")
     if args.force and not args.save:
         raise CliError("--force applies to --save; give --save CAL.json too")
-    check_outputs([(args.save, "--save"), (args.plot, "--plot")],
-                  [(args.log, "the log"), (args.truth, "the --truth file"), (args.payload, "the --payload file")],
-                  overwrite=args.overwrite)
+    check_outputs([(args.save, "--save"), (args.plot, "--plot")], inputs, overwrite=args.overwrite)
     try:
         data = read_data(args.log, args.urdf, args.frame)
         table = isinstance(data, (PoseTable, AttitudeLog))
@@ -111,7 +113,7 @@ def cmd_calibrate(args):
             raise CliError("--plot is not taken on a pose table (a figure of S against time needs a log)")
         payload = _payload(args, data, table)
         truth = read_truth(args.truth) if args.truth and not table else args.truth
-        cal = calibrate(data, payload, method=args.observer, reading=args.reading, gravity=args.gravity,
+        cal = calibrate(data, payload, observer=args.observer, reading=args.reading, gravity=args.gravity,
                         latency=args.latency, max_latency=args.max_latency, offset=args.offset,
                         pose_noise=args.pose_noise, wrench_noise=args.wrench_noise, truth=truth,
                         max_mass=max_mass(args))
@@ -123,24 +125,27 @@ def cmd_calibrate(args):
         print(f"fmscal calibrate: warning: {warning}", file=sys.stderr)
     if args.plot:                 # before saving: a failing plot leaves no calibration behind
         _plot(args, data, cal, truth)
-    refusal = None if cal.converged else cal.why_unconverged
-    saved = bool(args.save) and (refusal is None or args.force)
-    if saved:
-        replace(cal, log_name=Path(args.log).name, log_sha256=file_sha256(args.log),
-                forced=refusal is not None).save(args.save)
+    saved, refused = False, None
+    if args.save:                 # the library refuses an unconverged calibration and an existing file: our flags
+        try:
+            replace(cal, log_name=Path(args.log).name, log_sha256=file_sha256(args.log)).save(
+                args.save, force=args.force, overwrite=args.overwrite)
+            saved = True
+        except NotSavedError as err:
+            refused = CliError(err.template.format(_FLAGS[err.option]))
     if args.json:
         print(cal.to_json(saved=saved))
     else:
         _print_calibration(args, data, cal, saved)
-    if args.save and refusal is not None and not args.force:
-        raise CliError(f"did not save {args.save}: {refusal}; add --force to save it anyway (marked as forced)")
+    if refused is not None:
+        raise refused
 
 
 #: The command line's flag for each keyword of :func:`fmscal.analysis.calibrate` it refuses.
-_FLAGS = {"method": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
+_FLAGS = {"observer": "--observer", "offset=False": "--no-offset", "pose_noise": "--pose-noise",
           "wrench_noise": "--wrench-noise", "latency": "--latency", "max_latency": "--max-latency", "truth": "--truth",
           "gravity": "--gravity", "reading": "--reading", "urdf and frame": "--urdf and --frame",
-          "max_mass": "--max-mass"}
+          "max_mass": "--max-mass", "force=True": "--force", "overwrite=True": "--overwrite"}
 
 
 def _payload(args, data, table):
@@ -241,15 +246,18 @@ def add_apply(sub):
                    help="the calibrated wrenches, the same columns as the readings")
     p.add_argument("--overwrite", action="store_true", help="replace an existing WRENCH.csv (never an input)")
     p.add_argument("--mass", type=float, metavar="KG", help="refuse a calibration made for another payload")
-    p.add_argument("--inertia", type=float, nargs="+", metavar="I", help="planar I_G, or the six spatial entries")
-    p.add_argument("--rho", type=float, nargs="+", metavar="R",
-                   help="planar: RX RY, the sensor's position from the centre of mass (body frame, m)")
-    p.add_argument("--com", type=float, nargs="+", metavar="C",
-                   help="spatial: X Y Z, the centre of mass in the sensor frame (m)")
+    p.add_argument("--inertia", type=float, nargs="+", metavar=INERTIA_METAVAR,
+                   help="planar I_G, or the six spatial entries")
+    p.add_argument("--rho", type=float, **position_values("rho"),
+                   help="planar: the sensor's position from the centre of mass (body frame, m)")
+    p.add_argument("--com", type=float, **position_values("com"),
+                   help="spatial: the centre of mass in the sensor frame (m)")
     p.set_defaults(func=cmd_apply)
 
 
 def cmd_apply(args):
+    inputs = [(args.calibration, "the calibration"), (args.readings, "the readings")]
+    check_inputs(inputs)
     if args.rho is not None and args.com is not None:
         raise CliError("give --rho (a planar payload) or --com (a spatial one), not both")
     position = args.rho if args.com is None else args.com
@@ -264,13 +272,13 @@ def cmd_apply(args):
         payload = flag_payload(cls, args.mass, args.inertia, position)
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
-    check_outputs([(args.out, "--out")], [(args.calibration, "the calibration"), (args.readings, "the readings")],
-                  overwrite=args.overwrite)
+    check_outputs([(args.out, "--out")], inputs, overwrite=args.overwrite)
     calibration = Calibration.load(args.calibration, payload)
     if calibration.forced:
-        print(f"fmscal apply: warning: {args.calibration} was saved with --force: its run had not converged",
+        print(f"fmscal apply: warning: {args.calibration} was saved with --force (force=True): its run had not "
+              "converged",
               file=sys.stderr)
-    elif calibration.converged is False:          # saved from Python (Calibration.save writes what it is given)
+    elif calibration.converged is False:          # a file written by hand, or by fmscal before save refused it
         print(f"fmscal apply: warning: {args.calibration} records a calibration that did not converge",
               file=sys.stderr)
     t, w_hat = read_readings(args.readings)

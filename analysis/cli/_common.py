@@ -1,4 +1,6 @@
-"""What every ``fmscal`` command shares: the user-error type and small input helpers."""
+"""What every ``fmscal`` command shares: the user-error type, the help's formatter and small input helpers."""
+
+import argparse
 
 import numpy as np
 
@@ -12,7 +14,8 @@ from fmscal.observers import METHODS
 
 from .._comparison import case_scenario
 
-__all__ = ["CliError", "flag_payload", "positive", "strict", "add_scenarios_and_observers", "check_sizes",
+__all__ = ["CliError", "Words", "HelpFormatter", "RawDescriptionHelpFormatter", "INERTIA_METAVAR", "position_values",
+           "flag_payload", "positive", "strict", "add_scenarios_and_observers", "check_sizes",
            "check_seeds", "MAX_SEEDS"]
 
 #: Most seeds a compare or sweep runs (each seed simulates every scenario).
@@ -21,6 +24,42 @@ MAX_SEEDS = 100_000
 
 class CliError(FmscalError):
     """A user error: printed as one line, exit status 2."""
+
+
+class Words(str):
+    """A metavar printed as it is written, for a flag that takes one of a few fixed counts of values.
+
+    argparse prints ``nargs="+"`` as ``V [V ...]``, which hides the count (``--inertia I [I ...]`` for one
+    number or six): a ``Words`` metavar, ``"I_G | IXX IYY IZZ IXY IXZ IYZ"``, shows every form. A flag of
+    one fixed count takes ``nargs=N`` and a tuple metavar, unless a wrong count is better told by the
+    command (``--com X Y Z``: a spatial log's, where three numbers after ``--rho`` are named as such).
+    """
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, printing a :class:`Words` metavar as it is written (usage and help alike)."""
+
+    def _format_args(self, action, default_metavar):
+        if isinstance(action.metavar, Words):
+            return str(action.metavar)
+        return super()._format_args(action, default_metavar)
+
+
+class RawDescriptionHelpFormatter(HelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """:class:`HelpFormatter` with the description and epilog printed as written (``fmscal simulate``'s lists)."""
+
+
+#: ``--inertia``'s values: one form per model, as each declares its inertia's entries (planar ``I_G``, spatial six).
+INERTIA_METAVAR = Words(" | ".join(" ".join(m.inertia_names) for m in MODELS))
+
+
+def position_values(name):
+    """``nargs`` and ``metavar`` of ``--rho`` or ``--com`` (``name``): the names the model declares, as many as it
+    declares. The count is checked by :func:`flag_payload`, not by argparse, so that the other case's flag with its
+    own count (``--rho`` given three numbers on a spatial log) is told the flag it wants, not ``unrecognized
+    arguments``."""
+    model = next(m for m in MODELS if m.payload_position == name)
+    return {"nargs": "+", "metavar": Words(" ".join(model.payload_position_names))}
 
 
 #: What each payload's position vector is, in words (the models' :attr:`~fmscal.plant.Model.payload_position`).

@@ -1,6 +1,7 @@
 """``fmscal compensate``: the wrench the environment applies to the tool, from a saved calibration and a log."""
 
 import io
+import re
 import sys
 from pathlib import Path
 
@@ -11,15 +12,19 @@ from fmscal.plant.io import IMU_COLUMNS, csv_header, read_imu_log, read_joint_lo
 from fmscal.observers.payload import PayloadEstimate
 
 from .._compensate import (CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, DRIFT_INTENSITY, FRAMES, OFFLINE_WINDOW,
-                           compensate)
+                           CompensationError, compensate)
 from .._motion import ImuMotion, JointMotion, quaternion_to_matrix
-from ._common import CliError
-from ._files import atomic_write_text, check_outputs
+from .._setup import load_setup
+from .._tool_change import TOOL_CHANGE
+from ._common import CliError, Words
+from ._files import atomic_write_text, check_inputs, check_outputs
 
 
 def add_compensate(sub):
     p = sub.add_parser("compensate", help="the contact wrench: the payload's gravity and inertia removed from a log",
-                       description="With a calibration saved by fmscal calibrate --save, remove from each reading "
+                       description="With a calibration saved by fmscal calibrate --save, or a payload file saved by "
+                                   "fmscal identify-payload --save (the sensor's own S: the identity, or "
+                                   "--calibration's), remove from each reading "
                                    "of LOG.csv the wrench the payload's own motion needs under gravity "
                                    "(Newton-Euler from its poses, from its joint angles with --urdf, or from an "
                                    "IMU on the tool): w_e = W_p - S (w_hat - b), the wrench the "
@@ -27,7 +32,10 @@ def add_compensate(sub):
                                    "(or as --output-frame and --point say). "
                                    "Writes t, the reading's columns and contact (1 where the wrench is beyond "
                                    "the noise: a chi-square test of its normalised norm).")
-    p.add_argument("calibration", metavar="CAL.json", help="a calibration saved by fmscal calibrate --save")
+    p.add_argument("setup", metavar="CAL.json|PAYLOAD.json",
+                   help="a calibration saved by fmscal calibrate --save, or a payload file saved by fmscal "
+                        "identify-payload --save (its format tells which): the tool, the offset, gravity, the "
+                        "mounting, the reading's sign and their uncertainties")
     p.add_argument("log", metavar="LOG.csv",
                    help="a log of the same sensor: poses and raw readings; with --urdf, t, the joint angles (q1..qn "
                         "or the joints' names, rad) and the readings; or an IMU log: t," + ",".join(IMU_COLUMNS)
@@ -36,7 +44,7 @@ def add_compensate(sub):
     p.add_argument("--urdf", metavar="ROBOT.urdf", help="the log's joint angles are this robot's (pinocchio): the "
                                                           "motion from its forward kinematics")
     p.add_argument("--frame", metavar="FRAME", help="the sensor's frame in the URDF (with --urdf)")
-    p.add_argument("--imu-rotation", type=float, nargs="+", metavar="V",
+    p.add_argument("--imu-rotation", type=float, nargs="+", metavar=Words("QW QX QY QZ | R11 R12 ... R33"),
                    help="an IMU log: the IMU's axes in the sensor's, as a unit quaternion QW QX QY QZ or a rotation "
                         "matrix of 9 numbers by rows (v_sensor = C v_imu); default identity")
     p.add_argument("--imu-lever-arm", type=float, nargs=3, metavar=("X", "Y", "Z"),
@@ -64,8 +72,15 @@ def add_compensate(sub):
                    help=f"--causal: where the window is read, s before the newest sample (default {CAUSAL_DELAY:g}); "
                         "at least the calibration's latency")
     p.add_argument("--payload", metavar="PAYLOAD.json",
-                   help="the tool's mass properties from fmscal identify-payload --save, in place of the "
-                        "calibration's (a tool change: S does not depend on the tool)")
+                   help="with a calibration: the tool's mass properties from fmscal identify-payload --save, in "
+                        "place of the calibration's (a tool change: S does not depend on the tool)")
+    p.add_argument("--calibration", metavar="CAL.json",
+                   help="with a payload file: the sensor's calibrated S (fmscal calibrate --save, or a maker's "
+                        "matrix saved so); default the identity, a factory-calibrated sensor")
+    p.add_argument("--tool-radius", type=float, metavar="M",
+                   help="with a payload file whose inertia its poses did not determine: the tool's radius about its "
+                        "centre of mass, m, which bounds the inertia (default twice the centre of mass's distance, "
+                        "at least 0.05)")
     p.add_argument("--on-environment", action="store_true",
                    help="write the wrench the tool applies to the environment (-w_e) instead")
     p.add_argument("--track-offset", action="store_true",
@@ -77,6 +92,13 @@ def add_compensate(sub):
                         f"one per channel (--causal default {DRIFT_INTENSITY:g} x the reading's noise sd); 'fit', "
                         "offline only and its default: that scaled to the maximum of the innovations' likelihood, "
                         "printed")
+    p.add_argument("--sd", action="store_true",
+                   help="add the columns sd_<channel>: each component's one-sigma uncertainty (the covariance's "
+                        "diagonal: the reading's noise, the motion's, the calibration's or the payload's)")
+    p.add_argument("--tool-change", choices=TOOL_CHANGE,
+                   help="a change of the payload (a part grasped): detect and report it, one line each and the column "
+                        "tool_change (the changes declared by each row), the default on a 6-axis log; 'reidentify' "
+                        "(--causal) goes on with the payload fitted to the held attitudes after each; 'off'")
     p.add_argument("--overwrite", action="store_true", help="replace an existing CONTACT.csv (never an input)")
     p.set_defaults(func=cmd_compensate)
 
@@ -122,17 +144,47 @@ def _motion_log(args):
     return read_log(args.log), None
 
 
+def _as_flags(message, args):
+    """The library's message about its ``window`` or ``delay`` keyword, naming this command's flag instead.
+
+    ``window 0.06 s is 1 samples at dt = 0.04 s; ...`` becomes ``--window 0.06 s (the default with --causal) is 1
+    samples ...``, and ``give a window of at least ...`` ``give --window of at least ...``: the user of the command
+    line is told which flag to change (a 25 Hz log needs a longer ``--window`` than the causal default). Any other
+    message is returned as it is.
+    """
+    match = re.match(r"(window|delay) ", message)
+    if match is None:
+        return message
+    keyword = match.group(1)
+    given = args.window is not None if keyword == "window" else args.delay != CAUSAL_DELAY
+    message = re.sub(r"\b(?:a |the )?(window|delay)\b", r"--\1", message)
+    if not given:
+        mode = "with --causal" if args.causal else "offline"
+        message = re.sub(r"^(--\w+ \S+ s)", rf"\1 (the default {mode})", message)
+    return message
+
+
 def cmd_compensate(args):
+    inputs = [(args.setup, "the calibration or payload file"), (args.log, "the log"),
+              (args.payload, "the --payload file"), (args.calibration, "the --calibration file"),
+              (args.urdf, "the --urdf file")]
+    check_inputs(inputs)
     if not args.out.endswith(".csv"):
         raise CliError(f"--out must end in .csv; got {args.out}")
-    inputs = [(args.calibration, "the calibration"), (args.log, "the log")]
-    if args.payload is not None:
-        inputs.append((args.payload, "the --payload file"))
     check_outputs([(args.out, "--out")], inputs, overwrite=args.overwrite)
-    calibration = Calibration.load(args.calibration)
-    if calibration.forced or calibration.converged is False:
-        print(f"fmscal compensate: warning: {args.calibration} records a calibration that did not converge",
-              file=sys.stderr)
+    setup = load_setup(args.setup)
+    payload_file = isinstance(setup, PayloadEstimate)
+    if payload_file and args.payload is not None:
+        raise CliError(f"{args.setup} is a payload file: --payload replaces a calibration's payload (give the "
+                       "calibration first, or the payload file alone)")
+    if not payload_file and (args.calibration is not None or args.tool_radius is not None):
+        raise CliError(f"--calibration and --tool-radius go with a payload file; {args.setup} is a calibration")
+    calibration = None if args.calibration is None else Calibration.load(args.calibration)
+    for cal, path in ((setup, args.setup), (calibration, args.calibration)):
+        if isinstance(cal, Calibration) and (cal.forced or cal.converged is False):
+            print(f"fmscal compensate: warning: {path} records a calibration that did not converge", file=sys.stderr)
+    if payload_file and not setup.converged:
+        print(f"fmscal compensate: warning: {args.setup} records a payload that did not converge", file=sys.stderr)
     payload = None if args.payload is None else PayloadEstimate.load(args.payload)
     log, motion = _motion_log(args)
     if not args.causal and args.delay != CAUSAL_DELAY:
@@ -152,19 +204,28 @@ def cmd_compensate(args):
                 raise CliError(f"--drift-intensity takes numbers separated by commas, or fit; got "
                                f"{args.drift_intensity}") from None
             intensity = intensity[0] if len(intensity) == 1 else intensity
-    result = compensate(calibration, log, causal=args.causal, payload=payload, window=args.window,
-                        delay=args.delay, direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
-                        track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
-                        frame=args.output_frame, point=args.point)
+    try:
+        result = compensate(setup, log, causal=args.causal, payload=payload, calibration=calibration,
+                            tool_radius=args.tool_radius, window=args.window, delay=args.delay,
+                            direction=DIRECTIONS[1] if args.on_environment else DIRECTIONS[0],
+                            track_offset=args.track_offset, drift_intensity=intensity, motion=motion,
+                            frame=args.output_frame, point=args.point, tool_change=args.tool_change)
+    except CompensationError as err:
+        raise CliError(_as_flags(str(err), args)) from None
     if not np.isfinite(result.wrench).all():
         raise CliError("the compensated wrench is not finite (overflow): the calibration's S or b is far outside "
                        "any sensor's range: nothing written")
     text = io.StringIO()
-    extra = () if result.offset is None else (*(f"b_{n}" for n in result.names),
-                                              *(f"b_sd_{n}" for n in result.names))
-    text.write(",".join(("t", *result.names, "contact", *extra)) + "\n")
+    sd = result.sd if args.sd else None
+    extra = (() if sd is None else tuple(f"sd_{n}" for n in result.names)) + (
+        () if result.offset is None else (*(f"b_{n}" for n in result.names), *(f"b_sd_{n}" for n in result.names)))
+    changes = () if result.tool_change is None else ("tool_change",)
+    text.write(",".join(("t", *result.names, "contact", *extra, *changes)) + "\n")
     for i, (t, w, c) in enumerate(zip(result.t, result.wrench, result.contact)):
-        tail = "" if not extra else "," + ",".join(repr(float(v)) for v in (*result.offset[i], *result.offset_sd[i]))
+        more = (() if sd is None else tuple(sd[i])) + (() if result.offset is None else
+                                                       (*result.offset[i], *result.offset_sd[i]))
+        tail = "" if not more else "," + ",".join(repr(float(v)) for v in more)
+        tail += "" if not changes else f",{int(result.tool_change[i])}"
         text.write(",".join(repr(float(v)) for v in (t, *w)) + f",{int(c)}{tail}\n")
     atomic_write_text(args.out, text.getvalue())
     for warning in result.warnings:
@@ -181,6 +242,10 @@ def cmd_compensate(args):
     if args.track_offset and not args.causal and intensity in (None, "fit"):
         print("drift intensity fitted (per sqrt(s)) " + ", ".join(f"{n} {v:.3g}" for n, v in
                                                                   zip(result.names, result.drift_intensity)))
+    for change in result.tool_changes:
+        print(change.describe())
+    if result.tool_change is not None and not result.tool_changes:
+        print("no tool change detected")
     if result.offset is not None:
         print("offset at the end " + ", ".join(f"{n} {v:.4g} +- {s:.2g}" for n, v, s in
                                                zip(result.names, result.offset[-1], result.offset_sd[-1])))

@@ -1,6 +1,8 @@
 """What every ``fmscal`` command checks about its files before it starts the work.
 
-An output may not be one of the command's inputs (``fmscal apply LOG --out
+A missing input is named first, before any other check of the command's options or files
+(:func:`check_inputs`): a user who mistyped a file's name is told so, not about an option that
+depends on what the file would have held. An output may not be one of the command's inputs (``fmscal apply LOG --out
 LOG`` would replace the raw readings), may not replace an existing file
 unless ``--overwrite`` is given, and must go to a folder that exists or can
 be created and that is writable. Every check runs before any computation, so
@@ -17,7 +19,7 @@ from fmscal.plant.io import (atomic_write, atomic_write_many, atomic_write_text,
 
 from ._common import CliError
 
-__all__ = ["check_outputs", "check_output_dir", "same_file", "atomic_write", "atomic_write_many",
+__all__ = ["check_inputs", "check_outputs", "check_output_dir", "same_file", "atomic_write", "atomic_write_many",
            "atomic_write_text", "claim_folder", "exclusive"]
 
 
@@ -42,6 +44,31 @@ def _writable_folder(folder, label):
         raise CliError(f"{label}: {probe} is a file, not a folder")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise CliError(f"{label}: cannot write in {probe} (permission denied)")
+
+
+def check_inputs(inputs, folder_ok=()):
+    """Refuse a missing input file, naming it and what it is: the first check a command makes.
+
+    Parameters
+    ----------
+    inputs : sequence of (str or Path, str)
+        Each input file and what it is (``"the log"``); None entries are skipped.
+    folder_ok : sequence of str
+        The ``what`` of inputs that may be folders (a ROS 2 bag).
+
+    Raises
+    ------
+    CliError
+        ``"<path>: no such file (<what>)"``, or a link to a missing file. Any other problem of the file
+        (a folder, a FIFO, its contents) is left to the reader that reads it.
+    """
+    for path, what in inputs:
+        if path is None:
+            continue
+        problem = not_a_file(path, folder_ok=what in folder_ok)
+        if problem in ("no such file", "a link to a missing file"):
+            kind = "file or folder" if what in folder_ok else "file"
+            raise CliError(f"{path}: {'no such ' + kind if problem == 'no such file' else problem} ({what})")
 
 
 def check_outputs(outputs, inputs=(), overwrite=False):

@@ -10,8 +10,8 @@ import numpy as np
 from fmscal.plant.io import RobotKinematics, atomic_write_many, format_report, import_bag
 from fmscal.plant.physics import PlanarModel, SpatialModel
 
-from ._common import CliError, strict
-from ._files import check_outputs
+from ._common import CliError, Words, strict
+from ._files import check_inputs, check_outputs
 
 
 def add_import(sub):
@@ -30,7 +30,7 @@ def add_import(sub):
                    help="the payload's PoseStamped, TransformStamped or Odometry topic")
     p.add_argument("--out", required=True, metavar="LOG.csv",
                    help="the log to write; the sidecar LOG.import.json goes beside it")
-    p.add_argument("--pose-offset", type=float, nargs="+", default=None, metavar="D",
+    p.add_argument("--pose-offset", type=float, nargs="+", default=None, metavar=Words("DX DY | DX DY DZ"),
                    help="planar DX DY: the tracked marker frame's origin relative to the payload's centre of mass, "
                         "body frame, m; with --spatial DX DY DZ: the tracked frame's origin from the sensor point, "
                         "sensor axes, m (default zeros)")
@@ -53,6 +53,7 @@ def add_import(sub):
 
 
 def cmd_import(args):
+    check_inputs([(args.bag, "the bag"), (args.urdf, "the --urdf file")], folder_ok=("the bag",))
     out = Path(args.out)
     if out.suffix != ".csv":
         raise CliError(f"--out must end in .csv; got {out}")

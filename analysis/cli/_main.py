@@ -28,8 +28,10 @@ from .._plots import plot_comparison
 from .._reproduce import output_names, reproduce
 from ._calibration import add_apply, add_calibrate
 from ._compensate import add_compensate
-from ._common import (CliError, add_jobs, add_scenarios_and_observers, check_jobs, check_seeds, check_sizes,
-                      flag_payload, position_flag, positive, strict)
+from ._export import add_export
+from ._common import (INERTIA_METAVAR, CliError, HelpFormatter, RawDescriptionHelpFormatter, add_jobs,
+                      add_scenarios_and_observers, check_jobs, check_seeds, check_sizes, flag_payload, position_flag,
+                      position_values, positive, strict)
 from ._files import (atomic_write, atomic_write_many, atomic_write_text, check_output_dir, check_outputs, claim_folder,
                      exclusive)
 from ._import import add_import
@@ -81,7 +83,7 @@ def _add_simulate(sub):
         return "\n".join(textwrap.fill(sc.description, 79, initial_indent=f"  {name:<{width}}",
                                         subsequent_indent=" " * (width + 2)) for name, sc in scenarios.items())
     p = sub.add_parser("simulate", help="simulate a scenario and write LOG.csv and LOG.truth.json",
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       formatter_class=RawDescriptionHelpFormatter,
                        description=textwrap.fill(
                            "Simulate a named scenario. Writes the log (planar t,theta,x,y,M,fx,fy; spatial "
                            "t,qw,qx,qy,qz,x,y,z,tx,ty,tz,fx,fy,fz), or with --poses N a spatial scenario's pose "
@@ -101,14 +103,14 @@ def _add_simulate(sub):
     p.add_argument("--pose-rate", type=float, metavar="HZ", help="pose measurements per second")
     p.add_argument("--drop-rate", type=float, metavar="FRAC", help="fraction of pose frames dropped")
     p.add_argument("--mass", type=float, metavar="KG", help="the payload's mass, kg (default: the scenario's)")
-    p.add_argument("--inertia", type=float, nargs="+", metavar="I",
+    p.add_argument("--inertia", type=float, nargs="+", metavar=INERTIA_METAVAR,
                    help="the payload's inertia about its centre of mass (default: the scenario's): planar I_G, "
                         "kg m^2; spatial IXX IYY IZZ IXY IXZ IYZ, kg m^2, sensor axes")
-    p.add_argument("--rho", type=float, nargs="+", metavar="R",
-                   help="planar scenarios: RX RY, rho, from the centre of mass to the sensor, body frame, m (default: "
+    p.add_argument("--rho", type=float, **position_values("rho"),
+                   help="planar scenarios: rho, from the centre of mass to the sensor, body frame, m (default: "
                         "the scenario's)")
-    p.add_argument("--com", type=float, nargs="+", metavar="C",
-                   help="spatial scenarios: X Y Z, the centre of mass in the sensor frame, m (default: the "
+    p.add_argument("--com", type=float, **position_values("com"),
+                   help="spatial scenarios: the centre of mass in the sensor frame, m (default: the "
                         "scenario's; the opposite of a planar rho)")
     p.add_argument("--offset", type=float, nargs=3, metavar=("B_M", "B_FX", "B_FY"),
                    help="planar scenarios: sensor offset b in w = S (w_hat - b), N m and N (default: the scenario's; "
@@ -370,6 +372,7 @@ class _Parser(argparse.ArgumentParser):
     """
 
     def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)          # a Words metavar printed as written
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
@@ -402,7 +405,7 @@ def build_parser():
 
 
 _COMMANDS = [_add_simulate, add_calibrate, add_apply, add_compensate, add_identify_payload, _add_reproduce,
-             _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import, add_ros2]
+             _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import, add_ros2, add_export]
 
 
 def main(argv=None):

@@ -25,8 +25,8 @@ from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, SpatialModel, inertia_m
 from fmscal.observers.payload import fit_static, identify_payload
 
 from .._calibrate import OptionError, read_data
-from ._common import CliError, add_max_mass, max_mass, strict
-from ._files import check_outputs
+from ._common import CliError, Words, add_max_mass, max_mass, strict
+from ._files import check_inputs, check_outputs
 from ._spatial import _NAMES, _spatial_truth
 
 __all__ = ["add_identify_payload", "cmd_identify_payload"]
@@ -46,7 +46,7 @@ def add_identify_payload(sub):
     p.add_argument("log", metavar="LOG.csv|TABLE.csv",
                    help="a spatial log, an attitude-only log, or a pose table (the header tells which)")
     p.add_argument("--calibration", metavar="CAL.json", help="a spatial calibration (default: S = I)")
-    p.add_argument("--gravity", nargs="+", metavar="GX GY GZ|estimate",
+    p.add_argument("--gravity", nargs="+", metavar=Words("GX GY GZ | estimate"),
                    help="gravity in the pose frame, m/s^2 (default 0 0 -9.81); 'estimate': its direction is "
                         "estimated with the payload (a tilted or wall-mounted base)")
     p.add_argument("--mounting", choices=("estimate",),
@@ -113,10 +113,12 @@ def _calibration_S(args):
 
 def cmd_identify_payload(args):
     """``fmscal identify-payload``: mass, centre of mass, inertia and offset of a spatial log or a pose table."""
+    inputs = [(args.log, "the log"), (args.calibration, "the --calibration file"), (args.truth, "the --truth file"),
+              (args.urdf, "the --urdf file")]
+    check_inputs(inputs)
     if args.save is not None and not args.save.endswith(".json"):
         raise CliError(f"--save must end in .json; got {args.save}")
-    check_outputs([(args.save, "--save")], [(args.log, "the log"), (args.calibration, "the --calibration file"),
-                                            (args.truth, "the --truth file")], overwrite=args.overwrite)
+    check_outputs([(args.save, "--save")], inputs, overwrite=args.overwrite)
     gravity, estimate_gravity = _gravity(args)
     S = _calibration_S(args)
     try:

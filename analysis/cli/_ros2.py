@@ -3,6 +3,7 @@
 import argparse
 
 from ..ros2 import NODE_NAME, spin
+from ._files import check_inputs
 
 __all__ = ["add_ros2"]
 
@@ -24,6 +25,8 @@ def add_ros2(sub):
 
 
 def cmd_ros2(args):
+    files = [args.params_file] + [v for k, v in zip(args.ros_args, args.ros_args[1:]) if k == "--params-file"]
+    check_inputs([(f, "the params file") for f in files])
     ros_args = ["--ros-args"]
     if args.params_file is not None:
         ros_args += ["--params-file", args.params_file]

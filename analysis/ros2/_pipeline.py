@@ -1008,7 +1008,7 @@ class Pipeline:
                           payload=self.payload or self.calibration.payload, date=None,
                           latency=self.latency if self.settings.source == "pose_topic" else self.calibration.latency)
         try:
-            cal.save(path)
+            cal.save(path, force=True, overwrite=True)       # ~/save rewrites save_path by design
         except Exception as err:
             return False, "save failed: " + (str(err).splitlines()[0] if str(err) else repr(err))
         return True, f"saved {path}: offset " + " ".join(f"{v:.6g}" for v in (cal.offset)) + \

@@ -8,7 +8,7 @@ from ._result import (ObserverResult, initial_calibration, split_calibration, ca
     offset_from_c, offset_std)
 from ._samples import (check_sample, pack_input)
 from ._state import (StateLayout, INPUT)
-from ._discretise import (position_increment, velocity_increment, move)
+from ._discretise import (position_increment, velocity_increment, move, start_velocity, START_WINDOW)
 from ._progress import (progress_bar, MIN_SAMPLES, EVERY)
 from ._gains import (double_pole_gains, check_gains, GainReport, SubsystemGains, sampled_poles)
 from ._glitches import (Glitches, find_glitches, bridge_glitches, reading_noise, glitch_threshold, HALF_WINDOW,

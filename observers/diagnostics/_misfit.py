@@ -139,7 +139,10 @@ def _split_statistic(w, w_hat, t, speed, wrench_sd, block):
     blocks = ((t - t[0]) // block).astype(int)
     g = int(np.unique(blocks).size)
     low, high = np.quantile(speed, [SPLIT, 1.0 - SPLIT])
-    fits = [fit_readings(w[h], w_hat[h], blocks[h], wrench_sd) for h in (speed > high, speed <= low)]
+    halves = (speed > high, speed <= low)
+    if not all(h.any() for h in halves):            # one speed throughout (a pose that never moves): no split
+        return 0.0, 0, 1.0, np.zeros((w.shape[1], w_hat.shape[1] + 1))
+    fits = [fit_readings(w[h], w_hat[h], blocks[h], wrench_sd) for h in halves]
     n_w, k = fits[0].S_aug.shape
     worst = (0.0, 0, 1.0)
     difference = fits[0].S_aug - fits[1].S_aug
@@ -156,7 +159,7 @@ def _split_statistic(w, w_hat, t, speed, wrench_sd, block):
         keep = s > 1e-10 * s[0]
         y = (u[:, keep].T @ (d / scale)) / np.sqrt(s[keep])
         statistic, dof = float(y @ y), int(keep.sum())
-        if g <= dof + 1:                        # too few blocks to estimate the covariance of d: no test
+        if dof == 0 or g <= dof + 1:            # nothing to compare, or too few blocks to estimate d's covariance
             continue
         # the covariance estimated from g blocks: Hotelling's T^2 scaled to an F (module docstring)
         p = float(f_dist.sf((g - dof) / (dof * (g - 1)) * statistic, dof, g - dof))

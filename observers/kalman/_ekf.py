@@ -10,9 +10,9 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from fmscal.plant import NoiseSpec
 from fmscal.plant.io import estimate_noise
-from fmscal.plant.numerics import BufferedCall, FmscalError, as_bool, as_positive_scalar, ops
+from fmscal.plant.numerics import BufferedCall, FmscalError, as_bool, as_finite_array, as_positive_scalar, ops
 
-from fmscal.observers.core import Estimate, Observer, log_inputs, progress_bar
+from fmscal.observers.core import Estimate, Observer, log_inputs, progress_bar, start_velocity
 from ._eiv import EivCompensation, beta_from_copy, error_variances
 from ._error_state import (_SEED, _readable, _sizes, copy_layout, eiv_copy, error_params_layout, error_state_layout,
                            output_layout, whole_error_step)
@@ -383,16 +383,29 @@ class AugmentedEKF(Observer):
         """The pose in the error state, ``difference(q(x-), pose)`` (:meth:`inject`), shape (nv,)."""
         return self.inject(self.run_data.state.xs, pose, np.zeros(self.dim_x))[0]
 
-    def reset(self, S0=None):
-        """Forget the run; the next :meth:`step` starts from ``S0`` (default identity)."""
+    def reset(self, S0=None, velocity=None):
+        """Forget the run; the next :meth:`step` starts from ``S0`` (default identity) and ``velocity``.
+
+        Parameters
+        ----------
+        S0 : array_like, shape (n_w, n_w), optional
+        velocity : array_like, shape (nv,), optional
+            The motion's velocity at the first sample, in the model's layout
+            (:meth:`fmscal.plant.Model.velocity`; in 3D ``[v (world), omega
+            (sensor axes)]``); default rest. :meth:`run` takes it from the
+            log's first poses (eq. D1, :func:`fmscal.observers.core.start_velocity`).
+        """
         super().reset(S0)
+        self._velocity0 = None if velocity is None else as_finite_array(velocity, (self.model.nv,), "velocity")
         if self.level is not None:
             self.level.reset()
 
     def _estimate(self, log, S0):
-        """The filter over the log, with the noise model told or estimated from the log."""
+        """The filter over the log, with the noise model told or estimated from the log, its motion started at
+        the velocity the first poses show (eq. D1, :func:`fmscal.observers.core.start_velocity`)."""
         run = self.run_data
         run.noise = self.noise
+        self._velocity0 = start_velocity(log, self.model)
         info = {}
         if run.noise is None:
             run.noise = estimate_noise(log)
@@ -524,9 +537,23 @@ class AugmentedEKF(Observer):
         if self.eiv is not None:
             self.eiv.reset(u.pose, model.pose_sd(noise), np.sqrt(var_w))
         self.run_data.state = FilterRun(kf=kf, var_w=var_w, s_out=s.copy(), since_pose=0.0,
-                                         q_history=[self._q_now()], xs=np.concatenate([model.rest_state(u.pose), s]),
+                                         q_history=[self._q_now()], xs=np.concatenate([self._motion0(u.pose), s]),
                                          copy=copy, rng=rng, draw=rng.standard_normal(model.n_w + model.nv),
                                          S_Q=s.reshape(model.n_w, -1)[:, :model.n_w].copy())
+
+    def _motion0(self, pose):
+        """The motion the filter starts from: at the first pose, with the velocity :meth:`_estimate` found in the
+        log (eq. D1), or at rest (a live run, :meth:`step`).
+
+        At rest on a payload already moving, the first step misses by the velocity times the step: on a 25 Hz
+        log with poses good to microradians (``examples/arm.csv``), thousands of the poses' standard deviations,
+        which the filter's first updates, linearised at that wrong motion, put into ``S`` (it diverged there).
+        ``P_0`` keeps ``v0_sd`` on the velocity: the start moves the nominal, not the prior.
+        """
+        x = self.model.rest_state(pose)
+        if self._velocity0 is None:
+            return x
+        return np.asarray(self.model.state_from(self.model.configuration(x), self._velocity0), dtype=float).ravel()
 
     def _prior(self, w_hat):
         """The noise model of the run, the prior variances of ``[S | c]`` (flat, row order) and the reading's

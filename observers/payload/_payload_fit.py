@@ -50,7 +50,7 @@ from scipy.stats import f as f_dist
 
 from fmscal.observers.batch import few_blocks, pseudo_inverse, sandwich, time_blocks, weighted_fit
 from ._coverage import cone_deg, in_words, next_poses, weak_directions
-from ._estimate import PayloadEstimate
+from ._estimate import INERTIA_ROWS, PayloadEstimate, propagate_covariance
 from ._static_fit import (ODDS, TILT_RATIO, _OFFSET_NAMES, Refit, _Model, _angle_deg, _axis, _exp, _start,
                           _tangent_basis, cone_warning, gravity_up, other_convention, rotation_check,
                           rotations_unresolved)
@@ -161,6 +161,9 @@ def identify_payload(log, S=None, gravity=GRAVITY, window=0.2, block=None, readi
         named = _check_rotations(fit, log.name, motion, y, gravity, times, S, reading, estimate_gravity,
                                  estimate_mounting)
     _check_misfit(fit, y, S is None or np.allclose(S, np.eye(6)), named, None if named else masses)
+    # what the file records: the sign, the noise the fit weighed by, the gravity it took as given
+    fit.reading, fit.noise_sd = reading, 1.0 / information.weights
+    fit.gravity_given = None if estimate_gravity else gravity
     return fit
 
 
@@ -492,16 +495,13 @@ def _report(theta, cov, S, residual_rms):
         raise FmscalError("the log does not determine the payload's mass: it holds no force that gravity or "
                           "motion explains (is the reading in N and the pose in m and unit quaternions?)")
     values = _physical(theta[:10])
-    finite = np.isfinite(np.diag(cov)[:10])
-    J = _physical_jacobian(theta[:10])
-    sub = np.where(np.outer(finite, finite), cov[:10, :10], 0.0)
-    std = np.sqrt(np.maximum(np.diag(J @ sub @ J.T), 0))
-    std[np.abs(J[:, ~finite]).max(axis=1) > 0 if (~finite).any() else np.zeros(10, dtype=bool)] = np.inf
     S_inv = np.linalg.inv(S)
-    cov_c = cov[10:, 10:]
+    T = np.zeros((16, 16))                       # (pi, c) -> (m, com, I_c, b): eq. (E1) of _estimate
+    T[:10, :10], T[10:, 10:] = _physical_jacobian(theta[:10]), S_inv
+    full = propagate_covariance(T, cov)
+    std = np.sqrt(np.maximum(np.diag(full)[:10], 0))
     b = S_inv @ theta[10:]
-    b_std = np.sqrt(np.maximum(np.diag(S_inv @ np.where(np.isfinite(cov_c), cov_c, 0) @ S_inv.T), 0))
-    b_std[~np.isfinite(np.diag(cov_c))] = np.inf
+    b_std = np.sqrt(np.maximum(np.diag(full)[10:], 0))
     warnings = []
     mass_ok = std[0] < DETERMINED * values[0]
     com_ok = np.all(std[1:4] < np.maximum(DETERMINED * np.linalg.norm(values[1:4]), 1e-3))
@@ -511,9 +511,10 @@ def _report(theta, cov, S, residual_rms):
     if not mass_ok or not com_ok:
         warnings.append("the mass and centre of mass are not determined: hold the payload at attitudes that turn "
                         "gravity through several directions in the sensor frame")
+    inertia_reason = None if inertia_ok else ("the log holds too little angular acceleration (rotate faster, or "
+                                              "about more axes)")
     if not inertia_ok:
-        warnings.append("the inertia is not determined: the log holds too little angular acceleration "
-                        "(rotate faster, or about more axes)")
+        warnings.append(f"the inertia is not determined: {inertia_reason}")
     if not offset_ok:
         warnings.append("the offset is not separated from the weight: turn gravity through more directions "
                         "in the sensor frame")
@@ -521,4 +522,5 @@ def _report(theta, cov, S, residual_rms):
                       inertia=values[4:] if inertia_ok else None, inertia_std=std[4:] if inertia_ok else None,
                       b=b, b_std=b_std, residual_rms=residual_rms, warnings=warnings,
                       converged=bool(mass_ok and com_ok and inertia_ok and offset_ok),
-                      payload_determined=bool(mass_ok and com_ok))
+                      payload_determined=bool(mass_ok and com_ok), inertia_reason=inertia_reason,
+                      cov=propagate_covariance(np.eye(16), full, () if inertia_ok else INERTIA_ROWS))

@@ -55,7 +55,7 @@ from fmscal.observers.batch import (MIN_BLOCKS, InverseDynamicsFit, correlation_
                                    sandwich)
 from ._coverage import (DETERMINED_REL, DETERMINED_COM, _OFFSET_NAMES, cone_deg as _cone, covariance, in_words,
                         next_poses, rotation as _exp)
-from ._estimate import _Rotations
+from ._estimate import INERTIA_ROWS, _Rotations, _angle_deg, _axis, propagate_covariance
 
 __all__ = ["StaticFit", "fit_static", "calibrate_table", "other_convention", "tilt_warning", "mounting_warning",
            "rotation_warning", "both_rotations_warning", "rotation_check", "Refit", "gravity_up", "TILT_RATIO",
@@ -112,7 +112,20 @@ class StaticFit(_Rotations):
         Covariance of the fitted parameters (:attr:`names` order).
     names : tuple of str
         The fitted parameters.
+    payload_cov : ndarray, shape (16, 16)
+        Covariance over :data:`fmscal.observers.payload.PAYLOAD_PARAMETERS` (eq. E1 of
+        :mod:`fmscal.observers.payload._estimate`), the inertia's rows and columns infinite: held poses do not
+        give it.
+    noise_sd, gains
+        The noise of a row the fit weighed the corrected reading by (each group's, eq. N2), and the gains
+        (:class:`fmscal.observers.payload.PayloadEstimate`).
     """
+
+    #: Held poses never give the inertia (:meth:`tracked` takes these as a log's fit has them).
+    inertia = inertia_std = None
+    inertia_reason = "held poses do not accelerate: the inertia needs angular acceleration (a log of motion)"
+    #: :attr:`noise_sd` is the noise of one row, a held pose's averaged reading.
+    noise_of = "pose"
 
     mass: float
     mass_std: float
@@ -130,6 +143,11 @@ class StaticFit(_Rotations):
     payload_determined: bool = False
     cov: np.ndarray = None
     names: tuple = ()
+    payload_cov: np.ndarray = None
+
+    def payload_covariance(self):
+        """:attr:`payload_cov`: the covariance over :data:`fmscal.observers.payload.PAYLOAD_PARAMETERS`."""
+        return self.payload_cov
 
     def to_dict(self):
         """The fields as JSON-ready numbers and lists (None where not estimated); the keys of ``identify-payload``."""
@@ -168,20 +186,6 @@ def min_poses(estimate_gravity=False, estimate_mounting=False):
     """
     p_f = 4 + 2 * bool(estimate_gravity) + 3 * bool(estimate_mounting)
     return (p_f + 2) // 3 + 1
-
-
-def _angle_deg(R):
-    """The angle of a rotation matrix, degrees."""
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
-
-
-def _axis(M):
-    """The unit axis of the rotation ``M`` (any unit vector for no rotation)."""
-    v = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
-    if np.linalg.norm(v) < 1e-12:
-        _, u = np.linalg.eigh(M + M.T)
-        return u[:, -1]
-    return v / np.linalg.norm(v)
 
 
 def _tangent_basis(d):
@@ -421,11 +425,13 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     S_inv = np.linalg.inv(S)
     b = S_inv @ c
-    b_std = np.sqrt(np.maximum(np.diag(S_inv @ np.where(np.isfinite(cov[4:10, 4:10]), cov[4:10, 4:10], 0)
-                                       @ S_inv.T), 0))
-    b_std[~np.isfinite(np.diag(cov)[4:10])] = np.inf
+    T = np.zeros((16, len(theta)))          # (m, com, c, angles) -> (m, com, I_c, b): eq. (E1) of _estimate
+    T[:4, :4], T[10:, 4:10] = np.eye(4), S_inv
+    payload_cov = propagate_covariance(T, cov, INERTIA_ROWS)
+    b_std = np.sqrt(np.maximum(np.diag(payload_cov)[10:], 0))
     out = StaticFit(mass=float(m), mass_std=float(std[0]), com=com, com_std=std[1:4], b=b, b_std=b_std,
-                    reading=reading, residual_rms=sd, cov=cov, names=model.names)
+                    reading=reading, residual_rms=sd, cov=cov, names=model.names, payload_cov=payload_cov,
+                    noise_sd=1.0 / weights, gravity_given=None if estimate_gravity else g)
     k = 10
     if estimate_gravity:
         out.gravity = g_size * d

@@ -49,18 +49,19 @@ import datetime
 import hashlib
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.numerics import FmscalError, numbers_only, short_repr
+from fmscal.plant.numerics import FmscalError, as_bool, numbers_only, short_repr
 from fmscal.plant.physics import MODELS, NoiseSpec, Payload, check_calibration
 
-from ._files import atomic_write_text, not_a_file
+from ._files import atomic_write_text, exclusive, not_a_file, not_an_output
+from ._log import _echo
 
-__all__ = ["Calibration", "CalibrationFileError", "file_sha256", "reading_sign", "FORMAT", "FORMATS", "READINGS",
-           "KINDS", "json_ready"]
+__all__ = ["Calibration", "CalibrationFileError", "NotSavedError", "file_sha256", "reading_sign", "FORMAT", "FORMATS",
+           "READINGS", "KINDS", "json_ready"]
 
 #: The format tag a calibration file is written with.
 FORMAT = "fmscal-calibration/2"
@@ -76,6 +77,23 @@ READINGS = ("reaction", "load")
 
 class CalibrationFileError(FmscalError):
     """A calibration file that cannot be used: the message names the problem."""
+
+
+class NotSavedError(FmscalError):
+    """A calibration :meth:`Calibration.save` did not write, and the keyword that would write it.
+
+    Parameters
+    ----------
+    option : str
+        ``"force=True"`` (the calibration did not converge) or ``"overwrite=True"`` (the file exists).
+    template : str
+        The message with ``{}`` where the keyword goes; ``str(err)`` names the keyword, a command line
+        puts its own flag there (``err.template.format("--force")``).
+    """
+
+    def __init__(self, option, template):
+        super().__init__(template.format(option))
+        self.option, self.template = option, template
 
 
 def file_sha256(path):
@@ -410,21 +428,52 @@ class Calibration:
         out["saved"] = bool(saved)
         return json.dumps(json_ready(out), allow_nan=False)
 
-    def save(self, path):
+    def save(self, path, *, force=False, overwrite=False):
         """Write the calibration as JSON, format ``/2``, atomically (a temporary file, then a rename).
 
-        A failure (a full disk, a crash) leaves any previous file at ``path``
-        intact: never a truncated calibration.
+        A calibration that did not converge (``converged`` False) is refused
+        unless ``force``; written with it, the file records ``"forced":
+        true`` (``fmscal apply`` warns on reading it). An existing file is
+        refused unless ``overwrite``; without it, a file that appears at
+        ``path`` while this writes is not replaced either. A failure (a full
+        disk, a crash) leaves any previous file at ``path`` intact: never a
+        truncated calibration. ``fmscal calibrate --save`` calls this with
+        ``--force`` and ``--overwrite``.
+
+        Parameters
+        ----------
+        path : str or Path
+        force : bool
+            Save a calibration that did not converge (marked as forced).
+        overwrite : bool
+            Replace a file already at ``path``.
 
         Raises
         ------
+        NotSavedError
+            Not converged without ``force``, or ``path`` exists without ``overwrite``: the message
+            names the reason and the keyword.
         FmscalError
-            No payload to record (held poses calibrated without the inertia).
+            No payload to record (held poses calibrated without the inertia), or ``path`` is a folder,
+            a FIFO, a device, a symlink loop or a link to a missing file.
         """
+        force, overwrite = as_bool(force, "force"), as_bool(overwrite, "overwrite")
         if self.payload is None:
             raise FmscalError("a calibration file records the payload: calibrate with the payload's inertia too "
                               "(a plant.SpatialPayload; held poses do not use it)")
-        atomic_write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
+        shown = _echo(str(path))
+        if self.converged is False and not force:
+            why = self.why_unconverged or "the calibration did not converge (see its warnings)"
+            raise NotSavedError("force=True", f"did not save {shown}: {why}; add {{}} to save it anyway (marked "
+                                              "as forced)")
+        problem = not_an_output(path)
+        if problem is not None:
+            raise FmscalError(f"cannot save to {shown}: it is {problem}; choose another file")
+        if os.path.lexists(path) and not overwrite:
+            raise NotSavedError("overwrite=True", f"did not save {shown}: the file exists; add {{}} to replace it")
+        record = self if self.converged is not False or self.forced else replace(self, forced=True)
+        with exclusive(not overwrite):
+            atomic_write_text(path, json.dumps(record.to_dict(), indent=1, allow_nan=False) + "\n")
 
     @classmethod
     def load(cls, path, payload=None):

@@ -20,10 +20,11 @@ from contextlib import contextmanager
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError
-from ._log import Log, LogError, _as_path, _check_finite, _check_magnitudes, _check_steps, _echo, _read_csv
+from ._log import (Log, LogError, _as_path, _check_finite, _check_magnitudes, _check_steps, _echo, _read_csv,
+                   csv_header)
 from ._pose_table import PoseTable
 
-__all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log", "csv_header"]
+__all__ = ["RobotKinematics", "joint_columns", "read_joint_data", "JointLog", "read_joint_log"]
 
 _WRENCH = ("tx", "ty", "tz", "fx", "fy", "fz")
 _OTHERS = ("t", *_WRENCH)                   # the columns of a joint log that are not joints
@@ -167,19 +168,6 @@ class RobotKinematics:
             return np.array([self.jacobian(q) for q in joints]).reshape(len(joints), 6, joints.shape[1])
         return np.array(self._pin.computeFrameJacobian(self.model, self._data, joints, self.frame_id,
                                                        self._pin.LOCAL))
-
-
-def csv_header(path):
-    """A CSV file's header line as its stripped column names (a UTF-8 byte-order mark dropped; the first 64 kB).
-
-    Raises
-    ------
-    OSError
-        The file cannot be read.
-    """
-    with open(path, "rb") as f:
-        return [h.strip() for h in f.readline(65536).decode("utf-8", errors="replace").removeprefix("\ufeff")
-                .split(",")]
 
 
 def joint_columns(header, joint_names):

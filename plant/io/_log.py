@@ -29,6 +29,13 @@ In both, empty pose cells on a row (all of them) mean no pose measurement at
 that sample; every other cell is a finite number. Time is strictly
 increasing and evenly sampled.
 
+A file may be compressed (gzip, bzip2 or xz, told by its first bytes and
+read as it is); the header, read by :func:`csv_header`, picks the case by the
+columns the models declare (:data:`fmscal.plant.physics.MODELS`), in any
+case, so that names in another case are named. Time that reads as Unix time
+in s (a clock's stamps: a date from 2000 to 2100) is taken from its first
+stamp, with a note; in ms, us or ns it is refused naming the unit.
+
 Every log, from a file or from the simulator, is validated in one place:
 :meth:`Log.__init__`. Its messages count **rows**, the samples from 1 (the
 header is not a row); the file's own checks, before any row is read, count
@@ -36,23 +43,28 @@ header is not a row); the file's own checks, before any row is read, count
 and say so.
 """
 
+import bz2
+import datetime
+import gzip
 import io
 import json
+import lzma
 import os
 import re
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from fmscal.plant.numerics import FmscalError, LogError, as_finite_array, as_number, as_positive_scalar
-from fmscal.plant.physics import (QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload, PlanarModel,
-                                  SpatialModel, SpatialPayload, check_calibration, sign_continuous,
+from fmscal.plant.physics import (MODELS, QUATERNION_TOLERANCE, CalibrationSchedule, NoiseSpec, Payload,
+                                  PlanarModel, SpatialModel, SpatialPayload, check_calibration, sign_continuous,
                                   unit_quaternions)
 from ._files import atomic_write_text, not_a_file
 
-__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "COLUMNS",
-           "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE", "unit_quaternions"]
+__all__ = ["Log", "LogError", "Truth", "read_log", "read_readings", "read_truth", "log_kind", "csv_header",
+           "COLUMNS", "SPATIAL_COLUMNS", "READING_COLUMNS", "QUATERNION_TOLERANCE", "unit_quaternions"]
 
 #: Column names of a planar log, in order.
 COLUMNS = ("t", *PlanarModel.pose_names, *PlanarModel.wrench_names)
@@ -137,6 +149,7 @@ class Log:
         if n < MIN_SAMPLES:
             raise LogError(f"{self.name}: too few rows to calibrate; need at least {MIN_SAMPLES}, got {n}")
         _check_finite(self.name, (("t", self.t), *((c, self.w_hat[:, j]) for j, c in enumerate(wrench_names))))
+        self.t, clock = _from_unix_time(self.name, self.t)
         partial = np.isnan(self.pose).any(axis=1) & ~np.isnan(self.pose).all(axis=1)
         if partial.any():
             raise LogError(f"{self.name}: row {np.argmax(partial) + 1} has some but not all of {','.join(pose_names)}; "
@@ -150,7 +163,7 @@ class Log:
         if self.has_pose.sum() < MIN_SAMPLES:
             raise LogError(f"{self.name}: too few pose measurements to calibrate; "
                            f"need at least {MIN_SAMPLES}, got {int(self.has_pose.sum())}")
-        self.notes = []
+        self.notes = [] if clock is None else [clock]
         if not self.has_pose[0]:          # a recording starts with readings before its first pose: they are dropped
             first = int(np.argmax(self.has_pose))
             self.t, self.pose, self.w_hat, self.has_pose = (a[first:] for a in (self.t, self.pose, self.w_hat,
@@ -322,13 +335,60 @@ def _check_finite(name, columns):
             raise LogError(f"{name}: column {col} has a missing, NaN or infinite value at row {_first_bad(values)}")
 
 
+#: A first stamp that reads as a date from 2000 to 2100 in Unix time (s since 1970-01-01 UTC) is a clock's,
+#: not a log's own time from its start: in s, ms, us or ns.
+_UNIX_SPAN = (946684800.0, 4102444800.0)
+_UNIX_UNITS = (("s", 1.0), ("ms", 1e3), ("us", 1e6), ("ns", 1e9))
+#: Unix time in s is taken from its first stamp when a double resolves it to this share of the time step.
+_UNIX_RESOLUTION = 1e-3
+
+
+def _unix_time(t0):
+    """``(unit, factor, date)`` where the stamp ``t0`` reads as a Unix time of 2000 to 2100 in that unit, else None."""
+    for unit, factor in _UNIX_UNITS:
+        if _UNIX_SPAN[0] <= t0 / factor <= _UNIX_SPAN[1]:
+            date = datetime.datetime.fromtimestamp(t0 / factor, datetime.timezone.utc)
+            return unit, factor, date.strftime("%Y-%m-%d %H:%M:%S UTC")
+    return None
+
+
+def _from_unix_time(name, t):
+    """``t`` (finite), taken from its first stamp where it is Unix time in s, and the note saying so (else None).
+
+    A clock's stamps (``time.time()``, a ROS header's ``sec + nanosec 1e-9``) hold the date; the log's time is
+    the same less its first stamp, which changes no step: safe where a double at the first stamp resolves a
+    thousandth of the step (:data:`_UNIX_RESOLUTION`; 2.4e-7 s near 2024: steps of 0.24 ms or more). Unix time
+    in ms, us or ns is refused naming its unit (fmscal reads s), as is a step too fine for the double.
+    """
+    found = _unix_time(float(t[0])) if len(t) else None
+    if found is None:
+        return t, None
+    unit, factor, date = found
+    if unit != "s":
+        raise LogError(f"{name}: t is Unix time in {unit} (its first stamp, {t[0]:.6g}, is {date}); fmscal reads "
+                       f"time in s: divide t by {factor:g} (Unix time in s is then taken from its first stamp)")
+    steps = np.diff(t)
+    step = float(np.median(steps)) if len(steps) else 0.0
+    resolution = float(np.spacing(t[0]))
+    if not step * _UNIX_RESOLUTION >= resolution:
+        raise LogError(f"{name}: t is Unix time in s (its first stamp is {date}), where a double resolves "
+                       f"{resolution:.2g} s, over {_UNIX_RESOLUTION:g} of the time step ({step:.3g} s): write t "
+                       "from the first stamp (t - t[0]) at the source")
+    return t - t[0], (f"{name}: t is Unix time (its first stamp, {t[0]:.6f} s, is {date}); taken from the first "
+                      "stamp, so that the log's time starts at 0")
+
+
 def _check_magnitudes(name, columns):
     """No value of each ``(column name, values)`` beyond :data:`MAX_MAGNITUDE` (NaN, a missing cell, passes; an
-    infinity does not); else a one-line :class:`LogError`."""
+    infinity does not); else a one-line :class:`LogError` (naming Unix time for a ``t`` that reads as one)."""
     for col, values in columns:
         big = np.abs(np.nan_to_num(values)) > MAX_MAGNITUDE
         if big.any():
             row = int(np.argmax(big))
+            clock = _unix_time(float(values[row])) if col == "t" else None
+            if clock is not None:
+                raise LogError(f"{name}: t holds {values[row]:.6g} at row {row + 1}: Unix time in {clock[0]} "
+                               f"({clock[2]}), not the log's time in s; write t in s from the first stamp")
             raise LogError(f"{name}: column {col} holds {values[row]:.3g} at row {row + 1}; values beyond "
                            f"{MAX_MAGNITUDE:.0e} are not measurements in s, rad, m, N m or N")
 
@@ -361,7 +421,7 @@ _NONFINITE = re.compile(r"(?i)(^|,)\s*[+-]?(nan|inf|infinity)\s*(?=,|$)", re.M)
 
 
 def read_log(path):
-    """Read a log CSV (see the module docstring for the format).
+    """Read a log CSV (see the module docstring for the format), plain or compressed (gzip, bzip2, xz).
 
     Parameters
     ----------
@@ -374,13 +434,12 @@ def read_log(path):
     Raises
     ------
     LogError
-        Missing file, missing or misnamed columns, a cell that is not a
-        number, NaN or infinite values, time not strictly increasing or not
-        evenly sampled, too few rows or pose measurements, a quaternion not
-        of unit norm.
+        Missing or empty file, a zip or zstandard archive, missing or misnamed columns (names in another case
+        named), a cell that is not a number, NaN or infinite values, time not strictly increasing or not evenly
+        sampled, too few rows or pose measurements, a quaternion not of unit norm.
     """
     path = _as_path(path, "log")
-    case = SpatialModel if _looks_spatial(path) else PlanarModel
+    case = _header_model(csv_header(path))
     frame = _read_csv(path, ("t", *case.pose_names, *case.wrench_names),
                       "only pose cells may be empty (no measurement)")
     return Log(frame["t"].to_numpy(), frame[list(case.pose_names)].to_numpy(),
@@ -388,10 +447,10 @@ def read_log(path):
 
 
 def log_kind(path):
-    """``"spatial"`` when a log file's header names the spatial columns, else ``"planar"``.
+    """The case a log file's header names, :attr:`fmscal.plant.Model.name` (``"planar"`` or ``"spatial"``).
 
     Reads the first line only; a file that is neither is left to
-    :func:`read_log` (its errors are the planar format's).
+    :func:`read_log` (its errors are then the planar format's, the default).
 
     Parameters
     ----------
@@ -406,21 +465,19 @@ def log_kind(path):
     LogError
         Not a readable file.
     """
-    return "spatial" if _looks_spatial(_as_path(path, "log")) else "planar"
+    return _header_model(csv_header(_as_path(path, "log"))).name
 
 
-def _looks_spatial(path):
-    """True when the file's header shares more columns with the spatial format than with the planar one.
+def _header_model(header):
+    """The model (:data:`fmscal.plant.physics.MODELS`) whose declared columns a header shares most, in any case.
 
     A spatial header with a column missing is still spatial, so that its error names the missing spatial
-    column; a planar header with a misnamed column stays planar (a tie is planar, the default format).
+    column, and one written in capitals too, so that its error names the capitals; a planar header with a
+    misnamed column stays planar (a tie is the first model, the planar format, the default).
     """
-    with open(path, "rb") as f:
-        first = f.readline(4096).decode("utf-8", errors="replace").removeprefix("\ufeff")
-    header = {h.strip() for h in first.split(",")}
-    spatial = {*SpatialModel.pose_names, *SpatialModel.wrench_names}
-    planar = {*PlanarModel.pose_names, *PlanarModel.wrench_names}
-    return len(header & spatial) > len(header & planar)
+    cells = {h.lower() for h in header}
+    shared = [len(cells & {c.lower() for c in ("t", *m.pose_names, *m.wrench_names)}) for m in MODELS]
+    return MODELS[int(np.argmax(shared))]
 
 
 #: Columns of a file of raw readings (``fmscal apply``); a full log has them too.
@@ -449,9 +506,8 @@ def read_readings(path):
         infinite, time not strictly increasing, no rows.
     """
     path = _as_path(path, "readings")
-    with open(path, "rb") as f:
-        first = f.readline(4096).decode("utf-8", errors="replace")
-    names = SpatialModel.wrench_names if "tx" in {h.strip() for h in first.split(",")} else _WRENCH
+    header = set(csv_header(path))
+    names = max((m.wrench_names for m in MODELS if set(m.wrench_names) <= header), key=len, default=_WRENCH)
     frame = _read_csv(path, ("t", *names), f"every t, {', '.join(names)} cell must be a number")
     t = frame["t"].to_numpy()
     w_hat = frame[list(names)].to_numpy()
@@ -515,11 +571,64 @@ def _wrong_field_count(data, n):
     return (int(bad[0]) + 1, int(fields[bad[0]])) if len(bad) else (0, n)
 
 
+#: Compressed files, told by their first bytes: the compression's name and the module that reads it (None: a
+#: format fmscal does not read, an archive of several files or a codec outside Python's standard library).
+_COMPRESSIONS = ((b"\x1f\x8b", "gzip", gzip), (b"BZh", "bzip2", bz2), (b"\xfd7zXZ\x00", "xz", lzma),
+                 (b"PK\x03\x04", "a zip archive", None), (b"\x28\xb5\x2f\xfd", "zstandard", None))
+
+
+def _read_start(path, line=False):
+    """The content of ``path`` (``line``: its first line, at most 64 kB), decompressed where it is gzip, bzip2
+    or xz (told by its first bytes, whatever its name).
+
+    Raises
+    ------
+    LogError
+        A zip archive or a zstandard file (named, with what to do), or a compressed file that does not
+        decompress.
+    OSError
+        The file cannot be read.
+    """
+    with open(path, "rb") as f:
+        magic = f.read(6)
+    name, module = next(((n, m) for start, n, m in _COMPRESSIONS if magic.startswith(start)), (None, io))
+    if name is not None and module is None:
+        raise LogError(f"{_echo(path.name)}: is {name if name.startswith('a ') else name + '-compressed'}, not a "
+                       "CSV; decompress it first (fmscal reads a CSV as it is, or gzip, bzip2 or xz-compressed)")
+    try:
+        with module.open(path, "rb") as f:
+            return f.readline(65536) if line else f.read()
+    except (OSError, EOFError, lzma.LZMAError, zlib.error) as err:
+        if name is None or isinstance(err, (FileNotFoundError, PermissionError)):
+            raise
+        raise LogError(f"{_echo(path.name)}: {name}-compressed, but it does not decompress "
+                       f"({_echo(str(err) or type(err).__name__)}): the file is truncated or damaged") from None
+
+
+def csv_header(path):
+    """A CSV file's header line as its stripped column names (a UTF-8 byte-order mark dropped; the first 64 kB).
+
+    The file may be compressed (gzip, bzip2, xz: decompressed as it is read).
+
+    Raises
+    ------
+    LogError
+        A zip archive, a zstandard file, or a compressed file that does not decompress.
+    OSError
+        The file cannot be read.
+    """
+    first = _read_start(Path(path), line=True)
+    return [h.strip() for h in first.decode("utf-8", errors="replace").removeprefix("\ufeff").split(",")]
+
+
 def _read_csv(path, required, empty_rule):
     """A CSV with the ``required`` columns, every cell a number or empty; one-line errors."""
     import pandas as pd     # heavy: only reading a CSV needs it, not importing fmscal.plant
 
-    data = path.read_bytes()
+    data = _read_start(path)
+    if not data.strip():
+        raise LogError(f"{_echo(path.name)}: the file is empty ({'0 bytes' if not data else 'only blank lines'}): "
+                       "nothing to read; a CSV with its header on the first line is expected")
     nul = data.find(b"\0")
     if nul >= 0:
         raise LogError(f"{path.name}: holds a NUL byte at offset {nul}; not a text CSV")
@@ -546,6 +655,12 @@ def _read_csv(path, required, empty_rule):
         raise LogError(f"{path.name}: column(s) {_echo(', '.join(duplicated))} appear more than once in the header "
                        f"{_echo(','.join(header))}; keep one of each")
     missing = [c for c in required if c not in header]
+    other_case = [h for h in header if h not in required and h.lower() in {c.lower() for c in missing}]
+    if other_case:
+        absent = [c for c in missing if c.lower() not in {h.lower() for h in other_case}]
+        raise LogError(f"{path.name}: column(s) {_echo(', '.join(other_case))} are named in another case; column "
+                       f"names are case-sensitive: write the header as {','.join(required)}"
+                       + (f" ({', '.join(absent)} missing too)" if absent else ""))
     if missing:
         raise LogError(f"{path.name}: missing column(s) {', '.join(missing)}; expected the header "
                        f"{','.join(required)} (got {_echo(','.join(header))})")

@@ -29,7 +29,7 @@ import numpy as np
 from fmscal.plant.numerics import FmscalError, as_finite_array
 from fmscal.plant.physics import GRAVITY, SpatialPayload, rotation_matrix
 from ._files import atomic_write_text
-from ._log import LogError, _as_path, _echo, _read_csv, unit_quaternions
+from ._log import LogError, _as_path, _echo, _read_csv, csv_header, unit_quaternions
 
 __all__ = ["PoseTable", "read_pose_table", "write_pose_table", "is_pose_table", "simulate_table",
            "AttitudeLog", "read_attitude_log", "is_attitude_log", "held_table", "simulate_attitude_log",
@@ -86,10 +86,9 @@ class PoseTable:
 
 
 def is_pose_table(path):
-    """True when a file's header is a pose table's (the spatial columns and no ``t``)."""
-    with open(path, "rb") as f:
-        first = f.readline(4096).decode("utf-8", errors="replace").removeprefix("\ufeff")
-    header = {h.strip() for h in first.split(",")}
+    """True when a file's header is a pose table's (the spatial columns and no ``t``; in any case, so that a
+    header in capitals is read as a table and told its case)."""
+    header = {h.lower() for h in csv_header(path)}
     return "t" not in header and set(TABLE_COLUMNS) <= header
 
 
@@ -222,10 +221,9 @@ class AttitudeLog:
 
 
 def is_attitude_log(path):
-    """True when a file's header is an attitude-only log's (``t``, the quaternion and the reading, no position)."""
-    with open(path, "rb") as f:
-        first = f.readline(4096).decode("utf-8", errors="replace").removeprefix("\ufeff")
-    header = {h.strip() for h in first.split(",")}
+    """True when a file's header is an attitude-only log's (``t``, the quaternion and the reading, no position;
+    in any case)."""
+    header = {h.lower() for h in csv_header(path)}
     return set(ATTITUDE_COLUMNS) <= header and not {"x", "y", "z"} & header
 
 

@@ -6,7 +6,8 @@ checks read the data against what a wrist sensor on a robot can show, and
 name the slip before an expensive fit runs on it (a log with positions in mm
 would otherwise run for minutes and return a wrong mass):
 
-- a reading channel that never changes (all zero: not connected);
+- a reading channel that never changes (all zero: not connected), and a pose
+  stream that never changes (a stalled tracker);
 - gravity's size against Earth's, :data:`EARTH_G` (``--gravity 0 0 -981`` is in cm/s^2);
 - the payload's mass against what a wrist sensor carries, :data:`MAX_WRIST_MASS`;
 - the time step against a force sensor's rate (``t`` in ms gives steps of 1 s);
@@ -19,8 +20,10 @@ would otherwise run for minutes and return a wrong mass):
   beyond :data:`MAX_LEVER_ARM` is torques in N mm;
 - the weight the force reading shows against ``m |g|`` (readings in mN);
 - the translational acceleration the positions imply against the force's
-  share of it (the mass the accelerations imply against the weight's,
-  positions in mm), and against :data:`MAX_ACCELERATION`.
+  share of it (the mass the accelerations imply against the weight's:
+  positions in mm or in cm, told by the ratio), and against :data:`MAX_ACCELERATION`;
+- the centre of mass given against a wrist's lever arm, :data:`MAX_LEVER_ARM`
+  (in mm or cm, told by its ratio to the lever arm of eq. U2).
 
 The fit of the weight in the pose frame (eq. U1): with ``R`` the attitude
 (sensor to pose frame), ``p`` the position, ``h = m rho`` and ``b`` the
@@ -43,9 +46,11 @@ import numpy as np
 
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import rotation_matrices, sign_continuous
+from ._log import LogError
+from ._noise import estimate_noise
 
-__all__ = ["UnitsError", "check_readings_change", "check_gravity", "check_mass", "check_spatial_log_units",
-           "check_table_units", "check_imu_units", "MAX_GYRO_RATE",
+__all__ = ["UnitsError", "check_readings_change", "check_poses_move", "check_gravity", "check_mass",
+           "check_spatial_log_units", "check_table_units", "check_imu_units", "MAX_GYRO_RATE",
            "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
 
 #: Earth's gravity, m/s^2; a given ``|g|`` more than :data:`_G_TOLERANCE` from it is refused.
@@ -130,14 +135,18 @@ def _heavier(limit):
 
 
 def check_mass(mass, what="the payload's mass", max_mass=None):
-    """Refuse a mass beyond what a wrist sensor carries (``max_mass``, default :data:`MAX_WRIST_MASS`), naming
-    grams.
+    """Refuse a mass that is not positive, or beyond what a wrist sensor carries (``max_mass``, default
+    :data:`MAX_WRIST_MASS`), naming grams.
 
     Raises
     ------
     UnitsError
     """
     limit = _max_mass(max_mass)
+    number = not isinstance(mass, (bool, np.bool_)) and np.ndim(mass) == 0 \
+        and np.issubdtype(np.asarray(mass).dtype, np.number)
+    if not (number and np.isfinite(mass) and mass > 0):
+        raise UnitsError(f"{what} must be a positive number of kg; got {mass!r}")
     if mass > limit:
         raise UnitsError(f"{what} is {mass:.4g} kg, beyond {_carried(limit)}: in g? give it in kg" + _heavier(limit))
 
@@ -155,6 +164,38 @@ def check_readings_change(name, w_hat, names=("tx", "ty", "tz", "fx", "fy", "fz"
         raise UnitsError(f"{name}: column(s) {', '.join(constant)} of the reading never change (every row "
                          f"{w_hat[0, names.index(constant[0])]:g}): a channel not connected or a column written "
                          "empty; check the recording")
+
+
+def check_poses_move(log, names=("tx", "ty", "tz", "fx", "fy", "fz")):
+    """Refuse a log whose every pose row is the same: its pose stream never moved, and nothing can be fitted.
+
+    A tracker that stalls repeats its last pose to the last digit, where a real one's noise changes each row;
+    the readings then say which it was: moving far beyond their noise (a channel's spread over 20 of its
+    noise standard deviations, :func:`fmscal.plant.estimate_noise`), a stalled tracker beside a moving
+    payload; else a payload at rest.
+
+    Parameters
+    ----------
+    log : plant.Log
+    names : sequence of str
+        The reading's channels, for the message.
+
+    Raises
+    ------
+    LogError
+    """
+    poses = log.pose[log.has_pose]
+    if len(poses) == 0 or np.ptp(poses, axis=0).any():
+        return
+    spread = np.ptp(log.w_hat, axis=0) / np.maximum(np.asarray(estimate_noise(log).wrench_sd), 1e-300)
+    what = f"all {len(poses)} pose rows are the same ({','.join(f'{v:g}' for v in poses[0])})"
+    if np.max(spread) > 20:
+        k = int(np.argmax(spread))
+        raise LogError(f"{log.name}: {what} while the readings move ({names[k]} spans "
+                       f"{np.ptp(log.w_hat[:, k]):.3g}): the pose stream does not move, a stalled tracker; check "
+                       "the pose source (its connection, its frame, the topic recorded)")
+    raise LogError(f"{log.name}: {what} and the readings stay within their noise: the payload was at rest "
+                   "throughout, which determines nothing; record it moving")
 
 
 def check_imu_units(name, angular_velocity, specific_force, orientation=None, dt=None):
@@ -284,12 +325,23 @@ def _conventions(name, quaternions, w_hat, fits):
                      + fit.format(f"them read {convention}") + "; move qw to the first column")
 
 
+def _unit_of(ratio, units):
+    """The unit (a key of ``units``, its factor to SI) whose factor ``ratio`` is within a factor 3 of, or None."""
+    return next((u for u, k in units.items() if k / 3 < ratio < k * 3), None)
+
+
 def _torque_and_weight(name, w_hat, c, gravity, mass, com, max_mass=None):
     """The lever arm (eq. U2) and the weight ``|c|`` (eq. U1; None where eq. U1 does not fit) against the
-    payload's: N mm torques, mN readings."""
+    payload's: a centre of mass in mm (beyond :data:`MAX_LEVER_ARM`, the unit named by its ratio to the lever
+    arm), N mm torques, mN readings."""
     rho = _lever_arm(w_hat[:, 0:3], w_hat[:, 3:6])
     arm = float(np.linalg.norm(rho))
     known = None if com is None else float(np.linalg.norm(com))
+    if known is not None and known > MAX_LEVER_ARM:
+        unit = _unit_of(known / max(arm, 1e-12), {"mm": 1e3, "cm": 1e2})
+        raise UnitsError(f"{name}: the centre of mass given is {known:.4g} m from the sensor, beyond a wrist's "
+                         f"{MAX_LEVER_ARM:g} m, where torque over force puts it {arm * 1e3:.3g} mm away: "
+                         + (f"given in {unit}? give com in m" if unit else "give com in m, in the sensor frame"))
     if arm > MAX_LEVER_ARM or (known is not None and known > 0.01 and arm > _FAR * known):
         told = f" (the payload's is {known * 1e3:.3g} mm)" if known is not None else ""
         raise UnitsError(f"{name}: the torques look like N mm, not N m: torque over force gives a lever arm of "
@@ -395,6 +447,7 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None, max_mass=
     if np.shape(log.pose)[1:] != (7,) or np.shape(log.w_hat)[1:] != (6,):
         return                                          # not a spatial log: the caller says so
     check_readings_change(log.name, log.w_hat)
+    check_poses_move(log)
     check_gravity(gravity)
     _max_mass(max_mass)
     if mass is not None:
@@ -431,7 +484,9 @@ def check_spatial_log_units(log, gravity, mass=None, com=None, S=None, max_mass=
     m_g = float(np.linalg.norm(c)) / float(np.linalg.norm(gravity))
     told = fits and abs(m_g - abs(m_a)) > 10 * m_a_std and m_g > 0
     if rms > MAX_ACCELERATION or (told and abs(m_a) < m_g / _FAR):
-        share = f"the accelerations weigh the payload {abs(m_a) / m_g:.2g} times its weight (1e-3 for mm)"
+        unit = _unit_of(m_g / abs(m_a), {"millimetres": 1e3, "centimetres": 1e2}) if told and m_a else None
+        share = f"the accelerations weigh the payload {abs(m_a) / m_g:.2g} times its weight (1e-3 for mm, 1e-2 for cm)"
         size = f"their rms acceleration is {rms:.3g} m/s^2 (a robot's stays under {MAX_ACCELERATION:g})"
         why = "; ".join([*([size] if rms > MAX_ACCELERATION else []), *([share] if told else [])])
-        raise UnitsError(f"{log.name}: x, y, z look like millimetres, not metres: {why}; convert x, y, z to m")
+        raise UnitsError(f"{log.name}: x, y, z look like {unit or 'millimetres or centimetres'}, not metres: {why}; "
+                         "convert x, y, z to m")

@@ -168,6 +168,15 @@ class SpatialPayload:
         return np.r_[self.mass, self.mass * np.asarray(self.com),
                      I_O[0, 0], I_O[1, 1], I_O[2, 2], I_O[0, 1], I_O[0, 2], I_O[1, 2]]
 
+    @classmethod
+    def from_inertial_parameters(cls, pi):
+        """The payload of ``pi = (m, h, I_O)`` (:attr:`inertial_parameters`): ``com = h / m``,
+        ``I_c = I_O + m [com]x^2``. Two bodies held together are the payload of their parameters' sum."""
+        pi = as_finite_array(pi, (10,), "pi")
+        com = pi[1:4] / pi[0] if pi[0] > 0 else pi[1:4]
+        r = skew(com)
+        return cls(float(pi[0]), inertia_matrix(pi[4:]) + pi[0] * r @ r, com)
+
     def to_dict(self):
         """Return ``{"mass", "inertia", "com"}`` (inertia as the six entries) for JSON files."""
         return {"mass": self.mass, "inertia": list(self.inertia), "com": list(self.com)}

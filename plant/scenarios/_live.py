@@ -14,6 +14,10 @@ the payload, :mod:`fmscal.plant.scenarios`); on top of a log of free motion:
 and :func:`drift_contact_log` puts them together as issue 38's drift scenario does: a drift of up to 2 N and
 0.05 N m with a time constant of 15 s, and a 15 N contact of 2 s at 30 s.
 
+A **grasp** (:func:`with_grasp`) changes the payload itself: the scenario drawn twice with one seed (one motion,
+one sensor, one noise), with its tool and with the tool holding a part, the readings passing from the first to the
+second over :data:`GRASP_RAMP` (the part's weight taken up as it lifts off).
+
 Every function here takes the readings in the toolkit's convention, ``reading="reaction"`` (the wrench the
 mount applies to the payload, as the scenarios write them): the contact is subtracted and the drift added
 with that sign. A log of a sensor that reads the other way (``"load"``, :func:`fmscal.plant.io.reading_sign`
@@ -24,14 +28,17 @@ import numpy as np
 
 from fmscal.plant.io import Log
 from fmscal.plant.numerics import FmscalError
+from fmscal.plant.physics import SpatialPayload
 
 __all__ = ["same_rig", "contact_wrench", "with_contact", "with_push", "with_drift", "drift_contact_log",
-           "DRIFT_SIZE", "DRIFT_TAU"]
+           "with_grasp", "DRIFT_SIZE", "DRIFT_TAU", "GRASP_RAMP"]
 
 #: The drift's size per channel of a 6-axis reading (tx, ty, tz in N m; fx, fy, fz in N): issue 38's scenario.
 DRIFT_SIZE = (0.05, 0.05, 0.05, 2.0, 2.0, 2.0)
 #: The drift's time constant, s.
 DRIFT_TAU = 15.0
+#: A grasp's duration, s: the part's weight taken up linearly over it.
+GRASP_RAMP = 0.1
 
 
 class ScenarioInputError(FmscalError):
@@ -200,3 +207,35 @@ def drift_contact_log(log, S, *, size=DRIFT_SIZE, tau=DRIFT_TAU, contact=None, c
         out, w = with_push(out, S, push, *push_at)
         applied += w
     return out, change, applied
+
+
+def with_grasp(scenario, seed, part, at, ramp=GRASP_RAMP):
+    """A log of a spatial ``scenario`` whose tool grasps ``part`` at ``at`` s (module docstring).
+
+    Parameters
+    ----------
+    scenario : plant.SpatialScenario
+    seed : int
+        As for its :meth:`~fmscal.plant.SpatialScenario.generate`: both draws share it.
+    part : plant.SpatialPayload
+        The part, its centre of mass and inertia in the sensor's frame.
+    at, ramp : float
+        The grasp's start and duration, s.
+
+    Returns
+    -------
+    log : plant.Log
+    truth : plant.Truth
+        The tool's (``S``, the offset, the noise).
+    total : plant.SpatialPayload
+        The tool holding the part: the payload of their inertial parameters' sum.
+    """
+    part = SpatialPayload.check(part, "with_grasp")
+    if not (isinstance(ramp, (int, float)) and ramp > 0):
+        raise ScenarioInputError(f"ramp must be a positive number of seconds; got {ramp!r}")
+    total = SpatialPayload.from_inertial_parameters(scenario.payload.inertial_parameters + part.inertial_parameters)
+    before, truth, _ = scenario.generate(seed)
+    after, _, _ = scenario.with_(payload=total).generate(seed)
+    s = np.clip((before.t - at) / ramp, 0.0, 1.0)[:, None]
+    return (Log(before.t, before.pose, (1 - s) * before.w_hat + s * after.w_hat, name=f"{before.name}-grasp"),
+            truth, total)
