@@ -351,7 +351,22 @@ def tool_calibration(path):
     from fmscal.plant.scenarios._spatial import TOOL
     wrench_sd, angle_sd, position_sd = HARNESS_NOISE
     Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
-                noise=NoiseSpec(wrench_sd, angle_sd, position_sd)).save(path, overwrite=True)   # asked twice: the same file
+                noise=NoiseSpec(wrench_sd, angle_sd, position_sd)).save(path, overwrite=True)     # asked twice
+    return path
+
+
+def tool_payload(path):
+    """The harness's tool as ``fmscal identify-payload --save`` writes it (``fmscal-payload``), saved at ``path``: the
+    UR5's tool (``TOOL``) on a sensor with ``S = I``, no offset, gravity down the URDF's base z, the harness's noise
+    of a sample; its mass and centre of mass with the sds a few held poses give, the inertia undetermined (held
+    poses never show it)."""
+    from fmscal.observers.payload import PayloadEstimate
+    from fmscal.plant.scenarios._spatial import TOOL
+    sd = np.asarray(HARNESS_NOISE[0], dtype=float)
+    PayloadEstimate(mass=TOOL.mass, mass_std=2e-3, com=np.array(TOOL.com), com_std=np.full(3, 3e-4), inertia=None,
+                    inertia_std=None, b=np.zeros(6), b_std=sd / 10, residual_rms=sd, converged=True,
+                    payload_determined=True, gravity_given=np.array([0.0, 0.0, -9.81]), reading="reaction",
+                    noise_sd=sd, noise_of="sample", inertia_reason="held poses do not show the inertia").save(path)
     return path
 
 

@@ -205,8 +205,9 @@ def test_a_missing_calibration_exits_with_one_line():
     """``fmscal ros2`` without a calibration: exit status 2 and one line on stderr, no traceback."""
     done = _run(*node_command("pose_topic:=/ft_sensor/pose")[1:])
     assert done.returncode == 2
-    assert done.stderr.strip() == ("fmscal ros2: error: parameter calibration is required: a file saved by fmscal "
-                                   "calibrate --save (--ros-args -p calibration:=CAL.json)")
+    assert done.stderr.strip() == ("fmscal ros2: error: parameter calibration or payload is required: a file saved "
+                                   "by fmscal calibrate --save (--ros-args -p calibration:=CAL.json), or by fmscal "
+                                   "identify-payload --save (-p payload:=tool.json)")
 
 
 def test_without_rclpy_one_line_names_the_install(monkeypatch, capsys):
@@ -569,11 +570,12 @@ def test_identify_payload_from_an_imu_over_ros(request, tmp_path):
         try:
             peer.wait_for_node(proc)
             epoch = peer.replay_rows(t, w_hat, oriented, rate=4.0)
-            assert peer.wait_for(lambda: len(peer.contacts) >= len(t) - 20, 10), (len(peer.contacts), len(t))
+            assert peer.wait_for(lambda: len(peer.contacts) >= len(t) - 20, 120), (len(peer.contacts), len(t))
             ok, message = peer.call("identify_payload", proc=proc)
             more = t[-1] + 0.004 + np.arange(250) * 0.004
+            before = len(peer.contacts)
             peer.replay_rows(more, w_hat[:250], unoriented, epoch=epoch)
-            time.sleep(0.3)
+            assert peer.wait_for(lambda: len(peer.contacts) >= before + 200, 120), (len(peer.contacts), before)
             refused, why = peer.call("identify_payload", proc=proc)
         finally:
             peer.close()

@@ -253,19 +253,23 @@ class Run:
     fates: dict
     live: list
     epochs: list = field(default_factory=list)
+    then: object = None
 
 
-def _run(request, source, case, tmp_path):
-    """Start the node, run the case's sender (twice for a kill), take everything; a :class:`Run`."""
+def _run(request, source, case, tmp_path, files=None, then=None):
+    """Start the node, run the case's sender (twice for a kill), take everything; a :class:`Run`. ``files``: the
+    node's calibration or payload parameters (default the harness's calibration); ``then(listener)``, called
+    once every output has come, before the node stops: its value is the run's ``then``."""
     domain = domain_id(request.node.name)
-    cal = tool_calibration(tmp_path / "cal.json")
+    files = (f"calibration:={tool_calibration(tmp_path / 'cal.json')}",) if files is None else files
+    after = None
     plan = dict(domain=domain, source=source, rate=case.rate, duration=case.duration, seed=3, faults=case.faults)
     hog = CpuHog() if case.hog else None
     if hog is not None:
         hog.__enter__()
     try:
         depth = () if any(a.startswith("queue_depth") for a in case.node_args) else (f"queue_depth:={DEPTH}",)
-        with running_node(domain, f"calibration:={cal}", "qos:=reliable", *source_parameters(source), *depth,
+        with running_node(domain, *files, "qos:=reliable", *source_parameters(source), *depth,
                           *case.node_args) as proc:
             listener = Listener(domain)
             try:
@@ -288,13 +292,14 @@ def _run(request, source, case, tmp_path):
                 t, wrench, sd, flagged = listener.outputs(epoch)
                 fates = listener.fates(epoch)
                 messages, inputs, live = listener.messages(0), listener.messages(1), listener.messages(2)
+                after = None if then is None else then(listener)
             finally:
                 listener.close()
             log = node_log(proc)
     finally:
         if hog is not None:
             hog.__exit__(None, None, None)
-    return Run(t, wrench, sd, flagged, status, messages, inputs, log, sent, alive, fates, live, epochs)
+    return Run(t, wrench, sd, flagged, status, messages, inputs, log, sent, alive, fates, live, epochs, after)
 
 
 def _stamps(case):
@@ -485,7 +490,8 @@ def _feed(listener, domain, plan, case_stamps):
     """Run a sender of ``plan`` and wait until the node has taken each of its stamps."""
     sender_result(start_sender(plan), 300)
     assert listener.wait_for(lambda: (s := listener.status()) is not None and "received" in s and
-                             int(s["received"]) + int(s["lost"]) >= case_stamps and int(s["backlog"]) == 0, 300)
+                             int(s["received"]) + int(s["lost"]) >= case_stamps and int(s["backlog"]) == 0, 300), \
+        {k: v for k, v in (listener.status() or {}).items() if not k.startswith("offset")}
 
 
 @pytest.mark.slow
@@ -541,3 +547,33 @@ def _alive(pid):
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except FileNotFoundError:
         return False
+
+
+# --- a payload file alone (no calibration: S the identity) --------------------------------------------------------
+def test_the_node_runs_from_a_payload_file_alone(request, tmp_path):
+    """``-p payload:=tool.json`` with no calibration (the everyday job: a factory-calibrated sensor, a tool from
+    a few held poses): every output within 5 sd, rms z in [0.7, 1.4], each reading counted; the inertia the file
+    lacks bounded and said; ``~/identify_payload`` then fits the held motion, and ``~/save`` writes a payload
+    file (``fmscal-payload``, as ``fmscal identify-payload --save``) that the node and the library read back."""
+    from fmscal.analysis._setup import load_setup
+    from fmscal.observers.payload import PayloadEstimate
+    from fmscal.plant.scenarios._spatial import TOOL
+    from ros2_rig import tool_payload
+    path, saved = tool_payload(tmp_path / "tool.json"), tmp_path / "saved.json"
+    case = Case([], duration=4.0)
+
+    def services(listener):
+        return listener.call("identify_payload", 300), listener.call("save")
+    run = _run(request, "pose", case, tmp_path, files=(f"payload:={path}", f"save_path:={saved}"), then=services)
+    _check(run, case, "pose")
+    assert re.search(r"payload \S*tool\.json \(S the identity: no calibration\)", run.log), run.log[-2000:]
+    assert "the payload's inertia was not determined (held poses)" in run.log
+    (identified, said), (wrote, written) = run.then
+    assert identified, said
+    mass = float(re.search(r"mass (\S+) \+- (\S+) kg", said).group(1))
+    assert abs(mass - TOOL.mass) < 0.01 * TOOL.mass, said
+    assert wrote and written.startswith(f"saved {saved} (a payload file)"), written
+    estimate = load_setup(saved)
+    assert isinstance(estimate, PayloadEstimate) and estimate.mass == pytest.approx(mass, rel=1e-3)
+    np.testing.assert_allclose(estimate.com, TOOL.com, atol=2e-3)
+    assert estimate.inertia is not None and estimate.inertia_std is not None      # the motion determined it

@@ -266,7 +266,7 @@ class CompensatorNode:
         self.log.info(f"compensating {self._wrench_sub.topic_name} with the motion of "
                       f"{self._motion_sub.topic_name} into {self.contact_pub.topic_name} "
                       f"(the wrench {'on the tool' if s.direction == 'on_tool' else 'on the environment'}, "
-                      f"{s.output_frame} frame; flags on {self.flag_pub.topic_name}); calibration {s.calibration}")
+                      f"{s.output_frame} frame; flags on {self.flag_pub.topic_name}); {self.pipeline.source}")
         for warning in self.pipeline.warnings:
             self.log.warning(warning)
 

@@ -44,9 +44,15 @@ class Parameter:
 
 #: Every parameter the node declares, in the order the guide's table lists them.
 PARAMETERS = (
-    Parameter("calibration", "string", None, "required: a calibration saved by fmscal calibrate --save"),
-    Parameter("payload", "string", "", "a payload.json from fmscal identify-payload --save, in place of the "
-              "calibration's payload (a tool change); empty: the calibration's"),
+    Parameter("calibration", "string", None, "a calibration saved by fmscal calibrate --save; unset: the payload "
+              "file's sensor, S the identity (payload is then required)"),
+    Parameter("payload", "string", "", "a payload file from fmscal identify-payload --save: alone, the compensation "
+              "runs on it (S the identity; its offset, gravity, mounting, sign and noise; its uncertainty in the "
+              "output's covariance); with calibration, in place of the calibration's payload (a tool change); "
+              "empty: the calibration's"),
+    Parameter("tool_radius", "double", None, "m, payload: the tool's radius about its centre of mass, which bounds "
+              "an inertia the payload file does not hold (held poses never determine it); unset: twice the centre "
+              "of mass's distance from the sensor, at least 5 cm"),
     Parameter("wrench_topic", "string", "/ft_sensor/wrench", "geometry_msgs/WrenchStamped in: the raw reading"),
     Parameter("pose_topic", "string", "", "geometry_msgs/PoseStamped in: the sensor frame's pose (or the tracked "
               "frame's, with pose_to_sensor_*); one motion source of three"),
@@ -111,7 +117,8 @@ PARAMETERS = (
               "the motion is stale (the reading is then not compensated)"),
     Parameter("saturation", "double_array", None, "the raw reading's range per channel (one value or one per "
               "channel, the reading's units): a reading at or beyond it is not compensated; unset: not checked"),
-    Parameter("save_path", "string", "", "~/save: where the calibration is written; empty: ~/save refuses"),
+    Parameter("save_path", "string", "", "~/save: where the calibration is written (with a payload file alone: a payload "
+              "file); empty: ~/save refuses"),
     Parameter("identify_buffer", "double", 120.0, "s, the motion and readings ~/identify_payload keeps, the newest"),
     Parameter("diagnostics_period", "double", 1.0, "s between two diagnostics on /diagnostics"),
     Parameter("debug_latency", "bool", False, "publish ~/latency (std_msgs/Float64MultiArray per output: s from "
@@ -172,13 +179,19 @@ def settings(values):
     Raises
     ------
     Ros2Error
-        One line naming the parameter: the calibration missing, not exactly one motion source, a choice not
-        among its options, a number out of its range.
+        One line naming the parameter: neither a calibration nor a payload file, not exactly one motion source, a
+        choice not among its options, a number out of its range.
     """
     values = dict(values)
-    if not values.get("calibration"):
-        raise Ros2Error("parameter calibration is required: a file saved by fmscal calibrate --save "
-                        "(--ros-args -p calibration:=CAL.json)")
+    if not values.get("calibration") and not values.get("payload"):
+        raise Ros2Error("parameter calibration or payload is required: a file saved by fmscal calibrate --save "
+                        "(--ros-args -p calibration:=CAL.json), or by fmscal identify-payload --save (-p "
+                        "payload:=tool.json)")
+    radius = values.get("tool_radius")
+    if radius is not None and not (np.isfinite(radius) and radius > 0):
+        raise Ros2Error(f"parameter tool_radius must be a positive number of metres; got {radius!r}")
+    if radius is not None and not values.get("payload"):
+        raise Ros2Error("parameter tool_radius bounds a payload file's inertia: set payload too")
     given = [name for name in MOTION_SOURCES if values.get(name)]
     if len(given) != 1:
         raise Ros2Error(f"give exactly one motion source of {', '.join(MOTION_SOURCES)}; got "

@@ -62,6 +62,7 @@ from fmscal.plant.physics import quaternion_multiply
 from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload
 
 from .._compensate import TARE_FALSE_REFUSAL, TARE_WINDOW, Compensator, compensation_model
+from .._setup import load_setup, setup
 from .._motion import ImuMotion, JointMotion, PoseMotion, quaternion_from_matrix, quaternion_to_matrix
 from ._parameters import Ros2Error
 
@@ -94,7 +95,7 @@ SNAP_EVERY = 0.01
 MIN_HELD = 1.0
 
 
-_WAIT, _GAP, _KEEP = object(), object(), object()
+_WAIT, _GAP = object(), object()
 #: A block size the compensator's warm-up runs through (its casadi map built before the first backlog).
 _BLOCK = 40
 
@@ -150,15 +151,29 @@ def state_of(snapshot, now, stale_timeout):
 
 
 def _load(settings):
-    """The calibration (as saved), the payload replacing its own (or None), and the latency in use."""
-    calibration = Calibration.load(settings.calibration)
-    payload = None
-    if settings.payload:                              # the model's payload (refused here: no inertia, another case)
-        payload = compensation_model(calibration, PayloadEstimate.load(settings.payload)).payload
+    """What the compensation runs on (:func:`fmscal.analysis.setup`): a calibration; a payload file alone, ``S`` the
+    identity (K1); or both, the file's payload in place of the calibration's. The :class:`~fmscal.analysis.Setup`,
+    the payload file's estimate (None without one), and the latency in use."""
+    calibration = estimate = None
+    if settings.calibration:
+        calibration = load_setup(settings.calibration)
+        if not isinstance(calibration, Calibration):
+            raise Ros2Error(f"parameter calibration: {settings.calibration} is a payload file; give it as payload "
+                            f"(-p payload:={settings.calibration})")
+    if settings.payload:
+        estimate = load_setup(settings.payload)
+        if not isinstance(estimate, PayloadEstimate):
+            raise Ros2Error(f"parameter payload: {settings.payload} is a calibration (fmscal calibrate --save); give "
+                            f"it as calibration (-p calibration:={settings.payload})")
+    if calibration is None:
+        st = setup(estimate, tool_radius=settings.tool_radius)
+    else:
+        st = setup(calibration, estimate, tool_radius=settings.tool_radius)
+    compensation_model(st.calibration, st.payload)            # the payload's case checked now, in one line
     # the calibration's latency is its pose stream's: a joint-state or an IMU stream has its own (the parameter)
-    own = (calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
+    own = (st.calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
     latency = settings.latency if settings.latency is not None else own
-    return calibration, payload, latency
+    return st, estimate, latency
 
 
 def motion_source(settings):
@@ -273,8 +288,8 @@ class Pipeline:
         self.settings = settings
         self.motion = motion_source(settings) if motion is None else motion
         self.lock = threading.Lock()
-        self.calibration, self.payload, self.latency = _load(settings)
-        self.model = compensation_model(self.calibration, self.payload)
+        self.setup, self.estimate, self.latency = _load(settings)
+        self.model = compensation_model(self.calibration, self.setup.payload)
         self.n = self.model.n_w
         self.dt_in = settings.sample_time or None      # the readings' period
         self.decimation = 1
@@ -344,37 +359,55 @@ class Pipeline:
         return max(1, int(np.ceil(1.0 / (dt_in * self.settings.max_rate) - 0.05)))
 
     # --- the compensator --------------------------------------------------------------------------------------
-    def _build(self, calibration=None, payload=_KEEP):
-        """A Compensator of the calibration (its latency 0: the stamps are aligned here), at ``self.dt``; the
-        payload in use unless ``payload`` is given (None: the calibration's)."""
+    @property
+    def calibration(self):
+        """The calibration in use: a saved one, or the one a payload file stands for (K1)."""
+        return self.setup.calibration
+
+    @property
+    def payload(self):
+        """The payload in use: the one identified, the payload file's, or the calibration's."""
+        return self.setup.payload if self.setup.payload is not None else self.calibration.payload
+
+    @property
+    def source(self):
+        """What the compensation runs on, in words (the node's first log line)."""
         s = self.settings
-        calibration = self.calibration if calibration is None else calibration
+        if not s.payload:
+            return f"calibration {s.calibration}"
+        return f"payload {s.payload}" + (f" on calibration {s.calibration}" if s.calibration else
+                                         " (S the identity: no calibration)")
+
+    def _build(self, setup_=None):
+        """A Compensator of the setup (default the one in use; its latency 0: the stamps are aligned here), at
+        ``self.dt``."""
+        s = self.settings
+        st = self.setup if setup_ is None else setup_
         changes = {"latency": 0.0}
         if s.reading is not None:
             changes["reading"] = s.reading
         if s.gravity is not None:
             changes["gravity"] = s.gravity
-        kwargs = dict(payload=self.payload if payload is _KEEP else payload, direction=s.direction,
-                      window=s.window, delay=s.delay, false_alarm=float(s.contact_threshold),
+        kwargs = dict(direction=s.direction, window=s.window, delay=s.delay, false_alarm=float(s.contact_threshold),
                       track_offset=bool(s.track_offset))
         if s.drift_intensity is not None:
             kwargs["drift_intensity"] = s.drift_intensity[0] if len(s.drift_intensity) == 1 else s.drift_intensity
         kwargs.update(motion=self.motion, frame=s.output_frame, point=s.tool_point)
-        compensator = Compensator(replace(calibration, **changes), self.dt, **kwargs)
+        compensator = Compensator(replace(st, calibration=replace(st.calibration, **changes)), self.dt, **kwargs)
         self.warnings = list(compensator.warnings)
         return compensator
 
-    def _rebuilt(self, calibration=None, payload=_KEEP):
+    def _rebuilt(self, setup_=None):
         """A new compensator (:meth:`_build`), its casadi functions built first by a twin fed samples at rest: done
         outside the lock, then handed to :meth:`_swap` under it."""
-        warm = self._build(calibration, payload)
+        warm = self._build(setup_)
         n = int(round((self.settings.window + self.settings.delay) / self.dt)) + 4
         rest = self.motion.rest(self.model)
         self._feed(warm, [(i * self.dt, np.zeros(self.n), rest) for i in range(n)])
         for size in (2, _BLOCK):                          # the first blocks' sizes, as a backlog brings them
             start = n * self.dt
             self._feed(warm, [(start + i * self.dt, np.zeros(self.n), rest) for i in range(size)])
-        return self._build(calibration, payload)
+        return self._build(setup_)
 
     def _swap(self, compensator):
         """The compensation goes on with ``compensator`` (lock held), fed the rows the filter holds (their outputs
@@ -983,56 +1016,104 @@ class Pipeline:
         if result.get("payload") is not None:
             mass, inertia, com = result["payload"]
             payload = SpatialModel.payload_from(mass, inertia, com)
-            compensator = None
-            if self.compensator is not None:
-                b = result.get("offset")
-                compensator = self._rebuilt(self.calibration if b is None else replace(self.calibration, b=b),
-                                            payload)
+            b = result.get("offset")
+            st = _identified_setup(self.setup, payload, result, b)
+            compensator = None if self.compensator is None else self._rebuilt(st)
             with self.lock:
                 if compensator is not None:
                     self._swap(compensator)
-                self.payload = self.identified = payload
+                self.setup, self.identified = st, result
                 self.model = compensation_model(self.calibration, payload)
                 self._snap()
         return bool(result["ok"]), result["message"]
 
     def save(self):
-        """``(success, message)`` of ``~/save``: the calibration with the offset in use and the payload in use,
-        dated now."""
+        """``(success, message)`` of ``~/save``: with a calibration, the calibration with the offset in use and the
+        payload in use, dated now; with a payload file alone, a payload file (``fmscal-payload``, as
+        ``fmscal identify-payload --save`` writes): the payload in use with its uncertainty, the offset in use,
+        the file's gravity, mounting, sign and noise."""
         path = self.settings.save_path
         if not path:
             return False, "save refused: set the parameter save_path"
         with self.lock:
             b = None if self.compensator is None else self.compensator.offset
-            cal = replace(self.calibration, b=self.calibration.b if b is None else b,
-                          payload=self.payload or self.calibration.payload, date=None,
-                          latency=self.latency if self.settings.source == "pose_topic" else self.calibration.latency)
+            st, identified = self.setup, self.identified
+            if not self.settings.calibration:
+                document = _payload_document(self.estimate, st, b)
+            else:
+                document = replace(self.calibration, b=self.calibration.b if b is None else b,
+                                   payload=st.payload or self.calibration.payload, date=None,
+                                   latency=self.latency if self.settings.source == "pose_topic" else
+                                   self.calibration.latency)
         try:
-            cal.save(path, force=True, overwrite=True)       # ~/save rewrites save_path by design
+            if isinstance(document, PayloadEstimate):
+                document.save(path)
+            else:
+                document.save(path, force=True, overwrite=True)       # ~/save rewrites save_path by design
         except Exception as err:
             return False, "save failed: " + (str(err).splitlines()[0] if str(err) else repr(err))
-        return True, f"saved {path}: offset " + " ".join(f"{v:.6g}" for v in (cal.offset)) + \
-            ("" if self.identified is None else f", the identified payload (mass {cal.payload.mass:.4g} kg)")
+        what = "a payload file" if isinstance(document, PayloadEstimate) else "the calibration"
+        offset = document.b if isinstance(document, PayloadEstimate) else document.offset
+        mass = st.payload.mass if st.payload is not None else self.calibration.payload.mass
+        return True, f"saved {path} ({what}): offset " + " ".join(f"{v:.6g}" for v in offset) + \
+            ("" if identified is None else f", the identified payload (mass {mass:.4g} kg)")
 
     def reload(self):
         """``(success, message)`` of ``~/reload``: the calibration (and payload) files read again."""
         try:
-            calibration, payload, latency = _load(self.settings)
-            model = compensation_model(calibration, payload)
+            st, estimate, latency = _load(self.settings)
+            model = compensation_model(st.calibration, st.payload)
             if model.n_w != self.n:
                 raise Ros2Error(f"the calibration is now of a {model.name} reading; the node started with another")
-            compensator = None if self.compensator is None else self._rebuilt(calibration, payload)
+            compensator = None if self.compensator is None else self._rebuilt(st)
         except Exception as err:
             return False, "reload refused, the calibration in use kept: " + (str(err).splitlines()[0] or repr(err))
         with self.lock:
-            self.calibration, self.payload, self.latency, self.model = calibration, payload, latency, model
+            self.setup, self.estimate, self.latency, self.model = st, estimate, latency, model
             self.identified = None
-            self.expected_sensor_frame = (self.settings.sensor_frame or getattr(calibration, "sensor_frame", None)
+            self.expected_sensor_frame = (self.settings.sensor_frame or getattr(st.calibration, "sensor_frame", None)
                                           or "")
             if compensator is not None:
                 self._swap(compensator)
             self._snap()
-        return True, f"reloaded {self.settings.calibration}: offset " + " ".join(f"{v:.6g}" for v in calibration.offset)
+        return True, f"reloaded {self.source}: offset " + " ".join(f"{v:.6g}" for v in st.calibration.offset)
+
+
+def _identified_setup(st, payload, result, b):
+    """The setup after ``~/identify_payload``: its payload the fit's, the offset it was fitted at (``b``; None:
+    kept); where a payload file's covariance is in use (K2), the fit's sds in place of the file's for what it
+    determined (an inertia it did not determine keeps its bound, K3)."""
+    calibration = st.calibration if b is None else replace(st.calibration, b=np.asarray(b, dtype=float))
+    cov, bounded = None, False
+    if st.cov is not None:
+        cov = np.array(st.cov, dtype=float)
+        sd = result["sd"]
+        groups = [(slice(0, 1), [sd["mass"]]), (slice(1, 4), sd["com"])]
+        if sd.get("inertia") is not None:
+            groups.append((slice(4, 10), sd["inertia"]))
+        else:
+            bounded = st.inertia_bounded
+        for rows, values in groups:
+            cov[rows, :], cov[:, rows] = 0.0, 0.0
+            cov[rows, rows] = np.diag(np.square(np.asarray(values, dtype=float)))
+    return replace(st, calibration=calibration, payload=payload, cov=cov, inertia_bounded=bounded, warnings=[])
+
+
+def _payload_document(estimate, st, b):
+    """The payload file ``~/save`` writes with a payload file alone: ``estimate`` (the file read at start) with
+    the payload in use, its sds (the diagonal of the setup's covariance, K2), and the offset in use ``b``."""
+    payload, cov = st.payload, np.array(estimate.tracked().cov if estimate.cov is not None else st.cov, dtype=float)
+    if st.cov is not None:
+        cov[:10, :] = cov[:, :10] = 0.0
+        cov[:10, :10] = st.cov[:10, :10]
+    inertia = None if st.inertia_bounded else np.asarray(payload.inertia, dtype=float)
+    if inertia is None:
+        cov[4:10, :] = cov[:, 4:10] = np.inf
+    sd = np.sqrt(np.diag(cov))
+    return replace(estimate.tracked(), mass=float(payload.mass), mass_std=float(sd[0]),
+                   com=np.asarray(payload.com, dtype=float), com_std=sd[1:4], inertia=inertia,
+                   inertia_std=None if inertia is None else sd[4:10],
+                   b=np.asarray(estimate.b if b is None else b, dtype=float), cov=cov, payload_determined=True)
 
 
 def _clean_stretches(t, contact, starts, false_alarm, dt, margin):
@@ -1055,7 +1136,8 @@ def _clean_stretches(t, contact, starts, false_alarm, dt, margin):
 def fit_held(job, motion):
     """``~/identify_payload``'s fit of :meth:`Pipeline.identify_job`'s held samples (here, or in a process of its
     own: :mod:`._worker`): a dict, ``ok``, ``message``, and ``payload`` ``(mass, inertia, com)`` to use (None:
-    keep the one in use) with the ``offset`` it was fitted at.
+    keep the one in use) with the ``offset`` it was fitted at and ``sd`` (``mass``, ``com``, and ``inertia``,
+    None where the fit kept the one in use).
 
     Poses (a pose stream, or joint states through the URDF): :func:`fmscal.observers.payload.identify_payload`
     on the longest held stretch without a gap or a contact (mass, centre of mass and inertia). An IMU: its
@@ -1099,7 +1181,8 @@ def fit_held(job, motion):
             return dict(ok=False, payload=None, message=(
                 f"identify_payload: the held poses do not determine the payload (mass {fit.mass:.4g} +- "
                 f"{fit.mass_std:.2g} kg, {len(table)} held poses); kept the one in use"))
-        return dict(ok=True, payload=(fit.mass, job["inertia"], fit.com), offset=job["offset"], message=(
+        return dict(ok=True, payload=(fit.mass, job["inertia"], fit.com), offset=job["offset"],
+                    sd=dict(mass=float(fit.mass_std), com=np.asarray(fit.com_std, dtype=float), inertia=None), message=(
             f"payload identified from {len(table)} held poses ({used:.0%} of {t[-1] - t[0]:.3g} s; {left}): mass "
             f"{fit.mass:.4g} +- {fit.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in fit.com)
             + " m; the inertia kept (no held pose shows it)"
@@ -1112,7 +1195,9 @@ def fit_held(job, motion):
         return dict(ok=False, payload=None, message=(
             f"identify_payload: the held motion does not determine the payload (mass {estimate.mass:.4g} +- "
             f"{estimate.mass_std:.2g} kg); kept the one in use"))
-    return dict(ok=True, payload=(estimate.mass, estimate.inertia, estimate.com), offset=job["offset"], message=(
+    return dict(ok=True, payload=(estimate.mass, estimate.inertia, estimate.com), offset=job["offset"],
+                sd=dict(mass=float(estimate.mass_std), com=np.asarray(estimate.com_std, dtype=float),
+                        inertia=np.asarray(estimate.inertia_std, dtype=float)), message=(
         f"payload identified from {len(t)} samples ({t[-1] - t[0]:.3g} s; {left}): mass {estimate.mass:.4g} +- "
         f"{estimate.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in estimate.com) + " m"
         + ("" if estimate.converged else "; not converged: " + "; ".join(estimate.warnings[:1]))))
