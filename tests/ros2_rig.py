@@ -102,6 +102,16 @@ def running_node(domain, *parameters, params_file=None, ros_args=()):
             log.close()
 
 
+def wait_until(condition, timeout=WAIT):
+    """Whether ``condition()`` held within ``timeout`` s (looked at every 20 ms)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return False
+
+
 def node_log(proc):
     """What the node wrote to stderr so far."""
     proc.log_file.flush()
@@ -210,13 +220,8 @@ class Peer:
         return epoch
 
     def wait_for(self, condition, timeout=WAIT):
-        """Until ``condition()`` holds; its last value."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if condition():
-                return True
-            time.sleep(0.02)
-        return False
+        """Until ``condition()`` holds (:func:`wait_until`)."""
+        return wait_until(condition, timeout)
 
     def set_parameter(self, name, value, timeout=WAIT):
         """Set one of the node's parameters (a string) by its ``set_parameters`` service; the result."""
@@ -631,12 +636,8 @@ class Listener:
         raise AssertionError(f"the node was not discovered in {timeout} s: {node_log(proc)[-2000:]}")
 
     def wait_for(self, condition, timeout=WAIT):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if condition():
-                return True
-            time.sleep(0.02)
-        return False
+        """Until ``condition()`` holds (:func:`wait_until`)."""
+        return wait_until(condition, timeout)
 
     def call(self, service, timeout=WAIT):
         """Call a Trigger service of the node; ``(success, message)`` (None where no answer came in time)."""

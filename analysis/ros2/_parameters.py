@@ -117,8 +117,8 @@ PARAMETERS = (
               "the motion is stale (the reading is then not compensated)"),
     Parameter("saturation", "double_array", None, "the raw reading's range per channel (one value or one per "
               "channel, the reading's units): a reading at or beyond it is not compensated; unset: not checked"),
-    Parameter("save_path", "string", "", "~/save: where the calibration is written (with a payload file alone: a payload "
-              "file); empty: ~/save refuses"),
+    Parameter("save_path", "string", "", "~/save: where the calibration is written (with a payload file alone: "
+              "a payload file); empty: ~/save refuses"),
     Parameter("identify_buffer", "double", 120.0, "s, the motion and readings ~/identify_payload keeps, the newest"),
     Parameter("diagnostics_period", "double", 1.0, "s between two diagnostics on /diagnostics"),
     Parameter("debug_latency", "bool", False, "publish ~/latency (std_msgs/Float64MultiArray per output: s from "

@@ -57,6 +57,7 @@ import numpy as np
 from scipy.stats import binom
 
 from fmscal.plant import Calibration, SpatialModel
+from fmscal.plant.numerics import FmscalError
 from fmscal.plant.io import AttitudeLog, held_table
 from fmscal.plant.physics import quaternion_multiply
 from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload
@@ -156,15 +157,9 @@ def _load(settings):
     the payload file's estimate (None without one), and the latency in use."""
     calibration = estimate = None
     if settings.calibration:
-        calibration = load_setup(settings.calibration)
-        if not isinstance(calibration, Calibration):
-            raise Ros2Error(f"parameter calibration: {settings.calibration} is a payload file; give it as payload "
-                            f"(-p payload:={settings.calibration})")
+        calibration = _read(settings.calibration, Calibration, "calibration", "payload")
     if settings.payload:
-        estimate = load_setup(settings.payload)
-        if not isinstance(estimate, PayloadEstimate):
-            raise Ros2Error(f"parameter payload: {settings.payload} is a calibration (fmscal calibrate --save); give "
-                            f"it as calibration (-p calibration:={settings.payload})")
+        estimate = _read(settings.payload, PayloadEstimate, "payload", "calibration")
     if calibration is None:
         st = setup(estimate, tool_radius=settings.tool_radius)
     else:
@@ -174,6 +169,22 @@ def _load(settings):
     own = (st.calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
     latency = settings.latency if settings.latency is not None else own
     return st, estimate, latency
+
+
+def _read(path, kind, name, other):
+    """The file of parameter ``name``, a ``kind`` (its own loader's one-line error where it is not one); a file of
+    the other kind (a payload file given as the calibration, or the other way) named as such."""
+    try:
+        return kind.load(path)
+    except FmscalError:
+        try:
+            found = load_setup(path)
+        except FmscalError:
+            found = None
+        if found is not None and not isinstance(found, kind):
+            raise Ros2Error(f"parameter {name}: {path} is a {other} file; give it as {other} (-p {other}:={path})") \
+                from None
+        raise
 
 
 def motion_source(settings):
@@ -1052,10 +1063,10 @@ class Pipeline:
                 document.save(path, force=True, overwrite=True)       # ~/save rewrites save_path by design
         except Exception as err:
             return False, "save failed: " + (str(err).splitlines()[0] if str(err) else repr(err))
-        what = "a payload file" if isinstance(document, PayloadEstimate) else "the calibration"
+        what = " (a payload file)" if isinstance(document, PayloadEstimate) else ""
         offset = document.b if isinstance(document, PayloadEstimate) else document.offset
         mass = st.payload.mass if st.payload is not None else self.calibration.payload.mass
-        return True, f"saved {path} ({what}): offset " + " ".join(f"{v:.6g}" for v in offset) + \
+        return True, f"saved {path}{what}: offset " + " ".join(f"{v:.6g}" for v in offset) + \
             ("" if identified is None else f", the identified payload (mass {mass:.4g} kg)")
 
     def reload(self):
@@ -1076,7 +1087,8 @@ class Pipeline:
             if compensator is not None:
                 self._swap(compensator)
             self._snap()
-        return True, f"reloaded {self.source}: offset " + " ".join(f"{v:.6g}" for v in st.calibration.offset)
+        offset = " ".join(f"{v:.6g}" for v in st.calibration.offset)
+        return True, f"reloaded {self.settings.calibration or self.settings.payload}: offset {offset}"
 
 
 def _identified_setup(st, payload, result, b):
