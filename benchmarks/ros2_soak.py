@@ -12,7 +12,8 @@ memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
 - the outputs, and those unflagged beyond 5 sd of the truth (the target: none);
 - the rms z-score over the outputs away from every fault (the window and the delay either side);
 - the ledger: ``received = published + withheld + waiting`` (exact), and the readings lost;
-- the resident memory at minute 2 and at the end, and its growth (the target: under 20 MB).
+- the resident memory at minute 2 and at the end, and its growth (the target: under 20 MB; with ``--minutes``
+  under 2, minute 2 falls after the replay, in the wait for its last outputs).
 
 The machine's load is not controlled. About ``--minutes`` plus a minute of setup per source. ``--json`` prints
 the figures as one JSON object instead.
@@ -95,9 +96,14 @@ def soak(source, minutes, seed):
                 sampler.start()
                 done = sender_result(start_sender(plan), duration + 600)
                 epoch = done["epoch"]
-                quiet, seen, since = 5.0, None, time.monotonic()
-                while time.monotonic() - since < quiet:          # nothing new for 5 s: every output has come
+                stamps = int(round(duration * 1000.0)) + 1
+                quiet, seen, since = 60.0, None, time.monotonic()
+                while time.monotonic() - since < quiet:          # every stamp taken or lost, or nothing new for 60 s
                     s = listener.status()
+                    if s is not None and "received" in s and not int(s["backlog"]) and \
+                            int(s["received"]) + int(s["lost"]) - int(s["withheld_duplicate"]) >= stamps and \
+                            int(s["published"]) <= len(listener.contacts):
+                        break
                     now_seen = None if s is None else (s.get("received"), s.get("published"), len(listener.contacts))
                     if now_seen != seen:
                         seen, since = now_seen, time.monotonic()
@@ -118,7 +124,7 @@ def soak(source, minutes, seed):
         clean &= ~((t > f["at"] - CAUSAL_WINDOW - CAUSAL_DELAY - 0.01) &
                    (t < f["at"] + length + CAUSAL_WINDOW + CAUSAL_DELAY + 0.05))
     withheld = sum(int(v) for k, v in status.items() if k.startswith("withheld_"))
-    at2 = [m for s, m in memory if s >= 120.0 and m is not None]
+    at2 = [m for s, m in memory if s >= 120.0 and m is not None]             # the sampler starts with the sender
     last = [m for _, m in memory if m is not None]
     return dict(source=source, minutes=minutes, faults=len(plan_faults), alive=alive, outputs=int(len(t)),
                 unflagged_beyond=int(((worst > BOUND) & ~flagged).sum()), flagged=int(flagged.sum()),
@@ -129,6 +135,10 @@ def soak(source, minutes, seed):
                 rss_minute2_mb=at2[0] if at2 else None, rss_end_mb=last[-1] if last else None,
                 rss_growth_mb=(last[-1] - at2[0]) if at2 and last else None,
                 log_tail=None if alive else log[-2000:])
+
+
+def _mb(v):
+    return "n/a" if v is None else f"{v:.1f} MB"
 
 
 def main():
@@ -143,13 +153,13 @@ def main():
         print(json.dumps(results))
         return
     for r in results:
-        growth = "n/a" if r["rss_growth_mb"] is None else f"{r['rss_growth_mb']:.1f} MB"
+        growth = _mb(r["rss_growth_mb"])
         print(f"{r['source']}: {r['minutes']:g} min, {r['faults']} faults; alive {r['alive']}; {r['outputs']} "
               f"outputs, {r['unflagged_beyond']} unflagged beyond {BOUND:g} sd, {r['flagged']} flagged; rms z "
               f"(clean) {r['rms_z_clean']:.3f}; received {r['received']} = published {r['published']} + withheld "
               f"{r['withheld']} + waiting {r['waiting']} ({'exact' if r['ledger_exact'] else 'NOT exact'}), lost "
-              f"{r['lost']}; resident memory {r['rss_minute2_mb']} MB at minute 2, {r['rss_end_mb']} MB at the end "
-              f"(growth {growth})")
+              f"{r['lost']}; resident memory {_mb(r['rss_minute2_mb'])} at minute 2, {_mb(r['rss_end_mb'])} at the "
+              f"end (growth {growth})")
         if r["log_tail"]:
             print(r["log_tail"])
 

@@ -577,3 +577,24 @@ def test_the_node_runs_from_a_payload_file_alone(request, tmp_path):
     assert isinstance(estimate, PayloadEstimate) and estimate.mass == pytest.approx(mass, rel=1e-3)
     np.testing.assert_allclose(estimate.com, TOOL.com, atol=2e-3)
     assert estimate.inertia is not None and estimate.inertia_std is not None      # the motion determined it
+
+
+def test_calibration_and_payload_files_each_in_their_place(tmp_path, poses):
+    """A payload file given as the calibration, or a calibration as the payload: one line naming the parameter
+    to use; a payload file alone runs with S the identity, and with a calibration its payload replaces the
+    calibration's (the file's covariance carried, K2)."""
+    from fmscal.analysis.ros2 import Pipeline, Ros2Error
+    from ros2_rig import tool_payload
+    settings = poses[3]
+    payload, cal = tool_payload(tmp_path / "tool.json"), tool_calibration(tmp_path / "cal.json")
+    with pytest.raises(Ros2Error, match=r"^parameter calibration: \S*tool\.json is a payload file; give it as "
+                                        r"payload \(-p payload:="):
+        Pipeline(settings(calibration=str(payload)))
+    with pytest.raises(Ros2Error, match=r"^parameter payload: \S*cal\.json is a calibration file; give it as "
+                                        r"calibration \(-p calibration:="):
+        Pipeline(settings(calibration=None, payload=str(cal)))
+    alone = Pipeline(settings(calibration=None, payload=str(payload)))
+    assert alone.source.endswith("(S the identity: no calibration)") and alone.setup.inertia_bounded
+    np.testing.assert_array_equal(alone.calibration.S, np.eye(6))
+    both = Pipeline(settings(calibration=str(cal), payload=str(payload)))
+    assert both.source.startswith("payload ") and both.setup.cov is not None and both.calibration.method == "truth"

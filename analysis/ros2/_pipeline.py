@@ -300,6 +300,10 @@ class Pipeline:
         self.motion = motion_source(settings) if motion is None else motion
         self.lock = threading.Lock()
         self.setup, self.estimate, self.latency = _load(settings)
+        if self.setup.axes is not None and not self.motion.turns_with_mounting:
+            raise Ros2Error(f"parameter payload: {settings.payload}'s sensor is mounted turned on the tracked frame; "
+                            f"an {self.motion.source}'s axes are its rotation's (imu_rotation): use poses or joint "
+                            "states with it")
         self.model = compensation_model(self.calibration, self.setup.payload)
         self.n = self.model.n_w
         self.dt_in = settings.sample_time or None      # the readings' period
