@@ -546,7 +546,10 @@ def send_plan(plan):
             if kill is not None and not start and due >= kill["at"] - dt:
                 os.kill(os.getpid(), signal.SIGKILL)           # killed, as a crashing driver is
         gc.enable()
-        time.sleep(0.3)                                         # the last messages delivered
+        from rclpy.duration import Duration                     # the last messages delivered before it exits (a
+        for pub in pubs.values():                               # loaded node may be seconds behind)
+            pub.wait_for_all_acked(Duration(seconds=120))
+        time.sleep(0.3)                                         # best effort: no acknowledgement to wait for
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
