@@ -517,6 +517,7 @@ def test_identify_payload_cancelled_and_a_ctrl_c_stops_the_node(request, tmp_pat
             _feed(listener, domain, dict(plan, duration=10.0, seed=5), 20001 + 10001)
             listener.call_async("identify_payload")
             assert listener.wait_for(lambda: node_log(proc).count("~/identify_payload: fitting") == 2, 60)
+            assert listener.wait_for(lambda: _children(proc.pid), 60)     # the fit's process started
             workers = _children(proc.pid)
             stopped = time.monotonic()
             proc.send_signal(signals.SIGINT)
