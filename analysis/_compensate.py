@@ -45,7 +45,8 @@ wrench (C1), its covariance (C3) and test (C4), the offset's tracker (D1)-(D3), 
 
 **Stamps.** The causal filter assumes evenly spaced samples (:class:`Compensator`'s ``dt``). Each push's stamp is
 placed on that grid: the first intervals must be ``dt`` (within :data:`DT_TOLERANCE`, else an error names both);
-a reading whose stamp repeats the last one is dropped (``duplicate``); a gap of ``g`` missing samples is filled
+a reading whose stamp repeats the last one, or falls within half a step after it (its grid cell: a second
+publisher interleaving), is dropped (``duplicate``); a gap of ``g`` missing samples is filled
 with ``g`` empty rows (no reading, no motion: the fit takes the samples the window holds), the readings whose
 output falls due inside the gap withheld (``gap``); a gap longer than the filter's window and delay, or a stamp
 stepping back, restarts the window (``restart``): no output until it is full again. Each is counted by cause in
@@ -1297,6 +1298,10 @@ class Compensator:
         step = t - self._t
         if abs(step) <= 1e-6 * self.dt:
             self._event("duplicate", 1, f"a reading stamped {t:.9g} s twice: the second dropped")
+            return False
+        if 0 < step < 0.5 * self.dt:                   # the last one's grid cell: it cannot be a sample after it
+            self._event("duplicate", 1, f"a reading stamped {t:.9g} s, {step:.3g} s after the last (within half a "
+                                        "step): dropped")
             return False
         if step < 0:
             self._restart(f"the stamps stepped back by {-step:.6g} s (to {t:.9g} s)")

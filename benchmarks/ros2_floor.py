@@ -3,11 +3,11 @@
 
 The sender of ``benchmarks/ros2_latency.py`` (``benchmarks/ros2_sender.py``, a process of its own) publishes the
 same 1 kHz wrench and pose streams over DDS on loopback, in a ROS domain of its own; this process takes them
-(:class:`Taker`: a blocking wait on the subscriptions, every queued message taken, no executor) and notes when
-each wrench arrived. Printed: the delay from a wrench's stamp to its arrival here (p50, p99, the largest), the
-same less the sender's lateness against its schedule, and that lateness. The node's delay beyond its causal
-filter's (``benchmarks/ros2_latency.py``) is this delivery plus the node's own work: this is what it cannot go
-below on the same machine. About ``duration + 5`` s.
+(tests/ros2_rig.py's ``Taker``: a blocking wait on the subscriptions, every queued message taken, no executor) and
+notes when each wrench arrived. Printed: the delay from a wrench's stamp to its arrival here (p50, p99, the
+largest), the same less the sender's lateness against its schedule, and that lateness. The node's delay beyond
+its causal filter's (``benchmarks/ros2_latency.py``) is this delivery plus the node's own work: this is what it
+cannot go below on the same machine. About ``duration + 5`` s.
 """
 
 import argparse
@@ -15,16 +15,18 @@ import json
 import os
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
-from rclpy.context import Context
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
+from ros2_rig import Taker  # noqa: E402
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
@@ -38,53 +40,14 @@ def stats(v):
         if len(v) else None
 
 
-class Taker:
-    """Subscriptions taken by a thread of their own: it waits on them (rclpy's wait set, the interpreter's lock
-    released while it waits), takes every queued message and hands each with its arrival (``time.time()``) to
-    its subscription's callback. Much less Python per message than an executor's spin."""
-
-    def __init__(self, node, context):
-        self.node, self.context, self.subs = node, context, []
-        self._thread, self._running = None, False
-
-    def subscribe(self, msg_type, topic, callback, qos):
-        sub = self.node.create_subscription(msg_type, topic, lambda m: None, qos)
-        self.subs.append((sub, callback))
-        return sub
-
-    def start(self):
-        self._running = True
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self):
-        try:
-            with self.context.handle:
-                wait_set = _rclpy.WaitSet(len(self.subs), 0, 0, 0, 0, 0, self.context.handle)
-                while self._running and self.context.ok():
-                    wait_set.clear_entities()
-                    for sub, _ in self.subs:
-                        wait_set.add_subscription(sub.handle)
-                    wait_set.wait(50_000_000)
-                    for sub, callback in self.subs:
-                        with sub.handle:
-                            while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
-                                callback(taken[0], time.time())
-        except Exception:                             # the context shut down under the loop
-            pass
-
-    def stop(self):
-        """Stop the thread (within the wait's 50 ms), before the context shuts down."""
-        self._running = False
-        if self._thread is not None:
-            self._thread.join(timeout=5)
-
-
-def start_sender(domain, duration, seed=0, qos="reliable"):
-    """The sender's process, started (it waits for its subscribers)."""
+def start_sender(domain, duration, seed=0, qos="reliable", contact=None):
+    """The sender's process, started (it waits for its subscribers); ``contact`` ``(start, seconds)``: a push on
+    the tool then."""
+    extra = [] if not contact else ["--contact", *(str(v) for v in contact)]
     return subprocess.Popen([sys.executable, str(SENDER), "--domain", str(domain), "--duration", str(duration),
-                             "--seed", str(seed), "--qos", qos], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
+                             "--seed", str(seed), "--qos", qos, *extra], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
 
 
 def sender_result(proc, timeout):

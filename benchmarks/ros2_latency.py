@@ -4,7 +4,7 @@ The node (``fmscal ros2``, a subprocess) compensates a ``spatial-arm`` log (a ca
 scenario's truth) fed at 1 kHz by a sender of its own (``benchmarks/ros2_sender.py``, a third process that does
 nothing else): a ``WrenchStamped`` and a ``PoseStamped`` each millisecond, stamped with the time they are due,
 over DDS on loopback, in a ROS domain of its own. This process takes the node's outputs with a blocking wait and
-no executor (``benchmarks/ros2_floor.py``'s ``Taker``), so that neither it nor the sender competes for the node's
+no executor (tests/ros2_rig.py's ``Taker``), so that neither it nor the sender competes for the node's
 cores more than it must. Printed:
 
 - the delay from a reading's stamp to its output's publication, measured by the node itself (``debug_latency``:
@@ -20,7 +20,10 @@ cores more than it must. Printed:
 - the CPU the node used over the run (s);
 - with ``--pin``: the node on a CPU of its own (the last), this process and the sender on the others;
 - the messages: readings sent, received by the node, outputs expected (every reading the causal filter covers)
-  and received here; dropped = expected - received.
+  and received here; dropped = expected - received;
+- with ``--identify AT``: ``~/identify_payload`` called once the node has taken ``AT`` s of readings (with
+  ``--contact START SECONDS``, a 15 N push on the tool then: the node fits the longest stretch without it), its
+  answer, how long it took, and the delay beyond the causal filter's of the outputs published meanwhile.
 
 The machine's load is not controlled: on a shared machine the tails are the other processes' as much as the
 node's. About ``duration + 10`` s. ``--json`` prints the figures as one JSON object instead.
@@ -32,6 +35,7 @@ import os
 import signal
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -40,8 +44,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from fmscal.analysis import compensate  # noqa: E402
-from ros2_floor import Taker, sender_result, start_sender, stats  # noqa: E402
-from ros2_rig import node_log, running_node, truth_calibration  # noqa: E402
+from ros2_floor import sender_result, start_sender, stats  # noqa: E402
+from ros2_rig import Taker, node_log, running_node, truth_calibration  # noqa: E402
 from ros2_sender import scenario_log  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
@@ -49,25 +53,37 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 
 RELIABLE = QoSProfile(depth=2000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class Listener:
     """This process's side: the node's contact wrench (its stamp and arrival), its latency and diagnostics,
-    taken by a :class:`ros2_floor.Taker` (no executor: this process's own load kept down)."""
+    taken by tests/ros2_rig.py's ``Taker`` (no executor: this process's own load kept down)."""
 
     def __init__(self, domain):
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node("fmscal_bench_listener", context=self.context)
-        self.stamps, self.received_at, self.latencies, self.diagnostics = [], [], [], []
+        self.stamps, self.received_at, self.latencies, self.latency_at, self.diagnostics = [], [], [], [], []
         self.taker = Taker(self.node, self.context)
         self.contact_sub = self.taker.subscribe(WrenchStamped, "/ft_sensor/contact", self._contact, RELIABLE)
-        self.taker.subscribe(Float64MultiArray, "/fmscal_compensator/latency",
-                             lambda m, at: self.latencies.append(m.data.tolist()), RELIABLE)
+        self.taker.subscribe(Float64MultiArray, "/fmscal_compensator/latency", self._latency, RELIABLE)
         self.taker.subscribe(DiagnosticArray, "/diagnostics", lambda m, at: self.diagnostics.append(m), 10)
         self.taker.start()
+
+    def _latency(self, msg, at):
+        self.latencies.append(msg.data.tolist())
+        self.latency_at.append(at)
+
+    def received(self):
+        """The readings the node has taken, as its newest diagnostics say (0 before)."""
+        for d in reversed(self.diagnostics):
+            values = {k.key: k.value for k in d.status[0].values}
+            if "received" in values:
+                return int(values["received"])
+        return 0
 
     def _contact(self, msg, at):
         self.stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
@@ -96,12 +112,46 @@ class Listener:
         rclpy.try_shutdown(context=self.context)
 
 
-def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False):
+class IdentifyCall(threading.Thread):
+    """``~/identify_payload`` called once the node has taken ``at`` s of readings (a client of its own context):
+    when it went out and came back (``time.time()``), and its answer."""
+
+    def __init__(self, domain, listener, at, rate):
+        super().__init__(daemon=True)
+        self.domain, self.listener, self.readings = domain, listener, int(at * rate)
+        self.start_at = self.end_at = None
+        self.answer = None
+
+    def run(self):
+        while self.listener.received() < self.readings:
+            time.sleep(0.01)
+        context = Context()
+        rclpy.init(context=context, domain_id=self.domain)
+        node = rclpy.create_node("fmscal_bench_identify", context=context)
+        try:
+            client = node.create_client(Trigger, "/fmscal_compensator/identify_payload")
+            if not client.wait_for_service(timeout_sec=30.0):
+                self.answer = (False, "~/identify_payload not found")
+                return
+            self.start_at = time.time()
+            future = client.call_async(Trigger.Request())
+            rclpy.spin_until_future_complete(node, future, timeout_sec=600.0)
+            self.end_at = time.time()
+            result = future.result()
+            self.answer = (False, "no answer in 600 s") if result is None else (result.success, result.message)
+        finally:
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+
+
+def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False, identify=None, contact=None):
     """Run the node on ``duration`` s of a 1 kHz log; the figures (module docstring) as a dict. ``pin``: the
-    node on the last CPU, this process and the sender on the others (where there are two or more)."""
+    node on the last CPU, this process and the sender on the others (where there are two or more). ``identify``:
+    ``~/identify_payload`` called once the node has taken that many s of readings; ``contact`` ``(start,
+    seconds)``: a 15 N push on the tool then."""
     cpus = sorted(os.sched_getaffinity(0))
     pin = pin and len(cpus) >= 2
-    scenario, log, truth = scenario_log(duration, seed)
+    scenario, log, truth = scenario_log(duration, seed, contact)
     cal = truth_calibration(scenario, truth)
     domain = domain if domain is not None else 1 + (os.getpid() % 100)
     with tempfile.TemporaryDirectory() as folder:
@@ -118,12 +168,18 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False):
             try:
                 peer.wait_for_node(proc)
                 cpu = _cpu(proc.pid)
-                sent = sender_result(start_sender(domain, duration, seed, qos), duration + 60)
+                call = None
+                if identify is not None:
+                    call = IdentifyCall(domain, peer, identify, 1.0 / log.dt)
+                    call.start()
+                sent = sender_result(start_sender(domain, duration, seed, qos, contact), duration + 60)
                 epoch, lateness = sent["epoch"], np.array(sent["lateness"])
                 sent_in = len(lateness) * log.dt + lateness[-1]
                 expected = len(reference.t)
                 peer.wait_for(lambda: len(peer.stamps) >= expected and len(peer.latencies) >= expected, 10)
                 node_cpu = _cpu(proc.pid) - cpu
+                if call is not None:
+                    call.join(timeout=600.0)
                 time.sleep(0.3)
                 diagnostics = {k.key: k.value for k in peer.diagnostics[-1].status[0].values}
                 text = node_log(proc)
@@ -147,8 +203,23 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False):
             "beyond_delay_less_lateness_s": stats(net),
             "callback_to_publication_s": stats(node[:, 1]), "backlog": stats(node[:, 2]),
             "stamp_to_subscriber_s": stats(seen), "publisher_lateness_s": stats(lateness),
-            "node_counts": diagnostics,
+            "node_counts": diagnostics, **_identify_figures(call, peer, delay),
             "warnings": [line for line in text.splitlines() if "WARN" in line][:5]}
+
+
+def _identify_figures(call, peer, delay):
+    """The figures of an ``~/identify_payload`` call during the run: its answer, how long it took, and the delay
+    beyond the causal filter's of the outputs published meanwhile (p50, p99, the largest)."""
+    if call is None:
+        return {}
+    at = np.array(peer.latency_at)
+    node = np.array(peer.latencies) if peer.latencies else np.zeros((0, 3))
+    during = (at >= (call.start_at or np.inf)) & (at <= (call.end_at or -np.inf)) if len(at) == len(node) else []
+    return {"identify": {"success": None if call.answer is None else call.answer[0],
+                         "message": None if call.answer is None else call.answer[1],
+                         "took_s": None if call.end_at is None else call.end_at - call.start_at,
+                         "outputs_during": int(np.sum(during)),
+                         "beyond_delay_during_s": stats(node[during, 0] - delay) if np.any(during) else None}}
 
 
 def _cpu(pid):
@@ -164,9 +235,13 @@ def main(argv=None):
     parser.add_argument("--qos", default="reliable", choices=("reliable", "sensor_data"))
     parser.add_argument("--pin", action="store_true", help="the node on a CPU of its own (the last), this process "
                         "and the sender on the others")
+    parser.add_argument("--identify", type=float, metavar="AT", help="call ~/identify_payload once the node has "
+                        "taken AT s of readings; its figures printed apart")
+    parser.add_argument("--contact", type=float, nargs=2, metavar=("START", "SECONDS"),
+                        help="a 15 N push on the tool over [START, START + SECONDS) s of the log")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
-    r = measure(args.duration, args.seed, qos=args.qos, pin=args.pin)
+    r = measure(args.duration, args.seed, qos=args.qos, pin=args.pin, identify=args.identify, contact=args.contact)
     if args.json:
         print(json.dumps(r))
         return
@@ -190,6 +265,14 @@ def main(argv=None):
         print(f"| {name} | {s['p50'] * 1e3:.2f} | {s['p99'] * 1e3:.2f} | {s['max'] * 1e3:.2f} |")
     b = r["backlog"]
     print(f"backlog (readings waiting): p50 {b['p50']:.0f}, p99 {b['p99']:.0f}, max {b['max']:.0f}")
+    if "identify" in r:
+        i = r["identify"]
+        print(f"~/identify_payload: {'succeeded' if i['success'] else 'refused or failed'} in "
+              f"{i['took_s'] or float('nan'):.2f} s: {i['message']}")
+        d = i["beyond_delay_during_s"]
+        if d is not None:
+            print(f"  the {i['outputs_during']} outputs meanwhile, beyond the causal delay: p50 {d['p50'] * 1e3:.2f} "
+                  f"ms, p99 {d['p99'] * 1e3:.2f} ms, max {d['max'] * 1e3:.2f} ms")
     for line in r["warnings"]:
         print(line)
 

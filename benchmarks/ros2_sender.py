@@ -1,6 +1,6 @@
 """A 1 kHz sender of a ``spatial-arm`` log for the ROS 2 benchmarks (``benchmarks/ros2_latency.py``,
 ``benchmarks/ros2_floor.py``), run as a process of its own:
-``python benchmarks/ros2_sender.py --domain D [--duration 10] [--seed 0] [--qos reliable]``.
+``python benchmarks/ros2_sender.py --domain D [--duration 10] [--seed 0] [--qos reliable] [--contact START SECONDS]``.
 
 It publishes a ``WrenchStamped`` on ``/ft_sensor/wrench`` and a ``PoseStamped`` on ``/ft_sensor/pose`` for each
 row of the log, stamped ``epoch + t`` (the rows' 1 kHz schedule, in wall-clock time), each when the wall clock
@@ -27,13 +27,17 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 
 from fmscal.plant import SPATIAL_SCENARIOS
+from fmscal.plant.scenarios import contact_wrench, with_contact
 
 
-def scenario_log(duration, seed):
+def scenario_log(duration, seed, contact=None):
     """The benchmarks' log: ``spatial-arm`` for ``duration`` s (one row more: the last output's reading), its
-    scenario and truth."""
+    scenario and truth; ``contact`` ``(start, seconds)``: a 15 N push on the tool then
+    (:func:`fmscal.plant.scenarios.with_contact`)."""
     scenario = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=duration + 0.001)
     log, truth, _ = scenario.generate(seed)
+    if contact:
+        log, _ = with_contact(log, truth.S_at(0.0), contact_wrench(), *contact)
     return scenario, log, truth
 
 
@@ -53,9 +57,9 @@ def messages(log):
     return out
 
 
-def send(domain, duration=10.0, seed=0, qos="reliable", settle=0.5, timeout=30.0):
+def send(domain, duration=10.0, seed=0, qos="reliable", settle=0.5, timeout=30.0, contact=None):
     """Publish the log at 1 kHz once both topics have a subscriber; ``{"epoch", "sent", "lateness"}``."""
-    _, log, _ = scenario_log(duration, seed)
+    _, log, _ = scenario_log(duration, seed, contact)
     rows = messages(log)
     context = Context()
     rclpy.init(context=context, domain_id=domain)
@@ -102,8 +106,10 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--qos", default="reliable", choices=("reliable", "sensor_data"))
     parser.add_argument("--settle", type=float, default=0.5)
+    parser.add_argument("--contact", type=float, nargs=2, metavar=("START", "SECONDS"),
+                        help="a 15 N push on the tool over [START, START + SECONDS) s of the log")
     args = parser.parse_args(argv)
-    result = send(args.domain, args.duration, args.seed, args.qos, args.settle)
+    result = send(args.domain, args.duration, args.seed, args.qos, args.settle, contact=args.contact)
     sys.stdout.write(json.dumps(result) + "\n")
 
 

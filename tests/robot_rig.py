@@ -32,14 +32,15 @@ def ur5_urdf():
                          "pip install -e \".[test]\"")
 
 
-def ur5_run(duration=1.5, dt=1e-3, payload=TOOL):
+def ur5_run(duration=1.5, dt=1e-3, payload=TOOL, start=0.0):
     """The UR5 moving every joint sinusoidally (rotation and translation together: ``|omega x v|`` up to about
-    3 m/s^2) with the tool frame ``tool0`` as the sensor's. Returns a dict: ``motion`` (a JointMotion), ``t``,
-    ``q``, ``dq``, ``ddq`` (N, 6), the frame's ``pose`` (N, 7), ``v``, ``omega``, ``acc`` (classical), ``alpha``
-    (its axes) and ``W`` (N, 6), the mount's wrench on the payload ``[tau; f]`` by rnea."""
+    3 m/s^2) with the tool frame ``tool0`` as the sensor's, ``duration`` s from ``start``. Returns a dict:
+    ``motion`` (a JointMotion), ``t``, ``q``, ``dq``, ``ddq`` (N, 6), the frame's ``pose`` (N, 7), ``v``,
+    ``omega``, ``acc`` (classical), ``alpha`` (its axes) and ``W`` (N, 6), the mount's wrench on the payload
+    ``[tau; f]`` by rnea."""
     import pinocchio as pin
     motion = JointMotion(ur5_urdf(), "tool0")
-    t = np.arange(0.0, duration, dt)
+    t = start + np.arange(0.0, duration, dt)
     q0 = np.array([0.3, -1.2, 1.4, -1.6, -1.5, 0.4])
     amp = np.array([0.8, 0.4, 0.5, 0.9, 0.8, 1.2])
     w = 2 * np.pi * np.array([0.31, 0.23, 0.37, 0.29, 0.41, 0.35])

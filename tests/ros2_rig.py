@@ -1,11 +1,19 @@
 """The ROS 2 tests' and benchmark's rig: the node started as a subprocess (``python -m fmscal.analysis.cli ros2``)
 and a publisher and subscriber in this process, over real DDS on loopback.
 
-Each test runs in its own ROS domain (:func:`domain_id`: from the xdist worker and the test's name) with
+Each test runs in its own ROS domain (:func:`domain_id`: from the test process and the test's name) with
 discovery kept to this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), so that no two tests hear each
 other. Every wait is bounded, and the node is stopped by its process id in a ``finally``.
+
+The fault-injection harness (tests/test_ros2_faults.py): a sender of its own process (``python tests/ros2_rig.py
+PLAN.json``, :func:`send_plan`) replays the UR5 carrying its tool (tests/robot_rig.py) as a pose, joint-state or
+IMU stream with the readings, the faults :func:`schedule` scripts (messages dropped, paused, repeated, stamped back,
+a second publisher, the sender killed and restarted, garbage); :class:`Listener` takes the node's outputs, their
+covariances and flags and its diagnostics without an executor (:class:`Taker`); :class:`CpuHog` is a busy process
+beside the node.
 """
 
+import json
 import os
 import signal
 import subprocess
@@ -15,6 +23,7 @@ import threading
 import time
 import zlib
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -37,11 +46,15 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 WAIT = 30.0
 
 
+#: The ROS domains the tests use, 1 to this (Fast DDS's ports reach to 232).
+DOMAINS = 200
+
+
 def domain_id(name):
-    """A ROS domain for one test: from the xdist worker (gw0, gw1, ...) and the test's name, in 1-100."""
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
-    w = int("".join(c for c in worker if c.isdigit()) or 0)
-    return 1 + (w * 29 + zlib.crc32(name.encode())) % 100
+    """A ROS domain for one test, in 1-:data:`DOMAINS`: from this process (each xdist worker, and each of several
+    test runs on one machine: two runs of one test in one domain would hear each other's node) and the test's
+    name."""
+    return 1 + zlib.crc32(f"{os.getpid()}/{name}".encode()) % DOMAINS
 
 
 def truth_calibration(scenario, truth, **kw):
@@ -87,6 +100,16 @@ def running_node(domain, *parameters, params_file=None, ros_args=()):
                 proc.wait(timeout=5)
         if log is not None:
             log.close()
+
+
+def wait_until(condition, timeout=WAIT):
+    """Whether ``condition()`` held within ``timeout`` s (looked at every 20 ms)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return False
 
 
 def node_log(proc):
@@ -197,13 +220,8 @@ class Peer:
         return epoch
 
     def wait_for(self, condition, timeout=WAIT):
-        """Until ``condition()`` holds; its last value."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if condition():
-                return True
-            time.sleep(0.02)
-        return False
+        """Until ``condition()`` holds (:func:`wait_until`)."""
+        return wait_until(condition, timeout)
 
     def set_parameter(self, name, value, timeout=WAIT):
         """Set one of the node's parameters (a string) by its ``set_parameters`` service; the result."""
@@ -271,3 +289,417 @@ def imu_message(quaternion, omega, force):
         a.x, a.y, a.z = (float(v) for v in force[i])
         return msg
     return build
+
+
+# --- the fault-injection harness --------------------------------------------------------------------------------
+class Taker:
+    """Subscriptions taken by a thread of their own: it waits on them (rclpy's wait set, the interpreter's lock
+    released while it waits), takes every queued message and hands each with its arrival (``time.time()``) to
+    its subscription's callback. Much less Python per message than an executor's spin: a listener that keeps
+    up with 1 kHz outputs on a loaded machine."""
+
+    def __init__(self, node, context):
+        self.node, self.context, self.subs = node, context, []
+        self._thread, self._running = None, False
+
+    def subscribe(self, msg_type, topic, callback, qos):
+        sub = self.node.create_subscription(msg_type, topic, lambda m: None, qos)
+        self.subs.append((sub, callback))
+        return sub
+
+    def start(self):
+        self._running = True
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+        try:
+            with self.context.handle:
+                wait_set = _rclpy.WaitSet(len(self.subs), 0, 0, 0, 0, 0, self.context.handle)
+                while self._running and self.context.ok():
+                    wait_set.clear_entities()
+                    for sub, _ in self.subs:
+                        wait_set.add_subscription(sub.handle)
+                    wait_set.wait(50_000_000)
+                    for sub, callback in self.subs:
+                        with sub.handle:
+                            while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
+                                callback(taken[0], time.time())
+        except Exception:                             # the context shut down under the loop
+            pass
+
+    def stop(self):
+        """Stop the thread (within the wait's 50 ms), before the context shuts down."""
+        self._running = False
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+
+#: The harness's motion sources: the node's parameter and the message of each.
+SOURCES = {"pose": ("pose_topic", PoseStamped), "joints": ("joint_states_topic", JointState),
+           "imu": ("imu_topic", Imu)}
+#: The harness's noise model: the readings' sd (N m, N), the poses' (rad, m); the calibration's.
+HARNESS_NOISE = ((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
+#: The faults :func:`schedule` scripts (module docstring of tests/test_ros2_faults.py).
+FAULTS = ("drop", "pause", "back", "duplicate", "second", "kill", "garbage")
+#: The streams a fault acts on: the readings, the motion, both.
+STREAMS = ("w", "m", "both")
+#: The relay topics of the harness's motion (any source).
+MOTION_TOPIC = "/motion"
+
+
+def tool_calibration(path):
+    """The harness's calibration, saved at ``path``: the UR5's tool (``TOOL``) on a sensor with ``S = I``, no
+    offset, gravity down the URDF's base z, the harness's noise."""
+    from fmscal.plant import NoiseSpec
+    from fmscal.plant.scenarios._spatial import TOOL
+    wrench_sd, angle_sd, position_sd = HARNESS_NOISE
+    Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
+                noise=NoiseSpec(wrench_sd, angle_sd, position_sd)).save(path, overwrite=True)     # asked twice
+    return path
+
+
+def tool_payload(path):
+    """The harness's tool as ``fmscal identify-payload --save`` writes it (``fmscal-payload``), saved at ``path``: the
+    UR5's tool (``TOOL``) on a sensor with ``S = I``, no offset, gravity down the URDF's base z, the harness's noise
+    of a sample; its mass and centre of mass with the sds a few held poses give, the inertia undetermined (held
+    poses never show it)."""
+    from fmscal.observers.payload import PayloadEstimate
+    from fmscal.plant.scenarios._spatial import TOOL
+    sd = np.asarray(HARNESS_NOISE[0], dtype=float)
+    PayloadEstimate(mass=TOOL.mass, mass_std=2e-3, com=np.array(TOOL.com), com_std=np.full(3, 3e-4), inertia=None,
+                    inertia_std=None, b=np.zeros(6), b_std=sd / 10, residual_rms=sd, converged=True,
+                    payload_determined=True, gravity_given=np.array([0.0, 0.0, -9.81]), reading="reaction",
+                    noise_sd=sd, noise_of="sample", inertia_reason="held poses do not show the inertia").save(path)
+    return path
+
+
+def source_parameters(source):
+    """The node's parameters for a motion source of the harness (besides the calibration)."""
+    import robot_rig
+    from scipy.spatial.transform import Rotation
+    topic = f"{SOURCES[source][0]}:={MOTION_TOPIC}"
+    if source == "joints":
+        return (topic, f"urdf:={robot_rig.ur5_urdf()}", "frame:=tool0")
+    if source == "imu":
+        xyzw = Rotation.from_matrix(robot_rig.C_IMU).as_quat()
+        return (topic, "imu_rotation:=[" + ",".join(repr(float(v)) for v in xyzw) + "]",
+                "imu_lever_arm:=[" + ",".join(repr(float(v)) for v in robot_rig.R_IMU) + "]")
+    return (topic,)
+
+
+def harness_rows(source, duration, dt, seed, start=0.0):
+    """The harness's data: the UR5 moving every joint (tests/robot_rig.py), ``duration`` s from ``start`` at
+    ``dt``: its times, the readings (the payload's exact wrench plus the noise), and a builder of each row's
+    motion message for ``source`` (the poses with the noise; joint angles and an IMU's rate and specific force
+    exact: their noise is estimated by the node). The contact wrench's truth is zero throughout."""
+    import robot_rig
+    run = robot_rig.ur5_run(duration, dt, start=start)
+    rng = np.random.default_rng(seed)
+    wrench_sd, angle_sd, position_sd = HARNESS_NOISE
+    w_hat = run["W"] + rng.normal(0.0, 1.0, run["W"].shape) * np.asarray(wrench_sd)
+    if source == "joints":
+        return run["t"], w_hat, joint_state(run["motion"].joints, run["q"])
+    if source == "imu":
+        quaternion, omega, force, _ = robot_rig.imu_readings(run)
+        return run["t"], w_hat, imu_message(quaternion, omega, force)
+    pose = run["pose"].copy()
+    turn = robot_rig.Rotation.from_rotvec(rng.normal(0.0, angle_sd, (len(pose), 3)))
+    q = (robot_rig.Rotation.from_quat(pose[:, [1, 2, 3, 0]]) * turn).as_quat()
+    pose[:, :4] = q[:, [3, 0, 1, 2]]
+    pose[:, 4:] += rng.normal(0.0, position_sd, (len(pose), 3))
+
+    def build(i, stamp):
+        msg = PoseStamped()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "world"
+        o, p = msg.pose.orientation, msg.pose.position
+        o.w, o.x, o.y, o.z, p.x, p.y, p.z = (float(v) for v in pose[i])
+        return msg
+    return run["t"], w_hat, build
+
+
+def schedule(n, dt, faults, start=0):
+    """The emissions of a harness run of rows ``start..n-1`` at ``dt``, with ``faults`` scripted: a list of
+    ``(due, stream, row, stamp, publisher)``, in the order they go out (``due`` and ``stamp`` s from the epoch;
+    ``stream`` "w" or "m"; ``publisher`` 0, or 1 for a second publisher's).
+
+    Each fault is a dict: ``kind`` (:data:`FAULTS`), ``stream`` (:data:`STREAMS`), ``at`` (s) and as it needs
+    ``count`` (rows) or ``seconds``:
+
+    - ``drop``: ``count`` rows not sent;
+    - ``pause``: the rows due in ``[at, at + seconds)`` sent at ``at + seconds``, all at once (a stalled network or
+      driver that then flushes its queue);
+    - ``back``: from ``at`` on, the stamps ``seconds`` earlier (a clock stepped back);
+    - ``duplicate``: ``count`` rows sent twice;
+    - ``second``: a second publisher sends the log's rows from its start, stamped with its own clock ``seconds``
+      behind, for ``count`` rows from ``at`` (a restarted driver beside the old one);
+    - ``kill``: the sender killed at ``at`` (a restarted sender, :func:`send_plan` with ``start``, sends the rows
+      from ``at + seconds`` on, stamped from when it is up: the stamps jump forward, as a restarted driver's);
+    - ``garbage``: ``count`` motion messages the node skips (a pose's quaternion not of unit norm, a NaN joint
+      angle or IMU rate).
+    """
+    rows = np.arange(start, n)
+    base = [(float(i * dt), s, int(i), float(i * dt), 0) for i in rows for s in ("m", "w")]
+    out = base
+    for f in faults:
+        streams = ("w", "m") if f.get("stream", "both") == "both" else (f["stream"],)
+        at = int(round(f["at"] / dt))
+        kind = f["kind"]
+        if kind == "drop":
+            out = [e for e in out if not (e[1] in streams and e[4] == 0 and at <= e[2] < at + f["count"])]
+        elif kind == "pause":
+            end = f["at"] + f["seconds"]
+            out = [(end, *e[1:]) if e[1] in streams and f["at"] <= e[0] < end else e for e in out]
+        elif kind == "back":
+            out = [(e[0], e[1], e[2], e[3] - f["seconds"], e[4]) if e[1] in streams and e[2] >= at and e[4] == 0
+                   else e for e in out]
+        elif kind == "duplicate":
+            out = out + [e for e in out if e[1] in streams and e[4] == 0 and at <= e[2] < at + f["count"]]
+        elif kind == "second":
+            out = out + [(float((at + j) * dt + 0.3 * dt), s, j, float((at + j) * dt + 0.3 * dt) - f["seconds"], 1)
+                         for j in range(f["count"]) for s in streams if at + j < n]
+        elif kind == "garbage":
+            out = [(e[0], "g", *e[2:]) if e[1] == "m" and e[4] == 0 and at <= e[2] < at + f["count"] else e
+                   for e in out]
+    return sorted(out, key=lambda e: (e[0], e[4], e[1] != "m"))
+
+
+def send_plan(plan):
+    """Publish a harness run (``plan``: a dict, :func:`start_sender`'s); returns what was sent, as a dict."""
+    import gc
+    domain, source = plan["domain"], plan["source"]
+    dt = 1.0 / plan["rate"]
+    n = int(round(plan["duration"] / dt)) + 1
+    start = plan.get("start", 0)
+    t, w_hat, build = harness_rows(source, n * dt, dt, plan.get("seed", 0))
+    kill = next((f for f in plan.get("faults", ()) if f["kind"] == "kill"), None)
+    emissions = schedule(n, dt, plan.get("faults", ()), start)
+    if kill is not None and not start:
+        emissions = [e for e in emissions if e[0] < kill["at"]]
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node(plan.get("name", "fmscal_harness_sender"), context=context)
+    profile = QoSProfile(depth=plan.get("depth", 50000), history=HistoryPolicy.KEEP_LAST,
+                         reliability=ReliabilityPolicy.RELIABLE if plan.get("qos", "reliable") == "reliable"
+                         else ReliabilityPolicy.BEST_EFFORT)
+    message = SOURCES[source][1]
+    last_second = {s: max((e[0] for e in emissions if e[4] == 1 and e[1] == s), default=None) for s in ("w", "m")}
+
+    def make_publisher(stream):
+        return node.create_publisher(WrenchStamped if stream == "w" else message,
+                                     plan.get("wrench_topic", "/ft_sensor/wrench") if stream == "w" else MOTION_TOPIC,
+                                     profile)
+    pubs = {(s, 0): make_publisher(s) for s in ("w", "m")}
+    try:
+        end = time.monotonic() + 60
+        while not all(p.get_subscription_count() for p in pubs.values()):
+            if time.monotonic() > end:
+                raise SystemExit("harness sender: no subscriber")
+            time.sleep(0.05)
+        time.sleep(plan.get("settle", 0.5))
+        epoch = round(time.time() + 0.05, 3)
+        if start:                                              # a restarted sender: its rows from now on
+            emissions = [(e[0] - start * dt, e[1], e[2], e[3] - start * dt, e[4]) for e in emissions]
+        begin = epoch - time.time()                           # the schedule's times are the epoch's
+        sys.stdout.write(json.dumps({"epoch": epoch}) + "\n")   # said before it may be killed
+        sys.stdout.flush()
+        sent = {"w": 0, "m": 0, "g": 0}
+        first = emissions[0][2] if emissions else None
+        gc.disable()
+        lateness = []
+        wrench = WrenchStamped()
+        wrench.header.frame_id = plan.get("frame_id", "ft_sensor")
+        speed = plan.get("speed", 1.0)
+        for due, stream, row, stamp_t, publisher in emissions:
+            while (wait := epoch + due / speed - time.time()) > 0:
+                time.sleep(min(wait, 0.0005))
+            lateness.append(-wait)
+            kind = "m" if stream == "g" else stream
+            if publisher == 1 and (kind, 1) not in pubs:     # a second driver starts: its publisher discovered
+                pubs[kind, 1] = make_publisher(kind)
+                while not pubs[kind, 1].get_subscription_count():
+                    time.sleep(0.001)
+            sec, nanosec = divmod(int(round(epoch * 1e3)) * 1_000_000 + int(round(stamp_t * 1e9)), 1_000_000_000)
+            if stream == "w":
+                wrench.header.stamp.sec, wrench.header.stamp.nanosec = sec, nanosec
+                w = w_hat[row]
+                wrench.wrench.torque.x, wrench.wrench.torque.y, wrench.wrench.torque.z = (float(v) for v in w[:3])
+                wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (float(v) for v in w[3:])
+                pubs["w", publisher].publish(wrench)
+            else:
+                stamp = WrenchStamped().header.stamp
+                stamp.sec, stamp.nanosec = sec, nanosec
+                msg = build(row, stamp)
+                if stream == "g":                               # a message the node must skip
+                    if source == "pose":
+                        msg.pose.orientation.w *= 1.5               # a quaternion not of unit norm
+                    elif source == "imu":
+                        msg.angular_velocity.x = float("nan")
+                    else:
+                        msg.position = [float("nan")] + list(msg.position[1:])
+                pubs["m", publisher].publish(msg)
+            sent[stream] += 1
+            if publisher == 1 and due == last_second[kind]:
+                node.destroy_publisher(pubs.pop((kind, 1)))     # the second driver gone
+            if kill is not None and not start and due >= kill["at"] - dt:
+                os.kill(os.getpid(), signal.SIGKILL)           # killed, as a crashing driver is
+        gc.enable()
+        from rclpy.duration import Duration                     # the last messages delivered before it exits (a
+        for pub in pubs.values():                               # loaded node may be seconds behind)
+            pub.wait_for_all_acked(Duration(seconds=120))
+        time.sleep(0.3)                                         # best effort: no acknowledgement to wait for
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return {"epoch": epoch, "first_row": first, "sent": sent, "begin": begin,
+            "lateness_p99": float(np.percentile(lateness, 99)) if lateness else 0.0}
+
+
+def start_sender(plan):
+    """The harness's sender (:func:`send_plan`) as a process of its own (``python tests/ros2_rig.py PLAN.json``)."""
+    path = tempfile.NamedTemporaryFile("w", suffix=".json", delete=False)
+    json.dump(plan, path)
+    path.close()
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONPATH=os.pathsep.join(
+        [str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.Popen([sys.executable, __file__, path.name], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+
+
+def sender_result(proc, timeout):
+    """The sender's JSON once it is done (where its plan killed it: its epoch, and ``killed``); killed if this
+    process is stopped first."""
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except BaseException:
+        proc.kill()
+        raise
+    lines = [json.loads(line) for line in out.strip().splitlines() if line.startswith("{")]
+    if proc.returncode == -signal.SIGKILL:            # killed by its plan: what it said before
+        return {**lines[0], "killed": True} if lines else None
+    if proc.returncode:
+        raise AssertionError(f"the harness sender failed: {err[-2000:]}")
+    return lines[-1]
+
+
+class CpuHog:
+    """A busy process beside the node (``while True: pass``), for as long as the ``with`` lasts."""
+
+    def __enter__(self):
+        self.proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        return self
+
+    def __exit__(self, *exc):
+        self.proc.kill()
+        self.proc.wait(timeout=5)
+
+
+def _level(status):
+    """A DiagnosticStatus's level as an int (rclpy gives a byte)."""
+    return int.from_bytes(status.level, "little") if isinstance(status.level, bytes) else int(status.level)
+
+
+class Listener:
+    """The node's outputs taken by a :class:`Taker` (no executor): the contact wrenches, their covariances and
+    flags, the diagnostics."""
+
+    def __init__(self, domain, contact_topic="/ft_sensor/contact", covariance_topic="/ft_sensor/contact_covariance",
+                 flags_topic="/ft_sensor/contact_flags", node_name="fmscal_compensator"):
+        from diagnostic_msgs.msg import DiagnosticArray as Diagnostics
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("fmscal_harness_listener", context=self.context)
+        self.node_name = node_name
+        self.contacts, self.covariances, self.flags, self.diagnostics = [], [], [], []
+        deep = QoSProfile(depth=100000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+        self.taker = Taker(self.node, self.context)
+        self.contact_sub = self.taker.subscribe(WrenchStamped, contact_topic, lambda m, at: self.contacts.append(m),
+                                                deep)
+        self.taker.subscribe(Float64MultiArray, covariance_topic, lambda m, at: self.covariances.append(m.data),
+                             deep)
+        self.taker.subscribe(Diagnostics, flags_topic, lambda m, at: self.flags.append(m), deep)
+        self.taker.subscribe(Diagnostics, "/diagnostics", lambda m, at: self.diagnostics.append(m), 1000)
+        self.clients = {s: self.node.create_client(Trigger, f"/{node_name}/{s}")
+                        for s in ("tare", "tare_force", "identify_payload", "save", "reload", "cancel")}
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.taker.start()
+
+    def wait_for_node(self, proc, timeout=WAIT):
+        """Until the node publishes to this process and its diagnostics have come, or it exits."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if proc.poll() is not None:
+                raise AssertionError(f"the node exited ({proc.returncode}): {node_log(proc)[-2000:]}")
+            if self.contact_sub.get_publisher_count() and self.diagnostics:
+                return
+            time.sleep(0.05)
+        raise AssertionError(f"the node was not discovered in {timeout} s: {node_log(proc)[-2000:]}")
+
+    def wait_for(self, condition, timeout=WAIT):
+        """Until ``condition()`` holds (:func:`wait_until`)."""
+        return wait_until(condition, timeout)
+
+    def call(self, service, timeout=WAIT):
+        """Call a Trigger service of the node; ``(success, message)`` (None where no answer came in time)."""
+        return self.answer(self.call_async(service, timeout), timeout)
+
+    def call_async(self, service, timeout=WAIT):
+        """A Trigger service of the node called; the future (:meth:`answer` waits for it)."""
+        client = self.clients[service]
+        assert client.wait_for_service(timeout_sec=timeout), f"~/{service} not found"
+        return client.call_async(Trigger.Request())
+
+    def answer(self, future, timeout=WAIT):
+        """``(success, message)`` of a call (None where no answer came within ``timeout`` s)."""
+        end = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+        if not future.done():
+            return None
+        return future.result().success, future.result().message
+
+    def status(self, which=0):
+        """The newest diagnostics of the node (``which`` 0: its outputs, 1: its inputs) as a dict of values, with
+        ``message`` and ``level``."""
+        for d in reversed(self.diagnostics):
+            if len(d.status) > which and d.status[which].name.startswith(self.node_name + ":"):
+                s = d.status[which]
+                return {**{k.key: k.value for k in s.values}, "message": s.message, "level": _level(s)}
+        return None
+
+    def messages(self, which=0):
+        """Every diagnostics message of the node seen so far (``which`` as :meth:`status`)."""
+        return [d.status[which].message for d in self.diagnostics
+                if len(d.status) > which and d.status[which].name.startswith(self.node_name + ":")]
+
+    def outputs(self, epoch):
+        """The outputs so far: ``t`` (s from the epoch), ``wrench`` (fmscal's order), ``sd`` (the covariance's
+        diagonal's root, fmscal's order; paired by order, as the node publishes them), ``flagged`` (by stamp)."""
+        n = min(len(self.contacts), len(self.covariances))
+        t, wrench = contact_array(self.contacts[:n], epoch)
+        cov = np.array([np.asarray(c) for c in self.covariances[:n]]).reshape(n, 6, 6)
+        sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))[:, [3, 4, 5, 0, 1, 2]]      # ROS's force first back
+        flagged_at = {(m.header.stamp.sec, m.header.stamp.nanosec) for m in self.flags if _level(m.status[0]) == 1}
+        flagged = np.array([(m.header.stamp.sec, m.header.stamp.nanosec) in flagged_at for m in self.contacts[:n]],
+                           dtype=bool)
+        return t, wrench, sd, flagged
+
+    def fates(self, epoch):
+        """Each reading's fate by its stamp (s from the epoch, rounded to the microsecond), from the node's flags:
+        "" (published), the flags (published, flagged), "withheld: <cause>"; a later message of one stamp wins."""
+        return {round(seconds(m.header.stamp) - epoch, 6): m.status[0].message for m in self.flags}
+
+    def close(self):
+        self.taker.stop()
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+if __name__ == "__main__":                       # the harness's sender: python tests/ros2_rig.py PLAN.json
+    sys.path.insert(0, str(Path(__file__).parent))
+    result = send_plan(json.loads(Path(sys.argv[1]).read_text()))
+    sys.stdout.write(json.dumps(result) + "\n")

@@ -25,8 +25,8 @@ from fmscal.plant.io import simulate_attitude_log
 from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
 from geometry_msgs.msg import PoseStamped
-from ros2_rig import (Peer, contact_array, domain_id, imu_message, joint_state, node_command, node_log, running_node,
-                      truth_calibration)
+from ros2_rig import (DOMAINS, HARNESS_NOISE, Peer, contact_array, domain_id, imu_message, joint_state, node_command,
+                      node_log, running_node, tool_calibration, truth_calibration)
 import robot_rig
 from sensor_msgs.msg import Imu, JointState
 
@@ -170,7 +170,7 @@ def test_saturated_readings_are_withheld(arm, cal_file):
         states.append(pipeline.state())       # at once: "not ready" once the readings are silent (wall time)
         outputs.append({round(o.sample.t, 9): o.sample.wrench for o in out})
     assert set(outputs[0]) - set(outputs[1]) == {round(log.t[200], 9)}
-    assert pipelines[1].counts["saturated"] == 1 and states[1] == "saturated"
+    assert pipelines[1].withheld["saturated"] == 1 and states[1] == "saturated"
     assert states[0] == "running"
     assert all(np.array_equal(outputs[0][k], v) for k, v in outputs[1].items())
 
@@ -205,8 +205,9 @@ def test_a_missing_calibration_exits_with_one_line():
     """``fmscal ros2`` without a calibration: exit status 2 and one line on stderr, no traceback."""
     done = _run(*node_command("pose_topic:=/ft_sensor/pose")[1:])
     assert done.returncode == 2
-    assert done.stderr.strip() == ("fmscal ros2: error: parameter calibration is required: a file saved by fmscal "
-                                   "calibrate --save (--ros-args -p calibration:=CAL.json)")
+    assert done.stderr.strip() == ("fmscal ros2: error: parameter calibration or payload is required: a file saved "
+                                   "by fmscal calibrate --save (--ros-args -p calibration:=CAL.json), or by fmscal "
+                                   "identify-payload --save (-p payload:=tool.json)")
 
 
 def test_without_rclpy_one_line_names_the_install(monkeypatch, capsys):
@@ -303,8 +304,11 @@ def test_tare_refused_during_a_contact(request, arm, cal_file):
     assert not ok
     assert message.startswith("tare refused: a contact is detected (") and "\n" not in message, message
     assert message.endswith("; tare with the tool free, or call ~/tare_force where the offset itself is off (a "
-                            "sensor zeroed by its hardware, a drift without track_offset)"), message
+                            "sensor zeroed by its hardware, a drift without track_offset); ~/reload undoes a wrong "
+                            "~/tare_force"), message
     assert forced and forced_message.startswith("tared: offset "), forced_message
+    absorbed = float(forced_message.split("; absorbed ")[1].split(" N")[0])
+    assert absorbed == pytest.approx(np.linalg.norm(contact_wrench()[3:]), rel=0.2), forced_message
 
 
 def test_stale_motion_stops_the_output(request, arm, cal_file):
@@ -389,8 +393,8 @@ def test_planar_replay(request, tmp_path):
 
 
 # --- the other motion sources: joint states with a URDF, an IMU --------------------------------------------------
-#: The motion sources' tests' noise model (tests/test_motion_sources.py's).
-NOISE = NoiseSpec((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
+#: The motion sources' tests' noise model (tests/test_motion_sources.py's; the harness's calibration's).
+NOISE = NoiseSpec(*HARNESS_NOISE)
 
 
 @pytest.fixture(scope="module")
@@ -400,10 +404,7 @@ def ur5():
 
 
 def _source_calibration(tmp_path):
-    path = tmp_path / "cal.json"
-    Calibration(S=np.eye(6), payload=TOOL, method="truth", b=np.zeros(6), gravity=(0.0, 0.0, -9.81), latency=0.0,
-                noise=NOISE).save(path, overwrite=True)             # a test may ask for it twice: the same file
-    return path
+    return tool_calibration(tmp_path / "cal.json")
 
 
 def _replay_source(request, node_args, message, build, t, w_hat):
@@ -548,6 +549,17 @@ def test_imu(request, ur5, tmp_path):
     assert np.abs(wrench).max() < 1e-3
 
 
+def _taken(peer):
+    """The readings the node has taken or counted as lost, none waiting for the motion (its newest diagnostics;
+    -1 before any): what a loaded machine's late or lost delivery cannot hold up."""
+    if not peer.diagnostics:
+        return -1
+    values = {v.key: v.value for v in peer.diagnostics[-1].status[0].values}
+    if "received" not in values or int(values["backlog"]):
+        return -1
+    return int(values["received"]) + int(values["lost"])
+
+
 @pytest.mark.slow
 def test_identify_payload_from_an_imu_over_ros(request, tmp_path):
     """~/identify_payload on an imu_topic node (imu_rotation given), fed 10 s of a tool held at six attitudes
@@ -569,11 +581,11 @@ def test_identify_payload_from_an_imu_over_ros(request, tmp_path):
         try:
             peer.wait_for_node(proc)
             epoch = peer.replay_rows(t, w_hat, oriented, rate=4.0)
-            assert peer.wait_for(lambda: len(peer.contacts) >= len(t) - 20, 10), (len(peer.contacts), len(t))
+            assert peer.wait_for(lambda: _taken(peer) >= len(t) - 20, 120), _taken(peer)    # lost ones counted too
             ok, message = peer.call("identify_payload", proc=proc)
             more = t[-1] + 0.004 + np.arange(250) * 0.004
             peer.replay_rows(more, w_hat[:250], unoriented, epoch=epoch)
-            time.sleep(0.3)
+            assert peer.wait_for(lambda: _taken(peer) >= len(t) + 250 - 20, 120), _taken(peer)
             refused, why = peer.call("identify_payload", proc=proc)
         finally:
             peer.close()
@@ -637,7 +649,7 @@ def test_save(request, arm, cal_file, tmp_path):
     assert not changed.successful
     assert changed.reason == ("fmscal_compensator reads its parameters at start: restart it to change save_path "
                               "(~/reload reads the calibration file again)")
-    second = domain_id(request.node.name) % 100 + 1
+    second = domain_id(request.node.name) % DOMAINS + 1
     with _node(request, cal_file, "track_offset:=true", f"save_path:={saved}", domain=second) as proc:
         peer = Peer(second)
         try:

@@ -3,7 +3,8 @@
 It subscribes to a force-moment sensor's raw ``geometry_msgs/WrenchStamped`` and to one motion source (a
 ``PoseStamped`` of the sensor frame, ``JointState`` with a URDF, or an ``Imu`` on the tool), matches them by
 their header stamps, and publishes :func:`fmscal.analysis.Compensator`'s contact wrench with the reading's
-stamp, its covariance, and diagnostics; services tare, identify the payload, save and reload the calibration.
+stamp, its covariance, a flag per output, and diagnostics that count every reading by its fate; services tare,
+identify the payload (in a process of its own, cancellable), save and reload the calibration.
 The guide page "On a running robot" (docs/guide/robot.md) lists the topics, parameters and services.
 
 rclpy is imported when the node starts, not with this package: the wheels of the extra ``[ros2]``
@@ -12,8 +13,8 @@ rclpy is imported when the node starts, not with this package: the wheels of the
 
 from ._parameters import (MOTION_SOURCES, NODE_NAME, OUTPUT_FRAMES, PARAMETERS, QOS, Parameter, Ros2Error, Settings,
                           settings)
-from ._pipeline import STATES, Output, Pipeline, sensor_pose
-from ._node import INSTALL, spin
+from ._pipeline import FLAGS, LEVELS, STATES, WITHHELD, Output, Pipeline, Snapshot, fit_held, sensor_pose
+from ._node import INSTALL, spin, unknown_parameters
 
 __all__ = ["spin", "Pipeline", "settings", "sensor_pose", "PARAMETERS", "Parameter", "NODE_NAME", "STATES",
-           "Ros2Error"]
+           "LEVELS", "WITHHELD", "FLAGS", "Snapshot", "Output", "fit_held", "unknown_parameters", "Ros2Error"]

@@ -6,21 +6,36 @@ Jazzy) once its setup is sourced.
 
 Threads. The inputs (the wrench, the motion) are subscriptions of a node ``<name>_inputs`` that no executor
 spins: a thread of the node's own takes every message queued on both (:meth:`CompensatorNode.poll`, waiting on
-rclpy's wait set of the two when both are empty, the interpreter's lock released) and compensates them as one block
-(:meth:`fmscal.analysis.Compensator.push_many`). An executor costs a wake-up and a pass of Python per message,
-and rclpy's ``MultiThreadedExecutor`` lost 1 kHz messages on a loaded 2-core machine where this way loses none
-(docs/guide/robot.md quotes ``benchmarks/ros2_latency.py``). An rclpy without ``take_message`` falls back to its
-executor's callbacks. The parameters and the diagnostics' timer are the node's, on a ``SingleThreadedExecutor``
-in the main thread. The services live on a node ``<name>_services``, in their own mutually exclusive callback
-group on a ``MultiThreadedExecutor`` spun in another thread, and are named under the node's name
-(``/fmscal_compensator/tare``): an ``identify_payload`` fit runs beside the inputs, not in front of them; they
-share the pipeline through its lock, held for the short steps only (the fit runs outside it).
+rclpy's wait set of the two when both are empty, the interpreter's lock released), hands them to the pipeline in
+the order the middleware received them (each reading after the motion received before it, however long the take
+of either queue took) and compensates them as one block (:meth:`fmscal.analysis.Compensator.push_many`). An
+executor costs a wake-up and a pass of Python per message, and rclpy's ``MultiThreadedExecutor`` lost 1 kHz
+messages on a loaded 2-core machine where this way loses none (docs/guide/robot.md quotes
+``benchmarks/ros2_latency.py``). An rclpy without ``take_message`` falls back to its executor's callbacks. The
+parameters, the diagnostics' timer and the inputs' QoS events (their handlers moved to this node: the inputs' node
+is not spun) are the node's, on a ``SingleThreadedExecutor`` in the main thread; the diagnostics read the
+pipeline's snapshot, never its lock, so that a compensation that stalls is said, not silenced. The services live
+on a node ``<name>_services``, on a ``MultiThreadedExecutor`` spun in another thread, and are named under the
+node's name (``/fmscal_compensator/tare``); ``~/identify_payload``'s fit runs in a process of its own
+(:mod:`._worker`), which ``~/cancel`` or the node's stopping kills.
+
+Never a crash on an input. Whatever the messages (any order, loss, pause, duplicate, jump or restart of either
+stream), the poll thread goes on: an exception while compensating is logged with its traceback once, the
+pipeline's window restarted (the readings it held counted as ``error``), and the node keeps running.
 """
 
 import array
+import difflib
+import faulthandler
+import fnmatch
 import gc
+import heapq
+import signal
 import threading
 import time
+import traceback
+from collections import deque
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -29,9 +44,10 @@ from fmscal.plant.numerics import FmscalError
 
 from .._motion import ImuMotion, JointMotion, PoseMotion
 from ._parameters import NODE_NAME, PARAMETERS, Ros2Error, settings
-from ._pipeline import STATES, Pipeline, sensor_pose
+from ._pipeline import FLAGS, LEVELS, Pipeline, motion_source, sensor_pose, state_of
+from ._worker import Cancelled, Worker
 
-__all__ = ["ros", "CompensatorNode", "spin", "INSTALL"]
+__all__ = ["ros", "CompensatorNode", "spin", "INSTALL", "unknown_parameters"]
 
 #: How to get rclpy, as the one-line error says where it is missing.
 INSTALL = 'pip install "fmscal[ros2]" (-e ".[ros2]" in a clone), or source a ROS 2 install (Humble, Jazzy)'
@@ -46,6 +62,10 @@ IDLE = 0.005
 SILENT = 0.1
 #: The readings the node's own latency statistic keeps (diagnostics' p50 and p99).
 LATENCY_KEPT = 2000
+#: s beyond its usual lag an output may come (or a compensation pass may run) before the node is "behind".
+BEHIND = 0.25
+#: The parameters rclpy declares on every node (not the node's to refuse).
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
 def ros():
@@ -72,8 +92,14 @@ def ros():
         WaitSet = rclpy_implementation.WaitSet
     except (ImportError, AttributeError):
         WaitSet = None
+    try:                                       # the subscriptions' QoS events (Iron and later: matched too)
+        from rclpy.event_handler import SubscriptionEventCallbacks
+        from rclpy.event_handler import qos_policy_name_from_kind
+    except ImportError:
+        SubscriptionEventCallbacks = qos_policy_name_from_kind = None
     return SimpleNamespace(rclpy=rclpy, Node=rclpy.node.Node, WaitSet=WaitSet, Context=Context,
-                           Group=MutuallyExclusiveCallbackGroup,
+                           Group=MutuallyExclusiveCallbackGroup, Events=SubscriptionEventCallbacks,
+                           policy_name=qos_policy_name_from_kind,
                            Shutdown=ExternalShutdownException, Executor=MultiThreadedExecutor,
                            Single=SingleThreadedExecutor, Parameter=Parameter,
                            QoSProfile=QoSProfile, Reliability=ReliabilityPolicy, History=HistoryPolicy,
@@ -92,6 +118,61 @@ _WRENCH = {"tx": ("torque", "x"), "ty": ("torque", "y"), "tz": ("torque", "z"), 
 _ROS_ORDER = ("fx", "fy", "fz", "tx", "ty", "tz", "M")
 
 
+def _flat(section, prefix=""):
+    """A params file's ``ros__parameters`` as dotted names (nested maps are dotted, as rclpy reads them)."""
+    out = []
+    for key, value in (section or {}).items():
+        name = f"{prefix}{key}"
+        out += _flat(value, name + ".") if isinstance(value, dict) else [name]
+    return out
+
+
+def unknown_parameters(args, node_name, known):
+    """The parameters given to this node that it does not have: ``(errors, warnings)``, one line each naming the
+    closest known name.
+
+    ``args`` the ROS arguments (``-p``/``--param name:=value``, ``--params-file FILE``); ``node_name`` the node's
+    fully qualified name. A ``-p`` is this node's (its helpers take no command-line arguments), as is a params
+    file's section whose key is its name; a section whose key is a wildcard (``/**``, ``/**/fmscal_*``) holds other
+    nodes' parameters too: a warning there.
+    """
+    import yaml
+    known = set(known)
+    errors, warnings = [], []
+
+    def closest(name):
+        match = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.6)
+        return f": did you mean {match[0]}?" if match else f" (docs/guide/robot.md lists {node_name}'s parameters)"
+    short = node_name.rsplit("/", 1)[-1]
+    args = list(args)
+    for i, arg in enumerate(args[:-1]):
+        if arg in ("-p", "--param"):
+            name = args[i + 1].split(":=", 1)[0]
+            if name not in known:
+                errors.append(f"parameter {name} (-p on the command line) is not one of {short}'s{closest(name)}")
+        elif arg == "--params-file":
+            path = Path(args[i + 1])
+            try:
+                content = yaml.safe_load(path.read_text()) or {}
+            except (OSError, yaml.YAMLError):
+                continue                               # rclpy says what is wrong with the file itself
+            for key, section in (content.items() if isinstance(content, dict) else ()):
+                if not isinstance(section, dict):
+                    continue
+                key = str(key)
+                full = key if key.startswith("/") else "/" + key
+                wildcard = "*" in key
+                if not (full == node_name or key == short or
+                        wildcard and fnmatch.fnmatch(node_name, full.replace("/**", "*"))):
+                    continue
+                for name in _flat(section.get("ros__parameters")):
+                    if name in known:
+                        continue
+                    line = f"parameter {name} ({path.name}, section {key}) is not one of {short}'s{closest(name)}"
+                    (warnings if wildcard else errors).append(line)
+    return errors, warnings
+
+
 class CompensatorNode:
     """The node ``fmscal_compensator`` (module docstring; the guide, docs/guide/robot.md, lists its topics,
     parameters and services).
@@ -102,15 +183,25 @@ class CompensatorNode:
         :func:`ros`.
     context : rclpy.context.Context
         The context ``rclpy.init`` made of the command line's ``--ros-args``.
+    args : sequence of str
+        Those arguments (the parameters given are checked against the node's: :func:`unknown_parameters`).
     """
 
-    def __init__(self, r, context):
+    def __init__(self, r, context, args=()):
         self.r = r
         self.node = r.Node(NODE_NAME, context=context)
         self.log = self.node.get_logger()
+        self._last_warned, self._warned_count = {}, {}
+        builtin = set(self.node._parameters) if hasattr(self.node, "_parameters") else set(RCLPY_PARAMETERS)
+        errors, warnings = unknown_parameters(args, self.node.get_fully_qualified_name(),
+                                              {p.name for p in PARAMETERS} | builtin | set(RCLPY_PARAMETERS))
+        if errors:
+            raise Ros2Error(errors[0] + (f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""))
+        for line in warnings:
+            self.log.warning(line + " (a wildcard section: left alone)")
         self.settings = settings(self._declare())
         self.node.add_on_set_parameters_callback(self._refuse_changes)
-        motion = self._motion()
+        motion = motion_source(self.settings)
         self.pipeline = Pipeline(self.settings, motion)
         model = self.pipeline.model
         self.names = tuple(model.wrench_names)
@@ -123,19 +214,30 @@ class CompensatorNode:
         n = len(order)
         self._cov_msg.layout.dim = [r.Dimension(label=" ".join(self.names[i] for i in order), size=n, stride=n * n),
                                     r.Dimension(label="column", size=n, stride=n)]
+        self._flag_msg = r.DiagnosticArray()
+        self._flag_status = r.DiagnosticStatus(name=f"{self.node.get_name()}: contact wrench",
+                                               hardware_id=self.settings.wrench_topic)
+        self._flag_contact = r.KeyValue(key="contact", value="false")
+        self._flag_status.values = [self._flag_contact]
+        self._flag_msg.status = [self._flag_status]
         self._epoch = None
-        self._last_warned = {}
-        self._latencies = []
+        self._latencies = deque(maxlen=LATENCY_KEPT)
+        self._held_for = None                         # (s from the newest output's reading's reception, when)
+        self._pass_start, self._pass_size = None, 0
+        self._seen, self._latched = None, []           # the transient states' counts, those not said yet
         self._entered = time.monotonic()
+        self.error = None
+        self.stopping = threading.Event()
+        self.worker = Worker()
         s = self.settings
-        services = r.Group()
         depth = int(s.queue_depth)
+        self._reliable = s.qos != "sensor_data"
         qos_in = r.QoSProfile(depth=depth, history=r.History.KEEP_LAST,
-                              reliability=r.Reliability.BEST_EFFORT if s.qos == "sensor_data"
-                              else r.Reliability.RELIABLE)
+                              reliability=r.Reliability.RELIABLE if self._reliable else r.Reliability.BEST_EFFORT)
         qos_out = r.QoSProfile(depth=depth, history=r.History.KEEP_LAST, reliability=r.Reliability.RELIABLE)
         self.contact_pub = self.node.create_publisher(r.WrenchStamped, s.contact_topic, qos_out)
         self.cov_pub = self.node.create_publisher(r.Array, s.covariance_topic, qos_out)
+        self.flag_pub = self.node.create_publisher(r.DiagnosticArray, s.flags_topic, qos_out)
         self.diag_pub = self.node.create_publisher(r.DiagnosticArray, "/diagnostics", 10)
         self.latency_pub = self.node.create_publisher(r.Array, "~/latency", qos_out) if s.debug_latency else None
         # the inputs on a node of their own, not spun by an executor: a thread takes their messages (poll). The
@@ -144,27 +246,27 @@ class CompensatorNode:
         helper = dict(namespace=self.node.get_namespace(), context=context, start_parameter_services=False,
                       use_global_arguments=False)
         self.inputs = r.Node(f"{self.node.get_name()}_inputs", **helper)
-        self._wrench_sub = self.inputs.create_subscription(r.WrenchStamped, self._resolve(s.wrench_topic),
-                                                           self._on_wrench, qos_in)
         message, self._motion_message = {PoseMotion: (r.PoseStamped, self._pose),
                                          JointMotion: (r.JointState, self._joints),
                                          ImuMotion: (r.Imu, self._imu)}[type(motion)]
-        self._motion_sub = self.inputs.create_subscription(message, self._resolve(s.topic), self._on_motion, qos_in)
-        self.error = None
+        self._wrench_sub = self._subscribe(r.WrenchStamped, s.wrench_topic, self._on_wrench, qos_in)
+        self._motion_sub = self._subscribe(message, s.topic, self._on_motion, qos_in)
         # the services on a node of their own, spun by its own executor in another thread, named under this
-        # node's name: a fit never waits for the inputs' executor, nor the inputs for it
+        # node's name: a fit never waits for the inputs, nor the inputs for it; ~/cancel in a group of its own
         self.services = r.Node(f"{self.node.get_name()}_services", **helper)
         base = self.node.get_fully_qualified_name()
-        for name, work in (("tare", self.pipeline.tare), ("tare_force", self.pipeline.tare_force),
-                           ("identify_payload", self.pipeline.identify), ("save", self.pipeline.save),
+        work, cancel = r.Group(), r.Group()
+        for name, call in (("tare", self.pipeline.tare), ("tare_force", self.pipeline.tare_force),
+                           ("identify_payload", self._identify), ("save", self.pipeline.save),
                            ("reload", self.pipeline.reload)):
-            self.services.create_service(r.Trigger, f"{base}/{name}", self._service(name, work),
-                                         callback_group=services)
+            self.services.create_service(r.Trigger, f"{base}/{name}", self._service(name, call), callback_group=work)
+        self.services.create_service(r.Trigger, f"{base}/cancel", self._service("cancel", self._cancel),
+                                     callback_group=cancel)
         self.node.create_timer(s.diagnostics_period, self._diagnose)
         self.log.info(f"compensating {self._wrench_sub.topic_name} with the motion of "
                       f"{self._motion_sub.topic_name} into {self.contact_pub.topic_name} "
                       f"(the wrench {'on the tool' if s.direction == 'on_tool' else 'on the environment'}, "
-                      f"{s.output_frame} frame); calibration {s.calibration}")
+                      f"{s.output_frame} frame; flags on {self.flag_pub.topic_name}); {self.pipeline.source}")
         for warning in self.pipeline.warnings:
             self.log.warning(warning)
 
@@ -203,14 +305,67 @@ class CompensatorNode:
         return self.r.SetResult(successful=False, reason=f"{NODE_NAME} reads its parameters at start: restart it "
                                 f"to change {names} (~/reload reads the calibration file again)")
 
-    def _motion(self):
-        """The motion's source the parameters name (its stamps are aligned by the pipeline: no latency here)."""
-        s = self.settings
-        if s.source == "pose_topic":
-            return PoseMotion()
-        if s.source == "joint_states_topic":
-            return JointMotion(s.urdf, s.frame)
-        return ImuMotion(rotation=s.imu_rotation, lever_arm=s.imu_lever_arm)
+    # --- the inputs' subscriptions and their events -------------------------------------------------------------
+    def _subscribe(self, message, topic, callback, qos):
+        """A subscription of the inputs' node, its QoS events (an incompatible publisher, the publishers matched,
+        messages lost) handled by this node's executor (the inputs' node is not spun)."""
+        r, topic = self.r, self._resolve(topic)
+        events = None
+        if r.Events is not None:
+            events = r.Events(incompatible_qos=lambda info: self._incompatible(topic, info),
+                              matched=lambda info: self._matched(topic, info),
+                              message_lost=lambda info: self._message_lost(topic, info))
+        try:
+            sub = self.inputs.create_subscription(message, topic, callback, qos, event_callbacks=events)
+        except Exception:                          # an rmw without one of these events
+            sub = self.inputs.create_subscription(message, topic, callback, qos)
+        for handler in list(getattr(sub, "event_handlers", ())):
+            self.inputs.remove_waitable(handler)
+            self.node.add_waitable(handler)
+        return sub
+
+    def _incompatible(self, topic, info):
+        policy = getattr(info, "last_policy_kind", None)
+        name = self.r.policy_name(policy) if self.r.policy_name is not None and policy is not None else "a policy"
+        want = "reliable" if self._reliable else "sensor_data (best effort)"
+        hint = " (a best-effort publisher: set qos: sensor_data)" if "RELIAB" in str(name).upper() and \
+            self._reliable else ""
+        message = (f"a publisher of {topic} offers a QoS this node's subscription ({want}) cannot take: {name} "
+                   f"incompatible{hint}; none of its messages arrive")
+        self.pipeline.condition(f"qos {topic}", message)
+        self._warn(f"qos {topic}", message)
+
+    def _matched(self, topic, info):
+        count = getattr(info, "current_count", None)
+        if count is not None and count > 1:
+            self._publishers(topic, count)
+
+    def _message_lost(self, topic, info):
+        self._warn(f"lost {topic}", f"{topic}: {getattr(info, 'total_count_change', '?')} messages lost on the way "
+                                    f"(DDS; {getattr(info, 'total_count', '?')} so far)")
+
+    def _publishers(self, topic, count):
+        """More than one publisher on an input topic: the condition ``publishers`` (outputs flagged)."""
+        hold = self.settings.window + self.settings.delay + self.settings.stale_timeout
+        if count > 1:
+            message = (f"{count} publishers on {topic}: their messages interleave (a driver restarted beside the "
+                       "old one?); the outputs flagged")
+            if self.pipeline.condition("publishers", message):
+                self.log.warning(message)
+        elif self.pipeline.condition("publishers", None, hold):
+            self.log.info(f"one publisher on each input again: outputs unflagged after {hold:g} s")
+
+    def _check_graph(self):
+        """The input topics' publishers counted, each pass of the poll thread after its messages are taken and
+        before they are compensated (a message taken from a second publisher: it had matched, and is counted)."""
+        counts = {}
+        for sub in (self._wrench_sub, self._motion_sub):
+            try:
+                counts[sub.topic_name] = sub.get_publisher_count()
+            except Exception:
+                return
+        topic, most = max(counts.items(), key=lambda kv: kv[1])
+        self._publishers(topic, most)
 
     # --- inputs ----------------------------------------------------------------------------------------------
     def _time(self, stamp):
@@ -223,12 +378,19 @@ class CompensatorNode:
     def _queued(sub):
         """The messages waiting on a subscription, taken now (the executor hands one per callback: the rest of a
         backlog is taken in the same callback and compensated as one block)."""
+        return [m for _, _, m in CompensatorNode._taken(sub, 0)]
+
+    @staticmethod
+    def _taken(sub, kind):
+        """The messages waiting on a subscription, taken now: ``(received, kind, message)``, ``received`` the
+        middleware's reception time (ns; its order where it has none)."""
         handle, out = getattr(sub, "handle", None), []
         if handle is None or not hasattr(handle, "take_message"):
             return out
         with handle:
             while (taken := handle.take_message(sub.msg_type, sub.raw)) is not None:
-                out.append(taken[0])
+                info = taken[1] if len(taken) > 1 and isinstance(taken[1], dict) else {}
+                out.append((info.get("received_timestamp") or len(out), kind, taken[0]))
         return out
 
     def pollable(self):
@@ -260,29 +422,51 @@ class CompensatorNode:
         """Take the inputs' messages as they come, until the context shuts down: all the queued ones of both
         inputs, compensated as one block; where there were none, wait for the next (:meth:`_waiter`; without a
         wait set, look again after :data:`POLL` s, :data:`IDLE` s once the inputs have been silent for
-        :data:`SILENT` s). An exception stops the node (:attr:`error`)."""
+        :data:`SILENT` s). An exception while compensating never stops it (:meth:`_failed`); one outside that (the
+        middleware gone) stops the node (:attr:`error`)."""
         last = time.monotonic()
         wait = self._waiter(context)
+        idle = True
         try:
             while context.ok():
-                motions, readings = self._queued(self._motion_sub), self._queued(self._wrench_sub)
+                readings, motions = self._taken(self._wrench_sub, 1), self._taken(self._motion_sub, 0)
                 if not (motions or readings):
+                    if not idle:                         # the inputs fell silent: the diagnostics' numbers final
+                        self.pipeline.snap()
+                        idle = True
                     if wait is not None:
                         wait()
                     else:                                # inputs silent for long: looked at less often
                         time.sleep(POLL if time.monotonic() - last < SILENT else IDLE)
                     continue
-                last = time.monotonic()
-                self._entered = time.monotonic()
-                for m in motions:
-                    self._motion_message(m)
-                for m in readings:
-                    self._reading(m)
-                self._process()
+                idle = False
+                last = self._entered = self._pass_start = time.monotonic()
+                self._pass_size = len(readings)
+                try:
+                    self._check_graph()
+                    # in the order the middleware received them: each reading after the motion that came before it
+                    for received, kind, m in heapq.merge(motions, readings, key=lambda e: (e[0], e[1])):
+                        if kind:
+                            self._reading(m, received * 1e-9 if received > 1e18 else None)
+                        else:
+                            self._motion_message(m)
+                    self._process()
+                except Exception as err:
+                    self._failed(err)
+                finally:
+                    self._pass_start = None
         except Exception as err:                     # said by spin, in one line for FmscalError
             if context.ok():
                 self.error = err
                 self.r.rclpy.try_shutdown(context=context)
+
+    def _failed(self, err):
+        """An exception while compensating: logged (its traceback the first time), the pipeline restarted."""
+        key = f"error {type(err).__name__}"
+        first = key not in self._last_warned
+        self._warn(key, f"compensation failed ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})"
+                        "; the window restarted" + (":\n" + traceback.format_exc() if first else ""))
+        self.pipeline.reset(f"{type(err).__name__}")
 
     def _on_wrench(self, msg):
         self._entered = time.monotonic()
@@ -298,23 +482,35 @@ class CompensatorNode:
             self._motion_message(m)
         self._process()
 
-    def _reading(self, msg):
+    def _reading(self, msg, received=None):
         w = np.array([getattr(getattr(msg.wrench, part), axis) for part, axis in self._fields])
-        if not np.isfinite(w).all():
-            self._warn("reading", "a wrench with a NaN or infinite component: skipped")
-            return
-        self.pipeline.add_reading(self._time(msg.header.stamp), w, msg.header.stamp, msg.header.frame_id)
+        if not self.pipeline.add_reading(self._time(msg.header.stamp), w, msg.header.stamp, msg.header.frame_id,
+                                         received):
+            self._warn("reading", "a wrench with a NaN or infinite component: skipped (counted as invalid)")
 
     def _process(self):
-        """Compensate what the motion covers; publish it; warn of a stale motion or a saturated reading."""
-        for out in self.pipeline.process():
-            self._publish(out)
-        if self.pipeline.stale:
-            self._warn("stale", f"motion stale: {self.settings.topic} has no sample within "
-                                f"{self.settings.stale_timeout:g} s of the readings' stamps; no output until it "
-                                "covers the filter's window again")
-        if self.pipeline.state() == STATES[3]:
-            self._warn("saturated", "a reading at or beyond the saturation parameter: its output withheld")
+        """Compensate what the motion covers; publish it; say what the pipeline noticed."""
+        outputs = self.pipeline.process()
+        failed = []
+        for out in outputs:
+            try:
+                self._publish(out)
+            except Exception as err:                 # the middleware refused it: said, counted, never fatal
+                failed.append(out)
+                self._warn("publish", f"an output not published ({type(err).__name__}: {err})")
+        if failed:
+            self.pipeline.unpublished(failed)
+        dropped = self.pipeline.dropped
+        while dropped:
+            self._publish_withheld(*dropped.popleft())
+        notices = self.pipeline.notices
+        while notices:
+            key, message = notices.popleft()
+            self._warn(key, message)
+
+    def _skip_motion(self, key, message):
+        self.pipeline.skip_motion()
+        self._warn(key, message + " (counted in motion_skipped; the readings near it take the samples around it)")
 
     def _pose(self, msg):
         p, o = msg.pose.position, msg.pose.orientation
@@ -323,7 +519,7 @@ class CompensatorNode:
         q, position = sensor_pose(q, position, self.settings.pose_to_sensor)
         norm = np.linalg.norm(q)
         if not (np.isfinite(norm) and abs(norm - 1) < 1e-3 and np.isfinite(position).all()):
-            self._warn("pose", f"a pose whose quaternion is not of unit norm ({norm:.4g}): skipped")
+            self._skip_motion("pose", f"a pose whose quaternion is not of unit norm ({norm:.4g}): skipped")
             return
         q = q / norm
         values = {"qw": q[0], "qx": q[1], "qy": q[2], "qz": q[3], "x": position[0], "y": position[1],
@@ -336,12 +532,13 @@ class CompensatorNode:
         where = {name: i for i, name in enumerate(msg.name)}
         missing = [n for n in order if n not in where]
         if missing or len(msg.position) != len(msg.name):
-            self._warn("joints", f"a joint state without {', '.join(missing[:3]) or 'a position per name'}: skipped")
+            self._skip_motion("joints", f"a joint state without {', '.join(missing[:3]) or 'a position per name'}: "
+                                        "skipped")
             return
         index = [where[n] for n in order]
         q = np.asarray(msg.position, dtype=float)[index]
         if not np.isfinite(q).all():
-            self._warn("joints", "a joint state with a NaN or infinite position: skipped")
+            self._skip_motion("joints", "a joint state with a NaN or infinite position: skipped")
             return
         dq = np.asarray(msg.velocity, dtype=float)[index] if len(msg.velocity) == len(msg.name) else None
         if dq is not None and not np.isfinite(dq).all():
@@ -353,20 +550,20 @@ class CompensatorNode:
         quaternion = None if msg.orientation_covariance[0] == -1 else np.array([o.w, o.x, o.y, o.z])
         rate, force = np.array([w.x, w.y, w.z]), np.array([a.x, a.y, a.z])
         if not (np.isfinite(rate).all() and np.isfinite(force).all()):
-            self._warn("imu", "an IMU sample with a NaN or infinite rate or acceleration: skipped")
+            self._skip_motion("imu", "an IMU sample with a NaN or infinite rate or acceleration: skipped")
             return
         if quaternion is not None:
             norm = np.linalg.norm(quaternion)
             quaternion = quaternion / norm if np.isfinite(norm) and abs(norm - 1) < 1e-3 else None
         if quaternion is None and self.settings.output_frame == "base":
-            self._warn("imu", "an IMU sample without a unit orientation: skipped (output_frame base needs it)")
+            self._skip_motion("imu", "an IMU sample without a unit orientation: skipped (output_frame base needs it)")
             return
         self.pipeline.add_motion(self._time(msg.header.stamp), (quaternion, rate, force),
                                  msg.header.frame_id)
 
     # --- outputs ---------------------------------------------------------------------------------------------
     def _publish(self, out):
-        """The contact wrench (the reading's stamp and frame), its covariance, and the debug latency."""
+        """The contact wrench (the reading's stamp and frame), its covariance, its flags, the debug latency."""
         msg, sample = self._contact_msg, out.sample
         msg.header.stamp = out.stamp
         msg.header.frame_id = out.frame_id
@@ -376,22 +573,43 @@ class CompensatorNode:
         cov = self._cov_msg
         cov.data = array.array("d", sample.cov[self._cov_index].tobytes())
         self.cov_pub.publish(cov)
-        self.pipeline.counts["published"] += 1
-        since = time.time() - (out.stamp.sec + out.stamp.nanosec * 1e-9)
+        flags, status = self._flag_msg, self._flag_status
+        flags.header.stamp, flags.header.frame_id = out.stamp, out.frame_id
+        status.level = self.r.DiagnosticStatus.WARN if out.flags else self.r.DiagnosticStatus.OK
+        status.message = " ".join(out.flags)
+        self._flag_contact.value = "true" if sample.contact else "false"
+        self.flag_pub.publish(flags)
+        now = time.time()
+        since = now - (out.stamp.sec + out.stamp.nanosec * 1e-9)
         self._latencies.append(since)
-        if len(self._latencies) > LATENCY_KEPT:
-            del self._latencies[:LATENCY_KEPT // 2]
+        self._held_for = (now - out.arrival, now)          # from the reading's reception to its output
         if self.latency_pub is not None:
             debug = self.r.Array()
             debug.data = [since, time.monotonic() - self._entered, float(self.pipeline.backlog())]
             self.latency_pub.publish(debug)
 
+    def _publish_withheld(self, stamp, frame_id, cause):
+        """The flags of a reading given no output: level ERROR, ``withheld: <cause>``."""
+        flags, status = self._flag_msg, self._flag_status
+        flags.header.stamp, flags.header.frame_id = stamp, frame_id
+        status.level = self.r.DiagnosticStatus.ERROR
+        status.message = f"withheld: {cause}"
+        self._flag_contact.value = "false"
+        try:
+            self.flag_pub.publish(flags)
+        except Exception as err:
+            self._warn("publish", f"a flag not published ({type(err).__name__}: {err})")
+
     def _warn(self, key, message):
-        """A warning in the log, at most one of a kind every :data:`WARN_EVERY` s."""
+        """A warning in the log, at most one of a kind every :data:`WARN_EVERY` s (the ones held back counted in
+        the next)."""
         now = time.monotonic()
         if now - self._last_warned.get(key, -np.inf) >= WARN_EVERY:
+            held = self._warned_count.pop(key, 0)
             self._last_warned[key] = now
-            self.log.warning(message)
+            self.log.warning(message + (f" ({held} more since the last such line)" if held else ""))
+        else:
+            self._warned_count[key] = self._warned_count.get(key, 0) + 1
 
     def _service(self, name, work):
         def serve(request, response):
@@ -408,42 +626,161 @@ class CompensatorNode:
             return response
         return serve
 
+    def _identify(self):
+        """``~/identify_payload``: the held samples fitted in the worker process (:mod:`._worker`); cancelled by
+        ``~/cancel`` or the node stopping."""
+        job = self.pipeline.identify_job()
+        if isinstance(job, tuple):
+            return job
+        if self.stopping.is_set():
+            return False, "identify_payload refused: the node is stopping"
+        t = job["held"][0]
+        self.log.info(f"~/identify_payload: fitting {len(t)} samples ({t[-1] - t[0]:.3g} s) in a process of its own; "
+                      "~/cancel stops it")
+        try:
+            result = self.worker.run(self.settings, job)
+        except Cancelled:
+            return False, ("identify_payload interrupted: the node is stopping" if self.stopping.is_set() else
+                           "identify_payload cancelled (~/cancel); the payload in use kept")
+        except RuntimeError as err:
+            return False, f"identify_payload failed: {err}"
+        return self.pipeline.identified_by(result)
+
+    def _cancel(self):
+        """``~/cancel``: a running ``~/identify_payload`` stopped."""
+        if self.worker.cancel():
+            return True, "cancelled the running identify_payload; the payload in use kept"
+        return False, "cancel: no identify_payload is running"
+
+    def _behind(self, now):
+        """Why the compensation is behind the clock, or None: a pass running for :data:`BEHIND` s, or the newest
+        output (within the last 2 s) published that much later than its reading's reception and the causal delay
+        (the middleware's reception time: the wait in the input queue counted)."""
+        started = self._pass_start
+        snapshot = self.pipeline.snapshot
+        waiting = snapshot.backlog + (self._pass_size if started is not None else 0)
+        if started is not None and now - started > BEHIND:
+            return (f"behind: a compensation pass has run {now - started:.3g} s over {self._pass_size} readings; "
+                    f"{waiting} readings waiting, {snapshot.counts.get('lost', 0)} lost so far")
+        held = self._held_for
+        if held is not None and snapshot.delay is not None and time.time() - held[1] < 2.0:
+            late = held[0] - snapshot.delay
+            if late > BEHIND:
+                return (f"behind: the outputs come {late:.3g} s after their readings and the causal delay; "
+                        f"{waiting} readings waiting, {snapshot.counts.get('lost', 0)} lost so far")
+        return None
+
+    def _check_name(self):
+        """Another node of this name in the graph: its outputs and services mix with this one's."""
+        try:
+            names = self.node.get_fully_qualified_node_names()
+        except Exception:
+            return
+        me = self.node.get_fully_qualified_name()
+        count = sum(1 for n in names if n == me)
+        if count > 1:
+            message = (f"{count} nodes named {me}: their outputs mix on the same topics and one service call reaches "
+                       "either; stop one, or rename it (-r __node:=other_name)")
+            if self.pipeline.condition("name", message):
+                self.log.warning(message)
+        elif self.pipeline.condition("name", None):
+            self.log.info(f"one node named {me} again")
+
+    def _state(self, snapshot, now):
+        """The outputs' state (:data:`._pipeline.STATES`) of a snapshot; a restart, a stale motion or readings
+        apart from the motion since the last diagnostics said even where it is over by now, one per diagnostics
+        (a state that lasts less than a diagnostics period is not missed)."""
+        state = state_of(snapshot, now, self.settings.stale_timeout)
+        seen = {"motion stale": snapshot.withheld.get("stale", 0), "streams apart": snapshot.withheld.get("apart", 0),
+                "restarting": snapshot.events.get("restart", 0)}
+        last, self._seen = self._seen or seen, seen
+        for name, count in seen.items():
+            if count > last[name] and name != state and name not in self._latched:
+                self._latched.append(name)
+        if self._latched and LEVELS[state] < 2 and (state != "saturated" or LEVELS[self._latched[0]] == 2):
+            return self._latched.pop(0)
+        return state
+
     def _diagnose(self):
-        """The diagnostics: the state, the offset and its sd, the contact flag, the delays, the counts."""
-        r, p = self.r, self.pipeline
-        state = p.state()
+        """The diagnostics, from the pipeline's snapshot (no lock): the outputs' state with the offset and its sd,
+        the contact flag, the delays, the ledger; the inputs' conditions; the compensation's liveness."""
+        r = self.r
+        now = time.monotonic()
+        self._check_name()
+        p, snapshot = self.pipeline, self.pipeline.snapshot
+        levels = (r.DiagnosticStatus.OK, r.DiagnosticStatus.WARN, r.DiagnosticStatus.ERROR)
+        state = self._state(snapshot, now)
         status = r.DiagnosticStatus()
-        status.level = {STATES[0]: r.DiagnosticStatus.WARN, STATES[1]: r.DiagnosticStatus.OK,
-                        STATES[2]: r.DiagnosticStatus.ERROR, STATES[3]: r.DiagnosticStatus.WARN}[state]
+        status.level = levels[LEVELS[state]]
         status.name = f"{self.node.get_name()}: contact wrench"
         status.message = state
         status.hardware_id = self.settings.wrench_topic
-        sample = p.last_sample
-        offset = None if p.compensator is None else p.compensator.offset
-        sd = None if sample is None or sample.offset_sd is None else sample.offset_sd
-        kept = np.array(self._latencies[-LATENCY_KEPT:]) if self._latencies else None
-        values = {"state": state, "contact": str(bool(p.contact)).lower(),
+        kept = np.array(self._latencies) if self._latencies else None
+        offset, sd = snapshot.offset, snapshot.offset_sd
+        values = {"state": state, "contact": str(bool(snapshot.contact)).lower(),
                   "offset": "" if offset is None else " ".join(f"{v:.6g}" for v in offset),
                   "offset_sd": "" if sd is None else " ".join(f"{v:.3g}" for v in sd),
                   "channels": " ".join(self.names),
-                  "delay_s": "" if p.delay is None else f"{p.delay:g}", "latency_s": f"{p.latency:g}",
+                  "delay_s": "" if snapshot.delay is None else f"{snapshot.delay:g}", "latency_s": f"{p.latency:g}",
+                  "sample_time_s": "" if snapshot.dt is None else f"{snapshot.dt:g}",
+                  "decimation": str(snapshot.decimation),
                   "stamp_to_output_p50_s": "" if kept is None else f"{np.percentile(kept, 50):.6f}",
                   "stamp_to_output_p99_s": "" if kept is None else f"{np.percentile(kept, 99):.6f}",
-                  "backlog": str(p.backlog()), **{k: str(v) for k, v in p.counts.items()}}
+                  "backlog": str(snapshot.backlog), "waiting": str(snapshot.waiting),
+                  "motion_lag_s": "" if snapshot.motion_lag is None else f"{snapshot.motion_lag:.4f}",
+                  **{k: str(v) for k, v in snapshot.counts.items()},
+                  **{f"withheld_{k}": str(v) for k, v in snapshot.withheld.items()},
+                  **{f"events_{k}": str(v) for k, v in snapshot.events.items()},
+                  "flags": " ".join(f for f in FLAGS if f in snapshot.conditions)}
         status.values = [r.KeyValue(key=k, value=v) for k, v in values.items()]
-        array = r.DiagnosticArray()
-        array.header.stamp = self.node.get_clock().now().to_msg()
-        array.status = [status]
-        self.diag_pub.publish(array)
+        inputs = r.DiagnosticStatus()
+        inputs.name = f"{self.node.get_name()}: inputs"
+        inputs.hardware_id = self.settings.topic
+        conditions = {k: v for k, v in snapshot.conditions.items() if k not in ("frame", "apart")}
+        inputs.level = r.DiagnosticStatus.WARN if conditions else r.DiagnosticStatus.OK
+        inputs.message = "; ".join(sorted(set(conditions.values()))) if conditions else "ok"
+        inputs.values = [r.KeyValue(key=k, value=v) for k, v in sorted(conditions.items())]
+        behind = self._behind(now)
+        if behind:
+            self._warn("behind", behind)
+        live = r.DiagnosticStatus()
+        live.name = f"{self.node.get_name()}: compensation"
+        live.hardware_id = self.settings.wrench_topic
+        live.level = r.DiagnosticStatus.ERROR if behind else r.DiagnosticStatus.OK
+        live.message = behind or "keeping up"
+        pass_s = 0.0 if self._pass_start is None else now - self._pass_start
+        live.values = [r.KeyValue(key="pass_s", value=f"{pass_s:.3f}"),
+                       r.KeyValue(key="backlog", value=str(snapshot.backlog + (self._pass_size if pass_s else 0))),
+                       r.KeyValue(key="lost", value=str(snapshot.counts.get("lost", 0)))]
+        array_ = r.DiagnosticArray()
+        array_.header.stamp = self.node.get_clock().now().to_msg()
+        array_.status = [status, inputs, live]
+        self.diag_pub.publish(array_)
+
+    def stop(self):
+        """The node stopping: a running fit killed (its call answers at once)."""
+        self.stopping.set()
+        self.worker.close()
+
+    def destroy(self):
+        """The nodes destroyed (the QoS events' handlers first: they belong to the inputs' subscriptions)."""
+        for handler in [w for w in self.node.waitables]:
+            try:
+                self.node.remove_waitable(handler)
+            except Exception:
+                pass
+        for n in (self.services, self.inputs, self.node):
+            n.destroy_node()
 
 
 def spin(args):
-    """Run the node until it is interrupted: ``args`` the ROS arguments (``--ros-args ...``).
+    """Run the node until it is interrupted: ``args`` the ROS arguments (``--ros-args ...``). One Ctrl-C (or
+    SIGTERM) stops it within a second, a running ``~/identify_payload`` killed.
 
     Raises
     ------
     Ros2Error
-        rclpy missing, an argument rclpy does not take, a parameter missing or bad (one line naming it).
+        rclpy missing, an argument rclpy does not take, a parameter missing, bad or unknown (one line naming it).
     """
     r = ros()
     context = r.Context()
@@ -451,12 +788,14 @@ def spin(args):
         r.rclpy.init(args=["fmscal", *args], context=context)
     except Exception as err:
         raise Ros2Error(f"the ROS arguments were refused: {str(err).splitlines()[0] if str(err) else err}") from None
+    if hasattr(signal, "SIGUSR1"):                   # kill -USR1 <pid>: every thread's stack on stderr
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     node = None
     try:
-        node = CompensatorNode(r, context)
+        node = CompensatorNode(r, context, args)
         executor = r.Single(context=context)
         executor.add_node(node.node)
-        services = r.Executor(num_threads=2, context=context)
+        services = r.Executor(num_threads=3, context=context)
         services.add_node(node.services)
         threads = [threading.Thread(target=_spin_services, args=(r, services), daemon=True)]
         if node.pollable():
@@ -473,17 +812,19 @@ def spin(args):
             executor.spin()
         except (KeyboardInterrupt, r.Shutdown):
             pass
-        # the other threads stopped before their nodes are destroyed (else a C++ abort at exit)
+        # the other threads stopped before their nodes are destroyed (else a C++ abort at exit); a running fit
+        # killed first, so that its service call returns and the services' threads end
+        node.stop()
         r.rclpy.try_shutdown(context=context)
-        services.shutdown(timeout_sec=2.0)
+        services.shutdown(timeout_sec=0.5)
         for thread in threads:
-            thread.join(timeout=2.0)
+            thread.join(timeout=0.5)
         if node.error is not None:
             raise node.error
     finally:
         if node is not None:
-            for n in (node.services, node.inputs, node.node):
-                n.destroy_node()
+            node.stop()
+            node.destroy()
         r.rclpy.try_shutdown(context=context)
 
 

@@ -44,9 +44,15 @@ class Parameter:
 
 #: Every parameter the node declares, in the order the guide's table lists them.
 PARAMETERS = (
-    Parameter("calibration", "string", None, "required: a calibration saved by fmscal calibrate --save"),
-    Parameter("payload", "string", "", "a payload.json from fmscal identify-payload --save, in place of the "
-              "calibration's payload (a tool change); empty: the calibration's"),
+    Parameter("calibration", "string", None, "a calibration saved by fmscal calibrate --save; unset: the payload "
+              "file's sensor, S the identity (payload is then required)"),
+    Parameter("payload", "string", "", "a payload file from fmscal identify-payload --save: alone, the compensation "
+              "runs on it (S the identity; its offset, gravity, mounting, sign and noise; its uncertainty in the "
+              "output's covariance); with calibration, in place of the calibration's payload (a tool change); "
+              "empty: the calibration's"),
+    Parameter("tool_radius", "double", None, "m, payload: the tool's radius about its centre of mass, which bounds "
+              "an inertia the payload file does not hold (held poses never determine it); unset: twice the centre "
+              "of mass's distance from the sensor, at least 5 cm"),
     Parameter("wrench_topic", "string", "/ft_sensor/wrench", "geometry_msgs/WrenchStamped in: the raw reading"),
     Parameter("pose_topic", "string", "", "geometry_msgs/PoseStamped in: the sensor frame's pose (or the tracked "
               "frame's, with pose_to_sensor_*); one motion source of three"),
@@ -61,6 +67,10 @@ PARAMETERS = (
     Parameter("covariance_topic", "string", "/ft_sensor/contact_covariance", "std_msgs/Float64MultiArray out: the "
               "contact wrench's covariance, one per output, row-major, force first (fx fy fz tx ty tz; planar "
               "fx fy M)"),
+    Parameter("flags_topic", "string", "/ft_sensor/contact_flags", "diagnostic_msgs/DiagnosticArray out: one per "
+              "reading taken, stamped as it: level OK for an output right within its covariance, WARN for one "
+              "flagged (its message names why), ERROR for a reading given no output (withheld: the cause); the "
+              "value contact, the contact test's verdict"),
     Parameter("track_offset", "bool", False, "follow the offset's drift (a random walk updated while no contact "
               "is detected)"),
     Parameter("drift_intensity", "double_array", None, "track_offset: the random walk's intensity, the reading's "
@@ -79,6 +89,9 @@ PARAMETERS = (
               "base: the motion frame's axes (base_frame)"),
     Parameter("base_frame", "string", "", "output_frame base: the output's frame_id; empty: the motion "
               "message's header.frame_id"),
+    Parameter("sensor_frame", "string", "", "the wrench's header.frame_id expected: another is logged, said in the "
+              "diagnostics and flags the outputs; empty: the calibration's sensor_frame where it records one, else "
+              "not checked"),
     Parameter("tool_point", "double_array", None, "m, the point the torque is taken about, in the sensor's axes "
               "(3 values); unset: the sensor's point"),
     Parameter("pose_to_sensor_rotation", "double_array", None, "pose_topic: the sensor's axes in the tracked "
@@ -98,11 +111,14 @@ PARAMETERS = (
               "the output's delay behind its reading"),
     Parameter("sample_time", "double", 0.0, "s, the wrench stream's period; 0: the median interval of its first "
               "stamps"),
+    Parameter("max_rate", "double", 1000.0, "Hz, the fastest readings compensated: faster ones are decimated to "
+              "every N-th stamp (N the smallest that brings them within it; said at start and in the diagnostics)"),
     Parameter("stale_timeout", "double", 0.5, "s, how far the motion's newest stamp may trail a reading's before "
               "the motion is stale (the reading is then not compensated)"),
     Parameter("saturation", "double_array", None, "the raw reading's range per channel (one value or one per "
               "channel, the reading's units): a reading at or beyond it is not compensated; unset: not checked"),
-    Parameter("save_path", "string", "", "~/save: where the calibration is written; empty: ~/save refuses"),
+    Parameter("save_path", "string", "", "~/save: where the calibration is written (with a payload file alone: "
+              "a payload file); empty: ~/save refuses"),
     Parameter("identify_buffer", "double", 120.0, "s, the motion and readings ~/identify_payload keeps, the newest"),
     Parameter("diagnostics_period", "double", 1.0, "s between two diagnostics on /diagnostics"),
     Parameter("debug_latency", "bool", False, "publish ~/latency (std_msgs/Float64MultiArray per output: s from "
@@ -121,6 +137,8 @@ class Settings:
     topic: str
 
     def __getattr__(self, name):
+        if name.startswith("__") or name == "values":      # (pickle's lookups on an instance not yet filled)
+            raise AttributeError(name)
         try:
             return self.values[name]
         except KeyError:
@@ -161,13 +179,19 @@ def settings(values):
     Raises
     ------
     Ros2Error
-        One line naming the parameter: the calibration missing, not exactly one motion source, a choice not
-        among its options, a number out of its range.
+        One line naming the parameter: neither a calibration nor a payload file, not exactly one motion source, a
+        choice not among its options, a number out of its range.
     """
     values = dict(values)
-    if not values.get("calibration"):
-        raise Ros2Error("parameter calibration is required: a file saved by fmscal calibrate --save "
-                        "(--ros-args -p calibration:=CAL.json)")
+    if not values.get("calibration") and not values.get("payload"):
+        raise Ros2Error("parameter calibration or payload is required: a file saved by fmscal calibrate --save "
+                        "(--ros-args -p calibration:=CAL.json), or by fmscal identify-payload --save (-p "
+                        "payload:=tool.json)")
+    radius = values.get("tool_radius")
+    if radius is not None and not (np.isfinite(radius) and radius > 0):
+        raise Ros2Error(f"parameter tool_radius must be a positive number of metres; got {radius!r}")
+    if radius is not None and not values.get("payload"):
+        raise Ros2Error("parameter tool_radius bounds a payload file's inertia: set payload too")
     given = [name for name in MOTION_SOURCES if values.get(name)]
     if len(given) != 1:
         raise Ros2Error(f"give exactly one motion source of {', '.join(MOTION_SOURCES)}; got "
@@ -179,9 +203,10 @@ def settings(values):
                           ("reading", ("reaction", "load"))):
         if values[name] is not None and values[name] not in options:
             raise Ros2Error(f"parameter {name} must be one of {', '.join(options)}; got {values[name]!r}")
-    for name in ("window", "delay", "stale_timeout", "identify_buffer", "diagnostics_period"):
+    for name in ("window", "delay", "stale_timeout", "identify_buffer", "diagnostics_period", "max_rate"):
         if not (np.isfinite(values[name]) and values[name] > 0) and not (name == "delay" and values[name] == 0):
-            raise Ros2Error(f"parameter {name} must be a positive number of seconds; got {values[name]!r}")
+            unit = "Hz" if name == "max_rate" else "seconds"
+            raise Ros2Error(f"parameter {name} must be a positive number of {unit}; got {values[name]!r}")
     if not (np.isfinite(values["sample_time"]) and values["sample_time"] >= 0):
         raise Ros2Error(f"parameter sample_time must be 0 (from the stamps) or a period in s; got "
                         f"{values['sample_time']!r}")

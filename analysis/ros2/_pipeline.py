@@ -1,5 +1,6 @@
 """What the node does between its messages, without rclpy: readings and motion matched by their stamps, the
-motion interpolated at each reading's time, the compensation, the services' work, the node's state.
+motion interpolated at each reading's time, the compensation, the services' work, the node's state and its
+ledger of every reading.
 
 The node (:mod:`._node`) turns messages into numbers and calls :class:`Pipeline`; every call here takes and
 returns plain numbers, so the matching is tested without ROS too.
@@ -13,6 +14,26 @@ A reading the motion has not reached when a reading ``stale_timeout`` s newer ar
 the motion is stale, and the compensator, which never extrapolates, stops the output until the motion covers
 its window again.
 
+The streams' breaks. The readings go to the compensator in the order they came, and it owns their stamps'
+events (:attr:`fmscal.analysis.Compensator.events`: a duplicate dropped, a gap filled, a stamp stepping back or a
+gap beyond its window restarting the window). Here: a reading stamped before the newest one queued sends the
+queued ones on at once (with the motion that covers them, else none), so that the compensator sees the step;
+the motion's own stamps stepping back restart the motion's buffer (``motion_restart``), a motion stamp repeated
+is dropped (``motion_duplicate``). Readings missing from the stamps' grid are counted as ``lost`` (the input's
+period, before any decimation).
+
+The ledger. Every reading taken ends in one place, counted once: published; withheld by its cause (:data:`WITHHELD`:
+a ``duplicate``, at a ``gap``'s edge, at a ``restart``, while the ``window`` fills after a start or a restart, with
+the motion ``stale``, its stamp ``apart`` from the motion's clock, without enough ``motion`` in its window,
+``saturated``, ``decimated``, ``invalid`` (a NaN, or an output the middleware refused), held when the compensation
+failed (``error``, a bug said in the log)); or still
+``waiting`` (for the motion, or for the readings after it that its output needs). So
+``received = published + sum(withheld) + waiting`` at any time.
+
+Decimation. Readings faster than ``max_rate`` are thinned to every ``N``-th stamp of their grid, ``N`` the
+smallest integer that brings them within it (``decimated``): the compensator runs at ``N`` times the readings'
+period, each kept reading as it came (no averaging: its noise is the calibration's).
+
 Angles. A pose's angle columns (the model's :attr:`fmscal.plant.Model.angle_names`: the planar ``theta``, which
 the node takes from the quaternion, ``2 atan2(q_z, q_w)``, and a publisher may wrap into (-pi, pi]) are unwrapped
 against the motion's previous sample as they come::
@@ -22,54 +43,157 @@ against the motion's previous sample as they come::
 so that a payload turning through many revolutions is differentiated without the 2 pi steps (a turn of more
 than pi between two motion samples cannot be told from one the other way). A quaternion's sign is made
 continuous by :class:`fmscal.analysis.Compensator`.
+
+Snapshot. :attr:`Pipeline.snapshot` is replaced, never changed, after each pass: the diagnostics read it without
+the lock the compensation holds.
 """
 
 import threading
 import time
 from collections import deque
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.stats import binom
 
 from fmscal.plant import Calibration, SpatialModel
+from fmscal.plant.numerics import FmscalError
 from fmscal.plant.io import AttitudeLog, held_table
 from fmscal.plant.physics import quaternion_multiply
 from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload, reading_noise
 
-from .._compensate import Compensator, compensation_model
-from .._motion import PoseMotion, quaternion_from_matrix, quaternion_to_matrix
+from .._compensate import TARE_FALSE_REFUSAL, TARE_WINDOW, Compensator, compensation_model
+from .._setup import load_setup, setup
+from .._motion import ImuMotion, JointMotion, PoseMotion, quaternion_from_matrix, quaternion_to_matrix
 from ._parameters import Ros2Error
 
-__all__ = ["Pipeline", "Output", "STATES", "DT_SAMPLES", "sensor_pose"]
+__all__ = ["Pipeline", "Output", "Snapshot", "STATES", "LEVELS", "WITHHELD", "FLAGS", "DT_SAMPLES", "sensor_pose",
+           "motion_source", "fit_held", "state_of"]
 
-#: The node's states (diagnostics): no output yet, outputs coming, the motion stale, a reading saturated.
-STATES = ("not ready", "running", "motion stale", "saturated")
+#: The outputs' states (diagnostics): no output yet, outputs coming, the motion stale, the readings' stamps apart
+#: from the motion's, a reading saturated, the window filling again after a break in the streams.
+STATES = ("not ready", "running", "motion stale", "streams apart", "saturated", "restarting")
+#: Each state's level: 0 OK, 1 WARN, 2 ERROR (diagnostic_msgs' own).
+LEVELS = {"not ready": 1, "running": 0, "motion stale": 2, "streams apart": 2, "saturated": 1, "restarting": 1}
+#: Why a reading taken gave no output (module docstring, The ledger).
+WITHHELD = ("duplicate", "stray", "gap", "restart", "window", "stale", "apart", "motion", "saturated",
+            "decimated", "invalid", "error")
+#: The conditions that flag an output (it may be wrong beyond its covariance): another publisher on an input
+#: topic, a frame that is not the one configured.
+FLAGS = ("publishers", "frame")
 #: The number of wrench stamps whose median interval is the sample time (parameter ``sample_time`` 0).
 DT_SAMPLES = 21
 #: How long a saturated reading keeps the state ``saturated``, s.
 SATURATED_HOLD = 1.0
+#: s of motion kept beyond the newest reading that needs it (a wrench stream paused, or delivered late, while the
+#: motion goes on).
+MOTION_KEPT = 10.0
+#: The readings' stamps remembered: one repeated among them is a duplicate, not a step back.
+TAKEN_KEPT = 2000
+#: s between two renewals of :attr:`Pipeline.snapshot` while readings come.
+SNAP_EVERY = 0.01
+#: ``~/identify_payload``: the shortest stretch without a gap or a contact it fits, s.
+MIN_HELD = 1.0
+
+
+_WAIT, _GAP = object(), object()
+#: A block size the compensator's warm-up runs through (its casadi map built before the first backlog).
+_BLOCK = 40
 
 
 class Output:
     """One output: the :class:`fmscal.analysis.ContactSample`, the reading's stamp (as it came: any object)
-    and frame, and the reading's arrival time (``time.monotonic``)."""
+    and frame, the reading's reception (s, the wall clock of ``time.time``) and its flags (names of :data:`FLAGS`,
+    empty: right within its covariance)."""
 
-    __slots__ = ("sample", "stamp", "frame_id", "arrival")
+    __slots__ = ("sample", "stamp", "frame_id", "arrival", "flags")
 
-    def __init__(self, sample, stamp, frame_id, arrival):
-        self.sample, self.stamp, self.frame_id, self.arrival = sample, stamp, frame_id, arrival
+    def __init__(self, sample, stamp, frame_id, arrival, flags=()):
+        self.sample, self.stamp, self.frame_id, self.arrival, self.flags = sample, stamp, frame_id, arrival, flags
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The pipeline's state after a pass, read without its lock (module docstring)."""
+
+    counts: dict = field(default_factory=dict)
+    withheld: dict = field(default_factory=dict)
+    events: dict = field(default_factory=dict)
+    conditions: dict = field(default_factory=dict)
+    contact: bool = False
+    offset: object = None
+    offset_sd: object = None
+    stale: bool = False
+    apart: bool = False
+    saturated: bool = False
+    restarting: bool = False
+    started: bool = False
+    last_arrival: float = -np.inf
+    backlog: int = 0
+    waiting: int = 0
+    dt: object = None
+    delay: object = None
+    decimation: int = 1
+    motion_lag: object = None
+
+
+def state_of(snapshot, now, stale_timeout):
+    """The state (one of :data:`STATES`) of a :class:`Snapshot` at ``now``
+    (``time.monotonic``): "not ready" too where no reading has come for ``stale_timeout`` s."""
+    if snapshot.saturated:
+        return "saturated"
+    if snapshot.stale:
+        return "motion stale"
+    if snapshot.apart:
+        return "streams apart"
+    if now - snapshot.last_arrival > stale_timeout or not snapshot.started:
+        return "not ready"
+    return "restarting" if snapshot.restarting else "running"
 
 
 def _load(settings):
-    """The calibration (as saved), the payload replacing its own (or None), and the latency in use."""
-    calibration = Calibration.load(settings.calibration)
-    payload = None
-    if settings.payload:                              # the model's payload (refused here: no inertia, another case)
-        payload = compensation_model(calibration, PayloadEstimate.load(settings.payload)).payload
+    """What the compensation runs on (:func:`fmscal.analysis.setup`): a calibration; a payload file alone, ``S`` the
+    identity (K1); or both, the file's payload in place of the calibration's. The :class:`~fmscal.analysis.Setup`,
+    the payload file's estimate (None without one), and the latency in use."""
+    calibration = estimate = None
+    if settings.calibration:
+        calibration = _read(settings.calibration, Calibration, "calibration", "payload")
+    if settings.payload:
+        estimate = _read(settings.payload, PayloadEstimate, "payload", "calibration")
+    if calibration is None:
+        st = setup(estimate, tool_radius=settings.tool_radius)
+    else:
+        st = setup(calibration, estimate, tool_radius=settings.tool_radius)
+    compensation_model(st.calibration, st.payload)            # the payload's case checked now, in one line
     # the calibration's latency is its pose stream's: a joint-state or an IMU stream has its own (the parameter)
-    own = (calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
+    own = (st.calibration.latency or 0.0) if settings.source == "pose_topic" else 0.0
     latency = settings.latency if settings.latency is not None else own
-    return calibration, payload, latency
+    return st, estimate, latency
+
+
+def _read(path, kind, name, other):
+    """The file of parameter ``name``, a ``kind`` (its own loader's one-line error where it is not one); a file of
+    the other kind (a payload file given as the calibration, or the other way) named as such."""
+    try:
+        return kind.load(path)
+    except FmscalError:
+        try:
+            found = load_setup(path)
+        except FmscalError:
+            found = None
+        if found is not None and not isinstance(found, kind):
+            raise Ros2Error(f"parameter {name}: {path} is a {other} file; give it as {other} (-p {other}:={path})") \
+                from None
+        raise
+
+
+def motion_source(settings):
+    """The motion's source the parameters name (its stamps aligned by the pipeline: no latency here)."""
+    if settings.source == "pose_topic":
+        return PoseMotion()
+    if settings.source == "joint_states_topic":
+        return JointMotion(settings.urdf, settings.frame)
+    return ImuMotion(rotation=settings.imu_rotation, lever_arm=settings.imu_lever_arm)
 
 
 def sensor_pose(q, position, extrinsics=None):
@@ -100,6 +224,52 @@ def sensor_pose(q, position, extrinsics=None):
             position + quaternion_to_matrix(q) @ np.asarray(t, dtype=float))
 
 
+class _Held:
+    """What ``~/identify_payload`` fits: the newest ``capacity`` samples (time, motion, reading) in place, each with
+    its contact flag (set when its output comes) and whether a stretch starts at it (after a gap)."""
+
+    def __init__(self, capacity):
+        self.capacity, self.count, self.arrays, self._break = int(capacity), 0, None, True
+
+    def __len__(self):
+        return min(self.count, self.capacity)
+
+    def append(self, t, motion, w_hat):
+        """Hold a sample; its sequence number (for :meth:`contact`)."""
+        motion = np.asarray(motion, dtype=float)
+        if self.arrays is None or self.arrays[1].shape[1] != motion.size:
+            n = self.capacity
+            self.arrays = (np.zeros(n), np.zeros((n, motion.size)), np.zeros((n, len(w_hat))), np.zeros(n, bool),
+                           np.zeros(n, bool))
+            self.count = 0
+        i = self.count % self.capacity
+        t_, m_, w_, contact, starts = self.arrays
+        t_[i], m_[i], w_[i], contact[i], starts[i] = t, motion, w_hat, False, self._break
+        self._break = False
+        self.count += 1
+        return self.count - 1
+
+    def gap(self):
+        """The next sample starts a new stretch."""
+        self._break = True
+
+    def contact(self, seq):
+        """Sample ``seq`` read as a contact (C4)."""
+        if self.arrays is not None and 0 <= self.count - 1 - seq < self.capacity:
+            self.arrays[3][seq % self.capacity] = True
+
+    def take(self):
+        """The held samples, oldest first (copies), and none held after: ``(t, motion, w_hat, contact, starts)``."""
+        if not len(self):
+            return None
+        n, i = len(self), self.count % self.capacity
+        order = np.r_[i:self.capacity, 0:i] if self.count > self.capacity else np.arange(n)
+        out = tuple(a[order] for a in self.arrays)
+        out[4][0] = True
+        self.count, self._break = 0, True
+        return out
+
+
 class Pipeline:
     """Readings and motion in, contact wrenches out (module docstring); thread-safe (one lock).
 
@@ -108,93 +278,282 @@ class Pipeline:
     settings : Settings
         The node's parameters, checked (:func:`fmscal.analysis.ros2.settings`).
     motion : PoseMotion, JointMotion or ImuMotion, optional
-        The motion's source (None: poses); :meth:`add_motion` takes its samples as its ``interpolate`` gives
-        them (a pose in the model's order, ``(q, dq, ddq)``, ``(q_wxyz, omega, f)``).
+        The motion's source (None: the one ``settings`` names, :func:`motion_source`); :meth:`add_motion` takes
+        its samples as its ``interpolate`` gives them (a pose in the model's order, ``(q, dq, ddq)``,
+        ``(q_wxyz, omega, f)``).
+
+    Attributes
+    ----------
+    counts : dict
+        ``received`` (readings taken), ``published``, ``lost`` (readings missing from the stamps' grid),
+        ``motion`` (motion samples taken), ``motion_skipped`` (motion messages the node skipped: a quaternion not
+        of unit norm, a NaN), ``motion_duplicate``, ``motion_restart``, ``output_gaps`` (runs of readings without
+        an output between two outputs), ``unmatched`` (outputs without their reading's stamp: none, else a bug).
+    withheld : dict
+        The readings taken that gave no output, by cause (:data:`WITHHELD`).
+    conditions : dict
+        What the node found wrong about its inputs (a name to a message; :data:`FLAGS` flag the outputs).
     """
 
     def __init__(self, settings, motion=None):
-        self.settings, self.motion = settings, PoseMotion() if motion is None else motion
+        self.settings = settings
+        self.motion = motion_source(settings) if motion is None else motion
         self.lock = threading.Lock()
-        self.calibration, self.payload, self.latency = _load(settings)
-        self.model = compensation_model(self.calibration, self.payload)
+        self.setup, self.estimate, self.latency = _load(settings)
+        if self.setup.axes is not None and not self.motion.turns_with_mounting:
+            raise Ros2Error(f"parameter payload: {settings.payload}'s sensor is mounted turned on the tracked frame; "
+                            f"an {self.motion.source}'s axes are its rotation's (imu_rotation): use poses or joint "
+                            "states with it")
+        self.model = compensation_model(self.calibration, self.setup.payload)
         self.n = self.model.n_w
-        self.dt = settings.sample_time or None
+        self.dt_in = settings.sample_time or None      # the readings' period
+        self.decimation = 1
+        self.dt = None                                 # the compensator's (the readings' times the decimation)
         self.compensator = None
-        self._pending = deque()                       # (t, w_hat, stamp, frame_id, arrival)
-        self._motion = deque()                        # (t taken, value)
-        self._frames = {}                             # t -> (stamp, frame_id, arrival) of pushed readings
-        self._saturated = set()                       # t of pushed saturated readings
-        self._held = deque()                          # (t, pose, w_hat) for identify_payload
-        self._unoriented = 0                          # IMU samples without an orientation since the last call
-        self._recent = deque()                        # (t, w_hat, motion) of the rows the filter still holds
-        self._last_t = None
+        self._pending = deque()                        # (t, w_hat, stamp, frame_id, arrival, segment, apart, epoch)
+        self._segment = 0                              # readings stamped before the newest taken start another
+        self._newest_in = None                         # the newest reading's stamp taken
+        self._taken, self._taken_order = set(), deque()   # the last TAKEN_KEPT stamps taken
+        self._lead = None                              # the newest motion's stamp less a reading's, at its arrival
+        self._apart_from = None                        # a step back's reference lead while the streams are apart
+        self._stray, self._motion_stray = None, None   # a reading, a motion sample stamped back: held aside
+        self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
+        self._motion = deque()                         # (t taken, value)
+        self._motion_step = None                       # the motion's typical interval, s
+        self._frames = {}                              # t -> (stamp, frame_id, arrival, tag, held seq) pushed
+        self._held = _Held(1)
+        self._unoriented = 0                           # IMU samples without an orientation since the last call
+        self._recent = deque()                         # (t, w_hat, motion) of the rows the filter still holds
+        self._last_t = None                            # the last reading pushed
+        self._last_seen = None                         # the last reading taken from the queue (the input's grid)
+        self._grid0 = None                             # the decimation's grid: a kept stamp
+        self._segment_start = None                     # the first reading pushed since the start or a restart
+        self._last_out = None                          # the last output's reading time
+        self._gap_budget = 0                           # readings the compensator withheld at a gap, to forget
+        self._withheld_gap = 0                         # the compensator's count of those so far
         # the angle columns (U1), by what the source and the model declare; their last values
         self._angles = self.motion.angle_columns(self.model)
         self._last_angles = None
-        self.last_arrival = -np.inf                   # time.monotonic() of the newest reading
+        self.last_arrival = -np.inf                    # time.monotonic() of the newest reading
         self.motion_frame = ""
         self.identified = None
-        self.counts = dict(received=0, published=0, stale=0, saturated=0, out_of_order=0, gaps=0, motion=0)
+        self.counts = dict(received=0, published=0, lost=0, motion=0, motion_skipped=0, motion_duplicate=0,
+                           motion_restart=0, motion_stray=0, output_gaps=0, unmatched=0)
+        self.withheld = dict.fromkeys(WITHHELD, 0)
+        self.conditions = {}
+        self._flag_until = {}                          # a flag's condition: monotonic time it holds until
+        self.notices = deque(maxlen=64)                # (key, message) for the node's log
+        self.dropped = deque(maxlen=100000)            # (stamp, frame_id, cause) of readings withheld, for the node
         self.contact = False
         self.last_sample = None
         self.stale = False
+        self.restarting = False
         self._saturated_at = -np.inf
         self.warnings = []
         self._limit = None if settings.saturation is None else np.broadcast_to(settings.saturation, (self.n,))
+        self.expected_sensor_frame = settings.sensor_frame or getattr(self.calibration, "sensor_frame", None) or ""
+        self.snapshot, self._snapped = Snapshot(), -np.inf
+        self._base = settings.output_frame == "base"
+        self._recent_kept = 0
         self._warm_up()
 
     def _warm_up(self):
         """A compensator run on a few samples at rest before any message: what it builds on its first samples
         (the dynamics' compiled function, the filter) is built now, not while the first readings queue up."""
-        dt = self.dt or 0.001
+        dt = (self.dt_in or 0.001) * self._decimation_of(self.dt_in or 0.001)
         saved, self.dt = self.dt, dt
         try:
-            warm = self._build()
+            self._rebuilt()
         except Exception:                       # a setting the real sample time may accept: found then
-            return
+            pass
         finally:
             self.dt = saved
-        n = int(round((self.settings.window + self.settings.delay) / dt)) + 4
-        rest = self.motion.rest(self.model)
-        self._feed(warm, [(i * dt, np.zeros(self.n), rest) for i in range(n)])
+
+    def _decimation_of(self, dt_in):
+        """The decimation that brings readings ``dt_in`` s apart within ``max_rate`` (5 % leeway)."""
+        return max(1, int(np.ceil(1.0 / (dt_in * self.settings.max_rate) - 0.05)))
 
     # --- the compensator --------------------------------------------------------------------------------------
-    def _build(self, calibration=None, payload=None):
-        """A Compensator of the calibration (its latency 0: the stamps are aligned here), at ``self.dt``."""
+    @property
+    def calibration(self):
+        """The calibration in use: a saved one, or the one a payload file stands for (K1)."""
+        return self.setup.calibration
+
+    @property
+    def payload(self):
+        """The payload in use: the one identified, the payload file's, or the calibration's."""
+        return self.setup.payload if self.setup.payload is not None else self.calibration.payload
+
+    @property
+    def source(self):
+        """What the compensation runs on, in words (the node's first log line)."""
         s = self.settings
-        calibration = self.calibration if calibration is None else calibration
+        if not s.payload:
+            return f"calibration {s.calibration}"
+        return f"payload {s.payload}" + (f" on calibration {s.calibration}" if s.calibration else
+                                         " (S the identity: no calibration)")
+
+    def _build(self, setup_=None):
+        """A Compensator of the setup (default the one in use; its latency 0: the stamps are aligned here), at
+        ``self.dt``."""
+        s = self.settings
+        st = self.setup if setup_ is None else setup_
         changes = {"latency": 0.0}
         if s.reading is not None:
             changes["reading"] = s.reading
         if s.gravity is not None:
             changes["gravity"] = s.gravity
-        kwargs = dict(payload=self.payload if payload is None else payload, direction=s.direction,
-                      window=s.window, delay=s.delay, false_alarm=float(s.contact_threshold),
+        kwargs = dict(direction=s.direction, window=s.window, delay=s.delay, false_alarm=float(s.contact_threshold),
                       track_offset=bool(s.track_offset))
         if s.drift_intensity is not None:
             kwargs["drift_intensity"] = s.drift_intensity[0] if len(s.drift_intensity) == 1 else s.drift_intensity
         kwargs.update(motion=self.motion, frame=s.output_frame, point=s.tool_point)
-        compensator = Compensator(replace(calibration, **changes), self.dt, **kwargs)
+        compensator = Compensator(replace(st, calibration=replace(st.calibration, **changes)), self.dt, **kwargs)
         self.warnings = list(compensator.warnings)
         return compensator
+
+    def _rebuilt(self, setup_=None):
+        """A new compensator (:meth:`_build`), its casadi functions built first by a twin fed samples at rest: done
+        outside the lock, then handed to :meth:`_swap` under it."""
+        warm = self._build(setup_)
+        n = int(round((self.settings.window + self.settings.delay) / self.dt)) + 4
+        rest = self.motion.rest(self.model)
+        self._feed(warm, [(i * self.dt, np.zeros(self.n), rest) for i in range(n)])
+        for size in (2, _BLOCK):                          # the first blocks' sizes, as a backlog brings them
+            start = n * self.dt
+            self._feed(warm, [(start + i * self.dt, np.zeros(self.n), rest) for i in range(size)])
+        return self._build(setup_)
+
+    def _swap(self, compensator):
+        """The compensation goes on with ``compensator`` (lock held), fed the rows the filter holds (their outputs
+        already published): no gap."""
+        if self._recent:
+            self._feed(compensator, list(self._recent))
+            compensator.events.clear()
+            compensator.withheld.clear()
+        self._withheld_gap = 0
+        self.compensator = compensator
 
     @property
     def delay(self):
         """s: the causal filter's delay (None before the sample time is known)."""
         return None if self.compensator is None else self.compensator.delay
 
+    def _notice(self, key, message):
+        """A line for the node's log (it says at most one of a key every few seconds)."""
+        self.notices.append((key, message))
+
+    # --- the conditions ---------------------------------------------------------------------------------------
+    def condition(self, name, message=None, hold=0.0):
+        """Set (``message``) or clear (None) a condition of the inputs (:attr:`conditions`); one of :data:`FLAGS`
+        flags the outputs while it holds and ``hold`` s after it clears (the filter's window still holds its
+        samples). Returns whether it changed."""
+        with self.lock:
+            changed = self._condition(name, message, hold)
+            if changed:
+                self._snap()
+            return changed
+
+    def _condition(self, name, message=None, hold=0.0):
+        before = self.conditions.get(name)
+        if message is None:
+            self.conditions.pop(name, None)
+            if before is not None and name in FLAGS:
+                self._flag_until[name] = time.monotonic() + hold
+        else:
+            self.conditions[name] = message
+            self._flag_until.pop(name, None)
+        return before != message
+
+    def _flags(self):
+        """The flags an output published now carries."""
+        now = time.monotonic()
+        return tuple(f for f in FLAGS if f in self.conditions or self._flag_until.get(f, -np.inf) > now)
+
+    def _check_frame(self, which, got, expected):
+        """A frame_id compared with the one configured: a mismatch sets the condition ``frame`` (a message naming
+        both), a match clears it (the outputs flagged a window and delay more)."""
+        if not (got and expected):
+            return
+        key, hold = f"frame {which}", self.settings.window + self.settings.delay
+        if got == expected:
+            if key in self.conditions:
+                self._condition(key)
+                if not any(k.startswith("frame ") for k in self.conditions):
+                    self._condition("frame", None, hold)
+            return
+        if key not in self.conditions:
+            option = "sensor_frame" if which == "wrench" else "base_frame"
+            message = f"the {which} come in frame_id {got!r}, {option} is {expected!r}: the outputs flagged"
+            self._condition(key, message)
+            self._condition("frame", message)
+            self._notice("frame", message)
+
     # --- the streams ------------------------------------------------------------------------------------------
     def add_motion(self, t, value, frame_id=""):
-        """A motion sample stamped ``t`` (s): a pose (model order), ``(q, dq, ddq)`` or ``(q_wxyz, omega, f)``."""
+        """A motion sample stamped ``t`` (s): a pose (model order), ``(q, dq, ddq)`` or ``(q_wxyz, omega, f)``.
+
+        A sample stamped before the newest is held aside: where the next goes on from the newest, it was a stray
+        (``motion_stray``, dropped); where the next goes on from it, the motion's clock stepped back: its buffer
+        restarts (``motion_restart``) and a new epoch begins, which readings stamped on the old clock do not
+        share. A stamp repeated is dropped (``motion_duplicate``)."""
         t = float(t) - self.latency
         with self.lock:
             self.counts["motion"] += 1
             self.motion_frame = frame_id
-            if self._motion and t <= self._motion[-1][0]:
+            if self.settings.output_frame == "base" and self.settings.source == "pose_topic":
+                self._check_frame("poses", frame_id, self.settings.base_frame)
+            m = self._motion
+            newest = m[-1][0] if m else None
+            stray, self._motion_stray = self._motion_stray, None
+            if stray is not None:
+                if newest is not None and t > newest:          # the old timeline goes on: it was a stray
+                    self.counts["motion_stray"] += 1
+                elif t > stray[0]:                              # this one goes on from it: the clock stepped back
+                    self._motion_restart(stray[0], newest)
+                    self._append_motion(*stray)
+                    newest = stray[0]
+                else:                                           # back again: the first a stray, this one held
+                    self.counts["motion_stray"] += 1
+                    self._motion_stray = (t, value)
+                    return
+            if newest is not None and t <= newest:
+                if t > newest - 1e-9:
+                    self.counts["motion_duplicate"] += 1
+                else:
+                    self._motion_stray = (t, value)
                 return
-            if self._angles:
-                value = self._unwrapped(value)
-            self._motion.append((t, value))
+            if newest is not None:
+                step = t - newest
+                self._motion_step = step if self._motion_step is None else \
+                    self._motion_step + 0.05 * (min(step, 10 * self._motion_step) - self._motion_step)
+            self._append_motion(t, value)
+
+    def _append_motion(self, t, value):
+        m = self._motion
+        if self._angles:
+            value = self._unwrapped(value)
+        m.append((t, value))
+        while len(m) > 2 and m[0][0] < t - MOTION_KEPT - self.settings.stale_timeout:
+            m.popleft()
+
+    def _motion_restart(self, t, newest):
+        """The motion's clock stepped back to ``t`` from ``newest``: its buffer restarted, a new epoch; readings
+        stepped back alone before (apart) now share it."""
+        self.counts["motion_restart"] += 1
+        self._notice("motion_restart", f"the motion's stamps stepped back by {newest - t:.6g} s: its buffer "
+                                       "restarted; readings stamped on the old clock get no motion")
+        self._motion.clear()
+        self._last_angles = None
+        self._motion_epoch += 1
+        if self._apart_from is not None:               # the readings stepped back first: the motion followed
+            self._apart_from = None
+            self._reading_epoch = self._motion_epoch
+
+    def skip_motion(self):
+        """A motion message the node skipped (a quaternion not of unit norm, a NaN): counted."""
+        with self.lock:
+            self.counts["motion_skipped"] += 1
 
     def _unwrapped(self, pose):
         """``pose`` with its angle columns unwrapped against the previous motion sample's (U1)."""
@@ -206,66 +565,188 @@ class Pipeline:
         self._last_angles = angles
         return pose
 
+    def _apart_tolerance(self):
+        """s a reading's lead on the motion may grow past a step back's before the streams are apart: the
+        motion's interval twice, and 20 ms of delivery."""
+        return 0.02 + 2 * (self._motion_step or 0.0)
+
     def add_reading(self, t, w_hat, stamp=None, frame_id="", arrival=None):
         """A raw reading stamped ``t`` (s), queued; :meth:`process` compensates it once the motion covers it.
-        Returns False where it was dropped (not newer than the last reading)."""
-        arrival = time.monotonic() if arrival is None else arrival
+
+        A reading repeating the stamp of one of the last :data:`TAKEN_KEPT` taken (not the newest: the compensator
+        drops that one) is dropped (``duplicate``). A reading stamped before the newest is held aside: where the
+        next goes on from the newest, it was a stray (``stray``, dropped: an old message, a second publisher on
+        another clock); where the next goes on from it, the readings' clock stepped back: the queued readings go on
+        at once, and the compensator restarts its window. Where the motion's clock had stepped back before, the
+        readings now share its epoch; where it had not, and the readings' stamps now trail the motion's newest by
+        more than they did before (:meth:`_apart_tolerance`), the streams are apart: each such reading is pushed
+        with no motion (``apart``) until their stamps agree again. A reading of an older epoch than the motion's
+        gets no motion either. A reading with a NaN or infinite component is counted (``invalid``) and dropped:
+        returns False. ``arrival``: its reception, s of the wall clock (``time.time``; default now), for the node's
+        measure of how long its readings wait."""
+        arrival = time.time() if arrival is None else arrival
+        w_hat = np.asarray(w_hat, dtype=float)
+        t = float(t)
         with self.lock:
             self.counts["received"] += 1
-            self.last_arrival = arrival
-            newest = self._pending[-1][0] if self._pending else self._last_t
-            if newest is not None and t <= newest:
-                self.counts["out_of_order"] += 1
+            self.last_arrival = time.monotonic()
+            if not (np.isfinite(w_hat).all() and np.isfinite(t)):
+                self._withhold("invalid", stamp, frame_id)
                 return False
-            self._pending.append((float(t), np.asarray(w_hat, dtype=float), stamp, frame_id, arrival))
+            self._check_frame("wrench", frame_id, self.expected_sensor_frame)
+            if t in self._taken and self._newest_in is not None and t < self._newest_in:
+                self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
+                return True
+            entry = (t, w_hat, stamp, frame_id, arrival)
+            stray, self._stray = self._stray, None
+            if stray is not None:
+                if t > self._newest_in:                     # the old timeline goes on: it was a stray
+                    self._withhold("stray", stray[2], stray[3])
+                    self._notice("stray", f"a reading stamped {stray[0]:.9g} s, before the newest, and the next "
+                                          "going on from the newest: dropped (an old message, or a second "
+                                          "publisher on another clock)")
+                elif t > stray[0]:                          # this one goes on from it: the clock stepped back
+                    self._take(stray, back=True)
+                else:                                       # back again: the first a stray, this one held
+                    self._withhold("stray", stray[2], stray[3])
+                    self._stray = entry
+                    return True
+            if self._newest_in is not None and t < self._newest_in - 1e-9:
+                self._stray = entry                         # held aside until the next says what it is
+                return True
+            self._take(entry)
             return True
+
+    def _take(self, entry, back=False):
+        """Queue a reading (lock held); ``back``: its stamp steps back (confirmed by the next)."""
+        t = entry[0]
+        self._taken.add(t)
+        self._taken_order.append(t)
+        if len(self._taken_order) > TAKEN_KEPT:
+            self._taken.discard(self._taken_order.popleft())
+        lead = self._motion[-1][0] - t if self._motion else None
+        if back:
+            self._segment += 1                          # the queued readings go on at once
+            if self._motion_epoch > self._reading_epoch:    # the motion's clock stepped back first: the same step
+                self._reading_epoch = self._motion_epoch
+                self._apart_from = None
+            elif self._apart_from is None and self._lead is not None:
+                self._apart_from = self._lead
+        self._newest_in = t
+        apart = False
+        if self._apart_from is not None and lead is not None:
+            if lead - self._apart_from > self._apart_tolerance():
+                apart = True
+                if "apart" not in self.conditions:
+                    self._condition("apart", f"the readings' stamps stepped back {lead - self._apart_from:.6g} s "
+                                             "behind the motion's: the streams no longer share a clock; no output "
+                                             "until they do")
+                    self._notice("apart", self.conditions["apart"])
+            else:
+                self._apart_from = None
+        behind = self._reading_epoch != self._motion_epoch
+        if behind and "apart" not in self.conditions:
+            self._condition("apart", "the motion's stamps stepped back and the readings' did not: the streams no "
+                                     "longer share a clock; no output until they do")
+            self._notice("apart", self.conditions["apart"])
+        if not (apart or behind) and "apart" in self.conditions:
+            self._condition("apart")
+            self._notice("apart", "the readings' stamps agree with the motion's again")
+        if not apart and lead is not None:
+            self._lead = lead
+        self._pending.append((*entry, self._segment, apart, self._reading_epoch))
 
     def process(self):
         """Compensate every queued reading the motion covers, or has left stale; the outputs (list of
-        :class:`Output`), oldest first."""
+        :class:`Output`), oldest first. :attr:`snapshot` is renewed at most every :data:`SNAP_EVERY` s (and by
+        :meth:`snap`)."""
         with self.lock:
-            if self.compensator is None:
-                if self.dt is None:
-                    if len(self._pending) < DT_SAMPLES:
-                        return []
-                    self.dt = float(np.median(np.diff([p[0] for p in self._pending])))
-                    if not self.dt > 0:
-                        raise Ros2Error("the wrench stamps do not increase: set sample_time")
-                self.compensator = self._build()
-            if not self._pending:
-                return []
-            return self._drain(self._pending[-1][0])
+            try:
+                if self.compensator is None and not self._start():
+                    return []
+                return self._drain() if self._pending else []
+            finally:
+                if time.monotonic() - self._snapped > SNAP_EVERY:
+                    self._snap()
 
-    def _drain(self, newest):
-        """Push every pending reading the motion covers, or has left stale, as one block; the outputs."""
+    def snap(self):
+        """Renew :attr:`snapshot` now (the node does when its inputs fall silent)."""
+        with self.lock:
+            self._snap()
+
+    def _start(self):
+        """The sample time (given, or the median interval of the first readings), the decimation and the
+        compensator; False while too few readings have come."""
+        if self.dt_in is None:
+            if len(self._pending) < DT_SAMPLES:
+                return False
+            steps = np.diff([p[0] for p in self._pending])
+            dt = float(np.median(steps[steps > 0])) if (steps > 0).sum() > DT_SAMPLES // 2 else 0.0
+            if not dt > 0:
+                self._notice("dt", f"the wrench stamps do not increase ({len(self._pending)} readings): waiting for "
+                                   "more (or set sample_time)")
+                while len(self._pending) > DT_SAMPLES // 2:
+                    dropped = self._pending.popleft()
+                    self._withhold("window", dropped[2], dropped[3])
+                return False
+            self.dt_in = dt
+        self.decimation = self._decimation_of(self.dt_in)
+        self.dt = self.dt_in * self.decimation
+        if self.decimation > 1:
+            self._notice("decimation", f"the readings come at {1 / self.dt_in:.0f} Hz, beyond max_rate "
+                                       f"{self.settings.max_rate:g} Hz: 1 in {self.decimation} compensated (outputs "
+                                       f"at {1 / self.dt:.0f} Hz)")
+        self.compensator = self._build()
+        self._held = _Held(int(round(self.settings.identify_buffer / self.dt)) + 1)
+        self._recent_kept = int(round((self.settings.window + self.settings.delay) / self.dt)) + 4
+        return True
+
+    def _drain(self):
+        """Push every pending reading the motion covers, or has left stale (or that a step back sends on); the
+        outputs."""
         timeout = self.settings.stale_timeout
+        newest, last_segment = self._pending[-1][0], self._pending[-1][5]
         rows = []
         while self._pending:
-            t, w_hat, stamp, frame_id, arrival = self._pending[0]
-            value = self._at(t)
-            gap = value is _GAP
+            t, w_hat, stamp, frame_id, arrival, segment, apart, epoch = self._pending[0]
+            apart = apart or epoch != self._motion_epoch          # the motion's clock stepped back since
+            if not self._kept(t):
+                self._pending.popleft()
+                self.withheld["decimated"] += 1
+                continue
+            value = None if apart else self._at(t)
+            tag = "apart" if apart else None
             if value is _WAIT:
-                if newest - t <= timeout:
+                if segment == last_segment and newest - t <= timeout:
                     break
-                value = None
-                self.counts["stale"] += 1
-                self.stale = True
-            elif gap:
-                value = None
-            elif value is not None:
+                value, tag = None, "stale"
+                if segment == last_segment:
+                    if not self.stale:
+                        self._notice("stale", f"motion stale: {self.settings.topic} has no sample within "
+                                              f"{timeout:g} s of the readings' stamps; no output until it covers the "
+                                              "filter's window again")
+                    self.stale = True
+            elif value is _GAP:
+                value, tag = None, "motion"
+            elif value is None:
+                tag = tag or "motion"
+            else:
                 self.stale = False
             self._pending.popleft()
-            rows.append((t, w_hat, value))
-            self._note(t, w_hat, stamp, frame_id, arrival, value, gap)
-        if not rows:
-            return []
-        samples = self._feed(self.compensator, rows)
-        self._recent.extend(rows)
-        while len(self._recent) > int(round((self.settings.window + self.settings.delay) / self.dt)) + 4:
-            self._recent.popleft()
-        out = [o for o in (self._output(s) for s in samples) if o is not None]
-        self._forget(rows[-1][0] - self.compensator.delay)
-        return out
+            rows.append((t, w_hat, value, stamp, frame_id, arrival, tag))
+        return self._push(rows) if rows else []
+
+    def _kept(self, t):
+        """Whether the reading at ``t`` is compensated (decimation: every N-th stamp of the input's grid); counts
+        the readings missing from that grid (``lost``)."""
+        seen, self._last_seen = self._last_seen, t
+        if seen is not None and t - seen > 1.5 * self.dt_in:
+            self.counts["lost"] += int(round((t - seen) / self.dt_in)) - 1
+        if self.decimation == 1:
+            return True
+        if self._grid0 is None or t < self._grid0:
+            self._grid0 = t                             # a new grid after a start, a restart, a step back
+        return int(round((t - self._grid0) / self.dt_in)) % self.decimation == 0
 
     def _at(self, t):
         """The motion at ``t`` (interpolated), None where it starts after ``t``, or ``_WAIT``; ``_GAP`` where no
@@ -285,79 +766,191 @@ class Pipeline:
         (t0, v0), (t1, v1) = m[0], (m[1] if len(m) > 1 else m[0])
         if t0 == t or t1 == t0:
             return v0
-        if self.dt is not None and t - t0 >= 0.5 * self.dt and t1 - t > 0.5 * self.dt:
+        if t - t0 >= 0.5 * self.dt and t1 - t > 0.5 * self.dt:
             return _GAP
         return self.motion.interpolate(self.model, t, t0, v0, t1, v1)
+
+    def _push(self, rows):
+        """Push rows ``(t, w_hat, motion, stamp, frame_id, arrival, tag)`` into the compensator: runs of stamps
+        one step apart as one block, any other stamp alone (so that each of the compensator's events is known to
+        be its); the outputs."""
+        out, i, dt = [], 0, self.dt
+        while i < len(rows):
+            j, previous = i, self._last_t
+            while j < len(rows) and previous is not None and 0.5 * dt <= rows[j][0] - previous < 1.5 * dt:
+                previous = rows[j][0]
+                j += 1
+            j = max(j, i + 1)
+            out.extend(self._push_run(rows[i:j]))
+            i = j
+        return out
+
+    def _push_run(self, run):
+        """One push of :meth:`_push`: its rows' stamps kept for their outputs, the compensator's events of it
+        counted in the ledger; the outputs."""
+        c = self.compensator
+        events = dict(c.events)
+        added = []
+        for t, w_hat, value, stamp, frame_id, arrival, tag in run:
+            if t not in self._frames:
+                tag, seq = self._note(t, w_hat, value, tag)
+                self._frames[t] = (stamp, frame_id, arrival, tag, seq)
+                added.append(t)
+        samples = self._feed(c, [(r[0], r[1], r[2]) for r in run])
+        new = {k: n - events.get(k, 0) for k, n in c.events.items() if n != events.get(k, 0)}
+        if new.get("duplicate"):                      # (a run of one) the reading dropped
+            self.withheld["duplicate"] += 1
+            if added:
+                del self._frames[added[0]]
+        else:
+            self._last_t = run[-1][0]
+        if new.get("restart"):                        # (a run of one) every reading before it withheld
+            keep = run[0][0]
+            for t in [t for t in self._frames if t != keep]:
+                frame = self._frames.pop(t)
+                self._withhold("restart", frame[0], frame[1])
+            while len(self._recent) > 0:
+                self._recent.pop()
+            self._segment_start, self._grid0, self.restarting = keep, None, True
+            self._held.gap()
+        elif self._segment_start is None and not new.get("duplicate"):
+            self._segment_start = run[0][0]
+        if new.get("gap"):
+            self._gap_budget += c.withheld.get("gap", 0) - self._withheld_gap
+            if self.motion.breaks_hold:
+                self._held.gap()
+        self._withheld_gap = c.withheld.get("gap", 0)
+        last = getattr(c, "last_event", None)
+        for cause in new:
+            self._notice(cause, last[1] if last and last[0] == cause else f"the readings' stamps: a {cause}")
+        self._recent.extend((r[0], r[1], r[2]) for r in run)
+        while len(self._recent) > self._recent_kept:
+            self._recent.popleft()
+        flags = self._flags()
+        base = (self.settings.base_frame or self.motion_frame) if self._base else None
+        out = [o for o in (self._output(sample, flags, base) for sample in samples) if o is not None]
+        if self._last_t is not None:
+            self._forget(self._last_t - c.delay)
+        return out
 
     def _feed(self, compensator, rows):
         """Push rows ``(t, w_hat, motion)`` into ``compensator`` as one block; its samples."""
         return compensator.push_many([r[0] for r in rows], [r[1] for r in rows],
                                      **{self.motion.keyword: self.motion.stack([r[2] for r in rows], self.model)})
 
-    def _rebuild(self, calibration=None, payload=None):
-        """A new compensator (a new calibration or payload) fed the rows the old one's filter holds, their
-        outputs (already published) dropped: the output goes on with no gap."""
-        compensator = self._build(calibration, payload)
-        if self._recent:
-            self._feed(compensator, list(self._recent))
-        self.compensator = compensator
-
-    def _note(self, t, w_hat, stamp, frame_id, arrival, value, gap=False):
-        """A reading about to be pushed: its stamp kept for its output, saturation, the held motion (``gap``: no
-        motion sample at this reading, the stream still running)."""
-        if self._last_t is not None and t - self._last_t > 1.5 * self.dt:
-            self.counts["gaps"] += 1
-        self._last_t = t
+    def _note(self, t, w_hat, value, tag):
+        """A reading about to be pushed: saturation, the held motion; ``(tag, seq)``, its tag ("saturated" where
+        it is) and its sequence number among the held samples (-1: not held)."""
         if self._limit is not None and (np.abs(w_hat) >= self._limit).any():
-            self._saturated.add(t)
             self._saturated_at = t
-        self._frames[t] = (stamp, frame_id, arrival)
-        if gap:
-            return
+            tag = "saturated"
         if value is None:
-            if self.motion.breaks_hold:                # identify_payload takes the newest stretch without a gap
-                self._held.clear()
-            return
+            if tag != "motion" or not self._motion or self._motion[0][0] > t:
+                if self.motion.breaks_hold:            # identify_payload fits stretches without a gap
+                    self._held.gap()
+            return tag, -1
         held = self.motion.held(value)                 # a pose, joint angles, or an IMU's attitude
         if held is None:                               # an IMU without orientation: nothing to hold
             self._unoriented += 1
-        else:
-            self._hold(t, held, w_hat)
+            return tag, -1
+        return tag, self._held.append(t, held, w_hat)
 
-    def _hold(self, t, motion, w_hat):
-        """Keep a sample for ``~/identify_payload`` (the newest ``identify_buffer`` s)."""
-        self._held.append((t, motion, w_hat))
-        while self._held and self._held[0][0] < t - self.settings.identify_buffer:
-            self._held.popleft()
-
-    def _output(self, sample):
-        """The :class:`Output` of a compensated sample, None where its reading was saturated."""
-        stamp, frame_id, arrival = self._frames.pop(sample.t, (None, "", time.monotonic()))
-        if sample.t in self._saturated:
-            self._saturated.discard(sample.t)
-            self.counts["saturated"] += 1
+    def _output(self, sample, flags=(), base=None):
+        """The :class:`Output` of a compensated sample (``flags`` its flags; ``base`` the frame_id of an output in
+        the base's axes), None where its reading was saturated (or its stamp is not known: counted, never
+        published)."""
+        frame = self._frames.pop(sample.t, None)
+        if frame is None:
+            self.counts["unmatched"] += 1
             return None
-        self.contact, self.last_sample = sample.contact, sample
-        if self.settings.output_frame == "base":
-            frame_id = self.settings.base_frame or self.motion_frame
-        return Output(sample, stamp, frame_id, arrival)
+        stamp, frame_id, arrival, tag, seq = frame
+        if sample.contact and seq >= 0:
+            self._held.contact(seq)
+        if tag == "saturated":
+            self._withhold("saturated", stamp, frame_id)
+            return None
+        if self._last_out is not None and sample.t - self._last_out > 1.5 * self.dt:
+            self.counts["output_gaps"] += 1
+        self._last_out = sample.t
+        self.contact, self.last_sample, self.restarting = sample.contact, sample, False
+        self.counts["published"] += 1
+        return Output(sample, stamp, frame_id if base is None else base, arrival, flags)
 
     def _forget(self, before):
-        """Drop the stamps of readings older than ``before`` (their outputs will not come)."""
-        for key in [k for k in self._frames if k < before - 1e-9]:
-            del self._frames[key]
-        self._saturated = {k for k in self._saturated if k >= before - 1e-9}
+        """The readings older than ``before`` whose output did not come: withheld, by cause (module docstring)."""
+        window_end = (self._segment_start if self._segment_start is not None else -np.inf) + self.settings.window
+        frames = self._frames                           # in stamp order: the readings since the last restart
+        while frames and (t := next(iter(frames))) < before - 1e-9:
+            frame = frames.pop(t)
+            tag = frame[3]
+            if self._gap_budget > 0:
+                self._gap_budget -= 1
+                cause = "gap"
+            elif tag in ("saturated", "apart"):
+                cause = tag
+            elif t < window_end:
+                cause = "window"
+            else:
+                cause = "stale" if tag == "stale" else "motion"
+            self._withhold(cause, frame[0], frame[1])
+        self._gap_budget = 0
+
+    def reset(self, why):
+        """After a failure (``why``): the readings held counted (``error``), the window restarted with a new
+        compensator; the motion kept."""
+        with self.lock:
+            for entry in list(self._pending) + list(self._frames.values()):
+                self._withhold("error", entry[2] if len(entry) > 5 else entry[0],
+                               entry[3] if len(entry) > 5 else entry[1])
+            self._pending.clear()
+            self._frames.clear()
+            self._recent.clear()
+            self._last_t = self._segment_start = self._grid0 = None
+            self._gap_budget = 0
+            if self.dt is not None:
+                self.compensator = self._build()
+                self._withheld_gap = 0
+            self.restarting = True
+            self._notice("error", f"the window restarted after a failure ({why})")
+            self._snap()
+
+    def _withhold(self, cause, stamp, frame_id, said=True):
+        """A reading given no output, counted by its cause; kept for the node's flags (:attr:`dropped`) unless
+        it is a repeated stamp's (published under that stamp) or decimated (said once, at start)."""
+        self.withheld[cause] += 1
+        if stamp is not None and cause not in ("duplicate", "decimated"):
+            self.dropped.append((stamp, frame_id, cause))
+
+    def unpublished(self, outputs):
+        """Outputs the node could not publish (a failure said in its log): out of ``published``, into the ledger's
+        ``invalid``."""
+        with self.lock:
+            self.counts["published"] -= len(outputs)
+            self.withheld["invalid"] += len(outputs)
 
     # --- the state --------------------------------------------------------------------------------------------
+    def _snap(self):
+        """Replace :attr:`snapshot` (lock held)."""
+        c, sample = self.compensator, self.last_sample
+        self._snapped = time.monotonic()
+        self.snapshot = Snapshot(
+            counts=dict(self.counts), withheld=dict(self.withheld), conditions=dict(self.conditions),
+            events={} if c is None else dict(c.events), contact=bool(self.contact),
+            offset=None if c is None else c.offset, offset_sd=None if sample is None else sample.offset_sd,
+            stale=self.stale, apart=self._apart_from is not None or self._reading_epoch != self._motion_epoch,
+            restarting=self.restarting,
+            started=sample is not None,
+            saturated=self._last_t is not None and 0 <= self._last_t - self._saturated_at < SATURATED_HOLD,
+            last_arrival=self.last_arrival, backlog=len(self._pending),
+            waiting=len(self._pending) + len(self._frames) + (self._stray is not None),
+            dt=self.dt, delay=self.delay, decimation=self.decimation,
+            motion_lag=None if self._newest_in is None or not self._motion else self._newest_in - self._motion[-1][0])
+
     def state(self):
-        """One of :data:`STATES`: "not ready" too where no reading has come for ``stale_timeout`` s (wall time)."""
-        with self.lock:
-            if self._last_t is not None and self._last_t - self._saturated_at < SATURATED_HOLD:
-                return STATES[3]
-            if self.stale:
-                return STATES[2]
-            silent = time.monotonic() - self.last_arrival > self.settings.stale_timeout
-            return STATES[1] if self.last_sample is not None and not silent else STATES[0]
+        """One of :data:`STATES`: "not ready" too where no reading has come for
+        ``stale_timeout`` s (wall time). Takes the lock (the node's diagnostics read :attr:`snapshot` instead)."""
+        self.snap()
+        return state_of(self.snapshot, time.monotonic(), self.settings.stale_timeout)
 
     def backlog(self):
         """The readings waiting for the motion."""
@@ -365,136 +958,265 @@ class Pipeline:
 
     # --- the services -----------------------------------------------------------------------------------------
     def tare(self, force=False):
-        """``(success, message)`` of ``~/tare`` (:meth:`fmscal.analysis.Compensator.tare`)."""
+        """``(success, message)`` of ``~/tare`` (:meth:`fmscal.analysis.Compensator.tare`); ``force``: the
+        contact's size it absorbed said (the change of the output's force, N)."""
         with self.lock:
             if self.compensator is None:
                 return False, "tare refused: no reading compensated yet"
+            before = self.compensator.offset
             try:
                 b = self.compensator.tare(force=force)
-            except Ros2Error as err:
-                return False, str(err)
             except Exception as err:                   # the Compensator's refusal (a contact, no sample yet)
                 first = str(err).splitlines()[0]
                 return False, ((first.split(";")[0] + "; tare with the tool free, or call ~/tare_force where the "
                                 "offset itself is off (a sensor zeroed by its hardware, a drift without "
-                                "track_offset)") if "contact" in first else first)
-        return True, "tared: offset " + " ".join(f"{v:.6g}" for v in b) + " (the reading's units)"
+                                "track_offset); ~/reload undoes a wrong ~/tare_force") if "contact" in first
+                               else first)
+            self._snap()
+        message = "tared: offset " + " ".join(f"{v:.6g}" for v in b) + " (the reading's units)"
+        if force:
+            moved = np.asarray(self.calibration.S) @ (b - before)      # the output's change, sensor axes
+            names = list(self.model.wrench_names)
+            force_part = [moved[names.index(n)] for n in ("fx", "fy", "fz") if n in names]
+            torque = [moved[names.index(n)] for n in ("tx", "ty", "tz", "M") if n in names]
+            message += (f"; absorbed {np.linalg.norm(force_part):.4g} N and {np.linalg.norm(torque):.4g} N m "
+                        "(were that a contact, ~/reload undoes it)")
+        return True, message
 
     def tare_force(self):
         """``(success, message)`` of ``~/tare_force``: :meth:`tare` even where the samples read as a contact
-        (``Compensator.tare(force=True)``), for an offset itself far off; the tool must be free."""
+        (``Compensator.tare(force=True)``), for an offset itself far off; the tool must be free. The answer
+        names the wrench it absorbed."""
         return self.tare(force=True)
 
     def identify(self):
         """``(success, message)`` of ``~/identify_payload``: the payload fitted to the motion and readings held
-        since the last call; the compensation then uses it (and ``~/save`` writes it).
+        since the last call (:func:`fit_held`, here in this thread); the compensation then uses it (and ``~/save``
+        writes it). The node runs the fit in a process of its own (:meth:`identify_job`, :meth:`identified_by`).
+        """
+        job = self.identify_job()
+        if isinstance(job, tuple):
+            return job
+        return self.identified_by(fit_held(job, self.motion))
 
-        Poses (a pose stream, or joint states through the URDF): :func:`fmscal.observers.payload.identify_payload`
-        on the held stretch (mass, centre of mass and inertia). An IMU: its orientation turned into the sensor's
-        attitude, ``R_S = R_IMU C^T`` (``C`` the IMU's axes in the sensor's, ``imu_rotation``), the samples an
-        attitude-only log whose held segments (:func:`fmscal.plant.io.held_table`) are fitted statically
-        (:func:`fmscal.observers.payload.fit_static`, gravity the ``gravity`` parameter's or the calibration's, in
-        the IMU's world): the mass and centre of mass; the inertia, which no held pose shows, is kept from the
-        payload in use. An IMU that publishes no orientation (``orientation_covariance[0] == -1``) is refused."""
+    def identify_job(self):
+        """What :func:`fit_held` needs of the held samples (a dict, the held samples then released), or
+        ``(False, refusal)``."""
         if self.model.attitude != "quaternion":
             return False, (f"identify_payload refused: fmscal's payload fits are a 6-axis sensor's, and this "
                            f"calibration is of a {self.model.name} reading ({' '.join(self.model.wrench_names)}); "
                            "the payload in use is the calibration's")
         with self.lock:
-            held = list(self._held)
-            self._held.clear()
+            held = self._held.take()
             unoriented, self._unoriented = self._unoriented, 0
             b = None if self.compensator is None else self.compensator.offset
-        if not held and unoriented:
+        if held is None and unoriented:
             return False, (f"identify_payload refused: the IMU gave no orientation ({unoriented} samples with "
                            "orientation_covariance[0] == -1 since the last call); the static fit needs the sensor's "
                            "attitude at each held pose: an IMU that estimates its orientation, or pose_topic")
-        if len(held) < 2 or held[-1][0] - held[0][0] < 1.0:
-            return False, f"identify_payload refused: {len(held)} samples held since the last call (at least 1 s " \
-                          "of motion without a gap needed)"
-        t, motion, w_hat = (np.array(v) for v in zip(*held))
+        if held is None or len(held[0]) < 2 or held[0][-1] - held[0][0] < MIN_HELD:
+            n = 0 if held is None else len(held[0])
+            return False, f"identify_payload refused: {n} samples held since the last call (at least " \
+                          f"{MIN_HELD:g} s of motion without a gap needed)"
         cal = self.calibration
-        gravity = self.settings.gravity if self.settings.gravity is not None else cal.gravity
-        reading = self.settings.reading or cal.reading
-        try:
-            data = self.motion.held_log(t - t[0], motion, w_hat)   # poses; joint angles' poses; IMU attitudes
-        except Exception as err:
-            return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
-        if isinstance(data, AttitudeLog):
-            return self._identify_held(data, gravity, reading, b)
-        try:
-            estimate = identify_payload(data, S=cal.S, gravity=gravity, reading=reading)
-        except Exception as err:
-            return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
-        if estimate.inertia is None or not estimate.payload_determined:
-            return False, (f"identify_payload: the held motion does not determine the payload (mass "
-                           f"{estimate.mass:.4g} +- {estimate.mass_std:.2g} kg); kept the one in use")
-        self._use(SpatialModel.payload_from(estimate.mass, estimate.inertia, estimate.com), b)
-        return True, (f"payload identified from {len(t)} samples ({t[-1] - t[0]:.3g} s): mass {estimate.mass:.4g} +- "
-                      f"{estimate.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in estimate.com) + " m"
-                      + ("" if estimate.converged else "; not converged: " + "; ".join(estimate.warnings[:1])))
+        return dict(held=held, S=np.asarray(cal.S), offset=b,
+                    gravity=self.settings.gravity if self.settings.gravity is not None else cal.gravity,
+                    reading=self.settings.reading or cal.reading, inertia=self.model.payload.inertia,
+                    false_alarm=float(self.settings.contact_threshold), dt=self.dt,
+                    margin=self.settings.window + self.settings.delay)
 
-    def _identify_held(self, log, gravity, reading, b):
-        """:meth:`identify` of an IMU: the held segments of its attitudes (``R_S = R_IMU C^T``), fitted
-        statically."""
-        t = log.t
-        try:
-            table, used, why = held_table(log)
-            fit = fit_static(table, S=self.calibration.S, gravity=gravity, reading=reading,
-                             noise=reading_noise(table.noise, self.calibration.S, used * len(t) / len(table)))
-        except Exception as err:
-            return False, "identify_payload refused: " + (str(err).splitlines()[0] if str(err) else repr(err))
-        if not fit.payload_determined:
-            return False, (f"identify_payload: the held poses do not determine the payload (mass {fit.mass:.4g} +- "
-                           f"{fit.mass_std:.2g} kg, {len(table)} held poses); kept the one in use")
-        self._use(SpatialModel.payload_from(fit.mass, self.model.payload.inertia, fit.com), b)
-        return True, (f"payload identified from {len(table)} held poses ({used:.0%} of {t[-1] - t[0]:.3g} s): mass "
-                      f"{fit.mass:.4g} +- {fit.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in fit.com)
-                      + " m; the inertia kept (no held pose shows it)"
-                      + ("" if fit.converged else "; not converged: " + "; ".join(fit.warnings[:1])))
-
-    def _use(self, payload, b):
-        """The compensation goes on with ``payload`` (and the offset ``b`` it had), with no gap."""
-        with self.lock:
-            if self.compensator is not None:
-                self._rebuild(self.calibration if b is None else replace(self.calibration, b=b), payload)
-            self.payload = self.identified = payload
-            self.model = compensation_model(self.calibration, payload)
+    def identified_by(self, result):
+        """Apply :func:`fit_held`'s result (the payload in use replaced where it succeeded);
+        ``(success, message)``."""
+        if result.get("payload") is not None:
+            mass, inertia, com = result["payload"]
+            payload = SpatialModel.payload_from(mass, inertia, com)
+            b = result.get("offset")
+            st = _identified_setup(self.setup, payload, result, b)
+            compensator = None if self.compensator is None else self._rebuilt(st)
+            with self.lock:
+                if compensator is not None:
+                    self._swap(compensator)
+                self.setup, self.identified = st, result
+                self.model = compensation_model(self.calibration, payload)
+                self._snap()
+        return bool(result["ok"]), result["message"]
 
     def save(self):
-        """``(success, message)`` of ``~/save``: the calibration with the offset in use and the payload in use,
-        dated now."""
+        """``(success, message)`` of ``~/save``: with a calibration, the calibration with the offset in use and the
+        payload in use, dated now; with a payload file alone, a payload file (``fmscal-payload``, as
+        ``fmscal identify-payload --save`` writes): the payload in use with its uncertainty, the offset in use,
+        the file's gravity, mounting, sign and noise."""
         path = self.settings.save_path
         if not path:
             return False, "save refused: set the parameter save_path"
         with self.lock:
             b = None if self.compensator is None else self.compensator.offset
-            cal = replace(self.calibration, b=self.calibration.b if b is None else b,
-                          payload=self.payload or self.calibration.payload, date=None,
-                          latency=self.latency if self.settings.source == "pose_topic" else self.calibration.latency)
+            st, identified = self.setup, self.identified
+            if not self.settings.calibration:
+                document = _payload_document(self.estimate, st, b)
+            else:
+                document = replace(self.calibration, b=self.calibration.b if b is None else b,
+                                   payload=st.payload or self.calibration.payload, date=None,
+                                   latency=self.latency if self.settings.source == "pose_topic" else
+                                   self.calibration.latency)
         try:
-            cal.save(path, force=True, overwrite=True)       # ~/save rewrites save_path by design
+            if isinstance(document, PayloadEstimate):
+                document.save(path)
+            else:
+                document.save(path, force=True, overwrite=True)       # ~/save rewrites save_path by design
         except Exception as err:
             return False, "save failed: " + (str(err).splitlines()[0] if str(err) else repr(err))
-        return True, f"saved {path}: offset " + " ".join(f"{v:.6g}" for v in (cal.offset)) + \
-            ("" if self.identified is None else f", the identified payload (mass {cal.payload.mass:.4g} kg)")
+        what = " (a payload file)" if isinstance(document, PayloadEstimate) else ""
+        offset = document.b if isinstance(document, PayloadEstimate) else document.offset
+        mass = st.payload.mass if st.payload is not None else self.calibration.payload.mass
+        return True, f"saved {path}{what}: offset " + " ".join(f"{v:.6g}" for v in offset) + \
+            ("" if identified is None else f", the identified payload (mass {mass:.4g} kg)")
 
     def reload(self):
         """``(success, message)`` of ``~/reload``: the calibration (and payload) files read again."""
         try:
-            calibration, payload, latency = _load(self.settings)
-            model = compensation_model(calibration, payload)
+            st, estimate, latency = _load(self.settings)
+            model = compensation_model(st.calibration, st.payload)
             if model.n_w != self.n:
                 raise Ros2Error(f"the calibration is now of a {model.name} reading; the node started with another")
+            compensator = None if self.compensator is None else self._rebuilt(st)
         except Exception as err:
             return False, "reload refused, the calibration in use kept: " + (str(err).splitlines()[0] or repr(err))
         with self.lock:
-            self.calibration, self.payload, self.latency, self.model = calibration, payload, latency, model
+            self.setup, self.estimate, self.latency, self.model = st, estimate, latency, model
             self.identified = None
-            if self.compensator is not None:
-                self._rebuild()
-        return True, f"reloaded {self.settings.calibration}: offset " + " ".join(f"{v:.6g}" for v in calibration.offset)
+            self.expected_sensor_frame = (self.settings.sensor_frame or getattr(st.calibration, "sensor_frame", None)
+                                          or "")
+            if compensator is not None:
+                self._swap(compensator)
+            self._snap()
+        offset = " ".join(f"{v:.6g}" for v in st.calibration.offset)
+        return True, f"reloaded {self.settings.calibration or self.settings.payload}: offset {offset}"
 
 
-_WAIT = object()
-_GAP = object()
+def _identified_setup(st, payload, result, b):
+    """The setup after ``~/identify_payload``: its payload the fit's, the offset it was fitted at (``b``; None:
+    kept); where a payload file's covariance is in use (K2), the fit's sds in place of the file's for what it
+    determined (an inertia it did not determine keeps its bound, K3)."""
+    calibration = st.calibration if b is None else replace(st.calibration, b=np.asarray(b, dtype=float))
+    cov, bounded = None, False
+    if st.cov is not None:
+        cov = np.array(st.cov, dtype=float)
+        sd = result["sd"]
+        groups = [(slice(0, 1), [sd["mass"]]), (slice(1, 4), sd["com"])]
+        if sd.get("inertia") is not None:
+            groups.append((slice(4, 10), sd["inertia"]))
+        else:
+            bounded = st.inertia_bounded
+        for rows, values in groups:
+            cov[rows, :], cov[:, rows] = 0.0, 0.0
+            cov[rows, rows] = np.diag(np.square(np.asarray(values, dtype=float)))
+    return replace(st, calibration=calibration, payload=payload, cov=cov, inertia_bounded=bounded, warnings=[])
+
+
+def _payload_document(estimate, st, b):
+    """The payload file ``~/save`` writes with a payload file alone: ``estimate`` (the file read at start) with
+    the payload in use, its sds (the diagonal of the setup's covariance, K2), and the offset in use ``b``."""
+    payload, cov = st.payload, np.array(estimate.tracked().cov if estimate.cov is not None else st.cov, dtype=float)
+    if st.cov is not None:
+        cov[:10, :] = cov[:, :10] = 0.0
+        cov[:10, :10] = st.cov[:10, :10]
+    inertia = None if st.inertia_bounded else np.asarray(payload.inertia, dtype=float)
+    if inertia is None:
+        cov[4:10, :] = cov[:, 4:10] = np.inf
+    sd = np.sqrt(np.diag(cov))
+    return replace(estimate.tracked(), mass=float(payload.mass), mass_std=float(sd[0]),
+                   com=np.asarray(payload.com, dtype=float), com_std=sd[1:4], inertia=inertia,
+                   inertia_std=None if inertia is None else sd[4:10],
+                   b=np.asarray(estimate.b if b is None else b, dtype=float), cov=cov, payload_determined=True)
+
+
+def _clean_stretches(t, contact, starts, false_alarm, dt, margin):
+    """The held samples' stretches without a gap or a contact: ``(start, stop)`` index pairs. A contact is a run of
+    flagged samples (C4) beyond what false alarms give in :data:`fmscal.analysis.TARE_WINDOW` s but with probability
+    :data:`TARE_FALSE_REFUSAL` (tare's rule), widened by ``margin`` s each way."""
+    n = len(t)
+    width = max(1, int(round(TARE_WINDOW / dt)))
+    bound = binom.isf(TARE_FALSE_REFUSAL, width, false_alarm)
+    flagged = np.convolve(contact.astype(float), np.ones(width), mode="same") > bound
+    bad = np.zeros(n, bool)
+    if flagged.any():
+        grow = int(round(margin / dt)) + width
+        bad = np.convolve(flagged.astype(float), np.ones(2 * grow + 1), mode="same") > 0
+    cuts = np.flatnonzero(starts | np.r_[True, bad[1:] != bad[:-1]])
+    bounds = np.r_[cuts, n]
+    return [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if not bad[a] and b - a >= 2]
+
+
+def fit_held(job, motion):
+    """``~/identify_payload``'s fit of :meth:`Pipeline.identify_job`'s held samples (here, or in a process of its
+    own: :mod:`._worker`): a dict, ``ok``, ``message``, and ``payload`` ``(mass, inertia, com)`` to use (None:
+    keep the one in use) with the ``offset`` it was fitted at and ``sd`` (``mass``, ``com``, and ``inertia``,
+    None where the fit kept the one in use).
+
+    Poses (a pose stream, or joint states through the URDF): :func:`fmscal.observers.payload.identify_payload`
+    on the longest held stretch without a gap or a contact (mass, centre of mass and inertia). An IMU: its
+    orientation turned into the sensor's attitude, ``R_S = R_IMU C^T`` (``C`` the IMU's axes in the sensor's,
+    ``imu_rotation``), the samples outside contacts an attitude-only log whose held segments
+    (:func:`fmscal.plant.io.held_table`) are fitted statically (:func:`fmscal.observers.payload.fit_static`,
+    gravity the ``gravity`` parameter's or the calibration's, in the IMU's world): the mass and centre of mass;
+    the inertia, which no held pose shows, is kept from the payload in use."""
+    t, held, w_hat, contact, starts = job["held"]
+
+    def refused(why):
+        return dict(ok=False, message="identify_payload refused: " + why, payload=None)
+    if not motion.breaks_hold:
+        starts = np.zeros_like(starts)
+        starts[0] = True
+    stretches = _clean_stretches(t, contact, starts, job["false_alarm"], job["dt"], job["margin"])
+    if not stretches:
+        return refused(f"{len(t)} samples held, all within a contact (at least {MIN_HELD:g} s without one needed)")
+    left = f"{len(t) - sum(b - a for a, b in stretches)} samples in contacts or gaps left out"
+    if motion.breaks_hold:
+        a, b = max(stretches, key=lambda s: (t[s[1] - 1] - t[s[0]], s[0]))
+        if t[b - 1] - t[a] < MIN_HELD:
+            return refused(f"the longest stretch held without a gap or a contact is {t[b - 1] - t[a]:.3g} s (at "
+                           f"least {MIN_HELD:g} s of motion needed)")
+        keep = np.arange(a, b)
+    else:
+        keep = np.concatenate([np.arange(a, b) for a, b in stretches])
+    t, held, w_hat = t[keep], held[keep], w_hat[keep]
+    try:
+        data = motion.held_log(t - t[0], held, w_hat)   # poses; joint angles' poses; IMU attitudes
+    except Exception as err:
+        return refused(str(err).splitlines()[0] if str(err) else repr(err))
+    reading, gravity, S = job["reading"], job["gravity"], job["S"]
+    if isinstance(data, AttitudeLog):
+        try:
+            table, used, why = held_table(data)
+            fit = fit_static(table, S=S, gravity=gravity, reading=reading,   # the reading's own noise, eq. (E4)
+                             noise=reading_noise(table.noise, S, used * len(t) / len(table)))
+        except Exception as err:
+            return refused(str(err).splitlines()[0] if str(err) else repr(err))
+        if not fit.payload_determined:
+            return dict(ok=False, payload=None, message=(
+                f"identify_payload: the held poses do not determine the payload (mass {fit.mass:.4g} +- "
+                f"{fit.mass_std:.2g} kg, {len(table)} held poses); kept the one in use"))
+        return dict(ok=True, payload=(fit.mass, job["inertia"], fit.com), offset=job["offset"],
+                    sd=dict(mass=float(fit.mass_std), com=np.asarray(fit.com_std, dtype=float), inertia=None), message=(
+            f"payload identified from {len(table)} held poses ({used:.0%} of {t[-1] - t[0]:.3g} s; {left}): mass "
+            f"{fit.mass:.4g} +- {fit.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in fit.com)
+            + " m; the inertia kept (no held pose shows it)"
+            + ("" if fit.converged else "; not converged: " + "; ".join(fit.warnings[:1]))))
+    try:
+        estimate = identify_payload(data, S=S, gravity=gravity, reading=reading)
+    except Exception as err:
+        return refused(str(err).splitlines()[0] if str(err) else repr(err))
+    if estimate.inertia is None or not estimate.payload_determined:
+        return dict(ok=False, payload=None, message=(
+            f"identify_payload: the held motion does not determine the payload (mass {estimate.mass:.4g} +- "
+            f"{estimate.mass_std:.2g} kg); kept the one in use"))
+    return dict(ok=True, payload=(estimate.mass, estimate.inertia, estimate.com), offset=job["offset"],
+                sd=dict(mass=float(estimate.mass_std), com=np.asarray(estimate.com_std, dtype=float),
+                        inertia=np.asarray(estimate.inertia_std, dtype=float)), message=(
+        f"payload identified from {len(t)} samples ({t[-1] - t[0]:.3g} s; {left}): mass {estimate.mass:.4g} +- "
+        f"{estimate.mass_std:.2g} kg, com " + " ".join(f"{v:.4g}" for v in estimate.com) + " m"
+        + ("" if estimate.converged else "; not converged: " + "; ".join(estimate.warnings[:1]))))
+
+

@@ -1,0 +1,168 @@
+"""The ROS 2 node's soak under random faults: ``python benchmarks/ros2_soak.py [--minutes 10] [--sources pose
+joints imu] [--seed 0]``.
+
+For each motion source, the node (``fmscal ros2``, a subprocess) compensates the fault harness's replay of the UR5
+carrying its tool (tests/ros2_rig.py: a sender process at 1 kHz over DDS, the truth of the contact wrench zero
+throughout) for ``--minutes``, with faults drawn at random, one every 2-8 s: drops of 1, 2, 10 or 1000 messages on
+either stream or both, pauses of both of 2 ms to 0.5 s, repeated readings, motion messages the node skips. This
+process takes every output, its covariance and flag, and the node's diagnostics, and samples the node's resident
+memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
+
+- whether the node was alive at the end;
+- the outputs, and those unflagged beyond 5 sd of the truth (the target: none);
+- the rms z-score over the outputs away from every fault (the window and the delay either side);
+- the ledger: ``received = published + withheld + waiting`` (exact), and the readings lost;
+- the resident memory at minute 2 and at the end, and its growth (the target: under 20 MB; with ``--minutes``
+  under 2, minute 2 falls after the replay, in the wait for its last outputs).
+
+The machine's load is not controlled. About ``--minutes`` plus a minute of setup per source. ``--json`` prints
+the figures as one JSON object instead.
+"""
+
+import argparse
+import json
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from fmscal.analysis import CAUSAL_DELAY, CAUSAL_WINDOW  # noqa: E402
+from ros2_rig import (Listener, domain_id, node_log, running_node, sender_result, source_parameters,  # noqa: E402
+                      start_sender, tool_calibration)
+
+#: Every unflagged output within this many sd of the truth.
+BOUND = 5.0
+#: The node's input queues (deep: a loaded machine's pauses lose nothing; the overload is a test's).
+DEPTH = 50000
+
+
+def faults(duration, rng):
+    """Random faults, one every 2-8 s from 1 s to the last second (the harness's ``schedule`` dicts)."""
+    out, at = [], 1.0
+    while True:
+        at += float(rng.uniform(2.0, 8.0))
+        if at > duration - 2.0:
+            return out
+        kind = rng.choice(["drop", "drop", "pause", "duplicate", "garbage"])
+        stream = str(rng.choice(["w", "m", "both"]))
+        if kind == "drop":
+            out.append(dict(kind="drop", stream=stream, at=round(at, 3), count=int(rng.choice([1, 2, 10, 1000]))))
+        elif kind == "pause":
+            out.append(dict(kind="pause", stream="both", at=round(at, 3),
+                            seconds=float(rng.choice([0.002, 0.05, 0.5]))))
+        elif kind == "duplicate":
+            out.append(dict(kind="duplicate", stream="w", at=round(at, 3), count=int(rng.integers(1, 6))))
+        else:
+            out.append(dict(kind="garbage", stream="m", at=round(at, 3), count=int(rng.integers(1, 6))))
+        at += 0.0 if kind != "drop" else out[-1]["count"] * 1e-3
+
+
+def rss_mb(pid):
+    """The resident memory of process ``pid``, MB (None once it is gone)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    except FileNotFoundError:
+        return None
+    return None
+
+
+def soak(source, minutes, seed):
+    """One source's soak; a dict of its figures."""
+    duration = 60.0 * minutes
+    plan_faults = faults(duration, np.random.default_rng(seed))
+    domain = domain_id(f"soak-{source}-{seed}")
+    with tempfile.TemporaryDirectory() as tmp:
+        cal = tool_calibration(Path(tmp) / "cal.json")
+        plan = dict(domain=domain, source=source, rate=1000.0, duration=duration, seed=seed, faults=plan_faults)
+        with running_node(domain, f"calibration:={cal}", "qos:=reliable", f"queue_depth:={DEPTH}",
+                          *source_parameters(source)) as proc:
+            listener = Listener(domain)
+            memory, stop = [], threading.Event()
+
+            def sample():
+                begun = time.monotonic()
+                while not stop.wait(5.0):
+                    memory.append((time.monotonic() - begun, rss_mb(proc.pid)))
+            try:
+                listener.wait_for_node(proc)
+                sampler = threading.Thread(target=sample, daemon=True)
+                sampler.start()
+                done = sender_result(start_sender(plan), duration + 600)
+                epoch = done["epoch"]
+                stamps = int(round(duration * 1000.0)) + 1
+                quiet, seen, since = 60.0, None, time.monotonic()
+                while time.monotonic() - since < quiet:          # every stamp taken or lost, or nothing new for 60 s
+                    s = listener.status()
+                    if s is not None and "received" in s and not int(s["backlog"]) and \
+                            int(s["received"]) + int(s["lost"]) - int(s["withheld_duplicate"]) >= stamps and \
+                            int(s["published"]) <= len(listener.contacts):
+                        break
+                    now_seen = None if s is None else (s.get("received"), s.get("published"), len(listener.contacts))
+                    if now_seen != seen:
+                        seen, since = now_seen, time.monotonic()
+                    time.sleep(0.2)
+                stop.set()
+                alive = proc.poll() is None
+                status = listener.status()
+                t, wrench, sd, flagged = listener.outputs(epoch)
+            finally:
+                stop.set()
+                listener.close()
+            log = node_log(proc)
+    z = wrench / sd
+    worst = np.abs(z).max(axis=1)
+    clean = ~flagged
+    for f in plan_faults:
+        length = f.get("count", 0) * 1e-3 + f.get("seconds", 0.0)
+        clean &= ~((t > f["at"] - CAUSAL_WINDOW - CAUSAL_DELAY - 0.01) &
+                   (t < f["at"] + length + CAUSAL_WINDOW + CAUSAL_DELAY + 0.05))
+    withheld = sum(int(v) for k, v in status.items() if k.startswith("withheld_"))
+    at2 = [m for s, m in memory if s >= 120.0 and m is not None]             # the sampler starts with the sender
+    last = [m for _, m in memory if m is not None]
+    return dict(source=source, minutes=minutes, faults=len(plan_faults), alive=alive, outputs=int(len(t)),
+                unflagged_beyond=int(((worst > BOUND) & ~flagged).sum()), flagged=int(flagged.sum()),
+                rms_z_clean=float(np.sqrt(np.mean(z[clean] ** 2))) if clean.any() else None,
+                received=int(status["received"]), published=int(status["published"]), withheld=withheld,
+                waiting=int(status["waiting"]), lost=int(status["lost"]),
+                ledger_exact=int(status["received"]) == int(status["published"]) + withheld + int(status["waiting"]),
+                rss_minute2_mb=at2[0] if at2 else None, rss_end_mb=last[-1] if last else None,
+                rss_growth_mb=(last[-1] - at2[0]) if at2 and last else None,
+                log_tail=None if alive else log[-2000:])
+
+
+def _mb(v):
+    return "n/a" if v is None else f"{v:.1f} MB"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--sources", nargs="+", default=["pose", "joints", "imu"], choices=["pose", "joints", "imu"])
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    results = [soak(source, args.minutes, args.seed + k) for k, source in enumerate(args.sources)]
+    if args.json:
+        print(json.dumps(results))
+        return
+    for r in results:
+        growth = _mb(r["rss_growth_mb"])
+        print(f"{r['source']}: {r['minutes']:g} min, {r['faults']} faults; alive {r['alive']}; {r['outputs']} "
+              f"outputs, {r['unflagged_beyond']} unflagged beyond {BOUND:g} sd, {r['flagged']} flagged; rms z "
+              f"(clean) {r['rms_z_clean']:.3f}; received {r['received']} = published {r['published']} + withheld "
+              f"{r['withheld']} + waiting {r['waiting']} ({'exact' if r['ledger_exact'] else 'NOT exact'}), lost "
+              f"{r['lost']}; resident memory {_mb(r['rss_minute2_mb'])} at minute 2, {_mb(r['rss_end_mb'])} at the "
+              f"end (growth {growth})")
+        if r["log_tail"]:
+            print(r["log_tail"])
+
+
+if __name__ == "__main__":
+    main()
