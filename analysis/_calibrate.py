@@ -766,9 +766,8 @@ def _check_flipped_gain(run, warnings):
     """``"flipped_gain"``: the force block of ``S`` (on the ``force_channels``) is near the identity, else one line
     naming why, and not converged:
 
-    - a force channel along a direction the log leaves undetermined, and a force gain negative or beyond a factor
-      :data:`FAR_GAIN` of 1: too little rotation to tell the reading's sign, or the mass (no advice on ``reading``,
-      which the next run would reverse, nor on the mass);
+    - a force channel along a direction the log leaves undetermined, and a force gain negative: too little rotation
+      to tell the reading's sign (no advice on ``reading``, which the next run would reverse);
     - the polar factor ``R`` of the block (``S_ff = R P``, ``R`` orthogonal) a rotation turning more than
       :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
     - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
@@ -780,9 +779,8 @@ def _check_flipped_gain(run, warnings):
     U, _, Vt = np.linalg.svd(S_f)
     R = U @ Vt
     rotvec = Rotation.from_matrix(R).as_rotvec() if np.linalg.det(R) > 0 else None
-    plausible = np.all((np.diag(S_f) > 1 / FAR_GAIN) & (np.diag(S_f) < FAR_GAIN))
-    if untold and plausible:               # nothing to say of the sign, nor of a turn, where the gains are unknown
-        return [], True, None
+    if untold and np.all(np.diag(S_f) > 0):    # nothing to say of the sign, nor of a turn, where the gains are
+        return [], True, None                  # unknown and none is negative (a mass given wrong: the gains' check)
     if untold:
         run.named = True
         return [f"{run.log.name}: the log holds too little rotation to tell the reading's sign (the force gains are "

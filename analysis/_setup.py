@@ -47,7 +47,7 @@ import numpy as np
 from fmscal.plant import Calibration
 from fmscal.plant.io import CalibrationFileError, not_a_file
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import GRAVITY, NoiseSpec, SpatialPayload
+from fmscal.plant.physics import GRAVITY, NoiseSpec, SpatialPayload, find_model
 from fmscal.observers.payload import PAYLOAD_FORMAT, PayloadEstimate, StaticFit
 
 __all__ = ["Setup", "setup", "load_setup", "TOOL_RADIUS_FACTOR", "MIN_TOOL_RADIUS", "payload_jacobian"]
@@ -181,7 +181,7 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
         raise SetupError("payload= replaces a calibration's payload; a payload estimate is the payload itself")
     if sensor is not None and not isinstance(sensor, Calibration):
         raise SetupError(f"calibration= must be a plant.Calibration (the sensor's S); got {type(sensor).__name__}")
-    if sensor is not None and sensor.size != 6:
+    if sensor is not None and find_model(n_w=sensor.size, estimates="mass") is None:
         raise SetupError(f"a payload estimate is a 6-axis sensor's; the calibration given is of a {sensor.size}-axis "
                          "reading")
     estimate = calibration

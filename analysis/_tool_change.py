@@ -230,12 +230,12 @@ def threshold(evaluations_per_hour, candidates, rate=FALSE_ALARM_RATE):
 def check_mode(tool_change, model):
     """The mode ``tool_change`` asks for on ``model``: None is "detect" where the model has the spatial regressor
     (a 6-axis reading in 3D), "off" elsewhere; an explicit mode on another model is refused."""
-    spatial = model.attitude == "quaternion"
+    regressor = model.attitude == "quaternion"        # the model declares attitudes in 3D: the regressor (T1)
     if tool_change is None:
-        return TOOL_CHANGE[1] if spatial else TOOL_CHANGE[0]
+        return TOOL_CHANGE[1] if regressor else TOOL_CHANGE[0]
     if not (isinstance(tool_change, str) and tool_change in TOOL_CHANGE):
         raise ToolChangeError(f"tool_change must be one of {', '.join(TOOL_CHANGE)} (or None); got {tool_change!r}")
-    if tool_change != TOOL_CHANGE[0] and not spatial:
+    if tool_change != TOOL_CHANGE[0] and not regressor:
         raise ToolChangeError(f"a tool change is detected on a 6-axis reading in 3D (the Newton-Euler regressor); "
                               f"this is a {model.name} reading: leave tool_change None or 'off'")
     return tool_change

@@ -23,7 +23,7 @@ What it writes (examples/README.md says what each is for):
   the flange;
 - ``tool_poses.csv``, ``tool_check.csv`` and ``tool_run.csv``: the everyday job's rig, a sensor calibrated by its
   maker (``S = I``) on ``arm6.urdf`` with a new tool (:data:`GRIPPER`): 8 held poses to identify it, 4 other held
-  poses to check it, and a joint-state run of 6 s at 100 Hz pushed once (as ``joint_log.csv``'s), the same
+  poses to check it, and a joint-state run of 5 s at 100 Hz pushed once (as ``joint_log.csv``'s), the same
   sensor's offset throughout;
 - ``run_bag/``: a ROS 2 bag (mcap) of ``arm.csv``'s first 4 s: ``PoseStamped`` on ``/tool``, ``WrenchStamped`` on
   ``/ft``.
@@ -78,7 +78,7 @@ PUSH_FORCE, PUSH_POINT, PUSH_TIMES, PUSH_RAMP = (4.0, -3.0, -6.0), (0.0, 0.0, 0.
 JOINT_SD, GYRO_SD, ACCEL_SD = 2e-6, 1e-3, 0.01
 
 
-def arm_run(truth, urdf=HERE / "arm6.urdf", tool=TOOL, seed=11):
+def arm_run(truth, urdf=HERE / "arm6.urdf", tool=TOOL, seed=11, duration=RUN_DURATION):
     """The arm's run: every joint moving, the tool of ``spatial-arm`` on arm.csv's sensor (its ``S``, offset and
     noise, ``truth``), pushed once.
 
@@ -88,7 +88,7 @@ def arm_run(truth, urdf=HERE / "arm6.urdf", tool=TOOL, seed=11):
     sensor_wrench`, from the sensor frame's motion by pinocchio), ``w_e`` the push's wrench on the tool at the
     sensor's point.
     """
-    t = np.arange(int(round(RUN_DURATION / RUN_DT)) + 1) * RUN_DT
+    t = np.arange(int(round(duration / RUN_DT)) + 1) * RUN_DT
     q0 = np.array([0.2, -1.2, 1.0, -0.6, 0.8, 0.3])
     amplitude = np.array([0.6, 0.3, 0.4, 0.9, 0.8, 1.2])
     omega = 2 * np.pi * np.array([0.21, 0.17, 0.25, 0.31, 0.27, 0.23])
@@ -161,6 +161,8 @@ GRIPPER = SpatialPayload(0.8, (2.2e-3, 2.6e-3, 1.1e-3, 1e-4, 0.0, -5e-5), (0.004
 #: Its held poses' noise (each the mean of 0.5 s at 1 kHz of spatial-arm's sensor), N m and N; the run's readings
 #: are 100 Hz, each the mean of 10 samples at 1 kHz.
 HELD_AVERAGED, RUN_AVERAGED = 500, 10
+#: The everyday run's length, s (the push at 3-4.3 s within it; the folder kept small).
+EVERYDAY_DURATION = 5.0
 
 
 def everyday(out, urdf=HERE / "arm6.urdf"):
@@ -181,7 +183,7 @@ def everyday(out, urdf=HERE / "arm6.urdf"):
     scenario = ARM.with_(crosstalk=0.0).with_noise_scaled(1 / np.sqrt(RUN_AVERAGED))
     _, truth, _ = scenario.generate(seed=0)
     truth = dataclasses.replace(truth, offset=offset)
-    run = arm_run(truth, urdf, tool=GRIPPER, seed=24)
+    run = arm_run(truth, urdf, tool=GRIPPER, seed=24, duration=EVERYDAY_DURATION)
     rng = np.random.default_rng(25)
     names = ["t", *(f"q{i + 1}" for i in range(6)), "tx", "ty", "tz", "fx", "fy", "fz"]
     joints = run["q"] + rng.normal(0, JOINT_SD, run["q"].shape)

@@ -137,4 +137,4 @@ def test_causal_on_a_sparse_log_names_the_window_flag(folder, capsys):
     assert "--delay 0.4 s reaches past --window 0.24 s: give --window of at least" in err, err
     assert main(argv + ["--window", "0.24"]) == 0                  # the six poses the cubic needs
     rows = np.loadtxt(folder / "c.csv", delimiter=",", skiprows=1)
-    assert rows.shape[1] == 8 and len(rows) > 250
+    assert rows.shape[1] == 9 and len(rows) > 250                  # t, the wrench, contact, tool_change

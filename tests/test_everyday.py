@@ -199,12 +199,12 @@ def test_the_example_rig_end_to_end(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("gains", [False, True], ids=["S=I", "gains"])
-def test_everyday_targets(tmp_path, gains):
-    """Issue 44's targets over 10 seeds (benchmarks/everyday.py, which prints the table): 8 held attitudes,
-    identify-payload --save, compensate on a 20 s log with a 1 N push. Medians over seeds: the contact-free residual
-    within 1.3x the noise offline and 2x causal (and above 1/1.3: not a wrench left out), rms z in [0.7, 1.4],
-    false alarms at most twice the stated 0.1 %; the push flagged in at least 90 % of its samples on every seed."""
+def test_everyday_targets(tmp_path):
+    """Issue 44's targets on 3 seeds of the harder sensor, force gains off by up to 5 % (benchmarks/everyday.py
+    runs 10 seeds of each sensor and prints the table docs/status.md quotes): 8 held attitudes, identify-payload
+    --save, compensate on a 20 s log with a 1 N push. Medians over the seeds: the contact-free residual within 1.3x
+    the noise offline and 2x causal (and above 1/1.3: not a wrench left out), rms z in [0.7, 1.4], false alarms at
+    most twice the stated rate; the push flagged in at least 90 % of its samples on every seed."""
     import importlib.util
     from pathlib import Path
 
@@ -212,7 +212,7 @@ def test_everyday_targets(tmp_path, gains):
     spec = importlib.util.spec_from_file_location("everyday_benchmark", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    results = [bench.run(seed, gains, tmp_path) for seed in range(10)]
+    results = [bench.run(seed, True, tmp_path) for seed in range(3)]
     for k, ratio in ((0, 1.3), (1, 2.0)):
         rs = [r[k] for r in results]
         median_ratio = np.median([r["ratio"] for r in rs], axis=0)

@@ -20,8 +20,8 @@ from fmscal.observers.payload import PayloadEstimate
 
 from .. import _plots
 from .._calibrate import DEFAULT_MAX_LATENCY, DEFAULT_METHOD, OptionError, calibrate, log_model_class, read_data
-from ._common import (INERTIA_METAVAR, CliError, add_max_mass, flag_payload, max_mass, position_flag, position_values,
-                      positive)
+from ._common import (INERTIA_METAVAR, CliError, Words, add_max_mass, flag_payload, max_mass, position_flag,
+                      position_values, positive)
 from ._files import atomic_write_text, check_inputs, check_outputs
 from ._spatial import latency_line, print_spatial, print_std_parts
 
@@ -55,10 +55,10 @@ def add_calibrate(sub):
     p.add_argument("--mass-std", type=float, metavar="KG",
                    help=f"logs: the mass's standard deviation, kg (default {100 * DEFAULT_MASS_STD:g} %% of the "
                         "mass: a weighed tool; a CAD mass is off by a few %%); carried into S_std, as the three below")
-    p.add_argument("--com-std", type=float, nargs="+", metavar="M",
+    p.add_argument("--com-std", type=float, nargs="+", metavar=Words("M | MX MY MZ"),
                    help=f"logs: the centre of mass's standard deviation, m, one for each axis or one per axis (the "
                         f"planar rho's alike; default {DEFAULT_COM_STD:g} m, CAD's)")
-    p.add_argument("--inertia-std", type=float, nargs="+", metavar="REL",
+    p.add_argument("--inertia-std", type=float, nargs="+", metavar=Words("REL | REL x 6"),
                    help=f"logs: each inertia entry's standard deviation relative to its scale (I_ii; sqrt(I_ii I_jj) "
                         f"for a product), one for every entry or one per entry (default {DEFAULT_INERTIA_STD:g}, "
                         "CAD's)")

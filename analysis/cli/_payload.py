@@ -21,7 +21,7 @@ import numpy as np
 from fmscal.plant import Calibration, Log
 from fmscal.plant.io import AttitudeLog
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, SpatialModel, inertia_matrix
+from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, find_model, inertia_matrix
 
 from fmscal.observers.payload import identify_payload
 
@@ -105,7 +105,7 @@ def _calibration_S(args):
         args.reading = args.reading or "reaction"
         return None
     calibration = Calibration.load(path)
-    if calibration.size != len(SpatialModel.wrench_names):
+    if find_model(n_w=calibration.size, estimates="mass") is None:     # the payload's model: a 6-axis S
         raise CliError(f"{path} is a {calibration.kind} calibration ({calibration.size}x{calibration.size}); "
                        "identify-payload takes a spatial one")
     if calibration.forced:

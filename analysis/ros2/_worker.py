@@ -16,6 +16,8 @@ import subprocess
 import sys
 import threading
 
+from ._pipeline import fit_held, motion_source
+
 __all__ = ["Worker", "Cancelled", "main"]
 
 #: The worker's niceness: below the node's threads, which must keep their CPU.
@@ -124,7 +126,6 @@ def main():
     os.nice(NICE)
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)         # the node decides
-    from ._pipeline import fit_held, motion_source
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
     while True:
         try:

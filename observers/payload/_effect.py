@@ -18,8 +18,8 @@ promised for, those whose gravity directions lie within the cone the data span i
 and the payload is determined when both are within the tolerance, ``e_f <= tol_f`` and ``e_tau <=
 tol_tau`` (E3). The tolerance is the user's (``tolerance=(N, N m)``; ``--tolerance N NM``), by default
 :data:`DEFAULT_TOLERANCE` times the reading's noise, one standard deviation (E4): a log's reading's
-sample-to-sample scatter (``rms(diff) / sqrt 2``, each channel, their rms over the torques and over the
-forces), :data:`TABLE_TOLERANCE` times a table's rows' scatter about the fit (eq. N2 of
+sample-to-sample scatter (third differences', :func:`reading_noise`; each channel, their rms over the torques
+and over the forces), :data:`TABLE_TOLERANCE` times a table's rows' scatter about the fit (eq. N2 of
 :mod:`fmscal.observers.payload._static_fit`; a table's rows are averages, and a reading's own noise, which
 the compensation of a running robot sees, is larger: a row that averages ``n >= 4`` readings has at most
 half their sd, so that twice its scatter is at most one sd of a reading, the same promise as a log's), or,
@@ -112,7 +112,10 @@ def reading_noise(w_hat, S=None, samples=None):
     times the raw reading; its sign does not change a scatter), then their rms over the forces and over the
     torques.
 
-    A log's consecutive readings (``samples`` None): ``rms(diff) / sqrt 2``. Held segments' rows (``samples``
+    A log's consecutive readings (``samples`` None): the rms of their third differences over ``sqrt 20`` (white
+    noise's third difference has ``C(6, 3) = 20`` times its variance; the motion's share of it falls as ``dt^3``,
+    where a first difference keeps ``dt``'s: at 25 Hz the wrench's change between readings is many times the
+    noise). Held segments' rows (``samples``
     given): ``w_hat`` is then their standard errors (:func:`fmscal.plant.io.held_table`'s ``noise``), each the
     scatter within its segment over the square root of its samples, and the scatter is ``sqrt(mean(se^2)
     samples)``, ``samples`` the mean count a row averages (segments of equal length: exact).
@@ -133,7 +136,7 @@ def reading_noise(w_hat, S=None, samples=None):
     """
     w_hat = np.asarray(w_hat, dtype=float)
     S = np.eye(6) if S is None else np.asarray(S, dtype=float)
-    variance = np.mean(np.diff(w_hat, axis=0) ** 2, axis=0) / 2 if samples is None else \
+    variance = np.mean(np.diff(w_hat, n=3, axis=0) ** 2, axis=0) / 20 if samples is None else \
         np.mean(w_hat ** 2, axis=0) * float(samples)
     channel = np.sqrt(np.maximum(np.diag(S @ np.diag(variance) @ S.T), 0.0))
     return np.array([np.sqrt(np.mean(channel[3:] ** 2)), np.sqrt(np.mean(channel[:3] ** 2))])

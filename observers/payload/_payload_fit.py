@@ -131,7 +131,8 @@ def identify_payload(data, S=None, gravity=GRAVITY, window=0.2, block=None, read
     Examples
     --------
     >>> from fmscal.plant import SPATIAL_SCENARIOS
-    >>> table, truth = SPATIAL_SCENARIOS["spatial-arm"].generate_table(seed=0, poses=12)
+    >>> arm = SPATIAL_SCENARIOS["spatial-arm"].with_(crosstalk=0.0)      # a sensor with S's force block diagonal
+    >>> table, truth = arm.generate_table(seed=0, poses=12)
     >>> fit = identify_payload(table)
     >>> fit.payload_determined, abs(fit.mass - truth.payload.mass) < 3 * fit.mass_std, fit.gains.shape
     (True, True, (6,))
