@@ -1,11 +1,11 @@
 """The held-out check on every shipped table and log: ``python benchmarks/held_out.py``.
 
-The everyday job's rig first (examples/tool_*.csv: its own check poses and its run, :func:`tool_rig`); then, for
-each other example table and pose log (examples/README.md): the payload identified on half of it (a table's even rows, a log's
-first half) with the sensor's own ``S`` (the identity), then the other half compensated with that estimate alone
-(``fmscal.analysis.compensate``), and the residual's rms per channel printed against the noise (a table's: the
-identification's own per-pose noise; a log's: its readings' noise estimated from the log), with the share of rows
-flagged. docs/status.md quotes it. Seconds.
+The everyday job's rig first (examples/tool_poses.csv and its check poses and run, :func:`tool_rig`); then, for
+each other example table and pose log (examples/README.md): the payload identified on half of it (a table's even
+rows, a log's first half) with the sensor's own ``S`` (the identity), then the other half compensated with that
+estimate alone (``fmscal.analysis.compensate``), and the residual's rms per channel printed against the noise (a
+table's: the identification's own per-pose noise; a log's: its readings' noise estimated from the log), with the
+share of rows flagged. docs/status.md quotes it. Seconds.
 """
 
 import sys
