@@ -12,10 +12,10 @@ payload exact, so that ``S_std`` is the statistical part alone). Printed per fil
   may then not pin ``S`` down to the 5 % ``converged`` asks: ``python benchmarks/coloured_noise.py 5 20``);
 * the readings' noise the calibration recorded (fz's sd, against the scenario's) and its correlation time
   (``tau``, 1 for white noise; the noise model's, eq. (N2) of plant/io/_noise.py);
-* the contact test on the log itself compensated offline (free motion, no contact anywhere), by the true ``S``
-  and offset (the noise model then the log's own) and by the calibration (its recorded noise model) (``fmscal.analysis.compensate``): the rms of the output's z (each component over its
-  stated sd) and the share of samples flagged, against the stated false-alarm probability
-  (``fmscal.analysis.FALSE_ALARM``).
+* the contact test on the log itself compensated offline (``fmscal.analysis.compensate``; free motion, no
+  contact anywhere), by the true ``S`` and offset (the noise model then the log's own) and by the calibration
+  (its recorded noise model): the rms of the output's z (each component over its stated sd) and the share of
+  samples flagged, against the stated false-alarm probability (``fmscal.analysis.FALSE_ALARM``).
 
 tests/test_coloured_noise.py holds the targets (seeded; the 20-seed target in a slow test). A few minutes on
 2 cores at 5 seeds.
