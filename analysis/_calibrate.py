@@ -637,7 +637,8 @@ def _noise_model(log, model, pose_noise, wrench_noise):
     estimated = estimate_noise(log)
     noise = NoiseSpec(tuple(wrench_noise) if wrench_noise is not None else estimated.wrench_sd,
                       pose_noise[0] if pose_noise is not None else estimated.angle_sd,
-                      pose_noise[1] if pose_noise is not None else estimated.position_sd)
+                      pose_noise[1] if pose_noise is not None else estimated.position_sd,
+                      estimated.wrench_tau if wrench_noise is None else None)   # a given noise: white
     noise_estimated = [name for name, given in (("wrench", wrench_noise), ("pose", pose_noise)) if given is None]
     spread = np.ptp(log.pose[log.has_pose], axis=0)
     if np.all(spread <= 10 * model.pose_sd(noise)):

@@ -40,7 +40,7 @@ from scipy.signal import welch
 
 from fmscal.plant.physics import NoiseSpec
 
-__all__ = ["estimate_noise", "difference_noise", "reading_colour", "SEGMENT", "LOW_BAND", "WHITENESS_Z"]
+__all__ = ["estimate_noise", "difference_noise", "wrench_noise", "reading_colour", "SEGMENT", "LOW_BAND", "WHITENESS_Z"]
 
 #: Welch's segments of eq. (N1), s.
 SEGMENT = 0.5
@@ -83,12 +83,7 @@ def estimate_noise(log):
         from the quaternion's four components).
     """
     sd = _runs_sd
-    wrench = tuple(sd([log.w_hat[:, j]]) for j in range(log.w_hat.shape[1]))
-    colour = reading_colour(log.w_hat, log.dt)
-    tau = None
-    if colour is not None and np.any(colour[2]):     # eq. (N3): the coloured channels take eq. (N2)'s figures
-        wrench = tuple(float(c) if coloured else w for w, c, coloured in zip(wrench, colour[0], colour[2]))
-        tau = tuple(float(t) if coloured else 1.0 for t, coloured in zip(colour[1], colour[2]))
+    wrench, tau = wrench_noise(log.w_hat, log.dt)
     runs = _even_runs(np.flatnonzero(log.has_pose))
     if getattr(log, "kind", "planar") == "spatial":
         # a turn n about the sensor's axes moves the unit quaternion by |n| / 2 over its four
@@ -148,6 +143,35 @@ def _even_runs(rows):
     step = np.bincount(gaps).argmax()
     breaks = np.flatnonzero(gaps != step) + 1
     return np.split(rows, breaks)
+
+
+def wrench_noise(w_hat, dt):
+    """The reading's noise model: each channel's sd, and its correlation time where it is coloured.
+
+    The robust difference estimate of :func:`estimate_noise` on every channel; the channels eq. (N3) finds
+    coloured take eq. (N2)'s sd and ``tau`` instead (:func:`reading_colour`).
+
+    Parameters
+    ----------
+    w_hat : ndarray, shape (N, c)
+        The raw reading at evenly spaced samples.
+    dt : float
+        The sample interval, s.
+
+    Returns
+    -------
+    wrench_sd : tuple of float, shape (c,)
+    wrench_tau : tuple of float or None
+        1.0 on the white channels; None where every channel is white (:class:`fmscal.plant.NoiseSpec`).
+    """
+    w = np.asarray(w_hat, dtype=float)
+    wrench = tuple(_runs_sd([w[:, j]]) for j in range(w.shape[1]))
+    colour = reading_colour(w, dt)
+    if colour is None or not np.any(colour[2]):
+        return wrench, None
+    sd, tau, coloured = colour                       # eq. (N3): the coloured channels take eq. (N2)'s figures
+    return (tuple(float(c) if k else v for v, c, k in zip(wrench, sd, coloured)),
+            tuple(float(t) if k else 1.0 for t, k in zip(tau, coloured)))
 
 
 def reading_colour(w_hat, dt):
