@@ -9,7 +9,7 @@ payload exact, so that ``S_std`` is the statistical part alone). Printed per fil
 * ``z rms``: the rms of ``z = (S_hat - S) / S_std`` over ``S``'s 36 entries, its median over the seeds (target:
   within [0.7, 1.4]), its rms over every seed's entries (pooled), and the largest seed's;
 * ``converged``: the seeds converged (a log whose noise is correlated holds less information, and a 10 s log
-  may then not pin ``S`` down to the 5 % ``converged`` asks: ``python benchmarks/coloured_noise.py 5 20``);
+  may then not pin ``S`` down to the 5 % ``converged`` asks; the duration is the second argument);
 * the readings' noise the calibration recorded (fz's sd, against the scenario's) and its correlation time
   (``tau``, 1 for white noise; the noise model's, eq. (N2) of plant/io/_noise.py);
 * the contact test on the log itself compensated offline (``fmscal.analysis.compensate``; free motion, no

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from fmscal.analysis import FALSE_ALARM, calibrate
-from fmscal.plant import SPATIAL_SCENARIOS, FmscalError, NoiseSpec, PayloadStd, get_scenario
+from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, NoiseSpec, PayloadStd, get_scenario
 from fmscal.plant.io import difference_noise, estimate_noise, reading_colour
 
 _spec = importlib.util.spec_from_file_location(
@@ -87,16 +87,19 @@ def test_the_noise_model_holds_its_correlation():
 
 
 @pytest.mark.parametrize("name", ["white", "average 2"])
-def test_S_std_and_the_contact_test_take_the_correlation(name):
+def test_S_std_and_the_contact_test_take_the_correlation(name, tmp_path):
     """One seed each: the rms z of ``S`` within [0.5, 2.0] (on everyday, before the colour was measured: 5.0 on a
     2-sample average, benchmarks/coloured_noise.py), and the contact test on the compensated free motion, by the
-    calibration's noise model and by the log's own, with its output's rms z within [0.9, 1.1] and flagging at
-    most three times its false-alarm probability (before: 84 % of the samples)."""
+    calibration's noise model (saved and read back) and by the log's own, with its output's rms z within
+    [0.9, 1.1] and flagging at most three times its false-alarm probability (before: 84 % of the samples)."""
     log, truth = bench.coloured_log(3, bench.FILTERS[name])
     cal = calibrate(log, ARM.payload, payload_std=PayloadStd.exact())
     assert cal.noise.white == (name == "white")
     assert 0.5 <= _z_rms(cal, truth.S_at(log.t[-1])) <= 2.0
-    for setup in (cal, bench.truth_calibration(truth)):
+    cal.save(tmp_path / "cal.json", force=True)
+    loaded = Calibration.load(tmp_path / "cal.json")
+    assert loaded.noise == cal.noise
+    for setup in (loaded, bench.truth_calibration(truth)):
         z, flagged = bench.contact_test(setup, log)
         assert 0.9 <= z <= 1.1 and flagged <= 3 * FALSE_ALARM, (z, flagged)
 
