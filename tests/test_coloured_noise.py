@@ -35,7 +35,7 @@ def _z_rms(cal, S):
     return float(np.sqrt(np.mean(((np.asarray(cal.S) - S) / np.asarray(cal.S_std)) ** 2)))
 
 
-@pytest.mark.parametrize("name", list(TAU))
+@pytest.mark.parametrize("name", list(TAU), ids=lambda name: name.replace(" ", "-"))
 def test_the_colour_is_measured_from_the_reading(name):
     """On 10 s of filtered noise at 1 kHz (6 channels, 3 seeds), each channel is found coloured, its sd within
     8 % of the true one and its correlation time within [0.65, 1.35] of the filter's (a first-order filter at
@@ -105,7 +105,7 @@ def test_S_std_and_the_contact_test_take_the_correlation(name, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", list(bench.FILTERS))
+@pytest.mark.parametrize("name", list(bench.FILTERS), ids=lambda name: name.replace(" ", "-"))
 def test_z_scores_over_20_seeds(name):
     """Issue 46 item 2's target: over 20 seeds of 10 s, the median rms z of ``S`` within [0.7, 1.4], for white
     noise, first-order filters at 30-300 Hz and 2- and 4-sample averages; and the contact test's output rms z
