@@ -1,4 +1,6 @@
-"""Coloured reading noise over seeds (issue 46 item 2): ``python benchmarks/coloured_noise.py [SEEDS] [DURATION]``.
+"""Coloured reading noise over seeds (issue 46 item 2).
+
+Usage: ``python benchmarks/coloured_noise.py [SEEDS] [DURATION] [--ekf]``.
 
 On ``spatial-arm`` logs (default 5 seeds, 10 s at 1 kHz) whose reading noise is the scenario's white noise
 passed through a filter, its standard deviation kept at the scenario's (:data:`FILTERS`: white, a first-order
@@ -16,6 +18,8 @@ payload exact, so that ``S_std`` is the statistical part alone). Printed per fil
   contact anywhere), by the true ``S`` and offset (the noise model then the log's own) and by the calibration
   (its recorded noise model): the rms of the output's z (each component over its stated sd) and the share of
   samples flagged, against the stated false-alarm probability (``fmscal.analysis.FALSE_ALARM``).
+
+``--ekf``: the EKF's median rms z of ``S`` per filter instead.
 
 tests/test_coloured_noise.py holds the targets (seeded; the 20-seed target in a slow test). A few minutes on
 2 cores at 5 seeds.
@@ -118,5 +122,20 @@ def main(seeds=5, duration=10.0):
     return rows
 
 
+def ekf(seeds=5, duration=10.0):
+    """``--ekf``: the EKF's median rms z of ``S`` per filter (its ``Q`` takes the noise's long-run variance too)."""
+    print(f"the EKF on spatial-arm, {duration:g} s, {seeds} seeds; the payload exact\n")
+    print("| noise | z rms (median) | max z rms | converged |\n|---|---|---|---|")
+    for name, kind in FILTERS.items():
+        z, converged = [], 0
+        for seed in range(seeds):
+            log, truth = coloured_log(seed, kind, duration)
+            cal = calibrate(log, ARM.payload, method="ekf", payload_std=PayloadStd.exact())
+            z.append(float(np.sqrt(np.mean(((np.asarray(cal.S) - truth.S_at(log.t[-1])) / cal.S_std) ** 2))))
+            converged += bool(cal.converged)
+        print(f"| {name} | {np.median(z):.2f} | {max(z):.2f} | {converged}/{seeds} |", flush=True)
+
+
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 5, float(sys.argv[2]) if len(sys.argv) > 2 else 10.0)
+    args = [a for a in sys.argv[1:] if a != "--ekf"]
+    (ekf if "--ekf" in sys.argv else main)(int(args[0]) if args else 5, float(args[1]) if len(args) > 1 else 10.0)

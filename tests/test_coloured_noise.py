@@ -104,6 +104,14 @@ def test_S_std_and_the_contact_test_take_the_correlation(name, tmp_path):
         assert 0.9 <= z <= 1.1 and flagged <= 3 * FALSE_ALARM, (z, flagged)
 
 
+def test_the_ekf_takes_the_correlation():
+    """The EKF's ``Q`` takes the long-run variance too: on a log filtered at 100 Hz (seed 0) its rms z of ``S`` is
+    within [0.5, 2.4] (``python benchmarks/coloured_noise.py --ekf`` prints the EKF's over seeds)."""
+    log, truth = bench.coloured_log(0, bench.FILTERS["low-pass 100 Hz"])
+    cal = calibrate(log, ARM.payload, method="ekf", payload_std=PayloadStd.exact())
+    assert 0.5 <= _z_rms(cal, truth.S_at(log.t[-1])) <= 2.4
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(bench.FILTERS), ids=lambda name: name.replace(" ", "-"))
 def test_z_scores_over_20_seeds(name):
