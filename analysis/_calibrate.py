@@ -539,7 +539,10 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         aligned, ls_result, result = _run_aligned(signed, latency, model, name, told, offset, glitches, reference)
     result = _with_latency_uncertainty(result, timing if latency_estimated else None)
     try:                                # how S moves with the payload: its uncertainty's way into S_std (eq. Y1)
-        sensitivity = payload_sensitivity(aligned, model, offset=offset)
+        # the misfit's noise (its eq. (M1)): a coloured reading's standard deviation is the noise model's (eq. (N2)
+        # of plant/io/_noise.py), which the scatter about neighbouring samples reads small
+        sensitivity = payload_sensitivity(aligned, model, offset=offset,
+                                          wrench_sd=None if told.white else told.wrench_sd)
     except FmscalError as err:
         sensitivity, payload_problem = None, str(err)
     run = _Run(log, signed, aligned, model, name, result, ls_result, offset, reading, glitches=glitches,
@@ -634,7 +637,8 @@ def _noise_model(log, model, pose_noise, wrench_noise):
     estimated = estimate_noise(log)
     noise = NoiseSpec(tuple(wrench_noise) if wrench_noise is not None else estimated.wrench_sd,
                       pose_noise[0] if pose_noise is not None else estimated.angle_sd,
-                      pose_noise[1] if pose_noise is not None else estimated.position_sd)
+                      pose_noise[1] if pose_noise is not None else estimated.position_sd,
+                      estimated.wrench_tau if wrench_noise is None else None)   # a given noise: white
     noise_estimated = [name for name, given in (("wrench", wrench_noise), ("pose", pose_noise)) if given is None]
     spread = np.ptp(log.pose[log.has_pose], axis=0)
     if np.all(spread <= 10 * model.pose_sd(noise)):

@@ -72,10 +72,12 @@ The covariance of ``w_e`` per sample is the sum of three independent parts::
     Cov = S Sigma_r S^T + J cov J^T + A^-1 Sigma_a A^-T                                           (C3)
 
 ``Sigma_r`` the reading's noise (``diag(wrench_sd^2)``, the calibration's noise model or the log's,
-:func:`fmscal.plant.io.estimate_noise`); ``cov`` the calibration's covariance of ``vec([S | c])`` (row
-order), ``J = I (x) [sigma w_hat; 1]^T`` (``I (x) (sigma w_hat - b)^T`` where ``cov`` is of ``S`` alone;
-entries the data left undetermined, infinite in ``cov``, are left out and a warning says so); and
-``Sigma_a`` the accelerations' noise, the pose's noise through the second-derivative filter
+:func:`fmscal.plant.io.estimate_noise`): its variance sample by sample, which for a noise a sensor's filter or an
+average correlated in time is measured from its spectrum (eqs. N1-N3 there), and which (C4) tests each sample
+against (the correlation changes how the false alarms bunch, not their rate); ``cov`` the calibration's
+covariance of ``vec([S | c])`` (row order), ``J = I (x) [sigma w_hat; 1]^T`` (``I (x) (sigma w_hat - b)^T``
+where ``cov`` is of ``S`` alone; entries the data left undetermined, infinite in ``cov``, are left out and a
+warning says so); and ``Sigma_a`` the accelerations' noise, the pose's noise through the second-derivative filter
 (``var(a_j) = var(q_j) sum(c_k^2)``, ``c`` the filter's coefficients; offline, poses sparser than the
 readings are interpolated onto the readings' grid first, and the sum is taken times the number of samples
 between poses). The differentiated velocity's noise and the filter's bias are not counted.

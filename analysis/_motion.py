@@ -88,7 +88,7 @@ from scipy.signal import savgol_coeffs, savgol_filter
 
 from fmscal.plant import Log
 from fmscal.plant.io import (AttitudeLog, ImuLog, JointLog, PoseTable, RobotKinematics, check_imu_units,
-                             difference_noise, estimate_noise)
+                             difference_noise, estimate_noise, wrench_noise)
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import (ORDER, NoiseSpec, SpatialModel, edge, quaternion_multiply, rotation_matrices,
                                   rotation_matrix, sign_continuous, smoothed_state, spatial_motion)
@@ -399,9 +399,10 @@ class _Source:
         return log.t
 
     def log_noise(self, log):
-        """The readings' noise model estimated from a log (:func:`fmscal.plant.io.difference_noise`, the robust
-        estimate :func:`fmscal.plant.io.estimate_noise` takes of the readings)."""
-        noise = NoiseSpec(tuple(difference_noise(log.w_hat)))
+        """The readings' noise model estimated from a log (:func:`fmscal.plant.io.wrench_noise`, the estimate
+        :func:`fmscal.plant.io.estimate_noise` takes of the readings: their correlation in time too)."""
+        sd, tau = wrench_noise(log.w_hat, float(np.median(np.diff(log.t))))
+        noise = NoiseSpec(sd, wrench_tau=tau)
         if min(noise.wrench_sd) <= 0:
             raise MotionError(f"{log.name}: the readings' noise estimated from the log is zero (a constant or "
                               "coarsely quantised reading): give noise=plant.NoiseSpec(...), or a calibration "

@@ -90,6 +90,22 @@ latency the log was aligned at, and its standard deviation
 compares it with the cross-correlation's estimate). The blocks of ``s``
 are those the pass had without it, so its estimate is unchanged.
 
+**Coloured reading noise.** The filter takes the reading's noise as white
+from sample to sample. A sensor's own low-pass filter, an interpolation or
+an average over a few samples correlates it over ``tau`` samples (its
+integrated correlation time, :func:`fmscal.plant.io.estimate_noise`, eq.
+(N2)), and the motion, which integrates the noise twice, sees its power at
+frequencies far below the filter's corner: that of white noise of ``tau``
+times its variance. The process noise and the errors-in-variables copy take
+that variance::
+
+    Sigma = diag(wrench_sd^2 tau)                                            (LF3)
+
+(:attr:`fmscal.plant.NoiseSpec.long_run_wrench_sd`; ``tau`` = 1, the white
+noise's, where the noise model holds none). The filter's bandwidth on the
+scenarios' poses is a few Hz, well below a corner of 30 Hz and more, so the
+white noise of (LF3) drives the motion as the coloured one does there.
+
 What the log determines: the information ``J`` along each direction of the
 augmented reading ``[tx .. fz, 1]`` (:func:`undetermined_directions`), as
 the reference fit reports it; an undetermined direction leaves ``converged``
@@ -428,7 +444,7 @@ def fit_linearised(log, model, noise, offset, passes, S0, compiled=True, window=
     nominal = nominal_motion(log, model, window)
     y = _pose_residuals(model, log, nominal)
     var = _error_variances(model, noise)
-    var_w = np.square(noise.wrench_sd)
+    var_w = np.square(noise.long_run_wrench_sd)          # eq. (LF3): the reading noise's power at low frequencies
     s_bar = np.c_[S0, np.zeros(n_w)].ravel() if offset else np.asarray(S0, dtype=float).ravel()
     s0 = s_bar.copy()
     rng = np.random.default_rng(_SEED)

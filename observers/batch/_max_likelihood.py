@@ -7,7 +7,9 @@ constant and every noise white:
   ``R = diag(angle_sd^2, position_sd^2, position_sd^2)``;
 * the raw reading is ``w_hat_k = w_hat_true(t_k) + n_k``, ``n_k`` white per
   sample with variance ``Sigma = diag(wrench_sd^2)``, the true reading linear
-  between samples;
+  between samples (a coloured noise, correlated over ``tau`` samples, as
+  white noise of its power at low frequencies, ``diag(wrench_sd^2 tau)``: eq.
+  (LF3) of :mod:`fmscal.observers.batch._linearised_floor`);
 * the accelerations are ``a = G(theta) [S | c] [w_hat_true; 1]`` (eq. 1; the
   offset column ``c`` only with ``offset=True``), ``theta`` in ``G`` taken
   from the measured poses (interpolated between them on a multi-rate log, as
@@ -320,7 +322,7 @@ def fit_max_likelihood(log, model, noise=None, offset=False, passes=2, S0=None, 
     U = log_steps(log, model)
     pose_var = np.maximum(model.pose_sd(noise), POSE_SD_FLOOR) ** 2
     z0 = initial_state(model, log.pose[0], pose_var, n)
-    var_w = np.square(noise.wrench_sd)
+    var_w = np.square(noise.long_run_wrench_sd)        # coloured noise: eq. (LF3) of _linearised_floor
     S_noise = S0
     nx = model.nx
     with progress_bar(int(passes) * len(U), "max-likelihood") as bar:     # a long log in a terminal only

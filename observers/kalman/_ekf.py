@@ -120,7 +120,9 @@ class AugmentedEKF(Observer):
     Tuning rule: ``R`` the pose noise in the error state (planar
     ``diag(angle_sd^2, position_sd^2, position_sd^2)``); ``Q`` is the raw
     reading's noise carried through the dynamics, ``Q = J diag(wrench_sd^2)
-    J^T`` with ``J = J_0 + J_1`` the
+    J^T`` (a reading noise correlated in time as white noise of its power at
+    low frequencies, ``wrench_sd^2 tau``: eq. (LF3) of
+    :mod:`fmscal.observers.batch._linearised_floor`) with ``J = J_0 + J_1`` the
     sum of the step's Jacobians with respect to the raw readings at its two
     ends. Each reading's noise enters two consecutive steps (through ``J_1``
     of one and ``J_0`` of the next), so the process noise of eq. (1) is
@@ -567,7 +569,7 @@ class AugmentedEKF(Observer):
         if self.offset:
             c0_sd = self.c0_sd if self.c0_sd is not None else self.S0_sd * max(float(np.linalg.norm(w_hat)), 1.0)
             S_var[:, self.n_w] = c0_sd ** 2
-        return noise, S_var.ravel(), np.maximum(np.array(noise.wrench_sd), 1e-6) ** 2
+        return noise, S_var.ravel(), np.maximum(noise.long_run_wrench_sd, 1e-6) ** 2
 
     def _q_now(self):
         """The random walk's intensity now, 1/s."""

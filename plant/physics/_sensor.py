@@ -124,11 +124,22 @@ class NoiseSpec:
         attitude about each axis).
     position_sd : float
         Standard deviation of each measured position coordinate, in m.
+    wrench_tau : tuple of float, optional
+        Each reading component's integrated correlation time, in samples
+        (``tau = 1 + 2 sum_k rho_k``, ``rho_k`` the noise's autocorrelation at
+        lag ``k``): 1 for white noise, about 2 for readings averaged over 2
+        samples, ``(1 + a) / (1 - a)`` for a first-order filter of pole ``a``
+        (:func:`fmscal.plant.io.estimate_noise`, eq. (N2)). None (the
+        default): white. ``wrench_sd`` is then the noise's standard deviation
+        sample by sample, and ``wrench_sd * sqrt(wrench_tau)``
+        (:attr:`long_run_wrench_sd`) the white noise of the same power at low
+        frequencies, which is what a fit over many samples sees.
     """
 
     wrench_sd: tuple = (0.0, 0.0, 0.0)
     angle_sd: float = 0.0
     position_sd: float = 0.0
+    wrench_tau: tuple = None
 
     def __post_init__(self):
         sd = as_finite_array(self.wrench_sd, (-1,), "wrench_sd")
@@ -139,21 +150,40 @@ class NoiseSpec:
         object.__setattr__(self, "wrench_sd", tuple(float(v) for v in sd))
         object.__setattr__(self, "angle_sd", as_positive_scalar(self.angle_sd, "angle_sd", allow_zero=True))
         object.__setattr__(self, "position_sd", as_positive_scalar(self.position_sd, "position_sd", allow_zero=True))
+        if self.wrench_tau is not None:
+            tau = as_finite_array(self.wrench_tau, (len(sd),), "wrench_tau")
+            if np.any(tau < 1.0):
+                raise FmscalError(f"wrench_tau is a correlation time in samples, at least 1; got {tuple(tau.tolist())}")
+            object.__setattr__(self, "wrench_tau", tuple(float(v) for v in tau))
 
     @property
     def pose_sd(self):
         """``[angle_sd, position_sd, position_sd]``, shape (3,)."""
         return np.array([self.angle_sd, self.position_sd, self.position_sd])
 
+    @property
+    def white(self):
+        """True where the reading's noise is white (no :attr:`wrench_tau`)."""
+        return self.wrench_tau is None
+
+    @property
+    def long_run_wrench_sd(self):
+        """``wrench_sd * sqrt(wrench_tau)``, shape (n_w,): the white noise whose power at low frequencies is the
+        reading noise's (eq. (N2) of :func:`fmscal.plant.io.estimate_noise`); ``wrench_sd`` where it is white."""
+        sd = np.asarray(self.wrench_sd, dtype=float)
+        return sd if self.white else sd * np.sqrt(np.asarray(self.wrench_tau))
+
     def to_dict(self):
-        return {"wrench_sd": list(self.wrench_sd), "angle_sd": self.angle_sd,
-                "position_sd": self.position_sd}
+        out = {"wrench_sd": list(self.wrench_sd), "angle_sd": self.angle_sd, "position_sd": self.position_sd}
+        if not self.white:
+            out["wrench_tau"] = list(self.wrench_tau)
+        return out
 
     @classmethod
     def from_dict(cls, d):
-        return cls(tuple(d["wrench_sd"]), d["angle_sd"], d["position_sd"])
+        return cls(tuple(d["wrench_sd"]), d["angle_sd"], d["position_sd"], d.get("wrench_tau"))
 
     def scaled(self, factor):
-        """The same noise with every standard deviation times ``factor``."""
+        """The same noise with every standard deviation times ``factor`` (the correlation kept)."""
         return NoiseSpec(tuple(factor * v for v in self.wrench_sd),
-                         factor * self.angle_sd, factor * self.position_sd)
+                         factor * self.angle_sd, factor * self.position_sd, self.wrench_tau)
