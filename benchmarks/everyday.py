@@ -4,7 +4,9 @@ A factory-calibrated sensor (``S = I``), or one whose force gains are off by up 
 ``g`` uniform in [0.95, 1.05] per axis, seeded), and a tool; per seed, on the command line as a user runs it:
 
 1. 8 held attitudes of the tool (each row the mean of 500 readings), ``fmscal identify-payload TABLE --save
-   tool.json``;
+   tool.json --tolerance N NM`` with the sensor's noise per reading (its datasheet's): by default a table is held
+   to twice its rows' scatter, 11 times less here, and 8 poses leave the payload beyond that on some seeds
+   (``python benchmarks/identify.py``), while its effect is a tenth of what a running robot's reading shows;
 2. ``fmscal compensate tool.json LOG --out c.csv`` (offline, and ``--causal``) on a 20 s ``spatial-arm`` log of
    the same rig with a 1 N push on the tool for 1 s.
 
@@ -45,7 +47,9 @@ def run(seed, gains, folder):
     touched, on = with_contact(sensor, np.linalg.inv(S), contact_wrench(1.0), *PUSH)
     touched.write(folder / "log.csv")
     tool = folder / "tool.json"
-    if main(["identify-payload", str(folder / "table.csv"), "--save", str(tool), "--overwrite"]) != 0:
+    tolerance = [f"{sd[3]:g}", f"{sd[0]:g}"]       # the sensor's noise per reading, N and N m, as its datasheet gives
+    if main(["identify-payload", str(folder / "table.csv"), "--save", str(tool), "--overwrite",
+             "--tolerance", *tolerance]) != 0:
         raise SystemExit(f"seed {seed}: identify-payload refused the table")
     noise = sd                                     # the readings' noise S^-1 n through S: the scenario's own
     out = []
