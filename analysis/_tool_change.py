@@ -76,6 +76,11 @@ noise scale taken from the misfit where it exceeds the stated one, as an F test 
 
       Lambda_c = (RSS_c - RSS_1) / kappa' > h                                                      (T7)
 
+- a mass changed: the step's mass beyond :data:`MASS_SIGMAS` of its standard deviation (a step in the first
+  moment alone is the payload in use's centre of mass a little off, seen as the arm turns, not a part)::
+
+      |dm_hat| > MASS_SIGMAS sd(dm_hat)                                                           (T7')
+
 At a held attitude a part's weight is a constant wrench, and the two cannot be told apart: (T7) waits for the
 arm to turn (the change is pending meanwhile, its time kept). A contact fixed in the sensor's axes fits ``H_c``
 and never passes (T7). A contact fixed in the world (the tool pressed on a surface while the arm turns) turns
@@ -141,6 +146,9 @@ PRIOR_MASS = 0.01
 PRIOR_COM = 0.002
 #: A block counts as flagged where more of its samples are flagged (C4) than false alarms give but with this chance.
 FLAGGED = 1e-6
+#: (T7'): a change is a part grasped or let go only where its mass step is beyond this many of its sd (a step in
+#: the first moment alone, the payload in use's centre of mass a little off, is not declared).
+MASS_SIGMAS = 5.0
 #: Held attitudes after a change before it is re-identified automatically (``tool_change="reidentify"``).
 REIDENTIFY_POSES = 6
 #: The blocks kept for a re-identification, s.
@@ -391,8 +399,10 @@ class _Detector:
             self._pinned = tau                         # significant, not yet determined: kept as a candidate
             return
         K = list(_STEP)
-        self._declare(tau, phi[i] / d[i, K], np.linalg.inv(M1[i]) * scale / np.outer(d[i, K], d[i, K]), ratio,
-                      float(kappa[i]), versus)
+        step, cov = phi[i] / d[i, K], np.linalg.inv(M1[i]) * scale / np.outer(d[i, K], d[i, K])
+        if abs(step[0]) <= MASS_SIGMAS * np.sqrt(max(cov[0, 0], 0.0)):                           # (T7')
+            return                             # no mass changed: a part neither grasped nor let go
+        self._declare(tau, step, cov, ratio, float(kappa[i]), versus)
 
     def _declare(self, tau, phi, cov, ratio, kappa, versus):
         """A :class:`ToolChange` (T8) at the absolute block ``tau``; the window restarted."""
