@@ -76,8 +76,9 @@ noise scale taken from the misfit where it exceeds the stated one, as an F test 
 
       Lambda_c = (RSS_c - RSS_1) / kappa' > h                                                      (T7)
 
-- a mass changed: the step's mass beyond :data:`MASS_SIGMAS` of its standard deviation (a step in the first
-  moment alone is the payload in use's centre of mass a little off, seen as the arm turns, not a part)::
+- while a declared change is not yet re-identified, a mass changed again: the step's mass beyond
+  :data:`MASS_SIGMAS` of its standard deviation (a step in the first moment alone is then the declared
+  change's estimate, made at few attitudes, a little off as the arm turns: not a new part)::
 
       |dm_hat| > MASS_SIGMAS sd(dm_hat)                                                           (T7')
 
@@ -146,8 +147,8 @@ PRIOR_MASS = 0.01
 PRIOR_COM = 0.002
 #: A block counts as flagged where more of its samples are flagged (C4) than false alarms give but with this chance.
 FLAGGED = 1e-6
-#: (T7'): a change is a part grasped or let go only where its mass step is beyond this many of its sd (a step in
-#: the first moment alone, the payload in use's centre of mass a little off, is not declared).
+#: (T7'): while a declared change awaits re-identification, a further change is declared only where its mass step
+#: is beyond this many of its sd (a step in the first moment alone is the declared change's estimate settling).
 MASS_SIGMAS = 5.0
 #: Held attitudes after a change before it is re-identified automatically (``tool_change="reidentify"``).
 REIDENTIFY_POSES = 6
@@ -400,8 +401,9 @@ class _Detector:
             return
         K = list(_STEP)
         step, cov = phi[i] / d[i, K], np.linalg.inv(M1[i]) * scale / np.outer(d[i, K], d[i, K])
-        if abs(step[0]) <= MASS_SIGMAS * np.sqrt(max(cov[0, 0], 0.0)):                           # (T7')
-            return                             # no mass changed: a part neither grasped nor let go
+        pending = bool(self.events) and self.events[-1].reidentified_at is None
+        if pending and abs(step[0]) <= MASS_SIGMAS * np.sqrt(max(cov[0, 0], 0.0)):               # (T7')
+            return                             # the last change's estimate settling as the arm turns: no new part
         self._declare(tau, step, cov, ratio, float(kappa[i]), versus)
 
     def _declare(self, tau, phi, cov, ratio, kappa, versus):

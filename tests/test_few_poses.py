@@ -88,9 +88,10 @@ def test_six_poses_sigmas_cover_their_errors():
 @pytest.mark.slow
 def test_four_to_eight_poses_z_scores_and_how_many_are_left_unconverged():
     """200 tables, 40 each of 4 to 8 poses, gravity and the mounting estimated: the z-scores' rms (mass, centre of
-    mass, mounting, gravity) within [0.8, 1.25] at each count and over all; at 6 to 8 poses at most 10 % refused or
-    not converged. Measured: rms 0.99, 0.98, 1.00, 1.00, 0.99 at 4 to 8 poses; left 6, 1, 1, 0, 0 of 40 (before
-    issue 37: the mass's rms 1.9 at 4 and 5 poses, 5 % of reaction tables sent to --reading load)."""
+    mass, mounting, gravity) within [0.8, 1.25] at each count and over all; at 8 poses at most 10 % refused or not
+    converged, fewer poses leaving more (converged asks the payload determined, issue 44's effect rule; left 34,
+    35, 22, 6, 2 of 40 at 4 to 8 poses when it came). Before issue 37: the mass's rms 1.9 at 4 and 5 poses, 5 % of
+    reaction tables sent to --reading load."""
     z, left = {}, {}
     for n in range(4, 9):
         z[n], left[n] = [], 0
@@ -107,4 +108,6 @@ def test_four_to_eight_poses_z_scores_and_how_many_are_left_unconverged():
     rms = {n: float(np.sqrt(np.mean(np.square(v)))) for n, v in z.items()}
     assert 0.8 < float(np.sqrt(np.mean(every ** 2))) < 1.25, rms
     assert all(0.8 < r < 1.25 for r in rms.values()), rms
-    assert all(left[n] <= 4 for n in (6, 7, 8)), left
+    # converged needs the payload determined too (its effect on the compensated wrench within the tolerance, issue
+    # 44): with gravity and the mounting estimated, few poses leave it beyond at 4-7 poses; at 8, the most
+    assert left[8] <= 4 and all(left[n] >= left[n + 1] - 4 for n in range(4, 8)), left
