@@ -1607,6 +1607,11 @@ class Compensator:
         P = c @ np.array([self._channels[i] for i in rows])
         return P, c
 
+    @property
+    def setup(self):
+        """The :class:`~fmscal.analysis._setup.Setup` in use: the one given, or a re-identified payload's (T9)."""
+        return self._setup
+
     # --- the offset ----------------------------------------------------------------------------------------------
     @property
     def offset(self):

@@ -128,7 +128,7 @@ class Peer:
 
     def __init__(self, domain, wrench_topic="/ft_sensor/wrench", pose_topic="/ft_sensor/pose",
                  contact_topic="/ft_sensor/contact", covariance_topic="/ft_sensor/contact_covariance",
-                 node_name="fmscal_compensator", motion=PoseStamped, covariance=True):
+                 node_name="fmscal_compensator", motion=PoseStamped, covariance=True, flags=False):
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node("fmscal_test_peer", context=self.context)
@@ -140,10 +140,13 @@ class Peer:
         if covariance:
             self.node.create_subscription(Float64MultiArray, covariance_topic, self.covariances.append, RELIABLE)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 10)
+        self.flags = []                          # with flags: the outputs' flags (the node's flags_topic)
+        if flags:
+            self.node.create_subscription(DiagnosticArray, "/ft_sensor/contact_flags", self.flags.append, RELIABLE)
         self.node.create_subscription(Float64MultiArray, f"/{node_name}/latency",
                                       lambda m: self.latencies.append(list(m.data)), RELIABLE)
         self.clients = {s: self.node.create_client(Trigger, f"/{node_name}/{s}")
-                        for s in ("tare", "tare_force", "identify_payload", "save", "reload")}
+                        for s in ("tare", "tare_force", "identify_payload", "reidentify", "save", "reload")}
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)

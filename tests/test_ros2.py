@@ -17,7 +17,7 @@ import pytest
 
 from fmscal.analysis import Compensator, ImuMotion, calibrate, compensate
 from fmscal.analysis.cli import main
-from fmscal.analysis.ros2 import PARAMETERS, Pipeline, sensor_pose, settings
+from fmscal.analysis.ros2 import PARAMETERS, Pipeline, Ros2Error, sensor_pose, settings
 from fmscal.plant.physics import rotation_matrix
 from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS, Calibration, Log, SpatialModel
 from fmscal.plant import NoiseSpec
@@ -26,7 +26,7 @@ from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
 from geometry_msgs.msg import PoseStamped
 from ros2_rig import (DOMAINS, HARNESS_NOISE, Peer, contact_array, domain_id, imu_message, joint_state, node_command,
-                      node_log, running_node, tool_calibration, truth_calibration)
+                      node_log, running_node, seconds, tool_calibration, truth_calibration)
 import robot_rig
 from sensor_msgs.msg import Imu, JointState
 
@@ -112,6 +112,87 @@ def test_pipeline_interpolates_poses_at_the_readings_stamps(arm, cal_file):
     error = np.sqrt(np.mean(difference ** 2, axis=0)) / noise_rms(truth.S_at(0.0), truth.noise.wrench_sd)
     assert np.all(error < 0.3) and np.all(error > 0.01), error        # half the poses, interpolated: not equal
     assert pipeline.backlog() <= 3
+
+
+@pytest.fixture(scope="module")
+def grasped_held(tmp_path_factory):
+    """Held attitudes as tests/test_tool_change.py's: 50 s of spatial-static's motion at eight attitudes, a 200 g
+    part grasped in the first at 1.3 s; the truth's calibration file; the tool holding the part."""
+    from tool_change_rig import PART
+    from fmscal.plant.scenarios import with_grasp
+    held = ((0.0, 0.0, 0.0), (0.6, -0.5, 0.3), (-0.4, 0.5, -0.6), (0.8, 0.2, 0.7), (-0.7, -0.6, 0.1),
+            (0.3, 0.7, -0.2), (-0.8, 0.1, 0.5), (0.1, -0.7, -0.4))
+    scenario = SPATIAL_SCENARIOS["spatial-static"].with_(duration=50.0, targets=held)
+    log, truth, total = with_grasp(scenario, 5, PART, 1.3)
+    path = tmp_path_factory.mktemp("grasp") / "cal.json"
+    truth_calibration(scenario, truth).save(path)
+    return log, path, total
+
+
+def _through(pipeline, log, start, stop):
+    """Rows ``[start, stop)`` of ``log`` through ``pipeline`` (each pose with its reading) in passes of 50; the
+    outputs."""
+    out = []
+    for i in range(start, stop, 50):
+        for t, w, pose in zip(log.t[i:min(i + 50, stop)], log.w_hat[i:min(i + 50, stop)],
+                              log.pose[i:min(i + 50, stop)]):
+            pipeline.add_motion(t, pose)
+            pipeline.add_reading(t, w)
+        out += pipeline.process()
+    return out
+
+
+@pytest.mark.parametrize("mode", ["detect", "reidentify"])
+def test_a_tool_change_is_said_flagged_and_reidentified(grasped_held, mode):
+    """The node's pipeline with tool_change detect: the grasp counted once, its line said (the time named), every
+    output after the declaration flagged tool_change until ~/reidentify (refused while no attitude is held), then
+    the new total in use (within 4 g and 5 mm) and the outputs unflagged at the noise; with reidentify the same
+    without the call, from the held attitudes. The flags' onset: none before the grasp."""
+    from tool_change_rig import COM_WITHIN, MASS_WITHIN, PART
+    log, path, total = grasped_held
+    pipeline = Pipeline(_settings(path, sample_time=float(log.dt), tool_change=mode))
+    cut = int(np.searchsorted(log.t, 30.0 if mode == "detect" else 45.0))
+    out = _through(pipeline, log, 0, int(np.searchsorted(log.t, 2.0)))
+    early = pipeline.reidentify()
+    out += _through(pipeline, log, int(np.searchsorted(log.t, 2.0)), cut)
+    assert pipeline.counts["tool_changes"] == 1
+    said = [m for k, m in pipeline.notices if k == "tool_change"]
+    assert said and said[0].startswith("tool change at 1."), said
+    assert abs(float(said[0].split(": mass ")[1].split()[0]) - PART.mass) < 0.01, said
+    t = np.array([o.sample.t for o in out])
+    flagged = np.array(["tool_change" in o.flags for o in out])
+    assert not flagged[t < 1.3].any()
+    if mode == "detect":
+        assert not early[0] and early[1].startswith("reidentify refused: ") and "held" in early[1], early
+        assert flagged[t > 4.0].all() and "tool_change" in pipeline.snapshot.conditions
+        ok, message = pipeline.reidentify()
+        assert ok and message.startswith("re-identified: mass "), message
+    else:
+        assert flagged[(t > 4.0) & (t < 20.0)].all()
+        assert not flagged[t > 44.0].any()
+    assert "tool_change" not in pipeline.conditions
+    mass, com = pipeline.payload.mass, np.asarray(pipeline.payload.com)
+    assert abs(mass - total.mass) < MASS_WITHIN and np.linalg.norm(com - np.asarray(total.com)) < COM_WITHIN
+    assert "re-identified from" in pipeline.snapshot.tool_change
+    after = _through(pipeline, log, cut, len(log))
+    assert len(after) > 3000 and not any(o.flags for o in after)
+    assert np.mean([o.sample.contact for o in after]) < 0.01
+    assert pipeline.counts["tool_changes"] == 1
+
+
+def test_the_tool_change_parameter_is_checked(cal_file, tmp_path):
+    """tool_change: one of its options; detection on a planar calibration refused at start, naming the parameter."""
+    with pytest.raises(Ros2Error, match="^parameter tool_change must be one of off, detect, reidentify; got 'on'$"):
+        Pipeline(_settings(cal_file, tool_change="on"))
+    scenario = SCENARIOS["paper"]
+    log, truth, _ = scenario.with_(duration=1.0).generate(0)
+    planar = tmp_path / "planar.json"
+    Calibration(S=truth.S_at(0.0), payload=scenario.payload, method="truth", b=truth.offset, latency=0.0,
+                noise=truth.noise).save(planar)
+    assert Pipeline(_settings(planar)).compensator is None           # the default: off on a planar reading
+    with pytest.raises(Ros2Error, match="^parameter tool_change: a tool change is detected on a 6-axis reading "
+                                        "in 3D.*: leave it empty or off$"):
+        Pipeline(_settings(planar, tool_change="detect"))
 
 
 def test_a_slower_motion_is_given_to_the_nearest_reading_only(arm, cal_file):
@@ -632,6 +713,44 @@ def test_identify_payload(request, arm, cal_file):
     assert len(after) > 250
     rms = np.sqrt(np.mean(after ** 2, axis=0)) / noise_rms(truth.S_at(0.0), truth.noise.wrench_sd)
     assert np.all((rms > 0.7) & (rms < 1.5)), rms
+
+
+@pytest.mark.slow
+def test_a_tool_change_on_the_node(request, tmp_path):
+    """A 200 g part grasped while the arm moves (tests/test_tool_change.py's log, 6 s of it replayed around the
+    grasp): the node's log names the change and its time, the diagnostics count it and carry its line, the flags of
+    the outputs after it say tool_change (none before the grasp); ~/reidentify, with no attitude held, refuses in
+    one line and the flag stays."""
+    from tool_change_rig import PART
+    from fmscal.plant.scenarios import with_grasp
+    scenario = ARM.with_(duration=12.0)
+    log, truth, _ = with_grasp(scenario, 4, PART, 6.0)
+    path = tmp_path / "cal.json"
+    truth_calibration(scenario, truth).save(path)
+    first, last = (int(np.searchsorted(log.t, at)) for at in (4.0, 10.0))
+    with _node(request, path) as proc:
+        peer = Peer(domain_id(request.node.name), flags=True)
+        try:
+            peer.wait_for_node(proc)
+            epoch = peer.replay(log.head(last), start=first)
+            end = epoch + log.t[last - 1] - 0.1          # the newest outputs (under load, some may be withheld)
+            assert peer.wait_for(lambda: peer.contacts and seconds(peer.contacts[-1].header.stamp) > end, 30)
+            refused = peer.call("reidentify")
+            assert peer.wait_for(lambda: any(v.key == "tool_changes" and v.value == "1"
+                                             for d in peer.diagnostics for v in d.status[0].values), 5)
+            values = {v.key: v.value for v in peer.diagnostics[-1].status[0].values}
+            said = node_log(proc)
+        finally:
+            peer.close()
+    assert values["tool_changes"] == "1" and values["tool_change"].startswith("tool change at "), values
+    at = float(values["tool_change"].split()[3])
+    assert abs(at - epoch - 6.0) < 0.3 and "tool_change" in values["flags"], values
+    assert f"tool change at {at:.3f} s" in said and "then ~/reidentify" in said, said[-2000:]
+    flags = {m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 - epoch: m.status[0].message for m in peer.flags}
+    assert len(flags) >= 0.9 * (last - first)
+    assert not any("tool_change" in m for t, m in flags.items() if t < 6.0)
+    assert all("tool_change" in m for t, m in flags.items() if t > 8.5 and not m.startswith("withheld"))
+    assert not refused[0] and refused[1].startswith("reidentify refused: ") and "\n" not in refused[1], refused
 
 
 @pytest.mark.slow

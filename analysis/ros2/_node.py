@@ -257,7 +257,8 @@ class CompensatorNode:
         base = self.node.get_fully_qualified_name()
         work, cancel = r.Group(), r.Group()
         for name, call in (("tare", self.pipeline.tare), ("tare_force", self.pipeline.tare_force),
-                           ("identify_payload", self._identify), ("save", self.pipeline.save),
+                           ("identify_payload", self._identify), ("reidentify", self.pipeline.reidentify),
+                           ("save", self.pipeline.save),
                            ("reload", self.pipeline.reload)):
             self.services.create_service(r.Trigger, f"{base}/{name}", self._service(name, call), callback_group=work)
         self.services.create_service(r.Trigger, f"{base}/cancel", self._service("cancel", self._cancel),
@@ -372,6 +373,7 @@ class CompensatorNode:
         """A stamp in s from the first stamp's second (a float keeps its nanoseconds)."""
         if self._epoch is None:
             self._epoch = stamp.sec
+            self.pipeline.time_origin = float(stamp.sec)
         return (stamp.sec - self._epoch) + stamp.nanosec * 1e-9
 
     @staticmethod
@@ -731,7 +733,8 @@ class CompensatorNode:
                   **{k: str(v) for k, v in snapshot.counts.items()},
                   **{f"withheld_{k}": str(v) for k, v in snapshot.withheld.items()},
                   **{f"events_{k}": str(v) for k, v in snapshot.events.items()},
-                  "flags": " ".join(f for f in FLAGS if f in snapshot.conditions)}
+                  "flags": " ".join(f for f in FLAGS if f in snapshot.conditions),
+                  "tool_change": snapshot.tool_change}
         status.values = [r.KeyValue(key=k, value=v) for k, v in values.items()]
         inputs = r.DiagnosticStatus()
         inputs.name = f"{self.node.get_name()}: inputs"

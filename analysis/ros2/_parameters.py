@@ -12,6 +12,7 @@ import numpy as np
 from fmscal.plant.numerics import FmscalError
 
 from .._compensate import CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, FALSE_ALARM
+from .._tool_change import TOOL_CHANGE
 from .._motion import quaternion_to_matrix
 
 __all__ = ["NODE_NAME", "PARAMETERS", "Parameter", "Ros2Error", "Settings", "settings", "QOS", "OUTPUT_FRAMES",
@@ -117,6 +118,10 @@ PARAMETERS = (
               "the motion is stale (the reading is then not compensated)"),
     Parameter("saturation", "double_array", None, "the raw reading's range per channel (one value or one per "
               "channel, the reading's units): a reading at or beyond it is not compensated; unset: not checked"),
+    Parameter("tool_change", "string", "", "a change of the payload (a part grasped) detected, said in the log and "
+              "the diagnostics, the outputs flagged tool_change until it is re-identified: off, detect, or "
+              "reidentify (the new payload fitted to the next held attitudes and used); empty: detect on a 6-axis "
+              "reading in 3D, off otherwise"),
     Parameter("save_path", "string", "", "~/save: where the calibration is written (with a payload file alone: "
               "a payload file); empty: ~/save refuses"),
     Parameter("identify_buffer", "double", 120.0, "s, the motion and readings ~/identify_payload keeps, the newest"),
@@ -200,9 +205,10 @@ def settings(values):
     if source == "joint_states_topic" and not (values["urdf"] and values["frame"]):
         raise Ros2Error("joint_states_topic needs urdf (the robot's URDF file) and frame (the sensor's link)")
     for name, options in (("qos", QOS), ("output_frame", OUTPUT_FRAMES), ("direction", DIRECTIONS),
-                          ("reading", ("reaction", "load"))):
+                          ("reading", ("reaction", "load")), ("tool_change", ("",) + TOOL_CHANGE)):
         if values[name] is not None and values[name] not in options:
-            raise Ros2Error(f"parameter {name} must be one of {', '.join(options)}; got {values[name]!r}")
+            raise Ros2Error(f"parameter {name} must be one of {', '.join(o for o in options if o)}; got "
+                            f"{values[name]!r}")
     for name in ("window", "delay", "stale_timeout", "identify_buffer", "diagnostics_period", "max_rate"):
         if not (np.isfinite(values[name]) and values[name] > 0) and not (name == "delay" and values[name] == 0):
             unit = "Hz" if name == "max_rate" else "seconds"

@@ -44,6 +44,13 @@ so that a payload turning through many revolutions is differentiated without the
 than pi between two motion samples cannot be told from one the other way). A quaternion's sign is made
 continuous by :class:`fmscal.analysis.Compensator`.
 
+Tool changes. The compensator's detector (:mod:`fmscal.analysis._tool_change`, parameter ``tool_change``)
+declares a change of the payload; each is counted (``tool_changes``), said in the log with its time, and sets the
+condition ``tool_change``, which flags every output until the new payload is in use: re-identified from the held
+attitudes since the change (``tool_change`` reidentify, or ``~/reidentify``), identified (``~/identify_payload``)
+or read again (``~/reload``). A re-identified payload becomes the one in use: a restart of the window keeps it,
+and ``~/save`` writes it.
+
 Snapshot. :attr:`Pipeline.snapshot` is replaced, never changed, after each pass: the diagnostics read it without
 the lock the compensation holds.
 """
@@ -63,6 +70,7 @@ from fmscal.plant.physics import quaternion_multiply
 from fmscal.observers.payload import PayloadEstimate, fit_static, identify_payload, reading_noise
 
 from .._compensate import TARE_FALSE_REFUSAL, TARE_WINDOW, Compensator, compensation_model
+from .._tool_change import check_mode
 from .._setup import load_setup, setup
 from .._motion import ImuMotion, JointMotion, PoseMotion, quaternion_from_matrix, quaternion_to_matrix
 from ._parameters import Ros2Error
@@ -79,8 +87,8 @@ LEVELS = {"not ready": 1, "running": 0, "motion stale": 2, "streams apart": 2, "
 WITHHELD = ("duplicate", "stray", "gap", "restart", "window", "stale", "apart", "motion", "saturated",
             "decimated", "invalid", "error")
 #: The conditions that flag an output (it may be wrong beyond its covariance): another publisher on an input
-#: topic, a frame that is not the one configured.
-FLAGS = ("publishers", "frame")
+#: topic, a frame that is not the one configured, a tool change declared and not yet re-identified.
+FLAGS = ("publishers", "frame", "tool_change")
 #: The number of wrench stamps whose median interval is the sample time (parameter ``sample_time`` 0).
 DT_SAMPLES = 21
 #: How long a saturated reading keeps the state ``saturated``, s.
@@ -135,6 +143,7 @@ class Snapshot:
     delay: object = None
     decimation: int = 1
     motion_lag: object = None
+    tool_change: str = ""
 
 
 def state_of(snapshot, now, stale_timeout):
@@ -305,6 +314,11 @@ class Pipeline:
                             f"an {self.motion.source}'s axes are its rotation's (imu_rotation): use poses or joint "
                             "states with it")
         self.model = compensation_model(self.calibration, self.setup.payload)
+        try:
+            check_mode(settings.tool_change or None, self.model)
+        except FmscalError as err:
+            raise Ros2Error("parameter tool_change: " + str(err).splitlines()[0].replace(
+                "leave tool_change None or 'off'", "leave it empty or off")) from None
         self.n = self.model.n_w
         self.dt_in = settings.sample_time or None      # the readings' period
         self.decimation = 1
@@ -338,9 +352,12 @@ class Pipeline:
         self.motion_frame = ""
         self.identified = None
         self.counts = dict(received=0, published=0, lost=0, motion=0, motion_skipped=0, motion_duplicate=0,
-                           motion_restart=0, motion_stray=0, output_gaps=0, unmatched=0)
+                           motion_restart=0, motion_stray=0, output_gaps=0, unmatched=0, tool_changes=0)
         self.withheld = dict.fromkeys(WITHHELD, 0)
         self.conditions = {}
+        self.tool_change = ""                          # the newest tool change's line
+        self.time_origin = 0.0                         # s: a stamp's time less the time given here (the node's)
+        self._changes = (None, 0)                      # (the compensator, its tool changes counted)
         self._flag_until = {}                          # a flag's condition: monotonic time it holds until
         self.notices = deque(maxlen=64)                # (key, message) for the node's log
         self.dropped = deque(maxlen=100000)            # (stamp, frame_id, cause) of readings withheld, for the node
@@ -407,7 +424,7 @@ class Pipeline:
                       track_offset=bool(s.track_offset))
         if s.drift_intensity is not None:
             kwargs["drift_intensity"] = s.drift_intensity[0] if len(s.drift_intensity) == 1 else s.drift_intensity
-        kwargs.update(motion=self.motion, frame=s.output_frame, point=s.tool_point)
+        kwargs.update(motion=self.motion, frame=s.output_frame, point=s.tool_point, tool_change=s.tool_change or None)
         compensator = Compensator(replace(st, calibration=replace(st.calibration, **changes)), self.dt, **kwargs)
         self.warnings = list(compensator.warnings)
         return compensator
@@ -433,6 +450,7 @@ class Pipeline:
             compensator.withheld.clear()
         self._withheld_gap = 0
         self.compensator = compensator
+        self._changes = (compensator, len(compensator.tool_changes))
 
     @property
     def delay(self):
@@ -797,6 +815,7 @@ class Pipeline:
                 self._frames[t] = (stamp, frame_id, arrival, tag, seq)
                 added.append(t)
         samples = self._feed(c, [(r[0], r[1], r[2]) for r in run])
+        self._tool_changes(c)
         new = {k: n - events.get(k, 0) for k, n in c.events.items() if n != events.get(k, 0)}
         if new.get("duplicate"):                      # (a run of one) the reading dropped
             self.withheld["duplicate"] += 1
@@ -832,6 +851,67 @@ class Pipeline:
         if self._last_t is not None:
             self._forget(self._last_t - c.delay)
         return out
+
+    def _tool_changes(self, c):
+        """The changes ``c`` declared since the last look: counted, said, the condition ``tool_change`` set; a
+        re-identification ``c`` made (``tool_change`` reidentify) taken as the payload in use (lock held)."""
+        changes = c.tool_changes
+        seen = self._changes[1] if self._changes[0] is c else 0
+        if len(changes) == seen:
+            if changes and changes[-1].reidentified_at is not None and "tool_change" in self.conditions:
+                self._reidentified(c)
+                self._snap()
+            return
+        for change in changes[seen:]:
+            self.counts["tool_changes"] += 1
+            self.tool_change = self._described(change)
+            self._notice("tool_change", self.tool_change + "; the outputs flagged tool_change until it is "
+                         "re-identified" + (" (from the next held attitudes)"
+                                            if self.settings.tool_change == "reidentify" else
+                                            ": hold the tool still at a few attitudes, then ~/reidentify"))
+            self._condition("tool_change", f"tool change at {change.t + self.time_origin:.3f} s: mass "
+                            f"{change.mass_change:+.4g} kg, not yet re-identified")
+        self._changes = (c, len(changes))
+        self._snap()
+
+    def _reidentified(self, c):
+        """The compensator ``c`` went on with a re-identified payload (T9): it is the one in use, the condition
+        ``tool_change`` cleared, the line said (lock held)."""
+        st = c.setup
+        self.setup = replace(self.setup, payload=st.payload, cov=st.cov, inertia_bounded=st.inertia_bounded,
+                             warnings=[])
+        self.model, self.identified = c.model, {"payload": st.payload}
+        self._condition("tool_change", None)
+        if c.tool_changes and c.tool_changes[-1].reidentified is not None:
+            self.tool_change = self._described(c.tool_changes[-1])
+            self._notice("tool_change", self.tool_change)
+
+    def _described(self, change):
+        """A tool change's line, its times the stamps' (:attr:`time_origin` added)."""
+        o = self.time_origin
+        return replace(change, t=change.t + o, declared=change.declared + o,
+                       reidentified_at=None if change.reidentified_at is None else change.reidentified_at + o
+                       ).describe()
+
+    def reidentify(self):
+        """``(success, message)`` of ``~/reidentify``: the payload fitted to the held attitudes since the last
+        tool change declared (else the detector's newest, :meth:`fmscal.analysis.Compensator.reidentify`); the
+        compensation goes on with it, and ``~/save`` writes it."""
+        with self.lock:
+            c = self.compensator
+            if c is None:
+                return False, "reidentify refused: no reading compensated yet"
+            try:
+                fit = c.reidentify()
+            except FmscalError as err:
+                return False, "reidentify refused: " + str(err).splitlines()[0].replace(
+                    "tool_change='detect' or 'reidentify'", "tool_change:=detect or reidentify")
+            self._changes = (c, len(c.tool_changes))
+            self._reidentified(c)
+            self._snap()
+        return True, (f"re-identified: mass {fit.mass:.4g} +- {fit.mass_std:.2g} kg, com "
+                      + " ".join(f"{v:.4g}" for v in fit.com) + " m (+- " + " ".join(f"{v:.2g}" for v in fit.com_std)
+                      + "); the compensation goes on with it")
 
     def _feed(self, compensator, rows):
         """Push rows ``(t, w_hat, motion)`` into ``compensator`` as one block; its samples."""
@@ -944,7 +1024,8 @@ class Pipeline:
             last_arrival=self.last_arrival, backlog=len(self._pending),
             waiting=len(self._pending) + len(self._frames) + (self._stray is not None),
             dt=self.dt, delay=self.delay, decimation=self.decimation,
-            motion_lag=None if self._newest_in is None or not self._motion else self._newest_in - self._motion[-1][0])
+            motion_lag=None if self._newest_in is None or not self._motion else self._newest_in - self._motion[-1][0],
+            tool_change=self.tool_change)
 
     def state(self):
         """One of :data:`STATES`: "not ready" too where no reading has come for
@@ -1039,6 +1120,7 @@ class Pipeline:
                     self._swap(compensator)
                 self.setup, self.identified = st, result
                 self.model = compensation_model(self.calibration, payload)
+                self._condition("tool_change", None)
                 self._snap()
         return bool(result["ok"]), result["message"]
 
@@ -1090,6 +1172,7 @@ class Pipeline:
                                           or "")
             if compensator is not None:
                 self._swap(compensator)
+            self._condition("tool_change", None)
             self._snap()
         offset = " ".join(f"{v:.6g}" for v in st.calibration.offset)
         return True, f"reloaded {self.settings.calibration or self.settings.payload}: offset {offset}"
