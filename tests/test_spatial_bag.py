@@ -1,5 +1,7 @@
 """fmscal import --spatial: a 6-axis sensor's bag into a spatial log (issue 22)."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -46,3 +48,25 @@ def test_the_command_writes_a_spatial_log(mocap, tmp_path, capsys):
     assert read_log(tmp_path / "log.csv").kind == "spatial"
     assert main([*args[:-1], str(tmp_path / "two.csv"), "--pose-offset", "0", "0.1"]) == 2
     assert "--pose-offset must be 3 finite numbers in m with --spatial" in capsys.readouterr().err
+
+
+def test_the_wrench_frame_id_is_recorded(mocap, tmp_path, capsys):
+    """The wrench's header.frame_id in the report, the sidecar and the printed report (for the node's
+    sensor_frame); several frames among the messages: a warning naming each with its count, the most common kept."""
+    log, _ = mocap
+    write_bag(log, tmp_path / "one", wrench_frame_id="ft_sensor")
+    frames = ["ft_sensor"] * len(log.t)
+    frames[10:13] = ["tool0"] * 3
+    write_bag(log, tmp_path / "two", wrench_frame_id=frames)
+    _, report = import_bag(tmp_path / "one", "/ft_sensor/wrench", "/mocap/payload/pose", (0, 0, 0), spatial=True)
+    assert report["wrench"]["frame_id"] == "ft_sensor" and report["wrench"]["frame_ids"] == {"ft_sensor": len(log.t)}
+    assert not report["warnings"]
+    _, mixed = import_bag(tmp_path / "two", "/ft_sensor/wrench", "/mocap/payload/pose", (0, 0, 0), spatial=True)
+    assert mixed["wrench"]["frame_id"] == "ft_sensor"
+    assert mixed["warnings"] == [f"the wrench messages name 2 frames: ft_sensor ({len(log.t) - 3}), tool0 (3); the "
+                                 "most common, ft_sensor, is recorded as the sensor's"]
+    out = tmp_path / "log.csv"
+    assert main(["import", str(tmp_path / "one"), "--wrench-topic", "/ft_sensor/wrench", "--pose-topic",
+                 "/mocap/payload/pose", "--spatial", "--out", str(out)]) == 0
+    assert "frame_id 'ft_sensor' (the node's sensor_frame)" in capsys.readouterr().out
+    assert json.loads(out.with_suffix(".import.json").read_text())["wrench"]["frame_id"] == "ft_sensor"

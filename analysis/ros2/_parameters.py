@@ -90,9 +90,9 @@ PARAMETERS = (
               "base: the motion frame's axes (base_frame)"),
     Parameter("base_frame", "string", "", "output_frame base: the output's frame_id; empty: the motion "
               "message's header.frame_id"),
-    Parameter("sensor_frame", "string", "", "the wrench's header.frame_id expected: another is logged, said in the "
-              "diagnostics and flags the outputs; empty: the calibration's sensor_frame where it records one, else "
-              "not checked"),
+    Parameter("sensor_frame", "string", "", "the wrench's header.frame_id expected (fmscal import prints a bag's and "
+              "records it in LOG.import.json): another is logged, said in the diagnostics and flags the outputs; "
+              "empty: not checked"),
     Parameter("tool_point", "double_array", None, "m, the point the torque is taken about, in the sensor's axes "
               "(3 values); unset: the sensor's point"),
     Parameter("pose_to_sensor_rotation", "double_array", None, "pose_topic: the sensor's axes in the tracked "

@@ -368,7 +368,7 @@ class Pipeline:
         self._saturated_at = -np.inf
         self.warnings = []
         self._limit = None if settings.saturation is None else np.broadcast_to(settings.saturation, (self.n,))
-        self.expected_sensor_frame = settings.sensor_frame or getattr(self.calibration, "sensor_frame", None) or ""
+        self.expected_sensor_frame = settings.sensor_frame or ""
         self.snapshot, self._snapped = Snapshot(), -np.inf
         self._base = settings.output_frame == "base"
         self._recent_kept = 0
@@ -1168,8 +1168,6 @@ class Pipeline:
         with self.lock:
             self.setup, self.estimate, self.latency, self.model = st, estimate, latency, model
             self.identified = None
-            self.expected_sensor_frame = (self.settings.sensor_frame or getattr(st.calibration, "sensor_frame", None)
-                                          or "")
             if compensator is not None:
                 self._swap(compensator)
             self._condition("tool_change", None)

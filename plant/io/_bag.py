@@ -35,6 +35,7 @@ the import on a simulated run).
 """
 
 import datetime
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -134,7 +135,9 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         first wrench stamp), ``wrench`` and ``pose`` (per stream: messages
         read, messages used, nominal rate in Hz (one over the median step;
         the pose's mean rate too), frames dropped within the span used
-        (gaps of 1.5 steps and more), duplicate stamps),
+        (gaps of 1.5 steps and more), duplicate stamps; the wrench's
+        ``frame_id``, the most common ``header.frame_id``, which the ROS 2
+        node's ``sensor_frame`` expects, and ``frame_ids``, each one's count),
         ``resampled`` (None, or the spread of the wrench steps that made it
         necessary), ``snap_error_max_s``, ``poses_merged`` (poses that fell on
         the same sample as a nearer one), ``tilt_max_deg``,
@@ -159,7 +162,8 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
             raise BagError(f"{name} must be a finite number of seconds; got {value}")
     if start is not None and end is not None and not end > start:
         raise BagError(f"end must be after start; got start {start}, end {end}")
-    pose_type, wrench_msgs, pose_msgs = _read_messages(path, wrench_topic, pose_topic, kinematics, tf_frames)
+    pose_type, wrench_msgs, pose_msgs, frames = _read_messages(path, wrench_topic, pose_topic, kinematics,
+                                                               tf_frames)
     t_w, w, w_ignored, w_info = _stream(wrench_msgs, "wrench", path.name)
     if spatial:                                 # [torque.x, torque.y, torque.z, force.x, force.y, force.z]
         w, w_ignored = np.column_stack([w_ignored[:, :2], w[:, :1], w[:, 1:], w_ignored[:, 2:]]), w_ignored[:, :0]
@@ -217,7 +221,8 @@ def import_bag(path, wrench_topic, pose_topic, pose_offset=(0.0, 0.0), start=Non
         "start_time_utc": _utc(origin + round(t0 * 1e9)),
         "span_s": [float(t0), float(grid[last])],
         "window": [start, end],
-        "wrench": {**w_info, "used": int(used_w.sum()), "rate_hz": 1.0 / dt, "dropped": 0},
+        "wrench": {**w_info, "used": int(used_w.sum()), "rate_hz": 1.0 / dt, "dropped": 0,
+                   "frame_id": frames.most_common(1)[0][0], "frame_ids": dict(frames.most_common())},
         "pose": {**p_info, "used": int(len(rows)), "rate_hz": 1.0 / float(np.median(np.diff(tp))),
                  "mean_rate_hz": _rate(tp)},
         "resampled": resampled,
@@ -295,7 +300,8 @@ def _refuse_foreign(err, what):
 
 
 def _read_messages(path, wrench_topic, pose_topic, kinematics=None, tf_frames=None):
-    """The pose type and the (stamp ns, values) lists of both topics (poses as ``x, y, z, qx, qy, qz, qw``)."""
+    """The pose type, the (stamp ns, values) lists of both topics (poses as ``x, y, z, qx, qy, qz, qw``) and the
+    wrench messages' ``header.frame_id`` counted (a Counter)."""
     reader = _open_reader(path)
     try:
         topics = {name: info.msgtype for name, info in reader.topics.items()}
@@ -329,14 +335,15 @@ def _read_messages(path, wrench_topic, pose_topic, kinematics=None, tf_frames=No
         pose_type = topics[pose_topic]
     finally:
         reader.close()
+    frames = Counter(m.header.frame_id for _, m in out[wrench_topic])
     if tf_frames is not None:
         return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
                 chain_poses([m for _, m in out[pose_topic]], [m for _, m in out.get(static, [])], *tf_frames,
-                            path.name))
+                            path.name), frames)
     if kinematics is not None:
         poses = _joint_poses([m for _, m in out[pose_topic]], kinematics, path.name)
         return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
-                [(s, (*p[4:], *p[1:4], p[0])) for (s, _), p in zip(out[pose_topic], poses)])
+                [(s, (*p[4:], *p[1:4], p[0])) for (s, _), p in zip(out[pose_topic], poses)], frames)
     where = POSE_TYPES[pose_type]
 
     def pose_values(msg):
@@ -346,7 +353,7 @@ def _read_messages(path, wrench_topic, pose_topic, kinematics=None, tf_frames=No
         return (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
 
     return (pose_type, [(s, _wrench_values(m)) for s, m in out[wrench_topic]],
-            [(s, pose_values(m)) for s, m in out[pose_topic]])
+            [(s, pose_values(m)) for s, m in out[pose_topic]], frames)
 
 
 def _wrench_values(msg):
@@ -506,6 +513,11 @@ def _warnings(r):
                        + (f" (the clock steps back by {stream['step_back_ns'] / 1e6:.6g} ms at "
                           f"{_utc(stream['step_back_at_ns'])}, in the order recorded)"
                           if stream.get("step_back_ns") else ""))
+    frames = r.get("wrench", {}).get("frame_ids", {})
+    if len(frames) > 1:
+        out.append(f"the wrench messages name {len(frames)} frames: "
+                   + ", ".join(f"{name or '(empty)'!s} ({n})" for name, n in frames.items())
+                   + f"; the most common, {r['wrench']['frame_id'] or '(empty)'}, is recorded as the sensor's")
     if r["poses_merged"]:
         out.append(f"{r['poses_merged']} pose(s) fell on a wrench sample already holding a nearer pose and "
                    "were left out (poses faster than the sensor?)")
@@ -530,7 +542,8 @@ def format_report(report):
         f"{Path(report['bag']).name}: wrench {report['wrench_topic']} (WrenchStamped), "
         f"pose {report['pose_topic']} ({report['pose_type'].rsplit('/', 1)[-1]})",
         f"  wrench: {w['messages']} messages at {w['rate_hz']:.4g} Hz, {w['dropped']} dropped, "
-        f"{w['duplicate_stamps']} duplicate stamps; {w['used']} used",
+        f"{w['duplicate_stamps']} duplicate stamps; {w['used']} used; frame_id "
+        + (repr(w['frame_id']) + " (the node's sensor_frame)" if w.get('frame_id') else "empty"),
         f"  pose:   {p['messages']} messages at {p['rate_hz']:.4g} Hz (mean {p['mean_rate_hz']:.4g} Hz), "
         f"{p['dropped']} dropped, "
         f"{p['duplicate_stamps']} duplicate stamps; {p['used']} used",

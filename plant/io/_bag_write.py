@@ -30,7 +30,7 @@ def _wrench(T, header, row):
 def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_topic="/mocap/payload/pose",
               pose_type="PoseStamped", start_time_ns=1_700_000_000_000_000_000, receive_jitter=0.0,
               pose_offset=(0.0, 0.0), pose_stamp_jitter=0.0, wrench_drop_rate=0.0, seed=0, joints=None,
-              joint_names=None):
+              joint_names=None, wrench_frame_id="world"):
     """Write a log as a ROS bag, as a rig's recorder would.
 
     The reading goes out as ``WrenchStamped`` at every sample, the pose as
@@ -72,6 +72,8 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
         The joint angles at every sample of the log (``pose_type="JointState"``), rad.
     joint_names : sequence of str, optional
         Their names, as the URDF names its joints.
+    wrench_frame_id : str or sequence of str
+        The wrench messages' ``header.frame_id``: one for all, or one per sample of the log.
 
     Returns
     -------
@@ -111,8 +113,9 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
     def header(ns):
         return _header(T, ns, ros1=storage == "ros1")
 
-    def wrench_msg(ns, row):
-        return _wrench(T, header(ns), row if spatial else (0.0, 0.0, row[0], row[1], row[2], 0.0))
+    def wrench_msg(ns, row, frame_id):
+        head = _header(T, ns, frame_id, ros1=storage == "ros1")
+        return _wrench(T, head, row if spatial else (0.0, 0.0, row[0], row[1], row[2], 0.0))
 
     def marker(pose):
         """The tracked frame's position and attitude ``(px, py, pz, q)`` at a log's pose."""
@@ -148,7 +151,10 @@ def write_bag(log, path, storage="mcap", wrench_topic="/ft_sensor/wrench", pose_
 
     sent = rng.random(len(stamps)) >= wrench_drop_rate
     sent[0] = sent[-1] = True
-    messages = [(0, ns, wrench_msg(ns, row)) for ns, row, ok in zip(stamps, log.w_hat, sent) if ok]
+    frames = [wrench_frame_id] * len(stamps) if isinstance(wrench_frame_id, str) else list(wrench_frame_id)
+    if len(frames) != len(stamps):
+        raise BagError(f"wrench_frame_id must be one name or one per sample ({len(stamps)}); got {len(frames)}")
+    messages = [(0, ns, wrench_msg(ns, row, f)) for ns, row, ok, f in zip(stamps, log.w_hat, sent, frames) if ok]
     rows = np.flatnonzero(log.has_pose)
     shift = np.round(rng.uniform(-pose_stamp_jitter, pose_stamp_jitter, len(rows)) * 1e9).astype(np.int64)
     messages += [(1, stamps[k] + d, pose_msg(stamps[k] + d, log.pose[k], k)) for k, d in zip(rows, shift)]
