@@ -95,6 +95,9 @@ class Setup:
     warnings : list of str
     source : str
         What it came from, for messages.
+    inertia_note : str
+        The warning of :attr:`warnings` that says the inertia is the bound (K3), "" where it is not: held poses
+        leave it out (:meth:`warnings_for`).
     """
 
     calibration: Calibration
@@ -106,11 +109,12 @@ class Setup:
     held_noise: NoiseSpec = None
     warnings: list = field(default_factory=list)
     source: str = "the calibration"
+    inertia_note: str = ""
 
     def warnings_for(self, moves=True):
         """The warnings for a source that moves, or (``moves`` False: held poses) without the inertia's bound,
         which does not enter a static wrench."""
-        return [w for w in self.warnings if moves or not w.startswith(INERTIA_NOTE)]
+        return [w for w in self.warnings if moves or w != self.inertia_note]
 
 
 def payload_jacobian(mass, com):
@@ -169,11 +173,11 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
                 raise SetupError("tool_radius bounds a payload estimate's undetermined inertia; none is given")
             return Setup(calibration, payload=payload)
         tracked = payload.tracked()                         # its payload only: S and b are the calibration's
-        tool, theta_cov, warnings = _tool(tracked, tool_radius)
+        tool, theta_cov, note = _tool(tracked, tool_radius)
         cov = np.zeros((16, 16))
         cov[:10, :10] = _with_fit(theta_cov, tracked, slice(0, 10))
         return Setup(calibration, payload=tool, cov=cov, inertia_bounded=tracked.inertia is None,
-                     warnings=warnings, source="the payload file")
+                     warnings=[note] if note else [], source="the payload file", inertia_note=note)
     if not isinstance(calibration, _ESTIMATES):
         raise SetupError(f"compensate takes a plant.Calibration or a payload estimate (observers.payload."
                          f"PayloadEstimate, or a StaticFit); got {type(calibration).__name__}")
@@ -189,7 +193,7 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
         raise SetupError("the payload file holds no offset (written by an fmscal before fmscal-payload/2): identify "
                          "the payload again (fmscal identify-payload --save)")
     tracked = estimate.tracked()
-    tool, theta_cov, warnings = _tool(tracked, tool_radius)
+    tool, theta_cov, note = _tool(tracked, tool_radius)
     M = getattr(estimate, "mounting", None)
     M = np.eye(3) if M is None else np.asarray(M, dtype=float)
     gains = getattr(estimate, "gains", None)
@@ -215,8 +219,8 @@ def setup(calibration, payload=None, sensor=None, tool_radius=None):
                       noise=None if noise_sd is None else NoiseSpec(tuple(float(v) for v in noise_sd)),
                       converged=bool(estimate.converged))
     return Setup(cal, cov=cov, axes=None if np.allclose(M, np.eye(3)) else M.T, pose_noise_known=False,
-                 inertia_bounded=tracked.inertia is None, held_noise=held, warnings=warnings,
-                 source="the payload file")
+                 inertia_bounded=tracked.inertia is None, held_noise=held, warnings=[note] if note else [],
+                 source="the payload file", inertia_note=note)
 
 
 def _with_fit(cov, tracked, rows):
@@ -238,18 +242,18 @@ def _with_fit(cov, tracked, rows):
 
 def _tool(t, tool_radius):
     """The payload of an estimate ``t`` in the tracked frame's axes (the bound (K3) for an inertia not determined),
-    the covariance of ``theta = (m, c, I_c)`` from its sds, and the warnings."""
+    the covariance of ``theta = (m, c, I_c)`` from its sds, and the inertia's note (the bound's warning, "" where
+    the estimate holds an inertia)."""
     com = np.asarray(t.com, dtype=float)
     cov = np.zeros((10, 10))
     cov[0, 0] = float(t.mass_std) ** 2
     cov[1:4, 1:4] = np.diag(np.square(np.asarray(t.com_std, dtype=float)))
-    warnings = []
+    note = ""
     if t.inertia is None:
         inertia, cov[4:, 4:], r = _inertia_bound(t.mass, com, tool_radius)
-        warnings.append(f"{INERTIA_NOTE} (held poses): it starts at {inertia[0]:.3g} "
-                        f"kg m^2 on each axis with an sd as large, the bound of a tool of radius {r:.3g} m about its "
-                        "centre of mass (tool_radius), and is learned from the motion; its uncertainty is in the "
-                        "covariance")
+        note = (f"{INERTIA_NOTE} (held poses): it starts at {inertia[0]:.3g} kg m^2 on each axis with an sd as large, "
+                f"the bound of a tool of radius {r:.3g} m about its centre of mass (tool_radius), and is learned from "
+                "the motion; its uncertainty is in the covariance")
     else:
         if tool_radius is not None:
             raise SetupError("tool_radius bounds an inertia the payload file does not hold; this one holds it")
@@ -260,7 +264,7 @@ def _tool(t, tool_radius):
         tool = SpatialPayload(float(t.mass), inertia, com)
     except FmscalError as err:
         raise SetupError(f"the payload file's inertia is not a body's: {str(err).splitlines()[0]}") from None
-    return tool, cov, warnings
+    return tool, cov, note
 
 
 def load_setup(path):
