@@ -65,7 +65,7 @@ from ._calibrate import read_data
 from ._motion import quaternion_from_matrix
 
 __all__ = ["ros2_control_parameters", "Ros2ControlParameters", "DynamicsLeftOut", "dynamics_left_out", "ExportError",
-           "ROS2_CONTROL_RELEASES", "GRAVITY_FILTER", "READ_ONLY"]
+           "ROS2_CONTROL_RELEASES", "GRAVITY_FILTER", "READ_ONLY", "RUNTIME"]
 
 #: The releases whose parameter definitions the export writes, checked against their files
 #: (tests/data/ros2_control/): ROS 2 distribution -> (control_toolbox, ros2_controllers).
@@ -76,6 +76,8 @@ GRAVITY_FILTER = "control_filters/GravityCompensationWrench"
 #: The filter's parameters fixed when the controller is configured (``read_only``); ``tool.*`` and the
 #: broadcaster's offsets and multipliers are read again while it runs.
 READ_ONLY = ("world_frame", "sensor_frame")
+#: The parameters a running broadcaster reads again (their dotted names begin so, or hold the filter's ``tool``).
+RUNTIME = ("offset.", "multiplier.", ".params.tool.")
 #: The broadcaster's parameter of each reading channel (fmscal's order, ``tx ty tz fx fy fz``).
 CHANNELS = (("torque", "x"), ("torque", "y"), ("torque", "z"), ("force", "x"), ("force", "y"), ("force", "z"))
 #: The smoothing window of the log's pose differentiation, s (as :func:`fmscal.observers.payload.identify_payload`).
@@ -154,6 +156,21 @@ class Ros2ControlParameters:
     def save(self, path):
         """Write :meth:`to_yaml` to ``path`` (atomically)."""
         atomic_write_text(path, self.to_yaml())
+
+    def runtime(self):
+        """The controller's name and the parameters it reads again while it runs (:data:`RUNTIME`): ``(controller,
+        {dotted name: value})``, as :func:`fmscal.analysis.ros2.push_parameters` sets them on a running one."""
+        (controller, tree), = self.parameters.items()
+        found = {}
+
+        def walk(node, prefix):
+            for key, value in node.items():
+                if isinstance(value, dict):
+                    walk(value, f"{prefix}{key}.")
+                elif any(prefix.startswith(r) or r in prefix for r in RUNTIME):
+                    found[prefix + key] = value
+        walk(tree["ros__parameters"], "")
+        return controller, found
 
 
 def ros2_control_parameters(payload, sensor_frame, world_frame, controller="force_torque_sensor_broadcaster",

@@ -91,15 +91,20 @@ def running_node(domain, *parameters, params_file=None, ros_args=()):
     try:
         yield proc
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=5)
+        stop(proc)
         if log is not None:
             log.close()
+
+
+def stop(proc):
+    """A process of the tests stopped as Ctrl-C does (SIGINT), killed after 5 s."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
 
 
 def wait_until(condition, timeout=WAIT):

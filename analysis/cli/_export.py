@@ -41,6 +41,12 @@ def add_export(sub):
                         "(N, N m)")
     r.add_argument("--out", metavar="PARAMS.yaml", help="the parameter file to write (default: print it)")
     r.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    r.add_argument("--push", action="store_true",
+                   help="also set the run-time parameters (tool.*, offset.*, multiplier.*) on the running "
+                        "broadcaster --controller (its node at the root; the domain ROS_DOMAIN_ID's), atomically: "
+                        "all or none (rclpy: pip install \"fmscal[ros2]\")")
+    r.add_argument("--push-timeout", type=float, default=5.0, metavar="S",
+                   help="s to wait for the broadcaster's parameter service, and for its answer (default 5)")
     r.set_defaults(func=cmd_export_ros2_control)
 
 
@@ -55,8 +61,15 @@ def cmd_export_ros2_control(args):
                                        calibration=args.calibration, sensor_name=args.sensor_name, log=args.log)
     if args.out is None:
         sys.stdout.write(exported.to_yaml())
-        return
-    exported.save(args.out)
-    for note in exported.notes:
-        print(f"note: {note}")
-    print(f"wrote {args.out} (the parameters of {args.controller})")
+    else:
+        exported.save(args.out)
+        for note in exported.notes:
+            print(f"note: {note}")
+        print(f"wrote {args.out} (the parameters of {args.controller})")
+    if args.push:
+        from ..ros2 import push_parameters
+        node = "/" + args.controller.lstrip("/")
+        pushed = push_parameters(exported, node=node, timeout=args.push_timeout)
+        tool = {k.rsplit(".params.", 1)[-1]: v for k, v in pushed.items() if ".params.tool." in k}
+        print(f"pushed {len(pushed)} parameters to {node}: tool.mass {tool['tool.mass']:.6g} kg, tool.CoG "
+              + " ".join(f"{v:.6g}" for v in tool["tool.CoG"]) + " m, and the offsets and multipliers")

@@ -1,0 +1,124 @@
+"""An exported payload pushed to a running broadcaster (fmscal.analysis.ros2.push_parameters, ``fmscal export
+ros2-control --push``): a stand-in rclpy node in another process (tests/ros2_standin.py) declares Kilted's
+broadcaster and gravity filter parameters, typed and read-only as their definition files say; the push sets the
+run-time ones and reads back as the export wrote them; the refusals are one line.
+"""
+
+import os
+import subprocess
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fmscal.analysis import ros2_control_parameters
+from fmscal.analysis.cli import main
+from fmscal.analysis.ros2 import Ros2Error, push_parameters
+from fmscal.observers.payload import fit_static
+from fmscal.plant.io import simulate_table
+from fmscal.plant.scenarios import TOOL
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import parameter_value_to_python
+from rcl_interfaces.srv import GetParameters
+from ros2_rig import domain_id, stop
+
+HERE = Path(__file__).resolve().parent
+
+
+@contextmanager
+def standin(domain, *args):
+    """tests/ros2_standin.py in a subprocess of ``domain``, ready (its services up); stopped on leaving."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, str(HERE / "ros2_standin.py"), *args], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        if line.strip() != "ready":
+            proc.wait(timeout=10)
+            raise AssertionError(f"the stand-in did not start: {line!r} {proc.stderr.read()[-2000:]}")
+        yield proc
+    finally:
+        stop(proc)
+
+
+def read_back(domain, names, node="/force_torque_sensor_broadcaster"):
+    """The stand-in's values of ``names``, over GetParameters."""
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    reader = rclpy.create_node("fmscal_test_reader", context=context)
+    try:
+        client = reader.create_client(GetParameters, f"{node}/get_parameters")
+        assert client.wait_for_service(timeout_sec=10)
+        future = client.call_async(GetParameters.Request(names=list(names)))
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(reader)
+        executor.spin_until_future_complete(future, timeout_sec=10)
+        return dict(zip(names, (parameter_value_to_python(v) for v in future.result().values)))
+    finally:
+        reader.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture(scope="module")
+def exported():
+    return ros2_control_parameters(fit_static(simulate_table(TOOL, n=12, seed=0)), "ft_sensor", "base_link")
+
+
+def test_the_run_time_parameters_are_set_and_read_back(request, exported):
+    """The push sets every run-time parameter (tool.*, offset.*, multiplier.*: 15) and nothing else; the stand-in
+    then holds the export's values exactly, its frames unchanged."""
+    domain = domain_id(request.node.name)
+    with standin(domain):
+        pushed = push_parameters(exported, domain_id=domain, timeout=10)
+        back = read_back(domain, list(pushed) + ["sensor_filter_chain.filter1.params.sensor_frame", "frame_id"])
+    _, runtime = exported.runtime()
+    assert list(pushed) == list(runtime) and len(pushed) == 15
+    assert all(name.startswith(("offset.", "multiplier.", "sensor_filter_chain.filter1.params.tool."))
+               for name in pushed)
+    for name, value in runtime.items():
+        np.testing.assert_array_equal(back[name], value, err_msg=name)
+    assert back["sensor_filter_chain.filter1.params.sensor_frame"] == "ft_sensor" and back["frame_id"] == "ft_sensor"
+
+
+def test_refusals_are_one_line(request, exported):
+    """No such node: named, within the timeout; a chain without the gravity filter: the node's reason, none set;
+    a wildcard name refused before any ROS call."""
+    domain = domain_id(request.node.name)
+    with pytest.raises(Ros2Error, match=r"^no node /nobody answers set_parameters_atomically within 1 s: "):
+        push_parameters(exported, node="/nobody", timeout=1, domain_id=domain)
+    with standin(domain, "--no-filter"):
+        with pytest.raises(Ros2Error) as err:
+            push_parameters(exported, domain_id=domain, timeout=10)
+        back = read_back(domain, ["offset.force.x"])
+    message = str(err.value)
+    assert message.startswith("/force_torque_sensor_broadcaster refused the parameters, none set: ") and \
+        "\n" not in message, message
+    assert back["offset.force.x"] == 0.0                         # atomically: the declared ones untouched too
+    with pytest.raises(Ros2Error, match=r"^the broadcaster's node must be a name such as"):
+        push_parameters(exported, node="/**/broadcaster")
+
+
+def test_the_command_pushes(request, tmp_path, capsys, monkeypatch):
+    """``fmscal export ros2-control ... --push`` (the domain ROS_DOMAIN_ID's): the file written, then the
+    parameters set, a line saying so; no node: a one-line error and exit 2."""
+    domain = domain_id(request.node.name)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    fit = fit_static(simulate_table(TOOL, n=12, seed=0))
+    fit.save(tmp_path / "tool.json")
+    args = ["export", "ros2-control", str(tmp_path / "tool.json"), "--sensor-frame", "ft_sensor", "--world-frame",
+            "base_link", "--push", "--push-timeout", "10"]
+    with standin(domain):
+        assert main(args + ["--out", str(tmp_path / "params.yaml")]) == 0
+        back = read_back(domain, ["sensor_filter_chain.filter1.params.tool.mass"])
+    out = capsys.readouterr().out
+    assert "pushed 15 parameters to /force_torque_sensor_broadcaster: tool.mass " in out, out
+    assert back["sensor_filter_chain.filter1.params.tool.mass"] == pytest.approx(fit.mass, rel=1e-12)
+    assert (tmp_path / "params.yaml").exists()
+    assert main(args[:-1] + ["1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no node /force_torque_sensor_broadcaster answers" in err, err
