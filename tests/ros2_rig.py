@@ -151,7 +151,7 @@ class Peer:
         self.node.create_subscription(Float64MultiArray, f"/{node_name}/latency",
                                       lambda m: self.latencies.append(list(m.data)), RELIABLE)
         self.clients = {s: self.node.create_client(Trigger, f"/{node_name}/{s}")
-                        for s in ("tare", "tare_force", "identify_payload", "reidentify", "save", "reload")}
+                        for s in ("tare", "tare_force", "identify_payload", "reidentify", "save", "reload", "push")}
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)

@@ -103,6 +103,7 @@ def test_refusals_are_one_line(request, exported):
         push_parameters(exported, node="/**/broadcaster")
 
 
+@pytest.mark.slow
 def test_the_command_pushes(request, tmp_path, capsys, monkeypatch):
     """``fmscal export ros2-control ... --push`` (the domain ROS_DOMAIN_ID's): the file written, then the
     parameters set, a line saying so; no node: a one-line error and exit 2."""
@@ -122,3 +123,41 @@ def test_the_command_pushes(request, tmp_path, capsys, monkeypatch):
     assert main(args[:-1] + ["1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no node /force_torque_sensor_broadcaster answers" in err, err
+
+
+@pytest.mark.slow
+def test_the_node_pushes_its_payload(request, tmp_path):
+    """The node from a payload file alone with push_controller: ``~/push`` sets the stand-in's run-time parameters
+    to the payload in use (the file's, as its export gives them); push_controller with a calibration is refused
+    at start, and ``~/push`` without it refuses in one line."""
+    from ros2_rig import Peer, running_node, tool_calibration, tool_payload
+    from fmscal.observers.payload import PayloadEstimate
+    domain = domain_id(request.node.name)
+    path = tool_payload(tmp_path / "tool.json")
+    _, expected = ros2_control_parameters(PayloadEstimate.load(path), "ft_sensor", "world").runtime()
+    base = (f"payload:={path}", "pose_topic:=/ft_sensor/pose", "qos:=reliable")
+    with standin(domain), running_node(domain, *base, "push_controller:=/force_torque_sensor_broadcaster") as proc:
+        peer = Peer(domain)
+        try:
+            peer.wait_for_node(proc)
+            ok, message = peer.call("push")
+        finally:
+            peer.close()
+        back = read_back(domain, list(expected))
+    assert ok and message.startswith("pushed 15 parameters to /force_torque_sensor_broadcaster: tool.mass "), message
+    for name, value in expected.items():                  # the file's payload and offset: nothing identified yet
+        np.testing.assert_allclose(back[name], value, rtol=1e-12, atol=1e-15, err_msg=name)
+    with running_node(domain, *base) as proc:
+        peer = Peer(domain)
+        try:
+            peer.wait_for_node(proc)
+            refused = peer.call("push")
+        finally:
+            peer.close()
+    assert refused == (False, "push refused: set the parameter push_controller (with a payload file alone)")
+    from fmscal.analysis.ros2 import PARAMETERS, settings
+    values = {p.name: p.default for p in PARAMETERS}
+    values.update(calibration=str(tool_calibration(tmp_path / "cal.json")), payload=str(path), pose_topic="/p",
+                  push_controller="/force_torque_sensor_broadcaster")
+    with pytest.raises(Ros2Error, match="^parameter push_controller pushes a payload file's payload"):
+        settings(values)

@@ -67,9 +67,6 @@ def cmd_export_ros2_control(args):
             print(f"note: {note}")
         print(f"wrote {args.out} (the parameters of {args.controller})")
     if args.push:
-        from ..ros2 import push_parameters
+        from ..ros2._push import push_parameters, pushed_line
         node = "/" + args.controller.lstrip("/")
-        pushed = push_parameters(exported, node=node, timeout=args.push_timeout)
-        tool = {k.rsplit(".params.", 1)[-1]: v for k, v in pushed.items() if ".params.tool." in k}
-        print(f"pushed {len(pushed)} parameters to {node}: tool.mass {tool['tool.mass']:.6g} kg, tool.CoG "
-              + " ".join(f"{v:.6g}" for v in tool["tool.CoG"]) + " m, and the offsets and multipliers")
+        print(pushed_line(node, push_parameters(exported, node=node, timeout=args.push_timeout)))

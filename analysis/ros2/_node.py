@@ -42,9 +42,11 @@ import numpy as np
 
 from fmscal.plant.numerics import FmscalError
 
+from .._export import ros2_control_parameters
 from .._motion import ImuMotion, JointMotion, PoseMotion
 from ._parameters import NODE_NAME, PARAMETERS, Ros2Error, settings
 from ._pipeline import FLAGS, LEVELS, Pipeline, motion_source, sensor_pose, state_of
+from ._push import push_parameters, pushed_line
 from ._worker import Cancelled, Worker
 
 __all__ = ["ros", "CompensatorNode", "spin", "INSTALL", "unknown_parameters"]
@@ -257,8 +259,8 @@ class CompensatorNode:
         base = self.node.get_fully_qualified_name()
         work, cancel = r.Group(), r.Group()
         for name, call in (("tare", self.pipeline.tare), ("tare_force", self.pipeline.tare_force),
-                           ("identify_payload", self._identify), ("reidentify", self.pipeline.reidentify),
-                           ("save", self.pipeline.save),
+                           ("identify_payload", self._identify), ("reidentify", self._reidentify),
+                           ("save", self.pipeline.save), ("push", self._push),
                            ("reload", self.pipeline.reload)):
             self.services.create_service(r.Trigger, f"{base}/{name}", self._service(name, call), callback_group=work)
         self.services.create_service(r.Trigger, f"{base}/cancel", self._service("cancel", self._cancel),
@@ -646,7 +648,35 @@ class CompensatorNode:
                            "identify_payload cancelled (~/cancel); the payload in use kept")
         except RuntimeError as err:
             return False, f"identify_payload failed: {err}"
-        return self.pipeline.identified_by(result)
+        return self._then_push(*self.pipeline.identified_by(result))
+
+    def _reidentify(self):
+        """``~/reidentify``: :meth:`._pipeline.Pipeline.reidentify`, then the push where ``push_controller`` is set."""
+        return self._then_push(*self.pipeline.reidentify())
+
+    def _then_push(self, ok, message):
+        """A service's answer, with the new payload pushed (:meth:`_push`) where it succeeded and
+        ``push_controller`` is set; a failed push said, the payload in use kept."""
+        if not (ok and self.settings.push_controller):
+            return ok, message
+        _, line = self._push()
+        return ok, message + "; " + line
+
+    def _push(self):
+        """``~/push``: the payload and offset in use set on the broadcaster ``push_controller`` (its run-time
+        parameters, :func:`._push.push_parameters`), as ``fmscal export ros2-control --push`` does."""
+        node = self.settings.push_controller
+        if not node:
+            return False, "push refused: set the parameter push_controller (with a payload file alone)"
+        node = "/" + node.lstrip("/")
+        with self.pipeline.lock:
+            document = self.pipeline.payload_document()
+        try:
+            exported = ros2_control_parameters(document, self.settings.sensor_frame or "ft_sensor", "world",
+                                               controller=node.rsplit("/", 1)[-1])
+            return True, pushed_line(node, push_parameters(exported, node=node))
+        except FmscalError as err:
+            return False, "push failed: " + (str(err).splitlines()[0] or repr(err))
 
     def _cancel(self):
         """``~/cancel``: a running ``~/identify_payload`` stopped."""

@@ -124,6 +124,10 @@ PARAMETERS = (
               "reading in 3D, off otherwise"),
     Parameter("save_path", "string", "", "~/save: where the calibration is written (with a payload file alone: "
               "a payload file); empty: ~/save refuses"),
+    Parameter("push_controller", "string", "", "with a payload file alone: the node of a running ros2_control "
+              "force_torque_sensor_broadcaster (/force_torque_sensor_broadcaster); ~/push, and each ~/identify_payload "
+              "or ~/reidentify that succeeds, set its tool.*, offset.* and multiplier.* to the payload in use (as "
+              "fmscal export ros2-control --push); empty: no push"),
     Parameter("identify_buffer", "double", 120.0, "s, the motion and readings ~/identify_payload keeps, the newest"),
     Parameter("diagnostics_period", "double", 1.0, "s between two diagnostics on /diagnostics"),
     Parameter("debug_latency", "bool", False, "publish ~/latency (std_msgs/Float64MultiArray per output: s from "
@@ -221,6 +225,9 @@ def settings(values):
                         f"{values['contact_threshold']!r}")
     if values["latency"] is not None and not np.isfinite(values["latency"]):
         raise Ros2Error(f"parameter latency must be a finite number of seconds; got {values['latency']!r}")
+    if values["push_controller"] and (values.get("calibration") or not values.get("payload")):
+        raise Ros2Error("parameter push_controller pushes a payload file's payload (S the identity): give payload "
+                        "alone, no calibration")
     if values["queue_depth"] < 1:
         raise Ros2Error(f"parameter queue_depth must be at least 1; got {values['queue_depth']}")
     values["gravity"] = _vector(values, "gravity", (3,))

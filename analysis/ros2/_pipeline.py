@@ -1136,7 +1136,7 @@ class Pipeline:
             b = None if self.compensator is None else self.compensator.offset
             st, identified = self.setup, self.identified
             if not self.settings.calibration:
-                document = _payload_document(self.estimate, st, b)
+                document = self.payload_document()
             else:
                 document = replace(self.calibration, b=self.calibration.b if b is None else b,
                                    payload=st.payload or self.calibration.payload, date=None,
@@ -1154,6 +1154,12 @@ class Pipeline:
         mass = st.payload.mass if st.payload is not None else self.calibration.payload.mass
         return True, f"saved {path}{what}: offset " + " ".join(f"{v:.6g}" for v in offset) + \
             ("" if identified is None else f", the identified payload (mass {mass:.4g} kg)")
+
+    def payload_document(self):
+        """The payload file ``~/save`` writes with a payload file alone (:class:`PayloadEstimate`): the payload and
+        the offset in use, with their uncertainty (lock held, or taken here)."""
+        b = None if self.compensator is None else self.compensator.offset
+        return _payload_document(self.estimate, self.setup, b)
 
     def reload(self):
         """``(success, message)`` of ``~/reload``: the calibration (and payload) files read again."""
@@ -1199,7 +1205,8 @@ def _identified_setup(st, payload, result, b):
 def _payload_document(estimate, st, b):
     """The payload file ``~/save`` writes with a payload file alone: ``estimate`` (the file read at start) with
     the payload in use, its sds (the diagonal of the setup's covariance, K2), and the offset in use ``b``."""
-    payload, cov = st.payload, np.array(estimate.tracked().cov if estimate.cov is not None else st.cov, dtype=float)
+    payload = st.payload if st.payload is not None else st.calibration.payload     # the file's own (K1), or a fit's
+    cov = np.array(estimate.tracked().cov if estimate.cov is not None else st.cov, dtype=float)
     if st.cov is not None:
         cov[:10, :] = cov[:, :10] = 0.0
         cov[:10, :10] = st.cov[:10, :10]

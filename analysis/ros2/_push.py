@@ -10,10 +10,9 @@ here in one atomic call: all of them, or none and the controller's reason.
 import os
 import re
 
-from ._node import ros
 from ._parameters import Ros2Error
 
-__all__ = ["push_parameters"]
+__all__ = ["push_parameters", "pushed_line"]
 
 #: A ROS 2 node's fully qualified name: a namespace and a name, no wildcard.
 _NODE = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
@@ -51,6 +50,7 @@ def push_parameters(exported, node=None, timeout=5.0, domain_id=None):
                         f"wildcard); got {target!r}")
     if not (isinstance(timeout, (int, float)) and timeout > 0):
         raise Ros2Error(f"timeout must be a positive number of seconds; got {timeout!r}")
+    from ._node import ros                             # (the node's module imports this one)
     r = ros()
     from rcl_interfaces.srv import SetParametersAtomically
     context = r.Context()
@@ -79,3 +79,10 @@ def push_parameters(exported, node=None, timeout=5.0, domain_id=None):
         if pusher is not None:
             pusher.destroy_node()
         r.rclpy.try_shutdown(context=context)
+
+
+def pushed_line(node, pushed):
+    """One line saying what :func:`push_parameters` set on ``node``."""
+    tool = {k.rsplit(".params.", 1)[-1]: v for k, v in pushed.items() if ".params.tool." in k}
+    return (f"pushed {len(pushed)} parameters to {node}: tool.mass {tool['tool.mass']:.6g} kg, tool.CoG "
+            + " ".join(f"{v:.6g}" for v in tool["tool.CoG"]) + " m, and the offsets and multipliers")
