@@ -127,8 +127,8 @@ from fmscal.plant.physics import as_model
 from ._cluster_covariance import MIN_BLOCKS, block_length, small_sample_factor
 from ._inverse_dynamics import needed_wrench
 
-__all__ = ["estimate_latency", "LatencyEstimate", "UNDETERMINED_SAMPLES", "AGREEMENT_SIGMAS", "fit_latency",
-           "given_latency_warnings"]
+__all__ = ["estimate_latency", "LatencyEstimate", "UNDETERMINED_SAMPLES", "AGREEMENT_SIGMAS", "CURVATURE_SIGMAS",
+           "fit_latency", "given_latency_warnings"]
 
 #: The latency counts as undetermined when its standard deviation is above this many samples.
 UNDETERMINED_SAMPLES = 3.0
