@@ -333,8 +333,9 @@ def _search(log, model, K, window, start=None):
     factor = small_sample_factor(blocks, len(rows), 1)
     share = np.bincount(blocks) / len(rows)
     curvature_std = float(np.sqrt(factor * np.sum((np.bincount(blocks, eh) - eh.sum() * share) ** 2)))   # (L6)
-    determined = clear and blocks.max() > 0 and curvature > CURVATURE_SIGMAS * curvature_std
-    std = float(np.sqrt(factor * np.sum(scores ** 2)) / curvature) if determined else np.inf          # eq. (L3)
+    determined = clear and curvature > CURVATURE_SIGMAS * curvature_std
+    several = determined and blocks.max() > 0
+    std = float(np.sqrt(factor * np.sum(scores ** 2)) / curvature) if several else np.inf                 # eq. (L3)
     # rule 6's information per block: the Gauss-Newton shares of the curvature
     infos = np.bincount(blocks, info_row) * (curvature / max(float(info_row.sum()), 1e-300))
     # eq. (L4): d[S | c]/d tau of the least-squares fit, in the readings' units
