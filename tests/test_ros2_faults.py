@@ -132,6 +132,38 @@ def test_a_readings_clock_stepping_back_alone_is_withheld(poses):
     assert np.abs(z).max() < BOUND
 
 
+def test_a_motion_gap_seen_late_is_stale_as_when_seen_live(poses):
+    """1000 motion samples lost: fed live (each reading with its pose) and fed late (the motion 1.5 s ahead of
+    the readings, as a node behind its inputs takes them), the readings in the gap are withheld as ``stale``
+    alike, with one "motion stale" line; none as ``motion``; the output comes back after the gap."""
+    from types import SimpleNamespace
+    from fmscal.analysis.ros2 import Pipeline
+    t, w_hat, pose, settings = poses
+    gone = set(range(1500, 2500))
+    live, late = Pipeline(settings()), Pipeline(settings())
+    out_live, out_late, lead = [], [], 1500
+    for i in range(len(t)):
+        if i not in gone:
+            live.add_motion(t[i], pose[i])
+        live.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
+        j = i + lead
+        if j < len(t) and j not in gone:
+            late.add_motion(t[j], pose[j])
+        if i == 0:
+            for k in range(lead):
+                if k not in gone:
+                    late.add_motion(t[k], pose[k])
+        late.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
+        if i % 7 == 6 or i == len(t) - 1:
+            out_live += live.process()
+            out_late += late.process()
+    for pipeline, out in ((live, out_live), (late, out_late)):
+        s = _ledger(pipeline)
+        assert 900 <= s.withheld["stale"] <= 1000 and s.withheld["motion"] <= 2, s.withheld
+        assert sum("motion stale" in m for _, m in pipeline.notices) == 1
+        assert max(o.sample.t for o in out) > t[2500] + 0.2
+
+
 def test_faster_readings_are_decimated_as_stated(poses, tmp_path):
     """Readings at 1 kHz with max_rate 400 Hz: every third compensated (stated once), the others counted as
     decimated, the outputs at 333 Hz right within 5 sd."""

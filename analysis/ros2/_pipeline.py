@@ -12,7 +12,9 @@ motion's newest sample reaches ``t``; the motion is then interpolated at ``t`` (
 rates and specific force linearly) and the reading is pushed into :class:`fmscal.analysis.Compensator` with it.
 A reading the motion has not reached when a reading ``stale_timeout`` s newer arrives is pushed with no motion:
 the motion is stale, and the compensator, which never extrapolates, stops the output until the motion covers
-its window again.
+its window again. A reading inside a gap of the motion longer than ``stale_timeout`` is withheld as ``stale``
+too, where the motion came back before the reading was taken (a node behind its inputs sees the gap late): the
+cause is the same whatever the node's load.
 
 The streams' breaks. The readings go to the compensator in the order they came, and it owns their stamps'
 events (:attr:`fmscal.analysis.Compensator.events`: a duplicate dropped, a gap filled, a stamp stepping back or a
@@ -364,6 +366,7 @@ class Pipeline:
         self.contact = False
         self.last_sample = None
         self.stale = False
+        self._stale_gap = None                         # the start of the newest motion gap said stale, seen late
         self.restarting = False
         self._saturated_at = -np.inf
         self.warnings = []
@@ -746,6 +749,14 @@ class Pipeline:
                     self.stale = True
             elif value is _GAP:
                 value, tag = None, "motion"
+                (t0, _), (t1, _) = self._motion[0], self._motion[1]
+                if t1 - t0 > timeout:                   # the motion was stale here, though it came back before
+                    tag = "stale"                       # this reading was taken (a node behind its inputs)
+                    if self._stale_gap != t0 and not self.stale:      # (not said already, seen live)
+                        self._stale_gap = t0
+                        self._notice("stale", f"motion stale: {self.settings.topic} has no sample for "
+                                              f"{t1 - t0:.3f} s of the readings' stamps (come back before they "
+                                              "were taken); no output for the readings there")
             elif value is None:
                 tag = tag or "motion"
             else:
