@@ -20,6 +20,7 @@ One run per source mixes the short faults (the fast suite); each long fault runs
 """
 
 import re
+import subprocess
 import time
 from dataclasses import dataclass, field
 
@@ -542,7 +543,9 @@ def _feed(listener, domain, plan, case_stamps):
 def test_identify_payload_cancelled_and_a_ctrl_c_stops_the_node(request, tmp_path):
     """``~/identify_payload`` on 20 s held runs in a process of its own: ``~/cancel`` stops it (its call answers
     "cancelled", the payload in use kept); a second call, interrupted by one SIGINT to the node (Ctrl-C), ends
-    the node within a second and leaves no fit behind."""
+    the node and leaves no fit behind (within a second on an idle machine; 1.6 s was seen beside two busy
+    processes: the bound is 10 s, well before a user's second Ctrl-C). A node still running 30 s after the SIGINT
+    dumps its threads' stacks into the failure."""
     import signal as signals
     domain = domain_id(request.node.name)
     cal = tool_calibration(tmp_path / "cal.json")
@@ -559,19 +562,36 @@ def test_identify_payload_cancelled_and_a_ctrl_c_stops_the_node(request, tmp_pat
             answer = listener.answer(fit, 60)
             _feed(listener, domain, dict(plan, duration=10.0, seed=5), 20001 + 10001)
             listener.call_async("identify_payload")
-            assert listener.wait_for(lambda: node_log(proc).count("~/identify_payload: fitting") == 2, 60)
-            assert listener.wait_for(lambda: _children(proc.pid), 60)     # the fit's process started
+            assert listener.wait_for(lambda: node_log(proc).count("~/identify_payload: fitting") == 2, 60), \
+                node_log(proc)[-6000:]
+            assert listener.wait_for(lambda: _children(proc.pid), 60), node_log(proc)[-6000:]   # the fit's process
             workers = _children(proc.pid)
             stopped = time.monotonic()
             proc.send_signal(signals.SIGINT)
-            proc.wait(timeout=30)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:           # every thread's stack on its stderr (the node registers it)
+                proc.send_signal(signals.SIGUSR1)
+                time.sleep(2.0)
+                pytest.fail(f"the node still runs 30 s after one SIGINT: {node_log(proc)[-12000:]}")
             took = time.monotonic() - stopped
         finally:
             listener.close()
     assert cancelled == (True, "cancelled the running identify_payload; the payload in use kept"), cancelled
     assert answer == (False, "identify_payload cancelled (~/cancel); the payload in use kept"), answer
     assert workers and not any(_alive(pid) for pid in workers), workers
-    assert took < 1.0, f"the node took {took:.2f} s to stop after one SIGINT"
+    assert took < 10.0, f"the node took {took:.2f} s to stop after one SIGINT"
+
+
+def test_a_worker_closed_starts_no_fit():
+    """The node stopping (``Worker.close``) before a ``~/identify_payload`` call reaches the fit: the call raises
+    ``Cancelled`` and starts no process (else the fit would run to its end and hold the node's exit)."""
+    from fmscal.analysis.ros2._worker import Cancelled, Worker
+    worker = Worker()
+    worker.close()
+    with pytest.raises(Cancelled):
+        worker.run(None, None)
+    assert worker._proc is None and not worker.running
 
 
 def _children(pid):

@@ -37,6 +37,7 @@ class Worker:
         self._proc = None
         self._lock = threading.Lock()
         self._cancelled = threading.Event()
+        self._closed = False                            # the node stopping: no fit starts after it
         self.running = False
 
     def _start(self):
@@ -57,6 +58,8 @@ class Worker:
             The child died or answered nothing (its cause in the message).
         """
         with self._lock:
+            if self._closed:                            # closed before this call reached here: not started
+                raise Cancelled()
             self._cancelled.clear()
             proc = self._start()
             self.running = True
@@ -91,8 +94,9 @@ class Worker:
             return running
 
     def close(self):
-        """Kill the child (the node stopping)."""
+        """Kill the child (the node stopping); a :meth:`run` called after it raises :class:`Cancelled`."""
         with self._lock:
+            self._closed = True
             self._cancelled.set()
             self._kill()
 
