@@ -299,6 +299,7 @@ class _Detector:
         self._blocks = deque(maxlen=self.max_age + self.P + self.G + 1)          # (t, G, g, s, a_g) per block
         self._first = 0                                    # the absolute index of the deque's first block
         self._pinned = None
+        self._last_flag = None                             # (an index of the window emptied: none of the new)
 
     # --- rows in --------------------------------------------------------------------------------------------
     def add(self, t, w_hat, motion, rows):

@@ -161,3 +161,8 @@ def test_the_node_pushes_its_payload(request, tmp_path):
                   push_controller="/force_torque_sensor_broadcaster")
     with pytest.raises(Ros2Error, match="^parameter push_controller pushes a payload file's payload"):
         settings(values)
+    values.update(calibration="", push_controller="/ns/force_torque_sensor_broadcaster")
+    assert settings(values).push_controller == "/ns/force_torque_sensor_broadcaster"
+    for bad in ("*", "/ns/*_broadcaster", "force torque"):           # checked at start, not at the first push
+        with pytest.raises(Ros2Error, match=r"^parameter push_controller must be a node's name .*got"):
+            settings(dict(values, push_controller=bad))

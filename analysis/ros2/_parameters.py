@@ -5,6 +5,7 @@ by the checks below, which turn the values the node got into :class:`Settings` o
 :class:`Ros2Error`.
 """
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,6 +15,9 @@ from fmscal.plant.numerics import FmscalError
 from .._compensate import CAUSAL_DELAY, CAUSAL_WINDOW, DIRECTIONS, FALSE_ALARM
 from .._tool_change import TOOL_CHANGE
 from .._motion import quaternion_to_matrix
+
+#: A node's full name (namespaces and all, no wildcard): ``push_controller`` and the push's target.
+FULL_NAME = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
 
 __all__ = ["NODE_NAME", "PARAMETERS", "Parameter", "Ros2Error", "Settings", "settings", "QOS", "OUTPUT_FRAMES",
            "MOTION_SOURCES"]
@@ -228,6 +232,9 @@ def settings(values):
     if values["push_controller"] and (values.get("calibration") or not values.get("payload")):
         raise Ros2Error("parameter push_controller pushes a payload file's payload (S the identity): give payload "
                         "alone, no calibration")
+    if values["push_controller"] and not FULL_NAME.match("/" + values["push_controller"].lstrip("/")):
+        raise Ros2Error(f"parameter push_controller must be a node's name such as force_torque_sensor_broadcaster "
+                        f"(no wildcard); got {values['push_controller']!r}")
     if values["queue_depth"] < 1:
         raise Ros2Error(f"parameter queue_depth must be at least 1; got {values['queue_depth']}")
     values["gravity"] = _vector(values, "gravity", (3,))

@@ -8,16 +8,11 @@ here in one atomic call: all of them, or none and the controller's reason.
 """
 
 import os
-import re
 
-from ._parameters import Ros2Error
+from ._parameters import FULL_NAME, Ros2Error
 from ._rclpy import ros
 
 __all__ = ["push_parameters", "pushed_line"]
-
-#: A ROS 2 node's fully qualified name: a namespace and a name, no wildcard.
-_NODE = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
-
 
 def push_parameters(exported, node=None, timeout=5.0, domain_id=None):
     """Set an export's run-time parameters on a running broadcaster, atomically.
@@ -46,7 +41,7 @@ def push_parameters(exported, node=None, timeout=5.0, domain_id=None):
     """
     controller, values = exported.runtime()
     target = node if node is not None else "/" + controller.lstrip("/")
-    if not (isinstance(target, str) and _NODE.match(target)):
+    if not (isinstance(target, str) and FULL_NAME.match(target)):
         raise Ros2Error(f"the broadcaster's node must be a name such as /force_torque_sensor_broadcaster (no "
                         f"wildcard); got {target!r}")
     if not (isinstance(timeout, (int, float)) and timeout > 0):
