@@ -26,7 +26,11 @@ the blocks' scatter is within about 1.3x the stated sd (``benchmarks/tool_change
 the misfit's scale below absorbs it.
 
 **The hypotheses.** For a candidate time ``tau`` (a block's start), the window is :data:`PRE` s before
-``tau`` (less a guard of :data:`GUARD` s just before it, where a grasp is under way) and every block since::
+``tau`` (less a guard of :data:`GUARD` s just before it, where a grasp is under way) and every block since; where
+fewer blocks are kept before it (the first ``PRE + GUARD`` s of a stream, or of a restart), those there are, at least
+:data:`MIN_PRE` s: a part grasped then is tested against blocks without it, not against blocks that already hold
+its weight (a window that holds the part's weight at one attitude before ``tau`` sees, once the arm turns, a payload
+step plus a constant wrench, which neither ``H_1`` nor ``H_c`` below fits)::
 
     z_j = A_j beta + A_j,K phi [j >= tau] + eps_j,   eps_j ~ N(0, I)                               (T3)
 
@@ -43,7 +47,7 @@ mass and :data:`PRIOR_COM` m of its centre of mass)::
 
 without it, a window whose blocks before ``tau`` hold one attitude could not tell a new payload from an old one
 that was always so with an offset that jumped. The inertia and the offset's errors are free. The misfit
-per degree of freedom of ``H_1`` and the change's time::
+per degree of freedom of ``H_1`` (``n_tau`` the window's blocks) and the change's time::
 
     kappa(tau) = RSS_1(tau) / (6 n_tau - 26),    tau_hat = argmax {Lambda(tau) : kappa(tau) <= kappa_max}   (T4)
 
@@ -142,6 +146,9 @@ FALSE_ALARM_RATE = 1e-3
 MISFIT = 4.0
 #: A change's last blocks: at least this many since ``tau`` before it is tested, s.
 MIN_POST = 0.2
+#: The shortest window before a candidate (T3), s, where fewer than :data:`PRE` s of blocks are kept (the stream's
+#: start, a restart): with :data:`MIN_POST` after it, more blocks than the hypotheses' 26 numbers (T4).
+MIN_PRE = 0.3
 #: The nuisance's payload errors (T3'): at least this share of the mass, and this distance of the centre of mass, m.
 PRIOR_MASS = 0.01
 PRIOR_COM = 0.002
@@ -273,6 +280,7 @@ class _Detector:
         self.block_s = self.n * dt
         self.P, self.G = int(round(PRE / self.block_s)), int(round(GUARD / self.block_s))
         self.S, self.min_post = int(round(SEARCH / self.block_s)), max(1, int(round(MIN_POST / self.block_s)))
+        self.min_pre = min(self.P, max(1, int(round(MIN_PRE / self.block_s))))
         self.max_age = int(round(MAX_AGE / self.block_s))
         self.h = threshold(3600.0 / self.block_s, self.S + 1)
         self.events = []
@@ -345,7 +353,9 @@ class _Detector:
     def _evaluate(self):
         blocks, first = self._blocks, self._first
         end = first + len(blocks)                          # absolute index one past the newest block
-        lowest = first + self.P + self.G
+        # the earliest candidate: its whole pre-window kept; before PRE s of blocks since the reset, the shorter
+        # pre-window of the blocks there are, MIN_PRE s at least (T3)
+        lowest = first + self.P + self.G if first else self.min_pre + self.G
         if self._pinned is not None and self._pinned < lowest:
             self._pinned = None                            # older than the blocks kept (MAX_AGE): given up
         if self._pinned is None and (self._last_flag is None or self._last_flag < end - self.S - 1):
@@ -356,7 +366,8 @@ class _Detector:
         if not taus:
             return
         taus = np.array(taus)
-        lo = taus.min() - self.P - self.G
+        starts = np.maximum(taus - self.P - self.G, 0)     # each candidate's pre-window, from the reset's block on
+        lo = int(starts.min())
         kept = list(blocks)[lo - first:]
         G = np.array([b[1] for b in kept])
         g = np.array([b[2] for b in kept])
@@ -364,7 +375,7 @@ class _Detector:
         cg = np.concatenate([np.zeros((1, 16)), np.cumsum(g, axis=0)])
         cs = np.r_[0.0, np.cumsum([b[3] for b in kept])]
         k, e = taus - lo, end - lo                          # relative indices
-        w0, w1 = k - self.P - self.G, k - self.G
+        w0, w1 = starts - lo, k - self.G
         Np, bp, sp = cG[e] - cG[k], cg[e] - cg[k], cs[e] - cs[k]
         Nw = Np + cG[w1] - cG[w0] + self._information                                         # (T3')
         bw, sw = bp + cg[w1] - cg[w0] + self._prior_b, sp + cs[w1] - cs[w0] + self._prior_s
@@ -383,7 +394,7 @@ class _Detector:
             return rss0[rows] - np.einsum("ni,ni->n", reduced[rows][:, K], phi), phi, M
         every = np.arange(len(taus))
         rss1, phi, M1 = fit(_STEP, every)
-        kappa = rss1 / (6 * (e - k + self.P) - 26)
+        kappa = rss1 / (6 * (e - k + w1 - w0) - 26)
         scales = np.maximum(kappa, 1.0)
         ratios = (fit(_INERTIA, every)[0] - rss1) / scales                                     # (T5)
         explained = kappa <= MISFIT

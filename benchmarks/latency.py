@@ -7,6 +7,8 @@ Usage (from the repository's root)::
     python benchmarks/latency.py --seeds 20 --duration 20   # the targets' table (a few minutes of CPU per seed)
     python benchmarks/latency.py --held --seeds 3 --duration 60   # the wrench held over each step (MuJoCo):
                                                         # E at the default against E over a grid of latencies
+    python benchmarks/latency.py --noisy --seeds 12     # paper logs with their noise scaled (issue 46):
+                                                        # the latency's own z-scores, or not determined
 
 The table: for each source of logs (``simulate``'s ``spatial-arm`` and
 ``spatial-mocap``, and MuJoCo's ``spatial-arm``, ``tests/mujoco_log.py``, its
@@ -41,6 +43,18 @@ the smallest E over a grid of latencies given (0 to 1 ms), for the floor
 and for the EKF, and the EKF's E at the default over its E at ``dt / 2``.
 Target: the default's E within 1.15x of the grid's best. The payload is the simulator's, taken as exact
 (``PayloadStd.exact()``): ``S_std``'s statistical part is what the z-scores test.
+
+``--noisy``: logs of a scenario (``--scenarios``, default ``paper``; 20 s
+unless ``--duration``) with every noise standard deviation scaled (``--noise-scales``,
+default 1, 2 and issue 46's 30), seed by seed with ``--per-seed``: the
+latency's estimate (:func:`fmscal.observers.batch.estimate_latency`, no
+calibration), how many seeds it is determined on, its z-scores' rms and
+largest magnitude over those, and the errors where it is not determined
+(the noise's own minimum: what a calibration aligned there would be off by),
+and how many of those are a latency changing along the log (rule 6; a
+false step where the true latency is constant).
+Target: no determined seed more than 3 of its standard deviations off, the
+z-scores' rms within [0.5, 1.35] (the seeds of every scale pooled).
 """
 
 import argparse
@@ -192,6 +206,49 @@ def held(seeds, duration, grid=GRID, methods=("max-likelihood", "ekf")):
     return rows
 
 
+#: ``--noisy``'s noise scales: as the scenario has it, twice, and issue 46's thirty times.
+NOISE_SCALES = (1.0, 2.0, 30.0)
+
+
+def noisy(seeds, duration=20.0, scales=NOISE_SCALES, scenarios=("paper",), per_seed=False):
+    """Rows of the ``--noisy`` report, one per scenario and noise scale (module docstring)."""
+    from fmscal.observers.batch import CURVATURE_SIGMAS, estimate_latency
+    from fmscal.plant import SCENARIOS, SPATIAL_SCENARIOS
+    rows = []
+    for name in scenarios:
+        for scale in scales:
+            scenario = {**SCENARIOS, **SPATIAL_SCENARIOS}[name].with_(duration=duration).with_noise_scaled(scale)
+            z, undetermined, steps = [], [], 0
+            for seed in range(seeds):
+                log, truth, _ = scenario.generate(seed)
+                found = estimate_latency(log, scenario.model())
+                error = found.latency - truth.latency
+                steps += found.step is not None
+                if found.determined:
+                    z.append(error / found.std)
+                else:
+                    undetermined.append(error)
+                if per_seed:
+                    ratio = found.curvature[0] / found.curvature[1] if found.curvature else np.nan
+                    print(f"{name:>8} x{scale:<4g} seed {seed:2d}  latency error {error * 1e3:+8.3f} ms  " + (
+                        f"{z[-1]:+.2f} sd of {found.std * 1e3:.3f} ms" if found.determined else
+                        "not determined: a step along the log" if found.step is not None else
+                        f"not determined: its curvature {ratio:.1f} of its sd" if ratio <= CURVATURE_SIGMAS else
+                        "not determined: no clear minimum, or its std above 3 samples"), flush=True)
+            rows.append({"scenario": name, "noise_scale": scale, "seeds": seeds, "determined": len(z), "z": z,
+                         "steps": steps,
+                         "z_rms": float(np.sqrt(np.mean(np.square(z)))) if z else np.nan,
+                         "z_max": float(np.max(np.abs(z))) if z else np.nan,
+                         "undetermined_error_median": float(np.median(np.abs(undetermined))) if undetermined
+                         else np.nan})
+            r = rows[-1]
+            print(f"{name:>8} x{scale:<4g} determined on {r['determined']}/{seeds}: latency z rms {r['z_rms']:.2f}, "
+                  f"largest |z| {r['z_max']:.2f}; not determined: median |error| "
+                  f"{r['undetermined_error_median'] * 1e3:.3g} ms, {steps} of them a step along the log (rule 6)",
+                  flush=True)
+    return rows
+
+
 def _line(row):
     return (f"{row['source']:>14} {row['latency_samples']:+5.1f}  E ratio max {row['E_ratio_max']:.3f} median "
             f"{row['E_ratio_median']:.3f}  z rms {row['z_rms']:.2f} (known latency {row['z_rms_known']:.2f})  "
@@ -211,6 +268,11 @@ def main(argv=None):
                         help="MuJoCo's logs with the wrench held over each step: E at the default against a grid of "
                              "latencies, for the floor and the EKF")
     parser.add_argument("--latencies", nargs="+", type=float, default=list(LATENCIES), help="true latencies, samples")
+    parser.add_argument("--noisy", action="store_true",
+                        help="logs with their noise scaled: the latency's own z-scores, or not determined")
+    parser.add_argument("--noise-scales", nargs="+", type=float, default=list(NOISE_SCALES), metavar="F",
+                        help="with --noisy: the factors every noise standard deviation is scaled by")
+    parser.add_argument("--scenarios", nargs="+", default=["paper"], help="with --noisy: the scenarios")
     parser.add_argument("--per-seed", action="store_true",
                         help="print each seed, with E at the known latency moved by one standard deviation of the "
                              "estimate towards it (a third calibration per seed)")
@@ -219,6 +281,14 @@ def main(argv=None):
         print(f"{args.seeds} seeds of {args.duration:g} s, the wrench held over each step; target: E at the default "
               "within 1.15x of the grid's best")
         held(args.seeds, args.duration)
+        return
+    if args.noisy:
+        print(f"{args.seeds} seeds of {args.duration:g} s; target: no determined seed beyond 3 sd, z rms in "
+              "[0.5, 1.35]")
+        rows = noisy(args.seeds, args.duration, args.noise_scales, args.scenarios, args.per_seed)
+        z = [v for r in rows for v in r["z"]]
+        if z:
+            print(f"pooled: {len(z)} determined, latency z rms {np.sqrt(np.mean(np.square(z))):.2f}")
         return
     if args.timing:
         t = timing()

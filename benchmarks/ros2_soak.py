@@ -9,7 +9,9 @@ process takes every output, its covariance and flag, and the node's diagnostics,
 memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
 
 - whether the node was alive at the end;
-- the outputs, and those unflagged beyond 5 sd of the truth (the target: none);
+- the outputs, and those unflagged beyond 5 sd of the truth (the target: none) beside the count Gaussian noise at
+  the stated sd gives on average (each output's channels, two-sided: ``2 Phi(-5)`` each; about 2 in ten minutes of
+  six channels at 1 kHz, so a rare one is the noise's, not the node's), and the largest unflagged ``|z|``;
 - the rms z-score over the outputs away from every fault (the window and the delay either side);
 - the ledger: ``received = published + withheld + waiting`` (exact), and the readings lost;
 - the resident memory at minute 2 and at the end, and its growth (the target: under 20 MB; with ``--minutes``
@@ -28,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import norm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
@@ -128,6 +131,8 @@ def soak(source, minutes, seed):
     last = [m for _, m in memory if m is not None]
     return dict(source=source, minutes=minutes, faults=len(plan_faults), alive=alive, outputs=int(len(t)),
                 unflagged_beyond=int(((worst > BOUND) & ~flagged).sum()), flagged=int(flagged.sum()),
+                expected_beyond=float(z.size * 2 * norm.sf(BOUND)),
+                largest_unflagged_z=float(worst[~flagged].max()) if (~flagged).any() else None,
                 rms_z_clean=float(np.sqrt(np.mean(z[clean] ** 2))) if clean.any() else None,
                 received=int(status["received"]), published=int(status["published"]), withheld=withheld,
                 waiting=int(status["waiting"]), lost=int(status["lost"]),
@@ -155,7 +160,9 @@ def main():
     for r in results:
         growth = _mb(r["rss_growth_mb"])
         print(f"{r['source']}: {r['minutes']:g} min, {r['faults']} faults; alive {r['alive']}; {r['outputs']} "
-              f"outputs, {r['unflagged_beyond']} unflagged beyond {BOUND:g} sd, {r['flagged']} flagged; rms z "
+              f"outputs, {r['unflagged_beyond']} unflagged beyond {BOUND:g} sd (Gaussian noise at its stated sd "
+              f"gives {r['expected_beyond']:.2g} on average; the largest unflagged |z| "
+              f"{r['largest_unflagged_z']:.2f}), {r['flagged']} flagged; rms z "
               f"(clean) {r['rms_z_clean']:.3f}; received {r['received']} = published {r['published']} + withheld "
               f"{r['withheld']} + waiting {r['waiting']} ({'exact' if r['ledger_exact'] else 'NOT exact'}), lost "
               f"{r['lost']}; resident memory {_mb(r['rss_minute2_mb'])} at minute 2, {_mb(r['rss_end_mb'])} at the "

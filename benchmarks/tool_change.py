@@ -149,17 +149,20 @@ def main():
     again = pool.map(partial(reidentified, cal=cal, S=S, b=b), seeds)
     pool.close()
     print("\n### Re-identified after 6 held attitudes (60 s of spatial-static, tool_change='reidentify', causal)\n")
-    print("| seed | grasp, s | declared after, s | held attitudes | re-identified at, s | mass error, g | mass sd, g | "
-          "centre of mass error, mm | flagged after, % |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| seed | grasp, s | declared after, s | its mass change, g | changes declared | held attitudes | "
+          "re-identified at, s | mass error, g | mass sd, g | centre of mass error, mm | flagged after, % |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     good = 0
     for seed, r in zip(seeds, again):
         if "mass" not in r:
-            print(f"| {seed} | {r['at']:.2f} | {'none' if r['declared'] is None else format(r['declared'], '.2f')} "
-                  "| | not re-identified | | | | |")
+            found = r["declared"] is not None
+            print(f"| {seed} | {r['at']:.2f} | {format(r['declared'], '.2f') if found else 'none'} | "
+                  f"{format(r['declared_mass'] * 1e3, '.1f') if found else ''} | {r['changes']} | | not re-identified "
+                  "| | | | |")
             continue
         good += abs(r["mass"]) <= MASS_WITHIN and r["com"] <= COM_WITHIN
-        print(f"| {seed} | {r['at']:.2f} | {r['declared']:.2f} | {r['poses']} | {r['when']:.1f} | "
+        print(f"| {seed} | {r['at']:.2f} | {r['declared']:.2f} | {r['declared_mass'] * 1e3:.1f} | {r['changes']} | "
+              f"{r['poses']} | {r['when']:.1f} | "
               f"{r['mass'] * 1e3:+.2f} | {r['mass_sd'] * 1e3:.2f} | {r['com'] * 1e3:.2f} | "
               f"{100 * r['contact_after']:.2f} |")
     print(f"\ntarget, mass within {MASS_WITHIN * 1e3:g} g and centre of mass within {COM_WITHIN * 1e3:g} mm: "

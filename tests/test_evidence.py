@@ -126,10 +126,10 @@ def test_calibrate_asks_for_the_evidence_a_run_of_a_method_without_S_std_cannot_
         assert cal.run.converged          # the run alone: it settled; only the evidence says it is not enough
     assert not has_evidence(cal.run, log, truth.payload, offset=True)
     assert not cal.converged
-    # the evidence's line; beside it the latency check's (rule 9): at 30x the noise the log's own latency estimate
-    # is 42 +- 0.7 ms for a true 0 (a known gap of the planar estimate on very noisy logs, docs/status.md)
+    # the evidence's line, and no other: at 30x the noise the log's own latency is not determined (eq. L6 of
+    # observers/batch/_latency.py), so the latency given is not contradicted (it was, by 42 +- 0.7 ms for a true 0)
     assert f"{method}: S_hat did not settle within 5% over the last 20% of the log, or its uncertainty is above 5% " \
         "of it (each reading component in its own scale): record a longer log, or one that turns the payload " \
         "faster" in cal.warnings
-    assert all("did not settle" in w or "latency given" in w for w in cal.warnings), cal.warnings
+    assert len(cal.warnings) == 1, cal.warnings
     assert calibrate(log, truth.payload, method="max-likelihood", latency=0.0).S_std is not None

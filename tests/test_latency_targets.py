@@ -50,3 +50,20 @@ def test_the_issues_timing_cases_are_not_saved_sigma_off():
     assert abs(cal.latency) < 0.5e-3 and cal.converged == known.converged          # the latency adds no doubt
     assert not any("latency" in w for w in cal.warnings)
     assert calibration_error(cal.S, S) <= 1.15 * calibration_error(known.S, S)
+
+
+@pytest.mark.slow
+def test_a_noisy_planar_latency_is_covered_or_not_determined():
+    """Issue 46: 12 seeds of 20 s paper logs at the scenario's noise, twice it and thirty times it
+    (``python benchmarks/latency.py --noisy --seeds 12``). No seed is determined more than 3 of its standard
+    deviations off; at 30x none is determined (the review's 42 +- 0.7 ms for a true 0), at 1x every one is (the
+    rule does not refuse what the log determines). The latency's z-scores pooled over the determined seeds (15
+    of them) have their rms within [0.5, 1.35]: a right std gives [0.65, 1.35] with 95 % over 15 seeds, the upper
+    bound taken from it; the lower allows the std's known lean to the wide side (the scores' variance over
+    blocks, eq. L3, counts the smoothed noise's edges, and eq. L5 adds the windows' difference), and fails a std
+    1.3x wider than it is now (rms 0.66)."""
+    rows = {r["noise_scale"]: r for r in bench.noisy(seeds=12, duration=20.0, scales=(1.0, 2.0, 30.0))}
+    assert rows[1.0]["determined"] == 12 and rows[30.0]["determined"] == 0
+    z = np.concatenate([r["z"] for r in rows.values()])
+    assert np.max(np.abs(z)) <= 3
+    assert 0.5 <= np.sqrt(np.mean(z ** 2)) <= 1.35

@@ -72,7 +72,8 @@ def reidentified(seed, cal, S, b):
     c = compensate(cal, log, causal=True, track_offset=True, tool_change="reidentify")
     first = next((e for e in c.tool_changes if e.declared >= at), None)
     fit = None if first is None else first.reidentified
-    out = {"at": at, "changes": len(c.tool_changes), "declared": None if first is None else first.declared - at}
+    out = {"at": at, "changes": len(c.tool_changes), "declared": None if first is None else first.declared - at,
+           "declared_mass": None if first is None else first.mass_change}
     if fit is not None:
         out.update(mass=fit.mass - total.mass, com=float(np.linalg.norm(np.asarray(fit.com) - total.com)),
                    poses=first.poses, when=first.reidentified_at, mass_sd=fit.mass_std)

@@ -4,6 +4,7 @@ broadcaster and control_toolbox's gravity compensation filter, :func:`fmscal.ana
 import sys
 
 from .._export import GRAVITY_FILTER, ros2_control_parameters
+from ..ros2 import push_parameters, pushed_line
 from ._common import CliError
 from ._files import check_outputs
 
@@ -67,6 +68,5 @@ def cmd_export_ros2_control(args):
             print(f"note: {note}")
         print(f"wrote {args.out} (the parameters of {args.controller})")
     if args.push:
-        from ..ros2._push import push_parameters, pushed_line
         node = "/" + args.controller.lstrip("/")
         print(pushed_line(node, push_parameters(exported, node=node, timeout=args.push_timeout)))

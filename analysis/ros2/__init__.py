@@ -15,9 +15,10 @@ rclpy is imported when the node starts, not with this package: the wheels of the
 from ._parameters import (MOTION_SOURCES, NODE_NAME, OUTPUT_FRAMES, PARAMETERS, QOS, Parameter, Ros2Error, Settings,
                           settings)
 from ._pipeline import FLAGS, LEVELS, STATES, WITHHELD, Output, Pipeline, Snapshot, fit_held, sensor_pose
-from ._node import INSTALL, spin, unknown_parameters
-from ._push import push_parameters
+from ._node import spin, unknown_parameters
+from ._push import push_parameters, pushed_line
+from ._rclpy import INSTALL
 
 __all__ = ["spin", "Pipeline", "settings", "sensor_pose", "PARAMETERS", "Parameter", "NODE_NAME", "STATES",
            "LEVELS", "WITHHELD", "FLAGS", "Snapshot", "Output", "fit_held", "unknown_parameters", "Ros2Error",
-           "push_parameters"]
+           "push_parameters", "pushed_line"]

@@ -36,7 +36,6 @@ import time
 import traceback
 from collections import deque
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -45,14 +44,13 @@ from fmscal.plant.numerics import FmscalError
 from .._export import ros2_control_parameters
 from .._motion import ImuMotion, JointMotion, PoseMotion
 from ._parameters import NODE_NAME, PARAMETERS, Ros2Error, settings
+from ._rclpy import ros
 from ._pipeline import FLAGS, LEVELS, Pipeline, motion_source, sensor_pose, state_of
 from ._push import push_parameters, pushed_line
 from ._worker import Cancelled, Worker
 
-__all__ = ["ros", "CompensatorNode", "spin", "INSTALL", "unknown_parameters"]
+__all__ = ["CompensatorNode", "spin", "unknown_parameters"]
 
-#: How to get rclpy, as the one-line error says where it is missing.
-INSTALL = 'pip install "fmscal[ros2]" (-e ".[ros2]" in a clone), or source a ROS 2 install (Humble, Jazzy)'
 #: s between two of one warning in the log.
 WARN_EVERY = 2.0
 #: The longest wait for an input's message, s (:meth:`CompensatorNode.poll` then sees whether to stop).
@@ -68,48 +66,6 @@ LATENCY_KEPT = 2000
 BEHIND = 0.25
 #: The parameters rclpy declares on every node (not the node's to refuse).
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
-
-
-def ros():
-    """rclpy and the messages the node uses, imported now; a one-line :class:`Ros2Error` where missing."""
-    try:
-        import rclpy
-        import rclpy.node
-        from rclpy.context import Context
-        from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-        from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
-        from rclpy.parameter import Parameter
-        from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
-        from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-        from geometry_msgs.msg import PoseStamped, WrenchStamped
-        from sensor_msgs.msg import Imu, JointState
-        from std_msgs.msg import Float64MultiArray, MultiArrayDimension
-        from std_srvs.srv import Trigger
-        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-    except ImportError as err:
-        raise Ros2Error(f"fmscal ros2 needs rclpy and the ROS 2 messages ({err.name or err} not found): "
-                        f"{INSTALL}") from None
-    try:                                       # rclpy's wait set (private; Humble and later have it)
-        from rclpy.impl.implementation_singleton import rclpy_implementation
-        WaitSet = rclpy_implementation.WaitSet
-    except (ImportError, AttributeError):
-        WaitSet = None
-    try:                                       # the subscriptions' QoS events (Iron and later: matched too)
-        from rclpy.event_handler import SubscriptionEventCallbacks
-        from rclpy.event_handler import qos_policy_name_from_kind
-    except ImportError:
-        SubscriptionEventCallbacks = qos_policy_name_from_kind = None
-    return SimpleNamespace(rclpy=rclpy, Node=rclpy.node.Node, WaitSet=WaitSet, Context=Context,
-                           Group=MutuallyExclusiveCallbackGroup, Events=SubscriptionEventCallbacks,
-                           policy_name=qos_policy_name_from_kind,
-                           Shutdown=ExternalShutdownException, Executor=MultiThreadedExecutor,
-                           Single=SingleThreadedExecutor, Parameter=Parameter,
-                           QoSProfile=QoSProfile, Reliability=ReliabilityPolicy, History=HistoryPolicy,
-                           Durability=DurabilityPolicy, Descriptor=ParameterDescriptor,
-                           SetResult=SetParametersResult, PoseStamped=PoseStamped,
-                           WrenchStamped=WrenchStamped, Imu=Imu, JointState=JointState, Array=Float64MultiArray,
-                           Dimension=MultiArrayDimension, Trigger=Trigger, DiagnosticArray=DiagnosticArray,
-                           DiagnosticStatus=DiagnosticStatus, KeyValue=KeyValue)
 
 
 _TYPES = {"string": "STRING", "double": "DOUBLE", "integer": "INTEGER", "bool": "BOOL", "double_array": "DOUBLE_ARRAY"}

@@ -885,7 +885,7 @@ class Pipeline:
         st = c.setup
         self.setup = replace(self.setup, payload=st.payload, cov=st.cov, inertia_bounded=st.inertia_bounded,
                              warnings=[])
-        self.model, self.identified = c.model, {"payload": st.payload}
+        self.model, self.identified = compensation_model(self.calibration, st.payload), {"payload": st.payload}
         self._condition("tool_change", None)
         if c.tool_changes and c.tool_changes[-1].reidentified is not None:
             self.tool_change = self._described(c.tool_changes[-1])

@@ -11,6 +11,7 @@ import os
 import re
 
 from ._parameters import Ros2Error
+from ._rclpy import ros
 
 __all__ = ["push_parameters", "pushed_line"]
 
@@ -50,7 +51,6 @@ def push_parameters(exported, node=None, timeout=5.0, domain_id=None):
                         f"wildcard); got {target!r}")
     if not (isinstance(timeout, (int, float)) and timeout > 0):
         raise Ros2Error(f"timeout must be a positive number of seconds; got {timeout!r}")
-    from ._node import ros                             # (the node's module imports this one)
     r = ros()
     from rcl_interfaces.srv import SetParametersAtomically
     context = r.Context()

@@ -9,7 +9,8 @@ from ._inverse_dynamics import (InverseDynamicsFit, fit_inverse_dynamics, fit_re
     UNDETERMINED_STD, READING_NAMES, nominal_motion, smoothed_channels, needed_wrench, needed_wrenches, reading_rate)
 from ._least_squares import (LeastSquares, InverseDynamicsLeastSquares, SpatialLeastSquares, FitReport, phi_to_S_map,
                              EXCITATION_COND_LIMIT, CONSISTENCY_RATIO_LIMIT, LEAST_SQUARES_ENGINES)
-from ._latency import (estimate_latency, LatencyEstimate, fit_latency, given_latency_warnings, AGREEMENT_SIGMAS)
+from ._latency import (estimate_latency, LatencyEstimate, fit_latency, given_latency_warnings, AGREEMENT_SIGMAS,
+                       CURVATURE_SIGMAS)
 from ._payload_sensitivity import (PayloadSensitivity, payload_sensitivity)
 from ._max_likelihood import (MaximumLikelihoodFit, fit_max_likelihood, log_steps)
 from ._linearised_floor import (fit_linearised, undetermined_directions, configuration_residuals, error_layout)

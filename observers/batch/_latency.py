@@ -25,18 +25,51 @@ The rule.
    ``tau_0 = (k* + (J(k*-1) - J(k*+1)) / (2 (J(k*-1) - 2 J(k*) + J(k*+1)))) dt``,
    the fraction clipped to one sample. No clear minimum (``k*`` at ``+-K``,
    or the parabola not convex): the latency is undetermined.
-3. Two Gauss-Newton steps on the residual sum of squares weighted by each
+3. Two Newton steps on the residual sum of squares weighted by each
    component's residual variance ``s_c^2``: with ``g_k = (I - P) w'(t_k + tau)``
-   (the time derivative of the needed wrench, ``P`` the projection on the
-   readings ``[w_hat; 1]``), ``tau <- tau - sum_kc e_kc g_kc / s_c^2 / sum_kc g_kc^2 / s_c^2``.  (L2)
+   and ``h_k = (I - P) w''(t_k + tau)`` (the time derivatives of the needed
+   wrench, ``P`` the projection on the readings ``[w_hat; 1]``)::
+
+       H = sum_kc (g_kc^2 + e_kc h_kc) / s_c^2,    tau <- tau - sum_kc e_kc g_kc / s_c^2 / H      (L2)
+
+   The curvature ``H`` is the cost's own, not Gauss-Newton's ``sum g^2``:
+   the needed wrench carries the differentiated noise of the poses ``n``
+   in ``e`` and its derivative ``n'`` in ``g``, so ``sum g^2`` counts
+   ``sum n'^2`` as information about ``tau`` (the noise moves with the
+   poses it came from); ``sum e h`` carries ``sum n n'' = -sum n'^2`` (by
+   parts) and takes it out. On noisy poses ``sum n'^2`` is most of
+   ``sum g^2``, and Gauss-Newton's standard deviation was many times too
+   small.
 4. Its variance, cluster-robust over blocks of time (length
-   :func:`block_length` of the residuals, eq. (U2)), with the small-sample
+   :func:`block_length` of the scores, eq. (U2), or longer where the
+   scores' variance grows with the length, eq. (L7)), with the small-sample
    factor (eq. (U3))::
 
-       var(tau) = CR1 * sum_b (sum_{k in b, c} e_kc g_kc / s_c^2)^2 / (sum_kc g_kc^2 / s_c^2)^2   (L3)
+       var(tau) = CR1 * sum_b (sum_{k in b, c} e_kc g_kc / s_c^2)^2 / H^2                  (L3)
 
    The latency is undetermined when its standard deviation exceeds
-   :data:`UNDETERMINED_SAMPLES` samples.
+   :data:`UNDETERMINED_SAMPLES` samples, or when the curvature is not
+   clearly above its own noise: the products of the readings' noise and
+   the differentiated poses' in ``e h`` make ``H`` noisy, and where the
+   motion's own curvature is below that noise, the minimum found is the
+   noise's (it moves from one noisy log to the next, and ``H`` at it is
+   biased upwards by the choice of the lowest point). With ``H_b`` each
+   block's ``sum e h / s^2`` and ``n_b`` its rows (the motion's share,
+   ``sum g^2``, differs from block to block and is not noise)::
+
+       std(H)^2 = CR1 * sum_b (H_b - n_b / N sum_b H_b)^2,   determined only if H > CURVATURE_SIGMAS std(H)   (L6)
+
+   The blocks: the scores' correlation time (eq. U1) is the rows', where
+   the noise's products are white; a weak correlation over the motion's
+   own time (a systematic residual along a slow move) is lost under them
+   and shows only as block sums whose variance grows with the blocks'
+   length. Lengths ``2^j L_0`` (``L_0`` of eq. U2) are tried while
+   :data:`~fmscal.observers.batch.MIN_BLOCKS` blocks remain, and the
+   longest whose variance ``V_j`` exceeds the shortest's by two of its own
+   standard errors is taken::
+
+       V_j = CR1 sum_b s_b^2  (blocks of 2^j L_0),  taken where  V_j > V_0 (1 + 2 sqrt(2 / (G_j - 1)))   (L7)
+
 5. ``d[S | c] / d tau = (X^T X)^-1 X^T w'(t + tau)`` (``X`` the readings
    ``[w_hat; 1]``), for the calibration to carry ``var(tau)`` into ``S_std``.   (L4)
 6. One latency for the whole log: the scores of (L3) summed over
@@ -46,6 +79,8 @@ The rule.
    changes mid-log
    (a dropped or duplicated sample, a clock step). The change is placed at the
    block border that best splits the blocks' scores into two constant latencies.
+   Each block's curvature is its Gauss-Newton share of ``H`` (a part's own
+   ``H`` is too noisy to divide by).
 7. The smoothing window biases the needed wrench a little differently at
    each length: the search is repeated with half the window and half the
    difference of the two estimates is added to the standard deviation::
@@ -89,11 +124,11 @@ from fmscal.plant import Log
 from fmscal.plant.numerics import FmscalError, as_positive_scalar
 from fmscal.plant.physics import as_model
 
-from ._cluster_covariance import block_length, small_sample_factor
+from ._cluster_covariance import MIN_BLOCKS, block_length, small_sample_factor
 from ._inverse_dynamics import needed_wrench
 
-__all__ = ["estimate_latency", "LatencyEstimate", "UNDETERMINED_SAMPLES", "AGREEMENT_SIGMAS", "fit_latency",
-           "given_latency_warnings"]
+__all__ = ["estimate_latency", "LatencyEstimate", "UNDETERMINED_SAMPLES", "AGREEMENT_SIGMAS", "CURVATURE_SIGMAS",
+           "fit_latency", "given_latency_warnings"]
 
 #: The latency counts as undetermined when its standard deviation is above this many samples.
 UNDETERMINED_SAMPLES = 3.0
@@ -109,6 +144,8 @@ STEP_P = 1e-4
 MIN_STEP = 0.5
 #: Rules 8 and 9: the fit's own latency, or a latency given, this many standard deviations from the estimate.
 AGREEMENT_SIGMAS = 3.0
+#: Eq. (L6): the cost's curvature at the estimate must exceed this many of its own standard deviations.
+CURVATURE_SIGMAS = 3.0
 
 
 @dataclass
@@ -137,6 +174,9 @@ class LatencyEstimate:
         disagree (rule 8).
     notes : list of str
         What rule 8 did, in words.
+    curvature : tuple of float or None
+        ``(H, std(H))``: the cost's curvature in the latency at the estimate and its standard deviation
+        (eqs. L2, L6); None without a clear minimum.
     """
 
     latency: float
@@ -148,6 +188,7 @@ class LatencyEstimate:
     warnings: list = field(default_factory=list)
     source: str = "cross-correlation"
     notes: list = field(default_factory=list)
+    curvature: tuple = None
     _blocks: tuple = field(default=None, repr=False)        # rule 6's inputs: scores, information, times, length
 
 
@@ -260,41 +301,77 @@ def _search(log, model, K, window, start=None):
     frac = 0.0
     if clear:
         c_minus, c_0, c_plus = costs[best - 1], costs[best], costs[best + 1]
-        curvature = c_minus - 2 * c_0 + c_plus
-        clear = curvature > 0
+        bend = c_minus - 2 * c_0 + c_plus
+        clear = bend > 0
         if clear:
-            frac = float(np.clip((c_minus - c_plus) / (2 * curvature), -1.0, 1.0))
+            frac = float(np.clip((c_minus - c_plus) / (2 * bend), -1.0, 1.0))
     tau = (best + frac) * dt
     w_dot = np.gradient(w, t_w, axis=0)
+    w_ddot = np.gradient(w_dot, t_w, axis=0)
     t_rows = t_w[rows]
-    for _ in range(2):                                                         # eq. (L2)
+
+    def terms(tau):
+        """Each row's residual ``e``, its derivative's residual ``g``, the weights, and each row's ``e h`` (L2)."""
         e = residual(_interp(t_rows + tau, t_w, w))
         g = residual(_interp(t_rows + tau, t_w, w_dot))
+        h = residual(_interp(t_rows + tau, t_w, w_ddot))
         weight = 1.0 / np.maximum(np.mean(e ** 2, axis=0), 1e-300)
-        information = float(np.sum(g ** 2 * weight))
-        if not clear or information <= 0:
+        return e, g, weight, np.sum(e * h * weight, axis=1)
+
+    for _ in range(2):                                                         # eq. (L2)
+        e, g, weight, eh = terms(tau)
+        curvature = float(np.sum(g ** 2 * weight) + eh.sum())
+        if not clear or curvature <= 0:
             break
-        tau = float(np.clip(tau - np.sum(e * g * weight) / information, -K * dt, K * dt))
-    e = residual(_interp(t_rows + tau, t_w, w))
-    g = residual(_interp(t_rows + tau, t_w, w_dot))
-    weight = 1.0 / np.maximum(np.mean(e ** 2, axis=0), 1e-300)
+        tau = float(np.clip(tau - np.sum(e * g * weight) / curvature, -K * dt, K * dt))
+    e, g, weight, eh = terms(tau)
     per_row = np.sum(e * g * weight, axis=1)                                   # each row's score
-    info_row = np.sum(g ** 2 * weight, axis=1)
-    information = float(info_row.sum())
-    length = _BLOCK_WINDOWS * block_length(per_row[:, None], dt, window)
-    blocks = ((t_rows - t_rows[0]) // length).astype(int)
+    info_row = np.sum(g ** 2 * weight, axis=1)                                 # Gauss-Newton's information
+    curvature = float(info_row.sum() + eh.sum())
+    length, blocks = _score_blocks(per_row, t_rows, _BLOCK_WINDOWS * block_length(per_row[:, None], dt, window))
     scores = np.bincount(blocks, per_row)
-    infos = np.bincount(blocks, info_row)
-    if clear and information > 0 and blocks.max() > 0:                       # eq. (L3)
-        std = float(np.sqrt(small_sample_factor(blocks, len(rows), 1) * np.sum(scores ** 2)) / information)
-    else:
-        std = np.inf
+    factor = small_sample_factor(blocks, len(rows), 1)
+    share = np.bincount(blocks) / len(rows)
+    curvature_std = float(np.sqrt(factor * np.sum((np.bincount(blocks, eh) - eh.sum() * share) ** 2)))   # (L6)
+    determined = clear and curvature > CURVATURE_SIGMAS * curvature_std
+    several = determined and blocks.max() > 0
+    std = float(np.sqrt(factor * np.sum(scores ** 2)) / curvature) if several else np.inf                 # eq. (L3)
+    # rule 6's information per block: the Gauss-Newton shares of the curvature
+    infos = np.bincount(blocks, info_row) * (curvature / max(float(info_row.sum()), 1e-300))
     # eq. (L4): d[S | c]/d tau of the least-squares fit, in the readings' units
     theta_dot = fitted(_interp(t_rows + tau, t_w, w_dot)) / spread[:, None]
     estimate = LatencyEstimate(latency=float(tau), std=std, costs={k * dt: c for k, c in sorted(costs.items())},
-                               dS_dlatency=theta_dot.T, determined=clear)
+                               dS_dlatency=theta_dot.T, determined=determined,
+                               curvature=(curvature, curvature_std) if clear else None)
     estimate._blocks = (scores, infos, t_rows, length)
     return estimate
+
+
+def _score_blocks(per_row, t_rows, shortest):
+    """The blocks of eq. (L3): ``shortest`` (eq. U2) long, or longer where the scores' variance grows with the
+    length (eq. L7, rule 4 of the module docstring).
+
+    Returns
+    -------
+    length : float
+        s.
+    blocks : ndarray of int
+        Each row's block.
+    """
+    def variance(length):
+        blocks = ((t_rows - t_rows[0]) // length).astype(int)
+        return blocks, small_sample_factor(blocks, len(per_row), 1) * np.sum(np.bincount(blocks, per_row) ** 2)
+
+    best_blocks, base = variance(shortest)
+    best = shortest
+    length = 2 * shortest
+    while (t_rows[-1] - t_rows[0]) // length + 1 >= MIN_BLOCKS:
+        blocks, v = variance(length)
+        g = int(blocks.max()) + 1
+        if v > base * (1 + 2 * np.sqrt(2 / (g - 1))):
+            best, best_blocks = length, blocks
+        length *= 2
+    return best, best_blocks
 
 
 def _judge(estimate, dt, K):
@@ -308,6 +385,16 @@ def _judge(estimate, dt, K):
             f"the pose stream's latency is not determined: the delays searched (+-{K * dt * ms:g} ms) span under "
             f"two samples of this log (dt = {dt * ms:g} ms), too few to find a minimum between them; search "
             "further (--max-latency), or give the latency if it is known (--latency)")
+    elif not estimate.determined and estimate.curvature is not None and 0 < estimate.curvature[1] \
+            and estimate.curvature[0] <= CURVATURE_SIGMAS * estimate.curvature[1]:
+        estimate.std = np.inf
+        h, h_std = estimate.curvature
+        estimate.warnings.append(
+            f"the pose stream's latency is not determined: the cost's curvature in the delay at its lowest point, "
+            f"{tau * ms:.3g} ms, is {h / h_std:.1f} of its own standard deviations ({CURVATURE_SIGMAS:g} asked): "
+            "the log's noise, not its motion, places that point, and it moves from one noisy log to the next (too "
+            "little motion for its noise); S may be off by the latency's effect; give the latency if it is known "
+            "(--latency)")
     elif not estimate.determined:
         best = min(estimate.costs, key=estimate.costs.get)
         estimate.std = np.inf
