@@ -55,8 +55,13 @@ stepping back, restarts the window (``restart``): no output until it is full aga
 **Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
 table's fit holds its rows' noise, not a sample's: a :class:`Compensator` given none estimates the poses' from
 their second differences as they come (the model's :meth:`~fmscal.plant.Model.pose_sd` fitted to each column's), and
-the readings' from the first :data:`NOISE_SAMPLES` readings (:func:`fmscal.plant.io.difference_noise`), with no output
-before them.
+the readings' from its first readings, with no output before them, by the rule a log's noise model is measured
+with (:func:`fmscal.plant.io.wrench_noise`, eqs. N1-N3 of ``plant/io/_noise.py``): each channel's sd by the robust
+difference estimate, or, where its spectrum shows a correlation in time (a sensor's filter, an average), the
+spectrum's sd and correlation time. The spectrum needs :func:`fmscal.plant.io.colour_samples` readings (4 s at any
+rate above 160 Hz: 4002 at 1 kHz), the default count; fewer (``noise_samples``, at least
+:data:`NOISE_SAMPLES`), or readings too slow for its bands, take the noise as white with a warning, as a
+coloured noise read by its differences is read small.
 
 **The output's axes and point** (``frame``, ``point``). With ``r_t`` the tool point (sensor axes, from the
 sensor's point) and ``R`` the sensor's attitude (``frame="base"``), the published wrench and its covariance
@@ -146,7 +151,7 @@ from scipy.signal import savgol_coeffs
 from scipy.stats import binom, chi2
 
 from fmscal.plant import Calibration
-from fmscal.plant.io import difference_noise, reading_sign
+from fmscal.plant.io import colour_samples, difference_noise, reading_sign, wrench_noise
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import MODELS, NoiseSpec, regressor, rotation_matrices, sign_continuous, skew
 from fmscal.observers.payload import PayloadEstimate
@@ -189,7 +194,8 @@ DT_TOLERANCE = 0.1
 DT_INTERVALS = 8
 #: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
 POSE_NOISE_EVERY = 100
-#: A payload file's stream without the readings' noise: estimated from this many first readings, no output before.
+#: A payload file's stream without the readings' noise: the fewest first readings it is estimated from (their
+#: differences: white), no output before; by default as many as its colour needs (module docstring, Noise).
 NOISE_SAMPLES = 500
 #: The events :attr:`Compensator.events` counts (module docstring, Stamps).
 EVENTS = ("duplicate", "gap", "restart")
@@ -1111,6 +1117,12 @@ class Compensator:
         The sample time, s (the readings' rate; a motion sample may come with any of them).
     payload, direction, noise, window, delay, order, false_alarm, track_offset, drift_intensity, offset_sd
         As for :func:`compensate` (``noise`` default the calibration's: required where it has none).
+    noise_samples : int, optional
+        Where neither ``noise`` nor the calibration gives the readings' noise of a sample (a payload file's
+        stream): the first readings it is estimated from, no output before (module docstring, Noise); default
+        :func:`fmscal.plant.io.colour_samples` (its correlation in time measured, eqs. N1-N3 of
+        ``plant/io/_noise.py``), or :data:`NOISE_SAMPLES` where the readings are too slow for that. Fewer than the
+        colour needs: the noise taken as white, with a warning. At least :data:`NOISE_SAMPLES`.
     motion : PoseMotion, JointMotion or ImuMotion, optional
         The motion's source (module :mod:`fmscal.analysis._motion`): None, poses of the calibration's latency
         (``push(t, w_hat, pose)``); a :class:`JointMotion` (``push(t, w_hat, joints=(q, dq, ddq))``, ``dq``/``ddq``
@@ -1142,9 +1154,14 @@ class Compensator:
     def __init__(self, setup_, /, dt, *, calibration=None, payload=None, tool_radius=None, direction="on_tool",
                  noise=None, window=CAUSAL_WINDOW, delay=CAUSAL_DELAY, order=CAUSAL_ORDER, false_alarm=FALSE_ALARM,
                  track_offset=False, drift_intensity=None, offset_sd=None, motion=None, frame="sensor", point=None,
-                 tool_change=None):
+                 tool_change=None, noise_samples=None):
         if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
             raise CompensationError(f"dt must be a positive number of seconds; got {dt!r}")
+        if noise_samples is not None and not (isinstance(noise_samples, (int, np.integer))
+                                              and not isinstance(noise_samples, bool)
+                                              and noise_samples >= NOISE_SAMPLES):
+            raise CompensationError(f"noise_samples must be a whole number of readings, at least {NOISE_SAMPLES}; "
+                                    f"got {noise_samples!r}")
         st = setup_ if isinstance(setup_, Setup) else setup(setup_, payload, calibration, tool_radius)
         calibration = st.calibration
         self.model = compensation_model(calibration, st.payload)
@@ -1167,6 +1184,9 @@ class Compensator:
         if noise is None and not st.pose_noise_known and st.calibration.noise is None:
             self._first = []
             noise = NoiseSpec((1.0,) * self.model.n_w)              # replaced once the first readings are in
+            self._colour = colour_samples(float(dt))                # the readings eqs. (N1)-(N3) need; None: too slow
+            self._noise_samples = (int(noise_samples) if noise_samples is not None
+                                   else NOISE_SAMPLES if self._colour is None else max(self._colour, NOISE_SAMPLES))
         noise = _noise(st, noise)
         self._parts = _Parts(calibration, self.model, noise, direction, false_alarm, st.cov)
         self._tracker = _tracker(self._parts, noise, track_offset, drift_intensity, offset_sd,
@@ -1201,6 +1221,12 @@ class Compensator:
     def delay(self):
         """The delay the causal filter adds, s: each output is the wrench of the reading this much older."""
         return round(self._L * self.dt, 12)
+
+    @property
+    def noise(self):
+        """The noise model in use (:class:`fmscal.plant.NoiseSpec`): given, the calibration's, or learned from the
+        first readings (module docstring, Noise: its pose noise then the poses' as they come); None until learned."""
+        return None if self._first is not None else self._noise
 
     # --- input ---------------------------------------------------------------------------------------------------
     def _given(self, pose, joints, imu):
@@ -1456,22 +1482,40 @@ class Compensator:
         return self._var if self._running is None else self._running.variance()
 
     def _learn_noise(self, w_hat):
-        """A payload file's stream without the readings' noise: it from the first :data:`NOISE_SAMPLES` readings
-        (:func:`fmscal.plant.io.difference_noise`, robust to a contact's steps); until then no output."""
+        """A payload file's stream without the readings' noise: it from the first ``noise_samples`` readings, by a
+        log's rule (:func:`fmscal.plant.io.wrench_noise`: the robust difference estimate, robust to a contact's
+        steps, and eqs. N1-N3 where a channel's spectrum is not flat); white, with a warning, where they are fewer
+        than the colour needs or too slow for it (module docstring, Noise). Until then no output."""
         self._first.extend(w_hat)
-        if len(self._first) < NOISE_SAMPLES:
+        if len(self._first) < self._noise_samples:
             return
-        sd = difference_noise(np.array(self._first))
+        first = np.array(self._first)
+        n = len(first)
+        if self._colour is not None and n >= self._colour:
+            sd, tau = wrench_noise(first, self.dt)
+            sd = np.asarray(sd, dtype=float)
+        else:
+            sd, tau = difference_noise(first), None
         if not (sd > 0).all():
             raise CompensationError("the readings' noise estimated from the first readings is zero (a constant or "
                                     "coarsely quantised reading): give noise=plant.NoiseSpec(...)")
-        self._noise = replace(self._noise, wrench_sd=tuple(float(v) for v in sd))
+        self._noise = replace(self._noise, wrench_sd=tuple(float(v) for v in sd), wrench_tau=tau)
         self._parts.set_noise(self._noise)
         if self._tracker is not None and self._default_intensity and self._tracker.tracks_offset:
             self._tracker.shape = DRIFT_INTENSITY * sd                 # (D1)'s default: the noise's sd
             self._tracker.q2 = np.square(self._tracker.shape)
-        self.warnings.append(f"the readings' noise estimated from the first {len(self._first)} readings (sd "
-                             + " ".join(f"{v:.3g}" for v in sd) + "): the payload file holds none of a sample")
+        said = f"the readings' noise estimated from the first {n} readings (sd " + " ".join(f"{v:.3g}" for v in sd)
+        if tau is not None:
+            said += "; correlated in time, tau " + " ".join(f"{v:.3g}" for v in tau) + " samples"
+        self.warnings.append(said + "): the payload file holds none of a sample")
+        if self._colour is None:
+            self.warnings.append(f"readings at {1 / self.dt:.4g} Hz are too slow to measure their noise's correlation "
+                                 "in time: taken as white (a sensor's filter or an average would make the contact "
+                                 "test's sd small)")
+        elif n < self._colour:
+            self.warnings.append(f"the readings' noise taken as white from {n} readings: its correlation in time (a "
+                                 f"sensor's filter, an average) needs {self._colour} ({self._colour * self.dt:.3g} s; "
+                                 "noise_samples); a correlated noise would make the contact test's sd small")
         self._first = None
 
     def _pose_variance(self, rows):

@@ -1,6 +1,6 @@
 """Coloured reading noise over seeds (issue 46 item 2).
 
-Usage: ``python benchmarks/coloured_noise.py [SEEDS] [DURATION] [--ekf]``.
+Usage: ``python benchmarks/coloured_noise.py [SEEDS] [DURATION] [--ekf | --live]``.
 
 On ``spatial-arm`` logs (default 5 seeds, 10 s at 1 kHz) whose reading noise is the scenario's white noise
 passed through a filter, its standard deviation kept at the scenario's (:data:`FILTERS`: white, a first-order
@@ -21,6 +21,14 @@ payload exact, so that ``S_std`` is the statistical part alone). Printed per fil
 
 ``--ekf``: the EKF's median rms z of ``S`` per filter instead.
 
+``--live``: the live :class:`fmscal.analysis.Compensator` of a payload file instead (:func:`live`): the tool
+identified from 8 held poses (``fit_static`` of a simulated table, each row the mean of 500 readings: its noise a held
+pose's, so that the Compensator learns the readings' noise from its first readings), on ``spatial-arm`` with
+``S = I``; per filter, medians over the seeds of the output's rms z (each component over its stated sd) and the
+share of the output flagged (no contact anywhere; pooled over the seeds in brackets), with the noise learned by
+default (its colour measured from the first 4 s, eqs. N1-N3) and from the first ``NOISE_SAMPLES`` readings taken as
+white (the Compensator before it measured the colour, to the bit).
+
 tests/test_coloured_noise.py holds the targets (seeded; the 20-seed target in a slow test). A few minutes on
 2 cores at 5 seeds.
 """
@@ -30,10 +38,15 @@ import sys
 import numpy as np
 from scipy.signal import lfilter
 
-from fmscal.analysis import FALSE_ALARM, calibrate, compensate
+from fmscal.analysis import FALSE_ALARM, Compensator, calibrate, compensate
+from fmscal.analysis._compensate import NOISE_SAMPLES
+from fmscal.observers.payload import fit_static
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, PayloadStd
+from fmscal.plant.io import simulate_table
 
 ARM = SPATIAL_SCENARIOS["spatial-arm"]
+#: The everyday job's sensor (``--live``): ``spatial-arm`` with ``S = I``, as a payload file takes it.
+EVERYDAY = ARM.with_(crosstalk=0.0)
 
 #: The filters on the reading's noise: a name and ``(b, a)`` of :func:`scipy.signal.lfilter`, scaled so that
 #: white noise of unit variance comes out of unit variance.
@@ -102,6 +115,27 @@ def measure(seed, kind, duration=10.0):
             "truth": contact_test(truth_calibration(truth), log), "calibration": contact_test(cal, log)}
 
 
+def live(seed, kind, duration=10.0, noise_samples=None):
+    """The live Compensator of a payload file on an :data:`EVERYDAY` log of ``seed`` whose reading noise went
+    through ``kind``: the tool's payload fitted to 8 held poses (a table's fit, whose noise is a held pose's: the
+    Compensator learns the readings' from its first ``noise_samples``, default as many as the colour needs).
+
+    Returns ``(log, stream, outputs, figures)``: the outputs the stream's ``ContactSample`` list; the figures a dict
+    of ``z`` (the output's rms z, each component over its stated sd), ``flagged`` (the share of the output flagged;
+    no contact anywhere), ``n`` (outputs) and ``first`` (the first output's reading time, s).
+    """
+    log, truth = coloured_log(seed, kind, duration, EVERYDAY)
+    sd = np.asarray(truth.noise.wrench_sd)
+    table = simulate_table(EVERYDAY.payload, n=8, seed=100 + seed, S=truth.S_at(0.0), offset=truth.offset,
+                           wrench_sd=sd / np.sqrt(500))
+    stream = Compensator(fit_static(table), log.dt, noise_samples=noise_samples)
+    out = stream.push_many(log.t, log.w_hat, log.pose)
+    w = np.array([o.wrench for o in out])
+    z = w / np.sqrt(np.array([np.diag(o.cov) for o in out]))
+    return log, stream, out, {"z": float(np.sqrt(np.mean(z ** 2))), "flagged": float(np.mean([o.contact for o in out])),
+                         "n": len(out), "first": out[0].t}
+
+
 def main(seeds=5, duration=10.0):
     print(f"spatial-arm, {duration:g} s at 1 kHz, {seeds} seeds (medians); the payload exact; reading noise fz sd "
           f"{ARM.force_sd:g} N; contact test false alarm {FALSE_ALARM:g}\n")
@@ -136,6 +170,27 @@ def ekf(seeds=5, duration=10.0):
         print(f"| {name} | {np.median(z):.2f} | {max(z):.2f} | {converged}/{seeds} |", flush=True)
 
 
+def live_table(seeds=5, duration=10.0):
+    """``--live``: the live Compensator of a payload file per filter (:func:`live`), its noise learned by default
+    and from the first :data:`NOISE_SAMPLES` readings taken as white."""
+    print(f"the live Compensator of a payload file on spatial-arm (S = I), {duration:g} s at 1 kHz, {seeds} seeds "
+          f"(medians; pooled in brackets); no contact; false alarm {FALSE_ALARM:g}\n")
+    print(f"| noise | z rms | flagged % | first output, s | z rms, white from {NOISE_SAMPLES} | flagged %, white from "
+          f"{NOISE_SAMPLES} |\n|---|---|---|---|---|---|")
+    for name, kind in FILTERS.items():
+        cells = []
+        for samples in (None, NOISE_SAMPLES):
+            runs = [live(seed, kind, duration, samples)[3] for seed in range(seeds)]
+            z, flagged = [r["z"] for r in runs], [r["flagged"] for r in runs]
+            pooled = sum(r["flagged"] * r["n"] for r in runs) / sum(r["n"] for r in runs)
+            cells.append(f"{np.median(z):.2f} ({np.sqrt(np.mean(np.square(z))):.2f}) | "
+                         f"{100 * np.median(flagged):.3g} ({100 * pooled:.3g})")
+            if samples is None:
+                cells.append(f"{np.median([r['first'] for r in runs]):.3g}")
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+
+
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if a != "--ekf"]
-    (ekf if "--ekf" in sys.argv else main)(int(args[0]) if args else 5, float(args[1]) if len(args) > 1 else 10.0)
+    args = [a for a in sys.argv[1:] if a not in ("--ekf", "--live")]
+    (ekf if "--ekf" in sys.argv else live_table if "--live" in sys.argv else main)(
+        int(args[0]) if args else 5, float(args[1]) if len(args) > 1 else 10.0)

@@ -79,9 +79,9 @@ def test_a_contact_of_one_newton_is_flagged(rig):
 
 def test_the_stream_is_the_causal_log(rig):
     """Compensator with the estimate, fed the log with the log's noise model, gives compensate(..., causal=True)'s
-    numbers. Given none, it estimates the readings' noise from its first 500 readings (a table's fit holds its
-    rows' noise, not a sample's), with no output before, and the poses' as they come: its outputs then at the
-    noise in z."""
+    numbers. Given none, it estimates the readings' noise from its first 4002 readings (4 s at 1 kHz: a table's fit
+    holds its rows' noise, not a sample's; the readings' correlation in time measured, tests/test_coloured_noise.py),
+    with no output before, and the poses' as they come: its outputs then at the noise in z."""
     log, truth, table, fit, noise = rig
     short = log.head(2500)
     reference = compensate(fit, short, True)
@@ -91,9 +91,9 @@ def test_the_stream_is_the_causal_log(rig):
     assert len(out) == len(reference.t)
     np.testing.assert_allclose([o.wrench for o in out], reference.wrench, atol=1e-9)
     learning = Compensator(fit, log.dt)
-    out = [o for o in (learning.push(t, w, p) for t, w, p in zip(short.t, short.w_hat, short.pose)) if o is not None]
-    assert out[0].t >= short.t[499] - 0.03 - 1e-9 and len(out) > 1900
-    assert any("readings' noise estimated from the first 500 readings" in w for w in learning.warnings)
+    out = learning.push_many(log.t, log.w_hat, log.pose)
+    assert out[0].t >= log.t[4001] - 0.03 - 1e-9 and len(out) > 3900
+    assert any("readings' noise estimated from the first 4002 readings" in w for w in learning.warnings)
     z = np.array([o.wrench / np.sqrt(np.diag(o.cov)) for o in out])
     assert np.all(np.sqrt(np.mean(z ** 2, axis=0)) < 1.4) and np.all(np.sqrt(np.mean(z ** 2, axis=0)) > 0.7)
 

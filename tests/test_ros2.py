@@ -195,6 +195,34 @@ def test_the_tool_change_parameter_is_checked(cal_file, tmp_path):
         Pipeline(_settings(planar, tool_change="detect"))
 
 
+def test_a_payload_file_of_held_poses_learns_the_noise_once(tmp_path):
+    """A payload file from a table of held poses (its noise a held pose's, not a sample's): the pipeline's
+    compensator learns the readings' noise from its first 4 s (no output before), as a log's noise model is measured;
+    ``~/reload`` goes on with the noise learned, its outputs without a second wait."""
+    from fmscal.observers.payload import fit_static
+    from fmscal.plant.io import simulate_table, wrench_noise
+    scenario = ARM.with_(crosstalk=0.0, duration=5.0)                    # S = I, as a payload file takes it
+    log, truth, _ = scenario.generate(1)
+    sd = np.asarray(truth.noise.wrench_sd)
+    path = tmp_path / "tool.json"
+    fit_static(simulate_table(scenario.payload, n=8, seed=101, S=truth.S_at(0.0), offset=truth.offset,
+                              wrench_sd=sd / np.sqrt(500))).save(path)
+    values = {p.name: p.default for p in PARAMETERS}
+    values.update(payload=str(path), pose_topic="/p", sample_time=float(log.dt))
+    pipeline = Pipeline(settings(values))
+    out = _through(pipeline, log, 0, 4500)
+    t = np.array([o.sample.t for o in out])
+    assert len(t) and abs(t[0] - (log.t[4001] - pipeline.delay)) < 1e-9       # colour_samples(1 ms): 4002
+    learned = pipeline.compensator.noise
+    assert (learned.wrench_sd, learned.wrench_tau) == wrench_noise(log.w_hat[:4002], log.dt)
+    ok, said = pipeline.reload()
+    assert ok, said
+    after = _through(pipeline, log, 4500, len(log))
+    assert len(after) > 400 and pipeline.compensator.noise.wrench_sd == learned.wrench_sd
+    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out + after])
+    assert 0.7 < np.sqrt(np.mean(z ** 2)) < 1.4
+
+
 def test_a_slower_motion_is_given_to_the_nearest_reading_only(arm, cal_file):
     """Poses at 200 Hz, on every fifth reading's stamp: each goes to that reading only, the readings between get
     none, so the node's wrench and covariance are the Compensator's fed the sparse stream, exactly; poses

@@ -65,7 +65,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import binom
 
-from fmscal.plant import Calibration, SpatialModel
+from fmscal.plant import Calibration, NoiseSpec, SpatialModel
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.io import AttitudeLog, held_table
 from fmscal.plant.physics import quaternion_multiply
@@ -423,6 +423,11 @@ class Pipeline:
             changes["reading"] = s.reading
         if s.gravity is not None:
             changes["gravity"] = s.gravity
+        learned = None if self.compensator is None else self.compensator.noise
+        if st.calibration.noise is None and not st.pose_noise_known and learned is not None:
+            # a payload file without the readings' noise of a sample: the one the running compensator learned from
+            # its first readings, not learned again (no output until it is)
+            changes["noise"] = NoiseSpec(learned.wrench_sd, wrench_tau=learned.wrench_tau)
         kwargs = dict(direction=s.direction, window=s.window, delay=s.delay, false_alarm=float(s.contact_threshold),
                       track_offset=bool(s.track_offset))
         if s.drift_intensity is not None:

@@ -40,7 +40,8 @@ from scipy.signal import welch
 
 from fmscal.plant.physics import NoiseSpec
 
-__all__ = ["estimate_noise", "difference_noise", "wrench_noise", "reading_colour", "SEGMENT", "LOW_BAND", "WHITENESS_Z"]
+__all__ = ["estimate_noise", "difference_noise", "wrench_noise", "reading_colour", "colour_samples", "SEGMENT",
+           "LOW_BAND", "WHITENESS_Z"]
 
 #: Welch's segments of eq. (N1), s.
 SEGMENT = 0.5
@@ -174,6 +175,29 @@ def wrench_noise(w_hat, dt):
             tuple(float(t) if k else 1.0 for t, k in zip(tau, coloured)))
 
 
+def colour_samples(dt):
+    """The fewest evenly spaced readings :func:`reading_colour` measures the noise's colour from, at interval ``dt``.
+
+    Eq. (N1)'s spectrum over 8 segments of :data:`SEGMENT` s of the second difference (2 readings fewer): ``8
+    round(SEGMENT / dt) + 2`` readings, 4 s at any rate. None where the readings are too slow for the bands of
+    (N1)-(N3) (a sample rate of ``16 LOW_BAND`` Hz or less, or a segment under 16 samples): the reading is then
+    taken as white, however many there are.
+
+    Parameters
+    ----------
+    dt : float
+        The sample interval ``h``, s.
+
+    Returns
+    -------
+    int or None
+    """
+    per = int(round(SEGMENT / dt))
+    if 2 * LOW_BAND >= 0.125 / dt or per < 16:
+        return None
+    return _MIN_SEGMENTS * per + 2
+
+
 def reading_colour(w_hat, dt):
     """Each reading channel's noise spectrum: its standard deviation, correlation time and whether it is coloured.
 
@@ -190,14 +214,16 @@ def reading_colour(w_hat, dt):
     -------
     tuple of (ndarray, ndarray, ndarray of bool), each shape (c,), or None
         ``sd`` and ``tau`` of eq. (N2) and the test (N3); None where the log holds fewer than 8 segments of
-        :data:`SEGMENT` s or samples too slow for the bands (the reading is then taken as white).
+        :data:`SEGMENT` s or samples too slow for the bands (:func:`colour_samples`; the reading is then taken as
+        white).
     """
     w = np.asarray(w_hat, dtype=float)
+    need = colour_samples(dt)
+    if need is None or len(w) < need:
+        return None
     per = int(round(SEGMENT / dt))
     d = np.diff(w, n=2, axis=0)
-    count = len(d) // max(per, 1)
-    if count < _MIN_SEGMENTS or 2 * LOW_BAND >= 0.125 / dt or per < 16:
-        return None
+    count = len(d) // per
     segments = d[:count * per].reshape(count, per, -1)
     f, G_d = welch(segments, fs=1.0 / dt, nperseg=per, noverlap=0, window="hann", detrend="constant", axis=1)
     keep = f >= LOW_BAND
