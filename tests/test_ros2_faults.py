@@ -165,6 +165,24 @@ def test_a_motion_gap_seen_late_is_stale_as_when_seen_live(poses):
         assert max(o.sample.t for o in out) > t[2500] + 0.2
 
 
+def test_the_diagnostics_say_each_short_state_in_turn():
+    """Readings apart from the motion, then a restart, both within one diagnostics period, the restart on then
+    and over by the next: the diagnostics say "streams apart", then "restarting" (the state of that moment, not
+    lost behind the one said first), then "running"; each once. Both over by the first: the same."""
+    from types import SimpleNamespace
+    from fmscal.analysis.ros2._node import CompensatorNode
+    from fmscal.analysis.ros2._pipeline import Snapshot
+    node = SimpleNamespace(settings=SimpleNamespace(stale_timeout=0.5), _seen=None, _latched=[])
+    state = lambda **kw: CompensatorNode._state(node, Snapshot(started=True, last_arrival=0.0, **kw), 0.1)
+    said = [state(), state(withheld=dict(apart=40), events=dict(restart=1), restarting=True),
+            state(withheld=dict(apart=40), events=dict(restart=1)), state(withheld=dict(apart=40), events=dict(restart=1))]
+    assert said == ["running", "streams apart", "restarting", "running"], said
+    node._seen, node._latched = None, []
+    said = [state(), state(withheld=dict(apart=40), events=dict(restart=1)),
+            state(withheld=dict(apart=40), events=dict(restart=1)), state(withheld=dict(apart=40), events=dict(restart=1))]
+    assert said == ["running", "streams apart", "restarting", "running"], said
+
+
 def test_faster_readings_are_decimated_as_stated(poses, tmp_path):
     """Readings at 1 kHz with max_rate 400 Hz: every third compensated (stated once), the others counted as
     decimated, the outputs at 333 Hz right within 5 sd."""
@@ -438,8 +456,10 @@ def test_long_faults(request, name, source, tmp_path):
                                                      "0.43 over its clean stretches, on a loaded machine"))
     if name == "back-both" and source == "joints":    # a known gap: reported, not hidden (docs/status.md)
         request.applymarker(pytest.mark.xfail(reason="issue 45, left: in one clean-ci run the diagnostics said "
-                                                     "'streams apart' where 'restarting' was expected (not "
-                                                     "diagnosed; it passed in the CI before)"))
+                                                     "'streams apart' where 'restarting' was expected (a "
+                                                     "likely cause fixed since: a restart within the period of a "
+                                                     "latched 'streams apart' was never said; kept until a "
+                                                     "clean-ci shows it)"))
     case = SLOW[name]
     _check(_run(request, source, case, tmp_path), case, source)
 

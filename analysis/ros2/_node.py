@@ -686,7 +686,10 @@ class CompensatorNode:
             if count > last[name] and name != state and name not in self._latched:
                 self._latched.append(name)
         if self._latched and LEVELS[state] < 2 and (state != "saturated" or LEVELS[self._latched[0]] == 2):
-            return self._latched.pop(0)
+            shown = self._latched.pop(0)
+            if state in seen and state != shown and state not in self._latched:
+                self._latched.append(state)          # this one not said now either: said in turn
+            return shown
         return state
 
     def _diagnose(self):
