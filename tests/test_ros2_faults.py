@@ -174,12 +174,11 @@ def test_the_diagnostics_say_each_short_state_in_turn():
     from fmscal.analysis.ros2._pipeline import Snapshot
     node = SimpleNamespace(settings=SimpleNamespace(stale_timeout=0.5), _seen=None, _latched=[])
     state = lambda **kw: CompensatorNode._state(node, Snapshot(started=True, last_arrival=0.0, **kw), 0.1)
-    said = [state(), state(withheld=dict(apart=40), events=dict(restart=1), restarting=True),
-            state(withheld=dict(apart=40), events=dict(restart=1)), state(withheld=dict(apart=40), events=dict(restart=1))]
+    after = dict(withheld=dict(apart=40), events=dict(restart=1))
+    said = [state(), state(**after, restarting=True), state(**after), state(**after)]
     assert said == ["running", "streams apart", "restarting", "running"], said
     node._seen, node._latched = None, []
-    said = [state(), state(withheld=dict(apart=40), events=dict(restart=1)),
-            state(withheld=dict(apart=40), events=dict(restart=1)), state(withheld=dict(apart=40), events=dict(restart=1))]
+    said = [state(), state(**after), state(**after), state(**after)]
     assert said == ["running", "streams apart", "restarting", "running"], said
 
 
