@@ -129,13 +129,13 @@ def grasped_held(tmp_path_factory):
     return log, path, total
 
 
-def _through(pipeline, log, start, stop):
-    """Rows ``[start, stop)`` of ``log`` through ``pipeline`` (each pose with its reading) in passes of 50; the
-    outputs."""
+def _through(pipeline, log, start, stop, every=50):
+    """Rows ``[start, stop)`` of ``log`` through ``pipeline`` (each pose with its reading) in passes of ``every``;
+    the outputs."""
     out = []
-    for i in range(start, stop, 50):
-        for t, w, pose in zip(log.t[i:min(i + 50, stop)], log.w_hat[i:min(i + 50, stop)],
-                              log.pose[i:min(i + 50, stop)]):
+    for i in range(start, stop, every):
+        for t, w, pose in zip(log.t[i:min(i + every, stop)], log.w_hat[i:min(i + every, stop)],
+                              log.pose[i:min(i + every, stop)]):
             pipeline.add_motion(t, pose)
             pipeline.add_reading(t, w)
         out += pipeline.process()
@@ -178,6 +178,30 @@ def test_a_tool_change_is_said_flagged_and_reidentified(grasped_held, mode):
     assert len(after) > 3000 and not any(o.flags for o in after)
     assert np.mean([o.sample.contact for o in after]) < 0.01
     assert pipeline.counts["tool_changes"] == 1
+
+
+@pytest.mark.parametrize("mode", ["detect", "reidentify"])
+def test_a_tool_change_flags_from_its_declaration_in_long_passes(grasped_held, mode):
+    """A node behind its inputs pushes long runs (here 1.5 s of readings in one pass): the outputs of a pass that
+    declares the grasp are flagged tool_change from the one that declared it on (within 0.15 s of the one in
+    passes of 50: the detector's blocks fall alike), not before; with
+    reidentify, the pass that re-identifies keeps each of its outputs flagged, and the outputs after it are
+    unflagged."""
+    log, path, _ = grasped_held
+    onsets = []
+    for every in (50, 1500):
+        pipeline = Pipeline(_settings(path, sample_time=float(log.dt), tool_change=mode))
+        out = _through(pipeline, log, 0, int(np.searchsorted(log.t, 47.0)), every=every)
+        t = np.array([o.sample.t for o in out])
+        flagged = np.array(["tool_change" in o.flags for o in out])
+        assert pipeline.counts["tool_changes"] == 1 and t[0] < 1.0
+        onsets.append(t[flagged][0])
+    onset = onsets[1]
+    assert abs(onsets[0] - onset) < 0.15 and 1.3 < onset < 4.0 and not flagged[t < onset].any(), onsets
+    if mode == "detect":
+        assert flagged[t >= onset].all()
+    else:
+        assert flagged[(t >= onset) & (t < 20.0)].all() and not flagged[t > 45.0].any()
 
 
 def test_the_tool_change_parameter_is_checked(cal_file, tmp_path):
@@ -863,14 +887,19 @@ def test_reload(request, arm, tmp_path):
 
 @pytest.mark.slow
 def test_latency_benchmark_short():
-    """benchmarks/ros2_latency.py on 3 s: every output comes, in order, none dropped, and the delays it reports
+    """benchmarks/ros2_latency.py on 3 s: every output comes, in order, none dropped (or the readings a loaded
+    machine's node lost from its queue counted, and every output it published come), and the delays it reports
     are ordered (0 < p50 <= p99 <= largest). The delay's target lives in the benchmark and docs/speed.md, not
     here: the suite runs beside other tests, where the tail is the wait for a core."""
     done = _run(str(ROOT / "benchmarks" / "ros2_latency.py"), "--duration", "3", "--json")
     assert done.returncode == 0, done.stderr[-2000:]
     r = json.loads(done.stdout.strip().splitlines()[-1])
-    assert r["sent"] == r["received_by_node"] == 3002
-    assert r["received"] == r["expected"] == 3002 - 59 and r["dropped"] == 0 and r["in_order"]
+    # a loaded machine may overflow the node's 1 s queue: each reading then taken or counted lost, each output
+    # the node published come
+    assert r["sent"] == 3002 and r["received_by_node"] + r["lost_by_node"] == 3002, r
+    assert r["received"] == r["published_by_node"] and r["in_order"], r
+    if r["lost_by_node"] == 0:
+        assert r["received"] == r["expected"] == 3002 - 59 and r["dropped"] == 0, r
     d = r["beyond_delay_s"]
     assert 0 < d["p50"] <= d["p99"] <= d["max"] and np.isfinite(d["max"]), d
 

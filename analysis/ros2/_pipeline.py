@@ -830,6 +830,8 @@ class Pipeline:
                 tag, seq = self._note(t, w_hat, value, tag)
                 self._frames[t] = (stamp, frame_id, arrival, tag, seq)
                 added.append(t)
+        seen = self._changes[1] if self._changes[0] is c else 0          # the changes declared before this run
+        was = "tool_change" in self._flags()
         samples = self._feed(c, [(r[0], r[1], r[2]) for r in run])
         self._tool_changes(c)
         new = {k: n - events.get(k, 0) for k, n in c.events.items() if n != events.get(k, 0)}
@@ -862,8 +864,14 @@ class Pipeline:
         while len(self._recent) > self._recent_kept:
             self._recent.popleft()
         flags = self._flags()
+        if was and "tool_change" not in flags:      # re-identified in this run: each of its outputs kept flagged
+            flags = tuple(f for f in FLAGS if f in flags or f == "tool_change")
+        # a change declared in this run flags the outputs from the one that declared it (the sample's count), not
+        # those before it (a node behind its inputs pushes long runs)
+        early = tuple(f for f in flags if f != "tool_change") if not was else flags
         base = (self.settings.base_frame or self.motion_frame) if self._base else None
-        out = [o for o in (self._output(sample, flags, base) for sample in samples) if o is not None]
+        out = [o for o in (self._output(sample, flags if sample.tool_change > seen else early, base)
+                           for sample in samples) if o is not None]
         if self._last_t is not None:
             self._forget(self._last_t - c.delay)
         return out

@@ -14,6 +14,7 @@ from ._rclpy import ros
 
 __all__ = ["push_parameters", "pushed_line"]
 
+
 def push_parameters(exported, node=None, timeout=5.0, domain_id=None):
     """Set an export's run-time parameters on a running broadcaster, atomically.
 
