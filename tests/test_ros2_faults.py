@@ -165,6 +165,44 @@ def test_a_motion_gap_seen_late_is_stale_as_when_seen_live(poses):
         assert max(o.sample.t for o in out) > t[2500] + 0.2
 
 
+def test_a_motion_step_back_seen_late_keeps_the_readings_before_it(poses):
+    """The motion's stamps step back 0.5003 s at 1.5 s and the readings' do not: fed live and fed late (the motion
+    1.5 s ahead of the readings, as a node behind its inputs takes them), the readings before the step are
+    compensated alike against the motion of their stamps, those after it withheld as ``apart``; one line each
+    for the step and for the streams apart."""
+    from types import SimpleNamespace
+    from fmscal.analysis.ros2 import Pipeline
+    t, w_hat, pose, settings = poses
+    step = 1500
+    tm = t - 0.5003 * (np.arange(len(t)) >= step)
+    live, late = Pipeline(settings()), Pipeline(settings())
+    out_live, out_late, lead = [], [], 1500
+    for i in range(len(t)):
+        live.add_motion(tm[i], pose[i])
+        live.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
+        if i == 0:
+            for k in range(lead):
+                late.add_motion(tm[k], pose[k])
+        if i + lead < len(t):
+            late.add_motion(tm[i + lead], pose[i + lead])
+        late.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
+        if i % 7 == 6 or i == len(t) - 1:
+            out_live += live.process()
+            out_late += late.process()
+    before = []
+    for pipeline, out in ((live, out_live), (late, out_late)):
+        s = _ledger(pipeline)
+        stamps = np.array([o.sample.t for o in out])
+        before.append(int((stamps < t[step]).sum()))
+        assert stamps.max() < t[step] + 1e-9 and s.withheld["apart"] >= len(t) - step - 50, s.withheld
+        assert s.withheld["motion"] + s.withheld["stale"] <= 2, s.withheld
+        keys = [k for k, _ in pipeline.notices]
+        assert keys.count("motion_restart") == keys.count("apart") == 1, pipeline.notices
+        z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+        assert np.abs(z).max() < BOUND
+    assert before[0] > step - 100 and abs(before[0] - before[1]) <= 2, before
+
+
 def test_the_diagnostics_say_each_short_state_in_turn():
     """Readings apart from the motion, then a restart, both within one diagnostics period, the restart on then
     and over by the next: the diagnostics say "streams apart", then "restarting" (the state of that moment, not

@@ -335,6 +335,7 @@ class Pipeline:
         self._stray, self._motion_stray = None, None   # a reading, a motion sample stamped back: held aside
         self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
         self._motion = deque()                         # (t taken, value)
+        self._old_motion = None                        # (epoch, segment, newest t, buffer) before a step back
         self._motion_step = None                       # the motion's typical interval, s
         self._frames = {}                              # t -> (stamp, frame_id, arrival, tag, held seq) pushed
         self._held = _Held(1)
@@ -522,7 +523,8 @@ class Pipeline:
         A sample stamped before the newest is held aside: where the next goes on from the newest, it was a stray
         (``motion_stray``, dropped); where the next goes on from it, the motion's clock stepped back: its buffer
         restarts (``motion_restart``) and a new epoch begins, which readings stamped on the old clock do not
-        share. A stamp repeated is dropped (``motion_duplicate``)."""
+        share: those the old motion covers are still compensated with it (taken late as they would be live,
+        :meth:`_old_clock`), the others get none (``apart``). A stamp repeated is dropped (``motion_duplicate``)."""
         t = float(t) - self.latency
         with self.lock:
             self.counts["motion"] += 1
@@ -568,13 +570,26 @@ class Pipeline:
         stepped back alone before (apart) now share it."""
         self.counts["motion_restart"] += 1
         self._notice("motion_restart", f"the motion's stamps stepped back by {newest - t:.6g} s: its buffer "
-                                       "restarted; readings stamped on the old clock get no motion")
-        self._motion.clear()
+                                       "restarted; readings stamped on the old clock past its last "
+                                       "sample get no motion")
+        self._old_motion = None
+        if self._apart_from is None and self._motion:  # readings still to come on the old clock: its motion kept
+            self._old_motion = (self._motion_epoch, self._segment, self._motion[-1][0], deque(self._motion))
+        self._motion = deque()
         self._last_angles = None
         self._motion_epoch += 1
         if self._apart_from is not None:               # the readings stepped back first: the motion followed
             self._apart_from = None
             self._reading_epoch = self._motion_epoch
+
+    def _old_clock(self, t, epoch, segment):
+        """The motion kept from before the motion's step back, where it covers the reading at ``t`` of that
+        ``epoch`` and ``segment`` (a reading taken late, by a node behind its inputs, as it was covered live);
+        else None."""
+        old = self._old_motion
+        if old is not None and old[0] == epoch and old[1] == segment and t <= old[2]:
+            return old[3]
+        return None
 
     def skip_motion(self):
         """A motion message the node skipped (a quaternion not of unit norm, a NaN): counted."""
@@ -670,7 +685,8 @@ class Pipeline:
                     self._notice("apart", self.conditions["apart"])
             else:
                 self._apart_from = None
-        behind = self._reading_epoch != self._motion_epoch
+        behind = self._reading_epoch != self._motion_epoch and \
+            self._old_clock(t, self._reading_epoch, self._segment) is None
         if behind and "apart" not in self.conditions:
             self._condition("apart", "the motion's stamps stepped back and the readings' did not: the streams no "
                                      "longer share a clock; no output until they do")
@@ -735,12 +751,13 @@ class Pipeline:
         rows = []
         while self._pending:
             t, w_hat, stamp, frame_id, arrival, segment, apart, epoch = self._pending[0]
-            apart = apart or epoch != self._motion_epoch          # the motion's clock stepped back since
+            old = None if apart or epoch == self._motion_epoch else self._old_clock(t, epoch, segment)
+            apart = apart or (epoch != self._motion_epoch and old is None)    # the motion's clock stepped back
             if not self._kept(t):
                 self._pending.popleft()
                 self.withheld["decimated"] += 1
                 continue
-            value = None if apart else self._at(t)
+            value = None if apart else self._at(t, old)
             tag = "apart" if apart else None
             if value is _WAIT:
                 if segment == last_segment and newest - t <= timeout:
@@ -754,7 +771,8 @@ class Pipeline:
                     self.stale = True
             elif value is _GAP:
                 value, tag = None, "motion"
-                (t0, _), (t1, _) = self._motion[0], self._motion[1]
+                m = self._motion if old is None else old
+                (t0, _), (t1, _) = m[0], m[1]
                 if t1 - t0 > timeout:                   # the motion was stale here, though it came back before
                     tag = "stale"                       # this reading was taken (a node behind its inputs)
                     if self._stale_gap != t0 and not self.stale:      # (not said already, seen live)
@@ -782,15 +800,16 @@ class Pipeline:
             self._grid0 = t                             # a new grid after a start, a restart, a step back
         return int(round((t - self._grid0) / self.dt_in)) % self.decimation == 0
 
-    def _at(self, t):
+    def _at(self, t, m=None):
         """The motion at ``t`` (interpolated), None where it starts after ``t``, or ``_WAIT``; ``_GAP`` where no
-        motion sample lies within half a reading's step of ``t`` (a motion slower than the readings).
+        motion sample lies within half a reading's step of ``t`` (a motion slower than the readings). ``m``: the
+        buffer (default the motion's; :meth:`_old_clock`).
 
         Each motion sample is given to the reading nearest it only, interpolated to that reading's stamp; the
         readings between get none, as :meth:`fmscal.analysis.Compensator.push` takes a sparser stream. Given to
         every reading, interpolated values would count as independent samples: the motion's noise, and with it
         the output's covariance, would come out too small."""
-        m = self._motion
+        m = self._motion if m is None else m
         while len(m) >= 2 and m[1][0] <= t:
             m.popleft()
         if not m or m[-1][0] < t:
@@ -1041,7 +1060,7 @@ class Pipeline:
             counts=dict(self.counts), withheld=dict(self.withheld), conditions=dict(self.conditions),
             events={} if c is None else dict(c.events), contact=bool(self.contact),
             offset=None if c is None else c.offset, offset_sd=None if sample is None else sample.offset_sd,
-            stale=self.stale, apart=self._apart_from is not None or self._reading_epoch != self._motion_epoch,
+            stale=self.stale, apart=self._apart_from is not None or "apart" in self.conditions,
             restarting=self.restarting,
             started=sample is not None,
             saturated=self._last_t is not None and 0 <= self._last_t - self._saturated_at < SATURATED_HOLD,
