@@ -133,6 +133,35 @@ def test_a_readings_clock_stepping_back_alone_is_withheld(poses):
     assert np.abs(z).max() < BOUND
 
 
+def test_readings_apart_stay_apart_until_their_clock_steps_forward(poses):
+    """The readings' stamps step back 0.5003 s alone, then the motion stops (its publisher gone) while the
+    readings go on: the readings' lead on the motion shrinks back, which is not the clocks agreeing; no reading
+    is compensated against the motion of another time (every output within 5 sd). Stepping forward again by
+    as much, the readings agree with the motion: one line, and the output comes back."""
+    from types import SimpleNamespace
+    from fmscal.analysis.ros2 import Pipeline
+    t, w_hat, pose, settings = poses
+    stalled, out = Pipeline(settings()), []
+    for i in range(len(t)):
+        if i < 2000:                                # the motion stops at 2 s
+            stalled.add_motion(t[i], pose[i])
+        s = t[i] - 0.5003 * (i >= 1500)
+        stalled.add_reading(s, w_hat[i], SimpleNamespace(t=s), "ft_sensor")
+        if i % 7 == 6:
+            out += stalled.process()
+    _ledger(stalled)
+    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+    assert np.abs(z).max() < BOUND and max(o.sample.t for o in out) < t[1500]
+    assert stalled.state() == "streams apart"
+    back = Pipeline(settings())
+    out = _replay(back, t, w_hat, pose, stamp=lambda i, s: s - 0.5003 * (1500 <= i < 2500))
+    _ledger(back)
+    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+    assert np.abs(z).max() < BOUND and back.state() == "running"
+    assert sum(o.sample.t > t[2500] for o in out) > 1300
+    assert [m for k, m in back.notices if k == "apart"][-1].startswith("the readings' stamps agree")
+
+
 def test_a_motion_gap_seen_late_is_stale_as_when_seen_live(poses):
     """1000 motion samples lost: fed live (each reading with its pose) and fed late (the motion 1.5 s ahead of
     the readings, as a node behind its inputs takes them), the readings in the gap are withheld as ``stale``

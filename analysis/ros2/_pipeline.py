@@ -332,6 +332,7 @@ class Pipeline:
         self._taken, self._taken_order = set(), deque()   # the last TAKEN_KEPT stamps taken
         self._lead = None                              # the newest motion's stamp less a reading's, at its arrival
         self._apart_from = None                        # a step back's reference lead while the streams are apart
+        self._apart_said = False                       # the readings found apart since that step back
         self._stray, self._motion_stray = None, None   # a reading, a motion sample stamped back: held aside
         self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
         self._motion = deque()                         # (t taken, value)
@@ -579,7 +580,7 @@ class Pipeline:
         self._last_angles = None
         self._motion_epoch += 1
         if self._apart_from is not None:               # the readings stepped back first: the motion followed
-            self._apart_from = None
+            self._apart_from, self._apart_said = None, False
             self._reading_epoch = self._motion_epoch
 
     def _old_clock(self, t, epoch, segment):
@@ -670,21 +671,25 @@ class Pipeline:
             self._segment += 1                          # the queued readings go on at once
             if self._motion_epoch > self._reading_epoch:    # the motion's clock stepped back first: the same step
                 self._reading_epoch = self._motion_epoch
-                self._apart_from = None
+                self._apart_from, self._apart_said = None, False
             elif self._apart_from is None and self._lead is not None:
                 self._apart_from = self._lead
-        self._newest_in = t
+        previous, self._newest_in = self._newest_in, t
         apart = False
         if self._apart_from is not None and lead is not None:
-            if lead - self._apart_from > self._apart_tolerance():
-                apart = True
+            tolerance = self._apart_tolerance()
+            stalled = self._apart_said and not (previous is not None and t - previous > tolerance)
+            if lead - self._apart_from > tolerance or stalled:
+                # apart; and stays apart until the readings' clock steps forward again: a lead that shrinks
+                # step by step is the motion stalled, not the clocks agreeing
+                apart = self._apart_said = True
                 if "apart" not in self.conditions:
                     self._condition("apart", f"the readings' stamps stepped back {lead - self._apart_from:.6g} s "
                                              "behind the motion's: the streams no longer share a clock; no output "
                                              "until they do")
                     self._notice("apart", self.conditions["apart"])
             else:
-                self._apart_from = None
+                self._apart_from, self._apart_said = None, False
         behind = self._reading_epoch != self._motion_epoch and \
             self._old_clock(t, self._reading_epoch, self._segment) is None
         if behind and "apart" not in self.conditions:
