@@ -854,7 +854,7 @@ class Pipeline:
                 tag, seq = self._note(t, w_hat, value, tag)
                 self._frames[t] = (stamp, frame_id, arrival, tag, seq)
                 added.append(t)
-        seen = self._changes[1] if self._changes[0] is c else 0          # the changes declared before this run
+        seen = self._changes_seen(c)                                     # the changes declared before this run
         was = "tool_change" in self._flags()
         samples = self._feed(c, [(r[0], r[1], r[2]) for r in run])
         self._tool_changes(c)
@@ -900,11 +900,15 @@ class Pipeline:
             self._forget(self._last_t - c.delay)
         return out
 
+    def _changes_seen(self, c):
+        """How many of the compensator ``c``'s tool changes were taken (counted, said) already."""
+        return self._changes[1] if self._changes[0] is c else 0
+
     def _tool_changes(self, c):
         """The changes ``c`` declared since the last look: counted, said, the condition ``tool_change`` set; a
         re-identification ``c`` made (``tool_change`` reidentify) taken as the payload in use (lock held)."""
         changes = c.tool_changes
-        seen = self._changes[1] if self._changes[0] is c else 0
+        seen = self._changes_seen(c)
         if len(changes) == seen:
             if changes and changes[-1].reidentified_at is not None and "tool_change" in self.conditions:
                 self._reidentified(c)
@@ -1181,11 +1185,11 @@ class Pipeline:
         if not path:
             return False, "save refused: set the parameter save_path"
         with self.lock:
-            b = None if self.compensator is None else self.compensator.offset
             st, identified = self.setup, self.identified
             if not self.settings.calibration:
                 document = self.payload_document()
             else:
+                b = None if self.compensator is None else self.compensator.offset
                 document = replace(self.calibration, b=self.calibration.b if b is None else b,
                                    payload=st.payload or self.calibration.payload, date=None,
                                    latency=self.latency if self.settings.source == "pose_topic" else
