@@ -135,31 +135,60 @@ def test_a_readings_clock_stepping_back_alone_is_withheld(poses):
 
 def test_readings_apart_stay_apart_until_their_clock_steps_forward(poses):
     """The readings' stamps step back 0.5003 s alone, then the motion stops (its publisher gone) while the
-    readings go on: the readings' lead on the motion shrinks back, which is not the clocks agreeing; no reading
-    is compensated against the motion of another time (every output within 5 sd). Stepping forward again by
-    as much, the readings agree with the motion: one line, and the output comes back."""
+    readings go on, with the motion fed live and 0.3 s ahead (a node behind its inputs), and 30 readings lost
+    during the stall: the readings' lead on the motion shrinks back, which is not the clocks agreeing; no reading
+    after the step is compensated (against the motion of another time). Stepping forward again by as much, the
+    readings agree with the motion: one line each way, and the output comes back."""
     from types import SimpleNamespace
     from fmscal.analysis.ros2 import Pipeline
     t, w_hat, pose, settings = poses
-    stalled, out = Pipeline(settings()), []
-    for i in range(len(t)):
-        if i < 2000:                                # the motion stops at 2 s
-            stalled.add_motion(t[i], pose[i])
-        s = t[i] - 0.5003 * (i >= 1500)
-        stalled.add_reading(s, w_hat[i], SimpleNamespace(t=s), "ft_sensor")
-        if i % 7 == 6:
-            out += stalled.process()
-    _ledger(stalled)
-    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
-    assert np.abs(z).max() < BOUND and max(o.sample.t for o in out) < t[1500]
-    assert stalled.state() == "streams apart"
+    for lead in (0, 300):
+        stalled, out = Pipeline(settings()), []
+        for k in range(lead):
+            stalled.add_motion(t[k], pose[k])
+        for i in range(len(t)):
+            if i + lead < 2000:                         # the motion stops at 2 s
+                stalled.add_motion(t[i + lead], pose[i + lead])
+            s = t[i] - 0.5003 * (i >= 1500)
+            if not 2150 <= i < 2180:                    # lost
+                stalled.add_reading(s, w_hat[i], SimpleNamespace(t=s), "ft_sensor")
+            if i % 7 == 6:
+                out += stalled.process()
+        _ledger(stalled)
+        assert max(o.sample.t for o in out) < t[1500] and stalled.state() == "streams apart", lead
     back = Pipeline(settings())
     out = _replay(back, t, w_hat, pose, stamp=lambda i, s: s - 0.5003 * (1500 <= i < 2500))
     _ledger(back)
     z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
     assert np.abs(z).max() < BOUND and back.state() == "running"
     assert sum(o.sample.t > t[2500] for o in out) > 1300
-    assert [m for k, m in back.notices if k == "apart"][-1].startswith("the readings' stamps agree")
+    said = [m for k, m in back.notices if k == "apart"]
+    assert len(said) == 2 and said[-1].startswith("the readings' stamps agree"), said
+
+
+def test_readings_stepping_back_before_the_motion_get_no_motion_of_the_old_clock(poses):
+    """Both clocks step back, the readings 20 samples before the motion: by 0.5003 s (apart until the motion
+    follows), the readings share the motion's clock again (the state "running") and the output comes back; by
+    0.0103 s (within the tolerance), every output within 5 sd (the motion kept from the old clock is not given
+    to readings already on the new one, and the readings do not take the new clock's motion in a window that
+    holds the old one's: 19 outputs up to 152 sd)."""
+    from types import SimpleNamespace
+    from fmscal.analysis.ros2 import Pipeline
+    t, w_hat, pose, settings = poses
+    for step in (0.5003, 0.0103):
+        pipeline, out = Pipeline(settings()), []
+        for i in range(len(t)):
+            pipeline.add_motion(t[i] - step * (i >= 1520), pose[i])
+            s = t[i] - step * (i >= 1500)
+            pipeline.add_reading(s, w_hat[i], SimpleNamespace(t=s), "ft_sensor")
+            if i % 7 == 6:
+                out += pipeline.process()
+        _ledger(pipeline)
+        z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+        assert np.abs(z).max() < BOUND, step
+        order = [o.sample.t for o in out]
+        if step > 0.1:
+            assert pipeline.state() == "running" and sum(u > t[1520] - step + 0.2 for u in order) > 2000
 
 
 def test_a_motion_gap_seen_late_is_stale_as_when_seen_live(poses):

@@ -333,6 +333,8 @@ class Pipeline:
         self._lead = None                              # the newest motion's stamp less a reading's, at its arrival
         self._apart_from = None                        # a step back's reference lead while the streams are apart
         self._apart_said = False                       # the readings found apart since that step back
+        self._motion_at_take = None                    # the motion's newest stamp when the last reading was taken
+        self._reading_back = None                      # (segment, stamp) of the readings' last step back
         self._stray, self._motion_stray = None, None   # a reading, a motion sample stamped back: held aside
         self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
         self._motion = deque()                         # (t taken, value)
@@ -573,8 +575,12 @@ class Pipeline:
         self._notice("motion_restart", f"the motion's stamps stepped back by {newest - t:.6g} s: its buffer "
                                        "restarted; readings stamped on the old clock past its last "
                                        "sample get no motion")
+        back, self._reading_back = self._reading_back, None
+        stepped = back is not None and back[0] == self._segment and abs(t - back[1]) <= self.settings.stale_timeout
         self._old_motion = None
-        if self._apart_from is None and self._motion:  # readings still to come on the old clock: its motion kept
+        if self._apart_from is None and not stepped and self._motion:
+            # readings still to come on the old clock (not already on a new one, stepped back by less than the
+            # tolerance to about these stamps): its motion kept for them
             self._old_motion = (self._motion_epoch, self._segment, self._motion[-1][0], deque(self._motion))
         self._motion = deque()
         self._last_angles = None
@@ -672,16 +678,18 @@ class Pipeline:
             if self._motion_epoch > self._reading_epoch:    # the motion's clock stepped back first: the same step
                 self._reading_epoch = self._motion_epoch
                 self._apart_from, self._apart_said = None, False
-            elif self._apart_from is None and self._lead is not None:
-                self._apart_from = self._lead
-        previous, self._newest_in = self._newest_in, t
+            else:
+                self._reading_back = (self._segment, t)
+                if self._apart_from is None and self._lead is not None:
+                    self._apart_from = self._lead
+        self._newest_in = t
+        newest_motion = self._motion[-1][0] if self._motion else None
+        moved, self._motion_at_take = newest_motion != self._motion_at_take, newest_motion
         apart = False
         if self._apart_from is not None and lead is not None:
-            tolerance = self._apart_tolerance()
-            stalled = self._apart_said and not (previous is not None and t - previous > tolerance)
-            if lead - self._apart_from > tolerance or stalled:
-                # apart; and stays apart until the readings' clock steps forward again: a lead that shrinks
-                # step by step is the motion stalled, not the clocks agreeing
+            if lead - self._apart_from > self._apart_tolerance() or (self._apart_said and not moved):
+                # apart; and stays apart while the motion has not moved since the last reading: a lead that
+                # shrinks as the readings go on alone is the motion stalled, not the clocks agreeing
                 apart = self._apart_said = True
                 if "apart" not in self.conditions:
                     self._condition("apart", f"the readings' stamps stepped back {lead - self._apart_from:.6g} s "
