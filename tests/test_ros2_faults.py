@@ -61,22 +61,36 @@ def poses(tmp_path_factory):
     return t, w_hat, np.array(pose), lambda **kw: settings({**values, **kw})
 
 
-def _replay(pipeline, t, w_hat, pose, rows=None, stamp=lambda i, t: t, motion_stamp=None, block=7):
+def _replay(pipeline, t, w_hat, pose, rows=None, stamp=lambda i, t: t, motion_stamp=None, block=7, lead=0,
+            motion_sent=lambda j: True):
     """Feed rows (default all) to a pipeline as the node does, ``block`` at a time: each row's pose, then its
-    reading; the outputs."""
+    reading; the outputs. ``lead``: the poses that many rows ahead of the readings (a node behind its inputs
+    takes the motion first: the first ``lead`` poses before the first reading); ``motion_sent(j)``: whether
+    row ``j``'s pose is sent (lost where not)."""
     from types import SimpleNamespace
     rows = list(range(len(t)) if rows is None else rows)
     out, batch = [], []
+
+    def motion(j):
+        if j < len(t) and motion_sent(j):
+            pipeline.add_motion(t[j] if motion_stamp is None else motion_stamp(j, t[j]), pose[j])
+    for j in range(lead):
+        motion(j)
     for k, i in enumerate(rows):
         batch.append(i)
         if len(batch) == block or k == len(rows) - 1:
             for j in batch:
-                pipeline.add_motion(t[j] if motion_stamp is None else motion_stamp(j, t[j]), pose[j])
+                motion(j + lead)
                 s = stamp(j, t[j])
                 pipeline.add_reading(s, w_hat[j], SimpleNamespace(t=s), "ft_sensor")
             out += pipeline.process()
             batch = []
     return out
+
+
+def _z(out):
+    """The outputs' z-scores against the truth (zero): each component over its covariance's sd."""
+    return np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
 
 
 def _ledger(pipeline):
@@ -103,7 +117,7 @@ def test_the_ledger_counts_each_reading_once(poses):
     assert s.withheld["duplicate"] == 2 and s.withheld["window"] == 2 * 29 and s.withheld["restart"] == 30
     assert s.events == {"gap": 3, "restart": 1}                 # the repeats are the pipeline's (not the newest)
     assert s.withheld["gap"] == 1 + 2 + 10 and s.counts["published"] == len(out)
-    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+    z = _z(out)
     assert np.abs(z).max() < BOUND and 0.85 < np.sqrt(np.mean(z ** 2)) < 1.15
     withheld = [d for d in pipeline.dropped]
     assert len(withheld) == sum(s.withheld.values()) - s.withheld["duplicate"]
@@ -129,7 +143,7 @@ def test_a_readings_clock_stepping_back_alone_is_withheld(poses):
     assert s.events["restart"] == 1 and s.withheld["apart"] == 0 and both.state() == "running"
     late = [o for o in out if o.sample.t > t[1500] - 0.5 + 0.1]
     assert len(late) > 2000
-    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+    z = _z(out)
     assert np.abs(z).max() < BOUND
 
 
@@ -139,27 +153,19 @@ def test_readings_apart_stay_apart_until_their_clock_steps_forward(poses):
     during the stall: the readings' lead on the motion shrinks back, which is not the clocks agreeing; no reading
     after the step is compensated (against the motion of another time). Stepping forward again by as much, the
     readings agree with the motion: one line each way, and the output comes back."""
-    from types import SimpleNamespace
     from fmscal.analysis.ros2 import Pipeline
     t, w_hat, pose, settings = poses
+    rows = [i for i in range(len(t)) if not 2150 <= i < 2180]          # lost
     for lead in (0, 300):
-        stalled, out = Pipeline(settings()), []
-        for k in range(lead):
-            stalled.add_motion(t[k], pose[k])
-        for i in range(len(t)):
-            if i + lead < 2000:                         # the motion stops at 2 s
-                stalled.add_motion(t[i + lead], pose[i + lead])
-            s = t[i] - 0.5003 * (i >= 1500)
-            if not 2150 <= i < 2180:                    # lost
-                stalled.add_reading(s, w_hat[i], SimpleNamespace(t=s), "ft_sensor")
-            if i % 7 == 6:
-                out += stalled.process()
+        stalled = Pipeline(settings())
+        out = _replay(stalled, t, w_hat, pose, rows, stamp=lambda i, s: s - 0.5003 * (i >= 1500), lead=lead,
+                      motion_sent=lambda j: j < 2000)                   # the motion stops at 2 s
         _ledger(stalled)
         assert max(o.sample.t for o in out) < t[1500] and stalled.state() == "streams apart", lead
     back = Pipeline(settings())
     out = _replay(back, t, w_hat, pose, stamp=lambda i, s: s - 0.5003 * (1500 <= i < 2500))
     _ledger(back)
-    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+    z = _z(out)
     assert np.abs(z).max() < BOUND and back.state() == "running"
     assert sum(o.sample.t > t[2500] for o in out) > 1300
     said = [m for k, m in back.notices if k == "apart"]
@@ -172,20 +178,14 @@ def test_readings_stepping_back_before_the_motion_get_no_motion_of_the_old_clock
     0.0103 s (within the tolerance), every output within 5 sd (the motion kept from the old clock is not given
     to readings already on the new one, and the readings do not take the new clock's motion in a window that
     holds the old one's: 19 outputs up to 152 sd)."""
-    from types import SimpleNamespace
     from fmscal.analysis.ros2 import Pipeline
     t, w_hat, pose, settings = poses
     for step in (0.5003, 0.0103):
-        pipeline, out = Pipeline(settings()), []
-        for i in range(len(t)):
-            pipeline.add_motion(t[i] - step * (i >= 1520), pose[i])
-            s = t[i] - step * (i >= 1500)
-            pipeline.add_reading(s, w_hat[i], SimpleNamespace(t=s), "ft_sensor")
-            if i % 7 == 6:
-                out += pipeline.process()
+        pipeline = Pipeline(settings())
+        out = _replay(pipeline, t, w_hat, pose, stamp=lambda i, s: s - step * (i >= 1500),
+                      motion_stamp=lambda i, s: s - step * (i >= 1520))
         _ledger(pipeline)
-        z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
-        assert np.abs(z).max() < BOUND, step
+        assert np.abs(_z(out)).max() < BOUND, step
         order = [o.sample.t for o in out]
         if step > 0.1:
             assert pipeline.state() == "running" and sum(u > t[1520] - step + 0.2 for u in order) > 2000
@@ -195,27 +195,11 @@ def test_a_motion_gap_seen_late_is_stale_as_when_seen_live(poses):
     """1000 motion samples lost: fed live (each reading with its pose) and fed late (the motion 1.5 s ahead of
     the readings, as a node behind its inputs takes them), the readings in the gap are withheld as ``stale``
     alike, with one "motion stale" line; none as ``motion``; the output comes back after the gap."""
-    from types import SimpleNamespace
     from fmscal.analysis.ros2 import Pipeline
     t, w_hat, pose, settings = poses
-    gone = set(range(1500, 2500))
     live, late = Pipeline(settings()), Pipeline(settings())
-    out_live, out_late, lead = [], [], 1500
-    for i in range(len(t)):
-        if i not in gone:
-            live.add_motion(t[i], pose[i])
-        live.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
-        j = i + lead
-        if j < len(t) and j not in gone:
-            late.add_motion(t[j], pose[j])
-        if i == 0:
-            for k in range(lead):
-                if k not in gone:
-                    late.add_motion(t[k], pose[k])
-        late.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
-        if i % 7 == 6 or i == len(t) - 1:
-            out_live += live.process()
-            out_late += late.process()
+    out_live, out_late = (_replay(p, t, w_hat, pose, lead=lead, motion_sent=lambda j: not 1500 <= j < 2500)
+                          for p, lead in ((live, 0), (late, 1500)))
     for pipeline, out in ((live, out_live), (late, out_late)):
         s = _ledger(pipeline)
         assert 900 <= s.withheld["stale"] <= 1000 and s.withheld["motion"] <= 2, s.withheld
@@ -228,27 +212,13 @@ def test_a_motion_step_back_seen_late_keeps_the_readings_before_it(poses):
     1.5 s ahead of the readings, as a node behind its inputs takes them), the readings before the step are
     compensated alike against the motion of their stamps, those after it withheld as ``apart``; one line each
     for the step and for the streams apart."""
-    from types import SimpleNamespace
     from fmscal.analysis.ros2 import Pipeline
     t, w_hat, pose, settings = poses
     step = 1500
-    tm = t - 0.5003 * (np.arange(len(t)) >= step)
-    live, late = Pipeline(settings()), Pipeline(settings())
-    out_live, out_late, lead = [], [], 1500
-    for i in range(len(t)):
-        live.add_motion(tm[i], pose[i])
-        live.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
-        if i == 0:
-            for k in range(lead):
-                late.add_motion(tm[k], pose[k])
-        if i + lead < len(t):
-            late.add_motion(tm[i + lead], pose[i + lead])
-        late.add_reading(t[i], w_hat[i], SimpleNamespace(t=t[i]), "ft_sensor")
-        if i % 7 == 6 or i == len(t) - 1:
-            out_live += live.process()
-            out_late += late.process()
     before = []
-    for pipeline, out in ((live, out_live), (late, out_late)):
+    for lead in (0, 1500):
+        pipeline = Pipeline(settings())
+        out = _replay(pipeline, t, w_hat, pose, motion_stamp=lambda i, s: s - 0.5003 * (i >= step), lead=lead)
         s = _ledger(pipeline)
         stamps = np.array([o.sample.t for o in out])
         before.append(int((stamps < t[step]).sum()))
@@ -256,8 +226,7 @@ def test_a_motion_step_back_seen_late_keeps_the_readings_before_it(poses):
         assert s.withheld["motion"] + s.withheld["stale"] <= 2, s.withheld
         keys = [k for k, _ in pipeline.notices]
         assert keys.count("motion_restart") == keys.count("apart") == 1, pipeline.notices
-        z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
-        assert np.abs(z).max() < BOUND
+        assert np.abs(_z(out)).max() < BOUND
     assert before[0] > step - 100 and abs(before[0] - before[1]) <= 2, before
 
 
@@ -289,7 +258,7 @@ def test_faster_readings_are_decimated_as_stated(poses, tmp_path):
     assert pipeline.decimation == 3 and s.dt == pytest.approx(3e-3)
     assert any("1 in 3 compensated" in m for _, m in pipeline.notices)
     assert s.withheld["decimated"] == 2000 - 667 and np.allclose(np.diff([o.sample.t for o in out]), 3e-3)
-    z = np.array([o.sample.wrench / np.sqrt(np.diag(o.sample.cov)) for o in out])
+    z = _z(out)
     assert np.abs(z).max() < BOUND and 0.8 < np.sqrt(np.mean(z ** 2)) < 1.2
 
 
