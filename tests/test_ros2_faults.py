@@ -177,7 +177,7 @@ def test_readings_stepping_back_before_the_motion_get_no_motion_of_the_old_clock
     follows), the readings share the motion's clock again (the state "running") and the output comes back; by
     0.0103 s (within the tolerance), every output within 5 sd (the motion kept from the old clock is not given
     to readings already on the new one, and the readings do not take the new clock's motion in a window that
-    holds the old one's: 19 outputs up to 152 sd)."""
+    holds the old one's, which puts outputs far beyond their covariance)."""
     from fmscal.analysis.ros2 import Pipeline
     t, w_hat, pose, settings = poses
     for step in (0.5003, 0.0103):
