@@ -25,8 +25,9 @@ from fmscal.plant.io import simulate_attitude_log
 from fmscal.plant.scenarios._spatial import TOOL
 from live_rig import contact_wrench, noise_rms, with_contact
 from geometry_msgs.msg import PoseStamped
-from ros2_rig import (DOMAINS, HARNESS_NOISE, Peer, contact_array, domain_id, imu_message, joint_state, node_command,
-                      node_log, running_node, seconds, tool_calibration, truth_calibration)
+from ros2_rig import (DOMAINS, HARNESS_NOISE, WAIT, Peer, contact_array, domain_id, imu_message, joint_state,
+                      node_command, node_log, running_node, seconds, tool_calibration, truth_calibration,
+                      wait_until)
 import robot_rig
 from sensor_msgs.msg import Imu, JointState
 
@@ -318,6 +319,34 @@ def test_parameters_refused_in_one_line(cal_file):
         _settings(cal_file, drift_intensity=[0.1])
 
 
+def test_the_inputs_events_are_in_no_executors_wait_set(request, cal_file):
+    """The inputs' QoS event handlers (incompatible, matched, lost) are taken by a timer's look
+    (``take_events``), not waited on by the node's executor. Fast DDS wakes a wait set holding a subscription's
+    events at each of its messages; the executor then rebuilt its wait set in Python a thousand times a second,
+    and the compensation, waiting for the interpreter's lock, fell behind its 1 kHz inputs
+    (benchmarks/ros2_latency.py). Fails where the handlers are added to the node's executor."""
+    from fmscal.analysis.ros2._node import CompensatorNode
+    from fmscal.analysis.ros2._rclpy import ros
+    r = ros()
+    context = r.Context()
+    args = ["--ros-args", "-p", f"calibration:={cal_file}", "-p", "pose_topic:=/ft_sensor/pose"]
+    r.rclpy.init(args=["fmscal", *args], context=context, domain_id=domain_id(request.node.name))
+    node = None
+    try:
+        node = CompensatorNode(r, context, args)
+        assert node.pollable()
+        handlers = [*node._wrench_sub.event_handlers, *node._motion_sub.event_handlers]
+        timers = len(list(node.node.timers))
+        node.take_events(context)
+        assert len(handlers) >= 4                     # incompatible QoS, matched, lost: on each input
+        assert not set(map(id, handlers)) & set(map(id, node.node.waitables))
+        assert len(list(node.node.timers)) == timers + 1
+    finally:
+        if node is not None:
+            node.destroy()
+        r.rclpy.try_shutdown(context=context)
+
+
 def test_the_guide_lists_every_parameter_with_its_type_and_default():
     """docs/guide/robot.md's table: the node's parameters, in its order, each with its type and default."""
     text = (ROOT / "docs" / "guide" / "robot.md").read_text()
@@ -341,6 +370,21 @@ def test_a_missing_calibration_exits_with_one_line():
     assert done.stderr.strip() == ("fmscal ros2: error: parameter calibration or payload is required: a file saved "
                                    "by fmscal calibrate --save (--ros-args -p calibration:=CAL.json), or by fmscal "
                                    "identify-payload --save (-p payload:=tool.json)")
+
+
+def test_a_ctrl_c_stops_the_node_without_a_traceback(request, cal_file):
+    """One SIGINT (Ctrl-C) to a running node: it exits (0, or 130 where the interrupt reached the command line)
+    with no traceback on its stderr (the inputs' subscriptions and their QoS event handlers destroyed with their
+    node)."""
+    import signal as signals
+    with _node(request, cal_file) as proc:
+        started = wait_until(lambda: "compensating" in node_log(proc) or proc.poll() is not None)
+        proc.send_signal(signals.SIGINT)
+        proc.wait(timeout=WAIT)
+        log = node_log(proc)
+    assert started, log
+    assert proc.returncode in (0, 130), log
+    assert "Traceback" not in log and "Error" not in log, log
 
 
 def test_without_rclpy_one_line_names_the_install(monkeypatch, capsys):

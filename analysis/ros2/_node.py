@@ -25,6 +25,7 @@ pipeline's window restarted (the readings it held counted as ``error``), and the
 """
 
 import array
+import contextlib
 import difflib
 import faulthandler
 import fnmatch
@@ -60,6 +61,8 @@ POLL = 0.0003
 #: s between two looks at inputs silent for :data:`SILENT` s or more.
 IDLE = 0.005
 SILENT = 0.1
+#: s between two looks at the inputs' QoS events (:meth:`CompensatorNode.take_events`).
+EVENTS = 0.1
 #: The readings the node's own latency statistic keeps (diagnostics' p50 and p99).
 LATENCY_KEPT = 2000
 #: s beyond its usual lag an output may come (or a compensation pass may run) before the node is "behind".
@@ -207,6 +210,7 @@ class CompensatorNode:
         message, self._motion_message = {PoseMotion: (r.PoseStamped, self._pose),
                                          JointMotion: (r.JointState, self._joints),
                                          ImuMotion: (r.Imu, self._imu)}[type(motion)]
+        self._events = []                              # the inputs' QoS event handlers (take_events)
         self._wrench_sub = self._subscribe(r.WrenchStamped, s.wrench_topic, self._on_wrench, qos_in)
         self._motion_sub = self._subscribe(message, s.topic, self._on_motion, qos_in)
         # the services on a node of their own, spun by its own executor in another thread, named under this
@@ -267,7 +271,8 @@ class CompensatorNode:
     # --- the inputs' subscriptions and their events -------------------------------------------------------------
     def _subscribe(self, message, topic, callback, qos):
         """A subscription of the inputs' node, its QoS events (an incompatible publisher, the publishers matched,
-        messages lost) handled by this node's executor (the inputs' node is not spun)."""
+        messages lost) kept for :meth:`take_events` (the inputs' node is not spun where :meth:`poll` takes the
+        messages)."""
         r, topic = self.r, self._resolve(topic)
         events = None
         if r.Events is not None:
@@ -278,10 +283,42 @@ class CompensatorNode:
             sub = self.inputs.create_subscription(message, topic, callback, qos, event_callbacks=events)
         except Exception:                          # an rmw without one of these events
             sub = self.inputs.create_subscription(message, topic, callback, qos)
-        for handler in list(getattr(sub, "event_handlers", ())):
-            self.inputs.remove_waitable(handler)
-            self.node.add_waitable(handler)
+        self._events.extend(getattr(sub, "event_handlers", ()))
         return sub
+
+    def take_events(self, context):
+        """The inputs' QoS events taken and handled, each :data:`EVENTS` s (a timer of this node's executor): a
+        wait set looked at without waiting, not an executor waiting on the events. A middleware may wake a wait
+        set holding a subscription's events at each of its messages (Fast DDS does): an executor would then
+        rebuild its wait set in Python a thousand times a second, holding the interpreter's lock the
+        compensation needs. Where this rclpy has no wait set, the events go to this node's executor."""
+        if not self._events:
+            return
+        if self.r.WaitSet is None:
+            for handler in self._events:
+                self.inputs.remove_waitable(handler)
+                self.node.add_waitable(handler)
+            return
+        wait_set = self.r.WaitSet(0, 0, 0, 0, 0, len(self._events), context.handle)
+
+        def take():
+            with contextlib.ExitStack() as held:
+                held.enter_context(context.handle)
+                for handler in self._events:
+                    held.enter_context(handler)
+                wait_set.clear_entities()
+                for handler in self._events:
+                    handler.add_to_wait_set(wait_set)
+                wait_set.wait(0)
+                ready = [h for h in self._events if h.is_ready(wait_set)]
+                taken = [(h, h.take_data()) for h in ready]
+            for handler, data in taken:
+                if data:
+                    try:
+                        handler.callback(data)
+                    except Exception as err:           # said, never fatal
+                        self._warn("event", f"a QoS event not handled ({type(err).__name__}: {err})")
+        self.node.create_timer(EVENTS, take)
 
     def _incompatible(self, topic, info):
         policy = getattr(info, "last_policy_kind", None)
@@ -755,12 +792,13 @@ class CompensatorNode:
         self.worker.close()
 
     def destroy(self):
-        """The nodes destroyed (the QoS events' handlers first: they belong to the inputs' subscriptions)."""
-        for handler in [w for w in self.node.waitables]:
-            try:
+        """The nodes destroyed (the inputs' QoS event handlers that :meth:`take_events` gave this node's executor
+        given back first: the inputs' node removes them with its subscriptions)."""
+        moved = {id(w) for w in self.node.waitables}
+        for handler in self._events:
+            if id(handler) in moved:
                 self.node.remove_waitable(handler)
-            except Exception:
-                pass
+                self.inputs.add_waitable(handler)
         for n in (self.services, self.inputs, self.node):
             n.destroy_node()
 
@@ -792,6 +830,7 @@ def spin(args):
         threads = [threading.Thread(target=_spin_services, args=(r, services), daemon=True)]
         if node.pollable():
             threads.append(threading.Thread(target=node.poll, args=(context,), daemon=True))
+            node.take_events(context)
         else:                                        # an rclpy without take_message: its executor takes them
             executor.add_node(node.inputs)
         # everything built so far (the imports, the warmed-up compensator) out of the collector's way: a full
