@@ -49,6 +49,7 @@ from ros2_rig import Taker, node_log, running_node, truth_calibration  # noqa: E
 from ros2_sender import scenario_log  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -135,7 +136,10 @@ class IdentifyCall(threading.Thread):
                 return
             self.start_at = time.time()
             future = client.call_async(Trigger.Request())
-            rclpy.spin_until_future_complete(node, future, timeout_sec=600.0)
+            executor = SingleThreadedExecutor(context=context)   # of this context (the global one has none)
+            executor.add_node(node)
+            rclpy.spin_until_future_complete(node, future, executor=executor, timeout_sec=600.0)
+            executor.shutdown()
             self.end_at = time.time()
             result = future.result()
             self.answer = (False, "no answer in 600 s") if result is None else (result.success, result.message)
