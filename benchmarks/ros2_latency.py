@@ -138,8 +138,10 @@ class IdentifyCall(threading.Thread):
             future = client.call_async(Trigger.Request())
             executor = SingleThreadedExecutor(context=context)   # of this context (the global one has none)
             executor.add_node(node)
-            rclpy.spin_until_future_complete(node, future, executor=executor, timeout_sec=600.0)
-            executor.shutdown()
+            try:
+                executor.spin_until_future_complete(future, timeout_sec=600.0)
+            finally:
+                executor.shutdown()
             self.end_at = time.time()
             result = future.result()
             self.answer = (False, "no answer in 600 s") if result is None else (result.success, result.message)

@@ -338,8 +338,9 @@ def test_the_inputs_events_are_in_no_executors_wait_set(request, cal_file):
         handlers = [*node._wrench_sub.event_handlers, *node._motion_sub.event_handlers]
         timers = len(list(node.node.timers))
         node.take_events(context)
-        assert len(handlers) >= 4                     # incompatible QoS, matched, lost: on each input
-        assert not set(map(id, handlers)) & set(map(id, node.node.waitables))
+        # incompatible QoS, matched, lost: on each input
+        assert len(node._wrench_sub.event_handlers) >= 3 and len(node._motion_sub.event_handlers) >= 3
+        assert not set(map(id, handlers)) & {id(w) for n in (node.node, node.services) for w in n.waitables}
         assert len(list(node.node.timers)) == timers + 1
     finally:
         if node is not None:
@@ -384,7 +385,7 @@ def test_a_ctrl_c_stops_the_node_without_a_traceback(request, cal_file):
         log = node_log(proc)
     assert started, log
     assert proc.returncode in (0, 130), log
-    assert "Traceback" not in log and "Error" not in log, log
+    assert "Traceback" not in log and "ValueError" not in log, log
 
 
 def test_without_rclpy_one_line_names_the_install(monkeypatch, capsys):

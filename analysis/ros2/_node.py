@@ -12,8 +12,9 @@ of either queue took) and compensates them as one block (:meth:`fmscal.analysis.
 executor costs a wake-up and a pass of Python per message, and rclpy's ``MultiThreadedExecutor`` lost 1 kHz
 messages on a loaded 2-core machine where this way loses none (docs/guide/robot.md quotes
 ``benchmarks/ros2_latency.py``). An rclpy without ``take_message`` falls back to its executor's callbacks. The
-parameters, the diagnostics' timer and the inputs' QoS events (their handlers moved to this node: the inputs' node
-is not spun) are the node's, on a ``SingleThreadedExecutor`` in the main thread; the diagnostics read the
+parameters, the diagnostics' timer and a timer looking at the inputs' QoS events (their handlers stay with the
+inputs' node, which is not spun: :meth:`CompensatorNode.take_events`) are the node's, on a
+``SingleThreadedExecutor`` in the main thread; the diagnostics read the
 pipeline's snapshot, never its lock, so that a compensation that stalls is said, not silenced. The services live
 on a node ``<name>_services``, on a ``MultiThreadedExecutor`` spun in another thread, and are named under the
 node's name (``/fmscal_compensator/tare``); ``~/identify_payload``'s fit runs in a process of its own
@@ -290,34 +291,33 @@ class CompensatorNode:
         """The inputs' QoS events taken and handled, each :data:`EVENTS` s (a timer of this node's executor): a
         wait set looked at without waiting, not an executor waiting on the events. A middleware may wake a wait
         set holding a subscription's events at each of its messages (Fast DDS does): an executor would then
-        rebuild its wait set in Python a thousand times a second, holding the interpreter's lock the
-        compensation needs. Where this rclpy has no wait set, the events go to this node's executor."""
+        rebuild its wait set in Python at each message, holding the interpreter's lock the compensation needs.
+        An error while taking them is said, never fatal. Where this rclpy has no wait set, they are not taken,
+        said at start."""
         if not self._events:
             return
         if self.r.WaitSet is None:
-            for handler in self._events:
-                self.inputs.remove_waitable(handler)
-                self.node.add_waitable(handler)
+            self.log.warning("this rclpy has no wait set: the inputs' QoS events (an incompatible publisher, "
+                             "messages lost) are not watched")
             return
         wait_set = self.r.WaitSet(0, 0, 0, 0, 0, len(self._events), context.handle)
 
         def take():
-            with contextlib.ExitStack() as held:
-                held.enter_context(context.handle)
-                for handler in self._events:
-                    held.enter_context(handler)
-                wait_set.clear_entities()
-                for handler in self._events:
-                    handler.add_to_wait_set(wait_set)
-                wait_set.wait(0)
-                ready = [h for h in self._events if h.is_ready(wait_set)]
-                taken = [(h, h.take_data()) for h in ready]
-            for handler, data in taken:
-                if data:
-                    try:
+            try:
+                with contextlib.ExitStack() as held:
+                    held.enter_context(context.handle)
+                    for handler in self._events:
+                        held.enter_context(handler)
+                    wait_set.clear_entities()
+                    for handler in self._events:
+                        handler.add_to_wait_set(wait_set)
+                    wait_set.wait(0)
+                    taken = [(h, h.take_data()) for h in self._events if h.is_ready(wait_set)]
+                for handler, data in taken:
+                    if data:
                         handler.callback(data)
-                    except Exception as err:           # said, never fatal
-                        self._warn("event", f"a QoS event not handled ({type(err).__name__}: {err})")
+            except Exception as err:                   # said, never fatal
+                self._warn("event", f"the inputs' QoS events not taken ({type(err).__name__}: {err})")
         self.node.create_timer(EVENTS, take)
 
     def _incompatible(self, topic, info):
@@ -792,13 +792,8 @@ class CompensatorNode:
         self.worker.close()
 
     def destroy(self):
-        """The nodes destroyed (the inputs' QoS event handlers that :meth:`take_events` gave this node's executor
-        given back first: the inputs' node removes them with its subscriptions)."""
-        moved = {id(w) for w in self.node.waitables}
-        for handler in self._events:
-            if id(handler) in moved:
-                self.node.remove_waitable(handler)
-                self.inputs.add_waitable(handler)
+        """The nodes destroyed (each with its own waitables: the inputs' node with its subscriptions' QoS event
+        handlers)."""
         for n in (self.services, self.inputs, self.node):
             n.destroy_node()
 
