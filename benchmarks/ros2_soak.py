@@ -13,7 +13,9 @@ memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
   the stated sd gives on average (each output's channels, two-sided: ``2 Phi(-5)`` each; about 2 in ten minutes of
   six channels at 1 kHz, so a rare one is the noise's, not the node's), and the largest unflagged ``|z|``;
 - the rms z-score over the outputs away from every fault (the window and the delay either side);
-- the ledger: ``received = published + withheld + waiting`` (exact), and the readings lost;
+- the ledger: ``received = published + withheld + waiting`` (exact), and the readings lost; the withheld by cause;
+- the unflagged outputs beyond 5 sd, in runs (0.1 s apart or more): the first eight, each with its first stamp,
+  its size and the fault before it;
 - the resident memory at minute 2 and at the end, and its growth (the target: under 20 MB; with ``--minutes``
   under 2, minute 2 falls after the replay, in the wait for its last outputs).
 
@@ -139,7 +141,28 @@ def soak(source, minutes, seed):
                 ledger_exact=int(status["received"]) == int(status["published"]) + withheld + int(status["waiting"]),
                 rss_minute2_mb=at2[0] if at2 else None, rss_end_mb=last[-1] if last else None,
                 rss_growth_mb=(last[-1] - at2[0]) if at2 and last else None,
+                withheld_by_cause={k[len("withheld_"):]: int(v) for k, v in status.items()
+                                   if k.startswith("withheld_") and int(v)},
+                beyond=_beyond(t[(worst > BOUND) & ~flagged], plan_faults),
                 log_tail=None if alive else log[-2000:])
+
+
+def _beyond(times, plan_faults, most=8):
+    """The unflagged outputs beyond the bound, in runs 0.1 s apart or more: for the first ``most`` runs, their
+    first stamp, size, and the last fault before it (its kind, stream and how long before, s)."""
+    out = []
+    for k, at in enumerate(times):
+        if k and at - times[k - 1] < 0.1:
+            out[-1]["outputs"] += 1
+            continue
+        if len(out) == most:
+            break
+        before = [f for f in plan_faults if f["at"] <= at]
+        f = before[-1] if before else None
+        out.append(dict(t=round(float(at), 3), outputs=1,
+                        fault=None if f is None else f"{f['kind']} {f['stream']} {f.get('count', f.get('seconds'))}",
+                        after_s=None if f is None else round(float(at - f["at"]), 3)))
+    return out
 
 
 def _mb(v):
@@ -167,6 +190,10 @@ def main():
               f"{r['withheld']} + waiting {r['waiting']} ({'exact' if r['ledger_exact'] else 'NOT exact'}), lost "
               f"{r['lost']}; resident memory {_mb(r['rss_minute2_mb'])} at minute 2, {_mb(r['rss_end_mb'])} at the "
               f"end (growth {growth})")
+        print(f"  withheld by cause: {r['withheld_by_cause']}")
+        for b in r["beyond"]:
+            print(f"  unflagged beyond {BOUND:g} sd from t = {b['t']} s ({b['outputs']} outputs), {b['after_s']} s "
+                  f"after the fault {b['fault']}")
         if r["log_tail"]:
             print(r["log_tail"])
 
