@@ -322,8 +322,8 @@ def test_parameters_refused_in_one_line(cal_file):
 def test_the_inputs_events_are_in_no_executors_wait_set(request, cal_file):
     """The inputs' QoS event handlers (incompatible, matched, lost) are taken by a timer's look
     (``take_events``), not waited on by the node's executor. Fast DDS wakes a wait set holding a subscription's
-    events at each of its messages; the executor then rebuilt its wait set in Python a thousand times a second,
-    and the compensation, waiting for the interpreter's lock, fell behind its 1 kHz inputs
+    events at each of its messages; the executor then rebuilt its wait set in Python at each input message, and
+    the compensation, waiting for the interpreter's lock, fell behind its 1 kHz inputs
     (benchmarks/ros2_latency.py). Fails where the handlers are added to the node's executor."""
     from fmscal.analysis.ros2._node import CompensatorNode
     from fmscal.analysis.ros2._rclpy import ros
