@@ -9,13 +9,16 @@ process takes every output, its covariance and flag, and the node's diagnostics,
 memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
 
 - whether the node was alive at the end;
-- the outputs, and those unflagged beyond 5 sd of the truth (the target: none) beside the count Gaussian noise at
-  the stated sd gives on average (each output's channels, two-sided: ``2 Phi(-5)`` each; about 2 in ten minutes of
-  six channels at 1 kHz, so a rare one is the noise's, not the node's), and the largest unflagged ``|z|``;
+- the outputs, and those beyond 5 sd of the truth with no flag, a condition's or the contact's (the target: none),
+  beside the count Gaussian noise at the stated sd gives on average (each output's channels, two-sided:
+  ``2 Phi(-5)`` each; about 2 in ten minutes of six channels at 1 kHz, so a rare one is the noise's, not the
+  node's), and the largest unflagged ``|z|``;
 - the rms z-score over the outputs away from every fault (the window and the delay either side);
 - the ledger: ``received = published + withheld + waiting`` (exact), and the readings lost; the withheld by cause;
-- the unflagged outputs beyond 5 sd, in runs (0.1 s apart or more): the first eight, each with its first stamp,
-  its size and the fault before it;
+- the outputs flagged as contact (the truth has none: the contact test's false alarms, or a fault's), and those
+  beyond 5 sd;
+- the unflagged outputs beyond 5 sd, and apart those flagged as contact, in runs (0.1 s apart or more): the first
+  eight, each with its first stamp, its size and the last fault that reaches it;
 - the resident memory at minute 2 and at the end, and its growth (the target: under 20 MB; with ``--minutes``
   under 2, minute 2 falls after the replay, in the wait for its last outputs).
 
@@ -117,6 +120,7 @@ def soak(source, minutes, seed):
                 alive = proc.poll() is None
                 status = listener.status()
                 t, wrench, sd, flagged = listener.outputs(epoch)
+                contact = listener.contact_flags()
             finally:
                 stop.set()
                 listener.close()
@@ -124,6 +128,7 @@ def soak(source, minutes, seed):
     z = wrench / sd
     worst = np.abs(z).max(axis=1)
     clean = ~flagged
+    beyond = (worst > BOUND) & ~flagged & ~contact
     for f in plan_faults:
         length = f.get("count", 0) * 1e-3 + f.get("seconds", 0.0)
         clean &= ~((t > f["at"] - CAUSAL_WINDOW - CAUSAL_DELAY - 0.01) &
@@ -132,9 +137,10 @@ def soak(source, minutes, seed):
     at2 = [m for s, m in memory if s >= 120.0 and m is not None]             # the sampler starts with the sender
     last = [m for _, m in memory if m is not None]
     return dict(source=source, minutes=minutes, faults=len(plan_faults), alive=alive, outputs=int(len(t)),
-                unflagged_beyond=int(((worst > BOUND) & ~flagged).sum()), flagged=int(flagged.sum()),
+                unflagged_beyond=int(beyond.sum()), flagged=int(flagged.sum()), contact=int(contact.sum()),
+                contact_beyond=int(((worst > BOUND) & ~flagged & contact).sum()),
                 expected_beyond=float(z.size * 2 * norm.sf(BOUND)),
-                largest_unflagged_z=float(worst[~flagged].max()) if (~flagged).any() else None,
+                largest_unflagged_z=float(worst[~flagged & ~contact].max()) if (~flagged & ~contact).any() else None,
                 rms_z_clean=float(np.sqrt(np.mean(z[clean] ** 2))) if clean.any() else None,
                 received=int(status["received"]), published=int(status["published"]), withheld=withheld,
                 waiting=int(status["waiting"]), lost=int(status["lost"]),
@@ -143,13 +149,15 @@ def soak(source, minutes, seed):
                 rss_growth_mb=(last[-1] - at2[0]) if at2 and last else None,
                 withheld_by_cause={k[len("withheld_"):]: int(v) for k, v in status.items()
                                    if k.startswith("withheld_") and int(v)},
-                beyond=_beyond(t[(worst > BOUND) & ~flagged], plan_faults),
+                beyond=_beyond(t[beyond], plan_faults),
+                contact_runs=_beyond(t[(worst > BOUND) & ~flagged & contact], plan_faults),
                 log_tail=None if alive else log[-2000:])
 
 
 def _beyond(times, plan_faults, most=8):
-    """The unflagged outputs beyond the bound, in runs 0.1 s apart or more: for the first ``most`` runs, their
-    first stamp, size, and the last fault before it (its kind, stream and how long before, s)."""
+    """Outputs beyond the bound, in runs 0.1 s apart or more: for the first ``most`` runs, their first stamp, size,
+    and the last fault that reaches it (begun before the stamp plus the causal delay: an output waits for the
+    readings that long after it; its kind, stream and how long before the stamp, s, negative where after)."""
     out = []
     for k, at in enumerate(times):
         if k and at - times[k - 1] < 0.1:
@@ -157,7 +165,7 @@ def _beyond(times, plan_faults, most=8):
             continue
         if len(out) == most:
             break
-        before = [f for f in plan_faults if f["at"] <= at]
+        before = [f for f in plan_faults if f["at"] <= at + CAUSAL_DELAY + 0.01]
         f = before[-1] if before else None
         out.append(dict(t=round(float(at), 3), outputs=1,
                         fault=None if f is None else f"{f['kind']} {f['stream']} {f.get('count', f.get('seconds'))}",
@@ -190,10 +198,14 @@ def main():
               f"{r['withheld']} + waiting {r['waiting']} ({'exact' if r['ledger_exact'] else 'NOT exact'}), lost "
               f"{r['lost']}; resident memory {_mb(r['rss_minute2_mb'])} at minute 2, {_mb(r['rss_end_mb'])} at the "
               f"end (growth {growth})")
-        print(f"  withheld by cause: {r['withheld_by_cause']}")
+        print(f"  withheld by cause: {r['withheld_by_cause']}; flagged contact {r['contact']} (the contact "
+              f"test's false alarms; {r['contact_beyond']} of them beyond {BOUND:g} sd)")
         for b in r["beyond"]:
             print(f"  unflagged beyond {BOUND:g} sd from t = {b['t']} s ({b['outputs']} outputs), {b['after_s']} s "
                   f"after the fault {b['fault']}")
+        for b in r["contact_runs"]:
+            print(f"  flagged contact beyond {BOUND:g} sd from t = {b['t']} s ({b['outputs']} outputs), "
+                  f"{b['after_s']} s after the fault {b['fault']}")
         if r["log_tail"]:
             print(r["log_tail"])
 

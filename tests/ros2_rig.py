@@ -488,6 +488,21 @@ def _publish(pub, msg, tries=20):
     return False
 
 
+def garbled(msg, source):
+    """``msg``, a motion message of ``source``, made one the node must skip (a fault ``garbage``): a pose's
+    quaternion scaled to norm 1.5 (scaling one component alone leaves the norm within the node's tolerance where
+    that component is near zero: a pose turned by up to a degree, not a skipped one), a NaN in an IMU's rate or the
+    first joint angle."""
+    if source == "pose":
+        o = msg.pose.orientation
+        o.w, o.x, o.y, o.z = 1.5 * o.w, 1.5 * o.x, 1.5 * o.y, 1.5 * o.z
+    elif source == "imu":
+        msg.angular_velocity.x = float("nan")
+    else:
+        msg.position = [float("nan")] + list(msg.position[1:])
+    return msg
+
+
 def send_plan(plan):
     """Publish a harness run (``plan``: a dict, :func:`start_sender`'s); returns what was sent, as a dict."""
     import gc
@@ -556,12 +571,7 @@ def send_plan(plan):
                 stamp.sec, stamp.nanosec = sec, nanosec
                 msg = build(row, stamp)
                 if stream == "g":                               # a message the node must skip
-                    if source == "pose":
-                        msg.pose.orientation.w *= 1.5               # a quaternion not of unit norm
-                    elif source == "imu":
-                        msg.angular_velocity.x = float("nan")
-                    else:
-                        msg.position = [float("nan")] + list(msg.position[1:])
+                    garbled(msg, source)
                 published = _publish(pubs["m", publisher], msg)
             if published:
                 sent[stream] += 1
@@ -712,6 +722,15 @@ class Listener:
         flagged = np.array([(m.header.stamp.sec, m.header.stamp.nanosec) in flagged_at for m in self.contacts[:n]],
                            dtype=bool)
         return t, wrench, sd, flagged
+
+    def contact_flags(self):
+        """Whether each output (:meth:`outputs`' order) carried the contact flag (its flags message's ``contact``
+        key ``true``; a later message of one stamp wins)."""
+        n = min(len(self.contacts), len(self.covariances))
+        contact = {(m.header.stamp.sec, m.header.stamp.nanosec): any(
+            v.key == "contact" and v.value == "true" for v in m.status[0].values) for m in self.flags}
+        return np.array([contact.get((m.header.stamp.sec, m.header.stamp.nanosec), False)
+                         for m in self.contacts[:n]], dtype=bool)
 
     def fates(self, epoch):
         """Each reading's fate by its stamp (s from the epoch, rounded to the microsecond), from the node's flags:

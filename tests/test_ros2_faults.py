@@ -101,6 +101,25 @@ def _ledger(pipeline):
     return s
 
 
+def test_the_harness_garbage_is_a_message_the_node_skips():
+    """The fault ``garbage`` sends motion messages the node must skip, on each source, at any attitude: near a
+    quaternion's zero ``w`` too, where scaling ``w`` alone left a unit quaternion (a pose turned by up to a
+    degree, which the 10-minute soak compensated as data)."""
+    from types import SimpleNamespace
+    from ros2_rig import garbled, harness_rows
+    t, _, build = harness_rows("pose", 0.2, 1e-3, 0, start=383.6)           # w crosses zero at 383.707 s
+    stamp = SimpleNamespace(sec=0, nanosec=0)
+    w = np.array([build(i, stamp).pose.orientation.w for i in range(len(t))])
+    assert np.abs(w).min() < 1e-3 < np.abs(w).max()
+    for i in range(len(t)):
+        o = garbled(build(i, stamp), "pose").pose.orientation
+        assert abs(np.linalg.norm([o.w, o.x, o.y, o.z]) - 1.5) < 1e-3          # the node skips beyond 1e-3
+    for source, check in (("imu", lambda m: np.isnan(m.angular_velocity.x)),
+                          ("joints", lambda m: np.isnan(m.position[0]))):
+        _, _, build = harness_rows(source, 0.01, 1e-3, 0)
+        assert check(garbled(build(0, stamp), source))
+
+
 def test_the_ledger_counts_each_reading_once(poses):
     """Lost readings (1, 2, 10, 1000 in a row), repeated ones, a reading stepping back: each reading published,
     withheld by its cause or waiting, once; the lost ones counted from the stamps; every output right within
