@@ -20,7 +20,8 @@ memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
 - the unflagged outputs beyond 5 sd, and apart those flagged as contact, in runs (0.1 s apart or more): the first
   eight, each with its first stamp, its size and the last fault that reaches it;
 - the resident memory at minute 2 and at the end, and its growth (the target: under 20 MB; with ``--minutes``
-  under 2, minute 2 falls after the replay, in the wait for its last outputs).
+  under 2, minute 2 falls after the replay, in the wait for its last outputs); and its sample each minute (a
+  leak grows steadily; a queue's or buffer's high-water mark steps up and stays).
 
 The machine's load is not controlled. About ``--minutes`` plus a minute of setup per source. ``--json`` prints
 the figures as one JSON object instead.
@@ -147,6 +148,7 @@ def soak(source, minutes, seed):
                 ledger_exact=int(status["received"]) == int(status["published"]) + withheld + int(status["waiting"]),
                 rss_minute2_mb=at2[0] if at2 else None, rss_end_mb=last[-1] if last else None,
                 rss_growth_mb=(last[-1] - at2[0]) if at2 and last else None,
+                rss_by_minute_mb=[round(m, 1) for s, m in memory if m is not None and int(s) % 60 < 5],
                 withheld_by_cause={k[len("withheld_"):]: int(v) for k, v in status.items()
                                    if k.startswith("withheld_") and int(v)},
                 beyond=_beyond(t[beyond], plan_faults),
@@ -198,6 +200,7 @@ def main():
               f"{r['withheld']} + waiting {r['waiting']} ({'exact' if r['ledger_exact'] else 'NOT exact'}), lost "
               f"{r['lost']}; resident memory {_mb(r['rss_minute2_mb'])} at minute 2, {_mb(r['rss_end_mb'])} at the "
               f"end (growth {growth})")
+        print(f"  resident memory each minute, MB: {r['rss_by_minute_mb']}")
         print(f"  withheld by cause: {r['withheld_by_cause']}; flagged contact {r['contact']} (the contact "
               f"test's false alarms; {r['contact_beyond']} of them beyond {BOUND:g} sd)")
         for b in r["beyond"]:
