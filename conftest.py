@@ -1,4 +1,5 @@
-"""Test-suite settings: short notebooks, and no silent skips on CI.
+"""Test-suite settings: short notebooks (marked ``slow``: each runs for tens of seconds), and no silent skips
+on CI.
 
 The notebooks run on short settings inside the test suite (they read
 ``FMSCAL_QUICK``). When the environment variable ``CI`` is set (CI runs
@@ -26,3 +27,11 @@ def pytest_runtest_makereport(item, call):
         reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
         report.outcome = "failed"
         report.longrepr = f"skipped on CI (CI={os.environ['CI']}), where every test must run: {reason}"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(items):
+    """The notebooks are long scenarios: marked ``slow`` (before ``-m`` selects)."""
+    for item in items:
+        if item.path.suffix == ".ipynb":
+            item.add_marker(pytest.mark.slow)

@@ -81,6 +81,7 @@ def test_gain_checks_give_the_poles_of_reading_md():
     assert "does NOT hold" in str(report)
 
 
+@pytest.mark.slow
 def test_compiled_and_readable_paths_agree():
     log, truth, _ = plant.get_scenario("vision-50hz").with_(duration=3.0).generate(4)
     for obs in (AdaptiveObserver(plant.PAPER_PAYLOAD), PaperAdaptiveObserver(plant.PAPER_PAYLOAD)):

@@ -25,6 +25,7 @@ def _case(name, seed, duration):
     ("vision-50hz", {}),
     ("real-rig", {}),                  # offset and multi-rate poses
 ])
+@pytest.mark.slow
 def test_compiled_and_numpy_paths_agree(name, settings):
     sc, log, truth, _, offset = _case(name, 0, 1.5)
     obs = AdaptiveObserver(sc.payload, offset=offset, **settings)

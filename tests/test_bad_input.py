@@ -206,6 +206,7 @@ def test_scheduler_without_the_distributed_extra_is_one_line(monkeypatch, capsys
     assert len(lines) == 1 and "distributed extra" in lines[0]
 
 
+@pytest.mark.slow
 def test_no_runtime_warning_reaches_stderr(folder, capsys):
     """An all-zero wrench: numpy would warn about the degenerate fit; the user sees the toolkit's words only."""
     log = plant.read_log(folder / "log.csv")

@@ -153,6 +153,7 @@ def _square(x):
     return x * x
 
 
+@pytest.mark.slow
 def test_workers_are_capped_at_the_items_and_the_cores(monkeypatch):
     import joblib
     from tqdm import tqdm
@@ -238,6 +239,7 @@ def _concurrent(argvs):
     return [(p.wait(timeout=300), p.stderr.read()) for p in procs]
 
 
+@pytest.mark.slow
 def test_two_saves_at_once_one_succeeds(folder):
     out = folder / "same.json"
     results = _concurrent([["calibrate", str(folder / "log.csv"), *PAYLOAD, "--observer", "least-squares",
@@ -278,6 +280,7 @@ def test_two_runs_past_their_checks_place_one_output(command, folder, monkeypatc
     assert "appeared while this run worked; not replaced" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_two_simulations_at_once_one_succeeds(folder):
     out = folder / "s.csv"
     results = _concurrent([["simulate", "--duration", "2", "--seed", str(seed), "--out", str(out)]
@@ -290,6 +293,7 @@ def test_two_simulations_at_once_one_succeeds(folder):
     np.testing.assert_array_equal(plant.read_log(out).w_hat, log.w_hat)
 
 
+@pytest.mark.slow
 def test_two_compares_into_one_folder_at_once_one_succeeds(folder):
     out = folder / "cmp"
     results = _concurrent([["compare", "--duration", "1", "--observer", "least-squares", "--seeds", "1",

@@ -42,6 +42,7 @@ def _bag(folder, storage, pose_type, log, **kw):
 
 @pytest.mark.parametrize("storage, pose_type", [("mcap", "PoseStamped"), ("sqlite3", "TransformStamped"),
                                                 ("ros1", "Odometry")])
+@pytest.mark.slow
 def test_bag_calibrates_as_its_csv(rig, E_csv, storage, pose_type):
     folder, log, truth, _ = rig
     bag = _bag(folder, storage, pose_type, log)
@@ -141,6 +142,7 @@ def test_tilt_and_out_of_plane_travel_warned(rig, tmp_path):
     assert _warnings(report) == []
 
 
+@pytest.mark.slow
 def test_import_and_calibrate_on_the_command_line(rig, tmp_path, capsys):
     folder, log, _, _ = rig
     bag = _bag(folder, "mcap", "PoseStamped", log)

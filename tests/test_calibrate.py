@@ -55,6 +55,7 @@ def _calibrate_json(path, *extra):
 
 @pytest.mark.parametrize("method, tolerance", [("max-likelihood", 0.01), ("least-squares", 0.01), ("ekf", 0.02),
                                                ("high-gain", 0.02), ("adaptive", 0.01)])
+@pytest.mark.slow
 def test_every_method_recovers_S_of_another_payload(other_log, calibrated, method, tolerance):
     _, truth = other_log
     out = calibrated(method)
@@ -65,6 +66,7 @@ def test_every_method_recovers_S_of_another_payload(other_log, calibrated, metho
     assert (out["S_std"] is None) == (method in ("high-gain", "adaptive"))
 
 
+@pytest.mark.slow
 def test_least_squares_and_ekf_agree(calibrated):
     ls, ekf = calibrated("least-squares"), calibrated("ekf")
     assert calibrated()["observer"] == "max-likelihood"            # the default: the floor
@@ -73,6 +75,7 @@ def test_least_squares_and_ekf_agree(calibrated):
     assert not any("random walk" in w for w in ekf["warnings"])        # a constant S: nothing moved
 
 
+@pytest.mark.slow
 def test_ekf_warns_when_the_calibration_steps_during_the_log(tmp_path, capsys):
     """A Table 1 step at 100 s: the EKF raises its random walk there, and calibrate says so."""
     path = tmp_path / "step.csv"
@@ -83,6 +86,7 @@ def test_ekf_warns_when_the_calibration_steps_during_the_log(tmp_path, capsys):
     assert "the EKF raised its random walk on S" in err and "first at t = 100." in err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["random-S", "real-rig"])
 def test_least_squares_uncertainty_is_honest(scenario):
     """Issue 15: over 20 seeds the z-scores ``(S_hat - S) / S_std`` (and of ``b`` on the rig, with its offset,
@@ -104,6 +108,7 @@ def test_least_squares_uncertainty_is_honest(scenario):
         assert 0.8 < z_b.std() < 1.25 and abs(z_b.mean()) < 0.3
 
 
+@pytest.mark.slow
 def test_noise_is_estimated_and_said(other_log, capsys):
     path, truth = other_log
     assert main(["calibrate", str(path), *PAYLOAD_ARGS]) == 0
@@ -114,6 +119,7 @@ def test_noise_is_estimated_and_said(other_log, capsys):
     assert out["noise_estimated"] == ["wrench"] and out["noise"]["position_sd"] == 1e-4
 
 
+@pytest.mark.slow
 def test_plot_draws_S_hat(other_log, tmp_path):
     path, _ = other_log
     assert main(["calibrate", str(path), *PAYLOAD_ARGS, "--observer", "high-gain",
@@ -131,6 +137,7 @@ def test_excitation_warning_when_one_wrench_component_is_driven(tmp_path, capsys
     assert "does not excite all nine entries of S" in err
 
 
+@pytest.mark.slow
 def test_consistency_warning_when_angles_are_in_degrees(tmp_path, capsys):
     log, _, _ = plant.get_scenario("paper").with_(duration=20).generate(0)
     pose = log.pose.copy()

@@ -124,6 +124,7 @@ def _arm(seed=1, duration=10.0):
     return SPATIAL_SCENARIOS["spatial-arm"].with_(duration=duration).generate(seed)[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("reading", ["reaction", "load"])
 def test_too_little_rotation_names_that_not_the_sign(reading):
     """``spatial-weak``: the force gains undetermined: the line says the log cannot tell the sign, either way
@@ -135,6 +136,7 @@ def test_too_little_rotation_names_that_not_the_sign(reading):
     assert not any("pass reading" in w or "mass may be wrong" in w for w in cal.warnings)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("reading", ["reaction", "load"])
 def test_a_log_held_still_gives_no_advice_on_the_sign(reading):
     """A tool held all but still (turns of a milliradian): not converged, and no ``reading=`` advice either way."""

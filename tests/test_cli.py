@@ -41,6 +41,7 @@ def test_console_script_runs_and_reports_errors_without_traceback(tmp_path):
     assert "Traceback" not in proc.stderr and "--out must end in .csv" in proc.stderr
 
 
+@pytest.mark.slow
 def test_reproduce_writes_figures_and_summary(tmp_path):
     assert main(["reproduce", "--out", str(tmp_path), "--quick", "0.05"]) == 0
     for name in ("fig2_paper.png", "fig3_noisy.png", "fig4_time-varying.png", "summary.md"):
@@ -51,6 +52,7 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
         assert name in summary
 
 
+@pytest.mark.slow
 def test_reproduce_gives_the_same_rows_on_one_process_and_on_two(tmp_path):
     """The scenario and method pairs run on worker processes; the table does not depend on how many."""
     from fmscal.analysis._reproduce import reproduce
@@ -73,6 +75,7 @@ def test_compare_json_is_strict_and_has_a_row_per_observer_and_seed(capsys):
     assert any(r["convergence_time"] is None for r in rows)      # adaptive-paper: not within 3 s
 
 
+@pytest.mark.slow
 def test_compare_writes_plots_and_summary(tmp_path, capsys):
     assert main(["compare", "--scenario", "paper", "drift", "--duration", "2", "--out", str(tmp_path),
                  "--observer", "adaptive", "high-gain"]) == 0
@@ -117,6 +120,7 @@ def test_simulate_help_lists_every_scenario_on_its_own_line(capsys):
         assert sc.description.split()[0] in line
 
 
+@pytest.mark.slow
 def test_reproduce_replaces_its_own_folder_but_not_one_the_user_named(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     for _ in range(2):                  # README's quick start, run twice
@@ -138,6 +142,7 @@ def test_reproduce_says_why_the_floor_does_not_converge_where_S_changes():
     assert "on paper" not in text
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("unbuffered", ["", "1"])
 def test_output_cut_short_by_its_reader_ends_quietly(tmp_path, monkeypatch, unbuffered):
     """``fmscal ... | head``: the reader gone before the command writes; status 141 (128 + SIGPIPE), nothing on

@@ -121,6 +121,7 @@ def test_S_std_and_the_contact_test_take_the_correlation(name, tmp_path):
         assert 0.9 <= z <= 1.1 and flagged <= 3 * FALSE_ALARM, (z, flagged)
 
 
+@pytest.mark.slow
 def test_the_ekf_takes_the_correlation():
     """The EKF's ``Q`` takes the long-run variance too: on a log filtered at 100 Hz (seed 0) its rms z of ``S`` is
     within [0.5, 2.4] (``python benchmarks/coloured_noise.py --ekf`` prints the EKF's over seeds)."""
@@ -158,6 +159,7 @@ def test_an_independent_engines_log_averaged_over_2_samples():
 
 
 # --- the live Compensator of a payload file: the readings' noise learned from its first readings -----------------
+@pytest.mark.slow
 @pytest.mark.parametrize("name", LIVE, ids=lambda name: name.replace(" ", "-"))
 def test_the_live_compensator_measures_the_colour(name):
     """A payload file whose noise is a held pose's (a table's fit): the Compensator learns the readings' noise from
@@ -175,6 +177,7 @@ def test_the_live_compensator_measures_the_colour(name):
     assert 0.7 <= f["z"] <= 1.4 and f["flagged"] <= 2 * FALSE_ALARM, f
 
 
+@pytest.mark.slow
 def test_fewer_readings_take_the_noise_as_white():
     """Learned from fewer readings than the colour needs (``noise_samples``), or at a rate too slow for its bands,
     the readings' noise is white, with a warning naming why: a 100 Hz filter's noise then reads small and its free
@@ -192,6 +195,7 @@ def test_fewer_readings_take_the_noise_as_white():
             Compensator(stream.setup, log.dt, noise_samples=bad)
 
 
+@pytest.mark.slow
 def test_a_white_stream_is_compensated_as_before():
     """White readings: learned from the first NOISE_SAMPLES readings, the Compensator's output is the one it gave
     before it measured the colour (:data:`BEFORE_WHITE`); by default its noise is the difference estimate of its first

@@ -91,6 +91,7 @@ def test_buffers_refuse_sparse_outputs():
         BufferedCall(fun)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["c", "vm"])
 @pytest.mark.parametrize("scenario, seed", LOGS)
 def test_fast_and_readable_observers_agree(backend, scenario, seed, monkeypatch):

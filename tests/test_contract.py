@@ -50,6 +50,7 @@ def test_an_offline_method_refuses_S0_and_has_no_step(name, short_log):
         obs.reset()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", method_names(online=True))
 def test_step_after_reset_agrees_with_run(name, short_log):
     sc, log, truth = short_log
@@ -133,6 +134,7 @@ def test_no_module_keeps_its_own_list_of_method_names():
     assert not offenders, offenders
 
 
+@pytest.mark.slow
 def test_importing_every_module_leaves_the_matplotlib_backend_alone():
     code = ("import importlib, pkgutil, matplotlib\n"
             "from fmscal import analysis, observers, plant\n"

@@ -82,6 +82,7 @@ def test_the_packages_have_public_names():
     assert not any("._" in path for path in ALL_PUBLIC)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(ALL_PUBLIC))
 def test_public_name_has_a_docstring(path):
     assert docstring(path, ALL_PUBLIC[path]), f"{path} has no docstring (a '#:' comment for a constant)"
@@ -113,6 +114,7 @@ def test_the_api_reference_lists_only_public_names_and_constants_get_no_page(pac
     assert any(kind == "data" for kind in listed.values()) or package == "fmscal.analysis"
 
 
+@pytest.mark.slow
 def test_the_pages_are_written_from_the_packages(tmp_path):
     # What Sphinx reads is what this test checks: docs/conf.py writes these very pages.
     paths = _api.write_pages(tmp_path)

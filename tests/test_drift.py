@@ -168,6 +168,7 @@ def test_refusals(arm):
             Compensator(cal, log.dt, **kw)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kappa, seed", [(0.25, 0), (2.0, 1)])
 def test_fitted_intensity_recovers_a_random_walk(arm, kappa, seed):
     """drift_intensity="fit" (eq. D5) on a 5 s log whose raw offset walks at kappa x the reading's noise sd per

@@ -10,6 +10,7 @@ from fmscal.observers.kalman._filter import filter_layout, initial_state
 from fmscal.observers.batch._max_likelihood import fit_max_likelihood
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [3, 4])
 def test_compiled_compensation_matches_the_readable_step(n):
     """The compiled call and the same step in numpy agree to rounding, state and output, without and with the

@@ -72,6 +72,7 @@ def _close(a, b, rel=1e-9):
     ("vision-50hz", 4, {"offset": True}, 1.0),        # multi-rate, with the offset column
     ("other-payload", 2, {}, 0.5),                    # told half the noise: the level rises
 ])
+@pytest.mark.slow
 def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
     """The whole step compiled (the default) and filterpy's ExtendedKalmanFilter (``compiled=False``) agree to
     1e-9 relative: estimate, ``P``, ``S_std``, the compensation and the random-walk level; the filter left where
@@ -104,6 +105,7 @@ def test_compiled_run_matches_filterpy(scenario, seed, settings, noise_factor):
     assert raised.any() if noise_factor < 1 else not raised.any()     # the level is exercised, and only there
 
 
+@pytest.mark.slow
 def test_the_whole_step_runs_on_casadis_virtual_machine_too(monkeypatch):
     """Without a C compiler the whole step runs on casadi's virtual machine, with the same numbers."""
     from fmscal.observers.kalman import _error_state
@@ -161,6 +163,7 @@ def test_ekf_reaches_E_below_1e_2_within_30_s(paper_30s):
     assert result.S_std is not None and np.all(result.S_std > 0) and np.all(result.S_std < 0.05)
 
 
+@pytest.mark.slow
 def test_covariance_stays_symmetric_positive_definite(paper_30s):
     log, truth, _ = paper_30s
     ekf = AugmentedEKF(plant.PAPER_PAYLOAD, noise=truth.noise)
@@ -235,6 +238,7 @@ def test_ekf_refuses_bad_samples_like_every_observer(call, match):
     ("paper", 3, 0.8),           # told 20 % too little noise: within the adaptation's tolerance
     ("paper", 4, None),          # the noise estimated from the log
 ])
+@pytest.mark.slow
 def test_ekf_with_its_defaults_is_near_least_squares_on_the_same_data(scenario, seed, noise_factor):
     """Issue 4: with its defaults, the EKF within 1.5x of a least-squares fit of the same log."""
     from fmscal.observers import LeastSquares
@@ -361,6 +365,7 @@ def test_the_one_ekf_holds_the_planar_filters_accuracy_against_the_floor():
         assert before / 1.02 < now[name] < 1.02 * before, (name, now[name], before)
 
 
+@pytest.mark.slow
 def test_eiv_false_reports_the_filters_own_estimate_on_both_paths():
     """``eiv=False`` on the planar model: the compiled step carries the separate-bias filter unused, both paths
     report the filter's own estimate and agree; the compensation moves the estimate, by a few per cent this early

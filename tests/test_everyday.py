@@ -36,6 +36,7 @@ def _rms(c):
     return np.sqrt(np.mean(c.wrench ** 2, axis=0))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("causal, ratio", [(False, 1.3), (True, 2.0)])
 def test_a_payload_from_held_poses_compensates_a_log(rig, causal, ratio):
     """The table's fit alone (S the identity; the offset the fit's; the inertia, which held poses never give,
@@ -77,6 +78,7 @@ def test_a_contact_of_one_newton_is_flagged(rig):
         assert c.contact[inside].mean() >= 0.9, (causal, c.contact[inside].mean())
 
 
+@pytest.mark.slow
 def test_the_stream_is_the_causal_log(rig):
     """Compensator with the estimate, fed the log with the log's noise model, gives compensate(..., causal=True)'s
     numbers. Given none, it estimates the readings' noise from its first 4002 readings (4 s at 1 kHz: a table's fit

@@ -113,6 +113,7 @@ def test_ablation_of_10_ms_gives_no_ratio(capsys):
     assert all(r["ratio"] is None for r in json.loads(capsys.readouterr().out))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["adaptive", "high-gain"])
 def test_calibrate_asks_for_the_evidence_a_run_of_a_method_without_S_std_cannot_give(method):
     """A 20 s paper log with 30x the noise: the adaptive run settles (its own ``converged``), but a least-squares

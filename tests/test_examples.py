@@ -46,6 +46,7 @@ def test_the_surface_is_walked():
     assert len(ROUTINES) > 100 and len(WITH_EXAMPLES) >= 20
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(WITH_EXAMPLES))
 def test_an_example_runs_as_written(path):
     obj = WITH_EXAMPLES[path]

@@ -45,6 +45,7 @@ CAUSES = {"clip": ["the reading fx is pinned at -1 and 1 in 29", "saturates"],
           "ramp": ["offset of M drifts by +0.4", "to 20 s"]}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["clip", "step", "ramp"])
 @pytest.mark.parametrize("method", ["max-likelihood", "least-squares", "adaptive"])
 def test_a_faulty_log_is_not_saved_without_force(faulty_logs, kind, method, tmp_path, capsys):

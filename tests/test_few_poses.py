@@ -76,6 +76,7 @@ def test_the_unresolved_rotations_line_never_names_the_other_convention():
     assert "1.2 kg" in line and "load" not in line and "reading" in line
 
 
+@pytest.mark.slow
 def test_six_poses_sigmas_cover_their_errors():
     """Twelve seeds of six poses, gravity and the mounting estimated: the z-scores' rms two-sided (1.10 measured;
     the statistics over 200 seeds are the slow test's)."""

@@ -20,6 +20,7 @@ def _is_png(path):
     return data[:8] == PNG and len(data) > 10_000
 
 
+@pytest.mark.slow
 def test_importing_the_plots_leaves_the_backend_alone():
     code = ("import matplotlib; matplotlib.use('svg'); "
             "import fmscal.analysis._plots, fmscal.analysis.cli, fmscal.analysis._reproduce; "
@@ -29,6 +30,7 @@ def test_importing_the_plots_leaves_the_backend_alone():
     assert out.stdout.strip() == "svg"
 
 
+@pytest.mark.slow
 def test_calibrate_plot(tmp_path, capsys):
     log = tmp_path / "rig.csv"
     assert main(["simulate", "--scenario", "real-rig", "--duration", "6", "--out", str(log)]) == 0

@@ -40,6 +40,7 @@ def arm():
     return log, truth
 
 
+@pytest.mark.slow
 def test_frozen_runs_of_a_few_lengths_are_found_bridged_and_counted(arm):
     """Runs of 3-100 held samples (1.4 % of the log): each found where it is, bridged, counted; the calibration
     converged, within its stated sd of the truth and within 2 sd of the clean log's (the held samples' noise

@@ -120,6 +120,7 @@ def test_the_inputs_are_small():
         assert (GOLDEN / name).stat().st_size < 300_000, name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(MAKE.CASES))
 def test_the_command_line_reproduces_its_pinned_output(case, tmp_path, monkeypatch):
     record = json.loads((GOLDEN / "expected" / f"{case}.json").read_text())

@@ -46,6 +46,7 @@ def test_converges_on_noise_free_data():
     assert calibration_error(result.S_hat, plant.PAPER_S) < 1e-4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["paper", "vision-50hz"])
 def test_compiled_and_readable_paths_agree(scenario):
     log, truth, _ = plant.get_scenario(scenario).with_(duration=2).generate(3)

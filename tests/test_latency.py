@@ -84,6 +84,7 @@ def test_a_dropped_wrench_sample_is_found_and_placed():
     assert cal.why_unconverged == "the latency changes along the log"
 
 
+@pytest.mark.slow
 def test_the_latency_std_widens_S_std():
     """Estimated, the latency's variance enters S_std (never narrower than with the latency given)."""
     sc = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=10.0)

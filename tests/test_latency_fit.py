@@ -28,6 +28,7 @@ def _fit_step(log, model, latency):
     return fit.latency_step
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("start", [-0.4e-3, 0.0, 0.4e-3])
 def test_the_fit_finds_the_latency_from_either_side(start):
     """spatial-arm, 10 s, poses 0.4 ms late: aligned at the truth or 0.4 ms either side of it, the floor's own
@@ -58,6 +59,7 @@ def test_the_fit_takes_over_an_estimate_it_disagrees_with():
     assert fit_latency(replace(off, determined=False), {"step": -0.5e-3, "std": 1e-5}) is None     # nothing to check
 
 
+@pytest.mark.slow
 def test_a_latency_given_1_ms_wrong_is_said_and_not_converged():
     """The issue's case: --latency 0.004 on a spatial-mocap log 5 ms late (seed 1, 10 s) gave E 1.18 against
     0.29 at 5 ms, max |z| 7.4, without a word. Now a warning names both figures and the fit's own latency, and
@@ -88,6 +90,7 @@ def test_a_latency_given_is_judged_by_the_estimate_for_a_method_without_the_fits
     assert given_latency_warnings(far, None) == ([], False)            # no estimate: nothing to check against
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow)])
 def test_the_ekf_on_a_sub_sample_shift_keeps_its_E(seed):
     """The poses half a sample late, given: the EKF's E within 1.3x of its E on the same log not delayed (it

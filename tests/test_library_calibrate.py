@@ -83,6 +83,7 @@ LIBRARY_CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", list(LIBRARY_CASES))
 def test_the_library_reports_what_the_command_line_pinned(case, inputs):
     """The issue's "done when": calibrate(read_data(...)) is fmscal calibrate --json, S_hat to 1e-9, every key."""

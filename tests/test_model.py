@@ -146,6 +146,7 @@ def test_the_payload_read_at_run_time_gives_the_numbers_dynamics():
         PayloadSymbols(ca.SX.sym("short", 3))
 
 
+@pytest.mark.slow
 def test_the_spatial_floor_and_ekf_are_built_once_for_every_payload_and_gravity(monkeypatch):
     """The compiled steps of the spatial floor and EKF take the payload and the gravity as inputs: another
     payload or gravity finds the same step, and the step built afresh for it is the same function (no number

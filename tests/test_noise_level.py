@@ -18,6 +18,7 @@ def test_a_consistent_filter_keeps_the_base_level():
     assert np.mean(q > 1e-8) < 0.01
 
 
+@pytest.mark.slow
 def test_a_noise_model_within_the_tolerance_keeps_the_base_level():
     """Standard deviations told 20 % too small scale the NIS by 1/0.8^2 = 1.56; the 25 % tolerance takes it."""
     rng = np.random.default_rng(1)

@@ -55,6 +55,7 @@ def test_a_tilted_base_and_a_bolted_askew_sensor_in_one_table(tmp_path, capsys):
     np.testing.assert_allclose(numbers["--com"], mount @ TOOL.com, atol=3e-4)
 
 
+@pytest.mark.slow
 def test_a_log_in_the_load_convention_and_the_rotations_on_a_log(tmp_path, capsys):
     assert main(["simulate", "--scenario", "spatial-arm", "--duration", "20", "--seed", "1",
                  "--out", str(tmp_path / "arm.csv")]) == 0

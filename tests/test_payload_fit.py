@@ -10,6 +10,7 @@ from fmscal.plant import FmscalError
 from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_arm_gives_mass_within_1_percent_and_centre_of_mass_within_2_mm(seed):
     log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=30.0).generate(seed)
@@ -26,6 +27,7 @@ def test_arm_gives_mass_within_1_percent_and_centre_of_mass_within_2_mm(seed):
     assert fit.converged and not fit.warnings
 
 
+@pytest.mark.slow
 def test_static_poses_give_mass_and_centre_of_mass_but_not_the_inertia():
     log, truth, _ = SPATIAL_SCENARIOS["spatial-static"].generate(0)
     fit = identify_payload(log, S=truth.S_at(0.0))
@@ -36,6 +38,7 @@ def test_static_poses_give_mass_and_centre_of_mass_but_not_the_inertia():
     assert fit.to_dict()["inertia"] is None
 
 
+@pytest.mark.slow
 def test_an_unknown_S_biases_the_mass_and_the_known_one_removes_it():
     """With S = I on a sensor with cross-talk the mass is off by the gains' error; told S, it is not."""
     log, truth, _ = SPATIAL_SCENARIOS["spatial-arm"].with_(duration=20.0, crosstalk=0.1).generate(4)
@@ -51,6 +54,7 @@ def test_a_planar_log_is_refused():
         identify_payload(log)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_a_tilted_base_with_gravity_along_minus_z_says_to_estimate_it(seed):
     """A base tilted 5 degrees: with gravity along -z the log's fit names --gravity estimate (never --mounting
@@ -69,6 +73,7 @@ def test_a_tilted_base_with_gravity_along_minus_z_says_to_estimate_it(seed):
     assert not any("estimate" in w for w in identify_payload(level, S=truth.S_at(0.0)).warnings)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_a_sensor_bolted_askew_names_the_mounting_not_gravity(seed):
     """The sensor turned 7 degrees on the tracked frame, gravity along -z: the log's fit names --mounting estimate
@@ -89,6 +94,7 @@ def test_a_sensor_bolted_askew_names_the_mounting_not_gravity(seed):
     assert not any("--mounting estimate" in w or "--gravity estimate" in w for w in free.warnings)
 
 
+@pytest.mark.slow
 def test_a_tilted_base_and_a_sensor_askew_together_name_both_flags():
     """A base tilted 4 degrees and the sensor turned 3 degrees on the tracked frame: neither rotation alone explains
     the residuals (each leaves the other's), both together do: the one line names --gravity estimate --mounting
@@ -175,6 +181,7 @@ def _about_x(*more):
                                                      crosstalk=0.0)
 
 
+@pytest.mark.slow
 def test_a_log_turned_about_one_axis_names_its_narrow_cone_and_a_pose_that_helps():
     """Held attitudes turned +-15 degrees about x alone: a cone of 16 degrees (measured 16.4), the inertia about
     the other axes named as what the log leaves, the force gains not determined (gravity never along x: what the

@@ -38,6 +38,7 @@ def askew():
     return log
 
 
+@pytest.mark.slow
 def test_a_tilted_base_is_recovered_within_a_fifth_of_a_degree(tilted):
     fit = identify_payload(tilted, estimate_gravity=True)
     error = _degrees(fit.gravity, G_TILTED)
@@ -50,6 +51,7 @@ def test_a_tilted_base_is_recovered_within_a_fifth_of_a_degree(tilted):
     assert np.abs(upright.com - TOOL.com).max() > 10 * np.abs(fit.com - TOOL.com).max()
 
 
+@pytest.mark.slow
 def test_a_mounting_rotation_is_recovered_within_a_fifth_of_a_degree(askew):
     fit = identify_payload(askew, estimate_mounting=True)
     error = float(np.degrees(np.linalg.norm(Rotation.from_matrix(fit.mounting @ MOUNT.T).as_rotvec())))
@@ -60,6 +62,7 @@ def test_a_mounting_rotation_is_recovered_within_a_fifth_of_a_degree(askew):
     assert abs(fit.mass - TOOL.mass) < 0.01 * TOOL.mass and np.abs(fit.com - TOOL.com).max() < 2e-3
 
 
+@pytest.mark.slow
 def test_gravity_and_mounting_together(askew):
     fit = identify_payload(askew, estimate_gravity=True, estimate_mounting=True)
     error = float(np.degrees(np.linalg.norm(Rotation.from_matrix(fit.mounting @ MOUNT.T).as_rotvec())))
@@ -67,6 +70,7 @@ def test_gravity_and_mounting_together(askew):
     assert fit.to_dict()["mounting_axis"] is not None and len(fit.to_dict()["gravity"]) == 3
 
 
+@pytest.mark.slow
 def test_a_load_reading_with_gravity_estimated_names_the_flag(tilted):
     tilted_load = copy.copy(tilted)
     tilted_load.w_hat = -tilted.w_hat

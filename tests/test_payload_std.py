@@ -144,6 +144,7 @@ def test_the_planar_payload_moves_S_as_the_plane_s_exact_transformations():
         assert np.allclose(moved, exact, rtol=0, atol=1e-4 * np.abs(exact).max()), parameter
 
 
+@pytest.mark.slow
 def test_the_sensitivity_predicts_the_floor_moved_by_a_wrong_payload(arm):
     """The floor refitted with the inertia's one entry 30 % off, or gravity 9.7 for 9.81: its ``[S | c]`` moves as
     ``D d theta`` within a few tenths of its statistical standard deviation, where the move is tens of them."""
@@ -164,6 +165,7 @@ def test_the_sensitivity_predicts_the_floor_moved_by_a_wrong_payload(arm):
 
 # --- the calibration -------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_S_std_holds_the_statistical_part_and_the_payload_s_in_quadrature(arm):
     log, S, model = arm
     exact = calibrate(log, model, payload_std=PayloadStd.exact(), latency=0.0)
@@ -178,6 +180,7 @@ def test_S_std_holds_the_statistical_part_and_the_payload_s_in_quadrature(arm):
     assert np.all(np.diag(cal.S_std_payload) > np.diag(cal.S_std_statistical))
 
 
+@pytest.mark.slow
 def test_a_wrong_mass_within_its_stated_uncertainty_is_covered(arm):
     """The issue's case: the mass 5 % off. Taken as exact it is tens of sigma off; stated to 5 % it is covered."""
     log, S, model = arm
@@ -190,6 +193,7 @@ def test_a_wrong_mass_within_its_stated_uncertainty_is_covered(arm):
     assert np.abs((stated.S_hat - S) / stated.S_std).max() < 4
 
 
+@pytest.mark.slow
 def test_an_inertia_of_another_shape_is_named_and_a_uniform_scale_is_not(arm):
     """``IXX`` and ``IZZ`` swapped, stated to 5 %: the log's torques say the shape is wrong, and the warning names
     the inertia; the inertia scaled by 1.3 as a whole: no log sees it, no inertia is named."""
@@ -206,6 +210,7 @@ def test_an_inertia_of_another_shape_is_named_and_a_uniform_scale_is_not(arm):
     assert not any("inertia" in w for w in cal.warnings) and not any("inertia's shape" in n for n in cal.notes)
 
 
+@pytest.mark.slow
 def test_a_payload_estimate_brings_its_uncertainty_and_its_covariance(arm):
     log, _, model = arm
     p = model.payload
@@ -255,6 +260,7 @@ def test_the_planar_case_carries_its_payload_through_the_same_machinery():
 
 # --- the command line ------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_the_flags_state_the_uncertainty_and_the_report_prints_both_parts(arm_file, capsys):
     log = str(arm_file / "arm.csv")
     assert main(["calibrate", log, *TOOL, "--latency", "0", "--json", "--mass-std", "0.002", "--com-std", "0.001",
@@ -283,6 +289,7 @@ def test_a_bad_flag_is_one_line_and_exit_2(arm_file, capsys, flags, message):
     assert err.startswith(message) and len(err.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_a_payload_file_brings_its_standard_deviations_and_the_flags_replace_them(arm_file, capsys):
     estimate = PayloadEstimate(mass=1.2, mass_std=0.003, com=np.array([0.01, -0.005, 0.06]),
                                com_std=np.array([5e-4, 5e-4, 8e-4]), inertia=np.array([4e-3, 5e-3, 2.5e-3, 2e-4,

@@ -39,6 +39,7 @@ def offset_log():
     return sc, log, truth
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", sorted(OFFSET_E_BOUND))
 def test_every_method_recovers_the_offset_with_S(offset_log, method):
     sc, log, truth = offset_log
@@ -91,6 +92,7 @@ def test_mass_and_S_scale_together_unseen():
     assert not wrong.report.warnings           # nothing in the data says the mass is wrong
 
 
+@pytest.mark.slow
 def test_a_50_hz_log_with_dropped_frames_calibrates_close_to_full_rate():
     full, truth, _ = plant.get_scenario("paper").with_(duration=60).generate(3)
     slow, _, _ = plant.get_scenario("vision-50hz").with_(duration=60).generate(3)
@@ -101,6 +103,7 @@ def test_a_50_hz_log_with_dropped_frames_calibrates_close_to_full_rate():
     assert calibration_error(np.array(S_slow), np.array(S_full)) < 0.02
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ekf", "high-gain", "adaptive"])
 def test_every_observer_takes_empty_pose_cells(method):
     sc = plant.get_scenario("vision-50hz").with_(duration=30)
@@ -214,6 +217,7 @@ def test_malformed_calibration_files_are_refused(tmp_path, capsys, change, messa
     assert code == 2 and err.count("\n") == 1 and message.split(" (")[0] in err
 
 
+@pytest.mark.slow
 def test_simulate_calibrate_save_apply_on_a_multi_rate_log_with_an_offset(tmp_path, capsys):
     log_path, cal_path = tmp_path / "rig.csv", tmp_path / "cal.json"
     assert main(["simulate", "--scenario", "paper", "--duration", "40", "--pose-rate", "50", "--drop-rate", "0.1",

@@ -520,6 +520,8 @@ def _resumed(run, fault, end, dt):
         f"no output within {RESUME:g} s of {first:.3f} s, after {fault}: {[run.fates[k] for k in near][:5]}"
 
 
+@pytest.mark.slow
+@pytest.mark.jazzy
 @pytest.mark.parametrize("source", ["pose", "joints", "imu"])
 def test_short_faults(request, source, tmp_path):
     """Lost messages (1, 2, 10 in a row; 1 s of both streams), repeated readings, a 50 ms pause, skipped motion
@@ -568,6 +570,8 @@ def test_unknown_parameters_name_the_closest(tmp_path):
     assert unknown_parameters(["--ros-args", "-p", "window:=0.1"], "/ns/comp", known) == ([], [])
 
 
+@pytest.mark.slow
+@pytest.mark.jazzy
 def test_an_unknown_parameter_stops_the_node_in_one_line(tmp_path):
     """``fmscal ros2 --params-file`` with a misspelled parameter: exit status 2 and one line naming it and the
     closest, no traceback (the default is not used silently)."""
@@ -584,6 +588,8 @@ def test_an_unknown_parameter_stops_the_node_in_one_line(tmp_path):
                                    "stale_timeout?")
 
 
+@pytest.mark.slow
+@pytest.mark.jazzy
 def test_an_incompatible_qos_is_said(request, tmp_path):
     """A best-effort publisher on the wrench topic of a node whose qos is reliable: none of its messages can
     arrive; the node says so in its log and its inputs' diagnostics (the QoS event handled, though the inputs'
@@ -718,6 +724,8 @@ def _alive(pid):
 
 
 # --- a payload file alone (no calibration: S the identity) --------------------------------------------------------
+@pytest.mark.slow
+@pytest.mark.jazzy
 def test_the_node_runs_from_a_payload_file_alone(request, tmp_path):
     """``-p payload:=tool.json`` with no calibration (the everyday job: a factory-calibrated sensor, a tool from
     a few held poses): every output within 5 sd, rms z in [0.7, 1.4], each reading counted; the inertia the file

@@ -69,6 +69,8 @@ def exported():
     return ros2_control_parameters(fit_static(simulate_table(TOOL, n=12, seed=0)), "ft_sensor", "base_link")
 
 
+@pytest.mark.slow
+@pytest.mark.jazzy
 def test_the_run_time_parameters_are_set_and_read_back(request, exported):
     """The push sets every run-time parameter (tool.*, offset.*, multiplier.*: 15) and nothing else; the stand-in
     then holds the export's values exactly, its frames unchanged."""
@@ -85,6 +87,8 @@ def test_the_run_time_parameters_are_set_and_read_back(request, exported):
     assert back["sensor_filter_chain.filter1.params.sensor_frame"] == "ft_sensor" and back["frame_id"] == "ft_sensor"
 
 
+@pytest.mark.slow
+@pytest.mark.jazzy
 def test_refusals_are_one_line(request, exported):
     """No such node: named, within the timeout; a chain without the gravity filter: the node's reason, none set;
     a wildcard name refused before any ROS call."""

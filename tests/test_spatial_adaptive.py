@@ -79,6 +79,7 @@ def test_the_parameter_groups_are_the_torque_about_c_and_the_force():
     np.testing.assert_allclose(np.reshape(phis[0], (3, 7)) @ w, tau_C, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_compiled_and_numpy_steps_agree(short_log):
     log, _ = short_log
     obs = AdaptiveObserver(MODEL, offset=True)
@@ -90,6 +91,7 @@ def test_compiled_and_numpy_steps_agree(short_log):
     np.testing.assert_allclose(np.linalg.norm(fast.x_hat_history[:, 3:7], axis=1), 1.0, rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_step_after_reset_equals_run_and_takes_missing_poses():
     """On 200 Hz poses with some dropped (``spatial-mocap``): ``None`` where no pose arrived."""
     gappy, _, _ = MOCAP.with_(duration=0.5).generate(1)
@@ -106,6 +108,7 @@ def test_step_after_reset_equals_run_and_takes_missing_poses():
     np.testing.assert_array_equal(np.array(x_steps), result.x_hat_history)
 
 
+@pytest.mark.slow
 def test_a_flipped_quaternion_is_the_same_attitude(short_log):
     log, _ = short_log
     runs = []
@@ -120,6 +123,7 @@ def test_a_flipped_quaternion_is_the_same_attitude(short_log):
     np.testing.assert_allclose(runs[1][0], runs[0][0], rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("error::RuntimeWarning")
 @pytest.mark.parametrize("compiled", [True, False])
 def test_a_diverging_run_is_an_error_not_an_answer(compiled):

@@ -26,6 +26,7 @@ def _json(capsys):
     return json.loads(capsys.readouterr().out)
 
 
+@pytest.mark.slow
 def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
     assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--truth", str(arm / "arm.truth.json"), "--json",
                  "--save", str(arm / "cal.json")]) == 0
@@ -49,6 +50,7 @@ def test_calibrate_a_spatial_log_saves_and_applies(arm, capsys):
     assert len(err.splitlines()) == 1 and not (arm / "w2.csv").exists()
 
 
+@pytest.mark.slow
 def test_the_reference_fit_and_a_figure_of_a_spatial_calibration(arm, capsys):
     capsys.readouterr()
     assert main(["calibrate", str(arm / "arm.csv"), *TOOL, "--observer", "least-squares", "--latency", "0",
@@ -77,6 +79,7 @@ def test_identify_payload_with_the_saved_calibration(arm, capsys):
     assert abs(errors["mass_error"]) < 0.012 and len(errors["com_error"]) == 3
 
 
+@pytest.mark.slow
 def test_static_poses_are_not_saved_as_a_calibration(tmp_path, capsys):
     log = tmp_path / "static.csv"
     assert main(["simulate", "--scenario", "spatial-static", "--duration", "40", "--out", str(log)]) == 0
@@ -123,6 +126,7 @@ def test_a_quaternion_off_unit_norm_is_one_line(arm, tmp_path, capsys):
     assert "expected a unit quaternion" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_saturating_channel_is_not_saved(arm, tmp_path, capsys):
     lines = (arm / "arm.csv").read_text().splitlines()
     fz = np.array([float(line.split(",")[-1]) for line in lines[1:]])
@@ -150,6 +154,7 @@ def test_planar_scenario_options_are_refused_for_a_spatial_scenario(tmp_path, ca
     assert "takes --com X Y Z" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_compare_takes_a_spatial_scenario_and_writes_its_figure(tmp_path, capsys):
     out = tmp_path / "cmp"
     assert main(["compare", "--scenario", "spatial-arm", "--seeds", "1", "--duration", "3", "--observer",
@@ -162,6 +167,7 @@ def test_compare_takes_a_spatial_scenario_and_writes_its_figure(tmp_path, capsys
     assert "spatial-arm" in capsys.readouterr().err                    # the message lists both cases' scenarios
 
 
+@pytest.mark.slow
 def test_the_online_methods_calibrate_a_spatial_log(arm, capsys):
     """The adaptive observer (no uncertainty of its own) and the EKF through calibrate: S near the floor's, printed
     and in JSON, no uncertainty claimed where the method gives none. The latency is told (the log has none):

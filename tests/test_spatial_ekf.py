@@ -90,6 +90,7 @@ def test_the_error_state_jacobians_match_finite_differences_of_the_nominal_step(
             np.testing.assert_allclose(J[:, j], (error_after(xs, *ws_p) - error_after(xs, *ws_m)) / (2 * h), atol=1e-7)
 
 
+@pytest.mark.slow
 def test_compiled_run_matches_filterpy(short_log):
     """The whole step compiled (the default) and filterpy's ExtendedKalmanFilter agree to rounding: estimate,
     motion, S_std, b, P and the nominal the filter ends at, each to 1e-9 of its largest entry or to 4 times what
@@ -189,6 +190,7 @@ def test_poses_may_be_missing_and_the_quaternion_may_flip_sign(short_log):
     np.testing.assert_allclose(x_flip, x_same, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("compiled", [True, False])
 def test_a_diverging_run_is_an_error_not_an_answer(short_log, compiled):
     """A random walk on S far beyond the data drives S_hat out of the divergence bound: the run stops there,

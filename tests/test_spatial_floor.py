@@ -124,6 +124,7 @@ def test_the_compiled_floor_matches_casadis_virtual_machine():
     np.testing.assert_allclose(slow.S_aug, fast.S_aug, rtol=1e-6, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_static_poses_leave_directions_undetermined_and_not_converged():
     scenario = SPATIAL_SCENARIOS["spatial-static"].with_(duration=40.0)
     log, _, _ = scenario.generate(0)

@@ -27,6 +27,7 @@ def twenty_seeds():
     return [fit_static(simulate_table(TOOL, n=12, seed=seed, offset=OFFSET)) for seed in range(20)]
 
 
+@pytest.mark.slow
 def test_mass_centre_of_mass_and_offset_with_honest_uncertainties(twenty_seeds):
     """Twelve poses, S = I: the z-scores' rms two-sided (the gains estimated with the payload since issue 44);
     converged where the payload's effect is within the rows' scatter (its default tolerance, issue 44: 18 of the
@@ -54,6 +55,7 @@ def test_the_load_convention_is_named_never_a_negative_mass():
     np.testing.assert_allclose(fit.b, OFFSET, atol=5 * fit.b_std.max())     # of the reading negated, as simulated
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(3))
 def test_a_tilted_base_gravity_is_recovered_within_a_fifth_of_a_degree(seed):
     table = simulate_table(TOOL, n=24, seed=seed, gravity=TILT @ G, offset=OFFSET)
@@ -66,6 +68,7 @@ def test_a_tilted_base_gravity_is_recovered_within_a_fifth_of_a_degree(seed):
     assert fixed.residual_rms[3:].max() > 10 * fit.residual_rms[3:].max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(3))
 def test_a_mounting_rotation_is_recovered_within_a_fifth_of_a_degree(seed):
     """... and without --mounting estimate the fit names it with the angle found (7 degrees, measured 6.9 to 7.0),
@@ -150,6 +153,7 @@ def test_a_table_round_trips_and_bad_tables_are_one_line(tmp_path):
         read_pose_table(bad)
 
 
+@pytest.mark.slow
 def test_an_attitude_only_log_uses_its_held_segments_and_its_uncertainty_covers_a_drift():
     """No positions: only the held segments are used (and said so); with the offset drifting slowly the
     residual-based uncertainty still covers the truth (over 6 seeds, every mass within 3 sigma)."""
@@ -170,6 +174,7 @@ def test_an_attitude_log_without_enough_holds_is_one_line():
         held_table(log)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(3))
 def test_a_tilted_base_fitted_with_gravity_along_minus_z_says_to_estimate_it(seed, twenty_seeds):
     """Gravity fixed along -z on a base tilted 10 degrees: the fit names --gravity estimate and is not converged;
@@ -184,6 +189,7 @@ def test_a_tilted_base_fitted_with_gravity_along_minus_z_says_to_estimate_it(see
     assert not any("estimate" in w for fit in twenty_seeds for w in fit.warnings)
 
 
+@pytest.mark.slow
 def test_a_sensor_two_degrees_askew_is_named_on_every_seed(twenty_seeds):
     """Twelve poses, the sensor turned 2 degrees on the tracked frame: --mounting estimate named on each of 20 seeds
     with the angle found (measured 1.9 to 2.2 degrees), --gravity estimate never; on the square sensor's twenty
@@ -246,6 +252,7 @@ def test_poses_that_do_not_tilt_gravity_are_refused_in_one_line(q):
             fit_static(table, estimate_gravity=True)
 
 
+@pytest.mark.slow
 def test_poses_tilted_two_degrees_are_fitted_not_refused():
     """Just above the threshold (a cone of 2 degrees): a fit, with its weak directions named in words."""
     q = np.vstack([_about((1, 0, 0), [0.0, 2.0, -2.0]), _about((0, 1, 0), [2.0, -2.0])])
@@ -261,6 +268,7 @@ def test_a_weak_direction_of_one_parameter_reads_in_the_singular():
         "the mass and the centre of mass along y are not separated")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("flag", ["estimate_gravity", "estimate_mounting"])
 @pytest.mark.parametrize("text", ["False", "no", 0])
 def test_a_flag_given_as_text_or_a_number_is_refused_not_taken_as_true(flag, text):

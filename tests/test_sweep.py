@@ -32,12 +32,14 @@ def test_the_table_covers_the_product(serial_table):
     assert e[("paper", 0, 0.5, "adaptive", "default")] != e[("paper", 0, 1.0, "adaptive", "default")]
 
 
+@pytest.mark.slow
 def test_local_cores_give_the_serial_table(serial_table):
     parallel = sweep(["paper", "drift"], seeds=[0, 3], noise_scales=[0.5, 1.0], observers=["adaptive", "high-gain"],
                      settings=GRID, duration=1.5, n_jobs=2, progress=False)
     pd.testing.assert_frame_equal(_without_timing(parallel), _without_timing(serial_table))
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_gives_the_serial_table(serial_table):
     import dask.distributed as distributed      # the [distributed] extra; README installs it (a failure if missing)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
@@ -79,6 +81,7 @@ def test_the_sweep_command(tmp_path, capsys):
     assert main(["sweep", "--seeds", "0"]) == 2
 
 
+@pytest.mark.slow
 def test_the_bench_runs_in_its_short_mode(tmp_path, capsys):
     code = main(["bench", "--quick", "--out", str(tmp_path / "bench.md")])
     assert code == 0

@@ -68,6 +68,7 @@ def test_a_grasp_is_declared_once_with_its_mass(grasped, causal):
     assert change.describe().startswith(f"tool change at {change.t:.3f} s")
 
 
+@pytest.mark.slow
 def test_detection_off_leaves_the_numbers(grasped):
     """Detection only observes: every published number equal with it on and off, offline and causal; off, no count
     and no change."""
@@ -106,6 +107,7 @@ def test_a_grasp_in_the_streams_first_second():
     assert change.mass == pytest.approx(total.mass, abs=0.01)
 
 
+@pytest.mark.slow
 def test_reidentified_from_the_held_attitudes(held):
     """Offline, the change is reported with its held attitudes' fit (not applied); a stream re-identifies on
     request and goes on with the new total: its mass within 4 g, its centre of mass within 5 mm, the part's wrench

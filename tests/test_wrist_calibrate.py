@@ -150,6 +150,7 @@ def arm(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_a_load_log_calibrates_as_its_reaction_twin_and_applies_alike(arm, capsys):
     capsys.readouterr()
     a, b = Calibration.load(arm / "arm.json"), Calibration.load(arm / "load.json")
