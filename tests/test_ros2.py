@@ -392,9 +392,12 @@ def test_a_ctrl_c_stops_the_node_without_a_traceback(request, cal_file):
         try:
             proc.wait(timeout=WAIT)
         except subprocess.TimeoutExpired:               # every thread's stack on its stderr (the node registers it)
+            masks = [line for line in Path(f"/proc/{proc.pid}/status").read_text().splitlines()
+                     if line.startswith(("SigPnd", "ShdPnd", "SigBlk", "SigIgn", "SigCgt"))]   # SIGINT: bit 2
             proc.send_signal(signals.SIGUSR1)
             time.sleep(2.0)
-            pytest.fail(f"the node still runs {WAIT:g} s after one SIGINT: {node_log(proc)[-12000:]}")
+            pytest.fail(f"the node still runs {WAIT:g} s after one SIGINT (its signal masks {masks}): "
+                        f"{node_log(proc)[-12000:]}")
         log = node_log(proc)
     assert started, log
     assert proc.returncode in (0, 130), log
