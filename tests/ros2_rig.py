@@ -632,6 +632,11 @@ class CpuHog:
         self.proc.wait(timeout=5)
 
 
+def _key(msg):
+    """A message's stamp as a key, ``(sec, nanosec)``."""
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
+
+
 def _level(status):
     """A DiagnosticStatus's level as an int (rclpy gives a byte)."""
     return int.from_bytes(status.level, "little") if isinstance(status.level, bytes) else int(status.level)
@@ -718,19 +723,20 @@ class Listener:
         t, wrench = contact_array(self.contacts[:n], epoch)
         cov = np.array([np.asarray(c) for c in self.covariances[:n]]).reshape(n, 6, 6)
         sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))[:, [3, 4, 5, 0, 1, 2]]      # ROS's force first back
-        flagged_at = {(m.header.stamp.sec, m.header.stamp.nanosec) for m in self.flags if _level(m.status[0]) == 1}
-        flagged = np.array([(m.header.stamp.sec, m.header.stamp.nanosec) in flagged_at for m in self.contacts[:n]],
-                           dtype=bool)
+        flagged = self._at_outputs(n, {_key(m): True for m in self.flags if _level(m.status[0]) == 1})
         return t, wrench, sd, flagged
 
     def contact_flags(self):
         """Whether each output (:meth:`outputs`' order) carried the contact flag (its flags message's ``contact``
         key ``true``; a later message of one stamp wins)."""
         n = min(len(self.contacts), len(self.covariances))
-        contact = {(m.header.stamp.sec, m.header.stamp.nanosec): any(
-            v.key == "contact" and v.value == "true" for v in m.status[0].values) for m in self.flags}
-        return np.array([contact.get((m.header.stamp.sec, m.header.stamp.nanosec), False)
-                         for m in self.contacts[:n]], dtype=bool)
+        return self._at_outputs(n, {_key(m): any(v.key == "contact" and v.value == "true" for v in m.status[0].values)
+                                    for m in self.flags})
+
+    def _at_outputs(self, n, by_stamp):
+        """``by_stamp`` (a flags message's stamp key: bool) read at each of the first ``n`` outputs' stamps (False
+        where it has none)."""
+        return np.array([by_stamp.get(_key(m), False) for m in self.contacts[:n]], dtype=bool)
 
     def fates(self, epoch):
         """Each reading's fate by its stamp (s from the epoch, rounded to the microsecond), from the node's flags:
