@@ -154,3 +154,15 @@ def test_a_tilted_table_without_gravity_estimate_names_the_flag(tmp_path, capsys
     assert "record more poses" not in err and len(err.strip().splitlines()) == 1
     code, out, err = _run(capsys, ["identify-payload", str(path), "--gravity", "estimate"])
     assert code == 0 and "--gravity estimate" not in err
+
+
+def test_a_force_gain_left_undetermined_prints_no_infinite_figure(capsys):
+    """examples/joint_log.csv with S = I: the model does not fit, and the data leave a force gain free, whose
+    sd is infinite; the lines say "not determined" where the figure would read "inf N"."""
+    from pathlib import Path
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    code, out, err = _run(capsys, ["identify-payload", str(examples / "joint_log.csv"), "--urdf",
+                                   str(examples / "arm6.urdf"), "--frame", "ft_sensor"])
+    assert code == 0 and "converged: no" in out, (out, err)
+    assert "inf" not in (out + err).replace("information", ""), out + err
+    assert "not determined (forces)" in out and "the model does not fit" in out, out

@@ -200,13 +200,20 @@ def _print_gains(fit):
         print("gains: not estimated (too few poses for them beside the rotations asked); taken as one")
         return
     print("gains (w = diag(gains) S (sigma w_hat - b); forces relative to their mean): " + "  ".join(
-        f"{n} {v:.5f} +- {s:.1g}" for n, v, s in zip(_NAMES, fit.gains, fit.gains_std)))
+        f"{n} {v:.5f} +- {s:.1g}" if np.isfinite(s) else f"{n} not determined"
+        for n, v, s in zip(_NAMES, fit.gains, fit.gains_std)))
+
+
+def _figure(value, unit, what):
+    """A figure with its unit, or "not determined" where its sd is infinite (no "inf N" to read)."""
+    return f"{value:.2g} {unit}" if np.isfinite(value) else f"not determined ({what})"
 
 
 def _print_effect(fit):
     """The payload's effect on the compensated wrench against the tolerance, and the verdict (eq. E3)."""
-    print(f"the payload's effect on the compensated wrench within the cone (1 sd): {fit.effect[0]:.2g} N, "
-          f"{fit.effect[1]:.2g} N m; tolerance {fit.tolerance[0]:.2g} N, {fit.tolerance[1]:.2g} N m: "
+    forces, torques = _figure(fit.effect[0], "N", "forces"), _figure(fit.effect[1], "N m", "torques")
+    print(f"the payload's effect on the compensated wrench within the cone (1 sd): {forces}, {torques}; "
+          f"tolerance {fit.tolerance[0]:.2g} N, {fit.tolerance[1]:.2g} N m: "
           + ("determined" if fit.payload_determined else "not determined (" + fit.why_undetermined + ")"))
 
 

@@ -313,11 +313,13 @@ def judge(effect, tolerance, tolerance_words, cone, undetermined=False, axis=Non
         cause = "S = I may be wrong: calibrate S (fmscal calibrate) and pass it" if identity else \
             "the calibration given may be wrong"
         ratio = residual / noise
+        adds = (f"the payload adds up to {_pair(effect.cone)} (1 sd) within the cone of {cone:.0f} degrees, "
+                f"{told}") if np.all(np.isfinite(effect.cone)) else \
+            f"the data leave part of the payload not determined within the cone of {cone:.0f} degrees"  # no inf
         return False, (f"the model does not fit: the fit leaves {_pair(residual)} (rms), {ratio[0]:.2g} and "
                        f"{ratio[1]:.2g} times the reading's noise, which more data do not lower (cross-talk or "
-                       f"torque gains of S, which the payload cannot take up), and the payload adds up to "
-                       f"{_pair(effect.cone)} (1 sd) "
-                       f"within the cone of {cone:.0f} degrees, {told}: compensation will leave about the "
+                       f"torque gains of S, which the payload cannot take up), and {adds}: compensation will "
+                       f"leave about the "
                        f"residual; {cause}, or give a tolerance that accepts it"), False
     if axis is not None:
         return False, (f"the poses turn gravity about one axis only (its directions in the sensor frame lie on one "
