@@ -33,6 +33,7 @@ import fnmatch
 import gc
 import heapq
 import signal
+import socket
 import threading
 import time
 import traceback
@@ -57,6 +58,8 @@ __all__ = ["CompensatorNode", "spin", "unknown_parameters"]
 WARN_EVERY = 2.0
 #: The longest wait for an input's message, s (:meth:`CompensatorNode.poll` then sees whether to stop).
 WAIT = 0.05
+#: s: the longest the main executor waits before it looks whether a SIGINT or SIGTERM asked the node to stop
+STOP_LOOK = 0.1
 #: s between two looks at the inputs' queues when both were empty, where rclpy has no wait set.
 POLL = 0.0003
 #: s between two looks at inputs silent for :data:`SILENT` s or more.
@@ -834,10 +837,17 @@ def spin(args):
         gc.freeze()
         for thread in threads:
             thread.start()
+        stopping = threading.Event()
+        restore = _stop_on_signals(stopping)
         try:
-            executor.spin()
+            while not stopping.is_set():
+                executor.spin_once(timeout_sec=STOP_LOOK)
         except (KeyboardInterrupt, r.Shutdown):
             pass
+        finally:
+            restore()
+        if stopping.is_set():
+            node.node.get_logger().info("stopping (a SIGINT or SIGTERM)")
         # the other threads stopped before their nodes are destroyed (else a C++ abort at exit); a running fit
         # killed first, so that its service call returns and the services' threads end
         node.stop()
@@ -852,6 +862,53 @@ def spin(args):
             node.stop()
             node.destroy()
         r.rclpy.try_shutdown(context=context)
+
+
+def _stop_on_signals(stopping):
+    """SIGINT (Ctrl-C) and SIGTERM set ``stopping`` instead of raising; returns what restores the former handlers.
+
+    Python runs a signal's handler in the main thread, between two of its bytecodes, and a ``KeyboardInterrupt``
+    raised there can land in a finalizer, which swallows it (the node then ran on after a Ctrl-C). So the
+    handler raises nothing, and a thread of its own also reads the signal's number from Python's wakeup fd,
+    which the interpreter's C-level handler writes in whichever thread the signal lands: ``stopping`` is set
+    whatever the main thread does. Outside the main thread (no handler can be set there): nothing done.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    read, write = socket.socketpair()
+    write.setblocking(False)
+    stops = (int(signal.SIGINT), int(signal.SIGTERM))
+
+    def handler(signum, frame):
+        stopping.set()
+
+    def watch():
+        while not stopping.is_set():
+            try:
+                data = read.recv(64)
+            except OSError:
+                return
+            if not data:
+                return
+            if any(b in stops for b in data):
+                stopping.set()
+
+    former = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    former_fd = signal.set_wakeup_fd(write.fileno(), warn_on_full_buffer=False)
+    watcher = threading.Thread(target=watch, name="fmscal-signals", daemon=True)
+    watcher.start()
+
+    def restore():
+        signal.set_wakeup_fd(former_fd)
+        for s, h in former.items():
+            signal.signal(s, h)
+        with contextlib.suppress(OSError):
+            read.shutdown(socket.SHUT_RDWR)              # the watcher's recv returns
+        watcher.join(timeout=0.5)
+        read.close()
+        write.close()
+
+    return restore
 
 
 def _spin_services(r, executor):
