@@ -194,6 +194,9 @@ DT_TOLERANCE = 0.1
 DT_INTERVALS = 8
 #: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
 POSE_NOISE_EVERY = 100
+#: A motion stream's running noise estimate: three samples make a second difference only where their two
+#: intervals agree within this fraction (:class:`_RunningNoise`; a hole between them is the motion's change).
+EVEN = 0.1
 #: A payload file's stream without the readings' noise: the fewest first readings it is estimated from (their
 #: differences: white), no output before; by default as many as its colour needs (module docstring, Noise).
 NOISE_SAMPLES = 500
@@ -1367,20 +1370,22 @@ class Compensator:
             self._extras.append(None)
             if len(self._readings) > self._L and self._readings[0][1] is not None:
                 withheld += 1
-        for running in (self._running, self._pose_noise):
-            if running is not None:
-                running.recent.clear()
+        self._forget_noise_runs()
         self._event("gap", withheld, f"a gap of {step:.6g} s ({g} samples) in the stamps: filled with empty rows, "
                                      f"{withheld} outputs withheld at its edge")
+
+    def _forget_noise_runs(self):
+        """The running noise estimates' last samples forgotten (a gap, a restart): no difference spans it."""
+        for running in (self._running, self._pose_noise):
+            if running is not None:
+                running.clear()
 
     def _restart(self, why):
         """Start the window again: no output until it is full (module docstring, Stamps)."""
         pending = sum(1 for _, w in list(self._readings)[1:] if w is not None)
         for d in (self._readings, self._channels, self._extras, self._last):
             d.clear()
-        for running in (self._running, self._pose_noise):
-            if running is not None:
-                running.recent.clear()
+        self._forget_noise_runs()
         self._event("restart", pending, f"{why}: the window restarted, no output until it is full again")
 
     # --- one sample, or a block -------------------------------------------------------------------------------
@@ -1393,9 +1398,9 @@ class Compensator:
         channels = self._continuous(channels[None])[0] if np.isfinite(channels).all() else None
         if channels is not None:
             if self._running is not None:
-                self._running.add(channels)
+                self._running.add(channels, t)
             else:
-                self._pose_variance(channels[None])
+                self._pose_variance(channels[None], np.array([t]))
         self._readings.append((t, w_hat))
         self._channels.append(channels)
         self._extras.append(extra)
@@ -1439,8 +1444,8 @@ class Compensator:
         m, k, i0 = len(t), self._k, self._k - 1 - self._lead
         channels = self._continuous(channels)
         if self._running is None:
-            self._pose_variance(channels)
-        var = self._variance() if self._running is None else self._running.block(channels)
+            self._pose_variance(channels, t)
+        var = self._variance() if self._running is None else self._running.block(channels, t)
         window = np.concatenate([np.array(list(self._channels)[1:]), channels])          # (k - 1 + m, n)
         P = np.einsum("dk,mpk->dmp", self._coefficients,
                       np.lib.stride_tricks.sliding_window_view(window, k, axis=0))       # (3, m, n)
@@ -1518,7 +1523,7 @@ class Compensator:
                                  "noise_samples); a correlated noise would make the contact test's sd small")
         self._first = None
 
-    def _pose_variance(self, rows):
+    def _pose_variance(self, rows, t):
         """A pose stream's configuration variance (:func:`fmscal.analysis._motion.configuration_variance`): the
         noise model's, at its first pose; a payload file's stream (no pose noise given) from the poses' second
         differences as they come (the pose's angle and position sds fitted to each column's by the model's
@@ -1527,8 +1532,8 @@ class Compensator:
             if self._var is None:
                 self._var = configuration_variance(self.model, self._noise, rows[0])
             return
-        for row in rows:
-            self._pose_noise.add(row)
+        for row, ti in zip(rows, t):
+            self._pose_noise.add(row, ti)
         n = self._pose_noise.n
         if n and (self._var is None or n // POSE_NOISE_EVERY != (n - len(rows)) // POSE_NOISE_EVERY):
             var = self._pose_noise.variance()
@@ -1708,27 +1713,38 @@ class Compensator:
 class _RunningNoise:
     """A motion channel's noise variance from the second differences of its samples (the last three that came):
     a white noise of sd ``sigma`` on a signal smooth at the sample rate gives differences of variance
-    ``6 sigma^2``."""
+    ``6 sigma^2``. Only three samples evenly spaced in time make a difference (a stream sparser than the readings
+    counts, if even): across a hole (a sample dropped, a gap) the motion's own change, not its noise, would enter
+    the variance, and stay in it."""
 
     def __init__(self, size):
         self.recent = deque(maxlen=3)
+        self.times = deque(maxlen=3)
         self.sum, self.n = np.zeros(size), 0
 
-    def add(self, values):
+    def add(self, values, t):
         if values is None:
             return
         self.recent.append(values)
+        self.times.append(float(t))
         if len(self.recent) == self.recent.maxlen:
-            self.sum += np.square(self.recent[2] - 2 * self.recent[1] + self.recent[0])
-            self.n += 1
+            before, after = self.times[1] - self.times[0], self.times[2] - self.times[1]
+            if abs(after - before) <= EVEN * max(before, after):
+                self.sum += np.square(self.recent[2] - 2 * self.recent[1] + self.recent[0])
+                self.n += 1
+
+    def clear(self):
+        """Forget the last samples (the next difference starts after them)."""
+        self.recent.clear()
+        self.times.clear()
 
     def variance(self):
         return self.sum / (6 * self.n) if self.n else np.zeros_like(self.sum)
 
-    def block(self, rows):
-        """:meth:`add` each of ``rows`` (M, n) in turn: the variance after each, (M, n)."""
+    def block(self, rows, t):
+        """:meth:`add` each of ``rows`` (M, n), at times ``t`` (M,), in turn: the variance after each, (M, n)."""
         out = np.empty_like(rows)
-        for i, row in enumerate(rows):
-            self.add(row)
+        for i, (row, ti) in enumerate(zip(rows, t)):
+            self.add(row, ti)
             out[i] = self.variance()
         return out
