@@ -13,6 +13,13 @@ import os
 import pytest
 
 os.environ.setdefault("FMSCAL_QUICK", "1")
+# The arithmetic pinned to what every x86-64-v3 processor runs (AVX2), before numpy loads (this file is read
+# before any test module, and pytest-xdist's workers inherit the environment): OpenBLAS's Haswell kernel, and
+# numpy's own AVX-512 loops off. The golden outputs (tests/test_golden.py, whose docstring says how they move
+# with the kernel) are then one machine's to the last bits on any such processor, AVX-512 or not.
+os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
+os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", "AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX AVX512_CLX "
+                                                  "AVX512_CNL AVX512_ICL AVX512_SPR X86_V4")
 
 
 def _skips_fail():

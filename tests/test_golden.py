@@ -37,17 +37,17 @@ reason in the commit (make.py's docstring).
 Machine dependence
 ------------------
 On one machine the outputs are the same to the last bit, run after run (and
-with ``FMSCAL_COMPILER=none`` or one BLAS thread). The expected files were
-written with numpy's OpenBLAS on its AVX-512 (SkylakeX) kernel. On another
-kernel (``OPENBLAS_CORETYPE=Haswell``, ``Zen``, ``Prescott``: what other x86
-processors get) the planar cases still agree to 1e-11, but the spatial and
-table fits move by up to about 7e-8 relative (small entries of ``S``,
-``b_std``, the mounting: ill-conditioned least squares summed in another
-order), and the two table calibrations name another basis of their three
-undetermined directions (a null space: any basis of it is the same answer),
-so their warnings read differently too. Check a refactor on a machine whose
-BLAS kernel wrote the expected files, or re-write them there first, before
-the refactor.
+with ``FMSCAL_COMPILER=none`` or one BLAS thread). They move with the
+arithmetic's kernel: on another OpenBLAS kernel the planar cases agree to
+1e-11, but the spatial and table fits move by up to about 7e-8 relative
+(small entries of ``S``, ``b_std``, the mounting: ill-conditioned least
+squares summed in another order), and the two table calibrations name another
+basis of their three undetermined directions (a null space: any basis of it is
+the same answer), so their warnings read differently too. So the suite pins
+the kernel (``conftest.py``, before numpy loads): OpenBLAS's Haswell kernel
+and numpy's AVX-512 loops off, what every x86-64-v3 processor runs. The
+expected files were written so (``make.py`` runs ``conftest.py`` first). On
+another architecture (ARM) they do not hold to the last bits.
 
 Each case runs in-process (:func:`fmscal.analysis.cli.main`) in its own
 ``tmp_path`` holding a copy of the inputs, so that the file names in the

@@ -5,6 +5,8 @@ Usage (from anywhere; the files land beside this script)::
     python tests/data/golden/make.py              # the input files (deterministic, seeded)
     python tests/data/golden/make.py --expected   # expected/CASE.json: today's output of each case
 
+(with the arithmetic's kernel the suite pins: it runs the repository's ``conftest.py`` first.)
+
 The inputs are small logs and tables (each well under 300 KB), written by
 the toolkit's own writers (``fmscal simulate``, :meth:`fmscal.plant.Log.write`,
 :func:`fmscal.plant.io._pose_table.write_pose_table`; the joint-angle table as
@@ -41,6 +43,7 @@ import contextlib
 import io
 import json
 import os
+import runpy
 import shutil
 import sys
 import sysconfig
@@ -48,6 +51,9 @@ import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+# the arithmetic's kernel the suite pins, set before numpy loads: the repository's conftest.py (test_golden.py's
+# docstring, Machine dependence)
+runpy.run_path(str(HERE.parents[2] / "conftest.py"))
 EXPECTED = HERE / "expected"
 
 #: The payload of the planar paper scenario (``fmscal simulate --scenario paper``).
