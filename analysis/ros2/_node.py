@@ -818,6 +818,8 @@ def spin(args):
         raise Ros2Error(f"the ROS arguments were refused: {str(err).splitlines()[0] if str(err) else err}") from None
     if hasattr(signal, "SIGUSR1"):                   # kill -USR1 <pid>: every thread's stack on stderr
         faulthandler.register(signal.SIGUSR1, all_threads=True)
+    stopping = threading.Event()                     # set by a SIGINT or SIGTERM from here on, even mid-start
+    restore = _stop_on_signals(stopping)
     node = None
     try:
         node = CompensatorNode(r, context, args)
@@ -837,15 +839,11 @@ def spin(args):
         gc.freeze()
         for thread in threads:
             thread.start()
-        stopping = threading.Event()
-        restore = _stop_on_signals(stopping)
         try:
             while not stopping.is_set():
                 executor.spin_once(timeout_sec=STOP_LOOK)
         except (KeyboardInterrupt, r.Shutdown):
             pass
-        finally:
-            restore()
         if stopping.is_set():
             node.node.get_logger().info("stopping (a SIGINT or SIGTERM)")
         # the other threads stopped before their nodes are destroyed (else a C++ abort at exit); a running fit
@@ -862,6 +860,7 @@ def spin(args):
             node.stop()
             node.destroy()
         r.rclpy.try_shutdown(context=context)
+        restore()
 
 
 def _stop_on_signals(stopping):
