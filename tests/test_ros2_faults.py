@@ -646,10 +646,6 @@ def _feed(listener, domain, plan, case_stamps):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 45, left: in two clean-ci runs the node took over 30 s to exit on "
-                                        "the Ctrl-C sent during a fit (it passes alone and passed in the CI before; "
-                                        "a likely cause, a KeyboardInterrupt a finalizer swallowed, mended by "
-                                        "_stop_on_signals; the mark kept until CI shows it pass)")
 def test_identify_payload_cancelled_and_a_ctrl_c_stops_the_node(request, tmp_path):
     """``~/identify_payload`` on 20 s held runs in a process of its own: ``~/cancel`` stops it (its call answers
     "cancelled", the payload in use kept); a second call, interrupted by one SIGINT to the node (Ctrl-C), ends
