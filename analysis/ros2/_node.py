@@ -866,11 +866,12 @@ def spin(args):
 def _stop_on_signals(stopping):
     """SIGINT (Ctrl-C) and SIGTERM set ``stopping`` instead of raising; returns what restores the former handlers.
 
-    Python runs a signal's handler in the main thread, between two of its bytecodes, and a ``KeyboardInterrupt``
-    raised there can land in a finalizer, which swallows it (the node then ran on after a Ctrl-C). So the
-    handler raises nothing, and a thread of its own also reads the signal's number from Python's wakeup fd,
-    which the interpreter's C-level handler writes in whichever thread the signal lands: ``stopping`` is set
-    whatever the main thread does. Outside the main thread (no handler can be set there): nothing done.
+    The handlers are set whatever the process inherited: a child of a background job (CI's commands, a node
+    started with ``&``) starts with SIGINT ignored, Python then sets no handler of its own, and the node ran on
+    after every Ctrl-C. They raise nothing (a ``KeyboardInterrupt`` can land in a finalizer, which swallows it),
+    and a thread of its own also reads the signal's number from Python's wakeup fd, which the interpreter's
+    C-level handler writes in whichever thread the signal lands: ``stopping`` is set whatever the main thread
+    does. Outside the main thread (no handler can be set there): nothing done.
     """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None

@@ -319,8 +319,7 @@ def judge(effect, tolerance, tolerance_words, cone, undetermined=False, axis=Non
         return False, (f"the model does not fit: the fit leaves {_pair(residual)} (rms), {ratio[0]:.2g} and "
                        f"{ratio[1]:.2g} times the reading's noise, which more data do not lower (cross-talk or "
                        f"torque gains of S, which the payload cannot take up), and {adds}: compensation will "
-                       f"leave about the "
-                       f"residual; {cause}, or give a tolerance that accepts it"), False
+                       f"leave about the residual; {cause}, or give a tolerance that accepts it"), False
     if axis is not None:
         return False, (f"the poses turn gravity about one axis only (its directions in the sensor frame lie on one "
                        f"circle, about the axis {' '.join(f'{v:+.2f}' for v in axis)}): off that circle, within "
