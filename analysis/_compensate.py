@@ -48,8 +48,10 @@ placed on that grid: the first intervals must be ``dt`` (within :data:`DT_TOLERA
 a reading whose stamp repeats the last one, or falls within half a step after it (its grid cell: a second
 publisher interleaving), is dropped (``duplicate``); a gap of ``g`` missing samples is filled
 with ``g`` empty rows (no reading, no motion: the fit takes the samples the window holds), the readings whose
-output falls due inside the gap withheld (``gap``); a gap longer than the filter's window and delay, or a stamp
-stepping back, restarts the window (``restart``): no output until it is full again. Each is counted by cause in
+output falls due inside the gap withheld (``gap``); a gap longer than the filter's window and delay, a stamp
+stepping back, or one off the grid (its interval from the last further than :data:`GRID_SLIP` of a step from a
+whole number of steps: a clock's phase slipped) restarts the window (``restart``): no output until it is full
+again. Each is counted by cause in
 :attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`.
 
 **Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
@@ -192,6 +194,10 @@ FRAMES = ("sensor", "base")
 #: fraction (module docstring, Stamps).
 DT_TOLERANCE = 0.1
 DT_INTERVALS = 8
+#: A stamp further than this fraction of ``dt`` from the grid (its interval from the last not near a whole number
+#: of steps) restarts the window: read as evenly spaced, samples off the grid bias the filter's derivatives, which
+#: the covariance does not hold (module docstring, Stamps).
+GRID_SLIP = 0.1
 #: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
 POSE_NOISE_EVERY = 100
 #: A motion stream's running noise estimate: three samples make a second difference only where their two
@@ -1307,8 +1313,8 @@ class Compensator:
         while i < len(t):
             j, last = i, min(len(t), i + cap)
             if self._blockable():       # the contiguous rows with a motion sample each go as one block
-                while j < last and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= 0.5 * self.dt
-                                                   or j > i and abs(t[j] - t[j - 1] - self.dt) <= 0.5 * self.dt):
+                while j < last and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= GRID_SLIP * self.dt
+                                                   or j > i and abs(t[j] - t[j - 1] - self.dt) <= GRID_SLIP * self.dt):
                     j += 1
             if j - i >= 2:
                 out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j]))
@@ -1346,7 +1352,10 @@ class Compensator:
                     raise CompensationError(f"the stamps come {typical:.6g} s apart; dt is {self.dt:g} s: give "
                                             f"dt={typical:.6g} (the readings' sample time)")
         n = max(1, int(round(step / self.dt)))
-        if n - 1 >= self._k + self._L:
+        if abs(step / self.dt - n) > GRID_SLIP:
+            self._restart(f"a stamp {step:.6g} s after the last, {abs(step / self.dt - n):.2g} of a step off the "
+                          f"grid of dt {self.dt:g} s")
+        elif n - 1 >= self._k + self._L:
             self._restart(f"a gap of {step:.6g} s ({n - 1} samples) beyond the filter's window and delay")
         elif n > 1:
             self._gap(n - 1, step)

@@ -26,7 +26,7 @@ import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
-from ros2_rig import Taker  # noqa: E402
+from ros2_rig import Taker, domain_id  # noqa: E402
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
@@ -65,7 +65,7 @@ def sender_result(proc, timeout):
 
 def measure(duration=10.0, seed=0, domain=None, qos="reliable"):
     """The bare pair's delivery delay and the sender's lateness (module docstring), as a dict."""
-    domain = domain if domain is not None else 1 + (os.getpid() + 50) % 100
+    domain = domain if domain is not None else domain_id(f"floor-{os.getpid()}")
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node("fmscal_floor", context=context)

@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from fmscal.analysis import compensate  # noqa: E402
 from ros2_floor import sender_result, start_sender, stats  # noqa: E402
-from ros2_rig import Taker, node_log, running_node, truth_calibration  # noqa: E402
+from ros2_rig import Taker, domain_id, node_log, running_node, truth_calibration  # noqa: E402
 from ros2_sender import scenario_log  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.context import Context  # noqa: E402
@@ -172,7 +172,7 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False, ident
     pin = pin and len(cpus) >= 2
     scenario, log, truth = scenario_log(duration, seed, contact)
     cal = truth_calibration(scenario, truth)
-    domain = domain if domain is not None else 1 + (os.getpid() % 100)
+    domain = domain if domain is not None else domain_id(f"latency-{os.getpid()}")
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "cal.json"
         cal.save(path)

@@ -1,7 +1,7 @@
 """The ROS 2 tests' and benchmark's rig: the node started as a subprocess (``python -m fmscal.analysis.cli ros2``)
 and a publisher and subscriber in this process, over real DDS on loopback.
 
-Each test runs in its own ROS domain (:func:`domain_id`: from the test process and the test's name) with
+Each test runs in its own ROS domain (:func:`domain_id`: one no other process on this machine holds) with
 discovery kept to this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), so that no two tests hear each
 other. Every wait is bounded, and the node is stopped by its process id in a ``finally``.
 
@@ -13,6 +13,7 @@ covariances and flags and its diagnostics without an executor (:class:`Taker`); 
 beside the node.
 """
 
+import fcntl
 import json
 import os
 import signal
@@ -50,11 +51,41 @@ WAIT = 30.0
 DOMAINS = 200
 
 
+#: Where the domains' locks are (one file each): every process on this machine that runs these tests claims its
+#: domains there, xdist's workers and a second test run or the soak alike.
+DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "fmscal-ros-domains"
+
+#: How many of this process's newest names keep their domain (a test asks for one or two; the older are let go).
+KEPT = 4
+
+_claimed = {}                                          # name -> (domain, the open lock file), newest last
+
+
 def domain_id(name):
-    """A ROS domain for one test, in 1-:data:`DOMAINS`: from this process (each xdist worker, and each of several
-    test runs on one machine: two runs of one test in one domain would hear each other's node) and the test's
-    name."""
-    return 1 + zlib.crc32(f"{os.getpid()}/{name}".encode()) % DOMAINS
+    """A ROS domain for one test, in 1-:data:`DOMAINS`, that no other process on this machine holds: the first free
+    one from a hash of the name, claimed by an exclusive lock on its file in :data:`DOMAIN_LOCKS` and kept while
+    this process asks for at most :data:`KEPT` newer names (the same name gives the same domain). A hash alone let
+    two tests running at once on two xdist workers share a domain now and then; each then heard the other's node
+    (its outputs, its diagnostics, its answers)."""
+    if name in _claimed:
+        return _claimed[name][0]
+    DOMAIN_LOCKS.mkdir(exist_ok=True)
+    start = zlib.crc32(name.encode())
+    for k in range(DOMAINS):
+        domain = 1 + (start + k) % DOMAINS
+        if any(d == domain for d, _ in _claimed.values()):
+            continue
+        lock = open(DOMAIN_LOCKS / f"{domain}.lock", "a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        _claimed[name] = (domain, lock)
+        while len(_claimed) > KEPT:
+            _claimed.pop(next(iter(_claimed)))[1].close()
+        return domain
+    raise RuntimeError(f"all {DOMAINS} ROS domains are held by other processes ({DOMAIN_LOCKS})")
 
 
 def truth_calibration(scenario, truth, **kw):

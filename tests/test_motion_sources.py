@@ -602,6 +602,24 @@ def test_a_dropped_joint_state_leaves_the_running_noise_alone(ur5_run):
     assert np.all(covariance(sparse) > covariance(q)), (covariance(sparse), covariance(q))
 
 
+@pytest.mark.parametrize("slip", [-0.2, 0.3])
+def test_a_stamp_off_the_grid_restarts_the_window(slip):
+    """Readings at 1 kHz whose clock's phase slips by ``slip`` of a step at 0.5 s (one interval of 0.8 or 1.3 ms,
+    then 1 ms again; exact joint angles at the stamps): the window restarts there (counted, said), and every
+    output is within 5 sd. Read as evenly spaced, the samples either side of the slip bias the motion's
+    derivatives beyond the covariance (the largest |z| here 4.3-5.3 against 3.9; in the node at 5 kHz, 7 sd)."""
+    run = robot_rig.ur5_run(1.0, 1e-4)                        # 10 kHz: the stamps taken from it
+    rows = np.r_[np.arange(0, 5000, 10), np.arange(5000 + int(round(slip * 10)), len(run["t"]), 10)]
+    t, q, W = run["t"][rows], run["q"][rows], run["W"][rows]
+    W = W + np.random.default_rng(2).normal(0.0, 1.0, W.shape) * np.asarray(NOISE.wrench_sd)
+    stream = Compensator(_truth_calibration(), 1e-3, noise=NOISE, motion=run["motion"])
+    out = stream.push_many(t[:300], W[:300], joints=(q[:300], None, None))
+    out += [o for k in range(300, len(t)) if (o := stream.push(t[k], W[k], joints=(q[k], None, None)))]
+    z = np.array([np.abs(o.wrench) / np.sqrt(np.diag(o.cov)) for o in out]).max(axis=1)
+    assert stream.events["restart"] == 1 and any("off the grid" in w for w in stream.warnings), stream.warnings
+    assert len(out) > 800 and z.max() < 5.0, (len(out), z.max())
+
+
 def test_offline_joint_covariance_is_each_rows(ur5_run):
     """The offline joint path's covariance takes each row's Jacobian and attitude: the log run backwards in time
     (the smoothing symmetric, the noise estimate the same) gives each sample the same covariance, while its

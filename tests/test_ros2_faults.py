@@ -535,18 +535,6 @@ def test_short_faults(request, source, tmp_path):
 @pytest.mark.parametrize("name", sorted(SLOW))
 def test_long_faults(request, name, source, tmp_path):
     """Each long fault on its own (module docstring)."""
-    if name == "5kHz":                         # a known gap, said in docs/status.md: reported, not hidden
-        request.applymarker(pytest.mark.xfail(reason="issue 45, left: at 5 kHz, decimated, the pose source gave "
-                                                     "one unflagged output at 5.1 sd and the joint source rms z "
-                                                     "0.43 over its clean stretches, on a loaded machine; the IMU "
-                                                     "source 188 unflagged beyond 5 sd in its first 0.03 s in one "
-                                                     "clean-ci (0bd688b; passes alone)"))
-    if name == "back-both" and source == "joints":    # a known gap: reported, not hidden (docs/status.md)
-        request.applymarker(pytest.mark.xfail(reason="issue 45, left: in one clean-ci run the diagnostics said "
-                                                     "'streams apart' where 'restarting' was expected (a "
-                                                     "likely cause fixed since: a restart within the period of a "
-                                                     "latched 'streams apart' was never said; kept until a "
-                                                     "clean-ci shows it)"))
     case = SLOW[name]
     _check(_run(request, source, case, tmp_path), case, source)
 

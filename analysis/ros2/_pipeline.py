@@ -803,7 +803,12 @@ class Pipeline:
 
     def _kept(self, t):
         """Whether the reading at ``t`` is compensated (decimation: every N-th stamp of the input's grid); counts
-        the readings missing from that grid (``lost``)."""
+        the readings missing from that grid (``lost``).
+
+        After a restart of the window the grid starts at the reading that restarted it (:meth:`_push_run`), which
+        the old grid kept: the readings of the same pass past it, taken on the old grid, stay on the new one. A
+        grid started at the next pass's first reading put the stamps off the compensator's ``dt`` with no gap
+        (a step of 0.8 ``dt`` at 5 kHz, 1 in 5)."""
         seen, self._last_seen = self._last_seen, t
         if seen is not None and t - seen > 1.5 * self.dt_in:
             self.counts["lost"] += int(round((t - seen) / self.dt_in)) - 1
@@ -821,7 +826,13 @@ class Pipeline:
         Each motion sample is given to the reading nearest it only, interpolated to that reading's stamp; the
         readings between get none, as :meth:`fmscal.analysis.Compensator.push` takes a sparser stream. Given to
         every reading, interpolated values would count as independent samples: the motion's noise, and with it
-        the output's covariance, would come out too small."""
+        the output's covariance, would come out too small.
+
+        Across a hole in the motion (samples lost), ``_GAP`` too: a straight line's error at ``t`` between samples
+        at ``t0`` and ``t1`` is ``(t - t0) (t1 - t) |x''| / 2``, which the output's covariance does not hold; it is
+        kept within what the stream's own spacing gives, ``(t - t0) (t1 - t) <= (0.75 h)^2`` with ``h`` its typical
+        interval (the largest product of a bracket 1.5 ``h`` wide). Interpolated across a 60 ms hole, one reading's
+        motion put outputs 15 sd off where the filter's window held few samples (after a gap in the readings)."""
         m = self._motion if m is None else m
         while len(m) >= 2 and m[1][0] <= t:
             m.popleft()
@@ -834,6 +845,8 @@ class Pipeline:
             return v0
         if t - t0 >= 0.5 * self.dt and t1 - t > 0.5 * self.dt:
             return _GAP
+        if self._motion_step is not None and (t - t0) * (t1 - t) > (0.75 * self._motion_step) ** 2:
+            return _GAP                                 # across a hole in the motion (below)
         return self.motion.interpolate(self.model, t, t0, v0, t1, v1)
 
     def _push(self, rows):
@@ -880,7 +893,7 @@ class Pipeline:
                 self._withhold("restart", frame[0], frame[1])
             while len(self._recent) > 0:
                 self._recent.pop()
-            self._segment_start, self._grid0, self.restarting = keep, None, True
+            self._segment_start, self._grid0, self.restarting = keep, keep, True     # (:meth:`_kept`)
             self._held.gap()
         elif self._segment_start is None and not new.get("duplicate"):
             self._segment_start = run[0][0]
