@@ -1732,8 +1732,7 @@ class _RunningNoise:
         self.sum, self.n = np.zeros(size), 0
 
     def add(self, values, t):
-        if values is None:
-            return
+        """One sample ``values`` (n,) at time ``t``: a second difference where the last three are even."""
         self.recent.append(values)
         self.times.append(float(t))
         if len(self.recent) == self.recent.maxlen:
