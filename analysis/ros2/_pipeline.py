@@ -846,7 +846,7 @@ class Pipeline:
         if t - t0 >= 0.5 * self.dt and t1 - t > 0.5 * self.dt:
             return _GAP
         if self._motion_step is not None and (t - t0) * (t1 - t) > (0.75 * self._motion_step) ** 2:
-            return _GAP                                 # across a hole in the motion (below)
+            return _GAP                                 # across a hole in the motion (the docstring)
         return self.motion.interpolate(self.model, t, t0, v0, t1, v1)
 
     def _push(self, rows):
