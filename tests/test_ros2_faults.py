@@ -627,12 +627,13 @@ def test_another_node_of_the_same_name_is_said(request, tmp_path):
 
 
 def _feed(listener, domain, plan, case_stamps):
-    """Run a sender of ``plan`` and wait until the node has taken each of its stamps."""
-    sender_result(start_sender(plan), 300)
+    """Run a sender of ``plan`` and wait until the node has taken each of its stamps; the sender's result."""
+    done = sender_result(start_sender(plan), 300)
     assert listener.wait_for(lambda: (s := listener.status()) is not None and "received" in s and
                              int(s["received"]) + int(s["lost"]) >= case_stamps and int(s["backlog"]) == 0, 300), \
         " ".join(f"{k}={v}" for k, v in (listener.status() or {}).items() if v not in ("", "0") and k in
                  ("received", "lost", "published", "backlog", "waiting") or k.startswith("withheld"))
+    return done
 
 
 @pytest.mark.slow
@@ -651,11 +652,15 @@ def test_identify_payload_cancelled_and_a_ctrl_c_stops_the_node(request, tmp_pat
         listener = Listener(domain)
         try:
             listener.wait_for_node(proc)
-            _feed(listener, domain, plan, 20001)
+            first = _feed(listener, domain, plan, 20001)
             fit = listener.call_async("identify_payload")
             assert listener.wait_for(lambda: "~/identify_payload: fitting" in node_log(proc), 60), node_log(proc)
             cancelled = listener.call("cancel")
             answer = listener.answer(fit, 60)
+            # the second sender's stamps start after the first's last (sent at 4 times their pace, they ran ahead of
+            # the clock): else, under load, both streams stepped back by under a second, which leaves the node
+            # "streams apart" (docs/status.md, issue 45's left cases), and nothing is held for the second call
+            time.sleep(max(0.0, first["epoch"] + plan["duration"] + 0.5 - time.time()))
             _feed(listener, domain, dict(plan, duration=10.0, seed=5), 20001 + 10001)
             listener.call_async("identify_payload")
             assert listener.wait_for(lambda: node_log(proc).count("~/identify_payload: fitting") == 2, 60), \
