@@ -51,7 +51,7 @@ with ``g`` empty rows (no reading, no motion: the fit takes the samples the wind
 output falls due inside the gap withheld (``gap``); a gap longer than the filter's window and delay, a stamp
 stepping back, or one off the grid (its interval from the last further than :data:`GRID_SLIP` of a step from a
 whole number of steps: a clock's phase slipped) restarts the window (``restart``): no output until it is full
-again. Each is counted by cause in
+again; so does :meth:`Compensator.restart`, for a break the stamps do not show. Each is counted by cause in
 :attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`.
 
 **Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
@@ -1388,6 +1388,14 @@ class Compensator:
         for running in (self._running, self._pose_noise):
             if running is not None:
                 running.clear()
+
+    def restart(self, why="restarted by the caller"):
+        """Start the window again, as a stamp stepping back does (module docstring, Stamps): the readings in it
+        get no output, and none comes until it is full again; counted in :attr:`events` and :attr:`withheld`
+        (``restart``), the first said in :attr:`warnings` with ``why``. For a break the stamps do not show: a
+        motion whose clock stepped back while the readings' went on (the ROS 2 node's pipeline, where the
+        readings rejoin that clock). The stamps' grid goes on."""
+        self._restart(str(why))
 
     def _restart(self, why):
         """Start the window again: no output until it is full (module docstring, Stamps)."""

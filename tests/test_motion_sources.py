@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fmscal.analysis import Compensator, ImuMotion, JointMotion, compensate
+from fmscal.analysis import CAUSAL_WINDOW, Compensator, ImuMotion, JointMotion, compensate
 from fmscal.analysis.cli import main
 from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, LogError, NoiseSpec, get_scenario
 from fmscal.plant.io import ImuLog, JointLog, UnitsError
@@ -618,6 +618,28 @@ def test_a_stamp_off_the_grid_restarts_the_window(slip):
     z = np.array([np.abs(o.wrench) / np.sqrt(np.diag(o.cov)) for o in out]).max(axis=1)
     assert stream.events["restart"] == 1 and any("off the grid" in w for w in stream.warnings), stream.warnings
     assert len(out) > 800 and z.max() < 5.0, (len(out), z.max())
+
+
+def test_a_restart_on_the_callers_word_withholds_a_window():
+    """``Compensator.restart``: the readings in the window get no output, none comes until it is full again
+    (the window's count of readings missing, from the delay's before the restart on), counted (``restart``) and
+    said with the caller's reason; the outputs either side match a stream pushed without the restart (the same
+    samples, the same window)."""
+    run = robot_rig.ur5_run(1.0, 1e-3)
+    t, q = run["t"], run["q"]
+    W = run["W"] + np.random.default_rng(4).normal(0.0, 1.0, run["W"].shape) * np.asarray(NOISE.wrench_sd)
+    plain, stream = (Compensator(_truth_calibration(), 1e-3, noise=NOISE, motion=run["motion"]) for _ in range(2))
+    ref = {o.t: o for k in range(len(t)) if (o := plain.push(t[k], W[k], joints=(q[k], None, None)))}
+    out = {o.t: o for o in stream.push_many(t[:500], W[:500], joints=(q[:500], None, None))}
+    stream.restart("the motion's clock stepped back")
+    after = stream.push_many(t[500:], W[500:], joints=(q[500:], None, None))
+    assert stream.events["restart"] == 1 and any("the motion's clock stepped back" in w for w in stream.warnings)
+    missing = np.array(sorted(set(ref) - set(out) - {o.t for o in after}))
+    # the delay's readings before the restart, and the window's less the delay after it: the window's count
+    assert abs(missing[0] - (t[500] - stream.delay)) < 1.5e-3 and np.all(np.diff(missing) < 1.5e-3), missing
+    assert abs(len(missing) - CAUSAL_WINDOW / 1e-3) <= 1, len(missing)
+    for o in list(out.values()) + after:
+        np.testing.assert_allclose(o.wrench, ref[o.t].wrench, atol=1e-9)
 
 
 def test_offline_joint_covariance_is_each_rows(ur5_run):

@@ -338,6 +338,8 @@ class Pipeline:
         self._stray, self._motion_stray = None, None   # a reading, a motion sample stamped back: held aside
         self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
         self._motion = deque()                         # (t taken, value)
+        self._motion_back_to = None                    # the motion's first stamp after its last step back
+        self._window_epoch = None                      # the epoch of the motion in the compensator's window
         self._old_motion = None                        # (epoch, segment, newest t, buffer) before a step back
         self._motion_step = None                       # the motion's typical interval, s
         self._frames = {}                              # t -> (stamp, frame_id, arrival, tag, held seq) pushed
@@ -570,7 +572,8 @@ class Pipeline:
 
     def _motion_restart(self, t, newest):
         """The motion's clock stepped back to ``t`` from ``newest``: its buffer restarted, a new epoch; readings
-        stepped back alone before (apart) now share it."""
+        stepped back before, alone (apart) or to about these stamps (within the tolerance), now share it: the
+        compensator's window, which holds the old clock's motion, restarts at their next reading (:meth:`_drain`)."""
         self.counts["motion_restart"] += 1
         self._notice("motion_restart", f"the motion's stamps stepped back by {newest - t:.6g} s: its buffer "
                                        "restarted; readings stamped on the old clock past its last "
@@ -585,7 +588,8 @@ class Pipeline:
         self._motion = deque()
         self._last_angles = None
         self._motion_epoch += 1
-        if self._apart_from is not None:               # the readings stepped back first: the motion followed
+        self._motion_back_to = t
+        if self._apart_from is not None or stepped:    # the readings stepped back first: the motion followed
             self._apart_from, self._apart_said = None, False
             self._reading_epoch = self._motion_epoch
 
@@ -612,6 +616,16 @@ class Pipeline:
             pose[self._angles] = angles
         self._last_angles = angles
         return pose
+
+    def _rejoins(self, t):
+        """Whether a reading stamped ``t``, a repeat of a stamp taken, may be the readings' clock following the
+        motion's step back (a driver restarted on the same stamps, a bag played again): the motion's clock
+        stepped back and the readings' not yet, and ``t`` lies about the motion's new stamps. It then goes the way
+        of a stamp stepping back (held aside, the next reading says which it is), not dropped as a duplicate."""
+        if self._motion_epoch == self._reading_epoch or self._motion_back_to is None or not self._motion:
+            return False
+        tolerance = self._apart_tolerance() + abs(self._lead or 0.0)
+        return self._motion_back_to - tolerance <= t <= self._motion[-1][0] + tolerance
 
     def _apart_tolerance(self):
         """s a reading's lead on the motion may grow past a step back's before the streams are apart: the
@@ -642,13 +656,15 @@ class Pipeline:
                 self._withhold("invalid", stamp, frame_id)
                 return False
             self._check_frame("wrench", frame_id, self.expected_sensor_frame)
-            if t in self._taken and self._newest_in is not None and t < self._newest_in:
+            if t in self._taken and self._newest_in is not None and t < self._newest_in and not self._rejoins(t):
                 self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
                 return True
             entry = (t, w_hat, stamp, frame_id, arrival)
             stray, self._stray = self._stray, None
             if stray is not None:
-                if t > self._newest_in:                     # the old timeline goes on: it was a stray
+                if t > self._newest_in and stray[0] in self._taken:  # the old timeline goes on: it was a repeat
+                    self._withhold("duplicate", stray[2], stray[3])
+                elif t > self._newest_in:                   # the old timeline goes on: it was a stray
                     self._withhold("stray", stray[2], stray[3])
                     self._notice("stray", f"a reading stamped {stray[0]:.9g} s, before the newest, and the next "
                                           "going on from the newest: dropped (an old message, or a second "
@@ -700,6 +716,12 @@ class Pipeline:
                 self._apart_from, self._apart_said = None, False
         behind = self._reading_epoch != self._motion_epoch and \
             self._old_clock(t, self._reading_epoch, self._segment) is None
+        if behind and not apart and lead is not None and self._lead is not None \
+                and abs(lead - self._lead) <= self._apart_tolerance():
+            # the motion's clock stepped back and the readings' went on, their lead on it as before within the
+            # tolerance (a step back by less, or the readings' repeats of the step dropped as duplicates before
+            # it): the readings join its clock, as readings stepping back by less than that go on with the motion
+            self._reading_epoch, behind = self._motion_epoch, False
         if behind and "apart" not in self.conditions:
             self._condition("apart", "the motion's stamps stepped back and the readings' did not: the streams no "
                                      "longer share a clock; no output until they do")
@@ -707,8 +729,8 @@ class Pipeline:
         if not (apart or behind) and "apart" in self.conditions:
             self._condition("apart")
             self._notice("apart", "the readings' stamps agree with the motion's again")
-        if not apart and lead is not None:
-            self._lead = lead
+        if not apart and lead is not None and self._reading_epoch == self._motion_epoch:
+            self._lead = lead                           # (a lead on another clock's motion means nothing)
         self._pending.append((*entry, self._segment, apart, self._reading_epoch))
 
     def process(self):
@@ -758,10 +780,15 @@ class Pipeline:
 
     def _drain(self):
         """Push every pending reading the motion covers, or has left stale (or that a step back sends on); the
-        outputs."""
+        outputs.
+
+        A reading given the motion of another epoch than the compensator's window holds, its stamp going on from
+        the last pushed (the readings rejoined the motion's clock after it stepped back: :meth:`_motion_restart`,
+        :meth:`_rejoins`), restarts the window first: a window holding both clocks' motion puts the outputs far
+        beyond their covariance. (A stamp stepping back restarts it by itself.)"""
         timeout = self.settings.stale_timeout
         newest, last_segment = self._pending[-1][0], self._pending[-1][5]
-        rows = []
+        rows, previous = [], self._last_t
         while self._pending:
             t, w_hat, stamp, frame_id, arrival, segment, apart, epoch = self._pending[0]
             old = None if apart or epoch == self._motion_epoch else self._old_clock(t, epoch, segment)
@@ -798,7 +825,13 @@ class Pipeline:
             else:
                 self.stale = False
             self._pending.popleft()
-            rows.append((t, w_hat, value, stamp, frame_id, arrival, tag))
+            why = None
+            if value is not None:
+                if self._window_epoch not in (None, epoch) and previous is not None and t > previous:
+                    why = "the readings joined the motion's clock after it stepped back"
+                self._window_epoch = epoch
+            previous = t
+            rows.append((t, w_hat, value, stamp, frame_id, arrival, tag, why))
         return self._push(rows) if rows else []
 
     def _kept(self, t):
@@ -850,13 +883,14 @@ class Pipeline:
         return self.motion.interpolate(self.model, t, t0, v0, t1, v1)
 
     def _push(self, rows):
-        """Push rows ``(t, w_hat, motion, stamp, frame_id, arrival, tag)`` into the compensator: runs of stamps
-        one step apart as one block, any other stamp alone (so that each of the compensator's events is known to
-        be its); the outputs."""
+        """Push rows ``(t, w_hat, motion, stamp, frame_id, arrival, tag, why)`` into the compensator (``why``: a
+        restart due before the row, else None): runs of stamps one step apart as one block, any other stamp, and a
+        row with a restart, alone (so that each of the compensator's events is known to be its); the outputs."""
         out, i, dt = [], 0, self.dt
         while i < len(rows):
             j, previous = i, self._last_t
-            while j < len(rows) and previous is not None and 0.5 * dt <= rows[j][0] - previous < 1.5 * dt:
+            while j < len(rows) and previous is not None and 0.5 * dt <= rows[j][0] - previous < 1.5 * dt \
+                    and rows[j][7] is None:
                 previous = rows[j][0]
                 j += 1
             j = max(j, i + 1)
@@ -870,7 +904,14 @@ class Pipeline:
         c = self.compensator
         events = dict(c.events)
         added = []
-        for t, w_hat, value, stamp, frame_id, arrival, tag in run:
+        if run[0][7] is not None:                     # (a run of one) a restart the stamps do not show
+            c.restart(run[0][7])
+        for t, w_hat, value, stamp, frame_id, arrival, tag, _ in run:
+            if t in self._frames and self._last_t is not None and t < self._last_t:
+                # (a run of one, stepping back: a restart) a stamp the old clock's window still holds, its reading
+                # withheld with that window
+                frame = self._frames.pop(t)
+                self._withhold("restart", frame[0], frame[1])
             if t not in self._frames:
                 tag, seq = self._note(t, w_hat, value, tag)
                 self._frames[t] = (stamp, frame_id, arrival, tag, seq)
@@ -1058,7 +1099,7 @@ class Pipeline:
             self._pending.clear()
             self._frames.clear()
             self._recent.clear()
-            self._last_t = self._segment_start = self._grid0 = None
+            self._last_t = self._segment_start = self._grid0 = self._window_epoch = None
             self._gap_budget = 0
             if self.dt is not None:
                 self.compensator = self._build()
