@@ -49,10 +49,13 @@ a reading whose stamp repeats the last one, or falls within half a step after it
 publisher interleaving), is dropped (``duplicate``); a gap of ``g`` missing samples is filled
 with ``g`` empty rows (no reading, no motion: the fit takes the samples the window holds), the readings whose
 output falls due inside the gap withheld (``gap``); a gap longer than the filter's window and delay, a stamp
-stepping back, or one off the grid (its interval from the last further than :data:`GRID_SLIP` of a step from a
-whole number of steps: a clock's phase slipped) restarts the window (``restart``): no output until it is full
-again; so does :meth:`Compensator.restart`, for a break the stamps do not show. Each is counted by cause in
-:attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`.
+stepping back restarts the window (``restart``): no output until it is full again; so does
+:meth:`Compensator.restart`, for a break the stamps do not show. Each is counted by cause in
+:attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`. A stamp off the grid
+(its interval from the last further than :data:`GRID_SLIP` of a step from a whole number of steps: a clock that
+jitters, a phase that slipped) takes the nearest grid cell, and each window that holds it is fitted at its
+samples' own times (the filter's polynomial solved for them, :func:`_fit_coefficients`, as for a window with
+samples missing), not read as evenly spaced.
 
 **Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
 table's fit holds its rows' noise, not a sample's: a :class:`Compensator` given none estimates the poses' from
@@ -194,10 +197,11 @@ FRAMES = ("sensor", "base")
 #: fraction (module docstring, Stamps).
 DT_TOLERANCE = 0.1
 DT_INTERVALS = 8
-#: A stamp further than this fraction of ``dt`` from the grid (its interval from the last not near a whole number
-#: of steps) restarts the window: read as evenly spaced, samples off the grid bias the filter's derivatives, which
-#: the covariance does not hold (module docstring, Stamps).
-GRID_SLIP = 0.1
+#: A window whose stamps lie further than this fraction of ``dt`` from a grid (an interval not near a whole number
+#: of steps: a jittering clock, a phase that slipped) is fitted at its samples' own times (module docstring,
+#: Stamps). Read as evenly spaced, samples off the grid bias the filter's derivatives beyond the covariance. (Above
+#: a stamp's rounding: a float of epoch seconds holds 0.24 us, 1e-3 of a step at 5 kHz.)
+GRID_SLIP = 0.01
 #: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
 POSE_NOISE_EVERY = 100
 #: A motion stream's running noise estimate: three samples make a second difference only where their two
@@ -857,6 +861,24 @@ def _causal_coefficients(k, order, lead, dt):
     return [savgol_coeffs(k, order, deriv=d, delta=dt, pos=k - 1 - lead, use="dot") for d in range(3)]
 
 
+def _fit_coefficients(s, order, dt):
+    """The coefficients of a polynomial of degree ``order`` fitted by least squares to samples at times ``s``
+    (..., n) from the time it is read at: value and first two derivatives, (..., 3, n). On an even grid, the
+    causal filter's (:func:`_causal_coefficients`); otherwise a window's samples at their own times (module
+    docstring, Stamps), or the samples a window with some missing holds."""
+    V = (np.asarray(s, dtype=float) / dt)[..., None] ** np.arange(order + 1)        # in steps: well conditioned
+    pinv = np.linalg.pinv(V)                                                         # (..., order + 1, n)
+    return np.stack([pinv[..., 0, :], pinv[..., 1, :] / dt, 2 * pinv[..., 2, :] / dt ** 2], axis=-2)
+
+
+def _even(times, dt):
+    """Whether each window of stamps ``times`` (M, k; NaN or None rows: a gap's) lies on a grid of ``dt``: every
+    interval within :data:`GRID_SLIP` of a whole number of steps."""
+    steps = np.diff(np.asarray(times, dtype=float), axis=-1) / dt
+    off = np.abs(steps - np.round(steps))
+    return ~(off > GRID_SLIP).any(axis=-1)
+
+
 def _causal_settings(window, delay, order, dt, latency):
     """The window and the delay in samples, checked: ``(k, L, lead)``, the pose window, the reading's delay and
     how far the poses reach past the time they are read at (the pose stream's latency taken off)."""
@@ -1214,6 +1236,7 @@ class Compensator:
         # the last k motion samples' channels and extras (None where none came): the newest, latency samples
         # late, is the motion of the reading lead samples after the one read out, the oldest of the last L + 1
         self._channels = deque(maxlen=self._k)
+        self._times = deque(maxlen=self._k)             # their readings' stamps (None: a gap's row)
         self._extras = deque(maxlen=self._k)
         self._readings = deque(maxlen=self._L + 1)      # (t, w_hat) of the last L + 1 samples; w_hat None: a gap
         self._quaternion = self.motion.quaternion(self.model)
@@ -1313,8 +1336,10 @@ class Compensator:
         while i < len(t):
             j, last = i, min(len(t), i + cap)
             if self._blockable():       # the contiguous rows with a motion sample each go as one block
-                while j < last and present[j] and (j == i and abs(t[j] - self._t - self.dt) <= GRID_SLIP * self.dt
-                                                   or j > i and abs(t[j] - t[j - 1] - self.dt) <= GRID_SLIP * self.dt):
+                # (one grid cell on: ``_advance``'s one step, neither a duplicate nor a gap; off the grid within it,
+                # the windows that hold it fitted at their own times)
+                while j < last and present[j] and 0.5 * self.dt <= t[j] - (self._t if j == i else t[j - 1]) \
+                        < 1.5 * self.dt:
                     j += 1
             if j - i >= 2:
                 out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j]))
@@ -1352,10 +1377,7 @@ class Compensator:
                     raise CompensationError(f"the stamps come {typical:.6g} s apart; dt is {self.dt:g} s: give "
                                             f"dt={typical:.6g} (the readings' sample time)")
         n = max(1, int(round(step / self.dt)))
-        if abs(step / self.dt - n) > GRID_SLIP:
-            self._restart(f"a stamp {step:.6g} s after the last, {abs(step / self.dt - n):.2g} of a step off the "
-                          f"grid of dt {self.dt:g} s")
-        elif n - 1 >= self._k + self._L:
+        if n - 1 >= self._k + self._L:
             self._restart(f"a gap of {step:.6g} s ({n - 1} samples) beyond the filter's window and delay")
         elif n > 1:
             self._gap(n - 1, step)
@@ -1376,6 +1398,7 @@ class Compensator:
         for _ in range(g):
             self._readings.append((None, None))
             self._channels.append(None)
+            self._times.append(None)
             self._extras.append(None)
             if len(self._readings) > self._L and self._readings[0][1] is not None:
                 withheld += 1
@@ -1400,7 +1423,7 @@ class Compensator:
     def _restart(self, why):
         """Start the window again: no output until it is full (module docstring, Stamps)."""
         pending = sum(1 for _, w in list(self._readings)[1:] if w is not None)
-        for d in (self._readings, self._channels, self._extras, self._last):
+        for d in (self._readings, self._channels, self._times, self._extras, self._last):
             d.clear()
         self._forget_noise_runs()
         self._event("restart", pending, f"{why}: the window restarted, no output until it is full again")
@@ -1420,6 +1443,7 @@ class Compensator:
                 self._pose_variance(channels[None], np.array([t]))
         self._readings.append((t, w_hat))
         self._channels.append(channels)
+        self._times.append(t)
         self._extras.append(extra)
         if len(self._readings) <= self._L or len(self._channels) < self._k:
             return None
@@ -1430,11 +1454,11 @@ class Compensator:
         if not self._units_checked and any(present):
             self.motion.check_units(np.array([c for c in self._channels if c is not None]))
             self._units_checked = True
-        if all(present):
+        if all(present) and _even(np.array(self._times)[None], self.dt)[0]:
             P, sums = self._coefficients @ np.array(self._channels), self._c_sums
         else:
-            self.missing = True
-            fitted = self._fit(present)
+            self.missing = self.missing or not all(present)
+            fitted = self._fit(present, t0)
             if fitted is None:
                 return None
             P, c = fitted
@@ -1464,22 +1488,32 @@ class Compensator:
             self._pose_variance(channels, t)
         var = self._variance() if self._running is None else self._running.block(channels, t)
         window = np.concatenate([np.array(list(self._channels)[1:]), channels])          # (k - 1 + m, n)
-        P = np.einsum("dk,mpk->dmp", self._coefficients,
-                      np.lib.stride_tricks.sliding_window_view(window, k, axis=0))       # (3, m, n)
+        windows = np.lib.stride_tricks.sliding_window_view(window, k, axis=0)           # (m, n, k)
+        P = np.einsum("dk,mpk->dmp", self._coefficients, windows)                        # (3, m, n)
         readings = list(self._readings)[1:] + list(zip(t.tolist(), w_hat))
         t0 = np.array([r[0] for r in readings[:m]])
+        sums = self._c_sums
+        times = np.lib.stride_tricks.sliding_window_view(np.r_[np.array(list(self._times)[1:], dtype=float), t], k)
+        uneven = ~_even(times, self.dt)
+        if uneven.any():                            # those windows fitted at their samples' own times (Stamps)
+            c = _fit_coefficients(times[uneven] - (t0[uneven] + (self._L - self._lead) * self.dt)[:, None],
+                                  self.order, self.dt)                                  # (u, 3, k)
+            P[:, uneven] = np.einsum("udk,upk->dup", c, windows[uneven])
+            sums = np.repeat(self._c_sums[:, None, None], m, axis=1)                     # (3, m, 1): per row
+            sums[:, uneven, 0] = np.sum(c ** 2, axis=2).T
         reading = np.array([r[1] for r in readings[:m]])
         rows_out = i0 + np.arange(m)
         extra = None
         if extras is not None:
             extra = self.motion.read_out(np.concatenate([self._extras_array()[1:], extras]), rows_out, i0, k)
-        motion = self.motion.motion(self.model, P, self._c_sums, var, extra, window[rows_out],
+        motion = self.motion.motion(self.model, P, sums, var, extra, window[rows_out],
                                     self._sample if m <= _ROW_BY_ROW else None)
         rows = _step(self._parts, self._output, self._tracker, t0, reading, motion,
                      self._sample if m <= _ROW_BY_ROW else None)
         self._remember(reading, rows)
         counts = self._notice(t0, reading, motion, rows)
         self._channels.extend(channels)
+        self._times.extend(t.tolist())
         if extras is not None:
             self._extras.extend(extras)
         else:
@@ -1657,19 +1691,19 @@ class Compensator:
         self._last.clear()
         self._detector.use(self.model, st.cov)
 
-    def _fit(self, present):
-        """The polynomial fitted to the samples the window holds: ``(P, c)``, the value and first two
-        derivatives (3, n_channels) and their coefficients (3, n_present); None where they are too few or all on
-        one side of the time it is read at (a stale stream: no extrapolation)."""
+    def _fit(self, present, t0):
+        """The polynomial fitted to the samples the window holds, at their own times (their readings' stamps):
+        ``(P, c)``, the value and first two derivatives (3, n_channels) and their coefficients (3, n_present), read
+        at the time of the reading ``t0`` read out (and the motion's latency in whole samples); None where they are
+        too few or all on one side of that time (a stale stream: no extrapolation)."""
         rows = np.flatnonzero(present)
         if len(rows) < self.order + 3:
             return None
-        s = (rows - (self._k - 1 - self._lead)) * self.dt             # each sample's time from the evaluation time
+        at = t0 + (self._L - self._lead) * self.dt                     # the read-out row's time on the grid
+        s = np.array([self._times[i] for i in rows]) - at              # each sample's time from it
         if s.min() > 0 or s.max() < 0:                                 # no sample on one side: an extrapolation
             return None
-        V = np.vander(s, self.order + 1, increasing=True)
-        pinv = np.linalg.pinv(V)                                      # (order + 1, n): the polynomial's coefficients
-        c = np.array([pinv[0], pinv[1], 2 * pinv[2]])
+        c = _fit_coefficients(s, self.order, self.dt)
         P = c @ np.array([self._channels[i] for i in rows])
         return P, c
 

@@ -339,6 +339,8 @@ class Pipeline:
         self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
         self._motion = deque()                         # (t taken, value)
         self._motion_back_to = None                    # the motion's first stamp after its last step back
+        self._repeats_from = None                      # the first stamp of the last run of repeats dropped
+        self._repeating = False                        # the last reading a repeat dropped
         self._window_epoch = None                      # the epoch of the motion in the compensator's window
         self._old_motion = None                        # (epoch, segment, newest t, buffer) before a step back
         self._motion_step = None                       # the motion's typical interval, s
@@ -658,7 +660,10 @@ class Pipeline:
             self._check_frame("wrench", frame_id, self.expected_sensor_frame)
             if t in self._taken and self._newest_in is not None and t < self._newest_in and not self._rejoins(t):
                 self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
+                if not self._repeating:
+                    self._repeats_from, self._repeating = t, True
                 return True
+            self._repeating = False
             entry = (t, w_hat, stamp, frame_id, arrival)
             stray, self._stray = self._stray, None
             if stray is not None:
@@ -716,12 +721,15 @@ class Pipeline:
                 self._apart_from, self._apart_said = None, False
         behind = self._reading_epoch != self._motion_epoch and \
             self._old_clock(t, self._reading_epoch, self._segment) is None
-        if behind and not apart and lead is not None and self._lead is not None \
-                and abs(lead - self._lead) <= self._apart_tolerance():
-            # the motion's clock stepped back and the readings' went on, their lead on it as before within the
-            # tolerance (a step back by less, or the readings' repeats of the step dropped as duplicates before
-            # it): the readings join its clock, as readings stepping back by less than that go on with the motion
-            self._reading_epoch, behind = self._motion_epoch, False
+        tolerance = self._apart_tolerance()
+        if behind and not apart and lead is not None and self._lead is not None and self._repeats_from is not None \
+                and abs(self._repeats_from - self._motion_back_to) <= tolerance \
+                and abs(lead - self._lead) <= tolerance:
+            # the readings' repeats dropped as duplicates before the motion stepped back were their own step back
+            # to about the same stamp (a bag played again, a driver restarted on its old stamps, the readings
+            # first), and their lead on the motion is as before: they join its clock. (A motion stepping back
+            # alone leaves them apart: their lead cannot tell a step within the tolerance from delivery.)
+            self._reading_epoch, behind, self._repeats_from = self._motion_epoch, False, None
         if behind and "apart" not in self.conditions:
             self._condition("apart", "the motion's stamps stepped back and the readings' did not: the streams no "
                                      "longer share a clock; no output until they do")
