@@ -53,7 +53,7 @@ stepping back restarts the window (``restart``): no output until it is full agai
 :meth:`Compensator.restart`, for a break the stamps do not show. Each is counted by cause in
 :attr:`Compensator.events`, and the first of each kind said in :attr:`Compensator.warnings`. A stamp off the grid
 (its interval from the last further than :data:`GRID_SLIP` of a step from a whole number of steps: a clock that
-jitters, a phase that slipped) takes the nearest grid cell, and each window that holds it is fitted at its
+jitters, a phase that slipped) takes the cell its interval rounds to, and each window that holds it is fitted at its
 samples' own times (the filter's polynomial solved for them, :func:`_fit_coefficients`, as for a window with
 samples missing), not read as evenly spaced.
 
@@ -204,9 +204,10 @@ DT_INTERVALS = 8
 GRID_SLIP = 0.01
 #: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
 POSE_NOISE_EVERY = 100
-#: A motion stream's running noise estimate: three samples make a second difference only where their two
-#: intervals agree within this fraction (:class:`_RunningNoise`; a hole between them is the motion's change).
-EVEN = 0.1
+#: A motion stream's running noise estimate: three samples make a second difference only where the longer of
+#: their two intervals is within this factor of the shorter (:class:`_RunningNoise`: across a hole, a sample
+#: missing, the motion's curvature would enter; a stamp's jitter is within it).
+EVEN = 1.5
 #: A payload file's stream without the readings' noise: the fewest first readings it is estimated from (their
 #: differences: white), no output before; by default as many as its colour needs (module docstring, Noise).
 NOISE_SAMPLES = 500
@@ -1701,8 +1702,8 @@ class Compensator:
             return None
         at = t0 + (self._L - self._lead) * self.dt                     # the read-out row's time on the grid
         s = np.array([self._times[i] for i in rows]) - at              # each sample's time from it
-        if s.min() > 0 or s.max() < 0:                                 # no sample on one side: an extrapolation
-            return None
+        if s.min() > 0.5 * self.dt or s.max() < -0.5 * self.dt:        # none on one side: an extrapolation (not
+            return None                                                # a stamp's jitter about the read-out time)
         c = _fit_coefficients(s, self.order, self.dt)
         P = c @ np.array([self._channels[i] for i in rows])
         return P, c
@@ -1762,11 +1763,14 @@ class Compensator:
 
 
 class _RunningNoise:
-    """A motion channel's noise variance from the second differences of its samples (the last three that came):
-    a white noise of sd ``sigma`` on a signal smooth at the sample rate gives differences of variance
-    ``6 sigma^2``. Only three samples evenly spaced in time make a difference (a stream sparser than the readings
-    counts, if even): across a hole (a sample dropped, a gap) the motion's own change, not its noise, would enter
-    the variance, and stay in it."""
+    """A motion channel's noise variance from the second divided differences of its samples (the last three that
+    came, at their own times): with intervals ``h1``, ``h2``, ``d = (x2 - x1) / h2 - (x1 - x0) / h1``, which a
+    signal smooth at the sample rate leaves near zero, and a white noise of sd ``sigma`` gives the variance
+    ``sigma^2 (1/h1^2 + 1/h2^2 + (1/h1 + 1/h2)^2)`` (``6 sigma^2 / h^2`` where even). Read as evenly spaced, the
+    plain difference of jittered samples holds the motion's velocity times their intervals' difference, which
+    would enter the variance. Only three samples about evenly spaced make one (:data:`EVEN`; a stream sparser than
+    the readings counts): across a hole (a sample dropped, a gap) the motion's own curvature would enter the
+    variance, and stay in it."""
 
     def __init__(self, size):
         self.recent = deque(maxlen=3)
@@ -1778,9 +1782,10 @@ class _RunningNoise:
         self.recent.append(values)
         self.times.append(float(t))
         if len(self.recent) == self.recent.maxlen:
-            before, after = self.times[1] - self.times[0], self.times[2] - self.times[1]
-            if abs(after - before) <= EVEN * max(before, after):
-                self.sum += np.square(self.recent[2] - 2 * self.recent[1] + self.recent[0])
+            h1, h2 = self.times[1] - self.times[0], self.times[2] - self.times[1]
+            if 0 < min(h1, h2) and max(h1, h2) <= EVEN * min(h1, h2):
+                d = (self.recent[2] - self.recent[1]) / h2 - (self.recent[1] - self.recent[0]) / h1
+                self.sum += np.square(d) / (1 / h1 ** 2 + 1 / h2 ** 2 + (1 / h1 + 1 / h2) ** 2)
                 self.n += 1
 
     def clear(self):
@@ -1789,7 +1794,7 @@ class _RunningNoise:
         self.times.clear()
 
     def variance(self):
-        return self.sum / (6 * self.n) if self.n else np.zeros_like(self.sum)
+        return self.sum / self.n if self.n else np.zeros_like(self.sum)
 
     def block(self, rows, t):
         """:meth:`add` each of ``rows`` (M, n), at times ``t`` (M,), in turn: the variance after each, (M, n)."""

@@ -100,6 +100,9 @@ SATURATED_HOLD = 1.0
 MOTION_KEPT = 10.0
 #: The readings' stamps remembered: one repeated among them is a duplicate, not a step back.
 TAKEN_KEPT = 2000
+#: A run of this many repeated stamps, each a step on from the last, is the readings' clock stepping back (a bag
+#: played again, a driver restarted on its old stamps), not old messages delivered again.
+REPLAYED = 3
 #: s between two renewals of :attr:`Pipeline.snapshot` while readings come.
 SNAP_EVERY = 0.01
 #: ``~/identify_payload``: the shortest stretch without a gap or a contact it fits, s.
@@ -339,8 +342,9 @@ class Pipeline:
         self._reading_epoch = self._motion_epoch = 0   # the clocks' epochs (a confirmed step back begins one)
         self._motion = deque()                         # (t taken, value)
         self._motion_back_to = None                    # the motion's first stamp after its last step back
-        self._repeats_from = None                      # the first stamp of the last run of repeats dropped
-        self._repeating = False                        # the last reading a repeat dropped
+        self._motion_back_by = 0.0                     # and how far it stepped back, s
+        self._repeats = None                           # [first, count, last] stamps of the readings' run of repeats
+        self._replayed = None                          # the last such run of REPLAYED or more (the same list)
         self._window_epoch = None                      # the epoch of the motion in the compensator's window
         self._old_motion = None                        # (epoch, segment, newest t, buffer) before a step back
         self._motion_step = None                       # the motion's typical interval, s
@@ -590,10 +594,21 @@ class Pipeline:
         self._motion = deque()
         self._last_angles = None
         self._motion_epoch += 1
-        self._motion_back_to = t
+        self._motion_back_to, self._motion_back_by = t, newest - t
+        if not self._covers(self._replayed, t):
+            self._replayed = None                      # the readings' replay was of another step
         if self._apart_from is not None or stepped:    # the readings stepped back first: the motion followed
             self._apart_from, self._apart_said = None, False
-            self._reading_epoch = self._motion_epoch
+            self._join()
+
+    def _join(self):
+        """The readings take the motion's epoch (their clock is its new one); those queued of the old epoch in
+        the current segment that the old clock's motion does not cover take it too (they came on the new clock
+        before the join was seen; else each would be withheld as ``apart``)."""
+        old, new = self._reading_epoch, self._motion_epoch
+        self._reading_epoch = new
+        self._pending = deque((*e[:7], new) if e[7] == old and not e[6] and e[5] == self._segment
+                              and self._old_clock(e[0], old, e[5]) is None else e for e in self._pending)
 
     def _old_clock(self, t, epoch, segment):
         """The motion kept from before the motion's step back, where it covers the reading at ``t`` of that
@@ -622,12 +637,31 @@ class Pipeline:
     def _rejoins(self, t):
         """Whether a reading stamped ``t``, a repeat of a stamp taken, may be the readings' clock following the
         motion's step back (a driver restarted on the same stamps, a bag played again): the motion's clock
-        stepped back and the readings' not yet, and ``t`` lies about the motion's new stamps. It then goes the way
-        of a stamp stepping back (held aside, the next reading says which it is), not dropped as a duplicate."""
-        if self._motion_epoch == self._reading_epoch or self._motion_back_to is None or not self._motion:
+        stepped back and the readings' not yet, and the unbroken run of repeats ``t`` goes on (or ``t`` alone)
+        reaches the motion's first new stamp within the tolerance (where a clock restarted on it lands; the run
+        began before it where the readings came first). It then goes the way of a stamp stepping back (held
+        aside, the next reading says which it is), not dropped as a duplicate. An old reading delivered again
+        elsewhere stays a duplicate."""
+        if self._motion_epoch == self._reading_epoch or self._motion_back_to is None:
             return False
-        tolerance = self._apart_tolerance() + abs(self._lead or 0.0)
-        return self._motion_back_to - tolerance <= t <= self._motion[-1][0] + tolerance
+        return self._covers(self._repeats or [t, 1, t], self._motion_back_to)
+
+    def _covers(self, run, t):
+        """Whether a run of repeats ``[first, count, last]`` reaches the stamp ``t`` (within the tolerance)."""
+        tolerance = self._apart_tolerance()
+        return run is not None and run[0] - tolerance <= t <= run[2] + tolerance
+
+    def _repeated(self, t):
+        """A reading at ``t`` repeats a stamp taken: the run of repeats it goes on, or starts; a run of
+        :data:`REPLAYED` or more, each a step on, is the readings' clock stepping back to its first (a replay, a
+        driver restarted on its old stamps), kept as evidence for :meth:`_take`'s join until the motion's step
+        back, if any, says otherwise."""
+        run = self._repeats
+        if run is None or not 0 < t - run[2] < 1.5 * (self.dt_in or self._motion_step or np.inf):
+            run = self._repeats = [t, 0, t]
+        run[1], run[2] = run[1] + 1, t
+        if run[1] == REPLAYED:
+            self._replayed = run
 
     def _apart_tolerance(self):
         """s a reading's lead on the motion may grow past a step back's before the streams are apart: the
@@ -658,12 +692,13 @@ class Pipeline:
                 self._withhold("invalid", stamp, frame_id)
                 return False
             self._check_frame("wrench", frame_id, self.expected_sensor_frame)
-            if t in self._taken and self._newest_in is not None and t < self._newest_in and not self._rejoins(t):
-                self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
-                if not self._repeating:
-                    self._repeats_from, self._repeating = t, True
-                return True
-            self._repeating = False
+            if t in self._taken and self._newest_in is not None and t < self._newest_in:
+                self._repeated(t)
+                if not self._rejoins(t):
+                    self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
+                    return True
+            else:
+                self._repeats = None
             entry = (t, w_hat, stamp, frame_id, arrival)
             stray, self._stray = self._stray, None
             if stray is not None:
@@ -722,14 +757,17 @@ class Pipeline:
         behind = self._reading_epoch != self._motion_epoch and \
             self._old_clock(t, self._reading_epoch, self._segment) is None
         tolerance = self._apart_tolerance()
-        if behind and not apart and lead is not None and self._lead is not None and self._repeats_from is not None \
-                and abs(self._repeats_from - self._motion_back_to) <= tolerance \
-                and abs(lead - self._lead) <= tolerance:
-            # the readings' repeats dropped as duplicates before the motion stepped back were their own step back
-            # to about the same stamp (a bag played again, a driver restarted on its old stamps, the readings
-            # first), and their lead on the motion is as before: they join its clock. (A motion stepping back
-            # alone leaves them apart: their lead cannot tell a step within the tolerance from delivery.)
-            self._reading_epoch, behind, self._repeats_from = self._motion_epoch, False, None
+        replayed = self._motion_back_to is not None and self._covers(self._replayed, self._motion_back_to)
+        same_lead = lead is not None and self._lead is not None and abs(lead - self._lead) <= tolerance
+        if behind and not apart and (replayed or same_lead and self._motion_back_by > 2 * tolerance):
+            # the readings are on the motion's new clock too: their own step back to about the same stamp was seen
+            # (a run of repeats dropped before the motion's step: a bag played again, a driver restarted on its old
+            # stamps, the readings first), or their lead on the new clock is what it was on the old one where the
+            # motion's step was larger than the lead can blur (a motion stepping back alone by that shifts the
+            # lead by all of it; the readings back after a silence). A motion stepping back alone by less stays
+            # apart: within the tolerance, the lead cannot tell a step from delivery.
+            self._join()
+            behind, self._replayed = False, None
         if behind and "apart" not in self.conditions:
             self._condition("apart", "the motion's stamps stepped back and the readings' did not: the streams no "
                                      "longer share a clock; no output until they do")
