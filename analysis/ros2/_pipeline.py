@@ -601,6 +601,20 @@ class Pipeline:
             self._apart_from, self._apart_said = None, False
             self._join()
 
+    def _joins(self, lead):
+        """Whether readings going on from the newest, behind a motion whose clock stepped back (their ``lead`` on
+        its newest), are on its new clock too: their own step back to about its first new stamp was seen (a run
+        of repeats dropped before the motion's step: a bag played again, a driver restarted on its old stamps,
+        the readings first), or their lead is what it was on the old clock where the motion's step was larger
+        than the lead can blur (a motion stepping back alone by that shifts the lead by all of it; the readings
+        back after a silence). A motion stepping back alone by less stays apart: within the tolerance, the lead
+        cannot tell a step from delivery."""
+        tolerance = self._apart_tolerance()
+        if self._motion_back_to is not None and self._covers(self._replayed, self._motion_back_to):
+            return True
+        return lead is not None and self._lead is not None and abs(lead - self._lead) <= tolerance \
+            and self._motion_back_by > 2 * tolerance
+
     def _join(self):
         """The readings take the motion's epoch (their clock is its new one); those queued of the old epoch in
         the current segment that the old clock's motion does not cover take it too (they came on the new clock
@@ -644,7 +658,7 @@ class Pipeline:
         elsewhere stays a duplicate."""
         if self._motion_epoch == self._reading_epoch or self._motion_back_to is None:
             return False
-        return self._covers(self._repeats or [t, 1, t], self._motion_back_to)
+        return self._covers(self._repeats, self._motion_back_to)
 
     def _covers(self, run, t):
         """Whether a run of repeats ``[first, count, last]`` reaches the stamp ``t`` (within the tolerance)."""
@@ -672,16 +686,17 @@ class Pipeline:
         """A raw reading stamped ``t`` (s), queued; :meth:`process` compensates it once the motion covers it.
 
         A reading repeating the stamp of one of the last :data:`TAKEN_KEPT` taken (not the newest: the compensator
-        drops that one) is dropped (``duplicate``). A reading stamped before the newest is held aside: where the
-        next goes on from the newest, it was a stray (``stray``, dropped: an old message, a second publisher on
-        another clock); where the next goes on from it, the readings' clock stepped back: the queued readings go on
-        at once, and the compensator restarts its window. Where the motion's clock had stepped back before, the
-        readings now share its epoch; where it had not, and the readings' stamps now trail the motion's newest by
-        more than they did before (:meth:`_apart_tolerance`), the streams are apart: each such reading is pushed
-        with no motion (``apart``) until their stamps agree again. A reading of an older epoch than the motion's
-        gets no motion either. A reading with a NaN or infinite component is counted (``invalid``) and dropped:
-        returns False. ``arrival``: its reception, s of the wall clock (``time.time``; default now), for the node's
-        measure of how long its readings wait."""
+        drops that one) is dropped (``duplicate``), unless its run of repeats reaches the first stamp of a motion
+        whose clock stepped back (:meth:`_rejoins`: it then goes the way of a stamp stepping back). A reading
+        stamped before the newest is held aside: where the next goes on from the newest, it was a stray (``stray``,
+        dropped: an old message, a second publisher on another clock); where the next goes on from it, the readings'
+        clock stepped back: the queued readings go on at once, and the compensator restarts its window. Where the
+        motion's clock had stepped back before, the readings now share its epoch; where it had not, and the
+        readings' stamps now trail the motion's newest by more than they did before (:meth:`_apart_tolerance`), the
+        streams are apart: each such reading is pushed with no motion (``apart``) until their stamps agree again. A
+        reading of an older epoch than the motion's gets no motion either. A reading with a NaN or infinite
+        component is counted (``invalid``) and dropped: returns False. ``arrival``: its reception, s of the wall
+        clock (``time.time``; default now), for the node's measure of how long its readings wait."""
         arrival = time.time() if arrival is None else arrival
         w_hat = np.asarray(w_hat, dtype=float)
         t = float(t)
@@ -756,16 +771,7 @@ class Pipeline:
                 self._apart_from, self._apart_said = None, False
         behind = self._reading_epoch != self._motion_epoch and \
             self._old_clock(t, self._reading_epoch, self._segment) is None
-        tolerance = self._apart_tolerance()
-        replayed = self._motion_back_to is not None and self._covers(self._replayed, self._motion_back_to)
-        same_lead = lead is not None and self._lead is not None and abs(lead - self._lead) <= tolerance
-        if behind and not apart and (replayed or same_lead and self._motion_back_by > 2 * tolerance):
-            # the readings are on the motion's new clock too: their own step back to about the same stamp was seen
-            # (a run of repeats dropped before the motion's step: a bag played again, a driver restarted on its old
-            # stamps, the readings first), or their lead on the new clock is what it was on the old one where the
-            # motion's step was larger than the lead can blur (a motion stepping back alone by that shifts the
-            # lead by all of it; the readings back after a silence). A motion stepping back alone by less stays
-            # apart: within the tolerance, the lead cannot tell a step from delivery.
+        if behind and not apart and self._joins(lead):
             self._join()
             behind, self._replayed = False, None
         if behind and "apart" not in self.conditions:
