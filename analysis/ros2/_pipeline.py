@@ -343,8 +343,9 @@ class Pipeline:
         self._motion = deque()                         # (t taken, value)
         self._motion_back_to = None                    # the motion's first stamp after its last step back
         self._motion_back_by = 0.0                     # and how far it stepped back, s
-        self._repeats = None                           # [first, count, last] stamps of the readings' run of repeats
-        self._replayed = None                          # the last such run of REPLAYED or more (the same list)
+        self._repeats = None                           # the readings' run of repeats (:meth:`_repeated`)
+        self._replayed = None                          # the last such run that replayed the stamps to the newest
+        self._same_leads = 0                           # readings behind a stepped-back motion, its lead unchanged
         self._window_epoch = None                      # the epoch of the motion in the compensator's window
         self._old_motion = None                        # (epoch, segment, newest t, buffer) before a step back
         self._motion_step = None                       # the motion's typical interval, s
@@ -595,25 +596,32 @@ class Pipeline:
         self._last_angles = None
         self._motion_epoch += 1
         self._motion_back_to, self._motion_back_by = t, newest - t
-        if not self._covers(self._replayed, t):
+        if self._replayed is not None and abs(self._replayed[0] - t) > self._apart_tolerance():
             self._replayed = None                      # the readings' replay was of another step
+        self._same_leads = 0
         if self._apart_from is not None or stepped:    # the readings stepped back first: the motion followed
             self._apart_from, self._apart_said = None, False
             self._join()
 
-    def _joins(self, lead):
-        """Whether readings going on from the newest, behind a motion whose clock stepped back (their ``lead`` on
-        its newest), are on its new clock too: their own step back to about its first new stamp was seen (a run
-        of repeats dropped before the motion's step: a bag played again, a driver restarted on its old stamps,
-        the readings first), or their lead is what it was on the old clock where the motion's step was larger
-        than the lead can blur (a motion stepping back alone by that shifts the lead by all of it; the readings
-        back after a silence). A motion stepping back alone by less stays apart: within the tolerance, the lead
-        cannot tell a step from delivery."""
+    def _joins(self, lead, moved):
+        """Whether readings going on from the newest, behind a motion whose clock stepped back (``lead``: theirs
+        on its newest; ``moved``: it moved since the last reading), are on its new clock too. Either their own
+        step back to its first new stamp was seen: a replay of the stamps from there to the newest taken, each a
+        step on and delivered over about as long as they span (:meth:`_repeated`: a bag played again, a driver
+        restarted on its old stamps), not old messages delivered again in a burst. Or their lead is what it was
+        on the old clock, on :data:`REPLAYED` readings in a row taken as the motion moves (within a burst of
+        readings after a stall, the lead sweeps past any value), where the motion stepped back by more than twice
+        the tolerance (alone, it shifts the lead by all of that: the readings back after a silence). A motion
+        stepping back alone by less stays apart: within the tolerance, the lead cannot tell a step from
+        delivery."""
         tolerance = self._apart_tolerance()
-        if self._motion_back_to is not None and self._covers(self._replayed, self._motion_back_to):
+        if self._replayed is not None and abs(self._replayed[0] - self._motion_back_to) <= tolerance:
             return True
-        return lead is not None and self._lead is not None and abs(lead - self._lead) <= tolerance \
-            and self._motion_back_by > 2 * tolerance
+        if not moved or self._motion_back_by <= 2 * tolerance:
+            return False
+        same = lead is not None and self._lead is not None and abs(lead - self._lead) <= tolerance
+        self._same_leads = self._same_leads + 1 if same else 0
+        return self._same_leads >= REPLAYED
 
     def _join(self):
         """The readings take the motion's epoch (their clock is its new one); those queued of the old epoch in
@@ -648,33 +656,18 @@ class Pipeline:
         self._last_angles = angles
         return pose
 
-    def _rejoins(self, t):
-        """Whether a reading stamped ``t``, a repeat of a stamp taken, may be the readings' clock following the
-        motion's step back (a driver restarted on the same stamps, a bag played again): the motion's clock
-        stepped back and the readings' not yet, and the unbroken run of repeats ``t`` goes on (or ``t`` alone)
-        reaches the motion's first new stamp within the tolerance (where a clock restarted on it lands; the run
-        began before it where the readings came first). It then goes the way of a stamp stepping back (held
-        aside, the next reading says which it is), not dropped as a duplicate. An old reading delivered again
-        elsewhere stays a duplicate."""
-        if self._motion_epoch == self._reading_epoch or self._motion_back_to is None:
-            return False
-        return self._covers(self._repeats, self._motion_back_to)
-
-    def _covers(self, run, t):
-        """Whether a run of repeats ``[first, count, last]`` reaches the stamp ``t`` (within the tolerance)."""
-        tolerance = self._apart_tolerance()
-        return run is not None and run[0] - tolerance <= t <= run[2] + tolerance
-
-    def _repeated(self, t):
-        """A reading at ``t`` repeats a stamp taken: the run of repeats it goes on, or starts; a run of
-        :data:`REPLAYED` or more, each a step on, is the readings' clock stepping back to its first (a replay, a
-        driver restarted on its old stamps), kept as evidence for :meth:`_take`'s join until the motion's step
-        back, if any, says otherwise."""
+    def _repeated(self, t, arrival):
+        """A reading at ``t``, received at ``arrival`` (s), repeats a stamp taken: the run of repeats it goes on
+        (the last a step on, or a few lost between), or starts. A run that reaches the newest reading taken,
+        :data:`REPLAYED` or more delivered over at least half the time their stamps span, replayed the stamps
+        from its first: kept for :meth:`_joins` (old messages delivered again come in a burst, and rarely all the
+        way to the newest)."""
         run = self._repeats
-        if run is None or not 0 < t - run[2] < 1.5 * (self.dt_in or self._motion_step or np.inf):
-            run = self._repeats = [t, 0, t]
-        run[1], run[2] = run[1] + 1, t
-        if run[1] == REPLAYED:
+        if run is None or not 0 < t - run[1] <= self._apart_tolerance():
+            run = self._repeats = [t, t, 0, arrival, arrival]             # first, last, count, first and last arrival
+        run[1], run[2], run[4] = t, run[2] + 1, arrival
+        step = self.dt_in or self._motion_step or 0.0
+        if run[2] >= REPLAYED and t >= self._newest_in - 1.5 * step and run[4] - run[3] >= 0.5 * (t - run[0]):
             self._replayed = run
 
     def _apart_tolerance(self):
@@ -686,17 +679,17 @@ class Pipeline:
         """A raw reading stamped ``t`` (s), queued; :meth:`process` compensates it once the motion covers it.
 
         A reading repeating the stamp of one of the last :data:`TAKEN_KEPT` taken (not the newest: the compensator
-        drops that one) is dropped (``duplicate``), unless its run of repeats reaches the first stamp of a motion
-        whose clock stepped back (:meth:`_rejoins`: it then goes the way of a stamp stepping back). A reading
-        stamped before the newest is held aside: where the next goes on from the newest, it was a stray (``stray``,
-        dropped: an old message, a second publisher on another clock); where the next goes on from it, the readings'
-        clock stepped back: the queued readings go on at once, and the compensator restarts its window. Where the
-        motion's clock had stepped back before, the readings now share its epoch; where it had not, and the
-        readings' stamps now trail the motion's newest by more than they did before (:meth:`_apart_tolerance`), the
-        streams are apart: each such reading is pushed with no motion (``apart``) until their stamps agree again. A
-        reading of an older epoch than the motion's gets no motion either. A reading with a NaN or infinite
-        component is counted (``invalid``) and dropped: returns False. ``arrival``: its reception, s of the wall
-        clock (``time.time``; default now), for the node's measure of how long its readings wait."""
+        drops that one) is dropped (``duplicate``): its stamp's output came already (a run of them that replays the
+        stamps is the readings' clock stepping back, :meth:`_repeated`, for :meth:`_joins`). A reading stamped
+        before the newest is held aside: where the next goes on from the newest, it was a stray (``stray``, dropped:
+        an old message, a second publisher on another clock); where the next goes on from it, the readings' clock
+        stepped back: the queued readings go on at once, and the compensator restarts its window. Where the motion's
+        clock had stepped back before, the readings now share its epoch; where it had not, and the readings' stamps
+        now trail the motion's newest by more than they did before (:meth:`_apart_tolerance`), the streams are
+        apart: each such reading is pushed with no motion (``apart``) until their stamps agree again. A reading of
+        an older epoch than the motion's gets no motion either. A reading with a NaN or infinite component is
+        counted (``invalid``) and dropped: returns False. ``arrival``: its reception, s of the wall clock
+        (``time.time``; default now), for the node's measure of how long its readings wait."""
         arrival = time.time() if arrival is None else arrival
         w_hat = np.asarray(w_hat, dtype=float)
         t = float(t)
@@ -708,18 +701,14 @@ class Pipeline:
                 return False
             self._check_frame("wrench", frame_id, self.expected_sensor_frame)
             if t in self._taken and self._newest_in is not None and t < self._newest_in:
-                self._repeated(t)
-                if not self._rejoins(t):
-                    self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
-                    return True
-            else:
-                self._repeats = None
+                self._repeated(t, arrival)
+                self._withhold("duplicate", stamp, frame_id)  # a repeat of a stamp taken before the newest
+                return True
+            self._repeats = None
             entry = (t, w_hat, stamp, frame_id, arrival)
             stray, self._stray = self._stray, None
             if stray is not None:
-                if t > self._newest_in and stray[0] in self._taken:  # the old timeline goes on: it was a repeat
-                    self._withhold("duplicate", stray[2], stray[3])
-                elif t > self._newest_in:                   # the old timeline goes on: it was a stray
+                if t > self._newest_in:                     # the old timeline goes on: it was a stray
                     self._withhold("stray", stray[2], stray[3])
                     self._notice("stray", f"a reading stamped {stray[0]:.9g} s, before the newest, and the next "
                                           "going on from the newest: dropped (an old message, or a second "
@@ -771,7 +760,7 @@ class Pipeline:
                 self._apart_from, self._apart_said = None, False
         behind = self._reading_epoch != self._motion_epoch and \
             self._old_clock(t, self._reading_epoch, self._segment) is None
-        if behind and not apart and self._joins(lead):
+        if behind and not apart and self._joins(lead, moved):
             self._join()
             behind, self._replayed = False, None
         if behind and "apart" not in self.conditions:
@@ -836,7 +825,7 @@ class Pipeline:
 
         A reading given the motion of another epoch than the compensator's window holds, its stamp going on from
         the last pushed (the readings rejoined the motion's clock after it stepped back: :meth:`_motion_restart`,
-        :meth:`_rejoins`), restarts the window first: a window holding both clocks' motion puts the outputs far
+        :meth:`_joins`), restarts the window first: a window holding both clocks' motion puts the outputs far
         beyond their covariance. (A stamp stepping back restarts it by itself.)"""
         timeout = self.settings.stale_timeout
         newest, last_segment = self._pending[-1][0], self._pending[-1][5]
