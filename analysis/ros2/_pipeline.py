@@ -100,8 +100,9 @@ SATURATED_HOLD = 1.0
 MOTION_KEPT = 10.0
 #: The readings' stamps remembered: one repeated among them is a duplicate, not a step back.
 TAKEN_KEPT = 2000
-#: A run of this many repeated stamps, each a step on from the last, is the readings' clock stepping back (a bag
-#: played again, a driver restarted on its old stamps), not old messages delivered again.
+#: The fewest repeated stamps, each a step on from the last, that can be the readings' clock stepping back (a bag
+#: played again, a driver restarted on its old stamps), and the readings in a row whose lead must agree for a join
+#: on the lead alone (:meth:`Pipeline._joins`).
 REPLAYED = 3
 #: s between two renewals of :attr:`Pipeline.snapshot` while readings come.
 SNAP_EVERY = 0.01
@@ -948,11 +949,6 @@ class Pipeline:
         if run[0][7] is not None:                     # (a run of one) a restart the stamps do not show
             c.restart(run[0][7])
         for t, w_hat, value, stamp, frame_id, arrival, tag, _ in run:
-            if t in self._frames and self._last_t is not None and t < self._last_t:
-                # (a run of one, stepping back: a restart) a stamp the old clock's window still holds, its reading
-                # withheld with that window
-                frame = self._frames.pop(t)
-                self._withhold("restart", frame[0], frame[1])
             if t not in self._frames:
                 tag, seq = self._note(t, w_hat, value, tag)
                 self._frames[t] = (stamp, frame_id, arrival, tag, seq)
