@@ -949,6 +949,12 @@ class Pipeline:
         if run[0][7] is not None:                     # (a run of one) a restart the stamps do not show
             c.restart(run[0][7])
         for t, w_hat, value, stamp, frame_id, arrival, tag, _ in run:
+            if t in self._frames and self._last_t is not None and t < self._last_t:
+                # (a run of one, stepping back: a restart) a stamp the old clock's window still holds, taken again
+                # (a repeat older than the TAKEN_KEPT stamps remembered: inputs above 20 kHz), its reading withheld
+                # with that window
+                frame = self._frames.pop(t)
+                self._withhold("restart", frame[0], frame[1])
             if t not in self._frames:
                 tag, seq = self._note(t, w_hat, value, tag)
                 self._frames[t] = (stamp, frame_id, arrival, tag, seq)
