@@ -639,7 +639,8 @@ def test_the_running_noise_of_jittered_joints_is_their_noise(jitter):
     """Joint angles with a noise of 1e-5 rad (no noise model given: estimated as they come), beside a quiet
     sensor, stamps jittered by up to ``jitter`` of a step: the estimate's sd within 15 % of 1e-5 and the outputs'
     rms z in [0.85, 1.15]. The plain second difference of jittered samples, read as evenly spaced, holds the
-    arm's velocity times the intervals' difference: it read 3.8e-5, and the rms z fell to 0.57."""
+    arm's velocity times the intervals' difference: it read the noise several times too large, and the covariance
+    with it (this test fails there)."""
     run = robot_rig.ur5_run(2.0, 1e-4)
     rows, rng = _jittered(run, jitter, 5)
     quiet = NoiseSpec((0.0005,) * 3 + (0.01,) * 3, 1e-4, 1e-4)
