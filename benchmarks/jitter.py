@@ -39,10 +39,7 @@ def main(argv):
     print("jitter  seed  readings  outputs  events                 rms z   max |z|  joint noise sd")
     for jitter in JITTERS:
         for seed in range(seeds):
-            rng = np.random.default_rng(seed)
-            rows = np.arange(0, len(run["t"]) - 10, 10)
-            rows = rows + np.round(10 * rng.uniform(-jitter, jitter, len(rows))).astype(int)
-            rows[0] = 0
+            rows, rng = robot_rig.jittered_rows(run, jitter, seed)
             t = run["t"][rows]
             W = run["W"][rows] + rng.normal(0.0, 1.0, (len(rows), 6)) * np.asarray(NOISE.wrench_sd)
             q = run["q"][rows] + rng.normal(0.0, JOINT_SD, (len(rows), 6))

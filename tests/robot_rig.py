@@ -61,6 +61,18 @@ def ur5_run(duration=1.5, dt=1e-3, payload=TOOL, start=0.0):
     return dict(motion=motion, t=t, q=q, dq=dq, ddq=ddq, pose=pose, v=v, omega=omega, acc=acc, alpha=alpha, W=W)
 
 
+def jittered_rows(run, jitter, seed, slip=0.0):
+    """Rows of a 10 kHz ``run`` (:func:`ur5_run` with ``dt`` 1e-4) taken at 1 kHz, each stamp moved off its grid
+    uniformly by up to ``jitter`` of a step, and from the run's middle on by ``slip`` of a step too (a clock's phase
+    that slipped); the first row at 0. Returns the rows and the generator drawn from (seeded ``seed``)."""
+    rng = np.random.default_rng(seed)
+    rows = np.arange(0, len(run["t"]) - 10, 10)
+    rows = rows + np.round(10 * (slip * (rows >= len(run["t"]) // 2)
+                                 + rng.uniform(-jitter, jitter, len(rows)))).astype(int)
+    rows[0] = 0
+    return rows, rng
+
+
 def frame_motion(q, dq, ddq, frame="tool0", placement=None, classical=False):
     """Straight from pinocchio, not through fmscal: a frame's attitudes ``R`` (N, 3, 3), its velocity ``v``,
     ``omega`` and acceleration (``getFrameAcceleration``, the spatial one, or with ``classical``

@@ -607,13 +607,10 @@ def test_stamps_off_the_grid_are_fitted_at_their_own_times(slip, jitter):
     """Readings at 1 kHz (exact joint angles at the stamps) whose clock's phase slips by ``slip`` of a step at
     0.5 s, or whose stamps jitter uniformly by up to ``jitter`` of a step (a driver stamping at reception): no
     restart, an output for every reading after the first window, every output within 5 sd and the z-scores' rms
-    in [0.85, 1.15]. Read as evenly spaced, the jittered windows gave an rms of 1.21-1.24 and outputs to 6.4 sd
-    (three seeds); a restart at each slip, as the compensator did before, gave almost no output here."""
+    in [0.85, 1.15]. Read as evenly spaced, the jittered windows go beyond (``python benchmarks/jitter.py
+    --even``); a restart at each slip, as the compensator did before, gave almost no output here."""
     run = robot_rig.ur5_run(2.0, 1e-4)                        # 10 kHz: the stamps taken from it
-    rng = np.random.default_rng(2)
-    rows = np.arange(0, len(run["t"]) - 10, 10)
-    rows = rows + np.round(10 * (slip * (rows >= 10000) + rng.uniform(-jitter, jitter, len(rows)))).astype(int)
-    rows[0] = 0
+    rows, rng = robot_rig.jittered_rows(run, jitter, 2, slip)
     t, q, W = run["t"][rows], run["q"][rows], run["W"][rows]
     W = W + rng.normal(0.0, 1.0, W.shape) * np.asarray(NOISE.wrench_sd)
     stream = Compensator(_truth_calibration(), 1e-3, noise=NOISE, motion=run["motion"])
@@ -625,15 +622,6 @@ def test_stamps_off_the_grid_are_fitted_at_their_own_times(slip, jitter):
     assert np.abs(z).max() < 5.0 and 0.85 < np.sqrt(np.mean(z ** 2)) < 1.15, (np.abs(z).max(), np.sqrt(np.mean(z ** 2)))
 
 
-def _jittered(run, jitter, seed):
-    """Rows of a 10 kHz run at 1 kHz, each stamp off its grid by up to ``jitter`` of a step (uniform); the rng."""
-    rng = np.random.default_rng(seed)
-    rows = np.arange(0, len(run["t"]) - 10, 10)
-    rows = rows + np.round(10 * rng.uniform(-jitter, jitter, len(rows))).astype(int)
-    rows[0] = 0
-    return rows, rng
-
-
 @pytest.mark.parametrize("jitter", [0.0, 0.2])
 def test_the_running_noise_of_jittered_joints_is_their_noise(jitter):
     """Joint angles with a noise of 1e-5 rad (no noise model given: estimated as they come), beside a quiet
@@ -642,7 +630,7 @@ def test_the_running_noise_of_jittered_joints_is_their_noise(jitter):
     arm's velocity times the intervals' difference: it read the noise several times too large, and the covariance
     with it (this test fails there)."""
     run = robot_rig.ur5_run(2.0, 1e-4)
-    rows, rng = _jittered(run, jitter, 5)
+    rows, rng = robot_rig.jittered_rows(run, jitter, 5)
     quiet = NoiseSpec((0.0005,) * 3 + (0.01,) * 3, 1e-4, 1e-4)
     t = run["t"][rows]
     W = run["W"][rows] + rng.normal(0, 1, (len(rows), 6)) * np.asarray(quiet.wrench_sd)
@@ -664,7 +652,7 @@ def test_a_stream_read_at_its_newest_sample_keeps_its_outputs_under_jitter():
     run = robot_rig.ur5_run(2.0, 1e-4)
     counts = []
     for jitter in (0.0, 0.2):
-        rows, rng = _jittered(run, jitter, 5)
+        rows, rng = robot_rig.jittered_rows(run, jitter, 5)
         rows = rows[rows >= 400]
         t, q = run["t"][rows], run["q"][rows - 300]
         W = run["W"][rows] + rng.normal(0, 1, (len(rows), 6)) * np.asarray(NOISE.wrench_sd)
@@ -681,10 +669,7 @@ def test_a_window_off_the_grid_is_fitted_alike_in_a_block_and_one_by_one():
     """The same jittered stamps pushed as one block (``push_many``: the uneven windows fitted together) and one
     at a time (``push``): the same outputs and covariances."""
     run = robot_rig.ur5_run(0.5, 1e-4)
-    rng = np.random.default_rng(3)
-    rows = np.arange(0, len(run["t"]) - 10, 10)
-    rows = rows + np.round(10 * rng.uniform(-0.2, 0.2, len(rows))).astype(int)
-    rows[0] = 0
+    rows, _ = robot_rig.jittered_rows(run, 0.2, 3)
     t, q, W = run["t"][rows], run["q"][rows], run["W"][rows]
     block, single = (Compensator(_truth_calibration(), 1e-3, noise=NOISE, motion=run["motion"]) for _ in range(2))
     a = block.push_many(t, W, joints=(q, None, None))
