@@ -1696,7 +1696,8 @@ class Compensator:
         """The polynomial fitted to the samples the window holds, at their own times (their readings' stamps):
         ``(P, c)``, the value and first two derivatives (3, n_channels) and their coefficients (3, n_present), read
         at the time of the reading ``t0`` read out (and the motion's latency in whole samples); None where they are
-        too few or all on one side of that time (a stale stream: no extrapolation)."""
+        too few or all more than half a step to one side of that time (a stale stream: no extrapolation; within
+        half a step, a stamp's jitter about it)."""
         rows = np.flatnonzero(present)
         if len(rows) < self.order + 3:
             return None
