@@ -57,6 +57,36 @@ jitters, a phase that slipped) takes the cell its interval rounds to, and each w
 samples' own times (the filter's polynomial solved for them, :func:`_fit_coefficients`, as for a window with
 samples missing), not read as evenly spaced.
 
+**Glitches** of the motion. A motion sample that keeps its form (a unit quaternion turned by a degree, a joint
+angle a burst of counts off) passes every check of its values, and through the filter's derivatives would move the
+outputs far beyond their covariance. Each sample is compared with the cubic fitted to the stream's last
+:data:`GLITCH_SAMPLES` samples (at their own times), read at its time, ``c`` that read-out's coefficients
+(:func:`_fit_coefficients`)::
+
+    z_j = (x_j - c . X_j) / (sigma_j sqrt(1 + c . c))                                            (G1)
+
+``X_j`` channel ``j`` of those samples, ``sigma_j`` its noise sd: a pose column's from the noise model
+(:meth:`fmscal.plant.Model.pose_sd`), a joint's, an IMU's or a payload file's pose stream's the running estimate
+once it holds :data:`GLITCH_WARMUP` differences (no check before); a channel whose sd is zero (poses given as exact)
+is not checked. At 1 kHz the cubic's bias on a smooth motion is far below any stream's noise (the largest ``|z|``
+over a run of a UR5 is the noise's alone down to joint noise of 1e-9 rad); a stream sampled coarsely for its motion
+(poses at 25 Hz) is predicted less well than its noise, and its bound scales with its own predictions::
+
+    bound = GLITCH_SD max(1, median(max_j |z_j|) / m_n)                                          (G2)
+
+the median over its last :data:`GLITCH_WARMUP` samples, ``m_n`` that median for ``n`` channels of white noise
+(``Phi^-1((1 + 2^(-1/n)) / 2)``: 0.674 for one, 1.60 for six), none checked before it holds as many.
+A sample whose largest ``|z_j|`` exceeds the bound is a glitch: taken as missing (the windows that would hold it fit
+the samples they hold, as for a gap), counted (``glitch``: a run once, a pair at most twice) and said.
+:data:`GLITCH_RUN` glitches in a row are the motion's jump, not a glitch (a tracker that re-acquired, a joint
+re-homed): the motion before them is forgotten and the stream goes on from them, counted (``jump``); an output whose
+window then holds too few samples either side of its time gives none. A glitch below the bound enters the next
+sample's prediction (the newest sample weighs 1.45 in it) and can make that one look off: a sample off the
+prediction makes the sample before it the glitch instead where that one's ``|z|`` was beyond half the bound and the
+prediction without it (from the :data:`GLITCH_SAMPLES` samples before that) takes this one within half the bound. A
+prediction that reaches across a hole in the stream (more than four of its intervals) is not made. A stream's first
+samples (before the bound is known) are not checked.
+
 **Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
 table's fit holds its rows' noise, not a sample's: a :class:`Compensator` given none estimates the poses' from
 their second differences as they come (the model's :meth:`~fmscal.plant.Model.pose_sd` fitted to each column's), and
@@ -153,7 +183,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 from scipy.signal import savgol_coeffs
-from scipy.stats import binom, chi2
+from scipy.stats import binom, chi2, norm
 
 from fmscal.plant import Calibration
 from fmscal.plant.io import colour_samples, difference_noise, reading_sign, wrench_noise
@@ -211,8 +241,22 @@ EVEN = 1.5
 #: A payload file's stream without the readings' noise: the fewest first readings it is estimated from (their
 #: differences: white), no output before; by default as many as its colour needs (module docstring, Noise).
 NOISE_SAMPLES = 500
-#: The events :attr:`Compensator.events` counts (module docstring, Stamps).
-EVENTS = ("duplicate", "gap", "restart")
+#: A motion sample further than this many of its sd from the motion its last :data:`GLITCH_SAMPLES` samples predict is
+#: a glitch (module docstring, Glitches, eq. (G1)).
+GLITCH_SD = 8.0
+#: The motion samples a sample is predicted from (a cubic through them).
+GLITCH_SAMPLES = 11
+#: The predictions (and running noise estimate's differences) a stream needs before its samples are checked, and the
+#: last predictions' ``|z|`` whose median scales the bound (G2).
+GLITCH_WARMUP = 50
+#: This many glitches in a row are the motion's jump (a tracker that re-acquired, a joint re-homed): the motion
+#: before them forgotten (module docstring, Glitches).
+GLITCH_RUN = 3
+#: The predicting samples are on the stream's grid (the prediction's coefficients the grid's) within this fraction of a
+#: step (a stamp's rounding; off it they are fitted at their own times, as the filter's windows are, :data:`GRID_SLIP`).
+GLITCH_SLIP = GRID_SLIP
+#: The events :attr:`Compensator.events` counts (module docstring, Stamps and Glitches).
+EVENTS = ("duplicate", "gap", "restart", "glitch", "jump")
 
 
 class CompensationError(FmscalError):
@@ -872,6 +916,12 @@ def _fit_coefficients(s, order, dt):
     return np.stack([pinv[..., 0, :], pinv[..., 1, :] / dt, 2 * pinv[..., 2, :] / dt ** 2], axis=-2)
 
 
+@lru_cache(maxsize=None)
+def _median_largest(n):
+    """``m_n`` of (G2): the median of the largest ``|z|`` of ``n`` independent standard normals."""
+    return float(norm.ppf((1 + 0.5 ** (1 / n)) / 2))
+
+
 def _even(times, dt):
     """Whether each window of stamps ``times`` (M, k; NaN or None rows: a gap's) lies on a grid of ``dt``: every
     interval within :data:`GRID_SLIP` of a whole number of steps."""
@@ -1248,6 +1298,15 @@ class Compensator:
         self._t, self._intervals = None, []
         self.events, self.withheld = Counter(), Counter()
         self.missing = False                            # a motion sample missing from a full window, once
+        # the glitches' check (G1): the last motion samples taken (t, channels), the glitches in a row (t, channels,
+        # |z|), a pose stream's columns' sd, and the read-out of the cubic through samples on the grid
+        self._recent_motion = deque(maxlen=GLITCH_SAMPLES + 1)
+        self._z_history = deque(maxlen=GLITCH_WARMUP)  # the last samples' |z| (G2)
+        self._last_z, self._checked = None, 1           # the newest sample's |z| (None: none made); channels checked
+        self._suspects = []
+        self._pose_sd = None
+        self._glitch_c = _fit_coefficients(-self.dt * np.arange(GLITCH_SAMPLES, 0, -1), CAUSAL_ORDER, self.dt)[0]
+        self._glitch_scale = float(np.sqrt(1 + self._glitch_c @ self._glitch_c))
         self.warnings = st.warnings + list(self._parts.warnings) + _latency_warnings(calibration, self.motion)
 
     @property
@@ -1342,8 +1401,13 @@ class Compensator:
                 while j < last and present[j] and 0.5 * self.dt <= t[j] - (self._t if j == i else t[j - 1]) \
                         < 1.5 * self.dt:
                     j += 1
+            z = None
+            if j - i >= 2:              # cut before a glitch (G1): it goes alone, as push takes it
+                clean, z = self._clean_rows(t[i:j], channels[i:j])
+                j = i + clean
             if j - i >= 2:
-                out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j]))
+                out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j],
+                                       z[:j - i]))
                 i = j
                 continue
             sample = self._one(float(t[i]), w_hat[i], channels[i], None if extras is None else extras[i])
@@ -1388,7 +1452,8 @@ class Compensator:
     def _event(self, cause, withheld, message):
         """Count an event and the readings it withheld; the first of its kind said in :attr:`warnings`."""
         if not self.events[cause]:
-            self.warnings.append(message + f" (further {cause}s counted in Compensator.events)")
+            plural = cause + ("es" if cause.endswith("ch") else "s")
+            self.warnings.append(message + f" (further {plural} counted in Compensator.events)")
         self.events[cause] += 1
         self.withheld[cause] += withheld
         self.last_event = (cause, message)
@@ -1408,10 +1473,14 @@ class Compensator:
                                      f"{withheld} outputs withheld at its edge")
 
     def _forget_noise_runs(self):
-        """The running noise estimates' last samples forgotten (a gap, a restart): no difference spans it."""
+        """The running noise estimates' last samples forgotten (a gap, a restart): no difference spans it; nor does
+        a glitch's prediction (G1), the glitches held so far counted."""
         for running in (self._running, self._pose_noise):
             if running is not None:
                 running.clear()
+        self._settle()
+        self._recent_motion.clear()
+        self._last_z = None
 
     def restart(self, why="restarted by the caller"):
         """Start the window again, as a stamp stepping back does (module docstring, Stamps): the readings in it
@@ -1437,6 +1506,8 @@ class Compensator:
         if self._first is not None:
             self._learn_noise(w_hat[None])
         channels = self._continuous(channels[None])[0] if np.isfinite(channels).all() else None
+        if channels is not None and self._glitched(t, channels):
+            channels = None                                             # taken as missing (G1)
         if channels is not None:
             if self._running is not None:
                 self._running.add(channels, t)
@@ -1481,8 +1552,9 @@ class Compensator:
                 and len(self._channels) == self._k and all(w is not None for _, w in self._readings)
                 and all(c is not None for c in self._channels))
 
-    def _block(self, t, w_hat, channels, extras):
-        """:meth:`push_many`'s rows with the windows full, every sample present and the stamps ``dt`` apart."""
+    def _block(self, t, w_hat, channels, extras, z):
+        """:meth:`push_many`'s rows with the windows full, every sample present and the stamps ``dt`` apart, none a
+        glitch; ``z`` their predictions' ``|z|`` (G1; NaN where none was made)."""
         m, k, i0 = len(t), self._k, self._k - 1 - self._lead
         channels = self._continuous(channels)
         if self._running is None:
@@ -1515,6 +1587,9 @@ class Compensator:
         counts = self._notice(t0, reading, motion, rows)
         self._channels.extend(channels)
         self._times.extend(t.tolist())
+        self._recent_motion.extend(zip(t.tolist(), channels))
+        self._z_history.extend(z[~np.isnan(z)].tolist())
+        self._last_z = None if np.isnan(z[-1]) else float(z[-1])
         if extras is not None:
             self._extras.extend(extras)
         else:
@@ -1522,6 +1597,146 @@ class Compensator:
         self._readings.extend(zip(t.tolist(), w_hat))
         self._t = float(t[-1])
         return [self._sample_of(float(t0[r]), rows, r, counts) for r in range(m)]
+
+    # --- glitches of the motion (module docstring, Glitches) ---------------------------------------------------
+    def _channel_sd(self):
+        """Each motion channel's noise sd for (G1): a pose stream's columns' from the noise model, else the running
+        estimate's once it holds :data:`GLITCH_WARMUP` differences; None before."""
+        running = self._running if self._running is not None else self._pose_noise
+        if running is not None:
+            return np.sqrt(running.variance()) if running.n >= GLITCH_WARMUP else None
+        if self._pose_sd is None:
+            self._pose_sd = np.asarray(self.model.pose_sd(self._noise), dtype=float)
+        return self._pose_sd
+
+    def _glitch_z(self, t, rows, before=None):
+        """(G1) for motion samples ``rows`` (M, n, sign-continuous) at times ``t`` (M,) following the last ones
+        taken (or ``before``, a list of ``(t, row)``), each predicted from the :data:`GLITCH_SAMPLES` before it: the
+        largest ``|z_j|`` of each, (M,), NaN where none is made (too few before it, a hole, no sd yet)."""
+        z = np.full(len(t), np.nan)
+        sd = self._channel_sd()
+        if sd is None or not (sd > 0).any():
+            return z
+        checked = sd > 0
+        self._checked = int(checked.sum())
+        before = list(self._recent_motion)[-GLITCH_SAMPLES:] if before is None else before[-GLITCH_SAMPLES:]
+        recent = len(before)
+        first = max(0, GLITCH_SAMPLES - recent)                         # the first row with enough before it
+        if first >= len(t):
+            return z
+        if len(t) == 1:                                                 # one sample (push): the same, made cheaply
+            ts, t0, tol = [ti for ti, _ in before], float(t[0]), GLITCH_SLIP * self.dt
+            if t0 - ts[-1] > 4 * (ts[-1] - ts[0]) / (GLITCH_SAMPLES - 1):
+                return z
+            if all(abs(b - a - self.dt) <= tol for a, b in zip(ts, ts[1:] + [t0])):
+                c, scale = self._glitch_c, self._glitch_scale
+            else:
+                c = _fit_coefficients(np.array(ts) - t0, CAUSAL_ORDER, self.dt)[0]
+                scale = np.sqrt(1 + c @ c)
+            r = np.abs(rows[0] - c @ np.array([row for _, row in before]))
+            z[0] = float(np.max(r[checked] / sd[checked])) / scale
+            return z
+        X = np.concatenate([np.array([r for _, r in before]).reshape(recent, rows.shape[1]), rows])
+        T = np.r_[[ti for ti, _ in before], t]
+        at = recent + np.arange(first, len(t)) - GLITCH_SAMPLES        # each checked row's first predicting sample
+        W = np.lib.stride_tricks.sliding_window_view(X, GLITCH_SAMPLES + 1, axis=0)[at]     # (u, n, G + 1)
+        s = np.lib.stride_tricks.sliding_window_view(T, GLITCH_SAMPLES + 1)[at]
+        s = s[:, :-1] - s[:, -1:]                                       # (u, G): from the predicted sample
+        steps = np.diff(np.c_[s, np.zeros(len(s))], axis=1) / self.dt
+        on_grid = np.abs(steps - 1).max(axis=1) <= GLITCH_SLIP
+        c = np.broadcast_to(self._glitch_c, s.shape).copy()
+        if not on_grid.all():
+            c[~on_grid] = _fit_coefficients(s[~on_grid], CAUSAL_ORDER, self.dt)[:, 0]
+        spacing = (s[:, -1] - s[:, 0]) / (GLITCH_SAMPLES - 1)
+        made = -s[:, -1] <= 4 * spacing                                 # no prediction across a hole
+        r = W[:, checked, -1] - np.einsum("uk,unk->un", c, W[:, checked, :-1])
+        zs = np.abs(r) / (sd[checked] * np.sqrt(1 + np.sum(c ** 2, axis=1))[:, None])
+        z[first:] = np.where(made, zs.max(axis=1), np.nan)
+        return z
+
+    def _bound(self, history):
+        """(G2): the bound on a prediction's largest ``|z_j|``, :data:`GLITCH_SD` times the stream's own scale (the
+        median of its last over white noise's, at least 1); infinite before :data:`GLITCH_WARMUP` predictions."""
+        if len(history) < GLITCH_WARMUP:
+            return np.inf
+        return GLITCH_SD * max(1.0, float(np.median(history)) / _median_largest(self._checked))
+
+    def _clean_rows(self, t, rows):
+        """How many of a block's first rows are no glitch (G1, G2), the block going up to the first; and the
+        rows' ``|z|``."""
+        if self._quaternion is not None:
+            rows = np.array(rows, dtype=float)
+            rows[:, self._quaternion] = sign_continuous(rows[:, self._quaternion], self._last_q)
+        z = self._glitch_z(t, rows)
+        history, made = list(self._z_history), ~np.isnan(z)
+        for r in np.flatnonzero(made & (z > GLITCH_SD)):          # the bound is at least GLITCH_SD (G2)
+            if z[r] > self._bound(history + z[:r][made[:r]].tolist()):
+                return int(r), z
+        return len(t), z
+
+    def _glitched(self, t, row):
+        """(G1), (G2) for one motion sample: True where it is a glitch (held with those in a row before it); the
+        :data:`GLITCH_RUN`-th in a row is the motion's jump (:meth:`_jump`), taken."""
+        z = float(self._glitch_z(np.array([t]), row[None])[0])
+        bound = GLITCH_SD if np.isnan(z) or z <= GLITCH_SD else self._bound(self._z_history)     # (G2): >= GLITCH_SD
+        if not (np.isnan(z) or z <= bound) and not self._suspects \
+                and len(self._recent_motion) > GLITCH_SAMPLES and (self._last_z or 0.0) > bound / 2:
+            # the sample before it a glitch below the bound, in this one's prediction? (module docstring, Glitches)
+            older = list(self._recent_motion)[:-1]
+            alone = float(self._glitch_z(np.array([t]), row[None], older)[0])
+            if alone <= bound / 2:
+                t1, row1 = self._recent_motion.pop()
+                for i, ti in enumerate(self._times):
+                    if ti == t1:
+                        self._channels[i] = None
+                self._z_history.pop()
+                self._suspects = [(t1, row1, self._last_z)]
+                z = alone
+        if np.isnan(z) or z <= bound:
+            if self._suspects:
+                self._settle()
+            self._recent_motion.append((t, row))
+            self._last_z = None if np.isnan(z) else z
+            if not np.isnan(z):
+                self._z_history.append(z)
+            return False
+        self._last_z = None
+        self._suspects.append((t, row, z))
+        if len(self._suspects) < GLITCH_RUN:
+            return True
+        self._jump()
+        return False
+
+    def _settle(self):
+        """The glitches held (one run) counted and said: a sample after them fits the motion before them."""
+        if not self._suspects:
+            return
+        t0, _, z = self._suspects[0]
+        n, z = len(self._suspects), max(s[2] for s in self._suspects)
+        self._suspects = []
+        self._event("glitch", 0, f"a glitch of the motion ({self.motion.source}): {n} sample{'s' if n > 1 else ''} "
+                                 f"from {t0:.9g} s up to {z:.3g} sd from the motion the samples before predict (G1), "
+                                 "taken as missing")
+
+    def _jump(self):
+        """:data:`GLITCH_RUN` glitches in a row: the motion jumped. The samples before them forgotten (None in the
+        window), theirs put back (the newest, not yet in the window, is taken by the caller); the stream goes on
+        from them."""
+        suspects, self._suspects = self._suspects, []
+        for running in (self._running, self._pose_noise):
+            if running is not None:
+                running.clear()
+        put = {ti: row for ti, row, _ in suspects[:-1]}
+        for i, ti in enumerate(self._times):
+            self._channels[i] = put.get(ti)
+        self._recent_motion.clear()
+        self._recent_motion.extend((ti, row) for ti, row, _ in suspects)
+        self._last_z = None
+        self._z_history.extend(z for _, _, z in suspects)             # the motion's own, now
+        t0, z = suspects[0][0], max(s[2] for s in suspects)
+        self._event("jump", 0, f"the motion ({self.motion.source}) jumped at {t0:.9g} s ({len(suspects)} samples in a "
+                               f"row up to {z:.3g} sd from the motion before, G1): the motion before forgotten, no "
+                               "output until the window holds samples either side of it")
 
     def _continuous(self, rows):
         """Rows of channels with their unit quaternion (where the source has one) kept sign-continuous with the

@@ -4,9 +4,10 @@ joints imu] [--seed 0]``.
 For each motion source, the node (``fmscal ros2``, a subprocess) compensates the fault harness's replay of the UR5
 carrying its tool (tests/ros2_rig.py: a sender process at 1 kHz over DDS, the truth of the contact wrench zero
 throughout) for ``--minutes``, with faults drawn at random, one every 2-8 s: drops of 1, 2, 10 or 1000 messages on
-either stream or both, pauses of both of 2 ms to 0.5 s, repeated readings, motion messages the node skips. This
-process takes every output, its covariance and flag, and the node's diagnostics, and samples the node's resident
-memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
+either stream or both, pauses of both of 2 ms to 0.5 s, repeated readings, motion messages the node skips, one or two
+motion messages off the motion (a glitch: a pose turned by a degree, its norm kept; a joint angle 0.01 rad off; an
+IMU's rate 0.5 rad/s off). This process takes every output, its covariance and flag, and the node's diagnostics, and
+samples the node's resident memory (``/proc/PID/status``, VmRSS) every 5 s. Printed per source:
 
 - whether the node was alive at the end;
 - the outputs, and those beyond 5 sd of the truth with no flag, a condition's or the contact's (the target: none),
@@ -57,7 +58,7 @@ def faults(duration, rng):
         at += float(rng.uniform(2.0, 8.0))
         if at > duration - 2.0:
             return out
-        kind = rng.choice(["drop", "drop", "pause", "duplicate", "garbage"])
+        kind = rng.choice(["drop", "drop", "pause", "duplicate", "garbage", "glitch"])
         stream = str(rng.choice(["w", "m", "both"]))
         if kind == "drop":
             out.append(dict(kind="drop", stream=stream, at=round(at, 3), count=int(rng.choice([1, 2, 10, 1000]))))
@@ -66,6 +67,8 @@ def faults(duration, rng):
                             seconds=float(rng.choice([0.002, 0.05, 0.5]))))
         elif kind == "duplicate":
             out.append(dict(kind="duplicate", stream="w", at=round(at, 3), count=int(rng.integers(1, 6))))
+        elif kind == "glitch":
+            out.append(dict(kind="glitch", stream="m", at=round(at, 3), count=int(rng.integers(1, 3))))
         else:
             out.append(dict(kind="garbage", stream="m", at=round(at, 3), count=int(rng.integers(1, 6))))
         at += 0.0 if kind != "drop" else out[-1]["count"] * 1e-3

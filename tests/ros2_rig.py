@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from scipy.spatial.transform import Rotation
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -381,7 +382,7 @@ SOURCES = {"pose": ("pose_topic", PoseStamped), "joints": ("joint_states_topic",
 #: The harness's noise model: the readings' sd (N m, N), the poses' (rad, m); the calibration's.
 HARNESS_NOISE = ((0.005,) * 3 + (0.1,) * 3, 1e-4, 1e-4)
 #: The faults :func:`schedule` scripts (module docstring of tests/test_ros2_faults.py).
-FAULTS = ("drop", "pause", "back", "duplicate", "second", "kill", "garbage")
+FAULTS = ("drop", "pause", "back", "duplicate", "second", "kill", "garbage", "glitch")
 #: The streams a fault acts on: the readings, the motion, both.
 STREAMS = ("w", "m", "both")
 #: The relay topics of the harness's motion (any source).
@@ -477,7 +478,8 @@ def schedule(n, dt, faults, start=0):
     - ``kill``: the sender killed at ``at`` (a restarted sender, :func:`send_plan` with ``start``, sends the rows
       from ``at + seconds`` on, stamped from when it is up: the stamps jump forward, as a restarted driver's);
     - ``garbage``: ``count`` motion messages the node skips (a pose's quaternion not of unit norm, a NaN joint
-      angle or IMU rate).
+      angle or IMU rate);
+    - ``glitch``: ``count`` motion messages of their form but off the motion (:func:`glitched`).
     """
     rows = np.arange(start, n)
     base = [(float(i * dt), s, int(i), float(i * dt), 0) for i in rows for s in ("m", "w")]
@@ -499,8 +501,9 @@ def schedule(n, dt, faults, start=0):
         elif kind == "second":
             out = out + [(float((at + j) * dt + 0.3 * dt), s, j, float((at + j) * dt + 0.3 * dt) - f["seconds"], 1)
                          for j in range(f["count"]) for s in streams if at + j < n]
-        elif kind == "garbage":
-            out = [(e[0], "g", *e[2:]) if e[1] == "m" and e[4] == 0 and at <= e[2] < at + f["count"] else e
+        elif kind in ("garbage", "glitch"):
+            mark = "g" if kind == "garbage" else "j"
+            out = [(e[0], mark, *e[2:]) if e[1] == "m" and e[4] == 0 and at <= e[2] < at + f["count"] else e
                    for e in out]
     return sorted(out, key=lambda e: (e[0], e[4], e[1] != "m"))
 
@@ -531,6 +534,21 @@ def garbled(msg, source):
         msg.angular_velocity.x = float("nan")
     else:
         msg.position = [float("nan")] + list(msg.position[1:])
+    return msg
+
+
+def glitched(msg, source):
+    """``msg``, a motion message of ``source``, made a glitch (a fault ``glitch``): of its form, but off the motion
+    (eq. G1 of ``analysis/_compensate.py``): a pose turned by a degree about its x axis (the quaternion's norm kept),
+    the first joint angle 0.01 rad off, an IMU's rate 0.5 rad/s off on x."""
+    if source == "pose":
+        o = msg.pose.orientation
+        turned = (Rotation.from_quat([o.x, o.y, o.z, o.w]) * Rotation.from_rotvec([np.radians(1.0), 0, 0])).as_quat()
+        o.x, o.y, o.z, o.w = (float(v) for v in turned)
+    elif source == "imu":
+        msg.angular_velocity.x += 0.5
+    else:
+        msg.position = [msg.position[0] + 0.01] + list(msg.position[1:])
     return msg
 
 
@@ -573,7 +591,7 @@ def send_plan(plan):
         begin = epoch - time.time()                           # the schedule's times are the epoch's
         sys.stdout.write(json.dumps({"epoch": epoch}) + "\n")   # said before it may be killed
         sys.stdout.flush()
-        sent = {"w": 0, "m": 0, "g": 0}
+        sent = {"w": 0, "m": 0, "g": 0, "j": 0}
         failed = 0                                             # publishes the middleware refused (a loaded machine)
         first = emissions[0][2] if emissions else None
         gc.disable()
@@ -585,7 +603,7 @@ def send_plan(plan):
             while (wait := epoch + due / speed - time.time()) > 0:
                 time.sleep(min(wait, 0.0005))
             lateness.append(-wait)
-            kind = "m" if stream == "g" else stream
+            kind = "m" if stream in ("g", "j") else stream
             if publisher == 1 and (kind, 1) not in pubs:     # a second driver starts: its publisher discovered
                 pubs[kind, 1] = make_publisher(kind)
                 while not pubs[kind, 1].get_subscription_count():
@@ -603,6 +621,8 @@ def send_plan(plan):
                 msg = build(row, stamp)
                 if stream == "g":                               # a message the node must skip
                     garbled(msg, source)
+                elif stream == "j":                             # a glitch: of its form, off the motion
+                    glitched(msg, source)
                 published = _publish(pubs["m", publisher], msg)
             if published:
                 sent[stream] += 1

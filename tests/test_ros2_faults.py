@@ -120,6 +120,28 @@ def test_the_harness_garbage_is_a_message_the_node_skips():
         assert check(garbled(build(0, stamp), source))
 
 
+def test_a_pose_glitch_keeping_its_norm_is_said_not_taken_for_a_contact(poses):
+    """Two poses turned by a degree, their quaternions' norm kept (a tracker's glitch: the node's unit-norm check
+    passes it): the compensator takes them as missing (eq. G1 of ``analysis/_compensate.py``), the node says "a
+    glitch of the motion" in a line and counts it in its diagnostics (``events``), every output stays within 5 sd,
+    none of them flagged as a contact more than the clean stream's, the ledger exact. Before, the outputs carried
+    the contact flag, the cause unnamed."""
+    from scipy.spatial.transform import Rotation
+    from fmscal.analysis.ros2 import Pipeline
+    t, w_hat, pose, settings = poses
+    glitched = pose.copy()
+    for i in (1500, 2600):
+        glitched[i, :4] = (Rotation.from_quat(pose[i, :4], scalar_first=True)
+                           * Rotation.from_rotvec([np.radians(1.0), 0, 0])).as_quat(scalar_first=True)
+    clean, bad = Pipeline(settings()), Pipeline(settings())
+    ref, out = _replay(clean, t, w_hat, pose), _replay(bad, t, w_hat, glitched)
+    s = _ledger(bad)
+    assert s.events == {"glitch": 2} and not _ledger(clean).events, s.events
+    assert any(k == "glitch" and "a glitch of the motion (poses)" in m for k, m in bad.notices), bad.notices
+    assert len(out) == len(ref) and np.abs(_z(out)).max() < BOUND
+    assert sum(o.sample.contact for o in out) <= sum(o.sample.contact for o in ref)
+
+
 def test_the_ledger_counts_each_reading_once(poses):
     """Lost readings (1, 2, 10, 1000 in a row), repeated ones, a reading stepping back: each reading published,
     withheld by its cause or waiting, once; the lost ones counted from the stamps; every output right within
@@ -420,7 +442,7 @@ class Case:
     def end(self, fault, dt):
         """The stamp (s from the epoch) a fault's effect on the streams ends at."""
         kind = fault["kind"]
-        if kind in ("drop", "duplicate", "garbage", "second"):
+        if kind in ("drop", "duplicate", "garbage", "glitch", "second"):
             return fault["at"] + fault["count"] * dt
         if kind in ("pause", "kill"):
             return fault["at"] + fault["seconds"]
@@ -436,9 +458,11 @@ def _mixed(source):
                         dict(kind="drop", stream="m", at=2.0, count=10), dict(kind="duplicate", stream="w", at=2.5,
                                                                               count=3),
                         dict(kind="pause", stream="both", at=3.0, seconds=0.05),
+                        dict(kind="glitch", stream="m", at=3.25, count=2),
                         dict(kind="garbage", stream="m", at=3.5, count=5),
                         dict(kind="drop", stream="both", at=4.0, count=1000)],
-                logs=(r"a gap of 0\.00[23] s", r"twice: the second dropped", bad, r"the window restarted"),
+                logs=(r"a gap of 0\.00[23] s", r"twice: the second dropped", r"a glitch of the motion", bad,
+                      r"the window restarted"),
                 states=(r"^restarting$",), duration=6.5)
 
 
@@ -625,7 +649,8 @@ def _resumed(run, fault, end, dt):
 @pytest.mark.jazzy
 @pytest.mark.parametrize("source", ["pose", "joints", "imu"])
 def test_short_faults(request, source, tmp_path):
-    """Lost messages (1, 2, 10 in a row; 1 s of both streams), repeated readings, a 50 ms pause, skipped motion
+    """Lost messages (1, 2, 10 in a row; 1 s of both streams), repeated readings, a 50 ms pause, two motion
+    messages of their form but off the motion (a glitch, eq. G1 of ``analysis/_compensate.py``), skipped motion
     messages, one after the other: the node up, every output right within 5 sd, each loss counted and said."""
     case = _mixed(source)
     _check(_run(request, source, case, tmp_path), case, source)
