@@ -66,26 +66,36 @@ outputs far beyond their covariance. Each sample is compared with the cubic fitt
     z_j = (x_j - c . X_j) / (sigma_j sqrt(1 + c . c))                                            (G1)
 
 ``X_j`` channel ``j`` of those samples, ``sigma_j`` its noise sd: a pose column's from the noise model
-(:meth:`fmscal.plant.Model.pose_sd`), a joint's, an IMU's or a payload file's pose stream's the running estimate
-once it holds :data:`GLITCH_WARMUP` differences (no check before); a channel whose sd is zero (poses given as exact)
-is not checked. At 1 kHz the cubic's bias on a smooth motion is far below any stream's noise (the largest ``|z|``
-over a run of a UR5 is the noise's alone down to joint noise of 1e-9 rad); a stream sampled coarsely for its motion
-(poses at 25 Hz) is predicted less well than its noise, and its bound scales with its own predictions::
+(:meth:`fmscal.plant.Model.pose_sd`), a joint's, an IMU's or a payload file's pose stream's the running estimate as of
+the samples before it, once it holds :data:`GLITCH_WARMUP` differences (no check before); a channel whose sd is zero
+(poses given as exact, a joint held exactly still) is not checked. With the noise's own sd, the cubic's bias on a
+smooth motion at 1 kHz is far below it (the largest ``|z|`` over a run of a UR5 is the noise's alone down to joint
+noise of 1e-9 rad); a stream sampled coarsely for its motion (poses at 25 Hz) is predicted less well than its noise,
+and its bound scales with its own predictions::
 
     bound = GLITCH_SD max(1, median(max_j |z_j|) / m_n)                                          (G2)
 
 the median over its last :data:`GLITCH_WARMUP` samples, ``m_n`` that median for ``n`` channels of white noise
 (``Phi^-1((1 + 2^(-1/n)) / 2)``: 0.674 for one, 1.60 for six), none checked before it holds as many.
+
 A sample whose largest ``|z_j|`` exceeds the bound is a glitch: taken as missing (the windows that would hold it fit
-the samples they hold, as for a gap), counted (``glitch``: a run once, a pair at most twice) and said.
-:data:`GLITCH_RUN` glitches in a row are the motion's jump, not a glitch (a tracker that re-acquired, a joint
-re-homed): the motion before them is forgotten and the stream goes on from them, counted (``jump``); an output whose
-window then holds too few samples either side of its time gives none. A glitch below the bound enters the next
-sample's prediction (the newest sample weighs 1.45 in it) and can make that one look off: a sample off the
-prediction makes the sample before it the glitch instead where that one's ``|z|`` was beyond half the bound and the
-prediction without it (from the :data:`GLITCH_SAMPLES` samples before that) takes this one within half the bound. A
-prediction that reaches across a hole in the stream (more than four of its intervals) is not made. A stream's first
-samples (before the bound is known) are not checked.
+the samples they hold, as for a gap), counted (``glitch``: a run once, a pair at most twice) and said. Its
+quaternion's sign is not the next sample's reference. :data:`GLITCH_RUN` glitches in a row:
+
+- whose residuals ``r_j / sigma_j`` share one offset (the last's within half the first's largest of it) are the
+  motion's jump (a tracker that re-acquired, a joint re-homed): the motion before them is forgotten and the stream
+  goes on from them, counted (``jump``); an output whose window then holds too few samples either side of its time
+  gives none, counted in :attr:`Compensator.withheld` (``jump``);
+- otherwise the motion turned off the cubic (an acceleration that stepped, a noise that grew): they are its own
+  samples, put back in the window, and the stream goes on with them; not counted.
+
+A glitch below the bound enters the next sample's prediction (the newest sample weighs 1.45 in it) and can make that
+one look off: a sample off the prediction makes the sample before it the glitch instead where that one's ``|z|`` was
+beyond half the bound and the prediction without it (from the :data:`GLITCH_SAMPLES` samples before that) takes this
+one within half the bound. No prediction is made across a hole: where the predicted sample lies more than four times
+the predicting samples' mean interval after the newest of them. A stream's first samples, and those after a gap or
+a restart (before :data:`GLITCH_SAMPLES` samples are in again), are not checked. :meth:`Compensator.push_many`
+checks each row as :meth:`Compensator.push` would, and cuts its blocks before a glitch.
 
 **Noise** of a payload file's stream. A payload file (:mod:`fmscal.analysis._setup`) holds no pose noise, and a
 table's fit holds its rows' noise, not a sample's: a :class:`Compensator` given none estimates the poses' from
@@ -1226,9 +1236,11 @@ class Compensator:
     Attributes
     ----------
     events : collections.Counter
-        The stamps' events by cause (:data:`EVENTS`): a duplicate, a gap, a restart.
+        The events by cause (:data:`EVENTS`): the stamps' (a duplicate, a gap, a restart) and the motion's (a
+        glitch, a jump: module docstring, Glitches).
     withheld : collections.Counter
-        The readings given no output, by the same causes.
+        The readings given no output, by the same causes (a jump's: those whose window held too few samples after
+        it).
     warnings : list of str
         The calibration's and the source's warnings, and the first event of each kind.
     """
@@ -1302,7 +1314,8 @@ class Compensator:
         # |z|), a pose stream's columns' sd, and the read-out of the cubic through samples on the grid
         self._recent_motion = deque(maxlen=GLITCH_SAMPLES + 1)
         self._z_history = deque(maxlen=GLITCH_WARMUP)  # the last samples' |z| (G2)
-        self._last_z, self._checked = None, 1           # the newest sample's |z| (None: none made); channels checked
+        self._last_z, self._last_e = None, None         # the newest sample's |z| (None: none made), its r_j / sigma_j
+        self._jumped = False                            # since a jump, no output yet: those withheld counted
         self._suspects = []
         self._pose_sd = None
         self._glitch_c = _fit_coefficients(-self.dt * np.arange(GLITCH_SAMPLES, 0, -1), CAUSAL_ORDER, self.dt)[0]
@@ -1496,6 +1509,7 @@ class Compensator:
         for d in (self._readings, self._channels, self._times, self._extras, self._last):
             d.clear()
         self._forget_noise_runs()
+        self._jumped = False
         self._event("restart", pending, f"{why}: the window restarted, no output until it is full again")
 
     # --- one sample, or a block -------------------------------------------------------------------------------
@@ -1505,9 +1519,11 @@ class Compensator:
             return None
         if self._first is not None:
             self._learn_noise(w_hat[None])
-        channels = self._continuous(channels[None])[0] if np.isfinite(channels).all() else None
+        channels = self._signed(channels[None])[0] if np.isfinite(channels).all() else None
         if channels is not None and self._glitched(t, channels):
             channels = None                                             # taken as missing (G1)
+        if channels is not None and self._quaternion is not None:     # the sign of a sample taken: the next's
+            self._last_q = channels[self._quaternion].copy()
         if channels is not None:
             if self._running is not None:
                 self._running.add(channels, t)
@@ -1532,6 +1548,8 @@ class Compensator:
             self.missing = self.missing or not all(present)
             fitted = self._fit(present, t0)
             if fitted is None:
+                if self._jumped:                                        # the window holds too little since a jump
+                    self.withheld["jump"] += 1
                 return None
             P, c = fitted
             sums = np.sum(c ** 2, axis=1)
@@ -1542,6 +1560,7 @@ class Compensator:
         motion = self.motion.motion(self.model, P[:, None, :], sums, self._variance(), extra,
                                     None if raw is None else raw[None], self._sample)
         rows = _step(self._parts, self._output, self._tracker, [t0], reading[None], motion, self._sample)
+        self._jumped = False
         self._remember(reading[None], rows)
         return self._sample_of(t0, rows, 0, self._notice(np.array([t0]), reading[None], motion, rows))
 
@@ -1609,36 +1628,44 @@ class Compensator:
             self._pose_sd = np.asarray(self.model.pose_sd(self._noise), dtype=float)
         return self._pose_sd
 
-    def _glitch_z(self, t, rows, before=None):
+    def _glitch_z(self, t, rows, before=None, sd=None):
         """(G1) for motion samples ``rows`` (M, n, sign-continuous) at times ``t`` (M,) following the last ones
-        taken (or ``before``, a list of ``(t, row)``), each predicted from the :data:`GLITCH_SAMPLES` before it: the
-        largest ``|z_j|`` of each, (M,), NaN where none is made (too few before it, a hole, no sd yet)."""
-        z = np.full(len(t), np.nan)
-        sd = self._channel_sd()
-        if sd is None or not (sd > 0).any():
-            return z
-        checked = sd > 0
-        self._checked = int(checked.sum())
+        taken (or ``before``, a list of ``(t, row)``), each predicted from the :data:`GLITCH_SAMPLES` before it:
+        the largest ``|z_j|`` of each, (M,), NaN where none is made (too few before it, a hole, no sd yet), and each
+        row's channels checked, (M,). ``sd``: each row's channels' sd (M, n; NaN where not known), default the
+        current (:meth:`_channel_sd`). One row keeps its residuals in sd, ``r_j / sigma_j``, as :attr:`_last_e`."""
+        m = len(t)
+        z, count = np.full(m, np.nan), np.zeros(m, dtype=int)
+        if sd is None:
+            current = self._channel_sd()
+            if current is None:
+                return z, count
+            sd = np.broadcast_to(current, rows.shape)
+        with np.errstate(invalid="ignore"):
+            checked = sd > 0
+        count = checked.sum(axis=1)
         before = list(self._recent_motion)[-GLITCH_SAMPLES:] if before is None else before[-GLITCH_SAMPLES:]
         recent = len(before)
         first = max(0, GLITCH_SAMPLES - recent)                         # the first row with enough before it
-        if first >= len(t):
-            return z
-        if len(t) == 1:                                                 # one sample (push): the same, made cheaply
+        if first >= m or not count.any():
+            return z, count
+        if m == 1:                                                      # one sample (push): the same, made cheaply
             ts, t0, tol = [ti for ti, _ in before], float(t[0]), GLITCH_SLIP * self.dt
             if t0 - ts[-1] > 4 * (ts[-1] - ts[0]) / (GLITCH_SAMPLES - 1):
-                return z
+                return z, count
             if all(abs(b - a - self.dt) <= tol for a, b in zip(ts, ts[1:] + [t0])):
                 c, scale = self._glitch_c, self._glitch_scale
             else:
                 c = _fit_coefficients(np.array(ts) - t0, CAUSAL_ORDER, self.dt)[0]
                 scale = np.sqrt(1 + c @ c)
-            r = np.abs(rows[0] - c @ np.array([row for _, row in before]))
-            z[0] = float(np.max(r[checked] / sd[checked])) / scale
-            return z
+            e = np.zeros(rows.shape[1])
+            e[checked[0]] = (rows[0] - c @ np.array([row for _, row in before]))[checked[0]] / sd[0, checked[0]]
+            self._last_e = e
+            z[0] = float(np.max(np.abs(e))) / scale
+            return z, count
         X = np.concatenate([np.array([r for _, r in before]).reshape(recent, rows.shape[1]), rows])
         T = np.r_[[ti for ti, _ in before], t]
-        at = recent + np.arange(first, len(t)) - GLITCH_SAMPLES        # each checked row's first predicting sample
+        at = recent + np.arange(first, m) - GLITCH_SAMPLES             # each checked row's first predicting sample
         W = np.lib.stride_tricks.sliding_window_view(X, GLITCH_SAMPLES + 1, axis=0)[at]     # (u, n, G + 1)
         s = np.lib.stride_tricks.sliding_window_view(T, GLITCH_SAMPLES + 1)[at]
         s = s[:, :-1] - s[:, -1:]                                       # (u, G): from the predicted sample
@@ -1648,50 +1675,76 @@ class Compensator:
         if not on_grid.all():
             c[~on_grid] = _fit_coefficients(s[~on_grid], CAUSAL_ORDER, self.dt)[:, 0]
         spacing = (s[:, -1] - s[:, 0]) / (GLITCH_SAMPLES - 1)
-        made = -s[:, -1] <= 4 * spacing                                 # no prediction across a hole
-        r = W[:, checked, -1] - np.einsum("uk,unk->un", c, W[:, checked, :-1])
-        zs = np.abs(r) / (sd[checked] * np.sqrt(1 + np.sum(c ** 2, axis=1))[:, None])
-        z[first:] = np.where(made, zs.max(axis=1), np.nan)
-        return z
+        made = (-s[:, -1] <= 4 * spacing) & (count[first:] > 0)       # no prediction across a hole
+        r = np.abs(W[:, :, -1] - np.einsum("uk,unk->un", c, W[:, :, :-1]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.where(checked[first:], r / np.where(checked[first:], sd[first:], 1.0), 0.0)
+        zs = e.max(axis=1) / np.sqrt(1 + np.sum(c ** 2, axis=1))
+        z[first:] = np.where(made, zs, np.nan)
+        return z, count
 
-    def _bound(self, history):
-        """(G2): the bound on a prediction's largest ``|z_j|``, :data:`GLITCH_SD` times the stream's own scale (the
-        median of its last over white noise's, at least 1); infinite before :data:`GLITCH_WARMUP` predictions."""
-        if len(history) < GLITCH_WARMUP:
+    def _bound(self, history, n):
+        """(G2): the bound on a prediction's largest ``|z_j|`` over ``n`` channels, :data:`GLITCH_SD` times the
+        stream's own scale (the median of its last over white noise's, at least 1); infinite before
+        :data:`GLITCH_WARMUP` predictions."""
+        if len(history) < GLITCH_WARMUP or n < 1:
             return np.inf
-        return GLITCH_SD * max(1.0, float(np.median(history)) / _median_largest(self._checked))
+        return GLITCH_SD * max(1.0, float(np.median(history)) / _median_largest(int(n)))
+
+    def _block_sd(self, t, rows):
+        """Each of a block's rows' channel sd as :meth:`push` would check it (M, n; NaN where not yet known): a
+        running estimate's as it takes the rows before it (a copy of it run through them), else the noise model's."""
+        running = self._running if self._running is not None else self._pose_noise
+        if running is None:
+            sd = self._channel_sd()
+            return np.broadcast_to(sd, rows.shape)
+        trial, out = running.copy(), np.full(rows.shape, np.nan)
+        for i, (row, ti) in enumerate(zip(rows, t)):
+            if trial.n >= GLITCH_WARMUP:
+                out[i] = np.sqrt(trial.variance())
+            trial.add(row, ti)
+        return out
+
+    def _signed(self, rows):
+        """Rows with their unit quaternion (where the source has one) sign-continuous with the last kept."""
+        if self._quaternion is None:
+            return rows
+        rows = np.array(rows, dtype=float)
+        rows[:, self._quaternion] = sign_continuous(rows[:, self._quaternion], self._last_q)
+        return rows
 
     def _clean_rows(self, t, rows):
         """How many of a block's first rows are no glitch (G1, G2), the block going up to the first; and the
-        rows' ``|z|``."""
-        if self._quaternion is not None:
-            rows = np.array(rows, dtype=float)
-            rows[:, self._quaternion] = sign_continuous(rows[:, self._quaternion], self._last_q)
-        z = self._glitch_z(t, rows)
+        rows' ``|z|``. Each row is checked as :meth:`push` checks it (the noise estimate as of the rows before it)."""
+        rows = self._signed(rows)
+        z, count = self._glitch_z(t, rows, sd=self._block_sd(t, rows))
         history, made = list(self._z_history), ~np.isnan(z)
         for r in np.flatnonzero(made & (z > GLITCH_SD)):          # the bound is at least GLITCH_SD (G2)
-            if z[r] > self._bound(history + z[:r][made[:r]].tolist()):
+            if z[r] > self._bound((history + z[:r][made[:r]].tolist())[-GLITCH_WARMUP:], count[r]):
                 return int(r), z
         return len(t), z
 
     def _glitched(self, t, row):
         """(G1), (G2) for one motion sample: True where it is a glitch (held with those in a row before it); the
-        :data:`GLITCH_RUN`-th in a row is the motion's jump (:meth:`_jump`), taken."""
-        z = float(self._glitch_z(np.array([t]), row[None])[0])
-        bound = GLITCH_SD if np.isnan(z) or z <= GLITCH_SD else self._bound(self._z_history)     # (G2): >= GLITCH_SD
+        :data:`GLITCH_RUN`-th in a row is the motion's jump (:meth:`_jump`) or its turn, taken."""
+        z, n = (float(v[0]) for v in self._glitch_z(np.array([t]), row[None]))
+        bound = GLITCH_SD if np.isnan(z) or z <= GLITCH_SD else self._bound(self._z_history, n)  # (G2): >= GLITCH_SD
         if not (np.isnan(z) or z <= bound) and not self._suspects \
                 and len(self._recent_motion) > GLITCH_SAMPLES and (self._last_z or 0.0) > bound / 2:
             # the sample before it a glitch below the bound, in this one's prediction? (module docstring, Glitches)
+            e = self._last_e
             older = list(self._recent_motion)[:-1]
-            alone = float(self._glitch_z(np.array([t]), row[None], older)[0])
+            alone = float(self._glitch_z(np.array([t]), row[None], older)[0][0])
             if alone <= bound / 2:
                 t1, row1 = self._recent_motion.pop()
                 for i, ti in enumerate(self._times):
                     if ti == t1:
                         self._channels[i] = None
                 self._z_history.pop()
-                self._suspects = [(t1, row1, self._last_z)]
+                self._suspects = [(t1, row1, self._last_z, None)]
                 z = alone
+            else:
+                self._last_e = e
         if np.isnan(z) or z <= bound:
             if self._suspects:
                 self._settle()
@@ -1701,18 +1754,21 @@ class Compensator:
                 self._z_history.append(z)
             return False
         self._last_z = None
-        self._suspects.append((t, row, z))
+        self._suspects.append((t, row, z, self._last_e))
         if len(self._suspects) < GLITCH_RUN:
             return True
-        self._jump()
+        first, last = self._suspects[0][3], self._suspects[-1][3]
+        if first is not None and np.max(np.abs(last - first)) <= 0.5 * np.max(np.abs(first)):
+            self._jump()                                # the run shares one offset: a step of the motion
+        else:
+            self._turned()                              # the motion turned off the cubic: its samples, late
         return False
 
     def _settle(self):
         """The glitches held (one run) counted and said: a sample after them fits the motion before them."""
         if not self._suspects:
             return
-        t0, _, z = self._suspects[0]
-        n, z = len(self._suspects), max(s[2] for s in self._suspects)
+        t0, n, z = self._suspects[0][0], len(self._suspects), max(s[2] for s in self._suspects)
         self._suspects = []
         self._event("glitch", 0, f"a glitch of the motion ({self.motion.source}): {n} sample{'s' if n > 1 else ''} "
                                  f"from {t0:.9g} s up to {z:.3g} sd from the motion the samples before predict (G1), "
@@ -1726,17 +1782,32 @@ class Compensator:
         for running in (self._running, self._pose_noise):
             if running is not None:
                 running.clear()
-        put = {ti: row for ti, row, _ in suspects[:-1]}
+        put = {ti: row for ti, row, *_ in suspects[:-1]}
         for i, ti in enumerate(self._times):
             self._channels[i] = put.get(ti)
         self._recent_motion.clear()
-        self._recent_motion.extend((ti, row) for ti, row, _ in suspects)
+        self._recent_motion.extend((ti, row) for ti, row, *_ in suspects)
         self._last_z = None
-        self._z_history.extend(z for _, _, z in suspects)             # the motion's own, now
+        self._z_history.extend(s[2] for s in suspects)                # the motion's own, now
+        self._jumped = True
         t0, z = suspects[0][0], max(s[2] for s in suspects)
         self._event("jump", 0, f"the motion ({self.motion.source}) jumped at {t0:.9g} s ({len(suspects)} samples in a "
                                f"row up to {z:.3g} sd from the motion before, G1): the motion before forgotten, no "
                                "output until the window holds samples either side of it")
+
+    def _turned(self):
+        """:data:`GLITCH_RUN` samples in a row off the prediction, each further off than the one before (not one
+        offset: an acceleration that stepped, a noise that grew): the motion's own, taken late. Put back in the
+        window (the newest, not yet in it, is taken by the caller), and the stream goes on with them; not counted."""
+        suspects, self._suspects = self._suspects, []
+        put = {ti: row for ti, row, *_ in suspects[:-1]}
+        for i, ti in enumerate(self._times):
+            if ti in put:
+                self._channels[i] = put[ti]
+        for ti, row, z, _ in suspects:
+            self._recent_motion.append((ti, row))
+            self._z_history.append(z)
+        self._last_z = None
 
     def _continuous(self, rows):
         """Rows of channels with their unit quaternion (where the source has one) kept sign-continuous with the
@@ -2003,6 +2074,13 @@ class _RunningNoise:
                 d = (self.recent[2] - self.recent[1]) / h2 - (self.recent[1] - self.recent[0]) / h1
                 self.sum += np.square(d) / (1 / h1 ** 2 + 1 / h2 ** 2 + (1 / h1 + 1 / h2) ** 2)
                 self.n += 1
+
+    def copy(self):
+        """An estimate of its own in the same state."""
+        other = _RunningNoise(len(self.sum))
+        other.recent, other.times = deque(self.recent, maxlen=3), deque(self.times, maxlen=3)
+        other.sum, other.n = self.sum.copy(), self.n
+        return other
 
     def clear(self):
         """Forget the last samples (the next difference starts after them)."""
