@@ -1488,12 +1488,16 @@ class Compensator:
     def _forget_noise_runs(self):
         """The running noise estimates' last samples forgotten (a gap, a restart): no difference spans it; nor does
         a glitch's prediction (G1), the glitches held so far counted."""
-        for running in (self._running, self._pose_noise):
-            if running is not None:
-                running.clear()
+        self._clear_running()
         self._settle()
         self._recent_motion.clear()
         self._last_z = None
+
+    def _clear_running(self):
+        """The running noise estimates' last samples forgotten: the next difference starts after them."""
+        for running in (self._running, self._pose_noise):
+            if running is not None:
+                running.clear()
 
     def restart(self, why="restarted by the caller"):
         """Start the window again, as a stamp stepping back does (module docstring, Stamps): the readings in it
@@ -1737,9 +1741,7 @@ class Compensator:
             alone = float(self._glitch_z(np.array([t]), row[None], older)[0][0])
             if alone <= bound / 2:
                 t1, row1 = self._recent_motion.pop()
-                for i, ti in enumerate(self._times):
-                    if ti == t1:
-                        self._channels[i] = None
+                self._put_back({t1: None})
                 self._z_history.pop()
                 self._suspects = [(t1, row1, self._last_z, None)]
                 z = alone
@@ -1779,12 +1781,8 @@ class Compensator:
         window), theirs put back (the newest, not yet in the window, is taken by the caller); the stream goes on
         from them."""
         suspects, self._suspects = self._suspects, []
-        for running in (self._running, self._pose_noise):
-            if running is not None:
-                running.clear()
-        put = {ti: row for ti, row, *_ in suspects[:-1]}
-        for i, ti in enumerate(self._times):
-            self._channels[i] = put.get(ti)
+        self._clear_running()
+        self._put_back({ti: row for ti, row, *_ in suspects[:-1]}, forget=True)
         self._recent_motion.clear()
         self._recent_motion.extend((ti, row) for ti, row, *_ in suspects)
         self._last_z = None
@@ -1800,14 +1798,20 @@ class Compensator:
         offset: an acceleration that stepped, a noise that grew): the motion's own, taken late. Put back in the
         window (the newest, not yet in it, is taken by the caller), and the stream goes on with them; not counted."""
         suspects, self._suspects = self._suspects, []
-        put = {ti: row for ti, row, *_ in suspects[:-1]}
-        for i, ti in enumerate(self._times):
-            if ti in put:
-                self._channels[i] = put[ti]
+        self._put_back({ti: row for ti, row, *_ in suspects[:-1]})
         for ti, row, z, _ in suspects:
             self._recent_motion.append((ti, row))
             self._z_history.append(z)
         self._last_z = None
+
+    def _put_back(self, rows, forget=False):
+        """Set the window's motion samples at the stamps of ``rows`` (``{t: channels}``; None: taken out); with
+        ``forget``, every other one of the window's samples forgotten."""
+        for i, ti in enumerate(self._times):
+            if ti in rows:
+                self._channels[i] = rows[ti]
+            elif forget:
+                self._channels[i] = None
 
     def _continuous(self, rows):
         """Rows of channels with their unit quaternion (where the source has one) kept sign-continuous with the
