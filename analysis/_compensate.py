@@ -1816,11 +1816,9 @@ class Compensator:
     def _continuous(self, rows):
         """Rows of channels with their unit quaternion (where the source has one) kept sign-continuous with the
         stream's last (q and -q: one attitude)."""
-        if self._quaternion is None:
-            return rows
-        rows = np.array(rows, dtype=float)
-        rows[:, self._quaternion] = sign_continuous(rows[:, self._quaternion], self._last_q)
-        self._last_q = rows[-1, self._quaternion].copy()
+        rows = self._signed(rows)
+        if self._quaternion is not None:
+            self._last_q = rows[-1, self._quaternion].copy()
         return rows
 
     def _variance(self):
