@@ -242,6 +242,11 @@ DT_INTERVALS = 8
 #: Stamps). Read as evenly spaced, samples off the grid bias the filter's derivatives beyond the covariance. (Above
 #: a stamp's rounding: a float of epoch seconds holds 0.24 us, 1e-3 of a step at 5 kHz.)
 GRID_SLIP = 0.01
+#: The fewest rows :meth:`Compensator.push_many` fits as one block (fewer go one at a time: the block's fixed cost
+#: is higher, ``python benchmarks/compensation.py``).
+BLOCK_MIN = 3
+#: The most rows (G1) checks one at a time (more: vectorised over sliding windows, whose fixed cost is higher).
+GLITCH_LOOP = 16
 #: A payload file's stream of poses: their noise re-estimated every this many poses (:class:`Compensator`).
 POSE_NOISE_EVERY = 100
 #: A motion stream's running noise estimate: three samples make a second difference only where the longer of
@@ -1415,10 +1420,10 @@ class Compensator:
                         < 1.5 * self.dt:
                     j += 1
             z = None
-            if j - i >= 2:              # cut before a glitch (G1): it goes alone, as push takes it
+            if j - i >= BLOCK_MIN:      # cut before a glitch (G1): it goes alone, as push takes it
                 clean, z = self._clean_rows(t[i:j], channels[i:j])
                 j = i + clean
-            if j - i >= 2:
+            if j - i >= BLOCK_MIN:
                 out.extend(self._block(t[i:j], w_hat[i:j], channels[i:j], None if extras is None else extras[i:j],
                                        z[:j - i]))
                 i = j
@@ -1546,7 +1551,7 @@ class Compensator:
         if not self._units_checked and any(present):
             self.motion.check_units(np.array([c for c in self._channels if c is not None]))
             self._units_checked = True
-        if all(present) and _even(np.array(self._times)[None], self.dt)[0]:
+        if all(present) and self._window_even():
             P, sums = self._coefficients @ np.array(self._channels), self._c_sums
         else:
             self.missing = self.missing or not all(present)
@@ -1567,6 +1572,20 @@ class Compensator:
         self._jumped = False
         self._remember(reading[None], rows)
         return self._sample_of(t0, rows, 0, self._notice(np.array([t0]), reading[None], motion, rows))
+
+    def _window_even(self):
+        """:func:`_even` for the window's stamps, in plain arithmetic (one sample's path)."""
+        times, dt = self._times, self.dt
+        if None in times:
+            return False
+        previous = None
+        for ti in times:
+            if previous is not None:
+                step = (ti - previous) / dt
+                if abs(step - round(step)) > GRID_SLIP:
+                    return False
+            previous = ti
+        return True
 
     def _blockable(self):
         """Both windows full of samples, none missing: the next rows may go as one block."""
@@ -1639,6 +1658,15 @@ class Compensator:
         row's channels checked, (M,). ``sd``: each row's channels' sd (M, n; NaN where not known), default the
         current (:meth:`_channel_sd`). One row keeps its residuals in sd, ``r_j / sigma_j``, as :attr:`_last_e`."""
         m = len(t)
+        if m <= GLITCH_LOOP:                                            # a few rows: one at a time, cheaper
+            z, count = np.full(m, np.nan), np.zeros(m, dtype=int)
+            before, kept = list(self._recent_motion if before is None else before), self._last_e
+            for i in range(m):
+                z[i], count[i] = self._glitch_one(float(t[i]), rows[i], before, None if sd is None else sd[i])
+                before.append((float(t[i]), rows[i]))
+            if m > 1:
+                self._last_e = kept                                     # one row's residuals only
+            return z, count
         z, count = np.full(m, np.nan), np.zeros(m, dtype=int)
         if sd is None:
             current = self._channel_sd()
@@ -1652,20 +1680,6 @@ class Compensator:
         recent = len(before)
         first = max(0, GLITCH_SAMPLES - recent)                         # the first row with enough before it
         if first >= m or not count.any():
-            return z, count
-        if m == 1:                                                      # one sample (push): the same, made cheaply
-            ts, t0, tol = [ti for ti, _ in before], float(t[0]), GLITCH_SLIP * self.dt
-            if t0 - ts[-1] > 4 * (ts[-1] - ts[0]) / (GLITCH_SAMPLES - 1):
-                return z, count
-            if all(abs(b - a - self.dt) <= tol for a, b in zip(ts, ts[1:] + [t0])):
-                c, scale = self._glitch_c, self._glitch_scale
-            else:
-                c = _fit_coefficients(np.array(ts) - t0, CAUSAL_ORDER, self.dt)[0]
-                scale = np.sqrt(1 + c @ c)
-            e = np.zeros(rows.shape[1])
-            e[checked[0]] = (rows[0] - c @ np.array([row for _, row in before]))[checked[0]] / sd[0, checked[0]]
-            self._last_e = e
-            z[0] = float(np.max(np.abs(e))) / scale
             return z, count
         X = np.concatenate([np.array([r for _, r in before]).reshape(recent, rows.shape[1]), rows])
         T = np.r_[[ti for ti, _ in before], t]
@@ -1686,6 +1700,31 @@ class Compensator:
         zs = e.max(axis=1) / np.sqrt(1 + np.sum(c ** 2, axis=1))
         z[first:] = np.where(made, zs, np.nan)
         return z, count
+
+    def _glitch_one(self, t, row, before=None, sd=None):
+        """:meth:`_glitch_z` for one sample ``row`` (n,) at ``t``, in plain arithmetic: ``(|z|, channels checked)``,
+        NaN where no prediction is made; its residuals in sd kept as :attr:`_last_e`. ``sd`` default the current."""
+        sd = self._channel_sd() if sd is None else sd
+        if sd is None:
+            return np.nan, 0
+        checked = sd > 0                                                # NaN: not known, not checked
+        count = int(np.count_nonzero(checked))
+        before = self._recent_motion if before is None else before
+        if len(before) < GLITCH_SAMPLES or not count:
+            return np.nan, count
+        before = list(before)[-GLITCH_SAMPLES:]
+        ts = [ti for ti, _ in before]
+        if t - ts[-1] > 4 * (ts[-1] - ts[0]) / (GLITCH_SAMPLES - 1):   # no prediction across a hole
+            return np.nan, count
+        tol, dt = GLITCH_SLIP * self.dt, self.dt
+        if all(abs(b - a - dt) <= tol for a, b in zip(ts, ts[1:] + [t])):
+            c, scale = self._glitch_c, self._glitch_scale
+        else:
+            c = _fit_coefficients(np.array(ts) - t, CAUSAL_ORDER, self.dt)[0]
+            scale = np.sqrt(1 + c @ c)
+        e = np.where(checked, row - c @ np.array([x for _, x in before]), 0.0) / np.where(checked, sd, 1.0)
+        self._last_e = e
+        return float(np.abs(e).max()) / scale, count
 
     def _bound(self, history, n):
         """(G2): the bound on a prediction's largest ``|z_j|`` over ``n`` channels, :data:`GLITCH_SD` times the
@@ -1731,14 +1770,14 @@ class Compensator:
     def _glitched(self, t, row):
         """(G1), (G2) for one motion sample: True where it is a glitch (held with those in a row before it); the
         :data:`GLITCH_RUN`-th in a row is the motion's jump (:meth:`_jump`) or its turn, taken."""
-        z, n = (float(v[0]) for v in self._glitch_z(np.array([t]), row[None]))
+        z, n = self._glitch_one(t, row)
         bound = GLITCH_SD if np.isnan(z) or z <= GLITCH_SD else self._bound(self._z_history, n)  # (G2): >= GLITCH_SD
         if not (np.isnan(z) or z <= bound) and not self._suspects \
                 and len(self._recent_motion) > GLITCH_SAMPLES and (self._last_z or 0.0) > bound / 2:
             # the sample before it a glitch below the bound, in this one's prediction? (module docstring, Glitches)
             e = self._last_e
             older = list(self._recent_motion)[:-1]
-            alone = float(self._glitch_z(np.array([t]), row[None], older)[0][0])
+            alone = self._glitch_one(t, row, older)[0]
             if alone <= bound / 2:
                 t1, row1 = self._recent_motion.pop()
                 self._put_back({t1: None})

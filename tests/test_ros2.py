@@ -350,6 +350,151 @@ def test_the_inputs_events_are_in_no_executors_wait_set(request, cal_file):
         r.rclpy.try_shutdown(context=context)
 
 
+def _random_input(kind, rng, frame_id):
+    """A message of ``kind`` (rclpy's), random numbers, ``frame_id`` (its length moves the fields' alignment)."""
+    from geometry_msgs.msg import WrenchStamped
+    msg = {"wrench": WrenchStamped, "pose": PoseStamped, "imu": Imu, "joints": JointState}[kind]()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(rng.integers(-2 ** 31, 2 ** 31)), int(rng.integers(0, 10 ** 9))
+    msg.header.frame_id = frame_id
+    v = rng.normal(size=40).tolist()
+    if kind == "wrench":
+        f, t = msg.wrench.force, msg.wrench.torque
+        f.x, f.y, f.z, t.x, t.y, t.z = v[:6]
+    elif kind == "pose":
+        p, o = msg.pose.position, msg.pose.orientation
+        p.x, p.y, p.z, o.x, o.y, o.z, o.w = v[:7]
+    elif kind == "imu":
+        o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
+        o.x, o.y, o.z, o.w = v[:4]
+        w.x, w.y, w.z, a.x, a.y, a.z = v[4:10]
+        msg.orientation_covariance = v[10:19]
+        msg.angular_velocity_covariance = v[19:28]
+        msg.linear_acceleration_covariance = v[28:37]
+    else:
+        n = int(rng.integers(0, 8))
+        msg.name = ["j" * int(rng.integers(1, 9)) + str(i) for i in range(n)]
+        msg.position = v[:n] if rng.random() < 0.8 else []
+        msg.velocity = v[10:10 + n] if rng.random() < 0.6 else []
+        msg.effort = v[20:20 + n] if rng.random() < 0.3 else []
+    return msg
+
+
+@pytest.mark.parametrize("kind", ["wrench", "pose", "imu", "joints"])
+def test_the_inputs_bytes_are_decoded_as_rclpy_decodes_them(kind):
+    """The node takes its inputs as bytes (analysis/ros2/_cdr.py): each decoded as rclpy's own
+    deserialization gives its values, over frames of every length mod 8 (the fields' alignment) and random
+    numbers; bytes cut short or a string without its terminator are a ValueError, never a wrong value."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from fmscal.analysis.ros2._cdr import decoder, plain
+    rng = np.random.default_rng(7)
+    for i in range(48):
+        msg = _random_input(kind, rng, "f" * (i % 17))
+        data = bytes(serialize_message(msg))
+        assert data[:2] == b"\x00\x01"
+        stamp, frame_id, values = decoder(kind, type(msg), deserialize_message)(data)
+        want = plain(kind, deserialize_message(data, type(msg)))
+        assert (stamp, frame_id) == want[:2] == ((msg.header.stamp.sec, msg.header.stamp.nanosec), msg.header.frame_id)
+        if kind == "joints":
+            assert values[0] == want[2][0] == list(msg.name)
+            for got, expected in zip(values[1:], want[2][1:]):
+                np.testing.assert_array_equal(got, expected)
+        else:
+            assert tuple(values) == tuple(want[2])
+    # another encapsulation (here XCDR2's, 00 07) goes to the deserializer given (rclpy's, told it is plain CDR)
+    given = []
+    other = decoder(kind, type(msg), lambda b, t: given.append(b) or deserialize_message(b"\x00\x01" + b[2:], t))
+    assert str(other(b"\x00\x07" + data[2:])) == str(plain(kind, msg)) and len(given) == 1
+    decode = decoder(kind, type(msg), deserialize_message)
+    with pytest.raises(ValueError):
+        decode(data[:14])
+    broken = bytearray(bytes(serialize_message(_random_input(kind, rng, "abc"))))
+    broken[16 + 3] = ord("x")                                # the frame's terminating NUL
+    with pytest.raises(ValueError):
+        decode(bytes(broken))
+
+
+def test_the_outputs_bytes_are_the_messages_rclpy_makes(request, cal_file):
+    """The node publishes its outputs as bytes (analysis/ros2/_cdr.py's templates, their stamp and numbers
+    written in place): read back by rclpy, each is the message the node means, for a template reused with
+    another stamp and numbers, for frames and flags of several lengths, and beyond the templates kept."""
+    from rclpy.serialization import deserialize_message
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from geometry_msgs.msg import WrenchStamped
+    from std_msgs.msg import Float64MultiArray
+    from fmscal.analysis.ros2._node import CompensatorNode
+    from fmscal.analysis.ros2._rclpy import ros
+    r = ros()
+    context = r.Context()
+    args = ["--ros-args", "-p", f"calibration:={cal_file}", "-p", "pose_topic:=/ft_sensor/pose"]
+    r.rclpy.init(args=["fmscal", *args], context=context, domain_id=domain_id(request.node.name))
+    node = None
+    rng = np.random.default_rng(3)
+    try:
+        node = CompensatorNode(r, context, args)
+        encode = node._encode
+        encode.flags.kept = 3
+        for i in range(12):
+            stamp = (int(rng.integers(0, 2 ** 31)), int(rng.integers(0, 10 ** 9)))
+            frame, numbers = "tool" * (i % 4), rng.normal(size=6)
+            msg = deserialize_message(encode.contact(stamp, numbers, frame), WrenchStamped)
+            f, t = msg.wrench.force, msg.wrench.torque
+            assert ((msg.header.stamp.sec, msg.header.stamp.nanosec), msg.header.frame_id) == (stamp, frame)
+            assert [f.x, f.y, f.z, t.x, t.y, t.z] == numbers.tolist()
+            cov = rng.normal(size=36)
+            array_ = deserialize_message(encode.cov(None, cov), Float64MultiArray)
+            assert list(array_.data) == cov.tolist()
+            assert [(d.label, d.size, d.stride) for d in array_.layout.dim] == \
+                [("fx fy fz tx ty tz", 6, 36), ("column", 6, 6)]
+            level = [DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR][i % 3]
+            message, contact = "stale " * (i % 5), ["true", "false"][i % 2]
+            flags = deserialize_message(encode.flags(stamp, (), frame, level, message, contact), DiagnosticArray)
+            status = flags.status[0]
+            assert ((flags.header.stamp.sec, flags.header.stamp.nanosec), flags.header.frame_id) == (stamp, frame)
+            assert (status.level, status.message, status.hardware_id) == (level, message, "/ft_sensor/wrench")
+            assert status.name == "fmscal_compensator: contact wrench"
+            assert [(kv.key, kv.value) for kv in status.values] == [("contact", contact)]
+        assert len(encode.flags._layouts) == 3 and all(v is not None for v in encode.contact._layouts.values())
+    finally:
+        if node is not None:
+            node.destroy()
+        r.rclpy.try_shutdown(context=context)
+
+
+def test_an_input_whose_bytes_do_not_decode_is_counted_and_taken_by_rclpy_after(request, cal_file):
+    """A wrench message whose bytes do not decode (here cut short, published as bytes) is skipped, said (its length
+    and first bytes) and counted as an invalid reading; the wrench's messages are then taken through rclpy's own
+    conversion, and the next is read as it was sent. Real DDS in this process: the node's own take."""
+    from rclpy.serialization import serialize_message
+    from geometry_msgs.msg import WrenchStamped
+    from fmscal.analysis.ros2._node import CompensatorNode
+    from fmscal.analysis.ros2._rclpy import ros
+    r = ros()
+    context = r.Context()
+    args = ["--ros-args", "-p", f"calibration:={cal_file}", "-p", "pose_topic:=/ft_sensor/pose", "-p",
+            "qos:=reliable"]
+    r.rclpy.init(args=["fmscal", *args], context=context, domain_id=domain_id(request.node.name))
+    node = peer = None
+    try:
+        node = CompensatorNode(r, context, args)
+        peer = r.Node("bad_sender", context=context)
+        pub = peer.create_publisher(WrenchStamped, "/ft_sensor/wrench", r.QoSProfile(depth=10))
+        wait_until(lambda: pub.get_subscription_count() > 0, 10.0)
+        good = WrenchStamped()
+        good.header.stamp.sec, good.header.frame_id = 5, "ft"
+        good.wrench.force.x, good.wrench.torque.z = 1.5, -0.25
+        pub.publish(bytes(serialize_message(good))[:40])
+        pub.publish(good)
+        taken = []
+        wait_until(lambda: taken.extend(node._taken(node._wrench_sub, 1)) or len(taken) >= 1, 10.0)
+        assert [values for _, _, values in taken] == [((5, 0), "ft", (1.5, 0.0, 0.0, 0.0, 0.0, -0.25))]
+        assert node.pipeline.withheld["invalid"] == 1 and node._raw == [True, False]
+    finally:
+        for n in (peer, node):
+            if n is not None:
+                n.destroy() if n is node else n.destroy_node()
+        r.rclpy.try_shutdown(context=context)
+
+
 def test_the_guide_lists_every_parameter_with_its_type_and_default():
     """docs/guide/robot.md's table: the node's parameters, in its order, each with its type and default."""
     text = (ROOT / "docs" / "guide" / "robot.md").read_text()

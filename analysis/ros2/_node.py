@@ -25,13 +25,13 @@ stream), the poll thread goes on: an exception while compensating is logged with
 pipeline's window restarted (the readings it held counted as ``error``), and the node keeps running.
 """
 
-import array
 import contextlib
 import difflib
 import faulthandler
 import fnmatch
 import gc
 import heapq
+import math
 import signal
 import socket
 import threading
@@ -39,6 +39,7 @@ import time
 import traceback
 from collections import deque
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -47,6 +48,7 @@ from fmscal.plant.numerics import FmscalError
 from .._export import ros2_control_parameters
 from .._motion import ImuMotion, JointMotion, PoseMotion
 from ._parameters import NODE_NAME, PARAMETERS, Ros2Error, settings
+from ._cdr import Template, decoder, plain
 from ._rclpy import ros
 from ._pipeline import FLAGS, LEVELS, Pipeline, motion_source, sensor_pose, state_of
 from ._push import push_parameters, pushed_line
@@ -77,10 +79,12 @@ RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 _TYPES = {"string": "STRING", "double": "DOUBLE", "integer": "INTEGER", "bool": "BOOL", "double_array": "DOUBLE_ARRAY"}
 # a wrench's components by fmscal's names (the planar reading's moment M is about z)
-_WRENCH = {"tx": ("torque", "x"), "ty": ("torque", "y"), "tz": ("torque", "z"), "M": ("torque", "z"),
-           "fx": ("force", "x"), "fy": ("force", "y"), "fz": ("force", "z")}
 # ROS's order of a wrench's covariance: the force first (fx fy fz tx ty tz; planar fx fy tz)
 _ROS_ORDER = ("fx", "fy", "fz", "tx", "ty", "tz", "M")
+# a pose's values as the node makes them from a PoseStamped, which the model's pose names pick from
+_POSE_ORDER = ("qw", "qx", "qy", "qz", "x", "y", "z", "theta")
+# a wrench component's place among a WrenchStamped's six numbers (force x y z, torque x y z)
+_ROS_PLACE = {"fx": 0, "fy": 1, "fz": 2, "tx": 3, "ty": 4, "tz": 5, "M": 5}
 
 
 def _flat(section, prefix=""):
@@ -171,20 +175,13 @@ class CompensatorNode:
         model = self.pipeline.model
         self.names = tuple(model.wrench_names)
         self.pose_names = tuple(model.pose_names)
+        self._pose_index = np.array([_POSE_ORDER.index(n) for n in self.pose_names])
         order = [self.names.index(n) for n in _ROS_ORDER if n in self.names]
         self._cov_index = np.ix_(order, order)
-        self._fields = [_WRENCH[n] for n in self.names]
-        self._contact_msg = r.WrenchStamped()
-        self._cov_msg = r.Array()
+        # a reading's values (a wrench's six, force then torque) in the model's order, and back
+        self._from_ros = np.array([_ROS_PLACE[n] for n in self.names])
         n = len(order)
-        self._cov_msg.layout.dim = [r.Dimension(label=" ".join(self.names[i] for i in order), size=n, stride=n * n),
-                                    r.Dimension(label="column", size=n, stride=n)]
-        self._flag_msg = r.DiagnosticArray()
-        self._flag_status = r.DiagnosticStatus(name=f"{self.node.get_name()}: contact wrench",
-                                               hardware_id=self.settings.wrench_topic)
-        self._flag_contact = r.KeyValue(key="contact", value="false")
-        self._flag_status.values = [self._flag_contact]
-        self._flag_msg.status = [self._flag_status]
+        self._encode = self._templates(r, n, " ".join(self.names[i] for i in order))
         self._epoch = None
         self._latencies = deque(maxlen=LATENCY_KEPT)
         self._held_for = None                         # (s from the newest output's reading's reception, when)
@@ -211,9 +208,12 @@ class CompensatorNode:
         helper = dict(namespace=self.node.get_namespace(), context=context, start_parameter_services=False,
                       use_global_arguments=False)
         self.inputs = r.Node(f"{self.node.get_name()}_inputs", **helper)
-        message, self._motion_message = {PoseMotion: (r.PoseStamped, self._pose),
-                                         JointMotion: (r.JointState, self._joints),
-                                         ImuMotion: (r.Imu, self._imu)}[type(motion)]
+        message, self._motion_kind, self._motion_values = {
+            PoseMotion: (r.PoseStamped, "pose", self._pose), JointMotion: (r.JointState, "joints", self._joints),
+            ImuMotion: (r.Imu, "imu", self._imu)}[type(motion)]
+        self._decode = (decoder(self._motion_kind, message, r.deserialize),
+                        decoder("wrench", r.WrenchStamped, r.deserialize))
+        self._kinds, self._raw = (self._motion_kind, "wrench"), [True, True]    # motion, wrench: taken as bytes?
         self._events = []                              # the inputs' QoS event handlers (take_events)
         self._wrench_sub = self._subscribe(r.WrenchStamped, s.wrench_topic, self._on_wrench, qos_in)
         self._motion_sub = self._subscribe(message, s.topic, self._on_motion, qos_in)
@@ -368,29 +368,44 @@ class CompensatorNode:
 
     # --- inputs ----------------------------------------------------------------------------------------------
     def _time(self, stamp):
-        """A stamp in s from the first stamp's second (a float keeps its nanoseconds)."""
+        """A stamp ``(sec, nanosec)`` in s from the first stamp's second (a float keeps its nanoseconds)."""
         if self._epoch is None:
-            self._epoch = stamp.sec
-            self.pipeline.time_origin = float(stamp.sec)
-        return (stamp.sec - self._epoch) + stamp.nanosec * 1e-9
+            self._epoch = stamp[0]
+            self.pipeline.time_origin = float(stamp[0])
+        return (stamp[0] - self._epoch) + stamp[1] * 1e-9
 
-    @staticmethod
-    def _queued(sub):
-        """The messages waiting on a subscription, taken now (the executor hands one per callback: the rest of a
-        backlog is taken in the same callback and compensated as one block)."""
-        return [m for _, _, m in CompensatorNode._taken(sub, 0)]
+    def _queued(self, sub, kind):
+        """The plain values of the messages waiting on a subscription, taken now (the executor hands one per
+        callback: the rest of a backlog is taken in the same callback and compensated as one block)."""
+        return [m for _, _, m in self._taken(sub, kind)]
 
-    @staticmethod
-    def _taken(sub, kind):
-        """The messages waiting on a subscription, taken now: ``(received, kind, message)``, ``received`` the
-        middleware's reception time (ns; its order where it has none)."""
+    def _taken(self, sub, kind):
+        """The messages waiting on a subscription, taken now as bytes and decoded (:mod:`._cdr`): ``(received,
+        kind, values)``, ``kind`` 1 for the wrench, 0 for the motion, ``received`` the middleware's reception time
+        (ns; its order where it has none). A message whose bytes cannot be decoded is skipped, said and counted,
+        and that input's messages are taken through rclpy's own conversion from then on."""
         handle, out = getattr(sub, "handle", None), []
         if handle is None or not hasattr(handle, "take_message"):
             return out
+        raw, decode = self._raw[kind], self._decode[kind]
         with handle:
-            while (taken := handle.take_message(sub.msg_type, sub.raw)) is not None:
+            while (taken := handle.take_message(sub.msg_type, raw)) is not None:
                 info = taken[1] if len(taken) > 1 and isinstance(taken[1], dict) else {}
-                out.append((info.get("received_timestamp") or len(out), kind, taken[0]))
+                try:
+                    values = decode(taken[0]) if raw else plain(self._kinds[kind], taken[0])
+                except ValueError as err:              # counted as a reading invalid, or a motion sample skipped
+                    data = bytes(taken[0])
+                    line = (f"a message on {sub.topic_name} not decoded ({err}; {len(data)} bytes, "
+                            f"{data[:24].hex(' ')}): skipped")
+                    if kind:
+                        self.pipeline.add_reading(np.nan, np.full(len(self.names), np.nan))
+                        self._warn("decode", line + " (counted as invalid)")
+                    else:
+                        self._skip_motion("decode", line)
+                    self._raw[kind] = raw = False
+                    self.log.warning(f"{sub.topic_name}: its messages taken through rclpy's conversion from now on")
+                    continue
+                out.append((info.get("received_timestamp") or len(out), kind, values))
         return out
 
     def pollable(self):
@@ -447,9 +462,9 @@ class CompensatorNode:
                     # in the order the middleware received them: each reading after the motion that came before it
                     for received, kind, m in heapq.merge(motions, readings, key=lambda e: (e[0], e[1])):
                         if kind:
-                            self._reading(m, received * 1e-9 if received > 1e18 else None)
+                            self._reading(*m, received * 1e-9 if received > 1e18 else None)
                         else:
-                            self._motion_message(m)
+                            self._motion_values(*m)
                     self._process()
                 except Exception as err:
                     self._failed(err)
@@ -470,22 +485,22 @@ class CompensatorNode:
 
     def _on_wrench(self, msg):
         self._entered = time.monotonic()
-        for m in self._queued(self._motion_sub):
-            self._motion_message(m)
-        for m in [msg, *self._queued(self._wrench_sub)]:
-            self._reading(m)
+        for m in self._queued(self._motion_sub, 0):
+            self._motion_values(*m)
+        for m in [plain("wrench", msg), *self._queued(self._wrench_sub, 1)]:
+            self._reading(*m)
         self._process()
 
     def _on_motion(self, msg):
         self._entered = time.monotonic()
-        for m in [msg, *self._queued(self._motion_sub)]:
-            self._motion_message(m)
+        for m in [plain(self._motion_kind, msg), *self._queued(self._motion_sub, 0)]:
+            self._motion_values(*m)
         self._process()
 
-    def _reading(self, msg, received=None):
-        w = np.array([getattr(getattr(msg.wrench, part), axis) for part, axis in self._fields])
-        if not self.pipeline.add_reading(self._time(msg.header.stamp), w, msg.header.stamp, msg.header.frame_id,
-                                         received):
+    def _reading(self, stamp, frame_id, values, received=None):
+        """A wrench reading's plain values (:func:`._cdr.plain`) to the pipeline."""
+        w = np.array(values)[self._from_ros]
+        if not self.pipeline.add_reading(self._time(stamp), w, stamp, frame_id, received):
             self._warn("reading", "a wrench with a NaN or infinite component: skipped (counted as invalid)")
 
     def _process(self):
@@ -512,43 +527,46 @@ class CompensatorNode:
         self.pipeline.skip_motion()
         self._warn(key, message + " (counted in motion_skipped; the readings near it take the samples around it)")
 
-    def _pose(self, msg):
-        p, o = msg.pose.position, msg.pose.orientation
-        q = np.array([o.w, o.x, o.y, o.z])
-        position = np.array([p.x, p.y, p.z])
+    def _pose(self, stamp, frame_id, values):
+        """A pose's plain values (position, orientation x y z w) to the pipeline, the sensor's pose in the model's
+        order."""
+        q = np.array([values[6], values[3], values[4], values[5]])
+        position = np.array(values[:3])
         q, position = sensor_pose(q, position, self.settings.pose_to_sensor)
-        norm = np.linalg.norm(q)
-        if not (np.isfinite(norm) and abs(norm - 1) < 1e-3 and np.isfinite(position).all()):
+        norm = math.sqrt(float(q @ q))
+        if not (math.isfinite(norm) and abs(norm - 1) < 1e-3 and np.isfinite(position).all()):
             self._skip_motion("pose", f"a pose whose quaternion is not of unit norm ({norm:.4g}): skipped")
             return
         q = q / norm
-        values = {"qw": q[0], "qx": q[1], "qy": q[2], "qz": q[3], "x": position[0], "y": position[1],
-                  "z": position[2], "theta": 2 * np.arctan2(q[3], q[0])}
-        self.pipeline.add_motion(self._time(msg.header.stamp), np.array([values[n] for n in self.pose_names]),
-                                 msg.header.frame_id)
+        full = np.concatenate([q, position, [2 * math.atan2(q[3], q[0])]])        # _POSE_ORDER
+        self.pipeline.add_motion(self._time(stamp), full[self._pose_index], frame_id)
 
-    def _joints(self, msg):
+    def _joints(self, stamp, frame_id, values):
+        """A joint state's plain values (names, positions, velocities) to the pipeline, in the model's order."""
+        names, position, velocity = values
         order = self.pipeline.motion.joints
-        where = {name: i for i, name in enumerate(msg.name)}
+        where = {name: i for i, name in enumerate(names)}
         missing = [n for n in order if n not in where]
-        if missing or len(msg.position) != len(msg.name):
+        if missing or len(position) != len(names):
             self._skip_motion("joints", f"a joint state without {', '.join(missing[:3]) or 'a position per name'}: "
                                         "skipped")
             return
         index = [where[n] for n in order]
-        q = np.asarray(msg.position, dtype=float)[index]
+        q = np.asarray(position, dtype=float)[index]
         if not np.isfinite(q).all():
             self._skip_motion("joints", "a joint state with a NaN or infinite position: skipped")
             return
-        dq = np.asarray(msg.velocity, dtype=float)[index] if len(msg.velocity) == len(msg.name) else None
+        dq = np.asarray(velocity, dtype=float)[index] if len(velocity) == len(names) else None
         if dq is not None and not np.isfinite(dq).all():
             dq = None                                  # differentiated from the positions instead
-        self.pipeline.add_motion(self._time(msg.header.stamp), (q, dq, None), msg.header.frame_id)
+        self.pipeline.add_motion(self._time(stamp), (q, dq, None), frame_id)
 
-    def _imu(self, msg):
-        o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
-        quaternion = None if msg.orientation_covariance[0] == -1 else np.array([o.w, o.x, o.y, o.z])
-        rate, force = np.array([w.x, w.y, w.z]), np.array([a.x, a.y, a.z])
+    def _imu(self, stamp, frame_id, values):
+        """An IMU sample's plain values (:func:`._cdr.plain`) to the pipeline; an orientation whose covariance
+        begins with -1 is none (sensor_msgs/Imu's convention)."""
+        v = values
+        quaternion = None if v[4] == -1 else np.array([v[3], v[0], v[1], v[2]])
+        rate, force = np.array(v[13:16]), np.array(v[25:28])
         if not (np.isfinite(rate).all() and np.isfinite(force).all()):
             self._skip_motion("imu", "an IMU sample with a NaN or infinite rate or acceleration: skipped")
             return
@@ -558,45 +576,70 @@ class CompensatorNode:
         if quaternion is None and self.settings.output_frame == "base":
             self._skip_motion("imu", "an IMU sample without a unit orientation: skipped (output_frame base needs it)")
             return
-        self.pipeline.add_motion(self._time(msg.header.stamp), (quaternion, rate, force),
-                                 msg.header.frame_id)
+        self.pipeline.add_motion(self._time(stamp), (quaternion, rate, force), frame_id)
 
     # --- outputs ---------------------------------------------------------------------------------------------
+    def _templates(self, r, n, label):
+        """The outputs' bytes (:class:`._cdr.Template`): the contact wrench, its covariance (``n`` by ``n``, the
+        axes ``label``), its flags, the debug latency."""
+        status_name = f"{self.node.get_name()}: contact wrench"
+        hardware_id = self.settings.wrench_topic
+
+        def header(msg, stamp, frame_id):
+            msg.header.stamp = r.Time(sec=stamp[0], nanosec=stamp[1])
+            msg.header.frame_id = frame_id
+            return msg
+
+        def wrench(stamp, numbers, frame_id):
+            msg = header(r.WrenchStamped(), stamp, frame_id)
+            f, t = msg.wrench.force, msg.wrench.torque
+            f.x, f.y, f.z, t.x, t.y, t.z = (float(v) for v in numbers)
+            return msg
+
+        def array_(numbers, dims=()):
+            msg = r.Array()
+            msg.layout.dim = list(dims)
+            msg.data = [float(v) for v in numbers]
+            return msg
+
+        dims = [r.Dimension(label=label, size=n, stride=n * n), r.Dimension(label="column", size=n, stride=n)]
+
+        def flags(stamp, numbers, frame_id, level, message, contact):
+            msg = header(r.DiagnosticArray(), stamp, frame_id)
+            msg.status = [r.DiagnosticStatus(level=level, name=status_name, message=message, hardware_id=hardware_id,
+                                             values=[r.KeyValue(key="contact", value=contact)])]
+            return msg
+
+        return SimpleNamespace(
+            contact=Template(wrench, 6, r.serialize),
+            cov=Template(lambda stamp, numbers: array_(numbers, dims), n * n, r.serialize, stamped=False),
+            flags=Template(flags, 0, r.serialize),
+            latency=Template(lambda stamp, numbers: array_(numbers), 3, r.serialize, stamped=False))
+
     def _publish(self, out):
-        """The contact wrench (the reading's stamp and frame), its covariance, its flags, the debug latency."""
-        msg, sample = self._contact_msg, out.sample
-        msg.header.stamp = out.stamp
-        msg.header.frame_id = out.frame_id
-        for (part, axis), value in zip(self._fields, sample.wrench.tolist()):
-            setattr(getattr(msg.wrench, part), axis, value)
-        self.contact_pub.publish(msg)
-        cov = self._cov_msg
-        cov.data = array.array("d", sample.cov[self._cov_index].tobytes())
-        self.cov_pub.publish(cov)
-        flags, status = self._flag_msg, self._flag_status
-        flags.header.stamp, flags.header.frame_id = out.stamp, out.frame_id
-        status.level = self.r.DiagnosticStatus.WARN if out.flags else self.r.DiagnosticStatus.OK
-        status.message = " ".join(out.flags)
-        self._flag_contact.value = "true" if sample.contact else "false"
-        self.flag_pub.publish(flags)
+        """The contact wrench (the reading's stamp and frame), its covariance, its flags, the debug latency: as
+        bytes (:mod:`._cdr`)."""
+        encode, sample, stamp = self._encode, out.sample, out.stamp
+        six = np.zeros(6)
+        six[self._from_ros] = sample.wrench
+        self.contact_pub.publish(encode.contact(stamp, six, out.frame_id))
+        self.cov_pub.publish(encode.cov(None, sample.cov[self._cov_index].ravel()))
+        level = self.r.DiagnosticStatus.WARN if out.flags else self.r.DiagnosticStatus.OK
+        self.flag_pub.publish(encode.flags(stamp, (), out.frame_id, level, " ".join(out.flags),
+                                           "true" if sample.contact else "false"))
         now = time.time()
-        since = now - (out.stamp.sec + out.stamp.nanosec * 1e-9)
+        since = now - (stamp[0] + stamp[1] * 1e-9)
         self._latencies.append(since)
         self._held_for = (now - out.arrival, now)          # from the reading's reception to its output
         if self.latency_pub is not None:
-            debug = self.r.Array()
-            debug.data = [since, time.monotonic() - self._entered, float(self.pipeline.backlog())]
-            self.latency_pub.publish(debug)
+            self.latency_pub.publish(encode.latency(None, (since, time.monotonic() - self._entered,
+                                                           float(self.pipeline.backlog()))))
 
     def _publish_withheld(self, stamp, frame_id, cause):
         """The flags of a reading given no output: level ERROR, ``withheld: <cause>``."""
-        flags, status = self._flag_msg, self._flag_status
-        flags.header.stamp, flags.header.frame_id = stamp, frame_id
-        status.level = self.r.DiagnosticStatus.ERROR
-        status.message = f"withheld: {cause}"
-        self._flag_contact.value = "false"
         try:
-            self.flag_pub.publish(flags)
+            self.flag_pub.publish(self._encode.flags(stamp, (), frame_id, self.r.DiagnosticStatus.ERROR,
+                                                     f"withheld: {cause}", "false"))
         except Exception as err:
             self._warn("publish", f"a flag not published ({type(err).__name__}: {err})")
 

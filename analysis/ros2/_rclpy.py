@@ -26,6 +26,8 @@ def ros():
         from std_msgs.msg import Float64MultiArray, MultiArrayDimension
         from std_srvs.srv import Trigger
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from builtin_interfaces.msg import Time
+        from rclpy.serialization import deserialize_message, serialize_message
     except ImportError as err:
         raise Ros2Error(f"fmscal ros2 needs rclpy and the ROS 2 messages ({err.name or err} not found): "
                         f"{INSTALL}") from None
@@ -49,4 +51,5 @@ def ros():
                            SetResult=SetParametersResult, PoseStamped=PoseStamped,
                            WrenchStamped=WrenchStamped, Imu=Imu, JointState=JointState, Array=Float64MultiArray,
                            Dimension=MultiArrayDimension, Trigger=Trigger, DiagnosticArray=DiagnosticArray,
-                           DiagnosticStatus=DiagnosticStatus, KeyValue=KeyValue)
+                           DiagnosticStatus=DiagnosticStatus, KeyValue=KeyValue, Time=Time,
+                           serialize=serialize_message, deserialize=deserialize_message)
