@@ -243,7 +243,7 @@ DT_INTERVALS = 8
 #: a stamp's rounding: a float of epoch seconds holds 0.24 us, 1e-3 of a step at 5 kHz.)
 GRID_SLIP = 0.01
 #: The fewest rows :meth:`Compensator.push_many` fits as one block (fewer go one at a time: the block's fixed cost
-#: is higher, ``python benchmarks/compensation.py``).
+#: is higher, ``python benchmarks/compensation.py --blocks``).
 BLOCK_MIN = 3
 #: The most rows (G1) checks one at a time (more: vectorised over sliding windows, whose fixed cost is higher).
 GLITCH_LOOP = 16

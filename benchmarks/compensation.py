@@ -19,7 +19,10 @@ onto the first sensor, ``fmscal.plant.scenarios.same_rig``), prints:
   scenario's pose noise), from the joint angles (1e-5 rad of noise; with and without measured joint rates,
   1e-3 rad/s of noise) and from an IMU on the tool (gyroscope 2 mrad/s, accelerometer 0.03 m/s^2, turned and
   7 cm off the sensor's point), offline and causal, the causal residual of the joints and the IMU against
-  the delay, and the cost per sample of each.
+  the delay, and the cost per sample of each;
+- ``--blocks`` alone: :meth:`fmscal.analysis.Compensator.push_many`'s cost per row for blocks of 1 to 16 rows,
+  every block fitted whole, every row one at a time, and as it is (blocks of fewer than ``BLOCK_MIN`` rows one at
+  a time): where the first costs less than the second chooses ``BLOCK_MIN`` (analysis/_compensate.py).
 
 docs/guide/compensation.md quotes it. About a minute on 2 cores (the sources' part about half of it).
 """
@@ -59,6 +62,32 @@ def cost(stream, samples):
         spent.append(time.perf_counter() - start)
     spent = np.array(spent[1000:]) * 1e6
     return np.percentile(spent, 50), np.percentile(spent, 99)
+
+
+def blocks(cal, log, truth, rows=2400, repeats=5):
+    """``push_many``'s cost per row (us, the median of ``repeats`` passes of ``rows`` rows each, the three ways
+    alternated) for blocks of each size: every block of 2 rows or more fitted whole, every row one at a time
+    (:meth:`~fmscal.analysis.Compensator.push`'s path), and as it is (``BLOCK_MIN``)."""
+    from fmscal.analysis import _compensate
+    chosen = _compensate.BLOCK_MIN
+    print(f"\nCompensator.push_many, us per row (blocks of the size given; BLOCK_MIN {chosen})\n")
+    print("| rows a block | fitted whole | one at a time | as it is |")
+    print("|---|---|---|---|")
+    try:
+        for size in (1, 2, 3, 4, 6, 8, 16):
+            spent = {2: [], 10 ** 9: [], chosen: []}
+            for _ in range(repeats):                   # the two ways alternated: a machine's drift shared
+                for block_min in spent:
+                    _compensate.BLOCK_MIN = block_min
+                    stream = Compensator(cal, log.dt, noise=truth.noise)
+                    stream.push_many(log.t[:1000], log.w_hat[:1000], log.pose[:1000])       # warm-up
+                    start = time.perf_counter()
+                    for i in range(1000, 1000 + rows, size):
+                        stream.push_many(log.t[i:i + size], log.w_hat[i:i + size], log.pose[i:i + size])
+                    spent[block_min].append((time.perf_counter() - start) / rows * 1e6)
+            print(f"| {size} | " + " | ".join(f"{np.median(v):.0f}" for v in spent.values()) + " |", flush=True)
+    finally:
+        _compensate.BLOCK_MIN = chosen
 
 
 def sources(cal, truth, seed=5, duration=20.0):
@@ -141,6 +170,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sources", action="store_true", help="the motion's other sources only")
     parser.add_argument("--planar", action="store_true", help="the planar model only")
+    parser.add_argument("--blocks", action="store_true", help="push_many's cost per row by block size only")
     args = parser.parse_args()
     only_sources = args.sources
     if args.planar:
@@ -153,6 +183,10 @@ def main():
     print(f"calibration: {cal.method} on {log.name} ({time.perf_counter() - t0:.0f} s), converged {cal.converged}")
     if only_sources:
         sources(cal, truth)
+        return
+    if args.blocks:
+        second, truth2, _ = arm.generate(2)
+        blocks(cal, same_rig(second, truth2.S_at(0.0), truth2.offset, truth.S_at(0.0), truth.offset), truth)
         return
     S, b = truth.S_at(0.0), truth.offset
     logs = {}

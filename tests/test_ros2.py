@@ -379,11 +379,24 @@ def _random_input(kind, rng, frame_id):
     return msg
 
 
+def _same_values(got, want):
+    """Two plain values (analysis/ros2/_cdr.py's ``plain``) alike: the stamp, the frame, every number."""
+    assert got[:2] == want[:2]
+    a, b = got[2], want[2]
+    if isinstance(a[0], list):                               # a joint state: the names, then the sequences
+        assert a[0] == b[0]
+        a, b = a[1:], b[1:]
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x, y)
+    assert len(a) == len(b)
+
+
 @pytest.mark.parametrize("kind", ["wrench", "pose", "imu", "joints"])
 def test_the_inputs_bytes_are_decoded_as_rclpy_decodes_them(kind):
     """The node takes its inputs as bytes (analysis/ros2/_cdr.py): each decoded as rclpy's own
     deserialization gives its values, over frames of every length mod 8 (the fields' alignment) and random
-    numbers; bytes cut short or a string without its terminator are a ValueError, never a wrong value."""
+    numbers; strings read as rclpy reads them (up to the first NUL, with none, or empty); bytes cut short, or that
+    rclpy cannot read in another encapsulation, are a ValueError, never a wrong value nor another exception."""
     from rclpy.serialization import deserialize_message, serialize_message
     from fmscal.analysis.ros2._cdr import decoder, plain
     rng = np.random.default_rng(7)
@@ -403,14 +416,28 @@ def test_the_inputs_bytes_are_decoded_as_rclpy_decodes_them(kind):
     # another encapsulation (here XCDR2's, 00 07) goes to the deserializer given (rclpy's, told it is plain CDR)
     given = []
     other = decoder(kind, type(msg), lambda b, t: given.append(b) or deserialize_message(b"\x00\x01" + b[2:], t))
-    assert str(other(b"\x00\x07" + data[2:])) == str(plain(kind, msg)) and len(given) == 1
+    _same_values(other(b"\x00\x07" + data[2:]), plain(kind, msg))
+    assert len(given) == 1
     decode = decoder(kind, type(msg), deserialize_message)
     with pytest.raises(ValueError):
         decode(data[:14])
-    broken = bytearray(bytes(serialize_message(_random_input(kind, rng, "abc"))))
-    broken[16 + 3] = ord("x")                                # the frame's terminating NUL
-    with pytest.raises(ValueError):
-        decode(bytes(broken))
+    with pytest.raises(ValueError):                          # big endian, cut short: rclpy cannot read it either
+        decode(b"\x00\x00" + data[2:10])
+    # strings as rclpy reads them: up to the first NUL, with or without one, or empty (length 0)
+    sent = bytes(serialize_message(_random_input(kind, rng, "abcdefg")))
+    for frame_bytes in (b"ab\0d\0\0\0\0", b"abcdefgh", b""):
+        crafted = sent[:12] + len(frame_bytes).to_bytes(4, "little") + frame_bytes + sent[24:]
+        if frame_bytes == b"":                               # (the fields after it where alignment puts them)
+            crafted = sent[:12] + b"\0\0\0\0" + sent[24:]
+        _same_values(decode(crafted), plain(kind, deserialize_message(crafted, type(msg))))
+    if kind == "joints":                                     # cut inside the efforts: rclpy refuses it, and so here
+        full = _random_input(kind, rng, "")
+        full.name, full.position, full.velocity, full.effort = ["a", "b"], [1.0, 2.0], [], [3.0, 4.0]
+        whole = bytes(serialize_message(full))
+        with pytest.raises(Exception):
+            deserialize_message(whole[:-12], JointState)
+        with pytest.raises(ValueError):
+            decode(whole[:-12])
 
 
 def test_the_outputs_bytes_are_the_messages_rclpy_makes(request, cal_file):

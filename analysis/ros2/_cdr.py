@@ -9,7 +9,8 @@ Inputs. Decoded here where they are plain CDR, little endian (the encapsulation 
 middlewares send): a header (the stamp, ``sec`` and ``nanosec``, then ``frame_id``), then the fields, each
 aligned to its size counted from the end of the 4-byte encapsulation. Any other encapsulation goes to rclpy's
 ``deserialize_message`` and then to the same plain values (:func:`plain`), as the messages an executor hands do.
-A message that does not parse (too short, a string without its terminator) raises ``ValueError``.
+A string is read as rclpy reads it (up to its first NUL). A message that does not parse (too short for its
+fields, a string or a sequence longer than the message), or that rclpy cannot read, raises ``ValueError``.
 
 Outputs. Each output type's bytes are serialized once by rclpy (``serialize_message``) for each set of its
 strings (the frame, a status's text) and kept as a template, its stamp and its numbers then written in place: the
@@ -41,13 +42,16 @@ def _align(pos, size):
 
 
 def _string(data, pos):
-    """A CDR string at ``pos`` (its length, counting the terminating NUL, then its bytes) and the position after."""
+    """A CDR string at ``pos`` (its length, counting a terminating NUL, then its bytes) and the position after; read
+    as rclpy reads it, up to its first NUL."""
     pos = _align(pos, 4)
     (n,) = _U32.unpack_from(data, pos)
     end = pos + 4 + n
-    if n == 0 or end > len(data) or data[end - 1] != 0:
-        raise ValueError("a CDR string without its terminator")
-    return data[pos + 4:end - 1].decode("utf-8", "replace"), end
+    if end > len(data):
+        raise ValueError("a CDR string longer than its message")
+    text = data[pos + 4:end]
+    cut = text.find(b"\0")
+    return (text if cut < 0 else text[:cut]).decode("utf-8", "replace"), end
 
 
 def _header(data):
@@ -99,6 +103,7 @@ def _joint_state(data):
         names.append(name)
     position, pos = _double_sequence(data, pos)
     velocity, pos = _double_sequence(data, pos)
+    _double_sequence(data, pos)                        # the efforts: not used, but there in full
     return (sec, nanosec), frame_id, (names, position, velocity)
 
 
@@ -130,7 +135,7 @@ def plain(kind, msg):
 def decoder(kind, message_type, deserialize):
     """A function of a message's bytes (``kind`` one of wrench, pose, imu, joints) giving its plain values
     (:func:`plain`): decoded here where plain little-endian CDR, by ``deserialize(data, message_type)``
-    (rclpy's ``deserialize_message``) otherwise."""
+    (rclpy's ``deserialize_message``) otherwise; ``ValueError`` where neither can read them."""
     fast = _DECODERS[kind]
 
     def decode(data):
@@ -139,7 +144,11 @@ def decoder(kind, message_type, deserialize):
                 return fast(data)
             except struct.error:
                 raise ValueError(f"a {message_type.__name__} message shorter than its fields") from None
-        return plain(kind, deserialize(data, message_type))
+        try:
+            msg = deserialize(data, message_type)
+        except Exception as err:                      # rclpy's RMWError: a message it cannot read
+            raise ValueError(f"a {message_type.__name__} message rclpy cannot read ({type(err).__name__})") from None
+        return plain(kind, msg)
     return decode
 
 

@@ -393,7 +393,7 @@ class CompensatorNode:
                 info = taken[1] if len(taken) > 1 and isinstance(taken[1], dict) else {}
                 try:
                     values = decode(taken[0]) if raw else plain(self._kinds[kind], taken[0])
-                except ValueError as err:              # counted as a reading invalid, or a motion sample skipped
+                except Exception as err:               # counted as a reading invalid, or a motion sample skipped
                     data = bytes(taken[0])
                     line = (f"a message on {sub.topic_name} not decoded ({err}; {len(data)} bytes, "
                             f"{data[:24].hex(' ')}): skipped")
