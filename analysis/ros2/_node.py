@@ -185,6 +185,7 @@ class CompensatorNode:
         self._epoch = None
         self._latencies = deque(maxlen=LATENCY_KEPT)
         self._held_for = None                         # (s from the newest output's reading's reception, when)
+        self._late_most = 0.0                         # the longest such since the diagnostics last looked
         self._pass_start, self._pass_size = None, 0
         self._seen, self._latched = None, []           # the transient states' counts, those not said yet
         self._entered = time.monotonic()
@@ -631,6 +632,8 @@ class CompensatorNode:
         since = now - (stamp[0] + stamp[1] * 1e-9)
         self._latencies.append(since)
         self._held_for = (now - out.arrival, now)          # from the reading's reception to its output
+        if now - out.arrival > self._late_most:
+            self._late_most = now - out.arrival
         if self.latency_pub is not None:
             self.latency_pub.publish(encode.latency(None, (since, time.monotonic() - self._entered,
                                                            float(self.pipeline.backlog()))))
@@ -724,19 +727,24 @@ class CompensatorNode:
         return False, "cancel: no identify_payload is running"
 
     def _behind(self, now):
-        """Why the compensation is behind the clock, or None: a pass running for :data:`BEHIND` s, or the newest
-        output (within the last 2 s) published that much later than its reading's reception and the causal delay
-        (the middleware's reception time: the wait in the input queue counted)."""
+        """Why the compensation is behind the clock, or None: a pass running for :data:`BEHIND` s, or an output since
+        the last look (the newest within the last 2 s) published that much later than its reading's reception and
+        the causal delay (the middleware's reception time: the wait in the input queue counted), or half the input
+        queue's span (``queue_depth`` readings) where that is shorter: beyond it, a burst fills the queue and
+        readings are lost."""
         started = self._pass_start
         snapshot = self.pipeline.snapshot
         waiting = snapshot.backlog + (self._pass_size if started is not None else 0)
         if started is not None and now - started > BEHIND:
             return (f"behind: a compensation pass has run {now - started:.3g} s over {self._pass_size} readings; "
                     f"{waiting} readings waiting, {snapshot.counts.get('lost', 0)} lost so far")
-        held = self._held_for
+        held, most = self._held_for, self._late_most
+        self._late_most = 0.0                        # the longest since the last look
+        period = self.pipeline.dt_in
+        bound = BEHIND if not period else min(BEHIND, 0.5 * self.settings.queue_depth * period)
         if held is not None and snapshot.delay is not None and time.time() - held[1] < 2.0:
-            late = held[0] - snapshot.delay
-            if late > BEHIND:
+            late = max(held[0], most) - snapshot.delay
+            if late > bound:
                 return (f"behind: the outputs come {late:.3g} s after their readings and the causal delay; "
                         f"{waiting} readings waiting, {snapshot.counts.get('lost', 0)} lost so far")
         return None
