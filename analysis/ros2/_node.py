@@ -78,12 +78,12 @@ RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
 _TYPES = {"string": "STRING", "double": "DOUBLE", "integer": "INTEGER", "bool": "BOOL", "double_array": "DOUBLE_ARRAY"}
-# a wrench's components by fmscal's names (the planar reading's moment M is about z)
 # ROS's order of a wrench's covariance: the force first (fx fy fz tx ty tz; planar fx fy tz)
 _ROS_ORDER = ("fx", "fy", "fz", "tx", "ty", "tz", "M")
 # a pose's values as the node makes them from a PoseStamped, which the model's pose names pick from
 _POSE_ORDER = ("qw", "qx", "qy", "qz", "x", "y", "z", "theta")
-# a wrench component's place among a WrenchStamped's six numbers (force x y z, torque x y z)
+# a wrench component's place among a WrenchStamped's six numbers (force x y z, torque x y z; the planar reading's
+# moment M is about z)
 _ROS_PLACE = {"fx": 0, "fy": 1, "fz": 2, "tx": 3, "ty": 4, "tz": 5, "M": 5}
 
 
