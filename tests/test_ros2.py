@@ -522,6 +522,42 @@ def test_an_input_whose_bytes_do_not_decode_is_counted_and_taken_by_rclpy_after(
         r.rclpy.try_shutdown(context=context)
 
 
+def test_the_liveness_is_behind_before_the_input_queue_fills(request, cal_file):
+    """The liveness says "behind" where an output came later than its reading and the causal delay by 0.25 s, or by
+    half the input queue's span where that is shorter (``queue_depth`` readings: at 5 kHz, 1000 hold 0.2 s, and a
+    burst fills them before 0.25 s); the longest lateness since its last look counts, once (a burst between two
+    looks is said)."""
+    import dataclasses
+    from fmscal.analysis.ros2._node import CompensatorNode
+    from fmscal.analysis.ros2._rclpy import ros
+    r = ros()
+    context = r.Context()
+    args = ["--ros-args", "-p", f"calibration:={cal_file}", "-p", "pose_topic:=/ft_sensor/pose", "-p",
+            "queue_depth:=1000"]
+    r.rclpy.init(args=["fmscal", *args], context=context, domain_id=domain_id(request.node.name))
+    node = None
+    try:
+        node = CompensatorNode(r, context, args)
+        node.pipeline.snapshot = dataclasses.replace(node.pipeline.snapshot, delay=0.03)
+        now = time.time()
+
+        def behind(period, newest, longest=0.0):
+            node.pipeline.dt_in, node._held_for, node._late_most = period, (0.03 + newest, now), 0.03 + longest
+            return node._behind(time.monotonic())
+
+        assert behind(0.0002, 0.15).startswith("behind: the outputs come 0.15 s")        # 5 kHz: 0.1 s the bound
+        assert behind(0.0002, 0.09) is None
+        assert behind(0.001, 0.15) is None and behind(0.001, 0.26).startswith("behind")    # 1 kHz: 0.25 s
+        assert behind(None, 0.26).startswith("behind") and behind(None, 0.2) is None
+        assert behind(0.0002, 0.01, longest=0.3).startswith("behind: the outputs come 0.3 s")
+        node._held_for = (0.03 + 0.01, now)
+        assert node._behind(time.monotonic()) is None                                      # said once
+    finally:
+        if node is not None:
+            node.destroy()
+        r.rclpy.try_shutdown(context=context)
+
+
 def test_the_guide_lists_every_parameter_with_its_type_and_default():
     """docs/guide/robot.md's table: the node's parameters, in its order, each with its type and default."""
     text = (ROOT / "docs" / "guide" / "robot.md").read_text()
