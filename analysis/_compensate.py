@@ -1319,7 +1319,7 @@ class Compensator:
         # |z|), a pose stream's columns' sd, and the read-out of the cubic through samples on the grid
         self._recent_motion = deque(maxlen=GLITCH_SAMPLES + 1)
         self._z_history = deque(maxlen=GLITCH_WARMUP)  # the last samples' |z| (G2)
-        self._last_z, self._last_e = None, None         # the newest sample's |z| (None: none made), its r_j / sigma_j
+        self._last_z = None                             # the newest sample's |z| (None: none made)
         self._jumped = False                            # since a jump, no output yet: those withheld counted
         self._suspects = []
         self._pose_sd = None
@@ -1651,32 +1651,24 @@ class Compensator:
             self._pose_sd = np.asarray(self.model.pose_sd(self._noise), dtype=float)
         return self._pose_sd
 
-    def _glitch_z(self, t, rows, before=None, sd=None):
-        """(G1) for motion samples ``rows`` (M, n, sign-continuous) at times ``t`` (M,) following the last ones
-        taken (or ``before``, a list of ``(t, row)``), each predicted from the :data:`GLITCH_SAMPLES` before it:
-        the largest ``|z_j|`` of each, (M,), NaN where none is made (too few before it, a hole, no sd yet), and each
-        row's channels checked, (M,). ``sd``: each row's channels' sd (M, n; NaN where not known), default the
-        current (:meth:`_channel_sd`). One row keeps its residuals in sd, ``r_j / sigma_j``, as :attr:`_last_e`."""
+    def _glitch_z(self, t, rows, sd):
+        """(G1) for a block's motion samples ``rows`` (M, n, sign-continuous) at times ``t`` (M,) following the last
+        ones taken, each predicted from the :data:`GLITCH_SAMPLES` before it: the largest ``|z_j|`` of each, (M,),
+        NaN where none is made (too few before it, a hole, no sd yet), and each row's channels checked, (M,).
+        ``sd``: each row's channels' sd (M, n; NaN where not known)."""
         m = len(t)
         if m <= GLITCH_LOOP:                                            # a few rows: one at a time, cheaper
             z, count = np.full(m, np.nan), np.zeros(m, dtype=int)
-            before, kept = list(self._recent_motion if before is None else before), self._last_e
+            before = list(self._recent_motion)
             for i in range(m):
-                z[i], count[i] = self._glitch_one(float(t[i]), rows[i], before, None if sd is None else sd[i])
+                z[i], count[i], _ = self._glitch_one(float(t[i]), rows[i], before, sd[i])
                 before.append((float(t[i]), rows[i]))
-            if m > 1:
-                self._last_e = kept                                     # one row's residuals only
             return z, count
-        z, count = np.full(m, np.nan), np.zeros(m, dtype=int)
-        if sd is None:
-            current = self._channel_sd()
-            if current is None:
-                return z, count
-            sd = np.broadcast_to(current, rows.shape)
+        z = np.full(m, np.nan)
         with np.errstate(invalid="ignore"):
             checked = sd > 0
         count = checked.sum(axis=1)
-        before = list(self._recent_motion)[-GLITCH_SAMPLES:] if before is None else before[-GLITCH_SAMPLES:]
+        before = list(self._recent_motion)[-GLITCH_SAMPLES:]
         recent = len(before)
         first = max(0, GLITCH_SAMPLES - recent)                         # the first row with enough before it
         if first >= m or not count.any():
@@ -1702,20 +1694,21 @@ class Compensator:
         return z, count
 
     def _glitch_one(self, t, row, before=None, sd=None):
-        """:meth:`_glitch_z` for one sample ``row`` (n,) at ``t``, in plain arithmetic: ``(|z|, channels checked)``,
-        NaN where no prediction is made; its residuals in sd kept as :attr:`_last_e`. ``sd`` default the current."""
+        """:meth:`_glitch_z` for one sample ``row`` (n,) at ``t``, in plain arithmetic: ``(|z|, channels checked,
+        residuals)``, the residuals in sd ``r_j / sigma_j`` (n,); NaN and None where no prediction is made. ``before``
+        default the last samples taken, ``sd`` the current."""
         sd = self._channel_sd() if sd is None else sd
         if sd is None:
-            return np.nan, 0
+            return np.nan, 0, None
         checked = sd > 0                                                # NaN: not known, not checked
         count = int(np.count_nonzero(checked))
         before = self._recent_motion if before is None else before
         if len(before) < GLITCH_SAMPLES or not count:
-            return np.nan, count
+            return np.nan, count, None
         before = list(before)[-GLITCH_SAMPLES:]
         ts = [ti for ti, _ in before]
         if t - ts[-1] > 4 * (ts[-1] - ts[0]) / (GLITCH_SAMPLES - 1):   # no prediction across a hole
-            return np.nan, count
+            return np.nan, count, None
         tol, dt = GLITCH_SLIP * self.dt, self.dt
         if all(abs(b - a - dt) <= tol for a, b in zip(ts, ts[1:] + [t])):
             c, scale = self._glitch_c, self._glitch_scale
@@ -1723,8 +1716,7 @@ class Compensator:
             c = _fit_coefficients(np.array(ts) - t, CAUSAL_ORDER, self.dt)[0]
             scale = np.sqrt(1 + c @ c)
         e = np.where(checked, row - c @ np.array([x for _, x in before]), 0.0) / np.where(checked, sd, 1.0)
-        self._last_e = e
-        return float(np.abs(e).max()) / scale, count
+        return float(np.abs(e).max()) / scale, count, e
 
     def _bound(self, history, n):
         """(G2): the bound on a prediction's largest ``|z_j|`` over ``n`` channels, :data:`GLITCH_SD` times the
@@ -1770,12 +1762,11 @@ class Compensator:
     def _glitched(self, t, row):
         """(G1), (G2) for one motion sample: True where it is a glitch (held with those in a row before it); the
         :data:`GLITCH_RUN`-th in a row is the motion's jump (:meth:`_jump`) or its turn, taken."""
-        z, n = self._glitch_one(t, row)
+        z, n, e = self._glitch_one(t, row)
         bound = GLITCH_SD if np.isnan(z) or z <= GLITCH_SD else self._bound(self._z_history, n)  # (G2): >= GLITCH_SD
         if not (np.isnan(z) or z <= bound) and not self._suspects \
                 and len(self._recent_motion) > GLITCH_SAMPLES and (self._last_z or 0.0) > bound / 2:
             # the sample before it a glitch below the bound, in this one's prediction? (module docstring, Glitches)
-            e = self._last_e
             older = list(self._recent_motion)[:-1]
             alone = self._glitch_one(t, row, older)[0]
             if alone <= bound / 2:
@@ -1784,8 +1775,6 @@ class Compensator:
                 self._z_history.pop()
                 self._suspects = [(t1, row1, self._last_z, None)]
                 z = alone
-            else:
-                self._last_e = e
         if np.isnan(z) or z <= bound:
             if self._suspects:
                 self._settle()
@@ -1795,7 +1784,7 @@ class Compensator:
                 self._z_history.append(z)
             return False
         self._last_z = None
-        self._suspects.append((t, row, z, self._last_e))
+        self._suspects.append((t, row, z, e))
         if len(self._suspects) < GLITCH_RUN:
             return True
         first, last = self._suspects[0][3], self._suspects[-1][3]
