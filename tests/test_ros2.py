@@ -522,6 +522,62 @@ def test_an_input_whose_bytes_do_not_decode_is_counted_and_taken_by_rclpy_after(
         r.rclpy.try_shutdown(context=context)
 
 
+def test_the_diagnostics_never_wait_on_a_running_compensation(request, cal_file):
+    """A compensation pass holding the pipeline's lock for 1 s (a stalled pass): the diagnostics go on, at once,
+    with the liveness an ERROR naming the pass; another node of the same name is said once the lock is free (the
+    name check looked again, not waited)."""
+    import threading
+    from fmscal.analysis.ros2._node import CompensatorNode
+    from fmscal.analysis.ros2._rclpy import ros
+    r = ros()
+    context = r.Context()
+    args = ["--ros-args", "-p", f"calibration:={cal_file}", "-p", "pose_topic:=/ft_sensor/pose"]
+    r.rclpy.init(args=["fmscal", *args], context=context, domain_id=domain_id(request.node.name))
+    node = twin = None
+    try:
+        node = CompensatorNode(r, context, args)
+        sent = []
+        node.diag_pub.publish = sent.append          # the array as built, before the middleware
+        node._diagnose()
+        assert sent[-1].status[2].level == r.DiagnosticStatus.OK
+        twin = r.rclpy.create_node(node.node.get_name(), context=context)
+        deadline = time.monotonic() + 10
+        while sum(n == node.node.get_fully_qualified_name() for n in node.node.get_fully_qualified_node_names()) < 2:
+            assert time.monotonic() < deadline, "the twin never seen in the graph"
+            time.sleep(0.05)
+        held, release = threading.Event(), threading.Event()
+
+        def stalled_pass():
+            with node.pipeline.lock:
+                held.set()
+                release.wait(5)
+        thread = threading.Thread(target=stalled_pass)
+        thread.start()
+        try:
+            held.wait(5)
+            node._pass_start, node._pass_size = time.monotonic() - 1.0, 40
+            start = time.monotonic()
+            node._diagnose()
+            took = time.monotonic() - start
+        finally:
+            release.set()
+            thread.join()
+        assert took < 0.5, took
+        live = sent[-1].status[2]
+        assert live.level == r.DiagnosticStatus.ERROR and live.message.startswith("behind: a compensation pass has run")
+        assert "name" not in node.pipeline.conditions                       # not set while the lock was held
+        node._pass_start = None
+        node._diagnose()
+        assert "2 nodes named" in node.pipeline.conditions["name"]
+        assert "2 nodes named" in sent[-1].status[1].message
+    finally:
+        if twin is not None:
+            twin.destroy_node()
+        if node is not None:
+            node.destroy()
+        r.rclpy.try_shutdown(context=context)
+
+
 def test_the_liveness_is_behind_before_the_input_queue_fills(request, cal_file):
     """The liveness says "behind" where an output came later than its reading and the causal delay by 0.25 s, or by
     half the input queue's span where that is shorter (``queue_depth`` readings: at 5 kHz, 1000 hold 0.2 s, and a

@@ -188,6 +188,7 @@ class CompensatorNode:
         self._late_most = 0.0                         # the longest such since the diagnostics last looked
         self._pass_start, self._pass_size = None, 0
         self._seen, self._latched = None, []           # the transient states' counts, those not said yet
+        self._name_said = None                         # the name clash the pipeline's conditions hold
         self._entered = time.monotonic()
         self.error = None
         self.stopping = threading.Event()
@@ -750,20 +751,25 @@ class CompensatorNode:
         return None
 
     def _check_name(self):
-        """Another node of this name in the graph: its outputs and services mix with this one's."""
+        """Another node of this name in the graph: its outputs and services mix with this one's. Set in the
+        pipeline's conditions only where it changed, and never waiting on the compensation's lock (this runs in
+        the diagnostics): with the lock held, set at a later look."""
         try:
             names = self.node.get_fully_qualified_node_names()
         except Exception:
             return
         me = self.node.get_fully_qualified_name()
         count = sum(1 for n in names if n == me)
-        if count > 1:
-            message = (f"{count} nodes named {me}: their outputs mix on the same topics and one service call reaches "
-                       "either; stop one, or rename it (-r __node:=other_name)")
-            if self.pipeline.condition("name", message):
-                self.log.warning(message)
-        elif self.pipeline.condition("name", None):
+        message = None if count < 2 else (
+            f"{count} nodes named {me}: their outputs mix on the same topics and one service call reaches either; "
+            "stop one, or rename it (-r __node:=other_name)")
+        if message == self._name_said or self.pipeline.condition("name", message, wait=False) is None:
+            return
+        if message is not None:
+            self.log.warning(message)
+        elif self._name_said is not None:
             self.log.info(f"one node named {me} again")
+        self._name_said = message
 
     def _state(self, snapshot, now):
         """The outputs' state (:data:`._pipeline.STATES`) of a snapshot; a restart, a stale motion or readings
@@ -797,7 +803,7 @@ class CompensatorNode:
         status.name = f"{self.node.get_name()}: contact wrench"
         status.message = state
         status.hardware_id = self.settings.wrench_topic
-        kept = np.array(self._latencies) if self._latencies else None
+        kept = np.percentile(np.array(self._latencies), (50, 99)) if self._latencies else None
         offset, sd = snapshot.offset, snapshot.offset_sd
         values = {"state": state, "contact": str(bool(snapshot.contact)).lower(),
                   "offset": "" if offset is None else " ".join(f"{v:.6g}" for v in offset),
@@ -806,8 +812,8 @@ class CompensatorNode:
                   "delay_s": "" if snapshot.delay is None else f"{snapshot.delay:g}", "latency_s": f"{p.latency:g}",
                   "sample_time_s": "" if snapshot.dt is None else f"{snapshot.dt:g}",
                   "decimation": str(snapshot.decimation),
-                  "stamp_to_output_p50_s": "" if kept is None else f"{np.percentile(kept, 50):.6f}",
-                  "stamp_to_output_p99_s": "" if kept is None else f"{np.percentile(kept, 99):.6f}",
+                  "stamp_to_output_p50_s": "" if kept is None else f"{kept[0]:.6f}",
+                  "stamp_to_output_p99_s": "" if kept is None else f"{kept[1]:.6f}",
                   "backlog": str(snapshot.backlog), "waiting": str(snapshot.waiting),
                   "motion_lag_s": "" if snapshot.motion_lag is None else f"{snapshot.motion_lag:.4f}",
                   **{k: str(v) for k, v in snapshot.counts.items()},

@@ -484,15 +484,20 @@ class Pipeline:
         self.notices.append((key, message))
 
     # --- the conditions ---------------------------------------------------------------------------------------
-    def condition(self, name, message=None, hold=0.0):
+    def condition(self, name, message=None, hold=0.0, wait=True):
         """Set (``message``) or clear (None) a condition of the inputs (:attr:`conditions`); one of :data:`FLAGS`
         flags the outputs while it holds and ``hold`` s after it clears (the filter's window still holds its
-        samples). Returns whether it changed."""
-        with self.lock:
+        samples). Returns whether it changed; with ``wait`` False, None where :attr:`lock` is held (a compensation
+        running: nothing set)."""
+        if not self.lock.acquire(blocking=wait):
+            return None
+        try:
             changed = self._condition(name, message, hold)
             if changed:
                 self._snap()
             return changed
+        finally:
+            self.lock.release()
 
     def _condition(self, name, message=None, hold=0.0):
         before = self.conditions.get(name)
