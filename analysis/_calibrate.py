@@ -572,7 +572,14 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     if not converged:
         why = why or _UNSETTLED
     notes = list(signed.notes)
-    said = inertia_note(getattr(run.misfit, "inertia", None), converged)    # the shape the log sees, in words
+    shape = getattr(run.misfit, "inertia", None)
+    said = inertia_note(shape, converged)           # the shape the log sees, in words
+    if said and not converged and why == _LATENCY_STEP and _step_of_the_inertia(run, shape, max_latency):
+        step = run.latency.step                     # the latency's step, the shape's: named with the inertia
+        warnings = [w for w in warnings if w not in run.latency.warnings]
+        said += (f"; the latency's step along the log ({step['before'] * 1e3:.3g} ms before t = {step['t']:.3g} s, "
+                 f"{step['after'] * 1e3:.3g} ms after) is gone at that inertia: the shape's, not the stamps'")
+        why = _UNSETTLED
     if said and converged:
         notes.append(said)
     elif said:                          # the likely cause of a fit that did not settle: a longer log would not help
@@ -819,9 +826,30 @@ def _check_latency(run, warnings):
     if run.latency_given is not None:
         found, worse = given_latency_warnings(run.latency_given, found, run.result.info.get("latency_step"))
         return found, not worse, "the latency given does not fit the log" if worse else None
-    why = None if found.determined else ("the latency changes along the log" if found.step is not None
+    why = None if found.determined else (_LATENCY_STEP if found.step is not None
                                          else "the log does not determine the pose stream's latency")
     return list(found.warnings), found.determined, why
+
+
+_LATENCY_STEP = "the latency changes along the log"
+
+
+def _step_of_the_inertia(run, shape, max_latency):
+    """Whether the latency's step along the log (:attr:`LatencyEstimate.step`) is the payload's inertia's shape:
+    the latency estimated again with the inertia the log prefers (:attr:`InertiaShape.preferred`, eq. (M4) of
+    :mod:`fmscal.observers.diagnostics._misfit`) is determined, with no step. An inertia's shape leaves a residual
+    that moves with the motion, which a latency's search along the log can read as a step."""
+    if shape is None or shape.preferred is None or run.latency is None:
+        return False
+    theta = run.model.payload_parameters()
+    k = 1 + len(run.model.payload_position_names)
+    theta[k:k + len(shape.preferred)] = shape.preferred
+    try:
+        again = estimate_latency(run.signed, run.model.with_payload_parameters(theta), max_latency,
+                                 offset=run.offset)
+    except FmscalError:
+        return False
+    return bool(again.determined and again.step is None)
 
 
 def _with_latency_uncertainty(result, found):

@@ -210,6 +210,34 @@ def test_an_inertia_of_another_shape_is_named_and_a_uniform_scale_is_not(arm):
     assert not any("inertia" in w for w in cal.warnings) and not any("inertia's shape" in n for n in cal.notes)
 
 
+#: A draw of the default standard deviations about spatial-arm's payload (``benchmarks/payload_std.py``'s seed 1):
+#: its inertia's shape, within its stated uncertainty, moves the latency found along the log by 0.7 ms at 6.7 s.
+DRAWN = dict(mass=1.2100965894581424, com=(0.008584363507712743, -0.004115918899488192, 0.059405056081662154),
+             inertia=(0.0037215149176061143, 0.005326783128963805, 0.0023626073049211604, -0.0002647626627587112,
+                      3.1151526096597114e-05, -0.00024046129946681197))
+
+
+def test_a_latency_step_of_the_inertia_s_shape_is_named_the_inertia_and_a_dropped_sample_still_the_latency(arm):
+    """The payload's inertia within its default uncertainty, of a shape the log sees: the latency's search along
+    the log reads a step, which is gone at the inertia the log prefers, so the inertia is named (the advice to cut
+    the log or fix its stamps would send the user the wrong way); the same log with one reading dropped at 6.7 s
+    (a real step) is still named the latency's."""
+    from fmscal.plant import Log, SpatialPayload
+    log, S, model = arm
+    given = SpatialPayload(**DRAWN)
+    cal = calibrate(log, given)
+    assert not cal.converged and cal.why_unconverged.startswith("the payload's inertia's shape")
+    assert not any("latency changes along the log" in w for w in cal.warnings)
+    assert any("is gone at that inertia: the shape's, not the stamps'" in w for w in cal.warnings)
+    z = (np.asarray(cal.S) - S) / np.asarray(cal.S_std)
+    assert np.abs(z).max() < 4
+    j = 2 * len(log) // 3
+    dropped = Log(log.t[:-1], log.pose[:-1], np.r_[log.w_hat[:j], log.w_hat[j + 1:]], name="dropped")
+    cal = calibrate(dropped, given)
+    assert not cal.converged and cal.why_unconverged == "the latency changes along the log"
+    assert not any("is gone at that inertia" in w for w in cal.warnings)
+
+
 @pytest.mark.slow
 def test_a_payload_estimate_brings_its_uncertainty_and_its_covariance(arm):
     log, _, model = arm

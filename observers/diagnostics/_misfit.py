@@ -386,7 +386,8 @@ def inertia_note(shape, converged=True):
     shape : InertiaShape or None
     converged : bool
         Whether the calibration converged: where it did not, the inertia is named as a likely cause (its shape
-        moves the fit with the motion: the estimate does not settle, the latency seems to step).
+        moves the fit with the motion: the estimate does not settle, the latency seems to step; the calibration
+        checks that step at the inertia the log prefers).
 
     Returns
     -------
