@@ -67,7 +67,9 @@ outputs far beyond their covariance. Each sample is compared with the cubic fitt
 
 ``X_j`` channel ``j`` of those samples, ``sigma_j`` its noise sd: a pose column's from the noise model
 (:meth:`fmscal.plant.Model.pose_sd`), a joint's, an IMU's or a payload file's pose stream's the running estimate as of
-the samples before it, once it holds :data:`GLITCH_WARMUP` differences (no check before); a channel whose sd is zero
+the samples before it, once it holds :data:`GLITCH_WARMUP` differences (no check before; each difference enters it
+bounded, eq. (G3) of :class:`_RunningNoise`, so that a glitch among the samples no check sees does not widen it for
+good); a channel whose sd is zero
 (poses given as exact, a joint held exactly still) is not checked. With the noise's own sd, the cubic's bias on a
 smooth motion at 1 kHz is far below it (the largest ``|z|`` over a run of a UR5 is the noise's alone down to joint
 noise of 1e-9 rad); a stream sampled coarsely for its motion (poses at 25 Hz) is predicted less well than its noise,
@@ -253,6 +255,13 @@ POSE_NOISE_EVERY = 100
 #: their two intervals is within this factor of the shorter (:class:`_RunningNoise`: across a hole, a sample
 #: missing, the motion's curvature would enter; a stamp's jitter is within it).
 EVEN = 1.5
+#: A motion stream's running noise estimate: a second difference's term larger than this many times the estimate
+#: enters at that bound (:class:`_RunningNoise`, eq. (G3)); a term of white Gaussian noise (its variance times a
+#: chi-square of one degree of freedom) exceeds it with probability 1.5e-12.
+RUNNING_BOUND = 50.0
+#: The median of a chi-square of one degree of freedom: the level the first :data:`GLITCH_WARMUP` terms' median
+#: reads (G3).
+CHI2_MEDIAN = 0.45493642311957283
 #: A payload file's stream without the readings' noise: the fewest first readings it is estimated from (their
 #: differences: white), no output before; by default as many as its colour needs (module docstring, Noise).
 NOISE_SAMPLES = 500
@@ -2087,12 +2096,23 @@ class _RunningNoise:
     plain difference of jittered samples holds the motion's velocity times their intervals' difference, which
     would enter the variance. Only three samples about evenly spaced make one (:data:`EVEN`; a stream sparser than
     the readings counts): across a hole (a sample dropped, a gap) the motion's own curvature would enter the
-    variance, and stay in it."""
+    variance, and stay in it.
+
+    The estimate is the terms' mean, each term bounded::
+
+        term <= RUNNING_BOUND * v                                                                      (G3)
+
+    ``v`` the estimate before it, or for the first :data:`GLITCH_WARMUP` terms (once they are all in) their
+    median over :data:`CHI2_MEDIAN`; a channel whose ``v`` is zero is not bounded. The samples no glitch check
+    has seen (a stream's first, the first after a gap or a restart: module docstring, Glitches) enter it, and a
+    glitch among them, 2000 sd off, entered the plain mean for good: its sd tens of times the noise for seconds, a
+    later glitch passing beneath the check's bound."""
 
     def __init__(self, size):
         self.recent = deque(maxlen=3)
         self.times = deque(maxlen=3)
         self.sum, self.n = np.zeros(size), 0
+        self.first = []                                  # the first GLITCH_WARMUP terms, until they are all in
 
     def add(self, values, t):
         """One sample ``values`` (n,) at time ``t``: a second difference where the last three are even."""
@@ -2102,14 +2122,28 @@ class _RunningNoise:
             h1, h2 = self.times[1] - self.times[0], self.times[2] - self.times[1]
             if 0 < min(h1, h2) and max(h1, h2) <= EVEN * min(h1, h2):
                 d = (self.recent[2] - self.recent[1]) / h2 - (self.recent[1] - self.recent[0]) / h1
-                self.sum += np.square(d) / (1 / h1 ** 2 + 1 / h2 ** 2 + (1 / h1 + 1 / h2) ** 2)
-                self.n += 1
+                self._term(np.square(d) / (1 / h1 ** 2 + 1 / h2 ** 2 + (1 / h1 + 1 / h2) ** 2))
+
+    def _term(self, term):
+        """One term into the mean, bounded (G3)."""
+        if self.first is None:
+            np.minimum(term, (RUNNING_BOUND / self.n) * self.sum, out=term, where=self.sum > 0)
+        else:
+            self.first.append(term)
+        self.sum += term
+        self.n += 1
+        if self.first is not None and self.n >= GLITCH_WARMUP:
+            terms = np.array(self.first)
+            bound = RUNNING_BOUND / CHI2_MEDIAN * np.median(terms, axis=0)
+            self.sum = np.minimum(terms, np.where(bound > 0, bound, np.inf)).sum(axis=0)
+            self.first = None
 
     def copy(self):
         """An estimate of its own in the same state."""
         other = _RunningNoise(len(self.sum))
         other.recent, other.times = deque(self.recent, maxlen=3), deque(self.times, maxlen=3)
         other.sum, other.n = self.sum.copy(), self.n
+        other.first = None if self.first is None else list(self.first)
         return other
 
     def clear(self):

@@ -862,6 +862,25 @@ def test_a_motion_glitch_of_its_form_is_taken_as_missing(glitch_run, source, mon
     assert np.abs(z_blind).max() > 5.0 or sum(o.contact for o in blind) > sum(o.contact for o in ref_out)
 
 
+@pytest.mark.parametrize("source", ["joints", "imu"])
+def test_a_glitch_among_the_first_samples_leaves_the_running_noise_and_the_check_alone(glitch_run, source):
+    """A glitch 10 times the later ones' size at row 20, before the check starts (its running noise estimate not
+    yet :data:`GLITCH_WARMUP` differences): the running noise estimate stays within 1.2x of the clean stream's
+    (as a plain mean it read the glitch for good, its sd tens of times the noise), and the later glitches are
+    still found (``glitch`` 3 or 4), every output after 0.5 s within 5 sd."""
+    run, rng, W = glitch_run
+    motion, keyword, clean, bad = _glitch_streams(run, rng(), source)
+    channel = bad[0] if source == "joints" else bad[1]
+    channel[20, 0] += 10 * (2e-3 if source == "joints" else 0.5)
+    ref, _, _ = _pushed(run, W, motion, keyword, clean)
+    stream, out, z = _pushed(run, W, motion, keyword, bad)
+    ratio = np.sqrt(stream._running.variance() / ref._running.variance())
+    assert np.all((ratio > 1 / 1.2) & (ratio < 1.2)), ratio
+    assert 3 <= stream.events.get("glitch", 0) <= 4, stream.events
+    late = np.array([o.t for o in out]) > run["t"][0] + 0.5
+    assert np.abs(z[late]).max() < 5.0, np.abs(z[late]).max()
+
+
 def test_a_motion_that_jumps_goes_on_from_the_jump(glitch_run):
     """The poses 1 cm off from 2.5 s on, for good (a tracker that re-acquired): the glitches' run of three is the
     motion's jump (``jump``: 1, said), the motion before it forgotten; the outputs whose window held too few samples
