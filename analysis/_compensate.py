@@ -154,6 +154,14 @@ is the contact test (C4). Where it is within the bound (no contact), a Kalman st
 
     K = P S^T Cov_total^-1,   b <- b - K w_e,   P <- (I - K S) P                                  (D3)
 
+Where the readings' noise is correlated in time (``tau`` of eq. (N2) of :mod:`fmscal.plant.io._noise`: a sensor's
+filter, an average), the offset, which averages many samples, sees their long-run variance ``sd^2 tau``, not
+``sd^2``: the gain and ``P`` take it, the test (D2) and the covariance published the sample's own::
+
+    K = P S^T (Cov_total + S diag(sd^2 max(tau - 1, 0)) S^T)^-1                                  (D6)
+
+(taken as white, the offset's sd came out ``sqrt(tau)`` times too small).
+
 During a contact the offset is frozen (its sd grows by (D1)), so a contact is not taken for drift; a push
 slower than the tracker's time constant is, in part: the intensity sets the trade-off
 (docs/guide/compensation.md). The offset and its sd are reported per sample (after the sample's step).
@@ -535,8 +543,13 @@ class _Parts:
             self._J = payload_jacobian(payload.mass, payload.com)                             # (K2)
 
     def set_noise(self, noise):
-        """The readings' share of (C3), ``S Sigma_r S^T``."""
-        self.reading_cov = self.S @ np.diag(np.square(noise.wrench_sd)) @ self.S.T
+        """The readings' share of (C3), ``S Sigma_r S^T``; and the further share of their long-run variance the
+        offset's gain takes (D6), None where the noise is white."""
+        var = np.square(np.asarray(noise.wrench_sd, dtype=float))
+        self.reading_cov = self.S @ np.diag(var) @ self.S.T
+        tau = getattr(noise, "wrench_tau", None)
+        more = None if tau is None else var * np.maximum(np.asarray(tau, dtype=float) - 1.0, 0.0)
+        self.long_run = None if more is None or not more.any() else self.S @ np.diag(more) @ self.S.T
 
     def regressor(self, motion):
         """The Newton-Euler regressor ``Y`` (N, n_w, 10) of the rows' motion (K2), where a payload file's
@@ -786,7 +799,8 @@ class _OffsetTracker:
         solved = np.linalg.solve(total, np.c_[w_e, HP])                                        # (D2)
         statistic = float(w_e @ solved[:, 0])
         if statistic <= self.parts.threshold:                                                  # (D3)
-            K = solved[:, 1:].T                                                                # P H^T total^-1
+            long_run = self.parts.long_run
+            K = solved[:, 1:].T if long_run is None else np.linalg.solve(total + long_run, HP).T      # (D6)
             theta = np.r_[self.b, self.dI] - K @ w_e
             self.b, self.dI = theta[:n], theta[n:]
             self.P = self.P - K @ HP

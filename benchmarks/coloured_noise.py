@@ -1,6 +1,6 @@
 """Coloured reading noise over seeds (issue 46 item 2).
 
-Usage: ``python benchmarks/coloured_noise.py [SEEDS] [DURATION] [--ekf | --live]``.
+Usage: ``python benchmarks/coloured_noise.py [SEEDS] [DURATION] [--ekf | --live | --offset]``.
 
 On ``spatial-arm`` logs (default 5 seeds, 10 s at 1 kHz) whose reading noise is the scenario's white noise
 passed through a filter, its standard deviation kept at the scenario's (:data:`FILTERS`: white, a first-order
@@ -28,6 +28,12 @@ pose's, so that the Compensator learns the readings' noise from its first readin
 share of the output flagged (no contact anywhere; pooled over the seeds in brackets), with the noise learned by
 default (its colour measured from the first 4 s, eqs. N1-N3) and from the first ``NOISE_SAMPLES`` readings taken as
 white (the Compensator before it measured the colour, to the bit).
+
+``--offset``: the same live Compensator with ``track_offset=True`` (the offset a random walk, eqs. D1-D6 of
+analysis/_compensate.py): per filter, medians over the seeds of the offset's rms z after the first 2 s of output
+(``(b - b_true) / sd(b)`` sample by sample), on the force and on the torque channels, and the output's rms z. The
+true offset is constant, so the random walk's sd leans wide (the module docstring of analysis/_compensate.py: about
+0.7 expected).
 
 tests/test_coloured_noise.py holds the targets (seeded; the 20-seed target in a slow test). A few minutes on
 2 cores at 5 seeds.
@@ -115,25 +121,32 @@ def measure(seed, kind, duration=10.0):
             "truth": contact_test(truth_calibration(truth), log), "calibration": contact_test(cal, log)}
 
 
-def live(seed, kind, duration=10.0, noise_samples=None):
+def live(seed, kind, duration=10.0, noise_samples=None, track_offset=False):
     """The live Compensator of a payload file on an :data:`EVERYDAY` log of ``seed`` whose reading noise went
     through ``kind``: the tool's payload fitted to 8 held poses (a table's fit, whose noise is a held pose's: the
     Compensator learns the readings' from its first ``noise_samples``, default as many as the colour needs).
 
     Returns ``(log, stream, outputs, figures)``: the outputs the stream's ``ContactSample`` list; the figures a dict
     of ``z`` (the output's rms z, each component over its stated sd), ``flagged`` (the share of the output flagged;
-    no contact anywhere), ``n`` (outputs) and ``first`` (the first output's reading time, s).
+    no contact anywhere), ``n`` (outputs) and ``first`` (the first output's reading time, s); with ``track_offset``
+    also ``offset_z``: the offset's rms z after the first 2 s of output, per channel (torques first), (6,).
     """
     log, truth = coloured_log(seed, kind, duration, EVERYDAY)
     sd = np.asarray(truth.noise.wrench_sd)
     table = simulate_table(EVERYDAY.payload, n=8, seed=100 + seed, S=truth.S_at(0.0), offset=truth.offset,
                            wrench_sd=sd / np.sqrt(500))
-    stream = Compensator(fit_static(table), log.dt, noise_samples=noise_samples)
+    stream = Compensator(fit_static(table), log.dt, noise_samples=noise_samples, track_offset=track_offset)
     out = stream.push_many(log.t, log.w_hat, log.pose)
     w = np.array([o.wrench for o in out])
     z = w / np.sqrt(np.array([np.diag(o.cov) for o in out]))
-    return log, stream, out, {"z": float(np.sqrt(np.mean(z ** 2))), "flagged": float(np.mean([o.contact for o in out])),
-                         "n": len(out), "first": out[0].t}
+    figures = {"z": float(np.sqrt(np.mean(z ** 2))), "flagged": float(np.mean([o.contact for o in out])),
+               "n": len(out), "first": out[0].t}
+    if track_offset:
+        late = np.array([o.t for o in out]) > out[0].t + 2.0
+        b = np.array([o.offset for o in out])[late]
+        sd = np.array([o.offset_sd for o in out])[late]
+        figures["offset_z"] = np.sqrt(np.mean(((b - np.asarray(truth.offset)) / sd) ** 2, axis=0))
+    return log, stream, out, figures
 
 
 def main(seeds=5, duration=10.0):
@@ -190,7 +203,21 @@ def live_table(seeds=5, duration=10.0):
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
 
 
+def offset_table(seeds=5, duration=10.0):
+    """``--offset``: the live Compensator's offset tracker per filter (:func:`live` with ``track_offset``)."""
+    print(f"the live Compensator of a payload file on spatial-arm (S = I) tracking the offset, {duration:g} s at "
+          f"1 kHz, {seeds} seeds (medians); the true offset constant\n")
+    print("| noise | offset z rms, forces | offset z rms, torques | output z rms |\n|---|---|---|---|")
+    for name, kind in FILTERS.items():
+        runs = [live(seed, kind, duration, track_offset=True)[3] for seed in range(seeds)]
+        z = np.array([r["offset_z"] for r in runs])
+        forces, torques = np.sqrt(np.mean(z[:, 3:] ** 2, axis=1)), np.sqrt(np.mean(z[:, :3] ** 2, axis=1))
+        print(f"| {name} | {np.median(forces):.2f} | {np.median(torques):.2f} | "
+              f"{np.median([r['z'] for r in runs]):.2f} |", flush=True)
+
+
 if __name__ == "__main__":
-    args = [a for a in sys.argv[1:] if a not in ("--ekf", "--live")]
-    (ekf if "--ekf" in sys.argv else live_table if "--live" in sys.argv else main)(
+    args = [a for a in sys.argv[1:] if a not in ("--ekf", "--live", "--offset")]
+    (ekf if "--ekf" in sys.argv else live_table if "--live" in sys.argv else
+     offset_table if "--offset" in sys.argv else main)(
         int(args[0]) if args else 5, float(args[1]) if len(args) > 1 else 10.0)
