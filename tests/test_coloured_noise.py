@@ -185,7 +185,7 @@ def test_the_offset_tracker_takes_the_correlation(name):
     random walk's sd leans wide). Its gain taking each sample's noise as independent, the offset's sd came out
     ``sqrt(tau)`` times too small on correlated noise (rms z 1.4 for the 4-sample average, 2.1 at 30 Hz: ``python
     benchmarks/coloured_noise.py 5 --offset`` on the code before). The torque channels are not held: the tool's
-    centre of mass, fitted from held poses, leaks into their offset (docs/status.md)."""
+    inertia, learned from the noisy attitudes (L1), moves their offset beyond its sd (docs/status.md)."""
     _, stream, _, f = bench.live(0, bench.FILTERS[name], track_offset=True)
     assert (stream.noise.wrench_tau is None) == (name == "white")
     forces = float(np.sqrt(np.mean(f["offset_z"][3:] ** 2)))
