@@ -267,6 +267,8 @@ EVEN = 1.5
 #: enters at that bound (:class:`_RunningNoise`, eq. (G3)); a term of white Gaussian noise (its variance times a
 #: chi-square of one degree of freedom) exceeds it with probability 1.5e-12.
 RUNNING_BOUND = 50.0
+#: A motion stream's running noise estimate: the most first terms that wait for a level to bound them by (G3).
+RUNNING_OPEN = 1000
 #: The median of a chi-square of one degree of freedom: the level the first :data:`GLITCH_WARMUP` terms' median
 #: reads (G3).
 CHI2_MEDIAN = 0.45493642311957283
@@ -842,7 +844,7 @@ class _OffsetTracker:
             H = self.S if not self.k else np.concatenate([np.broadcast_to(self.S, (len(t), self.n, self.n)), Y], 2)
             q2 = np.zeros((len(new), self.n + self.k))
             q2[:, :self.n] = (2.0 ** new[:, None] * self.shape) ** 2
-            more = _likelihood_terms(t, w_e0, cov, H, self.P, q2, bound)
+            more = _likelihood_terms(t, w_e0, cov, H, self.P, q2, bound, self.parts.long_run)
             grid, d2, logdet = np.r_[grid, new], np.c_[d2, more[0]], np.c_[logdet, more[1]]
             order = np.argsort(grid)
             grid, d2, logdet = grid[order], d2[:, order], logdet[:, order]
@@ -870,10 +872,11 @@ class _OffsetTracker:
         self.q2 = np.square(2.0 ** best * self.shape)
 
 
-def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound):
+def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound, long_run=None):
     """(D1)-(D3), (L1) run for ``K`` intensities at once over rows ``w_e0`` (N, n) (the wrench with the state
     ``theta0`` the trackers start from), their covariances ``cov`` (N, n, n) and times ``t``, from the state's
-    covariance ``P0`` (p, p); ``H`` (n, p), or (N, n, p) per row; ``q2`` (K, p) the walks' ``q^2``. Returns
+    covariance ``P0`` (p, p); ``H`` (n, p), or (N, n, p) per row; ``q2`` (K, p) the walks' ``q^2``; ``long_run``
+    the readings' further long-run share (D6), None where white. Returns
     ``d^2`` of (D2) and ``log det Cov_total``, each (N, K): the terms of (D5)."""
     K, p = q2.shape
     Q = np.zeros((K, p, p))
@@ -892,7 +895,8 @@ def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound):
         solved = np.linalg.solve(total, np.concatenate([w[:, :, None], HP], axis=2))          # (D2)
         d2[k] = np.einsum("ki,ki->k", w, solved[:, :, 0])
         logdet[k] = np.linalg.slogdet(total)[1]
-        gain = np.swapaxes(solved[:, :, 1:], 1, 2) * (d2[k] <= bound)[:, None, None]           # (D3)
+        gain = np.swapaxes(solved[:, :, 1:] if long_run is None else np.linalg.solve(total + long_run, HP), 1, 2) \
+            * (d2[k] <= bound)[:, None, None]                                                  # (D3), (D6)
         dtheta -= np.einsum("kij,kj->ki", gain, w)
         P -= gain @ HP
     return d2, logdet
@@ -2065,7 +2069,8 @@ class Compensator:
 
         The payload's own wrench at that pose is restored, so the output does not jump beyond the noise; a
         sensor zeroed by its hardware at an unknown pose is one more offset found this way. With
-        ``track_offset``, the tracker restarts from it, its covariance ``S^-1 Cov S^-T / n`` over the ``n`` samples.
+        ``track_offset``, the tracker restarts from it, its covariance ``S^-1 Cov S^-T / n`` over the ``n`` samples
+        (``Cov`` with the readings' long-run share where their noise is correlated, (D6)).
 
         Parameters
         ----------
@@ -2098,7 +2103,8 @@ class Compensator:
         if self._tracker is None:
             self._parts.b = found.mean(axis=0)
         else:
-            self._tracker.tare(found.mean(axis=0), S_inv @ cov.mean(axis=0) @ S_inv.T / len(found))
+            long_run = 0.0 if self._parts.long_run is None else self._parts.long_run          # (D6)
+            self._tracker.tare(found.mean(axis=0), S_inv @ (cov.mean(axis=0) + long_run) @ S_inv.T / len(found))
         return self.offset
 
 
@@ -2117,7 +2123,12 @@ class _RunningNoise:
         term <= RUNNING_BOUND * v                                                                      (G3)
 
     ``v`` the estimate before it, or for the first :data:`GLITCH_WARMUP` terms (once they are all in) their
-    median over :data:`CHI2_MEDIAN`; a channel whose ``v`` is zero is not bounded. The samples no glitch check
+    median over :data:`CHI2_MEDIAN`, where that is zero (a quantised channel at rest, most differences zero) their
+    least above zero but for the three largest (a glitch's), a step of the quantum: where there is none yet, the
+    first terms are bounded once there is, up to :data:`RUNNING_OPEN` of them, then not (a channel exactly at
+    rest); later, a channel whose ``v`` is zero is not bounded. A glitch enters three
+    terms, each at most the bound: it still widens the estimate for a while, by at most sqrt(1 + 3 * RUNNING_BOUND /
+    n) at ``n`` terms, no longer for good. The samples no glitch check
     has seen (a stream's first, the first after a gap or a restart: module docstring, Glitches) enter it, and a
     glitch among them, 2000 sd off, entered the plain mean for good: its sd tens of times the noise for seconds, a
     later glitch passing beneath the check's bound."""
@@ -2148,9 +2159,13 @@ class _RunningNoise:
         self.n += 1
         if self.first is not None and self.n >= GLITCH_WARMUP:
             terms = np.array(self.first)
-            bound = RUNNING_BOUND / CHI2_MEDIAN * np.median(terms, axis=0)
-            self.sum = np.minimum(terms, np.where(bound > 0, bound, np.inf)).sum(axis=0)
-            self.first = None
+            level = np.median(terms, axis=0) / CHI2_MEDIAN
+            rest = np.sort(terms, axis=0)[:-3]                              # a glitch's three terms left out
+            least = np.where(rest > 0, rest, np.inf).min(axis=0)            # a quantised channel at rest: a step
+            level = np.where(level > 0, level, least)
+            if np.isfinite(level).all() or self.n >= RUNNING_OPEN:
+                self.sum = np.minimum(terms, RUNNING_BOUND * level).sum(axis=0)
+                self.first = None
 
     def copy(self):
         """An estimate of its own in the same state."""

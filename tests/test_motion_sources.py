@@ -881,6 +881,24 @@ def test_a_glitch_among_the_first_samples_leaves_the_running_noise_and_the_check
     assert np.abs(z[late]).max() < 5.0, np.abs(z[late]).max()
 
 
+def test_a_glitch_among_a_quantised_channel_at_rest_is_bounded_too():
+    """A joint encoder at rest, its noise a fifth of its quantum (most second differences zero, their median zero),
+    a glitch of 200 quanta at row 20: the running noise estimate (G3) bounds the glitch's terms by the channel's
+    least step, and ends within 2x of the clean channel's (unbounded, 31x)."""
+    from fmscal.analysis._compensate import _RunningNoise
+    rng = np.random.default_rng(5)
+    clean = np.round(0.2 * rng.standard_normal((3000, 1))) * 1e-4
+    bad = clean.copy()
+    bad[20] += 0.02
+    estimates = []
+    for rows in (clean, bad):
+        running = _RunningNoise(1)
+        for k, row in enumerate(rows):
+            running.add(row, 1e-3 * k)
+        estimates.append(running.variance()[0])
+    assert 0 < estimates[0] and np.sqrt(estimates[1] / estimates[0]) < 2.0, estimates
+
+
 def test_a_motion_that_jumps_goes_on_from_the_jump(glitch_run):
     """The poses 1 cm off from 2.5 s on, for good (a tracker that re-acquired): the glitches' run of three is the
     motion's jump (``jump``: 1, said), the motion before it forgotten; the outputs whose window held too few samples

@@ -10,6 +10,7 @@ import json
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -523,9 +524,10 @@ def test_an_input_whose_bytes_do_not_decode_is_counted_and_taken_by_rclpy_after(
 
 
 def test_the_diagnostics_never_wait_on_a_running_compensation(request, cal_file):
-    """A compensation pass holding the pipeline's lock for 1 s (a stalled pass): the diagnostics go on, at once,
-    with the liveness an ERROR naming the pass; another node of the same name is said once the lock is free (the
-    name check looked again, not waited)."""
+    """A compensation pass holding the pipeline's lock for 1 s (a stalled pass): the diagnostics and the inputs'
+    QoS events (taken in the same thread) go on, at once, with the liveness an ERROR naming the pass; another node
+    of the same name and an incompatible publisher are set as conditions once the lock is free (kept, not waited
+    for)."""
     import threading
     from fmscal.analysis.ros2._node import CompensatorNode
     from fmscal.analysis.ros2._rclpy import ros
@@ -546,6 +548,7 @@ def test_the_diagnostics_never_wait_on_a_running_compensation(request, cal_file)
             assert time.monotonic() < deadline, "the twin never seen in the graph"
             time.sleep(0.05)
         held, release = threading.Event(), threading.Event()
+        event = types.SimpleNamespace(last_policy_kind=None, current_count=2)
 
         def stalled_pass():
             with node.pipeline.lock:
@@ -558,6 +561,8 @@ def test_the_diagnostics_never_wait_on_a_running_compensation(request, cal_file)
             node._pass_start, node._pass_size = time.monotonic() - 1.0, 40
             start = time.monotonic()
             node._diagnose()
+            node._incompatible("/ft_sensor/wrench", event)         # the QoS events, taken in the same thread
+            node._matched("/ft_sensor/wrench", event)
             took = time.monotonic() - start
         finally:
             release.set()
@@ -565,10 +570,11 @@ def test_the_diagnostics_never_wait_on_a_running_compensation(request, cal_file)
         assert took < 0.5, took
         live = sent[-1].status[2]
         assert live.level == r.DiagnosticStatus.ERROR and live.message.startswith("behind: a compensation pass has run")
-        assert "name" not in node.pipeline.conditions                       # not set while the lock was held
+        assert not {"name", "qos /ft_sensor/wrench"} & set(node.pipeline.conditions)   # not while the lock was held
         node._pass_start = None
         node._diagnose()
         assert "2 nodes named" in node.pipeline.conditions["name"]
+        assert "none of its messages arrive" in node.pipeline.conditions["qos /ft_sensor/wrench"]
         assert "2 nodes named" in sent[-1].status[1].message
     finally:
         if twin is not None:

@@ -188,7 +188,8 @@ class CompensatorNode:
         self._late_most = 0.0                         # the longest such since the diagnostics last looked
         self._pass_start, self._pass_size = None, 0
         self._seen, self._latched = None, []           # the transient states' counts, those not said yet
-        self._name_said = None                         # the name clash the pipeline's conditions hold
+        self._name_said = None                         # the name clash seen in the graph, said in the log
+        self._pending = {}                             # conditions set from the main thread, the lock then held
         self._entered = time.monotonic()
         self.error = None
         self.stopping = threading.Event()
@@ -321,6 +322,7 @@ class CompensatorNode:
                 for handler, data in taken:
                     if data:
                         handler.callback(data)
+                self._set_pending()
             except Exception as err:                   # said, never fatal
                 self._warn("event", f"the inputs' QoS events not taken ({type(err).__name__}: {err})")
         self.node.create_timer(EVENTS, take)
@@ -333,27 +335,28 @@ class CompensatorNode:
             self._reliable else ""
         message = (f"a publisher of {topic} offers a QoS this node's subscription ({want}) cannot take: {name} "
                    f"incompatible{hint}; none of its messages arrive")
-        self.pipeline.condition(f"qos {topic}", message)
+        self._set_condition(f"qos {topic}", message)           # an event, taken in the main thread
         self._warn(f"qos {topic}", message)
 
     def _matched(self, topic, info):
         count = getattr(info, "current_count", None)
-        if count is not None and count > 1:
-            self._publishers(topic, count)
+        if count is not None and count > 1:            # an event, in the main thread: the poll thread's next
+            self._publishers(topic, count, wait=False)  # pass counts them where a pass holds the lock now
 
     def _message_lost(self, topic, info):
         self._warn(f"lost {topic}", f"{topic}: {getattr(info, 'total_count_change', '?')} messages lost on the way "
                                     f"(DDS; {getattr(info, 'total_count', '?')} so far)")
 
-    def _publishers(self, topic, count):
-        """More than one publisher on an input topic: the condition ``publishers`` (outputs flagged)."""
+    def _publishers(self, topic, count, wait=True):
+        """More than one publisher on an input topic: the condition ``publishers`` (outputs flagged); with ``wait``
+        False, nothing where the compensation's lock is held."""
         hold = self.settings.window + self.settings.delay + self.settings.stale_timeout
         if count > 1:
             message = (f"{count} publishers on {topic}: their messages interleave (a driver restarted beside the "
                        "old one?); the outputs flagged")
-            if self.pipeline.condition("publishers", message):
+            if self.pipeline.condition("publishers", message, wait=wait):
                 self.log.warning(message)
-        elif self.pipeline.condition("publishers", None, hold):
+        elif self.pipeline.condition("publishers", None, hold, wait=wait):
             self.log.info(f"one publisher on each input again: outputs unflagged after {hold:g} s")
 
     def _check_graph(self):
@@ -751,9 +754,9 @@ class CompensatorNode:
         return None
 
     def _check_name(self):
-        """Another node of this name in the graph: its outputs and services mix with this one's. Set in the
-        pipeline's conditions only where it changed, and never waiting on the compensation's lock (this runs in
-        the diagnostics): with the lock held, set at a later look."""
+        """Another node of this name in the graph: its outputs and services mix with this one's. Said where it
+        changed; set in the pipeline's conditions without waiting on the compensation's lock (this runs in the
+        diagnostics: :meth:`_set_condition`)."""
         try:
             names = self.node.get_fully_qualified_node_names()
         except Exception:
@@ -763,13 +766,27 @@ class CompensatorNode:
         message = None if count < 2 else (
             f"{count} nodes named {me}: their outputs mix on the same topics and one service call reaches either; "
             "stop one, or rename it (-r __node:=other_name)")
-        if message == self._name_said or self.pipeline.condition("name", message, wait=False) is None:
+        if message == self._name_said:
             return
         if message is not None:
             self.log.warning(message)
         elif self._name_said is not None:
             self.log.info(f"one node named {me} again")
         self._name_said = message
+        self._set_condition("name", message)
+
+    def _set_condition(self, name, message, hold=0.0):
+        """A condition set from the main executor's thread (the diagnostics, the QoS events): never waiting on the
+        compensation's lock; where a pass holds it, kept and set at a later look (:meth:`_set_pending`)."""
+        self._pending[name] = (message, hold)
+        self._set_pending()
+
+    def _set_pending(self):
+        """The conditions :meth:`_set_condition` kept, set in the pipeline where its lock is free now."""
+        for name, (message, hold) in list(self._pending.items()):
+            if self.pipeline.condition(name, message, hold, wait=False) is None:
+                return
+            del self._pending[name]
 
     def _state(self, snapshot, now):
         """The outputs' state (:data:`._pipeline.STATES`) of a snapshot; a restart, a stale motion or readings
@@ -795,6 +812,7 @@ class CompensatorNode:
         r = self.r
         now = time.monotonic()
         self._check_name()
+        self._set_pending()
         p, snapshot = self.pipeline, self.pipeline.snapshot
         levels = (r.DiagnosticStatus.OK, r.DiagnosticStatus.WARN, r.DiagnosticStatus.ERROR)
         state = self._state(snapshot, now)
