@@ -2123,15 +2123,15 @@ class _RunningNoise:
         term <= RUNNING_BOUND * v                                                                      (G3)
 
     ``v`` the estimate before it, or for the first :data:`GLITCH_WARMUP` terms (once they are all in) their
-    median over :data:`CHI2_MEDIAN`, where that is zero (a quantised channel at rest, most differences zero) their
-    least above zero but for the three largest (a glitch's), a step of the quantum: where there is none yet, the
+    median over :data:`CHI2_MEDIAN`; where that is zero (a quantised channel at rest, most differences zero), their
+    least above zero but for the three largest (a glitch's): a step of the quantum. Where there is none yet, the
     first terms are bounded once there is, up to :data:`RUNNING_OPEN` of them, then not (a channel exactly at
-    rest); later, a channel whose ``v`` is zero is not bounded. A glitch enters three
-    terms, each at most the bound: it still widens the estimate for a while, by at most sqrt(1 + 3 * RUNNING_BOUND /
-    n) at ``n`` terms, no longer for good. The samples no glitch check
-    has seen (a stream's first, the first after a gap or a restart: module docstring, Glitches) enter it, and a
-    glitch among them, 2000 sd off, entered the plain mean for good: its sd tens of times the noise for seconds, a
-    later glitch passing beneath the check's bound."""
+    rest); later, a channel whose ``v`` is zero is not bounded.
+
+    The samples no glitch check has seen (a stream's first, the first after a gap or a restart: module docstring,
+    Glitches) enter the estimate; a glitch among them, 2000 sd off, entered the plain mean for good, its sd tens of
+    times the noise for seconds and a later glitch passing beneath the check's bound. Bounded, a glitch's three
+    terms still widen it for a while, by at most ``sqrt(1 + 3 RUNNING_BOUND / n)`` at ``n`` terms, not for good."""
 
     def __init__(self, size):
         self.recent = deque(maxlen=3)
