@@ -82,7 +82,11 @@ the median over its last :data:`GLITCH_WARMUP` samples, ``m_n`` that median for 
 
 A sample whose largest ``|z_j|`` exceeds the bound is a glitch: taken as missing (the windows that would hold it fit
 the samples they hold, as for a gap), counted (``glitch``: a run once, a pair at most twice) and said. Its
-quaternion's sign is not the next sample's reference. :data:`GLITCH_RUN` glitches in a row:
+quaternion's sign is not the next sample's reference. A sample after a glitch that lies at the glitch's offset
+(its residuals ``r_j / sigma_j`` within half the glitch's largest of them) goes on with it, within the bound or
+not: predicted across the glitch, a motion that stepped by a little more than the bound reads within it at the next
+sample, and taken as data the step moved the outputs tens of sd for the filter's window.
+:data:`GLITCH_RUN` glitches in a row:
 
 - whose residuals ``r_j / sigma_j`` share one offset (the last's within half the first's largest of it) are the
   motion's jump (a tracker that re-acquired, a joint re-homed): the motion before them is forgotten and the stream
@@ -692,7 +696,8 @@ class _Rows:
     """What :func:`_step` gives for rows of samples: the published wrench, its covariance (with the offset's,
     (D2)), the contact flag and ``d^2``; the offset and its sd after each row (None without a tracker); the
     payload's wrench ``W_p`` and the rows' own (C3), for tare; the contact wrench ``w_e`` of (C1) in the model's
-    axes and its noise (:meth:`_Parts.noise`), for the tool change's detector (:mod:`fmscal.analysis._tool_change`)."""
+    axes and its noise (:meth:`_Parts.noise`), with the further share of the readings' long-run variance (D6; None
+    where they are white), for the tool change's detector (:mod:`fmscal.analysis._tool_change`)."""
 
     wrench: np.ndarray
     cov: np.ndarray
@@ -704,6 +709,7 @@ class _Rows:
     own: np.ndarray
     w_e: np.ndarray
     noise: np.ndarray
+    long_run: np.ndarray = None
 
 
 def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
@@ -749,7 +755,7 @@ def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
     if output.needs_attitude:
         R = motion.R if motion.R is not None else _pose_attitudes(motion.x, model)
     wrench, cov = output.apply(parts.out_sign * w_e, cov, R)                                 # (C8)
-    return _Rows(wrench, cov, statistic > parts.threshold, statistic, b, b_sd, W_p, own, w_e, noise)
+    return _Rows(wrench, cov, statistic > parts.threshold, statistic, b, b_sd, W_p, own, w_e, noise, parts.long_run)
 
 
 # --- the offset's drift -------------------------------------------------------------------------------------------
@@ -1802,7 +1808,9 @@ class Compensator:
                 self._z_history.pop()
                 self._suspects = [(t1, row1, self._last_z, None)]
                 z = alone
-        if np.isnan(z) or z <= bound:
+        first = self._suspects[0][3] if self._suspects else None
+        goes_on = first is not None and e is not None and np.max(np.abs(e - first)) <= 0.5 * np.max(np.abs(first))
+        if (np.isnan(z) or z <= bound) and not goes_on:      # (a sample at the glitches' offset goes on with them)
             if self._suspects:
                 self._settle()
             self._recent_motion.append((t, row))

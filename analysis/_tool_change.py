@@ -16,14 +16,20 @@ or in the world's.
 **Blocks.** The detector works on means over blocks of :data:`BLOCK` s (``n`` samples): for block ``j``, the
 mean wrench ``r_j``, the mean design ``X_j = [-mean(Y_k), I_6]`` (the ten inertial parameters, then a constant
 wrench: the offset) and the mean's noise from the samples' own (the reading's and the motion's noise of (C3),
-which is independent from sample to sample; the offset's tracker, the calibration's and the payload's
-covariance are left out: they are constant over a window, and the nuisance below carries them)::
+the share independent from sample to sample, ``Cov_noise,k``; the offset's tracker, the calibration's and the
+payload's covariance are left out: they are constant over a window, and the nuisance below carries them), with
+the further share of the readings' long-run variance where their noise is correlated in time (a sensor's filter,
+an average: ``Sigma_lr = S diag(sd^2 (tau - 1)) S^T``, eq. (D6) of :mod:`fmscal.analysis._compensate`; zero for
+white noise)::
 
-    Sigma_j = sum_k Cov_noise,k / n^2,   z_j = L_j^-1 r_j,   A_j = L_j^-1 X_j,   L_j L_j^T = Sigma_j      (T2)
+    Sigma_j = sum_k Cov_noise,k / n^2 + Sigma_lr / n,
+    z_j = L_j^-1 r_j,   A_j = L_j^-1 X_j,   L_j L_j^T = Sigma_j                                     (T2)
 
-The causal filter's noise on the accelerations is correlated over its window; over blocks of 0.1 s and more
-the blocks' scatter is within about 1.3x the stated sd (``benchmarks/tool_change.py --noise`` prints it), and
-the misfit's scale below absorbs it.
+Without ``Sigma_lr`` the blocks' scatter is about ``sqrt(tau)`` times their stated sd: for readings filtered at
+30 Hz and read at 1 kHz (``tau = (1 + a) / (1 - a)``, ``a = exp(-2 pi 30 h)``, about 10.6 samples) the misfit is
+beyond what (T6) allows, and no change is ever declared. The causal filter's noise on the
+accelerations is correlated over its window too; over blocks of 0.1 s and more the blocks' scatter is within about
+1.3x the stated sd (``benchmarks/tool_change.py --noise`` prints it), and the misfit's scale below absorbs it.
 
 **The hypotheses.** For a candidate time ``tau`` (a block's start), the window is :data:`PRE` s before
 ``tau`` (less a guard of :data:`GUARD` s just before it, where a grasp is under way) and every block since; where
@@ -290,6 +296,7 @@ class _Detector:
         #: The newest evaluation: (time, tau_hat's time, Lambda, kappa, Lambda_c or None where (T5) failed).
         self.latest = None
         self._count = 0                                    # rows in the open block
+        self._long_run = None                              # the readings' long-run share, (D6) of _compensate
         self._flags, self._last_flag = 0, None             # samples flagged (C4) in it; the last block flagged
         self._flag_bound = binom.isf(FLAGGED, self.n, false_alarm)
         self.reset()
@@ -313,6 +320,7 @@ class _Detector:
             j = min(m, i + self.n - self._count)
             self._rows.append((t[i:j], rows.w_e[i:j], rows.noise[i:j], motion.x[i:j], motion.a[i:j],
                                None if R is None else R[i:j], w_hat[i:j]))
+            self._long_run = rows.long_run
             self._flags += int(np.count_nonzero(rows.contact[i:j]))
             self._count += j - i
             if self._count >= self.n:
@@ -335,7 +343,8 @@ class _Detector:
         qx = x[:, 3:7] / np.linalg.norm(x[:, 3:7], axis=1, keepdims=True)
         Y = regressor(qx, x[:, 10:13], a[:, 3:], a[:, :3], model.gravity)                    # (T1)
         X = np.concatenate([-Y.mean(axis=0), np.eye(6)], axis=1)
-        L = np.linalg.cholesky(noise.mean(axis=0) / n)                                        # (T2)
+        Sigma = noise.mean(axis=0) if self._long_run is None else noise.mean(axis=0) + self._long_run
+        L = np.linalg.cholesky(Sigma / n)                                                     # (T2)
         A = np.linalg.solve(L, np.concatenate([X, r.mean(axis=0)[:, None]], axis=1))
         A, z = A[:, :16], A[:, 16]
         if len(self._blocks) == self._blocks.maxlen:

@@ -915,6 +915,24 @@ def test_a_motion_that_jumps_goes_on_from_the_jump(glitch_run):
     assert 20 <= len(ref_out) - len(out) <= 40 and stream.withheld["jump"] == len(ref_out) - len(out)
 
 
+@pytest.mark.parametrize("step", [2e-3, 3e-3])
+def test_a_motion_that_steps_a_little_beyond_the_bound_is_a_jump_too(glitch_run, step):
+    """The poses 2 or 3 mm off from 2.5 s on (10-15 sd of their noise): the first sample is beyond the bound, the
+    next, predicted across it, within it but at its offset, and goes on with it (G1): a jump, every output within
+    5 sd, no more contacts than the clean stream's. Before, the step was one or two glitches and then data: outputs
+    tens of sd off, flagged as contact for the filter's window."""
+    run, rng, W = glitch_run
+    _, _, pose, _ = _glitch_streams(run, rng(), "pose")
+    stepped = pose.copy()
+    stepped[2500:, 4] += step
+    ref, ref_out, _ = _pushed(run, W, None, "pose", pose)
+    stream, out, z = _pushed(run, W, None, "pose", stepped)
+    assert stream.events == {"jump": 1} and any("jumped at 2.5 s" in w for w in stream.warnings), stream.warnings
+    assert np.abs(z).max() < 5.0 and sum(o.contact for o in out) <= sum(o.contact for o in ref_out)
+    _, one, _ = _pushed(run, W, None, "pose", stepped, one=True)
+    assert [o.t for o in one] == [o.t for o in out]
+
+
 def test_a_pose_turned_half_a_turn_for_one_sample_is_one_glitch(glitch_run):
     """A pose turned by 180 degrees about an axis for one sample (a tracker confusing a symmetric marker set), at
     two places: two glitches, every output, all within 5 sd. The glitch's quaternion is not the next sample's sign

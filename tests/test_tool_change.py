@@ -6,11 +6,13 @@ Fast tests use a calibration made from the scenario's truth; the slow one holds 
 each (tests/tool_change_rig.py, as benchmarks/tool_change.py runs them), calibrated on another log.
 """
 
+import dataclasses
 from functools import partial
 from multiprocessing import Pool
 
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 
 from fmscal.analysis import Compensator, calibrate, compensate
 from fmscal.analysis.cli import main
@@ -92,6 +94,29 @@ def test_a_contact_and_a_drift_are_not_a_tool_change(grasped):
         c = compensate(cal, touched, causal=causal, track_offset=True)
         assert c.contact[(c.t > 2.1) & (c.t < 3.9)].mean() > 0.99
         assert c.tool_changes == [], [e.describe() for e in c.tool_changes]
+
+
+@pytest.mark.parametrize("causal", [True, False])
+def test_a_grasp_is_declared_on_filtered_readings(causal):
+    """Readings through a first-order low-pass at 30 Hz (their noise's correlation time about 10.6 samples; the
+    calibration's noise model holds it): the blocks' means (T2) take the readings' long-run variance (D6), so the
+    misfit stays the noise's (T6) and the grasp is declared once, within 2 s, its mass within 4 of its sds and 20 g.
+    Taken as white, the blocks' scatter was about 3x their stated sd, the misfit beyond ``MISFIT``: never
+    declared."""
+    scenario = ARM.with_(duration=12.0)
+    log, truth, total = with_grasp(scenario, 4, PART, GRASP_AT)
+    white = scenario.generate(4)[0].w_hat - scenario.generate(4, noise_free=True)[0].w_hat
+    a = np.exp(-2.0 * np.pi * 30.0 * log.dt)
+    filtered, _ = lfilter([np.sqrt(1.0 - a * a)], [1.0, -a], white, axis=0, zi=a * white[:1])     # variance kept
+    log.w_hat = log.w_hat - white + filtered
+    noise = truth.noise
+    cal = dataclasses.replace(_truth(scenario, truth), noise=NoiseSpec(
+        noise.wrench_sd, noise.angle_sd, noise.position_sd, wrench_tau=((1 + a) / (1 - a),) * 6))
+    c = compensate(cal, log, causal=causal)
+    assert len(c.tool_changes) == 1, [e.describe() for e in c.tool_changes]
+    change = c.tool_changes[0]
+    assert GRASP_AT <= change.declared <= GRASP_AT + GRASP_WITHIN and change.misfit <= 4.0
+    assert abs(change.mass_change - PART.mass) < min(0.02, 4 * change.mass_change_sd), change.describe()
 
 
 def test_a_grasp_in_the_streams_first_second():

@@ -233,8 +233,9 @@ def reading_colour(w_hat, dt):
     low, high = G[:, f < 0.125 / dt].mean(axis=1), G[:, f >= 0.25 / dt].mean(axis=1)      # per segment (N3)
     G_lo, G_hi = low.mean(axis=0), high.mean(axis=0)
     floor = np.finfo(float).tiny
-    scatter = np.sqrt(low.var(axis=0, ddof=1) / (count * np.maximum(G_lo, floor) ** 2)
-                      + high.var(axis=0, ddof=1) / (count * np.maximum(G_hi, floor) ** 2))
+    with np.errstate(divide="ignore", invalid="ignore"):       # a dead channel (G zero): not coloured, below
+        scatter = np.sqrt(low.var(axis=0, ddof=1) / (count * np.maximum(G_lo, floor) ** 2)
+                          + high.var(axis=0, ddof=1) / (count * np.maximum(G_hi, floor) ** 2))
     coloured = np.abs(np.log(np.maximum(G_lo, floor) / np.maximum(G_hi, floor))) > WHITENESS_Z * scatter
     variance = G.mean(axis=0).sum(axis=0) * (f[1] - f[0]) + LOW_BAND * G_0                # (N2)
     tau = np.maximum(G_0 / np.maximum(2.0 * dt * variance, floor), 1.0)
