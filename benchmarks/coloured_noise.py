@@ -31,7 +31,9 @@ white (the Compensator before it measured the colour, to the bit).
 
 ``--offset``: the same live Compensator with ``track_offset=True`` (the offset a random walk, eqs. D1-D6 of
 analysis/_compensate.py): per filter, medians over the seeds of the offset's rms z after the first 2 s of output
-(``(b - b_true) / sd(b)`` sample by sample), on the force and on the torque channels, and the output's rms z. The
+(``(b - b_true) / sd(b)`` sample by sample), on the force and on the torque channels, the output's rms z, and the
+inertia's diagonal at the end (the payload file's, a guess where held poses leave it bounded, plus what eq. L1
+learned from the motion). The
 true offset is constant, so the random walk's sd leans wide (the module docstring of analysis/_compensate.py: about
 0.7 expected).
 
@@ -129,7 +131,8 @@ def live(seed, kind, duration=10.0, noise_samples=None, track_offset=False):
     Returns ``(log, stream, outputs, figures)``: the outputs the stream's ``ContactSample`` list; the figures a dict
     of ``z`` (the output's rms z, each component over its stated sd), ``flagged`` (the share of the output flagged;
     no contact anywhere), ``n`` (outputs) and ``first`` (the first output's reading time, s); with ``track_offset``
-    also ``offset_z``: the offset's rms z after the first 2 s of output, per channel (torques first), (6,).
+    also ``offset_z``: the offset's rms z after the first 2 s of output, per channel (torques first), (6,), and
+    ``inertia``: the payload's inertia at the end (the file's, plus what eq. L1 learned), (6,).
     """
     log, truth = coloured_log(seed, kind, duration, EVERYDAY)
     sd = np.asarray(truth.noise.wrench_sd)
@@ -146,6 +149,9 @@ def live(seed, kind, duration=10.0, noise_samples=None, track_offset=False):
         b = np.array([o.offset for o in out])[late]
         sd = np.array([o.offset_sd for o in out])[late]
         figures["offset_z"] = np.sqrt(np.mean(((b - np.asarray(truth.offset)) / sd) ** 2, axis=0))
+        tracker = stream._tracker                        # the inertia learned from the motion (L1), where it is
+        figures["inertia"] = np.asarray(stream.model.payload.inertia, dtype=float) + (
+            tracker.dI if tracker is not None and tracker.k else 0.0)
     return log, stream, out, figures
 
 
@@ -207,13 +213,16 @@ def offset_table(seeds=5, duration=10.0):
     """``--offset``: the live Compensator's offset tracker per filter (:func:`live` with ``track_offset``)."""
     print(f"the live Compensator of a payload file on spatial-arm (S = I) tracking the offset, {duration:g} s at "
           f"1 kHz, {seeds} seeds (medians); the true offset constant\n")
-    print("| noise | offset z rms, forces | offset z rms, torques | output z rms |\n|---|---|---|---|")
+    true = np.asarray(EVERYDAY.payload.inertia, dtype=float)[:3]
+    print("| noise | offset z rms, forces | offset z rms, torques | output z rms | inertia's diagonal at the end, "
+          f"kg m^2 (true {', '.join(f'{v:.2e}' for v in true)}) |\n|---|---|---|---|---|")
     for name, kind in FILTERS.items():
         runs = [live(seed, kind, duration, track_offset=True)[3] for seed in range(seeds)]
         z = np.array([r["offset_z"] for r in runs])
         forces, torques = np.sqrt(np.mean(z[:, 3:] ** 2, axis=1)), np.sqrt(np.mean(z[:, :3] ** 2, axis=1))
+        diagonal = np.median([r["inertia"][:3] for r in runs], axis=0)
         print(f"| {name} | {np.median(forces):.2f} | {np.median(torques):.2f} | "
-              f"{np.median([r['z'] for r in runs]):.2f} |", flush=True)
+              f"{np.median([r['z'] for r in runs]):.2f} | {', '.join(f'{v:.2e}' for v in diagonal)} |", flush=True)
 
 
 if __name__ == "__main__":
