@@ -227,15 +227,11 @@ def test_fewer_readings_take_the_noise_as_white():
 
 
 @pytest.mark.slow
-def test_a_white_stream_is_compensated_as_before(monkeypatch):
+def test_a_white_stream_is_compensated_as_before():
     """White readings: learned from the first NOISE_SAMPLES readings, the Compensator's output is the one it gave
-    before it measured the colour (:data:`BEFORE_WHITE`), the inertia's errors-in-variables correction (eq. L2 of
-    analysis/_compensate.py, which came later and moves the learned inertia) left out; by default its noise is the
-    difference estimate of its first 4002 readings, to the bit, with no correlation time."""
-    import fmscal.analysis._compensate as compensate_module
-    with monkeypatch.context() as patched:
-        patched.setattr(compensate_module, "EIV_EVERY", 2 ** 62)              # (L2) never taken
-        log, stream, out, f = bench.live(0, None, noise_samples=NOISE_SAMPLES)
+    before it measured the colour (:data:`BEFORE_WHITE`); by default its noise is the difference estimate of its first
+    4002 readings, to the bit, with no correlation time."""
+    log, stream, out, f = bench.live(0, None, noise_samples=NOISE_SAMPLES)
     assert stream.noise.white and stream.noise.wrench_sd == tuple(difference_noise(log.w_hat[:NOISE_SAMPLES]))
     w, cov = np.array([o.wrench for o in out]), np.array([o.cov for o in out])
     assert (f["n"], sum(o.contact for o in out)) == (BEFORE_WHITE["n"], BEFORE_WHITE["flagged"])
