@@ -293,11 +293,6 @@ GLITCH_RUN = 3
 #: The predicting samples are on the stream's grid (the prediction's coefficients the grid's) within this fraction of a
 #: step (a stamp's rounding; off it they are fitted at their own times, as the filter's windows are, :data:`GRID_SLIP`).
 GLITCH_SLIP = GRID_SLIP
-#: (L2) of :class:`_OffsetTracker` is taken once every this many updates, for them all, at the last one's noise.
-EIV_EVERY = 10
-#: (L2) of :class:`_OffsetTracker` is skipped where ``I - P_I C`` (the information it takes back against what the
-#: inertia holds) has an eigenvalue at or below this.
-EIV_MARGIN = 0.1
 #: The events :attr:`Compensator.events` counts (module docstring, Stamps and Glitches).
 EVENTS = ("duplicate", "gap", "restart", "glitch", "jump")
 
@@ -610,12 +605,11 @@ class _Parts:
             return np.zeros((self.n, self.n))
         return self.S_inv @ self.cov4[:, self.n, :, self.n] @ self.S_inv.T
 
-    def finish(self, signed, W_p, cov, tracker=None, t=None, Y=None, noisy=None):
+    def finish(self, signed, W_p, cov, tracker=None, t=None, Y=None):
         """(C1), (C4) for rows of signed readings (N, n_w), payload wrenches ``W_p`` and their (C3) ``cov``; with an
-        :class:`_OffsetTracker`, (D1)-(D3), (L1), (L2) sample by sample at times ``t`` (``Y`` the rows' regressor,
-        ``noisy`` their motion's noise ``(A^-1 M (N, n_w, nv), v (nv,) or (N, nv), M or None)``, the intensity
-        fitted first where (D5) asks), ``Cov_total`` the covariance. ``(w_e, cov, d^2, b, sd(b))``, the last two
-        None where the offset is not tracked."""
+        :class:`_OffsetTracker`, (D1)-(D3), (L1) sample by sample at times ``t`` (``Y`` the rows' regressor, the
+        intensity fitted first where (D5) asks), ``Cov_total`` the covariance. ``(w_e, cov, d^2, b, sd(b))``, the
+        last two None where the offset is not tracked."""
         if tracker is None:
             w_e = W_p - (signed - self.b) @ self.S.T
             statistic = np.einsum("ni,ni->n", w_e, np.linalg.solve(cov, w_e[..., None])[..., 0])
@@ -624,15 +618,7 @@ class _Parts:
         if tracker.q2 is None:                                                                 # (D5)
             w_e0 = W_p - (signed - tracker.b) @ self.S.T
             tracker.fit(t, w_e0 if Y_I is None else w_e0 + Y_I @ tracker.dI, cov, Y_I)
-        if Y_I is None:
-            rows = zip(t, signed, W_p, cov)
-        elif noisy is None:
-            rows = zip(t, signed, W_p, cov, Y_I)
-        else:                                                                                  # (L2)
-            A_noise, v, M = noisy
-            B = tracker.regressor_noise(M, A_noise.shape[2])
-            v = np.broadcast_to(np.asarray(v, dtype=float), (len(t), A_noise.shape[2]))
-            rows = zip(t, signed, W_p, cov, Y_I, ((A, vk, B) for A, vk in zip(A_noise, v)))
+        rows = (zip(t, signed, W_p, cov) if Y_I is None else zip(t, signed, W_p, cov, Y_I))
         steps = [tracker.step(*row) for row in rows]
         w_e, total, statistic, b, b_sd = zip(*steps)
         tracked = tracker.tracks_offset
@@ -764,10 +750,7 @@ def _step(parts, output, tracker, t, w_hat, motion, dynamics=None):
     Y = parts.regressor(motion)
     noise = parts.noise(A_inv, motion.accel_var)
     own = parts.covariance(signed, noise, Y)                                                 # (C3), (K2)
-    noisy = None
-    if tracker is not None and tracker.k:               # the motion's noise in the inertia's regressor (L2)
-        noisy = (A_inv, motion.accel_var, None if motion.accel_map is None else motion.accel_map)
-    w_e, cov, statistic, b, b_sd = parts.finish(signed, W_p, own, tracker, t, Y, noisy)      # (C1), (C4), (D), (L1)
+    w_e, cov, statistic, b, b_sd = parts.finish(signed, W_p, own, tracker, t, Y)             # (C1), (C4), (D), (L1)
     R = None
     if output.needs_attitude:
         R = motion.R if motion.R is not None else _pose_attitudes(motion.x, model)
@@ -788,24 +771,6 @@ class _OffsetTracker:
     the sample's regressor (K2)::
 
         w_e = W_p + Y_I dI - S (sigma w_hat - b),    Cov_total = Cov + H P H^T                     (L1)
-
-    ``Y_I`` is built from the sample's angular acceleration, whose noise (the motion's, C3) also moves ``W_p``:
-    the regressor is noisy, and its noise is correlated with the measurement's (errors in variables). Taken as
-    exact, each update pulls the learned inertia towards zero by the share of that noise in the regressor's power
-    (large where the angular acceleration is a noisy attitude differentiated twice), and the torque offset,
-    correlated with the inertia in ``P``, moves with it beyond its sd. The updates the (D3) gate takes are
-    therefore followed by the bias-compensated least squares' correction (an information ``C`` taken back from
-    the inertia, with its mean share ``g``)::
-
-        a_n = M u,  u ~ N(0, diag(v)),   N_I = sum_k u_k B_k,   B_k = Y_I(alpha = (M u_k)_alpha),
-        C = sum_k v_k B_k^T R^-1 B_k,    g = sum_k v_k B_k^T R^-1 (A^-1 M)_k + C dI,
-        P' = (P^-1 - E^T C E)^-1,        theta' = theta + P' E^T g                                  (L2)
-
-    ``M`` the acceleration noise's map and ``v`` its variances (C3), ``R`` the sample's noise (C3, with the
-    readings' long-run share, D6), ``E`` the inertia's rows of ``theta``. ``C`` and ``g`` are expectations, which
-    the motion moves slowly: they are taken once every :data:`EIV_EVERY` updates, for them all, at the last one's
-    noise. It is skipped where ``P'`` would not be positive definite (an eigenvalue of ``P_I C``, the information
-    taken back against what the inertia holds, beyond ``1 -`` :data:`EIV_MARGIN`).
     """
 
     def __init__(self, parts, intensity, P0, shape=None, offset=True, inertia_cov=None):
@@ -820,17 +785,14 @@ class _OffsetTracker:
         if k:
             self.P[n:, n:] = inertia_cov
         self.t = None
-        self._updates = 0                                  # since (L2) was last taken
-        self._noise_regressors = {}                        # (L2)'s B_k per noise map
 
     def _H(self, Y):
         """``H = [S, Y_I]`` (n_w, n + k)."""
         return self.S if not self.k else np.concatenate([self.S, Y], axis=1)
 
-    def step(self, t, signed, W_p, cov, Y=None, noisy=None):
+    def step(self, t, signed, W_p, cov, Y=None):
         """One sample: ``(w_e, Cov_total, d^2, b, sd(b))``, ``w_e`` with the predicted offset (D2), (L1); ``Y``
-        the sample's inertia regressor where the inertia is learned, ``noisy`` its motion's noise
-        ``(A^-1 M (n_w, nv), v (nv,), (k, B_k))`` for (L2) (:meth:`regressor_noise`; None: no correction)."""
+        the sample's inertia regressor where the inertia is learned."""
         n = self.n
         if self.t is not None and self.tracks_offset:
             self.P[:n, :n] += np.diag(self.q2 * max(t - self.t, 0.0))                          # (D1)
@@ -847,56 +809,13 @@ class _OffsetTracker:
         if statistic <= self.parts.threshold:                                                  # (D3)
             long_run = self.parts.long_run
             K = solved[:, 1:].T if long_run is None else np.linalg.solve(total + long_run, HP).T      # (D6)
-            shift = K @ w_e
-            self.b, self.dI = self.b - shift[:n], self.dI - shift[n:]
+            theta = np.r_[self.b, self.dI] - K @ w_e
+            self.b, self.dI = theta[:n], theta[n:]
             self.P = self.P - K @ HP
             self.P = 0.5 * (self.P + self.P.T)
-            if self.k and noisy is not None:
-                self._updates += 1
-                if self._updates >= EIV_EVERY:                                                 # (L2)
-                    self._compensate(cov if long_run is None else cov + long_run, *noisy, self._updates)
-                    self._updates = 0
         if not self.tracks_offset:
             return w_e, total, statistic, None, None
         return w_e, total, statistic, self.b.copy(), np.sqrt(np.maximum(np.diag(self.P)[:n], 0.0))
-
-    def regressor_noise(self, M, nv):
-        """``B_k`` of (L2) for the noise's components that move the angular acceleration: ``(k, B)``, ``k`` their
-        indices and ``B`` (len(k), n_w, 6) the inertia's columns of the regressor at the angular acceleration each
-        moves (``M``'s angular rows; None: the identity), kept per ``M``."""
-        key = None if M is None else np.asarray(M, dtype=float).tobytes()
-        cache = self._noise_regressors
-        if key not in cache:
-            alpha = (np.eye(nv) if M is None else np.asarray(M, dtype=float))[3:6].T           # (nv, 3)
-            k = np.flatnonzero(np.abs(alpha).max(axis=1) > 0)
-            zero = np.zeros((len(k), 3))
-            B = regressor(np.tile([1.0, 0.0, 0.0, 0.0], (len(k), 1)), zero, alpha[k], zero, (0.0, 0.0, 0.0))
-            cache[key] = (k, np.ascontiguousarray(B[:, :, 4:]))
-            if len(cache) > 64:
-                cache.pop(next(iter(cache)))
-        return cache[key]
-
-    def _compensate(self, R, A_noise, v, noise_regressor, updates=1):
-        """(L2) for the last ``updates`` updates, at this sample's noise (an expectation, which the motion moves
-        slowly): the errors in variables' information taken back from the inertia, and its mean share's
-        correction; skipped where it would leave ``P`` not positive definite."""
-        n, (k, B) = self.n, noise_regressor
-        m, n_w = len(k), len(R)
-        if not m:
-            return
-        v = v[k]
-        RB = np.linalg.solve(R, B.transpose(1, 0, 2).reshape(n_w, 6 * m))                   # R^-1 B_k, side by side
-        vB = (B * (updates * v)[:, None, None]).transpose(1, 0, 2).reshape(n_w, 6 * m)
-        RB = RB.reshape(n_w, m, 6)
-        C = np.einsum("ika,ikb->ab", vB.reshape(n_w, m, 6), RB)                              # sum_k v_k B_k^T R^-1 B_k
-        g = np.einsum("ika,ik->a", RB, A_noise[:, k] * (updates * v)) + C @ self.dI
-        PC = self.P[n:, n:] @ C                 # its eigenvalues those of G^T P_I G (C = G G^T): real, >= 0
-        if np.trace(PC) >= 1.0 - EIV_MARGIN and np.linalg.eigvals(PC).real.max() >= 1.0 - EIV_MARGIN:
-            return
-        P = self.P + (self.P[:, n:] @ C) @ np.linalg.solve(np.eye(6) - PC, self.P[n:, :])   # Woodbury: P'
-        self.P = 0.5 * (P + P.T)
-        shift = self.P[:, n:] @ g
-        self.b, self.dI = self.b + shift[:n], self.dI + shift[n:]
 
     def tare(self, b, P):
         """Restart from the offset ``b`` of covariance ``P`` (D4); a learned inertia kept."""
