@@ -25,11 +25,17 @@ samples the node's resident memory (``/proc/PID/status``, VmRSS) every 5 s. Prin
   leak grows steadily; a queue's or buffer's high-water mark steps up and stays).
 
 The machine's load is not controlled. About ``--minutes`` plus a minute of setup per source. ``--json`` prints
-the figures as one JSON object instead.
+the figures as one JSON object instead. ``--depth`` sets the node's ``queue_depth`` (default :data:`DEPTH`).
+
+``--stalls S1 S2 ...`` measures what a stalled node costs in memory instead: for each source, the node is fed the
+clean replay and stopped (SIGSTOP) for each ``S`` seconds in turn, 10 s apart, its resident memory printed before
+each stop and 10 s after it resumes (the readings queued meanwhile taken and compensated).
 """
 
 import argparse
 import json
+import os
+import signal
 import sys
 import tempfile
 import threading
@@ -47,6 +53,8 @@ from ros2_rig import (Listener, domain_id, node_log, running_node, sender_result
 
 #: Every unflagged output within this many sd of the truth.
 BOUND = 5.0
+#: The resident memory's rise between two samples (5 s apart) printed as a step, MB.
+MEMORY_STEP = 2.0
 #: The node's input queues (deep: a loaded machine's pauses lose nothing; the overload is a test's).
 DEPTH = 50000
 
@@ -85,7 +93,38 @@ def rss_mb(pid):
     return None
 
 
-def soak(source, minutes, seed):
+def stalls(source, seconds, depth=DEPTH, seed=0):
+    """The node's resident memory around stops of ``seconds`` (each in turn, SIGSTOP then SIGCONT, 10 s apart) on the
+    clean replay of ``source``: a list of ``(stop s, MB before, MB 10 s after)``."""
+    domain = domain_id(f"stalls-{source}-{seed}")
+    duration = 20.0 + 12.0 * len(seconds)
+    plan = dict(domain=domain, source=source, rate=1000.0, duration=duration, seed=seed, faults=[])
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        cal = tool_calibration(Path(tmp) / "cal.json")
+        with running_node(domain, f"calibration:={cal}", "qos:=reliable", f"queue_depth:={depth}",
+                          *source_parameters(source)) as proc:
+            listener = Listener(domain)
+            try:
+                listener.wait_for_node(proc)
+                sender = start_sender(plan)
+                time.sleep(10.0)
+                for s in seconds:
+                    before = rss_mb(proc.pid)
+                    os.kill(proc.pid, signal.SIGSTOP)
+                    try:
+                        time.sleep(s)
+                    finally:
+                        os.kill(proc.pid, signal.SIGCONT)
+                    time.sleep(10.0)
+                    out.append((s, before, rss_mb(proc.pid)))
+                sender_result(sender, duration + 120)
+            finally:
+                listener.close()
+    return out
+
+
+def soak(source, minutes, seed, depth=DEPTH):
     """One source's soak; a dict of its figures."""
     duration = 60.0 * minutes
     plan_faults = faults(duration, np.random.default_rng(seed))
@@ -93,13 +132,15 @@ def soak(source, minutes, seed):
     with tempfile.TemporaryDirectory() as tmp:
         cal = tool_calibration(Path(tmp) / "cal.json")
         plan = dict(domain=domain, source=source, rate=1000.0, duration=duration, seed=seed, faults=plan_faults)
-        with running_node(domain, f"calibration:={cal}", "qos:=reliable", f"queue_depth:={DEPTH}",
+        with running_node(domain, f"calibration:={cal}", "qos:=reliable", f"queue_depth:={depth}",
                           *source_parameters(source)) as proc:
             listener = Listener(domain)
             memory, stop = [], threading.Event()
 
+            begun_wall = [None]
+
             def sample():
-                begun = time.monotonic()
+                begun, begun_wall[0] = time.monotonic(), time.time()
                 while not stop.wait(5.0):
                     memory.append((time.monotonic() - begun, rss_mb(proc.pid)))
             try:
@@ -125,6 +166,7 @@ def soak(source, minutes, seed):
                 status = listener.status()
                 t, wrench, sd, flagged = listener.outputs(epoch)
                 contact = listener.contact_flags()
+                behind = _behind_said(listener, begun_wall[0])
             finally:
                 stop.set()
                 listener.close()
@@ -155,8 +197,33 @@ def soak(source, minutes, seed):
                 withheld_by_cause={k[len("withheld_"):]: int(v) for k, v in status.items()
                                    if k.startswith("withheld_") and int(v)},
                 beyond=_beyond(t[beyond], plan_faults),
+                memory_steps=[dict(t=round(s1, 1), mb=round(m1 - m0, 1))
+                              for (_, m0), (s1, m1) in zip(memory, memory[1:])
+                              if m0 is not None and m1 is not None and m1 - m0 > MEMORY_STEP],
+                behind=behind,
                 contact_runs=_beyond(t[(worst > BOUND) & ~flagged & contact], plan_faults),
                 log_tail=None if alive else log[-2000:])
+
+
+def _behind_said(listener, begun, most=8):
+    """The node's liveness diagnostics that said "behind" (its compensation late; the first ``most`` in runs 1 s
+    apart): their time, s from the memory sampler's start, the backlog and the message."""
+    out = []
+    for d in listener.diagnostics:
+        live = [s for s in d.status if s.name.endswith(": compensation")]
+        if not live or not live[0].message.startswith("behind"):
+            continue
+        at = d.header.stamp.sec + 1e-9 * d.header.stamp.nanosec - (begun or 0.0)
+        if out and at - out[-1]["t_last"] < 1.5:
+            out[-1]["t_last"] = at
+            continue
+        if len(out) == most:
+            break
+        values = {v.key: v.value for v in live[0].values}
+        out.append(dict(t=round(at, 1), t_last=at, backlog=values.get("backlog"), message=live[0].message[:160]))
+    for o in out:
+        o["t_last"] = round(o["t_last"], 1)
+    return out
 
 
 def _beyond(times, plan_faults, most=8):
@@ -187,9 +254,18 @@ def main():
     parser.add_argument("--minutes", type=float, default=10.0)
     parser.add_argument("--sources", nargs="+", default=["pose", "joints", "imu"], choices=["pose", "joints", "imu"])
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--depth", type=int, default=DEPTH, help=f"the node's queue_depth (default {DEPTH})")
+    parser.add_argument("--stalls", type=float, nargs="+", metavar="S",
+                        help="instead of the soak: the node stopped for each S seconds, its memory around each stop")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    results = [soak(source, args.minutes, args.seed + k) for k, source in enumerate(args.sources)]
+    if args.stalls:
+        for k, source in enumerate(args.sources):
+            for s, before, after in stalls(source, args.stalls, args.depth, args.seed + k):
+                print(f"{source}, queue_depth {args.depth}: stopped {s:g} s, resident memory {_mb(before)} before, "
+                      f"{_mb(after)} 10 s after ({_mb(after - before)} more)")
+        return
+    results = [soak(source, args.minutes, args.seed + k, args.depth) for k, source in enumerate(args.sources)]
     if args.json:
         print(json.dumps(results))
         return
@@ -204,6 +280,10 @@ def main():
               f"{r['lost']}; resident memory {_mb(r['rss_minute2_mb'])} at minute 2, {_mb(r['rss_end_mb'])} at the "
               f"end (growth {growth})")
         print(f"  resident memory each minute, MB: {r['rss_by_minute_mb']}")
+        print(f"  its steps beyond {MEMORY_STEP:g} MB in 5 s: " + (", ".join(f"{m['mb']} MB by {m['t']} s"
+                                                                   for m in r["memory_steps"]) or "none"))
+        for b in r["behind"]:
+            print(f"  behind from {b['t']} to {b['t_last']} s (backlog {b['backlog']}): {b['message']}")
         print(f"  withheld by cause: {r['withheld_by_cause']}; flagged contact {r['contact']} (the contact "
               f"test's false alarms; {r['contact_beyond']} of them beyond {BOUND:g} sd)")
         for b in r["beyond"]:
