@@ -293,6 +293,9 @@ GLITCH_RUN = 3
 #: The predicting samples are on the stream's grid (the prediction's coefficients the grid's) within this fraction of a
 #: step (a stamp's rounding; off it they are fitted at their own times, as the filter's windows are, :data:`GRID_SLIP`).
 GLITCH_SLIP = GRID_SLIP
+#: The most samples the causal filter's window (or delay) may span: a ``dt`` far below the stream's step (given in
+#: another unit) would otherwise ask for memory by the gigabyte.
+WINDOW_SAMPLES = 100_000
 #: The events :attr:`Compensator.events` counts (module docstring, Stamps and Glitches).
 EVENTS = ("duplicate", "gap", "restart", "glitch", "jump")
 
@@ -986,6 +989,9 @@ def _causal_settings(window, delay, order, dt, latency):
             raise CompensationError(f"{name} must be a non-negative number of seconds; got {value!r}")
     if not (isinstance(order, int) and 2 <= order <= 7):
         raise CompensationError(f"order must be an integer from 2 to 7 (a second derivative); got {order!r}")
+    if window / dt > WINDOW_SAMPLES or delay / dt > WINDOW_SAMPLES:
+        raise CompensationError(f"window {window:g} s and delay {delay:g} s are {window / dt:.3g} and "
+                                f"{delay / dt:.3g} samples at dt = {dt:g} s: at most {WINDOW_SAMPLES} (dt in s?)")
     k = int(round(window / dt))
     if k < order + 3:
         raise CompensationError(f"window {window:g} s is {k} samples at dt = {dt:g} s; the causal filter of degree "
@@ -1182,6 +1188,41 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
                         offset=rows.offset, offset_sd=rows.offset_sd, frame=frame, point=output.point,
                         drift_intensity=None if tracker is None else tracker.intensity, tool_changes=changes,
                         tool_change=counts)
+
+
+def _stamps(t, rows):
+    """A push's time ``t`` (``rows`` None: one number) or a block's times (1-D), checked: finite seconds, or a
+    one-line :class:`CompensationError` before the stream takes anything."""
+    if rows is None:
+        if isinstance(t, (bool, np.bool_)) or np.ndim(t) != 0 or np.iscomplexobj(t):
+            raise CompensationError(f"t must be a number of seconds; got {t!r}"[:200])
+        try:
+            value = float(t)
+        except (TypeError, ValueError):
+            raise CompensationError(f"t must be a number of seconds; got {t!r}"[:200]) from None
+        if not np.isfinite(value):
+            raise CompensationError(f"t must be a finite number of seconds; got {value!r}")
+        return value
+    try:
+        values = np.asarray(t, dtype=float)
+    except (TypeError, ValueError):
+        raise CompensationError(f"t must be numbers of seconds; got {t!r}"[:200]) from None
+    if values.ndim != 1 or np.iscomplexobj(t):
+        raise CompensationError(f"t must be one column of seconds; got shape {values.shape}")
+    if not np.isfinite(values).all():
+        r = int(np.argmax(~np.isfinite(values)))
+        raise CompensationError(f"t must be finite seconds: row {r} is {float(values[r])!r}")
+    return values
+
+
+def _readings(w_hat):
+    """Raw readings as real floats, or a one-line :class:`CompensationError`."""
+    if np.iscomplexobj(w_hat):
+        raise CompensationError("w_hat must be real numbers; got complex ones")
+    try:
+        return np.asarray(w_hat, dtype=float)
+    except (TypeError, ValueError):
+        raise CompensationError(f"w_hat must be numbers; got {w_hat!r}"[:200]) from None
 
 
 def _streamed(stream, out, direction, warnings):
@@ -1404,11 +1445,12 @@ class Compensator:
         -------
         ContactSample or None
         """
-        w_hat = np.asarray(w_hat, dtype=float)
+        t = _stamps(t, None)
+        w_hat = _readings(w_hat)
         if w_hat.shape != (self._parts.n,) or not np.isfinite(w_hat).all():
             raise CompensationError(f"w_hat must be {self._parts.n} finite numbers; got {w_hat!r}")
         channels, extras = self.motion.samples(self._given(pose, joints, imu), 1, self.model)
-        return self._one(float(t), w_hat, channels[0], None if extras is None else extras[0])
+        return self._one(t, w_hat, channels[0], None if extras is None else extras[0])
 
     def push_many(self, t, w_hat, pose=None, *, joints=None, imu=None):
         """:meth:`push` over rows, vectorised: the same samples, for a block that came together (a backlog).
@@ -1433,11 +1475,14 @@ class Compensator:
         list of ContactSample
             The samples :meth:`push` returns, Nones left out, oldest first.
         """
-        t = np.asarray(t, dtype=float).ravel()
-        w_hat = np.asarray(w_hat, dtype=float)
-        if w_hat.shape != (len(t), self._parts.n) or not np.isfinite(w_hat).all():
+        t = _stamps(t, "rows")
+        w_hat = _readings(w_hat)
+        if w_hat.shape != (len(t), self._parts.n):
             raise CompensationError(f"w_hat must be {len(t)} rows of {self._parts.n} finite numbers; got shape "
                                     f"{w_hat.shape}")
+        if not np.isfinite(w_hat).all():
+            raise CompensationError(f"w_hat must be finite: row {int(np.argmax(~np.isfinite(w_hat).all(axis=1)))} "
+                                    "is not")
         channels, extras = self.motion.samples(self._given(pose, joints, imu), len(t), self.model)
         present = np.isfinite(channels).all(axis=1)
         out = []

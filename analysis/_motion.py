@@ -90,8 +90,8 @@ from fmscal.plant import Log
 from fmscal.plant.io import (AttitudeLog, ImuLog, JointLog, PoseTable, RobotKinematics, check_imu_units,
                              difference_noise, estimate_noise, wrench_noise)
 from fmscal.plant.numerics import FmscalError
-from fmscal.plant.physics import (ORDER, NoiseSpec, SpatialModel, edge, quaternion_multiply, rotation_matrices,
-                                  rotation_matrix, sign_continuous, smoothed_state, spatial_motion)
+from fmscal.plant.physics import (ORDER, QUATERNION_TOLERANCE, NoiseSpec, SpatialModel, edge, quaternion_multiply,
+                                  rotation_matrices, rotation_matrix, sign_continuous, smoothed_state, spatial_motion)
 from fmscal.observers.batch import smoothed_channels
 
 from ._calibrate import log_model_class
@@ -480,6 +480,15 @@ class PoseMotion(_Source):
             return np.full((m, model.n_pose), np.nan), None
         pose = _rows(value, m, model.n_pose, "pose")
         finite = np.isfinite(pose).all(axis=1)
+        turn = self.quaternion(model)
+        if turn is not None:             # a tracker that lost its target sends no pose (NaN), not a zero quaternion
+            norm = np.linalg.norm(pose[:, turn], axis=1)
+            bad = finite & (np.abs(norm - 1) > QUATERNION_TOLERANCE)
+            if bad.any():
+                r = int(np.argmax(bad))
+                raise MotionError(f"{'the pose' if m == 1 else f'pose row {r}'}: its quaternion (qw, qx, qy, qz) "
+                                  f"has norm {norm[r]:.4g}, not 1 within {QUATERNION_TOLERANCE:g}; a pose not "
+                                  "measured is None or NaN")
         return (pose if finite.all() else np.where(finite[:, None], pose, np.nan)), None
 
     def read_out(self, extras, rows, i0, k):

@@ -153,6 +153,62 @@ def test_refusals(arm):
         compensate(cal, log, payload=get_scenario("paper").generate(0)[1].payload)
 
 
+def test_a_stream_refuses_bad_stamps_poses_and_steps_before_taking_them(arm):
+    """A hostile review's cases, each a one-line CompensationError before the stream takes anything: a zero
+    quaternion (a tracker before it locks: the outputs were NaN, unflagged, where a stream's first samples are not
+    glitch-checked), a pose off unit norm, in ``push`` and in a ``push_many`` block (its row named); a time NaN,
+    infinite, None, an array or a bool (a ValueError, OverflowError or TypeError before, ``push_many`` left half
+    done); complex readings; a ``dt`` in another unit that would span the window with 6e10 samples (a MemoryError).
+    A pose not measured is still NaN or None."""
+    scenario, log, truth, cal = arm
+    stream = Compensator(cal, log.dt, noise=truth.noise)
+    zero = log.pose[0].copy()
+    zero[:4] = 0.0
+    with pytest.raises(FmscalError, match=r"^the pose: its quaternion \(qw, qx, qy, qz\) has norm 0, not 1 within"):
+        stream.push(log.t[0], log.w_hat[0], zero)
+    poses = log.pose[:300].copy()
+    poses[120, :4] *= 1.01
+    with pytest.raises(FmscalError, match=r"^pose row 120: its quaternion \(qw, qx, qy, qz\) has norm 1.01"):
+        stream.push_many(log.t[:300], log.w_hat[:300], poses)
+    for t in (np.nan, np.inf, None, np.array([0.0]), True, 1j):
+        with pytest.raises(FmscalError, match=r"^t must be a (finite )?number of seconds; got"):
+            stream.push(t, log.w_hat[0], log.pose[0])
+    stamps = log.t[:300].copy()
+    stamps[200] = np.nan
+    with pytest.raises(FmscalError, match=r"^t must be finite seconds: row 200 is nan"):
+        stream.push_many(stamps, log.w_hat[:300], log.pose[:300])
+    bad = log.w_hat[:300].copy()
+    bad[7, 2] = np.nan
+    with pytest.raises(FmscalError, match=r"^w_hat must be finite: row 7 is not"):
+        stream.push_many(log.t[:300], bad, log.pose[:300])
+    with pytest.raises(FmscalError, match=r"^w_hat must be real numbers"):
+        stream.push(log.t[0], log.w_hat[0] + 1j, log.pose[0])
+    assert not stream.events and stream._t is None                     # nothing taken by any of the above
+    assert stream.push(log.t[0], log.w_hat[0], None) is None and stream.push(log.t[1], log.w_hat[1], np.nan * zero) \
+        is None
+    with pytest.raises(FmscalError, match=r"^window 0.06 s and delay 0.03 s are 6e\+10 and 3e\+10 samples at "
+                                          r"dt = 1e-12 s: at most 100000 \(dt in s\?\)"):
+        Compensator(cal, 1e-12, noise=truth.noise)
+
+
+def test_cli_compensates_a_table_of_held_poses(tmp_path, capsys):
+    """``fmscal compensate PAYLOAD TABLE`` on a pose table of quaternions (``simulate --poses``'s format), the
+    everyday job's check: one output per held pose, none a contact. It asked for a log's columns (t, x, y, z), where
+    a joint-angle table with ``--urdf`` and the library took it (a hostile review's case)."""
+    table = tmp_path / "p12.csv"
+    assert main(["simulate", "--scenario", "spatial-arm", "--poses", "12", "--seed", "1", "--out", str(table)]) == 0
+    lines = table.read_text().splitlines()
+    (tmp_path / "id.csv").write_text("\n".join(lines[:9]) + "\n")
+    (tmp_path / "check.csv").write_text("\n".join([lines[0]] + lines[9:]) + "\n")
+    assert main(["identify-payload", str(tmp_path / "id.csv"), "--save", str(tmp_path / "tool.json")]) == 0
+    capsys.readouterr()
+    assert main(["compensate", str(tmp_path / "tool.json"), str(tmp_path / "check.csv"), "--out",
+                 str(tmp_path / "c.csv")]) == 0
+    assert "4 wrenches" in capsys.readouterr().out
+    rows = np.loadtxt(tmp_path / "c.csv", delimiter=",", skiprows=1)
+    assert rows.shape == (4, 8) and not rows[:, 7].any()
+
+
 def test_cli(arm, tmp_path, capsys):
     """fmscal compensate writes t, the wrench's columns and contact; --payload replaces the tool (one without an
     inertia bounded and learned, said); bad input is one line and exit 2."""

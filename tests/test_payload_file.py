@@ -247,7 +247,10 @@ BAD = [
     ("gains", [1.0, 1.0, 1.0, 1.0, 1.0], "gains must be 6 finite number(s) or null"),
     ("gains", [1.0, 1.0, 1.0, 1.0, 1.0, -1.0], "gains must be positive"),
     ("gravity", None, "gravity must be 3 finite number(s)"),
-    ("gravity", [0.0, 0.0, 0.0], "gravity must not be zero"),
+    ("gravity", [0.0, 0.0, 0.0], "gravity: gravity's size is 0, not Earth's 9.81 m/s^2"),
+    ("gravity", [0.0, 0.0, -9810.0], "gravity: gravity's size is 9810, not Earth's 9.81 m/s^2: in mm/s^2? give "
+                                     "gravity in m/s^2"),
+    ("gravity", [0.0, 0.0, -1.0], "gravity: gravity's size is 1, not Earth's 9.81 m/s^2: in g (multiples of 9.81)?"),
     ("mounting", [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]], "mounting must be a rotation matrix"),
     ("mounting", [[1.1, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], "mounting must be a rotation matrix"),
     ("inertia_note", None, "inertia_note must say why the inertia is null"),

@@ -151,6 +151,13 @@ def test_a_table_round_trips_and_bad_tables_are_one_line(tmp_path):
     bad.write_text("\n".join(lines) + "\n")
     with pytest.raises(LogError, match="row 2 has norm"):
         read_pose_table(bad)
+    lines = path.read_text().splitlines()                 # one cell 1e300 (a hostile review's: an SVD's traceback)
+    cells = lines[3].split(",")
+    cells[8] = "1e300"
+    lines[3] = ",".join(cells)
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(LogError, match=r"^bad.csv: column fy holds 1e\+300 at row 3; values beyond 1e\+09 are not"):
+        read_pose_table(bad)
 
 
 @pytest.mark.slow

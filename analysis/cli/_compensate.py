@@ -144,6 +144,8 @@ def _motion_log(args):
                 raise CliError(f"--imu-rotation takes 4 numbers (a unit quaternion QW QX QY QZ) or 9 (a rotation "
                                f"matrix by rows); got {len(values)}")
         return read_imu_log(args.log), ImuMotion(rotation, args.imu_lever_arm, latency=latency)
+    if header and "t" not in header:                 # held poses (a pose table): one output per row
+        return read_data(args.log), None
     return read_log(args.log), None
 
 

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmscal.plant.io import READINGS, atomic_write_text, not_a_file
+from fmscal.plant.io import READINGS, atomic_write_text, check_gravity, not_a_file
 from fmscal.plant.numerics import FmscalError, numbers_only
 from fmscal.plant.physics import GRAVITY, INERTIA_NAMES, inertia_matrix
 
@@ -489,6 +489,13 @@ class _Reader:
     def fail(self, message):
         raise PayloadFileError(f"{self.name}: {message}")
 
+    def gravity_size(self, gravity):
+        """Gravity's size Earth's, in m/s^2 (:func:`fmscal.plant.io.check_gravity`: a unit named), or :meth:`fail`."""
+        try:
+            check_gravity(gravity)
+        except FmscalError as err:
+            self.fail(f"gravity: {err}")
+
     def numbers(self, key, shape, optional=False, nonnegative=False, positive=False):
         """``data[key]`` as finite numbers of ``shape`` (None for null where ``optional``)."""
         value = self.data.get(key)
@@ -521,6 +528,8 @@ class _Reader:
         """A ``/1`` file: mass, centre of mass (``rho`` in files written before), inertia, gravity where estimated."""
         legacy = "com" not in self.data and "rho" in self.data
         gravity = self.numbers("gravity", (3,), True)
+        if gravity is not None:
+            self.gravity_size(gravity)
         return cls(mass=mass, mass_std=float(self.numbers("mass_std", ())),
                    com=self.numbers("rho" if legacy else "com", (3,)),
                    com_std=self.numbers("rho_std" if legacy else "com_std", (3,)),
@@ -541,8 +550,7 @@ class _Reader:
         if inertia is None and not (isinstance(note, str) and note):
             self.fail("inertia_note must say why the inertia is null")
         gravity = n("gravity", (3,))
-        if not np.linalg.norm(gravity) > 0:
-            self.fail("gravity must not be zero")
+        self.gravity_size(gravity)
         gravity_std_deg = n("gravity_std_deg", (), True, nonnegative=True)
         M = n("mounting", (3, 3))
         if not (np.allclose(M @ M.T, np.eye(3), atol=1e-6) and np.linalg.det(M) > 0):

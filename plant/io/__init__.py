@@ -8,7 +8,7 @@ from ._log import (Log, LogError, Truth, read_log, read_readings, read_truth, lo
     SPATIAL_COLUMNS, READING_COLUMNS, QUATERNION_TOLERANCE, unit_quaternions, MIN_SAMPLES)
 from ._noise import (estimate_noise, difference_noise, wrench_noise, reading_colour, colour_samples)
 from ._units import (implied_scale, diagnose_units, UnitFinding, COUNTS)
-from ._spatial_units import (UnitsError, check_spatial_log_units, check_poses_move,
+from ._spatial_units import (UnitsError, check_spatial_log_units, check_poses_move, check_gravity,
     check_table_units, check_imu_units, EARTH_G, MAX_WRIST_MASS, MAX_LEVER_ARM, MAX_ACCELERATION, MAX_STEP)
 from ._calibration import (json_ready, Calibration, CalibrationFileError, NotSavedError, file_sha256, reading_sign,
     FORMAT, READINGS)
@@ -25,7 +25,7 @@ from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, P
 __all__ = ["json_ready", "write_bag", "write_tf_bag", "Log", "LogError", "Truth", "read_log", "read_readings",
            "read_truth", "log_kind", "unit_quaternions", "estimate_noise", "difference_noise", "wrench_noise",
            "reading_colour", "colour_samples", "diagnose_units", "UnitFinding",
-           "UnitsError", "check_spatial_log_units", "check_poses_move",
+           "UnitsError", "check_spatial_log_units", "check_poses_move", "check_gravity",
            "check_table_units", "check_imu_units",
            "Calibration", "CalibrationFileError", "NotSavedError", "file_sha256", "reading_sign", "PoseTable",
            "read_pose_table",

@@ -29,7 +29,7 @@ import numpy as np
 from fmscal.plant.numerics import FmscalError, as_finite_array
 from fmscal.plant.physics import GRAVITY, SpatialPayload, rotation_matrix
 from ._files import atomic_write_text
-from ._log import LogError, _as_path, _echo, _read_csv, csv_header, unit_quaternions
+from ._log import LogError, _as_path, _check_magnitudes, _echo, _read_csv, csv_header, unit_quaternions
 
 __all__ = ["PoseTable", "read_pose_table", "write_pose_table", "is_pose_table", "simulate_table",
            "AttitudeLog", "read_attitude_log", "is_attitude_log", "held_table", "simulate_attitude_log",
@@ -76,6 +76,7 @@ class PoseTable:
     def __post_init__(self):
         self.q = as_finite_array(self.q, (-1, 4), "q")
         self.w_hat = as_finite_array(self.w_hat, (len(self.q), 6), "w_hat")
+        _check_magnitudes(self.name, zip(TABLE_COLUMNS[4:], self.w_hat.T))
         if len(self.q) < MIN_POSES:
             raise LogError(f"{self.name}: a pose table needs at least {MIN_POSES} poses for its ten unknowns "
                            f"(mass, centre of mass, offset); got {len(self.q)}")
@@ -211,6 +212,7 @@ class AttitudeLog:
         self.t = as_finite_array(self.t, (-1,), "t")
         self.q = as_finite_array(self.q, (len(self.t), 4), "q")
         self.w_hat = as_finite_array(self.w_hat, (len(self.t), 6), "w_hat")
+        _check_magnitudes(self.name, [("t", self.t), *zip(TABLE_COLUMNS[4:], self.w_hat.T)])
         steps = np.diff(self.t)
         if np.any(steps <= 0):
             raise LogError(f"{self.name}: time is not strictly increasing at row {int(np.argmax(steps <= 0)) + 2}")
