@@ -296,6 +296,9 @@ GLITCH_SLIP = GRID_SLIP
 #: The most samples the causal filter's window (or delay) may span: a ``dt`` far below the stream's step (given in
 #: another unit) would otherwise ask for memory by the gigabyte.
 WINDOW_SAMPLES = 100_000
+#: (L3): a stream learns the inertia (L1) from one sample in this many causal windows (samples whose windows share
+#: no sample, and so none of the motion's noise).
+INERTIA_SPACING = 1.0
 #: The events :attr:`Compensator.events` counts (module docstring, Stamps and Glitches).
 EVENTS = ("duplicate", "gap", "restart", "glitch", "jump")
 
@@ -774,9 +777,22 @@ class _OffsetTracker:
     the sample's regressor (K2)::
 
         w_e = W_p + Y_I dI - S (sigma w_hat - b),    Cov_total = Cov + H P H^T                     (L1)
+
+    ``Y_I`` holds the motion's angular acceleration and rates, fitted from a window of noisy samples: successive
+    samples' windows share most of their samples, and so their motion's noise; taken as independent, the inertia
+    would be learned as if from far more data than it is, its covariance too small, and the offset, correlated
+    with it in ``P``, would move beyond its sd with it. A stream's tracker (:class:`Compensator`) therefore learns
+    the inertia from one sample in each ``spacing`` s (the causal filter's window: samples of windows that share
+    none); the samples between update the offset alone, the inertia's uncertainty considered (a Schmidt update,
+    its gain's inertia rows zero, ``P`` in Joseph form with the noise the gain took)::
+
+        K_I = 0,    P' = (I - K H) P (I - K H)^T + K (Cov + Sigma_long) K^T                         (L3)
+
+    ``spacing`` 0 (:func:`compensate`, offline): every sample teaches the inertia (there, learned once in the
+    smoothing's 0.2 s, it fitted the example rig's torques measurably worse).
     """
 
-    def __init__(self, parts, intensity, P0, shape=None, offset=True, inertia_cov=None):
+    def __init__(self, parts, intensity, P0, shape=None, offset=True, inertia_cov=None, spacing=0.0):
         n, k = parts.n, (0 if inertia_cov is None else 6)
         self.parts, self.S, self.n, self.k, self.tracks_offset = parts, parts.S, n, k, offset
         self.q2 = (None if intensity is None else np.square(intensity)) if offset else np.zeros(n)
@@ -788,6 +804,17 @@ class _OffsetTracker:
         if k:
             self.P[n:, n:] = inertia_cov
         self.t = None
+        self.spacing, self._next = float(spacing), None           # (L3): the next time the inertia is learned
+
+    def _learns(self, t):
+        """(L3): whether the sample at ``t`` teaches the inertia (the first at or after the next learning time, the
+        time then moved ``spacing`` on; a time stepping back starts afresh)."""
+        if not self.k:
+            return False
+        if self._next is None or t >= self._next - 1e-9 * self.spacing or t < self._next - 2 * self.spacing:
+            self._next = t + self.spacing
+            return True
+        return False
 
     def _H(self, Y):
         """``H = [S, Y_I]`` (n_w, n + k)."""
@@ -809,12 +836,18 @@ class _OffsetTracker:
         total = 0.5 * (total + total.T)
         solved = np.linalg.solve(total, np.c_[w_e, HP])                                        # (D2)
         statistic = float(w_e @ solved[:, 0])
+        learns = self._learns(t)
         if statistic <= self.parts.threshold:                                                  # (D3)
             long_run = self.parts.long_run
             K = solved[:, 1:].T if long_run is None else np.linalg.solve(total + long_run, HP).T      # (D6)
+            if self.k and not learns:                                                          # (L3)
+                K[n:] = 0.0
+                A = np.eye(n + self.k) - K @ H
+                self.P = A @ self.P @ A.T + K @ (cov if long_run is None else cov + long_run) @ K.T
+            else:
+                self.P = self.P - K @ HP
             theta = np.r_[self.b, self.dI] - K @ w_e
             self.b, self.dI = theta[:n], theta[n:]
-            self.P = self.P - K @ HP
             self.P = 0.5 * (self.P + self.P.T)
         if not self.tracks_offset:
             return w_e, total, statistic, None, None
@@ -885,7 +918,8 @@ def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound, long_run=None):
     """(D1)-(D3), (L1) run for ``K`` intensities at once over rows ``w_e0`` (N, n) (the wrench with the state
     ``theta0`` the trackers start from), their covariances ``cov`` (N, n, n) and times ``t``, from the state's
     covariance ``P0`` (p, p); ``H`` (n, p), or (N, n, p) per row; ``q2`` (K, p) the walks' ``q^2``; ``long_run``
-    the readings' further long-run share (D6), None where white. Returns
+    the readings' further long-run share (D6), None where white (offline only: the inertia learned from every row,
+    no (L3)). Returns
     ``d^2`` of (D2) and ``log det Cov_total``, each (N, K): the terms of (D5)."""
     K, p = q2.shape
     Q = np.zeros((K, p, p))
@@ -911,9 +945,10 @@ def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound, long_run=None):
     return d2, logdet
 
 
-def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False, inertia_cov=None):
-    """The tracker of the offset (``track_offset``) and of a bounded inertia (``inertia_cov``, (L1)); None where
-    neither; its settings checked. ``drift_intensity="fit"`` (``offline`` only, and its default there) leaves the
+def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False, inertia_cov=None, spacing=0.0):
+    """The tracker of the offset (``track_offset``) and of a bounded inertia (``inertia_cov``, (L1), learned once in
+    ``spacing`` s, (L3)); None where neither; its settings checked. ``drift_intensity="fit"`` (``offline`` only, and
+    its default there) leaves the
     offset's intensity to (D5), fitted on the log's first pass (:meth:`_Parts.finish`)."""
     if not isinstance(track_offset, bool):
         raise CompensationError(f"track_offset must be True or False; got {track_offset!r}")
@@ -923,7 +958,7 @@ def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=Fal
         if inertia_cov is None:
             return None
         parts.inertia_learned = True                     # the bounded inertia's share is the tracker's (K2)
-        return _OffsetTracker(parts, None, None, offset=False, inertia_cov=inertia_cov)
+        return _OffsetTracker(parts, None, None, offset=False, inertia_cov=inertia_cov, spacing=spacing)
     values = {}
     shape = DRIFT_INTENSITY * np.asarray(noise.wrench_sd, dtype=float)
     fit = (isinstance(drift_intensity, str) and drift_intensity == "fit") or (drift_intensity is None and offline)
@@ -948,7 +983,8 @@ def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=Fal
     P0 = parts.offset_cov() if values["offset_sd"] is None else np.diag(np.square(values["offset_sd"]))
     parts.offset_tracked = True                          # a payload file's offset's share is the tracker's (K2)
     parts.inertia_learned = inertia_cov is not None
-    return _OffsetTracker(parts, None if fit else values["drift_intensity"], P0, shape, inertia_cov=inertia_cov)
+    return _OffsetTracker(parts, None if fit else values["drift_intensity"], P0, shape, inertia_cov=inertia_cov,
+                          spacing=spacing)
 
 
 def _causal_coefficients(k, order, lead, dt):
@@ -1373,6 +1409,8 @@ class Compensator:
         self._last = deque(maxlen=max(1, int(round(TARE_WINDOW / float(dt)))))
         self.dt, self.order, self._noise = float(dt), order, noise
         self._k, self._L, self._lead = _causal_settings(window, delay, order, self.dt, self.motion.latency)
+        if self._tracker is not None:
+            self._tracker.spacing = INERTIA_SPACING * self._k * self.dt       # (L3): windows that share no sample
         self._coefficients = np.array(_causal_coefficients(self._k, order, self._lead, self.dt))    # (3, k)
         self._c_sums = np.sum(self._coefficients ** 2, axis=1)
         # the last k motion samples' channels and extras (None where none came): the newest, latency samples
@@ -2080,7 +2118,8 @@ class Compensator:
         self._parts = _Parts(st.calibration, self.model, self._noise, s["direction"], s["false_alarm"], st.cov)
         self._parts.b = old_parts.b
         self._tracker = _tracker(self._parts, self._noise, s["track_offset"], s["drift_intensity"], s["offset_sd"],
-                                 inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None)
+                                 inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None,
+                                 spacing=INERTIA_SPACING * self._k * self.dt)
         if old is not None and old.tracks_offset and self._tracker is not None:
             n = self._parts.n
             self._tracker.b, self._tracker.q2, self._tracker.t = old.b.copy(), old.q2, old.t
