@@ -836,11 +836,10 @@ class _OffsetTracker:
         total = 0.5 * (total + total.T)
         solved = np.linalg.solve(total, np.c_[w_e, HP])                                        # (D2)
         statistic = float(w_e @ solved[:, 0])
-        learns = self._learns(t)
         if statistic <= self.parts.threshold:                                                  # (D3)
             long_run = self.parts.long_run
             K = solved[:, 1:].T if long_run is None else np.linalg.solve(total + long_run, HP).T      # (D6)
-            if self.k and not learns:                                                          # (L3)
+            if self.k and not self._learns(t):       # (L3); a sample (D3) leaves out does not take the turn
                 K[n:] = 0.0
                 A = np.eye(n + self.k) - K @ H
                 self.P = A @ self.P @ A.T + K @ (cov if long_run is None else cov + long_run) @ K.T
@@ -1239,11 +1238,15 @@ def _stamps(t, rows):
         if not np.isfinite(value):
             raise CompensationError(f"t must be a finite number of seconds; got {value!r}")
         return value
+    if np.iscomplexobj(t):
+        raise CompensationError("t must be real numbers of seconds; got complex ones")
     try:
         values = np.asarray(t, dtype=float)
     except (TypeError, ValueError):
         raise CompensationError(f"t must be numbers of seconds; got {t!r}"[:200]) from None
-    if values.ndim != 1 or np.iscomplexobj(t):
+    if values.ndim == 0 or (values.ndim == 2 and values.shape[1] == 1):
+        values = values.ravel()
+    if values.ndim != 1:
         raise CompensationError(f"t must be one column of seconds; got shape {values.shape}")
     if not np.isfinite(values).all():
         r = int(np.argmax(~np.isfinite(values)))
@@ -1569,12 +1572,16 @@ class Compensator:
             self._t = t
             return True
         if len(self._intervals) < DT_INTERVALS:
-            self._intervals.append(step)
-            if len(self._intervals) == DT_INTERVALS:
-                typical = float(np.median(self._intervals))
+            intervals = self._intervals + [step]      # taken only once checked: a refusal leaves the stream as it was
+            if len(intervals) == DT_INTERVALS:
+                typical = float(np.median(intervals))
                 if abs(typical / self.dt - 1) > DT_TOLERANCE:
-                    raise CompensationError(f"the stamps come {typical:.6g} s apart; dt is {self.dt:g} s: give "
-                                            f"dt={typical:.6g} (the readings' sample time)")
+                    unit = next((u for u, k in (("ms", 1e3), ("us", 1e6), ("ns", 1e9))
+                                 if abs(typical / (self.dt * k) - 1) <= DT_TOLERANCE), None)
+                    raise CompensationError(f"the stamps come {typical:.6g} s apart; dt is {self.dt:g} s: " + (
+                        f"stamps in {unit}? give t in s" if unit else
+                        f"give dt={typical:.6g} (the readings' sample time)"))
+            self._intervals = intervals
         n = max(1, int(round(step / self.dt)))
         if n - 1 >= self._k + self._L:
             self._restart(f"a gap of {step:.6g} s ({n - 1} samples) beyond the filter's window and delay")

@@ -29,7 +29,8 @@ the figures as one JSON object instead. ``--depth`` sets the node's ``queue_dept
 
 ``--stalls S1 S2 ...`` measures what a stalled node costs in memory instead: for each source, the node is fed the
 clean replay and stopped (SIGSTOP) for each ``S`` seconds in turn, 10 s apart, its resident memory printed before
-each stop and 10 s after it resumes (the readings queued meanwhile taken and compensated).
+each stop and 10 s after it resumes (the readings queued meanwhile taken and compensated). The stops share one
+node: the memory is a high-water mark, so each figure is what the stop added beyond the marks before it.
 """
 
 import argparse
@@ -97,7 +98,7 @@ def stalls(source, seconds, depth=DEPTH, seed=0):
     """The node's resident memory around stops of ``seconds`` (each in turn, SIGSTOP then SIGCONT, 10 s apart) on the
     clean replay of ``source``: a list of ``(stop s, MB before, MB 10 s after)``."""
     domain = domain_id(f"stalls-{source}-{seed}")
-    duration = 20.0 + 12.0 * len(seconds)
+    duration = 20.0 + sum(s + 12.0 for s in seconds)
     plan = dict(domain=domain, source=source, rate=1000.0, duration=duration, seed=seed, faults=[])
     out = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -380,6 +380,15 @@ def test_the_stamps_on_the_grid(arm):
         stream = Compensator(cal, 1e-4, noise=truth.noise)
         for t, w, p in zip(log.t[:20], log.w_hat[:20], log.pose[:20]):
             stream.push(t, w, p)
+    before = (dict(stream.events), stream._t)
+    for k in range(20, 60):              # each later push refused as well: the refusal took nothing (a review's
+        with pytest.raises(FmscalError, match=r"the stamps come 0\.001 s apart"):    # case: the rest then went on)
+            stream.push(log.t[k], log.w_hat[k], log.pose[k])
+    assert (dict(stream.events), stream._t) == before
+    with pytest.raises(FmscalError, match=r"the stamps come 1 s apart; dt is 0\.001 s: stamps in ms\? give t in s"):
+        stream = Compensator(cal, log.dt, noise=truth.noise)
+        for t, w, p in zip(1000 * log.t[:20], log.w_hat[:20], log.pose[:20]):
+            stream.push(t, w, p)
     rows = list(range(1200))
     del rows[600:602]                                    # two readings lost
     rows.insert(300, 299)                                # a repeated message
