@@ -947,8 +947,7 @@ def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound, long_run=None):
 def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False, inertia_cov=None, spacing=0.0):
     """The tracker of the offset (``track_offset``) and of a bounded inertia (``inertia_cov``, (L1), learned once in
     ``spacing`` s, (L3)); None where neither; its settings checked. ``drift_intensity="fit"`` (``offline`` only, and
-    its default there) leaves the
-    offset's intensity to (D5), fitted on the log's first pass (:meth:`_Parts.finish`)."""
+    its default there) leaves the offset's intensity to (D5), fitted on the log's first pass (:meth:`_Parts.finish`)."""
     if not isinstance(track_offset, bool):
         raise CompensationError(f"track_offset must be True or False; got {track_offset!r}")
     if not track_offset:

@@ -212,7 +212,7 @@ class AttitudeLog:
         self.t = as_finite_array(self.t, (-1,), "t")
         self.q = as_finite_array(self.q, (len(self.t), 4), "q")
         self.w_hat = as_finite_array(self.w_hat, (len(self.t), 6), "w_hat")
-        _check_magnitudes(self.name, [("t", self.t), *zip(TABLE_COLUMNS[4:], self.w_hat.T)])
+        _check_magnitudes(self.name, zip(TABLE_COLUMNS[4:], self.w_hat.T))    # t: Unix seconds are a clock's
         steps = np.diff(self.t)
         if np.any(steps <= 0):
             raise LogError(f"{self.name}: time is not strictly increasing at row {int(np.argmax(steps <= 0)) + 2}")
