@@ -123,6 +123,15 @@ are moved by one linear map::
 (the force unchanged by the point, the torque about the tool ``tau_t = tau_s - r_t x f``). The contact test
 (C4) is the same in any axes and point (``M`` is invertible), and the offset's tracker runs in the sensor's.
 
+Where most samples are flagged a contact, :func:`compensate` asks whether the calibrated readings
+``w_s`` follow the payload's wrench at another scale or sign, block by block (torques, forces), by the least
+squares slope of their changes about the mean::
+
+    k = sum (w_s - mean w_s) . (W_p - mean W_p) / sum |W_p - mean W_p|^2                            (C9)
+
+A slope near 1000 (or 1/1000) names readings in mN or N mm (or kN); near -1, the reading's other sign
+convention; each a warning beside the contacts, with the checks ``identify-payload`` runs on its data.
+
 The covariance of ``w_e`` per sample is the sum of three independent parts::
 
     Cov = S Sigma_r S^T + J cov J^T + A^-1 Sigma_a A^-T                                           (C3)
@@ -210,7 +219,8 @@ from scipy.signal import savgol_coeffs
 from scipy.stats import binom, chi2, norm
 
 from fmscal.plant import Calibration
-from fmscal.plant.io import colour_samples, difference_noise, reading_sign, wrench_noise
+from fmscal.plant.io import (MAX_WRIST_MASS, PoseTable, UnitsError, check_spatial_log_units, check_table_units,
+                             colour_samples, difference_noise, reading_sign, wrench_noise)
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import MODELS, NoiseSpec, regressor, rotation_matrices, sign_continuous, skew
 from fmscal.observers.payload import PayloadEstimate
@@ -788,11 +798,11 @@ class _OffsetTracker:
 
         K_I = 0,    P' = (I - K H) P (I - K H)^T + K (Cov + Sigma_long) K^T                         (L3)
 
-    ``spacing`` 0 (:func:`compensate`, offline): every sample teaches the inertia (there, learned once in the
-    smoothing's 0.2 s, it fitted the example rig's torques measurably worse).
+    ``spacing`` 0 (the default; :func:`compensate`, offline): every sample teaches the inertia (there, learned
+    once in the smoothing's 0.2 s, it fitted the example rig's torques measurably worse).
     """
 
-    def __init__(self, parts, intensity, P0, shape=None, offset=True, inertia_cov=None, spacing=0.0):
+    def __init__(self, parts, intensity, P0, shape=None, offset=True, inertia_cov=None):
         n, k = parts.n, (0 if inertia_cov is None else 6)
         self.parts, self.S, self.n, self.k, self.tracks_offset = parts, parts.S, n, k, offset
         self.q2 = (None if intensity is None else np.square(intensity)) if offset else np.zeros(n)
@@ -804,7 +814,7 @@ class _OffsetTracker:
         if k:
             self.P[n:, n:] = inertia_cov
         self.t = None
-        self.spacing, self._next = float(spacing), None           # (L3): the next time the inertia is learned
+        self.spacing, self._next = 0.0, None       # (L3): a stream's sets the spacing; the next time it learns
 
     def _learns(self, t):
         """(L3): whether the sample at ``t`` teaches the inertia (the first at or after the next learning time, the
@@ -944,9 +954,9 @@ def _likelihood_terms(t, w_e0, cov, H, P0, q2, bound, long_run=None):
     return d2, logdet
 
 
-def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False, inertia_cov=None, spacing=0.0):
-    """The tracker of the offset (``track_offset``) and of a bounded inertia (``inertia_cov``, (L1), learned once in
-    ``spacing`` s, (L3)); None where neither; its settings checked. ``drift_intensity="fit"`` (``offline`` only, and
+def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=False, inertia_cov=None):
+    """The tracker of the offset (``track_offset``) and of a bounded inertia (``inertia_cov``, (L1); a stream sets its
+    ``spacing``, (L3)); None where neither; its settings checked. ``drift_intensity="fit"`` (``offline`` only, and
     its default there) leaves the offset's intensity to (D5), fitted on the log's first pass (:meth:`_Parts.finish`)."""
     if not isinstance(track_offset, bool):
         raise CompensationError(f"track_offset must be True or False; got {track_offset!r}")
@@ -956,7 +966,7 @@ def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=Fal
         if inertia_cov is None:
             return None
         parts.inertia_learned = True                     # the bounded inertia's share is the tracker's (K2)
-        return _OffsetTracker(parts, None, None, offset=False, inertia_cov=inertia_cov, spacing=spacing)
+        return _OffsetTracker(parts, None, None, offset=False, inertia_cov=inertia_cov)
     values = {}
     shape = DRIFT_INTENSITY * np.asarray(noise.wrench_sd, dtype=float)
     fit = (isinstance(drift_intensity, str) and drift_intensity == "fit") or (drift_intensity is None and offline)
@@ -981,8 +991,7 @@ def _tracker(parts, noise, track_offset, drift_intensity, offset_sd, offline=Fal
     P0 = parts.offset_cov() if values["offset_sd"] is None else np.diag(np.square(values["offset_sd"]))
     parts.offset_tracked = True                          # a payload file's offset's share is the tracker's (K2)
     parts.inertia_learned = inertia_cov is not None
-    return _OffsetTracker(parts, None if fit else values["drift_intensity"], P0, shape, inertia_cov=inertia_cov,
-                          spacing=spacing)
+    return _OffsetTracker(parts, None if fit else values["drift_intensity"], P0, shape, inertia_cov=inertia_cov)
 
 
 def _causal_coefficients(k, order, lead, dt):
@@ -1061,6 +1070,10 @@ def _noise(st, noise, estimate=None, moves=True):
         return NoiseSpec(own.wrench_sd, log.angle_sd, log.position_sd)
     if estimate is None:
         raise CompensationError(f"{st.source} holds no noise model: give noise=plant.NoiseSpec(...)")
+    if not moves and own is None:                       # held poses: nothing to estimate the noise from
+        raise CompensationError(f"neither the pose table nor {st.source} holds the readings' noise (a payload file "
+                                "written by hand or by an older fmscal holds no noise_sd): identify the tool again "
+                                "(fmscal identify-payload --save), or give noise=plant.NoiseSpec(...)")
     return estimate()
 
 
@@ -1075,6 +1088,70 @@ def _latency_warnings(calibration, motion):
 
 
 # --- a log ---------------------------------------------------------------------------------------------------------
+def _unit_warnings(data, calibration, noise):
+    """The checks ``identify-payload`` runs on its data, as warnings: readings in mN or N mm, positions in mm,
+    stamps in ms, a quaternion's convention, a dead channel (:func:`fmscal.plant.io.check_spatial_log_units`,
+    :func:`fmscal.plant.io.check_table_units`, the payload's mass and centre of mass given), and every pose row
+    the same while the readings move beyond 20 of their noise's sd (a stalled tracker). Any of these flags every
+    sample a contact; the warning names why. Warnings, not refusals: a log compensated holds contacts, and a tool
+    held still and pushed has still poses beside moving readings.
+
+    ``data`` is the source's :meth:`pose_log` (None: nothing to check)."""
+    if data is None:
+        return []
+    payload = calibration.payload
+    given = dict(mass=payload.mass, com=payload.com, S=calibration.S, max_mass=max(MAX_WRIST_MASS, payload.mass))
+    try:
+        if isinstance(data, PoseTable):
+            check_table_units(data, calibration.gravity, **given)
+            return []
+        poses = data.pose[data.has_pose]
+        if len(poses) > 1 and not np.ptp(poses, axis=0).any():
+            moved = np.ptp(data.w_hat, axis=0) / np.asarray(noise.wrench_sd, dtype=float)
+            if np.max(moved) <= 20:
+                return []
+            return [f"{data.name}: all {len(poses)} pose rows are the same while the readings move (by up to "
+                    f"{np.max(moved):.3g} of their noise's sd): a stalled tracker, whose every change of the reading "
+                    "is flagged a contact, or a tool held still and pushed"]
+        check_spatial_log_units(data, calibration.gravity, **given)
+    except UnitsError as error:
+        return [f"{error} (every contact flagged may be this)"]
+    return []
+
+
+def _scale_warnings(name, names, w_s, W_p, contact):
+    """Readings at another scale or sign than the payload's wrench, where most samples are flagged a contact:
+    the slope ``k`` of eq. (C9) per block (the torques', the forces'), named where it is within 3x of 1000 or
+    1/1000 (a unit) or within 0.3 of -1 (the sign), and 10 of its standard errors from 1. ``w_s`` and ``W_p``
+    are rows in the model's axes."""
+    if len(contact) < 10 or np.mean(contact) < 0.5:
+        return []
+    said = []
+    for what, cols in (("torques", [i for i, n in enumerate(names) if n[0] in "tM"]),
+                       ("forces", [i for i, n in enumerate(names) if n[0] == "f"])):
+        y = w_s[:, cols] - w_s[:, cols].mean(axis=0)
+        x = W_p[:, cols] - W_p[:, cols].mean(axis=0)
+        xx = float(np.sum(x * x))
+        if not xx > 0:
+            continue
+        k = float(np.sum(x * y)) / xx
+        k_se = float(np.sqrt(np.sum((y - k * x) ** 2) / max(y.size - 1, 1) / xx))
+        if abs(k - 1) < 10 * k_se:
+            continue
+        unit = ("mN" if what == "forces" else "N mm") if 1e3 / 3 < k < 3e3 else \
+            ("kN" if what == "forces" else "kN m") if 1e-3 / 3 < k < 3e-3 else None
+        if unit:
+            said.append(f"{name}: the {what} read vary {k:.3g} times as much as the payload's (eq. C9), and "
+                        f"{np.mean(contact):.0%} of the samples are flagged a contact: readings in {unit}? give "
+                        "them in N and N m")
+        elif abs(k + 1) < 0.3:
+            said.append(f"{name}: the {what} read vary against the payload's (slope {k:.3g}, eq. C9), and "
+                        f"{np.mean(contact):.0%} of the samples are flagged a contact: the readings follow the other "
+                        "sign convention from the one the calibration or the payload file states (its reading: "
+                        "reaction or load)")
+    return said
+
+
 def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, tool_radius=None,
                direction="on_tool", noise=None, window=None, delay=CAUSAL_DELAY, order=CAUSAL_ORDER,
                false_alarm=FALSE_ALARM, track_offset=False, drift_intensity=None, offset_sd=None, motion=None,
@@ -1169,6 +1246,7 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
                                 f"comes from poses or joint states, not an {src.source} (whose axes are its "
                                 "rotation's)")
     noise = _noise(st, noise, lambda: src.log_noise(log), src.moves)
+    checked = _unit_warnings(src.pose_log(log), calibration, noise)
     if causal and not hasattr(log, "dt"):
         raise CompensationError(f"{getattr(log, 'name', 'the data')}: a pose table's rows are held poses, not a "
                                 "stream: compensate it offline (causal=False)")
@@ -1192,7 +1270,13 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
         if not out:
             raise CompensationError(f"{log.name}: no window of the causal filter holds enough {src.source}")
         missing = stream.missing
-        return _streamed(stream, out, direction, list(stream.warnings) + (
+        if not checked and stream._output.identity:        # the scale (C9): w_s = S (sigma w_hat - b), W_p = w_e + w_s
+            rows = np.searchsorted(log.t, [o.t for o in out])
+            w_s = (stream._parts.sign * log.w_hat[rows] - stream._parts.b) @ stream._parts.S.T
+            w_e = stream._parts.out_sign * np.array([o.wrench for o in out])
+            checked = _scale_warnings(log.name, stream._parts.names, w_s, w_e + w_s,
+                                      np.array([o.contact for o in out]))
+        return _streamed(stream, out, direction, checked + list(stream.warnings) + (
             [f"missing {src.source}: each window fitted to the samples it holds"] if missing else []))
     aligned = src.aligned(log)
     parts = _Parts(calibration, model, noise, direction, false_alarm, st.cov)
@@ -1202,6 +1286,8 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
     keep, m = src.offline(aligned, model, noise, OFFLINE_WINDOW if window is None else window)
     t = src.times(aligned)[keep]
     rows = _step(parts, output, tracker, t, aligned.w_hat[keep], m)
+    if not checked:
+        checked = _scale_warnings(log.name, parts.names, rows.W_p - rows.w_e, rows.W_p, rows.contact)    # (C9)
     changes, counts = [], None
     if mode != TOOL_CHANGE[0]:                          # (T1)-(T8), and each change's held attitudes fitted (T9)
         detector = _Detector(model, log.dt, mode, st.cov, false_alarm)
@@ -1216,7 +1302,7 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
                 pass
     return Compensation(t=t, wrench=rows.wrench, cov=rows.cov, contact=rows.contact, statistic=rows.statistic,
                         threshold=parts.threshold, names=parts.names, delay=0.0, direction=direction,
-                        warnings=(st.warnings_for(src.moves) + list(parts.warnings)
+                        warnings=(checked + st.warnings_for(src.moves) + list(parts.warnings)
                                   + _latency_warnings(calibration, src)
                                   + ([] if tracker is None else tracker.warnings)),
                         offset=rows.offset, offset_sd=rows.offset_sd, frame=frame, point=output.point,
@@ -2124,8 +2210,9 @@ class Compensator:
         self._parts = _Parts(st.calibration, self.model, self._noise, s["direction"], s["false_alarm"], st.cov)
         self._parts.b = old_parts.b
         self._tracker = _tracker(self._parts, self._noise, s["track_offset"], s["drift_intensity"], s["offset_sd"],
-                                 inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None,
-                                 spacing=INERTIA_SPACING * self._k * self.dt)
+                                 inertia_cov=self._parts.inertia_cov() if st.inertia_bounded else None)
+        if self._tracker is not None:
+            self._tracker.spacing = INERTIA_SPACING * self._k * self.dt       # (L3), as in __init__
         if old is not None and old.tracks_offset and self._tracker is not None:
             n = self._parts.n
             self._tracker.b, self._tracker.q2, self._tracker.t = old.b.copy(), old.q2, old.t

@@ -100,6 +100,10 @@ __all__ = ["PoseMotion", "JointMotion", "ImuMotion", "HeldPoses", "Motion", "Mot
            "configuration_variance", "quaternion_from_matrix", "quaternion_to_matrix"]
 
 
+#: The fewest rows a log's readings' noise is estimated from (:meth:`_Source.log_noise`).
+MIN_NOISE_ROWS = 20
+
+
 class MotionError(FmscalError):
     """A motion source's input that cannot be used: the message names the problem."""
 
@@ -394,6 +398,12 @@ class _Source:
     def check_units(self, rows):
         """A first window of channels (rows) in the units the source takes, or a one-line error."""
 
+    def pose_log(self, log):
+        """The sensor's tracked poses with ``log``'s readings, for the unit checks ``identify-payload`` runs
+        (:func:`fmscal.plant.io.check_spatial_log_units`): a spatial :class:`fmscal.plant.Log`, a pose table,
+        or None where the source gives no pose (an IMU; a planar log)."""
+        return None
+
     def times(self, log):
         """The rows' times, s (a table's: its row numbers)."""
         return log.t
@@ -401,6 +411,9 @@ class _Source:
     def log_noise(self, log):
         """The readings' noise model estimated from a log (:func:`fmscal.plant.io.wrench_noise`, the estimate
         :func:`fmscal.plant.io.estimate_noise` takes of the readings: their correlation in time too)."""
+        if len(log.t) < MIN_NOISE_ROWS:
+            raise MotionError(f"{log.name}: {len(log.t)} rows are too few to estimate the readings' noise from (at "
+                              f"least {MIN_NOISE_ROWS}): give a longer log, or noise=plant.NoiseSpec(...)")
         sd, tau = wrench_noise(log.w_hat, float(np.median(np.diff(log.t))))
         noise = NoiseSpec(sd, wrench_tau=tau)
         if min(noise.wrench_sd) <= 0:
@@ -472,6 +485,9 @@ class PoseMotion(_Source):
     def of_log(self, log):
         """What :meth:`fmscal.analysis.Compensator.push_many` takes of a log: its poses."""
         return log.pose
+
+    def pose_log(self, log):
+        return log if np.shape(log.pose)[1:] == (7,) else None
 
     def samples(self, value, m, model):
         """``(channels (m, n_pose), None)``: a push's ``pose`` rows, NaN rows where none came (or any is not
@@ -644,6 +660,9 @@ class JointMotion(_Source):
     def of_log(self, log):
         """What :meth:`fmscal.analysis.Compensator.push_many` takes of a log: ``(q, dq, ddq)``."""
         return log.joints, log.velocities, log.accelerations
+
+    def pose_log(self, log):
+        return Log(log.t, self.poses(log.joints), log.w_hat, name=log.name)
 
     def samples(self, value, m, model):
         """A push's ``joints=(q, dq, ddq)`` (rows, :attr:`joints` order; ``dq``/``ddq`` None where not given)
@@ -988,6 +1007,9 @@ class HeldPoses(_Source):
         return NoiseSpec(tuple(float(v) for v in np.median(log.noise, axis=0)))
 
     def aligned(self, log):
+        return log
+
+    def pose_log(self, log):
         return log
 
     def offline(self, log, model, noise, window):

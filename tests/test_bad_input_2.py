@@ -215,6 +215,21 @@ def test_without_hard_links_the_name_is_still_claimed_exclusively(tmp_path, monk
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
 
 
+def test_an_output_that_cannot_be_made_names_itself_not_its_temporary_file(capsys):
+    """A folder that takes no new file (Linux's /proc: not a permission, so the CLI's writable check passes it):
+    the error names the file asked for, where it named the hidden temporary file beside it (a hostile review's
+    case). One line, exit 2."""
+    from fmscal.plant.io._files import atomic_write_text
+
+    with pytest.raises(OSError) as raised:
+        atomic_write_text("/proc/fmscal-out.txt", "x\n")
+    assert raised.value.filename == "/proc/fmscal-out.txt"
+    capsys.readouterr()
+    assert main(["simulate", "--scenario", "paper", "--duration", "2", "--out", "/proc/fmscal-log.csv"]) == 2
+    err = capsys.readouterr().err.strip()            # the log or its sidecar, whichever is written first
+    assert len(err.splitlines()) == 1 and "'/proc/fmscal-log." in err and "/proc/." not in err, err
+
+
 def test_a_folder_is_claimed_by_one_run(tmp_path):
     from fmscal.plant.io._files import LOCK_NAME, claim_folder
     out = tmp_path / "new" / "d"

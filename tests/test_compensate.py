@@ -15,7 +15,7 @@ import pytest
 from fmscal.analysis import Compensator, calibrate, compensate
 from fmscal.analysis.cli import main
 from fmscal.observers.payload import PayloadEstimate
-from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, SpatialPayload, get_scenario
+from fmscal.plant import SPATIAL_SCENARIOS, Calibration, FmscalError, Log, SpatialPayload, get_scenario
 from fmscal.plant.scenarios import contact_wrench, same_rig, with_contact
 from live_rig import noise_rms
 
@@ -207,6 +207,93 @@ def test_cli_compensates_a_table_of_held_poses(tmp_path, capsys):
     assert "4 wrenches" in capsys.readouterr().out
     rows = np.loadtxt(tmp_path / "c.csv", delimiter=",", skiprows=1)
     assert rows.shape == (4, 8) and not rows[:, 7].any()
+
+
+def _slipped(log, slip):
+    """``log`` with a slip of its units or streams (a hostile review's cases)."""
+    pose, w_hat, t = log.pose.copy(), log.w_hat.copy(), log.t.copy()
+    if slip == "mN":
+        w_hat *= 1e3
+    elif slip == "mm":
+        pose[:, 4:] *= 1e3
+    elif slip == "ms":
+        t *= 1e3
+    elif slip == "stalled":
+        pose[:] = pose[0]
+    return Log(t, pose, w_hat, name=log.name)
+
+
+@pytest.mark.parametrize("slip, said", [(None, None), ("contact", None), ("mN", "readings in mN"),
+                                        ("mm", "like millimetres"), ("ms", "like milliseconds"),
+                                        ("stalled", "a stalled tracker")])
+def test_a_slipped_unit_or_a_stalled_tracker_is_named_beside_the_contacts(arm, slip, said):
+    """``compensate`` runs the checks ``identify-payload`` runs on its data, as warnings: readings in mN,
+    positions in mm, stamps in ms or a stalled tracker flag every sample a contact, and the warning names why
+    (before, every row was flagged and nothing said). A log with a long, large contact is not mistaken for one."""
+    scenario, log, truth, cal = arm
+    log = log.head(3000)
+    if slip == "contact":
+        log, _ = with_contact(log, truth.S_at(0.0), contact_wrench(force=60.0), 0.5, 2.0)
+    c = compensate(cal, _slipped(log, slip if slip != "contact" else None), noise=truth.noise)
+    named = [w for w in c.warnings if "flagged" in w]
+    if said is None:
+        assert named == [] and (0.6 < c.contact.mean() < 0.8 if slip else c.contact.mean() < 0.01)
+    else:
+        assert len(named) == 1 and said in named[0], c.warnings
+        assert c.contact.mean() > 0.9
+
+
+@pytest.fixture(scope="module")
+def example_tool(tmp_path_factory):
+    """The example rig's gripper identified from its 8 held poses (``identify-payload --save``)."""
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    tool = tmp_path_factory.mktemp("tool") / "gripper.json"
+    where = ["--urdf", str(examples / "arm6.urdf"), "--frame", "ft_sensor"]
+    assert main(["identify-payload", str(examples / "tool_poses.csv"), *where, "--save", str(tool)]) == 0
+    return examples, tool, where
+
+
+@pytest.mark.parametrize("causal", [False, True])
+@pytest.mark.parametrize("scale, said", [(1.0, None), (1e3, "readings in mN"),
+                                         (-1.0, "the other sign convention")])
+def test_readings_at_another_scale_or_sign_are_named(example_tool, tmp_path, capsys, scale, said, causal):
+    """Where most samples are flagged a contact, the readings' changes are fitted to the payload's (eq. C9): a
+    slope of 1000 names mN, of -1 the other sign convention. The example rig's joint-state run, pushed once: its
+    push spoils the weight's fit of the unit checks, which then say nothing. Where the slope is 1 (the run as
+    recorded, its push flagged), nothing is said. In mN the torques are in N mm, and named so."""
+    examples, tool, where = example_tool
+    lines = (examples / "tool_run.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    rows = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    rows[:, [header.index(n) for n in ("tx", "ty", "tz", "fx", "fy", "fz")]] *= scale
+    np.savetxt(tmp_path / "run.csv", rows, delimiter=",", header=",".join(header), comments="")
+    capsys.readouterr()
+    assert main(["compensate", str(tool), str(tmp_path / "run.csv"), *where, "--out", str(tmp_path / "c.csv"),
+                 *(["--causal"] if causal else [])]) == 0
+    told = [line for line in capsys.readouterr().err.splitlines() if "eq. C9" in line]
+    if said is None:
+        assert told == []
+    else:
+        assert told and said in " ".join(told), told
+
+
+def test_a_missing_noise_names_what_holds_none(example_tool, tmp_path, capsys):
+    """A payload file without ``noise_sd`` (hand-written) on a pose table: neither holds the noise, said so (it
+    asked for "a payload file" where one was given); a joint log of 7 rows is too short to estimate it from, said
+    so (it was called a constant reading). One line, exit 2 (a hostile review's cases)."""
+    examples, tool, where = example_tool
+    saved = json.loads(tool.read_text())
+    del saved["noise_sd"]
+    (tmp_path / "bare.json").write_text(json.dumps(saved))
+    (tmp_path / "short.csv").write_text("\n".join((examples / "tool_run.csv").read_text().splitlines()[:8]) + "\n")
+    for payload, data, said in (("bare.json", examples / "tool_check.csv", "neither the pose table nor the payload "
+                                 "file holds the readings' noise"),
+                                (str(tool), tmp_path / "short.csv", "7 rows are too few to estimate the readings' "
+                                 "noise")):
+        capsys.readouterr()
+        assert main(["compensate", str(tmp_path / payload), str(data), *where, "--out", str(tmp_path / "c.csv")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and said in err, err
 
 
 def test_cli(arm, tmp_path, capsys):

@@ -284,3 +284,21 @@ def test_a_flag_given_as_text_or_a_number_is_refused_not_taken_as_true(flag, tex
     with pytest.raises(FmscalError, match=f"^{flag} must be True or False; got"):
         fit_static(table, **{flag: text})
     assert fit_static(table, **{flag: False}).converged         # a boolean is taken
+
+
+def test_a_row_copied_counts_once():
+    """Rows that repeat earlier rows to the last digit (a table pasted twice) are copies, not poses: the fit is
+    the distinct rows', said in a warning (it was a mass's sd smaller by sqrt(2)); too few distinct rows are
+    refused, naming the copies. A hostile review's case."""
+    from fmscal.plant.io import PoseTable
+
+    table = simulate_table(TOOL, n=8, seed=3, offset=OFFSET)
+    once = fit_static(table)
+    twice = fit_static(PoseTable(np.r_[table.q, table.q[:5]], np.r_[table.w_hat, table.w_hat[:5]], name="pasted"))
+    assert twice.mass == once.mass and twice.mass_std == once.mass_std
+    np.testing.assert_array_equal(twice.com_std, once.com_std)
+    assert [w for w in twice.warnings if "rows 9, 10, 11, 12, 13 repeat earlier rows" in w]
+    assert not [w for w in once.warnings if "repeat" in w]
+    three = PoseTable(np.r_[table.q[:3], table.q[:3]], np.r_[table.w_hat[:3], table.w_hat[:3]], name="three")
+    with pytest.raises(FmscalError, match=r"three: 3 distinct poses \(rows 4, 5, 6 repeat"):
+        fit_static(three)

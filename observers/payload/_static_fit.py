@@ -349,6 +349,27 @@ def _extra(theta, model):
     return np.r_[theta, np.zeros(len(model.names) - len(theta))]
 
 
+def _rows_named(rows):
+    return (f"row {rows[0]}" if len(rows) == 1 else
+            f"rows {', '.join(map(str, rows[:8]))}{', ...' if len(rows) > 8 else ''}")
+
+
+def _distinct_rows(table):
+    """``(table, repeated)``: the table without the rows that repeat an earlier row to the last digit, its
+    attitude and its reading (a copy: no held pose's noise gives the same reading twice, and a copy counted
+    again would shrink the fit's sd as if it were a new pose), and those rows' numbers, 1-based."""
+    rows = np.column_stack([table.q, table.w_hat])
+    keep = np.sort(np.unique(rows, axis=0, return_index=True)[1])
+    if len(keep) == len(rows):
+        return table, []
+    repeated = [int(i) + 1 for i in np.setdiff1d(np.arange(len(rows)), keep)]
+    if len(keep) < MIN_POSES:
+        raise FmscalError(f"{table.name}: {len(keep)} distinct poses ({_rows_named(repeated)} repeat earlier rows to "
+                          f"the last digit); a pose table needs at least {MIN_POSES}")
+    return PoseTable(table.q[keep], table.w_hat[keep], name=table.name,
+                     noise=None if table.noise is None else np.asarray(table.noise)[keep]), repeated
+
+
 def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction",
                max_mass=None, tolerance=None, noise=None):
     """Mass, centre of mass, offset and force gains from a pose table (and gravity's direction, the mounting, if asked).
@@ -406,6 +427,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         raise FmscalError("gravity must not be zero")
     given = check_tolerance(tolerance)
     noise_given = check_tolerance(noise, "noise")
+    table, repeated = _distinct_rows(table)             # a row copied counts once
     check_table_units(table, g, S=S, max_mass=max_mass)  # a slipped unit named in one line, before the fit
     problem = PayloadModel(S, g)
     y = problem.corrected(table.w_hat, sign)
@@ -458,6 +480,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     out.cone_deg = _cone(a)
     out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
     out.warnings = list(out.undetermined)
+    if repeated:
+        out.warnings.append(f"{table.name}: {_rows_named(repeated)} repeat earlier rows to the last digit (copies: a "
+                            "held pose's noise never repeats), counted once")
     noise = _group_noise(model, theta, weights, y)[0]                 # the rows' scatter: torques N m, forces N
     out.tolerance = given if given is not None else (TABLE_TOLERANCE * noise[::-1] if noise_given is None else
                                                      DEFAULT_TOLERANCE * noise_given)

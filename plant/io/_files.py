@@ -106,7 +106,10 @@ def not_an_output(path):
 def _temporary(path):
     """A new empty temporary file beside ``path`` with the same suffix (writers infer formats from it)."""
     path = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix or ".tmp", dir=path.parent)
+    try:
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix or ".tmp", dir=path.parent)
+    except OSError as err:               # the error names the file asked for, not the temporary one
+        raise OSError(err.errno, err.strerror, str(path)) from None
     os.close(fd)
     umask = os.umask(0)                  # mkstemp makes 0600: give the file the mode open() would
     os.umask(umask)

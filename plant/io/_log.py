@@ -147,7 +147,7 @@ class Log:
         self.columns = ("t", *case.pose_names, *case.wrench_names)
         pose_names, wrench_names = case.pose_names, case.wrench_names
         if n < MIN_SAMPLES:
-            raise LogError(f"{self.name}: too few rows to calibrate; need at least {MIN_SAMPLES}, got {n}")
+            raise LogError(f"{self.name}: too few rows ({n}); a log needs at least {MIN_SAMPLES}")
         _check_finite(self.name, (("t", self.t), *((c, self.w_hat[:, j]) for j, c in enumerate(wrench_names))))
         self.t, clock = _from_unix_time(self.name, self.t)
         partial = np.isnan(self.pose).any(axis=1) & ~np.isnan(self.pose).all(axis=1)
