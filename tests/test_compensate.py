@@ -277,6 +277,21 @@ def test_readings_at_another_scale_or_sign_are_named(example_tool, tmp_path, cap
         assert told and said in " ".join(told), told
 
 
+def test_a_table_in_mn_is_named(example_tool, tmp_path, capsys):
+    """The held poses' check (``compensate PAYLOAD TABLE``) runs the table's unit checks: readings in mN named
+    beside the contacts (before, every pose a contact and nothing said)."""
+    examples, tool, where = example_tool
+    lines = (examples / "tool_check.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    rows = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    rows[:, [header.index(n) for n in ("tx", "ty", "tz", "fx", "fy", "fz")]] *= 1e3
+    np.savetxt(tmp_path / "check.csv", rows, delimiter=",", header=",".join(header), comments="")
+    capsys.readouterr()
+    assert main(["compensate", str(tool), str(tmp_path / "check.csv"), *where, "--out", str(tmp_path / "c.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "readings in mN" in err and "every contact flagged may be this" in err, err
+
+
 def test_a_missing_noise_names_what_holds_none(example_tool, tmp_path, capsys):
     """A payload file without ``noise_sd`` (hand-written) on a pose table: neither holds the noise, said so (it
     asked for "a payload file" where one was given); a joint log of 7 rows is too short to estimate it from, said

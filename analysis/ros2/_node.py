@@ -912,6 +912,7 @@ def spin(args):
         # collection over it would pause the compensation for tens of milliseconds
         gc.collect()
         gc.freeze()
+        node.worker.start()                     # the fit's process, its imports done before any call needs it
         for thread in threads:
             thread.start()
         try:

@@ -2,10 +2,12 @@
 
 The fit (:func:`._pipeline.fit_held`: a payload fit over up to ``identify_buffer`` s of samples, seconds of numpy
 and casadi) would hold the interpreter's lock in the node's process for most of its run: the inputs' thread
-would wait for it between messages. Here it runs in a child process (``python -m fmscal.analysis.ros2._worker``)
-at a lower priority (``nice`` 10): the node's threads keep their CPU; the fit takes what is left. The child is
-started at the first call and kept for the next ones; a cancelled call (``~/cancel``), or the node stopping,
-kills it. Jobs and results go through its standard input and output, pickled.
+would wait for it between messages. Here it runs in a child process (this module run as ``__main__``)
+at a lower priority (``nice`` 10, set before its imports) and its linear algebra on one thread: the node's threads
+keep their CPU; the fit takes what is left. The child is started with the node (:meth:`Worker.start`), so that its
+imports (a second of CPU) are done before a call comes, and kept for the next ones; a cancelled call
+(``~/cancel``) kills it (the next call starts another), as does the node stopping. Jobs and results go through its
+standard input and output, pickled.
 """
 
 import os
@@ -22,6 +24,12 @@ __all__ = ["Worker", "Cancelled", "main"]
 
 #: The worker's niceness: below the node's threads, which must keep their CPU.
 NICE = 10
+#: The worker's linear algebra on one thread (numpy's OpenBLAS takes every core by default, and its threads spin
+#: between calls): the node keeps a core of its own.
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: The child's command: its niceness first, then the imports (seconds of CPU that must not compete with the node).
+_LAUNCH = (f"import os; os.nice({NICE}); import runpy; "
+           "runpy.run_module('fmscal.analysis.ros2._worker', run_name='__main__', alter_sys=True)")
 #: s between two looks at a cancellation while the fit runs.
 POLL = 0.05
 
@@ -40,11 +48,18 @@ class Worker:
         self._closed = False                            # the node stopping: no fit starts after it
         self.running = False
 
+    def start(self):
+        """Start the child now (the node at its start), so that its imports are done before a call needs it."""
+        with self._lock:
+            if not self._closed:
+                self._start()
+
     def _start(self):
         if self._proc is None or self._proc.poll() is not None:
-            self._proc = subprocess.Popen([sys.executable, "-m", "fmscal.analysis.ros2._worker"],
+            self._proc = subprocess.Popen([sys.executable, "-c", _LAUNCH],
                                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                          start_new_session=True)     # a Ctrl-C to the node's group is the node's
+                                          start_new_session=True,     # a Ctrl-C to the node's group is the node's
+                                          env={**os.environ, **ONE_THREAD})
         return self._proc
 
     def run(self, settings, job):
@@ -127,7 +142,6 @@ def _die_with_parent():
 def main():
     """The child: take pickled ``(settings, job)`` from standard input, answer :func:`._pipeline.fit_held`'s
     result (or a failure's message) pickled on standard output; until standard input closes."""
-    os.nice(NICE)
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)         # the node decides
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
