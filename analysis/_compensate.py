@@ -130,7 +130,10 @@ squares slope of their changes about the mean::
     k = sum (w_s - mean w_s) . (W_p - mean W_p) / sum |W_p - mean W_p|^2                            (C9)
 
 A slope near 1000 (or 1/1000) names readings in mN or N mm (or kN); near -1, the reading's other sign
-convention; each a warning beside the contacts, with the checks ``identify-payload`` runs on its data.
+convention (or gravity given reversed, or a steady push of twice the tool's weight along it, which gives the
+forces the same slope); each a warning beside the contacts, with the checks ``identify-payload`` runs on its data
+(poses and joint states; an IMU's stream and a planar log have none of them). Causally, eq. (C9) is fitted where
+the output is in the sensor's axes at its point (no ``frame``, ``point`` or mounting).
 
 The covariance of ``w_e`` per sample is the sum of three independent parts::
 
@@ -1071,9 +1074,10 @@ def _noise(st, noise, estimate=None, moves=True):
     if estimate is None:
         raise CompensationError(f"{st.source} holds no noise model: give noise=plant.NoiseSpec(...)")
     if not moves and own is None:                       # held poses: nothing to estimate the noise from
-        raise CompensationError(f"neither the pose table nor {st.source} holds the readings' noise (a payload file "
-                                "written by hand or by an older fmscal holds no noise_sd): identify the tool again "
-                                "(fmscal identify-payload --save), or give noise=plant.NoiseSpec(...)")
+        again = ("identify the tool again (fmscal identify-payload --save)" if st.source == "the payload file" else
+                 "calibrate again (fmscal calibrate --save)")
+        raise CompensationError(f"neither the pose table nor {st.source} holds the readings' noise (a file written by "
+                                f"hand or by an older fmscal holds none): {again}, or give noise=plant.NoiseSpec(...)")
     return estimate()
 
 
@@ -1088,7 +1092,7 @@ def _latency_warnings(calibration, motion):
 
 
 # --- a log ---------------------------------------------------------------------------------------------------------
-def _unit_warnings(data, calibration, noise):
+def _unit_warnings(pose_log, calibration, noise):
     """The checks ``identify-payload`` runs on its data, as warnings: readings in mN or N mm, positions in mm,
     stamps in ms, a quaternion's convention, a dead channel (:func:`fmscal.plant.io.check_spatial_log_units`,
     :func:`fmscal.plant.io.check_table_units`, the payload's mass and centre of mass given), and every pose row
@@ -1096,7 +1100,12 @@ def _unit_warnings(data, calibration, noise):
     sample a contact; the warning names why. Warnings, not refusals: a log compensated holds contacts, and a tool
     held still and pushed has still poses beside moving readings.
 
-    ``data`` is the source's :meth:`pose_log` (None: nothing to check)."""
+    ``pose_log`` is the source's :meth:`pose_log` (None: nothing to check; a log whose poses make no
+    :class:`fmscal.plant.Log`, too few of them, is not checked)."""
+    try:
+        data = pose_log()
+    except FmscalError:
+        return []
     if data is None:
         return []
     payload = calibration.payload
@@ -1115,7 +1124,8 @@ def _unit_warnings(data, calibration, noise):
                     "is flagged a contact, or a tool held still and pushed"]
         check_spatial_log_units(data, calibration.gravity, **given)
     except UnitsError as error:
-        return [f"{error} (every contact flagged may be this)"]
+        steady = " or a steady push that large along gravity" if getattr(error, "quantity", None) == "weight" else ""
+        return [f"{error} (every contact flagged may be this{steady})"]
     return []
 
 
@@ -1148,7 +1158,8 @@ def _scale_warnings(name, names, w_s, W_p, contact):
             said.append(f"{name}: the {what} read vary against the payload's (slope {k:.3g}, eq. C9), and "
                         f"{np.mean(contact):.0%} of the samples are flagged a contact: the readings follow the other "
                         "sign convention from the one the calibration or the payload file states (its reading: "
-                        "reaction or load)")
+                        "reaction or load), or gravity is given pointing the other way, or a steady push about "
+                        "twice the tool's weight holds the tool down")
     return said
 
 
@@ -1246,7 +1257,7 @@ def compensate(setup_, /, log, causal=False, *, calibration=None, payload=None, 
                                 f"comes from poses or joint states, not an {src.source} (whose axes are its "
                                 "rotation's)")
     noise = _noise(st, noise, lambda: src.log_noise(log), src.moves)
-    checked = _unit_warnings(src.pose_log(log), calibration, noise)
+    checked = _unit_warnings(lambda: src.pose_log(log), calibration, noise)
     if causal and not hasattr(log, "dt"):
         raise CompensationError(f"{getattr(log, 'name', 'the data')}: a pose table's rows are held poses, not a "
                                 "stream: compensate it offline (causal=False)")

@@ -243,6 +243,27 @@ def test_a_slipped_unit_or_a_stalled_tracker_is_named_beside_the_contacts(arm, s
         assert c.contact.mean() > 0.9
 
 
+@pytest.mark.parametrize("factor, said", [(2.0, "or a steady push about twice the tool's weight"),
+                                           (35.0, "or a steady push that large along gravity")])
+def test_a_steady_push_along_gravity_is_named_beside_a_unit_or_a_sign(arm, factor, said):
+    """A tool pressed down while the wrist turns (a push constant in the base's axes, at the tool point) looks
+    like a weight: at twice the tool's weight the forces vary against the payload's (eq. C9's slope -1, a sign's),
+    at 35 times it they weigh as in mN. Each warning names the push beside the unit or the sign (a review's cases:
+    they named the sign or mN alone)."""
+    from fmscal.plant.physics import rotation_matrices
+
+    scenario, log, truth, cal = arm
+    log = log.head(3000)
+    f = -factor * scenario.payload.mass * np.asarray(scenario.gravity, dtype=float)
+    R = rotation_matrices(log.pose[:, :4], normalise=True)
+    force = np.einsum("nji,j->ni", R, f)                                  # R^T f: the push in the sensor's axes
+    wrench = np.c_[np.cross((0.0, 0.0, 0.12), force), force]
+    pushed = Log(log.t, log.pose, log.w_hat - np.linalg.solve(truth.S_at(0.0), wrench.T).T, name="pushed")
+    c = compensate(cal, pushed, noise=truth.noise)
+    assert c.contact.mean() > 0.9
+    assert [w for w in c.warnings if said in w], c.warnings
+
+
 @pytest.fixture(scope="module")
 def example_tool(tmp_path_factory):
     """The example rig's gripper identified from its 8 held poses (``identify-payload --save``)."""
@@ -275,6 +296,26 @@ def test_readings_at_another_scale_or_sign_are_named(example_tool, tmp_path, cap
         assert told == []
     else:
         assert told and said in " ".join(told), told
+
+
+def test_sparse_joint_states_are_compensated_without_the_unit_checks():
+    """A joint log whose joint states come at every 70th reading (9 of them): too few poses for the unit checks'
+    log, which then check nothing, and the log compensated as before (a review found it refused, "too few pose
+    measurements to calibrate")."""
+    from fmscal.analysis import JointMotion
+    from fmscal.plant import read_truth
+    from fmscal.plant.io import JointLog, read_joint_log
+
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    truth = read_truth(examples / "arm.truth.json")
+    cal = Calibration(S=truth.S_at(0.0), payload=truth.payload, method="truth", b=truth.offset,
+                      gravity=(0, 0, -9.81), latency=0.0, noise=truth.noise)
+    arm = JointMotion(examples / "arm6.urdf", "ft_sensor")
+    log = read_joint_log(examples / "joint_log.csv", arm.kinematics)
+    q = log.joints.copy()
+    q[np.arange(len(q)) % 70 != 0] = np.nan
+    c = compensate(cal, JointLog(log.t, q, log.w_hat, name="sparse"), motion=arm)
+    assert len(c.t) > 500 and not [w for w in c.warnings if "flagged may be" in w]
 
 
 def test_a_table_in_mn_is_named(example_tool, tmp_path, capsys):

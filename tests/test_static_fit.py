@@ -300,5 +300,5 @@ def test_a_row_copied_counts_once():
     assert [w for w in twice.warnings if "rows 9, 10, 11, 12, 13 repeat earlier rows" in w]
     assert not [w for w in once.warnings if "repeat" in w]
     three = PoseTable(np.r_[table.q[:3], table.q[:3]], np.r_[table.w_hat[:3], table.w_hat[:3]], name="three")
-    with pytest.raises(FmscalError, match=r"three: 3 distinct poses \(rows 4, 5, 6 repeat"):
+    with pytest.raises(FmscalError, match=r"three: 3 distinct poses \(rows 4, 5, 6 the same as earlier rows"):
         fit_static(three)

@@ -912,7 +912,11 @@ def spin(args):
         # collection over it would pause the compensation for tens of milliseconds
         gc.collect()
         gc.freeze()
-        node.worker.start()                     # the fit's process, its imports done before any call needs it
+        try:
+            node.worker.start()                 # the fit's process, its imports done before any call needs it
+        except OSError as err:                  # not started: the first ~/identify_payload tries again, and says
+            node.node.get_logger().warning(f"the fit's process did not start ({err}): ~/identify_payload will "
+                                           "try again when called")
         for thread in threads:
             thread.start()
         try:

@@ -355,19 +355,20 @@ def _rows_named(rows):
 
 
 def _distinct_rows(table):
-    """``(table, repeated)``: the table without the rows that repeat an earlier row to the last digit, its
+    """``(table, repeated, kept)``: the table without the rows that repeat an earlier row to the last digit, its
     attitude and its reading (a copy: no held pose's noise gives the same reading twice, and a copy counted
-    again would shrink the fit's sd as if it were a new pose), and those rows' numbers, 1-based."""
+    again would shrink the fit's sd as if it were a new pose), those rows' numbers (1-based), and the kept rows'
+    indices in ``table`` (for the poses' names in later advice)."""
     rows = np.column_stack([table.q, table.w_hat])
     keep = np.sort(np.unique(rows, axis=0, return_index=True)[1])
     if len(keep) == len(rows):
-        return table, []
+        return table, [], keep
     repeated = [int(i) + 1 for i in np.setdiff1d(np.arange(len(rows)), keep)]
     if len(keep) < MIN_POSES:
-        raise FmscalError(f"{table.name}: {len(keep)} distinct poses ({_rows_named(repeated)} repeat earlier rows to "
-                          f"the last digit); a pose table needs at least {MIN_POSES}")
+        raise FmscalError(f"{table.name}: {len(keep)} distinct poses ({_rows_named(repeated)} the same as earlier rows "
+                          f"to the last digit); a pose table needs at least {MIN_POSES}")
     return PoseTable(table.q[keep], table.w_hat[keep], name=table.name,
-                     noise=None if table.noise is None else np.asarray(table.noise)[keep]), repeated
+                     noise=None if table.noise is None else np.asarray(table.noise)[keep]), repeated, keep
 
 
 def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_mounting=False, reading="reaction",
@@ -427,7 +428,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         raise FmscalError("gravity must not be zero")
     given = check_tolerance(tolerance)
     noise_given = check_tolerance(noise, "noise")
-    table, repeated = _distinct_rows(table)             # a row copied counts once
+    table, repeated, kept = _distinct_rows(table)       # a row copied counts once
     check_table_units(table, g, S=S, max_mass=max_mass)  # a slipped unit named in one line, before the fit
     problem = PayloadModel(S, g)
     y = problem.corrected(table.w_hat, sign)
@@ -481,8 +482,9 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
     out.undetermined = in_words(model.names, [(v, np.inf) for v in weak])
     out.warnings = list(out.undetermined)
     if repeated:
-        out.warnings.append(f"{table.name}: {_rows_named(repeated)} repeat earlier rows to the last digit (copies: a "
-                            "held pose's noise never repeats), counted once")
+        verb = "repeats an earlier row" if len(repeated) == 1 else "repeat earlier rows"
+        out.warnings.append(f"{table.name}: {_rows_named(repeated)} {verb} to the last digit (copies: a held pose's "
+                            "noise never repeats), counted once")
     noise = _group_noise(model, theta, weights, y)[0]                 # the rows' scatter: torques N m, forces N
     out.tolerance = given if given is not None else (TABLE_TOLERANCE * noise[::-1] if noise_given is None else
                                                      DEFAULT_TOLERANCE * noise_given)
@@ -521,7 +523,7 @@ def fit_static(table, S=None, gravity=GRAVITY, estimate_gravity=False, estimate_
         why, determined = rotated, False
     elif why is not None or determined:
         out.next_poses = next_poses(model, theta, information, weights, s2, R,
-                                    [f"pose {k + 1}" for k in range(len(R))], attitudes, out.tolerance,
+                                    [f"pose {k + 1}" for k in kept], attitudes, out.tolerance,
                                     widened=lambda Rc: _widened(R, M, d, Rc))
     if why is not None:
         out.warnings.append(why)

@@ -359,14 +359,18 @@ def _torque_and_weight(name, w_hat, c, gravity, mass, com, max_mass=None):
                              f"{_carried(limit)}: readings in mN? give them in N and N m" + _heavier(limit))
         return
     ratio = weighed / mass
+    error = None
     if ratio > _FAR:
-        raise UnitsError(f"{name}: the force reading shows a weight {ratio:.3g} times m |g| ({weighed:.4g} kg against "
-                         f"the payload's {mass:.4g} kg): readings in mN (1000)? give them in N and N m, or check the "
-                         f"mass")
-    if ratio < 1 / _FAR:
-        raise UnitsError(f"{name}: the force reading shows a weight {ratio:.3g} times m |g| ({weighed:.4g} kg against "
-                         f"the payload's {mass:.4g} kg): readings in kN, or the mass in g? give the readings in N and "
-                         f"the mass in kg")
+        error = UnitsError(f"{name}: the force reading shows a weight {ratio:.3g} times m |g| ({weighed:.4g} kg "
+                           f"against the payload's {mass:.4g} kg): readings in mN (1000)? give them in N and N m, or "
+                           "check the mass")
+    elif ratio < 1 / _FAR:
+        error = UnitsError(f"{name}: the force reading shows a weight {ratio:.3g} times m |g| ({weighed:.4g} kg "
+                           f"against the payload's {mass:.4g} kg): readings in kN, or the mass in g? give the readings "
+                           "in N and the mass in kg")
+    if error is not None:
+        error.quantity = "weight"               # (a steady push along gravity weighs too: compensate says so)
+        raise error
 
 
 def check_table_units(table, gravity, mass=None, com=None, S=None, max_mass=None):
