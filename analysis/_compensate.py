@@ -222,8 +222,9 @@ from scipy.signal import savgol_coeffs
 from scipy.stats import binom, chi2, norm
 
 from fmscal.plant import Calibration
-from fmscal.plant.io import (MAX_WRIST_MASS, PoseTable, UnitsError, check_spatial_log_units, check_table_units,
-                             colour_samples, difference_noise, reading_sign, wrench_noise)
+from fmscal.plant.io import (MAX_WRIST_MASS, STALL_SPREAD, PoseTable, UnitsError, check_spatial_log_units,
+                             check_table_units, colour_samples, difference_noise, reading_sign, stalled_poses,
+                             wrench_noise)
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import MODELS, NoiseSpec, regressor, rotation_matrices, sign_continuous, skew
 from fmscal.observers.payload import PayloadEstimate
@@ -1096,7 +1097,8 @@ def _unit_warnings(pose_log, calibration, noise):
     """The checks ``identify-payload`` runs on its data, as warnings: readings in mN or N mm, positions in mm,
     stamps in ms, a quaternion's convention, a dead channel (:func:`fmscal.plant.io.check_spatial_log_units`,
     :func:`fmscal.plant.io.check_table_units`, the payload's mass and centre of mass given), and every pose row
-    the same while the readings move beyond 20 of their noise's sd (a stalled tracker). Any of these flags every
+    the same while the readings move beyond :data:`fmscal.plant.io.STALL_SPREAD` of their noise's sd
+    (:func:`fmscal.plant.io.stalled_poses`: a stalled tracker). Any of these flags every
     sample a contact; the warning names why. Warnings, not refusals: a log compensated holds contacts, and a tool
     held still and pushed has still poses beside moving readings.
 
@@ -1114,10 +1116,10 @@ def _unit_warnings(pose_log, calibration, noise):
         if isinstance(data, PoseTable):
             check_table_units(data, calibration.gravity, **given)
             return []
-        poses = data.pose[data.has_pose]
-        if len(poses) > 1 and not np.ptp(poses, axis=0).any():
-            moved = np.ptp(data.w_hat, axis=0) / np.asarray(noise.wrench_sd, dtype=float)
-            if np.max(moved) <= 20:
+        stall = stalled_poses(data, noise.wrench_sd)
+        if stall is not None and len(stall[0]) > 1:
+            poses, moved = stall
+            if np.max(moved) <= STALL_SPREAD:
                 return []
             return [f"{data.name}: all {len(poses)} pose rows are the same while the readings move (by up to "
                     f"{np.max(moved):.3g} of their noise's sd): a stalled tracker, whose every change of the reading "

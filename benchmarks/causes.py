@@ -2,9 +2,10 @@
 [DURATION] [--cost]``.
 
 For each seed (default 0-4, 20 s) of ``spatial-arm`` and ``spatial-mocap``: the clean log, a ramp of 10 noise
-sd on fx over the log, and the base tilted 3 degrees about x, each through
-:func:`fmscal.observers.diagnostics.fit_causes` (the mocap log aligned at its known latency). Printed per log:
-the offset test's and the tilt test's p-values, the tilt found and its sd, and whether a cause is named.
+sd on fx over the log, the issue's ramp of 2 noise sd (0.1 N, ``ramp2``), and the base tilted 3 degrees about x,
+each through :func:`fmscal.observers.diagnostics.fit_causes` (the mocap log aligned at its known latency).
+Printed per log: the offset test's and the tilt test's p-values, the tilt found and its sd, the offset row of the
+smallest p-value, its spread over its residual's rms (eq. (C4)), and whether a cause is named.
 tests/test_causes.py asserts the naming on ``spatial-arm`` and MuJoCo's logs; this prints the figures the
 docs quote (status.md, "Causes named in 3D").
 
@@ -32,15 +33,17 @@ def naming(seeds, duration):
         base = SPATIAL_SCENARIOS[name].with_(duration=duration)
         model = SpatialModel(base.payload)
         for seed in seeds:
-            for kind in ("clean", "ramp", "tilt"):
+            for kind in ("clean", "ramp", "ramp2", "tilt"):
                 scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
                 log, _, _ = scenario.generate(seed)
-                if kind == "ramp":
-                    log.w_hat[:, 3] += 10 * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
+                if kind.startswith("ramp"):
+                    sd = 2 if kind == "ramp2" else 10
+                    log.w_hat[:, 3] += sd * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
                 c = fit_causes(log.shift_poses(scenario.latency), model)
-                print(f"{name:14s} seed {seed} {kind:5s} offset p {c.offset.p_value:8.2g}  tilt p "
-                      f"{c.gravity.p_value:8.2g}  tilt {c.gravity.tilt_deg:5.2f} +- {c.gravity.std_deg:4.2f} deg  "
-                      f"named: {bool(c.warnings)}")
+                row = int(np.argmin(c.row_p_values))
+                print(f"{name:14s} seed {seed} {kind:5s} offset p {c.offset.p_value:8.2g} ({model.wrench_names[row]}, "
+                      f"spread {c.spreads[row]:4.2f})  tilt p {c.gravity.p_value:8.2g}  tilt "
+                      f"{c.gravity.tilt_deg:5.2f} +- {c.gravity.std_deg:4.2f} deg  named: {bool(c.warnings)}")
 
 
 def cost():

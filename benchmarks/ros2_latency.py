@@ -23,7 +23,11 @@ cores more than it must. Printed:
   and received here; dropped = expected - received;
 - with ``--identify AT``: ``~/identify_payload`` called once the node has taken ``AT`` s of readings (with
   ``--contact START SECONDS``, a 15 N push on the tool then: the node fits the longest stretch without it), its
-  answer, how long it took, and the delay beyond the causal filter's of the outputs published meanwhile.
+  answer, how long it took, and the delay beyond the causal filter's of the outputs published meanwhile (also less
+  the sender's lateness, and the node's callback to publication);
+- with ``--busy``: a busy loop (a process of pure Python, in the lowest scheduling class, ``SCHED_IDLE``) beside
+  the node over the run, and no fit: what any computation beside the node costs its outputs on this machine,
+  the yardstick for the fit's process (which runs at ``nice`` 10).
 
 The machine's load is not controlled: on a shared machine the tails are the other processes' as much as the
 node's. About ``duration + 10`` s. ``--json`` prints the figures as one JSON object instead.
@@ -33,6 +37,7 @@ import argparse
 import json
 import os
 import signal
+import subprocess
 import sys
 import tempfile
 import threading
@@ -163,11 +168,16 @@ def _settled(peer, sent):
             and len(peer.stamps) >= published and len(peer.latencies) >= published)
 
 
-def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False, identify=None, contact=None):
+#: ``--busy``'s process: pure Python spinning in the lowest scheduling class.
+_BUSY = "import os; os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))\nwhile True:\n    pass"
+
+
+def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False, identify=None, contact=None,
+            busy=False):
     """Run the node on ``duration`` s of a 1 kHz log; the figures (module docstring) as a dict. ``pin``: the
     node on the last CPU, this process and the sender on the others (where there are two or more). ``identify``:
     ``~/identify_payload`` called once the node has taken that many s of readings; ``contact`` ``(start,
-    seconds)``: a 15 N push on the tool then."""
+    seconds)``: a 15 N push on the tool then. ``busy``: a ``SCHED_IDLE`` busy loop beside the node over the run."""
     cpus = sorted(os.sched_getaffinity(0))
     pin = pin and len(cpus) >= 2
     scenario, log, truth = scenario_log(duration, seed, contact)
@@ -191,7 +201,13 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False, ident
                 if identify is not None:
                     call = IdentifyCall(domain, peer, identify, 1.0 / log.dt)
                     call.start()
-                sent = sender_result(start_sender(domain, duration, seed, qos, contact), duration + 60)
+                hog = subprocess.Popen([sys.executable, "-c", _BUSY]) if busy else None
+                try:
+                    sent = sender_result(start_sender(domain, duration, seed, qos, contact), duration + 60)
+                finally:
+                    if hog is not None:
+                        hog.kill()
+                        hog.wait()
                 epoch, lateness = sent["epoch"], np.array(sent["lateness"])
                 sent_in = len(lateness) * log.dt + lateness[-1]
                 expected = len(reference.t)
@@ -215,8 +231,8 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False, ident
     trigger = np.round((t + delay) / log.dt).astype(int)
     net = node[:, 0] - delay - lateness[np.minimum(trigger, len(lateness) - 1)] \
         if len(node) == len(t) else np.zeros(0)
-    return {"duration_s": duration, "pinned": pin, "node_cpu_s": node_cpu, "rate_hz": 1.0 / log.dt, "qos": qos,
-            "causal_delay_s": delay,
+    return {"duration_s": duration, "pinned": pin, "busy": busy, "node_cpu_s": node_cpu, "rate_hz": 1.0 / log.dt,
+            "qos": qos, "causal_delay_s": delay,
             "sent": len(log.t), "sent_in_s": sent_in, "received_by_node": int(diagnostics.get("received", -1)),
             "lost_by_node": int(diagnostics.get("lost", -1)),
             "published_by_node": int(diagnostics.get("published", -1)),
@@ -227,13 +243,14 @@ def measure(duration=10.0, seed=0, domain=None, qos="reliable", pin=False, ident
             "beyond_delay_less_lateness_s": stats(net),
             "callback_to_publication_s": stats(node[:, 1]), "backlog": stats(node[:, 2]),
             "stamp_to_subscriber_s": stats(seen), "publisher_lateness_s": stats(lateness),
-            "node_counts": diagnostics, **_identify_figures(call, peer, delay),
+            "node_counts": diagnostics, **_identify_figures(call, peer, delay, net),
             "warnings": [line for line in text.splitlines() if "WARN" in line][:5]}
 
 
-def _identify_figures(call, peer, delay):
-    """The figures of an ``~/identify_payload`` call during the run: its answer, how long it took, and the delay
-    beyond the causal filter's of the outputs published meanwhile (p50, p99, the largest)."""
+def _identify_figures(call, peer, delay, net):
+    """The figures of an ``~/identify_payload`` call during the run: its answer, how long it took, and of the
+    outputs published meanwhile (p50, p99, the largest) the delay beyond the causal filter's, the same less the
+    sender's lateness (``net``), and the node's callback to publication."""
     if call is None:
         return {}
     at = np.array(peer.latency_at)
@@ -243,7 +260,9 @@ def _identify_figures(call, peer, delay):
                          "message": None if call.answer is None else call.answer[1],
                          "took_s": None if call.end_at is None else call.end_at - call.start_at,
                          "outputs_during": int(np.sum(during)),
-                         "beyond_delay_during_s": stats(node[during, 0] - delay) if np.any(during) else None}}
+                         "beyond_delay_during_s": stats(node[during, 0] - delay) if np.any(during) else None,
+                         "less_lateness_during_s": stats(net[during]) if np.any(during) and len(net) else None,
+                         "callback_during_s": stats(node[during, 1]) if np.any(during) else None}}
 
 
 def _cpu(pid):
@@ -263,9 +282,12 @@ def main(argv=None):
                         "taken AT s of readings; its figures printed apart")
     parser.add_argument("--contact", type=float, nargs=2, metavar=("START", "SECONDS"),
                         help="a 15 N push on the tool over [START, START + SECONDS) s of the log")
+    parser.add_argument("--busy", action="store_true", help="a busy loop at SCHED_IDLE beside the node (no fit): "
+                        "what any computation beside it costs")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
-    r = measure(args.duration, args.seed, qos=args.qos, pin=args.pin, identify=args.identify, contact=args.contact)
+    r = measure(args.duration, args.seed, qos=args.qos, pin=args.pin, identify=args.identify, contact=args.contact,
+                busy=args.busy)
     if args.json:
         print(json.dumps(r))
         return
@@ -273,6 +295,7 @@ def main(argv=None):
           f"the node received {r['received_by_node']}; outputs expected {r['expected']}, received {r['received']} "
           f"(dropped {r['dropped']}, in order: {r['in_order']})")
     pinned = "the node pinned to a CPU of its own; " if r["pinned"] else ""
+    pinned += "a SCHED_IDLE busy loop beside it; " if r["busy"] else ""
     print(f"causal delay {r['causal_delay_s'] * 1e3:.1f} ms; {pinned}the node used "
           f"{r['node_cpu_s']:.1f} s of CPU over the "
           f"{r['duration_s']:g} s")
@@ -293,10 +316,13 @@ def main(argv=None):
         i = r["identify"]
         print(f"~/identify_payload: {'succeeded' if i['success'] else 'refused or failed'} in "
               f"{i['took_s'] or float('nan'):.2f} s: {i['message']}")
-        d = i["beyond_delay_during_s"]
-        if d is not None:
-            print(f"  the {i['outputs_during']} outputs meanwhile, beyond the causal delay: p50 {d['p50'] * 1e3:.2f} "
-                  f"ms, p99 {d['p99'] * 1e3:.2f} ms, max {d['max'] * 1e3:.2f} ms")
+        for key, name in (("beyond_delay_during_s", "beyond the causal delay"),
+                          ("less_lateness_during_s", "the same less the sender's lateness"),
+                          ("callback_during_s", "the node's callback to publication")):
+            d = i[key]
+            if d is not None:
+                print(f"  the {i['outputs_during']} outputs meanwhile, {name}: p50 {d['p50'] * 1e3:.2f} ms, p99 "
+                      f"{d['p99'] * 1e3:.2f} ms, max {d['max'] * 1e3:.2f} ms")
     for line in r["warnings"]:
         print(line)
 

@@ -41,9 +41,12 @@ eq. (M2) of :mod:`fmscal.observers.diagnostics._misfit`::
   smallest p-value times the rows (Bonferroni); a row is named only where
   its levels also spread as far as :data:`MOVING_SIZE` of its residual's
   rms ``s_i`` (a size that matters, beside one the test alone finds on a
-  long log)::
+  long log), or, where its p-value is below :data:`DECISIVE`, as far as
+  :data:`DECISIVE_SIZE` of it (a ramp of twice the noise over the log spreads
+  the levels of ``P`` parts over ``(P - 1) / P`` of it, below twice ``s_i``)::
 
-    max(0, beta_i) - min(0, beta_i) >= MOVING_SIZE s_i                             (C4)
+    max(0, beta_i) - min(0, beta_i) >= MOVING_SIZE s_i,
+                                   or DECISIVE_SIZE s_i where p_i < DECISIVE       (C4)
 
 - gravity is tilted: ``x`` the two components of ``dg`` across ``g``, ``K = 2``.
 
@@ -87,6 +90,13 @@ ABSORBED = 1e-3
 #: (C4)): on a long log the test alone finds shifts of a tenth of the noise that the pose noise's share leaves, which
 #: move no estimate.
 MOVING_SIZE = 2.0
+#: Eq. (C4)'s second arm: a row whose test's p-value (times the rows) is below this is named where its levels spread
+#: over :data:`DECISIVE_SIZE` of its residual's rms: a ramp of twice the noise, whose levels stay below
+#: :data:`MOVING_SIZE`, beside the pose noise's share of a clean log's residual, which the test finds less surely
+#: (``python benchmarks/causes.py`` prints both).
+DECISIVE = 1e-12
+#: Eq. (C4)'s size beside :data:`DECISIVE`, a share of the residual's rms.
+DECISIVE_SIZE = 1.0
 #: No test on fewer blocks of time than this many times the columns of eq. (C1) (43 in 3D): the cluster-robust
 #: covariance of that many coefficients from fewer blocks is too rough for eq. (C2)'s tails (a log of 20 s or more
 #: at the usual blocks of 0.2 s).
@@ -147,6 +157,8 @@ class Causes:
     levels, levels_std : ndarray, shape (n_w, P - 1)
         ``beta_i`` of eq. (C1), each row in its wrench's units (N m, N): the level of the needed wrench's
         residual in each part of the log against the first, and its standard deviation.
+    spreads, row_p_values : ndarray, shape (n_w,)
+        Each row's levels' spread over its residual's rms (eq. (C4)) and its test's p-value times the rows.
     """
 
     offset: OffsetDrift
@@ -154,6 +166,8 @@ class Causes:
     blocks: int
     levels: np.ndarray = None
     levels_std: np.ndarray = None
+    spreads: np.ndarray = None
+    row_p_values: np.ndarray = None
 
     @property
     def warnings(self):
@@ -244,13 +258,14 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     for i, (cols, Y) in enumerate(designs):
         scores[:, cols] += np.add.reduceat(Y * e[:, i:i + 1], starts, axis=0)
     cov = small_sample_factor(blocks, n * n_w, rank) * inverse @ (scores.T @ scores) @ inverse
-    offset = _offset_test(theta, cov, g, shared, n_t, scale, significance)
+    offset, spreads, row_p, moving = _offset_test(theta, cov, g, shared, n_t, scale, significance)
     if not offset.constant:
-        offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared)
+        offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving)
     gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance) if model.under_gravity else None
     beta = theta[shared:].reshape(n_w, n_t)
     beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
-    return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std)
+    return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
+                  row_p_values=row_p)
 
 
 def _pseudo_inverse(A):
@@ -275,23 +290,27 @@ def _wald(x, C, g):
 
 
 def _offset_test(theta, cov, g, shared, n_t, scale, significance):
-    """The moving offset's test: each row's ``beta_i`` of eq. (C1) by eq. (C2), Bonferroni over the rows; a row
-    counts where its levels also spread over :data:`MOVING_SIZE` of its residual's rms (eq. (C4))."""
+    """The moving offset's test, each row's spread and p-value, and the rows found moving: each row's ``beta_i`` of
+    eq. (C1) by eq. (C2), Bonferroni over the rows; a row counts where its levels also spread over
+    :data:`MOVING_SIZE` of its residual's rms, or :data:`DECISIVE_SIZE` of it below :data:`DECISIVE` (eq. (C4))."""
     n_w = len(scale)
     rows = [shared + i * n_t + np.arange(n_t) for i in range(n_w)]
     tests = [_wald(theta[idx], cov[np.ix_(idx, idx)], g) for idx in rows]
     sizes = [np.ptp(np.r_[0.0, theta[idx]]) / scale[i] for i, idx in enumerate(rows)]
-    moving = [i for i in range(n_w) if n_w * tests[i][2] < significance / 2 and sizes[i] >= MOVING_SIZE]
+    moving = [i for i in range(n_w) if n_w * tests[i][2] < significance / 2 and
+              (sizes[i] >= MOVING_SIZE or n_w * tests[i][2] < DECISIVE and sizes[i] >= DECISIVE_SIZE)]
     statistic, k, p = min((tests[i] for i in moving), key=lambda test: test[2]) if moving else \
         min(tests, key=lambda test: test[2])
     p_value = min(1.0, n_w * p)
     F = (g - k) / (k * (g - 1)) * statistic if k and g > k + 1 else np.nan
-    return OffsetDrift(not moving, float(F), p_value, np.zeros((0, n_w)), np.zeros(0))
+    return OffsetDrift(not moving, float(F), p_value, np.zeros((0, n_w)), np.zeros(0)), np.array(sizes), \
+        np.minimum(1.0, n_w * np.array([test[2] for test in tests])), moving
 
 
-def _describe(offset, log, model, t, r, designs, theta, scale, S, shared):
+def _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving):
     """The offset's change in words: the residual less the fitted gravity and payload terms, per window, taken to
-    the reading by ``-S^-1`` (:func:`describe_offset`)."""
+    the reading by ``-S^-1`` (:func:`describe_offset`), on the reading's channel that a change of a row found
+    moving (``moving``, rows of the wrench) moves most against its noise."""
     left = np.column_stack([r[:, i] - scale[i] * (Y[:, :shared] @ theta[:shared]) for i, (_, Y) in
                             enumerate(designs)])
     windows = ((t - t[0]) // DESCRIBE_WINDOW).astype(int)
@@ -302,13 +321,15 @@ def _describe(offset, log, model, t, r, designs, theta, scale, S, shared):
     est = -means @ S_inv.T
     per_sample = S.T @ np.diag(1.0 / scale ** 2) @ S
     info = counts[:, None, None] * per_sample[None]
+    sd = np.sqrt(np.maximum(np.diag(np.linalg.pinv(per_sample)), 1e-300))     # a reading channel's, per sample
     middle = np.add.reduceat(t, starts) / counts
     forces = set(model.force_channels)
     units = tuple("N" if k in forces else "N m" for k in range(len(model.wrench_names)))
     offset.offsets, offset.t = est, middle
     offset.warning = describe_offset(middle, est, info, 1.0, offset.p_value, model.wrench_names, units,
                                      "the residuals of a least-squares fit change level along the log, beyond "
-                                     "what gravity's direction and the payload explain")
+                                     "what gravity's direction and the payload explain",
+                                     channels=sorted({int(np.argmax(np.abs(S_inv[:, i]) / sd)) for i in moving}))
     return offset
 
 

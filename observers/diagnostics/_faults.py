@@ -238,7 +238,7 @@ def _ljung_box(z, lags):
     return float(chi2.sf(Q, lags))
 
 
-def describe_offset(t, est, info, scale, p_value, names, units, evidence):
+def describe_offset(t, est, info, scale, p_value, names, units, evidence, channels=None):
     """One line: which channel's offset moved, as a step or a ramp, and when.
 
     Parameters
@@ -256,6 +256,8 @@ def describe_offset(t, est, info, scale, p_value, names, units, evidence):
         The reading's channels and their units.
     evidence : str
         What the test saw, in words ("the residuals of a least-squares fit change level").
+    channels : sequence of int, optional
+        The channels the test found moving, to choose among (None: all).
 
     Returns
     -------
@@ -264,7 +266,8 @@ def describe_offset(t, est, info, scale, p_value, names, units, evidence):
     sd2 = np.array([np.diag(np.linalg.inv(I)) for I in info]) * scale          # (K, 3) variances
     w = 1.0 / sd2
     spread = [np.sum(w[:, j] * (est[:, j] - np.average(est[:, j], weights=w[:, j])) ** 2) for j in range(len(names))]
-    j = int(np.argmax(spread))
+    among = range(len(names)) if channels is None or not len(channels) else channels
+    j = int(max(among, key=lambda k: spread[k]))
     y, sw = est[:, j], np.sqrt(w[:, j])
     bounds = np.concatenate([[t[0]], 0.5 * (t[1:] + t[:-1]), [t[-1]]])      # between windows, K + 1
     grid = np.unique(np.linspace(0, len(t), min(len(t), 60) + 1).astype(int))

@@ -8,8 +8,9 @@ from ._log import (Log, LogError, Truth, read_log, read_readings, read_truth, lo
     SPATIAL_COLUMNS, READING_COLUMNS, QUATERNION_TOLERANCE, unit_quaternions, MIN_SAMPLES)
 from ._noise import (estimate_noise, difference_noise, wrench_noise, reading_colour, colour_samples)
 from ._units import (implied_scale, diagnose_units, UnitFinding, COUNTS)
-from ._spatial_units import (UnitsError, check_spatial_log_units, check_poses_move, check_gravity,
-    check_table_units, check_imu_units, EARTH_G, MAX_WRIST_MASS, MAX_LEVER_ARM, MAX_ACCELERATION, MAX_STEP)
+from ._spatial_units import (UnitsError, check_spatial_log_units, check_poses_move, stalled_poses, check_gravity,
+    check_table_units, check_imu_units, STALL_SPREAD, EARTH_G, MAX_WRIST_MASS, MAX_LEVER_ARM, MAX_ACCELERATION,
+    MAX_STEP)
 from ._calibration import (json_ready, Calibration, CalibrationFileError, NotSavedError, file_sha256, reading_sign,
     FORMAT, READINGS)
 from ._pose_table import (PoseTable, read_pose_table, write_pose_table, is_pose_table, simulate_table, AttitudeLog,
@@ -25,7 +26,8 @@ from ._bag import (BagError, import_bag, read_bag, format_report, WRENCH_TYPE, P
 __all__ = ["json_ready", "write_bag", "write_tf_bag", "Log", "LogError", "Truth", "read_log", "read_readings",
            "read_truth", "log_kind", "unit_quaternions", "estimate_noise", "difference_noise", "wrench_noise",
            "reading_colour", "colour_samples", "diagnose_units", "UnitFinding",
-           "UnitsError", "check_spatial_log_units", "check_poses_move", "check_gravity",
+           "UnitsError", "check_spatial_log_units", "check_poses_move", "stalled_poses", "STALL_SPREAD",
+           "check_gravity",
            "check_table_units", "check_imu_units",
            "Calibration", "CalibrationFileError", "NotSavedError", "file_sha256", "reading_sign", "PoseTable",
            "read_pose_table",

@@ -49,7 +49,8 @@ from fmscal.plant.physics import rotation_matrices, sign_continuous
 from ._log import LogError
 from ._noise import estimate_noise
 
-__all__ = ["UnitsError", "check_readings_change", "check_poses_move", "check_gravity", "check_mass",
+__all__ = ["UnitsError", "check_readings_change", "check_poses_move", "stalled_poses", "STALL_SPREAD",
+           "check_gravity", "check_mass",
            "check_spatial_log_units", "check_table_units", "check_imu_units", "MAX_GYRO_RATE",
            "EARTH_G", "MAX_WRIST_MASS", "MAX_LEVER_ARM", "MAX_ACCELERATION", "MAX_STEP"]
 
@@ -166,13 +167,40 @@ def check_readings_change(name, w_hat, names=("tx", "ty", "tz", "fx", "fy", "fz"
                          "empty; check the recording")
 
 
+#: A reading channel spanning more than this many of its noise's sd moves: beside pose rows all the same, a stalled
+#: tracker rather than a payload at rest.
+STALL_SPREAD = 20.0
+
+
+def stalled_poses(log, wrench_sd=None):
+    """Every pose row of ``log`` the same (a stalled tracker, or a payload at rest), and how far the readings move.
+
+    Parameters
+    ----------
+    log : plant.Log
+    wrench_sd : array_like, optional
+        The readings' noise sd per channel (None: :func:`fmscal.plant.estimate_noise`'s from the log).
+
+    Returns
+    -------
+    tuple or None
+        None where the poses move or there are none; else ``(poses, spread)``: the pose rows and each reading
+        channel's span over its noise sd (beyond :data:`STALL_SPREAD`, the readings move).
+    """
+    poses = log.pose[log.has_pose]
+    if len(poses) == 0 or np.ptp(poses, axis=0).any():
+        return None
+    sd = estimate_noise(log).wrench_sd if wrench_sd is None else wrench_sd
+    return poses, np.ptp(log.w_hat, axis=0) / np.maximum(np.asarray(sd, dtype=float), 1e-300)
+
+
 def check_poses_move(log, names=("tx", "ty", "tz", "fx", "fy", "fz")):
     """Refuse a log whose every pose row is the same: its pose stream never moved, and nothing can be fitted.
 
     A tracker that stalls repeats its last pose to the last digit, where a real one's noise changes each row;
-    the readings then say which it was: moving far beyond their noise (a channel's spread over 20 of its
-    noise standard deviations, :func:`fmscal.plant.estimate_noise`), a stalled tracker beside a moving
-    payload; else a payload at rest.
+    the readings then say which it was: moving far beyond their noise (a channel's spread over
+    :data:`STALL_SPREAD` of its noise standard deviations, :func:`stalled_poses`), a stalled tracker beside a
+    moving payload; else a payload at rest.
 
     Parameters
     ----------
@@ -184,12 +212,12 @@ def check_poses_move(log, names=("tx", "ty", "tz", "fx", "fy", "fz")):
     ------
     LogError
     """
-    poses = log.pose[log.has_pose]
-    if len(poses) == 0 or np.ptp(poses, axis=0).any():
+    stall = stalled_poses(log)
+    if stall is None:
         return
-    spread = np.ptp(log.w_hat, axis=0) / np.maximum(np.asarray(estimate_noise(log).wrench_sd), 1e-300)
+    poses, spread = stall
     what = f"all {len(poses)} pose rows are the same ({','.join(f'{v:g}' for v in poses[0])})"
-    if np.max(spread) > 20:
+    if np.max(spread) > STALL_SPREAD:
         k = int(np.argmax(spread))
         raise LogError(f"{log.name}: {what} while the readings move ({names[k]} spans "
                        f"{np.ptp(log.w_hat[:, k]):.3g}): the pose stream does not move, a stalled tracker; check "
