@@ -27,7 +27,8 @@ cores more than it must. Printed:
   the sender's lateness, and the node's callback to publication);
 - with ``--busy``: a busy loop (a process of pure Python, in the lowest scheduling class, ``SCHED_IDLE``) beside
   the node over the run, and no fit: what any computation beside the node costs its outputs on this machine,
-  the yardstick for the fit's process (which runs at ``nice`` 10).
+  the yardstick for the fit's process (which runs at ``nice`` 10); with ``--pin``, the loop on the sender's and
+  this process's CPUs, not the node's.
 
 The machine's load is not controlled: on a shared machine the tails are the other processes' as much as the
 node's. About ``duration + 10`` s. ``--json`` prints the figures as one JSON object instead.
@@ -283,7 +284,7 @@ def main(argv=None):
     parser.add_argument("--contact", type=float, nargs=2, metavar=("START", "SECONDS"),
                         help="a 15 N push on the tool over [START, START + SECONDS) s of the log")
     parser.add_argument("--busy", action="store_true", help="a busy loop at SCHED_IDLE beside the node (no fit): "
-                        "what any computation beside it costs")
+                        "what any computation beside it costs (with --pin, on the CPUs the node is not on)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
     r = measure(args.duration, args.seed, qos=args.qos, pin=args.pin, identify=args.identify, contact=args.contact,

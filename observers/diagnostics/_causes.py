@@ -94,7 +94,7 @@ MOVING_SIZE = 2.0
 #: over :data:`DECISIVE_SIZE` of its residual's rms: a ramp of twice the noise, whose levels stay below
 #: :data:`MOVING_SIZE`, beside the pose noise's share of a clean log's residual, which the test finds less surely
 #: (``python benchmarks/causes.py`` prints both).
-DECISIVE = 1e-12
+DECISIVE = 1e-14
 #: Eq. (C4)'s size beside :data:`DECISIVE`, a share of the residual's rms.
 DECISIVE_SIZE = 1.0
 #: No test on fewer blocks of time than this many times the columns of eq. (C1) (43 in 3D): the cluster-robust
