@@ -1,5 +1,5 @@
 """A moving offset and a tilted gravity named in 3D (issue 46 item 6): ``python benchmarks/causes.py [SEEDS]
-[DURATION] [--cost] [--clean START STOP]``.
+[DURATION] [--cost] [--clean START STOP [SCENARIO] [DURATION]]``.
 
 For each seed (default 0-4, 20 s) of ``spatial-arm`` and ``spatial-mocap``: the clean log, a ramp of 10 noise
 sd on fx over the log, the issue's ramp of 2 noise sd (0.1 N, ``ramp2``), and the base tilted 3 degrees about x,
@@ -9,9 +9,10 @@ smallest p-value, its spread over its residual's rms (eq. (C4)), and whether a c
 tests/test_causes.py asserts the naming on ``spatial-arm`` and MuJoCo's logs; this prints the figures the
 docs quote (status.md, "Causes named in 3D").
 
-``--clean START STOP``: eq. (C4) on clean ``spatial-mocap`` logs of 20 s, seeds ``START`` to ``STOP - 1`` (its
-false-alarm side, where the poses' noise makes the test find offsets moving): per seed and in sum, how many are
-named by each of (C4)'s arms, and how often each of the second arm's conditions holds alone.
+``--clean START STOP [SCENARIO] [DURATION]``: eq. (C4) on clean logs (``spatial-mocap`` and 20 s by default), seeds
+``START`` to ``STOP - 1`` (its false-alarm side; on ``spatial-mocap`` the poses' noise makes the test find offsets
+moving): per seed and in sum, how many are named by each of (C4)'s arms, how often each of the second arm's
+conditions holds alone, and how many are named tilted.
 
 ``--cost``: ``calibrate``'s CPU on a 60 s 1 kHz ``spatial-arm`` log with and without the ``"causes"`` check,
 after a warm-up, three alternated runs each in one process, and the ratio of the best of each.
@@ -64,13 +65,15 @@ def clean(start, stop, name="spatial-mocap", duration=20.0):
     from fmscal.observers.diagnostics._causes import CAUSE_SIGNIFICANCE, DECISIVE, DECISIVE_SIZE, MOVING_SIZE
     base = SPATIAL_SCENARIOS[name].with_(duration=duration)
     model = SpatialModel(base.payload)
-    counts = dict(first=0, second=0, p_alone=0, spread_alone=0)
+    counts = dict(first=0, second=0, p_alone=0, spread_alone=0, tilted=0, untested=0)
     for seed in range(start, stop):
         log, _, _ = base.generate(seed)
         c = fit_causes(log.shift_poses(base.latency), model)
         if c.row_p_values is None:
             print(f"{name} seed {seed}: not tested")
+            counts["untested"] += 1
             continue
+        counts["tilted"] += bool(c.gravity.tilted)
         p, spread = c.row_p_values, c.spreads
         significant = p < CAUSE_SIGNIFICANCE / 2
         first = significant & (spread >= MOVING_SIZE)
@@ -81,9 +84,10 @@ def clean(start, stop, name="spatial-mocap", duration=20.0):
         counts["spread_alone"] += bool((significant & (p >= DECISIVE) & (spread >= DECISIVE_SIZE)).any())
         print(f"{name} seed {seed}: offset p {c.offset.p_value:8.2g} ({_row(c, model)}), largest spread "
               f"{spread.max():4.2f} at p {p[int(np.argmax(spread))]:.2g}, named: {not c.offset.constant}", flush=True)
-    print(f"{name}, seeds {start}-{stop - 1}: named by (C4)'s first arm {counts['first']}, by its second alone "
-          f"{counts['second']}; p below {DECISIVE:g} with a spread under {DECISIVE_SIZE:g} {counts['p_alone']}, "
-          f"a significant spread of {DECISIVE_SIZE:g} or more at p above {DECISIVE:g} {counts['spread_alone']}")
+    print(f"{name}, {duration:g} s, seeds {start}-{stop - 1}: named by (C4)'s first arm {counts['first']}, by its "
+          f"second alone {counts['second']}; p below {DECISIVE:g} with a spread under {DECISIVE_SIZE:g} "
+          f"{counts['p_alone']}, a significant spread of {DECISIVE_SIZE:g} or more at p above {DECISIVE:g} "
+          f"{counts['spread_alone']}; gravity named tilted {counts['tilted']}; too short to test {counts['untested']}")
 
 
 def cost():
@@ -111,6 +115,6 @@ if __name__ == "__main__":
     if "--cost" in sys.argv[1:]:
         cost()
     elif args and args[0] == "--clean":
-        clean(int(args[1]), int(args[2]))
+        clean(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
     else:
         naming(range(int(args[0]) if args else 5), float(args[1]) if len(args) > 1 else 20.0)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from fmscal.analysis import calibrate
-from fmscal.observers.diagnostics import fit_causes
+from fmscal.observers.diagnostics import DRIFT_PARTS, fit_causes
 from fmscal.plant import SpatialModel
 from fmscal.plant.physics import GRAVITY
 from fmscal.plant.scenarios._spatial import SPATIAL_SCENARIOS
@@ -107,6 +107,24 @@ def test_a_tilted_base_is_named_with_its_tilt(seed):
     assert abs(tilt.tilt_deg - TILT_DEG) < 4 * tilt.std_deg + 0.05
     assert "--gravity estimate" in tilt.warning and "base is tilted" in tilt.warning
     np.testing.assert_allclose(tilt.gravity, _tilted(TILT_DEG), atol=0.15)
+
+
+def test_a_log_of_twelve_seconds_tests_its_offset_with_fewer_parts():
+    """12 s at 1 kHz: too few blocks of time for six parts' 43 columns, enough for three's 25: a ramp of 10 noise sd
+    on fx is named on fx, in the first warning of ``calibrate``, and not converged; gravity's direction is not
+    tested there; a clean log names nothing (issue 46's logs were 10 s long)."""
+    short = ARM.with_(duration=12.0)
+    model = SpatialModel(ARM.payload, GRAVITY)
+    for seed in (0, 1):
+        clean = fit_causes(_case(short, "clean", seed)[0], model)
+        assert clean.warnings == [] and clean.parts < DRIFT_PARTS
+    log, _ = _case(short, "ramp", 0)
+    causes = fit_causes(log, model)
+    assert 3 <= causes.parts < DRIFT_PARTS and causes.gravity.p_value == 1.0 and not causes.gravity.tilted
+    assert "offset of fx" in causes.offset.warning
+    cal = calibrate(log, ARM.payload)
+    assert not cal.converged and cal.why_unconverged == "the sensor's offset moves during the log"
+    assert "offset of fx" in cal.warnings[0]
 
 
 def test_a_log_too_short_to_test_names_nothing():

@@ -53,7 +53,9 @@ eq. (M2) of :mod:`fmscal.observers.diagnostics._misfit`::
 Each names its cause below half of :data:`CAUSE_SIGNIFICANCE`: the
 probability, for a log with one constant offset and the gravity given, of
 naming either, nominal (no test with ``G`` below :data:`BLOCKS_PER_COLUMN`
-times the columns of (C1)). The tilt the data ask
+times the columns of (C1); a log too short for that with ``P`` parts is
+fitted with fewer, down to :data:`MIN_PARTS`, its offset tested and its
+gravity not). The tilt the data ask
 for, and its one-sigma uncertainty::
 
     tilt = angle(g, g + dg),   sd = sqrt(lambda_max(C_perp)) / |g + dg|           (C3)
@@ -101,6 +103,10 @@ DECISIVE_SIZE = 1.0
 #: covariance of that many coefficients from fewer blocks is too rough for eq. (C2)'s tails (a log of 20 s or more
 #: at the usual blocks of 0.2 s).
 BLOCKS_PER_COLUMN = 2
+#: The fewest parts of eq. (C1) (``P``): a log too short for :data:`DRIFT_PARTS` (fewer blocks of time than
+#: :data:`BLOCKS_PER_COLUMN` times its columns) is fitted with fewer, down to this many, and its offset tested; its
+#: gravity's direction is not (on noisy poses the tilt's test finds clean short logs tilted).
+MIN_PARTS = 3
 #: Samples fitted at most: a longer log is taken at every ``stride``-th sample (the motion smoothed on all of them
 #: first), which keeps the check's cost flat beyond 20 s at 1 kHz; its blocks of time, and so its test, unchanged.
 MAX_ROWS = 20000
@@ -159,6 +165,8 @@ class Causes:
         residual in each part of the log against the first, and its standard deviation.
     spreads, row_p_values : ndarray, shape (n_w,)
         Each row's levels' spread over its residual's rms (eq. (C4)) and its test's p-value times the rows.
+    parts : int
+        ``P``: the parts of the log the offset's levels were fitted in.
     """
 
     offset: OffsetDrift
@@ -168,6 +176,7 @@ class Causes:
     levels_std: np.ndarray = None
     spreads: np.ndarray = None
     row_p_values: np.ndarray = None
+    parts: int = None
 
     @property
     def warnings(self):
@@ -187,7 +196,8 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     window : float
         Smoothing window of the pose differentiation, s.
     parts : int
-        ``P`` of eq. (C1).
+        ``P`` of eq. (C1): the most; a log with too few blocks of time for them takes fewer, down to
+        :data:`MIN_PARTS` (its gravity's direction then not tested).
     significance : float
         :data:`CAUSE_SIGNIFICANCE`.
 
@@ -228,10 +238,44 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     r = w - X @ theta0                                                        # the reference residual
     S = (theta0 / spread[:, None]).T[:, :n_w]                                 # S of the reference fit
     scale = np.maximum(np.sqrt(np.mean(r ** 2, axis=0)), 1e-300)
-    part = np.minimum((parts * (t - t[0]) / (t[-1] - t[0] + log.dt)).astype(int), parts - 1)
-    T = (part[:, None] == np.arange(1, parts)[None, :]).astype(float)        # (N, P - 1)
     D = gravity_jacobian(q, model.payload)                                  # (N, n_w, 3), eq. (G1)
     w_dot = np.gradient(w, t, axis=0)                                         # a latency's error, eq. (C1)
+    for p in range(parts, min(MIN_PARTS, parts) - 1, -1):     # P: the most parts the log has blocks of time for
+        fitted = _fit(t, log.dt, stride, window, p, D, W, w_dot, X, H, r, scale)
+        if fitted[-2] >= BLOCKS_PER_COLUMN * fitted[-1]:          # G against the columns
+            break
+    *fitted, g, size = fitted
+    designs, inverse, rank, theta, e, blocks, starts, shared, n_t = fitted
+    if g < BLOCKS_PER_COLUMN * size:          # the sandwich of eq. (C2) would be too rough to test on
+        return Causes(offset=OffsetDrift(True, np.nan, 1.0, np.zeros((0, n_w)), np.zeros(0)), gravity=None
+                      if not model.under_gravity else GravityTilt(np.asarray(model.gravity, dtype=float), np.nan,
+                                                                  np.nan, np.nan, 1.0, False), blocks=g)
+    scores = np.zeros((g, size))
+    for i, (cols, Y) in enumerate(designs):
+        scores[:, cols] += np.add.reduceat(Y * e[:, i:i + 1], starts, axis=0)
+    cov = small_sample_factor(blocks, n * n_w, rank) * inverse @ (scores.T @ scores) @ inverse
+    offset, spreads, row_p, moving = _offset_test(theta, cov, g, shared, n_t, scale, significance)
+    if not offset.constant:
+        offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving)
+    if not model.under_gravity:
+        gravity = None
+    elif n_t + 1 < parts:                     # a short log: its tilt not tested (MIN_PARTS)
+        gravity = GravityTilt(np.asarray(model.gravity, dtype=float), np.nan, np.nan, np.nan, 1.0, False)
+    else:
+        gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance)
+    beta = theta[shared:].reshape(n_w, n_t)
+    beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
+    return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
+                  row_p_values=row_p, parts=n_t + 1)
+
+
+def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale):
+    """Eq. (C1) fitted with ``parts`` parts of the log: the rows' designs, ``A^+``, its rank, ``theta``, the scaled
+    residual it leaves, the blocks of time (each sample's, and their starts), the shared columns, ``P - 1``, ``G``
+    and the columns."""
+    n_w = r.shape[1]
+    part = np.minimum((parts * (t - t[0]) / (t[-1] - t[0] + dt)).astype(int), parts - 1)
+    T = (part[:, None] == np.arange(1, parts)[None, :]).astype(float)        # (N, P - 1)
     shared = 3 + W.shape[2] - 1 + 1              # dg, dpi less the mass, and dtau (eq. C1)
     n_t = parts - 1
     size = shared + n_w * n_t
@@ -246,26 +290,10 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     inverse, rank = _pseudo_inverse(A)
     theta = inverse @ b
     e = np.column_stack([r[:, i] / scale[i] - Y @ theta[cols] for i, (cols, Y) in enumerate(designs)])
-    length = block_length(e, log.dt * stride, window)
+    length = block_length(e, dt * stride, window)
     blocks = ((t - t[0]) // length).astype(int)
     starts = np.flatnonzero(np.r_[True, np.diff(blocks) != 0])
-    g = len(starts)
-    if g < BLOCKS_PER_COLUMN * size:          # the sandwich of eq. (C2) would be too rough to test on
-        return Causes(offset=OffsetDrift(True, np.nan, 1.0, np.zeros((0, n_w)), np.zeros(0)), gravity=None
-                      if not model.under_gravity else GravityTilt(np.asarray(model.gravity, dtype=float), np.nan,
-                                                                  np.nan, np.nan, 1.0, False), blocks=g)
-    scores = np.zeros((g, size))
-    for i, (cols, Y) in enumerate(designs):
-        scores[:, cols] += np.add.reduceat(Y * e[:, i:i + 1], starts, axis=0)
-    cov = small_sample_factor(blocks, n * n_w, rank) * inverse @ (scores.T @ scores) @ inverse
-    offset, spreads, row_p, moving = _offset_test(theta, cov, g, shared, n_t, scale, significance)
-    if not offset.constant:
-        offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving)
-    gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance) if model.under_gravity else None
-    beta = theta[shared:].reshape(n_w, n_t)
-    beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
-    return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
-                  row_p_values=row_p)
+    return designs, inverse, rank, theta, e, blocks, starts, shared, n_t, len(starts), size
 
 
 def _pseudo_inverse(A):
