@@ -573,14 +573,18 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         why = why or _UNSETTLED
     notes = list(signed.notes)
     shape = getattr(run.misfit, "inertia", None)
-    said = inertia_note(shape, converged)           # the shape the log sees, in words
-    if said and not converged and why == _LATENCY_STEP and _step_of_the_inertia(run, shape, max_latency):
+    # the shape the log sees, in words; a cause named (a moving offset, gravity), or a misfit on one force channel
+    # alone, which no inertia leaves, is why it did not converge
+    explained = run.named or getattr(run.misfit, "alone", None) is not None
+    said = inertia_note(shape, converged or explained)
+    if said and not converged and not explained and why == _LATENCY_STEP and _step_of_the_inertia(run, shape,
+                                                                                                  max_latency):
         step = run.latency.step                     # the latency's step, the shape's: named with the inertia
         warnings = [w for w in warnings if w not in run.latency.warnings]
         said += (f"; the latency's step along the log ({step['before'] * 1e3:.3g} ms before t = {step['t']:.3g} s, "
                  f"{step['after'] * 1e3:.3g} ms after) is gone at that inertia: the shape's, not the stamps'")
         why = _UNSETTLED
-    if said and converged:
+    if said and (converged or explained):
         notes.append(said)
     elif said:                          # the likely cause of a fit that did not settle: a longer log would not help
         warnings = [w for w in warnings if w != _not_settled(name)] + [said]
@@ -1002,9 +1006,12 @@ FAR_GAIN = 1.5
 def _check_gains(run, warnings):
     """``"gains"``: each diagonal gain of ``S`` within a factor :data:`FAR_GAIN` of 1, else a warning naming
     the likely cause: the payload's mass (force gains) or its centre of mass and inertia (torque gains), or
-    the reading's units. Only gains the log determines count: a channel no undetermined direction holds (a
-    share above 0.1), a standard deviation under a tenth of the gain and a gain three of them from 1 (a
-    method without ``S_std``: a converged run). ``converged`` is not
+    the reading's units; force gains uneven among themselves (:data:`UNEVEN_GAIN`), which neither a mass nor a unit
+    makes, name the one channel far from 1 (its offset moving, and where the log was too short for the
+    ``"causes"`` check to test it, the length it would take; or its gain), or, where no one channel is or the
+    torque gains are far too, the centre of mass. Only gains the log determines count: a channel no undetermined
+    direction holds (a share above 0.1), a standard deviation under a tenth of the gain and a gain three of them
+    from 1 (a method without ``S_std``: a converged run). ``converged`` is not
     changed: ``S`` is what the data determine for the payload given (a sensor read in other units is
     calibrated so); the warning says the payload or the units may be wrong. Nothing is said where the
     ``"causes"`` or ``"flipped_gain"`` check named a cause: the gains are then that cause's."""
@@ -1018,16 +1025,30 @@ def _check_gains(run, warnings):
     if run.named:                          # a cause named (an offset, gravity, the sign, a turn) moved the gains
         return [], True, None
     forces = list(run.model.force_channels)
-    found = []
-    for part, channels in (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces])):
+    split = (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces]))
+    far = {}
+    for part, channels in split:
         gains, sd = np.diag(S)[channels], std[channels]
-        far = (((gains < 1 / FAR_GAIN) | (gains > FAR_GAIN)) & (sd < 0.1 * np.abs(gains))
-               & (np.abs(gains - 1) > 3 * sd))
-        if not channels or np.all(gains <= 0) or not far.any():
+        far[part] = (((gains < 1 / FAR_GAIN) | (gains > FAR_GAIN)) & (sd < 0.1 * np.abs(gains))
+                     & (np.abs(gains - 1) > 3 * sd))
+    found = []
+    for part, channels in split:
+        gains, sd = np.diag(S)[channels], std[channels]
+        if not channels or np.all(gains <= 0) or not far[part].any():
             continue
         names = ", ".join(run.model.wrench_names[k] for k in channels)
         listed = ", ".join(f"{g:.3g}" for g in gains)
-        if part == "force":
+        uneven, odd = _uneven(gains, sd) if part == "force" else (False, None)
+        if uneven and odd is not None and not far["torque"].any():
+            name = run.model.wrench_names[channels[odd]]
+            cause = (f"they differ from each other, which neither a mass given wrong nor a unit does (both scale "
+                     f"the three alike): {name}'s offset may move along the log{_too_short(run.causes)}, or {name} "
+                     "is read with another gain than the others")
+        elif uneven:
+            cause = ("they differ from each other, which neither a mass given wrong nor a unit does (both scale the "
+                     "three alike): the payload's centre of mass may be wrong (S trades force gains against the "
+                     "torques' for it)")
+        elif part == "force":
             mass = run.model.payload.mass
             cause = (f"the payload's mass may be wrong (the mass given is {mass:.4g} kg; force gains near "
                      f"{np.mean(gains):.3g} say the data weigh it at about {mass / np.mean(gains):.4g} kg), or the "
@@ -1036,6 +1057,33 @@ def _check_gains(run, warnings):
             cause = "the payload's centre of mass or inertia may be wrong, or the torques are not in N m"
         found.append(f"the {part} gains of S ({names}: {listed}) are far from 1: {cause}")
     return found, True, None
+
+
+#: Force gains of ``S`` whose largest is more than this factor of the smallest (each determined, and apart by more
+#: than three of their combined standard deviations) are not a mass's: a mass given wrong by a factor ``k`` scales
+#: the force block by ``k`` (``S' = [[I, (k-1)[c]x], [0, kI]] S``), and a unit all three alike.
+UNEVEN_GAIN = 1.25
+
+
+def _uneven(gains, sd):
+    """Whether the determined force gains are uneven (:data:`UNEVEN_GAIN`), and the one channel among them (an
+    index into ``gains``) beyond that factor of 1 while the others are within it; None where there is no such one."""
+    kept = np.flatnonzero(np.isfinite(sd) & (gains > 0))
+    if len(kept) < 2:
+        return False, None
+    low, high = kept[np.argmin(gains[kept])], kept[np.argmax(gains[kept])]
+    if gains[high] < UNEVEN_GAIN * gains[low] or gains[high] - gains[low] < 3 * np.hypot(sd[high], sd[low]):
+        return False, None
+    beyond = kept[np.abs(np.log(gains[kept])) > np.log(UNEVEN_GAIN)]
+    return True, (int(beyond[0]) if len(beyond) == 1 else None)
+
+
+def _too_short(causes):
+    """Where the log was too short to test a moving offset: a clause saying so, with the length it would take."""
+    if causes is None or causes.tested:
+        return ""
+    return (f" (the log is too short to test that: {causes.blocks} blocks of time where the test asks for "
+            f"{causes.needed}, a log of about {causes.needed_duration:.0f} s)")
 
 
 def _check_spatial_units(log, model, max_mass=None):

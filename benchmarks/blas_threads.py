@@ -16,6 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from fmscal.plant.numerics import THREAD_VARIABLES
+
 PAYLOAD = ["--mass", "1.2", "--com", "0.01", "-0.005", "0.06",
            "--inertia", "4e-3", "5e-3", "2.5e-3", "2e-4", "-1e-4", "1.5e-4"]
 
@@ -34,8 +36,7 @@ def _run(log, env):
 def main(argv=None):
     args = sys.argv[1:] if argv is None else argv
     runs = int(args[0]) if args else 3
-    base = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
-                                                             "MKL_NUM_THREADS")}
+    base = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
     settings = {"the command line (one thread)": base,
                 f"OPENBLAS_NUM_THREADS={os.cpu_count()}": {**base, "OPENBLAS_NUM_THREADS": str(os.cpu_count())}}
     with tempfile.TemporaryDirectory() as folder:

@@ -163,16 +163,16 @@ def test_a_command_runs_its_blas_on_one_thread_unless_told(monkeypatch):
     calls: CPU for no time gained, benchmarks/blas_threads.py); a thread count the environment sets is kept."""
     from threadpoolctl import threadpool_info
 
-    from fmscal.analysis.cli._main import _THREAD_VARIABLES, _one_blas_thread
+    from fmscal.plant.numerics import THREAD_VARIABLES, one_blas_thread
 
-    for name in _THREAD_VARIABLES:
+    for name in THREAD_VARIABLES:
         monkeypatch.delenv(name, raising=False)
     blas = [i for i in threadpool_info() if i["user_api"] == "blas"]
     assert blas, "numpy's BLAS not seen by threadpoolctl"
-    with _one_blas_thread():
+    with one_blas_thread():
         assert {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"} == {1}
     assert [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"] == [i["num_threads"] for i in blas]
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
-    with _one_blas_thread():
+    with one_blas_thread():
         assert [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"] == \
             [i["num_threads"] for i in blas]

@@ -15,9 +15,9 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from fmscal.plant import PAPER_PAYLOAD, SCENARIOS, SPATIAL_SCENARIOS, FmscalError, get_scenario
+from fmscal.plant.numerics import one_blas_thread
 from fmscal.plant.io import write_pose_table
 
 from fmscal.observers import (METHODS, HighGainObserver, PaperAdaptiveObserver, RecursiveObserver, check_gains,
@@ -409,19 +409,6 @@ _COMMANDS = [_add_simulate, add_calibrate, add_apply, add_compensate, add_identi
              _add_compare, _add_ablation, add_sweep, add_bench, _add_check_gains, add_import, add_ros2, add_export]
 
 
-#: The environment variables that set the linear algebra's threads: where the user sets one, the commands keep it.
-_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def _one_blas_thread():
-    """numpy's BLAS on one thread for a command (threadpoolctl), unless the environment sets its threads: the
-    fits' matrices are small, and OpenBLAS's further threads spin between calls, CPU spent for no time gained
-    (``python benchmarks/blas_threads.py`` measures both)."""
-    if any(name in os.environ for name in _THREAD_VARIABLES):
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def main(argv=None):
     """Entry point of ``fmscal``; returns the exit status."""
     parser = build_parser()
@@ -434,7 +421,7 @@ def main(argv=None):
         # commands report such input themselves (warnings, converged flags, refusals)
         # without --overwrite, no output replaces a file, even one that appears while the command works
         with exclusive(not getattr(args, "overwrite", False)), np.errstate(all="ignore"), \
-                warnings.catch_warnings(), _one_blas_thread():
+                warnings.catch_warnings(), one_blas_thread():
             warnings.simplefilter("ignore", RuntimeWarning)
             args.func(args)
     except BrokenPipeError:                    # the reader of stdout went away (| head): stop quietly, as cat does

@@ -10,7 +10,6 @@ imports (a second of CPU) are done before a call comes, and kept for the next on
 standard input and output, pickled.
 """
 
-import os
 import pickle
 import select
 import signal
@@ -18,15 +17,14 @@ import subprocess
 import sys
 import threading
 
+from fmscal.plant.numerics import one_thread_environment
+
 from ._pipeline import fit_held, motion_source
 
 __all__ = ["Worker", "Cancelled", "main"]
 
 #: The worker's niceness: below the node's threads, which must keep their CPU.
 NICE = 10
-#: The worker's linear algebra on one thread (numpy's OpenBLAS takes every core by default, and its threads spin
-#: between calls): the node keeps a core of its own.
-ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: The child's command: its niceness first, then the imports (seconds of CPU that must not compete with the node).
 _LAUNCH = (f"import os; os.nice({NICE}); import runpy; "
            "runpy.run_module('fmscal.analysis.ros2._worker', run_name='__main__', alter_sys=True)")
@@ -59,7 +57,7 @@ class Worker:
             self._proc = subprocess.Popen([sys.executable, "-c", _LAUNCH],
                                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                           start_new_session=True,     # a Ctrl-C to the node's group is the node's
-                                          env={**os.environ, **ONE_THREAD})
+                                          env=one_thread_environment())   # the node keeps a core
         return self._proc
 
     def run(self, settings, job):

@@ -31,7 +31,10 @@ residual is (what ``S`` and ``c`` absorb; the Frisch-Waugh-Lovell theorem),
 and each row is weighted by its residual's rms. The covariance of the
 coefficients is the cluster-robust sandwich over blocks of time (eq. (U3)
 of :mod:`fmscal.observers.batch._cluster_covariance`), the blocks five
-correlation times of the residual that (C1) leaves (eq. (U2)). Two Wald
+correlation times of the residual that (C1) leaves with the most parts
+(eq. (U2); fewer parts leave more of a moving offset in it, which would
+lengthen the blocks of a short log, where it moves, until it had too few to
+test). Two Wald
 tests, each a Hotelling's ``T^2`` over ``G`` blocks scaled to an ``F`` as in
 eq. (M2) of :mod:`fmscal.observers.diagnostics._misfit`::
 
@@ -104,9 +107,11 @@ DECISIVE_SIZE = 1.0
 #: at the usual blocks of 0.2 s).
 BLOCKS_PER_COLUMN = 2
 #: The fewest parts of eq. (C1) (``P``): a log too short for :data:`DRIFT_PARTS` (fewer blocks of time than
-#: :data:`BLOCKS_PER_COLUMN` times its columns) is fitted with fewer, down to this many, and its offset tested; its
-#: gravity's direction is not (on noisy poses the tilt's test finds clean short logs tilted).
-MIN_PARTS = 3
+#: :data:`BLOCKS_PER_COLUMN` times its columns) is fitted with fewer, down to this many (two: 19 columns, 38 blocks,
+#: about 8 s at the usual blocks of 0.2 s), and its offset tested; its gravity's direction is not (on noisy poses the
+#: tilt's test finds clean short logs tilted). Two parts see a change between the log's halves: an offset that moves
+#: and comes back by the end is not seen there.
+MIN_PARTS = 2
 #: Samples fitted at most: a longer log is taken at every ``stride``-th sample (the motion smoothed on all of them
 #: first), which keeps the check's cost flat beyond 20 s at 1 kHz; its blocks of time, and so its test, unchanged.
 MAX_ROWS = 20000
@@ -167,6 +172,11 @@ class Causes:
         Each row's levels' spread over its residual's rms (eq. (C4)) and its test's p-value times the rows.
     parts : int
         ``P``: the parts of the log the offset's levels were fitted in.
+    needed : int
+        The blocks of time the test asks for (:data:`BLOCKS_PER_COLUMN` times the columns of eq. (C1)); where
+        ``blocks`` is fewer, nothing was tested, with the fewest parts (:data:`MIN_PARTS`).
+    needed_duration : float
+        The log's length that many blocks, as long as this log's, would take, s.
     """
 
     offset: OffsetDrift
@@ -177,6 +187,13 @@ class Causes:
     spreads: np.ndarray = None
     row_p_values: np.ndarray = None
     parts: int = None
+    needed: int = None
+    needed_duration: float = None
+
+    @property
+    def tested(self):
+        """Whether the log had the blocks of time to test (``blocks`` at least ``needed``)."""
+        return self.needed is None or self.blocks >= self.needed
 
     @property
     def warnings(self):
@@ -240,16 +257,23 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     scale = np.maximum(np.sqrt(np.mean(r ** 2, axis=0)), 1e-300)
     D = gravity_jacobian(q, model.payload)                                  # (N, n_w, 3), eq. (G1)
     w_dot = np.gradient(w, t, axis=0)                                         # a latency's error, eq. (C1)
-    for p in range(parts, min(MIN_PARTS, parts) - 1, -1):     # P: the most parts the log has blocks of time for
-        fitted = _fit(t, log.dt, stride, window, p, D, W, w_dot, X, H, r, scale)
-        if fitted[-2] >= BLOCKS_PER_COLUMN * fitted[-1]:          # G against the columns
-            break
-    *fitted, g, size = fitted
+    # the blocks' length is the fit with the most parts' (a moving offset that fewer leave in the residual would
+    # lengthen them), and so is G; P the most parts the log has blocks of time for: G against the columns
+    fitted = _fit(t, log.dt, stride, window, parts, D, W, w_dot, X, H, r, scale)
+    g, length, shared = fitted[-3], fitted[-1], fitted[7]
+    p = next((p for p in range(parts, MIN_PARTS, -1) if g >= BLOCKS_PER_COLUMN * (shared + n_w * (p - 1))),
+             min(MIN_PARTS, parts))
+    if p != parts:
+        fitted = _fit(t, log.dt, stride, window, p, D, W, w_dot, X, H, r, scale, length)
+    *fitted, g, size, _ = fitted
+    needed = BLOCKS_PER_COLUMN * size
+    span = t[-1] - t[0] + log.dt * stride                                     # the blocks' time; the edges beside
+    needed_duration = float(needed * length + (log.t[-1] - log.t[0] + log.dt) - span)
     designs, inverse, rank, theta, e, blocks, starts, shared, n_t = fitted
-    if g < BLOCKS_PER_COLUMN * size:          # the sandwich of eq. (C2) would be too rough to test on
-        return Causes(offset=OffsetDrift(True, np.nan, 1.0, np.zeros((0, n_w)), np.zeros(0)), gravity=None
-                      if not model.under_gravity else GravityTilt(np.asarray(model.gravity, dtype=float), np.nan,
-                                                                  np.nan, np.nan, 1.0, False), blocks=g)
+    if g < needed:          # the sandwich of eq. (C2) would be too rough to test on
+        return Causes(offset=OffsetDrift(True, np.nan, 1.0, np.zeros((0, n_w)), np.zeros(0)),
+                      gravity=_gravity_untested(model), blocks=g, needed=needed,
+                      needed_duration=needed_duration)
     scores = np.zeros((g, size))
     for i, (cols, Y) in enumerate(designs):
         scores[:, cols] += np.add.reduceat(Y * e[:, i:i + 1], starts, axis=0)
@@ -257,22 +281,27 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     offset, spreads, row_p, moving = _offset_test(theta, cov, g, shared, n_t, scale, significance)
     if not offset.constant:
         offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving)
-    if not model.under_gravity:
-        gravity = None
-    elif n_t + 1 < parts:                     # a short log: its tilt not tested (MIN_PARTS)
-        gravity = GravityTilt(np.asarray(model.gravity, dtype=float), np.nan, np.nan, np.nan, 1.0, False)
+    if not model.under_gravity or n_t + 1 < parts:      # a short log: its tilt not tested (MIN_PARTS)
+        gravity = _gravity_untested(model)
     else:
         gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance)
     beta = theta[shared:].reshape(n_w, n_t)
     beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
     return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
-                  row_p_values=row_p, parts=n_t + 1)
+                  row_p_values=row_p, parts=n_t + 1, needed=needed, needed_duration=needed_duration)
 
 
-def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale):
+def _gravity_untested(model):
+    """Gravity's direction not tested (None on a model not under gravity): the gravity given, NaN statistics."""
+    if not model.under_gravity:
+        return None
+    return GravityTilt(np.asarray(model.gravity, dtype=float), np.nan, np.nan, np.nan, 1.0, False)
+
+
+def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale, length=None):
     """Eq. (C1) fitted with ``parts`` parts of the log: the rows' designs, ``A^+``, its rank, ``theta``, the scaled
-    residual it leaves, the blocks of time (each sample's, and their starts), the shared columns, ``P - 1``, ``G``
-    and the columns."""
+    residual it leaves, the blocks of time (each sample's, and their starts), the shared columns, ``P - 1``, ``G``,
+    the columns and the blocks' length, s (eq. (U2) of that residual, or ``length`` where given)."""
     n_w = r.shape[1]
     part = np.minimum((parts * (t - t[0]) / (t[-1] - t[0] + dt)).astype(int), parts - 1)
     T = (part[:, None] == np.arange(1, parts)[None, :]).astype(float)        # (N, P - 1)
@@ -290,10 +319,10 @@ def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale):
     inverse, rank = _pseudo_inverse(A)
     theta = inverse @ b
     e = np.column_stack([r[:, i] / scale[i] - Y @ theta[cols] for i, (cols, Y) in enumerate(designs)])
-    length = block_length(e, dt * stride, window)
+    length = block_length(e, dt * stride, window) if length is None else length
     blocks = ((t - t[0]) // length).astype(int)
     starts = np.flatnonzero(np.r_[True, np.diff(blocks) != 0])
-    return designs, inverse, rank, theta, e, blocks, starts, shared, n_t, len(starts), size
+    return designs, inverse, rank, theta, e, blocks, starts, shared, n_t, len(starts), size, length
 
 
 def _pseudo_inverse(A):

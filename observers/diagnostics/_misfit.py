@@ -93,6 +93,11 @@ GROSS_RATIO = 3.0
 #: The median: the extremes would see a misfit better, but the smoothed accelerations' bias grows with the
 #: speed too, and over a long log it would pass for one.
 SPLIT = 0.5
+#: A misfit whose worst row, a force channel's, is :data:`MISFIT_RATIO` times its noise or more while every other
+#: row's residual is within this many times its own is that channel's alone: the words point at its reading first
+#: (a mass given wrong ``S`` takes up, an inertia's shape leaves the torques; a centre of mass given wrong is still
+#: named beside it).
+ALONE_RATIO = 1.2
 _SEED = 20261126        # the draw of the poses' noise (M1): fixed, so a check is repeatable
 
 
@@ -127,6 +132,9 @@ class Misfit:
         motion it is fitted to (:func:`inflate`).
     inertia : InertiaShape or None
         Eq. (M4), where the payload's sensitivity was given and the inertia has a shape (two entries or more).
+    alone : int or None
+        The force channel a misfit is alone on (its residual :data:`MISFIT_RATIO` times its noise or more, every
+        other row's within :data:`ALONE_RATIO` of its own); None otherwise.
     """
 
     ratio: np.ndarray
@@ -140,6 +148,7 @@ class Misfit:
     warning: str = None
     S_spread: np.ndarray = None
     inertia: object = None
+    alone: int = None
 
     def to_dict(self):
         """The JSON form."""
@@ -147,6 +156,8 @@ class Misfit:
                "p_value": float(self.p_value), "fits": bool(self.fits), "gross": bool(self.gross)}
         if self.inertia is not None:
             out["inertia"] = self.inertia.to_dict()
+        if self.alone is not None:
+            out["alone"] = int(self.alone)
         return out
 
 
@@ -311,11 +322,14 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE, sensitivity
     gross = bool(split or ratio[worst] >= GROSS_RATIO or beyond)
     fits = bool(not split and ratio[worst] < MISFIT_RATIO and not beyond)
     parts = [_inertia_words(inertia)] if beyond else []
+    others = np.delete(ratio, worst)
+    alone = worst if (worst in model.force_channels and ratio[worst] >= MISFIT_RATIO and others.size
+                      and np.all(others < ALONE_RATIO)) else None
     if split or ratio[worst] >= MISFIT_RATIO:
-        parts.append(_words(model, ratio, worst, statistic, dof, p_value, split))
+        parts.append(_words(model, ratio, worst, statistic, dof, p_value, split, alone is not None))
     return Misfit(ratio=ratio, residual_rms=fit.residual_rms, noise=noise, statistic=statistic, dof=dof,
                   p_value=p_value, fits=fits, gross=gross, warning="; ".join(parts) if parts else None,
-                  S_spread=np.abs(difference[:, :model.n_w]) / 2, inertia=inertia)
+                  S_spread=np.abs(difference[:, :model.n_w]) / 2, inertia=inertia, alone=alone)
 
 
 def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significance):
@@ -406,16 +420,22 @@ def inertia_note(shape, converged=True):
             f"{_preferred_words(shape)}")
 
 
-def _words(model, ratio, worst, statistic, dof, p_value, split):
-    """The warning: how far the residual is above the noise, and the S of slow and fast motion."""
+def _words(model, ratio, worst, statistic, dof, p_value, split, alone=False):
+    """The warning: how far the residual is above the noise, and the S of slow and fast motion; the payload
+    suspected, or, where the misfit is one force channel's alone (:data:`ALONE_RATIO`), that channel's reading first."""
     name = model.wrench_names[worst]
     parts = [f"the model does not fit the log: the residual is {ratio[worst]:.2g} times the noise (on {name}; "
              + ", ".join(f"{n} {r:.2g}" for n, r in zip(model.wrench_names, ratio)) + ")"]
     if split:
         parts.append(f"the S fitted to the slow half of the motion and to the fast half differ (chi-square "
                      f"{statistic:.3g} on {dof}, p = {p_value:.2g}), which one S that fits cannot do")
-    parts.append("check the payload's mass properties and their axes (the sensor's), and that the poses are the "
-                 "sensor's frame (not one turned from it); S_std is inflated by the misfit")
+    if alone:
+        parts.append(f"the misfit is on {name} alone (every other channel within {ALONE_RATIO:g} times its noise): "
+                     f"check {name}'s reading first (an offset that moves, glitches), then the payload's centre of "
+                     "mass; S_std is inflated by the misfit")
+    else:
+        parts.append("check the payload's mass properties and their axes (the sensor's), and that the poses are the "
+                     "sensor's frame (not one turned from it); S_std is inflated by the misfit")
     return "; ".join(parts)
 
 
