@@ -20,9 +20,8 @@ from fmscal.observers.batch import (describe_direction, estimate_latency, fit_la
                                    payload_sensitivity)
 from fmscal.observers.core import (EVIDENCE_TOLERANCE, SETTLE_FRACTION, SETTLE_TOLERANCE, bridge_glitches,
                                    calibration_uncertainty)
-from fmscal.observers.diagnostics import (consistency_check, fit_causes, has_evidence, inertia_note, misfit,
-                                          offset_drift,
-                                          saturation)
+from fmscal.observers.diagnostics import (centre_of_mass_words, consistency_check, fit_causes, has_evidence,
+                                          inertia_note, misfit, offset_drift, saturation)
 from fmscal.observers.diagnostics import inflate as inflate_misfit
 from fmscal.observers.payload import PayloadEstimate, StaticFit, other_convention
 from fmscal.observers.payload import calibrate_table as fit_table
@@ -573,9 +572,19 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
         why = why or _UNSETTLED
     notes = list(signed.notes)
     shape = getattr(run.misfit, "inertia", None)
-    # the shape the log sees, in words; a cause named (a moving offset, gravity), or a misfit on one force channel
-    # alone, which no inertia leaves, is why it did not converge
+    # the shape the log sees, in words; a cause named (a moving offset, gravity, a centre of mass), or a misfit on
+    # one force channel alone, which no inertia leaves, is why it did not converge; a latency's step gone at the
+    # centre of mass the log prefers (M5) is the centre of mass's (or a turn of the poses' frame, which moves it)
+    com = getattr(run.misfit, "centre_of_mass", None)
     explained = run.named or getattr(run.misfit, "alone", None) is not None
+    if not converged and not explained and why == _LATENCY_STEP and _step_of_the_centre_of_mass(run, com,
+                                                                                                 max_latency):
+        step = run.latency.step                     # the latency's step, the centre of mass's (eq. M5)
+        warnings = [w for w in warnings if w not in run.latency.warnings]
+        warnings.insert(0, f"the latency's step along the log ({step['before'] * 1e3:.3g} ms before t = "
+                           f"{step['t']:.3g} s, {step['after'] * 1e3:.3g} ms after) is gone at the centre of mass the "
+                           f"log prefers: the payload's, not the stamps'; {centre_of_mass_words(com)}")
+        why, explained = _CENTRE_OF_MASS, True
     said = inertia_note(shape, converged or explained)
     if said and not converged and not explained and why == _LATENCY_STEP and _step_of_the_inertia(run, shape,
                                                                                                   max_latency):
@@ -848,6 +857,26 @@ def _step_of_the_inertia(run, shape, max_latency):
     theta = run.model.payload_parameters()
     k = 1 + len(run.model.payload_position_names)
     theta[k:k + len(shape.preferred)] = shape.preferred
+    return _no_step_at(run, theta, max_latency)
+
+
+#: Why a calibration did not converge, where the latency's step along the log is the centre of mass's.
+_CENTRE_OF_MASS = "the payload's centre of mass is not the one given, or the poses' frame is turned"
+
+
+def _step_of_the_centre_of_mass(run, com, max_latency):
+    """Whether the latency's step along the log is the payload's centre of mass: the log sees one other than the
+    one given, beyond its stated uncertainty (:class:`fmscal.observers.diagnostics.CentreOfMass`, eq. (M5)), and
+    the latency estimated again at it is determined, with no step."""
+    if com is None or not com.seen or com.covered or run.latency is None:
+        return False
+    theta = run.model.payload_parameters()
+    theta[1:1 + len(com.preferred)] = com.preferred
+    return _no_step_at(run, theta, max_latency)
+
+
+def _no_step_at(run, theta, max_latency):
+    """The latency estimated again with the payload's numbers ``theta``: determined, with no step."""
     try:
         again = estimate_latency(run.signed, run.model.with_payload_parameters(theta), max_latency,
                                  offset=run.offset)

@@ -8,6 +8,7 @@ converged) in the slow one.
 """
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -155,14 +156,42 @@ def test_a_ramp_the_test_does_not_name_is_not_blamed_on_the_payload(duration, te
 @pytest.mark.parametrize("shift", [(0.01, 0.0, 0.0), (0.0, 0.0, 0.03)])
 def test_a_centre_of_mass_given_wrong_is_not_one_channel_s_reading(shift):
     """A centre of mass given 1 cm off along x, or 3 cm along z, on 10 s: its misfit (the slow and fast halves'
-    ``S`` apart, the residual near the noise) and its uneven force gains (fx and fy 0.44, fz 1.04, the torque gains
-    far too) point at the payload, not at one channel's reading."""
+    ``S`` apart, the residual near the noise) and its uneven force gains (3 cm: fx and fy 0.44, fz 1.04, the
+    torque gains far too) point at the payload, not at one channel's reading."""
     short = ARM.with_(duration=10.0)
     log, _ = _case(short, "clean", 0)
     cal = calibrate(log, dataclasses.replace(short.payload, com=np.asarray(short.payload.com) + shift))
     assert not cal.converged
     assert any("check the payload's mass properties" in w for w in cal.warnings)
     assert not any("alone" in w or "offset may move" in w for w in cal.warnings)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_a_latency_step_of_a_centre_of_mass_given_wrong_is_named_the_centre_of_mass(seed):
+    """A centre of mass given 1 cm off along x on 10 s (its stated sd CAD's 1 mm): the latency's search along the
+    log read a step (seeds 0, 2, 3, 4 of 0-5), and the advice was to cut the log or fix its stamps. The step is
+    gone at the centre of mass the log prefers (eq. M5): named the payload's, with that centre of mass, within 3
+    of its sd of the true one, and the advice to check it or the poses' frame."""
+    short = ARM.with_(duration=10.0)
+    log, _ = _case(short, "clean", seed)
+    true = np.asarray(short.payload.com)
+    shift = np.array([0.01, 0.0, 0.0])
+    cal = calibrate(log, dataclasses.replace(short.payload, com=true + shift))
+    assert not cal.converged and cal.why_unconverged.startswith("the payload's centre of mass is not the one given")
+    assert "gone at the centre of mass the log prefers" in cal.warnings[0]
+    assert not any("fix the stamps" in w or "try the inertia" in w for w in cal.warnings)
+    found = re.findall(r"([-+.\d]+) \+- ([.\d]+) mm", cal.warnings[0])
+    delta, sd = (np.array([float(v[k]) for v in found]) * 1e-3 for k in (0, 1))
+    assert len(found) == 3 and np.all(sd < 0.3 * 0.01)
+    assert np.all(np.abs(delta + shift) < 3 * sd)       # the change the log asks for undoes the one given
+
+
+def test_a_clean_log_prefers_the_centre_of_mass_given():
+    """The false-alarm side: clean 10 s logs of the payload given converge, and no centre of mass is named."""
+    short = ARM.with_(duration=10.0)
+    for seed in (0, 1, 2):
+        cal = calibrate(_case(short, "clean", seed)[0], short.payload)
+        assert cal.converged and not any("centre of mass" in w for w in cal.warnings)
 
 
 def test_a_log_too_short_to_test_names_nothing():

@@ -5,11 +5,11 @@ its residual names (causes: a moving offset, gravity's direction).
 
 from ._evidence import (has_evidence, log_uncertainty, EVIDENCE_PREFIX)
 from ._health import (Consistency, consistency_check, DEFAULT_SIGNIFICANCE, DEFAULT_WINDOWS)
-from ._misfit import (Misfit, InertiaShape, misfit, inertia_note, inflate, MISFIT_SIGNIFICANCE, MISFIT_RATIO,
-    GROSS_RATIO)
+from ._misfit import (Misfit, InertiaShape, CentreOfMass, misfit, inertia_note, centre_of_mass_words, inflate,
+    MISFIT_SIGNIFICANCE, MISFIT_RATIO, GROSS_RATIO)
 from ._faults import (saturation, offset_drift, OffsetDrift, SATURATION_SHARE, SATURATION_RATIO, DRIFT_SIGNIFICANCE,
     DRIFT_PARTS, DRIFT_LAGS, describe_offset)
 from ._causes import (Causes, GravityTilt, fit_causes, CAUSE_SIGNIFICANCE)
 
 __all__ = ["has_evidence", "log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift",
-           "OffsetDrift", "Misfit", "InertiaShape", "misfit", "Causes", "GravityTilt", "fit_causes"]
+           "OffsetDrift", "Misfit", "InertiaShape", "CentreOfMass", "misfit", "Causes", "GravityTilt", "fit_causes"]

@@ -63,6 +63,21 @@ data alone (:func:`misfit`):
    ``S``'s error, and the model does not fit. Within it, (M1) and (M2) are
    measured on the wrench of the inertia the log prefers: a shape the stated
    uncertainty covers is carried by ``S_std`` (its payload part), not a misfit.
+4. **The centre of mass.** The same on its coordinates, none left out
+   (``S`` absorbs a centre of mass given wrong on a log held still, not the
+   part that moves with the rotation's rate and acceleration), fitted beside
+   the inertia's shape (the directions of M4)::
+
+       delta_c = -(sum_k C_k^T W R_k)^-1 sum_k C_k^T W e_k                     (M5)
+
+   its covariance cluster-robust over the scores ``R_k^T W (e_k + R_k
+   delta)`` (``R``, not ``C``: the centre of mass's columns are mostly what
+   the readings absorb, whose share of each block's score cancels over the
+   log), and its two tests Hotelling's, as (M2). It is not a warning of its
+   own: on noisy poses (0.1 degree) it is biased beyond its sd on clean logs.
+   It tests a latency that seems to step along the log: a step gone at the
+   centre of mass the log prefers is the payload's, not the stamps'
+   (:func:`fmscal.analysis.calibrate`).
 """
 
 import copy
@@ -78,8 +93,8 @@ from fmscal.plant.numerics import FmscalError
 from fmscal.observers.batch import block_length, fit_readings, needed_wrench, nominal_motion, small_sample_factor
 from fmscal.observers.core import reading_noise
 
-__all__ = ["Misfit", "InertiaShape", "misfit", "inertia_note", "inflate", "MISFIT_SIGNIFICANCE", "MISFIT_RATIO",
-           "GROSS_RATIO"]
+__all__ = ["Misfit", "InertiaShape", "CentreOfMass", "centre_of_mass_words", "misfit", "inertia_note", "inflate",
+           "MISFIT_SIGNIFICANCE", "MISFIT_RATIO", "GROSS_RATIO"]
 
 #: The probability, for a log the model fits, of calling it misfit by (M2).
 MISFIT_SIGNIFICANCE = 1e-3
@@ -132,6 +147,8 @@ class Misfit:
         motion it is fitted to (:func:`inflate`).
     inertia : InertiaShape or None
         Eq. (M4), where the payload's sensitivity was given and the inertia has a shape (two entries or more).
+    centre_of_mass : CentreOfMass or None
+        Eq. (M5), where the payload's sensitivity was given and the log can tell the centre of mass.
     alone : int or None
         The force channel a misfit is alone on (its residual :data:`MISFIT_RATIO` times its noise or more, every
         other row's within :data:`ALONE_RATIO` of its own); None otherwise.
@@ -149,6 +166,7 @@ class Misfit:
     S_spread: np.ndarray = None
     inertia: object = None
     alone: int = None
+    centre_of_mass: object = None
 
     def to_dict(self):
         """The JSON form."""
@@ -158,6 +176,8 @@ class Misfit:
             out["inertia"] = self.inertia.to_dict()
         if self.alone is not None:
             out["alone"] = int(self.alone)
+        if self.centre_of_mass is not None:
+            out["centre_of_mass"] = self.centre_of_mass.to_dict()
         return out
 
 
@@ -210,6 +230,45 @@ class InertiaShape:
                 "p_value": float(self.p_value), "p_stated": float(self.p_stated), "seen": bool(self.seen),
                 "covered": bool(self.covered),
                 "preferred": None if self.preferred is None else [float(v) for v in self.preferred]}
+
+
+@dataclass
+class CentreOfMass:
+    """The centre of mass the log prefers, against the one given: eq. (M5).
+
+    Attributes
+    ----------
+    names : tuple of str
+        Its coordinates (:attr:`fmscal.plant.Model.payload_position_names`).
+    delta, std : ndarray, shape (len(names),)
+        The log's estimate less the one given, m, and its one-sigma uncertainty from the log.
+    statistic : float
+        ``delta^T V^-1 delta``, chi-square with ``len(names)`` degrees of freedom.
+    p_value, p_stated : float
+        Of ``statistic``, and of ``delta^T (V + Sigma_c)^-1 delta`` (``Sigma_c`` the stated covariance).
+    seen, covered : bool
+        ``p_value`` below the significance (the log sees a centre of mass other than the one given);
+        ``p_stated`` at least the significance (the stated uncertainty covers it).
+    preferred : ndarray, shape (len(names),)
+        The centre of mass the log prefers, m.
+    """
+
+    names: tuple
+    delta: np.ndarray
+    std: np.ndarray
+    statistic: float
+    p_value: float
+    p_stated: float
+    seen: bool
+    covered: bool
+    preferred: np.ndarray
+
+    def to_dict(self):
+        """The JSON form."""
+        return {"names": list(self.names), "delta": [float(v) for v in self.delta],
+                "std": [float(v) for v in self.std], "statistic": float(self.statistic),
+                "p_value": float(self.p_value), "p_stated": float(self.p_stated), "seen": bool(self.seen),
+                "covered": bool(self.covered), "preferred": [float(v) for v in self.preferred]}
 
 
 def _pose_share(log, model, w, window):
@@ -277,7 +336,7 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE, sensitivity
     sensitivity : observers.batch.PayloadSensitivity, optional
         The payload's sensitivity on this log and model, with this ``window``
         (:func:`fmscal.observers.batch.payload_sensitivity`): its needed wrench
-        is used, and with ``payload_cov`` the inertia's shape is tested (M4).
+        is used, and with ``payload_cov`` the inertia's shape is tested (M4) and the centre of mass estimated (M5).
     payload_cov : ndarray, shape (k, k), optional
         The payload's covariance over its :meth:`~fmscal.plant.Model.payload_parameter_names`
         (:meth:`fmscal.plant.physics.PayloadStd.covariance`).
@@ -303,8 +362,12 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE, sensitivity
     fit = fit_readings(w, w_hat, None, wrench_sd)
     e = w - w_hat @ fit.S_hat.T - fit.c
     pose_share = _pose_share(log, model, w, window)
-    inertia, preferred = None, w
+    inertia, preferred, com = None, w, None
     if sensitivity is not None and payload_cov is not None:
+        try:
+            com = _centre_of_mass(sensitivity, model, e, t, log.dt, window, payload_cov, significance)
+        except np.linalg.LinAlgError:                     # a log that cannot tell the centre of mass
+            com = None
         inertia, correction = _inertia_shape(sensitivity, model, e, t, log.dt, window, payload_cov, significance)
         if inertia is not None and inertia.covered:       # (M1), (M2) on the wrench of the inertia the log prefers
             preferred = w + correction
@@ -329,7 +392,40 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE, sensitivity
         parts.append(_words(model, ratio, worst, statistic, dof, p_value, split, alone is not None))
     return Misfit(ratio=ratio, residual_rms=fit.residual_rms, noise=noise, statistic=statistic, dof=dof,
                   p_value=p_value, fits=fits, gross=gross, warning="; ".join(parts) if parts else None,
-                  S_spread=np.abs(difference[:, :model.n_w]) / 2, inertia=inertia, alone=alone)
+                  S_spread=np.abs(difference[:, :model.n_w]) / 2, inertia=inertia, alone=alone,
+                  centre_of_mass=com)
+
+
+def _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=False):
+    """Eqs. (M4), (M5): the payload's numbers ``index`` the log prefers, over their ``scale``, in the directions
+    ``Q`` (``a``; ``delta = Q a``), the needed wrench's change per unit of ``a`` (``C Q``), the covariance ``V``
+    of ``a``, and the chi-square statistics of ``a`` against ``V`` and against ``V`` plus the stated covariance.
+    The scores of ``V`` take ``C`` (M4), or its unabsorbed part ``R`` (M5: the centre of mass's columns are
+    mostly what the readings absorb, whose share of each block's score cancels over the log and would
+    widen ``V`` many times)."""
+    C = (sensitivity.columns[:, :, index] * scale) @ Q
+    R = (sensitivity.unabsorbed(index) * scale) @ Q
+    weight = 1.0 / np.maximum(np.mean(e ** 2, axis=0), 1e-300)
+    H = np.einsum("mcj,c,mck->jk", C, weight, R)
+    H = (H + H.T) / 2
+    a = -np.linalg.solve(H, np.einsum("mcj,c,mc->j", C, weight, e))
+    scores = np.einsum("mcj,c,mc->mj", R if unabsorbed_scores else C, weight, e + R @ a)
+    blocks = ((t - t[0]) // block_length(e + R @ a, dt, window)).astype(int)
+    summed = np.zeros((blocks.max() + 1, len(a)))
+    np.add.at(summed, blocks, scores)
+    H_inv = np.linalg.inv(H)
+    V = small_sample_factor(blocks, len(e), len(a)) * H_inv @ (summed.T @ summed) @ H_inv
+    stated = Q.T @ (np.asarray(payload_cov, dtype=float)[np.ix_(index, index)] / np.outer(scale, scale)) @ Q
+    statistic, against_stated = _tests(a, V, stated)
+    return a, C, V, statistic, against_stated, int(blocks.max() + 1)
+
+
+def _tests(a, V, stated):
+    """``a^T V^-1 a``, and ``a^T (V + stated)^-1 a`` (0 where ``stated`` is not finite: any change covered)."""
+    statistic = float(a @ np.linalg.solve(V, a))
+    if np.all(np.isfinite(stated)):
+        return statistic, float(a @ np.linalg.solve(V + stated, a))
+    return statistic, 0.0                                       # numbers not determined: any change is covered
 
 
 def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significance):
@@ -341,25 +437,8 @@ def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significan
     scale = model.inertia_scale()
     u = sensitivity.values[index] / scale                       # the common scale, in each entry's own scale
     Q = np.linalg.svd(u[None, :] / np.linalg.norm(u))[2][1:].T    # the shapes: orthogonal to it
-    C = (sensitivity.columns[:, :, index] * scale) @ Q
-    R = (sensitivity.unabsorbed(index) * scale) @ Q
-    weight = 1.0 / np.maximum(np.mean(e ** 2, axis=0), 1e-300)
-    H = np.einsum("mcj,c,mck->jk", C, weight, R)
-    H = (H + H.T) / 2
-    a = -np.linalg.solve(H, np.einsum("mcj,c,mc->j", C, weight, e))
-    scores = np.einsum("mcj,c,mc->mj", C, weight, e + R @ a)
-    blocks = ((t - t[0]) // block_length(e + R @ a, dt, window)).astype(int)
-    summed = np.zeros((blocks.max() + 1, len(a)))
-    np.add.at(summed, blocks, scores)
-    H_inv = np.linalg.inv(H)
-    V = small_sample_factor(blocks, len(e), len(a)) * H_inv @ (summed.T @ summed) @ H_inv
-    stated = Q.T @ (np.asarray(payload_cov, dtype=float)[np.ix_(index, index)] / np.outer(scale, scale)) @ Q
-    statistic = float(a @ np.linalg.solve(V, a))
+    a, C, V, statistic, against_stated, _ = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov)
     dof = len(a)
-    if np.all(np.isfinite(stated)):
-        against_stated = float(a @ np.linalg.solve(V + stated, a))
-    else:                                                       # an inertia not determined: any shape is covered
-        against_stated = 0.0
     p_value, p_stated = float(chi2.sf(statistic, dof)), float(chi2.sf(against_stated, dof))
     delta = Q @ a
     preferred = sensitivity.values.copy()
@@ -373,6 +452,43 @@ def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significan
                          statistic=statistic, dof=dof, p_value=p_value, p_stated=p_stated,
                          seen=p_value < significance, covered=p_stated >= significance, preferred=preferred)
     return shape, C @ a
+
+
+def _centre_of_mass(sensitivity, model, e, t, dt, window, payload_cov, significance):
+    """Eq. (M5): the centre of mass the log prefers against the one given, and its tests (None for a model whose
+    payload's position is not its centre of mass); fitted beside the inertia's shape (M4's directions), which would
+    otherwise lean on it."""
+    if model.payload_position != "com":
+        return None
+    index = [sensitivity.names.index(name) for name in model.payload_position_names]
+    n = len(index)
+    scale, Q = np.ones(n), np.eye(n)
+    inertia = [sensitivity.names.index(name) for name in model.inertia_names]
+    if len(inertia) >= 2:                                       # the shapes: orthogonal to the common scale
+        u = sensitivity.values[inertia] / model.inertia_scale()
+        shapes = np.linalg.svd(u[None, :] / np.linalg.norm(u))[2][1:].T
+        Q = np.block([[Q, np.zeros((n, shapes.shape[1]))], [np.zeros((len(inertia), n)), shapes]])
+        index, scale = index + inertia, np.r_[scale, model.inertia_scale()]
+    a, _, V, _, _, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=True)
+    stated = np.asarray(payload_cov, dtype=float)[np.ix_(index[:n], index[:n])]
+    a, V = a[:n], V[:n, :n]
+    statistic, against_stated = _tests(a, V, stated)
+    # Hotelling's T^2 over G blocks, as eq. (M2): chi-square's tail is too thin where the blocks are few
+    p_value, p_stated = ((float(f_dist.sf((g - n) / (n * (g - 1)) * x, n, g - n)) if g > n + 1 else 1.0)
+                         for x in (statistic, against_stated))
+    return CentreOfMass(names=tuple(model.payload_position_names), delta=a, std=np.sqrt(np.diag(V)),
+                        statistic=statistic, p_value=p_value, p_stated=p_stated, seen=p_value < significance,
+                        covered=p_stated >= significance, preferred=sensitivity.values[index[:n]] + a)
+
+
+def centre_of_mass_words(com):
+    """The centre of mass the log prefers, in words (M5): each coordinate's change and sd, mm, against the one
+    given, and the test against its stated uncertainty."""
+    mm = ", ".join(f"{n} {1e3 * d:+.1f} +- {1e3 * sd:.1f} mm" for n, d, sd in zip(com.names, com.delta, com.std))
+    return (f"the log prefers a centre of mass {mm} from the one given, beyond its stated uncertainty (p = "
+            f"{com.p_stated:.2g}): check the centre of mass (--com {' '.join(f'{v:.4g}' for v in com.preferred)}, "
+            "the one the log prefers), and that the poses are the sensor's frame (a turn of it moves the centre "
+            "of mass the log prefers alike)")
 
 
 def _inertia_words(shape):
