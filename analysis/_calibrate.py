@@ -581,17 +581,15 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
                                                                                                  max_latency):
         step = run.latency.step                     # the latency's step, the centre of mass's (eq. M5)
         warnings = [w for w in warnings if w not in run.latency.warnings]
-        warnings.insert(0, f"the latency's step along the log ({step['before'] * 1e3:.3g} ms before t = "
-                           f"{step['t']:.3g} s, {step['after'] * 1e3:.3g} ms after) is gone at the centre of mass the "
-                           f"log prefers: the payload's, not the stamps'; {centre_of_mass_words(com)}")
+        warnings.insert(0, f"{_step_words(step)} is gone at the centre of mass the log prefers: the payload's, not "
+                           f"the stamps'; {centre_of_mass_words(com)}")
         why, explained = _CENTRE_OF_MASS, True
     said = inertia_note(shape, converged or explained)
     if said and not converged and not explained and why == _LATENCY_STEP and _step_of_the_inertia(run, shape,
                                                                                                   max_latency):
         step = run.latency.step                     # the latency's step, the shape's: named with the inertia
         warnings = [w for w in warnings if w not in run.latency.warnings]
-        said += (f"; the latency's step along the log ({step['before'] * 1e3:.3g} ms before t = {step['t']:.3g} s, "
-                 f"{step['after'] * 1e3:.3g} ms after) is gone at that inertia: the shape's, not the stamps'")
+        said += f"; {_step_words(step)} is gone at that inertia: the shape's, not the stamps'"
         why = _UNSETTLED
     if said and (converged or explained):
         notes.append(said)
@@ -860,6 +858,12 @@ def _step_of_the_inertia(run, shape, max_latency):
     return _no_step_at(run, theta, max_latency)
 
 
+def _step_words(step):
+    """The latency's step along the log (:attr:`LatencyEstimate.step`) in words."""
+    return (f"the latency's step along the log ({step['before'] * 1e3:.3g} ms before t = {step['t']:.3g} s, "
+            f"{step['after'] * 1e3:.3g} ms after)")
+
+
 #: Why a calibration did not converge, where the latency's step along the log is the centre of mass's.
 _CENTRE_OF_MASS = "the payload's centre of mass is not the one given, or the poses' frame is turned"
 
@@ -1054,15 +1058,12 @@ def _check_gains(run, warnings):
     if run.named:                          # a cause named (an offset, gravity, the sign, a turn) moved the gains
         return [], True, None
     forces = list(run.model.force_channels)
-    split = (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces]))
-    far = {}
-    for part, channels in split:
-        gains, sd = np.diag(S)[channels], std[channels]
-        far[part] = (((gains < 1 / FAR_GAIN) | (gains > FAR_GAIN)) & (sd < 0.1 * np.abs(gains))
-                     & (np.abs(gains - 1) > 3 * sd))
+    split = {part: (channels, np.diag(S)[channels], std[channels]) for part, channels in
+             (("force", forces), ("torque", [k for k in range(len(S)) if k not in forces]))}
+    far = {part: ((gains < 1 / FAR_GAIN) | (gains > FAR_GAIN)) & (sd < 0.1 * np.abs(gains))
+           & (np.abs(gains - 1) > 3 * sd) for part, (_, gains, sd) in split.items()}
     found = []
-    for part, channels in split:
-        gains, sd = np.diag(S)[channels], std[channels]
+    for part, (channels, gains, sd) in split.items():
         if not channels or np.all(gains <= 0) or not far[part].any():
             continue
         names = ", ".join(run.model.wrench_names[k] for k in channels)
