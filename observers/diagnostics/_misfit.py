@@ -243,9 +243,10 @@ class CentreOfMass:
     delta, std : ndarray, shape (len(names),)
         The log's estimate less the one given, m, and its one-sigma uncertainty from the log.
     statistic : float
-        ``delta^T V^-1 delta``, chi-square with ``len(names)`` degrees of freedom.
+        ``delta^T V^-1 delta``: Hotelling's ``T^2`` over the blocks of time of ``V``, as eq. (M2).
     p_value, p_stated : float
-        Of ``statistic``, and of ``delta^T (V + Sigma_c)^-1 delta`` (``Sigma_c`` the stated covariance).
+        Of ``statistic``, and of ``delta^T (V + Sigma_c)^-1 delta`` (``Sigma_c`` the stated covariance), each
+        scaled to an ``F(n, G - n)`` (1 with too few blocks).
     seen, covered : bool
         ``p_value`` below the significance (the log sees a centre of mass other than the one given);
         ``p_stated`` at least the significance (the stated uncertainty covers it).
@@ -428,15 +429,24 @@ def _tests(a, V, stated):
     return statistic, 0.0                                       # numbers not determined: any change is covered
 
 
+def _shapes(sensitivity, model):
+    """The inertia's entries (indices into the sensitivity's names), their scales, and the shapes: the directions
+    orthogonal to their common scale (M4); None for an inertia of one entry."""
+    index = [sensitivity.names.index(name) for name in model.inertia_names]
+    if len(index) < 2:
+        return None
+    scale = model.inertia_scale()
+    u = sensitivity.values[index] / scale                       # the common scale, in each entry's own scale
+    return index, scale, np.linalg.svd(u[None, :] / np.linalg.norm(u))[2][1:].T
+
+
 def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significance):
     """Eq. (M4): the inertia's shape the log prefers, its tests, and the needed wrench's change to it
     (``(InertiaShape, correction)``; ``(None, None)`` for an inertia of one entry)."""
-    index = [sensitivity.names.index(name) for name in model.inertia_names]
-    if len(index) < 2:
+    shapes = _shapes(sensitivity, model)
+    if shapes is None:
         return None, None
-    scale = model.inertia_scale()
-    u = sensitivity.values[index] / scale                       # the common scale, in each entry's own scale
-    Q = np.linalg.svd(u[None, :] / np.linalg.norm(u))[2][1:].T    # the shapes: orthogonal to it
+    index, scale, Q = shapes
     a, C, V, statistic, against_stated, _ = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov)
     dof = len(a)
     p_value, p_stated = float(chi2.sf(statistic, dof)), float(chi2.sf(against_stated, dof))
@@ -463,12 +473,11 @@ def _centre_of_mass(sensitivity, model, e, t, dt, window, payload_cov, significa
     index = [sensitivity.names.index(name) for name in model.payload_position_names]
     n = len(index)
     scale, Q = np.ones(n), np.eye(n)
-    inertia = [sensitivity.names.index(name) for name in model.inertia_names]
-    if len(inertia) >= 2:                                       # the shapes: orthogonal to the common scale
-        u = sensitivity.values[inertia] / model.inertia_scale()
-        shapes = np.linalg.svd(u[None, :] / np.linalg.norm(u))[2][1:].T
-        Q = np.block([[Q, np.zeros((n, shapes.shape[1]))], [np.zeros((len(inertia), n)), shapes]])
-        index, scale = index + inertia, np.r_[scale, model.inertia_scale()]
+    shapes = _shapes(sensitivity, model)
+    if shapes is not None:                                      # beside the inertia's shapes (M4's directions)
+        inertia, inertia_scale, shape_Q = shapes
+        Q = np.block([[Q, np.zeros((n, shape_Q.shape[1]))], [np.zeros((len(inertia), n)), shape_Q]])
+        index, scale = index + inertia, np.r_[scale, inertia_scale]
     a, _, V, _, _, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=True)
     stated = np.asarray(payload_cov, dtype=float)[np.ix_(index[:n], index[:n])]
     a, V = a[:n], V[:n, :n]
