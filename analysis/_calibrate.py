@@ -571,6 +571,9 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     if not converged:
         why = why or _UNSETTLED
     notes = list(signed.notes)
+    effects = _effects_of_the_cause(run, name, warnings)
+    warnings = [w for w in warnings if w not in effects]
+    notes += [f"after the cause named: {w}" for w in effects]
     shape = getattr(run.misfit, "inertia", None)
     # the shape the log sees, in words; a cause named (a moving offset, gravity, a centre of mass), or a misfit on
     # one force channel alone, which no inertia leaves, is why it did not converge; a latency's step gone at the
@@ -793,7 +796,11 @@ def _check_flipped_gain(run, warnings):
     - the polar factor ``R`` of the block (``S_ff = R P``, ``R`` orthogonal) a rotation turning more than
       :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
     - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
+
+    Nothing is said where the ``"causes"`` check named a cause: ``S`` took it up, turn and sign alike.
     """
+    if run.causes is not None and run.causes.warnings:      # S took up the cause named: its force block says no more
+        return [], True, None
     channels = list(run.model.force_channels)
     S_f = np.asarray(run.result.S_hat, dtype=float)[np.ix_(channels, channels)]
     untold = any(np.abs(np.asarray(d, dtype=float)[channels]).max() > 0.1 for d in run.result.info.get("undetermined",
@@ -1149,6 +1156,17 @@ def _calibration(result, method, fields):
 
 #: Why a calibration did not converge where no check said why.
 _UNSETTLED = "the run did not converge (see the warnings)"
+
+
+def _effects_of_the_cause(run, name, warnings):
+    """The warnings that a cause named by the ``"causes"`` check (a moving offset, gravity's direction) explains:
+    the fit not settling and the latency not determined under it (their advice, a longer log or a latency given,
+    would not help), kept as notes."""
+    causes = getattr(run, "causes", None)
+    if causes is None or not causes.warnings:
+        return []
+    latency = getattr(run.latency, "warnings", []) if run.latency_given is None else []
+    return [w for w in warnings if w == _not_settled(name) or w in latency]
 
 
 def _not_settled(method):

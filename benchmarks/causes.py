@@ -1,5 +1,5 @@
 """A moving offset and a tilted gravity named in 3D (issue 46 item 6): ``python benchmarks/causes.py [SEEDS]
-[DURATION] [--cost] [--clean START STOP [SCENARIO] [DURATION]]``.
+[DURATION] [--cost] [--clean START STOP [SCENARIO] [DURATION]] [--zscores START STOP [SCENARIO] [DURATION]]``.
 
 For each seed (default 0-4, 20 s) of ``spatial-arm`` and ``spatial-mocap``: the clean log, a ramp of 10 noise
 sd on fx over the log, the issue's ramp of 2 noise sd (0.1 N, ``ramp2``), and the base tilted 3 degrees about x,
@@ -10,9 +10,12 @@ tests/test_causes.py asserts the naming on ``spatial-arm`` and MuJoCo's logs; th
 docs quote (status.md, "Causes named in 3D").
 
 ``--clean START STOP [SCENARIO] [DURATION]``: eq. (C4) on clean logs (``spatial-mocap`` and 20 s by default), seeds
-``START`` to ``STOP - 1`` (its false-alarm side; on ``spatial-mocap`` the poses' noise makes the test find offsets
-moving): per seed and in sum, how many are named by each of (C4)'s arms, how often each of the second arm's
-conditions holds alone, and how many are named tilted.
+``START`` to ``STOP - 1`` (its false-alarm side, on the noisiest poses): per seed and in sum, how many are named
+moving, how often each of (C4)'s two conditions holds alone, and how many are named tilted.
+
+``--zscores START STOP [SCENARIO] [DURATION]``: on clean logs (``spatial-mocap`` and 10 s by default), the
+offset's levels over their sd and the two tests' small p-values, with eq. (C1)'s payload columns from the motion
+smoothed over the reference fit's window and over ``PAYLOAD_WINDOW``: the poses' noise in those columns.
 
 ``--cost``: ``calibrate``'s CPU on a 60 s 1 kHz ``spatial-arm`` log with and without the ``"causes"`` check,
 after a warm-up, three alternated runs each in one process, and the ratio of the best of each.
@@ -37,6 +40,7 @@ def naming(seeds, duration):
     for name in ("spatial-arm", "spatial-mocap"):
         base = SPATIAL_SCENARIOS[name].with_(duration=duration)
         model = SpatialModel(base.payload)
+        counts = {kind: [0, 0] for kind in ("clean", "ramp", "ramp2", "tilt")}
         for seed in seeds:
             for kind in ("clean", "ramp", "ramp2", "tilt"):
                 scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
@@ -45,9 +49,13 @@ def naming(seeds, duration):
                     sd = 2 if kind == "ramp2" else 10
                     log.w_hat[:, 3] += sd * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
                 c = fit_causes(log.shift_poses(scenario.latency), model)
+                counts[kind][0] += not c.offset.constant
+                counts[kind][1] += bool(c.gravity.tilted)
                 print(f"{name:14s} seed {seed} {kind:5s} offset p {c.offset.p_value:8.2g} ({_row(c, model)})  tilt p "
                       f"{c.gravity.p_value:8.2g}  tilt {c.gravity.tilt_deg:5.2f} +- {c.gravity.std_deg:4.2f} deg  "
                       f"named: {bool(c.warnings)}")
+        print(f"{name}, {duration:g} s, {len(seeds)} seeds, named moving / tilted: "
+              + ", ".join(f"{kind} {moving} / {tilted}" for kind, (moving, tilted) in counts.items()), flush=True)
 
 
 def _row(c, model):
@@ -60,12 +68,12 @@ def _row(c, model):
 
 def clean(start, stop, name="spatial-mocap", duration=20.0):
     """Eq. (C4) on clean logs (seeds ``start`` to ``stop - 1``, aligned at their latency): per seed the row of the
-    smallest p-value, its spread, and whether it is named; then how many are named by each of (C4)'s arms, and how
-    often each of the second arm's two conditions holds alone."""
-    from fmscal.observers.diagnostics._causes import CAUSE_SIGNIFICANCE, DECISIVE, DECISIVE_SIZE, MOVING_SIZE
+    smallest p-value, its spread, and whether it is named; then how many are named, how often each of (C4)'s two
+    conditions holds alone, and how many are named tilted."""
+    from fmscal.observers.diagnostics._causes import CAUSE_SIGNIFICANCE, MOVING_SIZE
     base = SPATIAL_SCENARIOS[name].with_(duration=duration)
     model = SpatialModel(base.payload)
-    counts = dict(first=0, second=0, p_alone=0, spread_alone=0, tilted=0, untested=0)
+    counts = dict(named=0, p_alone=0, spread_alone=0, tilted=0, untested=0)
     for seed in range(start, stop):
         log, _, _ = base.generate(seed)
         c = fit_causes(log.shift_poses(base.latency), model)
@@ -75,19 +83,47 @@ def clean(start, stop, name="spatial-mocap", duration=20.0):
             continue
         counts["tilted"] += bool(c.gravity.tilted)
         p, spread = c.row_p_values, c.spreads
-        significant = p < CAUSE_SIGNIFICANCE / 2
-        first = significant & (spread >= MOVING_SIZE)
-        second = significant & (p < DECISIVE) & (spread >= DECISIVE_SIZE) & ~first
-        counts["first"] += bool(first.any())
-        counts["second"] += bool(second.any())
-        counts["p_alone"] += bool((significant & (p < DECISIVE) & (spread < DECISIVE_SIZE)).any())
-        counts["spread_alone"] += bool((significant & (p >= DECISIVE) & (spread >= DECISIVE_SIZE)).any())
+        significant, large = p < CAUSE_SIGNIFICANCE / 2, spread >= MOVING_SIZE
+        counts["named"] += bool((significant & large).any())
+        counts["p_alone"] += bool((significant & ~large).any())
+        counts["spread_alone"] += bool((~significant & large).any())
         print(f"{name} seed {seed}: offset p {c.offset.p_value:8.2g} ({_row(c, model)}), largest spread "
-              f"{spread.max():4.2f} at p {p[int(np.argmax(spread))]:.2g}, named: {not c.offset.constant}", flush=True)
-    print(f"{name}, {duration:g} s, seeds {start}-{stop - 1}: named by (C4)'s first arm {counts['first']}, by its "
-          f"second alone {counts['second']}; p below {DECISIVE:g} with a spread under {DECISIVE_SIZE:g} "
-          f"{counts['p_alone']}, a significant spread of {DECISIVE_SIZE:g} or more at p above {DECISIVE:g} "
-          f"{counts['spread_alone']}; gravity named tilted {counts['tilted']}; too short to test {counts['untested']}")
+              f"{spread.max():4.2f} at p {p[int(np.argmax(spread))]:.2g}, tilt p {c.gravity.p_value:8.2g}, "
+              f"named: {not c.offset.constant}", flush=True)
+    print(f"{name}, {duration:g} s, seeds {start}-{stop - 1}: offset named moving {counts['named']}; a row "
+          f"significant with a spread under {MOVING_SIZE:g} {counts['p_alone']}, a spread of {MOVING_SIZE:g} or more "
+          f"not significant {counts['spread_alone']}; gravity named tilted {counts['tilted']}; too short to test "
+          f"{counts['untested']}")
+
+
+def zscores(start, stop, name="spatial-mocap", duration=10.0):
+    """The tests' calibration on clean logs (seeds ``start`` to ``stop - 1``), with eq. (C1)'s payload columns from
+    the motion smoothed over the reference fit's window (0.2 s) and over ``PAYLOAD_WINDOW``: the rms over seeds and
+    entries of the offset's levels over their sd (1 where the covariance holds them), and how many logs' gravity and
+    offset tests fall below 0.05 and 0.01 (about 5 % and 1 % where calibrated, fewer where conservative)."""
+    from fmscal.observers.diagnostics import _causes
+    base = SPATIAL_SCENARIOS[name].with_(duration=duration)
+    model = SpatialModel(base.payload)
+    kept = _causes.PAYLOAD_WINDOW
+    try:
+        for window in (0.2, kept):
+            _causes.PAYLOAD_WINDOW = window
+            z, gravity_p, offset_p, named = [], [], [], 0
+            for seed in range(start, stop):
+                c = fit_causes(base.generate(seed)[0].shift_poses(base.latency), model)
+                if c.levels is None:
+                    continue
+                z.append((c.levels / c.levels_std).ravel())
+                gravity_p.append(c.gravity.p_value)
+                offset_p.append(c.offset.p_value)
+                named += bool(c.warnings)
+            gravity_p, offset_p = np.array(gravity_p), np.array(offset_p)
+            below = [int((p < level).sum()) for p in (gravity_p, offset_p) for level in (0.05, 0.01)]
+            print(f"{name}, {duration:g} s, seeds {start}-{stop - 1}, payload columns over {window:g} s: offset "
+                  f"levels' rms z {np.sqrt(np.mean(np.square(z))):.2f}; gravity p below 0.05 / 0.01: {below[0]} / "
+                  f"{below[1]}, offset p {below[2]} / {below[3]}, of {len(offset_p)}; named {named}", flush=True)
+    finally:
+        _causes.PAYLOAD_WINDOW = kept
 
 
 def cost():
@@ -114,6 +150,8 @@ if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if a != "--cost"]
     if "--cost" in sys.argv[1:]:
         cost()
+    elif args and args[0] == "--zscores":
+        zscores(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
     elif args and args[0] == "--clean":
         clean(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
     else:

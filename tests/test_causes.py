@@ -72,9 +72,9 @@ def test_a_ramping_offset_is_named_on_its_channel(seed):
 
 
 def test_the_issue_s_small_ramp_is_named():
-    """The issue's 0.1 N ramp (twice the noise) over 20 s: its levels spread 1.6 of the residual's rms, below eq.
-    (C4)'s first size, but the test is decisive (p about 1e-40): named first, on its channel, and not converged
-    (before, "record a longer log" came first, and the mass was suspected)."""
+    """The issue's 0.1 N ramp (twice the noise) over 20 s: its levels spread 1.6 of the residual's rms, over eq.
+    (C4)'s size, at p about 1e-40: named first, on its channel, and not converged (before, "record a longer log"
+    came first, and the mass was suspected)."""
     log, _ = _case(ARM, "ramp", 0, ramp_sd=2.0)
     cal = calibrate(log, ARM.payload)
     assert not cal.converged and cal.why_unconverged == "the sensor's offset moves during the log"
@@ -87,9 +87,9 @@ def test_the_issue_s_small_ramp_is_named():
 @pytest.mark.parametrize("seed", range(10))
 def test_the_mocap_logs_pose_noise_is_not_a_moving_offset(seed):
     """``spatial-mocap`` (poses at 0.1 degree, 200 Hz, 20 s, aligned at its latency as ``calibrate`` aligns it): the
-    pose noise's share of the residual shifts its levels at p down to 1e-9 (spread 0.5 of the rms, seed 4) and by
-    up to 1.8 of the rms (p 4e-6, seed 5) on clean logs: eq. (C4) names neither; the issue's 0.1 N ramp on the same
-    log is named (p 1e-22 to 1e-28). ``python benchmarks/causes.py --clean 0 500`` runs 500 clean seeds."""
+    pose noise, differentiated twice into eq. (C1)'s payload columns, once shifted clean logs' levels at p down to
+    1e-9; with those columns smoothed over ``PAYLOAD_WINDOW`` no clean log is named, and the issue's 0.1 N ramp on
+    the same log is. ``python benchmarks/causes.py --clean 0 100`` runs 100 clean seeds."""
     mocap = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=20.0)
     model = SpatialModel(mocap.payload, GRAVITY)
     clean = fit_causes(_case(mocap, "clean", seed)[0].shift_poses(mocap.latency), model)
@@ -110,12 +110,57 @@ def test_a_tilted_base_is_named_with_its_tilt(seed):
     np.testing.assert_allclose(tilt.gravity, _tilted(TILT_DEG), atol=0.15)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(10))
+def test_a_short_mocap_log_s_pose_noise_is_not_a_tilt(seed):
+    """10 s of ``spatial-mocap``, its gravity's direction tested with two parts of the log: the pose noise in eq.
+    (C1)'s payload columns, differentiated twice over the reference fit's window, had clean logs named tilted
+    (seeds 1 and 4 of these); over ``PAYLOAD_WINDOW`` none is, and the base tilted 1 degree is, at its angle."""
+    short = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=10.0)
+    model = SpatialModel(short.payload, GRAVITY)
+    clean = fit_causes(short.generate(seed)[0].shift_poses(short.latency), model)
+    assert clean.tested and clean.warnings == []
+    tilted = short.with_(gravity=_tilted(1.0))
+    tilt = fit_causes(tilted.generate(seed)[0].shift_poses(short.latency), model).gravity
+    assert tilt.tilted and abs(tilt.tilt_deg - 1.0) < 4 * tilt.std_deg + 0.05
+
+
+@pytest.mark.parametrize("name", ["spatial-arm", "spatial-mocap"])
+@pytest.mark.parametrize("degrees", [1.0, 5.0])
+def test_a_short_log_names_a_tilted_base(name, degrees):
+    """Issue 46's 10 s logs, the base tilted 1 or 5 degrees: gravity was not tested under about 17 s, and the tilt
+    was called the inertia's shape, a fit that did not settle, or the sensor turned 32 degrees about z. Now named
+    first, and nothing else advised: the fit not settling and the latency not determined under it are notes, and no
+    turn is named."""
+    short = SPATIAL_SCENARIOS[name].with_(duration=10.0, gravity=_tilted(degrees))
+    log, _, _ = short.generate(1)
+    tilt = fit_causes(log.shift_poses(short.latency), SpatialModel(short.payload, GRAVITY)).gravity
+    assert tilt.tilted and abs(tilt.tilt_deg - degrees) < 4 * tilt.std_deg + 0.05
+    cal = calibrate(log, short.payload)
+    assert not cal.converged and cal.why_unconverged == "gravity's direction is not the one given"
+    assert "gravity tilted" in cal.warnings[0]
+    assert not any(words in w for w in cal.warnings for words in ("turned", "record a longer log", "--latency",
+                                                                   "mass may be wrong", "try the inertia"))
+
+
+def test_a_short_log_s_ramp_taken_for_a_tilt_names_the_offset_beside_it():
+    """8 s, a ramp of 10 noise sd on fx that two parts of the log follow badly: the tilt's columns take up a share
+    (0.16 degrees, p 7e-5) where fx's test alone is not significant (p 0.003): the tilt's line names fx's offset
+    beside it, and a longer log to tell them apart."""
+    log, _ = _case(ARM.with_(duration=8.0), "ramp", 14)
+    causes = fit_causes(log, SpatialModel(ARM.payload, GRAVITY))
+    assert causes.gravity.tilted and causes.offset.constant and causes.parts == 2
+    line = causes.gravity.warning
+    assert "or fx's offset moves" in line and "a longer log tells them apart" in line
+
+
 @pytest.mark.parametrize("name, duration", [("spatial-arm", 12.0), ("spatial-arm", 10.0), ("spatial-mocap", 10.0)])
 def test_a_short_log_tests_its_offset_with_fewer_parts(name, duration):
     """10-12 s at 1 kHz (issue 46's logs were 10 s): too few blocks of time for six parts' 43 columns, enough for
     two or three parts': a ramp of 10 noise sd on fx is named on fx, in the first warning of ``calibrate``, and not
     converged (on ``spatial-mocap`` too, whose ramp the residual of two parts leaves long-correlated: the blocks'
-    length is the most parts' fit's); gravity's direction is not tested there; a clean log names nothing."""
+    length is the most parts' fit's); gravity's direction is tested there too, and not found tilted; a clean log
+    names nothing."""
     short = SPATIAL_SCENARIOS[name].with_(duration=duration)
     model = SpatialModel(short.payload, GRAVITY)
     for seed in (0, 1):
@@ -124,7 +169,7 @@ def test_a_short_log_tests_its_offset_with_fewer_parts(name, duration):
     log, _ = _case(short, "ramp", 0)
     causes = fit_causes(log.shift_poses(short.latency), model)
     assert causes.tested and 2 <= causes.parts < DRIFT_PARTS
-    assert causes.gravity.p_value == 1.0 and not causes.gravity.tilted
+    assert causes.gravity.p_value < 1.0 and not causes.gravity.tilted
     assert "offset of fx" in causes.offset.warning
     cal = calibrate(log, short.payload)
     assert not cal.converged and cal.why_unconverged == "the sensor's offset moves during the log"
@@ -132,25 +177,25 @@ def test_a_short_log_tests_its_offset_with_fewer_parts(name, duration):
 
 
 @pytest.mark.parametrize("duration, tested", [(6.0, False), (8.0, True)])
-def test_a_ramp_the_test_does_not_name_is_not_blamed_on_the_payload(duration, tested):
-    """6 s: too short for even two parts (38 blocks of time); 8 s: tested, and this ramp not found (the test is
-    weak there). A ramp of 10 noise sd on fx leaves the force gains uneven (fx's low), which no mass or unit
-    does: the gains' line names fx's offset (and at 6 s the length the test would take), not the mass; at 8 s the
-    misfit is on fx alone (2.3 times the noise, every other row 1.0) and points at fx's reading first."""
+def test_a_short_log_s_ramp_is_not_blamed_on_the_payload(duration, tested):
+    """6 s: too short for even two parts (38 blocks of time); 8 s: tested, and this ramp (10 noise sd on fx) named
+    on fx. Untested, the ramp leaves the force gains uneven (fx's low), which no mass or unit does: the gains' line
+    names fx's offset and the length the test would take, not the mass."""
     short = ARM.with_(duration=duration)
     log, _ = _case(short, "ramp", 0)
     causes = fit_causes(log, SpatialModel(short.payload, GRAVITY))
-    assert causes.tested == tested and causes.warnings == []
-    if not tested:
-        assert 6.0 < causes.needed_duration < 12.0
+    assert causes.tested == tested
     cal = calibrate(log, short.payload)
     assert not cal.converged
-    line, = [w for w in cal.warnings if "force gains" in w]
-    assert "fx's offset may move" in line and ("too short to test" in line) == (not tested)
     assert not any(words in w for w in cal.warnings for words in ("mass may be wrong", "check the payload's mass",
                                                                    "try the inertia"))
-    misfit = [w for w in cal.warnings if "does not fit" in w]
-    assert len(misfit) == tested and all("on fx alone" in w for w in misfit)
+    if tested:
+        assert "offset of fx" in causes.offset.warning and not causes.gravity.tilted
+        assert cal.why_unconverged == "the sensor's offset moves during the log" and "offset of fx" in cal.warnings[0]
+        return
+    assert causes.warnings == [] and 6.0 < causes.needed_duration < 12.0
+    line, = [w for w in cal.warnings if "force gains" in w]
+    assert "fx's offset may move" in line and "too short to test" in line
 
 
 @pytest.mark.parametrize("shift", [(0.01, 0.0, 0.0), (0.0, 0.0, 0.03)])
@@ -314,3 +359,18 @@ def test_a_long_log_is_taken_at_a_stride_and_still_tested(kind):
     causes = fit_causes(log, SpatialModel(long.payload, GRAVITY))
     assert causes.blocks > 250                          # 0.2 s blocks over 60 s, as without the stride
     assert causes.offset.constant == (kind == "clean") and not causes.gravity.tilted
+
+
+def test_a_misfit_s_covariance_from_fewer_blocks_than_numbers_is_no_traceback():
+    """A base tilted 5 degrees on 10 s of ``spatial-mocap``: the misfit's residual is so long-correlated that eq.
+    (M4)'s five inertia shapes and (M5)'s eight numbers had six blocks of time; their covariance is then singular,
+    and ``calibrate`` raised ``LinAlgError`` on one BLAS thread (as the command line runs). Each statistic is now
+    taken on the directions its covariance determines, and Hotelling's test over so few blocks says nothing."""
+    from fmscal.observers.diagnostics._misfit import _hotelling, _tests
+    rng = np.random.default_rng(0)
+    scores = rng.standard_normal((3, 5))                 # three blocks' scores of five numbers: rank 3
+    V = scores.T @ scores
+    a = V @ rng.standard_normal(5)                       # within V's range
+    statistic, against = _tests(a, V, np.eye(5))
+    assert np.isfinite(statistic) and 0.0 < against < statistic
+    assert _hotelling(statistic, 5, 6) == 1.0 and 0.0 < _hotelling(3.0, 2, 40) < 1.0

@@ -55,9 +55,11 @@ data alone (:func:`misfit`):
    fit, as ``e`` does, and their product would bias ``delta`` by several per
    cent on a noisy log; ``C`` comes from the poses alone. Its covariance
    ``V`` is cluster-robust over blocks of time (eq. (U3), the scores
-   ``C_k^T W (e_k + R_k delta)``). Two chi-square tests on the entries less
-   one: the log **sees** the shape where ``delta^T V^-1 delta`` is
-   significant, and the shape is **beyond its stated uncertainty** where
+   ``C_k^T W (e_k + R_k delta)``). Two Hotelling's tests over its ``G``
+   blocks, as (M2), on the entries less one (``V^+`` on the directions ``V``
+   determines; none with ``G`` at most one more than the entries, a misfit
+   whose correlation leaves few blocks): the log **sees** the shape where
+   ``delta^T V^-1 delta`` is significant, and the shape is **beyond its stated uncertainty** where
    ``delta^T (V + Sigma_I)^-1 delta`` is (``Sigma_I`` the inertia's stated
    covariance, its common scale taken out): ``S_std`` then does not cover
    ``S``'s error, and the model does not fit. Within it, (M1) and (M2) are
@@ -84,7 +86,6 @@ import copy
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
 from fmscal.plant import estimate_noise
@@ -400,7 +401,8 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE, sensitivity
 def _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=False):
     """Eqs. (M4), (M5): the payload's numbers ``index`` the log prefers, over their ``scale``, in the directions
     ``Q`` (``a``; ``delta = Q a``), the needed wrench's change per unit of ``a`` (``C Q``), the covariance ``V``
-    of ``a``, and the chi-square statistics of ``a`` against ``V`` and against ``V`` plus the stated covariance.
+    of ``a``, and the statistics of ``a`` against ``V`` and against ``V`` plus the stated covariance (:func:`_tests`),
+    and the blocks of time ``G``.
     The scores of ``V`` take ``C`` (M4), or its unabsorbed part ``R`` (M5: the centre of mass's columns are
     mostly what the readings absorb, whose share of each block's score cancels over the log and would
     widen ``V`` many times)."""
@@ -422,11 +424,29 @@ def _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorb
 
 
 def _tests(a, V, stated):
-    """``a^T V^-1 a``, and ``a^T (V + stated)^-1 a`` (0 where ``stated`` is not finite: any change covered)."""
-    statistic = float(a @ np.linalg.solve(V, a))
+    """``a^T V^+ a``, and ``a^T (V + stated)^+ a`` (0 where ``stated`` is not finite: any change covered), each on
+    the directions its matrix determines (a covariance from fewer blocks of time than numbers is singular)."""
+    statistic = _quadratic(a, V)
     if np.all(np.isfinite(stated)):
-        return statistic, float(a @ np.linalg.solve(V + stated, a))
+        return statistic, _quadratic(a, V + stated)
     return statistic, 0.0                                       # numbers not determined: any change is covered
+
+
+def _quadratic(a, V):
+    """``a^T V^+ a``, ``V^+`` on the eigen-directions of ``V`` above ``1e-12`` of its largest."""
+    lam, u = np.linalg.eigh((V + V.T) / 2)
+    keep = lam > 1e-12 * max(lam.max(), 1e-300)
+    y = u[:, keep].T @ a
+    return float(np.sum(y ** 2 / lam[keep]))
+
+
+def _hotelling(statistic, k, g):
+    """The p-value of ``k`` numbers' statistic whose covariance came from ``g`` blocks of time: Hotelling's ``T^2``
+    scaled to an ``F``, as eq. (M2) (chi-square's tail is too thin where the blocks are few); 1 where ``g`` is at
+    most ``k + 1``."""
+    if g <= k + 1:
+        return 1.0
+    return float(f_dist.sf((g - k) / (k * (g - 1)) * statistic, k, g - k))
 
 
 def _shapes(sensitivity, model):
@@ -447,9 +467,9 @@ def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significan
     if shapes is None:
         return None, None
     index, scale, Q = shapes
-    a, C, V, statistic, against_stated, _ = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov)
+    a, C, V, statistic, against_stated, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov)
     dof = len(a)
-    p_value, p_stated = float(chi2.sf(statistic, dof)), float(chi2.sf(against_stated, dof))
+    p_value, p_stated = (_hotelling(x, dof, g) for x in (statistic, against_stated))
     delta = Q @ a
     preferred = sensitivity.values.copy()
     preferred[index] += delta * scale
@@ -482,9 +502,7 @@ def _centre_of_mass(sensitivity, model, e, t, dt, window, payload_cov, significa
     stated = np.asarray(payload_cov, dtype=float)[np.ix_(index[:n], index[:n])]
     a, V = a[:n], V[:n, :n]
     statistic, against_stated = _tests(a, V, stated)
-    # Hotelling's T^2 over G blocks, as eq. (M2): chi-square's tail is too thin where the blocks are few
-    p_value, p_stated = ((float(f_dist.sf((g - n) / (n * (g - 1)) * x, n, g - n)) if g > n + 1 else 1.0)
-                         for x in (statistic, against_stated))
+    p_value, p_stated = (_hotelling(x, n, g) for x in (statistic, against_stated))
     return CentreOfMass(names=tuple(model.payload_position_names), delta=a, std=np.sqrt(np.diag(V)),
                         statistic=statistic, p_value=p_value, p_stated=p_stated, seen=p_value < significance,
                         covered=p_stated >= significance, preferred=sensitivity.values[index[:n]] + a)
