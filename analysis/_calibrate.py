@@ -760,8 +760,10 @@ def _check_causes(run, warnings):
         return [], True, None
     run.causes = found
     run.named = bool(found.warnings)
+    tilted = found.gravity is not None and found.gravity.tilted
     why = ("the sensor's offset moves during the log" if not found.offset.constant else
-           "gravity's direction is not the one given" if found.gravity is not None and found.gravity.tilted else None)
+           "gravity's direction is not the one given, or the offset moves (the log is too short to tell)"
+           if tilted and found.gravity.ambiguous else "gravity's direction is not the one given" if tilted else None)
     return found.warnings, why is None, why
 
 
@@ -797,10 +799,9 @@ def _check_flipped_gain(run, warnings):
       :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
     - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
 
-    Nothing is said where the ``"causes"`` check named a cause: ``S`` took it up, turn and sign alike.
+    No turn is named where the ``"causes"`` check named a cause (a moving offset, gravity's direction): ``S`` turns
+    to take it up. A reversed sign is no cause's, and is named beside it.
     """
-    if run.causes is not None and run.causes.warnings:      # S took up the cause named: its force block says no more
-        return [], True, None
     channels = list(run.model.force_channels)
     S_f = np.asarray(run.result.S_hat, dtype=float)[np.ix_(channels, channels)]
     untold = any(np.abs(np.asarray(d, dtype=float)[channels]).max() > 0.1 for d in run.result.info.get("undetermined",
@@ -816,7 +817,8 @@ def _check_flipped_gain(run, warnings):
                 "not determined: see the directions above); record a log that turns the payload through tens of "
                 "degrees about two axes, then judge the reading's sign convention"], False, \
             "the log holds too little rotation to tell the reading's sign"
-    if rotvec is not None and np.degrees(np.linalg.norm(rotvec)) > TURNED_DEG:
+    named = run.causes is not None and bool(run.causes.warnings)     # S took up the cause named: a turn is its
+    if rotvec is not None and np.degrees(np.linalg.norm(rotvec)) > TURNED_DEG and not named:
         run.named = True
         angle = float(np.degrees(np.linalg.norm(rotvec)))
         axis = rotvec / np.linalg.norm(rotvec)
@@ -1159,14 +1161,21 @@ _UNSETTLED = "the run did not converge (see the warnings)"
 
 
 def _effects_of_the_cause(run, name, warnings):
-    """The warnings that a cause named by the ``"causes"`` check (a moving offset, gravity's direction) explains:
-    the fit not settling and the latency not determined under it (their advice, a longer log or a latency given,
-    would not help), kept as notes."""
+    """The warnings that a cause named by the ``"causes"`` check (a moving offset, gravity's direction) explains,
+    kept as notes: the fit not settling, and the latency estimated but not determined under it (its advice, a
+    latency given, would not mend the cause). A latency that steps along the log, a search too narrow and a
+    latency given that the log disagrees with stay warnings."""
     causes = getattr(run, "causes", None)
     if causes is None or not causes.warnings:
         return []
-    latency = getattr(run.latency, "warnings", []) if run.latency_given is None else []
+    latency = [] if run.latency_given is not None else [
+        w for w in getattr(run.latency, "warnings", []) if w.startswith(_LATENCY_UNDETERMINED) and _NARROW not in w]
     return [w for w in warnings if w == _not_settled(name) or w in latency]
+
+
+#: How the latency's estimate says the log does not determine it; a search too narrow says :data:`_NARROW` too.
+_LATENCY_UNDETERMINED = "the pose stream's latency is not determined"
+_NARROW = "span under two samples"
 
 
 def _not_settled(method):

@@ -1,11 +1,13 @@
 """A moving offset and a tilted gravity named in 3D (issue 46 item 6): ``python benchmarks/causes.py [SEEDS]
-[DURATION] [--cost] [--clean START STOP [SCENARIO] [DURATION]] [--zscores START STOP [SCENARIO] [DURATION]]``.
+[DURATION] [--cost] [--clean START STOP [SCENARIO] [DURATION]] [--zscores START STOP [SCENARIO] [DURATION]]
+[--payload [SEEDS] [DURATION]]``.
 
 For each seed (default 0-4, 20 s) of ``spatial-arm`` and ``spatial-mocap``: the clean log, a ramp of 10 noise
 sd on fx over the log, the issue's ramp of 2 noise sd (0.1 N, ``ramp2``), and the base tilted 3 degrees about x,
 each through :func:`fmscal.observers.diagnostics.fit_causes` (the mocap log aligned at its known latency).
 Printed per log: the offset test's and the tilt test's p-values, the tilt found and its sd, the offset row of the
-smallest p-value, its spread over its residual's rms (eq. (C4)), and whether a cause is named.
+smallest p-value, its spread over its residual's rms (eq. (C4)), and whether a cause is named; per scenario, how many
+logs of each kind are named moving, tilted, and tilted beside an offset (ambiguous).
 tests/test_causes.py asserts the naming on ``spatial-arm`` and MuJoCo's logs; this prints the figures the
 docs quote (status.md, "Causes named in 3D").
 
@@ -16,6 +18,10 @@ moving, how often each of (C4)'s two conditions holds alone, and how many are na
 ``--zscores START STOP [SCENARIO] [DURATION]``: on clean logs (``spatial-mocap`` and 10 s by default), the
 offset's levels over their sd and the two tests' small p-values, with eq. (C1)'s payload columns from the motion
 smoothed over the reference fit's window and over ``PAYLOAD_WINDOW``: the poses' noise in those columns.
+
+``--payload [SEEDS] [DURATION]``: clean logs (seeds 0-9, 10 s by default) fitted with the payload given wrong
+(the mass 3 % high, the centre of mass 1 cm along x or 3 cm along z off, IXX 1.5 times, the inertia 1.3 times),
+which eq. (C1)'s payload columns and ``S`` take up: how many are named moving or tilted.
 
 ``--cost``: ``calibrate``'s CPU on a 60 s 1 kHz ``spatial-arm`` log with and without the ``"causes"`` check,
 after a warm-up, three alternated runs each in one process, and the ratio of the best of each.
@@ -40,7 +46,7 @@ def naming(seeds, duration):
     for name in ("spatial-arm", "spatial-mocap"):
         base = SPATIAL_SCENARIOS[name].with_(duration=duration)
         model = SpatialModel(base.payload)
-        counts = {kind: [0, 0] for kind in ("clean", "ramp", "ramp2", "tilt")}
+        counts = {kind: [0, 0, 0] for kind in ("clean", "ramp", "ramp2", "tilt")}
         for seed in seeds:
             for kind in ("clean", "ramp", "ramp2", "tilt"):
                 scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
@@ -51,11 +57,13 @@ def naming(seeds, duration):
                 c = fit_causes(log.shift_poses(scenario.latency), model)
                 counts[kind][0] += not c.offset.constant
                 counts[kind][1] += bool(c.gravity.tilted)
+                counts[kind][2] += bool(c.gravity.ambiguous)
                 print(f"{name:14s} seed {seed} {kind:5s} offset p {c.offset.p_value:8.2g} ({_row(c, model)})  tilt p "
                       f"{c.gravity.p_value:8.2g}  tilt {c.gravity.tilt_deg:5.2f} +- {c.gravity.std_deg:4.2f} deg  "
                       f"named: {bool(c.warnings)}")
-        print(f"{name}, {duration:g} s, {len(seeds)} seeds, named moving / tilted: "
-              + ", ".join(f"{kind} {moving} / {tilted}" for kind, (moving, tilted) in counts.items()), flush=True)
+        print(f"{name}, {duration:g} s, {len(seeds)} seeds, named moving / tilted (of which beside an offset, "
+              "ambiguous): " + ", ".join(f"{kind} {moving} / {tilted} ({ambiguous})"
+                                         for kind, (moving, tilted, ambiguous) in counts.items()), flush=True)
 
 
 def _row(c, model):
@@ -126,6 +134,29 @@ def zscores(start, stop, name="spatial-mocap", duration=10.0):
         _causes.PAYLOAD_WINDOW = kept
 
 
+def payload_given_wrong(seeds, duration):
+    """The payload given wrong, which eq. (C1)'s payload columns take up (or ``S`` absorbs): named neither moving nor
+    tilted. Per scenario and error, over ``seeds`` of clean logs of ``duration`` s, how many are named each."""
+    import dataclasses
+    for name in ("spatial-arm", "spatial-mocap"):
+        base = SPATIAL_SCENARIOS[name].with_(duration=duration)
+        payload = base.payload
+        inertia = np.asarray(payload.inertia, dtype=float)
+        wrong = {"mass +3 %": dataclasses.replace(payload, mass=payload.mass * 1.03),
+                 "com +1 cm x": dataclasses.replace(payload, com=tuple(np.add(payload.com, (0.01, 0.0, 0.0)))),
+                 "com +3 cm z": dataclasses.replace(payload, com=tuple(np.add(payload.com, (0.0, 0.0, 0.03)))),
+                 "IXX x1.5": dataclasses.replace(payload, inertia=tuple(inertia * np.r_[1.5, 1, 1, 1, 1, 1])),
+                 "inertia x1.3": dataclasses.replace(payload, inertia=tuple(inertia * 1.3))}
+        logs = [base.generate(seed)[0].shift_poses(base.latency) for seed in seeds]
+        counts = []
+        for label, given in wrong.items():
+            found = [fit_causes(log, SpatialModel(given)) for log in logs]
+            counts.append(f"{label} {sum(not c.offset.constant for c in found)} / "
+                          f"{sum(bool(c.gravity.tilted) for c in found)}")
+        print(f"{name}, {duration:g} s, {len(logs)} seeds, the payload given wrong, named moving / tilted: "
+              + ", ".join(counts), flush=True)
+
+
 def cost():
     scenario = SPATIAL_SCENARIOS["spatial-arm"]
     log, _, _ = scenario.generate(0)
@@ -150,6 +181,8 @@ if __name__ == "__main__":
     args = [a for a in sys.argv[1:] if a != "--cost"]
     if "--cost" in sys.argv[1:]:
         cost()
+    elif args and args[0] == "--payload":
+        payload_given_wrong(range(int(args[1]) if len(args) > 1 else 10), float(args[2]) if len(args) > 2 else 10.0)
     elif args and args[0] == "--zscores":
         zscores(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
     elif args and args[0] == "--clean":

@@ -63,14 +63,18 @@ noise, differentiated twice) move ``dg`` and ``beta`` by more than the
 covariance holds, a bias of each log's motion that no block length covers
 (clean logs of noisy poses named tilted); over :data:`PAYLOAD_WINDOW` their
 noise is far smaller, and they still span what a payload given wrong leaves.
-A tilt named where no offset is, but some row's offset test is below
-:data:`SUGGESTIVE`, names that offset beside it (a short log's ramp, which
-its few parts follow badly, leaves a share the tilt's columns take up). The
-tilt the data ask for, and its one-sigma uncertainty::
+On a log of fewer parts than ``P`` asked, a ramp that the parts follow
+badly leaves a share the tilt's columns take up: a tilt named there beside
+an offset named, or beside rows whose offset test is below
+:data:`SUGGESTIVE`, is ambiguous, and its line names both, the log's length
+that tells them apart, and no gravity to give. The tilt the data ask for,
+and its one-sigma uncertainty::
 
-    tilt = angle(g, g + dg),   sd = sqrt(lambda_max(C_perp)) / |g + dg|           (C3)
+    tilt = asin(|dg_perp| / |g|),   sd = sqrt(lambda_max(C_perp)) / |g|            (C3)
 
-``C_perp`` the covariance of the two components across ``g``. The offset's
+``dg_perp`` the two components of ``dg`` across ``g`` and ``C_perp`` their
+covariance; the gravity found is along ``g + dg`` at the size given (``dg``
+along ``g`` is the payload's mass's share, which ``S`` absorbs). The offset's
 change is described as the planar test describes it (a step or a ramp, the
 channel of the reading, when: :func:`describe_offset`), from the residual
 less the fitted gravity and payload terms over 0.5 s windows, taken back to
@@ -115,8 +119,8 @@ MIN_PARTS = 2
 #: Samples fitted at most: a longer log is taken at every ``stride``-th sample (the motion smoothed on all of them
 #: first), which keeps the check's cost flat beyond 20 s at 1 kHz; its blocks of time, and so its test, unchanged.
 MAX_ROWS = 20000
-#: A tilt named where no offset is, but some row's offset test (times the rows) is below this, names that row's
-#: offset beside it: on a short log a ramp the parts follow badly leaves a share the tilt's columns take up.
+#: On a log of fewer parts than asked, a tilt named beside an offset named, or beside rows whose offset test (times
+#: the rows) is below this, is ambiguous: a ramp the few parts follow badly leaves a share the tilt's columns take up.
 SUGGESTIVE = 0.05
 #: The windows over which the offset's change is described, s (as the planar test's).
 DESCRIBE_WINDOW = 0.5
@@ -135,9 +139,11 @@ class GravityTilt:
     Attributes
     ----------
     gravity : ndarray, shape (3,)
-        The pose frame's gravity the data ask for, ``g + dg``, m/s^2.
+        The pose frame's gravity along the direction the data ask for, ``g + dg``, at the size given (its size
+        along the direction given is the payload's mass's, which ``S`` absorbs), m/s^2.
     tilt_deg, std_deg : float
-        Its angle from the gravity given, and the one-sigma uncertainty across it, degrees (eq. (C3)).
+        Its angle from the gravity given, and the one-sigma uncertainty across the gravity given, degrees (eq.
+        (C3)).
     statistic : float
         ``X2`` of eq. (C2) on the two components across ``g``.
     p_value : float
@@ -145,6 +151,10 @@ class GravityTilt:
         ``p_value`` below half of the significance: the gravity given does not explain the data.
     warning : str or None
         One line naming the tilt, where ``tilted``.
+    ambiguous : bool
+        Tilted on a log of fewer parts than :data:`DRIFT_PARTS`, where an offset is named moving or some row's
+        offset test is below :data:`SUGGESTIVE`: the tilt may be that offset's share, and the line names both and
+        gives no gravity.
     """
 
     gravity: np.ndarray
@@ -154,11 +164,13 @@ class GravityTilt:
     p_value: float
     tilted: bool
     warning: str = None
+    ambiguous: bool = False
 
     def to_dict(self):
         """The JSON form."""
         return {"gravity": [float(v) for v in self.gravity], "tilt_deg": float(self.tilt_deg),
-                "std_deg": float(self.std_deg), "p_value": float(self.p_value), "tilted": bool(self.tilted)}
+                "std_deg": float(self.std_deg), "p_value": float(self.p_value), "tilted": bool(self.tilted),
+                "ambiguous": bool(self.ambiguous)}
 
 
 @dataclass
@@ -295,10 +307,17 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
         gravity = _gravity_untested(model)
     else:
         gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance)
-        row = int(np.argmin(row_p))
-        if gravity.tilted and offset.constant and row_p[row] < SUGGESTIVE:
-            gravity.warning += (f"; or {model.wrench_names[row]}'s offset moves (p = {row_p[row]:.2g} over {n_t + 1} "
-                                "parts of the log, too few to tell a drift from a tilt: a longer log tells them apart)")
+        rows = list(moving) if not offset.constant else [int(i) for i in np.argsort(row_p) if row_p[i] < SUGGESTIVE]
+        if gravity.tilted and n_t + 1 < parts and rows:
+            gravity.ambiguous = True           # the length that all the parts' blocks would take (as needed's)
+            full = BLOCKS_PER_COLUMN * (shared + n_w * (parts - 1)) * length + (log.t[-1] - log.t[0] + log.dt) - span
+            names = " or ".join(model.wrench_names[i] for i in rows)
+            gravity.warning = (f"gravity's direction, or the offset of {names}: the data ask for gravity tilted "
+                               f"{gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = {gravity.p_value:.2g}), "
+                               f"or the offset of {names} moves (p = {', '.join(f'{row_p[i]:.2g}' for i in rows)}): "
+                               f"{n_t + 1} parts of the log are too few to tell a drift from a tilt; record a log of "
+                               f"{full:.0f} s or more ({parts} parts) to tell them apart, or estimate gravity with "
+                               "fmscal identify-payload --gravity estimate")
     beta = theta[shared:].reshape(n_w, n_t)
     beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
     return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
@@ -411,14 +430,16 @@ def _across(u):
 def _gravity_test(dg, C, g, gravity, significance):
     """The tilt's test: the two components of ``dg`` across ``g`` by eq. (C2), its angle and sd by eq. (C3)."""
     g0 = np.asarray(gravity, dtype=float)
-    u = g0 / np.linalg.norm(g0)
-    statistic, _, p_value = _wald(_across(u).T @ dg, _across(u).T @ C @ _across(u), g)
-    found = g0 + dg
-    size = np.linalg.norm(found)
-    tilt = float(np.degrees(np.arccos(np.clip(found @ u / size, -1.0, 1.0))))
-    # across the direction found: along it lies gravity's size, which the payload's parameters share (C3)
-    across = _across(found / size)
-    std = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(across.T @ C @ across).max(), 0.0)) / size))
+    size = np.linalg.norm(g0)
+    u = g0 / size
+    A = _across(u)
+    x, C_perp = A.T @ dg, A.T @ C @ A
+    statistic, _, p_value = _wald(x, C_perp, g)
+    # eq. (C3): at gravity's size given (dg along g is the payload's mass's share, which S absorbs)
+    across = min(float(np.linalg.norm(x)), size)
+    tilt = float(np.degrees(np.arcsin(across / size)))
+    std = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(C_perp).max(), 0.0)) / size))
+    found = A @ x * (across / max(float(np.linalg.norm(x)), 1e-300)) + u * np.sqrt(size ** 2 - across ** 2)
     tilted = bool(p_value < significance / 2)
     out = GravityTilt(gravity=found, tilt_deg=tilt, std_deg=std, statistic=statistic, p_value=p_value,
                       tilted=tilted)

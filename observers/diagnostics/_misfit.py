@@ -195,11 +195,12 @@ class InertiaShape:
         (:meth:`fmscal.plant.Model.inertia_scale`), their common scale taken
         out; and its one-sigma uncertainty from the log.
     statistic : float
-        ``delta^T V^-1 delta``.
+        ``delta^T V^+ delta`` (on the directions ``V`` determines).
     dof : int
         Its degrees of freedom: the entries less one (the common scale).
     p_value : float
-        Of ``statistic``: below the significance, the log sees the shape.
+        Of ``statistic``, Hotelling's over the blocks of time of ``V`` (1 with at most ``dof + 1`` of them): below
+        the significance, the log sees the shape.
     p_stated : float
         Of ``delta^T (V + Sigma_I)^-1 delta``: below the significance, the shape is beyond its stated uncertainty.
     seen, covered : bool
