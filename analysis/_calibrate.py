@@ -787,6 +787,9 @@ def _check_evidence(run, warnings):
 #: A force block of ``S`` whose nearest rotation (its polar factor) turns further than this, degrees, is named a
 #: sensor turned from the frame the poses give.
 TURNED_DEG = 20.0
+#: Where the ``"causes"`` check named a cause, ``S`` turns to take it up (a base tilted 5 degrees turned it 32 on a
+#: 10 s log): a turn is named only beyond this, degrees, which no such cause reaches.
+CAUSED_TURN_DEG = 90.0
 
 
 def _check_flipped_gain(run, warnings):
@@ -799,8 +802,8 @@ def _check_flipped_gain(run, warnings):
       :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
     - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
 
-    No turn is named where the ``"causes"`` check named a cause (a moving offset, gravity's direction): ``S`` turns
-    to take it up. A reversed sign is no cause's, and is named beside it.
+    Where the ``"causes"`` check named a cause (a moving offset, gravity's direction), ``S`` turns to take it up:
+    a turn is named only beyond :data:`CAUSED_TURN_DEG`. A reversed sign is no cause's, and is named beside it.
     """
     channels = list(run.model.force_channels)
     S_f = np.asarray(run.result.S_hat, dtype=float)[np.ix_(channels, channels)]
@@ -818,7 +821,8 @@ def _check_flipped_gain(run, warnings):
                 "degrees about two axes, then judge the reading's sign convention"], False, \
             "the log holds too little rotation to tell the reading's sign"
     named = run.causes is not None and bool(run.causes.warnings)     # S took up the cause named: a turn is its
-    if rotvec is not None and np.degrees(np.linalg.norm(rotvec)) > TURNED_DEG and not named:
+    turn = np.degrees(np.linalg.norm(rotvec)) if rotvec is not None else 0.0
+    if turn > (CAUSED_TURN_DEG if named else TURNED_DEG):
         run.named = True
         angle = float(np.degrees(np.linalg.norm(rotvec)))
         axis = rotvec / np.linalg.norm(rotvec)
@@ -829,7 +833,7 @@ def _check_flipped_gain(run, warnings):
                 "are of another frame; mount it as the poses assume, or record the poses of the sensor's own frame "
                 "(the reading's sign convention is not the cause)"], False, \
             "the sensor is turned from the frame the poses give"
-    flipped = bool(np.trace(S_f) < 0)
+    flipped = bool(rotvec is None and np.trace(S_f) < 0)         # a reflection, not a turn (det R < 0)
     found = [other_convention(run.log.name, None, run.reading)] if flipped else []
     if flipped:
         run.named = True

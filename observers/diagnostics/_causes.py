@@ -152,7 +152,7 @@ class GravityTilt:
     warning : str or None
         One line naming the tilt, where ``tilted``.
     ambiguous : bool
-        Tilted on a log of fewer parts than :data:`DRIFT_PARTS`, where an offset is named moving or some row's
+        Tilted on a log fitted with fewer parts than asked (``parts``), where an offset is named moving or some row's
         offset test is below :data:`SUGGESTIVE`: the tilt may be that offset's share, and the line names both and
         gives no gravity.
     """
@@ -310,7 +310,8 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
         rows = list(moving) if not offset.constant else [int(i) for i in np.argsort(row_p) if row_p[i] < SUGGESTIVE]
         if gravity.tilted and n_t + 1 < parts and rows:
             gravity.ambiguous = True           # the length that all the parts' blocks would take (as needed's)
-            full = BLOCKS_PER_COLUMN * (shared + n_w * (parts - 1)) * length + (log.t[-1] - log.t[0] + log.dt) - span
+            full = np.ceil(BLOCKS_PER_COLUMN * (shared + n_w * (parts - 1)) * length
+                           + (log.t[-1] - log.t[0] + log.dt) - span)
             names = " or ".join(model.wrench_names[i] for i in rows)
             gravity.warning = (f"gravity's direction, or the offset of {names}: the data ask for gravity tilted "
                                f"{gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = {gravity.p_value:.2g}), "
