@@ -4,7 +4,7 @@ filter linearised about the smoothed motion on any model), cluster-robust covari
 """
 
 from ._cluster_covariance import (weighted_fit, pseudo_inverse, sandwich, small_sample_factor, correlation_time,
-    block_length, time_blocks, few_blocks, MIN_BLOCKS)
+    block_length, time_blocks, few_blocks, hotelling, MIN_BLOCKS)
 from ._inverse_dynamics import (InverseDynamicsFit, fit_inverse_dynamics, fit_readings, describe_direction,
     UNDETERMINED_STD, READING_NAMES, nominal_motion, smoothed_channels, needed_wrench, needed_wrenches, reading_rate)
 from ._least_squares import (LeastSquares, InverseDynamicsLeastSquares, SpatialLeastSquares, FitReport, phi_to_S_map,

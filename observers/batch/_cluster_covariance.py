@@ -23,10 +23,21 @@ over seeds: ``tests/test_spatial_floor.py``, docs/guide/spatial.md). Blocks
 of five correlation times (U2) miss at most a tenth
 of the variance across their borders (``tau / (2 L)`` for an exponential
 correlation); white residuals get blocks of the smoothing window, 25 in 5 s.
+
+A test of ``k`` numbers ``x`` against such a covariance ``C`` is Hotelling's
+``T^2`` over its ``G`` blocks, scaled to an ``F``, on the directions ``C``
+determines (its correlation matrix's eigenvalues above ``1e-10`` of the
+largest; ``k`` their count)::
+
+    X2 = x^T C^+ x,   (G - k) / (k (G - 1)) X2 ~ F(k, G - k)                     (U4)
+
+chi-square's tail is too thin where the blocks are few; with ``G`` at most
+``k + 1`` there is no test (p-value 1).
 """
 
 import numpy as np
 from scipy.fft import next_fast_len
+from scipy.stats import f as f_dist
 
 __all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "small_sample_factor", "correlation_time", "block_length",
            "time_blocks", "few_blocks", "MIN_BLOCKS"]
@@ -247,3 +258,33 @@ def few_blocks(blocks, length):
         return None
     return (f"the uncertainties are rough: the log holds only {count} blocks of {length:.2g} s, the time over which "
             f"its residuals are correlated ({MIN_BLOCKS} wanted); record a longer log")
+
+
+def hotelling(x, C, g):
+    """Hotelling's test of ``x`` against its covariance ``C`` estimated from ``g`` blocks of time, eq. (U4).
+
+    Parameters
+    ----------
+    x : ndarray, shape (k,)
+    C : ndarray, shape (k, k)
+        Symmetric, positive semidefinite; singular directions are left out.
+    g : int
+        The blocks of time ``C`` was estimated from.
+
+    Returns
+    -------
+    statistic : float
+        ``x^T C^+ x``.
+    dof : int
+        The directions ``C`` determines.
+    p_value : float
+        1 where none is determined, or ``g`` is at most ``dof + 1``.
+    """
+    d = np.sqrt(np.maximum(np.diag(C), 1e-300))
+    lam, u = np.linalg.eigh((C + C.T) / 2 / np.outer(d, d))
+    keep = lam > 1e-10 * max(lam.max(), 1e-300)
+    y = (u[:, keep].T @ (x / d)) / np.sqrt(lam[keep])
+    statistic, dof = float(y @ y), int(keep.sum())
+    if dof == 0 or g <= dof + 1:
+        return statistic, dof, 1.0
+    return statistic, dof, float(f_dist.sf((g - dof) / (dof * (g - 1)) * statistic, dof, g - dof))

@@ -84,12 +84,11 @@ the reading by ``-S^-1``.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import f as f_dist
 
 from fmscal.plant.numerics import FmscalError
 from fmscal.plant.physics import edge, gravity_jacobian, regressor, spatial_motion
 
-from fmscal.observers.batch import block_length, small_sample_factor
+from fmscal.observers.batch import block_length, hotelling, small_sample_factor
 from fmscal.observers.core import reading_noise
 from ._faults import DRIFT_PARTS, OffsetDrift, describe_offset
 
@@ -368,25 +367,13 @@ def _pseudo_inverse(A):
     return (u[:, keep] / lam[keep]) @ u[:, keep].T / np.outer(d, d), int(keep.sum())
 
 
-def _wald(x, C, g):
-    """Eq. (C2): ``X2``, its degrees of freedom and its p-value over ``g`` blocks (1 with too few blocks)."""
-    d = np.sqrt(np.maximum(np.diag(C), 1e-300))
-    lam, u = np.linalg.eigh(C / np.outer(d, d))
-    keep = lam > 1e-10 * max(lam.max(), 1e-300)
-    y = (u[:, keep].T @ (x / d)) / np.sqrt(lam[keep])
-    statistic, k = float(y @ y), int(keep.sum())
-    if k == 0 or g <= k + 1:
-        return statistic, k, 1.0
-    return statistic, k, float(f_dist.sf((g - k) / (k * (g - 1)) * statistic, k, g - k))
-
-
 def _offset_test(theta, cov, g, shared, n_t, scale, significance):
     """The moving offset's test, each row's spread and p-value, and the rows found moving: each row's ``beta_i`` of
     eq. (C1) by eq. (C2), Bonferroni over the rows; a row counts where its levels also spread over
     :data:`MOVING_SIZE` of its residual's rms (eq. (C4))."""
     n_w = len(scale)
     rows = [shared + i * n_t + np.arange(n_t) for i in range(n_w)]
-    tests = [_wald(theta[idx], cov[np.ix_(idx, idx)], g) for idx in rows]
+    tests = [hotelling(theta[idx], cov[np.ix_(idx, idx)], g) for idx in rows]
     sizes = [np.ptp(np.r_[0.0, theta[idx]]) / scale[i] for i, idx in enumerate(rows)]
     moving = [i for i in range(n_w) if n_w * tests[i][2] < significance / 2 and sizes[i] >= MOVING_SIZE]
     statistic, k, p = min((tests[i] for i in moving), key=lambda test: test[2]) if moving else \
@@ -435,7 +422,7 @@ def _gravity_test(dg, C, g, gravity, significance):
     u = g0 / size
     A = _across(u)
     x, C_perp = A.T @ dg, A.T @ C @ A
-    statistic, _, p_value = _wald(x, C_perp, g)
+    statistic, _, p_value = hotelling(x, C_perp, g)
     # eq. (C3): at gravity's size given (dg along g is the payload's mass's share, which S absorbs)
     across = min(float(np.linalg.norm(x)), size)
     tilt = float(np.degrees(np.arcsin(across / size)))

@@ -86,12 +86,12 @@ import copy
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import f as f_dist
 
 from fmscal.plant import estimate_noise
 from fmscal.plant.numerics import FmscalError
 
-from fmscal.observers.batch import block_length, fit_readings, needed_wrench, nominal_motion, small_sample_factor
+from fmscal.observers.batch import (block_length, fit_readings, hotelling, needed_wrench, nominal_motion,
+                                    small_sample_factor)
 from fmscal.observers.core import reading_noise
 
 __all__ = ["Misfit", "InertiaShape", "CentreOfMass", "centre_of_mass_words", "misfit", "inertia_note", "inflate",
@@ -309,15 +309,9 @@ def _split_statistic(w, w_hat, t, speed, wrench_sd, block):
         C = fits[0].cov[rows, rows] + fits[1].cov[rows, rows]
         if not np.all(np.isfinite(C)):
             continue
-        scale = np.sqrt(np.maximum(np.diag(C), 1e-300))
-        u, s, _ = np.linalg.svd(C / np.outer(scale, scale))
-        keep = s > 1e-10 * s[0]
-        y = (u[:, keep].T @ (d / scale)) / np.sqrt(s[keep])
-        statistic, dof = float(y @ y), int(keep.sum())
-        if dof == 0 or g <= dof + 1:            # nothing to compare, or too few blocks to estimate d's covariance
-            continue
-        # the covariance estimated from g blocks: Hotelling's T^2 scaled to an F (module docstring)
-        p = float(f_dist.sf((g - dof) / (dof * (g - 1)) * statistic, dof, g - dof))
+        # the covariance estimated from g blocks: Hotelling's T^2 scaled to an F (module docstring); p 1 where
+        # nothing is compared, or too few blocks estimate d's covariance
+        statistic, dof, p = hotelling(d, C, g)
         if p < worst[2]:
             worst = (statistic, dof, p)
     return worst[0], worst[1], min(1.0, n_w * worst[2]), difference
@@ -402,8 +396,7 @@ def misfit(log, model, window=0.2, significance=MISFIT_SIGNIFICANCE, sensitivity
 def _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=False):
     """Eqs. (M4), (M5): the payload's numbers ``index`` the log prefers, over their ``scale``, in the directions
     ``Q`` (``a``; ``delta = Q a``), the needed wrench's change per unit of ``a`` (``C Q``), the covariance ``V``
-    of ``a``, and the statistics of ``a`` against ``V`` and against ``V`` plus the stated covariance (:func:`_tests`),
-    and the blocks of time ``G``.
+    of ``a``, the stated covariance in the same directions, and the blocks of time ``G`` of ``V``.
     The scores of ``V`` take ``C`` (M4), or its unabsorbed part ``R`` (M5: the centre of mass's columns are
     mostly what the readings absorb, whose share of each block's score cancels over the log and would
     widen ``V`` many times)."""
@@ -420,34 +413,17 @@ def _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorb
     H_inv = np.linalg.inv(H)
     V = small_sample_factor(blocks, len(e), len(a)) * H_inv @ (summed.T @ summed) @ H_inv
     stated = Q.T @ (np.asarray(payload_cov, dtype=float)[np.ix_(index, index)] / np.outer(scale, scale)) @ Q
-    statistic, against_stated = _tests(a, V, stated)
-    return a, C, V, statistic, against_stated, int(blocks.max() + 1)
+    return a, C, V, stated, int(blocks.max() + 1)
 
 
-def _tests(a, V, stated):
-    """``a^T V^+ a``, and ``a^T (V + stated)^+ a`` (0 where ``stated`` is not finite: any change covered), each on
-    the directions its matrix determines (a covariance from fewer blocks of time than numbers is singular)."""
-    statistic = _quadratic(a, V)
-    if np.all(np.isfinite(stated)):
-        return statistic, _quadratic(a, V + stated)
-    return statistic, 0.0                                       # numbers not determined: any change is covered
-
-
-def _quadratic(a, V):
-    """``a^T V^+ a``, ``V^+`` on the eigen-directions of ``V`` above ``1e-12`` of its largest."""
-    lam, u = np.linalg.eigh((V + V.T) / 2)
-    keep = lam > 1e-12 * max(lam.max(), 1e-300)
-    y = u[:, keep].T @ a
-    return float(np.sum(y ** 2 / lam[keep]))
-
-
-def _hotelling(statistic, k, g):
-    """The p-value of ``k`` numbers' statistic whose covariance came from ``g`` blocks of time: Hotelling's ``T^2``
-    scaled to an ``F``, as eq. (M2) (chi-square's tail is too thin where the blocks are few); 1 where ``g`` is at
-    most ``k + 1``."""
-    if g <= k + 1:
-        return 1.0
-    return float(f_dist.sf((g - k) / (k * (g - 1)) * statistic, k, g - k))
+def _tests(a, V, stated, g):
+    """Eq. (U4) of :mod:`fmscal.observers.batch._cluster_covariance` (Hotelling's over ``g`` blocks, on the
+    directions the covariance determines: one from fewer blocks than numbers is singular) of ``a`` against ``V``,
+    and against ``V`` plus ``stated`` (p-value 1 where ``stated`` is not finite: any change covered): the statistic
+    against ``V`` and the two p-values."""
+    statistic, _, p_value = hotelling(a, V, g)
+    p_stated = hotelling(a, V + stated, g)[2] if np.all(np.isfinite(stated)) else 1.0
+    return statistic, p_value, p_stated
 
 
 def _shapes(sensitivity, model):
@@ -468,9 +444,9 @@ def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significan
     if shapes is None:
         return None, None
     index, scale, Q = shapes
-    a, C, V, statistic, against_stated, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov)
+    a, C, V, stated, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov)
     dof = len(a)
-    p_value, p_stated = (_hotelling(x, dof, g) for x in (statistic, against_stated))
+    statistic, p_value, p_stated = _tests(a, V, stated, g)
     delta = Q @ a
     preferred = sensitivity.values.copy()
     preferred[index] += delta * scale
@@ -499,11 +475,10 @@ def _centre_of_mass(sensitivity, model, e, t, dt, window, payload_cov, significa
         inertia, inertia_scale, shape_Q = shapes
         Q = np.block([[Q, np.zeros((n, shape_Q.shape[1]))], [np.zeros((len(inertia), n)), shape_Q]])
         index, scale = index + inertia, np.r_[scale, inertia_scale]
-    a, _, V, _, _, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=True)
+    a, _, V, _, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=True)
     stated = np.asarray(payload_cov, dtype=float)[np.ix_(index[:n], index[:n])]
     a, V = a[:n], V[:n, :n]
-    statistic, against_stated = _tests(a, V, stated)
-    p_value, p_stated = (_hotelling(x, n, g) for x in (statistic, against_stated))
+    statistic, p_value, p_stated = _tests(a, V, stated, g)
     return CentreOfMass(names=tuple(model.payload_position_names), delta=a, std=np.sqrt(np.diag(V)),
                         statistic=statistic, p_value=p_value, p_stated=p_stated, seen=p_value < significance,
                         covered=p_stated >= significance, preferred=sensitivity.values[index[:n]] + a)
