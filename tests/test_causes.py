@@ -390,10 +390,10 @@ def test_a_misfit_s_covariance_from_fewer_blocks_than_numbers_is_no_traceback(mo
     from fmscal.observers.diagnostics._misfit import _tests
     V = np.diag([1.0, 2.0, 3.0, 0.0, 0.0])              # exactly singular: solve raises on it
     a = np.array([1.0, 1.0, 1.0, 0.0, 0.0])
-    statistic, p_value, p_stated = _tests(a, V, np.eye(5), 40)
-    assert statistic == pytest.approx(1.0 + 1.0 / 2 + 1.0 / 3) and 0.0 < p_value < p_stated < 1.0
+    statistic, dof, p_value, p_stated = _tests(a, V, np.eye(5), 40)
+    assert statistic == pytest.approx(1.0 + 1.0 / 2 + 1.0 / 3) and dof == 3 and 0.0 < p_value < p_stated < 1.0
     assert hotelling(a, V, 40)[:2] == (pytest.approx(statistic), 3)     # the three directions V determines
-    assert hotelling(a, V, 4)[2] == 1.0 and _tests(a, V, np.eye(5), 4)[1:] == (1.0, 1.0)
+    assert hotelling(a, V, 4)[2] == 1.0 and _tests(a, V, np.eye(5), 4)[2:] == (1.0, 1.0)
     monkeypatch.setattr(_misfit, "block_length", lambda residual, dt, window: 1e9)
     short = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=10.0, gravity=_tilted(5.0))
     cal = calibrate(short.generate(1)[0], short.payload)

@@ -24,10 +24,10 @@ of five correlation times (U2) miss at most a tenth
 of the variance across their borders (``tau / (2 L)`` for an exponential
 correlation); white residuals get blocks of the smoothing window, 25 in 5 s.
 
-A test of ``k`` numbers ``x`` against such a covariance ``C`` is Hotelling's
-``T^2`` over its ``G`` blocks, scaled to an ``F``, on the directions ``C``
-determines (its correlation matrix's eigenvalues above ``1e-10`` of the
-largest; ``k`` their count)::
+A test of numbers ``x`` against such a covariance ``C`` is Hotelling's
+``T^2`` over its ``G`` blocks, scaled to an ``F``, on the ``k`` directions
+``C`` determines (its correlation matrix's eigenvalues above ``1e-10`` of
+the largest)::
 
     X2 = x^T C^+ x,   (G - k) / (k (G - 1)) X2 ~ F(k, G - k)                     (U4)
 
@@ -40,7 +40,7 @@ from scipy.fft import next_fast_len
 from scipy.stats import f as f_dist
 
 __all__ = ["weighted_fit", "pseudo_inverse", "sandwich", "small_sample_factor", "correlation_time", "block_length",
-           "time_blocks", "few_blocks", "MIN_BLOCKS"]
+           "time_blocks", "few_blocks", "hotelling", "MIN_BLOCKS"]
 
 #: Fewer blocks than this and the variance itself has under nine degrees of freedom: z-scores then run
 #: above 1.13 of their rms (``sqrt((G - 1) / (G - 3))``) and the fit warns.

@@ -36,8 +36,9 @@ correlation times of the residual that (C1) leaves with the most parts
 (eq. (U2); fewer parts leave more of a moving offset in it, which would
 lengthen the blocks of a short log, where it moves, until it had too few to
 test). Two Wald
-tests, each a Hotelling's ``T^2`` over ``G`` blocks scaled to an ``F`` as in
-eq. (M2) of :mod:`fmscal.observers.diagnostics._misfit`::
+tests, each a Hotelling's ``T^2`` over ``G`` blocks scaled to an ``F``, eq.
+(U4) of :mod:`fmscal.observers.batch._cluster_covariance` (``K`` the
+directions the covariance determines)::
 
     X2 = x^T C^+ x,   (G - K) / (K (G - 1)) X2 ~ F(K, G - K)                         (C2)
 

@@ -56,11 +56,12 @@ data alone (:func:`misfit`):
    cent on a noisy log; ``C`` comes from the poses alone. Its covariance
    ``V`` is cluster-robust over blocks of time (eq. (U3), the scores
    ``C_k^T W (e_k + R_k delta)``). Two Hotelling's tests over its ``G``
-   blocks, as (M2), on the entries less one (``V^+`` on the directions ``V``
-   determines; none with ``G`` at most one more than the entries, a misfit
-   whose correlation leaves few blocks): the log **sees** the shape where
-   ``delta^T V^-1 delta`` is significant, and the shape is **beyond its stated uncertainty** where
-   ``delta^T (V + Sigma_I)^-1 delta`` is (``Sigma_I`` the inertia's stated
+   blocks (eq. (U4) of :mod:`fmscal.observers.batch._cluster_covariance`),
+   on the directions ``V`` determines, at most the entries less one (none
+   with ``G`` at most one more than those, a misfit whose correlation leaves
+   few blocks): the log **sees** the shape where ``delta^T V^+ delta`` is
+   significant, and the shape is **beyond its stated uncertainty** where
+   ``delta^T (V + Sigma_I)^+ delta`` is (``Sigma_I`` the inertia's stated
    covariance, its common scale taken out): ``S_std`` then does not cover
    ``S``'s error, and the model does not fit. Within it, (M1) and (M2) are
    measured on the wrench of the inertia the log prefers: a shape the stated
@@ -197,12 +198,12 @@ class InertiaShape:
     statistic : float
         ``delta^T V^+ delta`` (on the directions ``V`` determines).
     dof : int
-        Its degrees of freedom: the entries less one (the common scale).
+        Its degrees of freedom: the directions ``V`` determines, at most the entries less one (the common scale).
     p_value : float
         Of ``statistic``, Hotelling's over the blocks of time of ``V`` (1 with at most ``dof + 1`` of them): below
         the significance, the log sees the shape.
     p_stated : float
-        Of ``delta^T (V + Sigma_I)^-1 delta``: below the significance, the shape is beyond its stated uncertainty.
+        Of ``delta^T (V + Sigma_I)^+ delta``: below the significance, the shape is beyond its stated uncertainty.
     seen, covered : bool
         ``p_value`` below the significance; ``p_stated`` at least the significance.
     preferred : ndarray, shape (len(names),), or None
@@ -245,10 +246,11 @@ class CentreOfMass:
     delta, std : ndarray, shape (len(names),)
         The log's estimate less the one given, m, and its one-sigma uncertainty from the log.
     statistic : float
-        ``delta^T V^-1 delta``: Hotelling's ``T^2`` over the blocks of time of ``V``, as eq. (M2).
+        ``delta^T V^+ delta``: Hotelling's ``T^2`` over the blocks of time of ``V``.
     p_value, p_stated : float
-        Of ``statistic``, and of ``delta^T (V + Sigma_c)^-1 delta`` (``Sigma_c`` the stated covariance), each
-        scaled to an ``F(n, G - n)`` (1 with too few blocks).
+        Of ``statistic``, and of ``delta^T (V + Sigma_c)^+ delta`` (``Sigma_c`` the stated covariance), each
+        scaled to an ``F`` (eq. (U4) of :mod:`fmscal.observers.batch._cluster_covariance`; 1 with too few
+        blocks).
     seen, covered : bool
         ``p_value`` below the significance (the log sees a centre of mass other than the one given);
         ``p_stated`` at least the significance (the stated uncertainty covers it).
@@ -420,10 +422,10 @@ def _tests(a, V, stated, g):
     """Eq. (U4) of :mod:`fmscal.observers.batch._cluster_covariance` (Hotelling's over ``g`` blocks, on the
     directions the covariance determines: one from fewer blocks than numbers is singular) of ``a`` against ``V``,
     and against ``V`` plus ``stated`` (p-value 1 where ``stated`` is not finite: any change covered): the statistic
-    against ``V`` and the two p-values."""
-    statistic, _, p_value = hotelling(a, V, g)
+    against ``V``, the directions ``V`` determines, and the two p-values."""
+    statistic, dof, p_value = hotelling(a, V, g)
     p_stated = hotelling(a, V + stated, g)[2] if np.all(np.isfinite(stated)) else 1.0
-    return statistic, p_value, p_stated
+    return statistic, dof, p_value, p_stated
 
 
 def _shapes(sensitivity, model):
@@ -445,8 +447,7 @@ def _inertia_shape(sensitivity, model, e, t, dt, window, payload_cov, significan
         return None, None
     index, scale, Q = shapes
     a, C, V, stated, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov)
-    dof = len(a)
-    statistic, p_value, p_stated = _tests(a, V, stated, g)
+    statistic, dof, p_value, p_stated = _tests(a, V, stated, g)
     delta = Q @ a
     preferred = sensitivity.values.copy()
     preferred[index] += delta * scale
@@ -478,7 +479,7 @@ def _centre_of_mass(sensitivity, model, e, t, dt, window, payload_cov, significa
     a, _, V, _, g = _shift(sensitivity, index, scale, Q, e, t, dt, window, payload_cov, unabsorbed_scores=True)
     stated = np.asarray(payload_cov, dtype=float)[np.ix_(index[:n], index[:n])]
     a, V = a[:n], V[:n, :n]
-    statistic, p_value, p_stated = _tests(a, V, stated, g)
+    statistic, _, p_value, p_stated = _tests(a, V, stated, g)
     return CentreOfMass(names=tuple(model.payload_position_names), delta=a, std=np.sqrt(np.diag(V)),
                         statistic=statistic, p_value=p_value, p_stated=p_stated, seen=p_value < significance,
                         covered=p_stated >= significance, preferred=sensitivity.values[index[:n]] + a)
