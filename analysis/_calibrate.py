@@ -570,6 +570,10 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     converged = converged and sensitivity is not None
     if not converged:
         why = why or _UNSETTLED
+    suggestion = getattr(run.causes, "suggestion", None)
+    if suggestion and not converged and not run.named:   # no cause named: the one the short log leans to, with
+        warnings.insert(0, suggestion)                  # the payload it cannot tell it from
+        why = (_OFFSET_OR_PAYLOAD if run.causes.suggested else _TILT_SUGGESTED) if why in (_UNSETTLED, _MISFIT) else why
     notes = list(signed.notes)
     effects = _effects_of_the_cause(run, name, warnings)
     warnings = [w for w in warnings if w not in effects]
@@ -802,6 +806,10 @@ def _check_flipped_gain(run, warnings):
       :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
     - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
 
+    A turn under :data:`CAUSED_TURN_DEG` where the ``"causes"`` check leans to a tilt of gravity it does not name
+    (:attr:`fmscal.observers.diagnostics.GravityTilt.suggestive`) names both: on a log that does not determine
+    the tilt, ``S`` turns to take it up.
+
     Where the ``"causes"`` check named a cause (a moving offset, gravity's direction), ``S`` turns to take it up:
     a turn is named only beyond :data:`CAUSED_TURN_DEG`. A reversed sign is no cause's, and is named beside it.
     """
@@ -820,14 +828,20 @@ def _check_flipped_gain(run, warnings):
                 "not determined: see the directions above); record a log that turns the payload through tens of "
                 "degrees about two axes, then judge the reading's sign convention"], False, \
             "the log holds too little rotation to tell the reading's sign"
-    named = run.causes is not None and bool(run.causes.warnings)     # S took up the cause named: a turn is its
-    turn = np.degrees(np.linalg.norm(rotvec)) if rotvec is not None else 0.0
-    if turn > (CAUSED_TURN_DEG if named else TURNED_DEG):
+    angle = float(np.degrees(np.linalg.norm(rotvec))) if rotvec is not None else 0.0
+    if angle > (CAUSED_TURN_DEG if _cause_named(run) else TURNED_DEG):    # S took up the cause named: a turn is its
         run.named = True
-        angle = float(np.degrees(np.linalg.norm(rotvec)))
         axis = rotvec / np.linalg.norm(rotvec)
         k = int(np.argmax(np.abs(axis)))
         about = ("xyz"[k] if abs(axis[k]) > 0.95 else "(" + ", ".join(f"{a:.2f}" for a in axis) + ")")
+        gravity = getattr(run.causes, "gravity", None)
+        if angle <= CAUSED_TURN_DEG and getattr(gravity, "suggestive", False):   # S turns to take up a tilt
+            return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} "
+                    f"from the frame the poses give, or gravity's direction is not the one given (the data lean to "
+                    f"gravity tilted {gravity.tilt_deg:.2g} degrees, +- {gravity.std_deg:.1g}; p = "
+                    f"{gravity.p_value:.2g}): S turns to take a tilt up, and this log is too short to tell them "
+                    "apart; record a longer log, or estimate gravity with fmscal identify-payload --gravity "
+                    "estimate, before mounting the sensor anew"], False, _TURN_OR_TILT
         return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} from "
                 "the frame the poses give (S's force block is that turn): the sensor is mounted turned, or the poses "
                 "are of another frame; mount it as the poses assume, or record the poses of the sensor's own frame "
@@ -838,6 +852,10 @@ def _check_flipped_gain(run, warnings):
     if flipped:
         run.named = True
     return found, not flipped, "the reading follows the other sign convention"
+
+
+_TURN_OR_TILT = ("the sensor is turned from the frame the poses give, or gravity's direction is not the one given "
+                "(the log is too short to tell)")
 
 
 def _check_latency(run, warnings):
@@ -1042,7 +1060,14 @@ def _check_misfit(run, warnings):
             S_std, _, b_std = calibration_uncertainty(np.c_[result.S_hat, c] if c is not None else result.S_hat,
                                                       cov, c is not None)
             run.result = replace(result, cov=cov, S_std=S_std, b_std=b_std if c is not None else result.b_std)
-    return ([] if found.fits else [found.warning]), not found.gross, "the model does not fit the log"
+    return ([] if found.fits else [found.warning]), not found.gross, _MISFIT
+
+
+_MISFIT = "the model does not fit the log"
+#: Why a run that did not converge, where the ``"causes"`` check leans to a cause it does not name: a moving offset
+#: on a short log, or a tilt of gravity.
+_OFFSET_OR_PAYLOAD = "the sensor's offset may move, or the payload is given wrong (the log is too short to tell)"
+_TILT_SUGGESTED = "gravity's direction may not be the one given (the log does not determine it)"
 
 
 #: A force or torque gain of ``S`` further than this factor from 1 (either way) is remarked on.
@@ -1160,6 +1185,12 @@ def _calibration(result, method, fields):
                           "rest)") from None
 
 
+def _cause_named(run):
+    """Whether the ``"causes"`` check named a cause (a moving offset, gravity's direction) on this run."""
+    causes = getattr(run, "causes", None)
+    return causes is not None and bool(causes.warnings)
+
+
 #: Why a calibration did not converge where no check said why.
 _UNSETTLED = "the run did not converge (see the warnings)"
 
@@ -1169,17 +1200,10 @@ def _effects_of_the_cause(run, name, warnings):
     kept as notes: the fit not settling, and the latency estimated but not determined under it (its advice, a
     latency given, would not mend the cause). A latency that steps along the log, a search too narrow and a
     latency given that the log disagrees with stay warnings."""
-    causes = getattr(run, "causes", None)
-    if causes is None or not causes.warnings:
+    if not _cause_named(run):
         return []
-    latency = [] if run.latency_given is not None else [
-        w for w in getattr(run.latency, "warnings", []) if w.startswith(_LATENCY_UNDETERMINED) and _NARROW not in w]
+    latency = [] if run.latency_given is not None else getattr(run.latency, "unresolved", [])
     return [w for w in warnings if w == _not_settled(name) or w in latency]
-
-
-#: How the latency's estimate says the log does not determine it; a search too narrow says :data:`_NARROW` too.
-_LATENCY_UNDETERMINED = "the pose stream's latency is not determined"
-_NARROW = "span under two samples"
 
 
 def _not_settled(method):

@@ -5,7 +5,8 @@ everything on"), run as a user runs it, in a process of its own: as the command 
 one thread, ``analysis/cli/_main.py``) and with ``OPENBLAS_NUM_THREADS`` set to the machine's cores (OpenBLAS's
 own default, which the command keeps where the environment sets it). ``RUNS`` (default 3) alternated runs of
 each after one warm-up; printed per run and as the range: the CPU (user and system, the process and its
-threads) and the wall time, s.
+threads) and the wall time, s. ``PYTHONDONTWRITEBYTECODE`` is dropped from the runs' environment: an installed
+package keeps its compiled bytecode, which the warm-up writes for an editable one.
 """
 
 import os
@@ -36,7 +37,7 @@ def _run(log, env):
 def main(argv=None):
     args = sys.argv[1:] if argv is None else argv
     runs = int(args[0]) if args else 3
-    base = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+    base = {k: v for k, v in os.environ.items() if k not in (*THREAD_VARIABLES, "PYTHONDONTWRITEBYTECODE")}
     settings = {"the command line (one thread)": base,
                 f"OPENBLAS_NUM_THREADS={os.cpu_count()}": {**base, "OPENBLAS_NUM_THREADS": str(os.cpu_count())}}
     with tempfile.TemporaryDirectory() as folder:

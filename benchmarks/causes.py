@@ -1,19 +1,21 @@
 """A moving offset and a tilted gravity named in 3D (issue 46 item 6): ``python benchmarks/causes.py [SEEDS]
 [DURATION] [--cost] [--clean START STOP [SCENARIO] [DURATION]] [--zscores START STOP [SCENARIO] [DURATION]]
-[--payload [SEEDS] [DURATION]]``.
+[--payload [SEEDS] [DURATION]] [--calibrate START STOP [DURATION]]``.
 
 For each seed (default 0-4, 20 s) of ``spatial-arm`` and ``spatial-mocap``: the clean log, a ramp of 10 noise
 sd on fx over the log, the issue's ramp of 2 noise sd (0.1 N, ``ramp2``), and the base tilted 3 degrees about x,
 each through :func:`fmscal.observers.diagnostics.fit_causes` (the mocap log aligned at its known latency).
 Printed per log: the offset test's and the tilt test's p-values, the tilt found and its sd, the offset row of the
 smallest p-value, its spread over its residual's rms (eq. (C4)), and whether a cause is named; per scenario, how many
-logs of each kind are named moving, tilted, and tilted beside an offset (ambiguous).
+logs of each kind are named moving, tilted, and tilted beside an offset (ambiguous), and how many are named
+nothing but a cause suggested (:attr:`fmscal.observers.diagnostics.Causes.suggestion`).
 tests/test_causes.py asserts the naming on ``spatial-arm`` and MuJoCo's logs; this prints the figures the
 docs quote (status.md, "Causes named in 3D").
 
 ``--clean START STOP [SCENARIO] [DURATION]``: eq. (C4) on clean logs (``spatial-mocap`` and 20 s by default), seeds
 ``START`` to ``STOP - 1`` (its false-alarm side, on the noisiest poses): per seed and in sum, how many are named
-moving, how often each of (C4)'s two conditions holds alone, and how many are named tilted.
+moving, how often each of (C4)'s two conditions holds alone, how many are named tilted, and how many suggest a
+cause.
 
 ``--zscores START STOP [SCENARIO] [DURATION]``: on clean logs (``spatial-mocap`` and 10 s by default), the
 offset's levels over their sd and the two tests' small p-values, with eq. (C1)'s payload columns from the motion
@@ -21,7 +23,12 @@ smoothed over the reference fit's window and over ``PAYLOAD_WINDOW``: the poses'
 
 ``--payload [SEEDS] [DURATION]``: clean logs (seeds 0-9, 10 s by default) fitted with the payload given wrong
 (the mass 3 % high, the centre of mass 1 cm along x or 3 cm along z off, IXX 1.5 times, the inertia 1.3 times),
-which eq. (C1)'s payload columns and ``S`` take up: how many are named moving or tilted.
+which eq. (C1)'s payload columns and ``S`` take up: how many are named moving or tilted, or suggest a cause.
+
+``--calibrate START STOP [DURATION]``: the same kinds (10 s by default) through ``calibrate`` as a user runs it,
+at the latency it estimates: per kind, how many runs are converged outside 4 of their sds, and of those not
+converged how many name a cause, suggest one (:attr:`fmscal.observers.diagnostics.Causes.suggestion`), or
+neither.
 
 ``--cost``: ``calibrate``'s CPU on a 60 s 1 kHz ``spatial-arm`` log with and without the ``"causes"`` check,
 after a warm-up, three alternated runs each in one process, and the ratio of the best of each.
@@ -46,7 +53,7 @@ def naming(seeds, duration):
     for name in ("spatial-arm", "spatial-mocap"):
         base = SPATIAL_SCENARIOS[name].with_(duration=duration)
         model = SpatialModel(base.payload)
-        counts = {kind: [0, 0, 0] for kind in ("clean", "ramp", "ramp2", "tilt")}
+        counts = {kind: [0, 0, 0, 0] for kind in ("clean", "ramp", "ramp2", "tilt")}
         for seed in seeds:
             for kind in ("clean", "ramp", "ramp2", "tilt"):
                 scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
@@ -58,12 +65,14 @@ def naming(seeds, duration):
                 counts[kind][0] += not c.offset.constant
                 counts[kind][1] += bool(c.gravity.tilted)
                 counts[kind][2] += bool(c.gravity.ambiguous)
+                counts[kind][3] += bool(c.suggestion) and not c.warnings
                 print(f"{name:14s} seed {seed} {kind:5s} offset p {c.offset.p_value:8.2g} ({_row(c, model)})  tilt p "
                       f"{c.gravity.p_value:8.2g}  tilt {c.gravity.tilt_deg:5.2f} +- {c.gravity.std_deg:4.2f} deg  "
-                      f"named: {bool(c.warnings)}")
+                      f"named: {bool(c.warnings)}{', suggested' if c.suggestion and not c.warnings else ''}")
         print(f"{name}, {duration:g} s, {len(seeds)} seeds, named moving / tilted (of which beside an offset, "
-              "ambiguous): " + ", ".join(f"{kind} {moving} / {tilted} ({ambiguous})"
-                                         for kind, (moving, tilted, ambiguous) in counts.items()), flush=True)
+              "ambiguous) / not named but suggested: " + ", ".join(
+                  f"{kind} {moving} / {tilted} ({ambiguous}) / {suggested}"
+                  for kind, (moving, tilted, ambiguous, suggested) in counts.items()), flush=True)
 
 
 def _row(c, model):
@@ -81,7 +90,7 @@ def clean(start, stop, name="spatial-mocap", duration=20.0):
     from fmscal.observers.diagnostics._causes import CAUSE_SIGNIFICANCE, MOVING_SIZE
     base = SPATIAL_SCENARIOS[name].with_(duration=duration)
     model = SpatialModel(base.payload)
-    counts = dict(named=0, p_alone=0, spread_alone=0, tilted=0, untested=0)
+    counts = dict(named=0, p_alone=0, spread_alone=0, tilted=0, untested=0, suggested=0)
     for seed in range(start, stop):
         log, _, _ = base.generate(seed)
         c = fit_causes(log.shift_poses(base.latency), model)
@@ -90,6 +99,7 @@ def clean(start, stop, name="spatial-mocap", duration=20.0):
             counts["untested"] += 1
             continue
         counts["tilted"] += bool(c.gravity.tilted)
+        counts["suggested"] += bool(c.suggestion) and not c.warnings
         p, spread = c.row_p_values, c.spreads
         significant, large = p < CAUSE_SIGNIFICANCE / 2, spread >= MOVING_SIZE
         counts["named"] += bool((significant & large).any())
@@ -100,8 +110,8 @@ def clean(start, stop, name="spatial-mocap", duration=20.0):
               f"named: {not c.offset.constant}", flush=True)
     print(f"{name}, {duration:g} s, seeds {start}-{stop - 1}: offset named moving {counts['named']}; a row "
           f"significant with a spread under {MOVING_SIZE:g} {counts['p_alone']}, a spread of {MOVING_SIZE:g} or more "
-          f"not significant {counts['spread_alone']}; gravity named tilted {counts['tilted']}; too short to test "
-          f"{counts['untested']}")
+          f"not significant {counts['spread_alone']}; gravity named tilted {counts['tilted']}; nothing named but a "
+          f"cause suggested {counts['suggested']}; too short to test {counts['untested']}")
 
 
 def zscores(start, stop, name="spatial-mocap", duration=10.0):
@@ -152,9 +162,46 @@ def payload_given_wrong(seeds, duration):
         for label, given in wrong.items():
             found = [fit_causes(log, SpatialModel(given)) for log in logs]
             counts.append(f"{label} {sum(not c.offset.constant for c in found)} / "
-                          f"{sum(bool(c.gravity.tilted) for c in found)}")
-        print(f"{name}, {duration:g} s, {len(logs)} seeds, the payload given wrong, named moving / tilted: "
+                          f"{sum(bool(c.gravity.tilted) for c in found)} / "
+                          f"{sum(bool(c.suggestion) and not c.warnings for c in found)}")
+        print(f"{name}, {duration:g} s, {len(logs)} seeds, the payload given wrong, named moving / tilted / "
+              "suggested: "
               + ", ".join(counts), flush=True)
+
+
+def through_calibrate(start, stop, duration=10.0):
+    """The issue's kinds (clean, the ramps of 10 and 2 noise sd on fx, the base tilted 3 degrees) through
+    ``calibrate`` as a user runs it (its own latency estimate; seeds ``start`` to ``stop - 1``, both scenarios): per
+    run converged or not, the largest ``|S_hat - S| / S_std`` and why; per kind, how many are converged outside 4 of
+    their sds (confident and wrong), named, suggested, or neither (said only as not settling or a misfit)."""
+    import warnings
+    for name in ("spatial-arm", "spatial-mocap"):
+        base = SPATIAL_SCENARIOS[name].with_(duration=duration)
+        for kind in ("clean", "ramp", "ramp2", "tilt"):
+            counts = dict(wrong=0, converged=0, named=0, suggested=0, neither=0)
+            for seed in range(start, stop):
+                scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
+                log, truth, _ = scenario.generate(seed)
+                if kind.startswith("ramp"):
+                    sd = 2 if kind == "ramp2" else 10
+                    log.w_hat[:, 3] += sd * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    cal = calibrate(log, scenario.payload)
+                z = float(np.max(np.abs((np.asarray(cal.S) - truth.S_at(log.t[-1])) / np.asarray(cal.S_std))))
+                why = cal.why_unconverged or ""
+                counts["converged"] += bool(cal.converged)
+                counts["wrong"] += bool(cal.converged and z > 4)
+                suggested = "may move" in why or "may not be" in why or "poses give, or gravity" in why
+                named = not cal.converged and not suggested and ("offset moves" in why or "gravity's" in why)
+                counts["named"] += named
+                counts["suggested"] += suggested
+                counts["neither"] += not cal.converged and not named and not suggested
+                print(f"{name:14s} seed {seed} {kind:5s} converged {str(cal.converged):5s} max |z| {z:5.1f}  "
+                      f"{why}", flush=True)
+            print(f"{name}, {duration:g} s, seeds {start}-{stop - 1}, {kind}: converged {counts['converged']} "
+                  f"(outside 4 sds {counts['wrong']}); not converged: a cause named {counts['named']}, suggested "
+                  f"{counts['suggested']}, neither {counts['neither']}", flush=True)
 
 
 def cost():
@@ -185,6 +232,8 @@ if __name__ == "__main__":
         payload_given_wrong(range(int(args[1]) if len(args) > 1 else 10), float(args[2]) if len(args) > 2 else 10.0)
     elif args and args[0] == "--zscores":
         zscores(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
+    elif args and args[0] == "--calibrate":
+        through_calibrate(int(args[1]), int(args[2]), *(float(a) for a in args[3:4]))
     elif args and args[0] == "--clean":
         clean(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
     else:

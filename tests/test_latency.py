@@ -132,6 +132,7 @@ def test_a_log_that_cannot_tell_the_delays_apart_is_not_converged():
     (said,) = found.warnings
     assert "latency is not determined" in said and "cannot tell the candidate delays apart" in said \
         and "--latency" in said
+    assert found.unresolved == [said]                 # the data's: a cause named elsewhere may explain it
     log, truth, _ = sc.generate(0)
     found = estimate_latency(log, sc.model())
     assert not found.determined or abs(found.latency - truth.latency) < 3 * found.std
@@ -166,4 +167,5 @@ def test_a_search_under_two_samples_says_so():
     log, _, _ = sc.generate(0)
     found = estimate_latency(log, sc.model(), max_latency=1.4 * log.dt)
     assert not found.determined and any("span under two samples" in w for w in found.warnings)
+    assert found.unresolved == []                     # the search's, not the data's
     assert estimate_latency(log, sc.model(), max_latency=10 * log.dt).determined

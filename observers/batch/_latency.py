@@ -169,6 +169,9 @@ class LatencyEstimate:
         Where the latency changes mid-log (rule 6): ``{"t": s, "size": s, "before": s, "after": s}``.
     warnings : list of str
         Why the latency is undetermined, or where it changes, in words.
+    unresolved : list of str
+        Those of ``warnings`` that say the log's data leave the latency undetermined (no clear minimum, a
+        curvature within its noise, too large an uncertainty): not a search too narrow, nor a step along the log.
     source : str
         ``"cross-correlation"`` (rules 1-7), or ``"fit"``: the fit's own latency, taken where the two
         disagree (rule 8).
@@ -186,6 +189,7 @@ class LatencyEstimate:
     dS_dlatency: np.ndarray = None
     step: dict = None
     warnings: list = field(default_factory=list)
+    unresolved: list = field(default_factory=list)
     source: str = "cross-correlation"
     notes: list = field(default_factory=list)
     curvature: tuple = None
@@ -376,7 +380,7 @@ def _score_blocks(per_row, t_rows, shortest):
 
 def _judge(estimate, dt, K):
     """Whether the log determines the latency (rule 2's clear minimum, :data:`UNDETERMINED_SAMPLES`) and keeps one
-    along the log (rule 6); the warnings in words."""
+    along the log (rule 6); the warnings in words, those of the data's (``unresolved``) among them."""
     ms = 1e3
     tau, std = estimate.latency, estimate.std
     if not estimate.determined and K < 2:    # rule 2's parabola needs a sample each side of the best in range
@@ -389,7 +393,7 @@ def _judge(estimate, dt, K):
             and estimate.curvature[0] <= CURVATURE_SIGMAS * estimate.curvature[1]:
         estimate.std = np.inf
         h, h_std = estimate.curvature
-        estimate.warnings.append(
+        estimate.unresolved.append(
             f"the pose stream's latency is not determined: the cost's curvature in the delay at its lowest point, "
             f"{tau * ms:.3g} ms, is {h / h_std:.1f} of its own standard deviations ({CURVATURE_SIGMAS:g} asked): "
             "the log's noise, not its motion, places that point, and it moves from one noisy log to the next (too "
@@ -398,13 +402,13 @@ def _judge(estimate, dt, K):
     elif not estimate.determined:
         best = min(estimate.costs, key=estimate.costs.get)
         estimate.std = np.inf
-        estimate.warnings.append(
+        estimate.unresolved.append(
             f"the pose stream's latency is not determined: the fit has no clear minimum over the delays searched "
             f"(+-{K * dt * ms:g} ms; best {best * ms:g} ms); the log cannot tell them apart, so S may be "
             "off by the latency's effect; give the latency if it is known (--latency)")
     elif std > UNDETERMINED_SAMPLES * dt:
         estimate.determined = False
-        estimate.warnings.append(
+        estimate.unresolved.append(
             f"the pose stream's latency is not determined: {tau * ms:.3g} +- {std * ms:.2g} ms, more than "
             f"{UNDETERMINED_SAMPLES:g} samples ({UNDETERMINED_SAMPLES * dt * ms:g} ms) of uncertainty: the log "
             "cannot tell the candidate delays apart (too little motion for its noise); give the latency if it "
@@ -419,6 +423,7 @@ def _judge(estimate, dt, K):
                 f"{s['after'] * ms:.3g} ms after it ({s['size'] / dt:+.2g} samples): a dropped or duplicated "
                 "sample or a clock step there; one latency cannot align the log (cut it at that time, or fix "
                 "the stamps)")
+    estimate.warnings.extend(estimate.unresolved)
 
 
 def _step(scores, infos, t_rows, length, tau, dt):
@@ -496,7 +501,8 @@ def fit_latency(estimate, fit_step):
         return None
     ms = 1e3
     moved = replace(estimate, latency=float(estimate.latency + step), std=float(std), source="fit",
-                    notes=list(estimate.notes), warnings=list(estimate.warnings))
+                    notes=list(estimate.notes), warnings=list(estimate.warnings),
+                    unresolved=list(estimate.unresolved))
     moved.notes.append(
         f"the pose stream's latency: the maximum-likelihood fit's own likelihood prefers {moved.latency * ms:.4g} "
         f"+- {std * ms:.2g} ms, where the needed wrench's cross-correlation found {estimate.latency * ms:.4g} +- "

@@ -68,7 +68,15 @@ On a log of fewer parts than ``P`` asked, a ramp that the parts follow
 badly leaves a share the tilt's columns take up: a tilt named there beside
 an offset named, or beside rows whose offset test is below
 :data:`SUGGESTIVE`, is ambiguous, and its line names both, the log's length
-that tells them apart, and no gravity to give. The tilt the data ask for,
+that tells them apart, and no gravity to give. Where nothing is named on such
+a log, rows whose test is below :data:`SUGGESTIVE` and whose levels spread
+as (C4) asks are a suggestion, not a cause: the payload's columns follow the
+motion's slow changes, which a short log's few parts cannot tell from an
+offset's (a ramp of twice the reading's noise over 10 s, a centre of mass
+given 1 cm off), and the line names both and the length that tells them
+apart; so is a tilt not named whose test is below :data:`SUGGESTIVE` (a log
+that does not determine it, where ``S`` turns to take it up). The tilt the
+data ask for,
 and its one-sigma uncertainty::
 
     tilt = asin(|dg_perp| / |g|),   sd = sqrt(lambda_max(C_perp)) / |g|            (C3)
@@ -121,6 +129,9 @@ MIN_PARTS = 2
 MAX_ROWS = 20000
 #: On a log of fewer parts than asked, a tilt named beside an offset named, or beside rows whose offset test (times
 #: the rows) is below this, is ambiguous: a ramp the few parts follow badly leaves a share the tilt's columns take up.
+#: Where nothing is named there, such rows (their levels spread as eq. (C4) asks) are suggested: a moving offset,
+#: or a payload given wrong, which the levels of a short log trade with; so is a tilt not named whose test is below
+#: this, on any log (:attr:`Causes.suggestion`).
 SUGGESTIVE = 0.05
 #: The windows over which the offset's change is described, s (as the planar test's).
 DESCRIBE_WINDOW = 0.5
@@ -155,6 +166,9 @@ class GravityTilt:
         Tilted on a log fitted with fewer parts than asked (``parts``), where an offset is named moving or some row's
         offset test is below :data:`SUGGESTIVE`: the tilt may be that offset's share, and the line names both and
         gives no gravity.
+    suggestive : bool
+        Not tilted, its p-value below :data:`SUGGESTIVE`: the data lean to the tilt without naming it (a log that
+        does not determine it), said in :attr:`Causes.suggestion`.
     """
 
     gravity: np.ndarray
@@ -165,12 +179,13 @@ class GravityTilt:
     tilted: bool
     warning: str = None
     ambiguous: bool = False
+    suggestive: bool = False
 
     def to_dict(self):
         """The JSON form."""
         return {"gravity": [float(v) for v in self.gravity], "tilt_deg": float(self.tilt_deg),
                 "std_deg": float(self.std_deg), "p_value": float(self.p_value), "tilted": bool(self.tilted),
-                "ambiguous": bool(self.ambiguous)}
+                "ambiguous": bool(self.ambiguous), "suggestive": bool(self.suggestive)}
 
 
 @dataclass
@@ -198,6 +213,15 @@ class Causes:
         ``blocks`` is fewer, nothing was tested, with the fewest parts (:data:`MIN_PARTS`).
     needed_duration : float
         The log's length that many blocks, as long as this log's, would take, s.
+    suggested : list of int
+        On a log fitted with fewer parts than asked, where nothing is named: the rows whose offset test is below
+        :data:`SUGGESTIVE` and whose levels spread as far as eq. (C4) asks. A short log's levels trade with the
+        payload's columns (a centre of mass or an inertia given wrong leaves a residual that follows the motion's
+        slow changes), so that a moving offset the log cannot name is still in sight.
+    suggestion : str or None
+        One line for the causes the data lean to without naming them: ``suggested`` (an offset that moves, or a
+        payload given wrong, and the log's length that tells them apart), and a tilt of gravity whose test is
+        below :data:`SUGGESTIVE` (:attr:`GravityTilt.suggestive`); not among :attr:`warnings` (no cause is named).
     """
 
     offset: OffsetDrift
@@ -210,6 +234,8 @@ class Causes:
     parts: int = None
     needed: int = None
     needed_duration: float = None
+    suggested: list = None
+    suggestion: str = None
 
     @property
     def tested(self):
@@ -303,15 +329,15 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     offset, spreads, row_p, moving = _offset_test(theta, cov, g, shared, n_t, scale, significance)
     if not offset.constant:
         offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving)
+    # the length that all the parts' blocks would take (as needed's), for a log fitted with fewer
+    full = np.ceil(BLOCKS_PER_COLUMN * (shared + n_w * (parts - 1)) * length + (log.t[-1] - log.t[0] + log.dt) - span)
     if not model.under_gravity:
         gravity = _gravity_untested(model)
     else:
         gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance)
         rows = list(moving) if not offset.constant else [int(i) for i in np.argsort(row_p) if row_p[i] < SUGGESTIVE]
         if gravity.tilted and n_t + 1 < parts and rows:
-            gravity.ambiguous = True           # the length that all the parts' blocks would take (as needed's)
-            full = np.ceil(BLOCKS_PER_COLUMN * (shared + n_w * (parts - 1)) * length
-                           + (log.t[-1] - log.t[0] + log.dt) - span)
+            gravity.ambiguous = True
             names = " or ".join(model.wrench_names[i] for i in rows)
             gravity.warning = (f"gravity's direction, or the offset of {names}: the data ask for gravity tilted "
                                f"{gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = {gravity.p_value:.2g}), "
@@ -319,10 +345,28 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
                                f"{n_t + 1} parts of the log are too few to tell a drift from a tilt; record a log of "
                                f"{full:.0f} s or more ({parts} parts) to tell them apart, or estimate gravity with "
                                "fmscal identify-payload --gravity estimate")
+    suggested, lines = [], []
+    if offset.constant and not (gravity is not None and gravity.tilted) and n_t + 1 < parts:
+        suggested = [int(i) for i in np.argsort(row_p) if row_p[i] < SUGGESTIVE and spreads[i] >= MOVING_SIZE]
+    if suggested:
+        names = " and ".join(model.wrench_names[i] for i in suggested)
+        lines.append(f"the sensor's offset may move, or the payload is given wrong: the level of {names} changes "
+                     f"between the log's {n_t + 1} parts (p = {', '.join(f'{row_p[i]:.2g}' for i in suggested)}; "
+                     f"a moving offset is named below {significance / 2:g}), which a centre of mass or an inertia "
+                     f"given wrong can also leave on a log this short; record a log of {full:.0f} s or more "
+                     f"({parts} parts) to tell them apart")
+    if gravity is not None and not gravity.tilted and gravity.p_value < SUGGESTIVE:
+        gravity.suggestive = True
+        lines.append(f"gravity's direction may not be the one given: the data lean to gravity tilted "
+                     f"{gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = {gravity.p_value:.2g}; a tilt is "
+                     f"named below {significance / 2:g}), which this log does not determine; record a longer log, "
+                     "or estimate gravity with fmscal identify-payload --gravity estimate")
+    suggestion = "; or ".join(lines) or None
     beta = theta[shared:].reshape(n_w, n_t)
     beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
     return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
-                  row_p_values=row_p, parts=n_t + 1, needed=needed, needed_duration=needed_duration)
+                  row_p_values=row_p, parts=n_t + 1, needed=needed, needed_duration=needed_duration,
+                  suggested=suggested, suggestion=suggestion)
 
 
 def _gravity_untested(model):
@@ -354,7 +398,10 @@ def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale, length=None)
     theta = inverse @ b
     e = np.column_stack([r[:, i] / scale[i] - Y @ theta[cols] for i, (cols, Y) in enumerate(designs)])
     length = block_length(e, dt * stride, window) if length is None else length
-    blocks = ((t - t[0]) // length).astype(int)
+    # a last block under half the length joins the one before: a sliver of a few samples is no block of time (a
+    # log a sample longer would otherwise count one more, and be fitted with more parts)
+    last = max(1, int(np.round((t[-1] - t[0] + dt * stride) / length))) - 1
+    blocks = np.minimum(((t - t[0]) // length).astype(int), last)
     starts = np.flatnonzero(np.r_[True, np.diff(blocks) != 0])
     return designs, inverse, rank, theta, e, blocks, starts, shared, n_t, len(starts), size, length
 
