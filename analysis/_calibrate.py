@@ -570,10 +570,6 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     converged = converged and sensitivity is not None
     if not converged:
         why = why or _UNSETTLED
-    suggestion = getattr(run.causes, "suggestion", None)
-    if suggestion and not converged and not run.named:   # no cause named: the one the short log leans to, with
-        warnings.insert(0, suggestion)                  # the payload it cannot tell it from
-        why = (_OFFSET_OR_PAYLOAD if run.causes.suggested else _TILT_SUGGESTED) if why in (_UNSETTLED, _MISFIT) else why
     notes = list(signed.notes)
     effects = _effects_of_the_cause(run, name, warnings)
     warnings = [w for w in warnings if w not in effects]
@@ -603,6 +599,10 @@ def _calibrate_log(log, cls, payload, method, reading, gravity, latency, max_lat
     elif said:                          # the likely cause of a fit that did not settle: a longer log would not help
         warnings = [w for w in warnings if w != _not_settled(name)] + [said]
         why = "the payload's inertia's shape moves the fit (see the warnings)" if why == _UNSETTLED else why
+    suggestion = getattr(run.causes, "suggestion", None)
+    if suggestion and not converged and not run.named and why in (_UNSETTLED, _MISFIT):
+        warnings.insert(0, suggestion)      # no cause named, none by another check: what the log leans to, first
+        why = _suggested_why(run.causes, why)
     statistical = run.result.S_std
     run.result, payload_part = _with_payload_uncertainty(run.result, sensitivity, payload_cov)
     # the noise model recorded with the calibration (compensation's covariance needs it): the one the method was
@@ -836,10 +836,11 @@ def _check_flipped_gain(run, warnings):
         about = ("xyz"[k] if abs(axis[k]) > 0.95 else "(" + ", ".join(f"{a:.2f}" for a in axis) + ")")
         gravity = getattr(run.causes, "gravity", None)
         if angle <= CAUSED_TURN_DEG and getattr(gravity, "suggestive", False):   # S turns to take up a tilt
+            drift = ", or the offset moves" if run.causes.parts < run.causes.asked else ""
             return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} "
                     f"from the frame the poses give, or gravity's direction is not the one given (the data lean to "
                     f"gravity tilted {gravity.tilt_deg:.2g} degrees, +- {gravity.std_deg:.1g}; p = "
-                    f"{gravity.p_value:.2g}): S turns to take a tilt up, and this log is too short to tell them "
+                    f"{gravity.p_value:.2g}){drift}: S turns to take a tilt up, and this log does not tell them "
                     "apart; record a longer log, or estimate gravity with fmscal identify-payload --gravity "
                     "estimate, before mounting the sensor anew"], False, _TURN_OR_TILT
         return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} from "
@@ -855,7 +856,7 @@ def _check_flipped_gain(run, warnings):
 
 
 _TURN_OR_TILT = ("the sensor is turned from the frame the poses give, or gravity's direction is not the one given "
-                "(the log is too short to tell)")
+                "(the log does not tell them apart)")
 
 
 def _check_latency(run, warnings):
@@ -1068,6 +1069,21 @@ _MISFIT = "the model does not fit the log"
 #: on a short log, or a tilt of gravity.
 _OFFSET_OR_PAYLOAD = "the sensor's offset may move, or the payload is given wrong (the log is too short to tell)"
 _TILT_SUGGESTED = "gravity's direction may not be the one given (the log does not determine it)"
+_TILT_OR_OFFSET = "gravity's direction may not be the one given, or the offset may move (the log is too short to tell)"
+_ALL_SUGGESTED = ("the sensor's offset may move, the payload may be given wrong, or gravity's direction may not be the "
+                  "one given (the log is too short to tell)")
+
+
+def _suggested_why(causes, why):
+    """``why_unconverged`` for a suggestion (:attr:`fmscal.observers.diagnostics.Causes.suggestion`) put first in
+    place of ``why``, :data:`_UNSETTLED` or :data:`_MISFIT`: an offset suggested names the payload beside it; a
+    tilt alone keeps a misfit's why (a payload given wrong misfits too), and on a short log names the offset."""
+    tilt = bool(getattr(causes.gravity, "suggestive", False))
+    if causes.suggested:
+        return _ALL_SUGGESTED if tilt else _OFFSET_OR_PAYLOAD
+    if why == _MISFIT:
+        return why
+    return _TILT_OR_OFFSET if causes.parts < causes.asked else _TILT_SUGGESTED
 
 
 #: A force or torque gain of ``S`` further than this factor from 1 (either way) is remarked on.

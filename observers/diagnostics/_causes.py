@@ -35,7 +35,8 @@ of :mod:`fmscal.observers.batch._cluster_covariance`), the blocks five
 correlation times of the residual that (C1) leaves with the most parts
 (eq. (U2); fewer parts leave more of a moving offset in it, which would
 lengthen the blocks of a short log, where it moves, until it had too few to
-test). Two Wald
+test); a last block under half that length joins the one before (a sliver
+of a few samples is no block of time). Two Wald
 tests, each a Hotelling's ``T^2`` over ``G`` blocks scaled to an ``F``, eq.
 (U4) of :mod:`fmscal.observers.batch._cluster_covariance` (``K`` the
 directions the covariance determines)::
@@ -74,8 +75,10 @@ as (C4) asks are a suggestion, not a cause: the payload's columns follow the
 motion's slow changes, which a short log's few parts cannot tell from an
 offset's (a ramp of twice the reading's noise over 10 s, a centre of mass
 given 1 cm off), and the line names both and the length that tells them
-apart; so is a tilt not named whose test is below :data:`SUGGESTIVE` (a log
-that does not determine it, where ``S`` turns to take it up). The tilt the
+apart; so is a tilt not named whose test is below :data:`SUGGESTIVE` and
+that is at least :data:`SUGGESTED_TILT_DEG` (a log
+that does not determine it, where ``S`` turns to take it up; on a short log
+beside an offset that may move, as the ambiguous tilt is). The tilt the
 data ask for,
 and its one-sigma uncertainty::
 
@@ -90,7 +93,7 @@ less the fitted gravity and payload terms over 0.5 s windows, taken back to
 the reading by ``-S^-1``.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -133,6 +136,10 @@ MAX_ROWS = 20000
 #: or a payload given wrong, which the levels of a short log trade with; so is a tilt not named whose test is below
 #: this, on any log (:attr:`Causes.suggestion`).
 SUGGESTIVE = 0.05
+#: A tilt not named is suggested only from this many degrees (and its test below :data:`SUGGESTIVE`): under half a
+#: degree gravity's direction moves the needed force by under one percent of the payload's weight, which a payload
+#: given wrong (a mass 3 % high, a centre of mass 1 cm off) leaves in the tilt's columns of a short log.
+SUGGESTED_TILT_DEG = 0.5
 #: The windows over which the offset's change is described, s (as the planar test's).
 DESCRIBE_WINDOW = 0.5
 #: The smoothing window of the motion in eq. (C1)'s payload columns ``W_k``, s: the angular acceleration and
@@ -167,8 +174,8 @@ class GravityTilt:
         offset test is below :data:`SUGGESTIVE`: the tilt may be that offset's share, and the line names both and
         gives no gravity.
     suggestive : bool
-        Not tilted, its p-value below :data:`SUGGESTIVE`: the data lean to the tilt without naming it (a log that
-        does not determine it), said in :attr:`Causes.suggestion`.
+        Not tilted, its p-value below :data:`SUGGESTIVE` and the tilt at least :data:`SUGGESTED_TILT_DEG`: the data
+        lean to the tilt without naming it (a log that does not determine it), said in :attr:`Causes.suggestion`.
     """
 
     gravity: np.ndarray
@@ -213,15 +220,18 @@ class Causes:
         ``blocks`` is fewer, nothing was tested, with the fewest parts (:data:`MIN_PARTS`).
     needed_duration : float
         The log's length that many blocks, as long as this log's, would take, s.
+    asked : int
+        The parts asked (``parts`` of :func:`fit_causes`); ``parts`` fewer on a short log.
     suggested : list of int
         On a log fitted with fewer parts than asked, where nothing is named: the rows whose offset test is below
         :data:`SUGGESTIVE` and whose levels spread as far as eq. (C4) asks. A short log's levels trade with the
         payload's columns (a centre of mass or an inertia given wrong leaves a residual that follows the motion's
         slow changes), so that a moving offset the log cannot name is still in sight.
     suggestion : str or None
-        One line for the causes the data lean to without naming them: ``suggested`` (an offset that moves, or a
-        payload given wrong, and the log's length that tells them apart), and a tilt of gravity whose test is
-        below :data:`SUGGESTIVE` (:attr:`GravityTilt.suggestive`); not among :attr:`warnings` (no cause is named).
+        Where nothing is named, one line for the causes the data lean to: ``suggested`` (an offset that moves, or
+        a payload given wrong, and the log's length that tells them apart), and a tilt of gravity whose test is
+        below :data:`SUGGESTIVE` (:attr:`GravityTilt.suggestive`; on a short log, beside an offset that may move,
+        whose drift leaves a share the tilt takes up); not among :attr:`warnings`.
     """
 
     offset: OffsetDrift
@@ -234,8 +244,9 @@ class Causes:
     parts: int = None
     needed: int = None
     needed_duration: float = None
-    suggested: list = None
+    suggested: list = field(default_factory=list)
     suggestion: str = None
+    asked: int = None
 
     @property
     def tested(self):
@@ -355,18 +366,24 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
                      f"a moving offset is named below {significance / 2:g}), which a centre of mass or an inertia "
                      f"given wrong can also leave on a log this short; record a log of {full:.0f} s or more "
                      f"({parts} parts) to tell them apart")
-    if gravity is not None and not gravity.tilted and gravity.p_value < SUGGESTIVE:
+    if offset.constant and gravity is not None and not gravity.tilted and gravity.p_value < SUGGESTIVE \
+            and gravity.tilt_deg >= SUGGESTED_TILT_DEG:
         gravity.suggestive = True
-        lines.append(f"gravity's direction may not be the one given: the data lean to gravity tilted "
-                     f"{gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = {gravity.p_value:.2g}; a tilt is "
-                     f"named below {significance / 2:g}), which this log does not determine; record a longer log, "
-                     "or estimate gravity with fmscal identify-payload --gravity estimate")
+        lean = (f"the data lean to gravity tilted {gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = "
+                f"{gravity.p_value:.2g}; a tilt is named below {significance / 2:g})")
+        lines.append(f"gravity's direction may not be the one given: {lean}, which this log does not determine; "
+                     "record a longer log, or estimate gravity with fmscal identify-payload --gravity estimate"
+                     if n_t + 1 == parts else
+                     f"gravity's direction may not be the one given, or the offset may move: {lean}, which a drift "
+                     f"that the log's {n_t + 1} parts follow badly can also leave; record a log of {full:.0f} s or "
+                     f"more ({parts} parts) to tell them apart, or estimate gravity with fmscal identify-payload "
+                     "--gravity estimate")
     suggestion = "; or ".join(lines) or None
     beta = theta[shared:].reshape(n_w, n_t)
     beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
     return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
                   row_p_values=row_p, parts=n_t + 1, needed=needed, needed_duration=needed_duration,
-                  suggested=suggested, suggestion=suggestion)
+                  suggested=suggested, suggestion=suggestion, asked=parts)
 
 
 def _gravity_untested(model):
