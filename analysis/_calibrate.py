@@ -806,9 +806,10 @@ def _check_flipped_gain(run, warnings):
       :data:`TURNED_DEG`: the sensor is turned about an axis from the frame the poses give;
     - ``det R < 0`` with a negative trace: the reading follows the other sign convention.
 
-    A turn under :data:`CAUSED_TURN_DEG` where the ``"causes"`` check leans to a tilt of gravity it does not name
-    (:attr:`fmscal.observers.diagnostics.GravityTilt.suggestive`) names both: on a log that does not determine
-    the tilt, ``S`` turns to take it up.
+    A turn beyond :data:`TURNED_DEG` and up to :data:`CAUSED_TURN_DEG` where the ``"causes"`` check leans to a
+    tilt of gravity it does not name (:attr:`fmscal.observers.diagnostics.GravityTilt.suggestive`) names both (on
+    a log that does not determine the tilt, ``S`` turns to take it up), and on a log fitted with fewer parts than
+    asked an offset that moves too.
 
     Where the ``"causes"`` check named a cause (a moving offset, gravity's direction), ``S`` turns to take it up:
     a turn is named only beyond :data:`CAUSED_TURN_DEG`. A reversed sign is no cause's, and is named beside it.
@@ -836,13 +837,14 @@ def _check_flipped_gain(run, warnings):
         about = ("xyz"[k] if abs(axis[k]) > 0.95 else "(" + ", ".join(f"{a:.2f}" for a in axis) + ")")
         gravity = getattr(run.causes, "gravity", None)
         if angle <= CAUSED_TURN_DEG and getattr(gravity, "suggestive", False):   # S turns to take up a tilt
-            drift = ", or the offset moves" if run.causes.parts < run.causes.asked else ""
+            drift = ", or the offset moves" if run.causes.short else ""
             return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} "
                     f"from the frame the poses give, or gravity's direction is not the one given (the data lean to "
                     f"gravity tilted {gravity.tilt_deg:.2g} degrees, +- {gravity.std_deg:.1g}; p = "
                     f"{gravity.p_value:.2g}){drift}: S turns to take a tilt up, and this log does not tell them "
                     "apart; record a longer log, or estimate gravity with fmscal identify-payload --gravity "
-                    "estimate, before mounting the sensor anew"], False, _TURN_OR_TILT
+                    "estimate, before mounting the sensor anew"], False, \
+                _TURN_TILT_OR_OFFSET if run.causes.short else _TURN_OR_TILT
         return [f"{run.log.name}: the reading's axes are turned {angle:.0f} degrees about the sensor's {about} from "
                 "the frame the poses give (S's force block is that turn): the sensor is mounted turned, or the poses "
                 "are of another frame; mount it as the poses assume, or record the poses of the sensor's own frame "
@@ -857,6 +859,8 @@ def _check_flipped_gain(run, warnings):
 
 _TURN_OR_TILT = ("the sensor is turned from the frame the poses give, or gravity's direction is not the one given "
                 "(the log does not tell them apart)")
+_TURN_TILT_OR_OFFSET = ("the sensor is turned from the frame the poses give, gravity's direction is not the one given, "
+                        "or the offset moves (the log is too short to tell)")
 
 
 def _check_latency(run, warnings):
@@ -1076,14 +1080,15 @@ _ALL_SUGGESTED = ("the sensor's offset may move, the payload may be given wrong,
 
 def _suggested_why(causes, why):
     """``why_unconverged`` for a suggestion (:attr:`fmscal.observers.diagnostics.Causes.suggestion`) put first in
-    place of ``why``, :data:`_UNSETTLED` or :data:`_MISFIT`: an offset suggested names the payload beside it; a
-    tilt alone keeps a misfit's why (a payload given wrong misfits too), and on a short log names the offset."""
+    place of ``why``, :data:`_UNSETTLED` or :data:`_MISFIT`: an offset suggested names the payload beside it (and
+    a tilt, where both are suggested); a tilt alone keeps a misfit's why (a payload given wrong misfits too), and
+    on a log fitted with fewer parts than asked names the offset."""
     tilt = bool(getattr(causes.gravity, "suggestive", False))
     if causes.suggested:
         return _ALL_SUGGESTED if tilt else _OFFSET_OR_PAYLOAD
     if why == _MISFIT:
         return why
-    return _TILT_OR_OFFSET if causes.parts < causes.asked else _TILT_SUGGESTED
+    return _TILT_OR_OFFSET if causes.short else _TILT_SUGGESTED
 
 
 #: A force or torque gain of ``S`` further than this factor from 1 (either way) is remarked on.

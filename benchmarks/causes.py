@@ -192,7 +192,10 @@ def through_calibrate(start, stop, duration=10.0):
                 why = cal.why_unconverged or ""
                 counts["converged"] += bool(cal.converged)
                 counts["wrong"] += bool(cal.converged and z > 4)
-                suggested = "may move" in why or "may not be" in why or "poses give, or gravity" in why
+                first = cal.warnings[0] if cal.warnings else ""       # a tilt alone keeps a misfit's why
+                suggested = "may move" in why or "may not be" in why or "poses give, gravity" in why or \
+                    "poses give, or gravity" in why or first.startswith(("the sensor's offset may move",
+                                                                         "gravity's direction may not be"))
                 named = not cal.converged and not suggested and ("offset moves" in why or "gravity's" in why)
                 counts["named"] += named
                 counts["suggested"] += suggested

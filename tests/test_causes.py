@@ -269,26 +269,51 @@ def test_a_suggestion_does_not_go_before_another_check_s_cause(fault):
     else:
         log, _ = _case(short, "clean", 1)
         payload = dataclasses.replace(payload, com=tuple(np.add(payload.com, (0.01, 0.0, 0.0))))
+    if fault == "saturated":                            # the log leans to the offset: a suggestion to keep second
+        assert fit_causes(log, SpatialModel(payload, GRAVITY)).suggestion is not None
     cal = calibrate(log, payload)
     assert not cal.converged
     if fault == "saturated":
         assert cal.why_unconverged.startswith("the reading saturates") and "saturat" in cal.warnings[0]
+        assert not any(w.startswith("the sensor's offset may move") for w in cal.warnings)
     else:
         assert "gravity" not in cal.why_unconverged and not cal.warnings[0].startswith("gravity's direction")
+
+
+@pytest.mark.parametrize("offset, tilt, short, why, expected", [
+    (True, False, True, "unsettled", "offset or payload"),
+    (True, True, True, "misfit", "all"),
+    (False, True, True, "misfit", "misfit"),             # a tilt alone keeps the misfit's why: the payload misfits too
+    (False, True, True, "unsettled", "tilt or offset"),
+    (False, True, False, "unsettled", "tilt")])
+def test_the_why_of_a_suggestion(offset, tilt, short, why, expected):
+    """What ``calibrate`` gives as why a run did not converge where it puts a suggestion first (in place of "did not
+    settle" or the misfit): each combination of an offset suggested, a tilt suggested and a short log."""
+    from fmscal.analysis import _calibrate as c
+    from fmscal.observers.diagnostics import Causes, GravityTilt, OffsetDrift
+    causes = Causes(offset=OffsetDrift(True, 1.0, 0.5, np.zeros((0, 6)), np.zeros(0)),
+                    gravity=GravityTilt(np.array(GRAVITY), 1.0, 0.5, 5.0, 0.01, False, suggestive=tilt), blocks=50,
+                    parts=2 if short else 6, asked=6, suggested=[3] if offset else [])
+    given = {"unsettled": c._UNSETTLED, "misfit": c._MISFIT}[why]
+    assert c._suggested_why(causes, given) == {"offset or payload": c._OFFSET_OR_PAYLOAD, "all": c._ALL_SUGGESTED,
+                                                "misfit": c._MISFIT, "tilt or offset": c._TILT_OR_OFFSET,
+                                                "tilt": c._TILT_SUGGESTED}[expected]
+    assert causes.short == short
 
 
 def test_a_short_log_s_tilt_that_turns_s_names_both():
     """A 10 s mocap log of a base tilted 3 degrees (seed 3): the tilt's test at the latency ``calibrate`` finds
     leans to it (p about 2e-3, 2.7 +- 2 degrees) without naming it, and ``S`` turned 46 degrees about z to take it up;
     that turn alone was named (mount the sensor anew). Now the line names both, and how to tell them apart."""
-    from fmscal.analysis._calibrate import _TURN_OR_TILT
+    from fmscal.analysis._calibrate import _TURN_TILT_OR_OFFSET
     short = SPATIAL_SCENARIOS["spatial-mocap"].with_(duration=10.0, gravity=_tilted(3.0))
     log, _, _ = short.generate(3)
     cal = calibrate(log, short.payload)
-    assert not cal.converged and cal.why_unconverged == _TURN_OR_TILT
+    assert not cal.converged
     line, = [w for w in cal.warnings if "turned" in w]
     assert "or gravity's direction is not the one given (the data lean to gravity tilted" in line
     assert ", or the offset moves: S turns" in line           # two parts of 10 s: a drift's share, too
+    assert cal.why_unconverged == _TURN_TILT_OR_OFFSET
     assert "--gravity estimate" in line
 
 

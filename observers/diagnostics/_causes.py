@@ -75,10 +75,11 @@ as (C4) asks are a suggestion, not a cause: the payload's columns follow the
 motion's slow changes, which a short log's few parts cannot tell from an
 offset's (a ramp of twice the reading's noise over 10 s, a centre of mass
 given 1 cm off), and the line names both and the length that tells them
-apart; so is a tilt not named whose test is below :data:`SUGGESTIVE` and
-that is at least :data:`SUGGESTED_TILT_DEG` (a log
-that does not determine it, where ``S`` turns to take it up; on a short log
-beside an offset that may move, as the ambiguous tilt is). The tilt the
+apart; so is, where no offset is named, a tilt not named whose test is
+below :data:`SUGGESTIVE` and that is at least :data:`SUGGESTED_TILT_DEG` (a
+log that does not determine it, where ``S`` turns to take it up; on a short
+log its line names an offset that may move too, whose drift the few parts
+follow badly leaves a share the tilt takes up). The tilt the
 data ask for,
 and its one-sigma uncertainty::
 
@@ -133,8 +134,9 @@ MAX_ROWS = 20000
 #: On a log of fewer parts than asked, a tilt named beside an offset named, or beside rows whose offset test (times
 #: the rows) is below this, is ambiguous: a ramp the few parts follow badly leaves a share the tilt's columns take up.
 #: Where nothing is named there, such rows (their levels spread as eq. (C4) asks) are suggested: a moving offset,
-#: or a payload given wrong, which the levels of a short log trade with; so is a tilt not named whose test is below
-#: this, on any log (:attr:`Causes.suggestion`).
+#: or a payload given wrong, which the levels of a short log trade with; so is, on any log where no offset is named,
+#: a tilt not named whose test is below this and that is at least :data:`SUGGESTED_TILT_DEG`
+#: (:attr:`Causes.suggestion`).
 SUGGESTIVE = 0.05
 #: A tilt not named is suggested only from this many degrees (and its test below :data:`SUGGESTIVE`): under half a
 #: degree gravity's direction moves the needed force by under one percent of the payload's weight, which a payload
@@ -174,8 +176,9 @@ class GravityTilt:
         offset test is below :data:`SUGGESTIVE`: the tilt may be that offset's share, and the line names both and
         gives no gravity.
     suggestive : bool
-        Not tilted, its p-value below :data:`SUGGESTIVE` and the tilt at least :data:`SUGGESTED_TILT_DEG`: the data
-        lean to the tilt without naming it (a log that does not determine it), said in :attr:`Causes.suggestion`.
+        Not tilted, no offset named, its p-value below :data:`SUGGESTIVE` and the tilt at least
+        :data:`SUGGESTED_TILT_DEG`: the data lean to the tilt without naming it (a log that does not determine it),
+        said in :attr:`Causes.suggestion`.
     """
 
     gravity: np.ndarray
@@ -220,8 +223,8 @@ class Causes:
         ``blocks`` is fewer, nothing was tested, with the fewest parts (:data:`MIN_PARTS`).
     needed_duration : float
         The log's length that many blocks, as long as this log's, would take, s.
-    asked : int
-        The parts asked (``parts`` of :func:`fit_causes`); ``parts`` fewer on a short log.
+    asked : int or None
+        The parts asked (``parts`` of :func:`fit_causes`); ``parts`` fewer on a short log; None where untested.
     suggested : list of int
         On a log fitted with fewer parts than asked, where nothing is named: the rows whose offset test is below
         :data:`SUGGESTIVE` and whose levels spread as far as eq. (C4) asks. A short log's levels trade with the
@@ -247,6 +250,11 @@ class Causes:
     suggested: list = field(default_factory=list)
     suggestion: str = None
     asked: int = None
+
+    @property
+    def short(self):
+        """Whether the log was fitted with fewer parts than asked (``parts`` below ``asked``; False untested)."""
+        return self.asked is not None and self.parts < self.asked
 
     @property
     def tested(self):
@@ -415,8 +423,9 @@ def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale, length=None)
     theta = inverse @ b
     e = np.column_stack([r[:, i] / scale[i] - Y @ theta[cols] for i, (cols, Y) in enumerate(designs)])
     length = block_length(e, dt * stride, window) if length is None else length
-    # a last block under half the length joins the one before: a sliver of a few samples is no block of time (a
-    # log a sample longer would otherwise count one more, and be fitted with more parts)
+    # a last block under half the length joins the one before: a sliver of a few samples is no block of time (one
+    # sample had made a 10 s log a block longer, and so fitted with more parts, than the same log aligned a
+    # twentieth of a sample shorter)
     last = max(1, int(np.round((t[-1] - t[0] + dt * stride) / length))) - 1
     blocks = np.minimum(((t - t[0]) // length).astype(int), last)
     starts = np.flatnonzero(np.r_[True, np.diff(blocks) != 0])
