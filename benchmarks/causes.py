@@ -49,6 +49,17 @@ def _tilted(degrees):
     return (0.0, 9.81 * np.sin(a), -9.81 * np.cos(a))
 
 
+def _case(base, kind, seed):
+    """The scenario, log and truth of ``kind``: "clean", "ramp" (10 noise sd on fx over the log), "ramp2" (2 sd,
+    the issue's 0.1 N) or "tilt" (the base tilted 3 degrees about x)."""
+    scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
+    log, truth, _ = scenario.generate(seed)
+    if kind.startswith("ramp"):
+        sd = 2 if kind == "ramp2" else 10
+        log.w_hat[:, 3] += sd * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
+    return scenario, log, truth
+
+
 def naming(seeds, duration):
     for name in ("spatial-arm", "spatial-mocap"):
         base = SPATIAL_SCENARIOS[name].with_(duration=duration)
@@ -56,11 +67,7 @@ def naming(seeds, duration):
         counts = {kind: [0, 0, 0, 0] for kind in ("clean", "ramp", "ramp2", "tilt")}
         for seed in seeds:
             for kind in ("clean", "ramp", "ramp2", "tilt"):
-                scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
-                log, _, _ = scenario.generate(seed)
-                if kind.startswith("ramp"):
-                    sd = 2 if kind == "ramp2" else 10
-                    log.w_hat[:, 3] += sd * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
+                scenario, log, _ = _case(base, kind, seed)
                 c = fit_causes(log.shift_poses(scenario.latency), model)
                 counts[kind][0] += not c.offset.constant
                 counts[kind][1] += bool(c.gravity.tilted)
@@ -180,11 +187,7 @@ def through_calibrate(start, stop, duration=10.0):
         for kind in ("clean", "ramp", "ramp2", "tilt"):
             counts = dict(wrong=0, converged=0, named=0, suggested=0, neither=0)
             for seed in range(start, stop):
-                scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
-                log, truth, _ = scenario.generate(seed)
-                if kind.startswith("ramp"):
-                    sd = 2 if kind == "ramp2" else 10
-                    log.w_hat[:, 3] += sd * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
+                scenario, log, truth = _case(base, kind, seed)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     cal = calibrate(log, scenario.payload)
