@@ -254,9 +254,10 @@ def calibrate(data, payload, *, observer=None, reading=None, gravity=None, laten
         :data:`AGREEMENT_E`). On a spatial log: the method's flag, no
         saturation, the log pins ``S`` down for a method that gives no
         ``S_std`` (:func:`fmscal.observers.diagnostics.has_evidence`: the
-        run judged settling alone), the offset keeps one level and gravity is
-        along the direction given (:func:`fmscal.observers.diagnostics.fit_causes`:
-        else a warning names the moving offset or the base's tilt), a positive
+        run judged settling alone), the offset keeps one level, ``S``'s gain one
+        value, and gravity is along the direction given
+        (:func:`fmscal.observers.diagnostics.fit_causes`: else a warning names
+        the moving offset or gain, or the base's tilt), a positive
         force gain (``trace S_ff > 0``: else the reading follows the other sign
         convention), and the model
         fits the log (:func:`fmscal.observers.diagnostics.misfit`; where it
@@ -754,9 +755,9 @@ def _check_offset_drift(run, warnings):
 
 
 def _check_causes(run, warnings):
-    """``"causes"``: the residual of the reference fit of a log under gravity names no moving offset and no
+    """``"causes"``: the residual of the reference fit of a log under gravity names no moving offset or gain and no
     gravity along another direction than the one given (:func:`fmscal.observers.diagnostics.fit_causes`, eqs.
-    (C1)-(C3)); either found is a warning naming it, and not converged: ``S`` took up what the cause left (the
+    (C1)-(C5)); any found is a warning naming it, and not converged: ``S`` took up what the cause left (the
     gains check then blames no mass). A log too short to test passes with nothing said."""
     try:
         found = fit_causes(run.aligned, run.model)
@@ -765,7 +766,10 @@ def _check_causes(run, warnings):
     run.causes = found
     run.named = bool(found.warnings)
     tilted = found.gravity is not None and found.gravity.tilted
-    why = ("the sensor's offset moves during the log" if not found.offset.constant else
+    gain = found.gain is not None and bool(found.gain.rows)
+    why = ("the sensor's offset and S's gain move during the log" if gain and not found.offset.constant else
+           "S's gain moves during the log" if gain else
+           "the sensor's offset moves during the log" if not found.offset.constant else
            "gravity's direction is not the one given, or the offset moves (the log is too short to tell)"
            if tilted and found.gravity.ambiguous else "gravity's direction is not the one given" if tilted else None)
     return found.warnings, why is None, why
@@ -811,8 +815,9 @@ def _check_flipped_gain(run, warnings):
     a log that does not determine the tilt, ``S`` turns to take it up), and on a log fitted with fewer parts than
     asked an offset that moves too.
 
-    Where the ``"causes"`` check named a cause (a moving offset, gravity's direction), ``S`` turns to take it up:
-    a turn is named only beyond :data:`CAUSED_TURN_DEG`. A reversed sign is no cause's, and is named beside it.
+    Where the ``"causes"`` check named a cause (a moving offset or gain, gravity's direction), ``S`` turns to take
+    it up: a turn is named only beyond :data:`CAUSED_TURN_DEG`. A reversed sign is no cause's, and is named beside
+    it.
     """
     channels = list(run.model.force_channels)
     S_f = np.asarray(run.result.S_hat, dtype=float)[np.ix_(channels, channels)]
@@ -1114,7 +1119,7 @@ def _check_gains(run, warnings):
         std = np.diag(np.asarray(run.result.S_std, dtype=float))
     for d in run.result.info.get("undetermined", []):   # a channel the undetermined directions hold: its gain is not
         std = np.where(np.abs(np.asarray(d, dtype=float)[:len(S)]) > 0.1, np.inf, std)
-    if run.named:                          # a cause named (an offset, gravity, the sign, a turn) moved the gains
+    if run.named:                  # a cause named (an offset, a gain, gravity, the sign, a turn) moved the gains
         return [], True, None
     forces = list(run.model.force_channels)
     split = {part: (channels, np.diag(S)[channels], std[channels]) for part, channels in
@@ -1207,7 +1212,7 @@ def _calibration(result, method, fields):
 
 
 def _cause_named(run):
-    """Whether the ``"causes"`` check named a cause (a moving offset, gravity's direction) on this run."""
+    """Whether the ``"causes"`` check named a cause (a moving offset or gain, gravity's direction) on this run."""
     causes = getattr(run, "causes", None)
     return causes is not None and bool(causes.warnings)
 
@@ -1217,9 +1222,9 @@ _UNSETTLED = "the run did not converge (see the warnings)"
 
 
 def _effects_of_the_cause(run, name, warnings):
-    """The warnings that a cause named by the ``"causes"`` check (a moving offset, gravity's direction) explains,
-    kept as notes: the fit not settling, and the latency estimated but not determined under it (its advice, a
-    latency given, would not mend the cause). A latency that steps along the log, a search too narrow and a
+    """The warnings that a cause named by the ``"causes"`` check (a moving offset or gain, gravity's direction)
+    explains, kept as notes: the fit not settling, and the latency estimated but not determined under it (its
+    advice, a latency given, would not mend the cause). A latency that steps along the log, a search too narrow and a
     latency given that the log disagrees with stay warnings."""
     if not _cause_named(run):
         return []

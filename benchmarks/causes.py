@@ -1,6 +1,6 @@
 """A moving offset and a tilted gravity named in 3D (issue 46 item 6): ``python benchmarks/causes.py [SEEDS]
 [DURATION] [--cost] [--clean START STOP [SCENARIO] [DURATION]] [--zscores START STOP [SCENARIO] [DURATION]]
-[--payload [SEEDS] [DURATION]] [--calibrate START STOP [DURATION]]``.
+[--payload [SEEDS] [DURATION]] [--calibrate START STOP [DURATION]] [--gain START STOP [DURATION]]``.
 
 For each seed (default 0-4, 20 s) of ``spatial-arm`` and ``spatial-mocap``: the clean log, a ramp of 10 noise
 sd on fx over the log, the issue's ramp of 2 noise sd (0.1 N, ``ramp2``), and the base tilted 3 degrees about x,
@@ -30,6 +30,10 @@ at the latency it estimates: per kind, how many runs are converged outside 4 of 
 converged how many name a cause, suggest one (:attr:`fmscal.observers.diagnostics.Causes.suggestion`), or
 neither.
 
+``--gain START STOP [DURATION]``: logs whose offset moves (the ramp on fx, a ramp and a step on fz) or whose gain
+does (fz's alone, every channel's as ``spatial-drift``), 20 s by default: how many are named a moving offset, a
+moving gain, both, or with a row the log cannot tell (eq. (C5) of ``fmscal.observers.diagnostics._causes``).
+
 ``--cost``: ``calibrate``'s CPU on a 60 s 1 kHz ``spatial-arm`` log with and without the ``"causes"`` check,
 after a warm-up, three alternated runs each in one process, and the ratio of the best of each.
 """
@@ -51,12 +55,21 @@ def _tilted(degrees):
 
 def _case(base, kind, seed):
     """The scenario, log and truth of ``kind``: "clean", "ramp" (10 noise sd on fx over the log), "ramp2" (2 sd,
-    the issue's 0.1 N) or "tilt" (the base tilted 3 degrees about x)."""
-    scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else base
+    the issue's 0.1 N), "tilt" (the base tilted 3 degrees about x), "rampz" (10 sd on fz), "stepz" (a step of 10 sd
+    on fz a third into the log), "gainz" (the reading's gain on fz falling 5 % over the log about its offset: ``S``'s
+    gain rising 5.3 %) or "drift" (every channel's gain drifting 5 %, as ``spatial-drift``)."""
+    scenario = base.with_(gravity=_tilted(3.0)) if kind == "tilt" else \
+        base.with_(drift=0.05) if kind == "drift" else base
     log, truth, _ = scenario.generate(seed)
-    if kind.startswith("ramp"):
-        sd = 2 if kind == "ramp2" else 10
-        log.w_hat[:, 3] += sd * scenario.force_sd * (log.t - log.t[0]) / (log.t[-1] - log.t[0])
+    u = (log.t - log.t[0]) / (log.t[-1] - log.t[0])
+    if kind in ("ramp", "ramp2"):
+        log.w_hat[:, 3] += (2 if kind == "ramp2" else 10) * scenario.force_sd * u
+    elif kind == "rampz":
+        log.w_hat[:, 5] += 10 * scenario.force_sd * u
+    elif kind == "stepz":
+        log.w_hat[:, 5] += 10 * scenario.force_sd * (u > 1 / 3)
+    elif kind == "gainz":
+        log.w_hat[:, 5] = truth.offset[5] + (log.w_hat[:, 5] - truth.offset[5]) * (1 - 0.05 * u)
     return scenario, log, truth
 
 
@@ -210,6 +223,40 @@ def through_calibrate(start, stop, duration=10.0):
                   f"{counts['suggested']}, neither {counts['neither']}", flush=True)
 
 
+def gain_or_offset(start, stop, duration=20.0):
+    """Eq. (C5) on logs whose offset or gain moves (seeds ``start`` to ``stop - 1``, both scenarios, aligned at their
+    latency): per kind ("ramp" and "rampz", "stepz": the offset; "gainz", "drift": the gain), how many logs are named
+    a moving offset, a moving gain, both, with a row the log cannot tell (the offset's line naming the gain too),
+    with eq. (C5) not fitted (too few blocks of time for it), or nothing;
+    and how many had too few blocks of time to test at all (eq. (C2)); per log, its blocks of time and the blocks
+    the test asks for."""
+    for name in ("spatial-arm", "spatial-mocap"):
+        base = SPATIAL_SCENARIOS[name].with_(duration=duration)
+        model = SpatialModel(base.payload)
+        for kind in ("ramp", "rampz", "stepz", "gainz", "drift"):
+            counts = dict(offset=0, gain=0, both=0, unresolved=0, untested=0, nothing=0, short=0)
+            for seed in range(start, stop):
+                scenario, log, _ = _case(base, kind, seed)
+                c = fit_causes(log.shift_poses(scenario.latency), model)
+                gain = c.gain is not None and bool(c.gain.rows)
+                offset = not c.offset.constant
+                counts["both" if gain and offset else "gain" if gain else "offset" if offset else "nothing"] += 1
+                counts["unresolved"] += c.gain is not None and bool(c.gain.unresolved)
+                counts["untested"] += c.gain is not None and not c.gain.tested
+                counts["short"] += not c.tested
+                rows = "" if c.gain is None else (
+                    f" gain {[model.wrench_names[i] for i in c.gain.rows]} "
+                    f"{[f'{100 * x:+.1f} %' for x in c.gain.changes]}, unresolved "
+                    f"{[model.wrench_names[i] for i in c.gain.unresolved]}, (C5) fitted {c.gain.tested}")
+                which = c.offset.warning.split("the offset of ")[1].split(" ")[0] if offset else "-"
+                print(f"{name:14s} seed {seed} {kind:5s} blocks {c.blocks} of {c.needed} asked, offset named "
+                      f"{offset} ({which}){rows}", flush=True)
+            print(f"{name}, {duration:g} s, seeds {start}-{stop - 1}, {kind}: named an offset {counts['offset']}, a "
+                  f"gain {counts['gain']}, both {counts['both']}, nothing {counts['nothing']}; a row not told "
+                  f"{counts['unresolved']}; eq. (C5) not fitted {counts['untested']}; too few blocks of time to test "
+                  f"{counts['short']}", flush=True)
+
+
 def cost():
     scenario = SPATIAL_SCENARIOS["spatial-arm"]
     log, _, _ = scenario.generate(0)
@@ -240,6 +287,8 @@ if __name__ == "__main__":
         zscores(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
     elif args and args[0] == "--calibrate":
         through_calibrate(int(args[1]), int(args[2]), *(float(a) for a in args[3:4]))
+    elif args and args[0] == "--gain":
+        gain_or_offset(int(args[1]), int(args[2]), *(float(a) for a in args[3:4]))
     elif args and args[0] == "--clean":
         clean(int(args[1]), int(args[2]), *args[3:4], *(float(a) for a in args[4:5]))
     else:

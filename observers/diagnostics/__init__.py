@@ -1,6 +1,6 @@
 """Checks of a log against the model: one constant ``S`` (health), saturation and a moving offset
 (faults), and how much a log says about ``S`` (evidence), whether the model fits it (misfit), and what
-its residual names (causes: a moving offset, gravity's direction).
+its residual names (causes: a moving offset or gain, gravity's direction).
 """
 
 from ._evidence import (has_evidence, log_uncertainty, EVIDENCE_PREFIX)
@@ -9,7 +9,8 @@ from ._misfit import (Misfit, InertiaShape, CentreOfMass, misfit, inertia_note, 
     MISFIT_SIGNIFICANCE, MISFIT_RATIO, GROSS_RATIO)
 from ._faults import (saturation, offset_drift, OffsetDrift, SATURATION_SHARE, SATURATION_RATIO, DRIFT_SIGNIFICANCE,
     DRIFT_PARTS, DRIFT_LAGS, describe_offset)
-from ._causes import (Causes, GravityTilt, fit_causes, CAUSE_SIGNIFICANCE)
+from ._causes import (Causes, GainDrift, GravityTilt, fit_causes, CAUSE_SIGNIFICANCE)
 
 __all__ = ["has_evidence", "log_uncertainty", "Consistency", "consistency_check", "saturation", "offset_drift",
-           "OffsetDrift", "Misfit", "InertiaShape", "CentreOfMass", "misfit", "Causes", "GravityTilt", "fit_causes"]
+           "OffsetDrift", "Misfit", "InertiaShape", "CentreOfMass", "misfit", "Causes", "GainDrift", "GravityTilt",
+           "fit_causes"]

@@ -1,4 +1,4 @@
-"""What a fit's residual names: a moving offset, or gravity along another direction than the one given.
+"""What a fit's residual names: a moving offset or gain, or gravity along another direction than the one given.
 
 The reference fit of a log under gravity (the wrench each sample needed,
 ``w_k``, from the smoothed poses by Newton-Euler, and ``w_k = S w_hat_k + c``
@@ -54,6 +54,33 @@ directions the covariance determines)::
 
 - gravity is tilted: ``x`` the two components of ``dg`` across ``g``, ``K = 2``.
 
+A row found moving may be its offset's change or ``S``'s gain's (a sensor
+warming up moves either): a gain changed by ``gamma_i(t)`` leaves
+``r_ik = gamma_i(t_k) w_ik``, which follows the row's needed wrench, where an
+offset's change does not. Both are fitted beside (C1)'s shared columns, each
+a ramp between :data:`GAIN_PARTS` ``+ 1`` knots over the log (``R(t)`` the
+ramps of the last :data:`GAIN_PARTS`; a level per part would leave a drift
+within each part, which the gain's columns take up where the load moves with
+time)::
+
+    r_ik = -D_ik dg - W_ik dpi + w_dot_ik dtau + R(t_k)^T beta_i
+           + R(t_k)^T gamma_i (w_ik - mean(w_i)) + e_ik                              (C5)
+
+every row's gain where the log has :data:`BLOCKS_PER_COLUMN` times (C5)'s
+columns in blocks of time (their length from (C5)'s own residual, eq. (U2)),
+else the moving rows' alone, else none (the row is named an offset, as
+found). A row's gain is named, and not its offset, where ``gamma_i``'s test
+(C2) is below half of the significance (times the rows) and its offset at no
+load, ``beta_i - gamma_i mean(w_i)``, tests at or above it (not times the
+rows: a guard); where both are below it, the offset is named, as found (a
+step of the offset, which the ramps follow badly, leaves a share in the
+gain's columns too); where the two together test below it and neither alone
+does, the offset's line names either. The gain
+named is ``S``'s gain on that row (``gamma_i`` at the last knot against the
+first) for an ``S`` near the identity; a gain's cross-talk into another row
+(through ``S``'s off-diagonal entries) is not modelled, and can leave that row
+a moving offset named beside it.
+
 Each names its cause below half of :data:`CAUSE_SIGNIFICANCE`: the
 probability, for a log with one constant offset and the gravity given, of
 naming either, nominal (no test with ``G`` below :data:`BLOCKS_PER_COLUMN`
@@ -105,7 +132,7 @@ from fmscal.observers.batch import block_length, hotelling, small_sample_factor
 from fmscal.observers.core import reading_noise
 from ._faults import DRIFT_PARTS, OffsetDrift, describe_offset
 
-__all__ = ["Causes", "GravityTilt", "fit_causes", "CAUSE_SIGNIFICANCE"]
+__all__ = ["Causes", "GainDrift", "GravityTilt", "fit_causes", "CAUSE_SIGNIFICANCE"]
 
 #: The probability, for a log with a constant offset under the gravity given, of naming a moving offset or a
 #: tilted gravity (each test half of it), nominal.
@@ -142,6 +169,10 @@ SUGGESTIVE = 0.05
 #: degree gravity's direction moves the needed force by under one percent of the payload's weight, which a payload
 #: given wrong (a mass 3 % high, a centre of mass 1 cm off) leaves in the tilt's columns of a short log.
 SUGGESTED_TILT_DEG = 0.5
+#: The segments of eq. (C5)'s ramps: a row's offset and its gain each a ramp between this many plus one knots over the
+#: log, which follow a drift or a warm-up smoothly (a level per part would leave a drift within each part, which the
+#: gain's columns take up where the load moves with time).
+GAIN_PARTS = 3
 #: The windows over which the offset's change is described, s (as the planar test's).
 DESCRIBE_WINDOW = 0.5
 #: The smoothing window of the motion in eq. (C1)'s payload columns ``W_k``, s: the angular acceleration and
@@ -199,6 +230,42 @@ class GravityTilt:
 
 
 @dataclass
+class GainDrift:
+    """Which of a row's offset and its gain moves, where the offset's test found it moving (eq. (C5) of
+    :mod:`fmscal.observers.diagnostics._causes`).
+
+    Attributes
+    ----------
+    rows : list of int
+        The rows whose gain moves and whose offset at no load does not: their gain's test below half of the
+        significance (times the rows), their offset's beside it at or above it. Named here, not as an offset.
+    changes : ndarray
+        Each of ``rows``' gain change from the log's start to its end, relative (``S``'s gain on it times ``1 +
+        change``).
+    p_values : ndarray
+        Each of ``rows``' gain test, times the rows tested.
+    unresolved : list of int
+        Rows found moving whose gain and offset (eq. (C5)) together move, neither alone determined (each test at or
+        above half of the significance): either may move, and the offset's line says so.
+    tested : bool
+        Eq. (C5) was fitted: the log had the blocks of time for it (:data:`BLOCKS_PER_COLUMN` times its columns).
+        Where not, a moving row is named an offset, as it was found.
+    warning : str or None
+        One line naming the gains, where ``rows``.
+    unresolved_words : str
+        The clause the offset's line takes for ``unresolved``.
+    """
+
+    rows: list
+    changes: np.ndarray
+    p_values: np.ndarray
+    unresolved: list
+    tested: bool
+    warning: str = None
+    unresolved_words: str = ""
+
+
+@dataclass
 class Causes:
     """The outcome of :func:`fit_causes`.
 
@@ -206,7 +273,10 @@ class Causes:
     ----------
     offset : OffsetDrift
         The moving offset's test (``constant``, ``statistic`` the largest row's ``F``, ``p_value``, ``warning``;
-        ``offsets`` and ``t`` the per-window offsets of the reading it is described from).
+        ``offsets`` and ``t`` the per-window offsets of the reading it is described from). ``constant`` where no
+        row's offset is named: a row found moving whose gain is named instead (``gain``) counts as constant.
+    gain : GainDrift or None
+        Which of a moving row's offset and gain moves (eq. (C5)); None where no row was found moving.
     gravity : GravityTilt or None
         The tilt's test; None on a model not under gravity.
     blocks : int
@@ -250,6 +320,7 @@ class Causes:
     suggested: list = field(default_factory=list)
     suggestion: str = None
     asked: int = None
+    gain: "GainDrift" = None
 
     @property
     def short(self):
@@ -264,7 +335,8 @@ class Causes:
     @property
     def warnings(self):
         """The lines naming the causes found."""
-        return [w for w in (self.offset.warning, None if self.gravity is None else self.gravity.warning) if w]
+        return [w for w in (None if self.gain is None else self.gain.warning, self.offset.warning,
+                            None if self.gravity is None else self.gravity.warning) if w]
 
 
 def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIGNIFICANCE):
@@ -341,31 +413,36 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
         return Causes(offset=OffsetDrift(True, np.nan, 1.0, np.zeros((0, n_w)), np.zeros(0)),
                       gravity=_gravity_untested(model), blocks=g, needed=needed,
                       needed_duration=needed_duration)
-    scores = np.zeros((g, size))
-    for i, (cols, Y) in enumerate(designs):
-        scores[:, cols] += np.add.reduceat(Y * e[:, i:i + 1], starts, axis=0)
-    cov = small_sample_factor(blocks, n * n_w, rank) * inverse @ (scores.T @ scores) @ inverse
-    offset, spreads, row_p, moving = _offset_test(theta, cov, g, shared, n_t, scale, significance)
-    if not offset.constant:
-        offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving)
+    cov = _covariance(designs, inverse, rank, e, blocks, starts, size)
+    offset, spreads, row_p, moving, tests = _offset_test(theta, cov, g, shared, n_t, scale, significance)
+    gain = _gain_drift(_gain_test(t, log.dt, stride, window, D, W, w_dot, X, H, r, scale, w, moving), moving,
+                       model.wrench_names, significance) if moving else None
+    levels = [i for i in moving if i not in gain.rows] if moving else []     # the rows whose offset is named
+    if gain is not None and gain.rows:       # the offset's test over the rows a gain does not explain
+        offset = _offset_drift([test if i not in gain.rows else (0.0, 0, 1.0) for i, test in enumerate(tests)],
+                               levels, g)
+    if levels:
+        offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, levels)
+        offset.warning += gain.unresolved_words
     # the length that all the parts' blocks would take (as needed's), for a log fitted with fewer
     full = np.ceil(BLOCKS_PER_COLUMN * (shared + n_w * (parts - 1)) * length + (log.t[-1] - log.t[0] + log.dt) - span)
     if not model.under_gravity:
         gravity = _gravity_untested(model)
     else:
         gravity = _gravity_test(theta[:3], cov[:3, :3], g, model.gravity, significance)
-        rows = list(moving) if not offset.constant else [int(i) for i in np.argsort(row_p) if row_p[i] < SUGGESTIVE]
+        rows = list(moving) if moving else [int(i) for i in np.argsort(row_p) if row_p[i] < SUGGESTIVE]
         if gravity.tilted and n_t + 1 < parts and rows:
             gravity.ambiguous = True
             names = " or ".join(model.wrench_names[i] for i in rows)
-            gravity.warning = (f"gravity's direction, or the offset of {names}: the data ask for gravity tilted "
+            what = "offset or gain" if gain is not None and set(rows) & set(gain.rows) else "offset"
+            gravity.warning = (f"gravity's direction, or the {what} of {names}: the data ask for gravity tilted "
                                f"{gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = {gravity.p_value:.2g}), "
-                               f"or the offset of {names} moves (p = {', '.join(f'{row_p[i]:.2g}' for i in rows)}): "
+                               f"or the {what} of {names} moves (p = {', '.join(f'{row_p[i]:.2g}' for i in rows)}): "
                                f"{n_t + 1} parts of the log are too few to tell a drift from a tilt; record a log of "
                                f"{full:.0f} s or more ({parts} parts) to tell them apart, or estimate gravity with "
                                "fmscal identify-payload --gravity estimate")
     suggested, lines = [], []
-    if offset.constant and not (gravity is not None and gravity.tilted) and n_t + 1 < parts:
+    if not moving and not (gravity is not None and gravity.tilted) and n_t + 1 < parts:
         suggested = [int(i) for i in np.argsort(row_p) if row_p[i] < SUGGESTIVE and spreads[i] >= MOVING_SIZE]
     if suggested:
         names = " and ".join(model.wrench_names[i] for i in suggested)
@@ -374,7 +451,7 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
                      f"a moving offset is named below {significance / 2:g}), which a centre of mass or an inertia "
                      f"given wrong can also leave on a log this short; record a log of {full:.0f} s or more "
                      f"({parts} parts) to tell them apart")
-    if offset.constant and gravity is not None and not gravity.tilted and gravity.p_value < SUGGESTIVE \
+    if not moving and gravity is not None and not gravity.tilted and gravity.p_value < SUGGESTIVE \
             and gravity.tilt_deg >= SUGGESTED_TILT_DEG:
         gravity.suggestive = True
         lean = (f"the data lean to gravity tilted {gravity.tilt_deg:.2g} degrees (+- {gravity.std_deg:.1g}; p = "
@@ -391,7 +468,7 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
     beta_std = np.sqrt(np.maximum(np.diag(cov)[shared:], 0.0)).reshape(n_w, n_t)
     return Causes(offset=offset, gravity=gravity, blocks=g, levels=beta, levels_std=beta_std, spreads=spreads,
                   row_p_values=row_p, parts=n_t + 1, needed=needed, needed_duration=needed_duration,
-                  suggested=suggested, suggestion=suggestion, asked=parts)
+                  suggested=suggested, suggestion=suggestion, asked=parts, gain=gain)
 
 
 def _gravity_untested(model):
@@ -401,21 +478,30 @@ def _gravity_untested(model):
     return GravityTilt(np.asarray(model.gravity, dtype=float), np.nan, np.nan, np.nan, 1.0, False)
 
 
-def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale, length=None):
+def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale, length=None, gains=(), w=None):
     """Eq. (C1) fitted with ``parts`` parts of the log: the rows' designs, ``A^+``, its rank, ``theta``, the scaled
-    residual it leaves, the blocks of time (each sample's, and their starts), the shared columns, ``P - 1``, ``G``,
-    the columns and the blocks' length, s (eq. (U2) of that residual, or ``length`` where given)."""
+    residual it leaves, the blocks of time (each sample's, and their starts), the shared columns, the columns of a
+    row's offset (``P - 1``), ``G``, the columns and the blocks' length, s (eq. (U2) of that residual, or ``length``
+    where given). With ``gains`` (rows), eq. (C5) instead: the offsets ramps between ``parts + 1`` knots, and
+    those rows' gains the same ramps times their needed wrench ``w`` about its mean, after all the others."""
     n_w = r.shape[1]
-    part = np.minimum((parts * (t - t[0]) / (t[-1] - t[0] + dt)).astype(int), parts - 1)
-    T = (part[:, None] == np.arange(1, parts)[None, :]).astype(float)        # (N, P - 1)
+    if gains:                                                                 # eq. (C5): ramps, (N, P)
+        knots = t[0] + (t[-1] - t[0] + dt) * np.arange(parts + 1) / parts
+        T = np.column_stack([np.interp(t, knots, np.eye(parts + 1)[k]) for k in range(1, parts + 1)])
+    else:                                                                     # eq. (C1): levels, (N, P - 1)
+        part = np.minimum((parts * (t - t[0]) / (t[-1] - t[0] + dt)).astype(int), parts - 1)
+        T = (part[:, None] == np.arange(1, parts)[None, :]).astype(float)
     shared = 3 + W.shape[2] - 1 + 1              # dg, dpi less the mass, and dtau (eq. C1)
-    n_t = parts - 1
-    size = shared + n_w * n_t
+    n_t = T.shape[1]
+    size = shared + n_w * n_t + len(gains) * n_t
     A, b, designs = np.zeros((size, size)), np.zeros(size), []
     for i in range(n_w):                                                      # eq. (C1), row by row
         Z = np.c_[-D[:, i], -W[:, i, 1:], w_dot[:, i], T] / scale[i]
-        Y = Z - X @ (H @ (X.T @ Z))                                          # what [S | c] leaves of it
         cols = np.r_[np.arange(shared), shared + i * n_t + np.arange(n_t)]
+        if i in gains:                                                        # eq. (C5)'s gain columns
+            Z = np.c_[Z, T * ((w[:, i] - w[:, i].mean()) / scale[i])[:, None]]
+            cols = np.r_[cols, shared + (n_w + list(gains).index(i)) * n_t + np.arange(n_t)]
+        Y = Z - X @ (H @ (X.T @ Z))                                          # what [S | c] leaves of it
         A[np.ix_(cols, cols)] += Z.T @ Y
         b[cols] += Z.T @ (r[:, i] / scale[i])
         designs.append((cols, Y))
@@ -430,6 +516,64 @@ def _fit(t, dt, stride, window, parts, D, W, w_dot, X, H, r, scale, length=None)
     blocks = np.minimum(((t - t[0]) // length).astype(int), last)
     starts = np.flatnonzero(np.r_[True, np.diff(blocks) != 0])
     return designs, inverse, rank, theta, e, blocks, starts, shared, n_t, len(starts), size, length
+
+
+def _gain_drift(which, moving, names, significance):
+    """The :class:`GainDrift` of eq. (C5)'s outcome ``which`` (:func:`_gain_test`) on the rows found moving."""
+    if not which:
+        return GainDrift(rows=[], changes=np.zeros(0), p_values=np.zeros(0), unresolved=[], tested=False)
+    half = significance / 2
+    rows = [i for i in moving if which[i][1] < half <= which[i][2]]
+    unresolved = [i for i in moving if which[i][1] >= half and which[i][2] >= half and which[i][3] < half]
+    out = GainDrift(rows=rows, changes=np.array([which[i][0] for i in rows]),
+                    p_values=np.array([which[i][1] for i in rows]), unresolved=unresolved, tested=True)
+    if rows:
+        changes = " and ".join(f"on {names[i]} by {100 * which[i][0]:+.2g} % (the reading's sensitivity "
+                               f"{100 * (1 / (1 + which[i][0]) - 1):+.2g} %; p = {which[i][1]:.2g})" for i in rows)
+        out.warning = (f"S's gain moves during the log: its gain changes {changes} from the log's start to its end "
+                       "(the residual follows the needed wrench's size along the log, beyond what a moving offset "
+                       "explains); one constant S does not describe it: let the sensor warm up before recording, and "
+                       "calibrate again")
+    if unresolved:
+        out.unresolved_words = "; " + "; ".join(
+            f"{names[i]}'s row moves by its offset or by S's gain on {names[i]}, which the log does not tell apart "
+            f"(p = {which[i][3]:.2g} for both; {which[i][1]:.2g} for the gain, {which[i][2]:.2g} for the offset "
+            "beside it)" for i in unresolved)
+    return out
+
+
+def _covariance(designs, inverse, rank, e, blocks, starts, size):
+    """The cluster-robust sandwich of a fit of eq. (C1) or (C5) over its blocks of time (eq. (U3))."""
+    scores = np.zeros((len(starts), size))
+    for i, (cols, Y) in enumerate(designs):
+        scores[:, cols] += np.add.reduceat(Y * e[:, i:i + 1], starts, axis=0)
+    return small_sample_factor(blocks, e.size, rank) * inverse @ (scores.T @ scores) @ inverse
+
+
+def _gain_test(t, dt, stride, window, D, W, w_dot, X, H, r, scale, w, moving):
+    """Eq. (C5) for the rows found moving: ``{row: (change, p_gamma, p_beta, p_both)}``, the row's gain change over
+    the log (``gamma_i`` at the last knot against the first), the p-values of ``gamma_i`` (times the rows), of its
+    offset at no load beside it (``beta_i - gamma_i mean(w_i)``; not times the rows: a guard, which a Bonferroni
+    factor would loosen) and of both together (times the rows). Every row's gain where the log has the blocks of
+    time for it, else the moving rows'; ``{}`` where it has not for those."""
+    n_w, out = r.shape[1], {}
+    for rows in dict.fromkeys((tuple(range(n_w)), tuple(moving))):            # every row's gain, else the moving
+        fitted = _fit(t, dt, stride, window, GAIN_PARTS, D, W, w_dot, X, H, r, scale, gains=rows, w=w)
+        designs, inverse, rank, theta, e, blocks, starts, shared, n_t, g, size, _ = fitted
+        if g >= BLOCKS_PER_COLUMN * size:
+            break
+    else:
+        return out
+    cov = _covariance(designs, inverse, rank, e, blocks, starts, size)
+    for i in moving:
+        gamma = shared + (n_w + rows.index(i)) * n_t + np.arange(n_t)
+        idx = np.r_[shared + i * n_t + np.arange(n_t), gamma]
+        M = np.c_[np.eye(n_t), -w[:, i].mean() * np.eye(n_t)]                  # the offset at no load
+        p_gamma = hotelling(theta[gamma], cov[np.ix_(gamma, gamma)], g)[2]
+        p_beta = hotelling(M @ theta[idx], M @ cov[np.ix_(idx, idx)] @ M.T, g)[2]
+        p_both = hotelling(theta[idx], cov[np.ix_(idx, idx)], g)[2]
+        out[i] = (float(theta[gamma][-1]), min(1.0, len(moving) * p_gamma), p_beta, min(1.0, len(moving) * p_both))
+    return out
 
 
 def _pseudo_inverse(A):
@@ -450,12 +594,17 @@ def _offset_test(theta, cov, g, shared, n_t, scale, significance):
     tests = [hotelling(theta[idx], cov[np.ix_(idx, idx)], g) for idx in rows]
     sizes = [np.ptp(np.r_[0.0, theta[idx]]) / scale[i] for i, idx in enumerate(rows)]
     moving = [i for i in range(n_w) if n_w * tests[i][2] < significance / 2 and sizes[i] >= MOVING_SIZE]
-    statistic, k, p = min((tests[i] for i in moving), key=lambda test: test[2]) if moving else \
+    return _offset_drift(tests, moving, g), np.array(sizes), \
+        np.minimum(1.0, n_w * np.array([test[2] for test in tests])), moving, tests
+
+
+def _offset_drift(tests, named, g):
+    """The :class:`OffsetDrift` of eq. (C2)'s row ``tests``: ``F`` and the p-value (times the rows) of the row
+    named (``named``) with the smallest p-value, or of all the rows where none is."""
+    statistic, k, p = min((tests[i] for i in named), key=lambda test: test[2]) if named else \
         min(tests, key=lambda test: test[2])
-    p_value = min(1.0, n_w * p)
     F = (g - k) / (k * (g - 1)) * statistic if k and g > k + 1 else np.nan
-    return OffsetDrift(not moving, float(F), p_value, np.zeros((0, n_w)), np.zeros(0)), np.array(sizes), \
-        np.minimum(1.0, n_w * np.array([test[2] for test in tests])), moving
+    return OffsetDrift(not named, float(F), min(1.0, len(tests) * p), np.zeros((0, len(tests))), np.zeros(0))
 
 
 def _describe(offset, log, model, t, r, designs, theta, scale, S, shared, moving):
