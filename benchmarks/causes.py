@@ -212,7 +212,8 @@ def through_calibrate(start, stop, duration=10.0):
                 suggested = "may move" in why or "may not be" in why or "poses give, gravity" in why or \
                     "poses give, or gravity" in why or first.startswith(("the sensor's offset may move",
                                                                          "gravity's direction may not be"))
-                named = not cal.converged and not suggested and ("offset moves" in why or "gravity's" in why)
+                named = not cal.converged and not suggested and \
+                    any(cause in why for cause in ("offset moves", "gain move", "gravity's"))
                 counts["named"] += named
                 counts["suggested"] += suggested
                 counts["neither"] += not cal.converged and not named and not suggested

@@ -450,6 +450,18 @@ def test_spatial_drift_s_gains_are_named():
     assert cal.warnings[0].startswith("S's gain moves")
 
 
+def test_the_offset_s_test_leaves_out_the_rows_a_gain_explains():
+    """The offset's ``F`` and p-value are those of the rows named an offset, else of the rows no gain explains (none
+    left: NaN and 1), not of a row named a gain."""
+    from fmscal.observers.diagnostics._causes import _offset_drift
+    tests = [(30.0, 2, 1e-9), (4.0, 2, 0.2), (2.0, 2, 0.5)]
+    assert _offset_drift(tests, [], 100, among=[1, 2]).p_value == pytest.approx(3 * 0.2)
+    assert _offset_drift(tests, [2], 100, among=[1, 2]).p_value == pytest.approx(1.0)          # 3 x 0.5, at most 1
+    assert _offset_drift(tests, [], 100).p_value == pytest.approx(3e-9)
+    none = _offset_drift(tests, [], 100, among=[])
+    assert none.constant and none.p_value == 1.0 and np.isnan(none.statistic)
+
+
 def test_a_log_too_short_to_test_names_nothing():
     """A 5 s log has too few blocks of time for the covariance of (C1)'s columns (19 at its fewest parts): nothing is
     named."""

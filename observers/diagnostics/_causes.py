@@ -419,8 +419,7 @@ def fit_causes(log, model, window=0.2, parts=DRIFT_PARTS, significance=CAUSE_SIG
                        model.wrench_names, significance) if moving else None
     levels = [i for i in moving if i not in gain.rows] if moving else []     # the rows whose offset is named
     if gain is not None and gain.rows:       # the offset's test over the rows a gain does not explain
-        offset = _offset_drift([test if i not in gain.rows else (0.0, 0, 1.0) for i, test in enumerate(tests)],
-                               levels, g)
+        offset = _offset_drift(tests, levels, g, among=[i for i in range(n_w) if i not in gain.rows])
     if levels:
         offset = _describe(offset, log, model, t, r, designs, theta, scale, S, shared, levels)
         offset.warning += gain.unresolved_words
@@ -598,11 +597,12 @@ def _offset_test(theta, cov, g, shared, n_t, scale, significance):
         np.minimum(1.0, n_w * np.array([test[2] for test in tests])), moving, tests
 
 
-def _offset_drift(tests, named, g):
+def _offset_drift(tests, named, g, among=None):
     """The :class:`OffsetDrift` of eq. (C2)'s row ``tests``: ``F`` and the p-value (times the rows) of the row
-    named (``named``) with the smallest p-value, or of all the rows where none is."""
-    statistic, k, p = min((tests[i] for i in named), key=lambda test: test[2]) if named else \
-        min(tests, key=lambda test: test[2])
+    named (``named``) with the smallest p-value, or of the rows ``among`` (all where None) where none is; NaN and 1
+    where there are none."""
+    rows = named or (range(len(tests)) if among is None else among)
+    statistic, k, p = min((tests[i] for i in rows), key=lambda test: test[2], default=(np.nan, 0, 1.0))
     F = (g - k) / (k * (g - 1)) * statistic if k and g > k + 1 else np.nan
     return OffsetDrift(not named, float(F), min(1.0, len(tests) * p), np.zeros((0, len(tests))), np.zeros(0))
 
